@@ -1,0 +1,38 @@
+# rangekit: two commands on a fresh machine.
+#   make scan   run the main job (simulated rig, no hardware, no arguments)
+#   make test   run the test suite
+# Each creates .venv and installs what is missing on first use.
+
+PYTHON ?= python3
+VENV   ?= .venv
+BIN    := $(VENV)/bin
+STAMP  := $(VENV)/.rangekit-installed
+
+.PHONY: setup test scan bench clean
+
+setup: $(STAMP)
+
+$(STAMP): pyproject.toml
+	@# open3d needs the system library libusb-1.0 (Debian: libusb-1.0-0).
+	@if ! ldconfig -p 2>/dev/null | grep -q 'libusb-1\.0\.so'; then \
+	  echo "installing libusb-1.0-0 (needed by open3d)"; \
+	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null; then \
+	    (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq libusb-1.0-0) >/dev/null; \
+	  else echo "please install libusb-1.0-0 (e.g. sudo apt-get install libusb-1.0-0)"; exit 1; fi; \
+	fi
+	@[ -x $(BIN)/python ] || $(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install -q --upgrade pip
+	$(BIN)/python -m pip install -q -e ".[test]"
+	@touch $(STAMP)
+
+test: $(STAMP)
+	$(BIN)/python -m pytest -q
+
+scan: $(STAMP)
+	$(BIN)/rangekit sim render --object lumpy --out scan1
+
+bench: $(STAMP)
+	$(BIN)/python benchmarks/bench_render.py
+
+clean:
+	rm -rf $(VENV) *.egg-info .pytest_cache

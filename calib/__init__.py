@@ -1,0 +1,1 @@
+"""Calibration procedures for camera, projector and turntable. See issue 7."""

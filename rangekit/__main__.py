@@ -1,0 +1,3 @@
+from rangekit.cli import main
+import sys
+sys.exit(main())

@@ -1,0 +1,351 @@
+"""The pinhole model with OpenCV lens distortion, for cameras and projectors alike.
+
+A projector is an inverse camera: the same intrinsics map a ray to the projector pixel it comes from.
+Frames and units: world points in metres; camera frame x right, y down, z forward (OpenCV); pixels
+``(u, v) = (column, row)`` with the centre of the top-left pixel at (0, 0). ``T_world_cam`` maps camera
+coordinates to world coordinates (for a projector it is the projector's pose).
+
+Distortion follows OpenCV exactly (``cv2.projectPoints``): coefficients ``(k1, k2, p1, p2[, k3[, k4, k5,
+k6[, s1, s2, s3, s4[, tx, ty]]]])``; the tilted-sensor terms tx, ty must be zero.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from rangekit.errors import ConfigError, InputError
+from rangekit.geometry import apply_T, invert_T, transform_vectors
+
+__all__ = ["PinholeCamera", "distort", "undistort"]
+
+_N_COEFFS = 12  # k1 k2 p1 p2 k3 k4 k5 k6 s1 s2 s3 s4
+
+
+def _full_coeffs(dist: np.ndarray) -> np.ndarray:
+    d = np.zeros(_N_COEFFS)
+    d[: min(len(dist), _N_COEFFS)] = dist[:_N_COEFFS]
+    return d
+
+
+def distort(xy: np.ndarray, dist: np.ndarray) -> np.ndarray:
+    """Apply OpenCV distortion to (N, 2) normalised image coordinates (x/z, y/z); returns (N, 2)."""
+    k1, k2, p1, p2, k3, k4, k5, k6, s1, s2, s3, s4 = _full_coeffs(np.asarray(dist, dtype=np.float64))
+    x, y = xy[:, 0], xy[:, 1]
+    r2 = x * x + y * y
+    r4 = r2 * r2
+    radial = (1 + r2 * (k1 + r2 * (k2 + r2 * k3))) / (1 + r2 * (k4 + r2 * (k5 + r2 * k6)))
+    xd = x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x) + s1 * r2 + s2 * r4
+    yd = y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y + s3 * r2 + s4 * r4
+    return np.column_stack([xd, yd])
+
+
+def _distort_jacobian(xy: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """(N, 2, 2) Jacobian of :func:`distort` with respect to (x, y)."""
+    k1, k2, p1, p2, k3, k4, k5, k6, s1, s2, s3, s4 = d
+    x, y = xy[:, 0], xy[:, 1]
+    r2 = x * x + y * y
+    num = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
+    den = 1 + r2 * (k4 + r2 * (k5 + r2 * k6))
+    dnum = k1 + r2 * (2 * k2 + 3 * k3 * r2)
+    dden = k4 + r2 * (2 * k5 + 3 * k6 * r2)
+    radial = num / den
+    drad = (dnum * den - num * dden) / (den * den)  # d radial / d r2
+    J = np.empty((len(x), 2, 2))
+    J[:, 0, 0] = radial + 2 * x * x * drad + 2 * p1 * y + 6 * p2 * x + 2 * s1 * x + 4 * s2 * r2 * x
+    J[:, 0, 1] = 2 * x * y * drad + 2 * p1 * x + 2 * p2 * y + 2 * s1 * y + 4 * s2 * r2 * y
+    J[:, 1, 0] = 2 * x * y * drad + 2 * p1 * x + 2 * p2 * y + 2 * s3 * x + 4 * s4 * r2 * x
+    J[:, 1, 1] = radial + 2 * y * y * drad + 6 * p1 * y + 2 * p2 * x + 2 * s3 * y + 4 * s4 * r2 * y
+    return J
+
+
+def undistort(xy_distorted: np.ndarray, dist: np.ndarray, *, tol: float = 1e-14,
+              max_iterations: int = 30) -> np.ndarray:
+    """Invert :func:`distort` by Newton's method, vectorised over points.
+
+    Parameters
+    ----------
+    xy_distorted : (N, 2) float64
+        Distorted normalised coordinates, ``K^-1 [u, v, 1]``.
+    dist : (M,) OpenCV distortion coefficients.
+    tol : float
+        Stop when every point's residual ``|distort(xy) - xy_distorted|`` is below this (normalised units;
+        1e-14 is about 1e-11 px for a 1000 px focal length).
+
+    Returns
+    -------
+    (N, 2) float64 undistorted normalised coordinates; NaN rows where Newton did not converge (far outside
+    the region where the distortion polynomial is invertible).
+    """
+    d = _full_coeffs(np.asarray(dist, dtype=np.float64))
+    target = np.asarray(xy_distorted, dtype=np.float64)
+    xy = target.copy()
+    if not np.any(d):
+        return xy
+    for _ in range(max_iterations):
+        res = distort(xy, d) - target
+        if not np.nanmax(np.abs(res), initial=0.0) >= tol:
+            break
+        J = _distort_jacobian(xy, d)
+        # Closed-form 2x2 Newton step (np.linalg.solve on (N, 2, 2) is ~10x slower).
+        det = J[:, 0, 0] * J[:, 1, 1] - J[:, 0, 1] * J[:, 1, 0]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            xy[:, 0] -= (J[:, 1, 1] * res[:, 0] - J[:, 0, 1] * res[:, 1]) / det
+            xy[:, 1] -= (J[:, 0, 0] * res[:, 1] - J[:, 1, 0] * res[:, 0]) / det
+    res = np.max(np.abs(distort(xy, d) - target), axis=1)
+    xy[~(res < 1e3 * tol)] = np.nan
+    return xy
+
+
+def _matrix(value, shape: tuple[int, ...], name: str, where: str) -> np.ndarray:
+    try:
+        arr = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise ConfigError(f"{where}: field {name!r} must be a numeric array of shape {shape}") from exc
+    if arr.shape != shape or not np.all(np.isfinite(arr)):
+        raise ConfigError(f"{where}: field {name!r} must be a finite array of shape {shape}, "
+                          f"found shape {arr.shape}")
+    return arr
+
+
+@dataclass(frozen=True, eq=False)
+class PinholeCamera:
+    """A calibrated camera or projector.
+
+    Attributes
+    ----------
+    K : (3, 3) float64 intrinsic matrix in pixels (fx, fy, cx, cy; zero skew, as OpenCV).
+    dist : (M,) float64 OpenCV distortion coefficients, M in {0, 4, 5, 8, 12, 14}.
+    width, height : int, image size in pixels (for a projector, its native resolution).
+    T_world_cam : (4, 4) float64 rigid pose, ``p_world = T_world_cam @ p_cam``.
+    name : str, a label used in messages and rig files.
+    """
+
+    K: np.ndarray
+    width: int
+    height: int
+    dist: np.ndarray = field(default_factory=lambda: np.zeros(5))
+    T_world_cam: np.ndarray = field(default_factory=lambda: np.eye(4))
+    name: str = "camera"
+
+    def __post_init__(self) -> None:
+        where = f"camera {self.name!r}"
+        K = _matrix(self.K, (3, 3), "K", where)
+        if K[0, 0] <= 0 or K[1, 1] <= 0 or K[2, 2] != 1 or np.any(K[2, :2] != 0) or K[1, 0] != 0 \
+                or K[0, 1] != 0:
+            raise ConfigError(f"{where}: K must be [[fx, 0, cx], [0, fy, cy], [0, 0, 1]] with fx, fy > 0 and no "
+                              f"skew (as in OpenCV), found {K.tolist()}")
+        dist = np.asarray(self.dist, dtype=np.float64).reshape(-1)
+        if dist.size not in (0, 4, 5, 8, 12, 14) or not np.all(np.isfinite(dist)):
+            raise ConfigError(f"{where}: 'dist' must hold 4, 5, 8, 12 or 14 finite OpenCV coefficients, "
+                              f"found {dist.size}")
+        if dist.size == 14 and np.any(dist[12:] != 0):
+            raise ConfigError(f"{where}: tilted-sensor distortion (tx, ty = {dist[12:].tolist()}) is not "
+                              "supported; recalibrate without CALIB_TILTED_MODEL")
+        T = _matrix(self.T_world_cam, (4, 4), "T_world_cam", where)
+        if not np.allclose(T[:3, :3] @ T[:3, :3].T, np.eye(3), atol=1e-9) or np.linalg.det(T[:3, :3]) < 0 \
+                or not np.allclose(T[3], [0, 0, 0, 1]):
+            raise ConfigError(f"{where}: 'T_world_cam' must be a rigid transform (orthonormal rotation, "
+                              "det +1, last row 0 0 0 1)")
+        if int(self.width) <= 0 or int(self.height) <= 0:
+            raise ConfigError(f"{where}: width and height must be positive, found {self.width}x{self.height}")
+        object.__setattr__(self, "K", K)
+        object.__setattr__(self, "dist", dist)
+        object.__setattr__(self, "T_world_cam", T)
+        object.__setattr__(self, "width", int(self.width))
+        object.__setattr__(self, "height", int(self.height))
+        for arr in (K, dist, T):
+            arr.flags.writeable = False
+
+    # ---------------------------------------------------------------- basic facts
+    @property
+    def size(self) -> tuple[int, int]:
+        """(width, height) in pixels."""
+        return self.width, self.height
+
+    @property
+    def center(self) -> np.ndarray:
+        """(3,) optical centre in world coordinates, metres."""
+        return self.T_world_cam[:3, 3].copy()
+
+    @property
+    def T_cam_world(self) -> np.ndarray:
+        return invert_T(self.T_world_cam)
+
+    def with_pose(self, T_world_cam: np.ndarray) -> "PinholeCamera":
+        """A copy with another pose."""
+        return PinholeCamera(self.K, self.width, self.height, self.dist, T_world_cam, self.name)
+
+    def resized(self, width: int, height: int) -> "PinholeCamera":
+        """The same lens on a sensor of another resolution (same field of view; pixel centres kept)."""
+        sx, sy = width / self.width, height / self.height
+        K = self.K.copy()
+        K[0, :] *= sx
+        K[1, :] *= sy
+        K[0, 2] = (self.K[0, 2] + 0.5) * sx - 0.5
+        K[1, 2] = (self.K[1, 2] + 0.5) * sy - 0.5
+        return PinholeCamera(K, width, height, self.dist, self.T_world_cam, self.name)
+
+    def pixel_grid(self) -> np.ndarray:
+        """(H * W, 2) float64 centres of every pixel, row-major (row 0 first)."""
+        v, u = np.mgrid[0: self.height, 0: self.width]
+        return np.column_stack([u.ravel(), v.ravel()]).astype(np.float64)
+
+    # ---------------------------------------------------------------- projection
+    def normalized_to_pixels(self, xy: np.ndarray) -> np.ndarray:
+        """(N, 2) undistorted normalised coordinates -> (N, 2) pixels (applies distortion and K)."""
+        xd = distort(np.asarray(xy, dtype=np.float64), self.dist)
+        K = self.K
+        u = K[0, 0] * xd[:, 0] + K[0, 2]
+        v = K[1, 1] * xd[:, 1] + K[1, 2]
+        return np.column_stack([u, v])
+
+    def pixels_to_normalized(self, uv: np.ndarray) -> np.ndarray:
+        """(N, 2) pixels -> (N, 2) undistorted normalised coordinates (exact inverse of the lens model)."""
+        uv = np.asarray(uv, dtype=np.float64)
+        if uv.ndim != 2 or uv.shape[1] != 2:
+            raise InputError(f"{self.name}: pixels must be an (N, 2) array of (u, v), found shape {uv.shape}")
+        K = self.K
+        yd = (uv[:, 1] - K[1, 2]) / K[1, 1]
+        xd = (uv[:, 0] - K[0, 2]) / K[0, 0]
+        return undistort(np.column_stack([xd, yd]), self.dist)
+
+    def project_cam(self, points_cam: np.ndarray) -> np.ndarray:
+        """(N, 3) points in this device's frame -> (N, 2) pixels; NaN where z <= 0."""
+        P = np.asarray(points_cam, dtype=np.float64)
+        z = P[:, 2]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            xy = P[:, :2] / z[:, None]
+        xy[~(z > 0)] = np.nan
+        return self.normalized_to_pixels(xy)
+
+    def project(self, points_world: np.ndarray) -> np.ndarray:
+        """(N, 3) world points (metres) -> (N, 2) pixels ``(u, v)``; NaN for points behind the device.
+
+        Pixels may fall outside the image; compare with ``width``/``height`` to test visibility.
+        """
+        return self.project_cam(apply_T(self.T_cam_world, points_world))
+
+    def rays(self, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Back-project pixels to world rays.
+
+        Parameters
+        ----------
+        uv : (N, 2) pixels (u = column, v = row), distorted (as seen in the image).
+
+        Returns
+        -------
+        origins : (N, 3) float64, the optical centre in world coordinates (metres).
+        directions : (N, 3) float64 unit vectors in world coordinates; NaN where the lens model could not
+            be inverted.
+        """
+        xy = self.pixels_to_normalized(uv)
+        d = np.column_stack([xy, np.ones(len(xy))])
+        d /= np.linalg.norm(d, axis=1, keepdims=True)
+        d_world = transform_vectors(self.T_world_cam, d)
+        return np.broadcast_to(self.center, d_world.shape).copy(), d_world
+
+    # ---------------------------------------------------------------- projector light planes
+    def column_planes(self, cols: np.ndarray | None = None, *, rows: np.ndarray | None = None,
+                      n_samples: int = 65) -> np.ndarray:
+        """World planes of projector columns, as (N, 4) ``[n, d]`` with ``n . X + d = 0``, |n| = 1.
+
+        The light a projector sends through column ``u`` is the fan of rays through ``(u, v)`` for every
+        row v. Without distortion that fan is exactly a plane through the optical centre. With
+        distortion it is a slightly curved surface through the centre, and this returns:
+
+        - ``rows`` is None: the least-squares plane through the centre that best fits the ray directions
+          sampled at ``n_samples`` rows evenly spread over the image (the smallest eigenvector of their
+          scatter matrix). Exact without distortion; with distortion the rays deviate from it by the
+          curvature of the column (see docs/camera.md for figures on the default rig).
+        - ``rows`` given (same length as ``cols``): the plane tangent to the light surface at
+          ``(u, v)``: it contains the ray through ``(u, v)`` exactly and the surface's direction along
+          the column there, so it is exact for points lit near that row (use it with a decoded row).
+
+        Normals point towards increasing column numbers. ``cols`` default: every column 0..width-1.
+        """
+        cols = np.arange(self.width, dtype=np.float64) if cols is None else \
+            np.asarray(cols, dtype=np.float64).reshape(-1)
+        R = self.T_world_cam[:3, :3]
+        if rows is None:
+            v = np.linspace(-0.5, self.height - 0.5, n_samples)
+            uv = np.column_stack([np.repeat(cols, n_samples), np.tile(v, cols.size)])
+            xy = self.pixels_to_normalized(uv)
+            D = np.concatenate([xy, np.ones((len(xy), 1))], axis=1)
+            D /= np.linalg.norm(D, axis=1, keepdims=True)
+            D = D.reshape(cols.size, n_samples, 3)
+            M = np.einsum("nsi,nsj->nij", D, D)
+            _, vecs = np.linalg.eigh(M)
+            n_cam = vecs[:, :, 0]
+        else:
+            rows = np.asarray(rows, dtype=np.float64).reshape(-1)
+            if rows.shape != cols.shape:
+                raise InputError(f"{self.name}: column_planes got {cols.size} cols and {rows.size} rows")
+            h = 0.5
+            xy = self.pixels_to_normalized(np.column_stack([np.r_[cols, cols, cols],
+                                                            np.r_[rows, rows - h, rows + h]]))
+            D = np.concatenate([xy, np.ones((len(xy), 1))], axis=1).reshape(3, cols.size, 3)
+            n_cam = np.cross(D[0], D[2] - D[1])
+            n_cam /= np.linalg.norm(n_cam, axis=1, keepdims=True)
+        # Orient towards increasing u: compare with the direction of the neighbouring column.
+        xy_next = self.pixels_to_normalized(np.column_stack([cols + 1.0, np.full(cols.size, self.height / 2)]))
+        probe = np.concatenate([xy_next, np.ones((cols.size, 1))], axis=1)
+        sign = np.sign(np.sum(n_cam * probe, axis=1))
+        sign[sign == 0] = 1.0
+        n_cam *= sign[:, None]
+        n_world = n_cam @ R.T
+        d = -n_world @ self.center
+        return np.column_stack([n_world, d])
+
+    # ---------------------------------------------------------------- serialisation
+    def to_dict(self) -> dict:
+        """A JSON-ready dict (lists of floats), the rig-file form of this device."""
+        return {
+            "name": self.name,
+            "width": self.width,
+            "height": self.height,
+            "K": self.K.tolist(),
+            "dist": self.dist.tolist(),
+            "T_world_cam": self.T_world_cam.tolist(),
+        }
+
+    @classmethod
+    def from_dict(cls, data: dict, *, where: str = "camera") -> "PinholeCamera":
+        """Inverse of :meth:`to_dict`; ``where`` names the source (file and key) in error messages."""
+        if not isinstance(data, dict):
+            raise ConfigError(f"{where}: expected an object with K, dist, width, height, T_world_cam, "
+                              f"found {type(data).__name__}")
+        missing = [k for k in ("K", "width", "height") if k not in data]
+        if missing:
+            raise ConfigError(f"{where}: missing field(s) {missing}")
+        try:
+            width, height = int(data["width"]), int(data["height"])
+        except (TypeError, ValueError) as exc:
+            raise ConfigError(f"{where}: 'width' and 'height' must be integers, found "
+                              f"{data['width']!r}, {data['height']!r}") from exc
+        try:
+            return cls(K=data["K"], width=width, height=height, dist=data.get("dist", []),
+                       T_world_cam=data.get("T_world_cam", np.eye(4).tolist()),
+                       name=str(data.get("name", where)))
+        except ConfigError as exc:
+            raise ConfigError(f"{where}: {exc}") from exc
+
+    def save(self, path: str | Path) -> None:
+        Path(path).write_text(json.dumps(self.to_dict(), indent=2))
+
+    @classmethod
+    def load(cls, path: str | Path) -> "PinholeCamera":
+        try:
+            data = json.loads(Path(path).read_text())
+        except (OSError, json.JSONDecodeError) as exc:
+            raise ConfigError(f"{path}: cannot read camera JSON: {exc}") from exc
+        return cls.from_dict(data, where=str(path))
+
+    def __repr__(self) -> str:
+        K = self.K
+        return (f"PinholeCamera(name={self.name!r}, {self.width}x{self.height}, fx={K[0, 0]:.2f}, "
+                f"fy={K[1, 1]:.2f}, cx={K[0, 2]:.2f}, cy={K[1, 2]:.2f}, dist={np.round(self.dist, 5).tolist()}, "
+                f"centre={np.round(self.center, 4).tolist()} m)")

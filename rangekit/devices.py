@@ -1,0 +1,74 @@
+"""Device protocols. Real drivers (:mod:`rangekit.drivers`) and simulated devices (:mod:`rangekit.sim`)
+both implement these, and never import each other; acquisition code is written against them only.
+
+Units: angles in radians, images as numpy arrays (RGB channel order, uint8 or uint16).
+"""
+
+from __future__ import annotations
+
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+
+from rangekit.camera import PinholeCamera
+
+__all__ = ["Camera", "Projector", "Turntable", "Rig"]
+
+
+@runtime_checkable
+class Camera(Protocol):
+    """Something that takes pictures."""
+
+    @property
+    def model(self) -> PinholeCamera:
+        """Its calibration: intrinsics, distortion, size and pose ``T_world_cam``."""
+        ...
+
+    def capture(self) -> np.ndarray:
+        """One exposure: (H, W) or (H, W, 3) uint8/uint16, taken after the call started."""
+        ...
+
+
+@runtime_checkable
+class Projector(Protocol):
+    """Something that shows pattern images."""
+
+    @property
+    def model(self) -> PinholeCamera:
+        """Its calibration as an inverse camera."""
+        ...
+
+    @property
+    def resolution(self) -> tuple[int, int]:
+        """(width, height) in pixels; every pattern shown must have this size."""
+        ...
+
+    def show(self, image: np.ndarray) -> None:
+        """Display ``image`` ((height, width) or (height, width, 3), uint8) until the next call.
+
+        Raises PatternError if the size is not the projector's.
+        """
+        ...
+
+
+@runtime_checkable
+class Turntable(Protocol):
+    """A motorised rotation stage."""
+
+    @property
+    def angle(self) -> float:
+        """Current angle in radians (0 = where it was zeroed)."""
+        ...
+
+    def rotate_to(self, angle: float) -> None:
+        """Move to an absolute angle in radians and return once the motion has finished."""
+        ...
+
+
+@runtime_checkable
+class Rig(Protocol):
+    """The devices of one scanner, grouped."""
+
+    camera: Camera
+    projector: Projector
+    turntable: Turntable | None

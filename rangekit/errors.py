@@ -1,0 +1,79 @@
+"""The rangekit exception hierarchy.
+
+Every error a user can cause (a bad file, a bad argument, a device that does not answer) is raised as
+one of these, with a message that names the input, what was expected and what was found. The CLI
+catches :class:`RangekitError`, prints the message and exits non-zero, without a traceback.
+"""
+
+__all__ = [
+    "RangekitError",
+    "InputError",
+    "FileFormatError",
+    "SceneError",
+    "PatternError",
+    "ConfigError",
+    "DecodeError",
+    "CalibrationError",
+    "RegistrationError",
+    "DeviceError",
+    "DeviceTimeout",
+    "DeviceDisconnected",
+    "ProtocolError",
+    "CommandError",
+]
+
+
+class RangekitError(Exception):
+    """Base of every error rangekit raises on purpose."""
+
+
+class InputError(RangekitError, ValueError):
+    """An argument has the wrong shape, type or value."""
+
+
+class FileFormatError(InputError):
+    """A file is missing, unreadable, or not of the expected format."""
+
+
+class SceneError(InputError):
+    """A simulated scene cannot be built or seen (empty mesh, camera that sees nothing)."""
+
+
+class PatternError(InputError):
+    """A pattern image or pattern spec does not fit the projector or the capture."""
+
+
+class ConfigError(InputError):
+    """A rig file or settings file has a missing or invalid field."""
+
+
+class DecodeError(RangekitError):
+    """A capture stack cannot be decoded into projector coordinates."""
+
+
+class CalibrationError(RangekitError):
+    """A calibration cannot be computed (too few views, degenerate poses)."""
+
+
+class RegistrationError(RangekitError):
+    """Scans cannot be registered (empty, no overlap)."""
+
+
+class DeviceError(RangekitError):
+    """A device (real or simulated) failed or is missing."""
+
+
+class DeviceTimeout(DeviceError):
+    """A device did not answer within its deadline."""
+
+
+class DeviceDisconnected(DeviceError):
+    """A device went away (unplugged, port closed)."""
+
+
+class ProtocolError(DeviceError):
+    """A device answered something the protocol does not allow."""
+
+
+class CommandError(DeviceError):
+    """A device understood a command and refused it."""

@@ -1,0 +1,86 @@
+"""Small file helpers: atomic writes and lossless image I/O (RGB in memory, BGR only inside OpenCV)."""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from rangekit.errors import FileFormatError
+
+__all__ = ["atomic_write_bytes", "atomic_write_text", "atomic_write_json", "write_png", "read_png",
+           "atomic_save_npz", "read_json"]
+
+
+def atomic_write_bytes(path: str | Path, data: bytes) -> None:
+    """Write ``data`` to ``path`` via a temporary file in the same folder and a rename (never half-written)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def atomic_write_text(path: str | Path, text: str) -> None:
+    atomic_write_bytes(path, text.encode("utf-8"))
+
+
+def atomic_write_json(path: str | Path, obj) -> None:
+    atomic_write_text(path, json.dumps(obj, indent=2) + "\n")
+
+
+def read_json(path: str | Path, *, what: str = "JSON file") -> dict:
+    """Read a JSON file; a missing or malformed file gives FileFormatError naming it."""
+    path = Path(path)
+    try:
+        return json.loads(path.read_text())
+    except FileNotFoundError as exc:
+        raise FileFormatError(f"{path}: {what} not found") from exc
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise FileFormatError(f"{path}: cannot read {what}: {exc}") from exc
+
+
+def atomic_save_npz(path: str | Path, **arrays: np.ndarray) -> None:
+    """``np.savez_compressed`` to ``path``, atomically."""
+    import io
+
+    buf = io.BytesIO()
+    np.savez_compressed(buf, **arrays)
+    atomic_write_bytes(path, buf.getvalue())
+
+
+def write_png(path: str | Path, image: np.ndarray) -> None:
+    """Write an (H, W) or (H, W, 3) RGB uint8/uint16 image as a lossless PNG, atomically."""
+    img = np.asarray(image)
+    if img.dtype not in (np.uint8, np.uint16) or img.ndim not in (2, 3):
+        raise FileFormatError(f"{path}: PNG needs an (H, W) or (H, W, 3) uint8/uint16 image, found "
+                              f"{img.dtype} {img.shape}")
+    if img.ndim == 3:
+        img = cv2.cvtColor(img, cv2.COLOR_RGB2BGR)
+    ok, buf = cv2.imencode(".png", img, [cv2.IMWRITE_PNG_COMPRESSION, 1])
+    if not ok:
+        raise FileFormatError(f"{path}: OpenCV could not encode the image as PNG")
+    atomic_write_bytes(path, buf.tobytes())
+
+
+def read_png(path: str | Path) -> np.ndarray:
+    """Read a PNG (or any lossless image OpenCV reads) unchanged in bit depth, colour as RGB."""
+    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    if img is None:
+        raise FileFormatError(f"{path}: not found or not a readable image")
+    if img.ndim == 3 and img.shape[2] == 4:
+        img = img[:, :, :3]
+    if img.ndim == 3:
+        img = cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
+    return img

@@ -1,0 +1,19 @@
+"""Simulated hardware with exact ground truth: scenes, ray casting, image formation, devices.
+
+``from rangekit.sim import SimRig, default_scene`` gives a projector-camera-turntable rig that produces
+the same captures as the hardware, plus the truth (depth, points, normals, projector coordinates).
+"""
+
+from rangekit.sim.devices import SimCamera, SimProjector, SimRig, SimTurntable, default_rig
+from rangekit.sim.objects import BUILTIN_OBJECTS, SceneObject, load_mesh, make_object
+from rangekit.sim.raycast import ViewGeometry, WorldMesh, cast_view
+from rangekit.sim.render import ImagingModel, ViewRenderer
+from rangekit.sim.scene import Scene, default_scene
+
+__all__ = [
+    "SimCamera", "SimProjector", "SimRig", "SimTurntable", "default_rig",
+    "BUILTIN_OBJECTS", "SceneObject", "load_mesh", "make_object",
+    "ViewGeometry", "WorldMesh", "cast_view",
+    "ImagingModel", "ViewRenderer",
+    "Scene", "default_scene",
+]

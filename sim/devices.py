@@ -1,0 +1,170 @@
+"""Simulated camera, projector and turntable implementing :mod:`rangekit.devices`, and the default rig.
+
+The default rig (world frame = turntable frame: origin at the centre of the table top, z up):
+camera 1280x1024 at 0.5 m from the object, 25 degrees above the table; projector 1280x800 with a 0.2 m
+baseline along the camera's x axis, both aimed at a point 6 cm above the table centre; mild lens
+distortion on both. ``default_rig()`` is the truth the calibration issue is measured against.
+
+Noise is reproducible per capture *state*: the generator for a capture is seeded from the rig's seed,
+the turntable angle, a hash of the projected image and how many times that state was captured before.
+So a scan that is interrupted and resumed records the same bytes as one that ran through.
+"""
+
+from __future__ import annotations
+
+import zlib
+
+import numpy as np
+
+from rangekit.camera import PinholeCamera
+from rangekit.errors import PatternError
+from rangekit.geometry import look_at, make_T
+from rangekit.rig import Rig
+from rangekit.sim.raycast import ViewGeometry, cast_view
+from rangekit.sim.render import ImagingModel, ViewRenderer
+from rangekit.sim.scene import Scene
+
+__all__ = ["default_rig", "SimCamera", "SimProjector", "SimTurntable", "SimRig"]
+
+
+def default_rig() -> Rig:
+    """The simulator's true rig (see the module docstring)."""
+    target = np.array([0.0, 0.0, 0.06])
+    elev = np.radians(25.0)
+    eye = target + 0.5 * np.array([0.0, -np.cos(elev), np.sin(elev)])
+    T_world_cam = look_at(eye, target)
+    cam = PinholeCamera(K=np.array([[1800.0, 0.0, 645.3], [0.0, 1801.5, 508.7], [0.0, 0.0, 1.0]]),
+                        width=1280, height=1024, dist=np.array([-0.08, 0.12, 2e-4, -1e-4, 0.0]),
+                        T_world_cam=T_world_cam, name="camera")
+    proj_eye = eye + 0.2 * T_world_cam[:3, 0]
+    proj = PinholeCamera(K=np.array([[1500.0, 0.0, 640.0], [0.0, 1500.0, 520.0], [0.0, 0.0, 1.0]]),
+                         width=1280, height=800, dist=np.array([-0.02, 0.01, 0.0, 0.0, 0.0]),
+                         T_world_cam=look_at(proj_eye, target), name="projector")
+    return Rig(cameras=(cam,), projector=proj, T_world_table=make_T(),
+               devices={"camera": {"type": "sim"}, "projector": {"type": "sim"}, "turntable": {"type": "sim"}},
+               capture={"bits": 8})
+
+
+class SimTurntable:
+    """A turntable that moves instantly; ``angle`` in radians."""
+
+    def __init__(self) -> None:
+        self._angle = 0.0
+
+    @property
+    def angle(self) -> float:
+        return self._angle
+
+    def rotate_to(self, angle: float) -> None:
+        self._angle = float(angle)
+
+
+class SimProjector:
+    """Holds the image being shown; black until the first :meth:`show`."""
+
+    def __init__(self, model: PinholeCamera) -> None:
+        self._model = model
+        self._image = np.zeros((model.height, model.width), np.uint8)
+
+    @property
+    def model(self) -> PinholeCamera:
+        return self._model
+
+    @property
+    def resolution(self) -> tuple[int, int]:
+        return self._model.width, self._model.height
+
+    @property
+    def image(self) -> np.ndarray:
+        return self._image
+
+    def show(self, image: np.ndarray) -> None:
+        img = np.asarray(image)
+        W, H = self.resolution
+        if img.shape[:2] != (H, W) or img.ndim not in (2, 3) or (img.ndim == 3 and img.shape[2] != 3):
+            raise PatternError(f"projector {self._model.name!r} is {W}x{H}: a pattern must have shape ({H}, {W}) "
+                               f"or ({H}, {W}, 3), found {img.shape}")
+        self._image = img
+
+
+class SimCamera:
+    """Renders the scene as lit by the sim projector at the sim turntable's angle."""
+
+    def __init__(self, rig: "SimRig") -> None:
+        self._rig = rig
+
+    @property
+    def model(self) -> PinholeCamera:
+        return self._rig.rig.camera
+
+    def capture(self) -> np.ndarray:
+        image = self._rig.projector.image
+        return self._rig.renderer().render(image, self._rig.rng_for(image))
+
+
+class SimRig:
+    """A simulated projector-camera-turntable rig with exact ground truth.
+
+    Parameters
+    ----------
+    scene : Scene, in the rig's world frame.
+    rig : Rig, default :func:`default_rig`.
+    imaging : ImagingModel (noise, blur, gamma, bit depth...).
+    seed : int, base seed of every capture's noise.
+    """
+
+    def __init__(self, scene: Scene, rig: Rig | None = None, *, imaging: ImagingModel | None = None,
+                 seed: int = 0) -> None:
+        self.scene = scene
+        self.rig = rig if rig is not None else default_rig()
+        self.imaging = imaging if imaging is not None else ImagingModel()
+        self.seed = int(seed)
+        self.camera = SimCamera(self)
+        self.projector = SimProjector(self.rig.projector)
+        self.turntable = SimTurntable() if self.rig.T_world_table is not None else None
+        self._cam_rays = None
+        self._cache_key = None
+        self._cache = None
+        self._counts: dict[tuple[int, int], int] = {}
+
+    # ---------------------------------------------------------------- ground truth
+    def _state_angle(self) -> float:
+        return 0.0 if self.turntable is None else self.turntable.angle
+
+    def _view(self) -> tuple[ViewGeometry, ViewRenderer]:
+        angle = self._state_angle()
+        if self._cache_key != angle:
+            if self._cam_rays is None:
+                self._cam_rays = self.rig.camera.rays(self.rig.camera.pixel_grid())
+            motion = self.rig.T_world_rotated(angle) if self.turntable is not None else None
+            geom = cast_view(self.scene.world_mesh(motion), self.rig.camera, self.rig.projector,
+                             cam_rays=self._cam_rays)
+            self._cache = (geom, ViewRenderer(geom, self.imaging, self.projector.resolution))
+            self._cache_key = angle
+        return self._cache
+
+    def ground_truth(self) -> ViewGeometry:
+        """Exact per-pixel truth for the current turntable angle."""
+        return self._view()[0]
+
+    def renderer(self) -> ViewRenderer:
+        return self._view()[1]
+
+    # ---------------------------------------------------------------- reproducible noise
+    def rng_for(self, image: np.ndarray) -> np.random.Generator:
+        """The generator for the next capture of ``image`` at the current angle (see module docstring)."""
+        angle_key = int(round((self._state_angle() % (2 * np.pi)) * 1e9))
+        img = np.ascontiguousarray(image)
+        key = (angle_key, zlib.crc32(img.tobytes()) ^ zlib.crc32(repr((img.shape, img.dtype.str)).encode()))
+        count = self._counts.get(key, 0)
+        self._counts[key] = count + 1
+        return np.random.default_rng(np.random.SeedSequence(self.seed, spawn_key=(*key, count)))
+
+    def capture_sequence(self, patterns) -> list[np.ndarray]:
+        """Show each pattern and capture it; renders on two threads. Same bytes as show()/capture() in turn."""
+        images, rngs = [], []
+        for p in patterns:
+            self.projector.show(p)
+            images.append(self.projector.image)
+            rngs.append(self.rng_for(self.projector.image))
+        return self.renderer().render_many(images, rngs)

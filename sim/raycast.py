@@ -1,0 +1,199 @@
+"""Ground truth of one camera view: what each pixel sees and where the projector lights it.
+
+Open3D's ``RaycastingScene`` (float32, BVH) finds which triangle each ray hits; the hit point, depth
+and barycentrics are then recomputed in float64 from that triangle (Moller-Trumbore), so the ground truth
+is exact to double precision for the tessellated scene, not to float32 (~0.1 um at 0.5 m, 3e-4 px).
+
+Frames: everything is in the rig's world frame, metres, unless the field says otherwise.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from rangekit.camera import PinholeCamera
+from rangekit.errors import SceneError
+
+__all__ = ["WorldMesh", "ViewGeometry", "cast_view"]
+
+
+@dataclass(frozen=True, eq=False)
+class WorldMesh:
+    """All scene triangles in the world frame for one scene state (one turntable angle)."""
+
+    vertices: np.ndarray        # (V, 3) float64 world, metres
+    triangles: np.ndarray       # (F, 3) int64
+    vertex_normals: np.ndarray  # (V, 3) float64 unit, world
+    vertex_albedo: np.ndarray   # (V, 3) float64 linear RGB in [0, 1]
+    face_specular: np.ndarray   # (F,) Blinn-Phong k_s
+    face_shininess: np.ndarray  # (F,) Blinn-Phong exponent
+    face_smooth: np.ndarray     # (F,) bool: shade with interpolated vertex normals
+    face_object: np.ndarray     # (F,) int index into ``object_names``
+    object_names: tuple[str, ...]
+
+
+@dataclass(frozen=True, eq=False)
+class ViewGeometry:
+    """Exact per-pixel ground truth of a camera view. All maps are (H, W[, 3]) in camera pixels.
+
+    ``hit``: the camera ray meets a surface. ``lit``: additionally the projector lights that point
+    (inside the projector image, facing the projector, no shadow). Undefined entries are NaN (floats),
+    False (bools) or -1 (ints).
+    """
+
+    hit: np.ndarray         # (H, W) bool
+    lit: np.ndarray         # (H, W) bool
+    xyz: np.ndarray         # (H, W, 3) float64 world hit point, metres
+    normal: np.ndarray      # (H, W, 3) float64 world unit shading normal, facing the camera
+    depth: np.ndarray       # (H, W) float64 z of the hit in the camera frame, metres
+    range: np.ndarray       # (H, W) float64 distance from the camera centre to the hit, metres
+    proj_col: np.ndarray    # (H, W) float64 projector column u (pixel centres at integers); NaN unless lit
+    proj_row: np.ndarray    # (H, W) float64 projector row v; NaN unless lit
+    object_id: np.ndarray   # (H, W) int32 index into object_names, -1 where no hit
+    object_names: tuple[str, ...]
+    albedo: np.ndarray      # (H, W, 3) float64 linear RGB albedo, 0 where no hit
+    cos_proj: np.ndarray    # (H, W) float64 cos(normal, direction to projector), 0 unless lit
+    specular: np.ndarray    # (H, W) float64 k_s * (n.h)^shininess towards projector and camera, 0 unless lit
+    proj_dist: np.ndarray   # (H, W) float64 distance hit -> projector centre, metres; NaN where no hit
+
+    @property
+    def valid(self) -> np.ndarray:
+        """(H, W) bool: seen by the camera and lit by the projector (where projector codes exist)."""
+        return self.lit
+
+
+def _open3d_cast(vertices: np.ndarray, triangles: np.ndarray, origins: np.ndarray,
+                 directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """First hit of each ray: (t_hit float32 with inf for misses, primitive id int64 with -1 for misses)."""
+    import open3d as o3d  # imported here: it takes ~2 s and most of rangekit never needs it
+
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(o3d.core.Tensor(vertices.astype(np.float32)),
+                        o3d.core.Tensor(triangles.astype(np.uint32)))
+    rays = np.concatenate([origins, directions], axis=1).astype(np.float32)
+    out = scene.cast_rays(o3d.core.Tensor(rays))
+    t_hit = out["t_hit"].numpy()
+    prim = out["primitive_ids"].numpy().astype(np.int64)
+    prim[~np.isfinite(t_hit)] = -1
+    return t_hit, prim
+
+
+def _intersect_exact(mesh: WorldMesh, prim: np.ndarray, o: np.ndarray, d: np.ndarray):
+    """Float64 Moller-Trumbore against the given triangles: (t, b1, b2)."""
+    tri = mesh.triangles[prim]
+    v0 = mesh.vertices[tri[:, 0]]
+    e1 = mesh.vertices[tri[:, 1]] - v0
+    e2 = mesh.vertices[tri[:, 2]] - v0
+    pvec = np.cross(d, e2)
+    det = np.einsum("ij,ij->i", e1, pvec)
+    tvec = o - v0
+    b1 = np.einsum("ij,ij->i", tvec, pvec) / det
+    qvec = np.cross(tvec, e1)
+    b2 = np.einsum("ij,ij->i", d, qvec) / det
+    t = np.einsum("ij,ij->i", e2, qvec) / det
+    return t, b1, b2
+
+
+def cast_view(mesh: WorldMesh, camera: PinholeCamera, projector: PinholeCamera | None, *,
+              cam_rays: tuple[np.ndarray, np.ndarray] | None = None,
+              shadow_eps: float = 2e-5) -> ViewGeometry:
+    """Cast every camera pixel into the scene and trace its shadow ray to the projector.
+
+    Parameters
+    ----------
+    mesh : WorldMesh of the scene at this state.
+    camera : the camera; every pixel centre is cast.
+    projector : the projector, or None for a scene without one (``lit`` is then all False).
+    cam_rays : optional cached ``camera.rays(camera.pixel_grid())`` (they do not change between views).
+    shadow_eps : float
+        Metres: an occluder must be at least this much closer to the projector than the point to shadow it.
+
+    Raises
+    ------
+    SceneError
+        If the mesh is empty or no camera ray hits any surface.
+    """
+    if len(mesh.triangles) == 0:
+        raise SceneError("the scene has no triangles; add at least one object")
+    H, W = camera.height, camera.width
+    o_all, d_all = cam_rays if cam_rays is not None else camera.rays(camera.pixel_grid())
+    _, prim_all = _open3d_cast(mesh.vertices, mesh.triangles, o_all, d_all)
+    hit_idx = np.flatnonzero(prim_all >= 0)
+    if hit_idx.size == 0:
+        raise SceneError(f"camera {camera.name!r} sees nothing: none of its {H * W} rays hits the scene "
+                         f"(objects: {', '.join(mesh.object_names)}); check T_world_cam and where the objects "
+                         "are placed")
+    prim = prim_all[hit_idx]
+    o, d = o_all[hit_idx], d_all[hit_idx]
+    t, b1, b2 = _intersect_exact(mesh, prim, o, d)
+    p = o + t[:, None] * d
+    tri = mesh.triangles[prim]
+    v0 = mesh.vertices[tri[:, 0]]
+    n_face = np.cross(mesh.vertices[tri[:, 1]] - v0, mesh.vertices[tri[:, 2]] - v0)
+    n_face /= np.linalg.norm(n_face, axis=1, keepdims=True)
+    # Barycentric weights, clipped for attribute interpolation (float32 may pick an edge neighbour).
+    wb = np.column_stack([1.0 - b1 - b2, b1, b2]).clip(0.0, 1.0)
+    wb /= wb.sum(axis=1, keepdims=True)
+    n_smooth = np.einsum("ij,ijk->ik", wb, mesh.vertex_normals[tri])
+    n_smooth /= np.linalg.norm(n_smooth, axis=1, keepdims=True)
+    smooth = mesh.face_smooth[prim]
+    n = np.where(smooth[:, None], n_smooth, n_face)
+    # Face the camera: a surface seen from its back side is shaded as its front.
+    back = np.einsum("ij,ij->i", n_face, d) > 0
+    n_face[back] *= -1
+    n[back] *= -1
+    albedo = np.einsum("ij,ijk->ik", wb, mesh.vertex_albedo[tri])
+
+    def full(shape, fill, dtype=np.float64):
+        return np.full((H * W,) + shape, fill, dtype=dtype)
+
+    xyz, normal, alb = full((3,), np.nan), full((3,), np.nan), full((3,), 0.0)
+    xyz[hit_idx], normal[hit_idx], alb[hit_idx] = p, n, albedo
+    cam_z = (p - camera.center) @ camera.T_world_cam[:3, 2]
+    depth, rng_map = full((), np.nan), full((), np.nan)
+    depth[hit_idx], rng_map[hit_idx] = cam_z, t
+    obj = full((), -1, np.int32)
+    obj[hit_idx] = mesh.face_object[prim]
+    proj_col, proj_row = full((), np.nan), full((), np.nan)
+    cos_proj, spec, pdist = full((), 0.0), full((), 0.0), full((), np.nan)
+    lit = np.zeros(H * W, dtype=bool)
+
+    if projector is not None:
+        c_p = projector.center
+        to_p = c_p - p
+        dist_p = np.linalg.norm(to_p, axis=1)
+        l_dir = to_p / dist_p[:, None]
+        pdist[hit_idx] = dist_p
+        uvp = projector.project(p)
+        inside = (uvp[:, 0] >= -0.5) & (uvp[:, 0] < projector.width - 0.5) & \
+                 (uvp[:, 1] >= -0.5) & (uvp[:, 1] < projector.height - 0.5)
+        cos_i = np.einsum("ij,ij->i", n, l_dir)
+        facing = (np.einsum("ij,ij->i", n_face, l_dir) > 0) & (cos_i > 0)
+        cand = np.flatnonzero(inside & facing)
+        # Shadow rays from the projector centre towards each candidate point.
+        t_s, prim_s = _open3d_cast(mesh.vertices, mesh.triangles,
+                                   np.broadcast_to(c_p, (cand.size, 3)), -l_dir[cand])
+        blocked = (prim_s != prim[cand]) & (t_s < dist_p[cand] - shadow_eps)
+        ok = cand[~blocked]
+        lit_idx = hit_idx[ok]
+        lit[lit_idx] = True
+        proj_col[lit_idx] = uvp[ok, 0]
+        proj_row[lit_idx] = uvp[ok, 1]
+        cos_proj[lit_idx] = cos_i[ok]
+        # Blinn-Phong half vector between the projector and the camera directions.
+        v_dir = -d[ok]
+        h = l_dir[ok] + v_dir
+        h /= np.linalg.norm(h, axis=1, keepdims=True)
+        ks = mesh.face_specular[prim[ok]]
+        if np.any(ks > 0):
+            nh = np.clip(np.einsum("ij,ij->i", n[ok], h), 0.0, 1.0)
+            spec[lit_idx] = ks * nh ** mesh.face_shininess[prim[ok]]
+
+    return ViewGeometry(
+        hit=(obj >= 0).reshape(H, W), lit=lit.reshape(H, W), xyz=xyz.reshape(H, W, 3),
+        normal=normal.reshape(H, W, 3), depth=depth.reshape(H, W), range=rng_map.reshape(H, W),
+        proj_col=proj_col.reshape(H, W), proj_row=proj_row.reshape(H, W), object_id=obj.reshape(H, W),
+        object_names=mesh.object_names, albedo=alb.reshape(H, W, 3), cos_proj=cos_proj.reshape(H, W),
+        specular=spec.reshape(H, W), proj_dist=pdist.reshape(H, W))

@@ -1,0 +1,62 @@
+"""A simulated scene: objects on (or off) the turntable, flattened to one world mesh per state."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from rangekit.errors import SceneError
+from rangekit.geometry import apply_T, compose, transform_vectors
+from rangekit.sim.objects import SceneObject, make_object, turntable_disc
+from rangekit.sim.raycast import WorldMesh
+
+__all__ = ["Scene", "default_scene"]
+
+
+@dataclass(frozen=True, eq=False)
+class Scene:
+    """Objects in the rig's world frame (the default rig's world is the turntable frame, z up)."""
+
+    objects: tuple[SceneObject, ...]
+
+    def __post_init__(self) -> None:
+        if not self.objects:
+            raise SceneError("a scene needs at least one object")
+        object.__setattr__(self, "objects", tuple(self.objects))
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return tuple(o.name for o in self.objects)
+
+    def world_mesh(self, T_motion: np.ndarray | None = None) -> WorldMesh:
+        """All triangles in world coordinates; ``T_motion`` (4, 4) moves the objects on the turntable."""
+        verts, tris, normals, albedo, spec, shin, smooth, owner = [], [], [], [], [], [], [], []
+        offset = 0
+        for i, obj in enumerate(self.objects):
+            T = obj.T_world_obj if (T_motion is None or not obj.on_turntable) else compose(T_motion, obj.T_world_obj)
+            verts.append(apply_T(T, obj.vertices))
+            normals.append(transform_vectors(T, obj.vertex_normals()))
+            tris.append(obj.triangles + offset)
+            albedo.append(obj.vertex_albedo)
+            nf = len(obj.triangles)
+            spec.append(np.full(nf, obj.specular))
+            shin.append(np.full(nf, obj.shininess))
+            smooth.append(np.full(nf, obj.smooth))
+            owner.append(np.full(nf, i, dtype=np.int32))
+            offset += len(obj.vertices)
+        return WorldMesh(vertices=np.concatenate(verts), triangles=np.concatenate(tris).astype(np.int64),
+                         vertex_normals=np.concatenate(normals), vertex_albedo=np.concatenate(albedo),
+                         face_specular=np.concatenate(spec), face_shininess=np.concatenate(shin),
+                         face_smooth=np.concatenate(smooth), face_object=np.concatenate(owner),
+                         object_names=self.names)
+
+
+def default_scene(obj: str | SceneObject = "lumpy", *, with_table: bool = True, **object_options) -> Scene:
+    """The object (a built-in name, a mesh file or a SceneObject) standing on the turntable's centre."""
+    if isinstance(obj, str):
+        obj = make_object(obj, **object_options)
+    objects = [obj.placed_on_table()]
+    if with_table:
+        objects.append(turntable_disc())
+    return Scene(tuple(objects))

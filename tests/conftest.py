@@ -1,0 +1,31 @@
+import numpy as np
+import pytest
+
+from rangekit.geometry import axis_angle_to_R, make_T
+from rangekit.sim import ImagingModel, Scene, SimRig, default_rig
+from rangekit.sim.objects import box, plane
+
+
+@pytest.fixture(scope="session")
+def rig():
+    return default_rig()
+
+
+@pytest.fixture(scope="session")
+def tilted_plane_scene():
+    """A large plane through the table centre, tilted 20 deg about x and 15 deg about z (off the table)."""
+    R = axis_angle_to_R([0, 0, 1], np.radians(15)) @ axis_angle_to_R([1, 0, 0], np.radians(70))
+    obj = plane(1.0, 1.0).with_pose(make_T(R, [0.0, 0.02, 0.06]))
+    return Scene((obj,))
+
+
+@pytest.fixture(scope="session")
+def box_on_plane_scene():
+    ground = plane(1.0, 1.0, albedo=0.6)
+    cube = box((0.06, 0.05, 0.08), albedo=0.8).placed_on_table(xy=(0.01, 0.0))
+    return Scene((ground, cube))
+
+
+@pytest.fixture(scope="session")
+def noiseless():
+    return ImagingModel().noiseless()

@@ -20,7 +20,7 @@ class Camera(Protocol):
     """Something that takes pictures."""
 
     @property
-    def model(self) -> PinholeCamera:
+    def calibration(self) -> PinholeCamera:
         """Its calibration: intrinsics, distortion, size and pose ``T_world_cam``."""
         ...
 
@@ -34,7 +34,7 @@ class Projector(Protocol):
     """Something that shows pattern images."""
 
     @property
-    def model(self) -> PinholeCamera:
+    def calibration(self) -> PinholeCamera:
         """Its calibration as an inverse camera."""
         ...
 

@@ -15,6 +15,11 @@ from rangekit.errors import FileFormatError
 __all__ = ["atomic_write_bytes", "atomic_write_text", "atomic_write_json", "write_png", "read_png",
            "atomic_save_npz", "read_json"]
 
+# mkstemp creates 0600 files; give written files the usual mode (0666 minus the umask).
+_UMASK = os.umask(0)
+os.umask(_UMASK)
+_FILE_MODE = 0o666 & ~_UMASK
+
 
 def atomic_write_bytes(path: str | Path, data: bytes) -> None:
     """Write ``data`` to ``path`` via a temporary file in the same folder and a rename (never half-written)."""
@@ -26,6 +31,7 @@ def atomic_write_bytes(path: str | Path, data: bytes) -> None:
             f.write(data)
             f.flush()
             os.fsync(f.fileno())
+        os.chmod(tmp, _FILE_MODE)
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)

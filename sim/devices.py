@@ -67,7 +67,7 @@ class SimProjector:
         self._image = np.zeros((model.height, model.width), np.uint8)
 
     @property
-    def model(self) -> PinholeCamera:
+    def calibration(self) -> PinholeCamera:
         return self._model
 
     @property
@@ -94,7 +94,7 @@ class SimCamera:
         self._rig = rig
 
     @property
-    def model(self) -> PinholeCamera:
+    def calibration(self) -> PinholeCamera:
         return self._rig.rig.camera
 
     def capture(self) -> np.ndarray:

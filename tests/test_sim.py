@@ -35,6 +35,8 @@ def test_plane_projector_map_equals_plane_induced_homography(rig, tilted_plane_s
     xp = np.c_[xc, np.ones(len(xc))] @ H.T
     ref, _ = cv2.projectPoints(xp / xp[:, 2:], np.zeros(3), np.zeros(3), proj.K, proj.dist)
     err = np.hypot(truth.proj_col[v, u] - ref[:, 0, 0], truth.proj_row[v, u] - ref[:, 0, 1])
+    print(f"\nplane: projector coordinates vs plane-induced homography: max {err.max():.2e} px, "
+          f"RMS {np.sqrt(np.mean(err ** 2)):.2e} px over {err.size} lit pixels")
     assert err.max() <= 1e-3, f"max {err.max():.2e} px"
     # Depth and points agree with the same plane.
     X = truth.xyz[v, u]
@@ -76,6 +78,8 @@ def test_box_on_plane_casts_the_geometric_shadow(rig, box_on_plane_scene):
     agree = np.mean(lit_analytic == lit_sim)
     n_shadow = np.count_nonzero(on_plane & in_image & shadow)
     assert n_shadow > 5000, "the test scene must cast a real shadow"
+    print(f"\nbox on plane: lit/shadow mask agreement {agree:.6f} over {lit_sim.size} "
+          f"pixels ({np.count_nonzero(lit_analytic != lit_sim)} differ; {n_shadow} shadowed plane pixels)")
     assert agree >= 0.999, f"shadow mask agreement {agree:.5f}"
     # Shadowed plane points get no projector light in a white capture (noise-free).
     sim_nf = SimRig(box_on_plane_scene, rig, imaging=ImagingModel(camera_blur=0.0).noiseless())
@@ -127,6 +131,8 @@ def test_noise_mean_and_variance_follow_the_model(rig, tilted_plane_scene):
         b = (e >= lo) & (e < hi)
         assert b.sum() > 5000
         ratio = var[b].mean() / model_var[b].mean()
+        print(f"\nnoise, signal in [{lo}, {hi}): variance measured/model {ratio:.4f}, "
+              f"mean measured/model {mean[b].mean() / e[b].mean():.5f}")
         assert abs(ratio - 1) < 0.05, f"variance ratio {ratio:.3f} in [{lo}, {hi})"
         assert abs(mean[b].mean() / e[b].mean() - 1) < 0.05
 
@@ -191,3 +197,43 @@ def test_bad_input_gives_clear_errors(rig, tmp_path, tilted_plane_scene):
         sim.projector.show(np.zeros((600, 800), np.uint8))
     with pytest.raises(PatternError, match=r"\(800, 1280\)"):
         sim.renderer().expected(np.zeros((800, 1000), np.uint8))
+
+
+def test_specular_highlight_follows_blinn_phong(rig):
+    from dataclasses import replace
+
+    ball = replace(sphere(0.05, subdivisions=5, specular=0.6, shininess=30.0).placed_on_table(), name="shiny")
+    model = ImagingModel(camera_blur=0.0, projector_blur=0.0, ambient=0.0).noiseless()
+    sim = SimRig(Scene((ball,)), rig, imaging=model)
+    truth = sim.ground_truth()
+    E = sim.renderer().expected(np.full((800, 1280), 255, np.uint8))
+    v, u = np.nonzero(truth.lit)
+    X, n = truth.xyz[v, u], truth.normal[v, u]
+    l = rig.projector.center - X
+    d_p = np.linalg.norm(l, axis=1)
+    l /= d_p[:, None]
+    view = rig.camera.center - X
+    view /= np.linalg.norm(view, axis=1, keepdims=True)
+    h = (l + view) / np.linalg.norm(l + view, axis=1, keepdims=True)
+    L = 1.0  # white, black level does not matter at full white: 0.001 + 0.999 * 1
+    ref = L * (0.8 * np.sum(n * l, axis=1) + 0.6 * np.clip(np.sum(n * h, axis=1), 0, 1) ** 30) * (0.5 / d_p) ** 2
+    assert np.abs(E[v, u] - ref).max() < 1e-5
+    assert (E[v, u] - 0.8 * np.sum(n * l, axis=1) * (0.5 / d_p) ** 2).max() > 0.3  # a real highlight
+
+
+def test_projector_defocus_blurs_a_stripe_edge(rig, tilted_plane_scene):
+    from scipy.ndimage import gaussian_filter1d
+
+    sigma = 1.5
+    model = ImagingModel(camera_blur=0.0, projector_blur=sigma, gamma=1.0, black_level=0.0, ambient=0.0).noiseless()
+    sim = SimRig(tilted_plane_scene, rig, imaging=model)
+    truth = sim.ground_truth()
+    ren = sim.renderer()
+    step = np.zeros((800, 1280), np.uint8)
+    step[:, :640] = 255
+    ratio = ren.expected(step) / np.where(truth.lit, ren.expected(np.full_like(step, 255)), np.nan)
+    row_profile = gaussian_filter1d(np.r_[np.ones(640), np.zeros(640)], sigma, mode="nearest", truncate=6)
+    near = truth.lit & (np.abs(truth.proj_col - 639.5) < 6) & (truth.proj_row > 50) & (truth.proj_row < 750)
+    ref = np.interp(truth.proj_col[near], np.arange(1280), row_profile)
+    assert near.sum() > 1000
+    assert np.abs(ratio[near] - ref).max() < 2e-3

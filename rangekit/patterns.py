@@ -1,31 +1,65 @@
 """Projector pattern sets, each described by a serialisable :class:`PatternSpec`.
 
-A spec names the method and the projector size; its frames are generated on demand (uint8 images of
-the projector's size), so a 44-frame sequence never sits in memory twice. The spec is saved with every
-capture (``patterns.json``) and checked when decoding.
+A spec names the method, the projector size and the options; its frames are generated on demand as
+uint8 images of the projector's size ((H, W), or (H, W, 3) for colour), so a long sequence is never held
+twice. The spec is saved with every capture (``patterns.json``) and checked when decoding.
 
-Methods
--------
-``white``: one full-white frame. ``black``: one black frame.
-``graycode``: white, black, then for each coded axis ("columns", then "rows") one frame per bit, most
-significant bit first, each followed by its inverse. ``n_bits = ceil(log2(width))`` for columns; a
-1280x800 projector gives 2 + 2 * (11 + 10) = 44 frames. Column u is lit in bit frame b when bit b of
-``gray(u)`` is 1, with ``gray(x) = x ^ (x >> 1)``.
+Methods and frame lists (Fusiello ch. 13.2; pixel centres at integers, column u lit means value 255):
+
+``white``, ``black``
+    One frame.
+``graycode``
+    white, black, then for each coded axis ("columns" first, then "rows") one frame per bit, most
+    significant first, each followed by its inverse. ``n_bits = ceil(log2(size))``: a 1280x800
+    projector gives 2 + 2 * (11 + 10) = 44 frames. Column u is lit in frame ``col_b{b}`` when bit b
+    of ``gray(u)`` is 1, ``gray(x) = x ^ (x >> 1)``; this is also OpenCV's ``GrayCodePattern``.
+``xor02``, ``xor04`` (Gupta & Nayar, CVPR 2011)
+    As graycode, but every bit frame coarser than the base is XORed with the base frame, bit 0 (stripes
+    2 px wide) for XOR-02 and bit 1 (4 px) for XOR-04. Every frame then has only fine stripes, so
+    long-range global light is about the same in a frame and its inverse.
+``phase``
+    white, black, then for each axis and each period T in ``periods`` (coarse to fine), ``steps``
+    frames ``0.5 + 0.5 cos(2 pi u / T - 2 pi s / steps)``. The coarsest period is at least the axis
+    size, so its phase is absolute; each finer phase is unwrapped with the coarser one.
+``hybrid``
+    The graycode frames, then ``steps`` phase frames of one ``period`` per axis: the Gray code gives the
+    period, the phase the position inside it.
+``debruijn`` (single shot, Fusiello 13.2.5)
+    One RGB frame of vertical stripes ``stripe_width`` px wide. Stripe colours follow a de Bruijn
+    sequence B(k, n) of transitions: colour_i = (colour_{i-1} + 1 + s_i) mod (k + 1), from a palette of
+    k + 1 colours, so neighbours always differ and any n + 1 consecutive stripes identify their place.
+
+Capture order: ``frame_names`` is rangekit's order. ``frame_names_in(order="opencv")`` gives OpenCV's
+GrayCodePattern order for graycode (column pairs MSB first, row pairs, then white, then black).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import lru_cache
 from typing import Iterator
 
 import numpy as np
 
 from rangekit.errors import PatternError
 
-__all__ = ["PatternSpec", "PATTERN_METHODS", "make_pattern_spec", "gray_encode", "gray_decode", "n_bits_for"]
+__all__ = ["PatternSpec", "PATTERN_METHODS", "make_pattern_spec", "gray_encode", "gray_decode", "n_bits_for",
+           "de_bruijn", "DEBRUIJN_PALETTE", "debruijn_stripe_colours"]
 
-PATTERN_METHODS = ("white", "black", "graycode")
+PATTERN_METHODS = ("white", "black", "graycode", "xor02", "xor04", "phase", "hybrid", "debruijn")
+_BINARY = ("graycode", "xor02", "xor04", "hybrid")
 _AXES = ("columns", "rows")
+_ORDERS = ("rangekit", "opencv")
+
+# Linear RGB stripe colours (0/1 per channel), as distinct as a colour camera sees them.
+DEBRUIJN_PALETTE = np.array([[1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 0], [1, 0, 1], [0, 1, 1], [1, 1, 1]],
+                            dtype=np.uint8)
+
+_DEFAULT_OPTIONS = {
+    "phase": {"steps": 4, "periods": None, "fine_steps": 8},
+    "hybrid": {"steps": 8, "period": 16},
+    "debruijn": {"k": 6, "n": 3, "stripe_width": 8},
+}
 
 
 def gray_encode(x: np.ndarray) -> np.ndarray:
@@ -36,8 +70,7 @@ def gray_encode(x: np.ndarray) -> np.ndarray:
 
 def gray_decode(g: np.ndarray) -> np.ndarray:
     """Inverse of :func:`gray_encode` (prefix XOR), vectorised."""
-    g = np.asarray(g, dtype=np.int64)
-    x = g.copy()
+    x = np.asarray(g, dtype=np.int64).copy()
     shift = 1
     while shift < 63:
         x ^= x >> shift
@@ -50,6 +83,41 @@ def n_bits_for(n: int) -> int:
     return max(1, int(np.ceil(np.log2(max(n, 2)))))
 
 
+@lru_cache(maxsize=32)
+def de_bruijn(k: int, n: int) -> tuple[int, ...]:
+    """The lexicographically least de Bruijn sequence B(k, n): length k**n, every n-window once (cyclic)."""
+    if k < 2 or n < 1:
+        raise PatternError(f"de Bruijn B(k, n) needs k >= 2 and n >= 1, found k={k}, n={n}")
+    a = [0] * k * n
+    seq: list[int] = []
+
+    def db(t: int, p: int) -> None:  # Ruskey, Savage & Wang's recursive algorithm (depth n)
+        if t > n:
+            if n % p == 0:
+                seq.extend(a[1: p + 1])
+        else:
+            a[t] = a[t - p]
+            db(t + 1, p)
+            for j in range(a[t - p] + 1, k):
+                a[t] = j
+                db(t + 1, t)
+
+    db(1, 1)
+    return tuple(seq)
+
+
+def debruijn_stripe_colours(k: int, n: int, n_stripes: int) -> np.ndarray:
+    """Palette index of each stripe, (n_stripes,) int: transitions follow B(k, n) (see module doc)."""
+    seq = np.array(de_bruijn(k, n), dtype=np.int64)
+    if n_stripes - 1 > len(seq):
+        raise PatternError(f"de Bruijn B({k}, {n}) codes {len(seq) + 1} stripes, the projector needs "
+                           f"{n_stripes}; raise k or n, or widen the stripes")
+    colours = np.zeros(n_stripes, dtype=np.int64)
+    if n_stripes > 1:
+        colours[1:] = np.cumsum(1 + seq[: n_stripes - 1]) % (k + 1)
+    return colours
+
+
 @dataclass(frozen=True)
 class PatternSpec:
     """What was projected: method, projector size and options. JSON round trip with to_dict/from_dict."""
@@ -58,7 +126,7 @@ class PatternSpec:
     width: int                      # projector width in pixels
     height: int                     # projector height in pixels
     axes: tuple[str, ...] = ("columns", "rows")  # coded axes, for coded methods
-    options: dict = field(default_factory=dict, hash=False)
+    options: dict = field(default_factory=dict, hash=False, compare=False)
 
     def __post_init__(self) -> None:
         if self.method not in PATTERN_METHODS:
@@ -66,53 +134,142 @@ class PatternSpec:
         if int(self.width) < 1 or int(self.height) < 1:
             raise PatternError(f"pattern size must be positive, found {self.width}x{self.height}")
         bad = [a for a in self.axes if a not in _AXES]
-        if bad or not self.axes:
+        if bad or not self.axes or len(set(self.axes)) != len(self.axes):
             raise PatternError(f"pattern axes must be a non-empty subset of {_AXES}, found {self.axes}")
-        object.__setattr__(self, "axes", tuple(self.axes))
+        axes = tuple(a for a in _AXES if a in self.axes)
+        if self.method == "debruijn":
+            axes = ("columns",)
+        opts = {**_DEFAULT_OPTIONS.get(self.method, {}), **dict(self.options)}
+        if self.method == "phase":
+            opts["periods"] = {a: list(self._default_periods(a)) if opts.get("periods") is None
+                               else list(opts["periods"][a] if isinstance(opts["periods"], dict)
+                                         else opts["periods"]) for a in axes}
+            for a, ps in opts["periods"].items():
+                if not ps or ps[0] < self._size(a) or any(p <= 0 for p in ps):
+                    raise PatternError(f"phase periods for {a} must start with one >= {self._size(a)} px "
+                                       f"(absolute phase) and be positive, found {ps}")
+        if self.method in ("phase", "hybrid") and int(opts["steps"]) < 3:
+            raise PatternError(f"phase shifting needs at least 3 steps, found {opts['steps']}")
+        if self.method == "debruijn":
+            n_stripes = -(-int(self.width) // int(opts["stripe_width"]))
+            debruijn_stripe_colours(int(opts["k"]), int(opts["n"]), n_stripes)  # raises if too short
+            if int(opts["k"]) + 1 > len(DEBRUIJN_PALETTE):
+                raise PatternError(f"de Bruijn needs k + 1 <= {len(DEBRUIJN_PALETTE)} colours, found k={opts['k']}")
+        object.__setattr__(self, "axes", axes)
+        object.__setattr__(self, "width", int(self.width))
+        object.__setattr__(self, "height", int(self.height))
+        object.__setattr__(self, "options", opts)
+
+    def _size(self, axis: str) -> int:
+        return self.width if axis == "columns" else self.height
+
+    def _default_periods(self, axis: str) -> tuple[float, ...]:
+        size = self._size(axis)
+        return (float(size), size / 8.0, size / 64.0)
 
     # -------------------------------------------------------------- frame list
     def bits(self, axis: str) -> int:
         """Number of Gray-code bits for an axis."""
-        return n_bits_for(self.width if axis == "columns" else self.height)
+        return n_bits_for(self._size(axis))
+
+    @property
+    def xor_base(self) -> int | None:
+        """Base bit of an XOR code (0 for XOR-02, 1 for XOR-04), else None."""
+        return {"xor02": 0, "xor04": 1}.get(self.method)
+
+    def phase_plan(self, axis: str) -> list[tuple[float, int]]:
+        """(period in projector px, steps) for each phase level of ``axis``, coarse to fine."""
+        o = self.options
+        if self.method == "hybrid":
+            return [(float(o["period"]), int(o["steps"]))]
+        if self.method == "phase":
+            ps = [float(p) for p in o["periods"][axis]]
+            return [(p, int(o["fine_steps"]) if i == len(ps) - 1 else int(o["steps"])) for i, p in enumerate(ps)]
+        return []
 
     @property
     def frame_names(self) -> list[str]:
-        """One name per frame, in projection order, e.g. ``['white', 'black', 'col_b10', 'col_b10_inv', ...]``."""
-        if self.method in ("white", "black"):
-            return [self.method]
+        """One name per frame, in rangekit's projection order."""
+        m = self.method
+        if m in ("white", "black"):
+            return [m]
+        if m == "debruijn":
+            return ["debruijn"]
         names = ["white", "black"]
         for axis in self.axes:
             prefix = "col" if axis == "columns" else "row"
-            for b in range(self.bits(axis) - 1, -1, -1):
-                names += [f"{prefix}_b{b}", f"{prefix}_b{b}_inv"]
+            if m in _BINARY:
+                for b in range(self.bits(axis) - 1, -1, -1):
+                    names += [f"{prefix}_b{b}", f"{prefix}_b{b}_inv"]
+        for axis in self.axes:
+            prefix = "col" if axis == "columns" else "row"
+            for period, steps in self.phase_plan(axis):
+                names += [f"{prefix}_p{period:g}_s{s}" for s in range(steps)]
+        return names
+
+    def frame_names_in(self, order: str = "rangekit") -> list[str]:
+        """Frame names in a capture order: "rangekit", or "opencv" (GrayCodePattern: pairs, white, black)."""
+        if order not in _ORDERS:
+            raise PatternError(f"unknown capture order {order!r}; known: {', '.join(_ORDERS)}")
+        names = self.frame_names
+        if order == "opencv":
+            if self.method != "graycode":
+                raise PatternError(f"order='opencv' exists only for graycode captures, not {self.method!r}")
+            return [n for n in names if n not in ("white", "black")] + ["white", "black"]
         return names
 
     @property
     def n_frames(self) -> int:
         return len(self.frame_names)
 
-    def frame(self, index: int) -> np.ndarray:
-        """Frame ``index`` as an (height, width) uint8 image (0 or 255 for binary patterns)."""
-        names = self.frame_names
+    @property
+    def is_colour(self) -> bool:
+        return self.method == "debruijn"
+
+    def frame(self, index: int, *, order: str = "rangekit") -> np.ndarray:
+        """Frame ``index`` (in ``order``) as a uint8 image, (height, width) or (height, width, 3)."""
+        names = self.frame_names_in(order)
         if not 0 <= index < len(names):
             raise PatternError(f"pattern {self.method!r} has {len(names)} frames; frame {index} does not exist")
-        name = names[index]
+        return self.frame_by_name(names[index])
+
+    def frame_by_name(self, name: str) -> np.ndarray:
         H, W = self.height, self.width
         if name == "white":
             return np.full((H, W), 255, np.uint8)
         if name == "black":
             return np.zeros((H, W), np.uint8)
-        prefix, bit = name.split("_")[:2]
-        b = int(bit[1:])
-        inverse = name.endswith("_inv")
+        if name == "debruijn":
+            o = self.options
+            w = int(o["stripe_width"])
+            colours = debruijn_stripe_colours(int(o["k"]), int(o["n"]), -(-W // w))
+            line = DEBRUIJN_PALETTE[colours[np.arange(W) // w]] * np.uint8(255)
+            return np.broadcast_to(line[None], (H, W, 3)).copy()
+        parts = name.split("_")
+        prefix = parts[0]
         n = W if prefix == "col" else H
-        stripe = ((gray_encode(np.arange(n)) >> b) & 1).astype(bool) ^ inverse
-        line = np.where(stripe, 255, 0).astype(np.uint8)
+        u = np.arange(n)
+        if parts[1].startswith("b"):
+            b = int(parts[1][1:])
+            code = gray_encode(u)
+            stripe = (code >> b) & 1
+            base = self.xor_base
+            if base is not None and b > base:
+                stripe ^= (code >> base) & 1
+            stripe = stripe.astype(bool) ^ name.endswith("_inv")
+            line = np.where(stripe, 255, 0).astype(np.uint8)
+        else:
+            period = float(parts[1][1:])
+            s = int(parts[2][1:])
+            steps = dict((f"{p:g}", st) for p, st in self.phase_plan("columns" if prefix == "col" else "rows"))
+            n_steps = steps[f"{period:g}"]
+            value = 0.5 + 0.5 * np.cos(2 * np.pi * u / period - 2 * np.pi * s / n_steps)
+            line = np.rint(value * 255).astype(np.uint8)
         return np.broadcast_to(line[None, :] if prefix == "col" else line[:, None], (H, W)).copy()
 
-    def frames(self) -> Iterator[np.ndarray]:
-        for i in range(self.n_frames):
-            yield self.frame(i)
+    def frames(self, *, order: str = "rangekit") -> Iterator[np.ndarray]:
+        for name in self.frame_names_in(order):
+            yield self.frame_by_name(name)
 
     # -------------------------------------------------------------- serialisation
     def to_dict(self) -> dict:
@@ -131,9 +288,15 @@ class PatternSpec:
                                f"method {spec.method!r} generates ({spec.n_frames} frames)")
         return spec
 
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, PatternSpec) and self.to_dict() == other.to_dict()
+
+    def __hash__(self) -> int:
+        return hash((self.method, self.width, self.height, self.axes))
+
 
 def make_pattern_spec(method: str, projector_size: tuple[int, int], **options) -> PatternSpec:
-    """A spec for ``method`` on a projector of ``(width, height)`` pixels."""
+    """A spec for ``method`` on a projector of ``(width, height)`` pixels; options as in the module doc."""
     axes = options.pop("axes", _AXES)
     return PatternSpec(method=method, width=int(projector_size[0]), height=int(projector_size[1]),
                        axes=tuple(axes), options=options)

@@ -13,8 +13,11 @@ For each camera pixel that sees a surface (ground truth from :mod:`rangekit.sim.
   ``camera_blur`` camera pixels), the sensor adds shot noise (``E * full_well`` electrons, Poisson,
   drawn as its normal approximation with the same mean and variance) and Gaussian read noise
   (``read_noise`` electrons RMS), and the ADC clips and rounds to ``bits`` bits.
-* The global term models interreflection and subsurface light: a fraction of the mean projected
-  radiance reaches every surface point, whether or not the projector lights it directly.
+* The global term models interreflection and subsurface light, whether or not the projector lights the
+  point directly: with ``global_blur = 0``, ``albedo * global_fraction * mean(L)`` (uniform); with
+  ``global_blur > 0`` camera pixels, ``global_fraction`` times the direct light averaged over the
+  surrounding surface with a Gaussian of that sigma, so it follows coarse patterns but not fine ones
+  (what breaks coarse Gray-code bits under interreflection, Gupta & Nayar 2011).
 
 The geometry does not depend on the pattern: :class:`ViewRenderer` precomputes every per-pixel factor
 once per view, so a pattern costs one bilinear gather, two blurs and the noise.
@@ -41,7 +44,9 @@ class ImagingModel:
     gain: float = 1.0              # full-scale fraction from white light on albedo 1, facing, at ref_distance
     ref_distance: float = 0.5      # metres; projector irradiance falls off as (ref_distance / d)^2
     ambient: float = 0.01          # room light, as a fraction of the projector's white
-    global_fraction: float = 0.0   # interreflections: fraction of the mean projected radiance, everywhere
+    global_fraction: float = 0.0   # global light: fraction of the (local) direct light added everywhere
+    global_blur: float = 0.0       # camera px; 0: global light from the mean projected radiance (uniform),
+                                   # > 0: from the direct light blurred over this Gaussian sigma (interreflection)
     gamma: float = 2.2             # projector response exponent (1 = linear)
     black_level: float = 0.001     # projector light leak at pattern value 0 (contrast 1000:1)
     projector_blur: float = 0.5    # projector defocus, Gaussian sigma in projector pixels (0 = sharp)
@@ -54,7 +59,7 @@ class ImagingModel:
     def __post_init__(self) -> None:
         if self.bits not in (8, 10, 12, 16):
             raise InputError(f"ImagingModel: bits must be 8, 10, 12 or 16, found {self.bits}")
-        for name in ("gain", "ref_distance", "ambient", "global_fraction", "gamma", "black_level",
+        for name in ("gain", "ref_distance", "ambient", "global_fraction", "global_blur", "gamma", "black_level",
                      "projector_blur", "camera_blur", "full_well", "read_noise"):
             value = getattr(self, name)
             if not np.isfinite(value) or value < 0:
@@ -143,6 +148,7 @@ class ViewRenderer:
         self._direct = direct.astype(np.float32)                          # (n_lit, C)
         self._ambient = (model.gain * model.ambient * albedo).astype(np.float32)  # (H*W, C)
         self._global = (model.gain * model.global_fraction * albedo).astype(np.float32)
+        self._hit_mask = geometry.hit.astype(np.float32)
 
     @property
     def n_channels(self) -> int:
@@ -171,15 +177,39 @@ class ViewRenderer:
         vals = (L[i] * w00[:, None] + L[i + self._dx] * w10[:, None]
                 + L[i + self._dy] * w01[:, None] + L[i + self._dy + self._dx] * w11[:, None])
         C = self.n_channels
-        img = self._ambient + self._global * mean_L.astype(np.float32)
+        H, W = self.shape
+        local = self.model.global_fraction > 0 and self.model.global_blur > 0
+        img = self._ambient + (0 if local else self._global * mean_L.astype(np.float32))
         if img.shape[1] != C:
             img = np.repeat(img, C, axis=1)
         img[self._lit_idx] += self._direct * vals
-        H, W = self.shape
+        if local:
+            direct = np.zeros((H * W, C), np.float32)
+            direct[self._lit_idx] = self._direct * vals
+            img += self._local_global(direct.reshape(H, W, C)).reshape(H * W, C)
         img = img.reshape(H, W, C) if C == 3 else img.reshape(H, W)
         if self.model.camera_blur > 0:
             img = cv2.GaussianBlur(img, (0, 0), self.model.camera_blur, borderType=cv2.BORDER_REPLICATE)
         return img
+
+    def _local_global(self, direct: np.ndarray) -> np.ndarray:
+        """Global light at each surface pixel: global_fraction x the direct light around it.
+
+        The direct image is averaged with a Gaussian of ``global_blur`` camera pixels over the surface
+        (normalised by the blurred surface mask, so object borders are not darkened), computed at a
+        quarter of the resolution (the kernel is wide).
+        """
+        H, W, C = direct.shape
+        f = 4 if self.model.global_blur >= 8 else 1
+        small = (max(W // f, 1), max(H // f, 1))
+        sigma = self.model.global_blur / f
+        d = cv2.resize(direct, small, interpolation=cv2.INTER_AREA).reshape(small[1], small[0], C)
+        m = cv2.resize(self._hit_mask, small, interpolation=cv2.INTER_AREA)
+        d = cv2.GaussianBlur(d, (0, 0), sigma).reshape(small[1], small[0], C)
+        m = cv2.GaussianBlur(m, (0, 0), sigma)
+        avg = d / np.maximum(m, 1e-6)[:, :, None]
+        avg = cv2.resize(avg, (W, H), interpolation=cv2.INTER_LINEAR).reshape(H, W, C)
+        return np.float32(self.model.global_fraction) * avg * self._hit_mask[:, :, None]
 
     def render(self, pattern: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         """One noisy, quantised capture: (H, W) or (H, W, 3), uint8 for 8 bits else uint16 (LSB-aligned)."""

@@ -1,0 +1,446 @@
+"""Decode a capture stack into per-pixel projector coordinates, with confidence and rejection masks.
+
+Fusiello ch. 13.2. Every method returns :class:`DecodeResult`: ``proj_col`` (and ``proj_row`` where the
+rows are coded) as float32 projector pixels (centres at integers, NaN where invalid), a confidence in
+[0, 1], and the masks that explain each rejection.
+
+How each method decodes
+-----------------------
+Binary codes (graycode, xor02, xor04): each bit is the sign of ``pattern - inverse``, which does not
+depend on albedo or shading. XOR codes are undone by XORing every coarse bit with the base bit. The Gray
+code is turned into a binary column by a look-up table.
+
+Subpixel Gray-code edges (``subpixel=True``): between neighbouring camera pixels whose columns differ by
+one, exactly one Gray bit changes; its pattern and inverse cross at the stripe edge, projector coordinate
+``c + 0.5``. Linear interpolation of ``pattern - inverse`` between the two pixels places that crossing to
+a fraction of a camera pixel. Columns are then interpolated along the camera row between the crossings
+on either side of each pixel (rows are done the same way along camera columns). Pixels without edges
+on both sides within ``max_gap`` pixels keep the integer value and half the confidence.
+
+Phase shifting (phase, hybrid): N-step phase ``atan2(sum I_s sin d_s, sum I_s cos d_s)``, ``d_s = 2 pi s
+/ N``. Multi-frequency ``phase`` unwraps each period with the next coarser one; ``hybrid`` unwraps with the
+Gray-code column (the Gray code gives the period, the phase the position in it) and flags pixels where
+the two disagree by more than ``max_disagreement`` columns.
+
+Direct/global separation (Nayar et al. 2006): in the finest binary stripes half the projector is lit,
+so ``direct = max - min`` and ``global = 2 (min - black)`` over the finest pattern/inverse pairs. Pixels
+whose global light exceeds ``max_global_ratio`` times the direct light are rejected as
+``global_dominated``.
+
+Memory: the stack is read in chunks of rows (uint8/uint16 as captured; float32 only per chunk), on
+``workers`` threads; nothing converts the whole stack.
+"""
+
+from __future__ import annotations
+
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+
+from rangekit.errors import DecodeError
+from rangekit.patterns import PatternSpec, gray_decode, gray_encode
+
+__all__ = ["DecodeResult", "decode", "phase_from_steps"]
+
+
+@dataclass(frozen=True, eq=False)
+class DecodeResult:
+    """Per-pixel projector coordinates of a capture, (H, W) maps in camera pixels."""
+
+    proj_col: np.ndarray          # (H, W) float32 projector column u, NaN where invalid
+    proj_row: np.ndarray          # (H, W) float32 projector row v, NaN where invalid or rows not coded
+    confidence: np.ndarray        # (H, W) float32 in [0, 1]; 0 where invalid; higher is better
+    shadow: np.ndarray            # (H, W) bool: white - black below shadow_threshold (projector light absent)
+    low_contrast: np.ndarray      # (H, W) bool: lit, but the code's contrast is below min_contrast
+    global_dominated: np.ndarray  # (H, W) bool: separated global light > max_global_ratio * direct light
+    inconsistent: np.ndarray      # (H, W) bool: code outside the projector, or code and phase disagree
+    direct: np.ndarray | None = None        # (H, W) float32 direct light, fraction of full scale
+    global_light: np.ndarray | None = None  # (H, W) float32 global light, fraction of full scale
+    white: np.ndarray | None = None         # (H, W[, 3]) the white capture, for colour
+
+    @property
+    def valid(self) -> np.ndarray:
+        """(H, W) bool: a projector column was decoded."""
+        return np.isfinite(self.proj_col)
+
+    def __repr__(self) -> str:
+        n = self.proj_col.size
+        return (f"DecodeResult({self.proj_col.shape[1]}x{self.proj_col.shape[0]}, valid={self.valid.sum() / n:.1%}, "
+                f"shadow={self.shadow.sum() / n:.1%}, low_contrast={self.low_contrast.sum() / n:.1%}, "
+                f"global={self.global_dominated.sum() / n:.1%}, inconsistent={self.inconsistent.sum() / n:.1%})")
+
+
+# --------------------------------------------------------------------------- stack access
+class _Frames:
+    """Named access to a capture stack, by rows or columns, converting colour to grey per chunk."""
+
+    def __init__(self, stack, spec: PatternSpec, order: str) -> None:
+        names = spec.frame_names_in(order)
+        frames: Sequence[np.ndarray]
+        if isinstance(stack, np.ndarray):
+            if stack.ndim not in (3, 4):
+                raise DecodeError(f"the capture stack must be (K, H, W) or (K, H, W, 3), found shape {stack.shape}")
+            frames = list(stack)
+        else:
+            frames = [np.asarray(f) for f in stack]
+        if len(frames) != len(names):
+            raise DecodeError(f"found {len(frames)} captures, pattern {spec.method!r} on a {spec.width}x{spec.height} "
+                              f"projector needs {len(names)} ({', '.join(names[:4])}{', ...' if len(names) > 4 else ''})")
+        shape0 = frames[0].shape
+        for i, f in enumerate(frames):
+            if f.shape != shape0:
+                raise DecodeError(f"capture {i} has shape {f.shape}, capture 0 has {shape0}; all captures must "
+                                  "have the same size")
+            if f.dtype not in (np.uint8, np.uint16):
+                raise DecodeError(f"capture {i} has dtype {f.dtype}; expected uint8 or uint16 raw captures")
+            if f.dtype != frames[0].dtype:
+                raise DecodeError(f"capture {i} is {f.dtype}, capture 0 is {frames[0].dtype}; mixed bit depths")
+        if len(shape0) not in (2, 3) or (len(shape0) == 3 and shape0[2] != 3):
+            raise DecodeError(f"captures must be (H, W) grey or (H, W, 3) RGB images, found {shape0}")
+        self.by_name = dict(zip(names, frames))
+        self.shape = shape0[:2]
+        self.colour = len(shape0) == 3
+        self.dtype = frames[0].dtype
+
+    def get(self, name: str, region: tuple[slice, slice]) -> np.ndarray:
+        f = self.by_name[name][region]
+        if self.colour:
+            f = (f.sum(axis=2, dtype=np.uint32) // 3).astype(self.dtype)
+        return f
+
+
+def _chunks(n: int, size: int) -> list[slice]:
+    return [slice(i, min(i + size, n)) for i in range(0, n, size)]
+
+
+# --------------------------------------------------------------------------- binary codes
+def _decode_bits(fr: _Frames, spec: PatternSpec, axis: str, region, need_diffs: bool):
+    """Integer code of one chunk (int32, -1 where outside the projector) and, if asked or needed for
+    XOR codes, the per-bit differences ``pattern - inverse`` (nb, h, w) indexed by bit."""
+    prefix = "col" if axis == "columns" else "row"
+    nb = spec.bits(axis)
+    base = spec.xor_base
+    gray = None
+    diffs = None
+    for b in range(nb - 1, -1, -1):  # most significant first
+        P = fr.get(f"{prefix}_b{b}", region)
+        I = fr.get(f"{prefix}_b{b}_inv", region)
+        if gray is None:
+            gray = np.zeros(P.shape, np.uint16 if nb <= 16 else np.uint32)
+            if need_diffs or base is not None:
+                diffs = np.empty((nb,) + P.shape, np.int16 if P.dtype == np.uint8 else np.int32)
+        gray <<= 1
+        gray |= P > I
+        if diffs is not None:
+            np.subtract(P, I, out=diffs[b], dtype=diffs.dtype)
+    if base is not None and nb > base + 1:
+        low_mask = gray.dtype.type((1 << (base + 1)) - 1)
+        gray &= low_mask
+        # Stripes of column codes cross camera rows (axis 1); stripes of row codes cross columns (axis 0).
+        high = _xor_high_bits(diffs, base, axis=1 if axis == "columns" else 0)
+        for i, b in enumerate(range(base + 1, nb)):
+            gray |= high[i].astype(gray.dtype) << gray.dtype.type(b)
+    code = _gray_lut(nb)[gray]
+    code[code >= (spec.width if axis == "columns" else spec.height)] = -1
+    return code, diffs
+
+
+def _box_along(a: np.ndarray, axis: int, half: int) -> np.ndarray:
+    """Sum over a window of 2 * half + 1 samples along ``axis`` (edges: the part inside)."""
+    c = np.cumsum(a, axis=axis, dtype=np.int64)
+    n = a.shape[axis]
+    pad = [(0, 0)] * a.ndim
+    pad[axis] = (1, 0)
+    c = np.pad(c, pad)
+    hi = np.minimum(np.arange(n) + half + 1, n)
+    lo = np.maximum(np.arange(n) - half, 0)
+    return np.take(c, hi, axis=axis) - np.take(c, lo, axis=axis)
+
+
+def _xor_high_bits(diffs: np.ndarray, base: int, axis: int, half: int = 2) -> np.ndarray:
+    """Gray bits above the base of an XOR code, decided robustly (bool (nb - base - 1, h, w)).
+
+    ``g_b = o_b XOR o_base`` is 1 where the frame and the base frame have opposite signs. Near a base
+    edge both are weak and noisy, so the sign of the product is averaged over ``2 * half + 1`` pixels
+    across the stripes: g_b never changes across a base edge, and near g_b's own edge an error only
+    moves the pixel to the neighbouring column.
+    """
+    d_base = diffs[base].astype(np.int32)
+    return np.stack([_box_along(diffs[b] * d_base, axis, half) < 0 for b in range(base + 1, len(diffs))])
+
+
+_LUTS: dict[int, np.ndarray] = {}
+
+
+def _gray_lut(nb: int) -> np.ndarray:
+    if nb not in _LUTS:
+        _LUTS[nb] = gray_decode(np.arange(1 << nb)).astype(np.int32)
+    return _LUTS[nb]
+
+
+def _edge_bit(lo: np.ndarray, spec: PatternSpec) -> np.ndarray:
+    """Index of the projected frame whose stripes change between codes lo and lo + 1."""
+    changed = gray_encode(lo) ^ gray_encode(lo + 1)
+    b = np.log2(np.maximum(changed, 1)).astype(np.int64)
+    return b  # for XOR codes the frame of bit b also flips (base bit: the base frame), see module doc
+
+
+def _subpixel_along_rows(code: np.ndarray, diffs: np.ndarray, spec: PatternSpec, max_gap: float):
+    """Subpixel coordinate along axis 1 from the crossings of pattern and inverse (module doc)."""
+    h, w = code.shape
+    c0, c1 = code[:, :-1], code[:, 1:]
+    step = c1 - c0
+    pair = (c0 >= 0) & (c1 >= 0) & (np.abs(step) == 1)
+    yy, xx = np.nonzero(pair)
+    lo = np.minimum(c0[yy, xx], c1[yy, xx]).astype(np.int64)
+    b = _edge_bit(lo, spec)
+    d0 = diffs[b, yy, xx].astype(np.float32)
+    d1 = diffs[b, yy, xx + 1].astype(np.float32)
+    crossing = (d0 * d1 <= 0) & (d0 != d1)
+    t = np.zeros_like(d0)
+    np.divide(d0, d0 - d1, out=t, where=crossing)
+    edge_pos = np.full((h, w - 1), np.nan, np.float32)   # camera x of the crossing in pair (y, x)
+    edge_val = np.full((h, w - 1), np.nan, np.float32)   # projector coordinate of that edge
+    edge_pos[yy[crossing], xx[crossing]] = xx[crossing] + t[crossing]
+    edge_val[yy[crossing], xx[crossing]] = lo[crossing] + 0.5
+    has = np.isfinite(edge_pos)
+    idx = np.where(has, np.arange(w - 1, dtype=np.int32), -1)
+    left = np.maximum.accumulate(idx, axis=1)                      # last edge at pair <= p
+    right = np.where(has, np.arange(w - 1, dtype=np.int32), w)
+    right = np.minimum.accumulate(right[:, ::-1], axis=1)[:, ::-1]  # first edge at pair >= p
+    # Pixel x: left edge in pairs <= x - 1, right edge in pairs >= x.
+    L = np.full((h, w), -1, np.int32)
+    R = np.full((h, w), w, np.int32)
+    L[:, 1:] = left
+    R[:, :-1] = right
+    ok = (L >= 0) & (R < w - 1)
+    rows = np.broadcast_to(np.arange(h)[:, None], (h, w))
+    Lc, Rc = np.clip(L, 0, w - 2), np.clip(R, 0, w - 2)
+    xL, uL = edge_pos[rows, Lc], edge_val[rows, Lc]
+    xR, uR = edge_pos[rows, Rc], edge_val[rows, Rc]
+    x = np.arange(w, dtype=np.float32)[None, :]
+    span = xR - xL
+    ok &= (span > 0) & (span <= max_gap) & (np.abs(uR - uL) >= 0.5) & (np.abs(uR - uL) <= 3.0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        u = uL + (x - xL) * (uR - uL) / span
+    ok &= np.abs(u - code) <= 1.0
+    return np.where(ok, u, np.nan).astype(np.float32)
+
+
+# --------------------------------------------------------------------------- phase
+def phase_from_steps(frames: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """N-step phase shifting: (phase in [0, 2 pi), modulation B, offset A) as float32.
+
+    ``frames[s] = A + B cos(phi - 2 pi s / N)``, N = len(frames) >= 3.
+    """
+    n = len(frames)
+    S = np.zeros(frames[0].shape, np.float32)
+    C = np.zeros(frames[0].shape, np.float32)
+    A = np.zeros(frames[0].shape, np.float32)
+    for s, f in enumerate(frames):
+        f32 = f.astype(np.float32)
+        S += np.float32(np.sin(2 * np.pi * s / n)) * f32
+        C += np.float32(np.cos(2 * np.pi * s / n)) * f32
+        A += f32
+    phi = np.arctan2(S, C)
+    phi[phi < 0] += np.float32(2 * np.pi)
+    return phi, np.float32(2.0 / n) * np.hypot(S, C), A / np.float32(n)
+
+
+def _decode_phase(fr: _Frames, spec: PatternSpec, axis: str, region, coarse: np.ndarray | None):
+    """Unwrapped projector coordinate and the weakest modulation for one chunk."""
+    prefix = "col" if axis == "columns" else "row"
+    value = coarse
+    mod_min = None
+    for period, steps in spec.phase_plan(axis):
+        frames = [fr.get(f"{prefix}_p{period:g}_s{s}", region) for s in range(steps)]
+        phi, B, _ = phase_from_steps(frames)
+        wrapped = phi * np.float32(period / (2 * np.pi))
+        if value is None:
+            value = wrapped  # period >= size: absolute
+        else:
+            k = np.rint((value - wrapped) / np.float32(period))
+            value = wrapped + k * np.float32(period)
+        mod_min = B if mod_min is None else np.minimum(mod_min, B)
+    return value.astype(np.float32), mod_min
+
+
+# --------------------------------------------------------------------------- driver
+def decode(stack, spec: PatternSpec, *, order: str = "rangekit", subpixel: bool = False,
+           min_contrast: float = 0.03, shadow_threshold: float = 0.02, max_global_ratio: float | None = None,
+           max_gap: float = 6.0, max_disagreement: float = 1.5, full_scale: float | None = None,
+           workers: int = 2, chunk_rows: int = 96) -> DecodeResult:
+    """Decode a capture stack into projector coordinates.
+
+    Parameters
+    ----------
+    stack : (K, H, W) or (K, H, W, 3) uint8/uint16 ndarray, or a sequence of K such images
+        Raw captures in ``spec``'s frame order (or OpenCV's with ``order="opencv"``). Read chunk by
+        chunk in its own dtype; never converted to float as a whole.
+    spec : PatternSpec
+        What was projected.
+    order : {"rangekit", "opencv"}
+        Capture order; "opencv" is GrayCodePattern's (column pairs, row pairs, white, black).
+    subpixel : bool
+        Binary codes: refine to subpixel by stripe-edge crossings (module doc). Phase methods are always
+        subpixel.
+    min_contrast : float
+        Reject pixels whose code contrast (white - black for binary codes; 2x modulation for phase) is
+        below this fraction of full scale.
+    shadow_threshold : float
+        Pixels with white - black below this fraction of full scale are in the projector's shadow.
+    max_global_ratio : float, optional
+        Reject pixels whose separated global light exceeds this multiple of their direct light. Default
+        1 for Gray code (its coarse bits fail there), 3 for XOR codes (built to tolerate global light).
+    max_gap : float
+        Subpixel: largest distance in camera pixels between the two stripe edges bracketing a pixel.
+    max_disagreement : float
+        Hybrid: largest |phase - Gray code| in projector pixels before a pixel is inconsistent.
+    full_scale : float, optional
+        Largest raw value (default 255 for uint8, 65535 for uint16; give 4095 for 12-bit data).
+    workers, chunk_rows : threads and rows per chunk.
+
+    Returns
+    -------
+    DecodeResult
+
+    Raises
+    ------
+    DecodeError
+        If the number of captures does not match the spec, sizes or dtypes differ, no pixel is lit
+        (an all-black stack), or the captures look like another order or spec (white darker than black).
+    """
+    if spec.method in ("white", "black"):
+        raise DecodeError(f"pattern {spec.method!r} carries no code; decode a graycode, xor02, xor04, phase, "
+                          "hybrid or debruijn capture")
+    if spec.method == "debruijn":
+        from rangekit.debruijn import decode_debruijn
+
+        return decode_debruijn(stack, spec, min_contrast=min_contrast, shadow_threshold=shadow_threshold,
+                               full_scale=full_scale)
+    fr = _Frames(stack, spec, order)
+    H, W = fr.shape
+    fs = float(full_scale if full_scale is not None else (255 if fr.dtype == np.uint8 else 65535))
+    binary = spec.method in ("graycode", "xor02", "xor04", "hybrid")
+    edges = subpixel and spec.method in ("graycode", "xor02", "xor04")
+    out = {k: np.full((H, W), np.nan, np.float32) for k in ("col", "row", "conf")}
+    sep = {k: np.zeros((H, W), np.float32) for k in ("direct", "global")} if binary else {}
+    masks = {k: np.zeros((H, W), bool) for k in ("shadow", "low", "glob", "incons")}
+    sep_axis = spec.axes[0]
+    # Separation frames: the method's own plain fine stripes (XOR frames above the base are too narrow).
+    sep_bits = {"xor02": (0,), "xor04": (0, 1)}.get(spec.method, (1, 2))
+    if max_global_ratio is None:
+        max_global_ratio = 3.0 if spec.xor_base is not None else 1.0
+    halo = int(np.ceil(max_gap)) + 2 if (edges and "rows" in spec.axes) else 0
+    t_shadow, t_low = shadow_threshold * fs, min_contrast * fs
+
+    def run(rs: slice) -> None:
+        region = (rs, slice(None))
+        white = fr.get("white", region)
+        black = fr.get("black", region)
+        span = white.astype(np.int32) - black
+        shadow = span < t_shadow
+        low = (span < t_low) & ~shadow
+        conf = np.clip(span.astype(np.float32) / np.float32(fs), 0, 1)
+        reject = shadow | low
+        if binary:  # direct/global separation from the finest stripes (module doc)
+            prefix = "col" if sep_axis == "columns" else "row"
+            best_d = best_min = None
+            for b in sep_bits:
+                if b >= spec.bits(sep_axis):
+                    continue
+                P = fr.get(f"{prefix}_b{b}", region)
+                I = fr.get(f"{prefix}_b{b}_inv", region)
+                d = np.abs(P.astype(np.int32) - I)
+                mn = np.minimum(P, I)
+                if best_d is None:
+                    best_d, best_min = d, mn
+                else:
+                    take = d > best_d
+                    best_d = np.where(take, d, best_d)
+                    best_min = np.where(take, mn, best_min)
+            glob2 = np.maximum(2 * (best_min.astype(np.int32) - black), 0)
+            sep["direct"][rs] = best_d / np.float32(fs)
+            sep["global"][rs] = glob2 / np.float32(fs)
+            gmask = ~reject & (glob2 > max_global_ratio * best_d)
+            masks["glob"][rs] = gmask
+            reject = reject | gmask
+        incons = np.zeros(span.shape, bool)
+        n_sub = 0
+        sub_missing = np.zeros(span.shape, bool)
+        for axis in spec.axes:
+            key = "col" if axis == "columns" else "row"
+            size = spec.width if axis == "columns" else spec.height
+            coarse = None
+            if binary:
+                if axis == "rows" and halo:
+                    r0, r1 = max(rs.start - halo, 0), min(rs.stop + halo, H)
+                    code_h, diffs_h = _decode_bits(fr, spec, axis, (slice(r0, r1), slice(None)), True)
+                    inner = slice(rs.start - r0, rs.stop - r0)
+                    code = code_h[inner]
+                    sub = _subpixel_along_rows(code_h.T, diffs_h.transpose(0, 2, 1), spec, max_gap).T[inner]
+                else:
+                    code, diffs = _decode_bits(fr, spec, axis, region, edges)
+                    sub = _subpixel_along_rows(code, diffs, spec, max_gap) if edges else None
+                incons |= code < 0
+                coarse = code.astype(np.float32)
+                value = coarse
+                if sub is not None:
+                    miss = ~np.isfinite(sub)
+                    value = np.where(miss, coarse, sub)
+                    sub_missing |= miss
+            if spec.method in ("phase", "hybrid"):
+                ph, mod = _decode_phase(fr, spec, axis, region, coarse)
+                if coarse is not None:
+                    incons |= np.abs(ph - coarse) > max_disagreement
+                value = ph
+                incons |= (ph < -0.5) | (ph > size - 0.5)
+                weak = (2 * mod < t_low) & ~shadow
+                low |= weak
+                reject = reject | weak
+                conf = np.minimum(conf, np.clip(2 * mod / np.float32(fs), 0, 1))
+            out[key][rs] = np.where(reject, np.nan, value)
+        incons &= ~reject
+        for key in ("col", "row"):
+            out[key][rs][incons] = np.nan
+        if edges:
+            conf = np.where(sub_missing, conf * 0.5, conf)
+        ok = ~(reject | incons)
+        out["conf"][rs] = np.where(ok, conf, 0.0)
+        masks["shadow"][rs] = shadow
+        masks["low"][rs] = low
+        masks["incons"][rs] = incons
+
+    _parallel(run, _chunks(H, chunk_rows), workers)
+
+    lit = ~masks["shadow"]
+    if not np.any(lit):
+        raise DecodeError(f"no pixel is lit: white - black is below {shadow_threshold:.0%} of full scale "
+                          f"({t_shadow:.0f}) everywhere; was the projector on and the capture exposed?")
+    w_all, b_all = fr.by_name["white"], fr.by_name["black"]
+    step = max(1, int(np.sqrt(H * W / 250000)))
+    if np.mean(w_all[::step, ::step] < b_all[::step, ::step]) > 0.25:
+        raise DecodeError("the white capture is darker than the black one in over 25% of the pixels: the "
+                          "captures are not in this spec's order (try order='opencv') or the spec does not "
+                          "match the capture")
+    if lit.sum() > 100 and np.mean(masks["incons"][lit]) > 0.5:
+        raise DecodeError(f"over half of the lit pixels decode to codes outside the {spec.width}x{spec.height} "
+                          "projector: the spec does not match the capture (projector size, method or order)")
+    nan = np.full((H, W), np.nan, np.float32)
+    return DecodeResult(proj_col=out["col"] if "columns" in spec.axes else nan,
+                        proj_row=out["row"] if "rows" in spec.axes else nan,
+                        confidence=out["conf"], shadow=masks["shadow"], low_contrast=masks["low"],
+                        global_dominated=masks["glob"], inconsistent=masks["incons"],
+                        direct=sep.get("direct"), global_light=sep.get("global"), white=w_all)
+
+
+def _parallel(fn, items, workers: int) -> None:
+    if workers <= 1:
+        for it in items:
+            fn(it)
+        return
+    with ThreadPoolExecutor(max_workers=workers) as pool:
+        for _ in pool.map(fn, items):
+            pass

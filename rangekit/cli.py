@@ -30,7 +30,7 @@ def cmd_sim_render(args: argparse.Namespace) -> int:
     from rangekit.sim.capture import write_capture
 
     t0 = time.perf_counter()
-    imaging = ImagingModel(bits=args.bits)
+    imaging = ImagingModel(bits=args.bits, colour=args.patterns == "debruijn")
     if args.no_noise:
         imaging = imaging.noiseless()
     if args.global_fraction is not None:
@@ -42,6 +42,78 @@ def cmd_sim_render(args: argparse.Namespace) -> int:
     spec = make_pattern_spec(args.patterns, sim.projector.resolution)
     write_capture(sim, spec, args.out, info={"object": args.object}, progress=_say)
     _say(f"done in {time.perf_counter() - t0:.1f} s")
+    return 0
+
+
+def _projector_size(text: str) -> tuple[int, int]:
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+        if w > 0 and h > 0:
+            return w, h
+    except ValueError:
+        pass
+    raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT in projector pixels, e.g. 1280x800, found {text!r}")
+
+
+def cmd_decode(args: argparse.Namespace) -> int:
+    """rangekit decode IMAGES --pattern SPEC_OR_NAME --projector WxH [--order opencv] --out maps.npz"""
+    from pathlib import Path
+
+    from rangekit.capture import list_images, read_stack
+    from rangekit.decode import decode
+    from rangekit.errors import ConfigError
+    from rangekit.io import atomic_save_npz, read_json
+    from rangekit.patterns import PATTERN_METHODS, PatternSpec, make_pattern_spec
+
+    t0 = time.perf_counter()
+    source = args.images[0] if len(args.images) == 1 else args.images
+    paths = list_images(source)
+    if args.pattern in PATTERN_METHODS:
+        if args.projector is None:
+            raise ConfigError(f"--pattern {args.pattern} needs --projector WxH (the projector's resolution)")
+        spec = make_pattern_spec(args.pattern, args.projector)
+    else:
+        spec = PatternSpec.from_dict(read_json(args.pattern, what="pattern spec"), where=args.pattern)
+        if args.projector is not None and args.projector != (spec.width, spec.height):
+            raise ConfigError(f"{args.pattern} is for a {spec.width}x{spec.height} projector, --projector says "
+                              f"{args.projector[0]}x{args.projector[1]}")
+    _say(f"reading {len(paths)} images")
+    images = read_stack(paths)
+    _say(f"decoding {spec.method} ({'subpixel' if not args.integer else 'integer'})")
+    res = decode(images, spec, order=args.order, subpixel=not args.integer)
+    atomic_save_npz(args.out, proj_col=res.proj_col, proj_row=res.proj_row, confidence=res.confidence,
+                    shadow=res.shadow, low_contrast=res.low_contrast, global_dominated=res.global_dominated,
+                    inconsistent=res.inconsistent)
+    _say(f"{res!r}")
+    _say(f"wrote {Path(args.out)} in {time.perf_counter() - t0:.1f} s")
+    return 0
+
+
+def cmd_reconstruct(args: argparse.Namespace) -> int:
+    """rangekit reconstruct CAPTURE_DIR [--rig RIG.json] --out cloud.ply"""
+    from rangekit.capture import load_capture
+    from rangekit.errors import ConfigError
+    from rangekit.pointcloud import save_cloud
+    from rangekit.reconstruct import reconstruct_view
+    from rangekit.rig import load_rig
+
+    t0 = time.perf_counter()
+    cap = load_capture(args.capture)
+    if cap.spec is None:
+        raise ConfigError(f"{args.capture}: no patterns.json; decode the images with 'rangekit decode' and a "
+                          "--pattern, or add the pattern spec to the folder")
+    rig = load_rig(args.rig) if args.rig else cap.rig
+    if rig is None or rig.projector is None:
+        raise ConfigError(f"{args.capture}: no rig.json with a projector; pass --rig RIG.json")
+    _say(f"decoding {len(cap.images)} images ({cap.spec.method})")
+    bits = cap.info.get("imaging", {}).get("bits")
+    full_scale = float((1 << bits) - 1) if bits else None
+    rec = reconstruct_view(cap.images, cap.spec, rig.camera, rig.projector, subpixel=not args.integer,
+                           method=args.method, full_scale=full_scale)
+    save_cloud(args.out, rec.cloud)
+    _say(f"{rec.decoded!r}")
+    _say(f"{rec.triangulated!r}")
+    _say(f"wrote {len(rec.cloud)} points to {args.out} in {time.perf_counter() - t0:.1f} s")
     return 0
 
 
@@ -76,6 +148,30 @@ def build_parser() -> argparse.ArgumentParser:
     render.add_argument("--global-fraction", type=float, default=None,
                         help="interreflection term, fraction of the mean projected light (default 0)")
     render.set_defaults(func=cmd_sim_render)
+
+    dec = sub.add_parser("decode", help="decode coded-light images into projector coordinates (maps.npz)",
+                         description="Decode a capture into per-pixel projector column/row maps with confidence.")
+    dec.add_argument("images", nargs="+", metavar="IMAGES",
+                     help="a folder (images taken in natural numeric order) or a list of image files")
+    dec.add_argument("--pattern", required=True,
+                     help=f"pattern method ({', '.join(PATTERN_METHODS)}) or a patterns.json spec file")
+    dec.add_argument("--projector", type=_projector_size, help="projector resolution WxH, e.g. 1280x800")
+    dec.add_argument("--order", default="rangekit", choices=("rangekit", "opencv"),
+                     help="capture order; 'opencv' = GrayCodePattern (pairs, then white, black)")
+    dec.add_argument("--integer", action="store_true", help="integer codes only (no subpixel refinement)")
+    dec.add_argument("--out", required=True, help="output .npz with proj_col, proj_row, confidence and masks")
+    dec.set_defaults(func=cmd_decode)
+
+    rec = sub.add_parser("reconstruct", help="decode and triangulate a capture folder into a point cloud",
+                         description="Decode a capture folder (from 'rangekit sim render' or acquisition) and "
+                                     "triangulate it against the projector into a coloured cloud with normals.")
+    rec.add_argument("capture", metavar="CAPTURE_DIR", help="capture folder (images + patterns.json)")
+    rec.add_argument("--rig", help="rig file (default: the folder's rig.json)")
+    rec.add_argument("--method", default="auto", choices=("auto", "ray-plane", "ray-ray"),
+                     help="triangulation; auto = ray-ray where rows are coded, else ray-plane")
+    rec.add_argument("--integer", action="store_true", help="integer codes only (no subpixel refinement)")
+    rec.add_argument("--out", required=True, help="output cloud (.ply, .xyz or .npy)")
+    rec.set_defaults(func=cmd_reconstruct)
     return parser
 
 

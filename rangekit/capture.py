@@ -1,0 +1,80 @@
+"""Capture folders on disk: image lists in natural order, parallel loading, and the folder's metadata.
+
+A capture folder (written by ``rangekit sim render`` or by acquisition) holds the raw images
+(``000.png ...``), ``patterns.json`` (the PatternSpec), and usually ``rig.json`` and ``capture.json``.
+"""
+
+from __future__ import annotations
+
+import re
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from rangekit.errors import FileFormatError
+from rangekit.io import read_json, read_png
+from rangekit.patterns import PatternSpec
+from rangekit.rig import Rig, load_rig
+
+__all__ = ["IMAGE_SUFFIXES", "list_images", "read_stack", "Capture", "load_capture"]
+
+IMAGE_SUFFIXES = (".png", ".tif", ".tiff", ".bmp", ".pgm", ".ppm")
+
+
+def _natural_key(path: Path):
+    return [int(t) if t.isdigit() else t.lower() for t in re.split(r"(\d+)", path.name)]
+
+
+def list_images(source: str | Path | Sequence[str | Path]) -> list[Path]:
+    """Image files of a folder in natural numeric order (``2.png`` before ``10.png``), or the given list."""
+    if isinstance(source, (str, Path)) and Path(source).is_dir():
+        files = [p for p in Path(source).iterdir() if p.suffix.lower() in IMAGE_SUFFIXES
+                 and not p.name.startswith(".") and p.stem != "preview"]
+        if not files:
+            raise FileFormatError(f"{source}: no images ({', '.join(IMAGE_SUFFIXES)}) in this folder")
+        return sorted(files, key=_natural_key)
+    paths = [Path(source)] if isinstance(source, (str, Path)) else [Path(p) for p in source]
+    for p in paths:
+        if not p.is_file():
+            raise FileFormatError(f"{p}: no such image file")
+    return paths
+
+
+def read_stack(paths: Sequence[Path], *, workers: int = 2) -> list[np.ndarray]:
+    """Read images (lossless, own bit depth, RGB order) on ``workers`` threads; sizes must agree."""
+    with ThreadPoolExecutor(max_workers=max(1, workers)) as pool:
+        images = list(pool.map(read_png, paths))
+    for p, img in zip(paths, images):
+        if img.shape != images[0].shape or img.dtype != images[0].dtype:
+            raise FileFormatError(f"{p}: image is {img.dtype} {img.shape}, but {paths[0].name} is "
+                                  f"{images[0].dtype} {images[0].shape}; a capture needs one size and depth")
+    return images
+
+
+@dataclass(frozen=True, eq=False)
+class Capture:
+    """A capture folder's images and metadata."""
+
+    folder: Path
+    images: list[np.ndarray]
+    spec: PatternSpec | None
+    rig: Rig | None
+    info: dict
+
+
+def load_capture(folder: str | Path, *, workers: int = 2) -> Capture:
+    """Read a capture folder; ``spec``/``rig`` are None when patterns.json / rig.json are absent."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise FileFormatError(f"{folder}: not a folder; expected a capture folder with 000.png ... and "
+                              "patterns.json")
+    spec = None
+    if (folder / "patterns.json").exists():
+        spec = PatternSpec.from_dict(read_json(folder / "patterns.json", what="pattern spec"),
+                                     where=str(folder / "patterns.json"))
+    rig = load_rig(folder / "rig.json") if (folder / "rig.json").exists() else None
+    info = read_json(folder / "capture.json", what="capture info") if (folder / "capture.json").exists() else {}
+    return Capture(folder, read_stack(list_images(folder), workers=workers), spec, rig, info)

@@ -1,0 +1,64 @@
+"""From a capture to a point cloud: decode, triangulate, filter, colour and orient normals."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from rangekit.camera import PinholeCamera
+from rangekit.decode import DecodeResult, decode
+from rangekit.errors import ConfigError, DecodeError
+from rangekit.patterns import PatternSpec
+from rangekit.pointcloud import PointCloud
+from rangekit.triangulate import TriangulationResult, discontinuity_mask, range_normals, triangulate
+
+__all__ = ["Reconstruction", "reconstruct_view"]
+
+
+@dataclass(frozen=True, eq=False)
+class Reconstruction:
+    """One view: the decoded maps, the organised points after filtering, and the coloured cloud."""
+
+    decoded: DecodeResult
+    triangulated: TriangulationResult  # organised (H, W, 3), world frame, flying pixels removed
+    cloud: PointCloud                  # valid points with colour (white capture) and normals (facing camera)
+
+    def __repr__(self) -> str:
+        return f"Reconstruction({self.decoded!r}, {self.cloud!r})"
+
+
+def reconstruct_view(images, spec: PatternSpec, camera: PinholeCamera, projector: PinholeCamera, *,
+                     order: str = "rangekit", subpixel: bool = True, method: str = "auto",
+                     max_jump: float = 0.004, max_residual: float = 0.002,
+                     full_scale: float | None = None) -> Reconstruction:
+    """Decode ``images`` and triangulate against ``projector``.
+
+    ``max_jump`` (relative range step, see :func:`rangekit.triangulate.discontinuity_mask`) removes flying
+    pixels at depth edges; ``max_residual`` (metres) removes ray-ray points whose rays miss each other.
+    """
+    if camera.size != (np.asarray(images[0]).shape[1], np.asarray(images[0]).shape[0]):
+        raise ConfigError(f"the captures are {np.asarray(images[0]).shape[1]}x{np.asarray(images[0]).shape[0]} "
+                          f"but the rig's camera {camera.name!r} is {camera.width}x{camera.height}")
+    if projector.size != (spec.width, spec.height):
+        raise ConfigError(f"the pattern spec is for a {spec.width}x{spec.height} projector but the rig's "
+                          f"projector is {projector.width}x{projector.height}")
+    dec = decode(images, spec, order=order, subpixel=subpixel, full_scale=full_scale)
+    rows = dec.proj_row if np.any(np.isfinite(dec.proj_row)) else None
+    tri = triangulate(camera, projector, dec.proj_col, rows, method=method)
+    xyz = tri.xyz.copy()
+    drop = discontinuity_mask(xyz, camera.center, max_jump=max_jump)
+    if tri.method == "ray-ray":
+        drop |= ~(tri.residual <= max_residual)
+    xyz[drop] = np.nan
+    tri = TriangulationResult(xyz, np.where(np.isfinite(xyz[:, :, 0]), tri.residual, np.nan), tri.method)
+    valid = tri.valid
+    if not np.any(valid):
+        raise DecodeError("no 3D point survived decoding and triangulation; check the rig file and that the "
+                          "captures show the object lit by the projector")
+    normals = range_normals(xyz, camera.center)[valid]
+    normals = np.where(np.isfinite(normals), normals, 0.0)
+    white = np.asarray(dec.white, dtype=np.float32)
+    white /= 255.0 if dec.white.dtype == np.uint8 else float(full_scale or 65535)
+    colours = white[valid] if white.ndim == 3 else np.repeat(white[valid][:, None], 3, axis=1)
+    return Reconstruction(dec, tri, PointCloud(xyz[valid], np.clip(colours, 0, 1), normals))

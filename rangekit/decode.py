@@ -37,6 +37,7 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Sequence
 
+import cv2
 import numpy as np
 
 from rangekit.errors import DecodeError
@@ -74,41 +75,45 @@ class DecodeResult:
 
 # --------------------------------------------------------------------------- stack access
 class _Frames:
-    """Named access to a capture stack, by rows or columns, converting colour to grey per chunk."""
+    """The capture stack as one (K, H, W) array with frame indices by name (colour converted to grey)."""
 
     def __init__(self, stack, spec: PatternSpec, order: str) -> None:
         names = spec.frame_names_in(order)
-        frames: Sequence[np.ndarray]
         if isinstance(stack, np.ndarray):
             if stack.ndim not in (3, 4):
                 raise DecodeError(f"the capture stack must be (K, H, W) or (K, H, W, 3), found shape {stack.shape}")
-            frames = list(stack)
+            frames = stack
         else:
             frames = [np.asarray(f) for f in stack]
         if len(frames) != len(names):
             raise DecodeError(f"found {len(frames)} captures, pattern {spec.method!r} on a {spec.width}x{spec.height} "
                               f"projector needs {len(names)} ({', '.join(names[:4])}{', ...' if len(names) > 4 else ''})")
-        shape0 = frames[0].shape
-        for i, f in enumerate(frames):
-            if f.shape != shape0:
-                raise DecodeError(f"capture {i} has shape {f.shape}, capture 0 has {shape0}; all captures must "
-                                  "have the same size")
-            if f.dtype not in (np.uint8, np.uint16):
-                raise DecodeError(f"capture {i} has dtype {f.dtype}; expected uint8 or uint16 raw captures")
-            if f.dtype != frames[0].dtype:
-                raise DecodeError(f"capture {i} is {f.dtype}, capture 0 is {frames[0].dtype}; mixed bit depths")
+        shape0, dtype0 = frames[0].shape, frames[0].dtype
+        if not isinstance(frames, np.ndarray):
+            for i, f in enumerate(frames):
+                if f.shape != shape0:
+                    raise DecodeError(f"capture {i} has shape {f.shape}, capture 0 has {shape0}; all captures must "
+                                      "have the same size")
+                if f.dtype != dtype0:
+                    raise DecodeError(f"capture {i} is {f.dtype}, capture 0 is {dtype0}; mixed bit depths")
+        if dtype0 not in (np.uint8, np.uint16):
+            raise DecodeError(f"captures have dtype {dtype0}; expected uint8 or uint16 raw captures")
         if len(shape0) not in (2, 3) or (len(shape0) == 3 and shape0[2] != 3):
             raise DecodeError(f"captures must be (H, W) grey or (H, W, 3) RGB images, found {shape0}")
-        self.by_name = dict(zip(names, frames))
-        self.shape = shape0[:2]
         self.colour = len(shape0) == 3
-        self.dtype = frames[0].dtype
+        self.colour_white = frames[names.index("white")] if "white" in names else None
+        if self.colour:  # grey = mean of RGB, in the captures' own dtype
+            frames = [(np.asarray(f).sum(axis=2, dtype=np.uint32) // 3).astype(dtype0) for f in frames]
+        if isinstance(frames, np.ndarray):
+            self.stack = np.ascontiguousarray(frames)
+        else:
+            self.stack = np.stack(frames)  # one copy; pass a (K, H, W) array to avoid it
+        self.index = {n: i for i, n in enumerate(names)}
+        self.shape = shape0[:2]
+        self.dtype = dtype0
 
     def get(self, name: str, region: tuple[slice, slice]) -> np.ndarray:
-        f = self.by_name[name][region]
-        if self.colour:
-            f = (f.sum(axis=2, dtype=np.uint32) // 3).astype(self.dtype)
-        return f
+        return self.stack[self.index[name]][region]
 
 
 def _chunks(n: int, size: int) -> list[slice]:
@@ -180,53 +185,16 @@ def _gray_lut(nb: int) -> np.ndarray:
     return _LUTS[nb]
 
 
-def _edge_bit(lo: np.ndarray, spec: PatternSpec) -> np.ndarray:
-    """Index of the projected frame whose stripes change between codes lo and lo + 1."""
-    changed = gray_encode(lo) ^ gray_encode(lo + 1)
-    b = np.log2(np.maximum(changed, 1)).astype(np.int64)
-    return b  # for XOR codes the frame of bit b also flips (base bit: the base frame), see module doc
+_EDGE_LUTS: dict[int, np.ndarray] = {}
 
 
-def _subpixel_along_rows(code: np.ndarray, diffs: np.ndarray, spec: PatternSpec, max_gap: float):
-    """Subpixel coordinate along axis 1 from the crossings of pattern and inverse (module doc)."""
-    h, w = code.shape
-    c0, c1 = code[:, :-1], code[:, 1:]
-    step = c1 - c0
-    pair = (c0 >= 0) & (c1 >= 0) & (np.abs(step) == 1)
-    yy, xx = np.nonzero(pair)
-    lo = np.minimum(c0[yy, xx], c1[yy, xx]).astype(np.int64)
-    b = _edge_bit(lo, spec)
-    d0 = diffs[b, yy, xx].astype(np.float32)
-    d1 = diffs[b, yy, xx + 1].astype(np.float32)
-    crossing = (d0 * d1 <= 0) & (d0 != d1)
-    t = np.zeros_like(d0)
-    np.divide(d0, d0 - d1, out=t, where=crossing)
-    edge_pos = np.full((h, w - 1), np.nan, np.float32)   # camera x of the crossing in pair (y, x)
-    edge_val = np.full((h, w - 1), np.nan, np.float32)   # projector coordinate of that edge
-    edge_pos[yy[crossing], xx[crossing]] = xx[crossing] + t[crossing]
-    edge_val[yy[crossing], xx[crossing]] = lo[crossing] + 0.5
-    has = np.isfinite(edge_pos)
-    idx = np.where(has, np.arange(w - 1, dtype=np.int32), -1)
-    left = np.maximum.accumulate(idx, axis=1)                      # last edge at pair <= p
-    right = np.where(has, np.arange(w - 1, dtype=np.int32), w)
-    right = np.minimum.accumulate(right[:, ::-1], axis=1)[:, ::-1]  # first edge at pair >= p
-    # Pixel x: left edge in pairs <= x - 1, right edge in pairs >= x.
-    L = np.full((h, w), -1, np.int32)
-    R = np.full((h, w), w, np.int32)
-    L[:, 1:] = left
-    R[:, :-1] = right
-    ok = (L >= 0) & (R < w - 1)
-    rows = np.broadcast_to(np.arange(h)[:, None], (h, w))
-    Lc, Rc = np.clip(L, 0, w - 2), np.clip(R, 0, w - 2)
-    xL, uL = edge_pos[rows, Lc], edge_val[rows, Lc]
-    xR, uR = edge_pos[rows, Rc], edge_val[rows, Rc]
-    x = np.arange(w, dtype=np.float32)[None, :]
-    span = xR - xL
-    ok &= (span > 0) & (span <= max_gap) & (np.abs(uR - uL) >= 0.5) & (np.abs(uR - uL) <= 3.0)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        u = uL + (x - xL) * (uR - uL) / span
-    ok &= np.abs(u - code) <= 1.0
-    return np.where(ok, u, np.nan).astype(np.float32)
+def _edge_bit_lut(size: int) -> np.ndarray:
+    """For code c, the Gray bit that changes between c and c + 1 (which frame has the edge)."""
+    if size not in _EDGE_LUTS:
+        c = np.arange(size + 1)
+        changed = gray_encode(c) ^ gray_encode(c + 1)
+        _EDGE_LUTS[size] = np.log2(np.maximum(changed, 1)).astype(np.int64)
+    return _EDGE_LUTS[size]
 
 
 # --------------------------------------------------------------------------- phase
@@ -269,7 +237,7 @@ def _decode_phase(fr: _Frames, spec: PatternSpec, axis: str, region, coarse: np.
 
 # --------------------------------------------------------------------------- driver
 def decode(stack, spec: PatternSpec, *, order: str = "rangekit", subpixel: bool = False,
-           min_contrast: float = 0.03, shadow_threshold: float = 0.02, max_global_ratio: float | None = None,
+           min_contrast: float = 0.015, shadow_threshold: float = 0.01, max_global_ratio: float | None = None,
            max_gap: float = 6.0, max_disagreement: float = 1.5, full_scale: float | None = None,
            workers: int = 2, chunk_rows: int = 96) -> DecodeResult:
     """Decode a capture stack into projector coordinates.
@@ -293,7 +261,8 @@ def decode(stack, spec: PatternSpec, *, order: str = "rangekit", subpixel: bool 
         Pixels with white - black below this fraction of full scale are in the projector's shadow.
     max_global_ratio : float, optional
         Reject pixels whose separated global light exceeds this multiple of their direct light. Default
-        1 for Gray code (its coarse bits fail there), 3 for XOR codes (built to tolerate global light).
+        1 for Gray code (its coarse bits fail there); no limit for XOR codes, which are built to tolerate
+        global light and whose narrow stripes make the separation itself unreliable under defocus.
     max_gap : float
         Subpixel: largest distance in camera pixels between the two stripe edges bracketing a pixel.
     max_disagreement : float
@@ -320,120 +289,148 @@ def decode(stack, spec: PatternSpec, *, order: str = "rangekit", subpixel: bool 
 
         return decode_debruijn(stack, spec, min_contrast=min_contrast, shadow_threshold=shadow_threshold,
                                full_scale=full_scale)
+    from rangekit import _decode_kernels as K
+
     fr = _Frames(stack, spec, order)
     H, W = fr.shape
     fs = float(full_scale if full_scale is not None else (255 if fr.dtype == np.uint8 else 65535))
     binary = spec.method in ("graycode", "xor02", "xor04", "hybrid")
     edges = subpixel and spec.method in ("graycode", "xor02", "xor04")
-    out = {k: np.full((H, W), np.nan, np.float32) for k in ("col", "row", "conf")}
-    sep = {k: np.zeros((H, W), np.float32) for k in ("direct", "global")} if binary else {}
-    masks = {k: np.zeros((H, W), bool) for k in ("shadow", "low", "glob", "incons")}
-    sep_axis = spec.axes[0]
-    # Separation frames: the method's own plain fine stripes (XOR frames above the base are too narrow).
-    sep_bits = {"xor02": (0,), "xor04": (0, 1)}.get(spec.method, (1, 2))
+    idx = fr.index
     if max_global_ratio is None:
-        max_global_ratio = 3.0 if spec.xor_base is not None else 1.0
-    halo = int(np.ceil(max_gap)) + 2 if (edges and "rows" in spec.axes) else 0
-    t_shadow, t_low = shadow_threshold * fs, min_contrast * fs
+        max_global_ratio = np.inf if spec.xor_base is not None else 1.0
 
-    def run(rs: slice) -> None:
-        region = (rs, slice(None))
-        white = fr.get("white", region)
-        black = fr.get("black", region)
-        span = white.astype(np.int32) - black
-        shadow = span < t_shadow
-        low = (span < t_low) & ~shadow
-        conf = np.clip(span.astype(np.float32) / np.float32(fs), 0, 1)
-        reject = shadow | low
-        if binary:  # direct/global separation from the finest stripes (module doc)
-            prefix = "col" if sep_axis == "columns" else "row"
-            best_d = best_min = None
-            for b in sep_bits:
-                if b >= spec.bits(sep_axis):
-                    continue
-                P = fr.get(f"{prefix}_b{b}", region)
-                I = fr.get(f"{prefix}_b{b}_inv", region)
-                d = np.abs(P.astype(np.int32) - I)
-                mn = np.minimum(P, I)
-                if best_d is None:
-                    best_d, best_min = d, mn
-                else:
-                    take = d > best_d
-                    best_d = np.where(take, d, best_d)
-                    best_min = np.where(take, mn, best_min)
-            glob2 = np.maximum(2 * (best_min.astype(np.int32) - black), 0)
-            sep["direct"][rs] = best_d / np.float32(fs)
-            sep["global"][rs] = glob2 / np.float32(fs)
-            gmask = ~reject & (glob2 > max_global_ratio * best_d)
-            masks["glob"][rs] = gmask
-            reject = reject | gmask
-        incons = np.zeros(span.shape, bool)
-        n_sub = 0
-        sub_missing = np.zeros(span.shape, bool)
+    # Masks, confidence and direct/global separation: one pass over white, black and the finest stripes
+    # (the method's own plain fine frames: XOR frames above the base are too narrow for it).
+    sep_axis = spec.axes[0]
+    sep_prefix = "col" if sep_axis == "columns" else "row"
+    sep_bits = [b for b in {"xor02": (0,), "xor04": (0, 1)}.get(spec.method, (1, 2))
+                if binary and b < spec.bits(sep_axis)]
+    sep_p = np.array([idx[f"{sep_prefix}_b{b}"] for b in sep_bits], np.int64)
+    sep_i = np.array([idx[f"{sep_prefix}_b{b}_inv"] for b in sep_bits], np.int64)
+    conf = np.empty((H, W), np.float32)
+    shadow, low, glob_mask = (np.empty((H, W), bool) for _ in range(3))
+    direct, glob = np.zeros((H, W), np.float32), np.zeros((H, W), np.float32)
+    K.masks_rows(fr.stack, idx["white"], idx["black"], sep_p, sep_i, np.float32(shadow_threshold * fs),
+                 np.float32(min_contrast * fs), np.float32(max_global_ratio), np.float32(1.0 / fs),
+                 conf, shadow, low, glob_mask, direct, glob)
+    if spec.method in ("graycode", "xor02", "xor04"):
+        # Binary codes: codes, subpixel edges and the final maps all in compiled passes.
+        empty_i, empty_f = np.zeros((1, 1), np.int32), np.zeros((1, 1), np.float32)
+        codes, subs = {}, {}
         for axis in spec.axes:
-            key = "col" if axis == "columns" else "row"
-            size = spec.width if axis == "columns" else spec.height
-            coarse = None
-            if binary:
-                if axis == "rows" and halo:
-                    r0, r1 = max(rs.start - halo, 0), min(rs.stop + halo, H)
-                    code_h, diffs_h = _decode_bits(fr, spec, axis, (slice(r0, r1), slice(None)), True)
-                    inner = slice(rs.start - r0, rs.stop - r0)
-                    code = code_h[inner]
-                    sub = _subpixel_along_rows(code_h.T, diffs_h.transpose(0, 2, 1), spec, max_gap).T[inner]
-                else:
-                    code, diffs = _decode_bits(fr, spec, axis, region, edges)
-                    sub = _subpixel_along_rows(code, diffs, spec, max_gap) if edges else None
-                incons |= code < 0
-                coarse = code.astype(np.float32)
-                value = coarse
-                if sub is not None:
-                    miss = ~np.isfinite(sub)
-                    value = np.where(miss, coarse, sub)
-                    sub_missing |= miss
-            if spec.method in ("phase", "hybrid"):
-                ph, mod = _decode_phase(fr, spec, axis, region, coarse)
-                if coarse is not None:
-                    incons |= np.abs(ph - coarse) > max_disagreement
-                value = ph
-                incons |= (ph < -0.5) | (ph > size - 0.5)
-                weak = (2 * mod < t_low) & ~shadow
-                low |= weak
-                reject = reject | weak
-                conf = np.minimum(conf, np.clip(2 * mod / np.float32(fs), 0, 1))
-            out[key][rs] = np.where(reject, np.nan, value)
-        incons &= ~reject
-        for key in ("col", "row"):
-            out[key][rs][incons] = np.nan
-        if edges:
-            conf = np.where(sub_missing, conf * 0.5, conf)
-        ok = ~(reject | incons)
-        out["conf"][rs] = np.where(ok, conf, 0.0)
-        masks["shadow"][rs] = shadow
-        masks["low"][rs] = low
-        masks["incons"][rs] = incons
-
-    _parallel(run, _chunks(H, chunk_rows), workers)
-
-    lit = ~masks["shadow"]
+            codes[axis] = _axis_code(fr, spec, axis, workers, chunk_rows)
+            subs[axis] = _axis_subpixel(fr, spec, axis, codes[axis], max_gap) if edges else empty_f
+        proj_col, proj_row = np.empty((H, W), np.float32), np.empty((H, W), np.float32)
+        incons = np.empty((H, W), bool)
+        K.finalise_binary(codes.get("columns", empty_i), subs.get("columns", empty_f), codes.get("rows", empty_i),
+                          subs.get("rows", empty_f), "columns" in codes, "rows" in codes, edges, shadow, low,
+                          glob_mask, conf, proj_col, proj_row, incons)
+    else:
+        proj_col, proj_row, conf, incons = _decode_phase_maps(
+            fr, spec, shadow, low, glob_mask, conf, min_contrast * fs, fs, max_disagreement, workers, chunk_rows)
+    lit = ~shadow
     if not np.any(lit):
         raise DecodeError(f"no pixel is lit: white - black is below {shadow_threshold:.0%} of full scale "
-                          f"({t_shadow:.0f}) everywhere; was the projector on and the capture exposed?")
-    w_all, b_all = fr.by_name["white"], fr.by_name["black"]
+                          f"({shadow_threshold * fs:.0f}) everywhere; was the projector on and the capture exposed?")
+    w_all, b_all = fr.stack[idx["white"]], fr.stack[idx["black"]]
     step = max(1, int(np.sqrt(H * W / 250000)))
     if np.mean(w_all[::step, ::step] < b_all[::step, ::step]) > 0.25:
         raise DecodeError("the white capture is darker than the black one in over 25% of the pixels: the "
                           "captures are not in this spec's order (try order='opencv') or the spec does not "
                           "match the capture")
-    if lit.sum() > 100 and np.mean(masks["incons"][lit]) > 0.5:
+    if np.count_nonzero(lit) > 100 and np.count_nonzero(incons) > 0.5 * np.count_nonzero(lit):
         raise DecodeError(f"over half of the lit pixels decode to codes outside the {spec.width}x{spec.height} "
                           "projector: the spec does not match the capture (projector size, method or order)")
-    nan = np.full((H, W), np.nan, np.float32)
-    return DecodeResult(proj_col=out["col"] if "columns" in spec.axes else nan,
-                        proj_row=out["row"] if "rows" in spec.axes else nan,
-                        confidence=out["conf"], shadow=masks["shadow"], low_contrast=masks["low"],
-                        global_dominated=masks["glob"], inconsistent=masks["incons"],
-                        direct=sep.get("direct"), global_light=sep.get("global"), white=w_all)
+    return DecodeResult(proj_col=proj_col, proj_row=proj_row, confidence=conf, shadow=shadow, low_contrast=low,
+                        global_dominated=glob_mask, inconsistent=incons,
+                        direct=direct if binary else None, global_light=glob if binary else None,
+                        white=fr.colour_white if fr.colour else w_all)
+
+
+def _decode_phase_maps(fr: _Frames, spec: PatternSpec, shadow, low, glob_mask, conf, t_low: float, fs: float,
+                       max_disagreement: float, workers: int, chunk_rows: int):
+    """Phase and hybrid methods: unwrapped phase per axis (Gray-code coarse values for hybrid)."""
+    H, W = fr.shape
+    reject = shadow | low | glob_mask
+    incons = np.zeros((H, W), bool)
+    values = {}
+    for axis in spec.axes:
+        size = spec.width if axis == "columns" else spec.height
+        coarse = None
+        if spec.method == "hybrid":
+            code = _axis_code(fr, spec, axis, workers, chunk_rows)
+            incons |= code < 0
+            coarse = code.astype(np.float32)
+        ph = np.empty((H, W), np.float32)
+        mod = np.empty((H, W), np.float32)
+
+        def run(rs: slice, axis=axis, coarse=coarse, ph=ph, mod=mod) -> None:
+            p, m = _decode_phase(fr, spec, axis, (rs, slice(None)), None if coarse is None else coarse[rs])
+            ph[rs], mod[rs] = p, m
+
+        _parallel(run, _chunks(H, chunk_rows), workers)
+        if coarse is not None:
+            incons |= np.abs(ph - coarse) > max_disagreement
+        incons |= (ph < -0.5) | (ph > size - 0.5)
+        weak = (2 * mod < t_low) & ~shadow
+        low |= weak
+        reject |= weak
+        conf = np.minimum(conf, np.clip(2 * mod / np.float32(fs), 0, 1))
+        values[axis] = ph
+    incons &= ~reject
+    ok = ~(reject | incons)
+    nan = np.float32(np.nan)
+    proj_col = np.where(ok, values["columns"], nan) if "columns" in values else np.full((H, W), nan)
+    proj_row = np.where(ok, values["rows"], nan) if "rows" in values else np.full((H, W), nan)
+    return proj_col, proj_row, np.where(ok, conf, 0).astype(np.float32), incons
+
+
+def _axis_code(fr: _Frames, spec: PatternSpec, axis: str, workers: int, chunk_rows: int) -> np.ndarray:
+    """Integer code map of one axis: compiled Gray decoding, or chunked numpy for XOR codes."""
+    from rangekit import _decode_kernels as K
+
+    H, W = fr.shape
+    prefix = "col" if axis == "columns" else "row"
+    nb = spec.bits(axis)
+    code = np.empty((H, W), np.int32)
+    if spec.xor_base is None:
+        p_idx = np.array([fr.index[f"{prefix}_b{b}"] for b in range(nb - 1, -1, -1)], np.int64)
+        i_idx = np.array([fr.index[f"{prefix}_b{b}_inv"] for b in range(nb - 1, -1, -1)], np.int64)
+        K.gray_rows(fr.stack, p_idx, i_idx, _gray_lut(nb), spec.width if axis == "columns" else spec.height, code)
+        return code
+    # XOR codes decide their high bits over windows across the stripes: rows need a halo of 2.
+    halo = 2 if axis == "rows" else 0
+
+    def run(rs: slice) -> None:
+        r0, r1 = max(rs.start - halo, 0), min(rs.stop + halo, H)
+        c, _ = _decode_bits(fr, spec, axis, (slice(r0, r1), slice(None)), False)
+        code[rs] = c[rs.start - r0: rs.stop - r0]
+
+    _parallel(run, _chunks(H, chunk_rows), workers)
+    return code
+
+
+def _axis_subpixel(fr: _Frames, spec: PatternSpec, axis: str, code: np.ndarray, max_gap: float) -> np.ndarray:
+    """Subpixel stripe-edge refinement of one axis's code map (compiled kernels; module doc)."""
+    from rangekit import _decode_kernels as K
+
+    H, W = fr.shape
+    prefix = "col" if axis == "columns" else "row"
+    nb = spec.bits(axis)
+    p_by_bit = np.array([fr.index[f"{prefix}_b{b}"] for b in range(nb)], np.int64)
+    i_by_bit = np.array([fr.index[f"{prefix}_b{b}_inv"] for b in range(nb)], np.int64)
+    edge_bit = _edge_bit_lut(spec.width if axis == "columns" else spec.height)
+    out = np.empty((H, W), np.float32)
+    if axis == "columns":  # column stripes cross camera rows
+        t = np.empty((H, W - 1), np.float32)
+        K.crossings(fr.stack, code, p_by_bit, i_by_bit, edge_bit, False, t)
+        K.interp_along_rows(code, t, np.float32(max_gap), out)
+    else:
+        t = np.empty((H - 1, W), np.float32)
+        K.crossings(fr.stack, code, p_by_bit, i_by_bit, edge_bit, True, t)
+        K.interp_along_cols(code, t, np.float32(max_gap), out)
+    return out
 
 
 def _parallel(fn, items, workers: int) -> None:

@@ -1,0 +1,229 @@
+"""Compiled inner loops of the coded-light decoder (numba; compiled once, cached on disk).
+
+Why numba: decoding is a per-pixel recurrence over 20-40 frames, and subpixel edges need, for each pixel,
+the nearest stripe crossing on either side. In numpy that is about 30 full-image passes per axis
+(0.6 s at 2048x1500); one fused loop per image row reads each frame row once (see docs/benchmarks.md).
+All kernels walk memory row by row; parallel loops are over rows or over blocks of columns.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+from numba import njit, prange
+
+# OpenMP or numba's own workqueue; skips the TBB probe (and its warning where TBB is too old).
+numba.config.THREADING_LAYER_PRIORITY = ["omp", "workqueue", "tbb"]
+
+__all__ = ["gray_rows", "masks_rows", "crossings", "interp_along_rows", "interp_along_cols"]
+
+
+@njit(parallel=True, cache=True, nogil=True)
+def gray_rows(stack, p_idx, i_idx, lut, size, code):  # pragma: no cover - compiled
+    """code[y, x] = binary column of the Gray code read MSB first from frames p_idx[j] > i_idx[j]; -1 if >= size."""
+    K, H, W = stack.shape
+    nb = p_idx.shape[0]
+    for y in prange(H):
+        g = np.zeros(W, np.int32)
+        for j in range(nb):
+            P = stack[p_idx[j], y]
+            I = stack[i_idx[j], y]
+            for x in range(W):
+                g[x] = (g[x] << 1) | (1 if P[x] > I[x] else 0)
+        for x in range(W):
+            c = lut[g[x]]
+            code[y, x] = c if c < size else -1
+
+
+@njit(parallel=True, cache=True, nogil=True)
+def masks_rows(stack, white_i, black_i, sep_p, sep_i, t_shadow, t_low, ratio, inv_fs,
+               conf, shadow, low, glob_mask, direct, glob):  # pragma: no cover - compiled
+    """Shadow / low-contrast masks, confidence (white - black) / fs, and direct/global separation from
+    the pattern/inverse pairs sep_p/sep_i (best contrast wins): direct = |P - I|, global = 2 (min - black)."""
+    K, H, W = stack.shape
+    ns = sep_p.shape[0]
+    for y in prange(H):
+        Wr = stack[white_i, y]
+        Br = stack[black_i, y]
+        for x in range(W):
+            span = np.float32(Wr[x]) - np.float32(Br[x])
+            if span < 0:
+                span = 0.0
+            sh = span < t_shadow
+            shadow[y, x] = sh
+            lo = (span < t_low) and not sh
+            low[y, x] = lo
+            conf[y, x] = span * inv_fs
+            best_d = -1.0
+            best_min = 0.0
+            for j in range(ns):
+                p = np.float32(stack[sep_p[j], y, x])
+                q = np.float32(stack[sep_i[j], y, x])
+                d = abs(p - q)
+                if d > best_d:
+                    best_d = d
+                    best_min = min(p, q)
+            if ns > 0:
+                g = 2.0 * (best_min - np.float32(Br[x]))
+                if g < 0:
+                    g = 0.0
+                direct[y, x] = best_d * inv_fs
+                glob[y, x] = g * inv_fs
+                glob_mask[y, x] = (not sh) and (not lo) and g > ratio * best_d
+            else:
+                glob_mask[y, x] = False
+
+
+@njit(parallel=True, cache=True, nogil=True)
+def crossings(stack, code, p_by_bit, i_by_bit, edge_bit, vertical, out):  # pragma: no cover - compiled
+    """Stripe-edge crossings between neighbouring pixels whose codes differ by one.
+
+    vertical == False: pairs (y, x)-(y, x+1), out (H, W-1); True: pairs (y, x)-(y+1, x), out (H-1, W).
+    out = t in [0, 1], the fraction of the way from the first pixel to the crossing of pattern and
+    inverse of the frame whose stripes change between the two codes; NaN where there is none.
+    """
+    Ho = out.shape[0]
+    Wo = out.shape[1]
+    dy = 1 if vertical else 0
+    for y in prange(Ho):
+        y1 = y + dy
+        for x in range(Wo):
+            x1 = x + 1 - dy
+            c0 = code[y, x]
+            c1 = code[y1, x1]
+            t = np.nan
+            if c0 >= 0 and c1 >= 0 and (c1 - c0 == 1 or c0 - c1 == 1):
+                lo = c0 if c0 < c1 else c1
+                b = edge_bit[lo]
+                d0 = np.float32(stack[p_by_bit[b], y, x]) - np.float32(stack[i_by_bit[b], y, x])
+                d1 = np.float32(stack[p_by_bit[b], y1, x1]) - np.float32(stack[i_by_bit[b], y1, x1])
+                if d0 * d1 <= 0 and d0 != d1:
+                    t = d0 / (d0 - d1)
+            out[y, x] = t
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _interp(code, x, xl, ul, xr, ur, max_gap):  # pragma: no cover - compiled
+    span = xr - xl
+    du = ur - ul
+    if span <= 0 or span > max_gap or abs(du) < 0.5 or abs(du) > 3.0:
+        return np.nan
+    u = ul + (x - xl) * du / span
+    if abs(u - code) > 1.0:
+        return np.nan
+    return u
+
+
+@njit(parallel=True, cache=True, nogil=True)
+def interp_along_rows(code, t, max_gap, out):  # pragma: no cover - compiled
+    """Subpixel value of each pixel from the crossings t (H, W-1) on either side along its row."""
+    H, W = code.shape
+    for y in prange(H):
+        pos = np.empty(W, np.float32)
+        val = np.empty(W, np.float32)
+        pair = np.empty(W, np.int64)
+        n = 0
+        for x in range(W - 1):
+            tt = t[y, x]
+            if tt == tt:  # not NaN
+                c0 = code[y, x]
+                c1 = code[y, x + 1]
+                pos[n] = x + tt
+                val[n] = (c0 if c0 < c1 else c1) + 0.5
+                pair[n] = x
+                n += 1
+        k = 0
+        for x in range(W):
+            while k < n and pair[k] < x:
+                k += 1
+            r = np.nan
+            if k >= 1 and k < n and code[y, x] >= 0:
+                r = _interp(code[y, x], x, pos[k - 1], val[k - 1], pos[k], val[k], max_gap)
+            out[y, x] = r
+
+
+@njit(parallel=True, cache=True, nogil=True)
+def interp_along_cols(code, t, max_gap, out):  # pragma: no cover - compiled
+    """As interp_along_rows, along columns: crossings t (H-1, W). Blocks of columns sweep down, recording
+    the row of the last crossing above each pixel, then up, interpolating with the first one below."""
+    H, W = code.shape
+    block = 64
+    nblocks = (W + block - 1) // block
+    for bi in prange(nblocks):
+        x0 = bi * block
+        x1 = min(W, x0 + block)
+        bw = x1 - x0
+        up = np.empty((H, bw), np.int32)  # row of the crossing pair above (pair y-1 or earlier), -1 if none
+        last = np.full(bw, -1, np.int32)
+        for y in range(H):
+            if y >= 1:
+                for j in range(bw):
+                    if t[y - 1, x0 + j] == t[y - 1, x0 + j]:
+                        last[j] = y - 1
+            for j in range(bw):
+                up[y, j] = last[j]
+        nxt = np.full(bw, -1, np.int32)
+        for y in range(H - 1, -1, -1):
+            if y <= H - 2:
+                for j in range(bw):
+                    if t[y, x0 + j] == t[y, x0 + j]:
+                        nxt[j] = y
+            for j in range(bw):
+                x = x0 + j
+                r = np.nan
+                a = up[y, j]
+                b = nxt[j]
+                c = code[y, x]
+                if c >= 0 and a >= 0 and b >= 0:
+                    ca0, ca1 = code[a, x], code[a + 1, x]
+                    cb0, cb1 = code[b, x], code[b + 1, x]
+                    r = _interp(c, y, a + t[a, x], (ca0 if ca0 < ca1 else ca1) + 0.5,
+                                b + t[b, x], (cb0 if cb0 < cb1 else cb1) + 0.5, max_gap)
+                out[y, x] = r
+
+
+@njit(parallel=True, cache=True, nogil=True)
+def finalise_binary(code_c, sub_c, code_r, sub_r, has_c, has_r, use_sub, shadow, low, glob_mask, conf,
+                    proj_col, proj_row, incons):  # pragma: no cover - compiled
+    """Combine codes, subpixel values and masks into the outputs in one pass (NaN where rejected).
+
+    Subpixel misses fall back to the integer code with half the confidence. ``incons``: a code outside
+    the projector on an otherwise accepted pixel.
+    """
+    H, W = shadow.shape
+    nan = np.float32(np.nan)
+    for y in prange(H):
+        for x in range(W):
+            reject = shadow[y, x] or low[y, x] or glob_mask[y, x]
+            bad = (has_c and code_c[y, x] < 0) or (has_r and code_r[y, x] < 0)
+            inc = bad and not reject
+            incons[y, x] = inc
+            if reject or bad:
+                proj_col[y, x] = nan
+                proj_row[y, x] = nan
+                conf[y, x] = 0.0
+                continue
+            c = conf[y, x]
+            if has_c:
+                v = np.float32(code_c[y, x])
+                if use_sub:
+                    s = sub_c[y, x]
+                    if s == s:
+                        v = s
+                    else:
+                        c *= 0.5
+                proj_col[y, x] = v
+            else:
+                proj_col[y, x] = nan
+            if has_r:
+                v = np.float32(code_r[y, x])
+                if use_sub:
+                    s = sub_r[y, x]
+                    if s == s:
+                        v = s
+                    else:
+                        c *= 0.5
+                proj_row[y, x] = v
+            else:
+                proj_row[y, x] = nan
+            conf[y, x] = c

@@ -182,13 +182,26 @@ def interp_along_cols(code, t, max_gap, out):  # pragma: no cover - compiled
                 out[y, x] = r
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _decoded(y, x, code_c, code_r, has_c, has_r, shadow, low, glob_mask):  # pragma: no cover - compiled
+    if shadow[y, x] or low[y, x] or glob_mask[y, x]:
+        return False
+    if has_c and code_c[y, x] < 0:
+        return False
+    if has_r and code_r[y, x] < 0:
+        return False
+    return True
+
+
 @njit(parallel=True, cache=True, nogil=True)
 def finalise_binary(code_c, sub_c, code_r, sub_r, has_c, has_r, use_sub, shadow, low, glob_mask, conf,
                     proj_col, proj_row, incons):  # pragma: no cover - compiled
     """Combine codes, subpixel values and masks into the outputs in one pass (NaN where rejected).
 
-    Subpixel misses fall back to the integer code with half the confidence. ``incons``: a code outside
-    the projector on an otherwise accepted pixel.
+    ``incons``: on an otherwise accepted pixel, a code outside the projector or (with ``use_sub``) no
+    subpixel value (no stripe edge on both sides within max_gap, or edges that disagree with the code)
+    at the border of the decoded region. Inside it (all 4 neighbours lit and decoded, e.g. where stripes
+    are narrower than a camera pixel) such pixels keep their integer code.
     """
     H, W = shadow.shape
     nan = np.float32(np.nan)
@@ -196,6 +209,16 @@ def finalise_binary(code_c, sub_c, code_r, sub_r, has_c, has_r, use_sub, shadow,
         for x in range(W):
             reject = shadow[y, x] or low[y, x] or glob_mask[y, x]
             bad = (has_c and code_c[y, x] < 0) or (has_r and code_r[y, x] < 0)
+            miss_c = use_sub and has_c and not (sub_c[y, x] == sub_c[y, x])
+            miss_r = use_sub and has_r and not (sub_r[y, x] == sub_r[y, x])
+            if (miss_c or miss_r) and not bad:
+                interior = y > 0 and y < H - 1 and x > 0 and x < W - 1
+                if interior:
+                    interior = _decoded(y - 1, x, code_c, code_r, has_c, has_r, shadow, low, glob_mask) and \
+                        _decoded(y + 1, x, code_c, code_r, has_c, has_r, shadow, low, glob_mask) and \
+                        _decoded(y, x - 1, code_c, code_r, has_c, has_r, shadow, low, glob_mask) and \
+                        _decoded(y, x + 1, code_c, code_r, has_c, has_r, shadow, low, glob_mask)
+                bad = not interior
             inc = bad and not reject
             incons[y, x] = inc
             if reject or bad:
@@ -203,27 +226,13 @@ def finalise_binary(code_c, sub_c, code_r, sub_r, has_c, has_r, use_sub, shadow,
                 proj_row[y, x] = nan
                 conf[y, x] = 0.0
                 continue
-            c = conf[y, x]
             if has_c:
-                v = np.float32(code_c[y, x])
-                if use_sub:
-                    s = sub_c[y, x]
-                    if s == s:
-                        v = s
-                    else:
-                        c *= 0.5
-                proj_col[y, x] = v
+                proj_col[y, x] = np.float32(code_c[y, x]) if (miss_c or not use_sub) else sub_c[y, x]
             else:
                 proj_col[y, x] = nan
             if has_r:
-                v = np.float32(code_r[y, x])
-                if use_sub:
-                    s = sub_r[y, x]
-                    if s == s:
-                        v = s
-                    else:
-                        c *= 0.5
-                proj_row[y, x] = v
+                proj_row[y, x] = np.float32(code_r[y, x]) if (miss_r or not use_sub) else sub_r[y, x]
             else:
                 proj_row[y, x] = nan
-            conf[y, x] = c
+            if miss_c or miss_r:
+                conf[y, x] *= 0.5

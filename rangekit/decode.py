@@ -15,7 +15,8 @@ one, exactly one Gray bit changes; its pattern and inverse cross at the stripe e
 ``c + 0.5``. Linear interpolation of ``pattern - inverse`` between the two pixels places that crossing to
 a fraction of a camera pixel. Columns are then interpolated along the camera row between the crossings
 on either side of each pixel (rows are done the same way along camera columns). Pixels without edges
-on both sides within ``max_gap`` pixels keep the integer value and half the confidence.
+on both sides within ``max_gap`` pixels, or whose edges disagree with their code, are rejected as
+``inconsistent`` (mixing in integer values would spoil the accuracy the caller asked for).
 
 Phase shifting (phase, hybrid): N-step phase ``atan2(sum I_s sin d_s, sum I_s cos d_s)``, ``d_s = 2 pi s
 / N``. Multi-frequency ``phase`` unwraps each period with the next coarser one; ``hybrid`` unwraps with the
@@ -56,7 +57,8 @@ class DecodeResult:
     shadow: np.ndarray            # (H, W) bool: white - black below shadow_threshold (projector light absent)
     low_contrast: np.ndarray      # (H, W) bool: lit, but the code's contrast is below min_contrast
     global_dominated: np.ndarray  # (H, W) bool: separated global light > max_global_ratio * direct light
-    inconsistent: np.ndarray      # (H, W) bool: code outside the projector, or code and phase disagree
+    inconsistent: np.ndarray      # (H, W) bool: code outside the projector, code and phase disagree, or
+                                  # (subpixel) no stripe edge on both sides
     direct: np.ndarray | None = None        # (H, W) float32 direct light, fraction of full scale
     global_light: np.ndarray | None = None  # (H, W) float32 global light, fraction of full scale
     white: np.ndarray | None = None         # (H, W[, 3]) the white capture, for colour

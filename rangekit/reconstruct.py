@@ -30,12 +30,15 @@ class Reconstruction:
 
 def reconstruct_view(images, spec: PatternSpec, camera: PinholeCamera, projector: PinholeCamera, *,
                      order: str = "rangekit", subpixel: bool = True, method: str = "auto",
-                     max_jump: float = 0.004, max_residual: float = 0.002,
+                     max_jump: float = 0.004, max_residual: float = 0.002, min_confidence: float = 0.03,
                      full_scale: float | None = None) -> Reconstruction:
     """Decode ``images`` and triangulate against ``projector``.
 
     ``max_jump`` (relative range step, see :func:`rangekit.triangulate.discontinuity_mask`) removes flying
-    pixels at depth edges; ``max_residual`` (metres) removes ray-ray points whose rays miss each other.
+    pixels at depth edges; ``max_residual`` (metres) removes ray-ray points whose rays miss each other;
+    ``min_confidence`` drops pixels whose decoded confidence (about the white - black signal as a fraction
+    of full scale) is lower: at 1-2% of full scale noise moves stripe edges by a large fraction of a
+    column, which at grazing angles is millimetres.
     """
     if camera.size != (np.asarray(images[0]).shape[1], np.asarray(images[0]).shape[0]):
         raise ConfigError(f"the captures are {np.asarray(images[0]).shape[1]}x{np.asarray(images[0]).shape[0]} "
@@ -44,8 +47,10 @@ def reconstruct_view(images, spec: PatternSpec, camera: PinholeCamera, projector
         raise ConfigError(f"the pattern spec is for a {spec.width}x{spec.height} projector but the rig's "
                           f"projector is {projector.width}x{projector.height}")
     dec = decode(images, spec, order=order, subpixel=subpixel, full_scale=full_scale)
-    rows = dec.proj_row if np.any(np.isfinite(dec.proj_row)) else None
-    tri = triangulate(camera, projector, dec.proj_col, rows, method=method)
+    weak = dec.confidence < min_confidence
+    cols = np.where(weak, np.nan, dec.proj_col)
+    rows = np.where(weak, np.nan, dec.proj_row) if np.any(np.isfinite(dec.proj_row)) else None
+    tri = triangulate(camera, projector, cols, rows, method=method)
     xyz = tri.xyz.copy()
     drop = discontinuity_mask(xyz, camera.center, max_jump=max_jump)
     if tri.method == "ray-ray":

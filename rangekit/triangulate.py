@@ -170,13 +170,15 @@ def range_normals(xyz: np.ndarray, viewpoint: np.ndarray) -> np.ndarray:
 
 
 def discontinuity_mask(xyz: np.ndarray, viewpoint: np.ndarray, *, max_jump: float = 0.004,
-                       min_neighbours: int = 3) -> np.ndarray:
+                       min_neighbours: int = 4) -> np.ndarray:
     """(H, W) bool: points to drop as "flying pixels" at depth discontinuities.
 
     A point is dropped when its distance to ``viewpoint`` differs from a 4-neighbour's by more than
     ``max_jump`` times its own distance (0.004 = 2 mm at 0.5 m), or when fewer than ``min_neighbours``
-    of its 4-neighbours are valid. Mixed pixels at silhouettes (half foreground, half background) decode
-    to codes of the wrong surface and land between the two; this removes them and the pixel on either side.
+    of its 4-neighbours are valid (default: all four, so the one-pixel rim of every region goes). Mixed
+    pixels at silhouettes (half foreground, half background) decode to codes of the wrong surface and
+    land between the two; at the rim of a surface the camera blur is cut off by the background and biases
+    the code by up to half a column. This removes both.
     """
     r = np.linalg.norm(np.asarray(xyz, dtype=np.float64) - viewpoint, axis=2)
     H, W = r.shape

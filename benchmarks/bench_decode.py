@@ -159,10 +159,11 @@ def write_pngs(cache: Path, stack: np.ndarray) -> list[Path]:
 
 
 # ------------------------------------------------------------------ timing and accuracy
-def median_time(fn, repeat: int, warmup: int = 3) -> tuple[float, float, object]:
+def median_time(fn, repeat: int, warmup: int = 10) -> tuple[float, float, object]:
     """(median of ``repeat`` calls after ``warmup`` untimed ones, first call, last result).
 
-    The first calls load the compiled kernels from numba's cache and start its thread pool.
+    The first calls load the compiled kernels from numba's cache, start its thread pool and page-fault
+    in ~150 MB of fresh output arrays; a scan decoding many views runs at the steady-state time.
     """
     t = time.perf_counter()
     out = fn()

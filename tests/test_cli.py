@@ -13,7 +13,8 @@ from rangekit.io import read_json
 from rangekit.rig import load_rig
 
 
-@pytest.mark.parametrize("argv", [["--help"], ["sim", "--help"], ["sim", "render", "--help"]])
+@pytest.mark.parametrize("argv", [["--help"], ["sim", "--help"], ["sim", "render", "--help"], ["decode", "--help"],
+                                  ["reconstruct", "--help"]])
 def test_every_command_has_help(argv, capsys):
     with pytest.raises(SystemExit) as exc:
         main(argv)
@@ -59,3 +60,39 @@ def test_cli_errors_are_one_line_without_traceback(tmp_path):
                            str(tmp_path / "o")], capture_output=True, text=True)
     assert proc.returncode == 2
     assert "bad.ply" in proc.stderr and "Traceback" not in proc.stderr
+
+
+def test_decode_and_reconstruct_commands(tmp_path):
+    cap = tmp_path / "cap"
+    assert main(["sim", "render", "--object", "sphere", "--patterns", "hybrid", "--out", str(cap)]) == 0
+    maps = tmp_path / "maps.npz"
+    assert main(["decode", str(cap), "--pattern", str(cap / "patterns.json"), "--out", str(maps)]) == 0
+    gt = np.load(cap / "ground_truth.npz")
+    with np.load(maps) as m:
+        assert {"proj_col", "proj_row", "confidence", "shadow"} <= set(m.files)
+        err = m["proj_col"][gt["valid"]] - gt["proj_col"][gt["valid"]]
+        assert np.nanmedian(np.abs(err)) < 0.1 and np.isfinite(err).mean() > 0.95
+    # The same images as a list of files with a method name and projector size.
+    files = [str(p) for p in sorted(cap.glob("[0-9][0-9][0-9].png"))]
+    assert main(["decode", *files, "--pattern", "hybrid", "--projector", "1280x800", "--out", str(maps)]) == 0
+    cloud = tmp_path / "sphere.ply"
+    assert main(["reconstruct", str(cap), "--out", str(cloud)]) == 0
+    import open3d as o3d
+
+    pc = o3d.io.read_point_cloud(str(cloud))
+    P = np.asarray(pc.points)
+    assert len(P) > 50000 and pc.has_colors() and pc.has_normals()
+    on_sphere = np.abs(np.linalg.norm(P - [0, 0, 0.05], axis=1) - 0.05) < 1e-3
+    assert on_sphere.sum() > 50000  # the sphere stands on the table, centre 5 cm up
+
+
+def test_decode_command_errors(tmp_path, capsys):
+    cap = tmp_path / "w"
+    assert main(["sim", "render", "--object", "plane", "--patterns", "white", "--out", str(cap)]) == 0
+    assert main(["decode", str(cap), "--pattern", "graycode", "--projector", "1280x800",
+                 "--out", str(tmp_path / "m.npz")]) == 2
+    assert "found 1 captures" in capsys.readouterr().err
+    assert main(["decode", str(cap), "--pattern", "graycode", "--out", str(tmp_path / "m.npz")]) == 2
+    assert "--projector" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["decode", str(cap), "--pattern", "graycode", "--projector", "1280by800", "--out", "x.npz"])

@@ -1,0 +1,342 @@
+"""Iterative closest point (Fusiello ch. 15): point-to-point, point-to-plane and symmetric objectives,
+robust kernels with a MAD scale, trimming, a coarse-to-fine voxel schedule, and two associations:
+a KD-tree for any cloud, or projection into an organised target scan (no tree at all).
+
+The result maps the source into the target frame: ``p_target = T_target_source @ p_source``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from rangekit.camera import PinholeCamera
+from rangekit.errors import InputError, RegistrationError
+from rangekit.geometry import apply_T, invert_T, make_T, procrustes, rotation_angle, rotvec_to_R, transform_vectors
+from rangekit.pointcloud import PointCloud
+
+__all__ = ["IcpOptions", "RegistrationResult", "icp", "KERNELS", "voxel_downsample", "estimate_normals",
+           "OrganisedScan"]
+
+KERNELS = ("none", "huber", "cauchy", "tukey", "geman_mcclure", "welsch")
+METHODS = ("point_to_point", "point_to_plane", "symmetric")
+
+
+@dataclass(frozen=True)
+class IcpOptions:
+    """ICP settings (distances in metres)."""
+
+    method: str = "point_to_plane"      # "point_to_point", "point_to_plane" or "symmetric"
+    max_distance: float = 0.005         # correspondences farther apart are ignored
+    max_iterations: int = 50
+    kernel: str = "huber"               # robust kernel, see KERNELS
+    kernel_scale: float | None = None   # metres; None: 1.4826 * MAD of the residuals, each iteration
+    trim: float = 0.0                   # fraction of the worst correspondences dropped each iteration
+    voxel_sizes: tuple[float, ...] = ()  # coarse-to-fine schedule: ICP on voxel-downsampled clouds first
+    max_samples: int | None = 10000     # source points per iteration and for the final statistics
+                                        # (random, seeded); None: all
+    tolerance: float = 1e-9             # stop when the update moves points by less (metres, at the cloud's size)
+    rng: int = 0
+
+    def __post_init__(self) -> None:
+        if self.method not in METHODS:
+            raise InputError(f"IcpOptions: method must be one of {METHODS}, found {self.method!r}")
+        if self.kernel not in KERNELS:
+            raise InputError(f"IcpOptions: kernel must be one of {KERNELS}, found {self.kernel!r}")
+        if not (self.max_distance > 0 and self.max_iterations >= 1 and 0 <= self.trim < 1):
+            raise InputError(f"IcpOptions: need max_distance > 0, max_iterations >= 1, 0 <= trim < 1; found "
+                             f"{self.max_distance}, {self.max_iterations}, {self.trim}")
+
+
+@dataclass(frozen=True, eq=False)
+class RegistrationResult:
+    """Result of a pairwise registration."""
+
+    T_target_source: np.ndarray  # (4, 4) float64; p_target = T_target_source @ p_source
+    rmse: float                  # inlier RMS distance in metres (point-to-plane: along the normal); lower is better
+    fitness: float               # source points with a correspondence within max_distance / all; higher is better
+    n_iterations: int
+    converged: bool
+    reason: str = ""             # why it stopped
+    residuals: np.ndarray = field(default_factory=lambda: np.zeros(0))  # (K,) final inlier residuals, metres
+
+    def __repr__(self) -> str:
+        ang = np.degrees(rotation_angle(self.T_target_source[:3, :3]))
+        return (f"RegistrationResult(angle={ang:.4f} deg, t={np.round(self.T_target_source[:3, 3], 5).tolist()}, "
+                f"rmse={self.rmse * 1e3:.4f} mm, fitness={self.fitness:.3f}, iterations={self.n_iterations}, "
+                f"converged={self.converged}, reason={self.reason!r})")
+
+
+@dataclass(frozen=True, eq=False)
+class OrganisedScan:
+    """A target scan kept as its range map, for projective association.
+
+    ``xyz`` (H, W, 3) points in the TARGET frame (NaN where invalid), ``normals`` the same shape, and the
+    ``camera`` that took it with ``T_world_cam`` expressed in that frame (for a scan in its own camera
+    frame: identity).
+    """
+
+    xyz: np.ndarray
+    normals: np.ndarray
+    camera: PinholeCamera
+
+    def cloud(self) -> PointCloud:
+        ok = np.isfinite(self.xyz[:, :, 0]) & np.isfinite(self.normals[:, :, 0])
+        return PointCloud(self.xyz[ok], normals=self.normals[ok])
+
+
+# --------------------------------------------------------------------------- helpers
+def voxel_downsample(points: np.ndarray, voxel: float, *, normals: np.ndarray | None = None):
+    """Mean point (and renormalised mean normal) per occupied voxel of edge ``voxel`` metres."""
+    P = np.asarray(points, dtype=np.float64)
+    if voxel <= 0 or len(P) == 0:
+        return (P, normals) if normals is not None else P
+    keys = np.floor(P / voxel).astype(np.int64)
+    keys -= keys.min(axis=0)
+    dims = keys.max(axis=0) + 1
+    flat = (keys[:, 0] * dims[1] + keys[:, 1]) * dims[2] + keys[:, 2]
+    _, inv, counts = np.unique(flat, return_inverse=True, return_counts=True)
+    out = np.zeros((len(counts), 3))
+    np.add.at(out, inv, P)
+    out /= counts[:, None]
+    if normals is None:
+        return out
+    n = np.zeros((len(counts), 3))
+    np.add.at(n, inv, normals)
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+    return out, n
+
+
+def estimate_normals(points: np.ndarray, *, k: int = 20, viewpoint: np.ndarray | None = None) -> np.ndarray:
+    """(N, 3) unit normals from the k nearest neighbours (PCA via Open3D), facing ``viewpoint`` if given."""
+    import open3d as o3d
+
+    pc = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.asarray(points, dtype=np.float64)))
+    pc.estimate_normals(o3d.geometry.KDTreeSearchParamKNN(knn=k))
+    n = np.asarray(pc.normals).copy()
+    if viewpoint is not None:
+        flip = np.einsum("ij,ij->i", n, np.asarray(viewpoint) - points) < 0
+        n[flip] *= -1
+    return n
+
+
+def _as_cloud(x, name: str) -> PointCloud:
+    cloud = x if isinstance(x, PointCloud) else PointCloud(np.asarray(x, dtype=np.float64))
+    ok = np.all(np.isfinite(cloud.points), axis=1)
+    if not np.all(ok):
+        cloud = PointCloud(cloud.points[ok], None if cloud.colours is None else cloud.colours[ok],
+                           None if cloud.normals is None else cloud.normals[ok])
+    if len(cloud) < 3:
+        raise RegistrationError(f"ICP {name}: needs at least 3 finite points, found {len(cloud)}")
+    return cloud
+
+
+def _weights(r: np.ndarray, kernel: str, scale: float) -> np.ndarray:
+    """IRLS weights w = rho'(r) / r for residuals r (any sign)."""
+    a = np.abs(r) / max(scale, 1e-15)
+    if kernel == "none":
+        return np.ones_like(a)
+    if kernel == "huber":
+        return np.where(a <= 1.345, 1.0, 1.345 / np.maximum(a, 1e-15))
+    if kernel == "cauchy":
+        return 1.0 / (1.0 + (a / 2.3849) ** 2)
+    if kernel == "tukey":
+        return np.where(a < 4.6851, (1 - (a / 4.6851) ** 2) ** 2, 0.0)
+    if kernel == "geman_mcclure":
+        return 1.0 / (1.0 + a ** 2) ** 2
+    return np.exp(-((a / 2.9846) ** 2))  # welsch
+
+
+# --------------------------------------------------------------------------- associations
+class _KdAssociation:
+    def __init__(self, target: PointCloud) -> None:
+        self.points = target.points
+        self.normals = target.normals
+        self.tree = cKDTree(target.points, leafsize=16, balanced_tree=False, compact_nodes=False)
+
+    def __call__(self, p: np.ndarray, max_distance: float):
+        d, idx = self.tree.query(p, k=1, distance_upper_bound=max_distance, workers=-1)
+        ok = np.isfinite(d)
+        idx = np.where(ok, idx, 0)
+        return ok, self.points[idx], None if self.normals is None else self.normals[idx]
+
+
+class _ProjectiveAssociation:
+    def __init__(self, scan: OrganisedScan) -> None:
+        self.scan = scan
+        self.camera = scan.camera
+
+    def __call__(self, p: np.ndarray, max_distance: float):
+        """Bilinear interpolation of the range map at the projection (nearest pixel where a neighbour is
+        missing), so correspondences are not quantised to the pixel grid."""
+        uv = self.camera.project(p)
+        H, W = self.scan.xyz.shape[:2]
+        inside = np.isfinite(uv[:, 0]) & (uv[:, 0] >= 0) & (uv[:, 0] <= W - 1) & (uv[:, 1] >= 0) & (uv[:, 1] <= H - 1)
+        uu = np.where(inside, uv[:, 0], 0.0)
+        vv = np.where(inside, uv[:, 1], 0.0)
+        u0 = np.minimum(np.floor(uu).astype(np.int64), W - 2)
+        v0 = np.minimum(np.floor(vv).astype(np.int64), H - 2)
+        fu, fv = (uu - u0)[:, None], (vv - v0)[:, None]
+        X, N = self.scan.xyz, self.scan.normals
+        corners = [(v0, u0, (1 - fu) * (1 - fv)), (v0, u0 + 1, fu * (1 - fv)), (v0 + 1, u0, (1 - fu) * fv),
+                   (v0 + 1, u0 + 1, fu * fv)]
+        q = sum(X[a, b] * w for a, b, w in corners)
+        n = sum(N[a, b] * w for a, b, w in corners)
+        near = ~np.isfinite(q[:, 0]) | ~np.isfinite(n[:, 0])
+        if np.any(near):
+            ui = np.rint(uu[near]).astype(np.int64)
+            vi = np.rint(vv[near]).astype(np.int64)
+            q[near], n[near] = X[vi, ui], N[vi, ui]
+        with np.errstate(invalid="ignore"):
+            n /= np.linalg.norm(n, axis=1, keepdims=True)
+        ok = inside & np.isfinite(q[:, 0]) & np.isfinite(n[:, 0])
+        ok &= np.sum((np.where(ok[:, None], q, 0) - p) ** 2, axis=1) <= max_distance ** 2
+        return ok, q, n
+
+
+# --------------------------------------------------------------------------- one level of ICP
+def _solve_increment(method: str, p: np.ndarray, q: np.ndarray, nq: np.ndarray | None, np_: np.ndarray | None,
+                     w: np.ndarray) -> np.ndarray:
+    """(4, 4) increment applied to the (already transformed) source points."""
+    if method == "point_to_point":
+        return procrustes(p, q, weights=w).T_dst_src
+    if method == "point_to_plane":
+        n = nq
+        r = np.einsum("ij,ij->i", p - q, n)
+        J = np.hstack([np.cross(p, n), n])
+    else:  # symmetric (Rusinkiewicz 2019): normals of both sides, rotation split between them
+        n = nq + np_
+        n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
+        r = np.einsum("ij,ij->i", p - q, n)
+        J = np.hstack([np.cross(p + q, n), n])
+    A = J.T @ (J * w[:, None])
+    b = -J.T @ (w * r)
+    try:
+        x = np.linalg.solve(A + 1e-12 * np.trace(A) / 6 * np.eye(6), b)
+    except np.linalg.LinAlgError:
+        return np.eye(4)
+    if method == "point_to_plane":
+        return make_T(rotvec_to_R(x[:3]), x[3:])
+    # symmetric: rotate by theta = atan(|a|) about a, translate t cos(theta), rotate again (R T R)
+    a, t = x[:3], x[3:]
+    na = np.linalg.norm(a)
+    theta = np.arctan(na)
+    R = rotvec_to_R(a / na * theta) if na > 0 else np.eye(3)
+    Rm = make_T(R)
+    return Rm @ make_T(None, t * np.cos(theta)) @ Rm
+
+
+def _icp_level(src: PointCloud, assoc, T: np.ndarray, opt: IcpOptions, rng: np.random.Generator, size: float):
+    P_all = src.points
+    N_all = src.normals
+    n_iter, reason, converged = 0, f"max_iterations={opt.max_iterations}", False
+    need_src_normals = opt.method == "symmetric"
+    if need_src_normals and N_all is None:
+        raise RegistrationError("symmetric ICP needs source normals; give PointCloud(points, normals=...)")
+    for n_iter in range(1, opt.max_iterations + 1):
+        if opt.max_samples is not None and len(P_all) > opt.max_samples:
+            sel = rng.choice(len(P_all), opt.max_samples, replace=False)
+        else:
+            sel = slice(None)
+        p = apply_T(T, P_all[sel])
+        ok, q, nq = assoc(p, opt.max_distance)
+        if np.count_nonzero(ok) < 6:
+            return T, n_iter, False, f"degenerate: {np.count_nonzero(ok)} correspondences within {opt.max_distance} m"
+        p, q = p[ok], q[ok]
+        nq = None if nq is None else nq[ok]
+        np_ = transform_vectors(T, N_all[sel][ok]) if need_src_normals else None
+        if opt.method != "point_to_point" and nq is None:
+            raise RegistrationError(f"{opt.method} ICP needs target normals; give the target PointCloud normals")
+        if opt.method == "point_to_point":
+            r = np.linalg.norm(p - q, axis=1)
+        else:
+            n_r = nq if opt.method == "point_to_plane" else (nq + np_)
+            r = np.einsum("ij,ij->i", p - q, n_r / np.maximum(np.linalg.norm(n_r, axis=1, keepdims=True), 1e-12))
+        keep = np.ones(len(r), bool)
+        if opt.trim > 0:
+            keep = np.abs(r) <= np.quantile(np.abs(r), 1 - opt.trim)
+        scale = opt.kernel_scale if opt.kernel_scale is not None else \
+            max(1.4826 * np.median(np.abs(r[keep] - (np.median(r[keep]) if opt.method != "point_to_point" else 0))),
+                1e-9)
+        w = _weights(r, opt.kernel, scale) * keep
+        dT = _solve_increment(opt.method, p, q, nq, np_, w)
+        T = dT @ T
+        step = np.linalg.norm(dT[:3, 3]) + rotation_angle(dT[:3, :3]) * size
+        if step < opt.tolerance:
+            converged, reason = True, f"update < {opt.tolerance:g} m"
+            break
+    return T, n_iter, converged, reason
+
+
+def icp(source, target, *, init_T_target_source: np.ndarray | None = None, options: IcpOptions = IcpOptions(),
+        target_scan: OrganisedScan | None = None) -> RegistrationResult:
+    """Align ``source`` to ``target``.
+
+    Parameters
+    ----------
+    source, target : PointCloud or (N, 3) array, metres. Point-to-plane needs target normals, symmetric
+        needs both clouds' normals.
+    init_T_target_source : (4, 4) initial guess (default identity).
+    options : IcpOptions.
+    target_scan : OrganisedScan, optional. If given, correspondences come from projecting the source into
+        the target's range map (projective association, no KD-tree); ``target`` may then be None.
+
+    Returns
+    -------
+    RegistrationResult. A run that ends with too few correspondences returns ``converged=False`` with a
+    reason, not an exception; empty inputs raise RegistrationError.
+    """
+    src = _as_cloud(source, "source")
+    if target_scan is not None:
+        tgt = target_scan.cloud()
+    else:
+        if target is None:
+            raise InputError("icp: give a target cloud or a target_scan")
+        tgt = _as_cloud(target, "target")
+    if options.method != "point_to_point" and tgt.normals is None:
+        raise RegistrationError(f"{options.method} ICP needs target normals; give the target PointCloud normals "
+                                "(rangekit.registration.icp.estimate_normals) or use method='point_to_point'")
+    if options.method == "symmetric" and src.normals is None:
+        raise RegistrationError("symmetric ICP needs source normals too; give PointCloud(points, normals=...)")
+    T = np.eye(4) if init_T_target_source is None else np.asarray(init_T_target_source, dtype=np.float64).copy()
+    if T.shape != (4, 4):
+        raise InputError(f"icp: init_T_target_source must be 4x4, found {T.shape}")
+    size = float(np.linalg.norm(np.ptp(tgt.points, axis=0)))
+    rng = np.random.default_rng(options.rng)
+    total = 0
+    converged, reason = False, ""
+    levels = list(options.voxel_sizes) + [0.0]
+    for voxel in levels:
+        if voxel > 0:
+            if src.normals is not None:
+                sp, sn = voxel_downsample(src.points, voxel, normals=src.normals)
+                s = PointCloud(sp, normals=sn)
+            else:
+                s = PointCloud(voxel_downsample(src.points, voxel))
+            if tgt.normals is not None:
+                tp, tn = voxel_downsample(tgt.points, voxel, normals=tgt.normals)
+                t_level = PointCloud(tp, normals=tn)
+            else:
+                t_level = PointCloud(voxel_downsample(tgt.points, voxel))
+            assoc = _KdAssociation(t_level)
+            opt = replace(options, max_distance=max(options.max_distance, 3 * voxel))
+        else:
+            s = src
+            assoc = _ProjectiveAssociation(target_scan) if target_scan is not None else _KdAssociation(tgt)
+            opt = options
+        T, n, converged, reason = _icp_level(s, assoc, T, opt, rng, size)
+        total += n
+    # Final statistics (on max_samples random source points: fitness and RMSE are estimates then).
+    P = src.points
+    if options.max_samples is not None and len(P) > options.max_samples:
+        P = P[rng.choice(len(P), options.max_samples, replace=False)]
+    p = apply_T(T, P)
+    ok, q, nq = assoc(p, options.max_distance)
+    if options.method == "point_to_plane" and nq is not None:
+        res = np.abs(np.einsum("ij,ij->i", p[ok] - q[ok], nq[ok]))
+    else:
+        res = np.linalg.norm(p[ok] - q[ok], axis=1)
+    rmse = float(np.sqrt(np.mean(res ** 2))) if res.size else float("inf")
+    return RegistrationResult(T, rmse, float(np.count_nonzero(ok) / len(P)), total, converged, reason, res)

@@ -35,8 +35,8 @@ class IcpOptions:
     kernel_scale: float | None = None   # metres; None: 1.4826 * MAD of the residuals, each iteration
     trim: float = 0.0                   # fraction of the worst correspondences dropped each iteration
     voxel_sizes: tuple[float, ...] = ()  # coarse-to-fine schedule: ICP on voxel-downsampled clouds first
-    max_samples: int | None = 10000     # source points per iteration and for the final statistics
-                                        # (random, seeded); None: all
+    max_samples: int | None = 10000     # source points used (one random subset per level, seeded) and
+                                        # for the final statistics; None: all
     tolerance: float = 1e-9             # stop when the update moves points by less (metres, at the cloud's size)
     rng: int = 0
 
@@ -235,11 +235,12 @@ def _icp_level(src: PointCloud, assoc, T: np.ndarray, opt: IcpOptions, rng: np.r
     need_src_normals = opt.method == "symmetric"
     if need_src_normals and N_all is None:
         raise RegistrationError("symmetric ICP needs source normals; give PointCloud(points, normals=...)")
+    # One random subset per level: the same points every iteration, so the updates settle and stop.
+    if opt.max_samples is not None and len(P_all) > opt.max_samples:
+        sel = np.sort(rng.choice(len(P_all), opt.max_samples, replace=False))
+    else:
+        sel = slice(None)
     for n_iter in range(1, opt.max_iterations + 1):
-        if opt.max_samples is not None and len(P_all) > opt.max_samples:
-            sel = rng.choice(len(P_all), opt.max_samples, replace=False)
-        else:
-            sel = slice(None)
         p = apply_T(T, P_all[sel])
         ok, q, nq = assoc(p, opt.max_distance)
         if np.count_nonzero(ok) < 6:

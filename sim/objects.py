@@ -317,9 +317,11 @@ def lumpy(radius: float = 0.06, *, subdivisions: int = 5, seed: int = 0, albedo=
     """Closed, watertight, star-shaped blob with no rotational or mirror symmetry (for registration).
 
     An icosphere whose radius along unit direction d is ``radius * (1 + sum_k a_k exp(-|d - c_k|^2 /
-    (2 s_k^2)))`` with 7 Gaussian bumps (5 bumps, 2 dents, |a_k| in [0.12, 0.3], s_k in [0.35, 0.6])
-    at directions c_k drawn from ``numpy.random.default_rng(seed)``, then scaled by (1.15, 0.95, 0.8)
-    along x, y, z. The factor stays >= 0.4, so the surface is star-shaped about the origin.
+    (2 s_k^2)))`` with 7 broad Gaussian bumps (5 bumps, 2 dents, |a_k| in [0.12, 0.3], s_k in [0.35, 0.6])
+    and 24 small ones (|a_k| in [0.04, 0.1], either sign, s_k in [0.12, 0.22]) at directions c_k drawn
+    from ``numpy.random.default_rng(seed)``, then scaled by (1.15, 0.95, 0.8) along x, y, z. The small
+    bumps give every region relief, so registration is well conditioned in every direction (a smooth
+    egg leaves rotations about its axes nearly free). The factor stays >= 0.4 (star-shaped).
     """
     _check("lumpy", radius=radius)
     _check_count("lumpy", "subdivisions", subdivisions, 0)
@@ -328,9 +330,14 @@ def lumpy(radius: float = 0.06, *, subdivisions: int = 5, seed: int = 0, albedo=
     c /= np.linalg.norm(c, axis=1, keepdims=True)
     amp = rng.uniform(0.12, 0.3, 7) * rng.permutation([1, 1, 1, 1, 1, -1, -1])
     s = rng.uniform(0.35, 0.6, 7)
+    c_small = rng.normal(size=(24, 3))
+    c_small /= np.linalg.norm(c_small, axis=1, keepdims=True)
+    c = np.r_[c, c_small]
+    amp = np.r_[amp, rng.uniform(0.04, 0.1, 24) * rng.choice([-1.0, 1.0], 24)]
+    s = np.r_[s, rng.uniform(0.12, 0.22, 24)]
     m = trimesh.creation.icosphere(subdivisions=int(subdivisions), radius=1.0)
     d = np.asarray(m.vertices) / np.linalg.norm(m.vertices, axis=1, keepdims=True)
-    d2 = np.sum((d[:, None, :] - c[None]) ** 2, axis=2)  # (V, 7) squared chord distance
+    d2 = np.sum((d[:, None, :] - c[None]) ** 2, axis=2)  # (V, 31) squared chord distance
     f = 1.0 + np.exp(-d2 / (2 * s**2)) @ amp
     verts = radius * f[:, None] * d * np.array([1.15, 0.95, 0.8])
     return SceneObject(name, verts, np.asarray(m.faces), albedo, specular, shininess)

@@ -1,0 +1,102 @@
+"""Register scan files into one frame and fuse them: the work behind ``rangekit register``."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable, Sequence
+
+import numpy as np
+
+from rangekit.errors import ConfigError
+from rangekit.geometry import axis_angle_to_R, make_T
+from rangekit.pointcloud import PointCloud, load_cloud, save_cloud
+from rangekit.poses import load_poses, save_poses
+from rangekit.registration.icp import voxel_downsample
+from rangekit.registration.multiview import MultiViewOptions, MultiViewResult, register_views
+
+__all__ = ["parse_init", "RegisterReport", "register_files"]
+
+
+def parse_init(init: str | None, n: int, sources: Sequence[str]) -> np.ndarray | None:
+    """Prior poses from ``none``, a poses.json file, or ``turntable:AX,AY,AZ:STEP_DEG[:PX,PY,PZ]``.
+
+    turntable: view i is rotated by i * STEP degrees about the axis (AX, AY, AZ) through (PX, PY, PZ)
+    (default the origin) of the first view's frame.
+    """
+    if init is None or init == "none":
+        return None
+    if init.startswith("turntable:"):
+        parts = init.split(":")
+        try:
+            axis = np.array([float(v) for v in parts[1].split(",")])
+            step = np.radians(float(parts[2]))
+            point = np.array([float(v) for v in parts[3].split(",")]) if len(parts) > 3 else np.zeros(3)
+            if axis.shape != (3,) or point.shape != (3,) or not np.linalg.norm(axis) > 0:
+                raise ValueError
+        except (ValueError, IndexError) as exc:
+            raise ConfigError(f"--init {init!r}: expected turntable:AX,AY,AZ:STEP_DEG[:PX,PY,PZ], e.g. "
+                              "turntable:0,1,0:24") from exc
+        Ts = []
+        for i in range(n):
+            R = axis_angle_to_R(axis, i * step)
+            Ts.append(make_T(R, point - R @ point))
+        return np.stack(Ts)
+    srcs, T = load_poses(init)
+    if len(T) != n:
+        raise ConfigError(f"{init}: has {len(T)} views, but {n} scans were given")
+    names = [Path(s).name for s in sources]
+    if [Path(s).name for s in srcs] != names:
+        order = {Path(s).name: k for k, s in enumerate(srcs)}
+        missing = [s for s in names if s not in order]
+        if missing:
+            raise ConfigError(f"{init}: no pose for {missing}")
+        T = T[[order[s] for s in names]]
+    return T
+
+
+@dataclass(frozen=True, eq=False)
+class RegisterReport:
+    sources: list[str]
+    result: MultiViewResult
+    merged: PointCloud
+    mesh_path: Path | None
+
+
+def register_files(paths: Sequence[str | Path], out_dir: str | Path, *, init: str | None = None,
+                   voxel: float | None = None, mesh: bool = True,
+                   progress: Callable[[str], None] | None = None) -> RegisterReport:
+    """Read the scans, register them (world = first scan's frame), write poses.json, merged.ply and mesh.ply."""
+    say = progress or (lambda msg: None)
+    paths = [Path(p) for p in paths]
+    clouds = []
+    for p in paths:
+        clouds.append(load_cloud(p))
+        say(f"read {p.name}: {len(clouds[-1])} points")
+    prior = parse_init(init, len(paths), [str(p) for p in paths])
+    res = register_views(clouds, init_T_world_view=prior, options=MultiViewOptions(voxel=voxel), progress=say)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    edges_of = {k: [e for e in res.edges if e.accepted and k in (e.i, e.j)] for k in range(len(paths))}
+    extra = [{"edges": len(edges_of[k]),
+              "mean_edge_rmse_m": float(np.mean([e.rmse for e in edges_of[k]])) if edges_of[k] else None}
+             for k in range(len(paths))]
+    save_poses(out / "poses.json", [str(p) for p in paths], res.T_world_view, extra=extra)
+    pts, nrm = [], []
+    for c, T in zip(clouds, res.T_world_view):
+        pts.append(c.points @ T[:3, :3].T + T[:3, 3])
+        if c.normals is not None:
+            nrm.append(c.normals @ T[:3, :3].T)
+    P = np.concatenate(pts)
+    N = np.concatenate(nrm) if len(nrm) == len(clouds) else None
+    merged = PointCloud(P, normals=N)
+    save_cloud(out / "merged.ply", merged)
+    mesh_path = None
+    if mesh:
+        from rangekit.mesh import poisson_mesh, save_mesh
+
+        say("meshing (screened Poisson)")
+        m = poisson_mesh(merged if N is not None else PointCloud(P))
+        mesh_path = out / "mesh.ply"
+        save_mesh(mesh_path, m)
+    return RegisterReport([str(p) for p in paths], res, merged, mesh_path)

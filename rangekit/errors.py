@@ -15,6 +15,7 @@ __all__ = [
     "DecodeError",
     "CalibrationError",
     "RegistrationError",
+    "MeshError",
     "DeviceError",
     "DeviceTimeout",
     "DeviceDisconnected",
@@ -57,6 +58,10 @@ class CalibrationError(RangekitError):
 
 class RegistrationError(RangekitError):
     """Scans cannot be registered (empty, no overlap)."""
+
+
+class MeshError(RangekitError):
+    """A mesh cannot be built or closed (too little data, a hole that cannot be filled)."""
 
 
 class DeviceError(RangekitError):

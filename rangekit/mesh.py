@@ -33,7 +33,7 @@ from scipy.sparse.csgraph import connected_components, depth_first_order
 from scipy.sparse.linalg import splu
 
 from rangekit.camera import PinholeCamera
-from rangekit.errors import FileFormatError, InputError, RangekitError
+from rangekit.errors import FileFormatError, InputError, MeshError
 from rangekit.io import atomic_write_bytes
 from rangekit.pointcloud import PointCloud
 from rangekit.pointcloud import to_open3d as _cloud_to_open3d
@@ -301,7 +301,7 @@ def poisson_mesh(cloud: PointCloud, *, depth: int = 9, density_quantile: float =
         m.remove_vertices_by_mask(density < np.quantile(density, density_quantile))
     mesh = _from_open3d(m)
     if len(mesh.triangles) == 0:
-        raise RangekitError(f"poisson_mesh: Poisson at depth {depth} gave no surface for {len(cloud)} points; "
+        raise MeshError(f"poisson_mesh: Poisson at depth {depth} gave no surface for {len(cloud)} points; "
                             "check that the normals point out of the object")
     return make_watertight(mesh) if watertight else _clean(mesh, fill=False)
 
@@ -433,7 +433,7 @@ def tsdf_fuse(views: Sequence[tuple[np.ndarray, np.ndarray | None, PinholeCamera
     if not with_colour:
         mesh = TriangleMesh(mesh.vertices, mesh.triangles)
     if len(mesh.triangles) == 0:
-        raise RangekitError(f"tsdf_fuse: the volume holds no surface after {len(checked)} views (voxel "
+        raise MeshError(f"tsdf_fuse: the volume holds no surface after {len(checked)} views (voxel "
                             f"{voxel:.4g} m, sdf_trunc {trunc:.4g} m); check the camera poses")
     return make_watertight(mesh) if watertight else _clean(mesh, fill=False)
 
@@ -546,7 +546,7 @@ def _clean(mesh: TriangleMesh, *, fill: bool) -> TriangleMesh:
         if len(F) == n_before or len(F) == 0:
             break
     if len(F) == 0:
-        raise RangekitError("make_watertight: nothing is left of the mesh after removing non-manifold and "
+        raise MeshError("make_watertight: nothing is left of the mesh after removing non-manifold and "
                             "dangling triangles")
     used = np.zeros(len(V), bool)
     used[F] = True
@@ -718,7 +718,7 @@ def make_watertight(mesh: TriangleMesh) -> TriangleMesh:
     ------
     InputError
         If the mesh has no triangles.
-    RangekitError
+    MeshError
         If the winding cannot be made consistent (non-orientable surface) or the result is not watertight.
     """
     cleaned = _clean(mesh, fill=True)
@@ -726,7 +726,7 @@ def make_watertight(mesh: TriangleMesh) -> TriangleMesh:
     if not _consistent_winding(F):
         m = cleaned.to_open3d()
         if not m.orient_triangles():
-            raise RangekitError(f"make_watertight: the surface ({len(F)} triangles) is not orientable")
+            raise MeshError(f"make_watertight: the surface ({len(F)} triangles) is not orientable")
         F = np.asarray(m.triangles).astype(np.int64)
     # Close each boundary loop with a ring patch; positions come from the fairing solve.
     loops = _boundary_loops(F, len(V))
@@ -758,7 +758,7 @@ def make_watertight(mesh: TriangleMesh) -> TriangleMesh:
         F = F[:, ::-1].copy()
     out = TriangleMesh(V, F, C)
     if not out.is_watertight:
-        raise RangekitError(f"make_watertight: could not close the mesh ({len(loops)} holes, {len(F)} triangles "
+        raise MeshError(f"make_watertight: could not close the mesh ({len(loops)} holes, {len(F)} triangles "
                             "after closing); it may have self-touching boundaries")
     return out
 

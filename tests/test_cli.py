@@ -14,7 +14,7 @@ from rangekit.rig import load_rig
 
 
 @pytest.mark.parametrize("argv", [["--help"], ["sim", "--help"], ["sim", "render", "--help"], ["decode", "--help"],
-                                  ["reconstruct", "--help"]])
+                                  ["reconstruct", "--help"], ["register", "--help"], ["mesh", "--help"]])
 def test_every_command_has_help(argv, capsys):
     with pytest.raises(SystemExit) as exc:
         main(argv)
@@ -96,3 +96,30 @@ def test_decode_command_errors(tmp_path, capsys):
     assert "--projector" in capsys.readouterr().err
     with pytest.raises(SystemExit):
         main(["decode", str(cap), "--pattern", "graycode", "--projector", "1280by800", "--out", "x.npz"])
+
+
+BUNNY = __import__("pathlib").Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "stanford-bunny"
+
+
+def test_register_and_mesh_commands(tmp_path, capsys):
+    if not BUNNY.is_dir():
+        pytest.skip("../shared/data/stanford-bunny is absent")
+    scans = [str(BUNNY / n) for n in ("bun000.ply", "bun045.ply", "bun315.ply", "chin.ply")]
+    out = tmp_path / "reg"
+    assert main(["register", *scans, "--init", "none", "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "synchronisation over" in text and "rmse" in text
+    from rangekit.mesh import load_mesh_file
+    from rangekit.poses import load_poses
+
+    sources, T = load_poses(out / "poses.json")
+    assert [s.split("/")[-1] for s in sources] == ["bun000.ply", "bun045.ply", "bun315.ply", "chin.ply"]
+    assert np.allclose(T[0], np.eye(4))
+    assert 20 < np.degrees(np.arccos((np.trace(T[1][:3, :3]) - 1) / 2)) < 50  # bun045 is ~34 deg from bun000
+    mesh = load_mesh_file(out / "mesh.ply")
+    assert mesh.is_watertight and len(mesh.triangles) > 1000
+    # The poses file seeds a second run; a turntable prior parses.
+    assert main(["register", *scans, "--init", str(out / "poses.json"), "--no-mesh", "--out", str(tmp_path / "r2")]) == 0
+    assert main(["mesh", str(out / "merged.ply"), "--depth", "7", "--out", str(tmp_path / "m.ply")]) == 0
+    assert main(["register", *scans, "--init", "turntable:0,1:24", "--out", str(tmp_path / "r3")]) == 2
+    assert "turntable:AX,AY,AZ:STEP_DEG" in capsys.readouterr().err

@@ -42,7 +42,8 @@ class MultiViewOptions:
                                          # alignments (e.g. front/back flips) can keep 0.3-0.6 overlap but
                                          # not a low RMSE: on the bunny, right <= 0.36, wrong >= 0.64 voxel
     rounds: int = 1
-    joint_iterations: int = 20           # joint multi-view refinement after synchronisation (0: none)
+    joint_iterations: int = 60           # joint multi-view refinement after synchronisation (0: none)
+    joint_tolerance: float = 1e-7        # metres: stop when no pose moves a point by more
     joint_samples: int = 50000           # points per view in the joint refinement (at most all fine points)
     icp: IcpOptions = field(default_factory=lambda: IcpOptions(method="point_to_plane", kernel="huber",
                                                                max_iterations=60))
@@ -287,9 +288,19 @@ def register_views(clouds: Sequence[PointCloud], *, init_T_world_view: np.ndarra
     acc = [e for e in edges if e.accepted]
     rmse = float(np.mean([e.rmse for e in acc]))
     if options.joint_iterations > 0:
-        pairs = [(e.i, e.j) for e in acc if e.i != e.j]
+        # Pairs by overlap at the synchronised poses (not by which pairwise runs passed), so the same data
+        # gives the same problem whatever the starting poses were.
+        trees = [cKDTree(c.points) for c in fine_clouds]
+        pairs = []
+        for i in range(n):
+            for j in range(i + 1, n):
+                T_i_j = invert_T(T[i]) @ T[j]
+                ov = max(pairwise_overlap(fine_clouds[j], trees[i], T_i_j, 2 * fine),
+                         pairwise_overlap(fine_clouds[i], trees[j], invert_T(T_i_j), 2 * fine))
+                if ov >= options.min_overlap:
+                    pairs.append((i, j))
         joint = refine_jointly(fine_clouds, T, pairs, max_distance=2.5 * fine, iterations=options.joint_iterations,
-                               samples=options.joint_samples, rng=options.rng)
+                               samples=options.joint_samples, tolerance=options.joint_tolerance, rng=options.rng)
         T = joint.T_world_view
         rmse = joint.rmse
         say(f"joint refinement of {n} views over {len(pairs)} pairs: rmse {joint.rmse * 1e3:.4f} mm, "

@@ -148,12 +148,15 @@ def cmd_register(args: argparse.Namespace) -> int:
 
 def cmd_mesh(args: argparse.Namespace) -> int:
     """rangekit mesh CLOUD --out MESH"""
-    from rangekit.mesh import poisson_mesh, save_mesh
+    from rangekit.mesh import oriented_normals_cloud, poisson_mesh, save_mesh
     from rangekit.pointcloud import load_cloud
 
     t0 = time.perf_counter()
     cloud = load_cloud(args.cloud)
-    _say(f"read {len(cloud)} points; screened Poisson, depth {args.depth}")
+    if cloud.normals is None:
+        _say(f"read {len(cloud)} points without normals: estimating outward normals")
+        cloud = oriented_normals_cloud(cloud.points)
+    _say(f"{len(cloud)} points; screened Poisson, depth {args.depth}")
     mesh = poisson_mesh(cloud, depth=args.depth)
     save_mesh(args.out, mesh)
     _say(f"wrote {args.out}: {len(mesh.vertices)} vertices, {len(mesh.triangles)} triangles, watertight "

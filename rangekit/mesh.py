@@ -39,7 +39,7 @@ from rangekit.pointcloud import PointCloud
 from rangekit.pointcloud import to_open3d as _cloud_to_open3d
 
 __all__ = ["TriangleMesh", "save_mesh", "load_mesh_file", "MESH_FORMATS", "orient_normals_to_sensor",
-           "poisson_mesh", "tsdf_fuse", "make_watertight", "distance_to_surface"]
+           "oriented_normals_cloud", "poisson_mesh", "tsdf_fuse", "make_watertight", "distance_to_surface"]
 
 
 # ------------------------------------------------------------------------------------------ the mesh
@@ -785,3 +785,29 @@ def distance_to_surface(points: np.ndarray, mesh: TriangleMesh) -> np.ndarray:
     scene.add_triangles(o3d.core.Tensor((mesh.vertices - c).astype(np.float32)),
                         o3d.core.Tensor(mesh.triangles.astype(np.uint32)))
     return scene.compute_distance(o3d.core.Tensor((P - c).astype(np.float32))).numpy().astype(np.float64)
+
+
+def oriented_normals_cloud(points: np.ndarray, *, voxel: float | None = None) -> PointCloud:
+    """A voxel-downsampled copy of ``points`` (N, 3) with outward normals, for clouds that have none.
+
+    Normals are estimated from 30 neighbours, pointed away from the centroid, then made consistent by
+    propagation over a neighbour graph (Open3D), which also gets concave parts right where the centroid
+    rule fails. ``voxel`` default: bounding-box diagonal / 400.
+    """
+    import open3d as o3d
+
+    from rangekit.registration.icp import estimate_normals, voxel_downsample
+
+    diag = float(np.linalg.norm(np.ptp(points, axis=0)))
+    v = voxel or diag / 400
+    P = voxel_downsample(points, v)
+    n = estimate_normals(P, k=30)
+    out = np.einsum("ij,ij->i", n, P - P.mean(axis=0)) < 0
+    n[out] *= -1
+    pc = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(P))
+    pc.normals = o3d.utility.Vector3dVector(n)
+    pc.orient_normals_consistent_tangent_plane(20)
+    n = np.asarray(pc.normals)
+    if np.mean(np.einsum("ij,ij->i", n, P - P.mean(axis=0)) < 0) > 0.5:  # propagation may flip all
+        n = -n
+    return PointCloud(P, normals=n)

@@ -12,7 +12,6 @@ from rangekit.errors import ConfigError
 from rangekit.geometry import axis_angle_to_R, make_T
 from rangekit.pointcloud import PointCloud, load_cloud, save_cloud
 from rangekit.poses import load_poses, save_poses
-from rangekit.registration.icp import voxel_downsample
 from rangekit.registration.multiview import MultiViewOptions, MultiViewResult, register_views
 
 __all__ = ["parse_init", "RegisterReport", "register_files"]
@@ -55,29 +54,6 @@ def parse_init(init: str | None, n: int, sources: Sequence[str]) -> np.ndarray |
     return T
 
 
-def _oriented_cloud(points: np.ndarray, voxel: float) -> PointCloud:
-    """Normals for scans that have none: estimated on the merged, downsampled cloud, pointed away from
-    its centroid, then made consistent by propagation over a neighbour graph (Open3D), which also gets
-    concave parts right where the centroid rule fails."""
-    import open3d as o3d
-
-    from rangekit.registration.icp import estimate_normals
-
-    diag = float(np.linalg.norm(np.ptp(points, axis=0)))
-    v = max(voxel, diag / 400)
-    P = voxel_downsample(points, v)
-    n = estimate_normals(P, k=30)
-    out = np.einsum("ij,ij->i", n, P - P.mean(axis=0)) < 0
-    n[out] *= -1
-    pc = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(P))
-    pc.normals = o3d.utility.Vector3dVector(n)
-    pc.orient_normals_consistent_tangent_plane(20)
-    n = np.asarray(pc.normals)
-    if np.mean(np.einsum("ij,ij->i", n, P - P.mean(axis=0)) < 0) > 0.5:  # propagation may flip all
-        n = -n
-    return PointCloud(P, normals=n)
-
-
 @dataclass(frozen=True, eq=False)
 class RegisterReport:
     sources: list[str]
@@ -116,10 +92,10 @@ def register_files(paths: Sequence[str | Path], out_dir: str | Path, *, init: st
     save_cloud(out / "merged.ply", merged)
     mesh_path = None
     if mesh:
-        from rangekit.mesh import poisson_mesh, save_mesh
+        from rangekit.mesh import oriented_normals_cloud, poisson_mesh, save_mesh
 
         say("meshing (screened Poisson)")
-        m = poisson_mesh(merged if N is not None else _oriented_cloud(P, voxel or res.rmse * 3))
+        m = poisson_mesh(merged if N is not None else oriented_normals_cloud(P, voxel=voxel))
         mesh_path = out / "mesh.ply"
         save_mesh(mesh_path, m)
     return RegisterReport([str(p) for p in paths], res, merged, mesh_path)

@@ -158,7 +158,7 @@ def bench_multiview(scans) -> list[str]:
         s = synchronise(len(scans.clouds), corrupted, robust=robust)
         r_, t_ = pose_errors(s.T_world_view, scans.T_world_view)
         out.append((r_[1:].mean(), t_[1:].mean() / diag))
-    lines.append(f"| same edges, {len(bad)}/{len(edges)} replaced by wrong poses (>= 30 deg) | robust: "
+    lines.append(f"| same edges, {len(bad)}/{len(edges)} replaced by wrong poses (>= 30 deg), synchronisation only | robust: "
                  f"{out[0][0]:.4f} deg, {out[0][1]:.1e} diag | plain spectral: {out[1][0]:.3f} deg, "
                  f"{out[1][1]:.1e} diag | |")
     return lines

@@ -102,6 +102,12 @@ def pairwise_overlap(src: PointCloud, tgt_tree: cKDTree, T_tgt_src: np.ndarray, 
     return float(np.mean(np.isfinite(d)))
 
 
+def _mutual_overlap(a: PointCloud, b: PointCloud, tree_a: cKDTree, tree_b: cKDTree, T_a_b: np.ndarray,
+                    radius: float) -> float:
+    """The larger of the two directed overlaps of views a and b (b's points in a, a's points in b)."""
+    return max(pairwise_overlap(b, tree_a, T_a_b, radius), pairwise_overlap(a, tree_b, invert_T(T_a_b), radius))
+
+
 def _sync(n: int, edges: list[EdgeResult]) -> SyncResult:
     acc = [(e.i, e.j, e.T_i_j) for e in edges if e.accepted]
     if not acc:
@@ -267,8 +273,7 @@ def register_views(clouds: Sequence[PointCloud], *, init_T_world_view: np.ndarra
         for i in range(n):
             for j in range(i + 1, n):
                 T_i_j = invert_T(T[i]) @ T[j]
-                ov = max(pairwise_overlap(level[j], trees[i], T_i_j, 2 * v),
-                         pairwise_overlap(level[i], trees[j], invert_T(T_i_j), 2 * v))
+                ov = _mutual_overlap(level[i], level[j], trees[i], trees[j], T_i_j, 2 * v)
                 if ov < options.min_overlap:
                     continue
                 r = icp(level[j], level[i], init_T_target_source=T_i_j, options=icp_opt)
@@ -294,9 +299,8 @@ def register_views(clouds: Sequence[PointCloud], *, init_T_world_view: np.ndarra
         pairs = []
         for i in range(n):
             for j in range(i + 1, n):
-                T_i_j = invert_T(T[i]) @ T[j]
-                ov = max(pairwise_overlap(fine_clouds[j], trees[i], T_i_j, 2 * fine),
-                         pairwise_overlap(fine_clouds[i], trees[j], invert_T(T_i_j), 2 * fine))
+                ov = _mutual_overlap(fine_clouds[i], fine_clouds[j], trees[i], trees[j], invert_T(T[i]) @ T[j],
+                                     2 * fine)
                 if ov >= options.min_overlap:
                     pairs.append((i, j))
         joint = refine_jointly(fine_clouds, T, pairs, max_distance=2.5 * fine, iterations=options.joint_iterations,

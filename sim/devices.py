@@ -17,7 +17,7 @@ import zlib
 import numpy as np
 
 from rangekit.camera import PinholeCamera
-from rangekit.errors import PatternError
+from rangekit.errors import DeviceDisconnected, PatternError
 from rangekit.geometry import look_at, make_T
 from rangekit.rig import Rig
 from rangekit.sim.raycast import ViewGeometry, cast_view
@@ -45,26 +45,46 @@ def default_rig() -> Rig:
                capture={"bits": 8})
 
 
+class _Faults:
+    """Simulated unplugging: ``arm(device, after)`` makes the device's (after + 1)-th call fail."""
+
+    def __init__(self) -> None:
+        self.left: dict[str, int] = {}
+
+    def arm(self, device: str, after: int) -> None:
+        self.left[device] = int(after)
+
+    def tick(self, device: str) -> None:
+        if device in self.left:
+            if self.left[device] <= 0:
+                del self.left[device]
+                raise DeviceDisconnected(f"{device} (simulated): unplugged")
+            self.left[device] -= 1
+
+
 class SimTurntable:
     """A turntable that moves instantly; ``angle`` in radians."""
 
-    def __init__(self) -> None:
+    def __init__(self, faults: _Faults | None = None) -> None:
         self._angle = 0.0
+        self._faults = faults or _Faults()
 
     @property
     def angle(self) -> float:
         return self._angle
 
     def rotate_to(self, angle: float) -> None:
+        self._faults.tick("turntable")
         self._angle = float(angle)
 
 
 class SimProjector:
     """Holds the image being shown; black until the first :meth:`show`."""
 
-    def __init__(self, model: PinholeCamera) -> None:
+    def __init__(self, model: PinholeCamera, faults: _Faults | None = None) -> None:
         self._model = model
         self._image = np.zeros((model.height, model.width), np.uint8)
+        self._faults = faults or _Faults()
 
     @property
     def calibration(self) -> PinholeCamera:
@@ -79,6 +99,7 @@ class SimProjector:
         return self._image
 
     def show(self, image: np.ndarray) -> None:
+        self._faults.tick("projector")
         img = np.asarray(image)
         W, H = self.resolution
         if img.shape[:2] != (H, W) or img.ndim not in (2, 3) or (img.ndim == 3 and img.shape[2] != 3):
@@ -98,6 +119,7 @@ class SimCamera:
         return self._rig.rig.camera
 
     def capture(self) -> np.ndarray:
+        self._rig._faults.tick("camera")
         image = self._rig.projector.image
         return self._rig.renderer().render(image, self._rig.rng_for(image))
 
@@ -119,13 +141,21 @@ class SimRig:
         self.rig = rig if rig is not None else default_rig()
         self.imaging = imaging if imaging is not None else ImagingModel()
         self.seed = int(seed)
+        self._faults = _Faults()
         self.camera = SimCamera(self)
-        self.projector = SimProjector(self.rig.projector)
-        self.turntable = SimTurntable() if self.rig.T_world_table is not None else None
+        self.projector = SimProjector(self.rig.projector, self._faults)
+        self.turntable = SimTurntable(self._faults) if self.rig.T_world_table is not None else None
         self._cam_rays = None
         self._cache_key = None
         self._cache = None
         self._counts: dict[tuple[int, int], int] = {}
+
+    def inject_fault(self, device: str, after: int = 0) -> None:
+        """Unplug ``device`` ("camera", "projector" or "turntable") at its (after + 1)-th call from now:
+        that call raises DeviceDisconnected. For testing crash safety."""
+        if device not in ("camera", "projector", "turntable"):
+            raise ValueError(f"inject_fault: device must be camera, projector or turntable, found {device!r}")
+        self._faults.arm(device, after)
 
     # ---------------------------------------------------------------- ground truth
     def _state_angle(self) -> float:

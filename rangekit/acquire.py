@@ -6,7 +6,8 @@ The same code drives the simulated rig and real hardware: it only uses the devic
     session.json          manifest (schema rangekit.session/1): plan, pattern spec, each view's state
     rig.json              the rig file (calibration) the session was taken with
     patterns.json         the PatternSpec
-    view_000/000.png ...  one folder per completed view (+ view.json with its angle and timing)
+    view_000/000.png ...  one folder per completed view (+ view.json with its angle and timing, and copies
+                          of patterns.json and rig.json: each view is a capture folder on its own)
 
 Every file is written atomically. A view is captured into ``view_NNN.partial/`` and renamed to
 ``view_NNN/`` only when all its frames are on disk, then ``session.json`` records it as done; so a fault
@@ -157,6 +158,9 @@ def acquire(devices: RigDevices, rig: Rig, spec: PatternSpec, out_dir: str | Pat
         except DeviceError as exc:
             raise type(exc)(f"view {k} (turntable {np.degrees(angle):.1f} deg), {step}: {exc}; {sum(done)} completed "
                             f"view(s) are safe in {out}; continue with resume") from exc
+        # Each view is a self-contained capture folder (rangekit reconstruct view_NNN works on it).
+        atomic_write_json(partial / "patterns.json", spec.to_dict())
+        save_rig(rig, partial / "rig.json")
         atomic_write_json(partial / "view.json", {"index": k, "angle_rad": float(angle), "started": t0,
                                                   "finished": time.time(), "n_frames": len(frames)})
         partial.rename(final)

@@ -164,6 +164,64 @@ def cmd_mesh(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_devices(args: argparse.Namespace) -> int:
+    """rangekit devices [--timeout 1.0]: list serial ports and depthai cameras"""
+    from rangekit.drivers.discovery import list_depthai_devices, list_serial_ports
+
+    ports = list_serial_ports()
+    _say("serial ports:" if ports else "serial ports: none found")
+    for p in ports:
+        _say(f"  {p['device']}  {p['description']}  USB {p['vid_pid'] or '-'}  serial {p['serial_number'] or '-'}")
+    cams = list_depthai_devices(timeout_s=args.timeout)
+    _say("depthai devices:" if cams else "depthai devices: none found")
+    for c in cams:
+        _say(f"  {c['device_id']}  {c['name']}  {c['state']}  {c['protocol']}")
+    return 0
+
+
+def cmd_scan(args: argparse.Namespace) -> int:
+    """rangekit scan --out DIR | --resume DIR [--object lumpy] [--views 12] [--patterns graycode] [--seed 0]"""
+    from rangekit.acquire import ScanPlan, acquire, load_session
+    from rangekit.errors import ConfigError
+    from rangekit.patterns import PatternSpec, make_pattern_spec
+    from rangekit.rig import load_rig
+    from rangekit.sim import ImagingModel, SimRig, default_scene
+
+    t0 = time.perf_counter()
+    folder = args.resume or args.out
+    if not folder:
+        raise ConfigError("give --out DIR for a new scan or --resume DIR to continue one")
+    if args.resume:
+        data, views = load_session(args.resume)
+        sim_info = data.get("simulator")
+        if sim_info is None:
+            raise ConfigError(f"{args.resume}: not a simulated session; resuming real hardware needs its rig "
+                              "drivers (rig file 'devices')")
+        obj, seed, n_views = sim_info["object"], sim_info["seed"], len(views)
+        spec = PatternSpec.from_dict(data["pattern"], where=f"{args.resume}/session.json")
+        rig = load_rig(f"{args.resume}/rig.json")
+        imaging = ImagingModel(**sim_info["imaging"])
+        _say(f"resuming {args.resume}: {sum(v.done for v in views)}/{n_views} views already done")
+    else:
+        if args.rig not in (None, "sim"):
+            raise ConfigError("scanning with real hardware (--rig RIG.json) needs the serial/depthai drivers "
+                              "wired into acquisition; use --rig sim for now")
+        obj, seed, n_views = args.object, args.seed, args.views
+        rig = None
+        imaging = ImagingModel()
+        spec = None
+    from dataclasses import asdict
+
+    sim = SimRig(default_scene(obj), rig, imaging=imaging, seed=seed)
+    spec = spec or make_pattern_spec(args.patterns, sim.projector.resolution)
+    views = acquire(sim, sim.rig, spec, folder, plan=ScanPlan(n_views=n_views), resume=bool(args.resume),
+                    extra={"simulator": {"object": obj, "seed": seed, "imaging": asdict(imaging)}}, progress=_say)
+    _say(f"acquired {sum(v.done for v in views)} views x {spec.n_frames} frames into {folder} in "
+         f"{time.perf_counter() - t0:.1f} s; reconstruct a view with: rangekit reconstruct {folder}/view_000 "
+         f"--rig {folder}/rig.json")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="rangekit", description="Active 3D scanning: simulate, capture, "
                                      "decode, register and fuse range data.")
@@ -239,6 +297,26 @@ def build_parser() -> argparse.ArgumentParser:
     mesh.add_argument("--depth", type=int, default=9, help="octree depth (default 9)")
     mesh.add_argument("--out", required=True, help="output mesh (.ply, .obj, .stl)")
     mesh.set_defaults(func=cmd_mesh)
+
+    scan = sub.add_parser("scan", help="acquire a turntable scan session (simulated rig), resumable",
+                          description="Acquire a crash-safe scan session: every turntable view, every pattern; "
+                                      "--resume continues an interrupted session without redoing finished views.")
+    where = scan.add_mutually_exclusive_group(required=True)
+    where.add_argument("--out", help="new session folder")
+    where.add_argument("--resume", metavar="DIR", help="continue the session in DIR")
+    scan.add_argument("--rig", default="sim", help="'sim' (default); real hardware follows")
+    scan.add_argument("--object", default="lumpy", help="simulated object: built-in name or mesh file")
+    scan.add_argument("--views", type=int, default=12, help="turntable views over a full turn (default 12)")
+    from rangekit.patterns import PATTERN_METHODS as _PM
+
+    scan.add_argument("--patterns", default="graycode", choices=_PM, help="pattern set (default graycode)")
+    scan.add_argument("--seed", type=int, default=0, help="simulator noise seed")
+    scan.set_defaults(func=cmd_scan)
+
+    dev = sub.add_parser("devices", help="list serial ports and depthai cameras",
+                         description="List serial ports (device, USB VID:PID, serial number) and depthai cameras.")
+    dev.add_argument("--timeout", type=float, default=1.0, help="seconds to search for depthai cameras (default 1)")
+    dev.set_defaults(func=cmd_devices)
     return parser
 
 

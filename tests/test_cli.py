@@ -14,7 +14,8 @@ from rangekit.rig import load_rig
 
 
 @pytest.mark.parametrize("argv", [["--help"], ["sim", "--help"], ["sim", "render", "--help"], ["decode", "--help"],
-                                  ["reconstruct", "--help"], ["register", "--help"], ["mesh", "--help"]])
+                                  ["reconstruct", "--help"], ["register", "--help"], ["mesh", "--help"],
+                                  ["scan", "--help"], ["devices", "--help"]])
 def test_every_command_has_help(argv, capsys):
     with pytest.raises(SystemExit) as exc:
         main(argv)
@@ -123,3 +124,18 @@ def test_register_and_mesh_commands(tmp_path, capsys):
     assert main(["mesh", str(out / "merged.ply"), "--depth", "7", "--out", str(tmp_path / "m.ply")]) == 0
     assert main(["register", *scans, "--init", "turntable:0,1:24", "--out", str(tmp_path / "r3")]) == 2
     assert "turntable:AX,AY,AZ:STEP_DEG" in capsys.readouterr().err
+
+
+def test_scan_command_acquires_and_resumes(tmp_path, capsys):
+    out = tmp_path / "scan"
+    assert main(["scan", "--out", str(out), "--views", "2", "--patterns", "hybrid", "--object", "sphere"]) == 0
+    assert main(["scan", "--out", str(out), "--views", "2"]) == 2
+    assert "already holds a session" in capsys.readouterr().err
+    assert main(["scan", "--resume", str(out)]) == 0
+    assert "2/2 views already done" in capsys.readouterr().out
+    # Each view is a capture folder that reconstructs on its own.
+    assert main(["reconstruct", str(out / "view_001"), "--out", str(tmp_path / "v1.ply")]) == 0
+    from rangekit.pointcloud import load_cloud
+
+    P = load_cloud(tmp_path / "v1.ply").points
+    assert len(P) > 20000

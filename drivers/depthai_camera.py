@@ -1,0 +1,347 @@
+"""Luxonis OAK cameras through depthai v3: colour/mono frames, on-device stereo depth, calibration.
+
+depthai is imported inside the functions and methods that need it, never at module level: importing it
+takes over a second, and opening a device searches for one (10 s by default). ``import
+rangekit.drivers.depthai_camera`` is therefore cheap and works without depthai.
+
+Conventions at this boundary (see ARCHITECTURE.md):
+
+- Lengths in metres. depthai depth frames are uint16 millimetres (0 = invalid) and its extrinsics are
+  centimetres unless ``LengthUnit.METER`` is passed; both are converted here.
+- Images RGB (``ImgFrame.Type.RGB888i``, read with ``getFrame()``; ``getCvFrame()`` would give BGR).
+- Poses ``T_a_b`` with ``p_a = T_a_b @ p_b``. depthai's ``getCameraExtrinsics(src, dst)`` is the
+  transform that maps points in ``src``'s frame into ``dst``'s (``T_dst_src``; e.g. left -> right on an
+  OAK-D has translation (-7.5, 0, 0) cm), so ``T_world_cam = getCameraExtrinsics(cam, first_cam)``.
+- Pixels: the centre of the top-left pixel is (0, 0). Intrinsics for a requested output size are
+  derived from the calibrated ones (``getDefaultIntrinsics``) by :func:`scale_intrinsics`, which keeps
+  pixel centres (``c' = (c + 0.5) s - 0.5``) and models ``ImgResizeMode.CROP`` (scale so the output is
+  covered, crop the centre). depthai's own ``getCameraIntrinsics(socket, w, h)`` scales ``c' = c s``,
+  i.e. treats pixel corners as the origin; the two differ by ``(s - 1) / 2`` px (0.25 px at half size).
+"""
+
+from __future__ import annotations
+
+import datetime
+import os
+import time
+
+import numpy as np
+
+from rangekit.camera import PinholeCamera
+from rangekit.errors import ConfigError, DeviceDisconnected, DeviceError, DeviceTimeout
+from rangekit.rig import Rig
+
+__all__ = ["DepthaiCamera", "DEPTHAI_NAMES", "calibration_to_rig", "pinhole_from_calibration",
+           "scale_intrinsics", "SOCKETS"]
+
+SOCKETS = ("CAM_A", "CAM_B", "CAM_C", "CAM_D", "CAM_E", "CAM_F", "CAM_G", "CAM_H")
+
+#: Every depthai attribute path this module uses; tests check each against the installed depthai.
+DEPTHAI_NAMES = [
+    "Pipeline", "Pipeline.create", "Pipeline.start", "Pipeline.stop", "Pipeline.isRunning",
+    "node.Camera", "node.Camera.build", "node.Camera.requestOutput", "node.Camera.requestFullResolutionOutput",
+    "node.Camera.initialControl",
+    "node.StereoDepth", "node.StereoDepth.build", "node.StereoDepth.depth", "node.StereoDepth.setDepthAlign",
+    "node.StereoDepth.setOutputSize", "node.StereoDepth.PresetMode.DEFAULT",
+    "Node.Output.createOutputQueue", "MessageQueue.get", "MessageQueue.QueueException",
+    "ImgFrame.Type.RGB888i", "ImgFrame.Type.GRAY8", "ImgFrame.getFrame", "ImgFrame.getWidth",
+    "ImgFrame.getHeight", "ImgFrame.getTimestamp", "CameraExposureOffset.START", "ImgResizeMode.CROP",
+    "CameraControl.setManualExposure", "Clock.now",
+    "Device", "Device.close", "Device.readCalibration", "Device.getConnectedCameras", "Device.getDeviceId",
+    "Device.setIrLaserDotProjectorIntensity", "Device.setIrFloodLightIntensity",
+    "Device.getAllAvailableDevices", "DeviceInfo.getDeviceId", "DeviceInfo.name", "DeviceInfo.state",
+    "DeviceInfo.protocol", "DeviceInfo.platform",
+    "CalibrationHandler", "CalibrationHandler.getDefaultIntrinsics",
+    "CalibrationHandler.getDistortionCoefficients", "CalibrationHandler.getDistortionModel",
+    "CalibrationHandler.getCameraExtrinsics", "CalibrationHandler.hasCameraCalibration",
+    "CameraModel.Perspective", "LengthUnit.METER",
+    *(f"CameraBoardSocket.{s}" for s in SOCKETS),
+]
+
+
+# ----------------------------------------------------------------------------- pure calibration helpers
+def _socket(dai, name: str):
+    if name not in SOCKETS:
+        raise ConfigError(f"depthai socket {name!r} is not one of {list(SOCKETS)}")
+    return getattr(dai.CameraBoardSocket, name)
+
+
+def scale_intrinsics(K: np.ndarray, calibrated_size: tuple[int, int],
+                     size: tuple[int, int]) -> np.ndarray:
+    """(3, 3) intrinsics for an output of ``size`` taken from a sensor calibrated at ``calibrated_size``.
+
+    Models depthai's ``ImgResizeMode.CROP``: scale by ``s = max(w / W, h / H)`` so the output is covered,
+    then crop the centre. Pixel centres are kept: ``c' = (c + 0.5) s - 0.5 - crop_offset``.
+    """
+    (W, H), (w, h) = calibrated_size, size
+    s = max(w / W, h / H)
+    ox, oy = (W * s - w) / 2.0, (H * s - h) / 2.0
+    K = np.asarray(K, dtype=np.float64)
+    out = np.array([[K[0, 0] * s, 0.0, (K[0, 2] + 0.5) * s - 0.5 - ox],
+                    [0.0, K[1, 1] * s, (K[1, 2] + 0.5) * s - 0.5 - oy],
+                    [0.0, 0.0, 1.0]])
+    return out
+
+
+def pinhole_from_calibration(handler, socket: str, size: tuple[int, int], *,
+                             world_socket: str | None = None) -> PinholeCamera:
+    """The :class:`PinholeCamera` of one depthai camera at an output ``size`` (width, height).
+
+    Parameters
+    ----------
+    handler : depthai.CalibrationHandler
+        From ``Device.readCalibration()`` or offline, ``depthai.CalibrationHandler("calib.json")``.
+    socket : str
+        "CAM_A" (usually colour), "CAM_B" (left), "CAM_C" (right), ...
+    size : (width, height) of the frames the camera node outputs (``ImgResizeMode.CROP``).
+    world_socket : str, optional
+        Camera whose frame is the world; ``T_world_cam`` is identity when omitted or equal to ``socket``.
+
+    Returns
+    -------
+    PinholeCamera named ``socket``; K rescaled by :func:`scale_intrinsics`, the 14 depthai
+    distortion coefficients (OpenCV order k1 k2 p1 p2 k3 k4 k5 k6 s1 s2 s3 s4 tx ty), pose in metres.
+
+    Raises
+    ------
+    ConfigError
+        If the handler has no calibration for ``socket``, the lens model is not perspective, or the
+        tilted-sensor terms tx, ty are non-zero (rangekit's lens model has no tilt).
+    """
+    import depthai as dai
+
+    sock = _socket(dai, socket)
+    where = f"depthai calibration of {socket}"
+    if not handler.hasCameraCalibration(sock):
+        raise ConfigError(f"{where}: not present in the calibration (calibrate this camera or pick another "
+                          "socket)")
+    model = handler.getDistortionModel(sock)
+    if model != dai.CameraModel.Perspective:
+        raise ConfigError(f"{where}: lens model {model.name} is not supported, expected Perspective")
+    K0, W, H = handler.getDefaultIntrinsics(sock)
+    w, h = (int(v) for v in size)
+    K = scale_intrinsics(np.asarray(K0), (int(W), int(H)), (w, h))
+    dist = np.asarray(handler.getDistortionCoefficients(sock), dtype=np.float64)
+    if dist.size == 14 and np.any(dist[12:] != 0):
+        raise ConfigError(f"{where}: tilted-sensor distortion tx, ty = {dist[12:].tolist()} is not supported "
+                          "by rangekit's lens model; recalibrate without the tilted model")
+    if dist.size not in (4, 5, 8, 12, 14):
+        raise ConfigError(f"{where}: expected 4, 5, 8, 12 or 14 distortion coefficients, found {dist.size}")
+    T = np.eye(4)
+    if world_socket is not None and world_socket != socket:
+        try:
+            T = np.asarray(handler.getCameraExtrinsics(sock, _socket(dai, world_socket),
+                                                       unit=dai.LengthUnit.METER), dtype=np.float64)
+        except RuntimeError as exc:
+            raise ConfigError(f"{where}: no extrinsics linking it to {world_socket}: {exc}") from exc
+        # depthai stores rotations as float32: re-orthonormalise so PinholeCamera accepts them.
+        U, _, Vt = np.linalg.svd(T[:3, :3])
+        T[:3, :3] = U @ Vt
+    return PinholeCamera(K, w, h, dist, T, socket)
+
+
+def calibration_to_rig(handler, *, size: tuple[int, int], sockets: tuple[str, ...] = ("CAM_A",),
+                       device_id: str | None = None, capture: dict | None = None) -> Rig:
+    """A :class:`Rig` of depthai cameras, world = the first socket's camera frame (metres).
+
+    ``size`` is the output size (width, height) used for every socket; ``device_id`` is recorded in
+    ``rig.devices["depthai"]`` so the rig file says how to reach the camera.
+    """
+    if not sockets:
+        raise ConfigError("calibration_to_rig: 'sockets' is empty; pass e.g. ('CAM_A',)")
+    cams = tuple(pinhole_from_calibration(handler, s, size, world_socket=sockets[0]) for s in sockets)
+    devices = {"depthai": {"device_id": device_id, "sockets": list(sockets), "size": list(size)}}
+    return Rig(cameras=cams, devices=devices, capture=dict(capture or {}))
+
+
+# ----------------------------------------------------------------------------- the device
+def _open_device(dai, device_id: str | None, search_timeout_s: float):
+    """Find the device (polling, so the timeout holds on every call) and open it.
+
+    depthai reads DEPTHAI_SEARCH_TIMEOUT once per process, at its first search, so the deadline here is
+    enforced by polling ``Device.getAllAvailableDevices()`` (about 0.5 s per poll) until the device is
+    listed; a device that is rebooting after a previous ``close()`` shows up again within that time.
+    """
+    os.environ.setdefault("DEPTHAI_SEARCH_TIMEOUT", str(max(1, int(round(search_timeout_s * 1000)))))
+    who = f"depthai device {device_id!r}" if device_id else "a depthai device"
+    deadline = time.monotonic() + search_timeout_s
+    while True:
+        try:
+            infos = dai.Device.getAllAvailableDevices()
+        except RuntimeError as exc:
+            raise DeviceError(f"{who}: the device search failed: {exc}") from exc
+        match = [i for i in infos if device_id is None or device_id in (i.getDeviceId(), i.name)]
+        if match:
+            break
+        if time.monotonic() >= deadline:
+            others = f"; found only {[i.getDeviceId() for i in infos]}" if infos else ""
+            raise DeviceDisconnected(f"{who}: none answered within {search_timeout_s:.1f} s{others}; check the "
+                                     "USB/PoE cable and power and that no other program holds it, list devices "
+                                     "with 'rangekit devices', or raise search_timeout_s")
+        time.sleep(0.05)
+    try:
+        return dai.Device(match[0])
+    except RuntimeError as exc:
+        raise DeviceError(f"{who}: found {match[0].getDeviceId()} but could not open it: {exc}; close other "
+                          "programs using it and replug it") from exc
+
+
+class DepthaiCamera:
+    """An OAK camera implementing :class:`rangekit.devices.Camera`, plus IR emitters and stereo depth.
+
+    Parameters
+    ----------
+    device_id : str, optional
+        Device id (MXID), name or IP; the first device found when omitted.
+    socket : str
+        Camera to capture from: "CAM_A" (colour on OAK-D), "CAM_B", "CAM_C", ...
+    size : (width, height) of captured frames; intrinsics are rescaled to it.
+    mono : bool
+        Return (H, W) uint8 grey instead of (H, W, 3) RGB.
+    exposure_us, iso : manual exposure (microseconds, ISO 100..1600); auto exposure when None.
+    search_timeout_s : how long to look for the device.
+    depth : bool
+        Also run on-device ``StereoDepth`` (CAM_B/CAM_C, aligned to ``socket``) for :meth:`depth`, when
+        the device has both cameras.
+
+    Raises
+    ------
+    DeviceDisconnected if no device answers; DeviceError if it cannot be opened or lacks ``socket``.
+    """
+
+    def __init__(self, device_id: str | None = None, *, socket: str = "CAM_A", size: tuple[int, int] = (1280, 800),
+                 mono: bool = False, exposure_us: int | None = None, iso: int | None = None,
+                 search_timeout_s: float = 3.0, depth: bool = True, frame_timeout_s: float = 2.0) -> None:
+        import depthai as dai
+
+        self._dai = dai
+        self._socket_name = socket
+        sock = _socket(dai, socket)
+        self.size = (int(size[0]), int(size[1]))
+        self.mono = mono
+        self.frame_timeout_s = frame_timeout_s
+        if (exposure_us is None) != (iso is None):
+            raise ConfigError("DepthaiCamera: give both exposure_us and iso for manual exposure, or neither")
+        self._device = _open_device(dai, device_id, search_timeout_s)
+        self.device_id = self._device.getDeviceId()
+        self._name = f"depthai {self.device_id} {socket}"
+        try:
+            connected = set(self._device.getConnectedCameras())
+            if sock not in connected:
+                raise DeviceError(f"{self._name}: no camera on {socket}; this device has "
+                                  f"{sorted(s.name for s in connected)}")
+            self._handler = self._device.readCalibration()
+            self._pipeline = dai.Pipeline(self._device)
+            cam = self._pipeline.create(dai.node.Camera).build(sock)
+            if exposure_us is not None:
+                cam.initialControl.setManualExposure(int(exposure_us), int(iso))
+            kind = dai.ImgFrame.Type.GRAY8 if mono else dai.ImgFrame.Type.RGB888i
+            out = cam.requestOutput(self.size, kind, dai.ImgResizeMode.CROP)
+            self._frames = out.createOutputQueue(maxSize=4, blocking=False)
+            self._depth = None
+            stereo_socks = (dai.CameraBoardSocket.CAM_B, dai.CameraBoardSocket.CAM_C)
+            if depth and all(s in connected for s in stereo_socks):
+                left, right = (cam if s == sock else self._pipeline.create(dai.node.Camera).build(s)
+                               for s in stereo_socks)
+                stereo = self._pipeline.create(dai.node.StereoDepth).build(
+                    left.requestFullResolutionOutput(), right.requestFullResolutionOutput(),
+                    dai.node.StereoDepth.PresetMode.DEFAULT)
+                stereo.setDepthAlign(sock)
+                stereo.setOutputSize(*self.size)
+                self._depth = stereo.depth.createOutputQueue(maxSize=4, blocking=False)
+            self._pipeline.start()
+        except RuntimeError as exc:
+            self._device.close()
+            raise DeviceError(f"{self._name}: could not start the pipeline: {exc}") from exc
+        except DeviceError:
+            self._device.close()
+            raise
+
+    # ------------------------------------------------------------------ Camera protocol
+    @property
+    def calibration(self) -> PinholeCamera:
+        """The capture camera at ``size``, from the device's EEPROM calibration; ``T_world_cam`` = I."""
+        return pinhole_from_calibration(self._handler, self._socket_name, self.size)
+
+    def calibration_handler(self):
+        """The raw ``depthai.CalibrationHandler`` (save it with ``.eepromToJsonFile(path)``)."""
+        return self._handler
+
+    def capture(self) -> np.ndarray:
+        """One frame whose exposure started after this call: (H, W, 3) RGB uint8, or (H, W) uint8 if mono.
+
+        Raises DeviceTimeout if no such frame arrives within ``frame_timeout_s``.
+        """
+        frame = self._fresh(self._frames, "frame")
+        w, h = frame.getWidth(), frame.getHeight()
+        data = np.asarray(frame.getFrame())
+        return data.reshape(h, w) if self.mono else data.reshape(h, w, 3)
+
+    def depth(self) -> np.ndarray:
+        """(H, W) float32 depth in metres along the optical axis of the capture camera, NaN where invalid.
+
+        Computed on the device by StereoDepth from CAM_B/CAM_C and aligned to this camera's pixels.
+        """
+        if self._depth is None:
+            raise DeviceError(f"{self._name}: stereo depth is not running (it needs CAM_B and CAM_C and "
+                              "depth=True)")
+        frame = self._fresh(self._depth, "depth frame")
+        mm = np.asarray(frame.getFrame()).reshape(frame.getHeight(), frame.getWidth())
+        out = mm.astype(np.float32) * np.float32(1e-3)
+        out[mm == 0] = np.nan
+        return out
+
+    # ------------------------------------------------------------------ IR emitters
+    def set_dot_projector(self, intensity: float) -> bool:
+        """Dot projector power in [0, 1]; returns False if this model has none."""
+        return bool(self._device.setIrLaserDotProjectorIntensity(float(np.clip(intensity, 0.0, 1.0))))
+
+    def set_flood(self, intensity: float) -> bool:
+        """IR flood light power in [0, 1]; returns False if this model has none."""
+        return bool(self._device.setIrFloodLightIntensity(float(np.clip(intensity, 0.0, 1.0))))
+
+    # ------------------------------------------------------------------ lifetime
+    def close(self) -> None:
+        """Stop the pipeline and release the device (idempotent)."""
+        pipeline, self._pipeline = getattr(self, "_pipeline", None), None
+        try:
+            if pipeline is not None and pipeline.isRunning():
+                pipeline.stop()
+        finally:
+            device = getattr(self, "_device", None)
+            if device is not None:
+                device.close()
+
+    def __enter__(self) -> "DepthaiCamera":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def __repr__(self) -> str:
+        return f"DepthaiCamera({self.device_id!r}, socket={self._socket_name!r}, size={self.size})"
+
+    # ------------------------------------------------------------------ helpers
+    def _fresh(self, queue, what: str):
+        """The first message on ``queue`` whose exposure started after now; older ones are dropped."""
+        dai = self._dai
+        t0 = dai.Clock.now()  # the host steady clock (CLOCK_MONOTONIC, as time.monotonic())
+        deadline = time.monotonic() + self.frame_timeout_s
+        while True:
+            left = deadline - time.monotonic()
+            if left <= 0:
+                raise DeviceTimeout(f"{self._name}: no {what} exposed after the request within "
+                                    f"{self.frame_timeout_s:.1f} s; check the cable and frame rate")
+            try:
+                msg = queue.get(datetime.timedelta(seconds=left))
+            except (RuntimeError, dai.MessageQueue.QueueException) as exc:
+                raise DeviceDisconnected(f"{self._name}: stream closed while waiting for a {what}: {exc}; "
+                                         "replug the device and reopen it") from exc
+            if msg is None:
+                continue
+            try:
+                ts = msg.getTimestamp(dai.CameraExposureOffset.START)
+            except TypeError:  # depth frames may not take an offset
+                ts = msg.getTimestamp()
+            if ts >= t0:
+                return msg

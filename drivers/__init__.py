@@ -1,1 +1,105 @@
-"""Real hardware drivers (serial turntables, serial projectors, depthai cameras). See issue 5."""
+"""Real hardware drivers: serial turntables (Horus, FabScan), projector control (ESC/VP21, PJLink),
+a full-screen projector display (pygame, optional) and Luxonis depthai cameras.
+
+``open_rig_devices(rig)`` opens what a rig file's ``devices`` section names::
+
+    "devices": {
+      "turntable": {"protocol": "horus" | "fabscan", "port": "/dev/ttyUSB0", "baud": 115200},
+      "projector": {"display": 1, "control": {"protocol": "escvp21" | "pjlink", "port": "/dev/ttyUSB1"}},
+      "camera": {"type": "depthai", "id": null, "socket": "CAM_A"}
+    }
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+__all__ = ["HardwareRig", "open_rig_devices"]
+
+
+@dataclass
+class HardwareRig:
+    """The opened devices of a rig (the :class:`rangekit.devices.Rig` protocol), plus projector control."""
+
+    camera: object
+    projector: object
+    turntable: object | None
+    projector_control: object | None = None
+
+    def close(self) -> None:
+        for dev in (self.camera, self.projector, self.turntable, self.projector_control):
+            if dev is not None and hasattr(dev, "close"):
+                dev.close()
+
+
+def _section(devices: dict, key: str, where: str) -> dict | None:
+    sec = devices.get(key)
+    if sec is None or sec.get("type") == "sim":
+        return None
+    if not isinstance(sec, dict):
+        from rangekit.errors import ConfigError
+
+        raise ConfigError(f"{where}: field 'devices.{key}' must be an object")
+    return sec
+
+
+def open_rig_devices(rig, *, where: str = "rig file", open_camera: bool = True,
+                     open_display: bool = True) -> HardwareRig:
+    """Open the turntable, projector (display + control) and camera named in ``rig.devices``.
+
+    Errors name the rig-file field (``devices.turntable.protocol``...) or the device's port. Devices
+    opened before a failure are closed again.
+    """
+    from rangekit.errors import ConfigError
+
+    devices = rig.devices or {}
+    opened: list = []
+    try:
+        turntable = None
+        sec = _section(devices, "turntable", where)
+        if sec is not None:
+            from rangekit.drivers.turntable import make_turntable
+
+            if "protocol" not in sec or "port" not in sec:
+                raise ConfigError(f"{where}: 'devices.turntable' needs 'protocol' and 'port', found {sorted(sec)}")
+            try:
+                turntable = make_turntable(sec["protocol"], sec["port"], sec.get("baud"))
+            except ConfigError as exc:
+                raise ConfigError(f"{where}: devices.turntable.protocol: {exc}") from exc
+            opened.append(turntable)
+        control = None
+        sec = _section(devices, "projector", where) or {}
+        if sec.get("control"):
+            from rangekit.drivers.projector_control import make_projector_control
+
+            c = sec["control"]
+            try:
+                control = make_projector_control(c.get("protocol", ""), c.get("port", ""),
+                                                 **{k: v for k, v in c.items() if k not in ("protocol", "port")})
+            except ConfigError as exc:
+                raise ConfigError(f"{where}: devices.projector.control: {exc}") from exc
+            opened.append(control)
+        projector = None
+        if open_display and rig.projector is not None and "display" in sec:
+            from rangekit.drivers.display import PygameProjector
+
+            projector = PygameProjector(rig.projector, display=int(sec["display"]))
+            opened.append(projector)
+        camera = None
+        sec = _section(devices, "camera", where)
+        if open_camera and sec is not None:
+            if sec.get("type") != "depthai":
+                raise ConfigError(f"{where}: devices.camera.type must be 'depthai' or 'sim', found {sec.get('type')!r}")
+            from rangekit.drivers.depthai_camera import DepthaiCamera
+
+            camera = DepthaiCamera(sec.get("id"), socket=sec.get("socket", "CAM_A"),
+                                   size=(rig.camera.width, rig.camera.height))
+            opened.append(camera)
+        return HardwareRig(camera, projector, turntable, control)
+    except BaseException:
+        for dev in opened:
+            try:
+                dev.close()
+            except Exception:
+                pass
+        raise

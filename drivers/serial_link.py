@@ -55,7 +55,7 @@ class SerialLink:
         self.timeout = float(timeout)
         self.name = name
         self._buf = bytearray()
-        self._last_sent: str | None = None
+        self._last_sent: str = "opening the port"
         self._last_write_t = time.monotonic()
         try:
             self._port = serial.serial_for_url(self.url, baudrate=self.baud, timeout=_READ_SLICE,
@@ -93,6 +93,10 @@ class SerialLink:
         """Send ``text`` (ASCII) followed by ``eol``."""
         self.write(text.encode("ascii") + eol, what=text)
 
+    @property
+    def _sent(self) -> str:
+        return self._last_sent if self._last_sent == "opening the port" else repr(self._last_sent)
+
     # -- reading -------------------------------------------------------------------------------
 
     def read_until(self, terminators: tuple[bytes, ...], deadline: float, *,
@@ -116,13 +120,13 @@ class SerialLink:
                 bad = bytes(self._buf)
                 self._buf.clear()
                 raise ProtocolError(
-                    f"{self.label}: expected {waiting_for} after {self._last_sent!r}, received "
+                    f"{self.label}: expected {waiting_for} after {self._sent}, received "
                     f"non-ASCII bytes {bad!r}; check the baud rate ({self.baud}) and that the board "
                     f"runs the expected firmware")
             if time.monotonic() >= deadline:
                 waited = max(0.0, deadline - self._last_write_t)
                 raise DeviceTimeout(f"{self.label}: no {waiting_for} within {waited:.1f} s after "
-                                    f"{self._last_sent!r}; received {bytes(self._buf)!r}")
+                                    f"{self._sent}; received {bytes(self._buf)!r}")
             self._read_chunk(deadline)
 
     def read_line(self, deadline: float | None = None, *, waiting_for: str = "line") -> str:
@@ -142,7 +146,7 @@ class SerialLink:
                 chunk = self._port.read(max(1, self._port.in_waiting))
             except (serial.SerialException, OSError) as exc:
                 raise DeviceDisconnected(f"{self.label}: reading failed while waiting after "
-                                         f"{self._last_sent!r} ({exc}); was the device unplugged?") from exc
+                                         f"{self._sent} ({exc}); was the device unplugged?") from exc
             self._buf += chunk
             if not drain or time.monotonic() >= deadline:
                 return

@@ -180,45 +180,60 @@ def cmd_devices(args: argparse.Namespace) -> int:
 
 
 def cmd_scan(args: argparse.Namespace) -> int:
-    """rangekit scan --out DIR | --resume DIR [--object lumpy] [--views 12] [--patterns graycode] [--seed 0]"""
+    """rangekit scan --out DIR | --resume DIR [--rig sim|RIG.json] [--object lumpy] [--views 12] [--patterns graycode]"""
+    from dataclasses import asdict
+
     from rangekit.acquire import ScanPlan, acquire, load_session
     from rangekit.errors import ConfigError
     from rangekit.patterns import PatternSpec, make_pattern_spec
     from rangekit.rig import load_rig
-    from rangekit.sim import ImagingModel, SimRig, default_scene
 
     t0 = time.perf_counter()
     folder = args.resume or args.out
-    if not folder:
-        raise ConfigError("give --out DIR for a new scan or --resume DIR to continue one")
+    extra: dict = {}
     if args.resume:
         data, views = load_session(args.resume)
-        sim_info = data.get("simulator")
-        if sim_info is None:
-            raise ConfigError(f"{args.resume}: not a simulated session; resuming real hardware needs its rig "
-                              "drivers (rig file 'devices')")
-        obj, seed, n_views = sim_info["object"], sim_info["seed"], len(views)
         spec = PatternSpec.from_dict(data["pattern"], where=f"{args.resume}/session.json")
         rig = load_rig(f"{args.resume}/rig.json")
-        imaging = ImagingModel(**sim_info["imaging"])
+        n_views = len(views)
+        hardware = "hardware" in data
         _say(f"resuming {args.resume}: {sum(v.done for v in views)}/{n_views} views already done")
     else:
-        if args.rig not in (None, "sim"):
-            raise ConfigError("scanning with real hardware (--rig RIG.json) needs the serial/depthai drivers "
-                              "wired into acquisition; use --rig sim for now")
-        obj, seed, n_views = args.object, args.seed, args.views
-        rig = None
-        imaging = ImagingModel()
-        spec = None
-    from dataclasses import asdict
+        hardware = args.rig not in (None, "sim")
+        rig = load_rig(args.rig) if hardware else None  # validated before anything moves
+        n_views, spec = args.views, None
+    if hardware:
+        from rangekit.drivers import open_rig_devices
 
-    sim = SimRig(default_scene(obj), rig, imaging=imaging, seed=seed)
-    spec = spec or make_pattern_spec(args.patterns, sim.projector.resolution)
-    views = acquire(sim, sim.rig, spec, folder, plan=ScanPlan(n_views=n_views), resume=bool(args.resume),
-                    extra={"simulator": {"object": obj, "seed": seed, "imaging": asdict(imaging)}}, progress=_say)
+        where = f"{args.resume}/rig.json" if args.resume else args.rig
+        if rig.projector is None:
+            raise ConfigError(f"{where}: a scan needs a projector (field 'projector')")
+        devices = open_rig_devices(rig, where=where)
+        if devices.camera is None or devices.projector is None:
+            devices.close()
+            raise ConfigError(f"{where}: 'devices' must name a camera (type depthai) and a projector display "
+                              "(devices.projector.display)")
+        extra = {"hardware": {"rig_file": str(where)}}
+    else:
+        from rangekit.sim import ImagingModel, SimRig, default_scene
+
+        if args.resume:
+            sim_info = data.get("simulator") or {}
+            obj, seed, imaging = sim_info["object"], sim_info["seed"], ImagingModel(**sim_info["imaging"])
+        else:
+            obj, seed, imaging = args.object, args.seed, ImagingModel()
+        devices = SimRig(default_scene(obj), rig, imaging=imaging, seed=seed)
+        rig = devices.rig
+        extra = {"simulator": {"object": obj, "seed": seed, "imaging": asdict(imaging)}}
+    spec = spec or make_pattern_spec(args.patterns, (rig.projector.width, rig.projector.height))
+    try:
+        views = acquire(devices, rig, spec, folder, plan=ScanPlan(n_views=n_views), resume=bool(args.resume),
+                        extra=extra, progress=_say)
+    finally:
+        if hardware:
+            devices.close()
     _say(f"acquired {sum(v.done for v in views)} views x {spec.n_frames} frames into {folder} in "
-         f"{time.perf_counter() - t0:.1f} s; reconstruct a view with: rangekit reconstruct {folder}/view_000 "
-         f"--rig {folder}/rig.json")
+         f"{time.perf_counter() - t0:.1f} s; reconstruct a view with: rangekit reconstruct {folder}/view_000")
     return 0
 
 
@@ -304,7 +319,8 @@ def build_parser() -> argparse.ArgumentParser:
     where = scan.add_mutually_exclusive_group(required=True)
     where.add_argument("--out", help="new session folder")
     where.add_argument("--resume", metavar="DIR", help="continue the session in DIR")
-    scan.add_argument("--rig", default="sim", help="'sim' (default); real hardware follows")
+    scan.add_argument("--rig", default="sim",
+                      help="'sim' (default) or a rig file whose 'devices' name the turntable, projector and camera")
     scan.add_argument("--object", default="lumpy", help="simulated object: built-in name or mesh file")
     scan.add_argument("--views", type=int, default=12, help="turntable views over a full turn (default 12)")
     from rangekit.patterns import PATTERN_METHODS as _PM

@@ -139,3 +139,27 @@ def test_scan_command_acquires_and_resumes(tmp_path, capsys):
 
     P = load_cloud(tmp_path / "v1.ply").points
     assert len(P) > 20000
+
+
+def test_scan_with_a_bad_rig_file_fails_before_anything_moves(tmp_path, capsys):
+    import json
+
+    from rangekit.sim import default_rig
+
+    data = default_rig().to_dict()
+    data["devices"] = {"turntable": {"protocol": "horus", "port": str(tmp_path / "no-such-port")},
+                       "projector": {"display": 1}, "camera": {"type": "depthai"}}
+    rig_file = tmp_path / "rig.json"
+    rig_file.write_text(json.dumps(data))
+    assert main(["scan", "--rig", str(rig_file), "--out", str(tmp_path / "s")]) == 2
+    assert "no-such-port" in capsys.readouterr().err
+    assert not (tmp_path / "s" / "session.json").exists()
+    data["devices"]["turntable"]["protocol"] = "stepper9000"
+    rig_file.write_text(json.dumps(data))
+    assert main(["scan", "--rig", str(rig_file), "--out", str(tmp_path / "s")]) == 2
+    assert "devices.turntable.protocol" in capsys.readouterr().err
+    data["cameras"][0]["K"] = [[1, 0], [0, 1]]
+    rig_file.write_text(json.dumps(data))
+    assert main(["scan", "--rig", str(rig_file), "--out", str(tmp_path / "s")]) == 2
+    err = capsys.readouterr().err
+    assert "cameras[0]" in err and "'K'" in err

@@ -84,7 +84,7 @@ def load_session(folder: str | Path) -> tuple[dict, list[SessionView]]:
 
 
 def acquire(devices: RigDevices, rig: Rig, spec: PatternSpec, out_dir: str | Path, *, plan: ScanPlan = ScanPlan(),
-            resume: bool = False, settle_s: float = 0.0, extra: dict | None = None,
+            resume: bool = False, settle_s: float = 0.0, pattern_settle_s: float = 0.0, extra: dict | None = None,
             progress: Callable[[str], None] | None = None) -> list[SessionView]:
     """Acquire (or resume) a session.
 
@@ -97,6 +97,8 @@ def acquire(devices: RigDevices, rig: Rig, spec: PatternSpec, out_dir: str | Pat
     plan : turntable angles.
     resume : continue the session in ``out_dir``; its plan and pattern must equal these.
     settle_s : wait after each turntable move (vibration).
+    pattern_settle_s : wait after each pattern is shown, for the projector's display latency, so the
+        camera (which only returns frames exposed after ``capture()`` is called) sees the new pattern.
     extra : more fields for session.json (e.g. the simulator's seed and object).
 
     Raises
@@ -152,6 +154,8 @@ def acquire(devices: RigDevices, rig: Rig, spec: PatternSpec, out_dir: str | Pat
             for i, (name, frame) in enumerate(zip(names, frames)):
                 step = f"frame {i} ({name}): projector"
                 devices.projector.show(frame)
+                if pattern_settle_s > 0:
+                    time.sleep(pattern_settle_s)
                 step = f"frame {i} ({name}): camera"
                 image = devices.camera.capture()
                 write_png(partial / f"{i:03d}.png", image)

@@ -228,6 +228,8 @@ def cmd_scan(args: argparse.Namespace) -> int:
     spec = spec or make_pattern_spec(args.patterns, (rig.projector.width, rig.projector.height))
     try:
         views = acquire(devices, rig, spec, folder, plan=ScanPlan(n_views=n_views), resume=bool(args.resume),
+                        pattern_settle_s=float(rig.capture.get("pattern_delay_s", 0.1)) if hardware else 0.0,
+                        settle_s=float(rig.capture.get("turntable_settle_s", 0.5)) if hardware else 0.0,
                         extra=extra, progress=_say)
     finally:
         if hardware:

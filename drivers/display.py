@@ -13,7 +13,8 @@ import time
 import numpy as np
 
 from rangekit.camera import PinholeCamera
-from rangekit.errors import DeviceError, PatternError
+from rangekit.devices import check_pattern
+from rangekit.errors import DeviceError
 
 __all__ = ["PygameProjector"]
 
@@ -63,11 +64,7 @@ class PygameProjector:
 
     def show(self, image: np.ndarray) -> None:
         """Display ``image`` ((H, W) or (H, W, 3) uint8, projector size) until the next call."""
-        img = np.asarray(image)
-        W, H = self.resolution
-        if img.shape[:2] != (H, W) or img.ndim not in (2, 3):
-            raise PatternError(f"projector is {W}x{H}: a pattern must have shape ({H}, {W}) or ({H}, {W}, 3), "
-                               f"found {img.shape}")
+        img = check_pattern(image, self.resolution, self._model.name)
         rgb = np.repeat(img[:, :, None], 3, axis=2) if img.ndim == 2 else img
         self._pg.event.pump()  # keep the window responsive
         self._pg.surfarray.blit_array(self._screen, np.ascontiguousarray(rgb.swapaxes(0, 1)))

@@ -12,7 +12,22 @@ import numpy as np
 
 from rangekit.camera import PinholeCamera
 
-__all__ = ["Camera", "Projector", "Turntable", "Rig"]
+__all__ = ["Camera", "Projector", "Turntable", "Rig", "check_pattern"]
+
+
+def check_pattern(image: np.ndarray, resolution: tuple[int, int], name: str = "projector") -> np.ndarray:
+    """``image`` as an array if it fits a projector of ``resolution`` (width, height): (H, W) or (H, W, 3).
+
+    Raises PatternError naming the projector, the expected and the found shape.
+    """
+    from rangekit.errors import PatternError
+
+    img = np.asarray(image)
+    W, H = resolution
+    if img.shape[:2] != (H, W) or img.ndim not in (2, 3) or (img.ndim == 3 and img.shape[2] != 3):
+        raise PatternError(f"projector {name!r} is {W}x{H}: a pattern must have shape ({H}, {W}) or ({H}, {W}, 3), "
+                           f"found {img.shape}")
+    return img
 
 
 @runtime_checkable

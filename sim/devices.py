@@ -17,7 +17,8 @@ import zlib
 import numpy as np
 
 from rangekit.camera import PinholeCamera
-from rangekit.errors import DeviceDisconnected, PatternError
+from rangekit.devices import check_pattern
+from rangekit.errors import DeviceDisconnected
 from rangekit.geometry import look_at, make_T
 from rangekit.rig import Rig
 from rangekit.sim.raycast import ViewGeometry, cast_view
@@ -100,11 +101,7 @@ class SimProjector:
 
     def show(self, image: np.ndarray) -> None:
         self._faults.tick("projector")
-        img = np.asarray(image)
-        W, H = self.resolution
-        if img.shape[:2] != (H, W) or img.ndim not in (2, 3) or (img.ndim == 3 and img.shape[2] != 3):
-            raise PatternError(f"projector {self._model.name!r} is {W}x{H}: a pattern must have shape ({H}, {W}) "
-                               f"or ({H}, {W}, 3), found {img.shape}")
+        img = check_pattern(image, self.resolution, self._model.name)
         self._image = img
 
 

@@ -29,7 +29,8 @@ test: $(STAMP)
 	$(BIN)/python -m pytest -q
 
 scan: $(STAMP)
-	$(BIN)/rangekit sim render --object lumpy --out scan1
+	@# A full simulated scan to a mesh; a second run resumes (and reprocesses) scan1/.
+	@if [ -f scan1/session.json ]; then $(BIN)/rangekit scan --resume scan1; else $(BIN)/rangekit scan --out scan1; fi
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_render.py

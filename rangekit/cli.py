@@ -235,8 +235,26 @@ def cmd_scan(args: argparse.Namespace) -> int:
         if hardware:
             devices.close()
     _say(f"acquired {sum(v.done for v in views)} views x {spec.n_frames} frames into {folder} in "
-         f"{time.perf_counter() - t0:.1f} s; reconstruct a view with: rangekit reconstruct {folder}/view_000")
+         f"{time.perf_counter() - t0:.1f} s")
+    if args.no_process:
+        _say(f"process it later with: rangekit process {folder}")
+        return 0
+    return _process(folder)
+
+
+def _process(folder: str) -> int:
+    from rangekit.pipeline import process_session
+
+    t0 = time.perf_counter()
+    res = process_session(folder, progress=_say)
+    _say(f"{res!r}")
+    _say(f"wrote {folder}/poses.json, merged.ply and mesh.ply in {time.perf_counter() - t0:.1f} s")
     return 0
+
+
+def cmd_process(args: argparse.Namespace) -> int:
+    """rangekit process DIR: decode, register and fuse an acquired session into DIR/mesh.ply"""
+    return _process(args.session)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -315,9 +333,10 @@ def build_parser() -> argparse.ArgumentParser:
     mesh.add_argument("--out", required=True, help="output mesh (.ply, .obj, .stl)")
     mesh.set_defaults(func=cmd_mesh)
 
-    scan = sub.add_parser("scan", help="acquire a turntable scan session (simulated rig), resumable",
-                          description="Acquire a crash-safe scan session: every turntable view, every pattern; "
-                                      "--resume continues an interrupted session without redoing finished views.")
+    scan = sub.add_parser("scan", help="scan: acquire a turntable session (resumable), then process it into a mesh",
+                          description="Acquire a crash-safe scan session (every turntable view, every pattern; "
+                                      "--resume continues an interrupted one without redoing finished views), then "
+                                      "decode, register and fuse it into DIR/mesh.ply.")
     where = scan.add_mutually_exclusive_group(required=True)
     where.add_argument("--out", help="new session folder")
     where.add_argument("--resume", metavar="DIR", help="continue the session in DIR")
@@ -329,7 +348,14 @@ def build_parser() -> argparse.ArgumentParser:
 
     scan.add_argument("--patterns", default="graycode", choices=_PM, help="pattern set (default graycode)")
     scan.add_argument("--seed", type=int, default=0, help="simulator noise seed")
+    scan.add_argument("--no-process", action="store_true", help="acquire only (process later with 'rangekit process')")
     scan.set_defaults(func=cmd_scan)
+
+    proc = sub.add_parser("process", help="decode, register and fuse an acquired session into a mesh",
+                          description="Process a session folder (from 'rangekit scan'): every view decoded and "
+                                      "triangulated, registered from the turntable angles, fused into mesh.ply.")
+    proc.add_argument("session", metavar="DIR", help="session folder")
+    proc.set_defaults(func=cmd_process)
 
     dev = sub.add_parser("devices", help="list serial ports and depthai cameras",
                          description="List serial ports (device, USB VID:PID, serial number) and depthai cameras.")

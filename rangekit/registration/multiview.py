@@ -190,7 +190,7 @@ def refine_jointly(clouds: Sequence[PointCloud], T_world_view: np.ndarray, pairs
         scale = max(1.4826 * np.median(np.abs(r_cat)), 1e-12)
         for i, j, r, Ji, Jj in res_all:
             a = np.abs(r) / scale
-            w = np.where(a <= kernel_k, 1.0, kernel_k / a)
+            w = np.minimum(1.0, kernel_k / np.maximum(a, 1e-12))  # Huber
             si, sj = slice(6 * i, 6 * i + 6), slice(6 * j, 6 * j + 6)
             Wi, Wj = Ji * w[:, None], Jj * w[:, None]
             Hm[si, si] += Ji.T @ Wi

@@ -72,7 +72,6 @@ def test_wrong_edges_are_rejected(turntable):
 
 def test_registered_scan_fuses_into_a_watertight_accurate_mesh(turntable):
     from rangekit.mesh import TriangleMesh, distance_to_surface, poisson_mesh, tsdf_fuse
-    from rangekit.triangulate import range_normals
 
     scans, _, res, _ = turntable
     P, N = [], []
@@ -91,7 +90,6 @@ def test_registered_scan_fuses_into_a_watertight_accurate_mesh(turntable):
     for xyz, T in zip(scans.range_maps, res.T_world_view):
         world = xyz @ T[:3, :3].T + T[:3, 3]
         views.append((world, None, cam.with_pose(T @ cam.T_world_cam)))
-    del range_normals
     t = time.perf_counter()
     fused = tsdf_fuse(views)
     t_tsdf = time.perf_counter() - t

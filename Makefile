@@ -8,7 +8,7 @@ VENV   ?= .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.rangekit-installed
 
-.PHONY: setup test scan bench clean
+.PHONY: setup test scan bench clean browser
 
 setup: $(STAMP)
 
@@ -25,8 +25,18 @@ $(STAMP): pyproject.toml
 	$(BIN)/python -m pip install -q -e ".[test]"
 	@touch $(STAMP)
 
-test: $(STAMP)
+test: $(STAMP) browser
 	$(BIN)/python -m pytest -q
+
+browser:
+	@# Headless Chromium + chromedriver for tests/test_chromium_harness.py (skips without them).
+	@if [ ! -x /usr/bin/chromium ] || [ ! -x /usr/bin/chromedriver ]; then \
+	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null; then \
+	    echo "installing chromium and chromium-driver (for the browser test)"; \
+	    (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium chromium-driver) >/dev/null \
+	      || echo "note: could not install chromium; the browser test will skip"; \
+	  else echo "note: chromium/chromedriver missing (sudo apt-get install chromium chromium-driver); the browser test will skip"; fi; \
+	fi
 
 scan: $(STAMP)
 	@# A full simulated scan to a mesh; a second run resumes (and reprocesses) scan1/.

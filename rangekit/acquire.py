@@ -29,6 +29,7 @@ from rangekit.devices import Rig as RigDevices
 from rangekit.errors import ConfigError, DeviceError
 from rangekit.io import atomic_write_json, read_json, write_png
 from rangekit.patterns import PatternSpec
+from rangekit.progress import call_progress
 from rangekit.rig import Rig, save_rig
 
 __all__ = ["ScanPlan", "SessionView", "acquire", "load_session", "SESSION_SCHEMA"]
@@ -100,6 +101,7 @@ def acquire(devices: RigDevices, rig: Rig, spec: PatternSpec, out_dir: str | Pat
     pattern_settle_s : wait after each pattern is shown, for the projector's display latency, so the
         camera (which only returns frames exposed after ``capture()`` is called) sees the new pattern.
     extra : more fields for session.json (e.g. the simulator's seed and object).
+    progress : ``progress(msg, done=None, total=None)`` (see :mod:`rangekit.progress`).
 
     Raises
     ------
@@ -110,7 +112,6 @@ def acquire(devices: RigDevices, rig: Rig, spec: PatternSpec, out_dir: str | Pat
         A device failed; the message names the device, the view and the frame. Completed views stay on
         disk and ``resume=True`` continues.
     """
-    say = progress or (lambda msg: None)
     out = Path(out_dir)
     angles = plan.angles()
     if (out / "session.json").exists():
@@ -147,7 +148,8 @@ def acquire(devices: RigDevices, rig: Rig, spec: PatternSpec, out_dir: str | Pat
         step = "turntable move"
         try:
             if devices.turntable is not None:
-                say(f"view {k + 1}/{plan.n_views}: turntable to {np.degrees(angle):.1f} deg")
+                call_progress(progress, f"view {k + 1}/{plan.n_views}: turntable to {np.degrees(angle):.1f} deg",
+                              k, plan.n_views)
                 devices.turntable.rotate_to(float(angle))
                 if settle_s > 0:
                     time.sleep(settle_s)
@@ -170,5 +172,6 @@ def acquire(devices: RigDevices, rig: Rig, spec: PatternSpec, out_dir: str | Pat
         partial.rename(final)
         done[k] = True
         atomic_write_json(out / "session.json", _manifest(plan, spec, done, extra or {}))
-        say(f"view {k + 1}/{plan.n_views} done ({len(frames)} frames, {time.time() - t0:.1f} s)")
+        call_progress(progress, f"view {k + 1}/{plan.n_views} done ({len(frames)} frames, {time.time() - t0:.1f} s)",
+                      k + 1, plan.n_views)
     return load_session(out)[1]

@@ -20,6 +20,13 @@ def _say(msg: str) -> None:
     print(msg, flush=True)
 
 
+def _console():
+    """Progress for long stages: a bar on a terminal, plain lines in CI, pipes and files."""
+    from rangekit.progress import Console
+
+    return Console(sys.stdout)
+
+
 def cmd_sim_render(args: argparse.Namespace) -> int:
     """rangekit sim render --object NAME_OR_MESH [--patterns graycode] --out DIR"""
     from dataclasses import replace
@@ -180,17 +187,22 @@ def cmd_devices(args: argparse.Namespace) -> int:
 
 
 def cmd_scan(args: argparse.Namespace) -> int:
-    """rangekit scan --out DIR | --resume DIR [--rig sim|RIG.json] [--object lumpy] [--views 12] [--patterns graycode]"""
+    """rangekit scan --out DIR | --resume DIR [--rig sim|RIG.json] [--object lumpy] [--views 12] [--patterns hybrid]"""
     from dataclasses import asdict
+    from pathlib import Path
 
     from rangekit.acquire import ScanPlan, acquire, load_session
     from rangekit.errors import ConfigError
     from rangekit.patterns import PatternSpec, make_pattern_spec
+    from rangekit.pipeline import FUSION_METHODS
     from rangekit.rig import load_rig
 
     t0 = time.perf_counter()
     folder = args.resume or args.out
     extra: dict = {}
+    # Everything is checked before any work starts or anything moves: the folder, the rig, the object.
+    if args.fusion not in FUSION_METHODS:
+        raise ConfigError(f"--fusion must be one of {', '.join(FUSION_METHODS)}, found {args.fusion!r}")
     if args.resume:
         data, views = load_session(args.resume)
         spec = PatternSpec.from_dict(data["pattern"], where=f"{args.resume}/session.json")
@@ -199,8 +211,20 @@ def cmd_scan(args: argparse.Namespace) -> int:
         hardware = "hardware" in data
         _say(f"resuming {args.resume}: {sum(v.done for v in views)}/{n_views} views already done")
     else:
+        out = Path(args.out)
+        if (out / "session.json").exists():
+            raise ConfigError(f"{out}: already holds a session (session.json); continue it with "
+                              f"'rangekit scan --resume {out}' or choose another folder")
+        if out.exists() and (not out.is_dir() or any(out.iterdir())):
+            raise ConfigError(f"{out}: exists and is not an empty folder; choose a new or empty folder")
+        if args.views < 2:
+            raise ConfigError(f"--views must be at least 2 to register a scan, found {args.views}")
         hardware = args.rig not in (None, "sim")
-        rig = load_rig(args.rig) if hardware else None  # validated before anything moves
+        rig = load_rig(args.rig) if hardware else None
+        if hardware:
+            from rangekit.drivers import validate_rig_for_hardware
+
+            validate_rig_for_hardware(rig, where=args.rig)
         n_views, spec = args.views, None
     if hardware:
         from rangekit.drivers import open_rig_devices
@@ -222,6 +246,7 @@ def cmd_scan(args: argparse.Namespace) -> int:
             obj, seed, imaging = sim_info["object"], sim_info["seed"], ImagingModel(**sim_info["imaging"])
         else:
             obj, seed, imaging = args.object, args.seed, ImagingModel()
+            default_scene(obj)  # a bad object name or file fails here, before the folder is made
         devices = SimRig(default_scene(obj), rig, imaging=imaging, seed=seed)
         rig = devices.rig
         extra = {"simulator": {"object": obj, "seed": seed, "imaging": asdict(imaging)}}
@@ -230,7 +255,11 @@ def cmd_scan(args: argparse.Namespace) -> int:
         views = acquire(devices, rig, spec, folder, plan=ScanPlan(n_views=n_views), resume=bool(args.resume),
                         pattern_settle_s=float(rig.capture.get("pattern_delay_s", 0.1)) if hardware else 0.0,
                         settle_s=float(rig.capture.get("turntable_settle_s", 0.5)) if hardware else 0.0,
-                        extra=extra, progress=_say)
+                        extra=extra, progress=_console())
+    except KeyboardInterrupt:
+        print(f"rangekit: interrupted; completed views are safe. Continue with: rangekit scan --resume {folder}",
+              file=sys.stderr)
+        return 130
     finally:
         if hardware:
             devices.close()
@@ -239,22 +268,111 @@ def cmd_scan(args: argparse.Namespace) -> int:
     if args.no_process:
         _say(f"process it later with: rangekit process {folder}")
         return 0
-    return _process(folder)
+    t_acq = time.perf_counter() - t0
+    return _process(folder, args, acquisition_s=t_acq, resume_cmd=f"rangekit scan --resume {folder}")
 
 
-def _process(folder: str) -> int:
+def _process(folder: str, args: argparse.Namespace, *, acquisition_s: float | None = None,
+             resume_cmd: str | None = None) -> int:
     from rangekit.pipeline import process_session
+    from rangekit.progress import format_seconds
 
     t0 = time.perf_counter()
-    res = process_session(folder, progress=_say)
-    _say(f"{res!r}")
-    _say(f"wrote {folder}/poses.json, merged.ply and mesh.ply in {time.perf_counter() - t0:.1f} s")
+    try:
+        res = process_session(folder, fusion=args.fusion, report=not args.no_report, progress=_console())
+    except KeyboardInterrupt:
+        print(f"rangekit: interrupted; the views decoded so far are cached. Continue with: "
+              f"{resume_cmd or f'rangekit process {folder}'}", file=sys.stderr)
+        return 130
+    _say("")
+    _say(f"== {folder}: summary ==")
+    if acquisition_s is not None:
+        _say(f"acquisition: {format_seconds(acquisition_s)}")
+    for line in res.summary_lines():
+        _say(line)
+    total = time.perf_counter() - t0 + (acquisition_s or 0.0)
+    _say(f"wrote {folder}/mesh.ply, merged.ply, poses.json, summary.json"
+         + ("" if args.no_report else ", report.html") + f" in {format_seconds(total)}")
     return 0
 
 
 def cmd_process(args: argparse.Namespace) -> int:
-    """rangekit process DIR: decode, register and fuse an acquired session into DIR/mesh.ply"""
-    return _process(args.session)
+    """rangekit process DIR [--fusion poisson|tsdf]: decode, register and fuse a session into DIR/mesh.ply"""
+    return _process(args.session, args)
+
+
+def _ply_has_faces(path) -> bool:
+    """True if ``path`` is a PLY whose header declares at least one face."""
+    import re
+
+    with open(path, "rb") as f:
+        head = f.read(4096)
+    if not head.startswith(b"ply"):
+        return False
+    m = re.search(rb"element\s+face\s+(\d+)", head.split(b"end_header")[0])
+    return bool(m and int(m.group(1)) > 0)
+
+
+def cmd_render(args: argparse.Namespace) -> int:
+    """rangekit render MESH_OR_CLOUD --out PNG: a shaded picture of a mesh or a cloud"""
+    from pathlib import Path
+
+    from rangekit.errors import FileFormatError
+    from rangekit.io import write_png
+    from rangekit.snapshot import fit_camera, montage, render_cloud, render_mesh
+
+    src = Path(args.input)
+    size = args.size
+    mesh = cloud = None
+    if not src.is_file():
+        raise FileFormatError(f"{src}: no such file (expected a mesh or a point cloud)")
+    if src.suffix.lower() in (".obj", ".stl", ".off", ".glb", ".gltf") or _ply_has_faces(src):
+        from rangekit.mesh import load_mesh_file
+
+        mesh = load_mesh_file(src)
+    else:
+        from rangekit.pointcloud import load_cloud
+
+        cloud = load_cloud(src)
+    pts = mesh.vertices if mesh is not None else cloud.points
+    if len(pts) == 0:
+        raise FileFormatError(f"{src}: holds no points or vertices to render")
+    bounds = np.stack([np.nanmin(pts, axis=0), np.nanmax(pts, axis=0)])
+    up = np.asarray(args.up, dtype=np.float64)
+    images = []
+    for az in args.azimuth:
+        cam = fit_camera(bounds, azimuth=np.radians(az), elevation=np.radians(args.elevation), size=size, up=up,
+                         tight=True, margin=1.05)
+        images.append(render_mesh(mesh, cam, smooth=True, colour_by_vertex=args.colour) if mesh is not None
+                      else render_cloud(cloud, cam))
+    write_png(args.out, images[0] if len(images) == 1 else montage(images, cols=min(len(images), 4)))
+    _say(f"wrote {args.out}: {'mesh' if mesh is not None else 'cloud'} of {len(pts):,} "
+         f"{'vertices' if mesh is not None else 'points'}, {len(images)} view(s)")
+    return 0
+
+
+def cmd_rig_init(args: argparse.Namespace) -> int:
+    """rangekit rig init [--sim] > rig.json: a template rig file, or the simulator's true rig"""
+    import json
+
+    if args.sim:
+        from rangekit.sim import default_rig
+
+        data = default_rig().to_dict()
+    else:
+        from rangekit.rig import template_rig
+
+        data = template_rig()
+    sys.stdout.write(json.dumps(data, indent=2) + "\n")
+    return 0
+
+
+def _processing_options(p: argparse.ArgumentParser) -> None:
+    from rangekit.pipeline import FUSION_METHODS
+
+    p.add_argument("--fusion", default="poisson", choices=FUSION_METHODS,
+                   help="fusion into one mesh: poisson (default, screened Poisson of the merged cloud) or tsdf")
+    p.add_argument("--no-report", action="store_true", help="skip report.html")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -346,16 +464,44 @@ def build_parser() -> argparse.ArgumentParser:
     scan.add_argument("--views", type=int, default=12, help="turntable views over a full turn (default 12)")
     from rangekit.patterns import PATTERN_METHODS as _PM
 
-    scan.add_argument("--patterns", default="graycode", choices=_PM, help="pattern set (default graycode)")
+    scan.add_argument("--patterns", default="hybrid", choices=_PM,
+                      help="pattern set (default hybrid: Gray code + phase shift)")
     scan.add_argument("--seed", type=int, default=0, help="simulator noise seed")
     scan.add_argument("--no-process", action="store_true", help="acquire only (process later with 'rangekit process')")
+    _processing_options(scan)
     scan.set_defaults(func=cmd_scan)
 
     proc = sub.add_parser("process", help="decode, register and fuse an acquired session into a mesh",
                           description="Process a session folder (from 'rangekit scan'): every view decoded and "
                                       "triangulated, registered from the turntable angles, fused into mesh.ply.")
     proc.add_argument("session", metavar="DIR", help="session folder")
+    _processing_options(proc)
     proc.set_defaults(func=cmd_process)
+
+    ren = sub.add_parser("render", help="render a mesh or point cloud to a PNG (no display needed)",
+                         description="Shade a mesh (ray cast) or a cloud (z-buffer splats) from one or more sides.")
+    ren.add_argument("input", metavar="MESH_OR_CLOUD", help="mesh (.ply with faces, .obj, .stl, .off) or cloud "
+                                                            "(.ply, .xyz, .npy, .pcd, .txt)")
+    ren.add_argument("--out", required=True, help="output PNG")
+    ren.add_argument("--azimuth", type=float, nargs="+", default=[30.0],
+                     help="viewing azimuth(s) in degrees about --up; several give a montage (default 30)")
+    ren.add_argument("--elevation", type=float, default=25.0, help="degrees above the horizontal (default 25)")
+    ren.add_argument("--up", type=float, nargs=3, default=[0.0, 0.0, 1.0], metavar=("X", "Y", "Z"),
+                     help="the object's up direction (default 0 0 1; Stanford scans: 0 1 0)")
+    ren.add_argument("--size", type=_projector_size, default=(800, 600), help="image size WxH (default 800x600)")
+    ren.add_argument("--colour", action="store_true", help="shade a mesh with its vertex colours (default grey)")
+    ren.set_defaults(func=cmd_render)
+
+    rig = sub.add_parser("rig", help="rig files: write a template",
+                         description="Rig files (docs/rig.md documents every field).")
+    rig_sub = rig.add_subparsers(dest="rig_command", metavar="SUBCOMMAND")
+    rig_sub.required = True
+    init = rig_sub.add_parser("init", help="print a template rig file for real hardware (rangekit rig init > rig.json)",
+                              description="Print a rig file to standard output: a template to edit for real "
+                                          "hardware, or with --sim the simulator's default rig (its true "
+                                          "parameters).")
+    init.add_argument("--sim", action="store_true", help="print the simulator's default rig instead")
+    init.set_defaults(func=cmd_rig_init)
 
     dev = sub.add_parser("devices", help="list serial ports and depthai cameras",
                          description="List serial ports (device, USB VID:PID, serial number) and depthai cameras.")

@@ -1,0 +1,205 @@
+"""``report.html``: one self-contained page (every image embedded) showing what a scan did.
+
+Sections: the summary; on the simulator, the error heat map of the mesh against the true surface; the
+mesh shaded from several sides; the registered views; the view graph with each pair's residual; and
+per view its capture, decoded projector column and confidence, depth and cloud. Every picture is a
+PNG in a ``data:`` URI (the view graph is an SVG, also in a ``data:`` URI), rendered by the ray caster
+and z-buffer of :mod:`rangekit.snapshot`: no display, browser or GPU is needed to write it.
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import time
+from pathlib import Path
+from typing import TYPE_CHECKING, Callable, Sequence
+
+import numpy as np
+
+from rangekit.geometry import apply_T
+from rangekit.io import atomic_write_text, read_png
+from rangekit.progress import call_progress
+
+if TYPE_CHECKING:
+    from rangekit.mesh import TriangleMesh
+    from rangekit.pipeline import ProcessResult
+    from rangekit.pointcloud import PointCloud
+    from rangekit.rig import Rig
+
+__all__ = ["write_report", "view_graph_svg"]
+
+THUMB_W = 256
+
+_CSS = """
+body{font-family:system-ui,-apple-system,Segoe UI,Helvetica,Arial,sans-serif;margin:24px auto;max-width:1400px;
+color:#222;padding:0 16px}
+h1{font-size:26px;margin-bottom:4px} h2{font-size:20px;margin-top:32px;border-bottom:1px solid #ddd}
+.sub{color:#666;margin-top:0} pre{background:#f6f6f6;padding:12px;overflow-x:auto;font-size:13px}
+.row{display:flex;flex-wrap:wrap;gap:10px;align-items:flex-start}
+figure{margin:0} figcaption{font-size:12px;color:#555;text-align:center}
+table{border-collapse:collapse;font-size:13px} td,th{padding:3px 6px;border-bottom:1px solid #eee;text-align:left}
+img{display:block}
+"""
+
+
+def _uri(image: np.ndarray) -> str:
+    from rangekit.snapshot import data_uri
+
+    return data_uri(image)
+
+
+def _img(image: np.ndarray | str, caption: str, alt: str | None = None) -> str:
+    src = image if isinstance(image, str) else _uri(image)
+    cap = html.escape(caption)
+    return f'<figure><img src="{src}" alt="{html.escape(alt or caption)}"><figcaption>{cap}</figcaption></figure>'
+
+
+def _thumb(image: np.ndarray, width: int = THUMB_W) -> np.ndarray:
+    import cv2
+
+    h, w = image.shape[:2]
+    return cv2.resize(image, (width, max(1, round(h * width / w))), interpolation=cv2.INTER_AREA)
+
+
+def _crop(image: np.ndarray, pad: int = 6) -> np.ndarray:
+    """``image`` cut to its non-white content plus ``pad`` pixels (renders frame a bounding sphere)."""
+    ys, xs = np.nonzero(np.any(image < 250, axis=2))
+    if ys.size == 0:
+        return image
+    return image[max(0, ys.min() - pad):ys.max() + pad + 1, max(0, xs.min() - pad):xs.max() + pad + 1]
+
+
+def view_graph_svg(n: int, edges: Sequence[dict], *, size: int = 460) -> str:
+    """The view graph as SVG: views on a circle (in turntable order), accepted pairs as lines coloured by
+    their ICP RMSE (green low, red high; the label in micrometres), rejected pairs dashed grey."""
+    from rangekit.snapshot import colourise
+
+    c, r = size / 2, size / 2 - 40
+    ang = np.pi / 2 - 2 * np.pi * np.arange(n) / n
+    xy = np.column_stack([c + r * np.cos(ang), c - r * np.sin(ang)])
+    acc = [e for e in edges if e["accepted"]]
+    hi = max([e["rmse_mm"] for e in acc], default=1.0) or 1.0
+    parts = [f'<svg xmlns="http://www.w3.org/2000/svg" width="{size}" height="{size}" '
+             f'viewBox="0 0 {size} {size}" font-family="sans-serif" font-size="11">',
+             f'<rect width="{size}" height="{size}" fill="white"/>']
+    for e in sorted(edges, key=lambda e: e["accepted"]):
+        (x1, y1), (x2, y2) = xy[e["i"]], xy[e["j"]]
+        if e["accepted"]:
+            rgb = colourise(np.array([e["rmse_mm"]]), 0.0, hi, cmap="turbo")[0]
+            parts.append(f'<line x1="{x1:.1f}" y1="{y1:.1f}" x2="{x2:.1f}" y2="{y2:.1f}" '
+                         f'stroke="rgb({rgb[0]},{rgb[1]},{rgb[2]})" stroke-width="2.5"/>')
+            if abs(e["i"] - e["j"]) in (1, n - 1):
+                mx, my = (x1 + x2) / 2, (y1 + y2) / 2
+                parts.append(f'<text x="{mx:.1f}" y="{my:.1f}" text-anchor="middle" fill="#333">'
+                             f'{e["rmse_mm"] * 1e3:.0f}</text>')
+        else:
+            parts.append(f'<line x1="{x1:.1f}" y1="{y1:.1f}" x2="{x2:.1f}" y2="{y2:.1f}" stroke="#bbb" '
+                         'stroke-width="1" stroke-dasharray="4 3"/>')
+    for k, (x, y) in enumerate(xy):
+        parts.append(f'<circle cx="{x:.1f}" cy="{y:.1f}" r="13" fill="#1f4e79"/>'
+                     f'<text x="{x:.1f}" y="{y + 4:.1f}" text-anchor="middle" fill="white">{k}</text>')
+    parts.append(f'<text x="8" y="{size - 8}" fill="#555">line colour: pair ICP RMSE, 0 (blue) to '
+                 f'{hi * 1e3:.0f} um (red); labels in um; dashed: rejected</text></svg>')
+    svg = "".join(parts)
+    return "data:image/svg+xml;base64," + base64.b64encode(svg.encode()).decode()
+
+
+def _summary_table(result: "ProcessResult", session: dict) -> str:
+    sim = session.get("simulator")
+    rows = [("session", str(result.folder)), ("written", time.strftime("%Y-%m-%d %H:%M:%S")),
+            ("rig", "simulated" if sim else "hardware"), ("pattern", session["pattern"]["method"])]
+    if sim:
+        rows += [("object", str(sim["object"])), ("noise seed", str(sim["seed"]))]
+    body = "".join(f"<tr><th>{html.escape(k)}</th><td>{html.escape(v)}</td></tr>" for k, v in rows)
+    return f"<table>{body}</table><pre>{html.escape(chr(10).join(result.summary_lines()))}</pre>"
+
+
+def write_report(folder: str | Path, result: "ProcessResult", *, clouds: Sequence["PointCloud"],
+                 merged: "PointCloud", mesh: "TriangleMesh", session: dict, rig: "Rig",
+                 truth: "TriangleMesh | None" = None, progress: Callable | None = None,
+                 size: tuple[int, int] = (400, 400)) -> Path:
+    """Write ``folder/report.html`` and return its path.
+
+    ``clouds`` are the views' clouds in their own frames, ``merged`` and ``mesh`` in the session world
+    (the first view's frame), ``truth`` the true surface in that frame (simulator) for the heat map.
+    """
+    from rangekit.mesh import distance_to_surface
+    from rangekit.snapshot import (colour_bar, colourise, fit_camera, render_cloud, render_mesh,
+                                   render_values_on_mesh)
+
+    out = Path(folder)
+    sections = [f"<h1>rangekit scan report</h1><p class='sub'>{html.escape(str(out.resolve()))}</p>",
+                "<h2>Summary</h2>", _summary_table(result, session)]
+    bounds = np.stack([mesh.vertices.min(axis=0), mesh.vertices.max(axis=0)])
+    up = rig.T_world_table[:3, 2] if rig.T_world_table is not None else np.array([0.0, -1.0, 0.0])
+    sides = [(np.radians(a), np.radians(25.0)) for a in (0, 90, 180, 270)] + [(0.0, np.radians(80.0))]
+    side_names = ["front", "right", "back", "left", "top"]
+
+    if truth is not None and result.accuracy:
+        call_progress(progress, "report: error heat map")
+        vmax = 1e-3 * max(0.2, round(result.accuracy["p95"] * 1e3 * 2, 1))
+        figs = []
+        for (az, el), name in zip(sides, side_names):
+            cam = fit_camera(bounds, azimuth=az, elevation=el, size=size, up=up, tight=True)
+            img, _ = render_values_on_mesh(mesh, cam, lambda X: distance_to_surface(X, truth), vmin=0.0,
+                                           vmax=vmax, cmap="turbo", smooth=True)
+            figs.append(_img(_crop(img), f"{name}: distance to the true surface"))
+        bar = colour_bar(0.0, vmax * 1e3, label="distance to the true surface, mm", cmap="turbo")
+        a = result.accuracy
+        sections += ["<h2>Accuracy against the true surface (simulator)</h2>",
+                     f"<p>RMS {a['rms'] * 1e3:.3f} mm, 95th percentile {a['p95'] * 1e3:.3f} mm, completeness "
+                     f"{a['completeness']:.1%} within {a['tolerance'] * 1e3:g} mm. Red at the bottom is the part "
+                     "no view can see (the object stands on it): the fusion closes it smoothly.</p>",
+                     f"<div class='row'>{''.join(figs)}</div>", _img(bar, "colour scale")]
+
+    call_progress(progress, "report: mesh renders")
+    figs = [_img(_crop(render_mesh(mesh, fit_camera(bounds, azimuth=az, elevation=el, size=size, up=up, tight=True),
+                                   smooth=True, colour_by_vertex=False)), name)
+            for (az, el), name in zip(sides, side_names)]
+    sections += ["<h2>Mesh</h2>", f"<div class='row'>{''.join(figs)}</div>"]
+
+    call_progress(progress, "report: registered views")
+    n = len(clouds)
+    view_id = np.concatenate([np.full(len(c), k, dtype=np.float64) for k, c in enumerate(clouds)])
+    step = max(1, len(merged) // 600_000)
+    figs = [_img(_crop(render_cloud(merged.points[::step], fit_camera(bounds, azimuth=az, elevation=el, size=size,
+                                                                      up=up, tight=True),
+                                    values=view_id[::step], vmin=0, vmax=max(1, n - 1))), f"{name}: colour = view")
+            for (az, el), name in list(zip(sides, side_names))[:2]]
+    figs.append(_img(view_graph_svg(n, result.edges), "view graph"))
+    sections += ["<h2>Registration</h2>", f"<div class='row'>{''.join(figs)}</div>"]
+
+    call_progress(progress, "report: views")
+    rows = []
+    names = session["pattern"]["frames"] if isinstance(session["pattern"].get("frames"), list) else []
+    white_index = next((i for i, f in enumerate(names) if (f if isinstance(f, str) else f.get("name")) == "white"), 0)
+    for k, (name, cloud) in enumerate(zip(result.view_names, clouds)):
+        vdir = out / name
+        maps = np.load(vdir / "maps.npz")
+        capture = read_png(vdir / f"{white_index:03d}.png")
+        capture = capture if capture.ndim == 3 else np.repeat(capture[:, :, None], 3, axis=2)
+        if capture.dtype != np.uint8:
+            capture = (capture / max(1, capture.max()) * 255).astype(np.uint8)
+        col = maps["proj_col"]
+        depth = maps["depth"]
+        finite = np.isfinite(depth)
+        dlo, dhi = (np.percentile(depth[finite], [1, 99]) if finite.any() else (0.0, 1.0))
+        ccam = fit_camera(np.stack([cloud.points.min(axis=0), cloud.points.max(axis=0)]), azimuth=np.radians(20),
+                          elevation=np.radians(20), size=(THUMB_W * 5 // 4, THUMB_W), up=up, tight=True)
+        figs = [_img(_thumb(capture), f"{name}: capture (white)"),
+                _img(_thumb(colourise(col, 0, rig.projector.width - 1, cmap="turbo")), "projector column"),
+                _img(_thumb(colourise(maps["confidence"], 0, max(1e-6, float(np.nanpercentile(maps["confidence"], 99))),
+                                      cmap="grey")), "confidence"),
+                _img(_thumb(colourise(depth, dlo, dhi, cmap="viridis")), f"depth {dlo * 1e3:.0f}-{dhi * 1e3:.0f} mm"),
+                _img(_crop(render_cloud(cloud, ccam)), f"cloud: {len(cloud):,} points")]
+        rows.append(f"<div class='row'>{''.join(figs)}</div>")
+        call_progress(progress, f"report: view {k + 1}/{n}", k + 1, n)
+    sections += ["<h2>Views</h2>", "".join(rows)]
+
+    page = ("<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'>"
+            f"<title>rangekit report: {html.escape(out.name)}</title><style>{_CSS}</style></head><body>"
+            + "".join(sections) + "</body></html>")
+    path = out / "report.html"
+    atomic_write_text(path, page)
+    return path

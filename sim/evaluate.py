@@ -1,0 +1,189 @@
+"""Accuracy of a scanned mesh against the simulator's true surface.
+
+Two figures, both on uniform (area-weighted) samples of a surface, so a dense patch does not count more:
+
+- **accuracy**: distance from the mesh to the true surface (RMS, 95th percentile, max), sampled on the
+  observed part of the mesh: where the closest true-surface point is one the views can see. It
+  includes everything: decoding, triangulation, registration drift and fusion. The rest of a watertight
+  mesh (under the object, where no view looks) is invented by the fusion; its share of the mesh area
+  and its RMS are reported apart.
+- **completeness**: the fraction of the *true surface the views can see* that lies within ``tolerance``
+  of the mesh. "Can see" is exact: a true-surface sample counts when, in at least one view, it faces
+  the camera and the projector, is inside both images, and nothing occludes it from either (rays cast
+  from both centres), faces both within ``max_incidence_deg`` (80 degrees: coded light at more
+  grazing angles loses pixels to the flying-pixel filter), and it is more than ``table_margin`` above the turntable top (the pipeline drops
+  that band so the table does not fuse with the object).
+
+Frames: the mesh is in the session's world, the first view's frame, i.e. the rig's world with the
+table at the first view's angle; the truth is moved there with the rig's turntable motion.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from rangekit.errors import InputError
+from rangekit.geometry import apply_T, invert_T
+from rangekit.mesh import TriangleMesh
+from rangekit.rig import Rig
+from rangekit.sim.raycast import _open3d_cast
+from rangekit.sim.scene import Scene
+
+__all__ = ["Accuracy", "sample_surface", "visible_samples", "mesh_accuracy"]
+
+
+@dataclass(frozen=True)
+class Accuracy:
+    """Mesh against the true surface. Distances in metres."""
+
+    rms: float               # mesh -> true surface
+    p95: float
+    max: float
+    completeness: float      # fraction of the visible true surface within ``tolerance`` of the mesh
+    tolerance: float
+    diagonal: float          # the true object's bounding-box diagonal
+    visible_fraction: float  # share of the object's whole surface the views can see
+    unobserved_area: float   # share of the mesh's area filled in where no view saw the truth
+    unobserved_rms: float    # mesh -> true surface over that filled-in part
+    rms_all: float           # mesh -> true surface over the whole mesh, filled-in parts included
+    max_incidence_deg: float # "can see" = facing camera and projector within this angle
+    n_mesh_samples: int
+    n_truth_samples: int
+
+    def to_dict(self) -> dict:
+        return {k: (float(v) if isinstance(v, (float, np.floating)) else v) for k, v in self.__dict__.items()}
+
+    def __str__(self) -> str:
+        return (f"RMS {self.rms * 1e3:.3f} mm ({self.rms / self.diagonal:.3%} of the {self.diagonal * 1e3:.0f} mm "
+                f"diagonal), 95th percentile {self.p95 * 1e3:.3f} mm, max {self.max * 1e3:.3f} mm; completeness "
+                f"{self.completeness:.1%} of the visible surface within {self.tolerance * 1e3:g} mm "
+                f"({self.visible_fraction:.0%} of the object is visible); {self.unobserved_area:.0%} of the mesh "
+                f"fills unseen parts (RMS {self.unobserved_rms * 1e3:.2f} mm there; whole mesh "
+                f"{self.rms_all * 1e3:.3f} mm)")
+
+
+def sample_surface(V: np.ndarray, F: np.ndarray, n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """``n`` area-uniform random points on a triangle mesh: (points (n, 3), face index (n,))."""
+    a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
+    area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+    if area.sum() <= 0:
+        raise InputError("sample_surface: the mesh has no area")
+    face = rng.choice(len(F), size=n, p=area / area.sum())
+    r1, r2 = rng.random(n), rng.random(n)
+    s = np.sqrt(r1)
+    w0, w1, w2 = 1 - s, s * (1 - r2), s * r2
+    P = w0[:, None] * a[face] + w1[:, None] * b[face] + w2[:, None] * c[face]
+    return P, face
+
+
+def _seen_from(centre: np.ndarray, P: np.ndarray, N: np.ndarray, scene_V: np.ndarray, scene_F: np.ndarray,
+               eps: float, min_cos: float) -> np.ndarray:
+    """(n,) bool: P faces ``centre`` (cosine above ``min_cos``) and the first scene hit along the ray from
+    the centre is P itself."""
+    to_c = centre - P
+    dist = np.linalg.norm(to_c, axis=1)
+    facing = np.einsum("ij,ij->i", N, to_c) > min_cos * dist
+    out = np.zeros(len(P), dtype=bool)
+    idx = np.flatnonzero(facing)
+    if idx.size:
+        t, _ = _open3d_cast(scene_V, scene_F, np.broadcast_to(centre, (idx.size, 3)),
+                            -to_c[idx] / dist[idx, None])
+        out[idx] = t >= dist[idx] - eps
+    return out
+
+
+def _inside(camera, P: np.ndarray) -> np.ndarray:
+    z = apply_T(invert_T(camera.T_world_cam), P)[:, 2]
+    uv = camera.project(P)
+    return (z > 0) & (uv[:, 0] >= -0.5) & (uv[:, 0] < camera.width - 0.5) & \
+        (uv[:, 1] >= -0.5) & (uv[:, 1] < camera.height - 0.5)
+
+
+def visible_samples(truth: TriangleMesh, scene: Scene, rig: Rig, angles: np.ndarray, P: np.ndarray,
+                    face: np.ndarray, *, eps: float = 1e-5, min_cos: float = 0.0) -> np.ndarray:
+    """(n,) bool: which true-surface samples ``P`` (frame of the table at angle 0) some view sees lit.
+
+    ``eps`` metres: how much closer than the sample a hit must be to occlude it (float32 ray casting).
+    ``min_cos``: the surface must face the camera and the projector at least this much (cosine of the
+    incidence angle; 0 = any angle short of grazing).
+    """
+    a, b, c = (truth.vertices[truth.triangles[face, k]] for k in range(3))
+    N = np.cross(b - a, c - a)
+    N /= np.linalg.norm(N, axis=1, keepdims=True)
+    seen = np.zeros(len(P), dtype=bool)
+    for angle in angles:
+        M = rig.T_world_rotated(float(angle)) if rig.T_world_table is not None else np.eye(4)
+        world = scene.world_mesh(M)
+        Pk, Nk = apply_T(M, P), N @ M[:3, :3].T
+        todo = np.flatnonzero(~seen & _inside(rig.camera, Pk) & _inside(rig.projector, Pk))
+        if todo.size == 0:
+            continue
+        ok = _seen_from(rig.camera.center, Pk[todo], Nk[todo], world.vertices, world.triangles, eps, min_cos)
+        todo = todo[ok]
+        ok = _seen_from(rig.projector.center, Pk[todo], Nk[todo], world.vertices, world.triangles, eps, min_cos)
+        seen[todo[ok]] = True
+    return seen
+
+
+def _closest_on(mesh: TriangleMesh, P: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Closest point of ``mesh`` to each of ``P``: (distance (n,), point (n, 3), face (n,)); Open3D, float32
+    inside, relative to the mesh's centre."""
+    import open3d as o3d
+
+    c = (mesh.vertices.min(axis=0) + mesh.vertices.max(axis=0)) / 2
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(o3d.core.Tensor((mesh.vertices - c).astype(np.float32)),
+                        o3d.core.Tensor(mesh.triangles.astype(np.uint32)))
+    ans = scene.compute_closest_points(o3d.core.Tensor((P - c).astype(np.float32)))
+    Q = ans["points"].numpy().astype(np.float64) + c
+    return np.linalg.norm(P - Q, axis=1), Q, ans["primitive_ids"].numpy().astype(np.int64)
+
+
+def mesh_accuracy(mesh: TriangleMesh, scene: Scene, rig: Rig, angles, *, tolerance: float = 1e-3,
+                  table_margin: float = 0.002, max_incidence_deg: float = 80.0, n_samples: int = 200_000,
+                  seed: int = 0) -> Accuracy:
+    """Compare ``mesh`` (session world = the first view's frame) with the scene's first object.
+
+    ``angles``: the turntable angles of the views (radians); the first is the world's angle.
+    Accuracy is taken over the *observed* part of the mesh: the samples whose closest true-surface point
+    the views can see (the rest of a watertight mesh is filled in where no view looked, under the
+    object, and is reported as ``unobserved_area``, with its own RMS). "Can see" means facing the
+    camera and the projector within ``max_incidence_deg`` in at least one view, nothing in the way:
+    beyond about 80 degrees coded light still decodes but the flying-pixel filter drops part of the
+    pixels (docs/tutorial.md gives the measured fractions).
+    """
+    angles = np.asarray(angles, dtype=np.float64)
+    rng = np.random.default_rng(seed)
+    obj = scene.objects[0]
+    M0 = rig.T_world_rotated(float(angles[0])) if rig.T_world_table is not None else np.eye(4)
+    # Truth at table angle 0 (the scene's frame); the mesh is brought there by inv(M0).
+    truth = TriangleMesh(obj.world_vertices(), obj.triangles)
+    mesh0 = TriangleMesh(apply_T(invert_T(M0), mesh.vertices), mesh.triangles)
+    T_table_world = invert_T(rig.T_world_table) if rig.T_world_table is not None else None
+
+    def observed(P: np.ndarray, face: np.ndarray) -> np.ndarray:
+        seen = visible_samples(truth, scene, rig, angles, P, face,
+                               min_cos=float(np.cos(np.radians(max_incidence_deg))))
+        if T_table_world is not None:
+            seen &= apply_T(T_table_world, P)[:, 2] > table_margin
+        return seen
+
+    Pm, _ = sample_surface(mesh0.vertices, mesh0.triangles, n_samples, rng)
+    d_mesh, Q, q_face = _closest_on(truth, Pm)
+    on_seen = observed(Q, q_face)
+    Pt, face = sample_surface(truth.vertices, truth.triangles, n_samples, rng)
+    seen = observed(Pt, face)
+    if not seen.any() or not on_seen.any():
+        raise InputError("mesh_accuracy: no view sees the object")
+    d_truth, _, _ = _closest_on(mesh0, Pt[seen])
+    d = d_mesh[on_seen]
+    diag = float(np.linalg.norm(np.ptp(truth.vertices, axis=0)))
+    d_fill = d_mesh[~on_seen]
+    return Accuracy(rms=float(np.sqrt(np.mean(d ** 2))), p95=float(np.percentile(d, 95)), max=float(d.max()),
+                    completeness=float(np.mean(d_truth <= tolerance)), tolerance=tolerance, diagonal=diag,
+                    visible_fraction=float(seen.mean()), unobserved_area=float(np.mean(~on_seen)),
+                    unobserved_rms=float(np.sqrt(np.mean(d_fill ** 2))) if d_fill.size else 0.0,
+                    rms_all=float(np.sqrt(np.mean(d_mesh ** 2))), max_incidence_deg=float(max_incidence_deg),
+                    n_mesh_samples=int(on_seen.sum()), n_truth_samples=int(seen.sum()))

@@ -337,12 +337,11 @@ def cmd_render(args: argparse.Namespace) -> int:
     pts = mesh.vertices if mesh is not None else cloud.points
     if len(pts) == 0:
         raise FileFormatError(f"{src}: holds no points or vertices to render")
-    bounds = np.stack([np.nanmin(pts, axis=0), np.nanmax(pts, axis=0)])
     up = np.asarray(args.up, dtype=np.float64)
     images = []
     for az in args.azimuth:
-        cam = fit_camera(bounds, azimuth=np.radians(az), elevation=np.radians(args.elevation), size=size, up=up,
-                         tight=True, margin=1.05)
+        cam = fit_camera(pts, azimuth=np.radians(az), elevation=np.radians(args.elevation), size=size, up=up,
+                         tight=True, margin=1.1)
         images.append(render_mesh(mesh, cam, smooth=True, colour_by_vertex=args.colour) if mesh is not None
                       else render_cloud(cloud, cam))
     write_png(args.out, images[0] if len(images) == 1 else montage(images, cols=min(len(images), 4)))

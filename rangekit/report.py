@@ -131,7 +131,7 @@ def write_report(folder: str | Path, result: "ProcessResult", *, clouds: Sequenc
     out = Path(folder)
     sections = [f"<h1>rangekit scan report</h1><p class='sub'>{html.escape(str(out.resolve()))}</p>",
                 "<h2>Summary</h2>", _summary_table(result, session)]
-    bounds = np.stack([mesh.vertices.min(axis=0), mesh.vertices.max(axis=0)])
+    frame_pts = mesh.vertices  # fit_camera(tight=True) frames the points themselves
     up = rig.T_world_table[:3, 2] if rig.T_world_table is not None else np.array([0.0, -1.0, 0.0])
     sides = [(np.radians(a), np.radians(25.0)) for a in (0, 90, 180, 270)] + [(0.0, np.radians(80.0))]
     side_names = ["front", "right", "back", "left", "top"]
@@ -141,7 +141,7 @@ def write_report(folder: str | Path, result: "ProcessResult", *, clouds: Sequenc
         vmax = 1e-3 * max(0.2, round(result.accuracy["p95"] * 1e3 * 2, 1))
         figs = []
         for (az, el), name in zip(sides, side_names):
-            cam = fit_camera(bounds, azimuth=az, elevation=el, size=size, up=up, tight=True)
+            cam = fit_camera(frame_pts, azimuth=az, elevation=el, size=size, up=up, tight=True)
             img, _ = render_values_on_mesh(mesh, cam, lambda X: distance_to_surface(X, truth), vmin=0.0,
                                            vmax=vmax, cmap="turbo", smooth=True)
             figs.append(_img(_crop(img), f"{name}: distance to the true surface"))
@@ -154,7 +154,7 @@ def write_report(folder: str | Path, result: "ProcessResult", *, clouds: Sequenc
                      f"<div class='row'>{''.join(figs)}</div>", _img(bar, "colour scale")]
 
     call_progress(progress, "report: mesh renders")
-    figs = [_img(_crop(render_mesh(mesh, fit_camera(bounds, azimuth=az, elevation=el, size=size, up=up, tight=True),
+    figs = [_img(_crop(render_mesh(mesh, fit_camera(frame_pts, azimuth=az, elevation=el, size=size, up=up, tight=True),
                                    smooth=True, colour_by_vertex=False)), name)
             for (az, el), name in zip(sides, side_names)]
     sections += ["<h2>Mesh</h2>", f"<div class='row'>{''.join(figs)}</div>"]
@@ -163,7 +163,7 @@ def write_report(folder: str | Path, result: "ProcessResult", *, clouds: Sequenc
     n = len(clouds)
     view_id = np.concatenate([np.full(len(c), k, dtype=np.float64) for k, c in enumerate(clouds)])
     step = max(1, len(merged) // 600_000)
-    figs = [_img(_crop(render_cloud(merged.points[::step], fit_camera(bounds, azimuth=az, elevation=el, size=size,
+    figs = [_img(_crop(render_cloud(merged.points[::step], fit_camera(frame_pts, azimuth=az, elevation=el, size=size,
                                                                       up=up, tight=True),
                                     values=view_id[::step], vmin=0, vmax=max(1, n - 1))), f"{name}: colour = view")
             for (az, el), name in list(zip(sides, side_names))[:2]]
@@ -185,7 +185,7 @@ def write_report(folder: str | Path, result: "ProcessResult", *, clouds: Sequenc
         depth = maps["depth"]
         finite = np.isfinite(depth)
         dlo, dhi = (np.percentile(depth[finite], [1, 99]) if finite.any() else (0.0, 1.0))
-        ccam = fit_camera(np.stack([cloud.points.min(axis=0), cloud.points.max(axis=0)]), azimuth=np.radians(20),
+        ccam = fit_camera(cloud.points, azimuth=np.radians(20),
                           elevation=np.radians(20), size=(THUMB_W * 5 // 4, THUMB_W), up=up, tight=True)
         figs = [_img(_thumb(capture), f"{name}: capture (white)"),
                 _img(_thumb(colourise(col, 0, rig.projector.width - 1, cmap="turbo")), "projector column"),

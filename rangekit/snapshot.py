@@ -69,8 +69,9 @@ def fit_camera(points: np.ndarray, *, azimuth: float, elevation: float, size: tu
     fov_deg : field of view across the smaller image side, degrees; square pixels, centred principal point.
     up : world direction that appears up in the image.
     margin : the bounding sphere of the box, scaled by ``margin``, just fits the smaller image side.
-    tight : instead, move as close as the 8 box corners allow (each inside the image with ``margin``):
-        the object fills more of the picture, and the pictures from different sides differ in scale.
+    tight : instead, move as close as the points allow (each inside the image with ``margin``; given
+        bounds, the 8 box corners): the object fills more of the picture, and pictures from different
+        sides differ in scale.
 
     Returns
     -------
@@ -105,7 +106,10 @@ def fit_camera(points: np.ndarray, *, azimuth: float, elevation: float, size: tu
         right = np.cross(direction, u)
         right /= np.linalg.norm(right)
         img_up = np.cross(right, direction)
-        corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+        if len(P) > 8:  # the points themselves (a blob's box corners stick out far beyond its outline)
+            corners = P[:: max(1, len(P) // 20_000)]
+        else:
+            corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
         rel = corners - centre
         toward = rel @ direction
         need = np.maximum(np.abs(rel @ right) * margin * f / (width / 2), np.abs(rel @ img_up) * margin * f / (height / 2))

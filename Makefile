@@ -29,7 +29,8 @@ test: $(STAMP) browser
 	$(BIN)/python -m pytest -q
 
 browser:
-	@# Headless Chromium + chromedriver for tests/test_chromium_harness.py (skips without them).
+	@# Headless Chromium + chromedriver (Debian packages) for the report test in tests/test_scan.py and
+	@# tests/test_chromium_harness.py; without them (not root, no apt) those tests skip.
 	@if [ ! -x /usr/bin/chromium ] || [ ! -x /usr/bin/chromedriver ]; then \
 	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null; then \
 	    echo "installing chromium and chromium-driver (for the browser test)"; \

@@ -35,7 +35,7 @@ _CSS = """
 body{font-family:system-ui,-apple-system,Segoe UI,Helvetica,Arial,sans-serif;margin:24px auto;max-width:1400px;
 color:#222;padding:0 16px}
 h1{font-size:26px;margin-bottom:4px} h2{font-size:20px;margin-top:32px;border-bottom:1px solid #ddd}
-.sub{color:#666;margin-top:0} pre{background:#f6f6f6;padding:12px;overflow-x:auto;font-size:13px}
+.sub{color:#666;margin-top:0} pre{background:#f6f6f6;padding:12px;white-space:pre-wrap;font-size:13px}
 .row{display:flex;flex-wrap:wrap;gap:10px;align-items:flex-start}
 figure{margin:0} figcaption{font-size:12px;color:#555;text-align:center}
 table{border-collapse:collapse;font-size:13px} td,th{padding:3px 6px;border-bottom:1px solid #eee;text-align:left}
@@ -118,7 +118,7 @@ def _summary_table(result: "ProcessResult", session: dict) -> str:
 def write_report(folder: str | Path, result: "ProcessResult", *, clouds: Sequence["PointCloud"],
                  merged: "PointCloud", mesh: "TriangleMesh", session: dict, rig: "Rig",
                  truth: "TriangleMesh | None" = None, progress: Callable | None = None,
-                 size: tuple[int, int] = (400, 400)) -> Path:
+                 size: tuple[int, int] = (230, 230)) -> Path:
     """Write ``folder/report.html`` and return its path.
 
     ``clouds`` are the views' clouds in their own frames, ``merged`` and ``mesh`` in the session world
@@ -144,7 +144,7 @@ def write_report(folder: str | Path, result: "ProcessResult", *, clouds: Sequenc
             cam = fit_camera(frame_pts, azimuth=az, elevation=el, size=size, up=up, tight=True)
             img, _ = render_values_on_mesh(mesh, cam, lambda X: distance_to_surface(X, truth), vmin=0.0,
                                            vmax=vmax, cmap="turbo", smooth=True)
-            figs.append(_img(_crop(img), f"{name}: distance to the true surface"))
+            figs.append(_img(_crop(img), name, alt=f"{name}: distance to the true surface"))
         bar = colour_bar(0.0, vmax * 1e3, label="distance to the true surface, mm", cmap="turbo")
         a = result.accuracy
         sections += ["<h2>Accuracy against the true surface (simulator)</h2>",

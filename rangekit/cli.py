@@ -116,7 +116,7 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
     bits = cap.info.get("imaging", {}).get("bits")
     full_scale = float((1 << bits) - 1) if bits else None
     rec = reconstruct_view(cap.images, cap.spec, rig.camera, rig.projector, subpixel=not args.integer,
-                           method=args.method, full_scale=full_scale)
+                           method=args.method, full_scale=full_scale, response=rig.projector_response)
     save_cloud(args.out, rec.cloud)
     _say(f"{rec.decoded!r}")
     _say(f"{rec.triangulated!r}")
@@ -374,6 +374,81 @@ def _processing_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-report", action="store_true", help="skip report.html")
 
 
+_POSE_HINTS = ("facing the camera, tilted ~30 deg to the left", "tilted ~30 deg to the right",
+               "top edge tilted ~30 deg away", "bottom edge tilted ~30 deg away", "turned ~20 deg in its plane, tilted left",
+               "near the left edge of the view, tilted right", "near the right edge of the view, tilted left",
+               "near the top of the view, tilted down", "near the bottom of the view, tilted up",
+               "closer to the camera, tilted ~40 deg", "further away, tilted ~20 deg")
+
+
+def cmd_calibrate(args: argparse.Namespace) -> int:
+    """rangekit calibrate --rig sim|RIG.json --out RIG.json: camera, projector, turntable and projector response"""
+    from pathlib import Path
+
+    from rangekit.boards import Board
+    from rangekit.calib.procedure import CalibrationSettings, calibrate_rig, compare_rigs, comparison_lines
+    from rangekit.errors import ConfigError
+    from rangekit.rig import load_rig, save_rig
+
+    out = Path(args.out)
+    if out.exists() and not args.force:
+        raise ConfigError(f"{out}: exists; choose another file or pass --force to overwrite it")
+    if args.poses < 3:
+        raise ConfigError(f"--poses must be at least 3 (Zhang's method), found {args.poses}; 15-25 is typical")
+    board = Board(kind=args.board, cols=args.cols, rows=args.rows, square=args.square_mm / 1000.0)
+    settings = CalibrationSettings(board=board, n_poses=args.poses)
+    hardware = args.rig != "sim"
+    t0 = time.perf_counter()
+    if hardware:
+        from rangekit.drivers import open_rig_devices, validate_rig_for_hardware
+
+        template = load_rig(args.rig)
+        validate_rig_for_hardware(template, where=args.rig)
+        if not sys.stdin.isatty():
+            raise ConfigError("calibrating real hardware is interactive (you move the board between captures); "
+                              "run 'rangekit calibrate' in a terminal")
+        devices = open_rig_devices(template, where=args.rig)
+
+        def place(i: int, n: int) -> None:
+            input(f"pose {i + 1}/{n}: hold the {board.cols}x{board.rows} board still, {_POSE_HINTS[i % len(_POSE_HINTS)]}, "
+                  "wholly inside the projected light; press Enter to capture ")
+
+        def on_turntable() -> None:
+            input("turntable: fix the board on the turntable, standing and tilted back towards the camera, off the "
+                  "axis, so that it stays visible while the table turns +-40 deg; press Enter ")
+        truth = None
+    else:
+        from rangekit.sim.calibration import board_poses, board_scene, turntable_board_scene
+        from rangekit.sim.devices import SimRig, default_rig
+
+        template = truth = default_rig()
+        poses = board_poses(truth, board, args.poses, seed=args.seed)
+        devices = SimRig(board_scene(board, poses[0]), truth, seed=args.seed)
+
+        def place(i: int, n: int) -> None:
+            devices.set_scene(board_scene(board, poses[i]))
+
+        def on_turntable() -> None:
+            devices.set_scene(turntable_board_scene(truth, board))
+    try:
+        res = calibrate_rig(devices, settings=settings, place_board=place, place_on_turntable=on_turntable,
+                            template=template, progress=_console())
+    finally:
+        if hardware:
+            devices.close()
+    save_rig(res.rig, out)
+    _say("")
+    _say("== calibration ==")
+    for line in res.summary_lines():
+        _say(line)
+    if truth is not None:
+        _say("deviation from the simulator's true rig (rangekit rig init --sim):")
+        for line in comparison_lines(compare_rigs(res.rig, truth)):
+            _say("  " + line)
+    _say(f"wrote {out} in {time.perf_counter() - t0:.1f} s")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="rangekit", description="Active 3D scanning: simulate, capture, "
                                      "decode, register and fuse range data.")
@@ -490,6 +565,24 @@ def build_parser() -> argparse.ArgumentParser:
     ren.add_argument("--size", type=_projector_size, default=(800, 600), help="image size WxH (default 800x600)")
     ren.add_argument("--colour", action="store_true", help="shade a mesh with its vertex colours (default grey)")
     ren.set_defaults(func=cmd_render)
+
+    cal = sub.add_parser("calibrate", help="calibrate camera, projector, turntable axis and projector response",
+                         description="Capture a board at several poses under coded light (the simulator moves it; "
+                                     "on hardware you do, pose by pose), calibrate the camera and the projector "
+                                     "(bundle adjusted together), the turntable axis and the projector's gamma, and "
+                                     "write a rig file. On the simulator it also prints each parameter's deviation "
+                                     "from the true rig.")
+    cal.add_argument("--rig", default="sim", help="'sim' (default) or a rig file naming the devices (its geometry "
+                                                   "is replaced)")
+    cal.add_argument("--out", required=True, help="rig file to write")
+    cal.add_argument("--force", action="store_true", help="overwrite --out if it exists")
+    cal.add_argument("--poses", type=int, default=20, help="board poses (default 20)")
+    cal.add_argument("--board", default="checkerboard", choices=("checkerboard", "charuco"), help="board type")
+    cal.add_argument("--cols", type=int, default=10, help="squares along the board's width (default 10)")
+    cal.add_argument("--rows", type=int, default=7, help="squares along its height (default 7)")
+    cal.add_argument("--square-mm", type=float, default=20.0, help="square side in millimetres (default 20)")
+    cal.add_argument("--seed", type=int, default=0, help="simulator: noise and pose seed")
+    cal.set_defaults(func=cmd_calibrate)
 
     rig = sub.add_parser("rig", help="rig files: write a template",
                          description="Rig files (docs/rig.md documents every field).")

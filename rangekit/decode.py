@@ -21,7 +21,9 @@ on both sides within ``max_gap`` pixels, or whose edges disagree with their code
 Phase shifting (phase, hybrid): N-step phase ``atan2(sum I_s sin d_s, sum I_s cos d_s)``, ``d_s = 2 pi s
 / N``. Multi-frequency ``phase`` unwraps each period with the next coarser one; ``hybrid`` unwraps with the
 Gray-code column (the Gray code gives the period, the phase the position in it) and flags pixels where
-the two disagree by more than ``max_disagreement`` columns.
+the two disagree by more than ``max_disagreement`` columns. Under a projector response ``p ** gamma``
+(``response``) the measured phase is a fixed, known function of the true phase; each wrapped phase is
+mapped back through :func:`rangekit.response.phase_correction` before unwrapping.
 
 Direct/global separation (Nayar et al. 2006): in the finest binary stripes half the projector is lit,
 so ``direct = max - min`` and ``global = 2 (min - black)`` over the finest pattern/inverse pairs. Pixels
@@ -43,6 +45,7 @@ import numpy as np
 
 from rangekit.errors import DecodeError
 from rangekit.patterns import PatternSpec, gray_decode, gray_encode
+from rangekit.response import PhaseCorrection, ProjectorResponse, phase_correction
 
 __all__ = ["DecodeResult", "decode", "phase_from_steps"]
 
@@ -219,14 +222,18 @@ def phase_from_steps(frames: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarr
     return phi, np.float32(2.0 / n) * np.hypot(S, C), A / np.float32(n)
 
 
-def _decode_phase(fr: _Frames, spec: PatternSpec, axis: str, region, coarse: np.ndarray | None):
-    """Unwrapped projector coordinate and the weakest modulation for one chunk."""
+def _decode_phase(fr: _Frames, spec: PatternSpec, axis: str, region, coarse: np.ndarray | None,
+                  corrections: dict[int, PhaseCorrection]):
+    """Unwrapped projector coordinate and the weakest modulation for one chunk (wrapped phases mapped
+    through ``corrections[steps]`` where given)."""
     prefix = "col" if axis == "columns" else "row"
     value = coarse
     mod_min = None
     for period, steps in spec.phase_plan(axis):
         frames = [fr.get(f"{prefix}_p{period:g}_s{s}", region) for s in range(steps)]
         phi, B, _ = phase_from_steps(frames)
+        if steps in corrections:
+            phi = corrections[steps](phi)
         wrapped = phi * np.float32(period / (2 * np.pi))
         if value is None:
             value = wrapped  # period >= size: absolute
@@ -241,7 +248,7 @@ def _decode_phase(fr: _Frames, spec: PatternSpec, axis: str, region, coarse: np.
 def decode(stack, spec: PatternSpec, *, order: str = "rangekit", subpixel: bool = False,
            min_contrast: float = 0.015, shadow_threshold: float = 0.01, max_global_ratio: float | None = None,
            max_gap: float = 6.0, max_disagreement: float = 1.5, full_scale: float | None = None,
-           workers: int = 2, chunk_rows: int = 96) -> DecodeResult:
+           response: ProjectorResponse | None = None, workers: int = 2, chunk_rows: int = 96) -> DecodeResult:
     """Decode a capture stack into projector coordinates.
 
     Parameters
@@ -271,6 +278,10 @@ def decode(stack, spec: PatternSpec, *, order: str = "rangekit", subpixel: bool 
         Hybrid: largest |phase - Gray code| in projector pixels before a pixel is inconsistent.
     full_scale : float, optional
         Largest raw value (default 255 for uint8, 65535 for uint16; give 4095 for 12-bit data).
+    response : ProjectorResponse, optional
+        The projector's response (the rig file's ``projector_response``). Phase methods correct each
+        wrapped phase for it (:func:`rangekit.response.phase_correction`); None or gamma 1 changes
+        nothing. Binary codes do not depend on it.
     workers, chunk_rows : threads and rows per chunk.
 
     Returns
@@ -283,6 +294,9 @@ def decode(stack, spec: PatternSpec, *, order: str = "rangekit", subpixel: bool 
         If the number of captures does not match the spec, sizes or dtypes differ, no pixel is lit
         (an all-black stack), or the captures look like another order or spec (white darker than black).
     """
+    if response is not None and not isinstance(response, ProjectorResponse):
+        raise DecodeError(f"response must be a rangekit.response.ProjectorResponse or None, found "
+                          f"{type(response).__name__} {response!r}; e.g. response=ProjectorResponse(gamma=2.2)")
     if spec.method in ("white", "black"):
         raise DecodeError(f"pattern {spec.method!r} carries no code; decode a graycode, xor02, xor04, phase, "
                           "hybrid or debruijn capture")
@@ -329,8 +343,14 @@ def decode(stack, spec: PatternSpec, *, order: str = "rangekit", subpixel: bool 
                           subs.get("rows", empty_f), "columns" in codes, "rows" in codes, edges, shadow, low,
                           glob_mask, conf, proj_col, proj_row, incons)
     else:
+        corrections = {}
+        if response is not None and not response.is_linear:
+            for axis in spec.axes:
+                for _, steps in spec.phase_plan(axis):
+                    corrections[steps] = phase_correction(response, steps)
         proj_col, proj_row, conf, incons = _decode_phase_maps(
-            fr, spec, shadow, low, glob_mask, conf, min_contrast * fs, fs, max_disagreement, workers, chunk_rows)
+            fr, spec, shadow, low, glob_mask, conf, min_contrast * fs, fs, max_disagreement, corrections, workers,
+            chunk_rows)
     lit = ~shadow
     if not np.any(lit):
         raise DecodeError(f"no pixel is lit: white - black is below {shadow_threshold:.0%} of full scale "
@@ -351,7 +371,8 @@ def decode(stack, spec: PatternSpec, *, order: str = "rangekit", subpixel: bool 
 
 
 def _decode_phase_maps(fr: _Frames, spec: PatternSpec, shadow, low, glob_mask, conf, t_low: float, fs: float,
-                       max_disagreement: float, workers: int, chunk_rows: int):
+                       max_disagreement: float, corrections: dict[int, PhaseCorrection], workers: int,
+                       chunk_rows: int):
     """Phase and hybrid methods: unwrapped phase per axis (Gray-code coarse values for hybrid)."""
     H, W = fr.shape
     reject = shadow | low | glob_mask
@@ -368,7 +389,8 @@ def _decode_phase_maps(fr: _Frames, spec: PatternSpec, shadow, low, glob_mask, c
         mod = np.empty((H, W), np.float32)
 
         def run(rs: slice, axis=axis, coarse=coarse, ph=ph, mod=mod) -> None:
-            p, m = _decode_phase(fr, spec, axis, (rs, slice(None)), None if coarse is None else coarse[rs])
+            p, m = _decode_phase(fr, spec, axis, (rs, slice(None)), None if coarse is None else coarse[rs],
+                                 corrections)
             ph[rs], mod[rs] = p, m
 
         _parallel(run, _chunks(H, chunk_rows), workers)

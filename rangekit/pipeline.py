@@ -114,7 +114,7 @@ def _view_cloud(v: SessionView, spec: PatternSpec, rig: Rig, settings: dict, ful
             pass  # a damaged cache is rebuilt
     images = read_stack(list_images(v.folder))
     rec = reconstruct_view(images, spec, rig.camera, rig.projector, method=settings["method"],
-                           full_scale=full_scale)
+                           full_scale=full_scale, response=rig.projector_response)
     xyz = rec.triangulated.xyz.copy()
     valid = np.isfinite(xyz[:, :, 0])
     c = rec.cloud
@@ -174,7 +174,8 @@ def process_session(folder: str | Path, *, fusion: str = "poisson", method: str 
     full_scale = float((1 << bits) - 1) if bits else None
     T_table_world = invert_T(rig.T_world_table) if rig.T_world_table is not None else None
     settings = {"rangekit": __version__, "method": method, "table_margin": table_margin,
-                "pattern": spec.to_dict()["method"], "full_scale": full_scale}
+                "pattern": spec.to_dict()["method"], "full_scale": full_scale,
+                "projector_response": None if rig.projector_response is None else rig.projector_response.to_dict()}
     timer = StageTimer()
 
     with timer.stage("decode"):

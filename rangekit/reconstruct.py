@@ -11,6 +11,7 @@ from rangekit.decode import DecodeResult, decode
 from rangekit.errors import ConfigError, DecodeError
 from rangekit.patterns import PatternSpec
 from rangekit.pointcloud import PointCloud
+from rangekit.response import ProjectorResponse
 from rangekit.triangulate import TriangulationResult, discontinuity_mask, range_normals, triangulate
 
 __all__ = ["Reconstruction", "reconstruct_view"]
@@ -31,14 +32,15 @@ class Reconstruction:
 def reconstruct_view(images, spec: PatternSpec, camera: PinholeCamera, projector: PinholeCamera, *,
                      order: str = "rangekit", subpixel: bool = True, method: str = "auto",
                      max_jump: float = 0.004, max_residual: float = 0.002, min_confidence: float = 0.03,
-                     full_scale: float | None = None) -> Reconstruction:
+                     full_scale: float | None = None, response: ProjectorResponse | None = None) -> Reconstruction:
     """Decode ``images`` and triangulate against ``projector``.
 
     ``max_jump`` (relative range step, see :func:`rangekit.triangulate.discontinuity_mask`) removes flying
     pixels at depth edges; ``max_residual`` (metres) removes ray-ray points whose rays miss each other;
     ``min_confidence`` drops pixels whose decoded confidence (about the white - black signal as a fraction
     of full scale) is lower: at 1-2% of full scale noise moves stripe edges by a large fraction of a
-    column, which at grazing angles is millimetres.
+    column, which at grazing angles is millimetres. ``response`` is the projector's response (the rig's
+    ``projector_response``), which phase methods correct for (see :func:`rangekit.decode.decode`).
     """
     if camera.size != (np.asarray(images[0]).shape[1], np.asarray(images[0]).shape[0]):
         raise ConfigError(f"the captures are {np.asarray(images[0]).shape[1]}x{np.asarray(images[0]).shape[0]} "
@@ -46,7 +48,7 @@ def reconstruct_view(images, spec: PatternSpec, camera: PinholeCamera, projector
     if projector.size != (spec.width, spec.height):
         raise ConfigError(f"the pattern spec is for a {spec.width}x{spec.height} projector but the rig's "
                           f"projector is {projector.width}x{projector.height}")
-    dec = decode(images, spec, order=order, subpixel=subpixel, full_scale=full_scale)
+    dec = decode(images, spec, order=order, subpixel=subpixel, full_scale=full_scale, response=response)
     weak = dec.confidence < min_confidence
     cols = np.where(weak, np.nan, dec.proj_col)
     rows = np.where(weak, np.nan, dec.proj_row) if np.any(np.isfinite(dec.proj_row)) else None

@@ -8,7 +8,8 @@ Schema ``rangekit.rig/1`` (every field is documented in docs/rig.md)::
       "projector": {camera} | null,          # a projector is an inverse camera
       "T_world_table": 4x4 | null,           # turntable frame: rotation axis = its z axis, origin on the axis
       "devices": {...},                      # how to reach each device (serial port, baud, protocol, ...)
-      "capture": {...}                       # capture settings (pattern delay, turntable settle time)
+      "capture": {...},                      # capture settings (pattern delay, turntable settle time)
+      "projector_response": {"gamma": g} | null   # optional: pattern value p -> relative radiance p ** g
     }
 
 All poses are ``T_world_x`` (maps x's frame to world), metres. A turntable angle theta rotates objects
@@ -29,15 +30,16 @@ from pathlib import Path
 import numpy as np
 
 from rangekit.camera import PinholeCamera
-from rangekit.errors import ConfigError
+from rangekit.errors import ConfigError, InputError
 from rangekit.geometry import axis_angle_to_R, compose, invert_T, make_T
 from rangekit.io import atomic_write_json, read_json
+from rangekit.response import ProjectorResponse
 
 __all__ = ["Rig", "SCHEMA", "RIG_FIELDS", "CAMERA_FIELDS", "load_rig", "save_rig", "template_rig"]
 
 SCHEMA = "rangekit.rig/1"
 #: The top-level fields of a rig file, in the order :meth:`Rig.to_dict` writes them.
-RIG_FIELDS = ("schema", "cameras", "projector", "T_world_table", "devices", "capture")
+RIG_FIELDS = ("schema", "cameras", "projector", "T_world_table", "devices", "capture", "projector_response")
 #: The fields of one camera or of the projector (:meth:`PinholeCamera.to_dict`).
 CAMERA_FIELDS = ("name", "width", "height", "K", "dist", "T_world_cam")
 _DIST_SIZES = (0, 4, 5, 8, 12, 14)
@@ -52,6 +54,7 @@ class Rig:
     T_world_table: np.ndarray | None = None  # (4, 4); table rotation axis = z of this frame
     devices: dict = field(default_factory=dict)
     capture: dict = field(default_factory=dict)
+    projector_response: ProjectorResponse | None = None  # pattern value -> radiance; None: not measured (linear)
 
     def __post_init__(self) -> None:
         if not self.cameras:
@@ -59,6 +62,9 @@ class Rig:
         object.__setattr__(self, "cameras", tuple(self.cameras))
         if self.T_world_table is not None:
             object.__setattr__(self, "T_world_table", _rigid(self.T_world_table, "rig", "T_world_table"))
+        if self.projector_response is not None and not isinstance(self.projector_response, ProjectorResponse):
+            raise ConfigError(f"rig: projector_response must be a ProjectorResponse or None, found "
+                              f"{self.projector_response!r}")
 
     @property
     def camera(self) -> PinholeCamera:
@@ -80,6 +86,7 @@ class Rig:
             "T_world_table": None if self.T_world_table is None else self.T_world_table.tolist(),
             "devices": self.devices,
             "capture": self.capture,
+            "projector_response": None if self.projector_response is None else self.projector_response.to_dict(),
         }
 
     @classmethod
@@ -101,11 +108,17 @@ class Rig:
         projector = None if proj is None else _camera(proj, where, "projector")
         T = data.get("T_world_table")
         T = None if T is None else _rigid(T, where, "T_world_table")
+        resp = data.get("projector_response")
+        if resp is not None:
+            try:
+                resp = ProjectorResponse.from_dict(resp, where="projector_response")
+            except InputError as exc:
+                raise ConfigError(f"{where}: {exc}") from None
         for key in ("devices", "capture"):
             if not isinstance(data.get(key, {}), dict):
                 raise _error(where, key, f"must be an object ({{...}}), found {_show(data[key])}")
         try:
-            return cls(cameras=cameras, projector=projector, T_world_table=T,
+            return cls(cameras=cameras, projector=projector, T_world_table=T, projector_response=resp,
                        devices=dict(data.get("devices", {})), capture=dict(data.get("capture", {})))
         except ConfigError as exc:
             raise ConfigError(f"{where}: {exc}") from exc
@@ -127,7 +140,8 @@ def template_rig() -> dict:
     World = the camera's frame (OpenCV: x right, y down, z forward; metres). Placeholders, to be replaced
     by a calibration: a 1280x800 depthai camera (CAM_A) with zero distortion; a 1280x800 projector
     0.2 m to the camera's right, turned towards a point 0.5 m in front of the camera; a turntable
-    0.5 m in front of the camera, its top 5 cm below the optical axis, its z axis pointing up (world -y).
+    0.5 m in front of the camera, its top 5 cm below the optical axis, its z axis pointing up (world -y);
+    no measured projector response (null: decoded as linear).
     ``devices`` names a Horus turntable, an ESC/VP21 projector on display 1 and a depthai camera;
     ``capture`` holds every capture setting rangekit reads, at its default. See docs/rig.md.
     """
@@ -157,6 +171,7 @@ def template_rig() -> dict:
             "camera": {"type": "depthai", "id": None, "socket": "CAM_A"},
         },
         "capture": {"pattern_delay_s": 0.1, "turntable_settle_s": 0.5},
+        "projector_response": None,
     }
 
 

@@ -6,8 +6,10 @@ baseline along the camera's x axis, both aimed at a point 6 cm above the table c
 distortion on both. ``default_rig()`` is the truth the calibration issue is measured against.
 
 Noise is reproducible per capture *state*: the generator for a capture is seeded from the rig's seed,
-the turntable angle, a hash of the projected image and how many times that state was captured before.
-So a scan that is interrupted and resumed records the same bytes as one that ran through.
+the turntable angle, a hash of the projected image, how many times that state was captured before and
+how many times :meth:`SimRig.set_scene` replaced the scene. So a scan that is interrupted and resumed
+records the same bytes as one that ran through, and a calibration run (one scene per board pose)
+records the same bytes for the same sequence of ``set_scene`` and capture calls.
 """
 
 from __future__ import annotations
@@ -18,10 +20,10 @@ import numpy as np
 
 from rangekit.camera import PinholeCamera
 from rangekit.devices import check_pattern
-from rangekit.errors import DeviceDisconnected
+from rangekit.errors import DeviceDisconnected, SceneError
 from rangekit.geometry import look_at, make_T
 from rangekit.rig import Rig
-from rangekit.sim.raycast import ViewGeometry, cast_view
+from rangekit.sim.raycast import ViewGeometry, cast_view, pixel_corners
 from rangekit.sim.render import ImagingModel, ViewRenderer
 from rangekit.sim.scene import Scene
 
@@ -29,7 +31,10 @@ __all__ = ["default_rig", "SimCamera", "SimProjector", "SimTurntable", "SimRig"]
 
 
 def default_rig() -> Rig:
-    """The simulator's true rig (see the module docstring)."""
+    """The simulator's true rig (see the module docstring); its projector response is ImagingModel's
+    default gamma (2.2)."""
+    from rangekit.response import ProjectorResponse
+
     target = np.array([0.0, 0.0, 0.06])
     elev = np.radians(25.0)
     eye = target + 0.5 * np.array([0.0, -np.cos(elev), np.sin(elev)])
@@ -43,7 +48,7 @@ def default_rig() -> Rig:
                          T_world_cam=look_at(proj_eye, target), name="projector")
     return Rig(cameras=(cam,), projector=proj, T_world_table=make_T(),
                devices={"camera": {"type": "sim"}, "projector": {"type": "sim"}, "turntable": {"type": "sim"}},
-               capture={"bits": 8})
+               capture={"bits": 8}, projector_response=ProjectorResponse(gamma=ImagingModel.gamma))
 
 
 class _Faults:
@@ -134,7 +139,10 @@ class SimRig:
 
     def __init__(self, scene: Scene, rig: Rig | None = None, *, imaging: ImagingModel | None = None,
                  seed: int = 0) -> None:
-        self.scene = scene
+        if not isinstance(scene, Scene):
+            raise SceneError(f"SimRig: scene must be a rangekit.sim.Scene, found {type(scene).__name__}")
+        self._scene = scene
+        self._scene_index = 0
         self.rig = rig if rig is not None else default_rig()
         self.imaging = imaging if imaging is not None else ImagingModel()
         self.seed = int(seed)
@@ -143,9 +151,34 @@ class SimRig:
         self.projector = SimProjector(self.rig.projector, self._faults)
         self.turntable = SimTurntable(self._faults) if self.rig.T_world_table is not None else None
         self._cam_rays = None
+        self._corner_rays = None
         self._cache_key = None
         self._cache = None
-        self._counts: dict[tuple[int, int], int] = {}
+        self._counts: dict[tuple[int, int, int], int] = {}
+
+    # ---------------------------------------------------------------- scene
+    @property
+    def scene(self) -> Scene:
+        """The scene being imaged; assigning to it is :meth:`set_scene`."""
+        return self._scene
+
+    @scene.setter
+    def scene(self, scene: Scene) -> None:
+        self.set_scene(scene)
+
+    def set_scene(self, scene: Scene) -> None:
+        """Replace the scene (e.g. move the calibration board to its next pose).
+
+        Drops the cached ground truth and starts a new noise stream: captures after the n-th
+        ``set_scene`` are seeded with n as well, so the same sequence of ``set_scene`` and capture calls
+        gives the same bytes, and two scenes never share noise. The turntable angle is kept.
+        """
+        if not isinstance(scene, Scene):
+            raise SceneError(f"SimRig.set_scene: expected a rangekit.sim.Scene, found {type(scene).__name__}")
+        self._scene = scene
+        self._scene_index += 1
+        self._cache_key = None
+        self._cache = None
 
     def inject_fault(self, device: str, after: int = 0) -> None:
         """Unplug ``device`` ("camera", "projector" or "turntable") at its (after + 1)-th call from now:
@@ -160,14 +193,18 @@ class SimRig:
 
     def _view(self) -> tuple[ViewGeometry, ViewRenderer]:
         angle = self._state_angle()
-        if self._cache_key != angle:
+        key = (self._scene_index, angle)
+        if self._cache_key != key:
+            cam = self.rig.camera
             if self._cam_rays is None:
-                self._cam_rays = self.rig.camera.rays(self.rig.camera.pixel_grid())
+                self._cam_rays = cam.rays(cam.pixel_grid())
+            if self._corner_rays is None and any(o.texture is not None for o in self._scene.objects):
+                self._corner_rays = cam.rays(pixel_corners(cam))
             motion = self.rig.T_world_rotated(angle) if self.turntable is not None else None
-            geom = cast_view(self.scene.world_mesh(motion), self.rig.camera, self.rig.projector,
-                             cam_rays=self._cam_rays)
+            geom = cast_view(self._scene.world_mesh(motion), cam, self.rig.projector,
+                             cam_rays=self._cam_rays, corner_rays=self._corner_rays)
             self._cache = (geom, ViewRenderer(geom, self.imaging, self.projector.resolution))
-            self._cache_key = angle
+            self._cache_key = key
         return self._cache
 
     def ground_truth(self) -> ViewGeometry:
@@ -179,13 +216,18 @@ class SimRig:
 
     # ---------------------------------------------------------------- reproducible noise
     def rng_for(self, image: np.ndarray) -> np.random.Generator:
-        """The generator for the next capture of ``image`` at the current angle (see module docstring)."""
+        """The generator for the next capture of ``image`` at the current angle (see module docstring).
+
+        Its spawn key is ``(angle, image CRC, repeat count)``, plus the scene index after the first
+        :meth:`set_scene` (so the initial scene keeps the bytes it had before scenes could change).
+        """
         angle_key = int(round((self._state_angle() % (2 * np.pi)) * 1e9))
         img = np.ascontiguousarray(image)
         key = (angle_key, zlib.crc32(img.tobytes()) ^ zlib.crc32(repr((img.shape, img.dtype.str)).encode()))
-        count = self._counts.get(key, 0)
-        self._counts[key] = count + 1
-        return np.random.default_rng(np.random.SeedSequence(self.seed, spawn_key=(*key, count)))
+        count = self._counts.get((self._scene_index, *key), 0)
+        self._counts[(self._scene_index, *key)] = count + 1
+        scene_key = (self._scene_index,) if self._scene_index else ()
+        return np.random.default_rng(np.random.SeedSequence(self.seed, spawn_key=(*key, count, *scene_key)))
 
     def capture_sequence(self, patterns) -> list[np.ndarray]:
         """Show each pattern and capture it; renders on two threads. Same bytes as show()/capture() in turn."""

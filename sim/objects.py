@@ -9,18 +9,20 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass, field
-from functools import cached_property
+from functools import cached_property, lru_cache
 from pathlib import Path
 from typing import Callable
 
 import numpy as np
 import trimesh
 
-from rangekit.errors import FileFormatError, SceneError
+from rangekit.boards import Board
+from rangekit.errors import FileFormatError, InputError, SceneError
 from rangekit.geometry import apply_T, axis_angle_to_R
 
-__all__ = ["SceneObject", "plane", "sphere", "box", "cylinder", "torus", "calibration_board",
-           "board_corners", "lumpy", "turntable_disc", "load_mesh", "BUILTIN_OBJECTS", "make_object"]
+__all__ = ["PlanarTexture", "SceneObject", "plane", "sphere", "box", "cylinder", "torus", "board_object",
+           "calibration_board", "board_corners", "lumpy", "turntable_disc", "load_mesh", "BUILTIN_OBJECTS",
+           "make_object"]
 
 
 def _readonly(a: np.ndarray) -> np.ndarray:
@@ -32,6 +34,96 @@ def _readonly(a: np.ndarray) -> np.ndarray:
 def _unit(n: np.ndarray) -> np.ndarray:
     norm = np.linalg.norm(n, axis=1, keepdims=True)
     return _readonly(np.divide(n, norm, out=np.zeros_like(n), where=norm > 0))
+
+
+@dataclass(frozen=True, eq=False, repr=False)
+class PlanarTexture:
+    """A grey albedo image printed on an object's own z = 0 plane (arrays stored read-only).
+
+    ``image`` (h, w) float32 albedo in [0, 1]; ``extent`` (x0, y0, x1, y1) metres in the object frame:
+    image row r, column c covers x in ``[x0 + c * tx, x0 + (c + 1) * tx]``, y in ``[y0 + r * ty, ...]`` with
+    texel sizes ``tx = (x1 - x0) / w``, ``ty = (y1 - y0) / h``. The texture replaces the vertex albedo where
+    a camera ray meets the object on its z = 0 plane from the front (the side its triangles face); seen
+    from behind, the object keeps its vertex albedo. Outside the extent the vertex albedo applies too.
+    """
+
+    image: np.ndarray
+    extent: tuple[float, float, float, float]
+
+    def __post_init__(self) -> None:
+        img = np.asarray(self.image)
+        if img.ndim != 2 or img.shape[0] < 1 or img.shape[1] < 1 or not np.issubdtype(img.dtype, np.floating):
+            raise SceneError(f"PlanarTexture: image must be an (h, w) float albedo array, found shape "
+                             f"{img.shape} dtype {img.dtype}")
+        img = img.astype(np.float32)
+        if not (np.all(np.isfinite(img)) and img.min() >= 0 and img.max() <= 1):
+            raise SceneError(f"PlanarTexture: albedo must be finite and in [0, 1], found "
+                             f"[{np.nanmin(img)}, {np.nanmax(img)}]")
+        ext = tuple(float(e) for e in np.asarray(self.extent, dtype=np.float64).reshape(-1))
+        if len(ext) != 4 or not np.all(np.isfinite(ext)) or not (ext[2] > ext[0] and ext[3] > ext[1]):
+            raise SceneError(f"PlanarTexture: extent must be finite (x0, y0, x1, y1) with x1 > x0 and y1 > y0 "
+                             f"(metres), found {self.extent!r}")
+        object.__setattr__(self, "image", _readonly(img))
+        object.__setattr__(self, "extent", ext)
+
+    def __repr__(self) -> str:
+        h, w = self.image.shape
+        return f"PlanarTexture({w}x{h} texels, extent_m={tuple(round(e, 6) for e in self.extent)})"
+
+    @property
+    def texel(self) -> tuple[float, float]:
+        """(tx, ty) texel size in metres along object x and y."""
+        h, w = self.image.shape
+        x0, y0, x1, y1 = self.extent
+        return (x1 - x0) / w, (y1 - y0) / h
+
+    @cached_property
+    def summed_area(self) -> np.ndarray:
+        """(h + 1, w + 1) float64 integral image: ``S[r, c] = image[:r, :c].sum()`` (texel units).
+
+        Bilinear interpolation of S at fractional texel coordinates is the exact integral of the
+        piecewise-constant texture over ``[0, X] x [0, Y]``.
+        """
+        h, w = self.image.shape
+        S = np.zeros((h + 1, w + 1))
+        np.cumsum(self.image, axis=0, dtype=np.float64, out=S[1:, 1:])
+        np.cumsum(S[1:, 1:], axis=1, out=S[1:, 1:])
+        S.flags.writeable = False
+        return S
+
+    def box_mean(self, x0: np.ndarray, y0: np.ndarray, x1: np.ndarray, y1: np.ndarray) -> np.ndarray:
+        """(N,) mean albedo over the object-frame boxes ``[x0, x1] x [y0, y1]`` (metres), clipped to the extent.
+
+        Exact area average (partial texels count by their covered area). A box that is empty after
+        clipping (or degenerate) gives the texel at its clipped centre.
+        """
+        h, w = self.image.shape
+        ex0, ey0, _, _ = self.extent
+        tx, ty = self.texel
+        X0, X1 = np.clip((np.asarray(x0) - ex0) / tx, 0, w), np.clip((np.asarray(x1) - ex0) / tx, 0, w)
+        Y0, Y1 = np.clip((np.asarray(y0) - ey0) / ty, 0, h), np.clip((np.asarray(y1) - ey0) / ty, 0, h)
+        area = (X1 - X0) * (Y1 - Y0)
+        F = self._integral
+        with np.errstate(divide="ignore", invalid="ignore"):
+            mean = (F(X1, Y1) - F(X0, Y1) - F(X1, Y0) + F(X0, Y0)) / area
+        small = ~(area > 1e-9)
+        if np.any(small):
+            c = np.clip(np.floor((X0[small] + X1[small]) / 2), 0, w - 1).astype(np.int64)
+            r = np.clip(np.floor((Y0[small] + Y1[small]) / 2), 0, h - 1).astype(np.int64)
+            mean[small] = self.image[r, c]
+        return np.clip(mean, 0.0, 1.0)
+
+    def _integral(self, X: np.ndarray, Y: np.ndarray) -> np.ndarray:
+        """Integral of the texture over [0, X] x [0, Y] (texel units): bilinear in the summed-area table."""
+        S = self.summed_area.ravel()
+        h, w = self.image.shape
+        c = np.minimum(X.astype(np.int64), w - 1)  # X >= 0, so truncation is floor
+        r = np.minimum(Y.astype(np.int64), h - 1)
+        fx, fy = X - c, Y - r
+        i = r * (w + 1) + c
+        top = S.take(i) + fx * (S.take(i + 1) - S.take(i))
+        bottom = S.take(i + w + 1) + fx * (S.take(i + w + 2) - S.take(i + w + 1))
+        return top + fy * (bottom - top)
 
 
 @dataclass(frozen=True, eq=False, repr=False)
@@ -50,6 +142,7 @@ class SceneObject:
     T_world_obj: np.ndarray = field(default_factory=lambda: np.eye(4))  # rigid, p_world = T @ p_obj
     on_turntable: bool = True   # rotates with the turntable
     smooth: bool = True         # shade with interpolated vertex normals (False: flat facet normals)
+    texture: PlanarTexture | None = None  # albedo printed on the object's z = 0 plane (front side only)
 
     def __post_init__(self) -> None:
         who = f"object {self.name!r}"
@@ -86,6 +179,8 @@ class SceneObject:
                 and np.linalg.det(R) > 0):
             raise SceneError(f"{who}: T_world_obj must be a rigid transform (rotation + translation), "
                              f"found rotation block with det {np.linalg.det(R):.6g}")
+        if self.texture is not None and not isinstance(self.texture, PlanarTexture):
+            raise SceneError(f"{who}: texture must be a PlanarTexture or None, found {type(self.texture).__name__}")
         for key, value in dict(vertices=_readonly(V), triangles=_readonly(F.astype(np.int64)),
                                vertex_albedo=_readonly(A), T_world_obj=_readonly(T),
                                specular=float(self.specular), shininess=float(self.shininess),
@@ -96,7 +191,8 @@ class SceneObject:
         ext = np.ptp(self.vertices, axis=0)
         return (f"SceneObject(name={self.name!r}, V={len(self.vertices)}, F={len(self.triangles)}, "
                 f"extent_m=({ext[0]:.4g}, {ext[1]:.4g}, {ext[2]:.4g}), specular={self.specular:g}, "
-                f"on_turntable={self.on_turntable}, smooth={self.smooth})")
+                f"on_turntable={self.on_turntable}, smooth={self.smooth}"
+                + (f", texture={self.texture!r})" if self.texture is not None else ")"))
 
     @cached_property
     def _face_cross(self) -> np.ndarray:
@@ -270,11 +366,38 @@ def torus(major_radius: float = 0.06, minor_radius: float = 0.02, *, major_secti
     return SceneObject(name, verts, _grid_triangles(nu, nv, True, True), albedo, specular, shininess)
 
 
+def board_object(board: Board, *, name: str = "board", texel: float = 1e-4) -> SceneObject:
+    """A flat calibration board: one quad over the board's texture extent, textured with ``board.texture``.
+
+    Board frame as in :mod:`rangekit.boards`: z = 0 plane, corners at ``board.object_points()``, printed
+    side facing -z (the triangles face -z, so the texture is seen from -z and the back is plain). Flat
+    shaded; the vertex albedo is the texture's mean (what ``to_trimesh`` and views from behind show).
+    ``texel`` (metres) must divide ``board.square``.
+    """
+    if not isinstance(board, Board):
+        raise SceneError(f"board_object: board must be a rangekit.boards.Board, found {type(board).__name__}")
+    try:
+        tex = _board_texture(board, float(texel))
+    except InputError as exc:
+        raise SceneError(f"board_object({name!r}): {exc}") from exc
+    x0, y0, x1, y1 = tex.extent
+    verts = np.array([[x0, y0, 0.0], [x0, y1, 0.0], [x1, y1, 0.0], [x1, y0, 0.0]])  # counter-clockwise from -z
+    tris = np.array([[0, 1, 2], [0, 2, 3]])
+    return SceneObject(name, verts, tris, float(tex.image.mean(dtype=np.float64)), smooth=False, texture=tex)
+
+
+@lru_cache(maxsize=8)
+def _board_texture(board: Board, texel: float) -> PlanarTexture:
+    """One shared (immutable) texture per board, so a calibration run builds its summed-area table once."""
+    return PlanarTexture(*board.texture(texel))
+
+
 def board_corners(rows: int = 7, cols: int = 9, square: float = 0.02) -> np.ndarray:
     """(rows-1)*(cols-1), 3) inner-corner positions of :func:`calibration_board`, board frame, metres.
 
     Row-major, x fastest: corner ``i * (cols - 1) + j`` is at ``(j * square, i * square, 0)``, the order
-    of OpenCV's ``findChessboardCorners(img, (cols - 1, rows - 1))`` object points.
+    of OpenCV's ``findChessboardCorners(img, (cols - 1, rows - 1))`` object points. Same as
+    ``Board(cols=cols, rows=rows, square=square).object_points()``.
     """
     j, i = np.meshgrid(np.arange(cols - 1), np.arange(rows - 1))
     return np.stack([j.ravel() * square, i.ravel() * square, np.zeros(j.size)], axis=1)
@@ -282,34 +405,29 @@ def board_corners(rows: int = 7, cols: int = 9, square: float = 0.02) -> np.ndar
 
 def calibration_board(rows: int = 7, cols: int = 9, square: float = 0.02, *, margin: float = 0.01,
                       dark: float = 0.05, light: float = 0.9, name: str = "board") -> SceneObject:
-    """Flat checkerboard of ``rows`` x ``cols`` squares in z = 0, normal +z, with a light border.
+    """Flat checkerboard of ``rows`` x ``cols`` squares: :func:`board_object` of the equivalent
+    ``Board("checkerboard", cols=cols, rows=rows, square=square, margin=margin, dark=dark, light=light)``.
 
     Board frame: x along columns, y along rows, origin at the first inner corner (see
     :func:`board_corners`), so squares span x in [-square, (cols-1)*square]. Square (row r, col c) is
-    dark when r + c is even (the corner square at -x, -y is dark). Each square and border cell has its
-    own 4 vertices, so the albedo is constant per square and the checker edges are exactly sharp.
-    With rows and cols both odd the pattern is symmetric under a 180 degree turn. Flat shaded.
+    dark when r + c is even (the corner square at -x, -y is dark); printed side towards -z. With rows
+    and cols both odd (the default 7 x 9) the pattern is symmetric under a 180 degree turn; the default
+    :class:`~rangekit.boards.Board` (10 x 7) is not.
     """
-    _check_count("calibration_board", "rows", rows, 2)
-    _check_count("calibration_board", "cols", cols, 2)
-    _check("calibration_board", square=square)
-    if not (margin >= 0 and 0 <= dark <= 1 and 0 <= light <= 1):
-        raise SceneError(f"calibration_board: need margin >= 0 and dark, light in [0, 1], "
-                         f"found margin={margin}, dark={dark}, light={light}")
-    pad = [margin] if margin > 0 else []  # cell edges: border, squares, border
-    xs, ys = (np.concatenate([[-square - m for m in pad], (np.arange(n + 1) - 1) * square,
-                              [(n - 1) * square + m for m in pad]]) for n in (cols, rows))
-    r, c = np.meshgrid(np.arange(len(ys) - 1), np.arange(len(xs) - 1), indexing="ij")
-    r, c = r.ravel(), c.ravel()
-    x0, x1, y0, y1 = xs[c], xs[c + 1], ys[r], ys[r + 1]
-    corners = np.stack([np.stack([x0, y0], -1), np.stack([x1, y0], -1),
-                        np.stack([x1, y1], -1), np.stack([x0, y1], -1)], axis=1)
-    corners = np.concatenate([corners, np.zeros(corners.shape[:2] + (1,))], axis=2)
-    sr, sc = r - len(pad), c - len(pad)  # square indices; outside [0, rows) x [0, cols) is border
-    inside = (sr >= 0) & (sr < rows) & (sc >= 0) & (sc < cols)
-    value = np.where(inside & ((sr + sc) % 2 == 0), dark, light)
-    verts, tris = _quad_soup(corners)
-    return SceneObject(name, verts, tris, np.repeat(value, 4)[:, None].repeat(3, 1), smooth=False)
+    try:
+        board = Board("checkerboard", cols=cols, rows=rows, square=square, margin=margin, dark=dark, light=light)
+    except InputError as exc:
+        raise SceneError(f"calibration_board: {exc}") from exc
+    return board_object(board, name=name)
+
+
+def _builtin_board(*, name: str = "board", **board_fields) -> SceneObject:
+    """The builtin "board": :func:`board_object` of ``Board(**board_fields)`` (default: 10 x 7 checkerboard)."""
+    try:
+        board = Board(**board_fields)
+    except (InputError, TypeError) as exc:
+        raise SceneError(f"board: {exc}") from exc
+    return board_object(board, name=name)
 
 
 def lumpy(radius: float = 0.06, *, subdivisions: int = 5, seed: int = 0, albedo=0.8,
@@ -385,7 +503,7 @@ def load_mesh(path, *, albedo=0.8, scale: float = 1.0, name: str | None = None) 
 
 BUILTIN_OBJECTS: dict[str, Callable[..., SceneObject]] = {
     "plane": plane, "sphere": sphere, "box": box, "cylinder": cylinder, "torus": torus,
-    "board": calibration_board, "lumpy": lumpy,
+    "board": _builtin_board, "lumpy": lumpy,
 }
 
 

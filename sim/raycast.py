@@ -15,8 +15,10 @@ import numpy as np
 
 from rangekit.camera import PinholeCamera
 from rangekit.errors import SceneError
+from rangekit.geometry import invert_T
+from rangekit.sim.objects import PlanarTexture
 
-__all__ = ["WorldMesh", "ViewGeometry", "cast_view"]
+__all__ = ["WorldMesh", "ViewGeometry", "cast_view", "pixel_corners"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -32,6 +34,8 @@ class WorldMesh:
     face_smooth: np.ndarray     # (F,) bool: shade with interpolated vertex normals
     face_object: np.ndarray     # (F,) int index into ``object_names``
     object_names: tuple[str, ...]
+    object_poses: tuple[np.ndarray, ...] = ()  # per object (4, 4) T_world_obj at this state (after turntable motion)
+    object_textures: tuple[PlanarTexture | None, ...] = ()  # per object, or () when no object is textured
 
 
 @dataclass(frozen=True, eq=False)
@@ -96,10 +100,75 @@ def _intersect_exact(mesh: WorldMesh, prim: np.ndarray, o: np.ndarray, d: np.nda
     return t, b1, b2
 
 
+def pixel_corners(camera: PinholeCamera) -> np.ndarray:
+    """((H + 1) * (W + 1), 2) float64 pixel corners, row-major: corner ``i * (W + 1) + j`` is
+    ``(u, v) = (j - 0.5, i - 0.5)``, the top-left corner of pixel (j, i)."""
+    v, u = np.mgrid[0: camera.height + 1, 0: camera.width + 1]
+    return np.column_stack([u.ravel(), v.ravel()]).astype(np.float64) - 0.5
+
+
+def _texture_albedo(tex: PlanarTexture, T_world_obj: np.ndarray, p: np.ndarray, pix: np.ndarray,
+                    camera: PinholeCamera, corner_rays) -> np.ndarray:
+    """(N,) texture albedo box-filtered over each pixel's footprint; NaN where the hit is not on the
+    textured part of the object's z = 0 plane (the vertex albedo stays there).
+
+    The footprint is the object-frame bounding box of the four pixel-corner rays (lens distortion
+    included) meeting the plane; the texture is averaged over it exactly (area sampling). The corner
+    rays are intersected once per corner, over the corner grid's box around the textured pixels.
+    """
+    T_obj_world = invert_T(T_world_obj)
+    R, t = T_obj_world[:3, :3], T_obj_world[:3, 3]
+    p_obj = p @ R.T + t
+    x0, y0, x1, y1 = tex.extent
+    on = (np.abs(p_obj[:, 2]) <= 1e-6) & (p_obj[:, 0] >= x0) & (p_obj[:, 0] <= x1) & \
+        (p_obj[:, 1] >= y0) & (p_obj[:, 1] <= y1)
+    out = np.full(len(p), np.nan)
+    sel = np.flatnonzero(on)
+    if sel.size == 0:
+        return out
+    v, u = np.divmod(pix[sel], camera.width)
+    r0, r1, c0, c1 = v.min(), v.max() + 2, u.min(), u.max() + 2  # corner rows/cols [r0, r1) x [c0, c1)
+    if corner_rays is not None:
+        d = corner_rays[1].reshape(camera.height + 1, camera.width + 1, 3)[r0:r1, c0:c1].reshape(-1, 3)
+    else:
+        cv, cu = np.mgrid[r0:r1, c0:c1]
+        d = camera.rays(np.column_stack([cu.ravel(), cv.ravel()]).astype(np.float64) - 0.5)[1]
+    o = R @ camera.center + t
+    d = d @ R.T
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = -o[2] / d[:, 2]
+        s[~(s > 0)] = np.nan  # the corner ray misses the plane (grazing view)
+        X = (o[0] + s * d[:, 0]).reshape(r1 - r0, c1 - c0)
+        Y = (o[1] + s * d[:, 1]).reshape(r1 - r0, c1 - c0)
+    lo_hi = []
+    for G in (X, Y):
+        quad = (G[:-1, :-1], G[:-1, 1:], G[1:, :-1], G[1:, 1:])
+        lo = np.fmin(np.fmin(quad[0], quad[1]), np.fmin(quad[2], quad[3]))
+        hi = np.fmax(np.fmax(quad[0], quad[1]), np.fmax(quad[2], quad[3]))
+        k = (v - r0) * (c1 - c0 - 1) + (u - c0)
+        lo_hi.append((np.take(lo, k), np.take(hi, k)))
+    (xl, xh), (yl, yh) = lo_hi
+    bad = ~(np.isfinite(xl) & np.isfinite(yl))  # every corner missed: sample the texel under the centre
+    if np.any(bad):
+        xl[bad], xh[bad] = p_obj[sel[bad], 0], p_obj[sel[bad], 0]
+        yl[bad], yh[bad] = p_obj[sel[bad], 1], p_obj[sel[bad], 1]
+    out[sel] = tex.box_mean(xl, yl, xh, yh)
+    return out
+
+
 def cast_view(mesh: WorldMesh, camera: PinholeCamera, projector: PinholeCamera | None, *,
               cam_rays: tuple[np.ndarray, np.ndarray] | None = None,
+              corner_rays: tuple[np.ndarray, np.ndarray] | None = None,
               shadow_eps: float = 2e-5) -> ViewGeometry:
     """Cast every camera pixel into the scene and trace its shadow ray to the projector.
+
+    Albedo: the vertex albedo interpolated at the hit, except on the front side of an object's
+    :class:`~rangekit.sim.objects.PlanarTexture`, where it is the texture **area-sampled** over the
+    pixel: the rays through the pixel's four corners (lens distortion included) meet the object's
+    z = 0 plane, and the texture is averaged exactly (summed-area table, partial texels by area) over
+    the bounding box of those four points. A pixel straddling a square edge thus gets the
+    area-weighted albedo of both sides (exact for a fronto-parallel plane and no distortion, where the
+    footprint is the box). Only textured pixels pay for this.
 
     Parameters
     ----------
@@ -107,6 +176,8 @@ def cast_view(mesh: WorldMesh, camera: PinholeCamera, projector: PinholeCamera |
     camera : the camera; every pixel centre is cast.
     projector : the projector, or None for a scene without one (``lit`` is then all False).
     cam_rays : optional cached ``camera.rays(camera.pixel_grid())`` (they do not change between views).
+    corner_rays : optional cached ``camera.rays(pixel_corners(camera))`` for textured objects; without it
+        only the corners of textured pixels are back-projected.
     shadow_eps : float
         Metres: an occluder must be at least this much closer to the projector than the point to shadow it.
 
@@ -145,6 +216,15 @@ def cast_view(mesh: WorldMesh, camera: PinholeCamera, projector: PinholeCamera |
     n_face[back] *= -1
     n[back] *= -1
     albedo = np.einsum("ij,ijk->ik", wb, mesh.vertex_albedo[tri])
+    owner = mesh.face_object[prim]
+    for k, tex in enumerate(mesh.object_textures):
+        if tex is None:
+            continue
+        sel = np.flatnonzero((owner == k) & ~back)  # the printed (front) side only
+        if sel.size:
+            value = _texture_albedo(tex, mesh.object_poses[k], p[sel], hit_idx[sel], camera, corner_rays)
+            ok = np.isfinite(value)
+            albedo[sel[ok]] = value[ok, None]
 
     def full(shape, fill, dtype=np.float64):
         return np.full((H * W,) + shape, fill, dtype=dtype)
@@ -155,7 +235,7 @@ def cast_view(mesh: WorldMesh, camera: PinholeCamera, projector: PinholeCamera |
     depth, rng_map = full((), np.nan), full((), np.nan)
     depth[hit_idx], rng_map[hit_idx] = cam_z, t
     obj = full((), -1, np.int32)
-    obj[hit_idx] = mesh.face_object[prim]
+    obj[hit_idx] = owner
     proj_col, proj_row = full((), np.nan), full((), np.nan)
     cos_proj, spec, pdist = full((), 0.0), full((), 0.0), full((), np.nan)
     lit = np.zeros(H * W, dtype=bool)

@@ -16,7 +16,8 @@ from rangekit.rig import load_rig
 @pytest.mark.parametrize("argv", [["--help"], ["sim", "--help"], ["sim", "render", "--help"], ["decode", "--help"],
                                   ["reconstruct", "--help"], ["register", "--help"], ["mesh", "--help"],
                                   ["scan", "--help"], ["devices", "--help"], ["process", "--help"],
-                                  ["render", "--help"], ["rig", "--help"], ["rig", "init", "--help"]])
+                                  ["render", "--help"], ["rig", "--help"], ["rig", "init", "--help"],
+                                  ["calibrate", "--help"]])
 def test_every_command_has_help(argv, capsys):
     with pytest.raises(SystemExit) as exc:
         main(argv)

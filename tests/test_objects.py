@@ -147,36 +147,49 @@ def test_board_corners_layout():
     assert np.allclose(k[8], [0, 0.02, 0]) and np.allclose(k[-1], [0.14, 0.10, 0])
 
 
+def texture_at(obj: SceneObject, xy: np.ndarray) -> np.ndarray:
+    """(N,) albedo of a textured z=0 object's texture at (N, 2) object-frame points."""
+    img, (x0, y0, x1, y1) = obj.texture.image, obj.texture.extent
+    h, w = img.shape
+    assert np.all((xy >= [x0, y0]) & (xy < [x1, y1])), "a sample point is off the board"
+    c = np.floor((xy[:, 0] - x0) / (x1 - x0) * w).astype(int)
+    r = np.floor((xy[:, 1] - y0) / (y1 - y0) * h).astype(int)
+    return img[r, c].astype(np.float64)
+
+
 def test_board_checker_alternates_around_every_corner():
     rows, cols, s, m = 7, 9, 0.02, 0.01
     b = calibration_board(rows, cols, s, margin=m, dark=0.05, light=0.9)
-    assert np.allclose(b.face_normals(), [0, 0, 1]) and not b.smooth
+    # one textured quad, printed side (triangle normals) towards -z, flat shaded
+    assert np.allclose(b.face_normals(), [0, 0, -1]) and not b.smooth and b.texture is not None
     k = board_corners(rows, cols, s)[:, :2]
     d = s / 4
-    pp, mm = albedo_at(b, k + [d, d]), albedo_at(b, k - [d, d])
-    pm, mp = albedo_at(b, k + [d, -d]), albedo_at(b, k + [-d, d])
+    pp, mm = texture_at(b, k + [d, d]), texture_at(b, k - [d, d])
+    pm, mp = texture_at(b, k + [d, -d]), texture_at(b, k + [-d, d])
     i, j = np.divmod(np.arange(len(k)), cols - 1)
     dark_pp = (i + j) % 2 == 0                                           # square (i+1, j+1) dark iff even
-    assert np.all(pp == np.where(dark_pp, 0.05, 0.9)) and np.all(mm == pp)
+    assert np.allclose(pp, np.where(dark_pp, 0.05, 0.9)) and np.all(mm == pp)
     assert np.all(pm == mp) and np.all(pm != pp)
-    # exactly sharp: a point 1 um either side of a square edge changes colour
+    # exactly sharp: a point 1 um either side of a square edge changes colour (edges on texel boundaries)
     e = 1e-6
-    assert np.all(albedo_at(b, k + [e, d]) != albedo_at(b, k + [-e, d]))
+    assert np.all(texture_at(b, k + [e, d]) != texture_at(b, k + [-e, d]))
     # the light margin all round, and the board's extent
     lo, hi = b.vertices.min(0), b.vertices.max(0)
     assert np.allclose(lo, [-s - m, -s - m, 0]) and np.allclose(hi, [(cols - 1) * s + m, (rows - 1) * s + m, 0])
+    assert np.allclose(b.texture.extent, [lo[0], lo[1], hi[0], hi[1]])
     border = np.array([[lo[0] + m / 2, 0.05], [hi[0] - m / 2, 0.05], [0.07, lo[1] + m / 2], [0.07, hi[1] - m / 2]])
-    assert np.all(albedo_at(b, border) == 0.9)
+    assert np.allclose(texture_at(b, border), 0.9)
+    assert np.allclose(b.vertex_albedo, b.texture.image.mean(dtype=np.float64))  # plain grey seen from behind
 
 
 def test_board_found_by_opencv_at_board_corners():
     rows, cols, s, m = 6, 9, 0.02, 0.02
     b = calibration_board(rows, cols, s, margin=m)
-    px = 1e-3                                                            # orthographic view from +z, 1 mm/px
+    px = 1e-3                                                            # orthographic view from -z, 1 mm/px
     lo, hi = b.vertices.min(0), b.vertices.max(0)
     u, v = np.meshgrid(np.arange(int((hi[0] - lo[0]) / px)), np.arange(int((hi[1] - lo[1]) / px)))
     xy = np.c_[lo[0] + (u.ravel() + 0.5) * px, lo[1] + (v.ravel() + 0.5) * px]
-    img = (albedo_at(b, xy).reshape(u.shape) * 255).astype(np.uint8)
+    img = (texture_at(b, xy).reshape(u.shape) * 255).astype(np.uint8)
     found, corners = cv2.findChessboardCorners(img, (cols - 1, rows - 1))
     assert found
     corners = cv2.cornerSubPix(img, corners, (5, 5), (-1, -1),

@@ -1,0 +1,316 @@
+"""The whole rig calibration: projector response, camera, projector, their extrinsics, turntable axis.
+
+:func:`calibrate_rig` drives the devices (simulated or real, through :mod:`rangekit.devices`):
+
+1. projector response: uniform grey levels on the board at its first pose (:mod:`rangekit.calib.response`);
+2. for each board pose (``place_board(i, n)`` puts it there: the simulator moves it, on hardware the user
+   does and confirms): a coded-light sequence (default ``hybrid``; its white frame finds the corners);
+3. camera calibration from the corners (:func:`rangekit.calib.camera.calibrate_device`);
+4. projector coordinates of each corner from the decoded maps (:func:`rangekit.calib.projector.corner_projector_coords`),
+   projector calibration as an inverse camera, then a bundle adjustment of both devices and every board pose;
+5. turntable (when there is one): the board fixed on the table (``place_on_turntable()``), a sequence at
+   each angle; board poses by PnP, the axis fit (:mod:`rangekit.calib.turntable`), the table top from the
+   triangulated scene at the middle angle.
+
+The result is a :class:`rangekit.rig.Rig` whose world is the turntable frame (z up the axis, origin on the
+axis at the table top, y horizontal from the camera to the axis), the simulator's convention, or the
+camera frame when there is no turntable. :func:`compare_rigs` gives each parameter's deviation from a
+reference rig (the simulator's truth).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Callable, Sequence
+
+import cv2
+import numpy as np
+
+from rangekit.boards import Board, detect_board
+from rangekit.calib.camera import Correspondences, DeviceCalibration, calibrate_device
+from rangekit.calib.projector import BundleResult, bundle_adjust, corner_projector_coords, initial_T_proj_cam
+from rangekit.calib.response import measure_response
+from rangekit.calib.turntable import AxisFit, fit_turntable_axis, turntable_frame
+from rangekit.camera import PinholeCamera
+from rangekit.decode import decode
+from rangekit.errors import CalibrationError
+from rangekit.geometry import compose, invert_T, make_T, rotation_angle, rotvec_to_R
+from rangekit.patterns import make_pattern_spec
+from rangekit.progress import call_progress
+from rangekit.response import ResponseFit
+from rangekit.rig import Rig
+from rangekit.triangulate import triangulate
+
+__all__ = ["CalibrationSettings", "RigCalibration", "calibrate_rig", "compare_rigs"]
+
+
+@dataclass(frozen=True)
+class CalibrationSettings:
+    """What :func:`calibrate_rig` captures. Angles in degrees (typed by people)."""
+
+    board: Board = field(default_factory=Board)
+    n_poses: int = 20                      # hand-held board poses for camera and projector
+    patterns: str = "hybrid"               # coded light for the projector coordinates of the corners
+    turntable_angles_deg: tuple[float, ...] = (-40.0, -30.0, -20.0, -10.0, 0.0, 10.0, 20.0, 30.0, 40.0)
+    response_levels: int = 17              # grey levels for the projector response (0 and 1 included)
+    corner_radius: int = 8                 # half-window (camera px) of the corner's local fit
+    measure_response: bool = True
+
+
+@dataclass(frozen=True, eq=False)
+class RigCalibration:
+    """Everything :func:`calibrate_rig` found; ``rig`` is what goes into the rig file."""
+
+    rig: Rig
+    camera: DeviceCalibration
+    projector: DeviceCalibration
+    bundle: BundleResult
+    axis: AxisFit | None
+    response: ResponseFit | None
+    corner_std_projector: float            # median standard error of a corner's projector coordinates, px
+    seconds: dict
+
+    def summary_lines(self) -> list[str]:
+        b = self.bundle
+        base = np.linalg.norm(b.T_cam_proj[:3, 3])
+        lines = [f"camera: {len(self.camera.used)}/{len(self.camera.views)} board poses used; "
+                 f"reprojection RMS {b.rms_camera:.4f} px (bundle adjusted; {self.camera.rms:.4f} px alone)",
+                 f"projector: reprojection RMS {b.rms_projector:.4f} px (bundle adjusted; {self.projector.rms:.4f} "
+                 f"px alone); corner coordinates +- {self.corner_std_projector:.4f} px (median standard error)",
+                 f"camera-projector baseline {base * 1e3:.3f} mm"]
+        for dev in (b.camera, b.projector):
+            K = dev.K
+            lines.append(f"  {dev.name}: fx {K[0, 0]:.2f} fy {K[1, 1]:.2f} cx {K[0, 2]:.2f} cy {K[1, 2]:.2f} "
+                         f"dist {' '.join(f'{x:.5f}' for x in dev.dist)}")
+        if self.response is not None:
+            lines.append(f"projector response: gamma {self.response.response.gamma:.4f}")
+        if self.axis is not None:
+            lines += self.axis.summary_lines()
+        rejected = [v.line() for v in self.camera.views if not v.used]
+        lines += [f"  {r}" for r in rejected]
+        lines.append("time: " + ", ".join(f"{k} {v:.1f} s" for k, v in self.seconds.items()))
+        return lines
+
+
+def _capture(devices, frames: Sequence[np.ndarray], delay_s: float = 0.0) -> list[np.ndarray]:
+    """Show each frame and capture it, waiting ``delay_s`` for the display (the simulator renders the whole
+    sequence at once)."""
+    fast = getattr(devices, "capture_sequence", None)
+    if fast is not None:
+        return fast(frames)
+    out = []
+    for f in frames:
+        devices.projector.show(f)
+        if delay_s > 0:
+            time.sleep(delay_s)
+        out.append(devices.camera.capture())
+    return out
+
+
+def _pose_from_corners(camera: PinholeCamera, obj: np.ndarray, ids: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    ok, rvec, tvec = cv2.solvePnP(obj[ids], uv.astype(np.float64), camera.K, camera.dist,
+                                  flags=cv2.SOLVEPNP_ITERATIVE)
+    if not ok:
+        raise CalibrationError("turntable: could not estimate the board's pose (solvePnP failed)")
+    return make_T(rotvec_to_R(rvec.ravel()), tvec.ravel())
+
+
+def calibrate_rig(devices, *, settings: CalibrationSettings = CalibrationSettings(),
+                  place_board: Callable[[int, int], None], place_on_turntable: Callable[[], None] | None = None,
+                  template: Rig | None = None,
+                  progress: Callable | None = None) -> RigCalibration:
+    """Run the whole calibration (module doc) and return the calibrated rig.
+
+    Parameters
+    ----------
+    devices : has ``camera``, ``projector`` and ``turntable`` (None: no turntable step), as in
+        :mod:`rangekit.devices` (a :class:`rangekit.sim.SimRig` or the opened hardware).
+    settings : board, number of poses, patterns, turntable angles.
+    place_board : ``place_board(i, n)`` puts the board in pose i of n before it is captured.
+    place_on_turntable : puts the board on the turntable (required when ``devices.turntable`` is set).
+    template : a rig whose ``devices`` and ``capture`` sections are copied into the result; its
+        ``capture.pattern_delay_s`` and ``capture.turntable_settle_s`` are waited on real hardware.
+    progress : ``progress(msg, done=None, total=None)``.
+
+    Raises
+    ------
+    CalibrationError
+        Too few usable poses, degenerate poses, no corners for the projector; the message says which views.
+    """
+    board = settings.board
+    obj = board.object_points()
+    capture_settings = template.capture if template is not None else {}
+    delay_s = float(capture_settings.get("pattern_delay_s", 0.0))
+    settle_s = float(capture_settings.get("turntable_settle_s", 0.0))
+    W, H = devices.projector.resolution
+    spec = make_pattern_spec(settings.patterns, (W, H))
+    frames = list(spec.frames())
+    white_index = spec.frame_names.index("white")
+    seconds: dict[str, float] = {}
+    t0 = time.time()
+
+    response_fit = None
+    response = None
+    n = settings.n_poses
+    place_board(0, n)
+    if settings.measure_response:
+        call_progress(progress, "projector response: grey levels")
+        levels = np.linspace(0.0, 1.0, settings.response_levels)
+        response_fit = measure_response(devices.projector, devices.camera, levels=levels)
+        response = response_fit.response
+        seconds["response"] = time.time() - t0
+
+    t1 = time.time()
+    detections, decoded = [], []
+    for i in range(n):
+        if i > 0:
+            place_board(i, n)
+        call_progress(progress, f"board pose {i + 1}/{n}: {len(frames)} frames", i, n)
+        images = _capture(devices, frames, delay_s)
+        det = detect_board(images[white_index], board)
+        detections.append(det)
+        if det.found:
+            dec = decode(images, spec, response=response)
+            decoded.append((dec.proj_col, dec.proj_row, dec.confidence))
+        else:
+            decoded.append(None)
+    call_progress(progress, f"captured {n} board poses", n, n)
+    seconds["capture"] = time.time() - t1
+
+    t2 = time.time()
+    names = [f"pose {i + 1}" for i in range(n)]
+    cam_views = [Correspondences(d.ids, d.uv, d.reason) for d in detections]
+    cam_cal = calibrate_device(cam_views, obj, devices.camera.calibration.size, name="camera", names=names)
+    proj_views: list[Correspondences | None] = []
+    stds = []
+    for i, (det, maps) in enumerate(zip(detections, decoded)):
+        if maps is None or i not in cam_cal.T_dev_board:
+            proj_views.append(Correspondences(np.zeros(0, np.int64), np.zeros((0, 2)),
+                                              det.reason or "not used for the camera"))
+            continue
+        fit = corner_projector_coords(*maps, det.uv, radius=settings.corner_radius)
+        ok = fit.ok
+        stds.append(fit.std[ok].ravel())
+        proj_views.append(Correspondences(det.ids[ok], fit.proj_uv[ok],
+                                          "" if ok.any() else "no corner lit by the projector"))
+    proj_cal = calibrate_device(proj_views, obj, (W, H), name="projector", names=names)
+    T_proj_cam = initial_T_proj_cam(cam_cal.T_dev_board, proj_cal.T_dev_board)
+    common = sorted(set(cam_cal.T_dev_board) & set(proj_cal.T_dev_board))
+    corner_std = float(np.median(np.concatenate(stds))) if stds else float("nan")
+    bundle = bundle_adjust(cam_cal.device, proj_cal.device, T_proj_cam,
+                           {i: cam_cal.T_dev_board[i] for i in common}, obj,
+                           {i: (cam_views[i].ids, cam_views[i].uv) for i in common},
+                           {i: (proj_views[i].ids, proj_views[i].uv) for i in common},
+                           sigma_camera=max(cam_cal.rms / np.sqrt(2), 1e-3),
+                           sigma_projector=max(proj_cal.rms / np.sqrt(2), 1e-3))
+    seconds["solve"] = time.time() - t2
+
+    camera, projector = bundle.camera, bundle.projector         # world = camera frame
+    axis = None
+    T_cam_world = np.eye(4)
+    turntable = getattr(devices, "turntable", None)
+    if turntable is not None:
+        if place_on_turntable is None:
+            raise CalibrationError("turntable: the rig has a turntable but no way to place the board on it "
+                                   "(place_on_turntable)")
+        t3 = time.time()
+        place_on_turntable()
+        angles = np.radians(settings.turntable_angles_deg)
+        obs, poses, table_points = [], [], None
+        mid = int(np.argmin(np.abs(angles - np.median(angles))))
+        for k, a in enumerate(angles):
+            call_progress(progress, f"turntable {np.degrees(a):+.0f} deg ({k + 1}/{len(angles)})", k, len(angles))
+            turntable.rotate_to(float(a))
+            if settle_s > 0 and not hasattr(devices, "capture_sequence"):
+                time.sleep(settle_s)
+            images = _capture(devices, frames, delay_s)
+            det = detect_board(images[white_index], board)
+            if not det.found:
+                raise CalibrationError(f"turntable: the board is not found at {np.degrees(a):+.1f} deg "
+                                       f"({det.reason}); mount it so the camera sees it at every angle")
+            obs.append((det.ids, det.uv))
+            poses.append(_pose_from_corners(camera, obj, det.ids, det.uv))
+            if k == mid:
+                dec = decode(images, spec, response=response)
+                tri = triangulate(camera, projector, dec.proj_col, dec.proj_row)
+                table_points = tri.xyz.reshape(-1, 3)
+        turntable.rotate_to(0.0)
+        axis = fit_turntable_axis(camera, obj, angles, obs, poses)
+        T_cam_table, _ = turntable_frame(axis, table_points)
+        T_cam_world = T_cam_table
+        seconds["turntable"] = time.time() - t3
+
+    T_world_cam = invert_T(T_cam_world)
+    rig = Rig(cameras=(camera.with_pose(T_world_cam),),
+              projector=projector.with_pose(compose(T_world_cam, projector.T_world_cam)),
+              T_world_table=None if axis is None else np.eye(4),
+              devices=dict(template.devices) if template is not None else {},
+              capture=dict(template.capture) if template is not None else {},
+              projector_response=response)
+    seconds["total"] = time.time() - t0
+    return RigCalibration(rig=rig, camera=cam_cal, projector=proj_cal, bundle=bundle, axis=axis,
+                          response=response_fit, corner_std_projector=corner_std, seconds=seconds)
+
+
+def _axis_in_camera(rig: Rig) -> tuple[np.ndarray, np.ndarray]:
+    """(direction, point) of the turntable axis in the main camera's frame."""
+    T_cam_table = compose(rig.camera.T_cam_world, rig.T_world_table)
+    return T_cam_table[:3, 2], T_cam_table[:3, 3]
+
+
+def compare_rigs(calibrated: Rig, truth: Rig) -> dict:
+    """Deviation of each calibrated parameter from ``truth`` (frame-independent quantities).
+
+    Returns a dict: per device (``camera``, ``projector``) the relative errors of fx, fy, cx, cy (%) and the
+    distortion differences; ``baseline_pct`` (camera-projector distance), ``rotation_deg`` (relative
+    rotation of projector to camera); with turntables, ``axis_direction_deg`` (angle between the axes),
+    ``axis_point_mm`` (distance of the calibrated table origin from the true axis line, in the camera
+    frame) and ``table_origin_mm`` (distance between the table origins); ``gamma`` (calibrated - true).
+    """
+    out: dict = {}
+    for key, c, t in (("camera", calibrated.camera, truth.camera), ("projector", calibrated.projector, truth.projector)):
+        Kc, Kt = c.K, t.K
+        d = {n: float((Kc[i, j] / Kt[i, j] - 1) * 100) for n, (i, j) in
+             {"fx": (0, 0), "fy": (1, 1), "cx": (0, 2), "cy": (1, 2)}.items()}
+        d["pp_px"] = float(np.hypot(Kc[0, 2] - Kt[0, 2], Kc[1, 2] - Kt[1, 2]))
+        n_d = max(len(c.dist), len(t.dist))
+        dc, dt = np.zeros(n_d), np.zeros(n_d)
+        dc[:len(c.dist)], dt[:len(t.dist)] = c.dist, t.dist
+        d["dist_diff"] = (dc - dt).tolist()
+        out[key] = d
+    T_c = compose(calibrated.camera.T_cam_world, calibrated.projector.T_world_cam)
+    T_t = compose(truth.camera.T_cam_world, truth.projector.T_world_cam)
+    out["baseline_pct"] = float((np.linalg.norm(T_c[:3, 3]) / np.linalg.norm(T_t[:3, 3]) - 1) * 100)
+    out["translation_mm"] = float(np.linalg.norm(T_c[:3, 3] - T_t[:3, 3]) * 1e3)
+    out["rotation_deg"] = float(np.degrees(rotation_angle(T_c[:3, :3].T @ T_t[:3, :3])))
+    if calibrated.T_world_table is not None and truth.T_world_table is not None:
+        ac, pc = _axis_in_camera(calibrated)
+        at, pt = _axis_in_camera(truth)
+        out["axis_direction_deg"] = float(np.degrees(np.arccos(np.clip(ac @ at, -1.0, 1.0))))
+        dp = pc - pt
+        out["axis_point_mm"] = float(np.linalg.norm(dp - (dp @ at) * at) * 1e3)
+        out["table_origin_mm"] = float(np.linalg.norm(dp) * 1e3)
+    gc = calibrated.projector_response.gamma if calibrated.projector_response is not None else None
+    gt = truth.projector_response.gamma if truth.projector_response is not None else None
+    if gc is not None and gt is not None:
+        out["gamma"] = float(gc - gt)
+    return out
+
+
+def comparison_lines(dev: dict) -> list[str]:
+    """Human-readable lines for :func:`compare_rigs`'s dict."""
+    lines = []
+    for key in ("camera", "projector"):
+        d = dev[key]
+        lines.append(f"{key}: fx {d['fx']:+.4f}% fy {d['fy']:+.4f}% cx {d['cx']:+.4f}% cy {d['cy']:+.4f}% "
+                     f"(principal point {d['pp_px']:.3f} px off); distortion diff "
+                     f"{' '.join(f'{x:+.5f}' for x in d['dist_diff'])}")
+    lines.append(f"camera-projector: baseline {dev['baseline_pct']:+.4f}%, translation {dev['translation_mm']:.3f} mm, "
+                 f"rotation {dev['rotation_deg']:.4f} deg")
+    if "axis_direction_deg" in dev:
+        lines.append(f"turntable: axis direction {dev['axis_direction_deg']:.4f} deg, axis point "
+                     f"{dev['axis_point_mm']:.3f} mm, table origin {dev['table_origin_mm']:.3f} mm")
+    if "gamma" in dev:
+        lines.append(f"projector gamma: {dev['gamma']:+.4f}")
+    return lines

@@ -449,6 +449,52 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_photometric(args: argparse.Namespace) -> int:
+    """rangekit photometric DIR [--method ls|robust|uncalibrated] --out OUT: normals, albedo, depth, mesh"""
+    from pathlib import Path
+
+    import numpy as np
+
+    from rangekit.diligent import load_diligent
+    from rangekit.io import write_png
+    from rangekit.mesh import TriangleMesh, save_mesh
+    from rangekit.photometric import (angular_error, depth_to_mesh, integrate_normals, photometric_stereo,
+                                      uncalibrated_photometric_stereo)
+
+    t0 = time.perf_counter()
+    data = load_diligent(args.folder)
+    _say(f"read {len(data.filenames)} images of {data.mask.shape[1]}x{data.mask.shape[0]} from {args.folder} "
+         f"({int(data.mask.sum())} pixels in the mask) in {time.perf_counter() - t0:.1f} s")
+    t1 = time.perf_counter()
+    if args.method == "uncalibrated":
+        res = uncalibrated_photometric_stereo(data.images, data.mask)
+    else:
+        res = photometric_stereo(data.images, data.lights, data.mask, method=args.method)
+    _say(f"normals ({args.method}) in {time.perf_counter() - t1:.1f} s")
+    if data.normals_gt is not None:
+        err = angular_error(res.normals, data.normals_gt, data.mask)
+        _say(f"angular error against Normal_gt.mat: mean {err.mean_deg:.3f} deg, median {err.median_deg:.3f} deg")
+    t2 = time.perf_counter()
+    depth = integrate_normals(res.normals, data.mask)
+    V, F = depth_to_mesh(depth, data.mask, pixel_size=1.0)
+    _say(f"integrated the normals into depth and a mesh of {len(V):,} vertices in {time.perf_counter() - t2:.1f} s")
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    np.save(out / "normals.npy", res.normals.astype(np.float32))
+    np.save(out / "depth.npy", depth.astype(np.float32))
+    n = np.nan_to_num(res.normals)
+    # Colour code as the benchmarks show it: RGB = (x, up, towards the viewer) / 2 + 1/2.
+    rgb = np.stack([n[..., 0], -n[..., 1], -n[..., 2]], axis=-1) * 0.5 + 0.5
+    write_png(out / "normals.png", np.where(data.mask[..., None], np.rint(rgb * 255), 0).astype(np.uint8))
+    albedo = np.nan_to_num(res.albedo if res.albedo.ndim == 2 else res.albedo.mean(axis=2))
+    scale = np.percentile(albedo[data.mask], 99) if data.mask.any() else 1.0
+    write_png(out / "albedo.png", np.rint(np.clip(albedo / max(scale, 1e-12), 0, 1) * 255).astype(np.uint8))
+    save_mesh(out / "mesh.ply", TriangleMesh(V, F))
+    _say(f"wrote {out}/normals.npy, normals.png, albedo.png, depth.npy, mesh.ply (pixel units, orthographic) in "
+         f"{time.perf_counter() - t0:.1f} s")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="rangekit", description="Active 3D scanning: simulate, capture, "
                                      "decode, register and fuse range data.")
@@ -583,6 +629,17 @@ def build_parser() -> argparse.ArgumentParser:
     cal.add_argument("--square-mm", type=float, default=20.0, help="square side in millimetres (default 20)")
     cal.add_argument("--seed", type=int, default=0, help="simulator: noise and pose seed")
     cal.set_defaults(func=cmd_calibrate)
+
+    pst = sub.add_parser("photometric", help="photometric stereo: normals, albedo, depth and a mesh from a DiLiGenT-style folder",
+                         description="Read a DiLiGenT-style folder (filenames.txt, light_directions.txt, "
+                                     "light_intensities.txt, mask.png, optional Normal_gt.mat), recover the normals "
+                                     "(OpenCV camera frame: x right, y down, z forward; NaN outside the mask), the "
+                                     "albedo, and integrate the normals into depth and a mesh (pixel units).")
+    pst.add_argument("folder", metavar="DIR", help="folder in the DiLiGenT layout")
+    pst.add_argument("--method", default="robust", choices=("ls", "robust", "uncalibrated"),
+                     help="least squares, robust to shadows and highlights (default), or without light directions")
+    pst.add_argument("--out", required=True, help="output folder")
+    pst.set_defaults(func=cmd_photometric)
 
     rig = sub.add_parser("rig", help="rig files: write a template",
                          description="Rig files (docs/rig.md documents every field).")

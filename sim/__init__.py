@@ -17,3 +17,9 @@ __all__ = [
     "ImagingModel", "ViewRenderer",
     "Scene", "default_scene",
 ]
+
+from rangekit.sim.lightstage import (LIGHT_STAGE_MODEL, LightStageCapture, light_stage_camera, light_stage_lights,
+                                     light_stage_scene, render_light_stage)
+
+__all__ += ["LIGHT_STAGE_MODEL", "LightStageCapture", "light_stage_camera", "light_stage_lights",
+            "light_stage_scene", "render_light_stage"]

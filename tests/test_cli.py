@@ -17,7 +17,7 @@ from rangekit.rig import load_rig
                                   ["reconstruct", "--help"], ["register", "--help"], ["mesh", "--help"],
                                   ["scan", "--help"], ["devices", "--help"], ["process", "--help"],
                                   ["render", "--help"], ["rig", "--help"], ["rig", "init", "--help"],
-                                  ["calibrate", "--help"]])
+                                  ["calibrate", "--help"], ["photometric", "--help"]])
 def test_every_command_has_help(argv, capsys):
     with pytest.raises(SystemExit) as exc:
         main(argv)

@@ -101,9 +101,9 @@ class DeviceCalibration:
         return lines
 
 
-def board_normal_spread(homographies_or_poses: Sequence[np.ndarray]) -> float:
+def board_normal_spread(T_dev_board: Sequence[np.ndarray]) -> float:
     """Largest angle (radians) between the board normals of any two poses ``T_dev_board`` (4, 4)."""
-    n = np.array([T[:3, 2] for T in homographies_or_poses])
+    n = np.array([T[:3, 2] for T in T_dev_board])
     if len(n) < 2:
         return 0.0
     c = np.clip(np.abs(n @ n.T), -1.0, 1.0)

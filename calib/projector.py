@@ -33,8 +33,6 @@ Frames: world = the camera's frame; the projector's pose is ``T_cam_proj``; boar
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Sequence
-
 import numpy as np
 from scipy.optimize import least_squares
 from scipy.sparse import lil_matrix

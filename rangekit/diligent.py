@@ -192,7 +192,8 @@ def _read_normals(path: Path, mask: np.ndarray) -> np.ndarray | None:
     except KeyError as exc:
         raise FileFormatError(f"{path}: no variable 'Normal_gt'") from exc
     except (ValueError, OSError, NotImplementedError) as exc:
-        raise FileFormatError(f"{path}: not a readable MATLAB file ({exc})") from exc
+        raise FileFormatError(f"{path}: not a readable MATLAB file ({exc}); save it as MATLAB v7 or older "
+                              "(scipy cannot read v7.3/HDF5 files)") from exc
     if N.shape != mask.shape + (3,):
         raise FileFormatError(f"{path}: Normal_gt has shape {N.shape}, expected {mask.shape + (3,)} like mask.png")
     N = N * _FLIP

@@ -16,7 +16,8 @@ from rangekit.boards import Board
 from rangekit.calib.camera import CalibrationWarning, Correspondences, calibrate_device
 from rangekit.calib.procedure import CalibrationSettings, calibrate_rig, compare_rigs
 from rangekit.errors import CalibrationError
-from rangekit.geometry import apply_T, compose, make_T
+from fits import fit_sphere
+from rangekit.geometry import apply_T, make_T
 
 pytestmark = pytest.mark.filterwarnings("ignore::rangekit.calib.camera.CalibrationWarning")
 
@@ -99,22 +100,6 @@ def test_calibrated_rig_has_the_simulator_schema(calibrated):
     assert np.abs(np.asarray(a["cameras"][0]["T_world_cam"]) - np.asarray(b["cameras"][0]["T_world_cam"])).max() < 1e-3
 
 
-def _fit_sphere(P: np.ndarray) -> tuple[np.ndarray, float]:
-    """Least-squares sphere (centre, radius): algebraic fit, then Gauss-Newton on the distances."""
-    A = np.column_stack([2 * P, np.ones(len(P))])
-    sol, *_ = np.linalg.lstsq(A, np.sum(P * P, axis=1), rcond=None)
-    c = sol[:3]
-    for _ in range(10):
-        d = P - c
-        r_i = np.linalg.norm(d, axis=1)
-        J = np.column_stack([-d / r_i[:, None], -np.ones(len(P))])
-        r = r_i.mean()
-        step, *_ = np.linalg.lstsq(J, -(r_i - r), rcond=None)
-        c = c + step[:3]
-    r_i = np.linalg.norm(P - c, axis=1)
-    return c, float(r_i.mean())
-
-
 def test_round_trip_sphere_radius_with_the_calibrated_rig(calibrated):
     """Scan a sphere in the simulator (true rig) and reconstruct with the calibrated rig."""
     from rangekit.patterns import make_pattern_spec
@@ -133,9 +118,9 @@ def test_round_trip_sphere_radius_with_the_calibrated_rig(calibrated):
     pts = rec.triangulated.xyz.reshape(-1, 3)
     pts = pts[np.all(np.isfinite(pts), axis=1)]
     assert len(pts) > 50000
-    _, r_cal = _fit_sphere(pts)
+    _, r_cal = fit_sphere(pts)
     gt = sim.ground_truth()
-    _, r_true = _fit_sphere(gt.xyz[gt.lit])
+    _, r_true = fit_sphere(gt.xyz[gt.lit])
     assert abs(r_cal - r_true) <= 0.2e-3, (r_cal, r_true)
     assert abs(r_cal - radius) <= 0.2e-3, (r_cal, radius)
 

@@ -7,6 +7,7 @@ the measured figures quoted in docs/coded-light.md.
 
 import numpy as np
 import pytest
+from fits import fit_sphere
 from scipy.ndimage import binary_erosion
 
 from rangekit.decode import decode
@@ -91,12 +92,6 @@ def test_phase_methods_on_a_plane(scenes, method, limit):
     assert np.isfinite(e).mean() > 0.995 and rms <= limit and rms_r <= limit
 
 
-def _fit_sphere(P):
-    A = np.c_[2 * P, np.ones(len(P))]
-    sol = np.linalg.lstsq(A, (P ** 2).sum(axis=1), rcond=None)[0]
-    return sol[:3], np.sqrt(sol[3] + sol[:3] @ sol[:3])
-
-
 def _fit_plane_rms(P):
     c = P.mean(axis=0)
     return np.linalg.svd(P - c, full_matrices=False)[1][-1] / np.sqrt(len(P))
@@ -114,7 +109,7 @@ def test_sphere_and_plane_fits_from_reconstructed_points(scenes):
             if name == "sphere":
                 ball = scenes["sphere"].objects[0]
                 centre_true = ball.T_world_obj[:3, 3]
-                c, r = _fit_sphere(P)
+                c, r = fit_sphere(P)
                 dr, dc = abs(r - 0.05), np.linalg.norm(c - centre_true)
                 lines.append(f"{method}{' subpixel' if subpixel else ''} sphere: radius error {dr * 1e3:.4f} mm, "
                              f"centre error {dc * 1e3:.4f} mm ({len(P)} points)")

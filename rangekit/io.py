@@ -13,7 +13,7 @@ import numpy as np
 from rangekit.errors import FileFormatError
 
 __all__ = ["atomic_write_bytes", "atomic_write_text", "atomic_write_json", "write_png", "read_png",
-           "atomic_save_npz", "read_json"]
+           "atomic_save_npz", "atomic_save_npy", "read_json"]
 
 # mkstemp creates 0600 files; give written files the usual mode (0666 minus the umask).
 _UMASK = os.umask(0)
@@ -63,6 +63,15 @@ def atomic_save_npz(path: str | Path, **arrays: np.ndarray) -> None:
 
     buf = io.BytesIO()
     np.savez_compressed(buf, **arrays)
+    atomic_write_bytes(path, buf.getvalue())
+
+
+def atomic_save_npy(path: str | Path, array: np.ndarray) -> None:
+    """``np.save`` to ``path``, atomically."""
+    import io
+
+    buf = io.BytesIO()
+    np.save(buf, np.asarray(array))
     atomic_write_bytes(path, buf.getvalue())
 
 

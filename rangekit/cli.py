@@ -11,7 +11,7 @@ import time
 
 import numpy as np
 
-from rangekit.errors import RangekitError
+from rangekit.errors import InputError, RangekitError
 
 __all__ = ["main"]
 
@@ -27,9 +27,67 @@ def _console():
     return Console(sys.stdout)
 
 
-def cmd_sim_render(args: argparse.Namespace) -> int:
-    """rangekit sim render --object NAME_OR_MESH [--patterns graycode] --out DIR"""
+def _sim_render_tof(args: argparse.Namespace) -> int:
+    """--sensor tof | tof-pulsed: the panel scene from --near to --far metres."""
     from dataclasses import replace
+
+    from rangekit.sim.tof import (KINECT_V2_PLAN, LUXONIS_PLAN, ToFSensor, render_pulsed, render_tof, tof_camera,
+                                  tof_scene, write_pulsed_capture, write_tof_capture)
+    from rangekit.tof import FrequencyPlan
+
+    t0 = time.perf_counter()
+    scene = tof_scene(args.near, args.far)
+    camera = tof_camera(*(args.size or (320, 240)))
+    info = {"scene": f"panels {args.near:g} to {args.far:g} m"}
+    if args.sensor == "tof-pulsed":
+        _say(f"rendering pulsed round trips ({camera.width}x{camera.height}, jitter {args.jitter_ps:g} ps)")
+        cap = render_pulsed(scene, camera=camera, jitter_s=args.jitter_ps * 1e-12, seed=args.seed)
+        write_pulsed_capture(cap, args.out, info=info)
+    else:
+        if args.frequencies_mhz:
+            plan = FrequencyPlan.uniform([f * 1e6 for f in args.frequencies_mhz], args.steps or 4)
+        else:
+            plan = {"kinect": KINECT_V2_PLAN, "luxonis": LUXONIS_PLAN}[args.plan]
+            if args.steps:
+                plan = FrequencyPlan.uniform(plan.frequencies, args.steps)
+        sensor = ToFSensor()
+        if args.multipath:
+            sensor = replace(sensor, multipath_strength=args.multipath[0], multipath_extra_m=args.multipath[1])
+        _say(f"rendering {plan.n_samples} raw samples ({plan.describe()}, {camera.width}x{camera.height}, "
+             f"3x3 rays per pixel)")
+        cap = render_tof(scene, plan, camera=camera, sensor=sensor, noise=not args.no_noise, seed=args.seed)
+        write_tof_capture(cap, args.out, info=info)
+    _say(f"wrote {args.out} (tof.json, rig.json, ground_truth.npz, preview.png) in {time.perf_counter() - t0:.1f} s")
+    return 0
+
+
+def _sim_render_stereo(args: argparse.Namespace) -> int:
+    """--sensor stereo: the white box and sphere seen by the simulated active-stereo pair."""
+    from rangekit.sim.stereo import render_stereo, stereo_rig, stereo_scene, write_stereo_capture
+
+    t0 = time.perf_counter()
+    rig = stereo_rig(*(args.size or (640, 400)))
+    _say(f"rendering the stereo pair ({rig.cameras[0].width}x{rig.cameras[0].height}, "
+         f"dots {'off' if args.no_dots else 'on'})")
+    cap = render_stereo(stereo_scene(), rig, dots=not args.no_dots, seed=args.seed)
+    write_stereo_capture(cap, rig, args.out)
+    _say(f"wrote {args.out} (left.png, right.png, rig.json, ground_truth.npz) in {time.perf_counter() - t0:.1f} s")
+    return 0
+
+
+def cmd_sim_render(args: argparse.Namespace) -> int:
+    """rangekit sim render [--sensor projector|tof|tof-pulsed|stereo] [--object NAME_OR_MESH] --out DIR"""
+    from dataclasses import replace
+
+    if args.sensor != "projector":
+        given = [f for f, v in (("--object", args.object), ("--patterns", args.patterns), ("--rig", args.rig))
+                 if v is not None]
+        if given:
+            raise InputError(f"{', '.join(given)}: only for --sensor projector; the {args.sensor} sensor renders its "
+                             "own scene (docs/simulator.md)")
+        return _sim_render_stereo(args) if args.sensor == "stereo" else _sim_render_tof(args)
+    args.object = args.object or "lumpy"
+    args.patterns = args.patterns or "graycode"
 
     from rangekit.patterns import make_pattern_spec
     from rangekit.rig import load_rig
@@ -60,6 +118,54 @@ def _projector_size(text: str) -> tuple[int, int]:
     except ValueError:
         pass
     raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT in projector pixels, e.g. 1280x800, found {text!r}")
+
+
+def _image_size(text: str) -> tuple[int, int]:
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+        if w > 0 and h > 0:
+            return w, h
+    except ValueError:
+        pass
+    raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT in pixels, e.g. 320x240, found {text!r}")
+
+
+def cmd_tof(args: argparse.Namespace) -> int:
+    """rangekit tof RAW_DIR --out OUT: range, depth, confidence and a cloud from raw ToF samples."""
+    from rangekit.range_files import load_ground_truth, load_tof_folder, write_depth_outputs
+    from rangekit.tof import decode_cw, pulsed_range, range_to_depth, range_to_points
+
+    t0 = time.perf_counter()
+    raw = load_tof_folder(args.raw_dir)
+    cam = raw.camera
+    if raw.pulsed:
+        rng_map = pulsed_range(raw.round_trip_s)
+        depth = range_to_depth(rng_map, cam)
+        valid = np.isfinite(rng_map)
+        points = range_to_points(rng_map, cam)[valid]
+        confidence = valid.astype(np.float32)
+        _say(f"pulsed: {valid.mean():.1%} of {cam.width}x{cam.height} pixels returned")
+    else:
+        res = decode_cw(raw.samples, raw.plan, cam, electrons_per_unit=raw.electrons_per_dn,
+                        read_noise_e=raw.read_noise_e, saturation=raw.saturation_dn, min_snr=args.min_snr,
+                        flying_angle_deg=None if args.keep_flying else args.flying_angle_deg,
+                        max_range=args.max_range)
+        rng_map, depth, points, confidence, valid = res.range, res.depth, res.points, res.confidence, res.valid
+        n = valid.size
+        _say(f"{raw.plan.describe()} ({raw.plan.unambiguous_range:.3f} m unambiguous): valid {valid.sum() / n:.1%}, "
+             f"low signal {res.low_signal.sum() / n:.1%}, ambiguous {res.ambiguous.sum() / n:.1%}, "
+             f"flying {res.flying.sum() / n:.1%}")
+    truth = load_ground_truth(args.raw_dir)
+    if truth is not None and "range" in truth:
+        ok = valid & np.isfinite(truth["range"]) & truth.get("valid", np.ones_like(valid))
+        if ok.any():
+            err = (rng_map - truth["range"])[ok]
+            wrong = np.abs(err) > 0.3
+            _say(f"against ground_truth.npz ({ok.sum():,} pixels): range RMS {np.sqrt(np.mean(err[~wrong] ** 2)) * 1e3:.2f} mm, "
+                 f"median |error| {np.median(np.abs(err)) * 1e3:.2f} mm, wrong wrap (> 0.3 m) {wrong.mean():.3%}")
+    names = write_depth_outputs(args.out, depth, points, range_map=rng_map, confidence=confidence)
+    _say(f"wrote {args.out}/{', '.join(names)} ({len(points):,} points) in {time.perf_counter() - t0:.1f} s")
+    return 0
 
 
 def cmd_decode(args: argparse.Namespace) -> int:
@@ -512,10 +618,13 @@ def build_parser() -> argparse.ArgumentParser:
                     "(depth, xyz, normals, proj_col, proj_row, valid), the rig file and a preview PNG.")
     from rangekit.patterns import PATTERN_METHODS
 
-    render.add_argument("--object", default="lumpy",
+    render.add_argument("--sensor", default="projector", choices=("projector", "tof", "tof-pulsed", "stereo"),
+                        help="projector-camera rig (default), continuous-wave or pulsed time of flight, or the "
+                             "active-stereo pair")
+    render.add_argument("--object", default=None,
                         help="built-in object (plane, sphere, box, cylinder, torus, board, lumpy) or a mesh "
                              "file trimesh can read (metres); default: lumpy")
-    render.add_argument("--patterns", default="graycode", choices=PATTERN_METHODS,
+    render.add_argument("--patterns", default=None, choices=PATTERN_METHODS,
                         help="pattern set to project; default: graycode (44 frames on the default rig)")
     render.add_argument("--out", required=True, help="output folder (created if missing)")
     render.add_argument("--rig", help="rig file to simulate (default: the built-in simulated rig)")
@@ -525,6 +634,21 @@ def build_parser() -> argparse.ArgumentParser:
     render.add_argument("--no-noise", action="store_true", help="disable shot and read noise")
     render.add_argument("--global-fraction", type=float, default=None,
                         help="interreflection term, fraction of the mean projected light (default 0)")
+    tof = render.add_argument_group("time of flight (--sensor tof, tof-pulsed)")
+    tof.add_argument("--plan", default="kinect", choices=("kinect", "luxonis"),
+                     help="frequency plan: kinect = 16/80/120 MHz x 3 steps (18.7 m), luxonis = 80/100 MHz x 4 "
+                          "steps (7.5 m); default kinect")
+    tof.add_argument("--frequencies-mhz", type=float, nargs="+", help="custom frequencies in MHz (instead of --plan)")
+    tof.add_argument("--steps", type=int, help="phase steps per frequency (default: the plan's, or 4)")
+    tof.add_argument("--near", type=float, default=0.5, help="nearest panel, metres (default 0.5)")
+    tof.add_argument("--far", type=float, default=15.0, help="farthest panel, metres (default 15)")
+    tof.add_argument("--multipath", type=float, nargs=2, metavar=("STRENGTH", "EXTRA_M"),
+                     help="add a second return of STRENGTH x the direct light, EXTRA_M metres longer round trip")
+    tof.add_argument("--jitter-ps", type=float, default=50.0, help="tof-pulsed: timing jitter, ps RMS (default 50)")
+    sz = render.add_argument_group("time of flight and stereo")
+    sz.add_argument("--size", type=_image_size, default=None,
+                    help="sensor size WIDTHxHEIGHT (default: tof 320x240, stereo 640x400)")
+    sz.add_argument("--no-dots", action="store_true", help="stereo: switch the dot projector off")
     render.set_defaults(func=cmd_sim_render)
 
     dec = sub.add_parser("decode", help="decode coded-light images into projector coordinates (maps.npz)",
@@ -640,6 +764,21 @@ def build_parser() -> argparse.ArgumentParser:
                      help="least squares, robust to shadows and highlights (default), or without light directions")
     pst.add_argument("--out", required=True, help="output folder")
     pst.set_defaults(func=cmd_photometric)
+
+    tofp = sub.add_parser("tof", help="time of flight: range, depth and a cloud from raw ToF samples",
+                          description="Decode a ToF capture folder (rangekit sim render --sensor tof|tof-pulsed, "
+                                      "layout in docs/tof.md): N-bucket phase, amplitude and offset per frequency, "
+                                      "multi-frequency unwrapping, flying-pixel filter, radial range to depth.")
+    tofp.add_argument("raw_dir", metavar="RAW_DIR", help="ToF capture folder (tof.json, rig.json, samples/)")
+    tofp.add_argument("--out", required=True, help="output folder: depth.npy (z, metres, NaN invalid), range.npy, "
+                                                    "confidence.npy/png, depth.png, cloud.ply")
+    tofp.add_argument("--max-range", type=float, help="metres; default the plan's unambiguous range")
+    tofp.add_argument("--min-snr", type=float, default=3.0,
+                      help="drop pixels whose phase noise exceeds 1/MIN_SNR rad (default 3)")
+    tofp.add_argument("--flying-angle-deg", type=float, default=15.0,
+                      help="flying-pixel filter threshold in degrees (default 15)")
+    tofp.add_argument("--keep-flying", action="store_true", help="do not filter flying pixels")
+    tofp.set_defaults(func=cmd_tof)
 
     rig = sub.add_parser("rig", help="rig files: write a template",
                          description="Rig files (docs/rig.md documents every field).")

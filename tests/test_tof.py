@@ -175,3 +175,45 @@ def test_bad_input_names_expected_and_found():
         unwrap_ranges(np.zeros((2, 3, 3)), LUXONIS_PLAN, max_range=10.0)
     with pytest.raises(InputError, match="range map is"):
         range_to_depth(np.zeros((5, 5)), cam)
+
+
+def test_cli_sim_render_then_tof(tmp_path, capsys):
+    from rangekit.cli import main
+
+    raw, out = tmp_path / "raw", tmp_path / "out"
+    assert main(["sim", "render", "--sensor", "tof", "--size", "160x120", "--out", str(raw)]) == 0
+    assert main(["tof", str(raw), "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "wrong wrap (> 0.3 m) 0.000%" in printed
+    truth = np.load(raw / "ground_truth.npz")
+    depth, rng = np.load(out / "depth.npy"), np.load(out / "range.npy")
+    ok = np.isfinite(depth) & truth["valid"]
+    assert ok.mean() > 0.9
+    assert np.abs(depth - truth["depth"])[ok].max() < 0.1              # no wrong wrap anywhere
+    assert np.sqrt(np.mean((rng - truth["range"])[ok] ** 2)) < 0.01     # measured 6 mm (far panels dominate)
+    conf = np.load(out / "confidence.npy")
+    assert conf.dtype == np.float32 and np.all(conf[~np.isfinite(depth)] == 0) and conf[ok].min() > 0
+    from rangekit.pointcloud import load_cloud
+    assert len(load_cloud(out / "cloud.ply")) == int(np.isfinite(depth).sum())
+    for name in ("depth.png", "confidence.png"):
+        assert (out / name).stat().st_size > 0
+
+    # A missing sample: the plan in tof.json does not match what is on disk.
+    (raw / "samples" / "008.png").unlink()
+    assert main(["tof", str(raw), "--out", str(tmp_path / "out2")]) == 2
+    err = capsys.readouterr().err
+    assert "samples: the frequency plan in tof.json (16/80/120 MHz x 3/3/3 steps) needs 9 raw samples, found 8" in err
+
+
+def test_cli_pulsed(tmp_path, capsys):
+    from rangekit.cli import main
+
+    raw, out = tmp_path / "raw", tmp_path / "out"
+    assert main(["sim", "render", "--sensor", "tof-pulsed", "--size", "80x60", "--jitter-ps", "10",
+                 "--out", str(raw)]) == 0
+    assert main(["tof", str(raw), "--out", str(out)]) == 0
+    truth = np.load(raw / "ground_truth.npz")
+    err = np.load(out / "range.npy") - truth["range"]
+    assert np.nanstd(err) == pytest.approx(C_LIGHT * 10e-12 / 2, rel=0.15)
+    assert main(["sim", "render", "--sensor", "tof", "--object", "sphere", "--out", str(tmp_path / "x")]) == 2
+    assert "--object: only for --sensor projector" in capsys.readouterr().err

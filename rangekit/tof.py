@@ -342,12 +342,27 @@ def _check_range_map(range_map, camera: PinholeCamera, where: str) -> np.ndarray
     return r
 
 
+_RAY_CACHE: dict[bytes, np.ndarray] = {}
+
+
 def camera_ray_z(camera: PinholeCamera) -> np.ndarray:
-    """(H, W, 3) float64 unit ray directions of every pixel centre in the camera frame (distortion undone)."""
-    xy = camera.pixels_to_normalized(camera.pixel_grid())
-    d = np.column_stack([xy, np.ones(len(xy))])
-    d /= np.linalg.norm(d, axis=1, keepdims=True)
-    return d.reshape(camera.height, camera.width, 3)
+    """(H, W, 3) float64 unit ray directions of every pixel centre in the camera frame (distortion undone).
+
+    Read-only; cached for the last few lenses (undoing the distortion of every pixel is the costly part of
+    a ToF decode, and a sensor's lens does not change between frames).
+    """
+    key = np.concatenate([camera.K.ravel(), camera.dist.ravel(), [camera.width, camera.height]]).tobytes()
+    d = _RAY_CACHE.get(key)
+    if d is None:
+        xy = camera.pixels_to_normalized(camera.pixel_grid())
+        d = np.column_stack([xy, np.ones(len(xy))])
+        d /= np.linalg.norm(d, axis=1, keepdims=True)
+        d = d.reshape(camera.height, camera.width, 3)
+        d.flags.writeable = False
+        if len(_RAY_CACHE) >= 4:
+            _RAY_CACHE.pop(next(iter(_RAY_CACHE)))
+        _RAY_CACHE[key] = d
+    return d
 
 
 def range_to_depth(range_map, camera: PinholeCamera) -> np.ndarray:
@@ -366,7 +381,7 @@ def range_to_points(range_map, camera: PinholeCamera, *, frame: str = "world") -
         raise InputError(f"range_to_points: frame must be 'camera' or 'world', found {frame!r}")
     r = _check_range_map(range_map, camera, "range_to_points")
     p = r[..., None] * camera_ray_z(camera)
-    if frame == "world":
+    if frame == "world" and not np.array_equal(camera.T_world_cam, np.eye(4)):
         p = apply_T(camera.T_world_cam, p.reshape(-1, 3)).reshape(p.shape)
     return p
 

@@ -168,6 +168,48 @@ def cmd_tof(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_stereo(args: argparse.Namespace) -> int:
+    """rangekit stereo LEFT RIGHT --rig RIG.json --out OUT: depth of the left camera from a stereo pair."""
+    from pathlib import Path
+
+    from rangekit.errors import ConfigError
+    from rangekit.io import read_png
+    from rangekit.range_files import load_ground_truth, write_depth_outputs
+    from rangekit.rig import load_rig
+    from rangekit.stereo import stereo_depth
+
+    t0 = time.perf_counter()
+    rig = load_rig(args.rig)
+    if len(rig.cameras) < 2:
+        raise ConfigError(f"{args.rig}: the stereo command needs two cameras in 'cameras' (left = cameras[0], "
+                          f"right = cameras[1]), found {len(rig.cameras)}")
+    left, right = read_png(args.left), read_png(args.right)
+    if left.shape[:2] != right.shape[:2]:
+        raise InputError(f"{args.left} is {left.shape[1]}x{left.shape[0]} but {args.right} is "
+                         f"{right.shape[1]}x{right.shape[0]} (width x height); a stereo pair needs two images of one "
+                         "size")
+    opts = {} if args.num_disparities is None else {"num_disparities": args.num_disparities}
+    res = stereo_depth(left, right, rig.cameras[0], rig.cameras[1], method=args.method, min_depth=args.min_depth,
+                       **opts)
+    dmap = res.disparity
+    ok = np.isfinite(res.depth)
+    _say(f"{dmap.method}: disparities [{dmap.min_disparity}, {dmap.min_disparity + dmap.num_disparities}) px, "
+         f"baseline {res.rectification.baseline * 1e3:.1f} mm; depth for {ok.mean():.1%} of the left image in "
+         f"{time.perf_counter() - t0:.1f} s")
+    truth = load_ground_truth(Path(args.left).parent)
+    if truth is not None and "depth" in truth and truth["depth"].shape == res.depth.shape:
+        vis = truth.get("valid", np.isfinite(truth["depth"])) & np.isfinite(truth["depth"])
+        both = vis & ok
+        if both.any():
+            err = (res.depth - truth["depth"])[both]
+            _say(f"against ground_truth.npz: depth for {both.sum() / max(vis.sum(), 1):.1%} of the {vis.sum():,} "
+                 f"visible pixels, RMS {np.sqrt(np.mean(err ** 2)) * 1e3:.2f} mm, median |error| "
+                 f"{np.median(np.abs(err)) * 1e3:.2f} mm")
+    names = write_depth_outputs(args.out, res.depth, res.points, confidence=res.confidence)
+    _say(f"wrote {args.out}/{', '.join(names)} ({len(res.points):,} points)")
+    return 0
+
+
 def cmd_decode(args: argparse.Namespace) -> int:
     """rangekit decode IMAGES --pattern SPEC_OR_NAME --projector WxH [--order opencv] --out maps.npz"""
     from pathlib import Path
@@ -779,6 +821,23 @@ def build_parser() -> argparse.ArgumentParser:
                       help="flying-pixel filter threshold in degrees (default 15)")
     tofp.add_argument("--keep-flying", action="store_true", help="do not filter flying pixels")
     tofp.set_defaults(func=cmd_tof)
+
+    stp = sub.add_parser("stereo", help="active stereo: depth of the left camera from a stereo pair",
+                         description="Rectify a raw stereo pair with the rig file's two cameras (cameras[0] = left, "
+                                     "cameras[1] = right), match it (census + semi-global matching, or OpenCV "
+                                     "StereoSGBM), check left-right consistency, refine to subpixel and convert to "
+                                     "depth on the left camera's own pixel grid (docs/stereo.md).")
+    stp.add_argument("left", metavar="LEFT", help="left image (PNG, 8 or 16 bit, grey or RGB)")
+    stp.add_argument("right", metavar="RIGHT", help="right image, same size")
+    stp.add_argument("--rig", required=True, help="rig file with two cameras (left first)")
+    stp.add_argument("--out", required=True, help="output folder: depth.npy (left z, metres, NaN invalid), depth.png, "
+                                                   "confidence.npy/png, cloud.ply")
+    stp.add_argument("--method", default="census-sgm", choices=("census-sgm", "sgbm"),
+                     help="our census + semi-global matcher (default) or OpenCV's StereoSGBM")
+    stp.add_argument("--num-disparities", type=int, help="disparity search range (multiple of 16; default from "
+                                                         "--min-depth)")
+    stp.add_argument("--min-depth", type=float, default=0.4, help="nearest depth to search, metres (default 0.4)")
+    stp.set_defaults(func=cmd_stereo)
 
     rig = sub.add_parser("rig", help="rig files: write a template",
                          description="Rig files (docs/rig.md documents every field).")

@@ -10,12 +10,12 @@ Run: .venv/bin/python benchmarks/bench_photometric.py
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
 
 from rangekit.photometric import angular_error, integrate_normals, photometric_stereo
 from rangekit.sim.lightstage import light_stage_lights
+
+from _timing import timed  # benchmarks/_timing.py (the script's folder is on sys.path)
 
 
 def scene(H: int = 512, W: int = 612, f: int = 96, seed: int = 0):
@@ -37,14 +37,6 @@ def scene(H: int = 512, W: int = 612, f: int = 96, seed: int = 0):
     images[:, mask] = I.T.astype(np.float32)
     return images, lights, mask, n
 
-
-def timed(fn, repeat: int = 3):
-    ts, out = [], None
-    for _ in range(repeat):
-        t = time.perf_counter()
-        out = fn()
-        ts.append(time.perf_counter() - t)
-    return float(np.median(ts)), out
 
 
 def main() -> None:

@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -24,6 +23,8 @@ import numpy as np
 from rangekit.geometry import apply_T, axis_angle_to_R, invert_T, make_T, rotation_angle
 from rangekit.pointcloud import PointCloud
 from rangekit.registration.icp import IcpOptions, OrganisedScan, icp
+
+from _timing import timed  # benchmarks/_timing.py (the script's folder is on sys.path)
 
 DATA = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "stanford-bunny"
 
@@ -43,14 +44,6 @@ def o3d_cloud(c: PointCloud):
         pc.normals = o3d.utility.Vector3dVector(c.normals)
     return pc
 
-
-def timed(fn, repeat=3):
-    times, out = [], None
-    for _ in range(repeat):
-        t = time.perf_counter()
-        out = fn()
-        times.append(time.perf_counter() - t)
-    return float(np.median(times)), out
 
 
 def bench_pairwise() -> list[str]:

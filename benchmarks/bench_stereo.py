@@ -16,8 +16,6 @@ Run: .venv/bin/python benchmarks/bench_stereo.py
 
 from __future__ import annotations
 
-import time
-
 import cv2
 import numba
 import numpy as np
@@ -25,17 +23,10 @@ import numpy as np
 from rangekit.sim.stereo import render_stereo, stereo_rig, stereo_scene
 from rangekit.stereo import depth_in_camera, rectify, rectify_images, sgbm_disparity, sgm_disparity
 
+from _timing import timed  # benchmarks/_timing.py (the script's folder is on sys.path)
+
 N_DISP = 64
 
-
-def timed(fn, repeat: int = 5):
-    fn()  # warm-up: numba loads its cached kernels, OpenCV allocates
-    ts, out = [], None
-    for _ in range(repeat):
-        t = time.perf_counter()
-        out = fn()
-        ts.append(time.perf_counter() - t)
-    return float(np.median(ts)), out
 
 
 def accuracy(dmap, rect, left, cap, mask):
@@ -66,9 +57,9 @@ def main() -> None:
     for threads in (1, n_all):
         numba.set_num_threads(threads)
         cv2.setNumThreads(threads)
-        t_ours, d_ours = timed(ours)
-        t_peer, d_peer = timed(peer)
-        t_hh, d_hh = timed(peer_hh)
+        t_ours, d_ours = timed(ours, 5, warmup=1)
+        t_peer, d_peer = timed(peer, 5, warmup=1)
+        t_hh, d_hh = timed(peer_hh, 5, warmup=1)
         rows.append((threads, t_ours, t_peer, t_hh))
     numba.set_num_threads(n_all)
     cv2.setNumThreads(n_all)

@@ -12,21 +12,14 @@ Run: .venv/bin/python benchmarks/bench_tof.py
 from __future__ import annotations
 
 import itertools
-import time
 
 import numpy as np
 
 from rangekit.sim.tof import KINECT_V2_PLAN, render_tof, tof_camera, tof_scene
 from rangekit.tof import decode_cw, phase_amplitude_offset
 
+from _timing import timed  # benchmarks/_timing.py (the script's folder is on sys.path)
 
-def timed(fn, repeat: int = 3):
-    ts, out = [], None
-    for _ in range(repeat):
-        t = time.perf_counter()
-        out = fn()
-        ts.append(time.perf_counter() - t)
-    return float(np.median(ts)), out
 
 
 def brute_force(samples, plan):

@@ -110,24 +110,15 @@ def cmd_sim_render(args: argparse.Namespace) -> int:
     return 0
 
 
-def _projector_size(text: str) -> tuple[int, int]:
+def _size(text: str) -> tuple[int, int]:
+    """Argument type for image, sensor and projector sizes: WIDTHxHEIGHT in pixels."""
     try:
         w, h = (int(v) for v in text.lower().split("x"))
         if w > 0 and h > 0:
             return w, h
     except ValueError:
         pass
-    raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT in projector pixels, e.g. 1280x800, found {text!r}")
-
-
-def _image_size(text: str) -> tuple[int, int]:
-    try:
-        w, h = (int(v) for v in text.lower().split("x"))
-        if w > 0 and h > 0:
-            return w, h
-    except ValueError:
-        pass
-    raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT in pixels, e.g. 320x240, found {text!r}")
+    raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT in pixels, e.g. 1280x800, found {text!r}")
 
 
 def cmd_tof(args: argparse.Namespace) -> int:
@@ -190,7 +181,7 @@ def cmd_stereo(args: argparse.Namespace) -> int:
                          "size")
     opts = {} if args.num_disparities is None else {"num_disparities": args.num_disparities}
     res = stereo_depth(left, right, rig.cameras[0], rig.cameras[1], method=args.method, min_depth=args.min_depth,
-                       **opts)
+                       alpha=args.alpha, **opts)
     dmap = res.disparity
     ok = np.isfinite(res.depth)
     _say(f"{dmap.method}: disparities [{dmap.min_disparity}, {dmap.min_disparity + dmap.num_disparities}) px, "
@@ -688,7 +679,7 @@ def build_parser() -> argparse.ArgumentParser:
                      help="add a second return of STRENGTH x the direct light, EXTRA_M metres longer round trip")
     tof.add_argument("--jitter-ps", type=float, default=50.0, help="tof-pulsed: timing jitter, ps RMS (default 50)")
     sz = render.add_argument_group("time of flight and stereo")
-    sz.add_argument("--size", type=_image_size, default=None,
+    sz.add_argument("--size", type=_size, default=None,
                     help="sensor size WIDTHxHEIGHT (default: tof 320x240, stereo 640x400)")
     sz.add_argument("--no-dots", action="store_true", help="stereo: switch the dot projector off")
     render.set_defaults(func=cmd_sim_render)
@@ -699,7 +690,7 @@ def build_parser() -> argparse.ArgumentParser:
                      help="a folder (images taken in natural numeric order) or a list of image files")
     dec.add_argument("--pattern", required=True,
                      help=f"pattern method ({', '.join(PATTERN_METHODS)}) or a patterns.json spec file")
-    dec.add_argument("--projector", type=_projector_size, help="projector resolution WxH, e.g. 1280x800")
+    dec.add_argument("--projector", type=_size, help="projector resolution WxH, e.g. 1280x800")
     dec.add_argument("--order", default="rangekit", choices=("rangekit", "opencv"),
                      help="capture order; 'opencv' = GrayCodePattern (pairs, then white, black)")
     dec.add_argument("--integer", action="store_true", help="integer codes only (no subpixel refinement)")
@@ -774,7 +765,7 @@ def build_parser() -> argparse.ArgumentParser:
     ren.add_argument("--elevation", type=float, default=25.0, help="degrees above the horizontal (default 25)")
     ren.add_argument("--up", type=float, nargs=3, default=[0.0, 0.0, 1.0], metavar=("X", "Y", "Z"),
                      help="the object's up direction (default 0 0 1; Stanford scans: 0 1 0)")
-    ren.add_argument("--size", type=_projector_size, default=(800, 600), help="image size WxH (default 800x600)")
+    ren.add_argument("--size", type=_size, default=(800, 600), help="image size WxH (default 800x600)")
     ren.add_argument("--colour", action="store_true", help="shade a mesh with its vertex colours (default grey)")
     ren.set_defaults(func=cmd_render)
 
@@ -837,6 +828,9 @@ def build_parser() -> argparse.ArgumentParser:
     stp.add_argument("--num-disparities", type=int, help="disparity search range (multiple of 16; default from "
                                                          "--min-depth)")
     stp.add_argument("--min-depth", type=float, default=0.4, help="nearest depth to search, metres (default 0.4)")
+    stp.add_argument("--alpha", type=float, default=0.0,
+                     help="rectification scaling: 0 crops to valid pixels (finer at low resolution, default), 1 keeps "
+                          "every source pixel; 0.5 reaches the image borders at 640x400 (docs/stereo.md)")
     stp.set_defaults(func=cmd_stereo)
 
     rig = sub.add_parser("rig", help="rig files: write a template",

@@ -23,3 +23,9 @@ from rangekit.sim.lightstage import (LIGHT_STAGE_MODEL, LightStageCapture, light
 
 __all__ += ["LIGHT_STAGE_MODEL", "LightStageCapture", "light_stage_camera", "light_stage_lights",
             "light_stage_scene", "render_light_stage"]
+
+from rangekit.sim.stereo import StereoCapture, render_stereo, speckle_pattern, stereo_rig, stereo_scene
+from rangekit.sim.tof import ToFCapture, ToFSensor, render_pulsed, render_tof, tof_camera, tof_scene
+
+__all__ += ["StereoCapture", "render_stereo", "speckle_pattern", "stereo_rig", "stereo_scene",
+            "ToFCapture", "ToFSensor", "render_pulsed", "render_tof", "tof_camera", "tof_scene"]

@@ -12,16 +12,20 @@ Accuracy is against the simulator's exact left-camera depth, on the raw left gri
 least 5 px from the border. Median of 5 runs, on 1 thread and on all threads.
 
 Run: .venv/bin/python benchmarks/bench_stereo.py
+     .venv/bin/python benchmarks/bench_stereo.py --tables   (docs/stereo.md's accuracy tables: 320x200 and
+     640x400, dots on and off, both matchers through stereo_depth)
 """
 
 from __future__ import annotations
+
+import sys
 
 import cv2
 import numba
 import numpy as np
 
 from rangekit.sim.stereo import render_stereo, stereo_rig, stereo_scene
-from rangekit.stereo import depth_in_camera, rectify, rectify_images, sgbm_disparity, sgm_disparity
+from rangekit.stereo import depth_in_camera, rectify, rectify_images, sgbm_disparity, sgm_disparity, stereo_depth
 
 from _timing import timed  # benchmarks/_timing.py (the script's folder is on sys.path)
 
@@ -79,5 +83,26 @@ def main() -> None:
               f"{gross * 100:.2f}% |")
 
 
+def tables() -> None:
+    """Coverage and errors of both matchers with and without dots (stereo_depth picks the disparities)."""
+    for W, H in ((320, 200), (640, 400)):
+        rig = stereo_rig(W, H)
+        print(f"\n| {W}x{H} | coverage | RMS | median abs error | within 1 cm | occluded band invalidated |")
+        print("|---|---|---|---|---|---|")
+        for dots in (True, False):
+            cap = render_stereo(stereo_scene(), rig, dots=dots, seed=0)
+            for method in ("census-sgm", "sgbm"):
+                res = stereo_depth(cap.left, cap.right, *rig.cameras, method=method)
+                rect, n_disp = res.rectification, res.disparity.num_disparities
+                mask = cap.visible & (rect.focal * rect.baseline / cap.depth < n_disp - 1)
+                mask[:5], mask[-5:], mask[:, :5], mask[:, -5:] = False, False, False, False
+                ok = mask & np.isfinite(res.depth)
+                e = np.abs(res.depth - cap.depth)[ok]
+                occluded = cap.hit & ~cap.visible
+                print(f"| {method}, {'dots' if dots else 'no dots'} ({n_disp} disparities) | "
+                      f"{ok.sum() / mask.sum():.1%} | {np.sqrt(np.mean(e ** 2)) * 1e3:.1f} mm | {np.median(e) * 1e3:.1f} mm | "
+                      f"{(e < 0.01).sum() / mask.sum():.1%} | {np.isnan(res.depth[occluded]).mean():.1%} |")
+
+
 if __name__ == "__main__":
-    main()
+    tables() if "--tables" in sys.argv[1:] else main()

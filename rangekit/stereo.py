@@ -460,12 +460,12 @@ def disparity_to_points(disparity: np.ndarray | DisparityMap, rect: Rectificatio
 
 def _raw_to_rectified(rect: Rectification, camera: PinholeCamera) -> tuple[np.ndarray, np.ndarray]:
     """(H, W) rectified-left coordinates (u, v) of every raw left pixel centre."""
-    uv = camera.pixel_grid().reshape(-1, 1, 2)
-    dist = camera.dist if camera.dist.size else np.zeros(5)
-    r = cv2.undistortPoints(uv, camera.K, dist, R=rect.R1, P=rect.P1,
-                            criteria=(cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 40, 1e-12))
-    r = r.reshape(camera.height, camera.width, 2).astype(np.float64)
-    return r[..., 0], r[..., 1]
+    xy = camera.pixels_to_normalized(camera.pixel_grid())          # the lens model's exact inverse
+    X = np.column_stack([xy, np.ones(len(xy))]) @ rect.R1.T          # rays in the rectified-left frame
+    P = rect.P1
+    u = (P[0, 0] * X[:, 0] + P[0, 2] * X[:, 2]) / X[:, 2]
+    v = (P[1, 1] * X[:, 1] + P[1, 2] * X[:, 2]) / X[:, 2]
+    return u.reshape(camera.height, camera.width), v.reshape(camera.height, camera.width)
 
 
 def _bilinear_all_valid(img: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -501,7 +501,7 @@ def depth_in_camera(disparity: np.ndarray | DisparityMap, rect: Rectification,
                     left_camera: PinholeCamera) -> np.ndarray:
     """(H, W) float64 depth (z in the original left camera frame, metres) on the raw left pixel grid.
 
-    Every raw left pixel is mapped to rectified coordinates (``cv2.undistortPoints`` with ``R1``, ``P1``), the
+    Every raw left pixel is mapped to rectified coordinates (the lens model's inverse, then ``R1``, ``P1``), the
     disparity is sampled bilinearly there (NaN unless all 4 neighbours are valid), triangulated in the
     rectified frame and rotated back by ``R1^T``. Compares directly with a left camera's true depth map.
     Bilinear interpolation of disparity is exact on planes (1/z is affine in rectified pixels there).

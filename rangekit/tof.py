@@ -52,7 +52,7 @@ __all__ = [
     "range_sigma",
     "unwrap_ranges",
     "flying_pixels",
-    "camera_ray_z",
+    "camera_rays",
     "range_to_depth",
     "range_to_points",
     "decode_cw",
@@ -345,7 +345,7 @@ def _check_range_map(range_map, camera: PinholeCamera, where: str) -> np.ndarray
 _RAY_CACHE: dict[bytes, np.ndarray] = {}
 
 
-def camera_ray_z(camera: PinholeCamera) -> np.ndarray:
+def camera_rays(camera: PinholeCamera) -> np.ndarray:
     """(H, W, 3) float64 unit ray directions of every pixel centre in the camera frame (distortion undone).
 
     Read-only; cached for the last few lenses (undoing the distortion of every pixel is the costly part of
@@ -371,7 +371,7 @@ def range_to_depth(range_map, camera: PinholeCamera) -> np.ndarray:
     ``z = r * d_z`` with ``d`` the unit ray of the pixel centre, lens distortion undone exactly.
     """
     r = _check_range_map(range_map, camera, "range_to_depth")
-    return r * camera_ray_z(camera)[..., 2]
+    return r * camera_rays(camera)[..., 2]
 
 
 def range_to_points(range_map, camera: PinholeCamera, *, frame: str = "world") -> np.ndarray:
@@ -380,7 +380,7 @@ def range_to_points(range_map, camera: PinholeCamera, *, frame: str = "world") -
     if frame not in ("camera", "world"):
         raise InputError(f"range_to_points: frame must be 'camera' or 'world', found {frame!r}")
     r = _check_range_map(range_map, camera, "range_to_points")
-    p = r[..., None] * camera_ray_z(camera)
+    p = r[..., None] * camera_rays(camera)
     if frame == "world" and not np.array_equal(camera.T_world_cam, np.eye(4)):
         p = apply_T(camera.T_world_cam, p.reshape(-1, 3)).reshape(p.shape)
     return p
@@ -397,7 +397,7 @@ def flying_pixels(range_map, camera: PinholeCamera, *, max_angle_deg: float = 15
     Pixels with NaN neighbours on both sides are not judged.
     """
     r = _check_range_map(range_map, camera, "flying_pixels")
-    d = camera_ray_z(camera)
+    d = camera_rays(camera)
     p = r[..., None] * d
     H, W = r.shape
     pad = np.pad(p, ((1, 1), (1, 1), (0, 0)), constant_values=np.nan)
@@ -505,5 +505,5 @@ def decode_cw(samples, plan: FrequencyPlan, camera: PinholeCamera, *, electrons_
     conf = np.where(valid, snr / (snr + 5.0), 0.0).astype(np.float32)
     return ToFResult(range=r_valid, depth=depth, points=pts, confidence=conf,
                      sigma_range=np.where(valid, sigma_comb, np.nan), amplitude=maps.amplitude,
-                     offset=maps.offset, phase=maps.phase, unwrap=un, low_signal=low & np.isfinite(snr),
+                     offset=maps.offset, phase=maps.phase, unwrap=un, low_signal=low,
                      ambiguous=un.ambiguous & ~low, flying=flying & ~low & ~un.ambiguous, valid=valid)

@@ -35,13 +35,13 @@ import numpy as np
 
 from rangekit.camera import PinholeCamera
 from rangekit.errors import InputError
-from rangekit.geometry import make_T, axis_angle_to_R, compose
+from rangekit.geometry import axis_angle_to_R, make_T
 from rangekit.io import atomic_save_npz, atomic_write_json, write_png
 from rangekit.rig import Rig, save_rig
 from rangekit.sim.objects import make_object
 from rangekit.sim.raycast import cast_view
 from rangekit.sim.scene import Scene
-from rangekit.tof import C_LIGHT, FrequencyPlan
+from rangekit.tof import C_LIGHT, FrequencyPlan, range_to_points
 
 __all__ = ["ToFSensor", "ToFCapture", "PulsedCapture", "KINECT_V2_PLAN", "LUXONIS_PLAN", "tof_camera", "tof_scene",
            "render_tof", "render_pulsed", "write_tof_capture", "write_pulsed_capture"]
@@ -57,7 +57,7 @@ class ToFSensor:
     """Light and sensor parameters of the simulated ToF camera (electrons per sample).
 
     Defaults: at 15 m an albedo-0.8 surface facing the camera gives ``A / sigma_s`` = 7.3 per sample
-    (phase noise 0.11 rad with 3 steps); at 0.5 m about 460, and the brightest sample (2.8e5 e-) stays
+    (phase noise 0.11 rad with 3 steps); below 0.6 m about 290, and the brightest sample (2.8e5 e-) stays
     below the full well.
     """
 
@@ -152,6 +152,9 @@ def tof_camera(width: int = 320, height: int = 240) -> PinholeCamera:
                          T_world_cam=np.eye(4), name="tof")
 
 
+_PANEL_MARGIN = 1.06 * 1.2  # panel size over the strip it covers
+
+
 def tof_scene(near: float = 0.5, far: float = 15.0, *, columns: int = 12, albedo: float = 0.8) -> Scene:
     """Panels facing the camera (world = camera frame) at ranges from ``near`` to ``far`` metres.
 
@@ -177,9 +180,10 @@ def tof_scene(near: float = 0.5, far: float = 15.0, *, columns: int = 12, albedo
             d = np.array([xc, yc, 1.0])
             d /= np.linalg.norm(d)
             centre = r * d
-            # Panel size: the strip's angular extent at range r, enlarged 6% so strips overlap.
-            w = 1.06 * r * (x1 - x0) / 1.0 * 1.2
-            h = 1.06 * r * (y1 - y0) * 1.2
+            # Panel size: the strip's extent in normalised coordinates times r, enlarged 27% so that
+            # neighbouring strips overlap (also once tilted).
+            w = _PANEL_MARGIN * r * (x1 - x0)
+            h = _PANEL_MARGIN * r * (y1 - y0)
             tilt = 0.0 if row == 0 else np.radians(30.0)
             # Panel frame: z towards the camera (normal = -d), then tilted about the panel's y axis.
             z_axis = -d
@@ -188,7 +192,7 @@ def tof_scene(near: float = 0.5, far: float = 15.0, *, columns: int = 12, albedo
             y_axis = np.cross(z_axis, x_axis)
             R = np.column_stack([x_axis, y_axis, z_axis]) @ axis_angle_to_R([0.0, 1.0, 0.0], tilt)
             panel = make_object("plane", width=w, height=h, albedo=albedo, name=f"panel_{row}_{i}")
-            objects.append(panel.with_pose(compose(make_T(R, centre))))
+            objects.append(panel.with_pose(make_T(R, centre)))
     return Scene(tuple(objects))
 
 
@@ -283,12 +287,9 @@ def _preview(values: np.ndarray) -> np.ndarray:
     return np.rint(np.where(ok, out, 0) * 255).astype(np.uint8)
 
 
-def _truth(out: Path, *, range_true, depth_true, hit, camera: PinholeCamera, **extra) -> None:
-    from rangekit.tof import range_to_points
-
-    atomic_save_npz(out / "ground_truth.npz", range=range_true, depth=depth_true,
-                    xyz=range_to_points(range_true, camera) if "xyz" not in extra else extra.pop("xyz"),
-                    hit=hit, T_world_cam=camera.T_world_cam, **extra)
+def _truth(out: Path, *, range_true, depth_true, xyz, hit, camera: PinholeCamera, **extra) -> None:
+    atomic_save_npz(out / "ground_truth.npz", range=range_true, depth=depth_true, xyz=xyz, hit=hit,
+                    T_world_cam=camera.T_world_cam, **extra)
 
 
 def write_tof_capture(capture: ToFCapture, out_dir: str | Path, *, info: dict | None = None) -> list[Path]:
@@ -331,7 +332,8 @@ def write_pulsed_capture(capture: PulsedCapture, out_dir: str | Path, *, info: d
     atomic_write_json(out / "tof.json", {"kind": "rangekit.tof.pulsed/1", "jitter_s": capture.jitter_s, **(info or {})})
     save_rig(Rig(cameras=(capture.camera,), devices={"camera": {"type": "sim", "sensor": "tof-pulsed"}}),
              out / "rig.json")
-    _truth(out, range_true=capture.range_true, depth_true=capture.depth_true, hit=capture.hit, camera=capture.camera,
+    _truth(out, range_true=capture.range_true, depth_true=capture.depth_true,
+           xyz=range_to_points(capture.range_true, capture.camera), hit=capture.hit, camera=capture.camera,
            valid=capture.hit)
     write_png(out / "preview.png", _preview(capture.round_trip_s))
     return path

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 
@@ -62,8 +64,12 @@ def test_kinect_plan_unwraps_0p5_to_15m(kinect):
     assert r[good].min() < 0.55 and r[good].max() > 14.9
     # The signal-to-noise ratio the acceptance is stated at: A / sigma per sample at the far panels.
     snr_far = np.median(_snr(cap)[0][good & (r > 12)])
+    snr_near = np.median(_snr(cap)[0][good & (r < 0.6)])
     assert 5 < snr_far < 10, snr_far  # measured 7.3 (phase noise 0.11 rad at 3 steps)
     correct = _correct(cap, res)
+    print(f"16/80/120 MHz: {correct[good].mean():.4%} of {good.sum()} unmixed pixels right; A/sigma per sample "
+          f"{snr_far:.1f} beyond 12 m, {snr_near:.0f} below 0.6 m; brightest sample {cap.expected.max():.3g} e- "
+          f"(full well {cap.sensor.full_well_e:.3g})")
     assert correct[good].mean() >= 0.999  # measured 1.0 over 74.8k pixels
     # Every wrap count occurs, so the test would catch a wrong unwrapping: one frequency alone fails.
     U = cap.plan.wrap_lengths
@@ -87,6 +93,10 @@ def test_combined_range_noise_matches_theory(kinect):
     sigma_theory = 1 / np.sqrt(inv_var)
     m = res.valid & clean.valid & ~cap.mixed
     z = (res.range - clean.range)[m] / sigma_theory[m]
+    bias = np.abs(clean.range - cap.range_true)[m]
+    print(f"noise / theory {z.std():.3f}, mean {z.mean():.4f}; predicted sigma / theory "
+          f"{np.median(res.sigma_range[m] / sigma_theory[m]):.3f}; noise-free error median {np.median(bias) * 1e6:.1f} um, "
+          f"max {bias.max() * 1e6:.1f} um")
     assert 0.9 <= z.std() <= 1.1, z.std()          # measured 1.02
     assert abs(z.mean()) < 0.02
     # The decoder's own prediction (from measured amplitude and offset) agrees too.
@@ -101,6 +111,7 @@ def test_radial_distance_to_depth_and_points_exact(kinect):
     cam = cap.camera
     assert np.abs(cam.dist).max() > 0.05  # a distorted lens: z != r along off-axis rays
     depth = range_to_depth(cap.range_true, cam)
+    print(f"range to depth: max error {np.nanmax(np.abs(depth - cap.depth_true)):.2g} m")
     assert np.nanmax(np.abs(depth - cap.depth_true)) < 1e-9
     assert np.nanmax(np.abs(range_to_points(cap.range_true, cam) - cap.xyz_true)) < 1e-9
     assert np.nanmax(np.abs(depth - cap.range_true)) > 1.0  # the conversion matters
@@ -111,6 +122,8 @@ def test_two_frequencies_80_100_mhz_beyond_1p875m():
     res = _decode(cap)
     r = cap.range_true
     beyond = cap.hit & ~cap.mixed & (r > 1.875)
+    print(f"80/100 MHz: {_correct(cap, res)[beyond].mean():.4%} of {beyond.sum()} pixels from 1.875 to "
+          f"{r[beyond].max():.2f} m right")
     assert r[beyond].max() > 7.2 and beyond.sum() > 5000
     assert _correct(cap, res)[beyond].mean() >= 0.999  # measured 1.0
     assert res.valid[beyond].mean() > 0.99
@@ -120,10 +133,13 @@ def test_two_frequencies_80_100_mhz_beyond_1p875m():
 
 def test_flying_pixels_are_removed(kinect):
     cap, res = kinect
-    with np.errstate(invalid="ignore"), pytest.warns(RuntimeWarning, match="All-NaN"):
-        err_any = np.nanmin(np.abs(cap.subray_range - res.unwrap.range[..., None]), axis=2)  # NaN: no hit
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN rows: pixels with no range
+        err_any = np.nanmin(np.abs(cap.subray_range - res.unwrap.range[..., None]), axis=2)
     flying = cap.mixed & (err_any > 0.02)  # more than 2 cm from every surface the pixel sees
     good = cap.hit & ~cap.mixed
+    print(f"flying pixels removed {(~res.valid[flying]).mean():.1%} of {flying.sum()}, unmixed removed "
+          f"{(~res.valid[good]).mean():.3%}")
     assert flying.sum() > 500
     assert (~res.valid[flying]).mean() >= 0.85   # measured 0.89
     assert (~res.valid[good]).mean() <= 0.002    # measured 0.0006
@@ -137,6 +153,8 @@ def test_ambiguity_flag_catches_wrong_wraps_at_low_snr():
     res = _decode(cap, min_snr=0.0, flying_angle_deg=None)
     good = cap.hit & ~cap.mixed
     correct = _correct(cap, res)
+    print(f"signal_e 1e4: A/sigma {np.median(_snr(cap)[0][good & (cap.range_true > 12)]):.1f} beyond 12 m; "
+          f"{correct[good].mean():.2%} right, {correct[good & ~res.ambiguous].mean():.3%} of the unflagged")
     assert correct[good].mean() < 0.99                      # the far panels are too dark (measured 0.978)
     assert correct[good & ~res.ambiguous].mean() >= 0.998   # what is not flagged is right (measured 0.999)
 
@@ -149,6 +167,8 @@ def test_multipath_biases_range_and_shows_in_the_residual():
     rp, rm = _decode(plain), _decode(multi)
     good = plain.hit & ~plain.mixed
     assert abs(np.nanmedian((rp.unwrap.range - plain.range_true)[good])) < 1e-3
+    print(f"multipath: bias {np.nanmedian((rm.unwrap.range - multi.range_true)[good]) * 1e3:.1f} mm, median residual "
+          f"{np.nanmedian(rm.unwrap.residual[good]):.1f} vs {np.nanmedian(rp.unwrap.residual[good]):.2f}")
     assert np.nanmedian((rm.unwrap.range - multi.range_true)[good]) > 0.02      # measured 4 cm
     assert np.nanmedian(rm.unwrap.residual[good]) > 10 * np.nanmedian(rp.unwrap.residual[good])
 
@@ -157,6 +177,7 @@ def test_pulsed_range_noise_is_timing_jitter():
     cap = render_pulsed(tof_scene(), camera=tof_camera(160, 120), jitter_s=50e-12, seed=5)
     err = (pulsed_range(cap.round_trip_s) - cap.range_true)[cap.hit]
     sigma = C_LIGHT * 50e-12 / 2  # 7.5 mm
+    print(f"pulsed: std {err.std() * 1e3:.2f} mm vs {sigma * 1e3:.2f} mm")
     assert err.std() == pytest.approx(sigma, rel=0.1)
     assert abs(err.mean()) < 4 * sigma / np.sqrt(err.size)
     exact = render_pulsed(tof_scene(), camera=tof_camera(160, 120), jitter_s=0.0)

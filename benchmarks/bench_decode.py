@@ -25,7 +25,7 @@ Accuracy is measured on the pixels the projector lights (ground truth ``lit``): 
 the fraction of them decoded to within half a projector pixel of the truth (integer decodes must equal
 ``floor(true + 0.5)``; failures count as wrong); "col RMS" is over valid lit pixels within 1 px of truth.
 
-Targets (exit status 1 if one is missed, checked only when ``rangekit.decode`` exists): integer columns
+Targets (exit status 1 if one is missed, checked only when ``rangekit.coded.decode`` exists): integer columns
 and rows with confidence in <= 0.05 s and >= 30x faster than OpenCV, where "OpenCV" is its fastest
 one-camera time at the matched threshold, min(getprojpixel, decode-stereo / 2); subpixel on both axes in <= 0.1 s.
 """
@@ -85,7 +85,7 @@ def run_peer(py: Path, *args: str, timeout: float = 3600) -> subprocess.Complete
 # ------------------------------------------------------------------ test stack
 def opencv_order_from_rangekit() -> np.ndarray:
     """rangekit's Gray-code frames (white, black, pairs) reordered as OpenCV's (pairs, white, black)."""
-    from rangekit.patterns import make_pattern_spec
+    from rangekit.coded.patterns import make_pattern_spec
 
     frames = list(make_pattern_spec("graycode", (PROJ_W, PROJ_H)).frames())
     return np.stack(frames[2:] + frames[:2])
@@ -294,11 +294,11 @@ def main() -> int:
     # (iv) rangekit's decoder
     have_decode = True
     try:
-        from rangekit.decode import decode
-        from rangekit.patterns import make_pattern_spec
+        from rangekit.coded.decode import decode
+        from rangekit.coded.patterns import make_pattern_spec
     except ImportError as exc:
         have_decode = False
-        print(f"rangekit.decode not available yet ({exc}); skipping the rangekit decoder")
+        print(f"rangekit.coded.decode not available yet ({exc}); skipping the rangekit decoder")
     t_int = t_sub = None
     if have_decode:
         spec = make_pattern_spec("graycode", (PROJ_W, PROJ_H))
@@ -344,7 +344,7 @@ def main() -> int:
 
     # targets
     if not have_decode:
-        print("targets not checked: rangekit.decode not available yet")
+        print("targets not checked: rangekit.coded.decode not available yet")
         return 0
     checks = [(f"integer col+row+conf <= {TARGET_INT_S} s", t_int <= TARGET_INT_S),
               (f"subpixel col+row <= {TARGET_SUBPIX_S} s", t_sub <= TARGET_SUBPIX_S)]

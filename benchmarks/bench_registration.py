@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from rangekit.geometry import apply_T, axis_angle_to_R, invert_T, make_T, rotation_angle
-from rangekit.pointcloud import PointCloud
+from rangekit.surface.cloud import PointCloud
 from rangekit.registration.icp import IcpOptions, OrganisedScan, icp
 
 from _timing import timed  # benchmarks/_timing.py (the script's folder is on sys.path)
@@ -158,7 +158,7 @@ def bench_multiview(scans) -> list[str]:
 
 
 def bench_bunny() -> list[str]:
-    from rangekit.pointcloud import load_cloud
+    from rangekit.surface.cloud import load_cloud
     from rangekit.registration.multiview import register_views
     from scipy.spatial.transform import Rotation
 

@@ -31,7 +31,7 @@ def main() -> int:
     t0 = time.perf_counter()
     import open3d  # noqa: F401  (import cost reported separately)
 
-    from rangekit.patterns import make_pattern_spec
+    from rangekit.coded.patterns import make_pattern_spec
     from rangekit.sim import SimRig, cast_view, default_scene
     from rangekit.sim.render import ViewRenderer
 

@@ -33,14 +33,14 @@ from rangekit.calib.projector import BundleResult, bundle_adjust, corner_project
 from rangekit.calib.response import measure_response
 from rangekit.calib.turntable import AxisFit, fit_turntable_axis, turntable_frame
 from rangekit.camera import PinholeCamera
-from rangekit.decode import decode
+from rangekit.coded.decode import decode
 from rangekit.errors import CalibrationError
 from rangekit.geometry import compose, invert_T, make_T, rotation_angle, rotvec_to_R
-from rangekit.patterns import make_pattern_spec
+from rangekit.coded.patterns import make_pattern_spec
 from rangekit.progress import call_progress
-from rangekit.response import ResponseFit
+from rangekit.coded.response import ResponseFit
 from rangekit.rig import Rig
-from rangekit.triangulate import triangulate
+from rangekit.coded.triangulate import triangulate
 
 __all__ = ["CalibrationSettings", "RigCalibration", "calibrate_rig", "compare_rigs"]
 

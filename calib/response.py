@@ -5,7 +5,7 @@ Point the projector at a matte surface the camera sees (a wall, a white board, t
     fit = measure_response(rig.projector, rig.camera)
     # store fit.response in the rig file: "projector_response": {"gamma": 2.21}
 
-The model and the fit are in :mod:`rangekit.response`; the result does not depend on the surface's
+The model and the fit are in :mod:`rangekit.coded.response`; the result does not depend on the surface's
 albedo, the room light or the projector's black level. Keep the camera's exposure fixed and below
 clipping on the full-white image.
 """
@@ -19,7 +19,7 @@ import numpy as np
 from rangekit.devices import Camera, Projector
 from rangekit.errors import InputError
 from rangekit.progress import call_progress
-from rangekit.response import ResponseFit, fit_response
+from rangekit.coded.response import ResponseFit, fit_response
 
 __all__ = ["measure_response", "DEFAULT_LEVELS"]
 
@@ -42,7 +42,7 @@ def measure_response(projector: Projector, camera: Camera, *, levels: Sequence[f
     mask : (H, W) bool ndarray, optional
         Camera pixels to use (e.g. the white board); default every pixel with enough contrast.
     progress : ``progress(msg, done=None, total=None)``, optional (see :mod:`rangekit.progress`).
-    fit_options : passed to :func:`rangekit.response.fit_response` (``min_contrast``, ``full_scale``).
+    fit_options : passed to :func:`rangekit.coded.response.fit_response` (``min_contrast``, ``full_scale``).
 
     Returns
     -------

@@ -23,7 +23,7 @@ import cv2
 import numpy as np
 
 from rangekit.io import atomic_save_npz, atomic_write_json, write_png
-from rangekit.patterns import PatternSpec
+from rangekit.coded.patterns import PatternSpec
 from rangekit.rig import save_rig
 from rangekit.sim.devices import SimRig
 from rangekit.sim.raycast import ViewGeometry

@@ -26,7 +26,7 @@ import numpy as np
 
 from rangekit.errors import InputError
 from rangekit.geometry import apply_T, invert_T
-from rangekit.mesh import TriangleMesh
+from rangekit.surface.mesh import TriangleMesh
 from rangekit.rig import Rig
 from rangekit.sim.raycast import _open3d_cast
 from rangekit.sim.scene import Scene

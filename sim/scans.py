@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from rangekit.geometry import apply_T, axis_angle_to_R, compose, invert_T, make_T, transform_vectors
-from rangekit.pointcloud import PointCloud
+from rangekit.surface.cloud import PointCloud
 from rangekit.rig import Rig
 from rangekit.sim.devices import SimRig, default_rig
 from rangekit.sim.scene import default_scene

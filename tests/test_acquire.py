@@ -5,9 +5,9 @@ import time
 import numpy as np
 import pytest
 
-from rangekit.acquire import ScanPlan, acquire, load_session
+from rangekit.app.acquire import ScanPlan, acquire, load_session
 from rangekit.errors import ConfigError, DeviceDisconnected
-from rangekit.patterns import make_pattern_spec
+from rangekit.coded.patterns import make_pattern_spec
 from rangekit.rig import Rig
 from rangekit.sim import SimRig, default_rig, default_scene
 

@@ -102,8 +102,8 @@ def test_calibrated_rig_has_the_simulator_schema(calibrated):
 
 def test_round_trip_sphere_radius_with_the_calibrated_rig(calibrated):
     """Scan a sphere in the simulator (true rig) and reconstruct with the calibrated rig."""
-    from rangekit.patterns import make_pattern_spec
-    from rangekit.reconstruct import reconstruct_view
+    from rangekit.coded.patterns import make_pattern_spec
+    from rangekit.app.reconstruct import reconstruct_view
     from rangekit.sim.devices import SimRig
     from rangekit.sim.objects import make_object
     from rangekit.sim.scene import Scene
@@ -193,8 +193,8 @@ def test_depthai_converted_rig_triangulates_in_the_simulator(tmp_path):
     dai = pytest.importorskip("depthai")
     from rangekit.drivers.depthai_camera import calibration_to_rig
     from rangekit.geometry import invert_T
-    from rangekit.patterns import make_pattern_spec
-    from rangekit.reconstruct import reconstruct_view
+    from rangekit.coded.patterns import make_pattern_spec
+    from rangekit.app.reconstruct import reconstruct_view
     from rangekit.sim import SimRig, default_scene
     from rangekit.sim.devices import default_rig
 

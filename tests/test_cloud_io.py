@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from rangekit.errors import FileFormatError
-from rangekit.pointcloud import (CLOUD_READERS, CLOUD_WRITERS, PointCloud, load_cloud, load_range_grid,
+from rangekit.surface.cloud import (CLOUD_READERS, CLOUD_WRITERS, PointCloud, load_cloud, load_range_grid,
                                  save_cloud)
 
 DATA = Path(__file__).parents[1] / ".." / "shared" / "data"

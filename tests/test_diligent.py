@@ -1,4 +1,4 @@
-"""rangekit.diligent: the DiLiGenT reader against the real ``ball`` object and against broken folders."""
+"""rangekit.photometric.diligent: the DiLiGenT reader against the real ``ball`` object and against broken folders."""
 
 from pathlib import Path
 
@@ -6,7 +6,7 @@ import cv2
 import numpy as np
 import pytest
 
-from rangekit.diligent import load_diligent
+from rangekit.photometric.diligent import load_diligent
 from rangekit.errors import FileFormatError
 
 BALL = (Path(__file__).parents[1] / ".." / "shared" / "data" / "diligent-ball").resolve()

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from rangekit.errors import DeviceError, PatternError
-from rangekit.patterns import make_pattern_spec
+from rangekit.coded.patterns import make_pattern_spec
 from rangekit.sim import default_rig
 
 pygame = pytest.importorskip("pygame", reason="optional extra 'display' (pygame) not installed")

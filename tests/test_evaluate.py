@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from rangekit.mesh import TriangleMesh
+from rangekit.surface.mesh import TriangleMesh
 from rangekit.sim import default_rig, default_scene
 from rangekit.sim.evaluate import mesh_accuracy, sample_surface, visible_samples
 

@@ -6,7 +6,7 @@ import trimesh
 
 from rangekit.errors import InputError, RegistrationError
 from rangekit.geometry import apply_T, axis_angle_to_R, invert_T, make_T, rotation_angle
-from rangekit.pointcloud import PointCloud
+from rangekit.surface.cloud import PointCloud
 from rangekit.registration.coarse import CoarseOptions, coarse_align
 from rangekit.registration.icp import KERNELS, IcpOptions, OrganisedScan, icp
 from rangekit.sim.objects import lumpy

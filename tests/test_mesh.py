@@ -17,11 +17,11 @@ from scipy.spatial import cKDTree
 
 from rangekit.errors import FileFormatError, InputError
 from rangekit.geometry import apply_T, compose, invert_T, transform_vectors
-from rangekit.mesh import (TriangleMesh, distance_to_surface, load_mesh_file, make_watertight,
+from rangekit.surface.mesh import (TriangleMesh, distance_to_surface, load_mesh_file, make_watertight,
                            orient_normals_to_sensor, poisson_mesh, save_mesh, tsdf_fuse)
-from rangekit.pointcloud import PointCloud
+from rangekit.surface.cloud import PointCloud
 from rangekit.sim import SimRig, default_rig, default_scene
-from rangekit.triangulate import range_normals
+from rangekit.coded.triangulate import range_normals
 
 N_VIEWS = 12
 

@@ -9,7 +9,7 @@ import pytest
 
 from rangekit.errors import RegistrationError
 from rangekit.geometry import axis_angle_to_R, make_T, rotation_angle
-from rangekit.pointcloud import PointCloud
+from rangekit.surface.cloud import PointCloud
 from rangekit.registration.multiview import overlap_rms, refine_jointly, register_views, _prepare
 from rangekit.registration.sync import synchronise
 from rangekit.sim.scans import perturb_poses, turntable_scans
@@ -71,7 +71,7 @@ def test_wrong_edges_are_rejected(turntable):
 
 
 def test_registered_scan_fuses_into_a_watertight_accurate_mesh(turntable):
-    from rangekit.mesh import TriangleMesh, distance_to_surface, poisson_mesh, tsdf_fuse
+    from rangekit.surface.mesh import TriangleMesh, distance_to_surface, poisson_mesh, tsdf_fuse
 
     scans, _, res, _ = turntable
     P, N = [], []
@@ -105,7 +105,7 @@ def test_registered_scan_fuses_into_a_watertight_accurate_mesh(turntable):
 def _bunny():
     from scipy.spatial.transform import Rotation
 
-    from rangekit.pointcloud import load_cloud
+    from rangekit.surface.cloud import load_cloud
 
     if not BUNNY.is_dir():
         pytest.skip("../shared/data/stanford-bunny is absent")

@@ -6,7 +6,7 @@ import pytest
 
 from rangekit.errors import FileFormatError, PatternError, SceneError
 from rangekit.geometry import apply_T, invert_T, look_at, make_T
-from rangekit.patterns import make_pattern_spec
+from rangekit.coded.patterns import make_pattern_spec
 from rangekit.sim import ImagingModel, Scene, SimRig, default_rig, default_scene, load_mesh
 from rangekit.sim.objects import plane, sphere
 

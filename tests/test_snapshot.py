@@ -9,9 +9,9 @@ import trimesh
 
 from rangekit.camera import PinholeCamera
 from rangekit.errors import InputError
-from rangekit.mesh import TriangleMesh
-from rangekit.pointcloud import PointCloud
-from rangekit.snapshot import (COLORMAPS, colour_bar, colourise, data_uri, fit_camera, montage, raycast_mesh,
+from rangekit.surface.mesh import TriangleMesh
+from rangekit.surface.cloud import PointCloud
+from rangekit.app.snapshot import (COLORMAPS, colour_bar, colourise, data_uri, fit_camera, montage, raycast_mesh,
                                render_cloud, render_mesh, render_values_on_mesh, to_png_bytes)
 
 R = 0.05

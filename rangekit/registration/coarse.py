@@ -12,7 +12,7 @@ from scipy.spatial import cKDTree
 
 from rangekit.errors import RegistrationError
 from rangekit.geometry import apply_T, make_T, procrustes
-from rangekit.pointcloud import PointCloud
+from rangekit.surface.cloud import PointCloud
 from rangekit.registration.icp import IcpOptions, RegistrationResult, estimate_normals, icp, voxel_downsample
 
 __all__ = ["CoarseOptions", "Features", "compute_features", "coarse_align"]

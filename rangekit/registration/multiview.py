@@ -21,7 +21,7 @@ from scipy.spatial import cKDTree
 
 from rangekit.errors import RegistrationError
 from rangekit.geometry import apply_T, invert_T, make_T, rotation_angle, rotvec_to_R
-from rangekit.pointcloud import PointCloud
+from rangekit.surface.cloud import PointCloud
 from rangekit.registration.coarse import CoarseOptions, compute_features, coarse_align
 from rangekit.registration.icp import IcpOptions, estimate_normals, icp, voxel_downsample
 from rangekit.registration.sync import SyncResult, synchronise

@@ -23,7 +23,7 @@ Phase shifting (phase, hybrid): N-step phase ``atan2(sum I_s sin d_s, sum I_s co
 Gray-code column (the Gray code gives the period, the phase the position in it) and flags pixels where
 the two disagree by more than ``max_disagreement`` columns. Under a projector response ``p ** gamma``
 (``response``) the measured phase is a fixed, known function of the true phase; each wrapped phase is
-mapped back through :func:`rangekit.response.phase_correction` before unwrapping.
+mapped back through :func:`rangekit.coded.response.phase_correction` before unwrapping.
 
 Direct/global separation (Nayar et al. 2006): in the finest binary stripes half the projector is lit,
 so ``direct = max - min`` and ``global = 2 (min - black)`` over the finest pattern/inverse pairs. Pixels
@@ -44,8 +44,8 @@ import cv2
 import numpy as np
 
 from rangekit.errors import DecodeError
-from rangekit.patterns import PatternSpec, gray_decode, gray_encode
-from rangekit.response import PhaseCorrection, ProjectorResponse, phase_correction
+from rangekit.coded.patterns import PatternSpec, gray_decode, gray_encode
+from rangekit.coded.response import PhaseCorrection, ProjectorResponse, phase_correction
 
 __all__ = ["DecodeResult", "decode", "phase_from_steps"]
 
@@ -280,7 +280,7 @@ def decode(stack, spec: PatternSpec, *, order: str = "rangekit", subpixel: bool 
         Largest raw value (default 255 for uint8, 65535 for uint16; give 4095 for 12-bit data).
     response : ProjectorResponse, optional
         The projector's response (the rig file's ``projector_response``). Phase methods correct each
-        wrapped phase for it (:func:`rangekit.response.phase_correction`); None or gamma 1 changes
+        wrapped phase for it (:func:`rangekit.coded.response.phase_correction`); None or gamma 1 changes
         nothing. Binary codes do not depend on it.
     workers, chunk_rows : threads and rows per chunk.
 
@@ -295,17 +295,17 @@ def decode(stack, spec: PatternSpec, *, order: str = "rangekit", subpixel: bool 
         (an all-black stack), or the captures look like another order or spec (white darker than black).
     """
     if response is not None and not isinstance(response, ProjectorResponse):
-        raise DecodeError(f"response must be a rangekit.response.ProjectorResponse or None, found "
+        raise DecodeError(f"response must be a rangekit.coded.response.ProjectorResponse or None, found "
                           f"{type(response).__name__} {response!r}; e.g. response=ProjectorResponse(gamma=2.2)")
     if spec.method in ("white", "black"):
         raise DecodeError(f"pattern {spec.method!r} carries no code; decode a graycode, xor02, xor04, phase, "
                           "hybrid or debruijn capture")
     if spec.method == "debruijn":
-        from rangekit.debruijn import decode_debruijn
+        from rangekit.coded.debruijn import decode_debruijn
 
         return decode_debruijn(stack, spec, min_contrast=min_contrast, shadow_threshold=shadow_threshold,
                                full_scale=full_scale)
-    from rangekit import _decode_kernels as K
+    from rangekit.coded import _kernels as K
 
     fr = _Frames(stack, spec, order)
     H, W = fr.shape
@@ -412,7 +412,7 @@ def _decode_phase_maps(fr: _Frames, spec: PatternSpec, shadow, low, glob_mask, c
 
 def _axis_code(fr: _Frames, spec: PatternSpec, axis: str, workers: int, chunk_rows: int) -> np.ndarray:
     """Integer code map of one axis: compiled Gray decoding, or chunked numpy for XOR codes."""
-    from rangekit import _decode_kernels as K
+    from rangekit.coded import _kernels as K
 
     H, W = fr.shape
     prefix = "col" if axis == "columns" else "row"
@@ -437,7 +437,7 @@ def _axis_code(fr: _Frames, spec: PatternSpec, axis: str, workers: int, chunk_ro
 
 def _axis_subpixel(fr: _Frames, spec: PatternSpec, axis: str, code: np.ndarray, max_gap: float) -> np.ndarray:
     """Subpixel stripe-edge refinement of one axis's code map (compiled kernels; module doc)."""
-    from rangekit import _decode_kernels as K
+    from rangekit.coded import _kernels as K
 
     H, W = fr.shape
     prefix = "col" if axis == "columns" else "row"

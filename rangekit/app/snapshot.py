@@ -18,8 +18,8 @@ import numpy as np
 from rangekit.camera import PinholeCamera
 from rangekit.errors import InputError
 from rangekit.geometry import apply_T, look_at
-from rangekit.mesh import TriangleMesh
-from rangekit.pointcloud import PointCloud
+from rangekit.surface.mesh import TriangleMesh
+from rangekit.surface.cloud import PointCloud
 
 __all__ = ["fit_camera", "MeshHits", "raycast_mesh", "shade", "render_mesh", "render_cloud", "colourise",
            "render_values_on_mesh", "colour_bar", "montage", "to_png_bytes", "data_uri", "COLORMAPS"]

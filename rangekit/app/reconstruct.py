@@ -7,12 +7,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from rangekit.camera import PinholeCamera
-from rangekit.decode import DecodeResult, decode
+from rangekit.coded.decode import DecodeResult, decode
 from rangekit.errors import ConfigError, DecodeError
-from rangekit.patterns import PatternSpec
-from rangekit.pointcloud import PointCloud
-from rangekit.response import ProjectorResponse
-from rangekit.triangulate import TriangulationResult, discontinuity_mask, range_normals, triangulate
+from rangekit.coded.patterns import PatternSpec
+from rangekit.surface.cloud import PointCloud
+from rangekit.coded.response import ProjectorResponse
+from rangekit.coded.triangulate import TriangulationResult, discontinuity_mask, range_normals, triangulate
 
 __all__ = ["Reconstruction", "reconstruct_view"]
 
@@ -35,12 +35,12 @@ def reconstruct_view(images, spec: PatternSpec, camera: PinholeCamera, projector
                      full_scale: float | None = None, response: ProjectorResponse | None = None) -> Reconstruction:
     """Decode ``images`` and triangulate against ``projector``.
 
-    ``max_jump`` (relative range step, see :func:`rangekit.triangulate.discontinuity_mask`) removes flying
+    ``max_jump`` (relative range step, see :func:`rangekit.coded.triangulate.discontinuity_mask`) removes flying
     pixels at depth edges; ``max_residual`` (metres) removes ray-ray points whose rays miss each other;
     ``min_confidence`` drops pixels whose decoded confidence (about the white - black signal as a fraction
     of full scale) is lower: at 1-2% of full scale noise moves stripe edges by a large fraction of a
     column, which at grazing angles is millimetres. ``response`` is the projector's response (the rig's
-    ``projector_response``), which phase methods correct for (see :func:`rangekit.decode.decode`).
+    ``projector_response``), which phase methods correct for (see :func:`rangekit.coded.decode.decode`).
     """
     if camera.size != (np.asarray(images[0]).shape[1], np.asarray(images[0]).shape[0]):
         raise ConfigError(f"the captures are {np.asarray(images[0]).shape[1]}x{np.asarray(images[0]).shape[0]} "

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from rangekit import _stereo_kernels as _k
+from rangekit.stereo import _kernels as _k
 from rangekit.camera import PinholeCamera
 from rangekit.errors import InputError
 from rangekit.geometry import apply_T, invert_T, make_T

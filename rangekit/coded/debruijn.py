@@ -1,4 +1,4 @@
-"""Single-shot decoding of de Bruijn colour stripes (Fusiello 13.2.5; see rangekit.patterns).
+"""Single-shot decoding of de Bruijn colour stripes (Fusiello 13.2.5; see rangekit.coded.patterns).
 
 1. Each pixel's colour is normalised by its brightest channel (cancels albedo and shading of grey
    surfaces) and classified to the nearest palette colour.
@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from rangekit.errors import DecodeError
-from rangekit.patterns import DEBRUIJN_PALETTE, PatternSpec, de_bruijn, debruijn_stripe_colours
+from rangekit.coded.patterns import DEBRUIJN_PALETTE, PatternSpec, de_bruijn, debruijn_stripe_colours
 
 __all__ = ["decode_debruijn"]
 
@@ -26,7 +26,7 @@ __all__ = ["decode_debruijn"]
 def decode_debruijn(stack, spec: PatternSpec, *, min_contrast: float = 0.03, shadow_threshold: float = 0.02,
                     full_scale: float | None = None, min_run: int = 2):
     """Decode one RGB capture of a ``debruijn`` spec. Returns a DecodeResult (columns only)."""
-    from rangekit.decode import DecodeResult
+    from rangekit.coded.decode import DecodeResult
 
     frames = list(stack) if not isinstance(stack, np.ndarray) or stack.ndim == 4 else [stack]
     if len(frames) != 1:

@@ -8,7 +8,7 @@ Writes into the session folder (atomically):
     poses.json                                 registered poses, world = the first view's frame
     merged.ply, mesh.ply                       all views in one frame; the fused watertight mesh
     summary.json                               what the end-of-run summary prints, as data
-    report.html                                the visual report (rangekit.report)
+    report.html                                the visual report (rangekit.app.report)
 
 A view's cloud is reused when ``cloud.json`` says it was made with the same settings, so processing
 that was interrupted (or rerun with another fusion method) does not decode again, and gives the same
@@ -25,16 +25,16 @@ from typing import Callable
 import numpy as np
 
 from rangekit import __version__
-from rangekit.acquire import SessionView, load_session
-from rangekit.capture import list_images, read_stack
+from rangekit.app.acquire import SessionView, load_session
+from rangekit.formats.capture import list_images, read_stack
 from rangekit.errors import ConfigError
 from rangekit.geometry import apply_T, compose, invert_T
 from rangekit.io import atomic_save_npz, atomic_write_json, read_json
-from rangekit.patterns import PatternSpec
-from rangekit.pointcloud import PointCloud, load_cloud, save_cloud
-from rangekit.poses import save_poses
+from rangekit.coded.patterns import PatternSpec
+from rangekit.surface.cloud import PointCloud, load_cloud, save_cloud
+from rangekit.formats.poses import save_poses
 from rangekit.progress import StageTimer, call_progress
-from rangekit.reconstruct import reconstruct_view
+from rangekit.app.reconstruct import reconstruct_view
 from rangekit.rig import Rig, load_rig
 
 __all__ = ["FUSION_METHODS", "ProcessResult", "process_session"]
@@ -151,14 +151,14 @@ def process_session(folder: str | Path, *, fusion: str = "poisson", method: str 
     ----------
     fusion : "poisson" (screened Poisson on the merged oriented cloud, the default and the more accurate)
         or "tsdf" (truncated signed distance volume of the registered depth maps).
-    method : triangulation, see :func:`rangekit.reconstruct.reconstruct_view`.
+    method : triangulation, see :func:`rangekit.app.reconstruct.reconstruct_view`.
     table_margin : points within this many metres above the turntable top (or below it) are dropped,
         so the table does not become part of the object.
     evaluate : on a simulated session, measure the mesh against the true surface.
     report : write ``report.html``.
     progress : ``progress(msg, done=None, total=None)`` (see :mod:`rangekit.progress`).
     """
-    from rangekit.mesh import poisson_mesh, save_mesh, tsdf_fuse
+    from rangekit.surface.mesh import poisson_mesh, save_mesh, tsdf_fuse
     from rangekit.registration.multiview import register_views
 
     if fusion not in FUSION_METHODS:
@@ -236,7 +236,7 @@ def process_session(folder: str | Path, *, fusion: str = "poisson", method: str 
     sim_info = data.get("simulator")
     if evaluate and sim_info:
         with timer.stage("evaluate"):
-            from rangekit.mesh import TriangleMesh
+            from rangekit.surface.mesh import TriangleMesh
             from rangekit.sim import default_scene
             from rangekit.sim.evaluate import mesh_accuracy
 
@@ -253,7 +253,7 @@ def process_session(folder: str | Path, *, fusion: str = "poisson", method: str 
                            mesh_info, timer.seconds, accuracy)
     if report:
         with timer.stage("report"):
-            from rangekit.report import write_report
+            from rangekit.app.report import write_report
 
             call_progress(progress, "writing report.html")
             write_report(out, result, clouds=clouds, merged=merged, mesh=mesh, session=data, rig=rig,

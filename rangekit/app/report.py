@@ -4,7 +4,7 @@ Sections: the summary; on the simulator, the error heat map of the mesh against 
 mesh shaded from several sides; the registered views; the view graph with each pair's residual; and
 per view its capture, decoded projector column and confidence, depth and cloud. Every picture is a
 PNG in a ``data:`` URI (the view graph is an SVG, also in a ``data:`` URI), rendered by the ray caster
-and z-buffer of :mod:`rangekit.snapshot`: no display, browser or GPU is needed to write it.
+and z-buffer of :mod:`rangekit.app.snapshot`: no display, browser or GPU is needed to write it.
 """
 
 from __future__ import annotations
@@ -22,9 +22,9 @@ from rangekit.io import atomic_write_text, read_png
 from rangekit.progress import call_progress
 
 if TYPE_CHECKING:
-    from rangekit.mesh import TriangleMesh
-    from rangekit.pipeline import ProcessResult
-    from rangekit.pointcloud import PointCloud
+    from rangekit.surface.mesh import TriangleMesh
+    from rangekit.app.process import ProcessResult
+    from rangekit.surface.cloud import PointCloud
     from rangekit.rig import Rig
 
 __all__ = ["write_report", "view_graph_svg"]
@@ -44,7 +44,7 @@ img{display:block}
 
 
 def _uri(image: np.ndarray) -> str:
-    from rangekit.snapshot import data_uri
+    from rangekit.app.snapshot import data_uri
 
     return data_uri(image)
 
@@ -73,7 +73,7 @@ def _crop(image: np.ndarray, pad: int = 6) -> np.ndarray:
 def view_graph_svg(n: int, edges: Sequence[dict], *, size: int = 460) -> str:
     """The view graph as SVG: views on a circle (in turntable order), accepted pairs as lines coloured by
     their ICP RMSE (green low, red high; the label in micrometres), rejected pairs dashed grey."""
-    from rangekit.snapshot import colourise
+    from rangekit.app.snapshot import colourise
 
     c, r = size / 2, size / 2 - 40
     ang = np.pi / 2 - 2 * np.pi * np.arange(n) / n
@@ -124,8 +124,8 @@ def write_report(folder: str | Path, result: "ProcessResult", *, clouds: Sequenc
     ``clouds`` are the views' clouds in their own frames, ``merged`` and ``mesh`` in the session world
     (the first view's frame), ``truth`` the true surface in that frame (simulator) for the heat map.
     """
-    from rangekit.mesh import distance_to_surface
-    from rangekit.snapshot import (colour_bar, colourise, fit_camera, render_cloud, render_mesh,
+    from rangekit.surface.mesh import distance_to_surface
+    from rangekit.app.snapshot import (colour_bar, colourise, fit_camera, render_cloud, render_mesh,
                                    render_values_on_mesh)
 
     out = Path(folder)

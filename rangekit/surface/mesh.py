@@ -35,8 +35,8 @@ from scipy.sparse.linalg import splu
 from rangekit.camera import PinholeCamera
 from rangekit.errors import FileFormatError, InputError, MeshError
 from rangekit.io import atomic_write_bytes
-from rangekit.pointcloud import PointCloud
-from rangekit.pointcloud import to_open3d as _cloud_to_open3d
+from rangekit.surface.cloud import PointCloud
+from rangekit.surface.cloud import to_open3d as _cloud_to_open3d
 
 __all__ = ["TriangleMesh", "save_mesh", "load_mesh_file", "MESH_FORMATS", "orient_normals_to_sensor",
            "oriented_normals_cloud", "poisson_mesh", "tsdf_fuse", "make_watertight", "distance_to_surface"]
@@ -251,7 +251,7 @@ def poisson_mesh(cloud: PointCloud, *, depth: int = 9, density_quantile: float =
     Parameters
     ----------
     cloud : PointCloud with ``normals`` (unit, pointing out of the object, e.g. from
-        :func:`rangekit.triangulate.range_normals` per view or :func:`orient_normals_to_sensor`).
+        :func:`rangekit.coded.triangulate.range_normals` per view or :func:`orient_normals_to_sensor`).
         Colours, if present, are carried to the vertices.
     depth : octree depth; the finest cell is ``1.1 * bounding-cube side / 2**depth``. Each step up
         roughly quadruples the vertex count and the run time. Choose the cell near the point spacing.
@@ -278,7 +278,7 @@ def poisson_mesh(cloud: PointCloud, *, depth: int = 9, density_quantile: float =
         raise InputError(f"poisson_mesh: expected a rangekit PointCloud, found {type(cloud).__name__}")
     if cloud.normals is None:
         raise InputError("poisson_mesh: the cloud has no normals; Poisson needs oriented normals. Compute them "
-                         "per view with rangekit.triangulate.range_normals(xyz, camera.center) (or estimate them "
+                         "per view with rangekit.coded.triangulate.range_normals(xyz, camera.center) (or estimate them "
                          "and call orient_normals_to_sensor) before merging the views")
     if not 1 <= int(depth) <= 12:
         raise InputError(f"poisson_mesh: depth must be in [1, 12], found {depth}")

@@ -10,8 +10,8 @@ import numpy as np
 
 from rangekit.errors import ConfigError
 from rangekit.geometry import axis_angle_to_R, make_T
-from rangekit.pointcloud import PointCloud, load_cloud, save_cloud
-from rangekit.poses import load_poses, save_poses
+from rangekit.surface.cloud import PointCloud, load_cloud, save_cloud
+from rangekit.formats.poses import load_poses, save_poses
 from rangekit.registration.multiview import MultiViewOptions, MultiViewResult, register_views
 
 __all__ = ["parse_init", "RegisterReport", "register_files"]
@@ -92,7 +92,7 @@ def register_files(paths: Sequence[str | Path], out_dir: str | Path, *, init: st
     save_cloud(out / "merged.ply", merged)
     mesh_path = None
     if mesh:
-        from rangekit.mesh import oriented_normals_cloud, poisson_mesh, save_mesh
+        from rangekit.surface.mesh import oriented_normals_cloud, poisson_mesh, save_mesh
 
         say("meshing (screened Poisson)")
         m = poisson_mesh(merged if N is not None else oriented_normals_cloud(P, voxel=voxel))

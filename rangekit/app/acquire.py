@@ -28,7 +28,7 @@ import numpy as np
 from rangekit.devices import Rig as RigDevices
 from rangekit.errors import ConfigError, DeviceError
 from rangekit.io import atomic_write_json, read_json, write_png
-from rangekit.patterns import PatternSpec
+from rangekit.coded.patterns import PatternSpec
 from rangekit.progress import call_progress
 from rangekit.rig import Rig, save_rig
 

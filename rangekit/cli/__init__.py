@@ -89,7 +89,7 @@ def cmd_sim_render(args: argparse.Namespace) -> int:
     args.object = args.object or "lumpy"
     args.patterns = args.patterns or "graycode"
 
-    from rangekit.patterns import make_pattern_spec
+    from rangekit.coded.patterns import make_pattern_spec
     from rangekit.rig import load_rig
     from rangekit.sim import ImagingModel, SimRig, default_scene
     from rangekit.sim.capture import write_capture
@@ -123,7 +123,7 @@ def _size(text: str) -> tuple[int, int]:
 
 def cmd_tof(args: argparse.Namespace) -> int:
     """rangekit tof RAW_DIR --out OUT: range, depth, confidence and a cloud from raw ToF samples."""
-    from rangekit.range_files import load_ground_truth, load_tof_folder, write_depth_outputs
+    from rangekit.formats.range_files import load_ground_truth, load_tof_folder, write_depth_outputs
     from rangekit.tof import decode_cw, pulsed_range, range_to_depth, range_to_points
 
     t0 = time.perf_counter()
@@ -165,7 +165,7 @@ def cmd_stereo(args: argparse.Namespace) -> int:
 
     from rangekit.errors import ConfigError
     from rangekit.io import read_png
-    from rangekit.range_files import load_ground_truth, write_depth_outputs
+    from rangekit.formats.range_files import load_ground_truth, write_depth_outputs
     from rangekit.rig import load_rig
     from rangekit.stereo import stereo_depth
 
@@ -205,11 +205,11 @@ def cmd_decode(args: argparse.Namespace) -> int:
     """rangekit decode IMAGES --pattern SPEC_OR_NAME --projector WxH [--order opencv] --out maps.npz"""
     from pathlib import Path
 
-    from rangekit.capture import list_images, read_stack
-    from rangekit.decode import decode
+    from rangekit.formats.capture import list_images, read_stack
+    from rangekit.coded.decode import decode
     from rangekit.errors import ConfigError
     from rangekit.io import atomic_save_npz, read_json
-    from rangekit.patterns import PATTERN_METHODS, PatternSpec, make_pattern_spec
+    from rangekit.coded.patterns import PATTERN_METHODS, PatternSpec, make_pattern_spec
 
     t0 = time.perf_counter()
     source = args.images[0] if len(args.images) == 1 else args.images
@@ -237,10 +237,10 @@ def cmd_decode(args: argparse.Namespace) -> int:
 
 def cmd_reconstruct(args: argparse.Namespace) -> int:
     """rangekit reconstruct CAPTURE_DIR [--rig RIG.json] --out cloud.ply"""
-    from rangekit.capture import load_capture
+    from rangekit.formats.capture import load_capture
     from rangekit.errors import ConfigError
-    from rangekit.pointcloud import save_cloud
-    from rangekit.reconstruct import reconstruct_view
+    from rangekit.surface.cloud import save_cloud
+    from rangekit.app.reconstruct import reconstruct_view
     from rangekit.rig import load_rig
 
     t0 = time.perf_counter()
@@ -268,7 +268,7 @@ def cmd_register(args: argparse.Namespace) -> int:
     import numpy as np
 
     from rangekit.geometry import rotation_angle
-    from rangekit.register_files import register_files
+    from rangekit.app.register_files import register_files
 
     t0 = time.perf_counter()
     voxel = args.voxel_mm * 1e-3 if args.voxel_mm else None
@@ -294,8 +294,8 @@ def cmd_register(args: argparse.Namespace) -> int:
 
 def cmd_mesh(args: argparse.Namespace) -> int:
     """rangekit mesh CLOUD --out MESH"""
-    from rangekit.mesh import oriented_normals_cloud, poisson_mesh, save_mesh
-    from rangekit.pointcloud import load_cloud
+    from rangekit.surface.mesh import oriented_normals_cloud, poisson_mesh, save_mesh
+    from rangekit.surface.cloud import load_cloud
 
     t0 = time.perf_counter()
     cloud = load_cloud(args.cloud)
@@ -330,10 +330,10 @@ def cmd_scan(args: argparse.Namespace) -> int:
     from dataclasses import asdict
     from pathlib import Path
 
-    from rangekit.acquire import ScanPlan, acquire, load_session
+    from rangekit.app.acquire import ScanPlan, acquire, load_session
     from rangekit.errors import ConfigError
-    from rangekit.patterns import PatternSpec, make_pattern_spec
-    from rangekit.pipeline import FUSION_METHODS
+    from rangekit.coded.patterns import PatternSpec, make_pattern_spec
+    from rangekit.app.process import FUSION_METHODS
     from rangekit.rig import load_rig
 
     t0 = time.perf_counter()
@@ -413,7 +413,7 @@ def cmd_scan(args: argparse.Namespace) -> int:
 
 def _process(folder: str, args: argparse.Namespace, *, acquisition_s: float | None = None,
              resume_cmd: str | None = None) -> int:
-    from rangekit.pipeline import process_session
+    from rangekit.app.process import process_session
     from rangekit.progress import format_seconds
 
     t0 = time.perf_counter()
@@ -458,7 +458,7 @@ def cmd_render(args: argparse.Namespace) -> int:
 
     from rangekit.errors import FileFormatError
     from rangekit.io import write_png
-    from rangekit.snapshot import fit_camera, montage, render_cloud, render_mesh
+    from rangekit.app.snapshot import fit_camera, montage, render_cloud, render_mesh
 
     src = Path(args.input)
     size = args.size
@@ -466,11 +466,11 @@ def cmd_render(args: argparse.Namespace) -> int:
     if not src.is_file():
         raise FileFormatError(f"{src}: no such file (expected a mesh or a point cloud)")
     if src.suffix.lower() in (".obj", ".stl", ".off", ".glb", ".gltf") or _ply_has_faces(src):
-        from rangekit.mesh import load_mesh_file
+        from rangekit.surface.mesh import load_mesh_file
 
         mesh = load_mesh_file(src)
     else:
-        from rangekit.pointcloud import load_cloud
+        from rangekit.surface.cloud import load_cloud
 
         cloud = load_cloud(src)
     pts = mesh.vertices if mesh is not None else cloud.points
@@ -506,7 +506,7 @@ def cmd_rig_init(args: argparse.Namespace) -> int:
 
 
 def _processing_options(p: argparse.ArgumentParser) -> None:
-    from rangekit.pipeline import FUSION_METHODS
+    from rangekit.app.process import FUSION_METHODS
 
     p.add_argument("--fusion", default="poisson", choices=FUSION_METHODS,
                    help="fusion into one mesh: poisson (default, screened Poisson of the merged cloud) or tsdf")
@@ -594,9 +594,9 @@ def cmd_photometric(args: argparse.Namespace) -> int:
 
     import numpy as np
 
-    from rangekit.diligent import load_diligent
+    from rangekit.photometric.diligent import load_diligent
     from rangekit.io import write_png
-    from rangekit.mesh import TriangleMesh, save_mesh
+    from rangekit.surface.mesh import TriangleMesh, save_mesh
     from rangekit.photometric import (angular_error, depth_to_mesh, integrate_normals, photometric_stereo,
                                       uncalibrated_photometric_stereo)
 
@@ -649,7 +649,7 @@ def build_parser() -> argparse.ArgumentParser:
         "render", help="render a pattern sequence on a simulated object and write captures + ground truth",
         description="Render the captures a real rig would take of an object, plus ground_truth.npz "
                     "(depth, xyz, normals, proj_col, proj_row, valid), the rig file and a preview PNG.")
-    from rangekit.patterns import PATTERN_METHODS
+    from rangekit.coded.patterns import PATTERN_METHODS
 
     render.add_argument("--sensor", default="projector", choices=("projector", "tof", "tof-pulsed", "stereo"),
                         help="projector-camera rig (default), continuous-wave or pulsed time of flight, or the "
@@ -739,7 +739,7 @@ def build_parser() -> argparse.ArgumentParser:
                       help="'sim' (default) or a rig file whose 'devices' name the turntable, projector and camera")
     scan.add_argument("--object", default="lumpy", help="simulated object: built-in name or mesh file")
     scan.add_argument("--views", type=int, default=12, help="turntable views over a full turn (default 12)")
-    from rangekit.patterns import PATTERN_METHODS as _PM
+    from rangekit.coded.patterns import PATTERN_METHODS as _PM
 
     scan.add_argument("--patterns", default="hybrid", choices=_PM,
                       help="pattern set (default hybrid: Gray code + phase shift)")

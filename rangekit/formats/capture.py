@@ -16,7 +16,7 @@ import numpy as np
 
 from rangekit.errors import FileFormatError
 from rangekit.io import read_json, read_png
-from rangekit.patterns import PatternSpec
+from rangekit.coded.patterns import PatternSpec
 from rangekit.rig import Rig, load_rig
 
 __all__ = ["IMAGE_SUFFIXES", "list_images", "read_stack", "Capture", "load_capture"]

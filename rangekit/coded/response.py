@@ -276,7 +276,7 @@ def phase_correction(response: ProjectorResponse | float, steps: int, *, samples
     ----------
     response : ProjectorResponse or float (gamma)
     steps : int >= 3
-        Phase steps N of the pattern (``d_s = 2 pi s / N``, as :func:`rangekit.decode.phase_from_steps`).
+        Phase steps N of the pattern (``d_s = 2 pi s / N``, as :func:`rangekit.coded.decode.phase_from_steps`).
     samples : int
         Grid size of the tables over one period (of true phase, and of measured phase).
 

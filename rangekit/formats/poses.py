@@ -2,7 +2,7 @@
 
 ::
 
-    {"schema": "rangekit.poses/1", "world": "frame of the first view",
+    {"schema": "rangekit.formats.poses/1", "world": "frame of the first view",
      "views": [{"source": "scan0.ply", "T_world_view": [[...], [...], [...], [...]]}, ...]}
 """
 
@@ -18,7 +18,7 @@ from rangekit.io import atomic_write_json, read_json
 
 __all__ = ["save_poses", "load_poses", "POSES_SCHEMA"]
 
-POSES_SCHEMA = "rangekit.poses/1"
+POSES_SCHEMA = "rangekit.formats.poses/1"
 
 
 def save_poses(path: str | Path, sources: Sequence[str], T_world_view: np.ndarray, *,

@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from rangekit.camera import PinholeCamera
-from rangekit.capture import list_images, read_stack
+from rangekit.formats.capture import list_images, read_stack
 from rangekit.errors import FileFormatError, InputError
 from rangekit.io import atomic_save_npy, read_json, write_png
 from rangekit.rig import load_rig
@@ -108,8 +108,8 @@ def load_ground_truth(folder: str | Path) -> dict | None:
 def write_depth_outputs(out: str | Path, depth: np.ndarray, points: np.ndarray, *,
                         range_map: np.ndarray | None = None, confidence: np.ndarray | None = None) -> list[str]:
     """Write depth.npy/png, optional range.npy and confidence.npy/png, and cloud.ply; returns file names."""
-    from rangekit.pointcloud import PointCloud, save_cloud
-    from rangekit.snapshot import colourise
+    from rangekit.surface.cloud import PointCloud, save_cloud
+    from rangekit.app.snapshot import colourise
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)

@@ -5,7 +5,8 @@ the same captures as the hardware, plus the truth (depth, points, normals, proje
 """
 
 from rangekit.sim.devices import SimCamera, SimProjector, SimRig, SimTurntable, default_rig
-from rangekit.sim.objects import BUILTIN_OBJECTS, SceneObject, load_mesh, make_object
+from rangekit.sim.objects import BUILTIN_OBJECTS, load_mesh, make_object
+from rangekit.sim.scene_object import SceneObject
 from rangekit.sim.raycast import ViewGeometry, WorldMesh, cast_view
 from rangekit.sim.render import ImagingModel, ViewRenderer
 from rangekit.sim.scene import Scene, default_scene

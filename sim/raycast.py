@@ -16,7 +16,7 @@ import numpy as np
 from rangekit.camera import PinholeCamera
 from rangekit.errors import SceneError
 from rangekit.geometry import invert_T
-from rangekit.sim.objects import PlanarTexture
+from rangekit.sim.scene_object import PlanarTexture
 
 __all__ = ["WorldMesh", "ViewGeometry", "cast_view", "pixel_corners"]
 

@@ -8,7 +8,8 @@ import numpy as np
 
 from rangekit.errors import SceneError
 from rangekit.geometry import apply_T, axis_angle_to_R, compose, make_T, transform_vectors
-from rangekit.sim.objects import SceneObject, make_object, turntable_disc
+from rangekit.sim.objects import make_object, turntable_disc
+from rangekit.sim.scene_object import SceneObject
 from rangekit.sim.raycast import WorldMesh
 
 __all__ = ["Scene", "default_scene"]

@@ -47,6 +47,7 @@ import cv2
 import numpy as np
 
 from rangekit.errors import InputError
+from rangekit.image import to_grey
 from rangekit.projector_response import ProjectorResponse
 
 __all__ = ["ResponseFit", "PhaseCorrection", "fit_response", "phase_correction"]
@@ -69,9 +70,10 @@ class ResponseFit:
 
 
 def _grey(image: np.ndarray) -> np.ndarray:
+    """(H, W) float32 of a grey or RGB capture (RGB: :func:`rangekit.image.to_grey`)."""
     img = np.asarray(image)
     if img.ndim == 3 and img.shape[2] == 3:
-        return img.astype(np.float32).mean(axis=2)
+        return to_grey(img)
     return img.astype(np.float32)
 
 

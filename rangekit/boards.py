@@ -23,6 +23,7 @@ import cv2
 import numpy as np
 
 from rangekit.errors import InputError
+from rangekit.image import to_grey
 
 __all__ = ["Board", "BoardDetection", "detect_board"]
 
@@ -212,18 +213,17 @@ def _failed(size: tuple[int, int], reason: str) -> BoardDetection:
 
 
 def _as_gray(image: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """uint8/uint16 gray or RGB -> (float32 gray, uint8 gray stretched to the image's maximum)."""
+    """uint8/uint16 gray or RGB -> (float32 gray (:func:`rangekit.image.to_grey`), uint8 gray stretched to
+    the image's maximum; uint8 input is not stretched)."""
     img = np.asarray(image)
     if img.dtype not in (np.uint8, np.uint16):
         raise InputError(f"detect_board: image dtype must be uint8 or uint16, found {img.dtype}")
-    if img.ndim == 3 and img.shape[2] == 3:
-        img = cv2.cvtColor(np.ascontiguousarray(img), cv2.COLOR_RGB2GRAY)
-    elif img.ndim != 2:
+    if img.ndim != 2 and not (img.ndim == 3 and img.shape[2] == 3):
         raise InputError(f"detect_board: image must be (H, W) gray or (H, W, 3) RGB, found shape {img.shape}")
-    gray = img.astype(np.float32)
-    if img.dtype == np.uint8:
+    gray = to_grey(img) if img.ndim == 3 else img.astype(np.float32)
+    if img.dtype == np.uint8 and img.ndim == 2:
         return gray, np.ascontiguousarray(img)
-    top = max(float(gray.max()), 1.0)
+    top = 255.0 if img.dtype == np.uint8 else max(float(gray.max()), 1.0)
     return gray, np.rint(gray * (255.0 / top)).astype(np.uint8)
 
 

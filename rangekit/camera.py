@@ -20,7 +20,7 @@ import numpy as np
 from rangekit.errors import ConfigError, InputError
 from rangekit.geometry import apply_T, invert_T, transform_vectors
 
-__all__ = ["PinholeCamera", "distort", "undistort"]
+__all__ = ["PinholeCamera", "distort", "undistort", "pixel_rays"]
 
 _N_COEFFS = 12  # k1 k2 p1 p2 k3 k4 k5 k6 s1 s2 s3 s4
 
@@ -349,3 +349,34 @@ class PinholeCamera:
         return (f"PinholeCamera(name={self.name!r}, {self.width}x{self.height}, fx={K[0, 0]:.2f}, "
                 f"fy={K[1, 1]:.2f}, cx={K[0, 2]:.2f}, cy={K[1, 2]:.2f}, dist={np.round(self.dist, 5).tolist()}, "
                 f"centre={np.round(self.center, 4).tolist()} m)")
+
+
+_RAY_CACHE: dict[bytes, np.ndarray] = {}
+
+
+def pixel_rays(camera: PinholeCamera) -> np.ndarray:
+    """Unit ray directions of every pixel centre, in the camera's own frame (lens distortion undone).
+
+    Returns
+    -------
+    (H, W, 3) float64, read-only: ``d[v, u]`` is the unit direction (x right, y down, z forward) of the
+    ray through pixel centre ``(u, v)``; NaN where the lens model cannot be inverted. The world-frame
+    rays are ``transform_vectors(camera.T_world_cam, d.reshape(-1, 3))`` from ``camera.center``, bit for
+    bit what ``camera.rays(camera.pixel_grid())`` returns.
+
+    Depends only on the lens (K, dist, size), not on the pose, and is cached for the last four lenses:
+    undoing the distortion of every pixel is costly, and a lens does not change between views.
+    """
+    lens = [camera.K.ravel(), camera.dist.ravel(), [camera.dist.size, camera.width, camera.height]]
+    key = np.concatenate(lens).tobytes()
+    d = _RAY_CACHE.get(key)
+    if d is None:
+        xy = camera.pixels_to_normalized(camera.pixel_grid())
+        d = np.column_stack([xy, np.ones(len(xy))])
+        d /= np.linalg.norm(d, axis=1, keepdims=True)
+        d = d.reshape(camera.height, camera.width, 3)
+        d.flags.writeable = False
+        if len(_RAY_CACHE) >= 4:
+            _RAY_CACHE.pop(next(iter(_RAY_CACHE)))
+        _RAY_CACHE[key] = d
+    return d

@@ -33,7 +33,7 @@ from rangekit.camera import PinholeCamera
 from rangekit.errors import ConfigError, InputError
 from rangekit.geometry import axis_angle_to_R, compose, invert_T, make_T
 from rangekit.io import atomic_write_json, read_json
-from rangekit.coded.response import ProjectorResponse
+from rangekit.projector_response import ProjectorResponse
 
 __all__ = ["Rig", "SCHEMA", "RIG_FIELDS", "CAMERA_FIELDS", "load_rig", "save_rig", "template_rig"]
 

@@ -33,7 +33,7 @@ __all__ = ["default_rig", "SimCamera", "SimProjector", "SimTurntable", "SimRig"]
 def default_rig() -> Rig:
     """The simulator's true rig (see the module docstring); its projector response is ImagingModel's
     default gamma (2.2)."""
-    from rangekit.coded.response import ProjectorResponse
+    from rangekit.projector_response import ProjectorResponse
 
     target = np.array([0.0, 0.0, 0.06])
     elev = np.radians(25.0)

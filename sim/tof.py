@@ -41,7 +41,8 @@ from rangekit.rig import Rig, save_rig
 from rangekit.sim.objects import make_object
 from rangekit.sim.raycast import cast_view
 from rangekit.sim.scene import Scene
-from rangekit.tof import C_LIGHT, FrequencyPlan, range_to_points
+from rangekit.tof.plan import C_LIGHT, FrequencyPlan
+from rangekit.tof.range_maps import range_to_points
 
 __all__ = ["ToFSensor", "ToFCapture", "PulsedCapture", "KINECT_V2_PLAN", "LUXONIS_PLAN", "tof_camera", "tof_scene",
            "render_tof", "render_pulsed", "write_tof_capture", "write_pulsed_capture"]

@@ -6,9 +6,9 @@ import cv2
 import numpy as np
 import pytest
 
-from rangekit.camera import PinholeCamera
+from rangekit.camera import PinholeCamera, pixel_rays
 from rangekit.errors import ConfigError
-from rangekit.geometry import look_at
+from rangekit.geometry import look_at, transform_vectors
 from rangekit.sim import default_rig
 
 DIST_MODELS = {
@@ -51,6 +51,21 @@ def test_default_rig_devices_round_trip():
         uv = dev.pixel_grid()
         o, d = dev.rays(uv)
         assert np.abs(dev.project(o + 0.5 * d) - uv).max() <= 1e-6
+
+
+@pytest.mark.parametrize("name", DIST_MODELS)
+def test_pixel_rays_are_camera_rays_bit_for_bit(name):
+    """The one per-pixel ray builder: camera frame, (H, W, 3), cached; in world, exactly camera.rays."""
+    cam = make_cam(DIST_MODELS[name], size=(320, 256))
+    d = pixel_rays(cam)
+    assert d.shape == (256, 320, 3) and d.dtype == np.float64 and not d.flags.writeable
+    assert pixel_rays(cam.with_pose(np.eye(4))) is d  # depends on the lens only
+    o_ref, d_ref = cam.rays(cam.pixel_grid())
+    assert np.array_equal(transform_vectors(cam.T_world_cam, d.reshape(-1, 3)), d_ref)
+    valid = np.random.default_rng(1).random((256, 320)) < 0.3
+    v, u = np.nonzero(valid)
+    _, d_sub = cam.rays(np.column_stack([u, v]).astype(np.float64))
+    assert np.array_equal(transform_vectors(cam.T_world_cam, d[valid]), d_sub)
 
 
 def test_column_planes_contain_their_rays_without_distortion():

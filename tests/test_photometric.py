@@ -1,7 +1,5 @@
 """Photometric stereo, normal integration and depth meshing against analytic truth (numpy-rendered)."""
 
-import time
-
 import numpy as np
 import pytest
 
@@ -128,14 +126,12 @@ def test_lsq_integration_on_l_shaped_mask():
     assert abs(np.median(Z[mask]) - np.median(Z_true[mask])) < 1e-12
 
 
-def test_lsq_integration_full_size_is_fast():
+def test_lsq_integration_full_size():
+    """The DiLiGenT size; its speed is measured by benchmarks/bench_photometric.py, not here."""
     H, W, ps = 512, 612, 1e-4
     Z_true, n = _bump(H, W, ps)
-    t0 = time.perf_counter()
     Z = integrate_normals(n, pixel_size=ps)
-    elapsed = time.perf_counter() - t0
     assert _rms_rel(Z, Z_true, np.ones((H, W), bool)) <= 0.005
-    assert elapsed < 6.0, elapsed  # ~1.5 s measured on 2 cores; generous for CI
 
 
 def test_fft_integration_on_rectangle():

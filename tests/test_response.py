@@ -11,10 +11,12 @@ import pytest
 from scipy.ndimage import binary_erosion
 
 from rangekit.calib.response import measure_response
-from rangekit.coded.decode import decode, phase_from_steps
+from rangekit.coded.decode import decode
+from rangekit.coded.phase import phase_from_steps
 from rangekit.errors import ConfigError, DecodeError, InputError
 from rangekit.coded.patterns import make_pattern_spec
-from rangekit.coded.response import ProjectorResponse, fit_response, phase_correction
+from rangekit.coded.response import fit_response, phase_correction
+from rangekit.projector_response import ProjectorResponse
 from rangekit.rig import Rig, load_rig, save_rig, template_rig
 from rangekit.sim import ImagingModel, SimRig, default_rig, default_scene
 

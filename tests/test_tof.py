@@ -143,14 +143,14 @@ def test_flying_pixels_are_removed(kinect):
     assert flying.sum() > 500
     assert (~res.valid[flying]).mean() >= 0.85   # measured 0.89
     assert (~res.valid[good]).mean() <= 0.002    # measured 0.0006
-    unfiltered = _decode(cap, flying_angle_deg=None)
+    unfiltered = _decode(cap, flying_angle=None)
     assert (~unfiltered.valid[flying]).mean() < 0.4  # without the filter most would stay
 
 
 def test_ambiguity_flag_catches_wrong_wraps_at_low_snr():
     cap = render_tof(tof_scene(0.5, 15.0), KINECT_V2_PLAN, camera=tof_camera(160, 120),
                      sensor=ToFSensor(signal_e=1e4), seed=3)
-    res = _decode(cap, min_snr=0.0, flying_angle_deg=None)
+    res = _decode(cap, min_snr=0.0, flying_angle=None)
     good = cap.hit & ~cap.mixed
     correct = _correct(cap, res)
     print(f"signal_e 1e4: A/sigma {np.median(_snr(cap)[0][good & (cap.range_true > 12)]):.1f} beyond 12 m; "

@@ -7,11 +7,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from rangekit.camera import PinholeCamera
-from rangekit.coded.decode import DecodeResult, decode
+from rangekit.coded.decode import decode
+from rangekit.coded.result import DecodeResult
 from rangekit.errors import ConfigError, DecodeError
 from rangekit.coded.patterns import PatternSpec
 from rangekit.surface.cloud import PointCloud
-from rangekit.coded.response import ProjectorResponse
+from rangekit.projector_response import ProjectorResponse
 from rangekit.coded.triangulate import TriangulationResult, discontinuity_mask, range_normals, triangulate
 
 __all__ = ["Reconstruction", "reconstruct_view"]

@@ -139,7 +139,7 @@ def cmd_tof(args: argparse.Namespace) -> int:
     else:
         res = decode_cw(raw.samples, raw.plan, cam, electrons_per_unit=raw.electrons_per_dn,
                         read_noise_e=raw.read_noise_e, saturation=raw.saturation_dn, min_snr=args.min_snr,
-                        flying_angle_deg=None if args.keep_flying else args.flying_angle_deg,
+                        flying_angle=None if args.keep_flying else np.radians(args.flying_angle_deg),
                         max_range=args.max_range)
         rng_map, depth, points, confidence, valid = res.range, res.depth, res.points, res.confidence, res.valid
         n = valid.size

@@ -19,15 +19,14 @@ import numpy as np
 
 from rangekit.errors import DecodeError
 from rangekit.coded.patterns import DEBRUIJN_PALETTE, PatternSpec, de_bruijn, debruijn_stripe_colours
+from rangekit.coded.result import DecodeResult
 
 __all__ = ["decode_debruijn"]
 
 
 def decode_debruijn(stack, spec: PatternSpec, *, min_contrast: float = 0.03, shadow_threshold: float = 0.02,
-                    full_scale: float | None = None, min_run: int = 2):
+                    full_scale: float | None = None, min_run: int = 2) -> DecodeResult:
     """Decode one RGB capture of a ``debruijn`` spec. Returns a DecodeResult (columns only)."""
-    from rangekit.coded.decode import DecodeResult
-
     frames = list(stack) if not isinstance(stack, np.ndarray) or stack.ndim == 4 else [stack]
     if len(frames) != 1:
         raise DecodeError(f"found {len(frames)} captures, pattern 'debruijn' is single-shot and needs 1")

@@ -1,4 +1,6 @@
-"""Projector response (gamma): the model, its fit from uniform grey levels, and the phase correction.
+"""Projector response (gamma): its fit from uniform grey levels, and the phase correction.
+
+The model, :class:`rangekit.projector_response.ProjectorResponse`, is a core type (a field of the rig file).
 
 Model
 -----
@@ -45,56 +47,10 @@ import cv2
 import numpy as np
 
 from rangekit.errors import InputError
+from rangekit.image import to_grey
+from rangekit.projector_response import ProjectorResponse
 
-__all__ = ["ProjectorResponse", "ResponseFit", "PhaseCorrection", "fit_response", "phase_correction"]
-
-
-@dataclass(frozen=True)
-class ProjectorResponse:
-    """How a projector turns pattern values into light: relative radiance ``p ** gamma``.
-
-    ``gamma`` is dimensionless and > 0; 1 is a linear projector. Stored in the rig file as
-    ``"projector_response": {"gamma": 2.2}``.
-    """
-
-    gamma: float = 1.0
-
-    def __post_init__(self) -> None:
-        g = self.gamma
-        if isinstance(g, bool) or not isinstance(g, (int, float, np.floating, np.integer)) \
-                or not math.isfinite(g) or g <= 0:
-            raise InputError(f"projector response: gamma must be a finite number > 0 (1 = linear projector), "
-                             f"found {g!r}")
-        object.__setattr__(self, "gamma", float(g))
-
-    @property
-    def is_linear(self) -> bool:
-        return self.gamma == 1.0
-
-    def __call__(self, p: np.ndarray) -> np.ndarray:
-        """Relative radiance of pattern values ``p`` in [0, 1] (clipped): ``p ** gamma``, same shape."""
-        return np.clip(np.asarray(p, dtype=np.float64), 0.0, 1.0) ** self.gamma
-
-    def to_dict(self) -> dict:
-        return {"gamma": self.gamma}
-
-    @classmethod
-    def from_dict(cls, data: dict, *, where: str = "projector_response") -> "ProjectorResponse":
-        """Inverse of :meth:`to_dict`. Errors read ``{where}: ...`` or ``{where}.gamma: ...``."""
-        if not isinstance(data, dict):
-            raise InputError(f"{where}: must be an object {{\"gamma\": number}} or null, found {data!r}")
-        unknown = [k for k in data if k != "gamma"]
-        if unknown:
-            raise InputError(f"{where}: unknown field(s) {', '.join(map(repr, unknown))}; a projector response "
-                             "has only 'gamma'")
-        if "gamma" not in data:
-            raise InputError(f"{where}: missing field 'gamma' (the exponent of the projector's response, "
-                             "1 = linear; measure it with rangekit.calib.response.measure_response)")
-        try:
-            return cls(gamma=data["gamma"])
-        except InputError:
-            raise InputError(f"{where}.gamma: must be a finite number > 0 (1 = linear projector), found "
-                             f"{data['gamma']!r}") from None
+__all__ = ["ResponseFit", "PhaseCorrection", "fit_response", "phase_correction"]
 
 
 # --------------------------------------------------------------------------- fit
@@ -114,9 +70,10 @@ class ResponseFit:
 
 
 def _grey(image: np.ndarray) -> np.ndarray:
+    """(H, W) float32 of a grey or RGB capture (RGB: :func:`rangekit.image.to_grey`)."""
     img = np.asarray(image)
     if img.ndim == 3 and img.shape[2] == 3:
-        return img.astype(np.float32).mean(axis=2)
+        return to_grey(img)
     return img.astype(np.float32)
 
 
@@ -276,7 +233,7 @@ def phase_correction(response: ProjectorResponse | float, steps: int, *, samples
     ----------
     response : ProjectorResponse or float (gamma)
     steps : int >= 3
-        Phase steps N of the pattern (``d_s = 2 pi s / N``, as :func:`rangekit.coded.decode.phase_from_steps`).
+        Phase steps N of the pattern (``d_s = 2 pi s / N``, as :func:`rangekit.coded.phase.phase_from_steps`).
     samples : int
         Grid size of the tables over one period (of true phase, and of measured phase).
 

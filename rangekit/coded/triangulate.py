@@ -21,8 +21,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rangekit.camera import PinholeCamera
+from rangekit.camera import PinholeCamera, pixel_rays
 from rangekit.errors import InputError
+from rangekit.geometry import transform_vectors
 
 __all__ = ["TriangulationResult", "triangulate_ray_plane", "triangulate_ray_ray", "triangulate",
            "range_normals", "discontinuity_mask"]
@@ -60,9 +61,10 @@ def _check_map(name: str, m: np.ndarray, camera: PinholeCamera) -> np.ndarray:
     return m
 
 
-def _camera_rays(camera: PinholeCamera, valid: np.ndarray):
-    v, u = np.nonzero(valid)
-    return camera.rays(np.column_stack([u, v]).astype(np.float64))
+def _camera_rays(camera: PinholeCamera, valid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """World rays (origins, unit directions), (N, 3) each, of the pixels where ``valid`` is True (row-major)."""
+    d = transform_vectors(camera.T_world_cam, pixel_rays(camera)[valid])
+    return np.broadcast_to(camera.center, d.shape).copy(), d
 
 
 def triangulate_ray_plane(camera: PinholeCamera, projector: PinholeCamera, proj_col: np.ndarray, *,

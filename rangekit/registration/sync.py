@@ -31,12 +31,13 @@ from typing import NamedTuple
 import numpy as np
 import scipy.sparse as sp
 from scipy.linalg import eigh
-from scipy.sparse.csgraph import connected_components
 from scipy.sparse.linalg import spsolve
 from scipy.spatial.transform import Rotation
 
-from rangekit.errors import InputError, RegistrationError
+from rangekit.errors import InputError
 from rangekit.geometry import make_T, nearest_rotation
+from rangekit.registration.view_graph import (ViewGraph, check_connected, check_rejection, parse_view_graph,
+                                              triangles)
 
 __all__ = ["SyncResult", "RotationSync", "TranslationSync", "synchronise_rotations",
            "synchronise_translations", "synchronise"]
@@ -80,134 +81,6 @@ class TranslationSync(NamedTuple):
     inlier: np.ndarray       # (E,) bool
 
 
-class _Graph(NamedTuple):
-    n: int
-    I: np.ndarray   # (E,) int
-    J: np.ndarray   # (E,) int
-    R: np.ndarray   # (E, 3, 3) measured R_ij
-    t: np.ndarray   # (E, 3) measured t_ij
-    w: np.ndarray   # (E,) user weights
-
-
-# --------------------------------------------------------------------------- input
-def _parse(n, edges, weights, max_iterations: int = 1) -> _Graph:
-    if not (isinstance(max_iterations, (int, np.integer)) and max_iterations >= 1):
-        raise InputError(f"sync: max_iterations must be an integer >= 1, found {max_iterations!r}")
-    if not (isinstance(n, (int, np.integer)) and n >= 2):
-        raise InputError(f"sync: n must be an integer number of views >= 2, found {n!r}")
-    n = int(n)
-    items = [(k[0], k[1], v) for k, v in edges.items()] if isinstance(edges, dict) else list(edges)
-    if not items:
-        raise InputError("sync: no edges given; pass a sequence of (i, j, T_i_j)")
-    I, J, Ts = [], [], []
-    seen: dict[tuple[int, int], int] = {}
-    for e, item in enumerate(items):
-        try:
-            i, j, T = item
-            i, j = int(i), int(j)
-            T = np.asarray(T, dtype=np.float64)
-        except (TypeError, ValueError) as exc:
-            raise InputError(f"sync: edge {e} must be (i, j, T_i_j) with a (4, 4) T_i_j ({exc})") from exc
-        if not (0 <= i < n and 0 <= j < n) or i == j:
-            raise InputError(f"sync: edge {e} joins views ({i}, {j}); both must be distinct and in [0, {n})")
-        if T.shape != (4, 4) or not np.all(np.isfinite(T)):
-            raise InputError(f"sync: edge {e} ({i}, {j}): T_i_j must be a finite (4, 4) array, found shape "
-                             f"{T.shape}")
-        A = T[:3, :3]
-        if np.abs(A.T @ A - np.eye(3)).max() > 1e-6 or np.linalg.det(A) <= 0:
-            raise InputError(f"sync: edge {e} ({i}, {j}): the 3x3 block of T_i_j is not a rotation "
-                             f"(|R^T R - I| = {np.abs(A.T @ A - np.eye(3)).max():.1e}, det = "
-                             f"{np.linalg.det(A):.4f}); relative poses must be rigid")
-        key = (min(i, j), max(i, j))
-        if key in seen:
-            raise InputError(f"sync: edges {seen[key]} and {e} both join views {key}; give one measurement "
-                             f"per pair (average them first)")
-        seen[key] = e
-        I.append(i)
-        J.append(j)
-        Ts.append(T)
-    Ts = np.stack(Ts)
-    E = len(Ts)
-    if weights is None:
-        w = np.ones(E)
-    else:
-        w = np.asarray(weights, dtype=np.float64).reshape(-1)
-        if w.shape != (E,) or not np.all(np.isfinite(w)) or np.any(w < 0):
-            raise InputError(f"sync: weights must be {E} finite non-negative numbers (one per edge), found "
-                             f"shape {w.shape}")
-    R = np.stack([nearest_rotation(A) for A in Ts[:, :3, :3]])
-    return _Graph(n, np.array(I), np.array(J), R, Ts[:, :3, 3].copy(), w)
-
-
-def _unreached(n: int, I: np.ndarray, J: np.ndarray, active: np.ndarray) -> list[int]:
-    """Views not connected to view 0 through active edges."""
-    A = sp.coo_matrix((np.ones(int(active.sum())), (I[active], J[active])), shape=(n, n))
-    _, labels = connected_components(A, directed=False)
-    return np.flatnonzero(labels != labels[0]).tolist()
-
-
-def _check_connected(g: _Graph, active: np.ndarray) -> None:
-    cut = _unreached(g.n, g.I, g.J, active)
-    if cut:
-        raise InputError(f"sync: views {cut} are not connected to view 0 by edges with positive weight; "
-                         f"their poses are not determined. Add edges to them or drop them")
-
-
-def _bridges(n: int, I: np.ndarray, J: np.ndarray, active: np.ndarray) -> np.ndarray:
-    """(E,) bool: active edges whose removal disconnects the active graph (iterative Tarjan)."""
-    adj: list[list[tuple[int, int]]] = [[] for _ in range(n)]
-    for e in np.flatnonzero(active).tolist():
-        adj[I[e]].append((int(J[e]), e))
-        adj[J[e]].append((int(I[e]), e))
-    disc = [-1] * n
-    low = [0] * n
-    bridge = np.zeros(len(I), dtype=bool)
-    timer = 0
-    for root in range(n):
-        if disc[root] >= 0:
-            continue
-        disc[root] = low[root] = timer
-        timer += 1
-        stack = [(root, -1, 0)]
-        while stack:
-            v, parent_edge, k = stack[-1]
-            if k < len(adj[v]):
-                stack[-1] = (v, parent_edge, k + 1)
-                u, e = adj[v][k]
-                if e == parent_edge:
-                    continue
-                if disc[u] < 0:
-                    disc[u] = low[u] = timer
-                    timer += 1
-                    stack.append((u, e, 0))
-                else:
-                    low[v] = min(low[v], disc[u])
-            else:
-                stack.pop()
-                if stack:
-                    p = stack[-1][0]
-                    low[p] = min(low[p], low[v])
-                    if low[v] > disc[p]:
-                        bridge[parent_edge] = True
-    return bridge
-
-
-def _check_rejection(g: _Graph, active: np.ndarray, inlier: np.ndarray) -> None:
-    """After the inlier test every view must still reach view 0 through edges confirmed by a cycle.
-
-    An edge that closed a cycle in the input but is a bridge among the inliers has a zero residual
-    whatever its value: nothing confirms it any more (e.g. a view whose two edges disagree keeps one of
-    them at random). Such edges do not count as a connection.
-    """
-    unconfirmed = _bridges(g.n, g.I, g.J, inlier) & ~_bridges(g.n, g.I, g.J, active)
-    cut = _unreached(g.n, g.I, g.J, inlier & ~unconfirmed)
-    if cut:
-        raise RegistrationError(
-            f"sync: after rejecting {int((active & ~inlier).sum())} outlier edges, views {cut} are no longer "
-            f"connected to view 0 by edges that a cycle confirms; their measurements disagree with each "
-            f"other and with the rest. Add edges to them, or use robust=False")
-
-
 # --------------------------------------------------------------------------- robust helpers
 def _cauchy(r: np.ndarray, scale: float) -> np.ndarray:
     return 1.0 / (1.0 + (r / (_CAUCHY_C * scale)) ** 2)
@@ -217,25 +90,13 @@ def _mad_scale(r: np.ndarray, active: np.ndarray, floor: float) -> float:
     return max(1.4826 * float(np.median(r[active])), floor)
 
 
-def _triangles(g: _Graph) -> np.ndarray:
-    """(K, 3) edge indices (ab, bc, ac) of every triangle a < b < c in the graph."""
-    key = {(min(i, j), max(i, j)): e for e, (i, j) in enumerate(zip(g.I.tolist(), g.J.tolist()))}
-    nbrs: list[set[int]] = [set() for _ in range(g.n)]
-    for a, b in key:
-        nbrs[a].add(b)
-        nbrs[b].add(a)
-    tri = [(key[a, b], key[b, c], key[a, c])
-           for (a, b) in key for c in nbrs[a] & nbrs[b] if c > b]
-    return np.array(tri, dtype=np.int64).reshape(-1, 3)
-
-
-def _oriented(g: _Graph, e: np.ndarray, forward: np.ndarray) -> np.ndarray:
+def _oriented(g: ViewGraph, e: np.ndarray, forward: np.ndarray) -> np.ndarray:
     """Measured relative rotations of edges ``e`` read from min to max view index."""
     R = g.R[e]
     return np.where(forward[:, None, None], R, np.transpose(R, (0, 2, 1)))
 
 
-def _cycle_weights(g: _Graph, cycle_error: np.ndarray, tri: np.ndarray, active: np.ndarray,
+def _cycle_weights(g: ViewGraph, cycle_error: np.ndarray, tri: np.ndarray, active: np.ndarray,
                    floor: float) -> np.ndarray:
     """Initial weights: Cauchy of each edge's best 3-cycle error (1 for edges in no triangle)."""
     score = np.full(len(g.I), np.inf)
@@ -249,7 +110,7 @@ def _cycle_weights(g: _Graph, cycle_error: np.ndarray, tri: np.ndarray, active: 
 
 
 # --------------------------------------------------------------------------- rotations
-def _spectral(g: _Graph, w: np.ndarray) -> np.ndarray:
+def _spectral(g: ViewGraph, w: np.ndarray) -> np.ndarray:
     """Weighted spectral rotation synchronisation (Fusiello eq. 14.11-14.18), R_world[0] = I."""
     n = g.n
     # Z has blocks w_ij R_ij (and their transposes), so Z X = D X for X = [R_1^T; ...; R_n^T].
@@ -277,17 +138,17 @@ def _spectral(g: _Graph, w: np.ndarray) -> np.ndarray:
     return R_world
 
 
-def _rotation_residuals(g: _Graph, R_world: np.ndarray) -> np.ndarray:
+def _rotation_residuals(g: ViewGraph, R_world: np.ndarray) -> np.ndarray:
     D = np.transpose(g.R, (0, 2, 1)) @ np.transpose(R_world[g.I], (0, 2, 1)) @ R_world[g.J]  # R_ij^T R_i^T R_j
     return Rotation.from_matrix(D).magnitude()
 
 
-def _rotation_sync(g: _Graph, robust: bool, max_iterations: int, active: np.ndarray):
+def _rotation_sync(g: ViewGraph, robust: bool, max_iterations: int, active: np.ndarray):
     if not robust:
         R_world = _spectral(g, g.w * active)
         return R_world, _rotation_residuals(g, R_world), active.copy(), 1
     # 1. 3-cycle consistency.
-    tri = _triangles(g)
+    tri = triangles(g)
     kw = np.ones(len(g.I))
     if len(tri):
         fwd = [g.I[tri[:, k]] < g.J[tri[:, k]] for k in range(3)]
@@ -309,7 +170,7 @@ def _rotation_sync(g: _Graph, robust: bool, max_iterations: int, active: np.ndar
             break
     # 3. Hard inlier test, connectivity, final solve on the inliers.
     inlier = active & (r <= _INLIER_K * scale)
-    _check_rejection(g, active, inlier)
+    check_rejection(g, active, inlier)
     R_world = _spectral(g, g.w * inlier)
     return R_world, _rotation_residuals(g, R_world), inlier, it
 
@@ -346,15 +207,15 @@ def synchronise_rotations(n: int, edges, *, robust: bool = True, weights=None,
     RegistrationError
         The robust scheme rejected so many edges that some views lost their connection to view 0.
     """
-    g = _parse(n, edges, weights, max_iterations)
+    g = parse_view_graph(n, edges, weights, max_iterations)
     active = g.w > 0
-    _check_connected(g, active)
+    check_connected(g, active)
     R_world, err, inlier, _ = _rotation_sync(g, robust, max_iterations, active)
     return RotationSync(R_world, err, inlier)
 
 
 # --------------------------------------------------------------------------- translations
-def _solve_translations(g: _Graph, U: np.ndarray, w: np.ndarray) -> np.ndarray:
+def _solve_translations(g: ViewGraph, U: np.ndarray, w: np.ndarray) -> np.ndarray:
     """Weighted least squares for X B = U with t_0 = 0 (Fusiello eq. 14.19-14.24).
 
     Each edge says t_j - t_i = u_ij with u_ij = R_i t_ij (from t_ij = R_i^T (t_j - t_i)); B is the
@@ -373,18 +234,18 @@ def _solve_translations(g: _Graph, U: np.ndarray, w: np.ndarray) -> np.ndarray:
     return t
 
 
-def _translation_residuals(g: _Graph, U: np.ndarray, t: np.ndarray) -> np.ndarray:
+def _translation_residuals(g: ViewGraph, U: np.ndarray, t: np.ndarray) -> np.ndarray:
     return np.linalg.norm(t[g.J] - t[g.I] - U, axis=1)  # = |t_ij - R_i^T (t_j - t_i)|
 
 
-def _translation_sync(g: _Graph, R_world: np.ndarray, robust: bool, max_iterations: int, active: np.ndarray):
+def _translation_sync(g: ViewGraph, R_world: np.ndarray, robust: bool, max_iterations: int, active: np.ndarray):
     U = np.einsum("eij,ej->ei", R_world[g.I], g.t)  # u_ij = R_i t_ij = t_j - t_i in world
     if not robust:
         t = _solve_translations(g, U, g.w * active)
         return t, _translation_residuals(g, U, t), active.copy(), 1
     lengths = np.linalg.norm(U[active], axis=1)
     floor = max(_LENGTH_FLOOR * float(np.median(lengths)), 1e-15)
-    tri = _triangles(g)
+    tri = triangles(g)
     kw = np.ones(len(g.I))
     if len(tri):
         sgn = [np.where(g.I[tri[:, k]] < g.J[tri[:, k]], 1.0, -1.0)[:, None] for k in range(3)]
@@ -402,7 +263,7 @@ def _translation_sync(g: _Graph, R_world: np.ndarray, robust: bool, max_iteratio
         if done:
             break
     inlier = active & (r <= _INLIER_K * scale)
-    _check_rejection(g, active, inlier)
+    check_rejection(g, active, inlier)
     t = _solve_translations(g, U, g.w * inlier)
     return t, _translation_residuals(g, U, t), inlier, it
 
@@ -432,10 +293,10 @@ def synchronise_translations(n: int, edges, R_world, *, robust: bool = True, wei
     InputError, RegistrationError
         As :func:`synchronise_rotations`.
     """
-    g = _parse(n, edges, weights, max_iterations)
+    g = parse_view_graph(n, edges, weights, max_iterations)
     R = _as_rotations(R_world, g.n)
     active = g.w > 0
-    _check_connected(g, active)
+    check_connected(g, active)
     t, err, inlier, _ = _translation_sync(g, R, robust, max_iterations, active)
     return TranslationSync(t, err, inlier)
 
@@ -457,9 +318,9 @@ def synchronise(n: int, edges, *, robust: bool = True, weights=None, max_iterati
     InputError, RegistrationError
         As :func:`synchronise_rotations`.
     """
-    g = _parse(n, edges, weights, max_iterations)
+    g = parse_view_graph(n, edges, weights, max_iterations)
     active = g.w > 0
-    _check_connected(g, active)
+    check_connected(g, active)
     R_world, rot_err, rot_in, it_r = _rotation_sync(g, robust, max_iterations, active)
     t_world, tr_err, tr_in, it_t = _translation_sync(g, R_world, robust, max_iterations, rot_in)
     T = np.stack([make_T(R, t) for R, t in zip(R_world, t_world)])

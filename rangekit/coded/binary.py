@@ -1,0 +1,139 @@
+"""Binary codes (Gray code and XOR codes): integer code maps and their subpixel stripe edges.
+
+Module doc of :mod:`rangekit.coded.decode` ("Binary codes", "Subpixel Gray-code edges") explains the
+method; the per-pixel work is in the compiled :mod:`rangekit.coded._kernels`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from rangekit.coded.frames import CaptureStack, row_chunks, run_parallel
+from rangekit.coded.patterns import PatternSpec, gray_decode, gray_encode
+
+__all__ = ["axis_code", "axis_subpixel", "gray_lut"]
+
+
+def _decode_bits(fr: CaptureStack, spec: PatternSpec, axis: str, region, need_diffs: bool):
+    """Integer code of one chunk (int32, -1 where outside the projector) and, if asked or needed for
+    XOR codes, the per-bit differences ``pattern - inverse`` (nb, h, w) indexed by bit."""
+    prefix = "col" if axis == "columns" else "row"
+    nb = spec.bits(axis)
+    base = spec.xor_base
+    gray = None
+    diffs = None
+    for b in range(nb - 1, -1, -1):  # most significant first
+        P = fr.get(f"{prefix}_b{b}", region)
+        I = fr.get(f"{prefix}_b{b}_inv", region)
+        if gray is None:
+            gray = np.zeros(P.shape, np.uint16 if nb <= 16 else np.uint32)
+            if need_diffs or base is not None:
+                diffs = np.empty((nb,) + P.shape, np.int16 if P.dtype == np.uint8 else np.int32)
+        gray <<= 1
+        gray |= P > I
+        if diffs is not None:
+            np.subtract(P, I, out=diffs[b], dtype=diffs.dtype)
+    if base is not None and nb > base + 1:
+        low_mask = gray.dtype.type((1 << (base + 1)) - 1)
+        gray &= low_mask
+        # Stripes of column codes cross camera rows (axis 1); stripes of row codes cross columns (axis 0).
+        high = _xor_high_bits(diffs, base, axis=1 if axis == "columns" else 0)
+        for i, b in enumerate(range(base + 1, nb)):
+            gray |= high[i].astype(gray.dtype) << gray.dtype.type(b)
+    code = gray_lut(nb)[gray]
+    code[code >= (spec.width if axis == "columns" else spec.height)] = -1
+    return code, diffs
+
+
+def _box_along(a: np.ndarray, axis: int, half: int) -> np.ndarray:
+    """Sum over a window of 2 * half + 1 samples along ``axis`` (edges: the part inside)."""
+    c = np.cumsum(a, axis=axis, dtype=np.int64)
+    n = a.shape[axis]
+    pad = [(0, 0)] * a.ndim
+    pad[axis] = (1, 0)
+    c = np.pad(c, pad)
+    hi = np.minimum(np.arange(n) + half + 1, n)
+    lo = np.maximum(np.arange(n) - half, 0)
+    return np.take(c, hi, axis=axis) - np.take(c, lo, axis=axis)
+
+
+def _xor_high_bits(diffs: np.ndarray, base: int, axis: int, half: int = 2) -> np.ndarray:
+    """Gray bits above the base of an XOR code, decided robustly (bool (nb - base - 1, h, w)).
+
+    ``g_b = o_b XOR o_base`` is 1 where the frame and the base frame have opposite signs. Near a base
+    edge both are weak and noisy, so the sign of the product is averaged over ``2 * half + 1`` pixels
+    across the stripes: g_b never changes across a base edge, and near g_b's own edge an error only
+    moves the pixel to the neighbouring column.
+    """
+    d_base = diffs[base].astype(np.int32)
+    return np.stack([_box_along(diffs[b] * d_base, axis, half) < 0 for b in range(base + 1, len(diffs))])
+
+
+_LUTS: dict[int, np.ndarray] = {}
+
+
+def gray_lut(nb: int) -> np.ndarray:
+    if nb not in _LUTS:
+        _LUTS[nb] = gray_decode(np.arange(1 << nb)).astype(np.int32)
+    return _LUTS[nb]
+
+
+_EDGE_LUTS: dict[int, np.ndarray] = {}
+
+
+def _edge_bit_lut(size: int) -> np.ndarray:
+    """For code c, the Gray bit that changes between c and c + 1 (which frame has the edge)."""
+    if size not in _EDGE_LUTS:
+        c = np.arange(size + 1)
+        changed = gray_encode(c) ^ gray_encode(c + 1)
+        _EDGE_LUTS[size] = np.log2(np.maximum(changed, 1)).astype(np.int64)
+    return _EDGE_LUTS[size]
+
+
+
+def axis_code(fr: CaptureStack, spec: PatternSpec, axis: str, workers: int, chunk_rows: int) -> np.ndarray:
+    """Integer code map of one axis: compiled Gray decoding, or chunked numpy for XOR codes."""
+    from rangekit.coded import _kernels as K
+
+    H, W = fr.shape
+    prefix = "col" if axis == "columns" else "row"
+    nb = spec.bits(axis)
+    code = np.empty((H, W), np.int32)
+    if spec.xor_base is None:
+        p_idx = np.array([fr.index[f"{prefix}_b{b}"] for b in range(nb - 1, -1, -1)], np.int64)
+        i_idx = np.array([fr.index[f"{prefix}_b{b}_inv"] for b in range(nb - 1, -1, -1)], np.int64)
+        K.gray_rows(fr.stack, p_idx, i_idx, gray_lut(nb), spec.width if axis == "columns" else spec.height, code)
+        return code
+    # XOR codes decide their high bits over windows across the stripes: rows need a halo of 2.
+    halo = 2 if axis == "rows" else 0
+
+    def run(rs: slice) -> None:
+        r0, r1 = max(rs.start - halo, 0), min(rs.stop + halo, H)
+        c, _ = _decode_bits(fr, spec, axis, (slice(r0, r1), slice(None)), False)
+        code[rs] = c[rs.start - r0: rs.stop - r0]
+
+    run_parallel(run, row_chunks(H, chunk_rows), workers)
+    return code
+
+
+def axis_subpixel(fr: CaptureStack, spec: PatternSpec, axis: str, code: np.ndarray, max_gap: float) -> np.ndarray:
+    """Subpixel stripe-edge refinement of one axis's code map (compiled kernels; module doc)."""
+    from rangekit.coded import _kernels as K
+
+    H, W = fr.shape
+    prefix = "col" if axis == "columns" else "row"
+    nb = spec.bits(axis)
+    p_by_bit = np.array([fr.index[f"{prefix}_b{b}"] for b in range(nb)], np.int64)
+    i_by_bit = np.array([fr.index[f"{prefix}_b{b}_inv"] for b in range(nb)], np.int64)
+    edge_bit = _edge_bit_lut(spec.width if axis == "columns" else spec.height)
+    out = np.empty((H, W), np.float32)
+    if axis == "columns":  # column stripes cross camera rows
+        t = np.empty((H, W - 1), np.float32)
+        K.crossings(fr.stack, code, p_by_bit, i_by_bit, edge_bit, False, t)
+        K.interp_along_rows(code, t, np.float32(max_gap), out)
+    else:
+        t = np.empty((H - 1, W), np.float32)
+        K.crossings(fr.stack, code, p_by_bit, i_by_bit, edge_bit, True, t)
+        K.interp_along_cols(code, t, np.float32(max_gap), out)
+    return out
+

@@ -1,0 +1,75 @@
+"""Range maps in space: radial range to camera-frame depth and to points, and the flying-pixel filter.
+
+A ToF camera measures radial distance along each pixel's ray, not ``z``; the rays are
+:func:`rangekit.camera.pixel_rays` (lens distortion undone exactly)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from rangekit.camera import PinholeCamera, pixel_rays
+from rangekit.errors import InputError
+from rangekit.geometry import apply_T
+
+__all__ = ["range_to_depth", "range_to_points", "flying_pixels"]
+
+
+def _check_range_map(range_map, camera: PinholeCamera, where: str) -> np.ndarray:
+    r = np.asarray(range_map, dtype=np.float64)
+    if r.shape != (camera.height, camera.width):
+        raise InputError(f"{where}: range map is {r.shape[1] if r.ndim == 2 else '?'}x"
+                         f"{r.shape[0] if r.ndim >= 1 else '?'} (shape {r.shape}) but camera {camera.name!r} is "
+                         f"{camera.width}x{camera.height}")
+    return r
+
+
+def range_to_depth(range_map, camera: PinholeCamera) -> np.ndarray:
+    """(H, W) camera-frame z in metres from radial distances along each pixel's ray (NaN stays NaN).
+
+    ``z = r * d_z`` with ``d`` the unit ray of the pixel centre, lens distortion undone exactly.
+    """
+    r = _check_range_map(range_map, camera, "range_to_depth")
+    return r * pixel_rays(camera)[..., 2]
+
+
+def range_to_points(range_map, camera: PinholeCamera, *, frame: str = "world") -> np.ndarray:
+    """(H, W, 3) points in metres, NaN where the range is NaN, in the ``"camera"`` or ``"world"`` frame
+    (``camera.T_world_cam``)."""
+    if frame not in ("camera", "world"):
+        raise InputError(f"range_to_points: frame must be 'camera' or 'world', found {frame!r}")
+    r = _check_range_map(range_map, camera, "range_to_points")
+    p = r[..., None] * pixel_rays(camera)
+    if frame == "world" and not np.array_equal(camera.T_world_cam, np.eye(4)):
+        p = apply_T(camera.T_world_cam, p.reshape(-1, 3)).reshape(p.shape)
+    return p
+
+
+def flying_pixels(range_map, camera: PinholeCamera, *, max_angle: float = math.radians(15.0)) -> np.ndarray:
+    """(H, W) bool: mixed ("flying") pixels at depth edges.
+
+    A pixel that averages a foreground and a background surface lands between them on its ray, so the
+    3D vectors to its neighbours on *both* sides (left and right, or above and below, or either
+    diagonal pair) run nearly along the ray. A pixel is flagged when, for some neighbour pair, both
+    vectors make less than ``max_angle`` (radians) with the ray. A true edge pixel has one such neighbour
+    only, and is kept; so is a surface seen at up to ``pi / 2 - max_angle`` of incidence.
+    Pixels with NaN neighbours on both sides are not judged.
+    """
+    r = _check_range_map(range_map, camera, "flying_pixels")
+    d = pixel_rays(camera)
+    p = r[..., None] * d
+    H, W = r.shape
+    pad = np.pad(p, ((1, 1), (1, 1), (0, 0)), constant_values=np.nan)
+    cos_max = math.cos(max_angle)
+
+    def along_ray(dy: int, dx: int) -> np.ndarray:
+        q = pad[1 + dy: 1 + dy + H, 1 + dx: 1 + dx + W] - p
+        with np.errstate(invalid="ignore", divide="ignore"):
+            c = np.abs(np.einsum("ijk,ijk->ij", q, d)) / np.linalg.norm(q, axis=2)
+        return c > cos_max  # NaN compares False
+
+    flagged = np.zeros((H, W), dtype=bool)
+    for dy, dx in ((0, 1), (1, 0), (1, 1), (1, -1)):
+        flagged |= along_ray(dy, dx) & along_ray(-dy, -dx)
+    return flagged & np.isfinite(r)

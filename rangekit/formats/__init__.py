@@ -1,4 +1,4 @@
-"""Files a user keeps: point clouds (PLY, PCD, XYZ, NPY), meshes (PLY, OBJ, STL), ..."""
+"""Files a user keeps: point clouds (PLY, PCD, XYZ, NPY) and meshes (PLY, OBJ, STL), with one PLY reader and writer."""
 
 from rangekit.formats.clouds import CLOUD_READERS, CLOUD_WRITERS, RangeGrid, load_cloud, load_range_grid, save_cloud
 from rangekit.formats.meshes import MESH_FORMATS, load_mesh_file, save_mesh

@@ -158,7 +158,7 @@ def bench_multiview(scans) -> list[str]:
 
 
 def bench_bunny() -> list[str]:
-    from rangekit.surface.cloud import load_cloud
+    from rangekit.formats.clouds import load_cloud
     from rangekit.registration.multiview import register_views
     from scipy.spatial.transform import Rotation
 

@@ -22,6 +22,7 @@ from typing import Callable
 import cv2
 import numpy as np
 
+from rangekit.colour import colourise
 from rangekit.io import atomic_save_npz, atomic_write_json, write_png
 from rangekit.coded.patterns import PatternSpec
 from rangekit.rig import save_rig
@@ -35,12 +36,8 @@ def _colourise(values: np.ndarray, valid: np.ndarray) -> np.ndarray:
     """(H, W) float -> (H, W, 3) uint8 RGB turbo colour map, black where invalid."""
     out = np.zeros(values.shape + (3,), np.uint8)
     if np.any(valid):
-        v = values[valid]
-        lo, hi = np.percentile(v, [1, 99])
-        scaled = np.clip((values - lo) / max(hi - lo, 1e-12), 0, 1)
-        grey = np.where(valid, scaled * 255, 0).astype(np.uint8)
-        rgb = cv2.cvtColor(cv2.applyColorMap(grey, cv2.COLORMAP_TURBO), cv2.COLOR_BGR2RGB)
-        out[valid] = rgb[valid]
+        lo, hi = np.percentile(values[valid], [1, 99])
+        out[valid] = colourise(values[valid], lo, max(hi, lo), cmap="turbo")
     return out
 
 

@@ -27,6 +27,7 @@ import numpy as np
 from rangekit.errors import InputError
 from rangekit.geometry import apply_T, invert_T
 from rangekit.surface.mesh import TriangleMesh
+from rangekit.surface.raycast import raycasting_scene
 from rangekit.rig import Rig
 from rangekit.sim.raycast import _open3d_cast
 from rangekit.sim.scene import Scene
@@ -133,9 +134,7 @@ def _closest_on(mesh: TriangleMesh, P: np.ndarray) -> tuple[np.ndarray, np.ndarr
     import open3d as o3d
 
     c = (mesh.vertices.min(axis=0) + mesh.vertices.max(axis=0)) / 2
-    scene = o3d.t.geometry.RaycastingScene()
-    scene.add_triangles(o3d.core.Tensor((mesh.vertices - c).astype(np.float32)),
-                        o3d.core.Tensor(mesh.triangles.astype(np.uint32)))
+    scene = raycasting_scene(mesh.vertices - c, mesh.triangles)
     ans = scene.compute_closest_points(o3d.core.Tensor((P - c).astype(np.float32)))
     Q = ans["points"].numpy().astype(np.float64) + c
     return np.linalg.norm(P - Q, axis=1), Q, ans["primitive_ids"].numpy().astype(np.int64)

@@ -34,6 +34,7 @@ from rangekit.sim.objects import make_object
 from rangekit.sim.raycast import cast_view
 from rangekit.sim.render import ImagingModel
 from rangekit.sim.scene import Scene
+from rangekit.surface.raycast import raycasting_scene
 
 __all__ = ["LightStageCapture", "LIGHT_STAGE_MODEL", "light_stage_camera", "light_stage_lights",
            "light_stage_scene", "render_light_stage"]
@@ -252,8 +253,7 @@ def _occluded(vertices: np.ndarray, triangles: np.ndarray, T_world_cam: np.ndarr
     """
     import open3d as o3d  # imported here: it takes ~2 s and most of rangekit never needs it
 
-    scene = o3d.t.geometry.RaycastingScene()
-    scene.add_triangles(o3d.core.Tensor(vertices.astype(np.float32)), o3d.core.Tensor(triangles.astype(np.uint32)))
+    scene = raycasting_scene(vertices, triangles)
     fi, ni = np.nonzero(todo)
     R, t = T_world_cam[:3, :3], T_world_cam[:3, 3]
     origins = (x[ni] + eps * n[ni]) @ R.T + t

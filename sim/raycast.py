@@ -17,6 +17,7 @@ from rangekit.camera import PinholeCamera
 from rangekit.errors import SceneError
 from rangekit.geometry import invert_T
 from rangekit.sim.scene_object import PlanarTexture
+from rangekit.surface.raycast import raycasting_scene
 
 __all__ = ["WorldMesh", "ViewGeometry", "cast_view", "pixel_corners"]
 
@@ -73,9 +74,7 @@ def _open3d_cast(vertices: np.ndarray, triangles: np.ndarray, origins: np.ndarra
     """First hit of each ray: (t_hit float32 with inf for misses, primitive id int64 with -1 for misses)."""
     import open3d as o3d  # imported here: it takes ~2 s and most of rangekit never needs it
 
-    scene = o3d.t.geometry.RaycastingScene()
-    scene.add_triangles(o3d.core.Tensor(vertices.astype(np.float32)),
-                        o3d.core.Tensor(triangles.astype(np.uint32)))
+    scene = raycasting_scene(vertices, triangles)
     rays = np.concatenate([origins, directions], axis=1).astype(np.float32)
     out = scene.cast_rays(o3d.core.Tensor(rays))
     t_hit = out["t_hit"].numpy()

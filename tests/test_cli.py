@@ -112,7 +112,7 @@ def test_register_and_mesh_commands(tmp_path, capsys):
     assert main(["register", *scans, "--init", "none", "--out", str(out)]) == 0
     text = capsys.readouterr().out
     assert "synchronisation over" in text and "rmse" in text
-    from rangekit.surface.mesh import load_mesh_file
+    from rangekit.formats.meshes import load_mesh_file
     from rangekit.formats.poses import load_poses
 
     sources, T = load_poses(out / "poses.json")
@@ -138,7 +138,7 @@ def test_scan_command_acquires_and_resumes(tmp_path, capsys):
     assert "2/2 views already done" in capsys.readouterr().out
     # Each view is a capture folder that reconstructs on its own.
     assert main(["reconstruct", str(out / "view_001"), "--out", str(tmp_path / "v1.ply")]) == 0
-    from rangekit.surface.cloud import load_cloud
+    from rangekit.formats.clouds import load_cloud
 
     P = load_cloud(tmp_path / "v1.ply").points
     assert len(P) > 20000

@@ -1,15 +1,14 @@
 """Point cloud readers: round trips through the writers, files written by Open3D, the Stanford range
 grids, and clean errors on bad files."""
 
-import time
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from rangekit.errors import FileFormatError
-from rangekit.surface.cloud import (CLOUD_READERS, CLOUD_WRITERS, PointCloud, load_cloud, load_range_grid,
-                                 save_cloud)
+from rangekit.formats.clouds import CLOUD_READERS, CLOUD_WRITERS, load_cloud, load_range_grid, save_cloud
+from rangekit.surface.cloud import PointCloud
 
 DATA = Path(__file__).parents[1] / ".." / "shared" / "data"
 BUNNY = DATA / "stanford-bunny" / "bun000.ply"
@@ -253,15 +252,12 @@ def bunny():
 
 
 def test_stanford_bun000(bunny):
-    t0 = time.perf_counter()
-    cloud = load_cloud(bunny)
-    elapsed = time.perf_counter() - t0
+    cloud = load_cloud(bunny)  # its load time is measured by benchmarks/bench_cloud_io.py
     assert len(cloud) == 40256 and cloud.normals is None and cloud.colours is None
     assert np.all(np.abs(cloud.points) < 0.2)
     assert np.ptp(cloud.points, axis=0).min() > 0.05  # a bunny-sized object, in metres
     np.testing.assert_array_equal(cloud.points[0], [-0.06325, 0.0359793, 0.0420873])
     np.testing.assert_array_equal(cloud.points[-1], [-0.018, 0.18794, -0.0197253])
-    assert elapsed < 1.0
 
 
 def test_stanford_bun000_range_grid(bunny):

@@ -118,3 +118,30 @@ def test_icp_bad_input():
     assert not far.converged and "degenerate" in far.reason
     with pytest.raises(InputError, match="kernel"):
         IcpOptions(kernel="bisquare")
+
+
+@pytest.mark.parametrize("method", ["point_to_plane", "point_to_point"])
+def test_singular_system_is_not_reported_as_converged(surface, method):
+    # Tukey weights are 0 beyond 4.7 kernel scales: with a 1 nm scale and a 5 deg offset no
+    # correspondence keeps any weight, so the normal equations are all zeros and there is no update.
+    a, na, b, nb = surface
+    res = icp(moved(T_5, b, nb), PointCloud(a, normals=na),
+              options=IcpOptions(method=method, kernel="tukey", kernel_scale=1e-9, max_distance=0.01))
+    assert not res.converged
+    assert "singular" in res.reason and "0 of" in res.reason
+    assert res.n_iterations == 1
+    assert np.array_equal(res.T_target_source, np.eye(4))  # no step taken, and it says so
+
+
+def test_voxel_downsample_returns_a_pair_whatever_its_flags():
+    from rangekit.surface.cloud import voxel_downsample
+
+    rng = np.random.default_rng(0)
+    P = rng.uniform(0, 0.01, (1000, 3))
+    N = rng.normal(size=(1000, 3))
+    for voxel in (0.002, 0.0):
+        p, n = voxel_downsample(P, voxel)
+        assert p.shape[1] == 3 and n is None
+        p2, n2 = voxel_downsample(P, voxel, normals=N)
+        assert np.array_equal(p, p2) and n2.shape == p2.shape
+    assert len(voxel_downsample(P, 0.002)[0]) < len(P)

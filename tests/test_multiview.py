@@ -71,7 +71,8 @@ def test_wrong_edges_are_rejected(turntable):
 
 
 def test_registered_scan_fuses_into_a_watertight_accurate_mesh(turntable):
-    from rangekit.surface.mesh import TriangleMesh, distance_to_surface, poisson_mesh, tsdf_fuse
+    from rangekit.surface.fusion import poisson_mesh, tsdf_fuse
+    from rangekit.surface.mesh import TriangleMesh, distance_to_surface
 
     scans, _, res, _ = turntable
     P, N = [], []
@@ -88,8 +89,8 @@ def test_registered_scan_fuses_into_a_watertight_accurate_mesh(turntable):
     views = []
     cam = scans.rig.camera
     for xyz, T in zip(scans.range_maps, res.T_world_view):
-        world = xyz @ T[:3, :3].T + T[:3, 3]
-        views.append((world, None, cam.with_pose(T @ cam.T_world_cam)))
+        depth = (xyz.reshape(-1, 3) @ cam.T_cam_world[2, :3] + cam.T_cam_world[2, 3]).reshape(xyz.shape[:2])
+        views.append((depth, None, cam.with_pose(T @ cam.T_world_cam)))
     t = time.perf_counter()
     fused = tsdf_fuse(views)
     t_tsdf = time.perf_counter() - t
@@ -105,7 +106,7 @@ def test_registered_scan_fuses_into_a_watertight_accurate_mesh(turntable):
 def _bunny():
     from scipy.spatial.transform import Rotation
 
-    from rangekit.surface.cloud import load_cloud
+    from rangekit.formats.clouds import load_cloud
 
     if not BUNNY.is_dir():
         pytest.skip("../shared/data/stanford-bunny is absent")

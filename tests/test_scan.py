@@ -13,7 +13,8 @@ import numpy as np
 import pytest
 
 from rangekit.cli import main
-from rangekit.surface.mesh import TriangleMesh, distance_to_surface, load_mesh_file
+from rangekit.formats.meshes import load_mesh_file
+from rangekit.surface.mesh import TriangleMesh, distance_to_surface
 from rangekit.sim import default_scene
 
 SCAN = ["--views", "6", "--seed", "1"]   # the same settings for the reference and the interrupted scan

@@ -11,7 +11,8 @@ from rangekit.camera import PinholeCamera
 from rangekit.errors import InputError
 from rangekit.surface.mesh import TriangleMesh
 from rangekit.surface.cloud import PointCloud
-from rangekit.app.snapshot import (COLORMAPS, colour_bar, colourise, data_uri, fit_camera, montage, raycast_mesh,
+from rangekit.colour import COLOUR_MAPS, colour_table
+from rangekit.app.snapshot import (colour_bar, colourise, data_uri, fit_camera, montage, raycast_mesh,
                                render_cloud, render_mesh, render_values_on_mesh, to_png_bytes)
 
 R = 0.05
@@ -186,7 +187,7 @@ def test_render_cloud_colour_priority(front_cam):
     col = np.array([[0.2, 0.4, 0.6]])
     px = (60, 80)
     assert np.all(render_cloud(PointCloud(p, col, n), front_cam, values=[3.0], vmin=0, vmax=3)[px]
-                  == COLORMAPS["turbo"][-1])
+                  == colour_table("turbo")[-1])
     assert np.all(render_cloud(PointCloud(p, col, n), front_cam)[px] == np.rint(col[0] * 255))
     assert np.all(render_cloud(PointCloud(p, None, n), front_cam)[px]
                   == np.rint(np.array([0.75, 0.78, 0.82]) * (0.25 + 0.75 * 0.8) * 255))
@@ -198,19 +199,20 @@ def test_render_cloud_colour_priority(front_cam):
 
 def test_colourise_anchors_nan_and_monotone_luminance():
     v = np.array([[-1.0, 0.0, 0.5], [1.0, 2.0, np.nan]])
-    for name, table in COLORMAPS.items():
+    for name in COLOUR_MAPS:
+        table = colour_table(name)
         out = colourise(v, 0.0, 1.0, cmap=name, nan_colour=(1, 2, 3))
         assert out.shape == (2, 3, 3) and out.dtype == np.uint8
         assert np.all(out[0, 0] == table[0]) and np.all(out[0, 1] == table[0])
         assert np.all(out[1, 0] == table[-1]) and np.all(out[1, 1] == table[-1])
         assert np.all(out[1, 2] == [1, 2, 3])
-    assert np.all(colourise(np.array([0.5]), 0, 1, cmap="turbo")[0] == COLORMAPS["turbo"][8])
+    assert np.all(colourise(np.array([0.5]), 0, 1, cmap="turbo")[0] == colour_table("turbo")[128])
     assert np.all(colourise(np.array([0.5]), 0, 1, cmap="grey")[0] == 128)
     ramp = np.linspace(-3, 7, 64)
     for name in ("viridis", "grey"):
         luma = colourise(ramp, -3, 7, cmap=name) @ np.array([0.299, 0.587, 0.114])
         assert np.all(np.diff(luma) > 0)
-    assert np.all(colourise(np.array([1.0, 1.0]), 1.0, 1.0) == COLORMAPS["turbo"][0])  # vmin == vmax
+    assert np.all(colourise(np.array([1.0, 1.0]), 1.0, 1.0) == colour_table("turbo")[0])  # vmin == vmax
     with pytest.raises(InputError, match="cmap"):
         colourise(v, 0, 1, cmap="jet")
 
@@ -247,7 +249,7 @@ def test_render_values_on_mesh_plane_distance(sphere):
 def test_colour_bar():
     bar = colour_bar(-2.0, 5.0, label="error [mm]", size=(300, 50))
     assert bar.shape == (50, 300, 3) and bar.dtype == np.uint8
-    assert np.all(bar[10, 6] == COLORMAPS["turbo"][0]) and np.all(bar[10, 293] == COLORMAPS["turbo"][-1])
+    assert np.all(bar[10, 6] == colour_table("turbo")[0]) and np.all(bar[10, 293] == colour_table("turbo")[-1])
     text = np.all(bar[25:] < 100, axis=2)
     assert text[:, :40].any() and text[:, 120:180].any() and text[:, 260:].any()  # vmin, label, vmax
 

@@ -293,7 +293,7 @@ def test_cli_sim_render_then_stereo(tmp_path, capsys):
     ok = vis & np.isfinite(depth)
     assert ok.sum() / vis.sum() > 0.9
     assert np.median(np.abs(depth - truth["depth"])[ok]) < 0.006
-    from rangekit.surface.cloud import load_cloud
+    from rangekit.formats.clouds import load_cloud
     assert len(load_cloud(out / "cloud.ply")) == int(np.isfinite(depth).sum())
 
     # A rig file with one camera, and a pair of two sizes: errors naming the file and both values.

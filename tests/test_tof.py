@@ -214,7 +214,7 @@ def test_cli_sim_render_then_tof(tmp_path, capsys):
     assert np.sqrt(np.mean((rng - truth["range"])[ok] ** 2)) < 0.01     # measured 6 mm (far panels dominate)
     conf = np.load(out / "confidence.npy")
     assert conf.dtype == np.float32 and np.all(conf[~np.isfinite(depth)] == 0) and conf[ok].min() > 0
-    from rangekit.surface.cloud import load_cloud
+    from rangekit.formats.clouds import load_cloud
     assert len(load_cloud(out / "cloud.ply")) == int(np.isfinite(depth).sum())
     for name in ("depth.png", "confidence.png"):
         assert (out / name).stat().st_size > 0

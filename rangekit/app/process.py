@@ -31,7 +31,8 @@ from rangekit.errors import ConfigError
 from rangekit.geometry import apply_T, compose, invert_T
 from rangekit.io import atomic_save_npz, atomic_write_json, read_json
 from rangekit.coded.patterns import PatternSpec
-from rangekit.surface.cloud import PointCloud, load_cloud, save_cloud
+from rangekit.formats.clouds import load_cloud, save_cloud
+from rangekit.surface.cloud import PointCloud, merge_clouds
 from rangekit.formats.poses import save_poses
 from rangekit.progress import StageTimer, call_progress
 from rangekit.app.reconstruct import reconstruct_view
@@ -134,14 +135,6 @@ def _view_cloud(v: SessionView, spec: PatternSpec, rig: Rig, settings: dict, ful
     return c
 
 
-def _range_map(depth: np.ndarray, camera) -> np.ndarray:
-    """(H, W, 3) world points of a camera-frame depth map (NaN where depth is NaN)."""
-    o, d = camera.rays(camera.pixel_grid())
-    z_dir = d @ camera.T_world_cam[:3, 2]
-    t = depth.reshape(-1).astype(np.float64) / z_dir
-    return (o + t[:, None] * d).reshape(depth.shape + (3,))
-
-
 def process_session(folder: str | Path, *, fusion: str = "poisson", method: str = "auto",
                     table_margin: float = 0.002, evaluate: bool = True, report: bool = True,
                     progress: Callable | None = None) -> ProcessResult:
@@ -158,7 +151,8 @@ def process_session(folder: str | Path, *, fusion: str = "poisson", method: str 
     report : write ``report.html``.
     progress : ``progress(msg, done=None, total=None)`` (see :mod:`rangekit.progress`).
     """
-    from rangekit.surface.mesh import poisson_mesh, save_mesh, tsdf_fuse
+    from rangekit.formats.meshes import save_mesh
+    from rangekit.surface.fusion import poisson_mesh, tsdf_fuse
     from rangekit.registration.multiview import register_views
 
     if fusion not in FUSION_METHODS:
@@ -206,25 +200,19 @@ def process_session(folder: str | Path, *, fusion: str = "poisson", method: str 
 
     with timer.stage("fuse"):
         T = res.T_world_view
-        P = np.concatenate([apply_T(Tk, c.points) for c, Tk in zip(clouds, T)])
-        N = np.concatenate([c.normals @ Tk[:3, :3].T for c, Tk in zip(clouds, T)])
-        C = np.concatenate([c.colours for c in clouds])
-        merged = PointCloud(P, C, N)
+        merged = merge_clouds(clouds, T)
         save_cloud(out / "merged.ply", merged)
-        call_progress(progress, f"fusing {len(P):,} points ({fusion})")
+        call_progress(progress, f"fusing {len(merged):,} points ({fusion})")
         if fusion == "poisson":
-            step = max(1, len(P) // 400_000)
+            step = max(1, len(merged) // 400_000)
             # One thread: Open3D's multi-threaded Poisson is not deterministic, and a resumed scan must
             # give the same mesh as an uninterrupted one (on 2 cores it is no slower).
-            mesh = poisson_mesh(PointCloud(P[::step], C[::step], N[::step]), depth=9, n_threads=1)
+            mesh = poisson_mesh(PointCloud(merged.points[::step], merged.colours[::step], merged.normals[::step]),
+                                depth=9, n_threads=1)
         else:
-            tsdf_views = []
-            for k, (v, Tk) in enumerate(zip(views, T)):
-                depth = np.load(v.folder / "maps.npz")["depth"]
-                cam_k = rig.camera.with_pose(compose(Tk, rig.camera.T_world_cam))
-                tsdf_views.append((apply_T(Tk, _range_map(depth, rig.camera).reshape(-1, 3)).reshape(depth.shape + (3,)),
-                                   None, cam_k))
-            mesh = tsdf_fuse(tsdf_views)
+            # Each view's camera-frame depth map as stored, seen by the camera at its registered pose.
+            mesh = tsdf_fuse([(np.load(v.folder / "maps.npz")["depth"], None,
+                               rig.camera.with_pose(compose(Tk, rig.camera.T_world_cam))) for v, Tk in zip(views, T)])
         save_mesh(out / "mesh.ply", mesh)
         mesh_info = {"vertices": len(mesh.vertices), "triangles": len(mesh.triangles),
                      "watertight": bool(mesh.is_watertight), "area_m2": float(mesh.area),

@@ -10,7 +10,8 @@ import numpy as np
 
 from rangekit.errors import ConfigError
 from rangekit.geometry import axis_angle_to_R, make_T
-from rangekit.surface.cloud import PointCloud, load_cloud, save_cloud
+from rangekit.formats.clouds import load_cloud, save_cloud
+from rangekit.surface.cloud import PointCloud, merge_clouds
 from rangekit.formats.poses import load_poses, save_poses
 from rangekit.registration.multiview import MultiViewOptions, MultiViewResult, register_views
 
@@ -81,21 +82,16 @@ def register_files(paths: Sequence[str | Path], out_dir: str | Path, *, init: st
               "mean_edge_rmse_m": float(np.mean([e.rmse for e in edges_of[k]])) if edges_of[k] else None}
              for k in range(len(paths))]
     save_poses(out / "poses.json", [str(p) for p in paths], res.T_world_view, extra=extra)
-    pts, nrm = [], []
-    for c, T in zip(clouds, res.T_world_view):
-        pts.append(c.points @ T[:3, :3].T + T[:3, 3])
-        if c.normals is not None:
-            nrm.append(c.normals @ T[:3, :3].T)
-    P = np.concatenate(pts)
-    N = np.concatenate(nrm) if len(nrm) == len(clouds) else None
-    merged = PointCloud(P, normals=N)
+    merged = merge_clouds(clouds, res.T_world_view)
     save_cloud(out / "merged.ply", merged)
     mesh_path = None
     if mesh:
-        from rangekit.surface.mesh import oriented_normals_cloud, poisson_mesh, save_mesh
+        from rangekit.formats.meshes import save_mesh
+        from rangekit.surface.cloud import oriented_normals_cloud
+        from rangekit.surface.fusion import poisson_mesh
 
         say("meshing (screened Poisson)")
-        m = poisson_mesh(merged if N is not None else oriented_normals_cloud(P, voxel=voxel))
+        m = poisson_mesh(merged if merged.normals is not None else oriented_normals_cloud(merged.points, voxel=voxel))
         mesh_path = out / "mesh.ply"
         save_mesh(mesh_path, m)
     return RegisterReport([str(p) for p in paths], res, merged, mesh_path)

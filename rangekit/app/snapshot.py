@@ -1,7 +1,7 @@
 """Headless snapshots of meshes and point clouds as RGB uint8 images (reports, ``rangekit render``).
 
-No display and no GPU: meshes are ray cast with Open3D's ``RaycastingScene`` (imported inside the
-functions that need it), clouds are splatted into a z-buffer with numpy. Frames and units follow
+No display and no GPU: meshes are ray cast with Open3D's ``RaycastingScene``
+(:func:`rangekit.surface.raycast.raycasting_scene`, open3d imported inside the functions that need it), clouds are splatted into a z-buffer with numpy. Frames and units follow
 docs/ARCHITECTURE.md: world points in metres, OpenCV camera frame (x right, y down, z forward),
 ``T_world_cam`` maps camera to world, pixels ``(u, v) = (column, row)``; images are (H, W, 3) uint8 RGB.
 """
@@ -16,27 +16,16 @@ import cv2
 import numpy as np
 
 from rangekit.camera import PinholeCamera
+from rangekit.colour import colourise
 from rangekit.errors import InputError
 from rangekit.geometry import apply_T, look_at
 from rangekit.surface.mesh import TriangleMesh
+from rangekit.surface.raycast import raycasting_scene
 from rangekit.surface.cloud import PointCloud
 
 __all__ = ["fit_camera", "MeshHits", "raycast_mesh", "shade", "render_mesh", "render_cloud", "colourise",
-           "render_values_on_mesh", "colour_bar", "montage", "to_png_bytes", "data_uri", "COLORMAPS"]
+           "render_values_on_mesh", "colour_bar", "montage", "to_png_bytes", "data_uri"]
 
-# Anchor tables (RGB uint8 at 17 evenly spaced positions in [0, 1]), sampled from the reference maps
-# (Google's Turbo; matplotlib's viridis); piecewise-linear between anchors, within 7 levels of the originals.
-COLORMAPS: dict[str, np.ndarray] = {
-    "turbo": np.array([[48, 18, 59], [64, 64, 162], [70, 107, 227], [66, 148, 255], [40, 188, 235],
-                       [24, 221, 194], [50, 242, 152], [109, 254, 98], [164, 252, 60], [203, 237, 52],
-                       [236, 209, 58], [253, 174, 53], [251, 129, 34], [236, 83, 15], [210, 49, 5],
-                       [172, 23, 1], [122, 4, 3]], dtype=np.float64),
-    "viridis": np.array([[68, 1, 84], [72, 24, 106], [71, 45, 123], [66, 64, 134], [59, 82, 139],
-                         [51, 99, 141], [44, 114, 142], [38, 130, 142], [33, 145, 140], [31, 159, 136],
-                         [39, 173, 129], [61, 188, 116], [92, 200, 99], [129, 211, 77], [170, 220, 50],
-                         [213, 226, 26], [253, 231, 37]], dtype=np.float64),
-    "grey": np.array([[0, 0, 0], [255, 255, 255]], dtype=np.float64),
-}
 AMBIENT = 0.25
 GREY = (0.75, 0.78, 0.82)
 
@@ -147,9 +136,7 @@ def raycast_mesh(mesh: TriangleMesh, camera: PinholeCamera) -> MeshHits:
     ok = np.all(np.isfinite(d), axis=1)
     d_cast = np.where(ok[:, None], d, [0.0, 0.0, 1.0])
     c = (mesh.vertices.min(axis=0) + mesh.vertices.max(axis=0)) / 2
-    scene = o3d.t.geometry.RaycastingScene()
-    scene.add_triangles(o3d.core.Tensor((mesh.vertices - c).astype(np.float32)),
-                        o3d.core.Tensor(mesh.triangles.astype(np.uint32)))
+    scene = raycasting_scene(mesh.vertices - c, mesh.triangles)
     out = scene.cast_rays(o3d.core.Tensor(np.concatenate([o - c, d_cast], axis=1).astype(np.float32)))
     t32 = out["t_hit"].numpy().astype(np.float64)
     hit = ok & np.isfinite(t32)
@@ -235,35 +222,6 @@ def render_mesh(mesh: TriangleMesh, camera: PinholeCamera, *, vertex_colours: np
     image = _canvas(m.shape, background, "render_mesh")
     image[m] = _to_uint8(shade(normals[m], _view_dirs(hits.xyz[m], camera), base))
     return image
-
-
-def colourise(values: np.ndarray, vmin: float, vmax: float, *, cmap: str = "turbo",
-              nan_colour=(255, 255, 255)) -> np.ndarray:
-    """Map ``values`` to RGB: vmin -> first anchor of ``cmap``, vmax -> last (clipped outside).
-
-    Parameters
-    ----------
-    values : any shape, float. Non-finite entries get ``nan_colour``.
-    cmap : "turbo", "viridis" or "grey" (:data:`COLORMAPS`).
-
-    Returns
-    -------
-    ``values.shape + (3,)`` uint8 RGB.
-    """
-    if cmap not in COLORMAPS:
-        raise InputError(f"colourise: cmap must be one of {sorted(COLORMAPS)}, found {cmap!r}")
-    if not (np.isfinite(vmin) and np.isfinite(vmax) and vmax >= vmin):
-        raise InputError(f"colourise: expected finite vmin <= vmax, found vmin={vmin}, vmax={vmax}")
-    v = np.asarray(values, dtype=np.float64)
-    span = vmax - vmin
-    t = np.clip((v - vmin) / span if span > 0 else (v > vmin).astype(np.float64), 0.0, 1.0)
-    table = COLORMAPS[cmap]
-    xa = np.linspace(0.0, 1.0, len(table))
-    bad = ~np.isfinite(v.reshape(-1))
-    flat = np.where(bad, 0.0, t.reshape(-1))
-    out = np.column_stack([np.interp(flat, xa, table[:, k]) for k in range(3)]).round().astype(np.uint8)
-    out[bad] = _rgb255(nan_colour, "colourise nan_colour").astype(np.uint8)
-    return out.reshape(v.shape + (3,))
 
 
 def render_cloud(cloud: PointCloud | np.ndarray, camera: PinholeCamera, *, values: np.ndarray | None = None,

@@ -239,7 +239,7 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
     """rangekit reconstruct CAPTURE_DIR [--rig RIG.json] --out cloud.ply"""
     from rangekit.formats.capture import load_capture
     from rangekit.errors import ConfigError
-    from rangekit.surface.cloud import save_cloud
+    from rangekit.formats.clouds import save_cloud
     from rangekit.app.reconstruct import reconstruct_view
     from rangekit.rig import load_rig
 
@@ -294,8 +294,10 @@ def cmd_register(args: argparse.Namespace) -> int:
 
 def cmd_mesh(args: argparse.Namespace) -> int:
     """rangekit mesh CLOUD --out MESH"""
-    from rangekit.surface.mesh import oriented_normals_cloud, poisson_mesh, save_mesh
-    from rangekit.surface.cloud import load_cloud
+    from rangekit.formats.meshes import save_mesh
+    from rangekit.surface.cloud import oriented_normals_cloud
+    from rangekit.surface.fusion import poisson_mesh
+    from rangekit.formats.clouds import load_cloud
 
     t0 = time.perf_counter()
     cloud = load_cloud(args.cloud)
@@ -466,11 +468,11 @@ def cmd_render(args: argparse.Namespace) -> int:
     if not src.is_file():
         raise FileFormatError(f"{src}: no such file (expected a mesh or a point cloud)")
     if src.suffix.lower() in (".obj", ".stl", ".off", ".glb", ".gltf") or _ply_has_faces(src):
-        from rangekit.surface.mesh import load_mesh_file
+        from rangekit.formats.meshes import load_mesh_file
 
         mesh = load_mesh_file(src)
     else:
-        from rangekit.surface.cloud import load_cloud
+        from rangekit.formats.clouds import load_cloud
 
         cloud = load_cloud(src)
     pts = mesh.vertices if mesh is not None else cloud.points
@@ -596,7 +598,8 @@ def cmd_photometric(args: argparse.Namespace) -> int:
 
     from rangekit.photometric.diligent import load_diligent
     from rangekit.io import write_png
-    from rangekit.surface.mesh import TriangleMesh, save_mesh
+    from rangekit.formats.meshes import save_mesh
+    from rangekit.surface.mesh import TriangleMesh
     from rangekit.photometric import (angular_error, depth_to_mesh, integrate_normals, photometric_stereo,
                                       uncalibrated_photometric_stereo)
 

@@ -108,8 +108,9 @@ def load_ground_truth(folder: str | Path) -> dict | None:
 def write_depth_outputs(out: str | Path, depth: np.ndarray, points: np.ndarray, *,
                         range_map: np.ndarray | None = None, confidence: np.ndarray | None = None) -> list[str]:
     """Write depth.npy/png, optional range.npy and confidence.npy/png, and cloud.ply; returns file names."""
-    from rangekit.surface.cloud import PointCloud, save_cloud
-    from rangekit.app.snapshot import colourise
+    from rangekit.formats.clouds import save_cloud
+    from rangekit.surface.cloud import PointCloud
+    from rangekit.colour import colourise
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)

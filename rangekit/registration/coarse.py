@@ -12,8 +12,8 @@ from scipy.spatial import cKDTree
 
 from rangekit.errors import RegistrationError
 from rangekit.geometry import apply_T, make_T, procrustes
-from rangekit.surface.cloud import PointCloud
-from rangekit.registration.icp import IcpOptions, RegistrationResult, estimate_normals, icp, voxel_downsample
+from rangekit.surface.cloud import PointCloud, estimate_normals, voxel_downsample
+from rangekit.registration.icp import IcpOptions, RegistrationResult, icp
 
 __all__ = ["CoarseOptions", "Features", "compute_features", "coarse_align"]
 
@@ -45,10 +45,8 @@ def compute_features(cloud: PointCloud, options: CoarseOptions) -> Features:
     import open3d as o3d
 
     v = options.voxel
-    if cloud.normals is not None:
-        pts, nrm = voxel_downsample(cloud.points, v, normals=cloud.normals)
-    else:
-        pts = voxel_downsample(cloud.points, v)
+    pts, nrm = voxel_downsample(cloud.points, v, normals=cloud.normals)
+    if nrm is None:
         nrm = estimate_normals(pts, k=20)
     if len(pts) < 10:
         raise RegistrationError(f"coarse alignment: only {len(pts)} points after {v * 1e3:.2f} mm voxels; "

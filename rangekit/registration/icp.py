@@ -15,10 +15,9 @@ from scipy.spatial import cKDTree
 from rangekit.camera import PinholeCamera
 from rangekit.errors import InputError, RegistrationError
 from rangekit.geometry import apply_T, invert_T, make_T, procrustes, rotation_angle, rotvec_to_R, transform_vectors
-from rangekit.surface.cloud import PointCloud
+from rangekit.surface.cloud import PointCloud, voxel_downsample
 
-__all__ = ["IcpOptions", "RegistrationResult", "icp", "KERNELS", "voxel_downsample", "estimate_normals",
-           "OrganisedScan"]
+__all__ = ["IcpOptions", "RegistrationResult", "icp", "KERNELS", "OrganisedScan"]
 
 KERNELS = ("none", "huber", "cauchy", "tukey", "geman_mcclure", "welsch")
 METHODS = ("point_to_point", "point_to_plane", "symmetric")
@@ -88,40 +87,6 @@ class OrganisedScan:
 
 
 # --------------------------------------------------------------------------- helpers
-def voxel_downsample(points: np.ndarray, voxel: float, *, normals: np.ndarray | None = None):
-    """Mean point (and renormalised mean normal) per occupied voxel of edge ``voxel`` metres."""
-    P = np.asarray(points, dtype=np.float64)
-    if voxel <= 0 or len(P) == 0:
-        return (P, normals) if normals is not None else P
-    keys = np.floor(P / voxel).astype(np.int64)
-    keys -= keys.min(axis=0)
-    dims = keys.max(axis=0) + 1
-    flat = (keys[:, 0] * dims[1] + keys[:, 1]) * dims[2] + keys[:, 2]
-    _, inv, counts = np.unique(flat, return_inverse=True, return_counts=True)
-    out = np.zeros((len(counts), 3))
-    np.add.at(out, inv, P)
-    out /= counts[:, None]
-    if normals is None:
-        return out
-    n = np.zeros((len(counts), 3))
-    np.add.at(n, inv, normals)
-    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
-    return out, n
-
-
-def estimate_normals(points: np.ndarray, *, k: int = 20, viewpoint: np.ndarray | None = None) -> np.ndarray:
-    """(N, 3) unit normals from the k nearest neighbours (PCA via Open3D), facing ``viewpoint`` if given."""
-    import open3d as o3d
-
-    pc = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.asarray(points, dtype=np.float64)))
-    pc.estimate_normals(o3d.geometry.KDTreeSearchParamKNN(knn=k))
-    n = np.asarray(pc.normals).copy()
-    if viewpoint is not None:
-        flip = np.einsum("ij,ij->i", n, np.asarray(viewpoint) - points) < 0
-        n[flip] *= -1
-    return n
-
-
 def _as_cloud(x, name: str) -> PointCloud:
     cloud = x if isinstance(x, PointCloud) else PointCloud(np.asarray(x, dtype=np.float64))
     ok = np.all(np.isfinite(cloud.points), axis=1)
@@ -198,9 +163,12 @@ class _ProjectiveAssociation:
 
 # --------------------------------------------------------------------------- one level of ICP
 def _solve_increment(method: str, p: np.ndarray, q: np.ndarray, nq: np.ndarray | None, np_: np.ndarray | None,
-                     w: np.ndarray) -> np.ndarray:
-    """(4, 4) increment applied to the (already transformed) source points."""
+                     w: np.ndarray) -> np.ndarray | None:
+    """(4, 4) increment applied to the (already transformed) source points, or None when the weighted
+    system is singular (e.g. every weight is 0), so there is no increment to take."""
     if method == "point_to_point":
+        if np.count_nonzero(w > 0) < 3:
+            return None
         return procrustes(p, q, weights=w).T_dst_src
     if method == "point_to_plane":
         n = nq
@@ -216,7 +184,9 @@ def _solve_increment(method: str, p: np.ndarray, q: np.ndarray, nq: np.ndarray |
     try:
         x = np.linalg.solve(A + 1e-12 * np.trace(A) / 6 * np.eye(6), b)
     except np.linalg.LinAlgError:
-        return np.eye(4)
+        return None
+    if not np.all(np.isfinite(x)):
+        return None
     if method == "point_to_plane":
         return make_T(rotvec_to_R(x[:3]), x[3:])
     # symmetric: rotate by theta = atan(|a|) about a, translate t cos(theta), rotate again (R T R)
@@ -263,6 +233,10 @@ def _icp_level(src: PointCloud, assoc, T: np.ndarray, opt: IcpOptions, rng: np.r
                 1e-9)
         w = _weights(r, opt.kernel, scale) * keep
         dT = _solve_increment(opt.method, p, q, nq, np_, w)
+        if dT is None:
+            return T, n_iter, False, (f"singular system at iteration {n_iter}: {np.count_nonzero(w > 0)} of "
+                                      f"{len(w)} correspondences have weight > 0 ({opt.kernel} kernel, scale "
+                                      f"{scale:.3g} m); they do not constrain the pose")
         T = dT @ T
         step = np.linalg.norm(dT[:3, 3]) + rotation_angle(dT[:3, :3]) * size
         if step < opt.tolerance:
@@ -298,7 +272,7 @@ def icp(source, target, *, init_T_target_source: np.ndarray | None = None, optio
         tgt = _as_cloud(target, "target")
     if options.method != "point_to_point" and tgt.normals is None:
         raise RegistrationError(f"{options.method} ICP needs target normals; give the target PointCloud normals "
-                                "(rangekit.registration.icp.estimate_normals) or use method='point_to_point'")
+                                "(rangekit.surface.cloud.estimate_normals) or use method='point_to_point'")
     if options.method == "symmetric" and src.normals is None:
         raise RegistrationError("symmetric ICP needs source normals too; give PointCloud(points, normals=...)")
     T = np.eye(4) if init_T_target_source is None else np.asarray(init_T_target_source, dtype=np.float64).copy()
@@ -311,16 +285,10 @@ def icp(source, target, *, init_T_target_source: np.ndarray | None = None, optio
     levels = list(options.voxel_sizes) + [0.0]
     for voxel in levels:
         if voxel > 0:
-            if src.normals is not None:
-                sp, sn = voxel_downsample(src.points, voxel, normals=src.normals)
-                s = PointCloud(sp, normals=sn)
-            else:
-                s = PointCloud(voxel_downsample(src.points, voxel))
-            if tgt.normals is not None:
-                tp, tn = voxel_downsample(tgt.points, voxel, normals=tgt.normals)
-                t_level = PointCloud(tp, normals=tn)
-            else:
-                t_level = PointCloud(voxel_downsample(tgt.points, voxel))
+            sp, sn = voxel_downsample(src.points, voxel, normals=src.normals)
+            s = PointCloud(sp, normals=sn)
+            tp, tn = voxel_downsample(tgt.points, voxel, normals=tgt.normals)
+            t_level = PointCloud(tp, normals=tn)
             assoc = _KdAssociation(t_level)
             opt = replace(options, max_distance=max(options.max_distance, 3 * voxel))
         else:

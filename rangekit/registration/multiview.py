@@ -21,9 +21,9 @@ from scipy.spatial import cKDTree
 
 from rangekit.errors import RegistrationError
 from rangekit.geometry import apply_T, invert_T, make_T, rotation_angle, rotvec_to_R
-from rangekit.surface.cloud import PointCloud
+from rangekit.surface.cloud import PointCloud, estimate_normals, voxel_downsample
 from rangekit.registration.coarse import CoarseOptions, compute_features, coarse_align
-from rangekit.registration.icp import IcpOptions, estimate_normals, icp, voxel_downsample
+from rangekit.registration.icp import IcpOptions, icp
 from rangekit.registration.sync import SyncResult, synchronise
 
 __all__ = ["MultiViewOptions", "EdgeResult", "MultiViewResult", "register_views", "pairwise_overlap",
@@ -87,10 +87,8 @@ def _prepare(clouds: Sequence[PointCloud], voxel: float) -> list[PointCloud]:
             raise RegistrationError(f"view {k}: {len(pts)} points; a scan needs at least 50 to register")
         if not np.all(np.isfinite(pts)):
             raise RegistrationError(f"view {k}: has NaN or infinite points; drop them first")
-        if c.normals is not None:
-            p, n = voxel_downsample(pts, voxel, normals=c.normals)
-        else:
-            p = voxel_downsample(pts, voxel)
+        p, n = voxel_downsample(pts, voxel, normals=c.normals)
+        if n is None:
             n = estimate_normals(p, k=20)
         out.append(PointCloud(p, normals=n))
     return out

@@ -1,0 +1,79 @@
+"""PLY reading speed: rangekit's vectorised reader side by side with plyfile, the usual Python peer.
+
+Inputs: the Stanford scan bun000.ply (ASCII, 40,256 vertices and a ragged 512 x 400 ``range_grid``;
+from ../shared/data, skipped when absent) and a binary mesh of about 900k triangles written by
+rangekit (an Open3D sphere). The reader's old test assert, now measured here: bun000 in under 1 s.
+
+    .venv/bin/python benchmarks/bench_cloud_io.py [--repeat 3] [--bunny PATH/bun000.ply]
+
+Prints a table (median seconds, ratio plyfile / rangekit) and exits non-zero if bun000 takes 1 s or more.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).parent))
+from _timing import timed  # noqa: E402
+
+BUNNY = Path(__file__).parents[1] / ".." / "shared" / "data" / "stanford-bunny" / "bun000.ply"
+TARGET_S = 1.0
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--repeat", type=int, default=3, help="timed repetitions (median reported)")
+    ap.add_argument("--bunny", type=Path, default=BUNNY, help="path of bun000.ply")
+    args = ap.parse_args()
+    bunny = args.bunny
+
+    import open3d as o3d
+    import plyfile
+
+    from rangekit.formats.clouds import load_cloud
+    from rangekit.formats.meshes import load_mesh_file, save_mesh
+    from rangekit.surface.mesh import TriangleMesh
+
+    rows, ok = [], True
+    if bunny.is_file():
+        def peer_bunny():
+            d = plyfile.PlyData.read(str(bunny))
+            v = d["vertex"]
+            return np.column_stack([v["x"], v["y"], v["z"]]), d["range_grid"]["vertex_indices"]
+
+        t_ours, _ = timed(lambda: load_cloud(bunny), args.repeat, warmup=1)
+        t_peer, _ = timed(peer_bunny, args.repeat, warmup=1)
+        rows.append(("bun000.ply (ASCII, range grid)", t_ours, t_peer))
+        ok = t_ours < TARGET_S
+    else:
+        print(f"(skipped bun000.ply: not found at {bunny})")
+
+    with tempfile.TemporaryDirectory() as tmp:
+        s = o3d.geometry.TriangleMesh.create_sphere(radius=0.1, resolution=474)
+        path = Path(tmp) / "sphere.ply"
+        save_mesh(path, TriangleMesh(np.asarray(s.vertices), np.asarray(s.triangles)))
+        n = len(s.triangles)
+
+        def peer_mesh():
+            d = plyfile.PlyData.read(str(path), known_list_len={"face": {"vertex_indices": 3}})
+            return np.asarray(d["face"]["vertex_indices"]).astype(np.int64)
+
+        t_ours, _ = timed(lambda: load_mesh_file(path), args.repeat, warmup=1)
+        t_peer, _ = timed(peer_mesh, args.repeat, warmup=1)
+        rows.append((f"{n:,}-triangle mesh (binary)", t_ours, t_peer))
+
+    print(f"{'input':38s} {'rangekit':>10s} {'plyfile':>10s} {'plyfile/rangekit':>17s}")
+    for name, a, b in rows:
+        print(f"{name:38s} {a:9.3f}s {b:9.3f}s {b / a:16.1f}x")
+    if not ok:
+        print(f"bun000.ply took {rows[0][1]:.3f} s, target < {TARGET_S} s")
+    return 0 if ok else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,102 @@
+"""Mesh files, chosen by extension: ``.ply`` (read and written by :mod:`rangekit.formats.ply`), ``.obj``
+and ``.stl`` (via trimesh). Writes are atomic."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from rangekit.errors import FileFormatError
+from rangekit.formats.ply import mesh_ply_bytes, ply_vertex_attributes, read_ply
+from rangekit.io import atomic_write_bytes
+from rangekit.surface.mesh import TriangleMesh
+
+__all__ = ["save_mesh", "load_mesh_file", "MESH_FORMATS"]
+
+
+def _write_via_trimesh(file_type: str):
+    def write(mesh: TriangleMesh) -> bytes:
+        data = mesh.to_trimesh().export(file_type=file_type)
+        return data.encode("utf-8") if isinstance(data, str) else bytes(data)
+    return write
+
+
+MESH_FORMATS = {".ply": mesh_ply_bytes, ".obj": _write_via_trimesh("obj"), ".stl": _write_via_trimesh("stl")}
+
+
+def _check_suffix(path: Path) -> str:
+    suffix = path.suffix.lower()
+    if suffix not in MESH_FORMATS:
+        raise FileFormatError(f"{path}: unknown mesh format {path.suffix!r}; known: {', '.join(MESH_FORMATS)}")
+    return suffix
+
+
+def save_mesh(path: str | Path, mesh: TriangleMesh) -> None:
+    """Write ``mesh`` in the format given by the extension (``.ply`` binary with colours, ``.obj``, ``.stl``).
+
+    The write is atomic (temporary file + rename). STL keeps no colours; OBJ keeps them as vertex colours.
+    """
+    path = Path(path)
+    suffix = _check_suffix(path)
+    atomic_write_bytes(path, MESH_FORMATS[suffix](mesh))
+
+
+def _read_ply_mesh(path: Path) -> TriangleMesh:
+    """A PLY mesh: vertices (and colours) in file order, polygons split into fans of triangles."""
+    header, elements = read_ply(path, ("vertex", "face"))
+    points, _, colours = ply_vertex_attributes(path, header, elements["vertex"])
+    face = elements["face"]
+    lists = face.get("vertex_indices", face.get("vertex_index"))
+    if lists is None or not hasattr(lists, "counts"):
+        raise FileFormatError(f"{path}: expected a face list property 'vertex_indices', found "
+                              f"{', '.join(face) or 'none'}")
+    items = lists.items.astype(np.int64)
+    if np.all(lists.counts == 3):
+        triangles = items.reshape(-1, 3)
+    else:  # polygons: fans (v0, v_k, v_k+1)
+        n_tri = np.maximum(lists.counts - 2, 0)
+        first = np.repeat(np.cumsum(lists.counts) - lists.counts, n_tri)
+        j = np.arange(int(n_tri.sum())) - np.repeat(np.cumsum(n_tri) - n_tri, n_tri)
+        triangles = np.column_stack([items[first], items[first + j + 1], items[first + j + 2]])
+    if len(triangles) == 0:
+        raise FileFormatError(f"{path}: expected a triangle mesh, found no triangles")
+    if triangles.min() < 0 or triangles.max() >= len(points):
+        raise FileFormatError(f"{path}: expected face indices in [0, {len(points)}), found "
+                              f"[{triangles.min()}, {triangles.max()}]")
+    if not np.all(np.isfinite(points)):
+        raise FileFormatError(f"{path}: expected finite vertices, found "
+                              f"{np.count_nonzero(~np.isfinite(points).all(axis=1))} that are not")
+    return TriangleMesh(points, triangles, None if colours is None else colours.astype(np.float32))
+
+
+def load_mesh_file(path: str | Path) -> TriangleMesh:
+    """Read a ``.ply`` (:mod:`rangekit.formats.ply`), ``.obj`` or ``.stl`` (trimesh) mesh; vertex order
+    kept, nothing merged.
+
+    Raises
+    ------
+    FileFormatError
+        If the file is missing, has an unknown extension, is malformed, or holds no triangles.
+    """
+    path = Path(path)
+    suffix = _check_suffix(path)
+    if not path.is_file():
+        raise FileFormatError(f"{path}: mesh file not found")
+    if suffix == ".ply":
+        return _read_ply_mesh(path)
+    import trimesh
+
+    try:
+        loaded = trimesh.load_mesh(path, file_type=suffix[1:], process=False)
+    except Exception as exc:  # trimesh raises many types for a corrupt file
+        raise FileFormatError(f"{path}: cannot read {suffix[1:].upper()} mesh: {exc}") from exc
+    if isinstance(loaded, trimesh.Scene):
+        loaded = loaded.to_mesh()
+    if not isinstance(loaded, trimesh.Trimesh) or len(loaded.faces) == 0:
+        raise FileFormatError(f"{path}: expected a triangle mesh, found no triangles")
+    colours = None
+    if loaded.visual.kind == "vertex":
+        colours = np.asarray(loaded.visual.vertex_colors)[:, :3].astype(np.float32) / 255.0
+    return TriangleMesh(np.asarray(loaded.vertices, dtype=np.float64), np.asarray(loaded.faces, dtype=np.int64),
+                        colours)

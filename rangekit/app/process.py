@@ -1,10 +1,12 @@
 """From an acquired session to one mesh: decode and triangulate every view, register the views seeded by
-the turntable angles, fuse, measure against the truth on the simulator, report (the work behind
-``rangekit process`` and the end of ``rangekit scan``).
+the turntable angles, fuse, measure against the truth when given an evaluator, report (the work behind
+``rangekit process`` and the end of ``rangekit scan``). The pipeline is the same on hardware and on
+the simulator: it never imports :mod:`rangekit.sim` (see :func:`rangekit.app.scan.session_evaluator`).
 
 Writes into the session folder (atomically):
 
-    view_NNN/cloud.ply, maps.npz, cloud.json   each view's cloud, its decoded maps and depth (cache)
+    view_NNN/cloud.ply, maps.npz, cloud.json   each view's cloud, its decoded maps and depth (cache,
+                                               rangekit.app.view_cache)
     poses.json                                 registered poses, world = the first view's frame
     merged.ply, mesh.ply                       all views in one frame; the fused watertight mesh
     summary.json                               what the end-of-run summary prints, as data

@@ -30,11 +30,12 @@ import numpy as np
 from rangekit.camera import PinholeCamera
 from rangekit.errors import ConfigError, DeviceDisconnected, DeviceError, DeviceTimeout
 from rangekit.rig import Rig
+from rangekit.rig_checks import DEPTHAI_SOCKETS
 
 __all__ = ["DepthaiCamera", "DEPTHAI_NAMES", "calibration_to_rig", "pinhole_from_calibration",
            "scale_intrinsics", "SOCKETS"]
 
-SOCKETS = ("CAM_A", "CAM_B", "CAM_C", "CAM_D", "CAM_E", "CAM_F", "CAM_G", "CAM_H")
+SOCKETS = DEPTHAI_SOCKETS
 
 #: Every depthai attribute path this module uses; tests check each against the installed depthai.
 DEPTHAI_NAMES = [

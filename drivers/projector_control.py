@@ -15,6 +15,7 @@ import time
 
 from rangekit.drivers.serial_link import SerialLink
 from rangekit.errors import CommandError, ConfigError, DeviceDisconnected, DeviceTimeout, ProtocolError
+from rangekit.rig_checks import PROJECTOR_PROTOCOLS
 
 __all__ = ["EscVp21Projector", "PJLinkProjector", "make_projector_control", "PROJECTOR_PROTOCOLS"]
 
@@ -156,8 +157,6 @@ class PJLinkProjector:
     def close(self) -> None:
         self._sock.close()
 
-
-PROJECTOR_PROTOCOLS = ("escvp21", "pjlink")
 
 
 def make_projector_control(protocol: str, url: str, **kwargs):

@@ -27,6 +27,7 @@ from typing import Iterator
 
 from rangekit.drivers.serial_link import SerialLink
 from rangekit.errors import ConfigError, DeviceError, DeviceDisconnected, DeviceTimeout, InputError, ProtocolError
+from rangekit.rig_checks import TURNTABLE_PROTOCOLS
 
 __all__ = ["HorusTurntable", "FabScanTurntable", "make_turntable", "TURNTABLE_PROTOCOLS"]
 
@@ -339,7 +340,7 @@ class FabScanTurntable(_SerialTurntable):
         self._command(f"M{19 + 2 * (n - 1) + (0 if on else 1)}")
 
 
-TURNTABLE_PROTOCOLS = {"horus": HorusTurntable, "fabscan": FabScanTurntable}
+_DRIVERS = {"horus": HorusTurntable, "fabscan": FabScanTurntable}  # one per rangekit.rig_checks.TURNTABLE_PROTOCOLS
 
 
 def make_turntable(protocol: str, url: str, baud: int | None = None, **kw) -> HorusTurntable | FabScanTurntable:
@@ -356,5 +357,5 @@ def make_turntable(protocol: str, url: str, baud: int | None = None, **kw) -> Ho
     if key not in TURNTABLE_PROTOCOLS:
         raise ConfigError(f"turntable protocol {protocol!r} is not known; known protocols: "
                           f"{', '.join(repr(k) for k in sorted(TURNTABLE_PROTOCOLS))}")
-    cls = TURNTABLE_PROTOCOLS[key]
+    cls = _DRIVERS[key]
     return cls(url, **kw) if baud is None else cls(url, baud, **kw)

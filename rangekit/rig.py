@@ -17,7 +17,7 @@ on the table by ``T_world_table @ Rz(theta) @ inv(T_world_table)``.
 
 :func:`load_rig` checks the geometry and names the file and the field of any error
 (``rig.json: cameras[0].dist: ...``). It does not check ``devices`` and ``capture`` beyond their being
-objects: :func:`rangekit.drivers.validate_rig_for_hardware` does, before any device is opened.
+objects: :func:`rangekit.rig_checks.validate_rig_for_hardware` does, before any device is opened.
 :func:`template_rig` is the starting point for a real rig (``rangekit rig init``).
 """
 
@@ -35,7 +35,8 @@ from rangekit.geometry import axis_angle_to_R, compose, invert_T, make_T
 from rangekit.io import atomic_write_json, read_json
 from rangekit.projector_response import ProjectorResponse
 
-__all__ = ["Rig", "SCHEMA", "RIG_FIELDS", "CAMERA_FIELDS", "load_rig", "save_rig", "template_rig"]
+__all__ = ["Rig", "SCHEMA", "RIG_FIELDS", "CAMERA_FIELDS", "load_rig", "save_rig", "template_rig", "table_motion",
+           "turntable_prior", "table_frame"]
 
 SCHEMA = "rangekit.rig/1"
 #: The top-level fields of a rig file, in the order :meth:`Rig.to_dict` writes them.
@@ -75,8 +76,7 @@ class Rig:
         """(4, 4) motion of the turntable at ``angle`` radians, in world coordinates."""
         if self.T_world_table is None:
             raise ConfigError("rig: no turntable ('T_world_table' is null), so it cannot rotate")
-        Rz = make_T(axis_angle_to_R([0.0, 0.0, 1.0], angle))
-        return compose(self.T_world_table, Rz, invert_T(self.T_world_table))
+        return table_motion(self.T_world_table, angle)
 
     def to_dict(self) -> dict:
         return {
@@ -122,6 +122,35 @@ class Rig:
                        devices=dict(data.get("devices", {})), capture=dict(data.get("capture", {})))
         except ConfigError as exc:
             raise ConfigError(f"{where}: {exc}") from exc
+
+
+def table_motion(T_world_table: np.ndarray, angle: float) -> np.ndarray:
+    """(4, 4) motion of a turntable turned by ``angle`` radians about its z axis, in world coordinates:
+    ``T_world_table @ Rz(angle) @ inv(T_world_table)`` (an object on the table moves by it)."""
+    Rz = make_T(axis_angle_to_R([0.0, 0.0, 1.0], angle))
+    return compose(T_world_table, Rz, invert_T(T_world_table))
+
+
+def turntable_prior(T_world_table: np.ndarray, angles) -> np.ndarray:
+    """(n, 4, 4) poses ``T_world_view`` of views taken at turntable ``angles`` (radians), world = the
+    first view's frame.
+
+    View k saw the object turned by ``M_k = table_motion(T_world_table, angles[k])``, so view k maps into
+    view 0 by ``M_0 @ inv(M_k)``. The registration prior of a turntable scan, and the simulator's truth.
+    """
+    M = [table_motion(T_world_table, float(a)) for a in angles]
+    return np.stack([compose(M[0], invert_T(Mk)) for Mk in M])
+
+
+def table_frame(axis, point=(0.0, 0.0, 0.0)) -> np.ndarray:
+    """(4, 4) a turntable frame ``T_world_table`` whose z axis is ``axis`` (normalised) and whose origin is
+    ``point`` (metres): the turntable of a rotation axis given as direction and point."""
+    z = np.asarray(axis, dtype=np.float64)
+    z = z / np.linalg.norm(z)
+    helper = np.array([1.0, 0.0, 0.0]) if abs(z[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    x = np.cross(helper, z)
+    x /= np.linalg.norm(x)
+    return make_T(np.column_stack([x, np.cross(z, x), z]), np.asarray(point, dtype=np.float64))
 
 
 def save_rig(rig: Rig, path: str | Path) -> None:

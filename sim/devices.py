@@ -15,6 +15,7 @@ records the same bytes for the same sequence of ``set_scene`` and capture calls.
 from __future__ import annotations
 
 import zlib
+from dataclasses import replace
 
 import numpy as np
 
@@ -143,8 +144,12 @@ class SimRig:
             raise SceneError(f"SimRig: scene must be a rangekit.sim.Scene, found {type(scene).__name__}")
         self._scene = scene
         self._scene_index = 0
-        self.rig = rig if rig is not None else default_rig()
         self.imaging = imaging if imaging is not None else ImagingModel()
+        rig = rig if rig is not None else default_rig()
+        if rig.capture.get("bits") != self.imaging.bits:
+            # The rig file states the camera's bit depth (capture.bits), as a real rig's does.
+            rig = replace(rig, capture={**rig.capture, "bits": self.imaging.bits})
+        self.rig = rig
         self.seed = int(seed)
         self._faults = _Faults()
         self.camera = SimCamera(self)

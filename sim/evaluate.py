@@ -21,6 +21,7 @@ table at the first view's angle; the truth is moved there with the rig's turntab
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Callable, Sequence
 
 import numpy as np
 
@@ -30,9 +31,9 @@ from rangekit.surface.mesh import TriangleMesh
 from rangekit.surface.raycast import raycasting_scene
 from rangekit.rig import Rig
 from rangekit.sim.raycast import _open3d_cast
-from rangekit.sim.scene import Scene
+from rangekit.sim.scene import Scene, default_scene
 
-__all__ = ["Accuracy", "sample_surface", "visible_samples", "mesh_accuracy"]
+__all__ = ["Accuracy", "TruthEvaluation", "sample_surface", "visible_samples", "mesh_accuracy", "truth_evaluator"]
 
 
 @dataclass(frozen=True)
@@ -186,3 +187,27 @@ def mesh_accuracy(mesh: TriangleMesh, scene: Scene, rig: Rig, angles, *, toleran
                     unobserved_rms=float(np.sqrt(np.mean(d_fill ** 2))) if d_fill.size else 0.0,
                     rms_all=float(np.sqrt(np.mean(d_mesh ** 2))), max_incidence_deg=float(max_incidence_deg),
                     n_mesh_samples=int(on_seen.sum()), n_truth_samples=int(seen.sum()))
+
+
+@dataclass(frozen=True, eq=False)
+class TruthEvaluation:
+    """A mesh measured against the simulator's truth."""
+
+    accuracy: Accuracy
+    truth: TriangleMesh   # the true surface in the session world (the table at the first view's angle)
+
+
+def truth_evaluator(obj: str, rig: Rig, **options) -> Callable[[TriangleMesh, Sequence[float]], TruthEvaluation]:
+    """The evaluator a simulated session passes to :func:`rangekit.app.process.process_session`:
+    ``evaluate(mesh, angles)`` measures ``mesh`` (session world) against object ``obj`` (built-in name or
+    mesh file, as in :func:`default_scene`) scanned on ``rig`` at turntable ``angles`` (radians), with
+    :func:`mesh_accuracy` (``options`` are its keywords)."""
+    scene = default_scene(obj)
+
+    def evaluate(mesh: TriangleMesh, angles: Sequence[float]) -> TruthEvaluation:
+        accuracy = mesh_accuracy(mesh, scene, rig, angles, **options)
+        ob = scene.objects[0]
+        M0 = rig.T_world_rotated(float(angles[0])) if rig.T_world_table is not None else np.eye(4)
+        return TruthEvaluation(accuracy, TriangleMesh(apply_T(M0, ob.world_vertices()), ob.triangles))
+
+    return evaluate

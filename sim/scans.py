@@ -2,7 +2,8 @@
 
 Each view is the object's ground-truth surface as the camera sees it at one turntable angle (plus
 Gaussian noise), in the camera's world frame. The object turned by ``M_k`` (the turntable motion at
-view k), so the pose that maps view k into view 0's frame is ``T_world_view[k] = M_0 @ inv(M_k)``.
+view k), so the pose that maps view k into view 0's frame is ``T_world_view[k] = M_0 @ inv(M_k)``
+(:func:`rangekit.rig.turntable_prior`).
 """
 
 from __future__ import annotations
@@ -11,9 +12,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rangekit.geometry import apply_T, axis_angle_to_R, compose, invert_T, make_T, transform_vectors
+from rangekit.geometry import apply_T, axis_angle_to_R, make_T
 from rangekit.surface.cloud import PointCloud
-from rangekit.rig import Rig
+from rangekit.rig import Rig, turntable_prior
 from rangekit.sim.devices import SimRig, default_rig
 from rangekit.sim.scene import default_scene
 
@@ -51,7 +52,7 @@ def turntable_scans(obj: str = "lumpy", *, n_views: int = 12, noise: float = 0.0
     V = ob.world_vertices()
     diag = float(np.linalg.norm(np.ptp(V, axis=0)))
     angles = 2 * np.pi * np.arange(n_views) / n_views
-    clouds, maps, nmaps, poses = [], [], [], []
+    clouds, maps, nmaps = [], [], []
     M0 = rig.T_world_rotated(angles[0])
     for a in angles:
         sim.turntable.rotate_to(a)
@@ -63,8 +64,7 @@ def turntable_scans(obj: str = "lumpy", *, n_views: int = 12, noise: float = 0.0
         maps.append(xyz)
         nmaps.append(nrm)
         clouds.append(PointCloud(xyz[m], normals=nrm[m]))
-        poses.append(compose(M0, invert_T(rig.T_world_rotated(a))))
-    return TurntableScans(clouds, maps, nmaps, np.stack(poses), angles, rig, apply_T(M0, V), ob.triangles, diag)
+    return TurntableScans(clouds, maps, nmaps, turntable_prior(rig.T_world_table, angles), angles, rig, apply_T(M0, V), ob.triangles, diag)
 
 
 def perturb_poses(T_world_view: np.ndarray, *, max_angle: float, max_translation: float,

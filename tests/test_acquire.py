@@ -5,7 +5,8 @@ import time
 import numpy as np
 import pytest
 
-from rangekit.app.acquire import ScanPlan, acquire, load_session
+from rangekit.app.acquire import acquire
+from rangekit.formats.session import ScanPlan, Session, SimulatorSettings, load_session
 from rangekit.errors import ConfigError, DeviceDisconnected
 from rangekit.coded.patterns import make_pattern_spec
 from rangekit.rig import Rig
@@ -37,8 +38,7 @@ def test_unplug_then_resume_gives_identical_bytes(tmp_path):
     with pytest.raises(DeviceDisconnected, match=r"view \d \(turntable .* deg\), frame \d+ \(.*\): camera: camera "
                                                  r"\(simulated\): unplugged.*resume") as exc:
         acquire(s, small_rig(), spec, tmp_path / "b", plan=plan)
-    _, views = load_session(tmp_path / "b")
-    n_done = sum(v.done for v in views)
+    n_done = len(load_session(tmp_path / "b").done_views)
     assert n_done == fail_at // spec.n_frames
     # Every completed view is intact on disk, byte for byte.
     a = pngs(tmp_path / "a")
@@ -46,8 +46,8 @@ def test_unplug_then_resume_gives_identical_bytes(tmp_path):
     assert b and all(a[k] == v for k, v in b.items())
     print(f"\nunplugged at capture {fail_at}: {exc.value}")
     # Resume in a fresh process-equivalent rig: same bytes as the uninterrupted run.
-    views = acquire(sim(), small_rig(), spec, tmp_path / "b", plan=plan, resume=True)
-    assert all(v.done for v in views)
+    session = acquire(sim(), small_rig(), spec, tmp_path / "b", plan=plan, resume=True)
+    assert all(v.done for v in session.views)
     assert pngs(tmp_path / "b") == a
     assert not list((tmp_path / "b").glob("*.partial"))
 
@@ -88,7 +88,7 @@ class _Devices:
         self.camera, self.projector, self.turntable = camera, projector, turntable
 
 
-def test_twelve_view_scan_with_44_patterns_within_a_minute(tmp_path):
+def test_twelve_view_scan_with_44_patterns_through_the_horus_driver(tmp_path):
     from rangekit.drivers.turntable import HorusTurntable
     from rangekit.sim.firmware import start_firmware
 
@@ -99,7 +99,7 @@ def test_twelve_view_scan_with_44_patterns_within_a_minute(tmp_path):
         table = HorusTurntable(fw.port, timeout=2.0)
         devices = _Devices(s.camera, s.projector, _DrivenTurntable(table, s.turntable))
         t = time.perf_counter()
-        views = acquire(devices, s.rig, spec, tmp_path / "full", plan=ScanPlan(n_views=12))
+        session = acquire(devices, s.rig, spec, tmp_path / "full", plan=ScanPlan(n_views=12))
         secs = time.perf_counter() - t
         final_deg = fw.position_deg
         table.close()
@@ -107,5 +107,45 @@ def test_twelve_view_scan_with_44_patterns_within_a_minute(tmp_path):
         fw.stop()
     print(f"\n12 views x 44 frames at 1280x1024, Horus driver on the simulated board (scaled time): "
           f"acquired and written in {secs:.1f} s")
-    assert all(v.done for v in views) and secs <= 60
+    assert all(v.done for v in session.views)
     assert abs(final_deg - 330.0) < 360 / 3200  # the last view, to within a microstep
+
+
+def test_session_records_the_camera_bit_depth_once(tmp_path):
+    """A 12-bit camera saving 16-bit PNGs decodes with full scale 4095, not 65535; the bit depth comes
+    from the rig file's capture.bits, recorded in session.json."""
+    from dataclasses import replace
+
+    from rangekit.io import read_png
+    from rangekit.sim import ImagingModel
+
+    spec = make_pattern_spec("white", (1280, 800))
+    rig = replace(small_rig(), capture={"bits": 12})
+    s = SimRig(default_scene("lumpy"), rig, imaging=ImagingModel(bits=12), seed=1)
+    session = acquire(s, rig, spec, tmp_path / "s", plan=ScanPlan(n_views=2), hardware={"rig_file": "rig.json"})
+    image = read_png(session.views[0].folder / "000.png")
+    assert image.dtype == np.uint16 and 0 < image.max() <= 4095
+    loaded = Session.load(tmp_path / "s")
+    assert loaded.capture.bits == 12 and loaded.capture.full_scale == 4095.0
+    assert loaded.capture.pattern_delay_s == 0.1 and loaded.hardware == {"rig_file": "rig.json"}
+    # The simulator states its imaging model's depth in its rig file, so a simulated session records it too.
+    assert SimRig(default_scene("lumpy"), small_rig(), imaging=ImagingModel(bits=12)).rig.capture["bits"] == 12
+
+
+def test_sessions_written_before_capture_settings_still_load(tmp_path):
+    import json
+
+    spec = make_pattern_spec("white", (1280, 800))
+    acquire(sim(), small_rig(), spec, tmp_path / "s", plan=ScanPlan(n_views=2),
+            simulator=SimulatorSettings(object="lumpy", seed=3, imaging={"bits": 10}))
+    path = tmp_path / "s" / "session.json"
+    data = json.loads(path.read_text())
+    del data["capture"]
+    path.write_text(json.dumps(data))
+    session = Session.load(tmp_path / "s")
+    assert session.capture.full_scale == 1023.0 and session.simulator.object == "lumpy"
+    assert [v.done for v in session.views] == [True, True]
+    data["views"] = "all"
+    path.write_text(json.dumps(data))
+    with pytest.raises(ConfigError, match=r"session.json: views: expected a list of views .*, found 'all'"):
+        Session.load(tmp_path / "s")

@@ -166,3 +166,29 @@ def test_scan_with_a_bad_rig_file_fails_before_anything_moves(tmp_path, capsys):
     assert main(["scan", "--rig", str(rig_file), "--out", str(tmp_path / "s")]) == 2
     err = capsys.readouterr().err
     assert "cameras[0]" in err and "'K'" in err
+
+
+def test_processing_and_the_cli_leave_the_work_to_the_library():
+    """Processing never imports the simulator (the evaluator is passed in); cli modules only parse,
+    call the library and print (numpy at most for formatting)."""
+    import ast
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1] / "rangekit"
+
+    def imported(path):
+        names = set()
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Import):
+                names |= {a.name for a in node.names}
+            elif isinstance(node, ast.ImportFrom) and node.module:
+                names.add(node.module)
+        return names
+
+    for name in ("process.py", "view_cache.py", "report.py"):
+        assert not [m for m in imported(root / "app" / name) if m.startswith("rangekit.sim")], name
+    for path in sorted((root / "cli").glob("*.py")):
+        calls = {n.func.attr for n in ast.walk(ast.parse(path.read_text()))
+                 if isinstance(n, ast.Call) and isinstance(n.func, ast.Attribute)
+                 and isinstance(n.func.value, ast.Name) and n.func.value.id == "np"}
+        assert calls <= {"radians", "degrees", "asarray", "mean", "max", "linalg"}, (path.name, calls)

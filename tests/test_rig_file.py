@@ -8,8 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from rangekit.drivers import (CAPTURE_FIELDS, DEVICE_FIELDS, open_rig_devices, validate_capture,
-                              validate_devices, validate_rig_for_hardware)
+from rangekit.drivers import open_rig_devices
+from rangekit.rig_checks import (CAPTURE_FIELDS, DEVICE_FIELDS, validate_capture, validate_devices,
+                                 validate_rig_for_hardware)
 from rangekit.errors import ConfigError
 from rangekit.rig import CAMERA_FIELDS, RIG_FIELDS, Rig, load_rig, save_rig, template_rig
 from rangekit.sim import default_rig
@@ -136,7 +137,7 @@ BAD_CAPTURE = [
     ("pattern_delay_s", float("nan"), "number of seconds"),
     ("turntable_settle_s", None, "number of seconds"),
     ("turntable_settle_s", 500, "from 0 to 60"),
-    ("bits", 12, "8 or 16"),
+    ("bits", 11, "8, 10, 12 or 16"),
     ("exposure", 10, "unknown field; capture has only pattern_delay_s, turntable_settle_s, bits"),
 ]
 

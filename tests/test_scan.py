@@ -6,7 +6,6 @@ import os
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -67,19 +66,23 @@ def test_report_opens_in_headless_chromium_with_every_image_loaded(scanned, tmp_
 
 
 def test_reprocess_with_tsdf_fusion(scanned, capsys):
+    caches = {p: p.stat().st_mtime_ns for p in sorted(scanned.glob("view_*/cloud.ply"))}
     assert main(["process", str(scanned), "--fusion", "tsdf", "--no-report"]) == 0
     out = capsys.readouterr().out
     assert "mesh (tsdf)" in out and "\r" not in out and "\x1b" not in out
     summary = json.loads((scanned / "summary.json").read_text())
     assert summary["mesh"]["fusion"] == "tsdf" and summary["mesh"]["watertight"]
     assert summary["accuracy"]["rms"] <= 0.002 * summary["accuracy"]["diagonal"]
-    assert summary["seconds"]["decode"] < 2.0  # the views' clouds came from the cache
+    # The views' clouds came from the cache: none was decoded and written again.
+    assert caches and {p: p.stat().st_mtime_ns for p in caches} == caches
 
 
 def _run_until(args, pattern, cwd):
     """Start ``rangekit ARGS`` with stdout to a pipe, send SIGINT when a line contains ``pattern``."""
+    # A suite started in the background hands its children an ignored SIGINT: give the child the default.
     proc = subprocess.Popen([sys.executable, "-m", "rangekit", *args], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, cwd=cwd, env={**os.environ, "PYTHONUNBUFFERED": "1"})
+                            stderr=subprocess.PIPE, text=True, cwd=cwd, env={**os.environ, "PYTHONUNBUFFERED": "1"},
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     lines = []
     for line in proc.stdout:
         lines.append(line)
@@ -122,10 +125,9 @@ def test_bad_input_fails_before_any_work(tmp_path, capsys):
     # An object file that is not a mesh: the error names it, no session folder is made.
     bad = tmp_path / "object.ply"
     bad.write_text("this is not a mesh")
-    t0 = time.perf_counter()
     assert main(["scan", "--out", str(tmp_path / "new"), "--object", str(bad)]) == 2
     assert str(bad) in capsys.readouterr().err
-    assert not (tmp_path / "new").exists() and time.perf_counter() - t0 < 10
+    assert not (tmp_path / "new").exists()
     # An invalid rig file: the message names the field.
     from rangekit.rig import template_rig
 

@@ -1,10 +1,12 @@
 """From an acquired session to one mesh: decode and triangulate every view, register the views seeded by
-the turntable angles, fuse, measure against the truth on the simulator, report (the work behind
-``rangekit process`` and the end of ``rangekit scan``).
+the turntable angles, fuse, measure against the truth when given an evaluator, report (the work behind
+``rangekit process`` and the end of ``rangekit scan``). The pipeline is the same on hardware and on
+the simulator: it never imports :mod:`rangekit.sim` (see :func:`rangekit.app.scan.session_evaluator`).
 
 Writes into the session folder (atomically):
 
-    view_NNN/cloud.ply, maps.npz, cloud.json   each view's cloud, its decoded maps and depth (cache)
+    view_NNN/cloud.ply, maps.npz, cloud.json   each view's cloud, its decoded maps and depth (cache,
+                                               rangekit.app.view_cache)
     poses.json                                 registered poses, world = the first view's frame
     merged.ply, mesh.ply                       all views in one frame; the fused watertight mesh
     summary.json                               what the end-of-run summary prints, as data
@@ -17,126 +19,43 @@ mesh as an uninterrupted run.
 
 from __future__ import annotations
 
-import time
-from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
+from typing import Callable, Protocol, Sequence
 
 import numpy as np
 
 from rangekit import __version__
-from rangekit.app.acquire import SessionView, load_session
-from rangekit.formats.capture import list_images, read_stack
+from rangekit.app.view_cache import ViewMaps, view_cloud
 from rangekit.errors import ConfigError
-from rangekit.geometry import apply_T, compose, invert_T
-from rangekit.io import atomic_save_npz, atomic_write_json, read_json
-from rangekit.coded.patterns import PatternSpec
-from rangekit.formats.clouds import load_cloud, save_cloud
-from rangekit.surface.cloud import PointCloud, merge_clouds
+from rangekit.formats.clouds import save_cloud
 from rangekit.formats.poses import save_poses
+from rangekit.formats.session import ProcessResult, Session
+from rangekit.geometry import compose, invert_T
+from rangekit.io import atomic_write_json
 from rangekit.progress import StageTimer, call_progress
-from rangekit.app.reconstruct import reconstruct_view
-from rangekit.rig import Rig, load_rig
+from rangekit.rig import turntable_prior
+from rangekit.surface.cloud import PointCloud, merge_clouds
 
-__all__ = ["FUSION_METHODS", "ProcessResult", "process_session"]
+__all__ = ["FUSION_METHODS", "Evaluation", "Evaluator", "process_session"]
 
 FUSION_METHODS = ("poisson", "tsdf")
 
 
-@dataclass(frozen=True, eq=False)
-class ProcessResult:
-    """What processing a session produced. Distances in metres, times in seconds."""
+class Evaluation(Protocol):
+    """What an evaluator returns: ``accuracy`` (an object with ``to_dict()``, the summary's "accuracy")
+    and ``truth`` (the true surface as a TriangleMesh in the session world, for the report's heat map)."""
 
-    folder: Path
-    view_names: list[str]
-    T_world_view: np.ndarray        # (n, 4, 4) registered poses, world = first view
-    n_points: list[int]             # points per view after filtering
-    edges: list[dict]               # view graph: i, j, rmse, overlap, accepted, rotation/translation residual
-    registration_rmse: float        # joint point-to-plane RMS of the final poses
-    mesh: dict                      # vertices, triangles, watertight, area_m2, volume_m3, fusion
-    seconds: dict = field(default_factory=dict)   # wall time per stage
-    accuracy: dict | None = None    # simulator only: rangekit.sim.evaluate.Accuracy.to_dict()
-
-    @property
-    def mesh_path(self) -> Path:
-        return self.folder / "mesh.ply"
-
-    @property
-    def mesh_watertight(self) -> bool:
-        return bool(self.mesh["watertight"])
-
-    def to_dict(self) -> dict:
-        return {"schema": "rangekit.summary/1", "views": self.view_names, "n_points": self.n_points,
-                "T_world_view": self.T_world_view.tolist(), "edges": self.edges,
-                "registration_rmse_m": self.registration_rmse, "mesh": self.mesh, "seconds": self.seconds,
-                "accuracy": self.accuracy}
-
-    def summary_lines(self) -> list[str]:
-        """The end-of-run summary, one line per fact, for people."""
-        acc = [e for e in self.edges if e["accepted"]]
-        rot = [e["rotation_residual_deg"] for e in acc if e.get("rotation_residual_deg") is not None]
-        tr = [e["translation_residual_mm"] for e in acc if e.get("translation_residual_mm") is not None]
-        m = self.mesh
-        lines = [f"views: {len(self.view_names)}, points: {sum(self.n_points):,} "
-                 f"({min(self.n_points):,} to {max(self.n_points):,} per view)",
-                 f"registration: {len(acc)}/{len(self.edges)} pairs accepted, pair ICP RMSE median "
-                 f"{np.median([e['rmse_mm'] for e in acc]):.4f} mm, joint RMS {self.registration_rmse * 1e3:.4f} mm"
-                 + (f"; synchronisation residual max {max(rot):.4f} deg, {max(tr):.4f} mm" if rot and tr else ""),
-                 f"mesh ({m['fusion']}): {m['vertices']:,} vertices, {m['triangles']:,} triangles, watertight "
-                 f"{m['watertight']}, area {m['area_m2'] * 1e4:.1f} cm^2"
-                 + (f", volume {m['volume_m3'] * 1e6:.1f} cm^3" if m["volume_m3"] is not None else ""),
-                 "time: " + ", ".join(f"{k} {v:.1f} s" for k, v in self.seconds.items())]
-        if self.accuracy:
-            a = self.accuracy
-            lines.append(f"accuracy against the true surface: RMS {a['rms'] * 1e3:.3f} mm "
-                         f"({a['rms'] / a['diagonal']:.3%} of the {a['diagonal'] * 1e3:.0f} mm diagonal), 95th "
-                         f"percentile {a['p95'] * 1e3:.3f} mm; completeness {a['completeness']:.1%} of the visible "
-                         f"surface within {a['tolerance'] * 1e3:g} mm")
-            lines.append(f"  ({a['visible_fraction']:.0%} of the object is visible within "
-                         f"{a['max_incidence_deg']:g} deg of incidence; the other {a['unobserved_area']:.0%} of the "
-                         f"mesh is filled in where no view looked, RMS {a['unobserved_rms'] * 1e3:.2f} mm there)")
-        return lines
-
-    def __repr__(self) -> str:
-        t = ", ".join(f"{k} {v:.1f} s" for k, v in self.seconds.items())
-        return (f"ProcessResult({len(self.n_points)} views, {sum(self.n_points)} points, mesh watertight "
-                f"{self.mesh_watertight}; {t})")
+    accuracy: object
+    truth: object
 
 
-def _view_cloud(v: SessionView, spec: PatternSpec, rig: Rig, settings: dict, full_scale: float | None,
-                T_table_world: np.ndarray | None, table_margin: float) -> PointCloud:
-    """Decode, triangulate and filter one view, or reuse its cache when made with the same settings."""
-    meta = v.folder / "cloud.json"
-    if meta.exists() and (v.folder / "cloud.ply").exists() and (v.folder / "maps.npz").exists():
-        try:
-            if read_json(meta, what="view cache").get("settings") == settings:
-                return load_cloud(v.folder / "cloud.ply")
-        except ConfigError:
-            pass  # a damaged cache is rebuilt
-    images = read_stack(list_images(v.folder))
-    rec = reconstruct_view(images, spec, rig.camera, rig.projector, method=settings["method"],
-                           full_scale=full_scale, response=rig.projector_response)
-    xyz = rec.triangulated.xyz.copy()
-    valid = np.isfinite(xyz[:, :, 0])
-    c = rec.cloud
-    if T_table_world is not None:
-        keep = apply_T(T_table_world, c.points)[:, 2] > table_margin
-        idx = np.flatnonzero(valid.ravel())
-        valid.ravel()[idx[~keep]] = False
-        c = PointCloud(c.points[keep], c.colours[keep], c.normals[keep])
-    # Normals as stored (float32), so a run from the cache and a fresh one see the same numbers.
-    c = PointCloud(c.points, c.colours, c.normals.astype(np.float32))
-    depth = np.full(valid.shape, np.nan, dtype=np.float32)
-    depth[valid] = apply_T(invert_T(rig.camera.T_world_cam), xyz[valid])[:, 2]
-    save_cloud(v.folder / "cloud.ply", c)
-    atomic_save_npz(v.folder / "maps.npz", proj_col=rec.decoded.proj_col.astype(np.float32),
-                    confidence=rec.decoded.confidence.astype(np.float32), depth=depth)
-    atomic_write_json(meta, {"settings": settings, "points": len(c)})
-    return c
+#: ``evaluate(mesh, angles)``: the fused mesh (session world) and the views' turntable angles (radians)
+#: to an :class:`Evaluation`. The simulator provides one (:func:`rangekit.sim.evaluate.truth_evaluator`).
+Evaluator = Callable[[object, Sequence[float]], Evaluation]
 
 
 def process_session(folder: str | Path, *, fusion: str = "poisson", method: str = "auto",
-                    table_margin: float = 0.002, evaluate: bool = True, report: bool = True,
+                    table_margin: float = 0.002, evaluate: Evaluator | None = None, report: bool = True,
                     progress: Callable | None = None) -> ProcessResult:
     """Process the completed views of a session into ``mesh.ply`` (and ``summary.json``, ``report.html``).
 
@@ -147,7 +66,8 @@ def process_session(folder: str | Path, *, fusion: str = "poisson", method: str 
     method : triangulation, see :func:`rangekit.app.reconstruct.reconstruct_view`.
     table_margin : points within this many metres above the turntable top (or below it) are dropped,
         so the table does not become part of the object.
-    evaluate : on a simulated session, measure the mesh against the true surface.
+    evaluate : measures the mesh against the truth (see :data:`Evaluator`); None on hardware. Processing
+        itself never imports the simulator.
     report : write ``report.html``.
     progress : ``progress(msg, done=None, total=None)`` (see :mod:`rangekit.progress`).
     """
@@ -158,14 +78,11 @@ def process_session(folder: str | Path, *, fusion: str = "poisson", method: str 
     if fusion not in FUSION_METHODS:
         raise ConfigError(f"fusion must be one of {', '.join(FUSION_METHODS)}, found {fusion!r}")
     out = Path(folder)
-    data, views = load_session(out)
-    views = [v for v in views if v.done]
+    session = Session.load(out)
+    views = session.done_views
     if len(views) < 2:
         raise ConfigError(f"{out}: {len(views)} completed view(s); processing needs at least 2 (resume the scan)")
-    rig = load_rig(out / "rig.json")
-    spec = PatternSpec.from_dict(data["pattern"], where=f"{out}/session.json")
-    bits = (data.get("simulator") or {}).get("imaging", {}).get("bits")
-    full_scale = float((1 << bits) - 1) if bits else None
+    rig, spec, full_scale = session.rig, session.pattern, session.capture.full_scale
     T_table_world = invert_T(rig.T_world_table) if rig.T_world_table is not None else None
     settings = {"rangekit": __version__, "method": method, "table_margin": table_margin,
                 "pattern": spec.to_dict()["method"], "full_scale": full_scale,
@@ -173,17 +90,16 @@ def process_session(folder: str | Path, *, fusion: str = "poisson", method: str 
     timer = StageTimer()
 
     with timer.stage("decode"):
-        clouds = []
+        clouds: list[PointCloud] = []
+        maps: list[ViewMaps] = []
         for k, v in enumerate(views):
-            clouds.append(_view_cloud(v, spec, rig, settings, full_scale, T_table_world, table_margin))
+            cloud, view_maps = view_cloud(v, spec, rig, settings, full_scale, T_table_world, table_margin)
+            clouds.append(cloud)
+            maps.append(view_maps)
             call_progress(progress, f"decoded {v.folder.name}: {len(clouds[-1]):,} points", k + 1, len(views))
 
     with timer.stage("register"):
-        # Turntable prior: view k saw the object turned by M_k, so view k maps into view 0 by M_0 inv(M_k).
-        prior = None
-        if rig.T_world_table is not None:
-            M = [rig.T_world_rotated(v.angle) for v in views]
-            prior = np.stack([compose(M[0], invert_T(Mk)) for Mk in M])
+        prior = None if rig.T_world_table is None else turntable_prior(rig.T_world_table, [v.angle for v in views])
         res = register_views(clouds, init_T_world_view=prior, progress=progress)
         names = [v.folder.name for v in views]
         save_poses(out / "poses.json", names, res.T_world_view,
@@ -211,8 +127,8 @@ def process_session(folder: str | Path, *, fusion: str = "poisson", method: str 
                                 depth=9, n_threads=1)
         else:
             # Each view's camera-frame depth map as stored, seen by the camera at its registered pose.
-            mesh = tsdf_fuse([(np.load(v.folder / "maps.npz")["depth"], None,
-                               rig.camera.with_pose(compose(Tk, rig.camera.T_world_cam))) for v, Tk in zip(views, T)])
+            mesh = tsdf_fuse([(m.depth, None, rig.camera.with_pose(compose(Tk, rig.camera.T_world_cam)))
+                              for m, Tk in zip(maps, T)])
         save_mesh(out / "mesh.ply", mesh)
         mesh_info = {"vertices": len(mesh.vertices), "triangles": len(mesh.triangles),
                      "watertight": bool(mesh.is_watertight), "area_m2": float(mesh.area),
@@ -221,21 +137,11 @@ def process_session(folder: str | Path, *, fusion: str = "poisson", method: str 
                                 f"watertight {mesh.is_watertight}")
 
     accuracy, truth = None, None
-    sim_info = data.get("simulator")
-    if evaluate and sim_info:
+    if evaluate is not None:
         with timer.stage("evaluate"):
-            from rangekit.surface.mesh import TriangleMesh
-            from rangekit.sim import default_scene
-            from rangekit.sim.evaluate import mesh_accuracy
-
             call_progress(progress, "measuring the mesh against the true surface")
-            scene = default_scene(sim_info["object"])
-            acc = mesh_accuracy(mesh, scene, rig, [v.angle for v in views])
-            accuracy = acc.to_dict()
-            # The true surface in the session world (the table at the first view's angle), for the heat map.
-            obj = scene.objects[0]
-            M0 = rig.T_world_rotated(views[0].angle) if rig.T_world_table is not None else np.eye(4)
-            truth = TriangleMesh(apply_T(M0, obj.world_vertices()), obj.triangles)
+            evaluation = evaluate(mesh, [v.angle for v in views])
+            accuracy, truth = evaluation.accuracy.to_dict(), evaluation.truth
 
     result = ProcessResult(out, names, res.T_world_view, [len(c) for c in clouds], edges, float(res.rmse),
                            mesh_info, timer.seconds, accuracy)
@@ -244,7 +150,7 @@ def process_session(folder: str | Path, *, fusion: str = "poisson", method: str 
             from rangekit.app.report import write_report
 
             call_progress(progress, "writing report.html")
-            write_report(out, result, clouds=clouds, merged=merged, mesh=mesh, session=data, rig=rig,
+            write_report(out, result, clouds=clouds, maps=maps, merged=merged, mesh=mesh, session=session,
                          truth=truth, progress=progress)
     atomic_write_json(out / "summary.json", result.to_dict())
     return result

@@ -9,11 +9,11 @@ from typing import Callable, Sequence
 import numpy as np
 
 from rangekit.errors import ConfigError
-from rangekit.geometry import axis_angle_to_R, make_T
 from rangekit.formats.clouds import load_cloud, save_cloud
 from rangekit.surface.cloud import PointCloud, merge_clouds
 from rangekit.formats.poses import load_poses, save_poses
 from rangekit.registration.multiview import MultiViewOptions, MultiViewResult, register_views
+from rangekit.rig import table_frame, turntable_prior
 
 __all__ = ["parse_init", "RegisterReport", "register_files"]
 
@@ -37,11 +37,8 @@ def parse_init(init: str | None, n: int, sources: Sequence[str]) -> np.ndarray |
         except (ValueError, IndexError) as exc:
             raise ConfigError(f"--init {init!r}: expected turntable:AX,AY,AZ:STEP_DEG[:PX,PY,PZ], e.g. "
                               "turntable:0,1,0:24") from exc
-        Ts = []
-        for i in range(n):
-            R = axis_angle_to_R(axis, i * step)
-            Ts.append(make_T(R, point - R @ point))
-        return np.stack(Ts)
+        # View i is turned by +i * STEP: the prior of a table turning by -i * STEP between views.
+        return turntable_prior(table_frame(axis, point), -step * np.arange(n))
     srcs, T = load_poses(init)
     if len(T) != n:
         raise ConfigError(f"{init}: has {len(T)} views, but {n} scans were given")

@@ -17,15 +17,14 @@ from typing import TYPE_CHECKING, Callable, Sequence
 
 import numpy as np
 
-from rangekit.geometry import apply_T
-from rangekit.io import atomic_write_text, read_png
+from rangekit.io import atomic_write_text
 from rangekit.progress import call_progress
 
 if TYPE_CHECKING:
-    from rangekit.surface.mesh import TriangleMesh
-    from rangekit.app.process import ProcessResult
+    from rangekit.app.view_cache import ViewMaps
+    from rangekit.formats.session import ProcessResult, Session
     from rangekit.surface.cloud import PointCloud
-    from rangekit.rig import Rig
+    from rangekit.surface.mesh import TriangleMesh
 
 __all__ = ["write_report", "view_graph_svg"]
 
@@ -73,7 +72,7 @@ def _crop(image: np.ndarray, pad: int = 6) -> np.ndarray:
 def view_graph_svg(n: int, edges: Sequence[dict], *, size: int = 460) -> str:
     """The view graph as SVG: views on a circle (in turntable order), accepted pairs as lines coloured by
     their ICP RMSE (green low, red high; the label in micrometres), rejected pairs dashed grey."""
-    from rangekit.app.snapshot import colourise
+    from rangekit.colour import colourise
 
     c, r = size / 2, size / 2 - 40
     ang = np.pi / 2 - 2 * np.pi * np.arange(n) / n
@@ -105,30 +104,33 @@ def view_graph_svg(n: int, edges: Sequence[dict], *, size: int = 460) -> str:
     return "data:image/svg+xml;base64," + base64.b64encode(svg.encode()).decode()
 
 
-def _summary_table(result: "ProcessResult", session: dict) -> str:
-    sim = session.get("simulator")
+def _summary_table(result: "ProcessResult", session: "Session") -> str:
+    sim = session.simulator
     rows = [("session", str(result.folder)), ("written", time.strftime("%Y-%m-%d %H:%M:%S")),
-            ("rig", "simulated" if sim else "hardware"), ("pattern", session["pattern"]["method"])]
+            ("rig", "simulated" if sim else "hardware"), ("pattern", session.pattern.method)]
     if sim:
-        rows += [("object", str(sim["object"])), ("noise seed", str(sim["seed"]))]
+        rows += [("object", str(sim.object)), ("noise seed", str(sim.seed))]
     body = "".join(f"<tr><th>{html.escape(k)}</th><td>{html.escape(v)}</td></tr>" for k, v in rows)
     return f"<table>{body}</table><pre>{html.escape(chr(10).join(result.summary_lines()))}</pre>"
 
 
 def write_report(folder: str | Path, result: "ProcessResult", *, clouds: Sequence["PointCloud"],
-                 merged: "PointCloud", mesh: "TriangleMesh", session: dict, rig: "Rig",
+                 maps: Sequence["ViewMaps"], merged: "PointCloud", mesh: "TriangleMesh", session: "Session",
                  truth: "TriangleMesh | None" = None, progress: Callable | None = None,
                  size: tuple[int, int] = (230, 230)) -> Path:
-    """Write ``folder/report.html`` and return its path.
+    """Write ``folder/report.html`` and return its path; reads nothing from disk.
 
-    ``clouds`` are the views' clouds in their own frames, ``merged`` and ``mesh`` in the session world
-    (the first view's frame), ``truth`` the true surface in that frame (simulator) for the heat map.
+    ``clouds`` are the views' clouds in their own frames and ``maps`` their decoded maps and white
+    captures (as processing holds them), ``merged`` and ``mesh`` in the session world (the first view's
+    frame), ``truth`` the true surface in that frame (from an evaluator) for the heat map.
     """
     from rangekit.surface.mesh import distance_to_surface
-    from rangekit.app.snapshot import (colour_bar, colourise, fit_camera, render_cloud, render_mesh,
+    from rangekit.colour import colourise
+    from rangekit.app.snapshot import (colour_bar, fit_camera, render_cloud, render_mesh,
                                    render_values_on_mesh)
 
     out = Path(folder)
+    rig = session.rig
     sections = [f"<h1>rangekit scan report</h1><p class='sub'>{html.escape(str(out.resolve()))}</p>",
                 "<h2>Summary</h2>", _summary_table(result, session)]
     frame_pts = mesh.vertices  # fit_camera(tight=True) frames the points themselves
@@ -172,24 +174,20 @@ def write_report(folder: str | Path, result: "ProcessResult", *, clouds: Sequenc
 
     call_progress(progress, "report: views")
     rows = []
-    names = session["pattern"]["frames"] if isinstance(session["pattern"].get("frames"), list) else []
-    white_index = next((i for i, f in enumerate(names) if (f if isinstance(f, str) else f.get("name")) == "white"), 0)
-    for k, (name, cloud) in enumerate(zip(result.view_names, clouds)):
-        vdir = out / name
-        maps = np.load(vdir / "maps.npz")
-        capture = read_png(vdir / f"{white_index:03d}.png")
+    for k, (name, cloud, view_maps) in enumerate(zip(result.view_names, clouds, maps)):
+        capture = view_maps.capture
         capture = capture if capture.ndim == 3 else np.repeat(capture[:, :, None], 3, axis=2)
         if capture.dtype != np.uint8:
             capture = (capture / max(1, capture.max()) * 255).astype(np.uint8)
-        col = maps["proj_col"]
-        depth = maps["depth"]
+        col = view_maps.proj_col
+        depth = view_maps.depth
         finite = np.isfinite(depth)
         dlo, dhi = (np.percentile(depth[finite], [1, 99]) if finite.any() else (0.0, 1.0))
         ccam = fit_camera(cloud.points, azimuth=np.radians(20),
                           elevation=np.radians(20), size=(THUMB_W * 5 // 4, THUMB_W), up=up, tight=True)
         figs = [_img(_thumb(capture), f"{name}: capture (white)"),
                 _img(_thumb(colourise(col, 0, rig.projector.width - 1, cmap="turbo")), "projector column"),
-                _img(_thumb(colourise(maps["confidence"], 0, max(1e-6, float(np.nanpercentile(maps["confidence"], 99))),
+                _img(_thumb(colourise(view_maps.confidence, 0, max(1e-6, float(np.nanpercentile(view_maps.confidence, 99))),
                                       cmap="grey")), "confidence"),
                 _img(_thumb(colourise(depth, dlo, dhi, cmap="viridis")), f"depth {dlo * 1e3:.0f}-{dhi * 1e3:.0f} mm"),
                 _img(_crop(render_cloud(cloud, ccam)), f"cloud: {len(cloud):,} points")]

@@ -23,7 +23,7 @@ from rangekit.surface.mesh import TriangleMesh
 from rangekit.surface.raycast import raycasting_scene
 from rangekit.surface.cloud import PointCloud
 
-__all__ = ["fit_camera", "MeshHits", "raycast_mesh", "shade", "render_mesh", "render_cloud", "colourise",
+__all__ = ["fit_camera", "MeshHits", "raycast_mesh", "shade", "render_mesh", "render_cloud",
            "render_values_on_mesh", "colour_bar", "montage", "to_png_bytes", "data_uri"]
 
 AMBIENT = 0.25

@@ -67,7 +67,6 @@ def decode_debruijn(stack, spec: PatternSpec, *, min_contrast: float = 0.03, sha
     row = starts // W
     # Merge neighbours of equal colour in the same row (a dropped blip inside one stripe).
     same = np.r_[False, (run_lab[1:] == run_lab[:-1]) & (row[1:] == row[:-1]) & (starts[1:] - ends[:-1] <= min_run)]
-    group = np.cumsum(~same) - 1
     g_start = np.minimum.reduceat(starts, np.flatnonzero(~same)) if len(starts) else starts
     g_end = np.maximum.reduceat(ends, np.flatnonzero(~same)) if len(ends) else ends
     g_lab = run_lab[~same]

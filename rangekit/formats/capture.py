@@ -14,12 +14,13 @@ from typing import Sequence
 
 import numpy as np
 
-from rangekit.errors import FileFormatError
-from rangekit.io import read_json, read_png
-from rangekit.coded.patterns import PatternSpec
+from rangekit.coded.patterns import PATTERN_METHODS, PatternSpec, make_pattern_spec
+from rangekit.errors import ConfigError, FileFormatError
+from rangekit.io import atomic_save_npz, read_json, read_png
 from rangekit.rig import Rig, load_rig
 
-__all__ = ["IMAGE_SUFFIXES", "list_images", "read_stack", "Capture", "load_capture"]
+__all__ = ["IMAGE_SUFFIXES", "list_images", "read_stack", "Capture", "load_capture", "pattern_spec_for",
+           "save_decoded"]
 
 IMAGE_SUFFIXES = (".png", ".tif", ".tiff", ".bmp", ".pgm", ".ppm")
 
@@ -64,6 +65,14 @@ class Capture:
     rig: Rig | None
     info: dict
 
+    @property
+    def full_scale(self) -> float | None:
+        """The camera's largest pixel value, ``2**bits - 1``: the simulator's imaging bits in
+        ``capture.json``, else the rig file's ``capture.bits``; None: the images' dtype gives it."""
+        bits = self.info.get("imaging", {}).get("bits") \
+            or (self.rig.capture.get("bits") if self.rig is not None else None)
+        return float((1 << bits) - 1) if bits else None
+
 
 def load_capture(folder: str | Path, *, workers: int = 2) -> Capture:
     """Read a capture folder; ``spec``/``rig`` are None when patterns.json / rig.json are absent."""
@@ -78,3 +87,25 @@ def load_capture(folder: str | Path, *, workers: int = 2) -> Capture:
     rig = load_rig(folder / "rig.json") if (folder / "rig.json").exists() else None
     info = read_json(folder / "capture.json", what="capture info") if (folder / "capture.json").exists() else {}
     return Capture(folder, read_stack(list_images(folder), workers=workers), spec, rig, info)
+
+
+def pattern_spec_for(pattern: str, projector: tuple[int, int] | None) -> PatternSpec:
+    """The spec of a pattern method name on a ``projector`` of (width, height) pixels, or read from a
+    ``patterns.json`` file (whose size must then agree with ``projector`` when given)."""
+    if pattern in PATTERN_METHODS:
+        if projector is None:
+            raise ConfigError(f"--pattern {pattern} needs --projector WxH (the projector's resolution)")
+        return make_pattern_spec(pattern, projector)
+    spec = PatternSpec.from_dict(read_json(pattern, what="pattern spec"), where=pattern)
+    if projector is not None and tuple(projector) != (spec.width, spec.height):
+        raise ConfigError(f"{pattern} is for a {spec.width}x{spec.height} projector, --projector says "
+                          f"{projector[0]}x{projector[1]}")
+    return spec
+
+
+def save_decoded(path: str | Path, decoded) -> None:
+    """Write a :class:`rangekit.coded.decode.DecodeResult`'s maps to ``path`` (.npz, atomically):
+    proj_col, proj_row, confidence and the masks shadow, low_contrast, global_dominated, inconsistent."""
+    atomic_save_npz(path, proj_col=decoded.proj_col, proj_row=decoded.proj_row, confidence=decoded.confidence,
+                    shadow=decoded.shadow, low_contrast=decoded.low_contrast,
+                    global_dominated=decoded.global_dominated, inconsistent=decoded.inconsistent)

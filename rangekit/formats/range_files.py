@@ -1,4 +1,4 @@
-"""Range-sensor folders on disk: reading a ToF capture, writing depth outputs (ToF and stereo).
+"""Range-sensor folders on disk: reading a ToF capture and a simulated capture's ground truth.
 
 A ToF capture folder (``rangekit sim render --sensor tof|tof-pulsed``, or a real sensor's dump in
 the same layout) holds:
@@ -10,9 +10,8 @@ the same layout) holds:
   the first frequency, then the next). Pulsed: ``round_trip_s.npy`` (seconds, NaN where no return).
 * optionally ``ground_truth.npz`` (range, depth, xyz, hit, valid) from the simulator.
 
-Outputs (:func:`write_depth_outputs`): ``depth.npy`` (float64 camera z in metres, NaN where invalid),
-``depth.png`` (turbo colour map, white where invalid), ``confidence.npy`` (float32 in [0, 1]) and
-``confidence.png`` when given, ``range.npy`` when given, and ``cloud.ply`` (valid points, world frame).
+The depth outputs of ``rangekit tof`` and ``rangekit stereo`` are written by
+:func:`rangekit.app.range_runs.write_depth_outputs`.
 """
 
 from __future__ import annotations
@@ -25,11 +24,11 @@ import numpy as np
 from rangekit.camera import PinholeCamera
 from rangekit.formats.capture import list_images, read_stack
 from rangekit.errors import FileFormatError, InputError
-from rangekit.io import atomic_save_npy, read_json, write_png
+from rangekit.io import read_json
 from rangekit.rig import load_rig
 from rangekit.tof import FrequencyPlan
 
-__all__ = ["ToFFolder", "load_tof_folder", "load_ground_truth", "write_depth_outputs"]
+__all__ = ["ToFFolder", "load_tof_folder", "load_ground_truth"]
 
 TOF_KINDS = ("rangekit.tof.cw/1", "rangekit.tof.pulsed/1")
 
@@ -103,29 +102,3 @@ def load_ground_truth(folder: str | Path) -> dict | None:
         return None
     with np.load(path) as z:
         return {k: z[k] for k in z.files}
-
-
-def write_depth_outputs(out: str | Path, depth: np.ndarray, points: np.ndarray, *,
-                        range_map: np.ndarray | None = None, confidence: np.ndarray | None = None) -> list[str]:
-    """Write depth.npy/png, optional range.npy and confidence.npy/png, and cloud.ply; returns file names."""
-    from rangekit.formats.clouds import save_cloud
-    from rangekit.surface.cloud import PointCloud
-    from rangekit.colour import colourise
-
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    names = ["depth.npy", "depth.png"]
-    atomic_save_npy(out / "depth.npy", np.asarray(depth, dtype=np.float64))
-    ok = np.isfinite(depth)
-    lo, hi = (np.percentile(depth[ok], [1, 99]) if ok.any() else (0.0, 1.0))
-    write_png(out / "depth.png", colourise(depth, float(lo), float(max(hi, lo))))
-    if range_map is not None:
-        atomic_save_npy(out / "range.npy", np.asarray(range_map, dtype=np.float64))
-        names.append("range.npy")
-    if confidence is not None:
-        atomic_save_npy(out / "confidence.npy", np.asarray(confidence, dtype=np.float32))
-        write_png(out / "confidence.png", np.rint(np.clip(confidence, 0, 1) * 255).astype(np.uint8))
-        names += ["confidence.npy", "confidence.png"]
-    save_cloud(out / "cloud.ply", PointCloud(np.asarray(points, dtype=np.float64).reshape(-1, 3)))
-    names.append("cloud.ply")
-    return names

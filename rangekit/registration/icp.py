@@ -14,7 +14,7 @@ from scipy.spatial import cKDTree
 
 from rangekit.camera import PinholeCamera
 from rangekit.errors import InputError, RegistrationError
-from rangekit.geometry import apply_T, invert_T, make_T, procrustes, rotation_angle, rotvec_to_R, transform_vectors
+from rangekit.geometry import apply_T, make_T, procrustes, rotation_angle, rotvec_to_R, transform_vectors
 from rangekit.surface.cloud import PointCloud, voxel_downsample
 
 __all__ = ["IcpOptions", "RegistrationResult", "icp", "KERNELS", "OrganisedScan"]

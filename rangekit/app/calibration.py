@@ -1,0 +1,96 @@
+"""Calibrating a rig, on the simulator or on hardware: the work behind ``rangekit calibrate``.
+
+On hardware the person moves the board: :func:`calibrate` asks them (``ask(prompt)``, e.g. ``input``) to
+place it for each pose and on the turntable. On the simulator the board is moved by the code and the
+result is compared with the simulator's true rig.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+from rangekit.boards import Board
+from rangekit.errors import ConfigError
+from rangekit.rig import Rig, load_rig, save_rig
+from rangekit.rig_checks import validate_rig_for_hardware
+
+__all__ = ["Calibration", "calibrate"]
+
+_POSE_HINTS = ("facing the camera, tilted ~30 deg to the left", "tilted ~30 deg to the right",
+               "top edge tilted ~30 deg away", "bottom edge tilted ~30 deg away", "turned ~20 deg in its plane, tilted left",
+               "near the left edge of the view, tilted right", "near the right edge of the view, tilted left",
+               "near the top of the view, tilted down", "near the bottom of the view, tilted up",
+               "closer to the camera, tilted ~40 deg", "further away, tilted ~20 deg")
+
+
+@dataclass(frozen=True, eq=False)
+class Calibration:
+    result: object             # rangekit.calib.procedure.CalibrationResult (its rig, summary_lines())
+    truth: Rig | None          # the simulator's true rig; None on hardware
+    deviation: list[str]       # simulator: each parameter's deviation from the truth, one line each
+
+
+def calibrate(out: str | Path, *, rig: str = "sim", board: Board, n_poses: int = 20, seed: int = 0,
+              force: bool = False, interactive: bool = False, ask: Callable[[str], object] = input,
+              progress: Callable | None = None) -> Calibration:
+    """Calibrate the camera, projector, turntable axis and projector response; write the rig file ``out``.
+
+    ``rig`` is "sim" or a rig file naming the devices (its geometry is replaced). On hardware,
+    ``interactive`` must be true (someone moves the board; ``ask`` prompts them).
+
+    Raises
+    ------
+    ConfigError
+        ``out`` exists (without ``force``), fewer than 3 poses, hardware without a terminal, a bad rig file.
+    """
+    from rangekit.calib.procedure import CalibrationSettings, calibrate_rig, compare_rigs, comparison_lines
+
+    out = Path(out)
+    if out.exists() and not force:
+        raise ConfigError(f"{out}: exists; choose another file or pass --force to overwrite it")
+    if n_poses < 3:
+        raise ConfigError(f"--poses must be at least 3 (Zhang's method), found {n_poses}; 15-25 is typical")
+    settings = CalibrationSettings(board=board, n_poses=n_poses)
+    hardware = rig != "sim"
+    if hardware:
+        from rangekit.drivers import open_rig_devices
+
+        template = load_rig(rig)
+        validate_rig_for_hardware(template, where=rig)
+        if not interactive:
+            raise ConfigError("calibrating real hardware is interactive (you move the board between captures); "
+                              "run 'rangekit calibrate' in a terminal")
+        devices = open_rig_devices(template, where=rig)
+
+        def place(i: int, n: int) -> None:
+            ask(f"pose {i + 1}/{n}: hold the {board.cols}x{board.rows} board still, {_POSE_HINTS[i % len(_POSE_HINTS)]}, "
+                "wholly inside the projected light; press Enter to capture ")
+
+        def on_turntable() -> None:
+            ask("turntable: fix the board on the turntable, standing and tilted back towards the camera, off the "
+                "axis, so that it stays visible while the table turns +-40 deg; press Enter ")
+        truth = None
+    else:
+        from rangekit.sim.calibration import board_poses, board_scene, turntable_board_scene
+        from rangekit.sim.devices import SimRig, default_rig
+
+        template = truth = default_rig()
+        poses = board_poses(truth, board, n_poses, seed=seed)
+        devices = SimRig(board_scene(board, poses[0]), truth, seed=seed)
+
+        def place(i: int, n: int) -> None:
+            devices.set_scene(board_scene(board, poses[i]))
+
+        def on_turntable() -> None:
+            devices.set_scene(turntable_board_scene(truth, board))
+    try:
+        res = calibrate_rig(devices, settings=settings, place_board=place, place_on_turntable=on_turntable,
+                            template=template, progress=progress)
+    finally:
+        if hardware:
+            devices.close()
+    save_rig(res.rig, out)
+    deviation = comparison_lines(compare_rigs(res.rig, truth)) if truth is not None else []
+    return Calibration(res, truth, deviation)

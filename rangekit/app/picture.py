@@ -1,0 +1,72 @@
+"""A shaded picture of a mesh or point cloud file from one or more sides: the work behind ``rangekit render``."""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from rangekit.errors import FileFormatError
+
+__all__ = ["Picture", "render_file"]
+
+MESH_SUFFIXES = (".obj", ".stl", ".off", ".glb", ".gltf")
+
+
+@dataclass(frozen=True, eq=False)
+class Picture:
+    image: np.ndarray   # (H, W, 3) uint8; several sides as a montage of up to 4 columns
+    is_mesh: bool       # a mesh (vertices) or a cloud (points)
+    n_points: int       # vertices or points
+    n_views: int
+
+
+def _ply_has_faces(path: Path) -> bool:
+    """True if ``path`` is a PLY whose header declares at least one face."""
+    with open(path, "rb") as f:
+        head = f.read(4096)
+    if not head.startswith(b"ply"):
+        return False
+    m = re.search(rb"element\s+face\s+(\d+)", head.split(b"end_header")[0])
+    return bool(m and int(m.group(1)) > 0)
+
+
+def render_file(path: str | Path, *, azimuths: Sequence[float] = (np.radians(30.0),),
+                elevation: float = np.radians(25.0), size: tuple[int, int] = (800, 600),
+                up: Sequence[float] = (0.0, 0.0, 1.0), colour: bool = False) -> Picture:
+    """Render a mesh (ray cast; ``colour``: with its vertex colours) or a cloud (z-buffer splats), framed
+    tightly, from each azimuth (radians about ``up``) at ``elevation`` (radians above the horizontal).
+
+    Raises
+    ------
+    FileFormatError
+        No such file, or nothing in it to render.
+    """
+    from rangekit.app.snapshot import fit_camera, montage, render_cloud, render_mesh
+
+    src = Path(path)
+    mesh = cloud = None
+    if not src.is_file():
+        raise FileFormatError(f"{src}: no such file (expected a mesh or a point cloud)")
+    if src.suffix.lower() in MESH_SUFFIXES or _ply_has_faces(src):
+        from rangekit.formats.meshes import load_mesh_file
+
+        mesh = load_mesh_file(src)
+    else:
+        from rangekit.formats.clouds import load_cloud
+
+        cloud = load_cloud(src)
+    pts = mesh.vertices if mesh is not None else cloud.points
+    if len(pts) == 0:
+        raise FileFormatError(f"{src}: holds no points or vertices to render")
+    up = np.asarray(up, dtype=np.float64)
+    images = []
+    for az in azimuths:
+        cam = fit_camera(pts, azimuth=az, elevation=elevation, size=size, up=up, tight=True, margin=1.1)
+        images.append(render_mesh(mesh, cam, smooth=True, colour_by_vertex=colour) if mesh is not None
+                      else render_cloud(cloud, cam))
+    image = images[0] if len(images) == 1 else montage(images, cols=min(len(images), 4))
+    return Picture(image, mesh is not None, len(pts), len(images))

@@ -1,0 +1,87 @@
+"""One view of a session decoded, triangulated and filtered, with its cache in the view folder.
+
+Writes into ``view_NNN/`` (atomically): ``cloud.ply`` (the filtered cloud, session-world frame of that
+view), ``maps.npz`` (decoded projector column, confidence, camera-frame depth) and ``cloud.json`` (the
+settings they were made with). A view whose ``cloud.json`` holds the same settings is read back instead
+of decoded again, so interrupted processing gives the same mesh as an uninterrupted run.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from rangekit.app.reconstruct import reconstruct_view
+from rangekit.coded.patterns import PatternSpec
+from rangekit.errors import ConfigError
+from rangekit.formats.capture import list_images, read_stack
+from rangekit.formats.session import SessionView
+from rangekit.geometry import apply_T, invert_T
+from rangekit.io import atomic_save_npz, atomic_write_json, read_json, read_png
+from rangekit.rig import Rig
+from rangekit.formats.clouds import load_cloud, save_cloud
+from rangekit.surface.cloud import PointCloud
+
+__all__ = ["ViewMaps", "view_cloud", "white_frame_index"]
+
+
+@dataclass(frozen=True, eq=False)
+class ViewMaps:
+    """What a view's decoding left, per camera pixel (H, W): for the TSDF fusion and the report."""
+
+    proj_col: np.ndarray     # (H, W) float32 projector column, NaN where undecoded
+    confidence: np.ndarray   # (H, W) float32 in [0, 1]
+    depth: np.ndarray        # (H, W) float32 camera-frame z in metres, NaN where no point was kept
+    capture: np.ndarray      # (H, W[, 3]) the capture under the white pattern, as read
+
+
+def white_frame_index(spec: PatternSpec) -> int:
+    """Index of the frame lit by the white pattern (0 if the set has none)."""
+    return next((i for i, name in enumerate(spec.frame_names) if name == "white"), 0)
+
+
+def _cached(v: SessionView, settings: dict) -> bool:
+    meta = v.folder / "cloud.json"
+    if not (meta.exists() and (v.folder / "cloud.ply").exists() and (v.folder / "maps.npz").exists()):
+        return False
+    try:
+        return read_json(meta, what="view cache").get("settings") == settings
+    except ConfigError:
+        return False  # a damaged cache is rebuilt
+
+
+def view_cloud(v: SessionView, spec: PatternSpec, rig: Rig, settings: dict, full_scale: float | None,
+               T_table_world: np.ndarray | None, table_margin: float) -> tuple[PointCloud, ViewMaps]:
+    """Decode, triangulate and filter one view, or reuse its cache when made with the same ``settings``.
+
+    ``settings["method"]`` is the triangulation method; ``full_scale`` the camera's largest pixel value
+    (None: the images' dtype). Points less than ``table_margin`` metres above the turntable top
+    (``T_table_world`` maps world points to the table frame; None: no table) are dropped.
+    """
+    white = white_frame_index(spec)
+    if _cached(v, settings):
+        maps = np.load(v.folder / "maps.npz")
+        return load_cloud(v.folder / "cloud.ply"), ViewMaps(maps["proj_col"], maps["confidence"], maps["depth"],
+                                                            read_png(v.folder / f"{white:03d}.png"))
+    images = read_stack(list_images(v.folder))
+    rec = reconstruct_view(images, spec, rig.camera, rig.projector, method=settings["method"],
+                           full_scale=full_scale, response=rig.projector_response)
+    xyz = rec.triangulated.xyz.copy()
+    valid = np.isfinite(xyz[:, :, 0])
+    c = rec.cloud
+    if T_table_world is not None:
+        keep = apply_T(T_table_world, c.points)[:, 2] > table_margin
+        idx = np.flatnonzero(valid.ravel())
+        valid.ravel()[idx[~keep]] = False
+        c = PointCloud(c.points[keep], c.colours[keep], c.normals[keep])
+    # Normals as stored (float32), so a run from the cache and a fresh one see the same numbers.
+    c = PointCloud(c.points, c.colours, c.normals.astype(np.float32))
+    depth = np.full(valid.shape, np.nan, dtype=np.float32)
+    depth[valid] = apply_T(invert_T(rig.camera.T_world_cam), xyz[valid])[:, 2]
+    maps = ViewMaps(rec.decoded.proj_col.astype(np.float32), rec.decoded.confidence.astype(np.float32), depth,
+                    images[white])
+    save_cloud(v.folder / "cloud.ply", c)
+    atomic_save_npz(v.folder / "maps.npz", proj_col=maps.proj_col, confidence=maps.confidence, depth=depth)
+    atomic_write_json(v.folder / "cloud.json", {"settings": settings, "points": len(c)})
+    return c, maps

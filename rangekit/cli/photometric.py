@@ -1,0 +1,32 @@
+"""``rangekit photometric``: normals, albedo, depth and a mesh from a DiLiGenT-style folder."""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+from rangekit.cli._common import say
+
+
+def cmd_photometric(args: argparse.Namespace) -> int:
+    """rangekit photometric DIR [--method ls|robust|uncalibrated] --out OUT: normals, albedo, depth, mesh"""
+    from rangekit.app.photometric_run import photometric_files
+
+    t0 = time.perf_counter()
+    out = photometric_files(args.folder, args.out, method=args.method, progress=say)
+    say(f"wrote {out}/normals.npy, normals.png, albedo.png, depth.npy, mesh.ply (pixel units, orthographic) in "
+        f"{time.perf_counter() - t0:.1f} s")
+    return 0
+
+
+def add_parsers(sub) -> None:
+    pst = sub.add_parser("photometric", help="photometric stereo: normals, albedo, depth and a mesh from a DiLiGenT-style folder",
+                         description="Read a DiLiGenT-style folder (filenames.txt, light_directions.txt, "
+                                     "light_intensities.txt, mask.png, optional Normal_gt.mat), recover the normals "
+                                     "(OpenCV camera frame: x right, y down, z forward; NaN outside the mask), the "
+                                     "albedo, and integrate the normals into depth and a mesh (pixel units).")
+    pst.add_argument("folder", metavar="DIR", help="folder in the DiLiGenT layout")
+    pst.add_argument("--method", default="robust", choices=("ls", "robust", "uncalibrated"),
+                     help="least squares, robust to shadows and highlights (default), or without light directions")
+    pst.add_argument("--out", required=True, help="output folder")
+    pst.set_defaults(func=cmd_photometric)

@@ -1,0 +1,98 @@
+"""``rangekit rig init``, ``rangekit calibrate`` and ``rangekit devices``: the rig file and the hardware."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+
+from rangekit.cli._common import console, say
+
+
+def cmd_rig_init(args: argparse.Namespace) -> int:
+    """rangekit rig init [--sim] > rig.json: a template rig file, or the simulator's true rig"""
+    if args.sim:
+        from rangekit.sim import default_rig
+
+        data = default_rig().to_dict()
+    else:
+        from rangekit.rig import template_rig
+
+        data = template_rig()
+    sys.stdout.write(json.dumps(data, indent=2) + "\n")
+    return 0
+
+
+def cmd_calibrate(args: argparse.Namespace) -> int:
+    """rangekit calibrate --rig sim|RIG.json --out RIG.json: camera, projector, turntable and projector response"""
+    from rangekit.app.calibration import calibrate
+    from rangekit.boards import Board
+
+    t0 = time.perf_counter()
+    board = Board(kind=args.board, cols=args.cols, rows=args.rows, square=args.square_mm / 1000.0)
+    cal = calibrate(args.out, rig=args.rig, board=board, n_poses=args.poses, seed=args.seed, force=args.force,
+                    interactive=sys.stdin.isatty(), ask=input, progress=console())
+    say("")
+    say("== calibration ==")
+    for line in cal.result.summary_lines():
+        say(line)
+    if cal.truth is not None:
+        say("deviation from the simulator's true rig (rangekit rig init --sim):")
+        for line in cal.deviation:
+            say("  " + line)
+    say(f"wrote {args.out} in {time.perf_counter() - t0:.1f} s")
+    return 0
+
+
+def cmd_devices(args: argparse.Namespace) -> int:
+    """rangekit devices [--timeout 1.0]: list serial ports and depthai cameras"""
+    from rangekit.drivers.discovery import list_depthai_devices, list_serial_ports
+
+    ports = list_serial_ports()
+    say("serial ports:" if ports else "serial ports: none found")
+    for p in ports:
+        say(f"  {p['device']}  {p['description']}  USB {p['vid_pid'] or '-'}  serial {p['serial_number'] or '-'}")
+    cams = list_depthai_devices(timeout_s=args.timeout)
+    say("depthai devices:" if cams else "depthai devices: none found")
+    for c in cams:
+        say(f"  {c['device_id']}  {c['name']}  {c['state']}  {c['protocol']}")
+    return 0
+
+
+def add_calibrate_parser(sub) -> None:
+    cal = sub.add_parser("calibrate", help="calibrate camera, projector, turntable axis and projector response",
+                         description="Capture a board at several poses under coded light (the simulator moves it; "
+                                     "on hardware you do, pose by pose), calibrate the camera and the projector "
+                                     "(bundle adjusted together), the turntable axis and the projector's gamma, and "
+                                     "write a rig file. On the simulator it also prints each parameter's deviation "
+                                     "from the true rig.")
+    cal.add_argument("--rig", default="sim", help="'sim' (default) or a rig file naming the devices (its geometry "
+                                                   "is replaced)")
+    cal.add_argument("--out", required=True, help="rig file to write")
+    cal.add_argument("--force", action="store_true", help="overwrite --out if it exists")
+    cal.add_argument("--poses", type=int, default=20, help="board poses (default 20)")
+    cal.add_argument("--board", default="checkerboard", choices=("checkerboard", "charuco"), help="board type")
+    cal.add_argument("--cols", type=int, default=10, help="squares along the board's width (default 10)")
+    cal.add_argument("--rows", type=int, default=7, help="squares along its height (default 7)")
+    cal.add_argument("--square-mm", type=float, default=20.0, help="square side in millimetres (default 20)")
+    cal.add_argument("--seed", type=int, default=0, help="simulator: noise and pose seed")
+    cal.set_defaults(func=cmd_calibrate)
+
+
+def add_parsers(sub) -> None:
+    rig = sub.add_parser("rig", help="rig files: write a template",
+                         description="Rig files (docs/rig.md documents every field).")
+    rig_sub = rig.add_subparsers(dest="rig_command", metavar="SUBCOMMAND")
+    rig_sub.required = True
+    init = rig_sub.add_parser("init", help="print a template rig file for real hardware (rangekit rig init > rig.json)",
+                              description="Print a rig file to standard output: a template to edit for real "
+                                          "hardware, or with --sim the simulator's default rig (its true "
+                                          "parameters).")
+    init.add_argument("--sim", action="store_true", help="print the simulator's default rig instead")
+    init.set_defaults(func=cmd_rig_init)
+
+    dev = sub.add_parser("devices", help="list serial ports and depthai cameras",
+                         description="List serial ports (device, USB VID:PID, serial number) and depthai cameras.")
+    dev.add_argument("--timeout", type=float, default=1.0, help="seconds to search for depthai cameras (default 1)")
+    dev.set_defaults(func=cmd_devices)

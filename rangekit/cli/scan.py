@@ -1,0 +1,106 @@
+"""``rangekit scan`` and ``rangekit process``: a turntable session, acquired (resumable) and processed."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+
+from rangekit.cli._common import console, say
+
+
+def cmd_scan(args: argparse.Namespace) -> int:
+    """rangekit scan --out DIR | --resume DIR [--rig sim|RIG.json] [--object lumpy] [--views 12] [--patterns hybrid]"""
+    from rangekit.app.acquire import acquire
+    from rangekit.app.scan import prepare_scan
+    from rangekit.formats.session import ScanPlan
+
+    t0 = time.perf_counter()
+    setup = prepare_scan(out=args.out, resume=args.resume, rig=args.rig, obj=args.object, n_views=args.views,
+                         patterns=args.patterns, seed=args.seed, fusion=args.fusion)
+    folder = args.resume or args.out
+    if setup.resume:
+        say(f"resuming {folder}: {setup.n_done}/{setup.n_views} views already done")
+    try:
+        session = acquire(setup.devices, setup.rig, setup.spec, folder, plan=ScanPlan(n_views=setup.n_views),
+                          resume=setup.resume, capture=setup.capture, simulator=setup.simulator,
+                          hardware=setup.hardware, progress=console())
+    except KeyboardInterrupt:
+        print(f"rangekit: interrupted; completed views are safe. Continue with: rangekit scan --resume {folder}",
+              file=sys.stderr)
+        return 130
+    finally:
+        setup.close()
+    say(f"acquired {len(session.done_views)} views x {setup.spec.n_frames} frames into {folder} in "
+        f"{time.perf_counter() - t0:.1f} s")
+    if args.no_process:
+        say(f"process it later with: rangekit process {folder}")
+        return 0
+    t_acq = time.perf_counter() - t0
+    return _process(folder, args, acquisition_s=t_acq, resume_cmd=f"rangekit scan --resume {folder}")
+
+
+def _process(folder: str, args: argparse.Namespace, *, acquisition_s: float | None = None,
+             resume_cmd: str | None = None) -> int:
+    from rangekit.app.scan import process_scan
+    from rangekit.progress import format_seconds
+
+    t0 = time.perf_counter()
+    try:
+        res = process_scan(folder, fusion=args.fusion, report=not args.no_report, progress=console())
+    except KeyboardInterrupt:
+        print(f"rangekit: interrupted; the views decoded so far are cached. Continue with: "
+              f"{resume_cmd or f'rangekit process {folder}'}", file=sys.stderr)
+        return 130
+    say("")
+    say(f"== {folder}: summary ==")
+    if acquisition_s is not None:
+        say(f"acquisition: {format_seconds(acquisition_s)}")
+    for line in res.summary_lines():
+        say(line)
+    total = time.perf_counter() - t0 + (acquisition_s or 0.0)
+    say(f"wrote {folder}/mesh.ply, merged.ply, poses.json, summary.json"
+        + ("" if args.no_report else ", report.html") + f" in {format_seconds(total)}")
+    return 0
+
+
+def cmd_process(args: argparse.Namespace) -> int:
+    """rangekit process DIR [--fusion poisson|tsdf]: decode, register and fuse a session into DIR/mesh.ply"""
+    return _process(args.session, args)
+
+
+def _processing_options(p: argparse.ArgumentParser) -> None:
+    from rangekit.app.process import FUSION_METHODS
+
+    p.add_argument("--fusion", default="poisson", choices=FUSION_METHODS,
+                   help="fusion into one mesh: poisson (default, screened Poisson of the merged cloud) or tsdf")
+    p.add_argument("--no-report", action="store_true", help="skip report.html")
+
+
+def add_parsers(sub) -> None:
+    from rangekit.coded.patterns import PATTERN_METHODS
+
+    scan = sub.add_parser("scan", help="scan: acquire a turntable session (resumable), then process it into a mesh",
+                          description="Acquire a crash-safe scan session (every turntable view, every pattern; "
+                                      "--resume continues an interrupted one without redoing finished views), then "
+                                      "decode, register and fuse it into DIR/mesh.ply.")
+    where = scan.add_mutually_exclusive_group(required=True)
+    where.add_argument("--out", help="new session folder")
+    where.add_argument("--resume", metavar="DIR", help="continue the session in DIR")
+    scan.add_argument("--rig", default="sim",
+                      help="'sim' (default) or a rig file whose 'devices' name the turntable, projector and camera")
+    scan.add_argument("--object", default="lumpy", help="simulated object: built-in name or mesh file")
+    scan.add_argument("--views", type=int, default=12, help="turntable views over a full turn (default 12)")
+    scan.add_argument("--patterns", default="hybrid", choices=PATTERN_METHODS,
+                      help="pattern set (default hybrid: Gray code + phase shift)")
+    scan.add_argument("--seed", type=int, default=0, help="simulator noise seed")
+    scan.add_argument("--no-process", action="store_true", help="acquire only (process later with 'rangekit process')")
+    _processing_options(scan)
+    scan.set_defaults(func=cmd_scan)
+
+    proc = sub.add_parser("process", help="decode, register and fuse an acquired session into a mesh",
+                          description="Process a session folder (from 'rangekit scan'): every view decoded and "
+                                      "triangulated, registered from the turntable angles, fused into mesh.ply.")
+    proc.add_argument("session", metavar="DIR", help="session folder")
+    _processing_options(proc)
+    proc.set_defaults(func=cmd_process)

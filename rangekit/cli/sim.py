@@ -1,0 +1,87 @@
+"""``rangekit sim render``: simulated captures with exact ground truth."""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+
+from rangekit.cli._common import say, size
+from rangekit.errors import InputError
+
+
+def cmd_sim_render(args: argparse.Namespace) -> int:
+    """rangekit sim render [--sensor projector|tof|tof-pulsed|stereo] [--object NAME_OR_MESH] --out DIR"""
+    from rangekit.app.simulate import render_projector_capture, render_stereo_capture, render_tof_capture
+
+    t0 = time.perf_counter()
+    if args.sensor != "projector":
+        given = [f for f, v in (("--object", args.object), ("--patterns", args.patterns), ("--rig", args.rig))
+                 if v is not None]
+        if given:
+            raise InputError(f"{', '.join(given)}: only for --sensor projector; the {args.sensor} sensor renders its "
+                             "own scene (docs/simulator.md)")
+    if args.sensor == "stereo":
+        render_stereo_capture(args.out, size=args.size or (640, 400), dots=not args.no_dots, seed=args.seed,
+                              progress=say)
+        say(f"wrote {args.out} (left.png, right.png, rig.json, ground_truth.npz) in {time.perf_counter() - t0:.1f} s")
+        return 0
+    if args.sensor in ("tof", "tof-pulsed"):
+        render_tof_capture(args.out, pulsed=args.sensor == "tof-pulsed", near=args.near, far=args.far,
+                           size=args.size or (320, 240), plan=args.plan,
+                           frequencies=[f * 1e6 for f in args.frequencies_mhz] if args.frequencies_mhz else None,
+                           steps=args.steps, multipath=args.multipath, jitter=args.jitter_ps * 1e-12,
+                           noise=not args.no_noise, seed=args.seed, progress=say)
+        say(f"wrote {args.out} (tof.json, rig.json, ground_truth.npz, preview.png) in {time.perf_counter() - t0:.1f} s")
+        return 0
+    render_projector_capture(args.out, obj=args.object or "lumpy", patterns=args.patterns or "graycode",
+                             rig_file=args.rig, angle=np.radians(args.angle_deg), bits=args.bits, seed=args.seed,
+                             noise=not args.no_noise, global_fraction=args.global_fraction, progress=say)
+    say(f"done in {time.perf_counter() - t0:.1f} s")
+    return 0
+
+
+def add_parsers(sub) -> None:
+    from rangekit.coded.patterns import PATTERN_METHODS
+
+    sim = sub.add_parser("sim", help="simulated rig: render captures with exact ground truth",
+                         description="Simulated projector-camera-turntable rig.")
+    sim_sub = sim.add_subparsers(dest="sim_command", metavar="SUBCOMMAND")
+    sim_sub.required = True
+    render = sim_sub.add_parser(
+        "render", help="render a pattern sequence on a simulated object and write captures + ground truth",
+        description="Render the captures a real rig would take of an object, plus ground_truth.npz "
+                    "(depth, xyz, normals, proj_col, proj_row, valid), the rig file and a preview PNG.")
+    render.add_argument("--sensor", default="projector", choices=("projector", "tof", "tof-pulsed", "stereo"),
+                        help="projector-camera rig (default), continuous-wave or pulsed time of flight, or the "
+                             "active-stereo pair")
+    render.add_argument("--object", default=None,
+                        help="built-in object (plane, sphere, box, cylinder, torus, board, lumpy) or a mesh "
+                             "file trimesh can read (metres); default: lumpy")
+    render.add_argument("--patterns", default=None, choices=PATTERN_METHODS,
+                        help="pattern set to project; default: graycode (44 frames on the default rig)")
+    render.add_argument("--out", required=True, help="output folder (created if missing)")
+    render.add_argument("--rig", help="rig file to simulate (default: the built-in simulated rig)")
+    render.add_argument("--angle-deg", type=float, default=0.0, help="turntable angle in degrees (default 0)")
+    render.add_argument("--bits", type=int, default=8, choices=(8, 10, 12, 16), help="camera bit depth")
+    render.add_argument("--seed", type=int, default=0, help="noise seed (default 0)")
+    render.add_argument("--no-noise", action="store_true", help="disable shot and read noise")
+    render.add_argument("--global-fraction", type=float, default=None,
+                        help="interreflection term, fraction of the mean projected light (default 0)")
+    tof = render.add_argument_group("time of flight (--sensor tof, tof-pulsed)")
+    tof.add_argument("--plan", default="kinect", choices=("kinect", "luxonis"),
+                     help="frequency plan: kinect = 16/80/120 MHz x 3 steps (18.7 m), luxonis = 80/100 MHz x 4 "
+                          "steps (7.5 m); default kinect")
+    tof.add_argument("--frequencies-mhz", type=float, nargs="+", help="custom frequencies in MHz (instead of --plan)")
+    tof.add_argument("--steps", type=int, help="phase steps per frequency (default: the plan's, or 4)")
+    tof.add_argument("--near", type=float, default=0.5, help="nearest panel, metres (default 0.5)")
+    tof.add_argument("--far", type=float, default=15.0, help="farthest panel, metres (default 15)")
+    tof.add_argument("--multipath", type=float, nargs=2, metavar=("STRENGTH", "EXTRA_M"),
+                     help="add a second return of STRENGTH x the direct light, EXTRA_M metres longer round trip")
+    tof.add_argument("--jitter-ps", type=float, default=50.0, help="tof-pulsed: timing jitter, ps RMS (default 50)")
+    sz = render.add_argument_group("time of flight and stereo")
+    sz.add_argument("--size", type=size, default=None,
+                    help="sensor size WIDTHxHEIGHT (default: tof 320x240, stereo 640x400)")
+    sz.add_argument("--no-dots", action="store_true", help="stereo: switch the dot projector off")
+    render.set_defaults(func=cmd_sim_render)

@@ -11,7 +11,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from rangekit.errors import RegistrationError
-from rangekit.geometry import apply_T, make_T, procrustes
+from rangekit.geometry import apply_T, procrustes
 from rangekit.surface.cloud import PointCloud, estimate_normals, voxel_downsample
 from rangekit.registration.icp import IcpOptions, RegistrationResult, icp
 

@@ -1,0 +1,157 @@
+"""The package's shape: no import cycle, imports only go down the layers, no file over 400 lines.
+
+Every ``import`` and ``from ... import`` statement of every module is read with ``ast``, including
+imports inside functions and under ``if TYPE_CHECKING:`` (a cycle hidden in a function is still a
+cycle). Module names are the installed ones: ``sim/raycast.py`` is ``rangekit.sim.raycast``.
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+#: Source folders and the package each one installs as (pyproject's package-dir).
+FOLDERS = {"rangekit": "rangekit", "sim": "rangekit.sim", "drivers": "rangekit.drivers", "calib": "rangekit.calib"}
+
+#: Layer of each part, lowest first; a module may import its own layer or a lower one, never a higher.
+#: Core modules (errors, geometry, camera, io, ...) are the top-level modules of rangekit/.
+LAYERS = {
+    "core": 0,
+    "coded": 1, "stereo": 1, "photometric": 1, "tof": 1, "surface": 1, "registration": 1,
+    "formats": 2,
+    "sim": 3, "drivers": 3, "calib": 3,
+    "app": 4,
+    "cli": 5,
+}
+#: Pairs of parts on one layer that must not import each other either way.
+APART = [("sim", "drivers"), ("sim", "calib"), ("drivers", "calib")]
+MAX_LINES = 400
+
+
+def _module_name(path: Path) -> str:
+    folder = path.relative_to(ROOT).parts[0]
+    rel = path.relative_to(ROOT / folder).with_suffix("")
+    parts = [p for p in rel.parts if p != "__init__"]
+    return ".".join([FOLDERS[folder], *parts])
+
+
+def _sources() -> dict[str, Path]:
+    # (A development checkout may link rangekit/sim -> ../sim; each source is read once, from its folder.)
+    return {_module_name(p): p for folder in FOLDERS for p in sorted((ROOT / folder).rglob("*.py"))
+            if "__pycache__" not in p.parts and not (folder == "rangekit" and p.parts[len(ROOT.parts) + 1] in FOLDERS)}
+
+
+def _part(module: str) -> str:
+    """The part of the package a module belongs to: ``rangekit.coded.decode`` -> ``coded``."""
+    parts = module.split(".")
+    if len(parts) == 1:
+        return "core"
+    if parts[1] == "__main__":
+        return "cli"  # python -m rangekit
+    if parts[1] in LAYERS:
+        return parts[1]
+    return "core"  # a top-level module of rangekit/
+
+
+def _imports(path: Path, module: str, known: set[str]) -> set[str]:
+    """The rangekit modules ``path`` imports, anywhere in the file."""
+    tree = ast.parse(path.read_text(), filename=str(path))
+    package = module if path.name == "__init__.py" else module.rsplit(".", 1)[0]
+    found: set[str] = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            names = [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package.split(".")
+                base = base[:len(base) - node.level + 1]
+                src = ".".join(base + ([node.module] if node.module else []))
+            else:
+                src = node.module or ""
+            # `from rangekit.coded import decode` imports the module rangekit.coded.decode.
+            names = [f"{src}.{a.name}" if f"{src}.{a.name}" in known else src for a in node.names]
+        else:
+            continue
+        for name in names:
+            if name == "rangekit" or not name.startswith("rangekit."):
+                continue
+            while name not in known and "." in name:
+                name = name.rsplit(".", 1)[0]
+            if name in known and name != module:
+                found.add(name)
+    return found
+
+
+@pytest.fixture(scope="module")
+def graph() -> dict[str, set[str]]:
+    src = _sources()
+    known = set(src)
+    return {m: _imports(p, m, known) for m, p in src.items()}
+
+
+def test_the_tree_is_read(graph):
+    # The walk must see the package (so the other tests cannot pass on an empty graph).
+    assert len(graph) > 60
+    for m in ("rangekit.camera", "rangekit.sim.raycast", "rangekit.drivers.turntable", "rangekit.calib.camera",
+              "rangekit.registration.icp", "rangekit.cli"):
+        assert m in graph, m
+    assert "rangekit.geometry" in graph["rangekit.camera"]
+
+
+def _find_cycle(graph: dict[str, set[str]]) -> list[str] | None:
+    """One import cycle as a list of modules, or None (iterative depth-first search)."""
+    state: dict[str, int] = {}   # 1 on the stack, 2 done
+    for start in sorted(graph):
+        if state.get(start):
+            continue
+        stack = [(start, iter(sorted(graph[start])))]
+        path = [start]
+        state[start] = 1
+        while stack:
+            node, children = stack[-1]
+            child = next(children, None)
+            if child is None:
+                state[node] = 2
+                stack.pop()
+                path.pop()
+            elif state.get(child) == 1:
+                return path[path.index(child):] + [child]
+            elif not state.get(child):
+                state[child] = 1
+                path.append(child)
+                stack.append((child, iter(sorted(graph[child]))))
+    return None
+
+
+def test_no_import_cycle(graph):
+    cycle = _find_cycle(graph)
+    assert cycle is None, "import cycle: " + " -> ".join(cycle)
+
+
+def test_the_cycle_finder_finds_cycles():
+    assert _find_cycle({"a": {"b"}, "b": {"c"}, "c": {"a"}}) == ["a", "b", "c", "a"]
+    assert _find_cycle({"a": {"b"}, "b": set(), "c": {"a", "b"}}) is None
+
+
+def test_imports_go_down_the_layers(graph):
+    upward = []
+    for m, deps in graph.items():
+        for d in deps:
+            pm, pd = _part(m), _part(d)
+            if LAYERS[pd] > LAYERS[pm] or (pm, pd) in APART or (pd, pm) in APART:
+                upward.append(f"{m} ({pm}) imports {d} ({pd})")
+    assert not upward, "imports against the layers:\n" + "\n".join(sorted(upward))
+
+
+def test_layer_check_catches_an_upward_import():
+    assert LAYERS[_part("rangekit.app.process")] > LAYERS[_part("rangekit.surface.mesh")]
+    assert _part("rangekit.camera") == "core" and _part("rangekit.sim.devices") == "sim"
+
+
+def test_no_file_over_400_lines():
+    long = [f"{p.relative_to(ROOT)}: {n} lines" for p in _sources().values()
+            if (n := len(p.read_text().splitlines())) > MAX_LINES]
+    assert not long, "files over 400 lines:\n" + "\n".join(long)

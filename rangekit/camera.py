@@ -20,7 +20,7 @@ import numpy as np
 from rangekit.errors import ConfigError, InputError
 from rangekit.geometry import apply_T, invert_T, transform_vectors
 
-__all__ = ["PinholeCamera", "distort", "undistort", "pixel_rays"]
+__all__ = ["PinholeCamera", "distort", "undistort", "pixel_rays", "world_pixel_rays"]
 
 _N_COEFFS = 12  # k1 k2 p1 p2 k3 k4 k5 k6 s1 s2 s3 s4
 
@@ -380,3 +380,12 @@ def pixel_rays(camera: PinholeCamera) -> np.ndarray:
             _RAY_CACHE.pop(next(iter(_RAY_CACHE)))
         _RAY_CACHE[key] = d
     return d
+
+
+def world_pixel_rays(camera: PinholeCamera) -> tuple[np.ndarray, np.ndarray]:
+    """The rays of every pixel centre in world coordinates, row by row: ``(origins, directions)``, each
+    (H * W, 3) float64 (origins the optical centre, directions unit vectors, NaN where the lens model
+    cannot be inverted). The same numbers as ``camera.rays(camera.pixel_grid())``, from the cached
+    :func:`pixel_rays`."""
+    d = transform_vectors(camera.T_world_cam, pixel_rays(camera).reshape(-1, 3))
+    return np.broadcast_to(camera.center, d.shape).copy(), d

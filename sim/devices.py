@@ -19,7 +19,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from rangekit.camera import PinholeCamera
+from rangekit.camera import PinholeCamera, world_pixel_rays
 from rangekit.devices import check_pattern
 from rangekit.errors import DeviceDisconnected, SceneError
 from rangekit.geometry import look_at, make_T
@@ -202,7 +202,7 @@ class SimRig:
         if self._cache_key != key:
             cam = self.rig.camera
             if self._cam_rays is None:
-                self._cam_rays = cam.rays(cam.pixel_grid())
+                self._cam_rays = world_pixel_rays(cam)
             if self._corner_rays is None and any(o.texture is not None for o in self._scene.objects):
                 self._corner_rays = cam.rays(pixel_corners(cam))
             motion = self.rig.T_world_rotated(angle) if self.turntable is not None else None

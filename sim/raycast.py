@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rangekit.camera import PinholeCamera
+from rangekit.camera import PinholeCamera, world_pixel_rays
 from rangekit.errors import SceneError
 from rangekit.geometry import invert_T
 from rangekit.sim.scene_object import PlanarTexture
@@ -174,7 +174,7 @@ def cast_view(mesh: WorldMesh, camera: PinholeCamera, projector: PinholeCamera |
     mesh : WorldMesh of the scene at this state.
     camera : the camera; every pixel centre is cast.
     projector : the projector, or None for a scene without one (``lit`` is then all False).
-    cam_rays : optional cached ``camera.rays(camera.pixel_grid())`` (they do not change between views).
+    cam_rays : optional cached :func:`rangekit.camera.world_pixel_rays` (they do not change between views).
     corner_rays : optional cached ``camera.rays(pixel_corners(camera))`` for textured objects; without it
         only the corners of textured pixels are back-projected.
     shadow_eps : float
@@ -188,7 +188,7 @@ def cast_view(mesh: WorldMesh, camera: PinholeCamera, projector: PinholeCamera |
     if len(mesh.triangles) == 0:
         raise SceneError("the scene has no triangles; add at least one object")
     H, W = camera.height, camera.width
-    o_all, d_all = cam_rays if cam_rays is not None else camera.rays(camera.pixel_grid())
+    o_all, d_all = cam_rays if cam_rays is not None else world_pixel_rays(camera)
     _, prim_all = _open3d_cast(mesh.vertices, mesh.triangles, o_all, d_all)
     hit_idx = np.flatnonzero(prim_all >= 0)
     if hit_idx.size == 0:

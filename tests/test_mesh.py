@@ -16,7 +16,7 @@ import trimesh
 from scipy.spatial import cKDTree
 
 from rangekit.errors import FileFormatError, InputError
-from rangekit.geometry import apply_T, compose, invert_T, transform_vectors
+from rangekit.geometry import apply_T, compose, invert_T
 from rangekit.formats.meshes import load_mesh_file, save_mesh
 from rangekit.surface.cloud import PointCloud, orient_normals_to_sensor
 from rangekit.surface.fusion import poisson_mesh, tsdf_fuse

@@ -15,7 +15,7 @@ from typing import Callable, Sequence
 import cv2
 import numpy as np
 
-from rangekit.camera import PinholeCamera
+from rangekit.camera import PinholeCamera, world_pixel_rays
 from rangekit.colour import colourise
 from rangekit.errors import InputError
 from rangekit.geometry import apply_T, look_at
@@ -132,7 +132,7 @@ def raycast_mesh(mesh: TriangleMesh, camera: PinholeCamera) -> MeshHits:
     if not isinstance(mesh, TriangleMesh) or len(mesh.triangles) == 0:
         raise InputError(f"raycast_mesh: expected a TriangleMesh with triangles, found {mesh!r}")
     H, W = camera.height, camera.width
-    o, d = camera.rays(camera.pixel_grid())
+    o, d = world_pixel_rays(camera)
     ok = np.all(np.isfinite(d), axis=1)
     d_cast = np.where(ok[:, None], d, [0.0, 0.0, 1.0])
     c = (mesh.vertices.min(axis=0) + mesh.vertices.max(axis=0)) / 2

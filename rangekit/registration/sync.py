@@ -143,6 +143,26 @@ def _rotation_residuals(g: ViewGraph, R_world: np.ndarray) -> np.ndarray:
     return Rotation.from_matrix(D).magnitude()
 
 
+def _irls(g: ViewGraph, solve, residuals, kw: np.ndarray, active: np.ndarray, floor: float, max_iterations: int):
+    """Iteratively reweighted least squares with the Cauchy kernel from the weights ``kw``, then a hard inlier
+    test at ``_INLIER_K`` scales and a final solve on the inliers. ``solve(edge_weights)`` gives the
+    solution, ``residuals(solution)`` one residual per edge. Returns (solution, residuals, inlier, iterations)."""
+    it = 0
+    for it in range(1, max_iterations + 1):
+        x = solve(g.w * active * kw)
+        r = residuals(x)
+        scale = _mad_scale(r, active, floor)
+        new = _cauchy(r, scale)
+        done = np.max(np.abs(new - kw)[active]) < _WEIGHT_TOL
+        kw = new
+        if done:
+            break
+    inlier = active & (r <= _INLIER_K * scale)
+    check_rejection(g, active, inlier)
+    x = solve(g.w * inlier)
+    return x, residuals(x), inlier, it
+
+
 def _rotation_sync(g: ViewGraph, robust: bool, max_iterations: int, active: np.ndarray):
     if not robust:
         R_world = _spectral(g, g.w * active)
@@ -157,22 +177,9 @@ def _rotation_sync(g: ViewGraph, robust: bool, max_iterations: int, active: np.n
         ok = active[tri].all(axis=1)
         kw = _cycle_weights(g, np.where(ok, Rotation.from_matrix(C).magnitude(), np.inf), tri, active,
                             _ANGLE_FLOOR)
-    # 2. IRLS on the spectral solution.
-    it = 0
-    for it in range(1, max_iterations + 1):
-        R_world = _spectral(g, g.w * active * kw)
-        r = _rotation_residuals(g, R_world)
-        scale = _mad_scale(r, active, _ANGLE_FLOOR)
-        new = _cauchy(r, scale)
-        done = np.max(np.abs(new - kw)[active]) < _WEIGHT_TOL
-        kw = new
-        if done:
-            break
-    # 3. Hard inlier test, connectivity, final solve on the inliers.
-    inlier = active & (r <= _INLIER_K * scale)
-    check_rejection(g, active, inlier)
-    R_world = _spectral(g, g.w * inlier)
-    return R_world, _rotation_residuals(g, R_world), inlier, it
+    # 2. IRLS on the spectral solution; 3. hard inlier test, connectivity, final solve on the inliers.
+    return _irls(g, lambda w: _spectral(g, w), lambda R: _rotation_residuals(g, R), kw, active, _ANGLE_FLOOR,
+                 max_iterations)
 
 
 def synchronise_rotations(n: int, edges, *, robust: bool = True, weights=None,
@@ -252,20 +259,8 @@ def _translation_sync(g: ViewGraph, R_world: np.ndarray, robust: bool, max_itera
         cyc = sgn[0] * U[tri[:, 0]] + sgn[1] * U[tri[:, 1]] - sgn[2] * U[tri[:, 2]]  # u_ab + u_bc - u_ac
         ok = active[tri].all(axis=1)
         kw = _cycle_weights(g, np.where(ok, np.linalg.norm(cyc, axis=1), np.inf), tri, active, floor)
-    it = 0
-    for it in range(1, max_iterations + 1):
-        t = _solve_translations(g, U, g.w * active * kw)
-        r = _translation_residuals(g, U, t)
-        scale = _mad_scale(r, active, floor)
-        new = _cauchy(r, scale)
-        done = np.max(np.abs(new - kw)[active]) < _WEIGHT_TOL
-        kw = new
-        if done:
-            break
-    inlier = active & (r <= _INLIER_K * scale)
-    check_rejection(g, active, inlier)
-    t = _solve_translations(g, U, g.w * inlier)
-    return t, _translation_residuals(g, U, t), inlier, it
+    return _irls(g, lambda w: _solve_translations(g, U, w), lambda t: _translation_residuals(g, U, t), kw, active,
+                 floor, max_iterations)
 
 
 def _as_rotations(R_world, n: int) -> np.ndarray:

@@ -15,8 +15,9 @@ from typing import Sequence
 
 import numpy as np
 
-from rangekit.camera import PinholeCamera
+from rangekit.camera import PinholeCamera, pixel_rays
 from rangekit.errors import InputError, MeshError
+from rangekit.geometry import transform_vectors
 from rangekit.surface.cloud import PointCloud
 from rangekit.surface.cloud import to_open3d as _cloud_to_open3d
 from rangekit.surface.mesh import TriangleMesh, mesh_from_open3d
@@ -116,8 +117,8 @@ def _depth_image(depth: np.ndarray, colour: np.ndarray | None, camera: PinholeCa
 def _world_points(depth: np.ndarray, camera: PinholeCamera) -> np.ndarray:
     """(K, 3) points, in the frame of ``camera.T_world_cam``, of the pixels with a depth > 0."""
     ok = np.isfinite(depth) & (depth > 0)
-    o, d = camera.rays(camera.pixel_grid()[ok.reshape(-1)])
-    return o + (depth[ok] / (d @ camera.T_world_cam[:3, 2]))[:, None] * d
+    d = transform_vectors(camera.T_world_cam, pixel_rays(camera).reshape(-1, 3)[ok.reshape(-1)])
+    return camera.center + (depth[ok] / (d @ camera.T_world_cam[:3, 2]))[:, None] * d
 
 
 def tsdf_fuse(views: Sequence[tuple[np.ndarray, np.ndarray | None, PinholeCamera]], *,

@@ -8,7 +8,7 @@ VENV   ?= .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.rangekit-installed
 
-.PHONY: setup test scan bench clean browser
+.PHONY: setup test test-slow scan bench clean browser
 
 setup: $(STAMP)
 
@@ -26,7 +26,11 @@ $(STAMP): pyproject.toml
 	@touch $(STAMP)
 
 test: $(STAMP) browser
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q -m "not slow"
+
+test-slow: $(STAMP) browser
+	@# The full-size cases (whole calibration, 6-view scans to a mesh, 12-view registration, ...): CI runs them.
+	$(BIN)/python -m pytest -q -m slow
 
 browser:
 	@# Headless Chromium + chromedriver (Debian packages) for the report test in tests/test_scan.py and

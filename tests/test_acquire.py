@@ -88,6 +88,7 @@ class _Devices:
         self.camera, self.projector, self.turntable = camera, projector, turntable
 
 
+@pytest.mark.slow
 def test_twelve_view_scan_with_44_patterns_through_the_horus_driver(tmp_path):
     from rangekit.drivers.turntable import HorusTurntable
     from rangekit.sim.firmware import start_firmware

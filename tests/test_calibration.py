@@ -46,6 +46,7 @@ def calibrated():
     return truth, result, compare_rigs(result.rig, truth), messages
 
 
+@pytest.mark.slow
 def test_reprojection_errors(calibrated):
     _, res, _, _ = calibrated
     assert res.bundle.rms_camera <= 0.1, res.summary_lines()
@@ -54,6 +55,7 @@ def test_reprojection_errors(calibrated):
     assert res.bundle.rms_camera <= 0.04 and res.bundle.rms_projector <= 0.04
 
 
+@pytest.mark.slow
 def test_intrinsics_match_truth(calibrated):
     _, _, dev, _ = calibrated
     for key in ("fx", "fy", "cx", "cy"):
@@ -63,12 +65,14 @@ def test_intrinsics_match_truth(calibrated):
     assert abs(dev["camera"]["dist_diff"][0]) < 0.002 and abs(dev["projector"]["dist_diff"][0]) < 0.002
 
 
+@pytest.mark.slow
 def test_extrinsics_match_truth(calibrated):
     _, _, dev, _ = calibrated
     assert abs(dev["baseline_pct"]) <= 0.1, dev
     assert dev["rotation_deg"] <= 0.02, dev
 
 
+@pytest.mark.slow
 def test_turntable_axis_matches_truth(calibrated):
     _, res, dev, _ = calibrated
     assert dev["axis_direction_deg"] <= 0.05, dev
@@ -77,11 +81,13 @@ def test_turntable_axis_matches_truth(calibrated):
     assert abs(res.axis.angle_scale - 1.0) < 1e-3
 
 
+@pytest.mark.slow
 def test_projector_response_matches_truth(calibrated):
     _, _, dev, _ = calibrated
     assert abs(dev["gamma"]) < 0.02, dev
 
 
+@pytest.mark.slow
 def test_missing_board_view_is_skipped_and_named(calibrated):
     _, res, _, messages = calibrated
     view = res.camera.views[3]
@@ -91,6 +97,7 @@ def test_missing_board_view_is_skipped_and_named(calibrated):
     assert any("board pose" in m for m in messages)
 
 
+@pytest.mark.slow
 def test_calibrated_rig_has_the_simulator_schema(calibrated):
     truth, res, _, _ = calibrated
     a, b = res.rig.to_dict(), truth.to_dict()
@@ -100,6 +107,7 @@ def test_calibrated_rig_has_the_simulator_schema(calibrated):
     assert np.abs(np.asarray(a["cameras"][0]["T_world_cam"]) - np.asarray(b["cameras"][0]["T_world_cam"])).max() < 1e-3
 
 
+@pytest.mark.slow
 def test_round_trip_sphere_radius_with_the_calibrated_rig(calibrated):
     """Scan a sphere in the simulator (true rig) and reconstruct with the calibrated rig."""
     from rangekit.coded.patterns import make_pattern_spec

@@ -104,6 +104,7 @@ def test_decode_command_errors(tmp_path, capsys):
 BUNNY = __import__("pathlib").Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "stanford-bunny"
 
 
+@pytest.mark.slow
 def test_register_and_mesh_commands(tmp_path, capsys):
     if not BUNNY.is_dir():
         pytest.skip("../shared/data/stanford-bunny is absent")

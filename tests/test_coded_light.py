@@ -31,6 +31,13 @@ def capture(scene_name, scene, method, model=ISSUE_MODEL, seed=1):
     return _CACHE[key]
 
 
+@pytest.fixture(scope="module", autouse=True)
+def _free_captures():
+    """The rendered stacks (and their simulators) are shared by this module's tests only."""
+    yield
+    _CACHE.clear()
+
+
 @pytest.fixture(scope="module")
 def scenes(tilted_plane_scene):
     return {"plane": tilted_plane_scene, "sphere": default_scene("sphere")}

@@ -32,6 +32,7 @@ def turntable():
     return scans, prior, res, time.perf_counter() - t
 
 
+@pytest.mark.slow
 def test_turntable_scan_registers_to_ground_truth(turntable):
     scans, prior, res, secs = turntable
     rot0, tr0 = pose_errors(prior, scans.T_world_view)
@@ -42,6 +43,7 @@ def test_turntable_scan_registers_to_ground_truth(turntable):
     assert rot[1:].mean() <= 0.01 and tr[1:].mean() <= 2e-4 * scans.diag
 
 
+@pytest.mark.slow
 def test_wrong_edges_are_rejected(turntable):
     """15% of the pairwise edges replaced by relative poses 30+ degrees off."""
     scans, _, res, _ = turntable
@@ -70,6 +72,7 @@ def test_wrong_edges_are_rejected(turntable):
     assert r_pl[1:].mean() > 1.0
 
 
+@pytest.mark.slow
 def test_registered_scan_fuses_into_a_watertight_accurate_mesh(turntable):
     from rangekit.surface.fusion import poisson_mesh, tsdf_fuse
     from rangekit.surface.mesh import TriangleMesh, distance_to_surface
@@ -119,6 +122,7 @@ def _bunny():
     return names, [load_cloud(BUNNY / n) for n in names], np.stack(poses)
 
 
+@pytest.mark.slow
 def test_stanford_bunny_without_initial_guess():
     names, clouds, conf = _bunny()
     t = time.perf_counter()

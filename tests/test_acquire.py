@@ -7,7 +7,7 @@ import pytest
 
 from rangekit.app.acquire import acquire
 from rangekit.formats.session import ScanPlan, Session, SimulatorSettings, load_session
-from rangekit.errors import ConfigError, DeviceDisconnected
+from rangekit.errors import ConfigError, DecodeError, DeviceDisconnected
 from rangekit.coded.patterns import make_pattern_spec
 from rangekit.rig import Rig
 from rangekit.sim import SimRig, default_rig, default_scene
@@ -150,3 +150,36 @@ def test_sessions_written_before_capture_settings_still_load(tmp_path):
     path.write_text(json.dumps(data))
     with pytest.raises(ConfigError, match=r"session.json: views: expected a list of views .*, found 'all'"):
         Session.load(tmp_path / "s")
+
+
+def test_a_12_bit_session_decodes_with_full_scale_4095(tmp_path):
+    """The full scale processing uses is the session's (4095 for a 12-bit camera in 16-bit PNGs): with the
+    PNG's 65535 the confidence threshold is 16x too high and most of the object is rejected."""
+    from dataclasses import replace
+
+    from rangekit.app.reconstruct import reconstruct_view
+    from rangekit.formats.capture import list_images, read_stack
+    from rangekit.sim import ImagingModel
+
+    rig = replace(small_rig(), capture={"bits": 12})
+    s = SimRig(default_scene("lumpy"), rig, imaging=ImagingModel(bits=12), seed=1)
+    spec = make_pattern_spec("graycode", s.projector.resolution)
+    session = acquire(s, rig, spec, tmp_path / "s", plan=ScanPlan(n_views=2), hardware={"rig_file": "rig.json"})
+    truth = s.ground_truth()  # the table at the last view's angle
+    images = read_stack(list_images(session.views[-1].folder))
+    assert images[0].dtype == np.uint16 and max(int(im.max()) for im in images) <= 4095
+    loaded = Session.load(tmp_path / "s")
+    right = reconstruct_view(images, spec, rig.camera, rig.projector, full_scale=loaded.capture.full_scale)
+    try:
+        n_wrong = int(reconstruct_view(images, spec, rig.camera, rig.projector,
+                                       full_scale=65535.0).triangulated.valid.sum())
+    except DecodeError:
+        n_wrong = 0  # nothing survived
+    lit = int((truth.lit & (truth.object_id == 0)).sum())  # the object (not the table)
+    n_right = int(right.triangulated.valid.sum())
+    print(f"\n12-bit view: {n_right} of {lit} lit pixels with full scale 4095, {n_wrong} with 65535")
+    assert n_right >= 0.8 * lit
+    assert n_wrong <= 0.5 * n_right
+    # And the points it keeps are on the true surface.
+    err = np.linalg.norm(right.triangulated.xyz[right.triangulated.valid] - truth.xyz[right.triangulated.valid], axis=1)
+    assert np.median(err) < 5e-4

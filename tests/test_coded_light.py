@@ -5,6 +5,8 @@ half scale), projector blur sigma 1 projector px, projector gamma 2.2. Run with 
 the measured figures quoted in docs/coded-light.md.
 """
 
+from typing import NamedTuple
+
 import numpy as np
 import pytest
 from fits import fit_sphere
@@ -19,15 +21,34 @@ from rangekit.coded.triangulate import triangulate_ray_plane, triangulate_ray_ra
 
 ISSUE_MODEL = ImagingModel(full_well=5000.0, projector_blur=1.0, gamma=2.2, bits=8)
 _CACHE: dict = {}
+_CACHED = 2  # full-size stacks kept at once (each ~250 MB with its truth): bounds the suite's memory
+
+
+class _Rendered(NamedTuple):
+    """What the tests read of a simulator after the capture (not its ray caches)."""
+
+    truth: object
+    view_renderer: object
+    rig: object
+
+    def ground_truth(self):
+        return self.truth
+
+    def renderer(self):
+        return self.view_renderer
 
 
 def capture(scene_name, scene, method, model=ISSUE_MODEL, seed=1):
-    """Rendered captures + truth, cached per (scene, method, model)."""
+    """Rendered captures + truth, cached per (scene, method, model), the last few used."""
     key = (scene_name, method, model)
     if key not in _CACHE:
         sim = SimRig(scene, imaging=model, seed=seed)
         spec = make_pattern_spec(method, sim.projector.resolution)
-        _CACHE[key] = (np.stack(sim.capture_sequence(list(spec.frames()))), spec, sim)
+        stack = np.stack(sim.capture_sequence(list(spec.frames())))
+        while len(_CACHE) >= _CACHED:
+            _CACHE.pop(next(iter(_CACHE)))
+        _CACHE[key] = (stack, spec, _Rendered(sim.ground_truth(), sim.renderer(), sim.rig))
+    _CACHE[key] = _CACHE.pop(key)  # most recently used last
     return _CACHE[key]
 
 

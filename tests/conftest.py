@@ -1,6 +1,7 @@
 import ctypes
 import ctypes.util
 import gc
+import os
 
 import numpy as np
 import pytest
@@ -36,23 +37,35 @@ def noiseless():
 
 
 _LIBC = ctypes.CDLL(ctypes.util.find_library("c")) if ctypes.util.find_library("c") else None
+_PAGE = os.sysconf("SC_PAGE_SIZE")
+_RSS_AFTER_LAST_FREE = [0]
+
+
+def _rss() -> int:
+    """Resident bytes of this process."""
+    with open("/proc/self/statm") as f:
+        return int(f.read().split()[1]) * _PAGE
+
+
+def _free_memory() -> None:
+    gc.collect()
+    if _LIBC is not None and hasattr(_LIBC, "malloc_trim"):
+        _LIBC.malloc_trim(0)
+    _RSS_AFTER_LAST_FREE[0] = _rss()
 
 
 @pytest.fixture(autouse=True)
 def _return_freed_memory():
-    """After each test, free what reference cycles hold (a dropped simulator holds its full-size maps in
-    a cycle, and the cyclic collector counts objects, not bytes) and hand the freed heap back to the
-    system (glibc keeps it otherwise, and the suite's resident memory would grow test after test)."""
+    """After a test that grew the process by more than 256 MB, free what reference cycles hold (a dropped
+    simulator holds its full-size maps in a cycle, and the cyclic collector counts objects, not bytes)
+    and hand the freed heap back to the system (glibc keeps it otherwise, and the suite's resident
+    memory would grow test after test). Small tests skip the collection, which costs time."""
     yield
-    gc.collect()
-    if _LIBC is not None and hasattr(_LIBC, "malloc_trim"):
-        _LIBC.malloc_trim(0)
+    if _rss() - _RSS_AFTER_LAST_FREE[0] > 256 << 20:
+        _free_memory()
 
 
 @pytest.fixture(scope="module", autouse=True)
 def _collect_after_module():
     yield
-    gc.collect()
-    if _LIBC is not None and hasattr(_LIBC, "malloc_trim"):
-        _LIBC.malloc_trim(0)
-
+    _free_memory()

@@ -2,12 +2,14 @@
 
 Every error a user can cause (a bad file, a bad argument, a device that does not answer) is raised as
 one of these, with a message that names the input, what was expected and what was found. The CLI
-catches :class:`RangekitError`, prints the message and exits non-zero, without a traceback.
+catches :class:`RangekitError`, prints ``rangekit: error: MESSAGE`` and exits 2 for a
+:class:`UsageError` (a bad option), 1 for anything else, without a traceback.
 """
 
 __all__ = [
     "RangekitError",
     "InputError",
+    "UsageError",
     "FileFormatError",
     "SceneError",
     "PatternError",
@@ -30,6 +32,11 @@ class RangekitError(Exception):
 
 class InputError(RangekitError, ValueError):
     """An argument has the wrong shape, type or value."""
+
+
+class UsageError(InputError):
+    """A command-line option has a bad value or names an output that cannot be written (the CLI exits 2;
+    every other :class:`RangekitError` is a runtime failure and exits 1)."""
 
 
 class FileFormatError(InputError):

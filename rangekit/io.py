@@ -12,7 +12,7 @@ import numpy as np
 
 from rangekit.errors import FileFormatError
 
-__all__ = ["atomic_write_bytes", "atomic_write_text", "atomic_write_json", "write_png", "read_png",
+__all__ = ["atomic_write_bytes", "fsync_folder", "atomic_write_text", "atomic_write_json", "write_png", "read_png",
            "atomic_save_npz", "atomic_save_npy", "read_json"]
 
 # mkstemp creates 0600 files; give written files the usual mode (0666 minus the umask).
@@ -36,6 +36,22 @@ def atomic_write_bytes(path: str | Path, data: bytes) -> None:
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+    fsync_folder(path.parent)
+
+
+def fsync_folder(folder: str | Path) -> None:
+    """Flush a folder's entries to disk, so that a rename in it survives a power cut (POSIX; a no-op where
+    folders cannot be opened)."""
+    try:
+        fd = os.open(folder, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0))
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
 
 
 def atomic_write_text(path: str | Path, text: str) -> None:

@@ -244,10 +244,12 @@ def test_calibrate_command_refuses_bad_input_before_any_work(tmp_path, capsys):
     existing.write_text("{}")
     assert main(["calibrate", "--out", str(existing)]) == 2
     assert "exists; choose another file or pass --force" in capsys.readouterr().err
-    assert main(["calibrate", "--out", str(tmp_path / "new.json"), "--poses", "2"]) == 2
-    assert "--poses must be at least 3" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as stop:
+        main(["calibrate", "--out", str(tmp_path / "new.json"), "--poses", "2"])
+    assert stop.value.code == 2
+    assert "--poses: expected an integer in 3..200, found '2'" in capsys.readouterr().err
     bad = tmp_path / "bad_rig.json"
     bad.write_text('{"schema": "rangekit.rig/1", "cameras": []}')
-    assert main(["calibrate", "--rig", str(bad), "--out", str(tmp_path / "out.json")]) == 2
+    assert main(["calibrate", "--rig", str(bad), "--out", str(tmp_path / "out.json")]) == 1
     assert "cameras" in capsys.readouterr().err
     assert not (tmp_path / "new.json").exists() and not (tmp_path / "out.json").exists()

@@ -61,7 +61,7 @@ def test_cli_errors_are_one_line_without_traceback(tmp_path):
     bad.write_bytes(b"ply\nformat nonsense\n")
     proc = subprocess.run([sys.executable, "-m", "rangekit", "sim", "render", "--object", str(bad), "--out",
                            str(tmp_path / "o")], capture_output=True, text=True)
-    assert proc.returncode == 2
+    assert proc.returncode == 1
     assert "bad.ply" in proc.stderr and "Traceback" not in proc.stderr
 
 
@@ -93,7 +93,7 @@ def test_decode_command_errors(tmp_path, capsys):
     cap = tmp_path / "w"
     assert main(["sim", "render", "--object", "plane", "--patterns", "white", "--out", str(cap)]) == 0
     assert main(["decode", str(cap), "--pattern", "graycode", "--projector", "1280x800",
-                 "--out", str(tmp_path / "m.npz")]) == 2
+                 "--out", str(tmp_path / "m.npz")]) == 1
     assert "found 1 captures" in capsys.readouterr().err
     assert main(["decode", str(cap), "--pattern", "graycode", "--out", str(tmp_path / "m.npz")]) == 2
     assert "--projector" in capsys.readouterr().err
@@ -155,16 +155,16 @@ def test_scan_with_a_bad_rig_file_fails_before_anything_moves(tmp_path, capsys):
                        "projector": {"display": 1}, "camera": {"type": "depthai"}}
     rig_file = tmp_path / "rig.json"
     rig_file.write_text(json.dumps(data))
-    assert main(["scan", "--rig", str(rig_file), "--out", str(tmp_path / "s")]) == 2
+    assert main(["scan", "--rig", str(rig_file), "--out", str(tmp_path / "s")]) == 1
     assert "no-such-port" in capsys.readouterr().err
     assert not (tmp_path / "s" / "session.json").exists()
     data["devices"]["turntable"]["protocol"] = "stepper9000"
     rig_file.write_text(json.dumps(data))
-    assert main(["scan", "--rig", str(rig_file), "--out", str(tmp_path / "s")]) == 2
+    assert main(["scan", "--rig", str(rig_file), "--out", str(tmp_path / "s")]) == 1
     assert "devices.turntable.protocol" in capsys.readouterr().err
     data["cameras"][0]["K"] = [[1, 0], [0, 1]]
     rig_file.write_text(json.dumps(data))
-    assert main(["scan", "--rig", str(rig_file), "--out", str(tmp_path / "s")]) == 2
+    assert main(["scan", "--rig", str(rig_file), "--out", str(tmp_path / "s")]) == 1
     err = capsys.readouterr().err
     assert "cameras[0]" in err and "'K'" in err
 

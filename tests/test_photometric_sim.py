@@ -115,5 +115,5 @@ def test_photometric_command_bad_input(tmp_path, capsys):
     from rangekit.cli import main
 
     (tmp_path / "empty").mkdir()
-    assert main(["photometric", str(tmp_path / "empty"), "--out", str(tmp_path / "o")]) == 2
+    assert main(["photometric", str(tmp_path / "empty"), "--out", str(tmp_path / "o")]) == 1
     assert "filenames.txt" in capsys.readouterr().err

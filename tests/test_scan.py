@@ -151,7 +151,7 @@ def test_bad_input_fails_before_any_work(tmp_path, capsys):
     # An object file that is not a mesh: the error names it, no session folder is made.
     bad = tmp_path / "object.ply"
     bad.write_text("this is not a mesh")
-    assert main(["scan", "--out", str(tmp_path / "new"), "--object", str(bad)]) == 2
+    assert main(["scan", "--out", str(tmp_path / "new"), "--object", str(bad)]) == 1
     assert str(bad) in capsys.readouterr().err
     assert not (tmp_path / "new").exists()
     # An invalid rig file: the message names the field.
@@ -160,7 +160,7 @@ def test_bad_input_fails_before_any_work(tmp_path, capsys):
     rig = template_rig()
     rig["devices"]["turntable"]["baud"] = "fast"
     (tmp_path / "rig.json").write_text(json.dumps(rig))
-    assert main(["scan", "--rig", str(tmp_path / "rig.json"), "--out", str(tmp_path / "hw")]) == 2
+    assert main(["scan", "--rig", str(tmp_path / "rig.json"), "--out", str(tmp_path / "hw")]) == 1
     assert "devices.turntable.baud" in capsys.readouterr().err
     assert not (tmp_path / "hw").exists()
 
@@ -176,7 +176,7 @@ def test_render_command_draws_meshes_and_clouds(scanned, tmp_path):
                  "--azimuth", "0", "90", "--size", "200x150"]) == 0
     img = read_png(tmp_path / "c.png")
     assert img.shape[1] > 400 and np.mean(np.any(img < 250, axis=2)) > 0.1  # a montage of two views
-    assert main(["render", str(tmp_path / "missing.ply"), "--out", str(tmp_path / "x.png")]) == 2
+    assert main(["render", str(tmp_path / "missing.ply"), "--out", str(tmp_path / "x.png")]) == 1
 
 
 def test_rig_init_prints_a_loadable_template_and_the_true_sim_rig(capsys):

@@ -301,12 +301,12 @@ def test_cli_sim_render_then_stereo(tmp_path, capsys):
     one["cameras"] = one["cameras"][:1]
     (tmp_path / "one.json").write_text(json.dumps(one))
     args = [str(pair / "left.png"), str(pair / "right.png")]
-    assert main(["stereo", *args, "--rig", str(tmp_path / "one.json"), "--out", str(tmp_path / "o2")]) == 2
+    assert main(["stereo", *args, "--rig", str(tmp_path / "one.json"), "--out", str(tmp_path / "o2")]) == 1
     assert "needs two cameras in 'cameras' (left = cameras[0], right = cameras[1]), found 1" in capsys.readouterr().err
     small = cv2.resize(cv2.imread(str(pair / "right.png"), cv2.IMREAD_UNCHANGED), (160, 100))
     cv2.imwrite(str(tmp_path / "small.png"), small)
     assert main(["stereo", args[0], str(tmp_path / "small.png"), "--rig", str(pair / "rig.json"),
-                 "--out", str(tmp_path / "o3")]) == 2
+                 "--out", str(tmp_path / "o3")]) == 1
     assert "left.png is 320x200 but" in capsys.readouterr().err
 
 

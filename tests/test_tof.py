@@ -221,7 +221,7 @@ def test_cli_sim_render_then_tof(tmp_path, capsys):
 
     # A missing sample: the plan in tof.json does not match what is on disk.
     (raw / "samples" / "008.png").unlink()
-    assert main(["tof", str(raw), "--out", str(tmp_path / "out2")]) == 2
+    assert main(["tof", str(raw), "--out", str(tmp_path / "out2")]) == 1
     err = capsys.readouterr().err
     assert "samples: the frequency plan in tof.json (16/80/120 MHz x 3/3/3 steps) needs 9 raw samples, found 8" in err
 

@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import Callable
 
 from rangekit.boards import Board
-from rangekit.errors import ConfigError
+from rangekit.errors import ConfigError, UsageError
 from rangekit.rig import Rig, load_rig, save_rig
 from rangekit.rig_checks import validate_rig_for_hardware
 
@@ -49,9 +49,9 @@ def calibrate(out: str | Path, *, rig: str = "sim", board: Board, n_poses: int =
 
     out = Path(out)
     if out.exists() and not force:
-        raise ConfigError(f"{out}: exists; choose another file or pass --force to overwrite it")
+        raise UsageError(f"--out {out}: exists; choose another file or pass --force to overwrite it")
     if n_poses < 3:
-        raise ConfigError(f"--poses must be at least 3 (Zhang's method), found {n_poses}; 15-25 is typical")
+        raise UsageError(f"--poses must be at least 3 (Zhang's method), found {n_poses}; 15-25 is typical")
     settings = CalibrationSettings(board=board, n_poses=n_poses)
     hardware = rig != "sim"
     if hardware:

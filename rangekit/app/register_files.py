@@ -8,7 +8,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from rangekit.errors import ConfigError
+from rangekit.errors import ConfigError, UsageError
 from rangekit.formats.clouds import load_cloud, save_cloud
 from rangekit.surface.cloud import PointCloud, merge_clouds
 from rangekit.formats.poses import load_poses, save_poses
@@ -32,11 +32,12 @@ def parse_init(init: str | None, n: int, sources: Sequence[str]) -> np.ndarray |
             axis = np.array([float(v) for v in parts[1].split(",")])
             step = np.radians(float(parts[2]))
             point = np.array([float(v) for v in parts[3].split(",")]) if len(parts) > 3 else np.zeros(3)
-            if axis.shape != (3,) or point.shape != (3,) or not np.linalg.norm(axis) > 0:
+            if (axis.shape != (3,) or point.shape != (3,) or not np.all(np.isfinite([*axis, *point, step]))
+                    or not np.linalg.norm(axis) > 0):
                 raise ValueError
         except (ValueError, IndexError) as exc:
-            raise ConfigError(f"--init {init!r}: expected turntable:AX,AY,AZ:STEP_DEG[:PX,PY,PZ], e.g. "
-                              "turntable:0,1,0:24") from exc
+            raise UsageError(f"--init {init!r}: expected turntable:AX,AY,AZ:STEP_DEG[:PX,PY,PZ] with finite numbers "
+                             "and a non-zero axis, e.g. turntable:0,1,0:24") from exc
         # View i is turned by +i * STEP: the prior of a table turning by -i * STEP between views.
         return turntable_prior(table_frame(axis, point), -step * np.arange(n))
     srcs, T = load_poses(init)

@@ -13,7 +13,7 @@ from typing import Callable
 
 from rangekit.app.process import FUSION_METHODS, Evaluator, process_session
 from rangekit.coded.patterns import PatternSpec, make_pattern_spec
-from rangekit.errors import ConfigError
+from rangekit.errors import ConfigError, UsageError
 from rangekit.formats.session import CaptureSettings, ProcessResult, Session, SimulatorSettings
 from rangekit.rig import Rig, load_rig
 from rangekit.rig_checks import validate_rig_for_hardware
@@ -56,7 +56,7 @@ def prepare_scan(*, out: str | None = None, resume: str | None = None, rig: str 
     """
     # Everything is checked before any work starts or anything moves: the folder, the rig, the object.
     if fusion not in FUSION_METHODS:
-        raise ConfigError(f"--fusion must be one of {', '.join(FUSION_METHODS)}, found {fusion!r}")
+        raise UsageError(f"--fusion must be one of {', '.join(FUSION_METHODS)}, found {fusion!r}")
     session = None
     if resume:
         session = Session.load(resume)
@@ -65,12 +65,12 @@ def prepare_scan(*, out: str | None = None, resume: str | None = None, rig: str 
     else:
         folder = Path(out)
         if (folder / "session.json").exists():
-            raise ConfigError(f"{folder}: already holds a session (session.json); continue it with "
+            raise UsageError(f"--out {folder}: already holds a session (session.json); continue it with "
                               f"'rangekit scan --resume {folder}' or choose another folder")
         if folder.exists() and (not folder.is_dir() or any(folder.iterdir())):
-            raise ConfigError(f"{folder}: exists and is not an empty folder; choose a new or empty folder")
+            raise UsageError(f"--out {folder}: exists and is not an empty folder; choose a new or empty folder")
         if n_views < 2:
-            raise ConfigError(f"--views must be at least 2 to register a scan, found {n_views}")
+            raise UsageError(f"--views must be at least 2 to register a scan, found {n_views}")
         hardware = rig not in (None, "sim")
         rig_file, the_rig, spec = rig, (load_rig(rig) if hardware else None), None
         if hardware:

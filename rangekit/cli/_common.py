@@ -1,9 +1,21 @@
-"""What every command shares: printing, progress on the console, the WIDTHxHEIGHT argument type."""
+"""What every command shares: printing, progress on the console, argument types that refuse bad values
+at parse time (exit 2), and the check that an output path can be written before any work starts."""
 
 from __future__ import annotations
 
 import argparse
+import math
+import os
+import shutil
 import sys
+from pathlib import Path
+
+from rangekit.errors import UsageError
+
+#: The largest image any command renders or allocates from a WIDTHxHEIGHT option (pixels per side).
+MAX_SIZE_PX = 16384
+#: Free space an output folder needs before a command starts, bytes.
+MIN_FREE_BYTES = 64 * 2**20
 
 
 def say(msg: str) -> None:
@@ -18,11 +30,82 @@ def console():
 
 
 def size(text: str) -> tuple[int, int]:
-    """Argument type for image, sensor and projector sizes: WIDTHxHEIGHT in pixels."""
+    """Argument type for image, sensor and projector sizes: WIDTHxHEIGHT in pixels, each 1..MAX_SIZE_PX."""
     try:
         w, h = (int(v) for v in text.lower().split("x"))
-        if w > 0 and h > 0:
+        if 0 < w <= MAX_SIZE_PX and 0 < h <= MAX_SIZE_PX:
             return w, h
     except ValueError:
         pass
-    raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT in pixels, e.g. 1280x800, found {text!r}")
+    raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT in pixels, each 1..{MAX_SIZE_PX}, e.g. 1280x800, "
+                                     f"found {text!r}")
+
+
+def _number(kind, text: str, test, expected: str):
+    try:
+        value = kind(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected {expected}, found {text!r}") from None
+    if not (math.isfinite(value) and test(value)):
+        raise argparse.ArgumentTypeError(f"expected {expected}, found {text!r}")
+    return value
+
+
+def positive_float(text: str) -> float:
+    """Argument type: a finite number > 0."""
+    return _number(float, text, lambda v: v > 0, "a finite number > 0")
+
+
+def non_negative_float(text: str) -> float:
+    """Argument type: a finite number >= 0."""
+    return _number(float, text, lambda v: v >= 0, "a finite number >= 0")
+
+
+def finite_float(text: str) -> float:
+    """Argument type: any finite number (no nan, no inf)."""
+    return _number(float, text, lambda v: True, "a finite number")
+
+
+def fraction(text: str) -> float:
+    """Argument type: a number in [0, 1]."""
+    return _number(float, text, lambda v: 0 <= v <= 1, "a number in [0, 1]")
+
+
+def int_in(lo: int, hi: int):
+    """Argument type factory: an integer in [lo, hi]."""
+    def parse(text: str) -> int:
+        return _number(int, text, lambda v: lo <= v <= hi, f"an integer in {lo}..{hi}")
+    parse.__name__ = f"int_{lo}_{hi}"
+    return parse
+
+
+def seed(text: str) -> int:
+    """Argument type: a random seed, 0 <= seed < 2**32 (what numpy accepts)."""
+    return int_in(0, 2**32 - 1)(text)
+
+
+def check_output(path: str | os.PathLike, *, option: str = "--out", folder: bool = False,
+                 force: bool = True) -> Path:
+    """Check before any work that ``path`` can be written: a file where a file is expected (not an existing
+    folder), a folder where a folder is expected, its nearest existing parent a writable folder with at
+    least :data:`MIN_FREE_BYTES` free. Raises :class:`UsageError` naming the option and the path."""
+    out = Path(path)
+    if folder and out.exists() and not out.is_dir():
+        raise UsageError(f"{option} {out}: expected a folder, found an existing file")
+    if not folder and out.is_dir():
+        raise UsageError(f"{option} {out}: expected a file name, found an existing folder")
+    if not folder and out.exists() and not force:
+        raise UsageError(f"{option} {out}: exists; choose another file or pass --force to overwrite it")
+    parent = out if folder and out.is_dir() else out.parent
+    parent = parent.resolve()
+    while not parent.exists():
+        parent = parent.parent
+    if not parent.is_dir():
+        raise UsageError(f"{option} {out}: {parent} is a file, not a folder")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise UsageError(f"{option} {out}: the folder {parent} is not writable")
+    free = shutil.disk_usage(parent).free
+    if free < MIN_FREE_BYTES:
+        raise UsageError(f"{option} {out}: only {free / 2**20:.1f} MB free on the disk of {parent}; "
+                         f"expected at least {MIN_FREE_BYTES / 2**20:.0f} MB")
+    return out

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import time
 
-from rangekit.cli._common import say, size
+from rangekit.cli._common import check_output, say, size
 
 
 def cmd_decode(args: argparse.Namespace) -> int:
@@ -16,6 +16,7 @@ def cmd_decode(args: argparse.Namespace) -> int:
     from rangekit.formats.capture import list_images, pattern_spec_for, read_stack, save_decoded
 
     t0 = time.perf_counter()
+    check_output(args.out)
     paths = list_images(args.images[0] if len(args.images) == 1 else args.images)
     spec = pattern_spec_for(args.pattern, args.projector)
     say(f"reading {len(paths)} images")
@@ -37,6 +38,7 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
     from rangekit.formats.clouds import save_cloud
 
     t0 = time.perf_counter()
+    check_output(args.out)
     cap = load_capture(args.capture)
     if cap.spec is None:
         raise ConfigError(f"{args.capture}: no patterns.json; decode the images with 'rangekit decode' and a "

@@ -8,6 +8,8 @@ library, prints. Run ``rangekit --help`` or ``rangekit COMMAND --help``.
 from __future__ import annotations
 
 import argparse
+import errno
+import os
 import sys
 
 from rangekit.cli.coded import add_parsers as add_coded
@@ -18,13 +20,24 @@ from rangekit.cli.render import add_parsers as add_render
 from rangekit.cli.rig import add_calibrate_parser, add_parsers as add_rig
 from rangekit.cli.scan import add_parsers as add_scan
 from rangekit.cli.sim import add_parsers as add_sim
-from rangekit.errors import RangekitError
+from rangekit.errors import RangekitError, UsageError
 
-__all__ = ["build_parser", "main"]
+__all__ = ["build_parser", "main", "EXIT_OK", "EXIT_FAILURE", "EXIT_USAGE", "EXIT_INTERRUPTED"]
+
+EXIT_OK, EXIT_FAILURE, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with rangekit's error line: ``rangekit: error: COMMAND: MESSAGE`` after the usage, exit 2."""
+
+    def error(self, message: str):
+        self.print_usage(sys.stderr)
+        command = self.prog.partition(" ")[2]
+        self.exit(EXIT_USAGE, f"rangekit: error: {command + ': ' if command else ''}{message}\n")
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="rangekit", description="Active 3D scanning: simulate, capture, "
+    parser = _Parser(prog="rangekit", description="Active 3D scanning: simulate, capture, "
                                      "decode, register and fuse range data.")
     parser.add_argument("--version", action="version", version=f"rangekit {__import__('rangekit').__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
@@ -42,16 +55,59 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run one command; return its exit code: 0 done, 1 runtime failure (bad data, device fault, I/O),
+    2 usage error (bad option, unusable output path), 130 interrupted. Never a traceback, unless the
+    environment sets ``RANGEKIT_DEBUG=1`` (then unexpected exceptions propagate)."""
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
         return args.func(args)
+    except UsageError as exc:
+        return _fail(str(exc), EXIT_USAGE)
     except RangekitError as exc:
-        print(f"rangekit: error: {exc}", file=sys.stderr)
-        return 2
+        return _fail(str(exc), EXIT_FAILURE)
     except KeyboardInterrupt:
         print("rangekit: interrupted", file=sys.stderr)
-        return 130
+        return EXIT_INTERRUPTED
+    except BrokenPipeError:
+        _detach_stdout()
+        return _fail("standard output was closed before the output was written", EXIT_FAILURE)
+    except OSError as exc:
+        return _fail(_os_message(exc), EXIT_FAILURE)
+    except MemoryError:
+        return _fail("out of memory; use smaller images, fewer views or a larger --voxel-mm", EXIT_FAILURE)
+    except Exception as exc:  # the last net: a bug, reported in one line, never a traceback
+        if os.environ.get("RANGEKIT_DEBUG") == "1":
+            raise
+        return _fail(f"internal error ({type(exc).__name__}: {str(exc)[:200]}); please report it with the "
+                     "command line (RANGEKIT_DEBUG=1 shows the traceback)", EXIT_FAILURE)
+
+
+def _fail(message: str, code: int) -> int:
+    try:
+        print(f"rangekit: error: {message}", file=sys.stderr, flush=True)
+    except OSError:
+        pass
+    return code
+
+
+def _os_message(exc: OSError) -> str:
+    """An OSError in one line naming the file; a full disk says so."""
+    where = exc.filename if exc.filename is not None else "a file"
+    if exc.errno in (errno.ENOSPC, errno.EFBIG, errno.EDQUOT):
+        return (f"{where}: no space left to write ({exc.strerror}); free some space, then run the command again "
+                "(a scan continues with: rangekit scan --resume DIR)")
+    return f"{where}: {exc.strerror or exc}"
+
+
+def _detach_stdout() -> None:
+    """After a broken pipe, point stdout at /dev/null so the interpreter's final flush stays quiet."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+    except (OSError, ValueError):
+        pass
 
 
 if __name__ == "__main__":

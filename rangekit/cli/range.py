@@ -6,7 +6,7 @@ import argparse
 import math
 import time
 
-from rangekit.cli._common import say
+from rangekit.cli._common import check_output, fraction, int_in, non_negative_float, positive_float, say
 
 
 def cmd_tof(args: argparse.Namespace) -> int:
@@ -14,6 +14,7 @@ def cmd_tof(args: argparse.Namespace) -> int:
     from rangekit.app.range_runs import tof_depth_files
 
     t0 = time.perf_counter()
+    check_output(args.out, folder=True)
     run = tof_depth_files(args.raw_dir, args.out, min_snr=args.min_snr,
                           flying_angle=None if args.keep_flying else math.radians(args.flying_angle_deg),
                           max_range=args.max_range, progress=say)
@@ -25,6 +26,7 @@ def cmd_stereo(args: argparse.Namespace) -> int:
     """rangekit stereo LEFT RIGHT --rig RIG.json --out OUT: depth of the left camera from a stereo pair."""
     from rangekit.app.range_runs import stereo_depth_files
 
+    check_output(args.out, folder=True)
     run = stereo_depth_files(args.left, args.right, args.rig, args.out, method=args.method,
                              min_depth=args.min_depth, alpha=args.alpha, num_disparities=args.num_disparities,
                              progress=say)
@@ -40,10 +42,10 @@ def add_parsers(sub) -> None:
     tofp.add_argument("raw_dir", metavar="RAW_DIR", help="ToF capture folder (tof.json, rig.json, samples/)")
     tofp.add_argument("--out", required=True, help="output folder: depth.npy (z, metres, NaN invalid), range.npy, "
                                                     "confidence.npy/png, depth.png, cloud.ply")
-    tofp.add_argument("--max-range", type=float, help="metres; default the plan's unambiguous range")
-    tofp.add_argument("--min-snr", type=float, default=3.0,
+    tofp.add_argument("--max-range", type=positive_float, help="metres; default the plan's unambiguous range")
+    tofp.add_argument("--min-snr", type=non_negative_float, default=3.0,
                       help="drop pixels whose phase noise exceeds 1/MIN_SNR rad (default 3)")
-    tofp.add_argument("--flying-angle-deg", type=float, default=15.0,
+    tofp.add_argument("--flying-angle-deg", type=positive_float, default=15.0,
                       help="flying-pixel filter threshold in degrees (default 15)")
     tofp.add_argument("--keep-flying", action="store_true", help="do not filter flying pixels")
     tofp.set_defaults(func=cmd_tof)
@@ -60,10 +62,10 @@ def add_parsers(sub) -> None:
                                                    "confidence.npy/png, cloud.ply")
     stp.add_argument("--method", default="census-sgm", choices=("census-sgm", "sgbm"),
                      help="our census + semi-global matcher (default) or OpenCV's StereoSGBM")
-    stp.add_argument("--num-disparities", type=int, help="disparity search range (multiple of 16; default from "
+    stp.add_argument("--num-disparities", type=int_in(16, 1024), help="disparity search range (multiple of 16; default from "
                                                          "--min-depth)")
-    stp.add_argument("--min-depth", type=float, default=0.4, help="nearest depth to search, metres (default 0.4)")
-    stp.add_argument("--alpha", type=float, default=0.0,
+    stp.add_argument("--min-depth", type=positive_float, default=0.4, help="nearest depth to search, metres (default 0.4)")
+    stp.add_argument("--alpha", type=fraction, default=0.0,
                      help="rectification scaling: 0 crops to valid pixels (finer at low resolution, default), 1 keeps "
                           "every source pixel; 0.5 reaches the image borders at 640x400 (docs/stereo.md)")
     stp.set_defaults(func=cmd_stereo)

@@ -7,7 +7,7 @@ import time
 
 import numpy as np
 
-from rangekit.cli._common import say
+from rangekit.cli._common import check_output, int_in, positive_float, say
 
 
 def cmd_register(args: argparse.Namespace) -> int:
@@ -16,6 +16,7 @@ def cmd_register(args: argparse.Namespace) -> int:
     from rangekit.geometry import rotation_angle
 
     t0 = time.perf_counter()
+    check_output(args.out, folder=True)
     voxel = args.voxel_mm * 1e-3 if args.voxel_mm else None
     rep = register_files(args.scans, args.out, init=args.init, voxel=voxel, mesh=not args.no_mesh, progress=say)
     res = rep.result
@@ -44,6 +45,7 @@ def cmd_mesh(args: argparse.Namespace) -> int:
     from rangekit.surface.fusion import poisson_mesh
 
     t0 = time.perf_counter()
+    check_output(args.out)
     cloud = load_cloud(args.cloud)
     if cloud.normals is None:
         say(f"read {len(cloud)} points without normals: estimating outward normals")
@@ -64,7 +66,7 @@ def add_parsers(sub) -> None:
     reg.add_argument("--init", default="none",
                      help="prior poses: none (coarse alignment of all pairs), a poses.json, or "
                           "turntable:AX,AY,AZ:STEP_DEG[:PX,PY,PZ] (view i turned i*STEP degrees about the axis)")
-    reg.add_argument("--voxel-mm", type=float, default=None,
+    reg.add_argument("--voxel-mm", type=positive_float, default=None,
                      help="voxel for features and the first ICP round, mm (default: scene diagonal / 80)")
     reg.add_argument("--no-mesh", action="store_true", help="skip meshing")
     reg.add_argument("--out", required=True, help="output folder")
@@ -73,6 +75,6 @@ def add_parsers(sub) -> None:
     mesh = sub.add_parser("mesh", help="fuse one cloud into a watertight mesh (screened Poisson)",
                           description="Screened Poisson reconstruction with low-density trimming and hole closing.")
     mesh.add_argument("cloud", metavar="CLOUD", help="point cloud file (normals are estimated if missing)")
-    mesh.add_argument("--depth", type=int, default=9, help="octree depth (default 9)")
+    mesh.add_argument("--depth", type=int_in(4, 12), default=9, help="octree depth (default 9)")
     mesh.add_argument("--out", required=True, help="output mesh (.ply, .obj, .stl)")
     mesh.set_defaults(func=cmd_mesh)

@@ -6,7 +6,7 @@ import argparse
 
 import numpy as np
 
-from rangekit.cli._common import say, size
+from rangekit.cli._common import check_output, finite_float, say, size
 
 
 def cmd_render(args: argparse.Namespace) -> int:
@@ -14,6 +14,7 @@ def cmd_render(args: argparse.Namespace) -> int:
     from rangekit.app.picture import render_file
     from rangekit.io import write_png
 
+    check_output(args.out)
     pic = render_file(args.input, azimuths=[np.radians(az) for az in args.azimuth],
                       elevation=np.radians(args.elevation), size=args.size, up=args.up, colour=args.colour)
     write_png(args.out, pic.image)
@@ -28,10 +29,10 @@ def add_parsers(sub) -> None:
     ren.add_argument("input", metavar="MESH_OR_CLOUD", help="mesh (.ply with faces, .obj, .stl, .off) or cloud "
                                                             "(.ply, .xyz, .npy, .pcd, .txt)")
     ren.add_argument("--out", required=True, help="output PNG")
-    ren.add_argument("--azimuth", type=float, nargs="+", default=[30.0],
+    ren.add_argument("--azimuth", type=finite_float, nargs="+", default=[30.0],
                      help="viewing azimuth(s) in degrees about --up; several give a montage (default 30)")
-    ren.add_argument("--elevation", type=float, default=25.0, help="degrees above the horizontal (default 25)")
-    ren.add_argument("--up", type=float, nargs=3, default=[0.0, 0.0, 1.0], metavar=("X", "Y", "Z"),
+    ren.add_argument("--elevation", type=finite_float, default=25.0, help="degrees above the horizontal (default 25)")
+    ren.add_argument("--up", type=finite_float, nargs=3, default=[0.0, 0.0, 1.0], metavar=("X", "Y", "Z"),
                      help="the object's up direction (default 0 0 1; Stanford scans: 0 1 0)")
     ren.add_argument("--size", type=size, default=(800, 600), help="image size WxH (default 800x600)")
     ren.add_argument("--colour", action="store_true", help="shade a mesh with its vertex colours (default grey)")

@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 import argparse
+import errno
 import json
 import sys
 import time
 
-from rangekit.cli._common import console, say
+from rangekit.cli._common import check_output, console, int_in, non_negative_float, positive_float, say, seed
 
 
 def cmd_rig_init(args: argparse.Namespace) -> int:
@@ -20,6 +21,9 @@ def cmd_rig_init(args: argparse.Namespace) -> int:
         from rangekit.rig import template_rig
 
         data = template_rig()
+    if sys.stdout is None:
+        raise OSError(errno.EBADF, "standard output is closed; redirect it to a file: rangekit rig init > rig.json",
+                      "<stdout>")
     sys.stdout.write(json.dumps(data, indent=2) + "\n")
     return 0
 
@@ -30,6 +34,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     from rangekit.boards import Board
 
     t0 = time.perf_counter()
+    check_output(args.out, force=args.force)
     board = Board(kind=args.board, cols=args.cols, rows=args.rows, square=args.square_mm / 1000.0)
     cal = calibrate(args.out, rig=args.rig, board=board, n_poses=args.poses, seed=args.seed, force=args.force,
                     interactive=sys.stdin.isatty(), ask=input, progress=console())
@@ -71,12 +76,12 @@ def add_calibrate_parser(sub) -> None:
                                                    "is replaced)")
     cal.add_argument("--out", required=True, help="rig file to write")
     cal.add_argument("--force", action="store_true", help="overwrite --out if it exists")
-    cal.add_argument("--poses", type=int, default=20, help="board poses (default 20)")
+    cal.add_argument("--poses", type=int_in(3, 200), default=20, help="board poses (default 20)")
     cal.add_argument("--board", default="checkerboard", choices=("checkerboard", "charuco"), help="board type")
-    cal.add_argument("--cols", type=int, default=10, help="squares along the board's width (default 10)")
-    cal.add_argument("--rows", type=int, default=7, help="squares along its height (default 7)")
-    cal.add_argument("--square-mm", type=float, default=20.0, help="square side in millimetres (default 20)")
-    cal.add_argument("--seed", type=int, default=0, help="simulator: noise and pose seed")
+    cal.add_argument("--cols", type=int_in(3, 60), default=10, help="squares along the board's width (default 10)")
+    cal.add_argument("--rows", type=int_in(3, 60), default=7, help="squares along its height (default 7)")
+    cal.add_argument("--square-mm", type=positive_float, default=20.0, help="square side in millimetres (default 20)")
+    cal.add_argument("--seed", type=seed, default=0, help="simulator: noise and pose seed")
     cal.set_defaults(func=cmd_calibrate)
 
 
@@ -94,5 +99,5 @@ def add_parsers(sub) -> None:
 
     dev = sub.add_parser("devices", help="list serial ports and depthai cameras",
                          description="List serial ports (device, USB VID:PID, serial number) and depthai cameras.")
-    dev.add_argument("--timeout", type=float, default=1.0, help="seconds to search for depthai cameras (default 1)")
+    dev.add_argument("--timeout", type=non_negative_float, default=1.0, help="seconds to search for depthai cameras (default 1)")
     dev.set_defaults(func=cmd_devices)

@@ -6,7 +6,7 @@ import argparse
 import sys
 import time
 
-from rangekit.cli._common import console, say
+from rangekit.cli._common import check_output, console, int_in, say, seed
 
 
 def cmd_scan(args: argparse.Namespace) -> int:
@@ -16,6 +16,7 @@ def cmd_scan(args: argparse.Namespace) -> int:
     from rangekit.formats.session import ScanPlan
 
     t0 = time.perf_counter()
+    check_output(args.out or args.resume, option="--out" if args.out else "--resume", folder=True)
     setup = prepare_scan(out=args.out, resume=args.resume, rig=args.rig, obj=args.object, n_views=args.views,
                          patterns=args.patterns, seed=args.seed, fusion=args.fusion)
     folder = args.resume or args.out
@@ -66,6 +67,7 @@ def _process(folder: str, args: argparse.Namespace, *, acquisition_s: float | No
 
 def cmd_process(args: argparse.Namespace) -> int:
     """rangekit process DIR [--fusion poisson|tsdf]: decode, register and fuse a session into DIR/mesh.ply"""
+    check_output(args.session, option="DIR", folder=True)
     return _process(args.session, args)
 
 
@@ -90,10 +92,10 @@ def add_parsers(sub) -> None:
     scan.add_argument("--rig", default="sim",
                       help="'sim' (default) or a rig file whose 'devices' name the turntable, projector and camera")
     scan.add_argument("--object", default="lumpy", help="simulated object: built-in name or mesh file")
-    scan.add_argument("--views", type=int, default=12, help="turntable views over a full turn (default 12)")
+    scan.add_argument("--views", type=int_in(2, 720), default=12, help="turntable views over a full turn (default 12)")
     scan.add_argument("--patterns", default="hybrid", choices=PATTERN_METHODS,
                       help="pattern set (default hybrid: Gray code + phase shift)")
-    scan.add_argument("--seed", type=int, default=0, help="simulator noise seed")
+    scan.add_argument("--seed", type=seed, default=0, help="simulator noise seed")
     scan.add_argument("--no-process", action="store_true", help="acquire only (process later with 'rangekit process')")
     _processing_options(scan)
     scan.set_defaults(func=cmd_scan)

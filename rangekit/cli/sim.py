@@ -7,8 +7,9 @@ import time
 
 import numpy as np
 
-from rangekit.cli._common import say, size
-from rangekit.errors import InputError
+from rangekit.cli._common import (check_output, finite_float, int_in, non_negative_float, positive_float, say,
+                                  seed, size)
+from rangekit.errors import UsageError
 
 
 def cmd_sim_render(args: argparse.Namespace) -> int:
@@ -16,11 +17,12 @@ def cmd_sim_render(args: argparse.Namespace) -> int:
     from rangekit.app.simulate import render_projector_capture, render_stereo_capture, render_tof_capture
 
     t0 = time.perf_counter()
+    check_output(args.out, folder=True)
     if args.sensor != "projector":
         given = [f for f, v in (("--object", args.object), ("--patterns", args.patterns), ("--rig", args.rig))
                  if v is not None]
         if given:
-            raise InputError(f"{', '.join(given)}: only for --sensor projector; the {args.sensor} sensor renders its "
+            raise UsageError(f"{', '.join(given)}: only for --sensor projector; the {args.sensor} sensor renders its "
                              "own scene (docs/simulator.md)")
     if args.sensor == "stereo":
         render_stereo_capture(args.out, size=args.size or (640, 400), dots=not args.no_dots, seed=args.seed,
@@ -63,23 +65,23 @@ def add_parsers(sub) -> None:
                         help="pattern set to project; default: graycode (44 frames on the default rig)")
     render.add_argument("--out", required=True, help="output folder (created if missing)")
     render.add_argument("--rig", help="rig file to simulate (default: the built-in simulated rig)")
-    render.add_argument("--angle-deg", type=float, default=0.0, help="turntable angle in degrees (default 0)")
+    render.add_argument("--angle-deg", type=finite_float, default=0.0, help="turntable angle in degrees (default 0)")
     render.add_argument("--bits", type=int, default=8, choices=(8, 10, 12, 16), help="camera bit depth")
-    render.add_argument("--seed", type=int, default=0, help="noise seed (default 0)")
+    render.add_argument("--seed", type=seed, default=0, help="noise seed (default 0)")
     render.add_argument("--no-noise", action="store_true", help="disable shot and read noise")
-    render.add_argument("--global-fraction", type=float, default=None,
+    render.add_argument("--global-fraction", type=non_negative_float, default=None,
                         help="interreflection term, fraction of the mean projected light (default 0)")
     tof = render.add_argument_group("time of flight (--sensor tof, tof-pulsed)")
     tof.add_argument("--plan", default="kinect", choices=("kinect", "luxonis"),
                      help="frequency plan: kinect = 16/80/120 MHz x 3 steps (18.7 m), luxonis = 80/100 MHz x 4 "
                           "steps (7.5 m); default kinect")
-    tof.add_argument("--frequencies-mhz", type=float, nargs="+", help="custom frequencies in MHz (instead of --plan)")
-    tof.add_argument("--steps", type=int, help="phase steps per frequency (default: the plan's, or 4)")
-    tof.add_argument("--near", type=float, default=0.5, help="nearest panel, metres (default 0.5)")
-    tof.add_argument("--far", type=float, default=15.0, help="farthest panel, metres (default 15)")
-    tof.add_argument("--multipath", type=float, nargs=2, metavar=("STRENGTH", "EXTRA_M"),
+    tof.add_argument("--frequencies-mhz", type=positive_float, nargs="+", help="custom frequencies in MHz (instead of --plan)")
+    tof.add_argument("--steps", type=int_in(3, 64), help="phase steps per frequency (default: the plan's, or 4)")
+    tof.add_argument("--near", type=positive_float, default=0.5, help="nearest panel, metres (default 0.5)")
+    tof.add_argument("--far", type=positive_float, default=15.0, help="farthest panel, metres (default 15)")
+    tof.add_argument("--multipath", type=non_negative_float, nargs=2, metavar=("STRENGTH", "EXTRA_M"),
                      help="add a second return of STRENGTH x the direct light, EXTRA_M metres longer round trip")
-    tof.add_argument("--jitter-ps", type=float, default=50.0, help="tof-pulsed: timing jitter, ps RMS (default 50)")
+    tof.add_argument("--jitter-ps", type=non_negative_float, default=50.0, help="tof-pulsed: timing jitter, ps RMS (default 50)")
     sz = render.add_argument_group("time of flight and stereo")
     sz.add_argument("--size", type=size, default=None,
                     help="sensor size WIDTHxHEIGHT (default: tof 320x240, stereo 640x400)")

@@ -15,7 +15,7 @@ from typing import Sequence
 import numpy as np
 
 from rangekit.coded.patterns import PATTERN_METHODS, PatternSpec, make_pattern_spec
-from rangekit.errors import ConfigError, FileFormatError
+from rangekit.errors import ConfigError, FileFormatError, UsageError
 from rangekit.io import atomic_save_npz, read_json, read_png
 from rangekit.rig import Rig, load_rig
 
@@ -94,7 +94,7 @@ def pattern_spec_for(pattern: str, projector: tuple[int, int] | None) -> Pattern
     ``patterns.json`` file (whose size must then agree with ``projector`` when given)."""
     if pattern in PATTERN_METHODS:
         if projector is None:
-            raise ConfigError(f"--pattern {pattern} needs --projector WxH (the projector's resolution)")
+            raise UsageError(f"--pattern {pattern} needs --projector WxH (the projector's resolution)")
         return make_pattern_spec(pattern, projector)
     spec = PatternSpec.from_dict(read_json(pattern, what="pattern spec"), where=pattern)
     if projector is not None and tuple(projector) != (spec.width, spec.height):

@@ -25,13 +25,15 @@ class Run:
 
 
 def cli_process(*args, timeout: float = 300, **kwargs) -> Run:
-    """``python -m rangekit ARGS`` as a child process, no standard input; kwargs go to subprocess.run."""
+    """``python -m rangekit ARGS`` as a child process, no standard input, stdout and stderr captured (pass
+    ``stdout=`` to send it elsewhere); other kwargs go to subprocess.run."""
     env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
     env.pop("RANGEKIT_DEBUG", None)
     kwargs.setdefault("stdin", subprocess.DEVNULL)
-    proc = subprocess.run([sys.executable, "-m", "rangekit", *[str(a) for a in args]], capture_output=True,
+    kwargs.setdefault("stdout", subprocess.PIPE)
+    proc = subprocess.run([sys.executable, "-m", "rangekit", *[str(a) for a in args]], stderr=subprocess.PIPE,
                           text=True, timeout=timeout, env=kwargs.pop("env", env), **kwargs)
-    return Run(proc.returncode, proc.stdout, proc.stderr)
+    return Run(proc.returncode, proc.stdout or "", proc.stderr)
 
 
 def assert_error(run: Run, code: int, *mentions) -> str:

@@ -135,3 +135,22 @@ def test_rig_init_into_a_pipe_closed_by_the_reader(tmp_path):
         os.close(write_end)
     assert_error(run, 1, "standard output was closed")
     assert "Exception ignored" not in run.err
+
+
+def test_sigint_during_a_render_exits_130_and_leaves_no_partial_file(tmp_path):
+    import time
+
+    out = tmp_path / "cap"
+    env = dict(os.environ, PYTHONPATH=str(Path(__file__).resolve().parents[2]))
+    proc = subprocess.Popen([sys.executable, "-m", "rangekit", "sim", "render", "--out", str(out)],
+                            stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env=env, preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    for line in proc.stdout:  # interrupt while the frames are rendered and written (about 5 s)
+        if line.startswith("rendering"):
+            break
+    time.sleep(1.0)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, err
+    assert "Traceback" not in err and err.strip().splitlines()[-1] == "rangekit: interrupted"
+    assert not list(out.rglob("*.tmp"))

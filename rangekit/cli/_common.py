@@ -10,7 +10,7 @@ import shutil
 import sys
 from pathlib import Path
 
-from rangekit.errors import UsageError
+from rangekit.errors import FileFormatError, UsageError
 
 #: The largest image any command renders or allocates from a WIDTHxHEIGHT option (pixels per side).
 MAX_SIZE_PX = 16384
@@ -85,12 +85,16 @@ def seed(text: str) -> int:
 
 
 def check_output(path: str | os.PathLike, *, option: str = "--out", folder: bool = False,
-                 force: bool = True) -> Path:
+                 force: bool = True, session: bool = False) -> Path:
     """Check before any work that ``path`` can be written: a file where a file is expected (not an existing
     folder), a folder where a folder is expected, its nearest existing parent a writable folder with at
-    least :data:`MIN_FREE_BYTES` free. Raises :class:`UsageError` naming the option and the path."""
+    least :data:`MIN_FREE_BYTES` free. Raises :class:`UsageError` naming the option and the path; with
+    ``session=True`` the folder is also read (a session to resume or process), so a file there is bad data
+    (:class:`FileFormatError`, exit 1)."""
     out = Path(path)
     if folder and out.exists() and not out.is_dir():
+        if session:
+            raise FileFormatError(f"{out}: expected a session folder (with session.json), found a file")
         raise UsageError(f"{option} {out}: expected a folder, found an existing file")
     if not folder and out.is_dir():
         raise UsageError(f"{option} {out}: expected a file name, found an existing folder")

@@ -16,7 +16,8 @@ def cmd_scan(args: argparse.Namespace) -> int:
     from rangekit.formats.session import ScanPlan
 
     t0 = time.perf_counter()
-    check_output(args.out or args.resume, option="--out" if args.out else "--resume", folder=True)
+    check_output(args.out or args.resume, option="--out" if args.out else "--resume", folder=True,
+                 session=bool(args.resume))
     setup = prepare_scan(out=args.out, resume=args.resume, rig=args.rig, obj=args.object, n_views=args.views,
                          patterns=args.patterns, seed=args.seed, fusion=args.fusion)
     folder = args.resume or args.out
@@ -67,7 +68,7 @@ def _process(folder: str, args: argparse.Namespace, *, acquisition_s: float | No
 
 def cmd_process(args: argparse.Namespace) -> int:
     """rangekit process DIR [--fusion poisson|tsdf]: decode, register and fuse a session into DIR/mesh.ply"""
-    check_output(args.session, option="DIR", folder=True)
+    check_output(args.session, option="DIR", folder=True, session=True)
     return _process(args.session, args)
 
 

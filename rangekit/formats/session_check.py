@@ -3,8 +3,8 @@
 Each finished view records ``{"000.png": sha256, ...}`` (computed by acquisition from the bytes it wrote).
 :func:`verify_views` re-hashes the frame files of the done views and raises naming the view and the
 changed, missing or extra frame, so an edited, deleted or added image never gives a silently wrong mesh
-(``rangekit process`` and ``scan --resume`` call it). Hashing runs at disk speed (about 0.3 s for a
-default 12-view session on a warm cache), on 2 threads.
+(``rangekit process`` and ``scan --resume`` call it). Hashing runs at disk speed (0.4-0.5 s for the
+default 12-view session, 720 frames, 208 MB, warm cache, against 233 s of processing), on 2 threads.
 """
 
 from __future__ import annotations

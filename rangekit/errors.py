@@ -23,6 +23,7 @@ __all__ = [
     "DeviceDisconnected",
     "ProtocolError",
     "CommandError",
+    "StorageError",
 ]
 
 
@@ -89,3 +90,7 @@ class ProtocolError(DeviceError):
 
 class CommandError(DeviceError):
     """A device understood a command and refused it."""
+
+
+class StorageError(RangekitError):
+    """A file cannot be written (disk full, file too large, read-only); what was finished is kept."""

@@ -12,7 +12,8 @@ import numpy as np
 
 from rangekit.errors import FileFormatError
 
-__all__ = ["atomic_write_bytes", "fsync_folder", "atomic_write_text", "atomic_write_json", "write_png", "read_png",
+__all__ = ["atomic_write_bytes", "fsync_folder", "atomic_write_text", "atomic_write_json", "encode_png", "write_png",
+           "read_png",
            "atomic_save_npz", "atomic_save_npy", "read_json"]
 
 # mkstemp creates 0600 files; give written files the usual mode (0666 minus the umask).
@@ -74,8 +75,9 @@ def read_json(path: str | Path, *, what: str = "JSON file") -> dict:
         return json.loads(path.read_text())
     except FileNotFoundError as exc:
         raise FileFormatError(f"{path}: {what} not found") from exc
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise FileFormatError(f"{path}: cannot read {what}: {exc}") from exc
+    except (OSError, UnicodeDecodeError, ValueError, RecursionError) as exc:
+        # ValueError: not JSON, or an integer of more than 4300 digits; RecursionError: nesting too deep.
+        raise FileFormatError(f"{path}: cannot read {what}: {str(exc)[:200]}") from exc
 
 
 def atomic_save_npz(path: str | Path, **arrays: np.ndarray) -> None:
@@ -96,8 +98,17 @@ def atomic_save_npy(path: str | Path, array: np.ndarray) -> None:
     atomic_write_bytes(path, buf.getvalue())
 
 
-def write_png(path: str | Path, image: np.ndarray) -> None:
-    """Write an (H, W) or (H, W, 3) RGB uint8/uint16 image as a lossless PNG, atomically."""
+def write_png(path: str | Path, image: np.ndarray) -> bytes:
+    """Write an (H, W) or (H, W, 3) RGB uint8/uint16 image as a lossless PNG, atomically; returns the
+    file's bytes (for a checksum without reading the file back)."""
+    data = encode_png(image, where=path)
+    atomic_write_bytes(path, data)
+    return data
+
+
+def encode_png(image: np.ndarray, *, where: str | Path = "image") -> bytes:
+    """An (H, W) or (H, W, 3) RGB uint8/uint16 image as the bytes of a lossless PNG (fast compression)."""
+    path = where
     img = np.asarray(image)
     if img.dtype not in (np.uint8, np.uint16) or img.ndim not in (2, 3):
         raise FileFormatError(f"{path}: PNG needs an (H, W) or (H, W, 3) uint8/uint16 image, found "
@@ -107,7 +118,7 @@ def write_png(path: str | Path, image: np.ndarray) -> None:
     ok, buf = cv2.imencode(".png", img, [cv2.IMWRITE_PNG_COMPRESSION, 1])
     if not ok:
         raise FileFormatError(f"{path}: OpenCV could not encode the image as PNG")
-    atomic_write_bytes(path, buf.tobytes())
+    return buf.tobytes()
 
 
 def read_png(path: str | Path) -> np.ndarray:

@@ -9,6 +9,12 @@ Every file is written atomically. A view is captured into ``view_NNN.partial/`` 
 ``view_NNN/`` only when all its frames are on disk, then ``session.json`` records it as done; so a fault
 at any moment leaves every completed view intact, and ``acquire(..., resume=True)`` redoes only the
 view that was interrupted and the ones after it.
+
+Each frame's SHA-256 is taken from the bytes written and recorded with its view in ``session.json``; a
+resume first checks the finished views against them (:mod:`rangekit.formats.session_check`). The
+session folder is locked (:mod:`rangekit.formats.session_lock`) while acquisition runs. A file that
+cannot be written (full disk) stops with a :class:`StorageError` that says how to resume; the view being
+captured is removed, the finished ones stay.
 """
 
 from __future__ import annotations
@@ -22,9 +28,11 @@ import numpy as np
 
 from rangekit.coded.patterns import PatternSpec
 from rangekit.devices import Rig as RigDevices
-from rangekit.errors import ConfigError, DeviceError
+from rangekit.errors import ConfigError, DeviceError, StorageError
 from rangekit.formats.session import CaptureSettings, ScanPlan, Session, SimulatorSettings, view_folder
-from rangekit.io import atomic_write_json, write_png
+from rangekit.formats.session_check import frame_sha256, verify_views
+from rangekit.formats.session_lock import session_lock
+from rangekit.io import atomic_write_bytes, atomic_write_json, fsync_folder, write_png
 from rangekit.progress import call_progress
 from rangekit.rig import Rig, save_rig
 
@@ -34,7 +42,7 @@ __all__ = ["acquire"]
 def acquire(devices: RigDevices, rig: Rig, spec: PatternSpec, out_dir: str | Path, *, plan: ScanPlan = ScanPlan(),
             resume: bool = False, capture: CaptureSettings | None = None,
             simulator: SimulatorSettings | None = None, hardware: dict | None = None,
-            progress: Callable[[str], None] | None = None) -> Session:
+            files: dict[str, bytes] | None = None, progress: Callable[[str], None] | None = None) -> Session:
     """Acquire (or resume) a session.
 
     Parameters
@@ -51,6 +59,7 @@ def acquire(devices: RigDevices, rig: Rig, spec: PatternSpec, out_dir: str | Pat
         each pattern is shown, for the projector's display latency, so the camera (which only returns
         frames exposed after ``capture()`` is called) sees the new pattern.
     simulator, hardware : how the views are taken, recorded in session.json (see :class:`Session`).
+    files : files a new session keeps, relative name -> bytes (a simulated object's mesh, ``object/NAME``).
     progress : ``progress(msg, done=None, total=None)`` (see :mod:`rangekit.progress`).
 
     Returns
@@ -62,31 +71,71 @@ def acquire(devices: RigDevices, rig: Rig, spec: PatternSpec, out_dir: str | Pat
     ------
     ConfigError
         The folder holds another session (without ``resume``), or the resumed session's plan or pattern
-        differ from these.
+        differ from these, or its session.json is malformed.
+    FileFormatError
+        A finished view's frames differ from the SHA-256s recorded in session.json (resume).
+    SessionLocked
+        Another process is working on the session folder.
+    StorageError
+        A file cannot be written (full disk); the message says how to resume.
     DeviceError
         A device failed; the message names the device, the view and the frame. Completed views stay on
         disk and ``resume=True`` continues.
     """
     out = Path(out_dir)
-    angles = plan.angles()
     if (out / "session.json").exists():
         if not resume:
             raise ConfigError(f"{out}: already holds a session (session.json); use resume to continue it or "
                               "choose another folder")
+    elif resume:
+        raise ConfigError(f"{out}: no session.json to resume")
+    else:
+        try:
+            out.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise StorageError(f"{out}: cannot create the session folder: {exc.strerror or exc}") from exc
+        fsync_folder(out.parent)
+    with session_lock(out):
+        return _acquire(devices, rig, spec, out, plan, resume, capture, simulator, hardware, files or {}, progress)
+
+
+def _resume_hint(out: Path, n_done: int) -> str:
+    return (f"{n_done} completed view(s) are safe in {out}; continue with: rangekit scan --resume {out} "
+            "(or acquire(..., resume=True))")
+
+
+def _new_session(out: Path, plan, spec, rig, capture, simulator, hardware, files: dict) -> Session:
+    if (out / "session.json").exists():  # another process made it meanwhile
+        raise ConfigError(f"{out}: already holds a session (session.json); choose another folder")
+    session = Session.new(out, plan, spec, rig, capture=capture, simulator=simulator, hardware=hardware)
+    try:
+        for name, data in files.items():
+            atomic_write_bytes(out / name, data)
+        save_rig(rig, out / "rig.json")
+        atomic_write_json(out / "patterns.json", spec.to_dict())
+        session.save()   # last: a folder with session.json has everything else
+    except OSError as exc:
+        raise StorageError(f"{getattr(exc, 'filename', None) or out}: cannot write the new session: "
+                           f"{exc.strerror or exc}; free some space and start the scan again") from exc
+    return session
+
+
+def _acquire(devices, rig, spec, out: Path, plan, resume, capture, simulator, hardware, files,
+             progress) -> Session:
+    angles = plan.angles()
+    if resume:
         session = Session.load(out)
         old = session.plan.angles()
         if session.pattern != spec or old.shape != angles.shape or not np.allclose(old, angles):
             raise ConfigError(f"{out}: the session was taken with another plan or pattern "
                               f"({len(old)} views, pattern {session.pattern.method!r}); "
                               "resume it with the same settings")
+        unverified = verify_views(session)
+        if unverified:
+            call_progress(progress, f"{', '.join(unverified)}: no frame checksums in session.json (written by an "
+                                    "older rangekit); their frames are not verified")
     else:
-        if resume:
-            raise ConfigError(f"{out}: no session.json to resume")
-        out.mkdir(parents=True, exist_ok=True)
-        session = Session.new(out, plan, spec, rig, capture=capture, simulator=simulator, hardware=hardware)
-        save_rig(rig, out / "rig.json")
-        atomic_write_json(out / "patterns.json", spec.to_dict())
-        session.save()
+        session = _new_session(out, plan, spec, rig, capture, simulator, hardware, files)
     settle_s, pattern_settle_s = session.capture.turntable_settle_s, session.capture.pattern_delay_s
     done = [v.done for v in session.views]
     frames = list(spec.frames())
@@ -96,18 +145,19 @@ def acquire(devices: RigDevices, rig: Rig, spec: PatternSpec, out_dir: str | Pat
             continue
         final = view_folder(out, k)
         partial = out / f"view_{k:03d}.partial"
-        shutil.rmtree(partial, ignore_errors=True)
-        shutil.rmtree(final, ignore_errors=True)
-        partial.mkdir(parents=True)
         t0 = time.time()
-        step = "turntable move"
+        step, target = "turntable move", partial
         try:
+            shutil.rmtree(partial, ignore_errors=True)
+            shutil.rmtree(final, ignore_errors=True)
+            partial.mkdir(parents=True)
             if devices.turntable is not None:
                 call_progress(progress, f"view {k + 1}/{plan.n_views}: turntable to {np.degrees(angle):.1f} deg",
                               k, plan.n_views)
                 devices.turntable.rotate_to(float(angle))
                 if settle_s > 0:
                     time.sleep(settle_s)
+            sha256 = {}
             for i, (name, frame) in enumerate(zip(names, frames)):
                 step = f"frame {i} ({name}): projector"
                 devices.projector.show(frame)
@@ -115,19 +165,29 @@ def acquire(devices: RigDevices, rig: Rig, spec: PatternSpec, out_dir: str | Pat
                     time.sleep(pattern_settle_s)
                 step = f"frame {i} ({name}): camera"
                 image = devices.camera.capture()
-                write_png(partial / f"{i:03d}.png", image)
+                step, target = f"frame {i} ({name}): writing", partial / f"{i:03d}.png"
+                sha256[target.name] = frame_sha256(write_png(target, image))
+            step, target = "writing view.json", partial
+            # Each view is a self-contained capture folder (rangekit reconstruct view_NNN works on it).
+            atomic_write_json(partial / "patterns.json", spec.to_dict())
+            save_rig(rig, partial / "rig.json")
+            atomic_write_json(partial / "view.json", {"index": k, "angle_rad": float(angle), "started": t0,
+                                                      "finished": time.time(), "n_frames": len(frames)})
+            partial.rename(final)
+            fsync_folder(out)
+            step, target = "recording the view", out / "session.json"
+            session = session.with_view_done(k, sha256)
+            session.save()
         except DeviceError as exc:
-            raise type(exc)(f"view {k} (turntable {np.degrees(angle):.1f} deg), {step}: {exc}; {sum(done)} completed "
-                            f"view(s) are safe in {out}; continue with resume") from exc
-        # Each view is a self-contained capture folder (rangekit reconstruct view_NNN works on it).
-        atomic_write_json(partial / "patterns.json", spec.to_dict())
-        save_rig(rig, partial / "rig.json")
-        atomic_write_json(partial / "view.json", {"index": k, "angle_rad": float(angle), "started": t0,
-                                                  "finished": time.time(), "n_frames": len(frames)})
-        partial.rename(final)
+            shutil.rmtree(partial, ignore_errors=True)
+            raise type(exc)(f"view {k} (turntable {np.degrees(angle):.1f} deg), {step}: {exc}; "
+                            f"{_resume_hint(out, sum(done))}") from exc
+        except OSError as exc:
+            shutil.rmtree(partial, ignore_errors=True)
+            raise StorageError(f"view {k} (turntable {np.degrees(angle):.1f} deg), {step}: cannot write "
+                               f"{target}: {exc.strerror or exc}; free some space; "
+                               f"{_resume_hint(out, sum(done))}") from exc
         done[k] = True
-        session = session.with_view_done(k)
-        session.save()
         call_progress(progress, f"view {k + 1}/{plan.n_views} done ({len(frames)} frames, {time.time() - t0:.1f} s)",
                       k + 1, plan.n_views)
     return Session.load(out)

@@ -15,6 +15,11 @@ Writes into the session folder (atomically):
 A view's cloud is reused when ``cloud.json`` says it was made with the same settings, so processing
 that was interrupted (or rerun with another fusion method) does not decode again, and gives the same
 mesh as an uninterrupted run.
+
+The outputs are written as a set: a stale ``summary.json`` is removed first and the new one written
+last, so a folder with ``summary.json`` always has the mesh, poses and merged cloud of the same run.
+Processing holds the session's lock and first checks every view's frames against their recorded
+SHA-256s (:func:`rangekit.formats.session_check.verify_views`).
 """
 
 from __future__ import annotations
@@ -29,9 +34,12 @@ from rangekit.app.view_cache import ViewMaps, view_cloud
 from rangekit.errors import ConfigError
 from rangekit.formats.clouds import save_cloud
 from rangekit.formats.poses import save_poses
-from rangekit.formats.session import ProcessResult, Session
+from rangekit.formats.session import Session
+from rangekit.formats.session_check import verify_views
+from rangekit.formats.session_lock import session_lock
+from rangekit.formats.summary import ProcessResult
 from rangekit.geometry import compose, invert_T
-from rangekit.io import atomic_write_json
+from rangekit.io import atomic_write_json, fsync_folder
 from rangekit.progress import StageTimer, call_progress
 from rangekit.rig import turntable_prior
 from rangekit.surface.cloud import PointCloud, merge_clouds
@@ -70,18 +78,42 @@ def process_session(folder: str | Path, *, fusion: str = "poisson", method: str 
         itself never imports the simulator.
     report : write ``report.html``.
     progress : ``progress(msg, done=None, total=None)`` (see :mod:`rangekit.progress`).
+
+    Raises
+    ------
+    FileFormatError
+        A view's frames differ from the SHA-256s recorded in session.json (changed, missing, extra).
+    SessionLocked
+        Another process is working on the session.
     """
+    if fusion not in FUSION_METHODS:
+        raise ConfigError(f"fusion must be one of {', '.join(FUSION_METHODS)}, found {fusion!r}")
+    out = Path(folder)
+    if not (out / "session.json").is_file():
+        raise ConfigError(f"{out}: not a session folder (no session.json)")
+    with session_lock(out):
+        return _process(out, fusion, method, table_margin, evaluate, report, progress)
+
+
+def _process(out: Path, fusion: str, method: str, table_margin: float, evaluate: Evaluator | None, report: bool,
+             progress: Callable | None) -> ProcessResult:
     from rangekit.formats.meshes import save_mesh
     from rangekit.surface.fusion import poisson_mesh, tsdf_fuse
     from rangekit.registration.multiview import register_views
 
-    if fusion not in FUSION_METHODS:
-        raise ConfigError(f"fusion must be one of {', '.join(FUSION_METHODS)}, found {fusion!r}")
-    out = Path(folder)
     session = Session.load(out)
     views = session.done_views
     if len(views) < 2:
         raise ConfigError(f"{out}: {len(views)} completed view(s); processing needs at least 2 (resume the scan)")
+    unverified = verify_views(session)
+    if unverified:
+        call_progress(progress, f"{', '.join(unverified)}: no frame checksums in session.json (written by an older "
+                                "rangekit); their frames are not verified")
+    # The outputs are a set: summary.json goes first and comes back last, after all the others.
+    stale = out / "summary.json"
+    if stale.exists():
+        stale.unlink()
+        fsync_folder(out)
     rig, spec, full_scale = session.rig, session.pattern, session.capture.full_scale
     T_table_world = invert_T(rig.T_world_table) if rig.T_world_table is not None else None
     settings = {"rangekit": __version__, "method": method, "table_margin": table_margin,
@@ -152,5 +184,5 @@ def process_session(folder: str | Path, *, fusion: str = "poisson", method: str 
             call_progress(progress, "writing report.html")
             write_report(out, result, clouds=clouds, maps=maps, merged=merged, mesh=mesh, session=session,
                          truth=truth, progress=progress)
-    atomic_write_json(out / "summary.json", result.to_dict())
+    atomic_write_json(out / "summary.json", result.to_dict())   # last: the set is complete
     return result

@@ -22,7 +22,8 @@ from rangekit.progress import call_progress
 
 if TYPE_CHECKING:
     from rangekit.app.view_cache import ViewMaps
-    from rangekit.formats.session import ProcessResult, Session
+    from rangekit.formats.session import Session
+    from rangekit.formats.summary import ProcessResult
     from rangekit.surface.cloud import PointCloud
     from rangekit.surface.mesh import TriangleMesh
 

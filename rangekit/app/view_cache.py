@@ -2,25 +2,28 @@
 
 Writes into ``view_NNN/`` (atomically): ``cloud.ply`` (the filtered cloud, session-world frame of that
 view), ``maps.npz`` (decoded projector column, confidence, camera-frame depth) and ``cloud.json`` (the
-settings they were made with). A view whose ``cloud.json`` holds the same settings is read back instead
-of decoded again, so interrupted processing gives the same mesh as an uninterrupted run.
+settings they were made with and the SHA-256 of the other two). A view whose ``cloud.json`` holds the
+same settings is read back instead of decoded again, so interrupted processing gives the same mesh as an
+uninterrupted run. A damaged cache (a file missing, truncated, edited or unreadable) is rebuilt.
 """
 
 from __future__ import annotations
 
+import zipfile
 from dataclasses import dataclass
 
 import numpy as np
 
 from rangekit.app.reconstruct import reconstruct_view
 from rangekit.coded.patterns import PatternSpec
-from rangekit.errors import ConfigError
+from rangekit.errors import RangekitError
 from rangekit.formats.capture import list_images, read_stack
 from rangekit.formats.session import SessionView
 from rangekit.geometry import apply_T, invert_T
 from rangekit.io import atomic_save_npz, atomic_write_json, read_json, read_png
 from rangekit.rig import Rig
 from rangekit.formats.clouds import load_cloud, save_cloud
+from rangekit.formats.session_check import file_sha256
 from rangekit.surface.cloud import PointCloud
 
 __all__ = ["ViewMaps", "view_cloud", "white_frame_index"]
@@ -41,14 +44,27 @@ def white_frame_index(spec: PatternSpec) -> int:
     return next((i for i, name in enumerate(spec.frame_names) if name == "white"), 0)
 
 
-def _cached(v: SessionView, settings: dict) -> bool:
-    meta = v.folder / "cloud.json"
-    if not (meta.exists() and (v.folder / "cloud.ply").exists() and (v.folder / "maps.npz").exists()):
-        return False
+def _read_cache(v: SessionView, settings: dict, shape: tuple[int, int]) -> tuple[PointCloud, dict] | None:
+    """The view's cached cloud and maps when ``cloud.json`` holds these settings and its files are intact
+    (recorded SHA-256s, arrays of the camera's ``shape``); None otherwise (the cache is rebuilt)."""
     try:
-        return read_json(meta, what="view cache").get("settings") == settings
-    except ConfigError:
-        return False  # a damaged cache is rebuilt
+        meta = read_json(v.folder / "cloud.json", what="view cache")
+        if not isinstance(meta, dict) or meta.get("settings") != settings:
+            return None
+        sha = meta.get("sha256")
+        if not isinstance(sha, dict) or any(file_sha256(v.folder / name) != sha.get(name) for name in _CACHE_FILES):
+            return None
+        cloud = load_cloud(v.folder / "cloud.ply")
+        with np.load(v.folder / "maps.npz") as npz:
+            maps = {k: np.asarray(npz[k], dtype=np.float32) for k in ("proj_col", "confidence", "depth")}
+    except (RangekitError, OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):
+        return None
+    if any(m.shape != shape for m in maps.values()):
+        return None
+    return cloud, maps
+
+
+_CACHE_FILES = ("cloud.ply", "maps.npz")
 
 
 def view_cloud(v: SessionView, spec: PatternSpec, rig: Rig, settings: dict, full_scale: float | None,
@@ -60,10 +76,10 @@ def view_cloud(v: SessionView, spec: PatternSpec, rig: Rig, settings: dict, full
     (``T_table_world`` maps world points to the table frame; None: no table) are dropped.
     """
     white = white_frame_index(spec)
-    if _cached(v, settings):
-        maps = np.load(v.folder / "maps.npz")
-        return load_cloud(v.folder / "cloud.ply"), ViewMaps(maps["proj_col"], maps["confidence"], maps["depth"],
-                                                            read_png(v.folder / f"{white:03d}.png"))
+    cached = _read_cache(v, settings, (rig.camera.height, rig.camera.width))
+    if cached is not None:
+        cloud, m = cached
+        return cloud, ViewMaps(m["proj_col"], m["confidence"], m["depth"], read_png(v.folder / f"{white:03d}.png"))
     images = read_stack(list_images(v.folder))
     rec = reconstruct_view(images, spec, rig.camera, rig.projector, method=settings["method"],
                            full_scale=full_scale, response=rig.projector_response)
@@ -83,5 +99,7 @@ def view_cloud(v: SessionView, spec: PatternSpec, rig: Rig, settings: dict, full
                     images[white])
     save_cloud(v.folder / "cloud.ply", c)
     atomic_save_npz(v.folder / "maps.npz", proj_col=maps.proj_col, confidence=maps.confidence, depth=depth)
-    atomic_write_json(v.folder / "cloud.json", {"settings": settings, "points": len(c)})
+    # cloud.json last, with the others' checksums: it vouches for a complete cache.
+    atomic_write_json(v.folder / "cloud.json", {"settings": settings, "points": len(c),
+                                                "sha256": {name: file_sha256(v.folder / name) for name in _CACHE_FILES}})
     return c, maps

@@ -5,19 +5,31 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from pathlib import Path
 
 from rangekit.cli._common import check_output, console, int_in, say, seed
 
 
 def cmd_scan(args: argparse.Namespace) -> int:
     """rangekit scan --out DIR | --resume DIR [--rig sim|RIG.json] [--object lumpy] [--views 12] [--patterns hybrid]"""
-    from rangekit.app.acquire import acquire
-    from rangekit.app.scan import prepare_scan
-    from rangekit.formats.session import ScanPlan
+    from rangekit.formats.session_lock import session_lock as session_lock_of
 
     t0 = time.perf_counter()
     check_output(args.out or args.resume, option="--out" if args.out else "--resume", folder=True,
                  session=bool(args.resume))
+    if args.resume and Path(args.resume, "session.json").is_file():
+        # Held from the first read of the session to the end of processing (acquire and process take it
+        # again, re-entrantly): a second scan or process of this folder stops at once.
+        with session_lock_of(args.resume):
+            return _scan(args, t0)
+    return _scan(args, t0)
+
+
+def _scan(args: argparse.Namespace, t0: float) -> int:
+    from rangekit.app.acquire import acquire
+    from rangekit.app.scan import prepare_scan
+    from rangekit.formats.session import ScanPlan
+
     setup = prepare_scan(out=args.out, resume=args.resume, rig=args.rig, obj=args.object, n_views=args.views,
                          patterns=args.patterns, seed=args.seed, fusion=args.fusion)
     folder = args.resume or args.out
@@ -26,7 +38,7 @@ def cmd_scan(args: argparse.Namespace) -> int:
     try:
         session = acquire(setup.devices, setup.rig, setup.spec, folder, plan=ScanPlan(n_views=setup.n_views),
                           resume=setup.resume, capture=setup.capture, simulator=setup.simulator,
-                          hardware=setup.hardware, progress=console())
+                          hardware=setup.hardware, files=setup.files, progress=console())
     except KeyboardInterrupt:
         print(f"rangekit: interrupted; completed views are safe. Continue with: rangekit scan --resume {folder}",
               file=sys.stderr)
@@ -90,13 +102,16 @@ def add_parsers(sub) -> None:
     where = scan.add_mutually_exclusive_group(required=True)
     where.add_argument("--out", help="new session folder")
     where.add_argument("--resume", metavar="DIR", help="continue the session in DIR")
-    scan.add_argument("--rig", default="sim",
-                      help="'sim' (default) or a rig file whose 'devices' name the turntable, projector and camera")
-    scan.add_argument("--object", default="lumpy", help="simulated object: built-in name or mesh file")
-    scan.add_argument("--views", type=int_in(2, 720), default=12, help="turntable views over a full turn (default 12)")
-    scan.add_argument("--patterns", default="hybrid", choices=PATTERN_METHODS,
-                      help="pattern set (default hybrid: Gray code + phase shift)")
-    scan.add_argument("--seed", type=seed, default=0, help="simulator noise seed")
+    # No argparse defaults: a resumed scan takes the session's settings, and an option given with --resume
+    # must equal them (rangekit.app.scan.SCAN_DEFAULTS fills in a new scan).
+    scan.add_argument("--rig", help="'sim' (default) or a rig file whose 'devices' name the turntable, projector and "
+                                    "camera")
+    scan.add_argument("--object", help="simulated object: built-in name (default lumpy) or mesh file (copied into "
+                                       "the session)")
+    scan.add_argument("--views", type=int_in(2, 720), help="turntable views over a full turn (default 12)")
+    scan.add_argument("--patterns", choices=PATTERN_METHODS, help="pattern set (default hybrid: Gray code + phase "
+                                                                  "shift)")
+    scan.add_argument("--seed", type=seed, help="simulator noise seed (default 0)")
     scan.add_argument("--no-process", action="store_true", help="acquire only (process later with 'rangekit process')")
     _processing_options(scan)
     scan.set_defaults(func=cmd_scan)

@@ -7,6 +7,16 @@ A session folder (written by :func:`rangekit.app.acquire.acquire`) holds::
     rig.json              the rig file (calibration) the session was taken with
     patterns.json         the PatternSpec
     view_000/000.png ...  one folder per completed view
+    object/NAME.ply       a simulated session's object mesh, when it came from a file (copied at creation)
+    .lock                 held (``flock``) by the process working on the session (:mod:`.session_lock`)
+
+Each finished view records the SHA-256 of every frame file in ``views[k].sha256`` (``{"000.png": hex,
+...}``); :func:`rangekit.formats.session_check.verify_views` checks them before processing or resuming.
+Sessions written before checksums were recorded still load (their views are "unverified").
+
+``Session.load`` checks every field (type, range, the views against the plan) and names session.json,
+the field, what was expected and what was found; a simulated object's mesh file must lie inside the
+session folder (``simulator.object`` is a built-in name or a relative path such as ``object/bunny.ply``).
 
 :class:`Session` is the only reader and writer of ``session.json``; acquisition, processing, the report
 and the command line use its fields. Sessions written before ``capture`` was recorded still load: their
@@ -26,7 +36,8 @@ from pathlib import Path
 import numpy as np
 
 from rangekit.coded.patterns import PatternSpec
-from rangekit.errors import ConfigError, PatternError
+from rangekit.errors import ConfigError, RangekitError
+from rangekit.formats.summary import ProcessResult
 from rangekit.io import atomic_write_json, read_json
 from rangekit.rig import Rig, load_rig
 
@@ -34,7 +45,6 @@ __all__ = ["SESSION_SCHEMA", "ScanPlan", "CaptureSettings", "SimulatorSettings",
            "load_session", "view_folder", "ProcessResult"]
 
 SESSION_SCHEMA = "rangekit.session/1"
-_FIELDS = ("schema", "plan", "pattern", "views", "capture", "simulator", "hardware")
 #: Waits on hardware when the rig file's ``capture`` section does not set them, seconds.
 DEFAULT_PATTERN_DELAY_S = 0.1
 DEFAULT_TURNTABLE_SETTLE_S = 0.5
@@ -88,12 +98,14 @@ class SimulatorSettings:
 
 @dataclass(frozen=True)
 class SessionView:
-    """One view's state; ``done`` only when its folder holds every frame."""
+    """One view's state as recorded: ``done`` once its folder holds every frame; ``sha256`` maps each frame
+    file name to its SHA-256 (hex) for a done view (None: a session written before checksums)."""
 
     index: int
     angle: float    # radians
     done: bool
     folder: Path
+    sha256: dict | None = field(default=None, hash=False)
 
 
 def view_folder(folder: str | Path, index: int) -> Path:
@@ -132,8 +144,17 @@ class Session:
     def done_views(self) -> list[SessionView]:
         return [v for v in self.views if v.done]
 
-    def with_view_done(self, index: int) -> "Session":
-        views = tuple(replace(v, done=True) if v.index == index else v for v in self.views)
+    @property
+    def simulator_object(self) -> str | None:
+        """The simulated object: a built-in name, or the path of its mesh file inside the session folder
+        (checked by :meth:`load`); None on hardware."""
+        if self.simulator is None:
+            return None
+        return object_source(self.folder, self.simulator.object, self.folder / "session.json")
+
+    def with_view_done(self, index: int, sha256: dict | None = None) -> "Session":
+        """This session with view ``index`` done; ``sha256``: its frames' checksums (file name -> hex)."""
+        views = tuple(replace(v, done=True, sha256=sha256) if v.index == index else v for v in self.views)
         return replace(self, views=views)
 
     def to_dict(self) -> dict:
@@ -141,7 +162,8 @@ class Session:
         data = {"schema": SESSION_SCHEMA, "plan": {**asdict(self.plan), "angles_rad": self.plan.angles().tolist()},
                 "pattern": self.pattern.to_dict(),
                 "views": [{"index": v.index, "angle_rad": v.angle, "state": "done" if v.done else "pending",
-                           "folder": v.folder.name} for v in self.views],
+                           "folder": v.folder.name, **({"sha256": dict(v.sha256)} if v.sha256 else {})}
+                          for v in self.views],
                 "capture": asdict(self.capture)}
         if self.simulator is not None:
             data["simulator"] = asdict(self.simulator)
@@ -155,8 +177,17 @@ class Session:
 
     @classmethod
     def load(cls, folder: str | Path) -> "Session":
-        """Read ``folder/session.json`` and ``folder/rig.json``; a view counts as done only if its folder
-        is complete. Errors name the file, the field, what was expected and what was found."""
+        """Read ``folder/session.json`` and ``folder/rig.json``, checking every field. Views keep their
+        recorded state; their frames are checked by :func:`rangekit.formats.session_check.verify_views`.
+
+        Raises
+        ------
+        ConfigError
+            A field is missing, of the wrong type or out of range; the message names session.json, the
+            field, what was expected and what was found.
+        FileFormatError
+            session.json or rig.json is missing or not JSON.
+        """
         return _from_dict(read_json(Path(folder) / "session.json", what="session manifest"), Path(folder))
 
 
@@ -165,128 +196,189 @@ def load_session(folder: str | Path) -> Session:
     return Session.load(folder)
 
 
+#: Bounds of the manifest's numbers: views per session, the noise seed (numpy's range), the camera's bit
+#: depth, a wait in seconds, an angle in radians.
+MAX_VIEWS = 3600
+MAX_SEED = 2**32 - 1
+MAX_WAIT_S = 3600.0
+MAX_ANGLE_RAD = 1e3
+_SHA256_HEX = frozenset("0123456789abcdef")
+
+
+def object_source(folder: Path, value: str, path: Path) -> str:
+    """A simulated session's ``simulator.object`` as the simulator takes it: a built-in name (no ``/``,
+    no ``.``) as is, else the path of a mesh file inside ``folder`` (``value`` relative to it, no ``..``,
+    no symbolic link out of it). ConfigError naming ``path`` and the reason otherwise."""
+    if not any(c in value for c in "/\\."):
+        return value
+    p = Path(value)
+    why = None
+    if p.is_absolute():
+        why = "an absolute path"
+    elif ".." in p.parts:
+        why = "a path with '..'"
+    else:
+        full = folder / p
+        try:
+            inside = full.resolve().is_relative_to(folder.resolve())
+        except (OSError, RuntimeError, ValueError):
+            inside = False
+        if not inside:
+            why = "a link out of the session folder"
+        elif not full.is_file():
+            why = "not a file in the session folder"
+    if why is not None:
+        raise _error(path, "simulator.object", "a built-in object name or a mesh file inside the session folder "
+                     f"(such as 'object/bunny.ply'), not {why}", value)
+    return str(folder / p)
+
+
+def _show(found) -> str:
+    try:
+        text = repr(found)
+    except ValueError:  # an integer too long to print
+        return "an integer of more than 4300 digits"
+    return text if len(text) <= 80 else text[:77] + "..."
+
+
 def _error(path: Path, key: str, expected: str, found) -> ConfigError:
-    text = repr(found)
-    return ConfigError(f"{path}: {key}: expected {expected}, found {text if len(text) <= 80 else text[:77] + '...'}")
+    return ConfigError(f"{path}: {key}: expected {expected}, found {_show(found)}")
 
 
-def _from_dict(data: dict, folder: Path) -> Session:
+def _fields(value, path: Path, key: str, required: tuple[str, ...], optional: tuple[str, ...] = ()) -> dict:
+    """``value`` as an object holding every ``required`` key and no key beyond ``optional``."""
+    expected = "an object with " + ", ".join(required) + (f" (and {', '.join(optional)})" if optional else "")
+    if not isinstance(value, dict):
+        raise _error(path, key, expected, value)
+    missing = [k for k in required if k not in value]
+    unknown = [k for k in value if k not in required + optional]
+    if missing or unknown:
+        problem = (f"missing {', '.join(map(repr, missing))}" if missing else
+                   f"unknown field(s) {', '.join(_show(k) for k in unknown)}")
+        raise ConfigError(f"{path}: {key}: expected {expected}; {problem}")
+    return value
+
+
+def _int(value, path: Path, key: str, lo: int, hi: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or not lo <= value <= hi:
+        raise _error(path, key, f"an integer in {lo}..{hi}", value)
+    return value
+
+
+def _number(value, path: Path, key: str, lo: float, hi: float) -> float:
+    """A finite JSON number in [lo, hi] (lo, hi finite), as float."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not lo <= value <= hi:
+        raise _error(path, key, f"a finite number in [{lo:g}, {hi:g}]", value)
+    return float(value)
+
+
+def _plan(value, path: Path) -> ScanPlan:
+    d = _fields(value, path, "plan", ("n_views",), ("step", "start", "angles_rad"))
+    n = _int(d["n_views"], path, "plan.n_views", 1, MAX_VIEWS)
+    step = d.get("step")
+    step = None if step is None else _number(step, path, "plan.step", -2 * np.pi, 2 * np.pi)
+    return ScanPlan(n_views=n, step=step, start=_number(d.get("start", 0.0), path, "plan.start", -MAX_ANGLE_RAD,
+                                                        MAX_ANGLE_RAD))
+
+
+def _pattern(value, path: Path) -> PatternSpec:
+    if not isinstance(value, dict):
+        raise _error(path, "pattern", "a pattern spec (an object with method, width, height, ...)", value)
+    try:
+        return PatternSpec.from_dict(value, where=f"{path}: pattern")
+    except RangekitError as exc:
+        raise ConfigError(str(exc)) from None
+    except (KeyError, TypeError, ValueError, AttributeError, OverflowError, MemoryError) as exc:
+        raise ConfigError(f"{path}: pattern: not a valid pattern spec ({type(exc).__name__}: "
+                          f"{_show(str(exc))})") from None
+
+
+def _capture(value, path: Path) -> CaptureSettings:
+    d = _fields(value, path, "capture", (), ("bits", "pattern_delay_s", "turntable_settle_s"))
+    bits = d.get("bits")
+    return CaptureSettings(bits=None if bits is None else _int(bits, path, "capture.bits", 1, 16),
+                           pattern_delay_s=_number(d.get("pattern_delay_s", 0.0), path, "capture.pattern_delay_s",
+                                                   0.0, MAX_WAIT_S),
+                           turntable_settle_s=_number(d.get("turntable_settle_s", 0.0), path,
+                                                      "capture.turntable_settle_s", 0.0, MAX_WAIT_S))
+
+
+def _simulator(value, path: Path, folder: Path) -> SimulatorSettings:
+    d = _fields(value, path, "simulator", ("object", "seed"), ("imaging",))
+    obj = d["object"]
+    if not isinstance(obj, str) or not obj or len(obj) > 1024:
+        raise _error(path, "simulator.object", "a built-in object name or a mesh file in the session folder", obj)
+    object_source(folder, obj, path)
+    imaging = d.get("imaging", {})
+    if not isinstance(imaging, dict):
+        raise _error(path, "simulator.imaging", "an object (the simulator's imaging model)", imaging)
+    return SimulatorSettings(object=obj, seed=_int(d["seed"], path, "simulator.seed", 0, MAX_SEED), imaging=imaging)
+
+
+def _sha256(value, path: Path, key: str, n_frames: int) -> dict:
+    names = [f"{j:03d}.png" for j in range(n_frames)]
+    if not isinstance(value, dict) or sorted(value) != names:
+        raise _error(path, key, f"an object with the SHA-256 of each of the {n_frames} frames "
+                                f"({names[0]} ... {names[-1]})", value)
+    for name, digest in value.items():
+        if not (isinstance(digest, str) and len(digest) == 64 and set(digest) <= _SHA256_HEX):
+            raise _error(path, f"{key}[{name!r}]", "64 lower-case hex digits (SHA-256)", digest)
+    return dict(value)
+
+
+def _views(value, path: Path, folder: Path, plan: ScanPlan, n_frames: int) -> tuple[SessionView, ...]:
+    if not isinstance(value, list) or len(value) != plan.n_views:
+        raise _error(path, "views", f"a list of views (index, angle_rad, state), {plan.n_views} as in "
+                                    "plan.n_views", value)
+    angles = plan.angles()
+    views = []
+    for i, v in enumerate(value):
+        key = f"views[{i}]"
+        d = _fields(v, path, key, ("index", "angle_rad", "state"), ("folder", "sha256"))
+        _int(d["index"], path, f"{key}.index", i, i)
+        angle = _number(d["angle_rad"], path, f"{key}.angle_rad", -MAX_ANGLE_RAD, MAX_ANGLE_RAD)
+        if abs(angle - angles[i]) > 1e-9:
+            raise _error(path, f"{key}.angle_rad", f"{angles[i]!r} (the plan's angle of view {i})", angle)
+        if d["state"] not in ("done", "pending"):
+            raise _error(path, f"{key}.state", "'done' or 'pending'", d["state"])
+        name = view_folder(folder, i).name
+        if d.get("folder", name) != name:
+            raise _error(path, f"{key}.folder", repr(name), d["folder"])
+        done, sha = d["state"] == "done", d.get("sha256")
+        if sha is not None:
+            if not done:
+                raise _error(path, f"{key}.sha256", "none on a pending view", sha)
+            sha = _sha256(sha, path, f"{key}.sha256", n_frames)
+        views.append(SessionView(i, angle, done, view_folder(folder, i), sha))
+    return tuple(views)
+
+
+def _from_dict(data, folder: Path) -> Session:
     path = folder / "session.json"
     if not isinstance(data, dict):
-        raise ConfigError(f"{path}: expected a JSON object (a session manifest), found {type(data).__name__}")
+        raise ConfigError(f"{path}: expected a JSON object (a session manifest), found {type(data).__name__} "
+                          f"{_show(data)}")
     if data.get("schema") != SESSION_SCHEMA:
-        raise ConfigError(f"{path}: schema must be {SESSION_SCHEMA!r}, found {data.get('schema')!r}")
-    unknown = [k for k in data if k not in _FIELDS]
-    if unknown:
-        raise ConfigError(f"{path}: unknown field(s) {', '.join(map(repr, unknown))}; a session manifest has only "
-                          f"{', '.join(_FIELDS)}")
-    plan_data = data.get("plan")
-    try:
-        plan = ScanPlan(n_views=int(plan_data["n_views"]), step=plan_data.get("step"),
-                        start=float(plan_data.get("start", 0.0)))
-    except (KeyError, TypeError, ValueError):
-        raise _error(path, "plan", "an object with n_views (and step, start in radians)", plan_data) from None
-    try:
-        pattern = PatternSpec.from_dict(data["pattern"], where=f"{path}: pattern")
-    except KeyError:
-        raise _error(path, "pattern", "a pattern spec (method, width, height, ...)", None) from None
-    except (PatternError, AttributeError) as exc:
-        raise ConfigError(f"{path}: pattern: {exc}") from None
-    rig = load_rig(folder / "rig.json")
-    simulator = None
-    if data.get("simulator") is not None:
-        s = data["simulator"]
-        try:
-            simulator = SimulatorSettings(object=str(s["object"]), seed=int(s["seed"]), imaging=dict(s.get("imaging", {})))
-        except (KeyError, TypeError, ValueError):
-            raise _error(path, "simulator", "an object with object, seed (and imaging)", s) from None
+        raise _error(path, "schema", repr(SESSION_SCHEMA), data.get("schema"))
+    _fields(data, path, "session manifest", ("schema", "plan", "pattern", "views"),
+            ("capture", "simulator", "hardware"))
+    plan = _plan(data["plan"], path)
+    pattern = _pattern(data["pattern"], path)
+    views = _views(data["views"], path, folder, plan, pattern.n_frames)
+    simulator = None if data.get("simulator") is None else _simulator(data["simulator"], path, folder)
     hardware = data.get("hardware")
-    if hardware is not None and not isinstance(hardware, dict):
-        raise _error(path, "hardware", "an object ({\"rig_file\": ...})", hardware)
-    if "capture" in data:
-        c = data["capture"]
-        try:
-            capture = CaptureSettings(bits=None if c.get("bits") is None else int(c["bits"]),
-                                      pattern_delay_s=float(c.get("pattern_delay_s", 0.0)),
-                                      turntable_settle_s=float(c.get("turntable_settle_s", 0.0)))
-        except (AttributeError, TypeError, ValueError):
-            raise _error(path, "capture", "an object with bits, pattern_delay_s, turntable_settle_s", c) from None
+    if hardware is not None:
+        d = _fields(hardware, path, "hardware", (), ("rig_file",))
+        if not isinstance(d.get("rig_file", ""), str):
+            raise _error(path, "hardware.rig_file", "a file name", d["rig_file"])
+        if simulator is not None:
+            raise ConfigError(f"{path}: expected either simulator or hardware, found both")
+    rig = load_rig(folder / "rig.json")
+    if data.get("capture") is not None:
+        capture = _capture(data["capture"], path)
     else:  # written before capture settings were recorded
         capture = CaptureSettings.from_rig(rig, hardware=hardware is not None)
-        if simulator is not None and simulator.imaging.get("bits"):
-            capture = replace(capture, bits=int(simulator.imaging["bits"]))
-    views_data = data.get("views")
-    if not isinstance(views_data, list):
-        raise _error(path, "views", "a list of views (index, angle_rad, state)", views_data)
-    n_frames = pattern.n_frames
-    views = []
-    for i, v in enumerate(views_data):
-        try:
-            k, angle, state = int(v["index"]), float(v["angle_rad"]), v["state"]
-        except (KeyError, TypeError, ValueError):
-            raise _error(path, f"views[{i}]", "an object with index, angle_rad, state", v) from None
-        d = view_folder(folder, k)
-        complete = (state == "done" and (d / "view.json").exists()
-                    and len(list(d.glob("[0-9][0-9][0-9].png"))) == n_frames)
-        views.append(SessionView(k, angle, complete, d))
-    return Session(folder, plan, pattern, rig, capture, tuple(views), simulator, hardware)
-
-
-@dataclass(frozen=True, eq=False)
-class ProcessResult:
-    """What processing a session produced. Distances in metres, times in seconds."""
-
-    folder: Path
-    view_names: list[str]
-    T_world_view: np.ndarray        # (n, 4, 4) registered poses, world = first view
-    n_points: list[int]             # points per view after filtering
-    edges: list[dict]               # view graph: i, j, rmse, overlap, accepted, rotation/translation residual
-    registration_rmse: float        # joint point-to-plane RMS of the final poses
-    mesh: dict                      # vertices, triangles, watertight, area_m2, volume_m3, fusion
-    seconds: dict = field(default_factory=dict)   # wall time per stage
-    accuracy: dict | None = None    # against the truth when an evaluator was given (the simulator's Accuracy)
-
-    @property
-    def mesh_path(self) -> Path:
-        return self.folder / "mesh.ply"
-
-    @property
-    def mesh_watertight(self) -> bool:
-        return bool(self.mesh["watertight"])
-
-    def to_dict(self) -> dict:
-        return {"schema": "rangekit.summary/1", "views": self.view_names, "n_points": self.n_points,
-                "T_world_view": self.T_world_view.tolist(), "edges": self.edges,
-                "registration_rmse_m": self.registration_rmse, "mesh": self.mesh, "seconds": self.seconds,
-                "accuracy": self.accuracy}
-
-    def summary_lines(self) -> list[str]:
-        """The end-of-run summary, one line per fact, for people."""
-        acc = [e for e in self.edges if e["accepted"]]
-        rot = [e["rotation_residual_deg"] for e in acc if e.get("rotation_residual_deg") is not None]
-        tr = [e["translation_residual_mm"] for e in acc if e.get("translation_residual_mm") is not None]
-        m = self.mesh
-        lines = [f"views: {len(self.view_names)}, points: {sum(self.n_points):,} "
-                 f"({min(self.n_points):,} to {max(self.n_points):,} per view)",
-                 f"registration: {len(acc)}/{len(self.edges)} pairs accepted, pair ICP RMSE median "
-                 f"{np.median([e['rmse_mm'] for e in acc]):.4f} mm, joint RMS {self.registration_rmse * 1e3:.4f} mm"
-                 + (f"; synchronisation residual max {max(rot):.4f} deg, {max(tr):.4f} mm" if rot and tr else ""),
-                 f"mesh ({m['fusion']}): {m['vertices']:,} vertices, {m['triangles']:,} triangles, watertight "
-                 f"{m['watertight']}, area {m['area_m2'] * 1e4:.1f} cm^2"
-                 + (f", volume {m['volume_m3'] * 1e6:.1f} cm^3" if m["volume_m3"] is not None else ""),
-                 "time: " + ", ".join(f"{k} {v:.1f} s" for k, v in self.seconds.items())]
-        if self.accuracy:
-            a = self.accuracy
-            lines.append(f"accuracy against the true surface: RMS {a['rms'] * 1e3:.3f} mm "
-                         f"({a['rms'] / a['diagonal']:.3%} of the {a['diagonal'] * 1e3:.0f} mm diagonal), 95th "
-                         f"percentile {a['p95'] * 1e3:.3f} mm; completeness {a['completeness']:.1%} of the visible "
-                         f"surface within {a['tolerance'] * 1e3:g} mm")
-            lines.append(f"  ({a['visible_fraction']:.0%} of the object is visible within "
-                         f"{a['max_incidence_deg']:g} deg of incidence; the other {a['unobserved_area']:.0%} of the "
-                         f"mesh is filled in where no view looked, RMS {a['unobserved_rms'] * 1e3:.2f} mm there)")
-        return lines
-
-    def __repr__(self) -> str:
-        t = ", ".join(f"{k} {v:.1f} s" for k, v in self.seconds.items())
-        return (f"ProcessResult({len(self.n_points)} views, {sum(self.n_points)} points, mesh watertight "
-                f"{self.mesh_watertight}; {t})")
+        bits = simulator.imaging.get("bits") if simulator is not None else None
+        if bits is not None:
+            capture = replace(capture, bits=_int(bits, path, "simulator.imaging.bits", 1, 16))
+    return Session(folder, plan, pattern, rig, capture, views, simulator, hardware)

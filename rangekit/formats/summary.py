@@ -1,0 +1,76 @@
+"""What processing a session produced (``summary.json``, schema ``rangekit.summary/1``), as one value.
+
+:func:`rangekit.app.process.process_session` writes it into the session folder last, after the mesh,
+poses and merged cloud, so a folder holding ``summary.json`` holds all of them.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["SUMMARY_SCHEMA", "ProcessResult"]
+
+SUMMARY_SCHEMA = "rangekit.summary/1"
+
+
+@dataclass(frozen=True, eq=False)
+class ProcessResult:
+    """What processing a session produced. Distances in metres, times in seconds."""
+
+    folder: Path
+    view_names: list[str]
+    T_world_view: np.ndarray        # (n, 4, 4) registered poses, world = first view
+    n_points: list[int]             # points per view after filtering
+    edges: list[dict]               # view graph: i, j, rmse, overlap, accepted, rotation/translation residual
+    registration_rmse: float        # joint point-to-plane RMS of the final poses
+    mesh: dict                      # vertices, triangles, watertight, area_m2, volume_m3, fusion
+    seconds: dict = field(default_factory=dict)   # wall time per stage
+    accuracy: dict | None = None    # against the truth when an evaluator was given (the simulator's Accuracy)
+
+    @property
+    def mesh_path(self) -> Path:
+        return self.folder / "mesh.ply"
+
+    @property
+    def mesh_watertight(self) -> bool:
+        return bool(self.mesh["watertight"])
+
+    def to_dict(self) -> dict:
+        return {"schema": SUMMARY_SCHEMA, "views": self.view_names, "n_points": self.n_points,
+                "T_world_view": self.T_world_view.tolist(), "edges": self.edges,
+                "registration_rmse_m": self.registration_rmse, "mesh": self.mesh, "seconds": self.seconds,
+                "accuracy": self.accuracy}
+
+    def summary_lines(self) -> list[str]:
+        """The end-of-run summary, one line per fact, for people."""
+        acc = [e for e in self.edges if e["accepted"]]
+        rot = [e["rotation_residual_deg"] for e in acc if e.get("rotation_residual_deg") is not None]
+        tr = [e["translation_residual_mm"] for e in acc if e.get("translation_residual_mm") is not None]
+        m = self.mesh
+        lines = [f"views: {len(self.view_names)}, points: {sum(self.n_points):,} "
+                 f"({min(self.n_points):,} to {max(self.n_points):,} per view)",
+                 f"registration: {len(acc)}/{len(self.edges)} pairs accepted, pair ICP RMSE median "
+                 f"{np.median([e['rmse_mm'] for e in acc]):.4f} mm, joint RMS {self.registration_rmse * 1e3:.4f} mm"
+                 + (f"; synchronisation residual max {max(rot):.4f} deg, {max(tr):.4f} mm" if rot and tr else ""),
+                 f"mesh ({m['fusion']}): {m['vertices']:,} vertices, {m['triangles']:,} triangles, watertight "
+                 f"{m['watertight']}, area {m['area_m2'] * 1e4:.1f} cm^2"
+                 + (f", volume {m['volume_m3'] * 1e6:.1f} cm^3" if m["volume_m3"] is not None else ""),
+                 "time: " + ", ".join(f"{k} {v:.1f} s" for k, v in self.seconds.items())]
+        if self.accuracy:
+            a = self.accuracy
+            lines.append(f"accuracy against the true surface: RMS {a['rms'] * 1e3:.3f} mm "
+                         f"({a['rms'] / a['diagonal']:.3%} of the {a['diagonal'] * 1e3:.0f} mm diagonal), 95th "
+                         f"percentile {a['p95'] * 1e3:.3f} mm; completeness {a['completeness']:.1%} of the visible "
+                         f"surface within {a['tolerance'] * 1e3:g} mm")
+            lines.append(f"  ({a['visible_fraction']:.0%} of the object is visible within "
+                         f"{a['max_incidence_deg']:g} deg of incidence; the other {a['unobserved_area']:.0%} of the "
+                         f"mesh is filled in where no view looked, RMS {a['unobserved_rms'] * 1e3:.2f} mm there)")
+        return lines
+
+    def __repr__(self) -> str:
+        t = ", ".join(f"{k} {v:.1f} s" for k, v in self.seconds.items())
+        return (f"ProcessResult({len(self.n_points)} views, {sum(self.n_points)} points, mesh watertight "
+                f"{self.mesh_watertight}; {t})")

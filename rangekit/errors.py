@@ -6,7 +6,13 @@ catches :class:`RangekitError`, prints ``rangekit: error: MESSAGE`` and exits 2 
 :class:`UsageError` (a bad option), 1 for anything else, without a traceback.
 """
 
+from __future__ import annotations
+
+from contextlib import contextmanager
+from typing import Iterator
+
 __all__ = [
+    "naming",
     "RangekitError",
     "InputError",
     "UsageError",
@@ -89,3 +95,20 @@ class ProtocolError(DeviceError):
 
 class CommandError(DeviceError):
     """A device understood a command and refused it."""
+
+
+@contextmanager
+def naming(source) -> Iterator[None]:
+    """Name ``source`` (a file or folder) in the :class:`RangekitError` raised inside the block.
+
+    Library functions that see only arrays (a cloud, a stack of images) cannot name the file the data came
+    from; the code that read the file wraps the call, and the error is re-raised as the same type with
+    ``"SOURCE: "`` in front of its message (unless the message names it already).
+    """
+    try:
+        yield
+    except RangekitError as exc:
+        text = str(source)
+        if text in str(exc):
+            raise
+        raise type(exc)(f"{text}: {exc}") from exc

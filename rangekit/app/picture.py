@@ -49,6 +49,8 @@ def render_file(path: str | Path, *, azimuths: Sequence[float] = (np.radians(30.
 
     src = Path(path)
     mesh = cloud = None
+    if src.is_dir():
+        raise FileFormatError(f"{src}: is a folder, expected a mesh or a point cloud file")
     if not src.is_file():
         raise FileFormatError(f"{src}: no such file (expected a mesh or a point cloud)")
     if src.suffix.lower() in MESH_SUFFIXES or _ply_has_faces(src):

@@ -103,12 +103,13 @@ def naming(source) -> Iterator[None]:
 
     Library functions that see only arrays (a cloud, a stack of images) cannot name the file the data came
     from; the code that read the file wraps the call, and the error is re-raised as the same type with
-    ``"SOURCE: "`` in front of its message (unless the message names it already).
+    ``"SOURCE: "`` in front of its message (unless the message starts with it already, as errors about a file
+    inside a folder ``SOURCE/...`` do).
     """
     try:
         yield
     except RangekitError as exc:
         text = str(source)
-        if text in str(exc):
+        if str(exc).startswith(text):
             raise
         raise type(exc)(f"{text}: {exc}") from exc

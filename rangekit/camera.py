@@ -334,7 +334,10 @@ class PinholeCamera:
             raise ConfigError(f"{where}: {exc}") from exc
 
     def save(self, path: str | Path) -> None:
-        Path(path).write_text(json.dumps(self.to_dict(), indent=2))
+        """Write the camera as JSON (:meth:`to_dict`), atomically: a crash leaves the old file or the new one."""
+        from rangekit.io import atomic_write_json  # imported here: rangekit.io loads OpenCV
+
+        atomic_write_json(path, self.to_dict())
 
     @classmethod
     def load(cls, path: str | Path) -> "PinholeCamera":

@@ -6,7 +6,13 @@ catches :class:`RangekitError`, prints ``rangekit: error: MESSAGE`` and exits 2 
 :class:`UsageError` (a bad option), 1 for anything else, without a traceback.
 """
 
+from __future__ import annotations
+
+from contextlib import contextmanager
+from typing import Iterator
+
 __all__ = [
+    "naming",
     "RangekitError",
     "InputError",
     "UsageError",
@@ -94,3 +100,21 @@ class CommandError(DeviceError):
 
 class StorageError(RangekitError):
     """A file cannot be written (disk full, file too large, read-only); what was finished is kept."""
+
+
+@contextmanager
+def naming(source) -> Iterator[None]:
+    """Name ``source`` (a file or folder) in the :class:`RangekitError` raised inside the block.
+
+    Library functions that see only arrays (a cloud, a stack of images) cannot name the file the data came
+    from; the code that read the file wraps the call, and the error is re-raised as the same type with
+    ``"SOURCE: "`` in front of its message (unless the message starts with it already, as errors about a file
+    inside a folder ``SOURCE/...`` do).
+    """
+    try:
+        yield
+    except RangekitError as exc:
+        text = str(source)
+        if str(exc).startswith(text):
+            raise
+        raise type(exc)(f"{text}: {exc}") from exc

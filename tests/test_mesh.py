@@ -15,7 +15,7 @@ import pytest
 import trimesh
 from scipy.spatial import cKDTree
 
-from rangekit.errors import FileFormatError, InputError
+from rangekit.errors import FileFormatError, InputError, MeshError
 from rangekit.geometry import apply_T, compose, invert_T
 from rangekit.formats.meshes import load_mesh_file, save_mesh
 from rangekit.surface.cloud import PointCloud, orient_normals_to_sensor
@@ -148,9 +148,9 @@ def test_poisson_mesh_without_trimming_or_closing(scan):
 def test_poisson_mesh_bad_input():
     with pytest.raises(InputError, match="no normals"):
         poisson_mesh(PointCloud(np.random.default_rng(0).normal(size=(100, 3))))
-    with pytest.raises(InputError, match="at least 10 points"):
+    with pytest.raises(MeshError, match="at least 10 points"):
         poisson_mesh(PointCloud(np.zeros((0, 3)), normals=np.zeros((0, 3))))
-    with pytest.raises(InputError, match="at least 10 points"):
+    with pytest.raises(MeshError, match="at least 10 points"):
         poisson_mesh(PointCloud(np.full((50, 3), np.nan), normals=np.ones((50, 3))))
     with pytest.raises(InputError, match="PointCloud"):
         poisson_mesh(np.zeros((100, 3)))

@@ -3,7 +3,8 @@
 Outputs in ``out``: ``normals.npy`` (H, W, 3) float32 unit normals in the OpenCV camera frame (NaN outside
 the mask), ``normals.png`` (RGB = (x, up, towards the viewer) / 2 + 1/2, as the benchmarks show them),
 ``albedo.png`` (scaled to its 99th percentile), ``depth.npy`` (H, W) float32 integrated depth and
-``mesh.ply`` (pixel units, orthographic).
+``mesh.ply`` (pixel units, orthographic). Every file is written atomically (temporary file, fsync, rename):
+an interrupted run leaves whole files or none, never a truncated one.
 """
 
 from __future__ import annotations
@@ -14,7 +15,8 @@ from typing import Callable
 
 import numpy as np
 
-from rangekit.io import write_png
+from rangekit.errors import naming
+from rangekit.io import atomic_save_npy, write_png
 from rangekit.progress import call_progress
 
 __all__ = ["photometric_files"]
@@ -36,10 +38,11 @@ def photometric_files(folder: str | Path, out: str | Path, *, method: str = "rob
     call_progress(progress, f"read {len(data.filenames)} images of {data.mask.shape[1]}x{data.mask.shape[0]} from "
                             f"{folder} ({int(data.mask.sum())} pixels in the mask) in {time.perf_counter() - t0:.1f} s")
     t1 = time.perf_counter()
-    if method == "uncalibrated":
-        res = uncalibrated_photometric_stereo(data.images, data.mask)
-    else:
-        res = photometric_stereo(data.images, data.lights, data.mask, method=method)
+    with naming(folder):  # the solvers see arrays; say which folder the images came from
+        if method == "uncalibrated":
+            res = uncalibrated_photometric_stereo(data.images, data.mask)
+        else:
+            res = photometric_stereo(data.images, data.lights, data.mask, method=method)
     call_progress(progress, f"normals ({method}) in {time.perf_counter() - t1:.1f} s")
     if data.normals_gt is not None:
         err = angular_error(res.normals, data.normals_gt, data.mask)
@@ -52,8 +55,8 @@ def photometric_files(folder: str | Path, out: str | Path, *, method: str = "rob
                             f"{time.perf_counter() - t2:.1f} s")
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    np.save(out / "normals.npy", res.normals.astype(np.float32))
-    np.save(out / "depth.npy", depth.astype(np.float32))
+    atomic_save_npy(out / "normals.npy", res.normals.astype(np.float32))
+    atomic_save_npy(out / "depth.npy", depth.astype(np.float32))
     n = np.nan_to_num(res.normals)
     # Colour code as the benchmarks show it: RGB = (x, up, towards the viewer) / 2 + 1/2.
     rgb = np.stack([n[..., 0], -n[..., 1], -n[..., 2]], axis=-1) * 0.5 + 0.5

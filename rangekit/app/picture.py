@@ -9,7 +9,7 @@ from typing import Sequence
 
 import numpy as np
 
-from rangekit.errors import FileFormatError
+from rangekit.errors import FileFormatError, MeshError
 
 __all__ = ["Picture", "render_file"]
 
@@ -49,6 +49,8 @@ def render_file(path: str | Path, *, azimuths: Sequence[float] = (np.radians(30.
 
     src = Path(path)
     mesh = cloud = None
+    if src.is_dir():
+        raise FileFormatError(f"{src}: is a folder, expected a mesh or a point cloud file")
     if not src.is_file():
         raise FileFormatError(f"{src}: no such file (expected a mesh or a point cloud)")
     if src.suffix.lower() in MESH_SUFFIXES or _ply_has_faces(src):
@@ -62,6 +64,9 @@ def render_file(path: str | Path, *, azimuths: Sequence[float] = (np.radians(30.
     pts = mesh.vertices if mesh is not None else cloud.points
     if len(pts) == 0:
         raise FileFormatError(f"{src}: holds no points or vertices to render")
+    if mesh is not None and not mesh.area > 0:  # ray casting would see nothing: a blank picture
+        raise MeshError(f"{src}: nothing to render: its {len(mesh.triangles)} triangle(s) all have zero area "
+                        "(expected at least one with three vertices not on one line)")
     up = np.asarray(up, dtype=np.float64)
     images = []
     for az in azimuths:

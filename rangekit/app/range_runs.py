@@ -18,7 +18,7 @@ from typing import Callable
 
 import numpy as np
 
-from rangekit.errors import ConfigError, InputError
+from rangekit.errors import ConfigError, InputError, naming
 from rangekit.formats.range_files import load_ground_truth, load_tof_folder
 from rangekit.io import atomic_save_npy, read_png, write_png
 from rangekit.progress import call_progress
@@ -64,7 +64,7 @@ def tof_depth_files(raw_dir: str | Path, out: str | Path, *, min_snr: float = 3.
         call_progress(progress, f"{raw.plan.describe()} ({raw.plan.unambiguous_range:.3f} m unambiguous): valid "
                                 f"{valid.sum() / n:.1%}, low signal {res.low_signal.sum() / n:.1%}, ambiguous "
                                 f"{res.ambiguous.sum() / n:.1%}, flying {res.flying.sum() / n:.1%}")
-    truth = load_ground_truth(raw_dir)
+    truth = load_ground_truth(raw_dir, shape=rng_map.shape)
     if truth is not None and "range" in truth:
         ok = valid & np.isfinite(truth["range"]) & truth.get("valid", np.ones_like(valid))
         if ok.any():
@@ -99,9 +99,15 @@ def stereo_depth_files(left: str | Path, right: str | Path, rig_file: str | Path
         raise InputError(f"{left} is {left_img.shape[1]}x{left_img.shape[0]} but {right} is "
                          f"{right_img.shape[1]}x{right_img.shape[0]} (width x height); a stereo pair needs two "
                          "images of one size")
+    left_cam = rig.cameras[0]
+    if left_img.shape[:2] != (left_cam.height, left_cam.width):
+        raise InputError(f"{left} is {left_img.shape[1]}x{left_img.shape[0]} but the left camera {left_cam.name!r} "
+                         f"in {rig_file} is {left_cam.width}x{left_cam.height} (width x height); use the images this "
+                         "rig recorded, or a rig calibrated at this resolution")
     opts = {} if num_disparities is None else {"num_disparities": num_disparities}
-    res = stereo_depth(left_img, right_img, rig.cameras[0], rig.cameras[1], method=method, min_depth=min_depth,
-                       alpha=alpha, **opts)
+    with naming(rig_file):  # rectification refuses a rig without a usable baseline
+        res = stereo_depth(left_img, right_img, rig.cameras[0], rig.cameras[1], method=method, min_depth=min_depth,
+                           alpha=alpha, **opts)
     dmap = res.disparity
     ok = np.isfinite(res.depth)
     call_progress(progress, f"{dmap.method}: disparities [{dmap.min_disparity}, "

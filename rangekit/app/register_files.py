@@ -8,7 +8,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from rangekit.errors import ConfigError, UsageError
+from rangekit.errors import ConfigError, UsageError, naming
 from rangekit.formats.clouds import load_cloud, save_cloud
 from rangekit.surface.cloud import PointCloud, merge_clouds
 from rangekit.formats.poses import load_poses, save_poses
@@ -89,7 +89,9 @@ def register_files(paths: Sequence[str | Path], out_dir: str | Path, *, init: st
         from rangekit.surface.fusion import poisson_mesh
 
         say("meshing (screened Poisson)")
-        m = poisson_mesh(merged if merged.normals is not None else oriented_normals_cloud(merged.points, voxel=voxel))
+        with naming(out / "merged.ply"):  # the merged scans: too flat or too few to close (use --no-mesh)
+            m = poisson_mesh(merged if merged.normals is not None
+                             else oriented_normals_cloud(merged.points, voxel=voxel))
         mesh_path = out / "mesh.ply"
         save_mesh(mesh_path, m)
     return RegisterReport([str(p) for p in paths], res, merged, mesh_path)

@@ -80,7 +80,10 @@ def fit_camera(points: np.ndarray, *, azimuth: float, elevation: float, size: tu
                          f"'up' 3-vector, found elevation {elevation}, up {up!r}")
     u = u / np.linalg.norm(u)
     lo, hi = P.min(axis=0), P.max(axis=0)
-    centre, radius = (lo + hi) / 2, max(float(np.linalg.norm(hi - lo)) / 2, 1e-9)
+    # A single point (or all at one point) still gets a picture: a sphere of a millionth of its distance
+    # from the origin (at least 1 micrometre) is framed instead.
+    centre = (lo + hi) / 2
+    radius = max(float(np.linalg.norm(hi - lo)) / 2, 1e-6 * max(1.0, float(np.abs(centre).max())))
     a = np.eye(3)[0] if abs(u[0]) < 0.9 else np.eye(3)[1]
     e1 = a - (a @ u) * u
     e1 /= np.linalg.norm(e1)
@@ -102,7 +105,7 @@ def fit_camera(points: np.ndarray, *, azimuth: float, elevation: float, size: tu
         rel = corners - centre
         toward = rel @ direction
         need = np.maximum(np.abs(rel @ right) * margin * f / (width / 2), np.abs(rel @ img_up) * margin * f / (height / 2))
-        distance = float(np.max(toward + need))
+        distance = max(float(np.max(toward + need)), radius)  # never inside a point's own sphere
     K = np.array([[f, 0, (width - 1) / 2], [0, f, (height - 1) / 2], [0, 0, 1]])
     return PinholeCamera(K, width, height, np.zeros(5), look_at(centre + distance * direction, centre, u),
                          name="snapshot")

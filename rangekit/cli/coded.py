@@ -13,6 +13,7 @@ def cmd_decode(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from rangekit.coded.decode import decode
+    from rangekit.errors import naming
     from rangekit.formats.capture import list_images, pattern_spec_for, read_stack, save_decoded
 
     t0 = time.perf_counter()
@@ -22,7 +23,8 @@ def cmd_decode(args: argparse.Namespace) -> int:
     say(f"reading {len(paths)} images")
     images = read_stack(paths)
     say(f"decoding {spec.method} ({'subpixel' if not args.integer else 'integer'})")
-    res = decode(images, spec, order=args.order, subpixel=not args.integer)
+    with naming(args.images[0] if len(args.images) == 1 else f"{len(paths)} images from {paths[0]}"):
+        res = decode(images, spec, order=args.order, subpixel=not args.integer)
     save_decoded(args.out, res)
     say(f"{res!r}")
     say(f"wrote {Path(args.out)} in {time.perf_counter() - t0:.1f} s")
@@ -32,7 +34,7 @@ def cmd_decode(args: argparse.Namespace) -> int:
 def cmd_reconstruct(args: argparse.Namespace) -> int:
     """rangekit reconstruct CAPTURE_DIR [--rig RIG.json] --out cloud.ply"""
     from rangekit.app.reconstruct import reconstruct_view
-    from rangekit.errors import ConfigError
+    from rangekit.errors import ConfigError, naming
     from rangekit.formats.capture import load_capture
     from rangekit.rig import load_rig
     from rangekit.formats.clouds import save_cloud
@@ -47,8 +49,9 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
     if rig is None or rig.projector is None:
         raise ConfigError(f"{args.capture}: no rig.json with a projector; pass --rig RIG.json")
     say(f"decoding {len(cap.images)} images ({cap.spec.method})")
-    rec = reconstruct_view(cap.images, cap.spec, rig.camera, rig.projector, subpixel=not args.integer,
-                           method=args.method, full_scale=cap.full_scale, response=rig.projector_response)
+    with naming(args.capture):
+        rec = reconstruct_view(cap.images, cap.spec, rig.camera, rig.projector, subpixel=not args.integer,
+                               method=args.method, full_scale=cap.full_scale, response=rig.projector_response)
     save_cloud(args.out, rec.cloud)
     say(f"{rec.decoded!r}")
     say(f"{rec.triangulated!r}")

@@ -39,19 +39,24 @@ def cmd_register(args: argparse.Namespace) -> int:
 
 def cmd_mesh(args: argparse.Namespace) -> int:
     """rangekit mesh CLOUD --out MESH"""
+    from rangekit.errors import MeshError, naming
     from rangekit.formats.clouds import load_cloud
     from rangekit.formats.meshes import save_mesh
     from rangekit.surface.cloud import oriented_normals_cloud
-    from rangekit.surface.fusion import poisson_mesh
+    from rangekit.surface.fusion import poisson_input_problem, poisson_mesh
 
     t0 = time.perf_counter()
     check_output(args.out)
     cloud = load_cloud(args.cloud)
-    if cloud.normals is None:
-        say(f"read {len(cloud)} points without normals: estimating outward normals")
-        cloud = oriented_normals_cloud(cloud.points)
-    say(f"{len(cloud)} points; screened Poisson, depth {args.depth}")
-    mesh = poisson_mesh(cloud, depth=args.depth)
+    problem = poisson_input_problem(cloud.points)
+    if problem:  # before estimating normals, which needs less
+        raise MeshError(f"{args.cloud}: cannot build a closed surface: {problem}")
+    with naming(args.cloud):
+        if cloud.normals is None:
+            say(f"read {len(cloud)} points without normals: estimating outward normals")
+            cloud = oriented_normals_cloud(cloud.points)
+        say(f"{len(cloud)} points; screened Poisson, depth {args.depth}")
+        mesh = poisson_mesh(cloud, depth=args.depth)
     save_mesh(args.out, mesh)
     say(f"wrote {args.out}: {len(mesh.vertices)} vertices, {len(mesh.triangles)} triangles, watertight "
         f"{mesh.is_watertight}, in {time.perf_counter() - t0:.1f} s")

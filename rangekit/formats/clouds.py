@@ -89,9 +89,12 @@ def load_cloud(path: str | Path) -> PointCloud:
     Raises
     ------
     FileFormatError
-        If the suffix is unknown, the file is missing, malformed or truncated, or no finite point is left.
+        If the suffix is unknown, the file is missing or a folder, malformed or truncated, or no finite point
+        is left.
     """
     path = Path(path)
+    if path.is_dir():
+        raise FileFormatError(f"{path}: is a folder, expected a point cloud file ({', '.join(CLOUD_READERS)})")
     reader = CLOUD_READERS.get(path.suffix.lower())
     if reader is None:
         raise FileFormatError(f"{path}: unknown point cloud format {path.suffix!r}; known: "

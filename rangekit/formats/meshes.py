@@ -1,5 +1,5 @@
 """Mesh files, chosen by extension: ``.ply`` (read and written by :mod:`rangekit.formats.ply`), ``.obj``
-and ``.stl`` (via trimesh). Writes are atomic."""
+and ``.stl`` (via trimesh), ``.off`` (read only, via trimesh). Writes are atomic."""
 
 from __future__ import annotations
 
@@ -23,12 +23,13 @@ def _write_via_trimesh(file_type: str):
 
 
 MESH_FORMATS = {".ply": mesh_ply_bytes, ".obj": _write_via_trimesh("obj"), ".stl": _write_via_trimesh("stl")}
+_READ_ONLY = (".off",)  # read by trimesh, never written
 
 
-def _check_suffix(path: Path) -> str:
+def _check_suffix(path: Path, known=MESH_FORMATS) -> str:
     suffix = path.suffix.lower()
-    if suffix not in MESH_FORMATS:
-        raise FileFormatError(f"{path}: unknown mesh format {path.suffix!r}; known: {', '.join(MESH_FORMATS)}")
+    if suffix not in known:
+        raise FileFormatError(f"{path}: unknown mesh format {path.suffix!r}; known: {', '.join(known)}")
     return suffix
 
 
@@ -51,6 +52,11 @@ def _read_ply_mesh(path: Path) -> TriangleMesh:
     if lists is None or not hasattr(lists, "counts"):
         raise FileFormatError(f"{path}: expected a face list property 'vertex_indices', found "
                               f"{', '.join(face) or 'none'}")
+    declared = {p.name: p.dtype for p in header.element("face").properties}
+    declared = declared.get("vertex_indices", declared.get("vertex_index"))
+    if np.dtype(declared).kind not in "iu" or not np.all(lists.items == np.floor(lists.items)):
+        raise FileFormatError(f"{path}: expected whole-number vertex indices in the face lists, found "
+                              f"{'type ' + np.dtype(declared).name if np.dtype(declared).kind not in 'iu' else 'fractions'}")
     items = lists.items.astype(np.int64)
     if np.all(lists.counts == 3):
         triangles = items.reshape(-1, 3)
@@ -71,16 +77,19 @@ def _read_ply_mesh(path: Path) -> TriangleMesh:
 
 
 def load_mesh_file(path: str | Path) -> TriangleMesh:
-    """Read a ``.ply`` (:mod:`rangekit.formats.ply`), ``.obj`` or ``.stl`` (trimesh) mesh; vertex order
-    kept, nothing merged.
+    """Read a ``.ply`` (:mod:`rangekit.formats.ply`), ``.obj``, ``.stl`` or ``.off`` (trimesh) mesh; vertex
+    order kept, nothing merged.
 
     Raises
     ------
     FileFormatError
-        If the file is missing, has an unknown extension, is malformed, or holds no triangles.
+        If the file is missing, a folder, has an unknown extension, is malformed, holds no triangles or
+        a vertex that is not finite.
     """
     path = Path(path)
-    suffix = _check_suffix(path)
+    suffix = _check_suffix(path, (*MESH_FORMATS, *_READ_ONLY))
+    if path.is_dir():
+        raise FileFormatError(f"{path}: is a folder, expected a mesh file")
     if not path.is_file():
         raise FileFormatError(f"{path}: mesh file not found")
     if suffix == ".ply":
@@ -95,8 +104,11 @@ def load_mesh_file(path: str | Path) -> TriangleMesh:
         loaded = loaded.to_mesh()
     if not isinstance(loaded, trimesh.Trimesh) or len(loaded.faces) == 0:
         raise FileFormatError(f"{path}: expected a triangle mesh, found no triangles")
+    vertices = np.asarray(loaded.vertices, dtype=np.float64)
+    if not np.all(np.isfinite(vertices)):
+        raise FileFormatError(f"{path}: expected finite vertices, found "
+                              f"{np.count_nonzero(~np.isfinite(vertices).all(axis=1))} that are not")
     colours = None
     if loaded.visual.kind == "vertex":
         colours = np.asarray(loaded.visual.vertex_colors)[:, :3].astype(np.float32) / 255.0
-    return TriangleMesh(np.asarray(loaded.vertices, dtype=np.float64), np.asarray(loaded.faces, dtype=np.int64),
-                        colours)
+    return TriangleMesh(vertices, np.asarray(loaded.faces, dtype=np.int64), colours)

@@ -49,6 +49,10 @@ def read_pcd(path: Path) -> PointCloud:
     if not len(names) == len(sizes) == len(types) == len(counts):
         raise FileFormatError(f"{path}: expected as many SIZE, TYPE and COUNT entries as FIELDS ({len(names)}), "
                               f"found {len(sizes)}, {len(types)} and {len(counts)}")
+    if any(s not in (1, 2, 4, 8) for s in sizes) or any(c < 1 for c in counts) or n < 0:
+        raise FileFormatError(f"{path}: expected PCD SIZE entries of 1, 2, 4 or 8 bytes, COUNT entries >= 1 and "
+                              f"POINTS >= 0, found SIZE {' '.join(header['SIZE'])}, COUNT "
+                              f"{' '.join(map(str, counts))}, {n} points")
     kind = header["DATA"][0] if header["DATA"] else ""
     columns = {}
     if kind == "binary":

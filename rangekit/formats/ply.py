@@ -282,7 +282,8 @@ def _gather(u8: np.ndarray, offsets: np.ndarray, dtype: str) -> np.ndarray:
 def ply_points(path: Path, header: PlyHeader, vertex: dict) -> np.ndarray:
     props = {p.name: p for p in header.element("vertex").properties}
     if not all(c in props and props[c].count_dtype is None for c in "xyz"):
-        raise FileFormatError(f"{path}: expected vertex properties x, y, z, found {', '.join(props) or 'none'}")
+        found = ", ".join(n + (" (a list)" if p.count_dtype else "") for n, p in props.items())
+        raise FileFormatError(f"{path}: expected vertex properties x, y, z (one number each), found {found or 'none'}")
     return np.column_stack([np.asarray(vertex[c], dtype=np.float64) for c in "xyz"])
 
 

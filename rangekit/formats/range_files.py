@@ -16,6 +16,7 @@ The depth outputs of ``rangekit tof`` and ``rangekit stereo`` are written by
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -26,7 +27,7 @@ from rangekit.formats.capture import list_images, read_stack
 from rangekit.errors import FileFormatError, InputError
 from rangekit.io import read_json
 from rangekit.rig import load_rig
-from rangekit.tof import FrequencyPlan
+from rangekit.tof import FrequencyPlan, round_trip_problem
 
 __all__ = ["ToFFolder", "load_tof_folder", "load_ground_truth"]
 
@@ -59,6 +60,9 @@ def load_tof_folder(folder: str | Path) -> ToFFolder:
         raise FileFormatError(f"{folder}: not a folder (expected a ToF capture folder with tof.json, rig.json and "
                               "samples/)")
     meta = read_json(folder / "tof.json", what="ToF capture description")
+    if not isinstance(meta, dict):
+        raise FileFormatError(f"{folder / 'tof.json'}: expected a JSON object with 'kind', found a "
+                              f"{type(meta).__name__}")
     kind = meta.get("kind")
     if kind not in TOF_KINDS:
         raise FileFormatError(f"{folder / 'tof.json'}: 'kind' must be one of {', '.join(TOF_KINDS)}, found {kind!r}")
@@ -68,10 +72,13 @@ def load_tof_folder(folder: str | Path) -> ToFFolder:
         path = folder / "round_trip_s.npy"
         try:
             dt = np.load(path)
-        except (OSError, ValueError) as exc:
-            raise FileFormatError(f"{path}: cannot read the round-trip times ({exc})") from None
+        except (OSError, ValueError, EOFError) as exc:
+            raise FileFormatError(f"{path}: cannot read the round-trip times ({str(exc)[:200]})") from None
         if dt.shape != (cam.height, cam.width):
             raise FileFormatError(f"{path}: shape {dt.shape} but the camera in rig.json is {cam.width}x{cam.height}")
+        problem = round_trip_problem(dt)
+        if problem:
+            raise FileFormatError(f"{path}: {problem}")
         return ToFFolder(folder, kind, cam, None, None, dt.astype(np.float64), 1.0, 0.0, None)
     try:
         plan = FrequencyPlan.from_dict(meta.get("plan"), where=f"{folder / 'tof.json'}: plan")
@@ -86,19 +93,52 @@ def load_tof_folder(folder: str | Path) -> ToFFolder:
                               f"{plan.n_samples} raw samples, found {len(files)}"
                               + (f" ({files[0].name} ... {files[-1].name})" if files else ""))
     stack = np.stack(read_stack(files))
-    if stack.ndim != 3 or stack.shape[1:] != (cam.height, cam.width):
-        raise FileFormatError(f"{folder / 'samples'}: samples are {stack.shape[1:][::-1]} (width, height) but the "
+    if stack.ndim != 3:
+        raise FileFormatError(f"{folder / 'samples'}: expected single-channel (grey) raw samples, found images of "
+                              f"shape {stack.shape[1:]} ({files[0].name})")
+    if stack.shape[1:] != (cam.height, cam.width):
+        raise FileFormatError(f"{folder / 'samples'}: samples are {stack.shape[2]}x{stack.shape[1]} but the "
                               f"camera in rig.json is {cam.width}x{cam.height}")
-    g = float(meta.get("electrons_per_dn", 1.0))
-    rn = float(meta.get("read_noise_e", 0.0))
-    sat = meta.get("saturation_dn")
-    return ToFFolder(folder, kind, cam, plan, stack, None, g, rn, None if sat is None else float(sat))
+    g = _number(meta, "electrons_per_dn", 1.0, folder / "tof.json", positive=True)
+    rn = _number(meta, "read_noise_e", 0.0, folder / "tof.json")
+    sat = _number(meta, "saturation_dn", None, folder / "tof.json", positive=True)
+    return ToFFolder(folder, kind, cam, plan, stack, None, g, rn, sat)
 
 
-def load_ground_truth(folder: str | Path) -> dict | None:
-    """``ground_truth.npz`` of a simulated capture as a dict of arrays, or None when absent."""
+def _number(meta: dict, key: str, default: float | None, path: Path, *, positive: bool = False) -> float | None:
+    """``meta[key]`` as a finite float (> 0 if ``positive``, else >= 0), ``default`` when absent or null."""
+    value = meta.get(key)
+    if value is None:
+        return default
+    ok = isinstance(value, (int, float)) and not isinstance(value, bool) and np.isfinite(value) \
+        and (value > 0 if positive else value >= 0)
+    if not ok:
+        raise FileFormatError(f"{path}: '{key}' must be a finite number {'> 0' if positive else '>= 0'}, found "
+                              f"{json.dumps(value)[:200]}")
+    return float(value)
+
+
+_TRUTH_MAPS = {"range": "f", "depth": "f", "valid": "b", "hit": "b"}
+
+
+def load_ground_truth(folder: str | Path, *, shape: tuple[int, int] | None = None) -> dict | None:
+    """``ground_truth.npz`` of a simulated capture as a dict of arrays, or None when absent.
+
+    With ``shape`` (H, W), the maps ``range``, ``depth`` (float) and ``valid``, ``hit`` (bool) present in
+    the file must have that shape and kind; FileFormatError naming the file otherwise (or when it cannot be
+    read)."""
     path = Path(folder) / "ground_truth.npz"
     if not path.exists():
         return None
-    with np.load(path) as z:
-        return {k: z[k] for k in z.files}
+    try:
+        with np.load(path) as z:
+            truth = {k: z[k] for k in z.files}
+    except Exception as exc:  # numpy and zipfile raise many types (ValueError, BadZipFile, EOFError...)
+        raise FileFormatError(f"{path}: cannot read the ground truth ({type(exc).__name__}: {str(exc)[:200]}); "
+                              "expected an .npz of maps, or no file") from None
+    for key, kind in _TRUTH_MAPS.items():
+        a = truth.get(key)
+        if shape is not None and a is not None and (a.shape != tuple(shape) or a.dtype.kind != kind):
+            raise FileFormatError(f"{path}: map '{key}' is {a.dtype} {a.shape}, expected "
+                                  f"{'bool' if kind == 'b' else 'float'} {tuple(shape)} like the capture")
+    return truth

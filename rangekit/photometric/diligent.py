@@ -18,6 +18,7 @@ With it the least-squares (L2) baseline on ``ball`` scores 4.17 deg mean angular
 
 from __future__ import annotations
 
+import warnings
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
@@ -49,7 +50,8 @@ class DiligentData:
     intensities : (f, 3) float64 RGB light intensities as in ``light_intensities.txt`` (already divided out).
     mask : (H, W) bool, the object pixels.
     normals_gt : (H, W, 3) float64 unit normals, OpenCV camera frame (facing the camera: z < 0), NaN
-        outside the mask; None when the folder has no ``Normal_gt.mat``.
+        outside the mask (and where the file has a zero or NaN normal); None when the folder has no
+        ``Normal_gt.mat``.
     filenames : image file names in ``filenames.txt`` order (the order of ``images`` and ``lights``).
     grey : the grey conversion applied ("rgb2gray", "mean"), or None for RGB images.
     folder : the folder read.
@@ -90,9 +92,11 @@ def load_diligent(folder: str | Path, *, grey: str | None = "rgb2gray", workers:
     Raises
     ------
     FileFormatError
-        If the folder or a listed file is missing or unreadable; if ``filenames.txt``, the light rows and
+        If the folder or a listed file is missing or unreadable, or a name in ``filenames.txt`` leads out of
+        the folder (an absolute path, ``..``, a symbolic link); if ``filenames.txt``, the light rows and
         the intensity rows disagree in count; if a light row is not unit length or an intensity is not
-        positive; if the images, the mask or the normals differ in size; or if an image is not 16-bit RGB.
+        positive; if the images, the mask or the normals differ in size; if the mask is empty or a mask pixel
+        has no ground-truth normal; or if an image is not 16-bit RGB.
     """
     folder = Path(folder)
     if grey is not None and grey not in GREY_WEIGHTS:
@@ -102,6 +106,7 @@ def load_diligent(folder: str | Path, *, grey: str | None = "rgb2gray", workers:
         raise FileFormatError(f"{folder}: not a folder; expected a DiLiGenT object folder with filenames.txt, "
                               "light_directions.txt, light_intensities.txt, mask.png and the images")
     names = _read_names(folder / "filenames.txt")
+    paths = [_inside(folder, name, folder / "filenames.txt") for name in names]
     lights = _read_rows(folder / "light_directions.txt", len(names))
     intensities = _read_rows(folder / "light_intensities.txt", len(names))
     norms = np.linalg.norm(lights, axis=1)
@@ -118,7 +123,7 @@ def load_diligent(folder: str | Path, *, grey: str | None = "rgb2gray", workers:
     weights = None if grey is None else GREY_WEIGHTS[grey].astype(np.float32)
 
     def read(i: int) -> np.ndarray:
-        return _read_image(folder / names[i], (H, W), intensities[i], weights)
+        return _read_image(paths[i], (H, W), intensities[i], weights)
 
     with ThreadPoolExecutor(max_workers=max(1, int(workers))) as pool:
         images = np.stack(list(pool.map(read, range(len(names)))))
@@ -132,9 +137,43 @@ def _read_names(path: Path) -> list[str]:
         names = [line.strip() for line in path.read_text().splitlines() if line.strip()]
     except OSError as exc:
         raise FileFormatError(f"{path}: cannot read the image list ({exc.strerror or exc})") from exc
+    except UnicodeDecodeError as exc:
+        raise FileFormatError(f"{path}: expected a text file of image names, found bytes that are not text "
+                              f"({exc.reason} at byte {exc.start})") from exc
     if not names:
         raise FileFormatError(f"{path}: no image names; expected one PNG file name per line")
     return names
+
+
+def _quote(text: str, limit: int = 200) -> str:
+    """``repr`` of at most ``limit`` characters of ``text`` (a file may hold anything)."""
+    return repr(text[:limit]) + (f" ({len(text)} characters)" if len(text) > limit else "")
+
+
+def _inside(folder: Path, name: str, listing: Path) -> Path:
+    """The file ``name`` (a line of ``listing``) in ``folder``, refused unless it stays inside the folder:
+    no absolute path, no ``..``, no symbolic link leading out of it."""
+    rel = Path(name)
+    reason = None
+    if "\0" in name:
+        reason = "it contains a NUL character"
+    elif rel.is_absolute():
+        reason = "it is an absolute path"
+    elif ".." in rel.parts:
+        reason = "it climbs out with '..'"
+    elif len(name) > 255:
+        reason = "it is longer than a file name can be"
+    if reason is None:
+        try:
+            target = (folder / rel).resolve()
+            if not target.is_relative_to(folder.resolve()):
+                reason = f"it is a symbolic link to {_quote(str(target))}, outside the folder"
+        except (OSError, RuntimeError) as exc:  # a loop of links, a name the system refuses
+            reason = f"it cannot be resolved ({exc})"
+    if reason:
+        raise FileFormatError(f"{listing}: image name {_quote(name)} is refused: {reason}; expected a file name "
+                              f"inside {folder}")
+    return folder / rel
 
 
 def _read_rows(path: Path, n: int) -> np.ndarray:
@@ -142,9 +181,11 @@ def _read_rows(path: Path, n: int) -> np.ndarray:
     if not path.is_file():
         raise FileFormatError(f"{path}: missing; expected {n} rows of 3 numbers, one per image in filenames.txt")
     try:
-        rows = np.loadtxt(path, dtype=np.float64, ndmin=2)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)  # "input contained no data": reported below
+            rows = np.loadtxt(path, dtype=np.float64, ndmin=2)
     except ValueError as exc:
-        raise FileFormatError(f"{path}: not a table of numbers ({exc})") from exc
+        raise FileFormatError(f"{path}: not a table of numbers ({str(exc)[:200]})") from exc
     if rows.shape != (n, 3) or not np.all(np.isfinite(rows)):
         raise FileFormatError(f"{path}: found {rows.shape[0]} rows of {rows.shape[1] if rows.ndim == 2 else 0} "
                               f"values, expected {n} rows of 3 finite numbers (one per image in filenames.txt)")
@@ -152,6 +193,8 @@ def _read_rows(path: Path, n: int) -> np.ndarray:
 
 
 def _imread(path: Path, what: str) -> np.ndarray:
+    if path.is_dir():
+        raise FileFormatError(f"{path}: is a folder; expected {what}")
     if not path.is_file():
         raise FileFormatError(f"{path}: missing; expected {what}")
     img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
@@ -164,6 +207,9 @@ def _read_mask(path: Path) -> np.ndarray:
     m = _imread(path, "the object mask (non-zero = object)")
     if m.ndim == 3:
         m = m[..., :3].max(axis=2)
+    if not np.any(m > 0):
+        raise FileFormatError(f"{path}: the mask is empty (all {m.shape[1]}x{m.shape[0]} pixels are 0); expected "
+                              "non-zero pixels on the object")
     return m > 0
 
 
@@ -188,16 +234,24 @@ def _read_normals(path: Path, mask: np.ndarray) -> np.ndarray | None:
     import scipy.io  # imported here: only the ground truth needs it
 
     try:
-        N = np.asarray(scipy.io.loadmat(str(path))["Normal_gt"], dtype=np.float64)
-    except KeyError as exc:
-        raise FileFormatError(f"{path}: no variable 'Normal_gt'") from exc
-    except (ValueError, OSError, NotImplementedError) as exc:
-        raise FileFormatError(f"{path}: not a readable MATLAB file ({exc}); save it as MATLAB v7 or older "
-                              "(scipy cannot read v7.3/HDF5 files)") from exc
-    if N.shape != mask.shape + (3,):
-        raise FileFormatError(f"{path}: Normal_gt has shape {N.shape}, expected {mask.shape + (3,)} like mask.png")
-    N = N * _FLIP
+        variables = scipy.io.loadmat(str(path))
+    except Exception as exc:  # scipy raises many types (TypeError, MatReadError, ValueError...) on a damaged file
+        raise FileFormatError(f"{path}: not a readable MATLAB file ({type(exc).__name__}: {str(exc)[:200]}); "
+                              "save it as MATLAB v7 or older (scipy cannot read v7.3/HDF5 files)") from exc
+    if "Normal_gt" not in variables:
+        found = [k for k in variables if not k.startswith("__")]
+        raise FileFormatError(f"{path}: no variable 'Normal_gt', found {_quote(', '.join(found)) if found else 'none'}")
+    raw = np.asarray(variables["Normal_gt"])
+    if raw.dtype.kind not in "fiu" or raw.shape != mask.shape + (3,):
+        raise FileFormatError(f"{path}: Normal_gt has shape {raw.shape}, expected {mask.shape + (3,)} like mask.png, "
+                              f"and type {raw.dtype}, expected real numbers")
+    N = raw.astype(np.float64) * _FLIP
+    length = np.linalg.norm(N, axis=2)
+    known = mask & np.isfinite(length) & (length > 0)
+    if not known.any():
+        raise FileFormatError(f"{path}: none of the {int(mask.sum())} mask pixels has a normal in Normal_gt (all "
+                              "NaN, infinite or zero); expected unit normals on the object")
     with np.errstate(invalid="ignore", divide="ignore"):
-        N /= np.linalg.norm(N, axis=2, keepdims=True)
-    N[~mask] = np.nan
+        N /= length[..., None]
+    N[~known] = np.nan  # outside the mask, and any mask pixel without a normal: not compared
     return N

@@ -119,7 +119,7 @@ def integrate_normals(normals, mask=None, *, pixel_size: float = 1.0, camera=Non
         sp.coo_matrix((np.ones(m), (i0, i1)), shape=(n, n)), directed=False)
     first = np.unique(labels, return_index=True)[1]
     pin = np.zeros(n)
-    pin[first] = max(float(np.mean(a * a)), 1e-12)
+    pin[first] = max(float(np.mean(a * a)), 1e-12) if m else 1.0  # m = 0: isolated pixels only
     # Symmetric-mode SuperLU with minimum-degree ordering of A + A^T: ~2x faster than spsolve here.
     lu = spla.splu(AtA + sp.diags(pin, format="csc"), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
                    options=dict(SymmetricMode=True))

@@ -96,12 +96,15 @@ def check_lights(lights, f: int) -> np.ndarray:
 
 
 def stack_pixels(images: np.ndarray, mask: np.ndarray) -> np.ndarray:
-    """(f, H, W[, 3]) -> (p, f[, 3]) masked pixels, with a NaN check."""
+    """(f, H, W[, 3]) -> (p, f[, 3]) masked pixels, with a NaN check and a check that some light arrived."""
     B = np.moveaxis(images[:, mask], 0, 1)
     if not np.all(np.isfinite(B)):
         n = int((~np.isfinite(B)).any(axis=tuple(range(1, B.ndim))).sum())
         raise InputError(f"images: {n} masked pixels contain NaN/inf; remove them from the mask "
                          f"(e.g. mask &= np.isfinite(images).all(axis=0))")
+    if not np.any(B > 0):  # every normal would be 0/0: NaN maps that look like a result
+        raise InputError(f"images: all {B.shape[1]} images are black (no value > 0) in the {B.shape[0]} masked "
+                         "pixels: the images carry no light; expected images of the object lit by each light")
     return B
 
 

@@ -35,6 +35,9 @@ def _integrability_gbr(E: np.ndarray) -> np.ndarray:
     ok = np.isfinite(ex).all(2) & np.isfinite(ey).all(2) & np.isfinite(E).all(2)
     ok[:, [0, -1]] = False
     ok[[0, -1], :] = False
+    if np.count_nonzero(ok) < 6:  # six unknowns in theta below; fewer rows leave them undetermined
+        raise InputError(f"mask: uncalibrated photometric stereo needs at least 6 mask pixels whose four "
+                         f"neighbours are in the mask too (integrability), found {np.count_nonzero(ok)}")
     e, ex, ey = E[ok], ex[ok], ey[ok]
     pairs = [(0, 1), (0, 2), (1, 2)]
     Py = [e[:, i] * ey[:, j] - e[:, j] * ey[:, i] for i, j in pairs]
@@ -94,6 +97,12 @@ def uncalibrated_photometric_stereo(images, mask=None, *, shadow_threshold: floa
     rng = np.random.default_rng(rng)
     W = (B > shadow_threshold * B.max(axis=1, keepdims=True)).astype(np.float64)
     sub = rng.choice(len(B), size=min(max_fit_pixels, len(B)), replace=False)
+    spread = np.linalg.svd(B[sub], compute_uv=False)
+    if len(spread) < 3 or not spread[2] > 1e-6 * spread[0]:
+        raise InputError(f"images: the {f} images vary with the light in fewer than 3 independent ways over the "
+                         f"{len(B)} masked pixels (rank {int(np.sum(spread > 1e-6 * spread[0]))} < 3); "
+                         "uncalibrated photometric stereo needs lights from at least 3 directions, "
+                         "not in one plane, and a curved surface")
     _, S0 = _rank3_with_shadows(B[sub], W[sub])
     X0 = np.empty((len(B), 3))
     for i in range(0, len(B), CHUNK):

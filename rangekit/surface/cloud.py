@@ -11,10 +11,10 @@ from typing import Sequence
 
 import numpy as np
 
-from rangekit.errors import InputError
+from rangekit.errors import InputError, MeshError
 
 __all__ = ["PointCloud", "to_open3d", "voxel_downsample", "estimate_normals", "orient_normals_to_sensor",
-           "oriented_normals_cloud", "transform_cloud", "merge_clouds"]
+           "oriented_normals_cloud", "transform_cloud", "merge_clouds", "affine_dimension", "spread_problem"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -57,6 +57,42 @@ def to_open3d(cloud: PointCloud):
         pc.normals = o3d.utility.Vector3dVector(cloud.normals)
     return pc
 
+
+
+def affine_dimension(points: np.ndarray, *, rel_tol: float = 1e-6) -> int:
+    """Dimension of the smallest affine space holding the finite ``points`` (N, 3): 0 (none, one point or
+    all identical), 1 (a line), 2 (a plane) or 3. A direction counts when the points spread along it by
+    more than ``rel_tol`` times their largest spread (1e-6: a micrometre over a metre is flat)."""
+    P = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    P = P[np.isfinite(P).all(axis=1)]
+    if len(P) < 2 or not np.ptp(P, axis=0).max() > 1e-12 * (1.0 + np.abs(P).max()):
+        return 0
+    Q = P - P.mean(axis=0)
+    spread = np.sqrt(np.clip(np.linalg.eigvalsh(Q.T @ Q), 0.0, None))  # singular values of Q, ascending
+    return int(np.count_nonzero(spread > rel_tol * spread[-1]))
+
+
+_SHAPES = {0: "all at one point", 1: "all on one line", 2: "all in one plane"}
+
+
+def spread_problem(points: np.ndarray, *, min_points: int, dimension: int = 3,
+                   noun: tuple[str, str] = ("finite point", "finite points")) -> str | None:
+    """Why ``points`` (N, 3) are too few or too flat to build a surface from, or None.
+
+    The reason reads "need at least 10 points not all in one plane, found 3 points, all on one line":
+    at least ``min_points`` finite points spanning ``dimension`` dimensions (3: not in one plane; 2: not
+    on one line). ``noun`` (singular, plural) names what was counted.
+    """
+    P = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    n = int(np.count_nonzero(np.isfinite(P).all(axis=1)))
+    dim = affine_dimension(P)
+    if n >= min_points and dim >= dimension:
+        return None
+    need = {3: " not all in one plane", 2: " not all on one line", 1: " not all at one point"}.get(dimension, "")
+    found = f"{n} {noun[n != 1]}" + (f" of {len(P)}" if n != len(P) else "")
+    if dim < dimension and n > 1:
+        found += f", {_SHAPES[dim]}"
+    return f"need at least {min_points} points{need}, found {found}"
 
 
 def voxel_downsample(points: np.ndarray, voxel: float, *,
@@ -138,19 +174,34 @@ def oriented_normals_cloud(points: np.ndarray, *, voxel: float | None = None) ->
 
     Normals are estimated from 30 neighbours, pointed away from the centroid, then made consistent by
     propagation over a neighbour graph (Open3D), which also gets concave parts right where the centroid
-    rule fails. ``voxel`` default: bounding-box diagonal / 400.
+    rule fails. ``voxel`` default: bounding-box diagonal / 400. Non-finite points are dropped.
+
+    Raises
+    ------
+    MeshError
+        If fewer than 4 distinct points not all in one plane are left after downsampling: "outward" needs
+        an inside (and the propagation, a Delaunay tetrahedralisation in Qhull, fails on flat input).
     """
     import open3d as o3d
 
-    diag = float(np.linalg.norm(np.ptp(points, axis=0)))
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    points = points[np.isfinite(points).all(axis=1)]
+    diag = float(np.linalg.norm(np.ptp(points, axis=0))) if len(points) else 0.0
     v = voxel or diag / 400
     P, _ = voxel_downsample(points, v)
+    problem = spread_problem(P, min_points=4)
+    if problem:
+        raise MeshError(f"cannot orient normals outwards: {problem}" + (f" (after {v:.3g} m voxels)" if len(P) < len(points) else ""))
     n = estimate_normals(P, k=30)
     out = np.einsum("ij,ij->i", n, P - P.mean(axis=0)) < 0
     n[out] *= -1
     pc = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(P))
     pc.normals = o3d.utility.Vector3dVector(n)
-    pc.orient_normals_consistent_tangent_plane(20)
+    try:
+        pc.orient_normals_consistent_tangent_plane(20)
+    except RuntimeError as exc:  # Qhull on nearly flat or nearly coincident input
+        raise MeshError(f"cannot orient normals outwards on {len(P)} points: the neighbour graph failed "
+                        f"({str(exc).splitlines()[0][:200]}); are the points nearly all in one plane?") from None
     n = np.asarray(pc.normals)
     if np.mean(np.einsum("ij,ij->i", n, P - P.mean(axis=0)) < 0) > 0.5:  # propagation may flip all
         n = -n

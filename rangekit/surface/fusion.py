@@ -18,12 +18,24 @@ import numpy as np
 from rangekit.camera import PinholeCamera, pixel_rays
 from rangekit.errors import InputError, MeshError
 from rangekit.geometry import transform_vectors
-from rangekit.surface.cloud import PointCloud
+from rangekit.surface.cloud import PointCloud, spread_problem
 from rangekit.surface.cloud import to_open3d as _cloud_to_open3d
 from rangekit.surface.mesh import TriangleMesh, mesh_from_open3d
 from rangekit.surface.watertight import clean_mesh, make_watertight
 
-__all__ = ["poisson_mesh", "tsdf_fuse"]
+__all__ = ["poisson_mesh", "poisson_input_problem", "tsdf_fuse"]
+
+#: Fewest oriented points :func:`poisson_mesh` accepts.
+MIN_POISSON_POINTS = 10
+
+
+def poisson_input_problem(points: np.ndarray, *, watertight: bool = True,
+                          noun: tuple[str, str] = ("finite point", "finite points")) -> str | None:
+    """Why :func:`poisson_mesh` cannot mesh ``points`` (N, 3), or None: fewer than 10 finite points, or
+    points all at one point or on one line (no surface), or all in one plane when ``watertight`` (a closed
+    surface of them would enclose nothing)."""
+    return spread_problem(points, min_points=MIN_POISSON_POINTS, dimension=3 if watertight else 2, noun=noun)
+
 
 
 def poisson_mesh(cloud: PointCloud, *, depth: int = 9, density_quantile: float = 0.02, watertight: bool = True,
@@ -49,13 +61,14 @@ def poisson_mesh(cloud: PointCloud, *, depth: int = 9, density_quantile: float =
 
     Raises
     ------
+    MeshError
+        If fewer than 10 points have finite coordinates and normals, or they are all on one line (all in
+        one plane when ``watertight``): see :func:`poisson_input_problem`.
     InputError
-        If the cloud has fewer than 10 finite points or no normals. Normals are not estimated here on
+        If the cloud has no normals. Normals are not estimated here on
         purpose: on a cloud merged from many views their sign cannot be recovered reliably; orient them
         towards the sensor per view before merging.
     """
-    import open3d as o3d
-
     if not isinstance(cloud, PointCloud):
         raise InputError(f"poisson_mesh: expected a rangekit PointCloud, found {type(cloud).__name__}")
     if cloud.normals is None:
@@ -68,11 +81,16 @@ def poisson_mesh(cloud: PointCloud, *, depth: int = 9, density_quantile: float =
         raise InputError(f"poisson_mesh: density_quantile must be in [0, 1), found {density_quantile}")
     with np.errstate(invalid="ignore"):
         ok = np.all(np.isfinite(cloud.points), axis=1) & (np.linalg.norm(cloud.normals, axis=1) > 0)
-    if np.count_nonzero(ok) < 10:
-        raise InputError(f"poisson_mesh: need at least 10 points with finite coordinates and normals, found "
-                         f"{np.count_nonzero(ok)} of {len(cloud)}")
+    problem = poisson_input_problem(cloud.points[ok], watertight=watertight,
+                                    noun=("point with a normal", "points with a normal"))
+    if problem:
+        raise MeshError(f"cannot build a {'closed ' if watertight else ''}surface: {problem}"
+                        + (f" ({len(cloud)} points, {len(cloud) - np.count_nonzero(ok)} of them with a NaN, "
+                           "infinite or zero coordinate or normal)" if not ok.all() else ""))
     if not ok.all():
         cloud = PointCloud(cloud.points[ok], None if cloud.colours is None else cloud.colours[ok], cloud.normals[ok])
+
+    import open3d as o3d
 
     # Screened Poisson: indicator function whose gradient fits the normals, iso-surface at the samples.
     m, density = o3d.geometry.TriangleMesh.create_from_point_cloud_poisson(

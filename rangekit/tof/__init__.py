@@ -32,7 +32,7 @@ from rangekit.tof.decode import ToFResult, decode_cw
 from rangekit.tof.phase import (PhaseMaps, UnwrapResult, phase_amplitude_offset, phase_to_range, range_sigma,
                                 unwrap_ranges)
 from rangekit.tof.plan import C_LIGHT, FrequencyPlan
-from rangekit.tof.pulsed import pulsed_range
+from rangekit.tof.pulsed import MAX_ROUND_TRIP_S, pulsed_range, round_trip_problem
 from rangekit.tof.range_maps import flying_pixels, range_to_depth, range_to_points
 
 __all__ = [
@@ -42,6 +42,8 @@ __all__ = [
     "UnwrapResult",
     "ToFResult",
     "pulsed_range",
+    "round_trip_problem",
+    "MAX_ROUND_TRIP_S",
     "phase_amplitude_offset",
     "phase_to_range",
     "range_sigma",

@@ -28,6 +28,7 @@ import time
 import numpy as np
 
 from rangekit.camera import PinholeCamera
+from rangekit.drivers.discovery import check_search_timeout, search_depthai
 from rangekit.errors import ConfigError, DeviceDisconnected, DeviceError, DeviceTimeout
 from rangekit.rig import Rig
 from rangekit.rig_checks import DEPTHAI_SOCKETS
@@ -50,8 +51,8 @@ DEPTHAI_NAMES = [
     "CameraControl.setManualExposure", "Clock.now",
     "Device", "Device.close", "Device.readCalibration", "Device.getConnectedCameras", "Device.getDeviceId",
     "Device.setIrLaserDotProjectorIntensity", "Device.setIrFloodLightIntensity",
-    "Device.getAllAvailableDevices", "DeviceInfo.getDeviceId", "DeviceInfo.name", "DeviceInfo.state",
-    "DeviceInfo.protocol", "DeviceInfo.platform",
+    "XLinkConnection.getAllConnectedDevices", "XLinkDeviceState.X_LINK_BOOTED",
+    "DeviceInfo.getDeviceId", "DeviceInfo.name", "DeviceInfo.state", "DeviceInfo.protocol", "DeviceInfo.platform",
     "CalibrationHandler", "CalibrationHandler.getDefaultIntrinsics",
     "CalibrationHandler.getDistortionCoefficients", "CalibrationHandler.getDistortionModel",
     "CalibrationHandler.getCameraExtrinsics", "CalibrationHandler.hasCameraCalibration",
@@ -160,30 +161,39 @@ def _open_device(dai, device_id: str | None, search_timeout_s: float):
     """Find the device (polling, so the timeout holds on every call) and open it.
 
     depthai reads DEPTHAI_SEARCH_TIMEOUT once per process, at its first search, so the deadline here is
-    enforced by polling ``Device.getAllAvailableDevices()`` (about 0.5 s per poll) until the device is
-    listed; a device that is rebooting after a previous ``close()`` shows up again within that time.
+    enforced by polling :func:`rangekit.drivers.discovery.search_depthai`, each search bounded by the time
+    left (at most 0.5 s), until the device is listed and free; a device that is rebooting after a previous
+    ``close()`` shows up again within that time. Runs on the calling thread: nothing is left inside
+    depthai when this returns or raises.
     """
+    check_search_timeout(search_timeout_s)
     os.environ.setdefault("DEPTHAI_SEARCH_TIMEOUT", str(max(1, int(round(search_timeout_s * 1000)))))
     who = f"depthai device {device_id!r}" if device_id else "a depthai device"
-    deadline = time.monotonic() + search_timeout_s
+    t0 = time.monotonic()
+    deadline = t0 + search_timeout_s
     while True:
         try:
-            infos = dai.Device.getAllAvailableDevices()
+            infos = search_depthai(dai, min(0.5, max(0.0, deadline - time.monotonic())))
         except RuntimeError as exc:
             raise DeviceError(f"{who}: the device search failed: {exc}") from exc
         match = [i for i in infos if device_id is None or device_id in (i.getDeviceId(), i.name)]
-        if match:
+        free = [i for i in match if i.state != dai.XLinkDeviceState.X_LINK_BOOTED]
+        if free:
             break
         if time.monotonic() >= deadline:
-            others = f"; found only {[i.getDeviceId() for i in infos]}" if infos else ""
-            raise DeviceDisconnected(f"{who}: none answered within {search_timeout_s:.1f} s{others}; check the "
-                                     "USB/PoE cable and power and that no other program holds it, list devices "
-                                     "with 'rangekit devices', or raise search_timeout_s")
-        time.sleep(0.05)
+            if match:
+                found = f"; {match[0].getDeviceId()} is held by another program (state X_LINK_BOOTED)"
+            else:
+                found = f"; found only {[i.getDeviceId() for i in infos]}" if infos else ""
+            raise DeviceDisconnected(f"{who}: none answered within search_timeout_s={search_timeout_s:g} s "
+                                     f"(searched {time.monotonic() - t0:.2f} s){found}; check the USB/PoE cable "
+                                     "and power and that no other program holds it, list devices with "
+                                     "'rangekit devices', or raise search_timeout_s")
+        time.sleep(min(0.05, max(0.0, deadline - time.monotonic())))
     try:
-        return dai.Device(match[0])
+        return dai.Device(free[0])
     except RuntimeError as exc:
-        raise DeviceError(f"{who}: found {match[0].getDeviceId()} but could not open it: {exc}; close other "
+        raise DeviceError(f"{who}: found {free[0].getDeviceId()} but could not open it: {exc}; close other "
                           "programs using it and replug it") from exc
 
 

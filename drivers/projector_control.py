@@ -13,8 +13,8 @@ import hashlib
 import socket
 import time
 
-from rangekit.drivers.serial_link import SerialLink
-from rangekit.errors import CommandError, ConfigError, DeviceDisconnected, DeviceTimeout, ProtocolError
+from rangekit.drivers.serial_link import MAX_REPLY_BYTES, SerialLink
+from rangekit.errors import CommandError, ConfigError, DeviceDisconnected, DeviceTimeout, ProtocolError, quote
 from rangekit.rig_checks import PROJECTOR_PROTOCOLS
 
 __all__ = ["EscVp21Projector", "PJLinkProjector", "make_projector_control", "PROJECTOR_PROTOCOLS"]
@@ -51,7 +51,7 @@ class EscVp21Projector:
         for ln in lines:
             if ln.startswith("PWR="):
                 return ln[4:] in ("01", "02")  # 01 lamp on, 02 warming up
-        raise ProtocolError(f"{self.link.label}: 'PWR?' answered {lines!r}; expected 'PWR=NN'")
+        raise ProtocolError(f"{self.link.label}: 'PWR?' answered {quote(chr(10).join(lines))}; expected 'PWR=NN'")
 
     def blank(self, on: bool) -> None:
         """A/V mute: the projector shows black without switching off."""
@@ -93,7 +93,7 @@ class PJLinkProjector:
                                       "rig file (devices.projector.control.password)")
                 self._prefix = hashlib.md5((greeting.split()[2] + password).encode()).hexdigest()
             else:
-                raise ProtocolError(f"{self.label}: expected a PJLink greeting 'PJLINK 0|1', received {greeting!r}")
+                raise ProtocolError(f"{self.label}: expected a PJLink greeting 'PJLINK 0|1', received {quote(greeting)}")
         except Exception:
             self._sock.close()
             raise
@@ -105,7 +105,7 @@ class PJLinkProjector:
             left = deadline - time.monotonic()
             if left <= 0:
                 raise DeviceTimeout(f"{self.label}: no {what} within {self.timeout:.1f} s after {self._last}; "
-                                    f"received {self._buf!r}")
+                                    f"received {quote(self._buf)}")
             self._sock.settimeout(left)
             try:
                 chunk = self._sock.recv(1024)
@@ -116,11 +116,16 @@ class PJLinkProjector:
             if not chunk:
                 raise DeviceDisconnected(f"{self.label}: the projector closed the connection (waiting for {what})")
             self._buf += chunk
+            if len(self._buf) > MAX_REPLY_BYTES and b"\r" not in self._buf:
+                bad, self._buf = self._buf, b""
+                raise ProtocolError(f"{self.label}: expected {what} after {self._last}, received more than "
+                                    f"{MAX_REPLY_BYTES} bytes without a CR ({quote(bad)}); is this a PJLink "
+                                    "projector?")
         line, self._buf = self._buf.split(b"\r", 1)
         try:
             return line.decode("ascii").strip()
         except UnicodeDecodeError as exc:
-            raise ProtocolError(f"{self.label}: non-ASCII reply {line!r} to {self._last}; is this a PJLink "
+            raise ProtocolError(f"{self.label}: non-ASCII reply {quote(line)} to {self._last}; is this a PJLink "
                                 "projector?") from exc
 
     def _command(self, body: str, param: str) -> str:
@@ -133,12 +138,12 @@ class PJLinkProjector:
         if line == "PJLINK ERRA":
             raise CommandError(f"{self.label}: PJLink authentication failed (wrong password)")
         if not line.startswith(f"%1{body}="):
-            raise ProtocolError(f"{self.label}: %1{body} answered {line!r}; expected '%1{body}=...'")
+            raise ProtocolError(f"{self.label}: %1{body} answered {quote(line)}; expected '%1{body}=...'")
         value = line.split("=", 1)[1]
         if value.startswith("ERR"):
             meaning = {"ERR1": "undefined command", "ERR2": "parameter out of range",
-                       "ERR3": "unavailable now (warming up or off)", "ERR4": "projector failure"}.get(value, value)
-            raise CommandError(f"{self.label}: %1{body} {param} was refused: {value} ({meaning})")
+                       "ERR3": "unavailable now (warming up or off)", "ERR4": "projector failure"}.get(value, "unknown")
+            raise CommandError(f"{self.label}: %1{body} {param} was refused: {quote(value)} ({meaning})")
         return value
 
     def power(self, on: bool) -> None:

@@ -8,10 +8,13 @@ was expected and the bytes that did arrive:
 
 - the port cannot be opened, or goes away (``serial.SerialException``, ``OSError``) -> ``DeviceDisconnected``
 - nothing complete arrives before the deadline -> ``DeviceTimeout`` (partial bytes in the message)
-- bytes that are not printable ASCII (wrong baud rate, wrong firmware) -> ``ProtocolError``
+- bytes that are not printable ASCII (wrong baud rate, wrong firmware), or a reply longer than
+  :data:`MAX_REPLY_BYTES` without its terminator -> ``ProtocolError``
 - an ``error...`` reply to :meth:`SerialLink.command` -> ``CommandError``
 
 After any of these but ``DeviceDisconnected``, call :meth:`SerialLink.flush` before the next command.
+Messages quote at most :data:`rangekit.errors.QUOTE_LIMIT` bytes of what the device sent, escaped
+(:func:`rangekit.errors.quote`), so a babbling device cannot flood the terminal or the memory.
 """
 
 from __future__ import annotations
@@ -20,12 +23,14 @@ import time
 
 import serial
 
-from rangekit.errors import CommandError, DeviceDisconnected, DeviceTimeout, ProtocolError
+from rangekit.errors import CommandError, DeviceDisconnected, DeviceTimeout, ProtocolError, quote
 
-__all__ = ["SerialLink"]
+__all__ = ["SerialLink", "MAX_REPLY_BYTES"]
 
 _READ_SLICE = 0.02  # seconds; longest a single read blocks, so deadlines overshoot by at most this
-_ALLOWED = frozenset(range(0x20, 0x7F)) | {0x09, 0x0A, 0x0D}  # printable ASCII, tab, CR, LF
+_ALLOWED = bytes(range(0x20, 0x7F)) + b"\t\n\r"  # printable ASCII, tab, CR, LF
+#: The longest reply (bytes up to and including its terminator) a read accepts: longer is a ProtocolError.
+MAX_REPLY_BYTES = 4096
 _GARBAGE_SETTLE = 0.05  # seconds to keep reading after a bad byte, so the message shows the whole burst
 
 
@@ -84,7 +89,7 @@ class SerialLink:
             self._port.write(data)
             self._port.flush()
         except (serial.SerialException, OSError) as exc:
-            raise DeviceDisconnected(f"{self.label}: writing {data!r} failed ({exc}); "
+            raise DeviceDisconnected(f"{self.label}: writing {quote(data)} failed ({exc}); "
                                      f"was the device unplugged?") from exc
         self._last_sent = what if what is not None else repr(data)
         self._last_write_t = time.monotonic()
@@ -110,23 +115,30 @@ class SerialLink:
         """
         while True:
             ends = [self._buf.find(t) + len(t) for t in terminators if t in self._buf]
-            if ends:
-                end = min(ends)
-                out = bytes(self._buf[:end])
-                del self._buf[:end]
-                return out
-            if any(b not in _ALLOWED for b in self._buf):
+            end = min(ends) if ends else len(self._buf)
+            if self._buf[:end].translate(None, _ALLOWED):
                 self._read_chunk(min(deadline, time.monotonic() + _GARBAGE_SETTLE), drain=True)
                 bad = bytes(self._buf)
                 self._buf.clear()
                 raise ProtocolError(
                     f"{self.label}: expected {waiting_for} after {self._sent}, received "
-                    f"non-ASCII bytes {bad!r}; check the baud rate ({self.baud}) and that the board "
+                    f"non-ASCII bytes {quote(bad)}; check the baud rate ({self.baud}) and that the board "
                     f"runs the expected firmware")
+            if end > MAX_REPLY_BYTES:
+                bad = bytes(self._buf)
+                self._buf.clear()
+                raise ProtocolError(
+                    f"{self.label}: expected {waiting_for} after {self._sent}, received a reply of more "
+                    f"than {MAX_REPLY_BYTES} bytes without its end ({quote(bad)}); check the baud rate "
+                    f"({self.baud}) and that the board runs the expected firmware")
+            if ends:
+                out = bytes(self._buf[:end])
+                del self._buf[:end]
+                return out
             if time.monotonic() >= deadline:
                 waited = max(0.0, deadline - self._last_write_t)
                 raise DeviceTimeout(f"{self.label}: no {waiting_for} within {waited:.1f} s after "
-                                    f"{self._sent}; received {bytes(self._buf)!r}")
+                                    f"{self._sent}; received {quote(self._buf)}")
             self._read_chunk(deadline)
 
     def read_line(self, deadline: float | None = None, *, waiting_for: str = "line") -> str:
@@ -148,7 +160,7 @@ class SerialLink:
                 raise DeviceDisconnected(f"{self.label}: reading failed while waiting after "
                                          f"{self._sent} ({exc}); was the device unplugged?") from exc
             self._buf += chunk
-            if not drain or time.monotonic() >= deadline:
+            if not drain or time.monotonic() >= deadline or len(self._buf) > MAX_REPLY_BYTES:
                 return
 
     # -- commands ------------------------------------------------------------------------------
@@ -173,10 +185,10 @@ class SerialLink:
                 return lines
             if error_prefix and line.lower().startswith(error_prefix):
                 raise CommandError(f"{self.label}: {text!r} was refused: expected {expect!r}, "
-                                   f"received {line!r}")
+                                   f"received {quote(line)}")
             if any(line.startswith(p) for p in reset_prefixes):
                 raise ProtocolError(f"{self.label}: reset during {text!r}: expected {expect!r}, received "
-                                    f"the boot banner {line!r}; the command was lost and the position "
+                                    f"the boot banner {quote(line)}; the command was lost and the position "
                                     f"origin is reset")
             lines.append(line)
 

@@ -26,7 +26,8 @@ from contextlib import contextmanager
 from typing import Iterator
 
 from rangekit.drivers.serial_link import SerialLink
-from rangekit.errors import ConfigError, DeviceError, DeviceDisconnected, DeviceTimeout, InputError, ProtocolError
+from rangekit.errors import (ConfigError, DeviceError, DeviceDisconnected, DeviceTimeout, InputError, ProtocolError,
+                             quote)
 from rangekit.rig_checks import TURNTABLE_PROTOCOLS
 
 __all__ = ["HorusTurntable", "FabScanTurntable", "make_turntable", "TURNTABLE_PROTOCOLS"]
@@ -150,7 +151,7 @@ class HorusTurntable(_SerialTurntable):
                     raise DeviceTimeout(f"{link.label}: no answer to Ctrl-X (0x18) within {link.timeout:.1f} s; "
                                         f"is the board powered and on this port?") from exc
                 raise ProtocolError(f"{link.label}: expected the banner \"Horus <version> ['$' for help]\" "
-                                    f"after Ctrl-X (0x18), received {received!r}; is this a Horus/Ciclop "
+                                    f"after Ctrl-X (0x18), received {quote(received)}; is this a Horus/Ciclop "
                                     f"board (protocol 'horus') at {link.baud} baud?") from exc
             except ProtocolError:
                 link.flush()
@@ -175,11 +176,11 @@ class HorusTurntable(_SerialTurntable):
                 continue  # a late 'ok' or a [MSG:...] line is not an answer to '?'
             if line.startswith(_BANNER_PREFIXES):
                 raise ProtocolError(f"{link.label}: reset during a status query: expected '<Idle|Run,"
-                                    f"MPos:...>', received the boot banner {line!r}; the origin is reset")
+                                    f"MPos:...>', received the boot banner {quote(line)}; the origin is reset")
             m = _STATUS.match(line)
             if m is None:
                 raise ProtocolError(f"{link.label}: expected a status report '<Idle,MPos:x,y,z,...>' after "
-                                    f"'?', received {line!r}")
+                                    f"'?', received {quote(line)}")
             return m["state"], float(m["x"]), line
 
     # -- Turntable protocol ----------------------------------------------------------------------
@@ -214,11 +215,11 @@ class HorusTurntable(_SerialTurntable):
                 if state.lower() == "idle" and abs(x_deg - target_deg) <= tol_deg:
                     return
                 if state.lower() == "alarm":
-                    raise DeviceError(f"{link.label}: alarm during {command!r}: {report!r}; "
+                    raise DeviceError(f"{link.label}: alarm during {command!r}: {quote(report)}; "
                                       f"reconnect (Ctrl-X) and zero the table")
                 if time.monotonic() > deadline:
                     raise DeviceTimeout(f"{link.label}: motion {command!r} not finished within {limit_s:.1f} s; "
-                                        f"expected Idle at X={target_deg:.3f}, last status {report!r}")
+                                        f"expected Idle at X={target_deg:.3f}, last status {quote(report)}")
                 time.sleep(self.poll_interval)
 
     # -- extras ----------------------------------------------------------------------------------
@@ -290,7 +291,7 @@ class FabScanTurntable(_SerialTurntable):
             deadline = time.monotonic() + (link.timeout if timeout is None else timeout)
             echo = link.read_until((b"\n", b"\r"), deadline, waiting_for=f"echo of {text!r}")
             if echo.strip(b"\r\n") != text.encode("ascii"):
-                raise ProtocolError(f"{link.label}: expected the echo {text!r} then '>', received {echo!r}; "
+                raise ProtocolError(f"{link.label}: expected the echo {text!r} then '>', received {quote(echo)}; "
                                     f"is this a FabScan board (protocol 'fabscan') at {link.baud} baud?")
             rest = link.read_until((b">",), deadline, waiting_for="prompt '>'")
         lines = rest[:-1].decode("ascii").replace("\r", "\n").split("\n")

@@ -30,6 +30,8 @@ __all__ = [
     "ProtocolError",
     "CommandError",
     "StorageError",
+    "QUOTE_LIMIT",
+    "quote",
 ]
 
 
@@ -118,3 +120,20 @@ def naming(source) -> Iterator[None]:
         if str(exc).startswith(text):
             raise
         raise type(exc)(f"{text}: {exc}") from exc
+
+
+#: The most characters (or bytes) of outside text an error message quotes: a device's reply, a line of a file.
+QUOTE_LIMIT = 200
+
+
+def quote(data: bytes | bytearray | str, limit: int = QUOTE_LIMIT) -> str:
+    """``repr`` of at most ``limit`` bytes (characters) of ``data`` for an error message, so control
+    characters and binary are escaped and a huge reply cannot flood the terminal: ``b'ok'``, or
+    ``b'xxx...'... (10000 bytes)`` when longer.
+    """
+    if isinstance(data, bytearray):
+        data = bytes(data)
+    if len(data) <= limit:
+        return repr(data)
+    unit = "characters" if isinstance(data, str) else "bytes"
+    return f"{data[:limit]!r}... ({len(data)} {unit})"

@@ -38,10 +38,11 @@ class DepthRun:
 
 def tof_depth_files(raw_dir: str | Path, out: str | Path, *, min_snr: float = 3.0,
                     flying_angle: float | None = math.radians(15.0), max_range: float | None = None,
-                    progress: Callable | None = None) -> DepthRun:
+                    min_fill: float | None = 0.5, progress: Callable | None = None) -> DepthRun:
     """Range, depth, confidence and a cloud from a ToF capture folder (pulsed or continuous wave).
 
-    ``flying_angle`` (radians) None keeps flying pixels; ``max_range`` metres (None: the plan's unambiguous
+    ``flying_angle`` (radians) None keeps flying pixels, ``min_fill`` None partially covered ones
+    (:func:`rangekit.tof.partial_pixels`); ``max_range`` metres (None: the plan's unambiguous
     range). Against ``ground_truth.npz``: range RMS without wrong wraps (errors above 0.3 m).
     """
     from rangekit.tof import decode_cw, pulsed_range, range_to_depth, range_to_points
@@ -58,12 +59,13 @@ def tof_depth_files(raw_dir: str | Path, out: str | Path, *, min_snr: float = 3.
     else:
         res = decode_cw(raw.samples, raw.plan, cam, electrons_per_unit=raw.electrons_per_dn,
                         read_noise_e=raw.read_noise_e, saturation=raw.saturation_dn, min_snr=min_snr,
-                        flying_angle=flying_angle, max_range=max_range)
+                        flying_angle=flying_angle, max_range=max_range, min_fill=min_fill)
         rng_map, depth, points, confidence, valid = res.range, res.depth, res.points, res.confidence, res.valid
         n = valid.size
         call_progress(progress, f"{raw.plan.describe()} ({raw.plan.unambiguous_range:.3f} m unambiguous): valid "
                                 f"{valid.sum() / n:.1%}, low signal {res.low_signal.sum() / n:.1%}, ambiguous "
-                                f"{res.ambiguous.sum() / n:.1%}, flying {res.flying.sum() / n:.1%}")
+                                f"{res.ambiguous.sum() / n:.1%}, flying {res.flying.sum() / n:.1%}, partial "
+                                f"{res.partial.sum() / n:.1%}")
     truth = load_ground_truth(raw_dir, shape=rng_map.shape)
     if truth is not None and "range" in truth:
         ok = valid & np.isfinite(truth["range"]) & truth.get("valid", np.ones_like(valid))

@@ -61,6 +61,14 @@ def non_negative_float(text: str) -> float:
     return _number(float, text, lambda v: v >= 0, "a finite number >= 0")
 
 
+def float_in(lo: float, hi: float):
+    """Argument type factory: a finite number in [lo, hi]."""
+    def parse(text: str) -> float:
+        return _number(float, text, lambda v: lo <= v <= hi, f"a number in {lo:g}..{hi:g}")
+    parse.__name__ = f"float_{lo:g}_{hi:g}"
+    return parse
+
+
 def finite_float(text: str) -> float:
     """Argument type: any finite number (no nan, no inf)."""
     return _number(float, text, lambda v: True, "a finite number")

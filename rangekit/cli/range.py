@@ -17,7 +17,7 @@ def cmd_tof(args: argparse.Namespace) -> int:
     check_output(args.out, folder=True)
     run = tof_depth_files(args.raw_dir, args.out, min_snr=args.min_snr,
                           flying_angle=None if args.keep_flying else math.radians(args.flying_angle_deg),
-                          max_range=args.max_range, progress=say)
+                          max_range=args.max_range, min_fill=None if args.keep_flying else 0.5, progress=say)
     say(f"wrote {args.out}/{', '.join(run.names)} ({run.n_points:,} points) in {time.perf_counter() - t0:.1f} s")
     return 0
 
@@ -47,7 +47,8 @@ def add_parsers(sub) -> None:
                       help="drop pixels whose phase noise exceeds 1/MIN_SNR rad (default 3)")
     tofp.add_argument("--flying-angle-deg", type=positive_float, default=15.0,
                       help="flying-pixel filter threshold in degrees (default 15)")
-    tofp.add_argument("--keep-flying", action="store_true", help="do not filter flying pixels")
+    tofp.add_argument("--keep-flying", action="store_true", help="do not filter mixed pixels (flying, or partially "
+                                                                    "covered at depth edges)")
     tofp.set_defaults(func=cmd_tof)
 
     stp = sub.add_parser("stereo", help="active stereo: depth of the left camera from a stereo pair",

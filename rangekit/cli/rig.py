@@ -8,7 +8,8 @@ import json
 import sys
 import time
 
-from rangekit.cli._common import check_output, console, int_in, non_negative_float, positive_float, say, seed
+from rangekit.cli._common import check_output, console, float_in, int_in, positive_float, say, seed
+from rangekit.drivers.discovery import MAX_SEARCH_S
 
 
 def cmd_rig_init(args: argparse.Namespace) -> int:
@@ -58,8 +59,10 @@ def cmd_devices(args: argparse.Namespace) -> int:
     say("serial ports:" if ports else "serial ports: none found")
     for p in ports:
         say(f"  {p['device']}  {p['description']}  USB {p['vid_pid'] or '-'}  serial {p['serial_number'] or '-'}")
+    t0 = time.monotonic()
     cams = list_depthai_devices(timeout_s=args.timeout)
-    say("depthai devices:" if cams else "depthai devices: none found")
+    searched = f"(search limit {args.timeout:g} s; {time.monotonic() - t0:.2f} s with loading depthai)"
+    say(f"depthai devices: {searched}" if cams else f"depthai devices: none found {searched}")
     for c in cams:
         say(f"  {c['device_id']}  {c['name']}  {c['state']}  {c['protocol']}")
     return 0
@@ -99,5 +102,6 @@ def add_parsers(sub) -> None:
 
     dev = sub.add_parser("devices", help="list serial ports and depthai cameras",
                          description="List serial ports (device, USB VID:PID, serial number) and depthai cameras.")
-    dev.add_argument("--timeout", type=non_negative_float, default=1.0, help="seconds to search for depthai cameras (default 1)")
+    dev.add_argument("--timeout", type=float_in(0.0, MAX_SEARCH_S), default=1.0,
+                     help=f"seconds to search for depthai cameras, 0..{MAX_SEARCH_S:g} (default 1)")
     dev.set_defaults(func=cmd_devices)

@@ -33,7 +33,7 @@ from rangekit.tof.phase import (PhaseMaps, UnwrapResult, phase_amplitude_offset,
                                 unwrap_ranges)
 from rangekit.tof.plan import C_LIGHT, FrequencyPlan
 from rangekit.tof.pulsed import MAX_ROUND_TRIP_S, pulsed_range, round_trip_problem
-from rangekit.tof.range_maps import flying_pixels, range_to_depth, range_to_points
+from rangekit.tof.range_maps import flying_pixels, partial_pixels, range_to_depth, range_to_points
 
 __all__ = [
     "C_LIGHT",
@@ -49,6 +49,7 @@ __all__ = [
     "range_sigma",
     "unwrap_ranges",
     "flying_pixels",
+    "partial_pixels",
     "range_to_depth",
     "range_to_points",
     "decode_cw",

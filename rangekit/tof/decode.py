@@ -11,7 +11,7 @@ from rangekit.camera import PinholeCamera
 from rangekit.errors import InputError
 from rangekit.tof.phase import UnwrapResult, check_samples, phase_amplitude_offset, range_sigma, unwrap_ranges
 from rangekit.tof.plan import C_LIGHT, FrequencyPlan
-from rangekit.tof.range_maps import flying_pixels, range_to_depth, range_to_points
+from rangekit.tof.range_maps import flying_pixels, partial_pixels, range_to_depth, range_to_points
 
 __all__ = ["ToFResult", "decode_cw"]
 
@@ -28,7 +28,9 @@ class ToFResult:
     sigma_range : float64 predicted standard deviation of ``range``, metres.
     amplitude, offset, phase : (F, H, W) per-frequency N-bucket estimates (samples' units, radians).
     unwrap : the :class:`UnwrapResult` (wrap counts, margin, ambiguity flag).
-    low_signal, ambiguous, flying, valid : bool masks; ``valid`` = not any of the three and finite.
+    low_signal, ambiguous, flying, partial, valid : bool masks (each only where the ones before it are
+        False); ``valid`` = none of the four and finite. ``partial``: mixed pixels at a depth edge that
+        report a surface covering less than ``min_fill`` of them (:func:`partial_pixels`).
     """
 
     range: np.ndarray
@@ -43,19 +45,21 @@ class ToFResult:
     low_signal: np.ndarray
     ambiguous: np.ndarray
     flying: np.ndarray
+    partial: np.ndarray
     valid: np.ndarray
 
     def __repr__(self) -> str:
         H, W = self.valid.shape
         n = H * W
         return (f"ToFResult({W}x{H}, valid={self.valid.sum() / n:.1%}, low_signal={self.low_signal.sum() / n:.1%}, "
-                f"ambiguous={self.ambiguous.sum() / n:.1%}, flying={self.flying.sum() / n:.1%})")
+                f"ambiguous={self.ambiguous.sum() / n:.1%}, flying={self.flying.sum() / n:.1%}, "
+                f"partial={self.partial.sum() / n:.1%})")
 
 
 def decode_cw(samples, plan: FrequencyPlan, camera: PinholeCamera, *, electrons_per_unit: float = 1.0,
               read_noise_e: float = 0.0, max_range: float | None = None, min_snr: float = 3.0,
               min_margin: float = 2.0, flying_angle: float | None = math.radians(15.0),
-              saturation: float | None = None) -> ToFResult:
+              saturation: float | None = None, min_fill: float | None = 0.5) -> ToFResult:
     """Raw CW samples -> range, depth, points, confidence and masks (the whole ToF decoder).
 
     Parameters
@@ -72,6 +76,8 @@ def decode_cw(samples, plan: FrequencyPlan, camera: PinholeCamera, *, electrons_
         filter.
     saturation : sample value at which the sensor clips; pixels with any sample at or above it are
         ``low_signal`` (their phase is biased). None: no check.
+    min_fill : threshold of :func:`partial_pixels` (default 0.5: the reported surface covers less than half
+        the pixel); None disables the filter.
     """
     S = check_samples(samples, plan, "decode_cw")
     if S.shape[1:] != (camera.height, camera.width):
@@ -99,7 +105,9 @@ def decode_cw(samples, plan: FrequencyPlan, camera: PinholeCamera, *, electrons_
     r = un.range
     flying = (flying_pixels(r, camera, max_angle=flying_angle) if flying_angle is not None
               else np.zeros(r.shape, bool))
-    valid = np.isfinite(r) & ~low & ~un.ambiguous & ~flying
+    partial = (partial_pixels(r, maps.amplitude, min_fill=min_fill) if min_fill is not None
+               else np.zeros(r.shape, bool))
+    valid = np.isfinite(r) & ~low & ~un.ambiguous & ~flying & ~partial
     r_valid = np.where(valid, r, np.nan)
     depth = range_to_depth(r_valid, camera)
     pts = range_to_points(r_valid, camera, frame="world")[valid]
@@ -107,4 +115,5 @@ def decode_cw(samples, plan: FrequencyPlan, camera: PinholeCamera, *, electrons_
     return ToFResult(range=r_valid, depth=depth, points=pts, confidence=conf,
                      sigma_range=np.where(valid, sigma_comb, np.nan), amplitude=maps.amplitude,
                      offset=maps.offset, phase=maps.phase, unwrap=un, low_signal=low,
-                     ambiguous=un.ambiguous & ~low, flying=flying & ~low & ~un.ambiguous, valid=valid)
+                     ambiguous=un.ambiguous & ~low, flying=flying & ~low & ~un.ambiguous,
+                     partial=partial & ~low & ~un.ambiguous & ~flying, valid=valid)

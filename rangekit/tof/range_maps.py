@@ -1,4 +1,5 @@
-"""Range maps in space: radial range to camera-frame depth and to points, and the flying-pixel filter.
+"""Range maps in space: radial range to camera-frame depth and to points, and the two mixed-pixel filters
+(flying pixels between two surfaces, partially covered pixels that report a surface their centre misses).
 
 A ToF camera measures radial distance along each pixel's ray, not ``z``; the rays are
 :func:`rangekit.camera.pixel_rays` (lens distortion undone exactly)."""
@@ -13,7 +14,7 @@ from rangekit.camera import PinholeCamera, pixel_rays
 from rangekit.errors import InputError
 from rangekit.geometry import apply_T
 
-__all__ = ["range_to_depth", "range_to_points", "flying_pixels"]
+__all__ = ["range_to_depth", "range_to_points", "flying_pixels", "partial_pixels"]
 
 
 def _check_range_map(range_map, camera: PinholeCamera, where: str) -> np.ndarray:
@@ -73,3 +74,54 @@ def flying_pixels(range_map, camera: PinholeCamera, *, max_angle: float = math.r
     for dy, dx in ((0, 1), (1, 0), (1, 1), (1, -1)):
         flagged |= along_ray(dy, dx) & along_ray(-dy, -dx)
     return flagged & np.isfinite(r)
+
+
+def _neighbours(a: np.ndarray, fill):
+    """The 8 neighbour maps of ``a`` (H, W), ``fill`` outside the image."""
+    H, W = a.shape
+    pad = np.pad(a, 1, constant_values=fill)
+    for dy in (-1, 0, 1):
+        for dx in (-1, 0, 1):
+            if dy or dx:
+                yield pad[1 + dy: 1 + dy + H, 1 + dx: 1 + dx + W]
+
+
+def partial_pixels(range_map, amplitude, *, min_fill: float = 0.5, edge: float = 0.05) -> np.ndarray:
+    """(H, W) bool: pixels at a depth edge that the surface they report covers only partly.
+
+    A pixel straddling a depth edge sums the light of both surfaces, and the returned light falls as
+    ``1 / r^2``: when the near surface covers part of the pixel it outshines the far one (by 50x for
+    1 m against 7 m) and the pixel measures the near range, consistently at every frequency, so neither
+    the unwrapping residual nor :func:`flying_pixels` sees anything wrong. But its centre ray, the
+    direction the range is reported along, may see the far surface. The tell is the brightness
+    ``A r^2`` (amplitude times range squared: albedo x incidence x covered fraction, the same along one
+    surface): such a pixel is dimmer than the fully covered pixels of the surface it reports.
+
+    Parameters
+    ----------
+    range_map : (H, W) metres (NaN where unknown).
+    amplitude : (H, W) or (F, H, W) modulation amplitude (any units; averaged over frequencies).
+    min_fill : flag a pixel whose brightness is below ``min_fill`` times the brightest neighbour on the
+        same surface. 0.5 means "the reported surface covers less than half of the pixel": then the pixel
+        centre is, for a straight edge, on the other surface.
+    edge : a neighbour is on the same surface when its range is within ``edge`` x range (5%); a pixel is
+        only judged when some neighbour in the image is not (a depth edge, or no range).
+
+    Pixels with no neighbour on their surface are not judged; the image border is not an edge.
+    """
+    r = np.asarray(range_map, dtype=np.float64)
+    A = np.asarray(amplitude, dtype=np.float64)
+    if A.ndim == 3:
+        A = A.mean(axis=0)
+    if A.shape != r.shape:
+        raise InputError(f"partial_pixels: amplitude is {A.shape}, range map {r.shape}; expected the same (H, W)")
+    b = A * r ** 2
+    at_edge = np.zeros(r.shape, dtype=bool)
+    ref = np.full(r.shape, -np.inf)
+    with np.errstate(invalid="ignore"):
+        for rn, bn, inside in zip(_neighbours(r, np.nan), _neighbours(b, np.nan),
+                                  _neighbours(np.ones(r.shape, bool), False)):
+            same = np.abs(rn - r) <= edge * r  # NaN compares False
+            at_edge |= inside & ~same          # the image border is not a depth edge
+            ref = np.where(same, np.fmax(ref, bn), ref)
+        return at_edge & (b < min_fill * ref) & np.isfinite(r)

@@ -58,9 +58,8 @@ def main(argv: list[str] | None = None) -> int:
     """Run one command; return its exit code: 0 done, 1 runtime failure (bad data, device fault, I/O),
     2 usage error (bad option, unusable output path), 130 interrupted. Never a traceback, unless the
     environment sets ``RANGEKIT_DEBUG=1`` (then unexpected exceptions propagate)."""
-    parser = build_parser()
-    args = parser.parse_args(argv)
     try:
+        args = build_parser().parse_args(argv)
         return args.func(args)
     except UsageError as exc:
         return _fail(str(exc), EXIT_USAGE)

@@ -123,19 +123,20 @@ def read_image_header(path: str | Path) -> ImageHeader | None:
         raise FileFormatError(f"{path}: not found; expected an image file") from exc
     except OSError as exc:
         raise FileFormatError(f"{path}: cannot read the image ({exc.strerror or exc})") from exc
+    if b[:8] == b"\x89PNG\r\n\x1a\n":
+        kind, parse = "png", _png
+    elif b[:4] in (b"II*\x00", b"MM\x00*", b"II+\x00", b"MM\x00+"):
+        kind, parse = "tiff", lambda head: _tiff(head, path)
+    elif b[:2] == b"BM":
+        kind, parse = "bmp", _bmp
+    elif len(b) > 2 and b[:1] == b"P" and b[1:2] in b"123456" and b[2:3].isspace():
+        kind, parse = "pnm", _pnm
+    else:
+        return None
     try:
-        if b[:8] == b"\x89PNG\r\n\x1a\n":
-            kind, found = "png", _png(b)
-        elif b[:4] in (b"II*\x00", b"MM\x00*", b"II+\x00", b"MM\x00+"):
-            kind, found = "tiff", _tiff(b, path)
-        elif b[:2] == b"BM":
-            kind, found = "bmp", _bmp(b)
-        elif len(b) > 2 and b[:1] == b"P" and b[1:2] in b"123456" and b[2:3].isspace():
-            kind, found = "pnm", _pnm(b)
-        else:
-            return None
+        found = parse(b)
     except (struct.error, OSError, ValueError):
-        kind, found = "image", None
+        found = None
     if found is None or found[0] < 1 or found[1] < 1:
         raise FileFormatError(f"{path}: not a readable {kind.upper()} image: its header is cut short, damaged or "
                               f"gives a zero size ({'x'.join(map(str, found[:2])) if found else 'no size'})")

@@ -24,7 +24,8 @@ from rangekit.surface.mesh import TriangleMesh
 from rangekit.surface.raycast import raycasting_scene
 from rangekit.surface.cloud import PointCloud
 
-__all__ = ["MESH_RENDER_BYTES_PER_PIXEL", "CLOUD_RENDER_BYTES_PER_PIXEL", "fit_camera", "MeshHits", "raycast_mesh", "shade", "render_mesh", "render_cloud",
+__all__ = ["MESH_RENDER_BYTES_PER_PIXEL", "CLOUD_RENDER_BYTES_PER_PIXEL",
+           "fit_camera", "MeshHits", "raycast_mesh", "shade", "render_mesh", "render_cloud",
            "render_values_on_mesh", "colour_bar", "montage", "to_png_bytes", "data_uri"]
 
 AMBIENT = 0.25
@@ -132,12 +133,12 @@ def raycast_mesh(mesh: TriangleMesh, camera: PinholeCamera) -> MeshHits:
     Open3D finds the triangle in float32 (coordinates relative to the mesh centre); hit point and
     barycentrics are then recomputed in float64 against that triangle (Moller-Trumbore), as the simulator does.
     """
-    import open3d as o3d
-
     if not isinstance(mesh, TriangleMesh) or len(mesh.triangles) == 0:
         raise InputError(f"raycast_mesh: expected a TriangleMesh with triangles, found {mesh!r}")
     H, W = camera.height, camera.width
     check_budget(H * W * MESH_RENDER_BYTES_PER_PIXEL, f"ray casting a {W}x{H} image")
+    import open3d as o3d
+
     o, d = world_pixel_rays(camera)
     ok = np.all(np.isfinite(d), axis=1)
     d_cast = np.where(ok[:, None], d, [0.0, 0.0, 1.0])

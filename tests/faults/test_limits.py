@@ -39,7 +39,8 @@ def _chunk(kind: bytes, data: bytes) -> bytes:
 
 def png_header(path, width: int, height: int, *, bits: int = 8, colour: int = 0) -> None:
     """A PNG cut after its IHDR chunk: the header of a ``width`` x ``height`` image, no pixels (33 bytes)."""
-    path.write_bytes(b"\x89PNG\r\n\x1a\n" + _chunk(b"IHDR", struct.pack(">IIBBBBB", width, height, bits, colour, 0, 0, 0)))
+    ihdr = struct.pack(">IIBBBBB", width, height, bits, colour, 0, 0, 0)
+    path.write_bytes(b"\x89PNG\r\n\x1a\n" + _chunk(b"IHDR", ihdr))
 
 
 @pytest.fixture

@@ -22,12 +22,14 @@ from functools import lru_cache
 import cv2
 import numpy as np
 
+from rangekit.budget import check_budget
 from rangekit.errors import InputError
 from rangekit.image import to_grey
 
-__all__ = ["Board", "BoardDetection", "detect_board"]
+__all__ = ["Board", "BoardDetection", "detect_board", "MAX_SQUARES"]
 
 _KINDS = ("checkerboard", "charuco")
+MAX_SQUARES = 100  # squares per side: a board is printed, detected and textured whole (texture(): the budget)
 
 
 def _is_int(value) -> bool:
@@ -73,8 +75,8 @@ class Board:
             raise InputError(f"Board: kind must be one of {_KINDS}, found {self.kind!r}")
         for name in ("cols", "rows"):
             value = getattr(self, name)
-            if not _is_int(value) or value < 2:
-                raise InputError(f"Board: {name} (number of squares) must be an integer >= 2, found {value!r}")
+            if not _is_int(value) or not 2 <= value <= MAX_SQUARES:
+                raise InputError(f"Board: {name} (squares) must be an integer in 2..{MAX_SQUARES}, found {value!r}")
             object.__setattr__(self, name, int(value))
         for name in ("square", "margin", "dark", "light"):
             value = getattr(self, name)
@@ -169,6 +171,7 @@ def _texture(board: Board, texel: float) -> tuple[np.ndarray, tuple[float, float
     n = int(round(board.square / texel))
     m = int(np.ceil(board.margin / texel - 1e-6))
     h, w = board.rows * n + 2 * m, board.cols * n + 2 * m
+    check_budget(h * w * 12, f"the texture of a {board.cols}x{board.rows} board ({w}x{h} texels of {texel} m)")
     x0 = y0 = -board.square - m * texel
     extent = (x0, y0, x0 + w * texel, y0 + h * texel)
     img = np.full((h, w), board.light, np.float32)
@@ -199,9 +202,7 @@ class BoardDetection:
     image_size: tuple[int, int]
     reason: str = ""
 
-    @property
-    def found(self) -> bool:
-        return self.reason == ""
+    found = property(lambda self: self.reason == "")
 
     def __repr__(self) -> str:
         return (f"BoardDetection(found={self.found}, n={len(self.ids)}, image_size={self.image_size}, "

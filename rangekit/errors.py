@@ -16,6 +16,8 @@ __all__ = [
     "RangekitError",
     "InputError",
     "UsageError",
+    "BudgetError",
+    "BudgetUsageError",
     "FileFormatError",
     "SceneError",
     "PatternError",
@@ -46,6 +48,15 @@ class InputError(RangekitError, ValueError):
 class UsageError(InputError):
     """A command-line option has a bad value or names an output that cannot be written (the CLI exits 2;
     every other :class:`RangekitError` is a runtime failure and exits 1)."""
+
+
+class BudgetError(InputError):
+    """An input (a file's header, a spec's sizes) asks for more memory or work than rangekit allows: the
+    memory budget of :mod:`rangekit.budget`, or a documented size limit. Raised before allocating."""
+
+
+class BudgetUsageError(UsageError, BudgetError):
+    """A command-line option asks for more memory than the budget allows (the CLI exits 2)."""
 
 
 class FileFormatError(InputError):

@@ -11,6 +11,7 @@ import cv2
 import numpy as np
 
 from rangekit.errors import FileFormatError
+from rangekit.image_header import check_image_files
 
 __all__ = ["atomic_write_bytes", "fsync_folder", "atomic_write_text", "atomic_write_json", "encode_png", "write_png",
            "read_png",
@@ -122,7 +123,11 @@ def encode_png(image: np.ndarray, *, where: str | Path = "image") -> bytes:
 
 
 def read_png(path: str | Path) -> np.ndarray:
-    """Read a PNG (or any lossless image OpenCV reads) unchanged in bit depth, colour as RGB."""
+    """Read a PNG (or any lossless image OpenCV reads) unchanged in bit depth, colour as RGB.
+
+    The header is read first (:func:`rangekit.image_header.read_image_header`): an image that would not fit
+    the memory budget raises BudgetError before its pixels are decoded."""
+    check_image_files([path], what="image", extra_bytes=0)
     img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
     if img is None:
         raise FileFormatError(f"{path}: not found or not a readable image")

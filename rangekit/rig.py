@@ -29,6 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
+from rangekit.budget import MAX_IMAGE_SIDE_PX
 from rangekit.camera import PinholeCamera
 from rangekit.errors import ConfigError, InputError
 from rangekit.geometry import axis_angle_to_R, compose, invert_T, make_T
@@ -241,11 +242,11 @@ def _rigid(value, where: str, path: str) -> np.ndarray:
     return T
 
 
-def _positive_int(value, where: str, path: str, unit: str) -> int:
+def _positive_int(value, where: str, path: str, unit: str, hi: int = MAX_IMAGE_SIDE_PX) -> int:
     ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value) \
-        and float(value).is_integer() and value > 0
+        and float(value).is_integer() and 0 < value <= hi
     if not ok:
-        raise _error(where, path, f"must be a positive integer ({unit}), found {_show(value)}")
+        raise _error(where, path, f"must be a positive integer ({unit}) of at most {hi}, found {_show(value)}")
     return int(value)
 
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 
+from rangekit.budget import MAX_IMAGE_SIDE_PX
 from rangekit.errors import ConfigError
 
 __all__ = ["validate_devices", "validate_capture", "validate_rig_for_hardware", "DEVICE_FIELDS", "CAPTURE_FIELDS",
@@ -167,8 +168,10 @@ def _check_depthai_record(sec, where: str) -> None:
     if not isinstance(sockets, list) or not all(s in DEPTHAI_SOCKETS for s in sockets):
         raise _error(where, f"{path}.sockets", f"must be a list of {', '.join(DEPTHAI_SOCKETS)}, found {_show(sockets)}")
     size = sec.get("size")
-    if size is not None and not (isinstance(size, list) and len(size) == 2 and all(_is_int(v) and v > 0 for v in size)):
-        raise _error(where, f"{path}.size", f"must be [width, height] in pixels, found {_show(size)}")
+    if size is not None and not (isinstance(size, list) and len(size) == 2
+                                 and all(_is_int(v) and 0 < v <= MAX_IMAGE_SIDE_PX for v in size)):
+        raise _error(where, f"{path}.size", f"must be [width, height] in pixels, each 1..{MAX_IMAGE_SIDE_PX}, found "
+                     f"{_show(size)}")
 
 
 def validate_devices(devices: dict, *, where: str) -> None:

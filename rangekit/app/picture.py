@@ -9,6 +9,7 @@ from typing import Sequence
 
 import numpy as np
 
+from rangekit.budget import check_budget
 from rangekit.errors import FileFormatError, MeshError
 
 __all__ = ["Picture", "render_file"]
@@ -45,7 +46,8 @@ def render_file(path: str | Path, *, azimuths: Sequence[float] = (np.radians(30.
     FileFormatError
         No such file, or nothing in it to render.
     """
-    from rangekit.app.snapshot import fit_camera, montage, render_cloud, render_mesh
+    from rangekit.app.snapshot import (CLOUD_RENDER_BYTES_PER_PIXEL, MESH_RENDER_BYTES_PER_PIXEL, fit_camera, montage,
+                                       render_cloud, render_mesh)
 
     src = Path(path)
     mesh = cloud = None
@@ -53,7 +55,13 @@ def render_file(path: str | Path, *, azimuths: Sequence[float] = (np.radians(30.
         raise FileFormatError(f"{src}: is a folder, expected a mesh or a point cloud file")
     if not src.is_file():
         raise FileFormatError(f"{src}: no such file (expected a mesh or a point cloud)")
-    if src.suffix.lower() in MESH_SUFFIXES or _ply_has_faces(src):
+    is_mesh = src.suffix.lower() in MESH_SUFFIXES or _ply_has_faces(src)
+    w, h = (int(v) for v in size)
+    per_px = MESH_RENDER_BYTES_PER_PIXEL if is_mesh else CLOUD_RENDER_BYTES_PER_PIXEL
+    kind = "mesh" if is_mesh else "cloud"
+    check_budget(w * h * (per_px + 6 * len(azimuths)),  # one render at a time; the images and their montage
+                 f"rendering a {kind} from {len(azimuths)} side(s)", option=f"--size {w}x{h}")
+    if is_mesh:
         from rangekit.formats.meshes import load_mesh_file
 
         mesh = load_mesh_file(src)

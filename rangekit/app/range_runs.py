@@ -20,6 +20,7 @@ import numpy as np
 
 from rangekit.errors import ConfigError, InputError, naming
 from rangekit.formats.range_files import load_ground_truth, load_tof_folder
+from rangekit.image_header import check_image_files
 from rangekit.io import atomic_save_npy, read_png, write_png
 from rangekit.progress import call_progress
 from rangekit.rig import load_rig
@@ -96,6 +97,7 @@ def stereo_depth_files(left: str | Path, right: str | Path, rig_file: str | Path
     if len(rig.cameras) < 2:
         raise ConfigError(f"{rig_file}: the stereo command needs two cameras in 'cameras' (left = cameras[0], "
                           f"right = cameras[1]), found {len(rig.cameras)}")
+    check_image_files([left, right], what="stereo pair", same_size=False)  # the budget, before any pixel
     left_img, right_img = read_png(left), read_png(right)
     if left_img.shape[:2] != right_img.shape[:2]:
         raise InputError(f"{left} is {left_img.shape[1]}x{left_img.shape[0]} but {right} is "

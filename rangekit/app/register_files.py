@@ -10,7 +10,7 @@ import numpy as np
 
 from rangekit.errors import ConfigError, UsageError, naming
 from rangekit.formats.clouds import load_cloud, save_cloud
-from rangekit.surface.cloud import PointCloud, merge_clouds
+from rangekit.surface.cloud import PointCloud, bbox_diagonal, check_voxel, merge_clouds
 from rangekit.formats.poses import load_poses, save_poses
 from rangekit.registration.multiview import MultiViewOptions, MultiViewResult, register_views
 from rangekit.rig import table_frame, turntable_prior
@@ -72,6 +72,8 @@ def register_files(paths: Sequence[str | Path], out_dir: str | Path, *, init: st
         clouds.append(load_cloud(p))
         say(f"read {p.name}: {len(clouds[-1])} points")
     prior = parse_init(init, len(paths), [str(p) for p in paths])
+    if voxel is not None:  # the caller's option, checked against the scans before any work
+        check_voxel(voxel, bbox_diagonal(clouds), what=f"--voxel-mm {voxel * 1e3:g}", error=UsageError)
     res = register_views(clouds, init_T_world_view=prior, options=MultiViewOptions(voxel=voxel), progress=say)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)

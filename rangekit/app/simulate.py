@@ -10,9 +10,23 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Callable, Sequence
 
+from rangekit.budget import check_budget
+from rangekit.errors import InputError, UsageError
 from rangekit.progress import call_progress
 
-__all__ = ["render_projector_capture", "render_tof_capture", "render_stereo_capture"]
+__all__ = ["render_projector_capture", "render_tof_capture", "render_stereo_capture", "BYTES_PER_PIXEL"]
+
+#: Peak memory of a simulated capture per camera pixel, bytes (measured as the growth of the peak from a
+#: small to a large sensor: ToF 4.6 KB/px, its 3x3 rays per pixel; pulsed ToF 0.54 KB; stereo 1.0 KB per
+#: pixel of one camera; projector-camera rig 0.5 KB), checked against the memory budget before rendering.
+BYTES_PER_PIXEL = {"tof": 5000, "tof-pulsed": 640, "stereo": 1100, "projector": 640}
+
+
+def _check_size(sensor: str, size: tuple[int, int], *, option: str | None = "--size", extra: int = 0,
+                where: str = "") -> None:
+    w, h = (int(v) for v in size)
+    check_budget(w * h * BYTES_PER_PIXEL[sensor] + extra, f"{where}simulating a {w}x{h} {sensor} camera",
+                 option=None if option is None else f"{option} {w}x{h}")
 
 
 def render_projector_capture(out: str | Path, *, obj: str = "lumpy", patterns: str = "graycode",
@@ -32,6 +46,9 @@ def render_projector_capture(out: str | Path, *, obj: str = "lumpy", patterns: s
     if global_fraction is not None:
         imaging = replace(imaging, global_fraction=global_fraction)
     rig = load_rig(rig_file) if rig_file else None
+    if rig is not None:
+        cam = rig.camera
+        _check_size("projector", (cam.width, cam.height), option=None, where=f"{rig_file}: ")
     sim = SimRig(default_scene(obj), rig, imaging=imaging, seed=seed)
     if sim.turntable is not None:
         sim.turntable.rotate_to(angle)
@@ -54,6 +71,20 @@ def render_tof_capture(out: str | Path, *, pulsed: bool = False, near: float = 0
                                   tof_scene, write_pulsed_capture, write_tof_capture)
     from rangekit.tof import FrequencyPlan
 
+    if pulsed:
+        _check_size("tof-pulsed", size)
+    else:
+        try:
+            if frequencies:
+                freq_plan = FrequencyPlan.uniform(list(frequencies), steps or 4)
+            else:
+                freq_plan = {"kinect": KINECT_V2_PLAN, "luxonis": LUXONIS_PLAN}[plan]
+                if steps:
+                    freq_plan = FrequencyPlan.uniform(freq_plan.frequencies, steps)
+        except InputError as exc:
+            raise UsageError(f"--frequencies-mhz/--steps: {exc}") from None
+        # Besides the per-pixel peak: the raw samples, as float64 and as 16-bit images.
+        _check_size("tof", size, extra=int(size[0]) * int(size[1]) * 10 * freq_plan.n_samples)
     scene = tof_scene(near, far)
     camera = tof_camera(*size)
     info = {"scene": f"panels {near:g} to {far:g} m"}
@@ -62,12 +93,6 @@ def render_tof_capture(out: str | Path, *, pulsed: bool = False, near: float = 0
                                 f"{jitter * 1e12:g} ps)")
         write_pulsed_capture(render_pulsed(scene, camera=camera, jitter_s=jitter, seed=seed), out, info=info)
         return
-    if frequencies:
-        freq_plan = FrequencyPlan.uniform(list(frequencies), steps or 4)
-    else:
-        freq_plan = {"kinect": KINECT_V2_PLAN, "luxonis": LUXONIS_PLAN}[plan]
-        if steps:
-            freq_plan = FrequencyPlan.uniform(freq_plan.frequencies, steps)
     sensor = ToFSensor()
     if multipath:
         sensor = replace(sensor, multipath_strength=multipath[0], multipath_extra_m=multipath[1])
@@ -82,6 +107,7 @@ def render_stereo_capture(out: str | Path, *, size: tuple[int, int] = (640, 400)
     """The white box and sphere seen by the simulated active-stereo pair of ``size`` (W, H) pixels."""
     from rangekit.sim.stereo import render_stereo, stereo_rig, stereo_scene, write_stereo_capture
 
+    _check_size("stereo", size)
     rig = stereo_rig(*size)
     call_progress(progress, f"rendering the stereo pair ({rig.cameras[0].width}x{rig.cameras[0].height}, "
                             f"dots {'off' if not dots else 'on'})")

@@ -10,10 +10,9 @@ import shutil
 import sys
 from pathlib import Path
 
+from rangekit.budget import MAX_IMAGE_SIDE_PX as MAX_SIZE_PX
 from rangekit.errors import FileFormatError, UsageError
 
-#: The largest image any command renders or allocates from a WIDTHxHEIGHT option (pixels per side).
-MAX_SIZE_PX = 16384
 #: Free space an output folder needs before a command starts, bytes.
 MIN_FREE_BYTES = 64 * 2**20
 

@@ -35,15 +35,18 @@ GrayCodePattern order for graycode (column pairs MSB first, row pairs, then whit
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from functools import lru_cache
 from typing import Iterator
 
 import numpy as np
 
+from rangekit.budget import MAX_IMAGE_SIDE_PX, check_budget
 from rangekit.errors import PatternError
 
-__all__ = ["PatternSpec", "PATTERN_METHODS", "make_pattern_spec", "gray_encode", "gray_decode", "n_bits_for",
+__all__ = ["PatternSpec", "PATTERN_METHODS", "MAX_PHASE_STEPS", "MAX_PHASE_LEVELS", "MAX_DEBRUIJN_LENGTH",
+           "make_pattern_spec", "gray_encode", "gray_decode", "n_bits_for",
            "de_bruijn", "DEBRUIJN_PALETTE", "debruijn_stripe_colours"]
 
 PATTERN_METHODS = ("white", "black", "graycode", "xor02", "xor04", "phase", "hybrid", "debruijn")
@@ -55,11 +58,35 @@ _ORDERS = ("rangekit", "opencv")
 DEBRUIJN_PALETTE = np.array([[1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 0], [1, 0, 1], [0, 1, 1], [1, 1, 1]],
                             dtype=np.uint8)
 
+#: Limits of a spec (checked before any frame exists): phase steps per level, phase levels per axis, and the
+#: length k**n of a de Bruijn sequence (generated in full). Sizes: 1..rangekit.budget.MAX_IMAGE_SIDE_PX.
+MAX_PHASE_STEPS = 64
+MAX_PHASE_LEVELS = 16
+MAX_DEBRUIJN_LENGTH = 2**20
+
 _DEFAULT_OPTIONS = {
     "phase": {"steps": 4, "periods": None, "fine_steps": 8},
     "hybrid": {"steps": 8, "period": 16},
     "debruijn": {"k": 6, "n": 3, "stripe_width": 8},
 }
+
+
+def _show(value) -> str:
+    text = repr(value)
+    return text if len(text) <= 80 else text[:77] + "..."
+
+
+def _is_number(value) -> bool:
+    """A finite real number (not a bool)."""
+    return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, (bool, np.bool_)) \
+        and math.isfinite(value)
+
+
+def _count(value, what: str, lo: int, hi: int) -> int:
+    """``value`` as an int in [lo, hi] (a whole number, int or float); PatternError naming ``what`` otherwise."""
+    if not (_is_number(value) and float(value).is_integer() and lo <= value <= hi):
+        raise PatternError(f"{what} must be a whole number in {lo}..{hi}, found {_show(value)}")
+    return int(value)
 
 
 def gray_encode(x: np.ndarray) -> np.ndarray:
@@ -129,36 +156,56 @@ class PatternSpec:
     options: dict = field(default_factory=dict, hash=False, compare=False)
 
     def __post_init__(self) -> None:
-        if self.method not in PATTERN_METHODS:
-            raise PatternError(f"unknown pattern method {self.method!r}; known: {', '.join(PATTERN_METHODS)}")
-        if int(self.width) < 1 or int(self.height) < 1:
-            raise PatternError(f"pattern size must be positive, found {self.width}x{self.height}")
+        if not isinstance(self.method, str) or self.method not in PATTERN_METHODS:
+            raise PatternError(f"unknown pattern method {_show(self.method)}; known: {', '.join(PATTERN_METHODS)}")
+        for name in ("width", "height"):
+            object.__setattr__(self, name, _count(getattr(self, name), f"pattern {name} (projector pixels)",
+                                                  1, MAX_IMAGE_SIDE_PX))
+        if not isinstance(self.axes, (tuple, list)) or not all(isinstance(a, str) for a in self.axes):
+            raise PatternError(f"pattern axes must be a non-empty subset of {_AXES}, found {_show(self.axes)}")
         bad = [a for a in self.axes if a not in _AXES]
         if bad or not self.axes or len(set(self.axes)) != len(self.axes):
             raise PatternError(f"pattern axes must be a non-empty subset of {_AXES}, found {self.axes}")
         axes = tuple(a for a in _AXES if a in self.axes)
         if self.method == "debruijn":
             axes = ("columns",)
+        if not isinstance(self.options, dict):
+            raise PatternError(f"pattern options must be an object, found {_show(self.options)}")
         opts = {**_DEFAULT_OPTIONS.get(self.method, {}), **dict(self.options)}
-        if self.method == "phase":
-            opts["periods"] = {a: list(self._default_periods(a)) if opts.get("periods") is None
-                               else list(opts["periods"][a] if isinstance(opts["periods"], dict)
-                                         else opts["periods"]) for a in axes}
-            for a, ps in opts["periods"].items():
-                if not ps or ps[0] < self._size(a) or any(p <= 0 for p in ps):
-                    raise PatternError(f"phase periods for {a} must start with one >= {self._size(a)} px "
-                                       f"(absolute phase) and be positive, found {ps}")
-        if self.method in ("phase", "hybrid") and int(opts["steps"]) < 3:
-            raise PatternError(f"phase shifting needs at least 3 steps, found {opts['steps']}")
-        if self.method == "debruijn":
-            n_stripes = -(-int(self.width) // int(opts["stripe_width"]))
-            debruijn_stripe_colours(int(opts["k"]), int(opts["n"]), n_stripes)  # raises if too short
-            if int(opts["k"]) + 1 > len(DEBRUIJN_PALETTE):
-                raise PatternError(f"de Bruijn needs k + 1 <= {len(DEBRUIJN_PALETTE)} colours, found k={opts['k']}")
         object.__setattr__(self, "axes", axes)
-        object.__setattr__(self, "width", int(self.width))
-        object.__setattr__(self, "height", int(self.height))
+        if self.method == "phase":
+            opts["periods"] = {a: self._periods(opts.get("periods"), a) for a in axes}
+        if self.method == "hybrid":
+            period = opts["period"]
+            if not (_is_number(period) and 0 < period <= MAX_IMAGE_SIDE_PX):
+                raise PatternError(f"hybrid period must be a number in (0, {MAX_IMAGE_SIDE_PX}] projector px, "
+                                   f"found {_show(period)}")
+        for key in ("steps", "fine_steps"):
+            if key in opts and self.method in ("phase", "hybrid"):
+                opts[key] = _count(opts[key], f"phase shifting {key}", 3, MAX_PHASE_STEPS)
+        if self.method == "debruijn":
+            k = _count(opts["k"], "de Bruijn k (stripe colours - 1)", 2, len(DEBRUIJN_PALETTE) - 1)
+            n = _count(opts["n"], "de Bruijn n (window length)", 1, 64)
+            if k ** n > MAX_DEBRUIJN_LENGTH:
+                raise PatternError(f"de Bruijn B(k={k}, n={n}) has k**n = {k ** n} entries, expected at most "
+                                   f"{MAX_DEBRUIJN_LENGTH}; lower n")
+            w = _count(opts["stripe_width"], "de Bruijn stripe_width (projector px)", 1, self.width)
+            opts.update(k=k, n=n, stripe_width=w)
+            debruijn_stripe_colours(k, n, -(-self.width // w))  # raises if too short
         object.__setattr__(self, "options", opts)
+        check_budget(self.width * self.height * (3 if self.is_colour else 1),
+                     f"a {self.width}x{self.height} {self.method} pattern frame")
+
+    def _periods(self, given, axis: str) -> list:
+        """The checked phase periods of ``axis``: finite, positive, the first >= the axis size."""
+        ps = list(self._default_periods(axis)) if given is None else given.get(axis) if isinstance(given, dict) \
+            else given
+        size = self._size(axis)
+        if not (isinstance(ps, (list, tuple)) and 1 <= len(ps) <= MAX_PHASE_LEVELS and all(map(_is_number, ps))
+                and ps[0] >= size and all(p > 0 for p in ps)):
+            raise PatternError(f"phase periods for {axis} must be 1 to {MAX_PHASE_LEVELS} finite numbers > 0, the "
+                               f"first >= {size} px (absolute phase), found {_show(ps)}")
+        return list(ps)
 
     def _size(self, axis: str) -> int:
         return self.width if axis == "columns" else self.height
@@ -278,13 +325,24 @@ class PatternSpec:
 
     @classmethod
     def from_dict(cls, data: dict, *, where: str = "pattern spec") -> "PatternSpec":
+        """Inverse of :meth:`to_dict`; every problem is a PatternError starting with ``where``."""
+        if not isinstance(data, dict):
+            raise PatternError(f"{where}: expected a JSON object with method, width, height (and axes, options), "
+                               f"found {_show(data)}")
+        missing = [k for k in ("method", "width", "height") if k not in data]
+        if missing:
+            raise PatternError(f"{where}: expected method, width, height (and axes, options); missing "
+                               f"{', '.join(missing)}")
+        axes = data.get("axes", _AXES)
         try:
-            spec = cls(method=data["method"], width=int(data["width"]), height=int(data["height"]),
-                       axes=tuple(data.get("axes", _AXES)), options=dict(data.get("options", {})))
-        except (KeyError, TypeError, ValueError) as exc:
-            raise PatternError(f"{where}: expected method, width, height (and axes, options): {exc}") from exc
-        if "frames" in data and list(data["frames"]) != spec.frame_names:
-            raise PatternError(f"{where}: its frame list ({len(data['frames'])} frames) does not match what "
+            spec = cls(method=data["method"], width=data["width"], height=data["height"],
+                       axes=tuple(axes) if isinstance(axes, list) else axes, options=data.get("options", {}))
+        except PatternError as exc:
+            raise PatternError(f"{where}: {exc}") from None
+        frames = data.get("frames", spec.frame_names)
+        if not isinstance(frames, list) or frames != spec.frame_names:
+            n = len(frames) if isinstance(frames, list) else _show(frames)
+            raise PatternError(f"{where}: its frame list ({n} frames) does not match what "
                                f"method {spec.method!r} generates ({spec.n_frames} frames)")
         return spec
 

@@ -16,6 +16,7 @@ import numpy as np
 
 from rangekit.coded.patterns import PATTERN_METHODS, PatternSpec, make_pattern_spec
 from rangekit.errors import ConfigError, FileFormatError, UsageError
+from rangekit.image_header import check_image_files
 from rangekit.io import atomic_save_npz, read_json, read_png
 from rangekit.rig import Rig, load_rig
 
@@ -44,14 +45,19 @@ def list_images(source: str | Path | Sequence[str | Path]) -> list[Path]:
     return paths
 
 
-def read_stack(paths: Sequence[Path], *, workers: int = 2) -> list[np.ndarray]:
-    """Read images (lossless, own bit depth, RGB order) on ``workers`` threads; sizes must agree."""
+def read_stack(paths: Sequence[Path], *, workers: int = 2, what: str = "a capture") -> list[np.ndarray]:
+    """Read images (lossless, own bit depth, RGB order) on ``workers`` threads; sizes must agree.
+
+    The headers are read first (:func:`rangekit.image_header.check_image_files`): images of different sizes or
+    depths, or a stack over the memory budget (:mod:`rangekit.budget`), are refused before any pixel is read.
+    """
+    check_image_files(paths, what=what)
     with ThreadPoolExecutor(max_workers=max(1, workers)) as pool:
         images = list(pool.map(read_png, paths))
     for p, img in zip(paths, images):
         if img.shape != images[0].shape or img.dtype != images[0].dtype:
             raise FileFormatError(f"{p}: image is {img.dtype} {img.shape}, but {paths[0].name} is "
-                                  f"{images[0].dtype} {images[0].shape}; a capture needs one size and depth")
+                                  f"{images[0].dtype} {images[0].shape}; {what} needs one size and depth")
     return images
 
 

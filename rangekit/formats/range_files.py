@@ -25,6 +25,7 @@ import numpy as np
 from rangekit.camera import PinholeCamera
 from rangekit.formats.capture import list_images, read_stack
 from rangekit.errors import FileFormatError, InputError
+from rangekit.image_header import check_image_files
 from rangekit.io import read_json
 from rangekit.rig import load_rig
 from rangekit.tof import FrequencyPlan, round_trip_problem
@@ -70,6 +71,7 @@ def load_tof_folder(folder: str | Path) -> ToFFolder:
     cam = rig.camera
     if kind == "rangekit.tof.pulsed/1":
         path = folder / "round_trip_s.npy"
+        _check_npy_shape(path, (cam.height, cam.width))
         try:
             dt = np.load(path)
         except (OSError, ValueError, EOFError) as exc:
@@ -92,7 +94,11 @@ def load_tof_folder(folder: str | Path) -> ToFFolder:
         raise FileFormatError(f"{folder / 'samples'}: the frequency plan in tof.json ({plan.describe()}) needs "
                               f"{plan.n_samples} raw samples, found {len(files)}"
                               + (f" ({files[0].name} ... {files[-1].name})" if files else ""))
-    stack = np.stack(read_stack(files))
+    headers = check_image_files(files, what="ToF raw samples", copies=2)  # read_stack's list, then np.stack
+    if headers and headers[0] is not None and (headers[0].width, headers[0].height) != (cam.width, cam.height):
+        raise FileFormatError(f"{files[0]}: samples are {headers[0].width}x{headers[0].height} (width x height) "
+                              f"but the camera in rig.json is {cam.width}x{cam.height}")
+    stack = np.stack(read_stack(files, what="ToF raw samples"))
     if stack.ndim != 3:
         raise FileFormatError(f"{folder / 'samples'}: expected single-channel (grey) raw samples, found images of "
                               f"shape {stack.shape[1:]} ({files[0].name})")
@@ -119,6 +125,19 @@ def _number(meta: dict, key: str, default: float | None, path: Path, *, positive
 
 
 _TRUTH_MAPS = {"range": "f", "depth": "f", "valid": "b", "hit": "b"}
+
+
+def _check_npy_shape(path: Path, shape: tuple[int, ...]) -> None:
+    """Refuse a .npy whose header declares another shape, before its data is allocated."""
+    fmt = np.lib.format
+    try:
+        with open(path, "rb") as f:
+            major, _ = fmt.read_magic(f)
+            found = (fmt.read_array_header_1_0 if major == 1 else fmt.read_array_header_2_0)(f)[0]
+    except (OSError, ValueError) as exc:
+        raise FileFormatError(f"{path}: cannot read the round-trip times ({exc})") from None
+    if found != shape:
+        raise FileFormatError(f"{path}: shape {found} but the camera in rig.json is {shape[1]}x{shape[0]}")
 
 
 def load_ground_truth(folder: str | Path, *, shape: tuple[int, int] | None = None) -> dict | None:

@@ -27,6 +27,7 @@ import cv2
 import numpy as np
 
 from rangekit.errors import FileFormatError
+from rangekit.image_header import check_image_files
 
 __all__ = ["DiligentData", "load_diligent", "GREY_WEIGHTS"]
 
@@ -118,6 +119,9 @@ def load_diligent(folder: str | Path, *, grey: str | None = "rgb2gray", workers:
         row = int(np.flatnonzero(~(intensities > 0).all(axis=1))[0])
         raise FileFormatError(f"{folder / 'light_intensities.txt'}: row {row + 1} is {intensities[row].tolist()}, "
                               "expected three positive RGB intensities")
+    # The budget from the headers, before any pixel (float32 images, twice: the list and the stack).
+    check_image_files([p for p in (folder / n for n in names) if p.is_file()], what="DiLiGenT images",
+                      same_size=False, copies=2, bytes_per_pixel=4 * (3 if grey is None else 1))
     mask = _read_mask(folder / "mask.png")
     H, W = mask.shape
     weights = None if grey is None else GREY_WEIGHTS[grey].astype(np.float32)

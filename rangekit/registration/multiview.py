@@ -21,7 +21,7 @@ from scipy.spatial import cKDTree
 
 from rangekit.errors import RegistrationError
 from rangekit.geometry import apply_T, invert_T, make_T, rotation_angle, rotvec_to_R
-from rangekit.surface.cloud import PointCloud, estimate_normals, voxel_downsample
+from rangekit.surface.cloud import PointCloud, bbox_diagonal, check_voxel, estimate_normals, voxel_downsample
 from rangekit.registration.coarse import CoarseOptions, compute_features, coarse_align
 from rangekit.registration.icp import IcpOptions, icp
 from rangekit.registration.sync import SyncResult, synchronise
@@ -233,10 +233,9 @@ def register_views(clouds: Sequence[PointCloud], *, init_T_world_view: np.ndarra
     n = len(clouds)
     if n < 2:
         raise RegistrationError(f"multi-view registration needs at least 2 scans, found {n}")
-    all_pts = np.concatenate([np.asarray(c.points)[::max(1, len(c.points) // 2000)] for c in clouds])
-    diag = float(np.linalg.norm(np.nanmax(all_pts, axis=0) - np.nanmin(all_pts, axis=0)))
-    voxel = options.voxel or diag / 110.0
-    fine = options.fine_voxel or voxel / 3.0
+    diag = bbox_diagonal(clouds)
+    voxel = diag / 110.0 if options.voxel is None else check_voxel(options.voxel, diag, what="voxel")
+    fine = voxel / 3.0 if options.fine_voxel is None else check_voxel(options.fine_voxel, diag, what="fine_voxel")
     coarse_clouds = _prepare(clouds, voxel)
     fine_clouds = _prepare(clouds, fine)
 

@@ -11,11 +11,14 @@ import numpy as np
 
 from rangekit.errors import InputError
 
-__all__ = ["C_LIGHT", "FrequencyPlan"]
+__all__ = ["C_LIGHT", "FrequencyPlan", "MAX_FREQUENCIES", "MAX_STEPS"]
 
 
 #: Speed of light in vacuum, m/s (exact by definition of the metre).
 C_LIGHT = 299_792_458.0
+#: The most modulation frequencies in a plan, and phase steps per frequency (real sensors use 2-3 and 3-4).
+MAX_FREQUENCIES = 16
+MAX_STEPS = 64
 
 
 @dataclass(frozen=True)
@@ -36,6 +39,10 @@ class FrequencyPlan:
         f = tuple(float(v) for v in np.atleast_1d(np.asarray(self.frequencies, dtype=np.float64)))
         if not f or not all(math.isfinite(v) and v > 0 for v in f):
             raise InputError(f"FrequencyPlan: frequencies must be positive Hz values, found {self.frequencies!r}")
+        if len(f) > MAX_FREQUENCIES or any(len(s) > MAX_STEPS for s in self.steps):
+            raise InputError(f"FrequencyPlan: expected at most {MAX_FREQUENCIES} frequencies of at most {MAX_STEPS} "
+                             f"phase steps each, found {len(f)} frequencies of "
+                             f"{[len(s) for s in self.steps][:20]} steps")
         if len(set(f)) != len(f):
             raise InputError(f"FrequencyPlan: frequencies must be distinct, found {self.frequencies!r}")
         steps = tuple(tuple(float(t) for t in s) for s in self.steps)
@@ -52,8 +59,8 @@ class FrequencyPlan:
     @classmethod
     def uniform(cls, frequencies, n_steps: int = 4) -> "FrequencyPlan":
         """``n_steps`` equally spaced steps ``2 pi k / n_steps`` at every frequency (Hz)."""
-        if int(n_steps) != n_steps or n_steps < 3:
-            raise InputError(f"FrequencyPlan.uniform: n_steps must be an integer >= 3, found {n_steps!r}")
+        if int(n_steps) != n_steps or not 3 <= n_steps <= MAX_STEPS:
+            raise InputError(f"FrequencyPlan.uniform: n_steps must be an integer in 3..{MAX_STEPS}, found {n_steps!r}")
         freqs = tuple(float(v) for v in np.atleast_1d(frequencies))
         step = tuple(2 * np.pi * k / int(n_steps) for k in range(int(n_steps)))
         return cls(freqs, tuple(step for _ in freqs))

@@ -72,7 +72,8 @@ def register_files(paths: Sequence[str | Path], out_dir: str | Path, *, init: st
         clouds.append(load_cloud(p))
         say(f"read {p.name}: {len(clouds[-1])} points")
     prior = parse_init(init, len(paths), [str(p) for p in paths])
-    res = register_views(clouds, init_T_world_view=prior, options=MultiViewOptions(voxel=voxel), progress=say)
+    res = register_views(clouds, init_T_world_view=prior, options=MultiViewOptions(voxel=voxel), progress=say,
+                         names=[p.name for p in paths])
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     edges_of = {k: [e for e in res.edges if e.accepted and k in (e.i, e.j)] for k in range(len(paths))}

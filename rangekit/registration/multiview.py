@@ -87,7 +87,11 @@ class MultiViewResult:
         return f"MultiViewResult({len(self.T_world_view)} views, {acc}/{len(self.edges)} edges, rmse={self.rmse * 1e3:.3f} mm)"
 
 
-def _prepare(clouds: Sequence[PointCloud], voxel: float) -> list[PointCloud]:
+MIN_VOXELS = 30   # points a view must keep after voxel downsampling: fewer cannot fix 6 degrees of freedom
+                  # with any margin (and FPFH needs neighbours)
+
+
+def _prepare(clouds: Sequence[PointCloud], voxel: float, names: Sequence[str] | None = None) -> list[PointCloud]:
     out = []
     for k, c in enumerate(clouds):
         pts = np.asarray(c.points)
@@ -96,6 +100,10 @@ def _prepare(clouds: Sequence[PointCloud], voxel: float) -> list[PointCloud]:
         if not np.all(np.isfinite(pts)):
             raise RegistrationError(f"view {k}: has NaN or infinite points; drop them first")
         p, n = voxel_downsample(pts, voxel, normals=c.normals)
+        if len(p) < MIN_VOXELS:
+            raise RegistrationError(f"view {k}{f' ({names[k]})' if names is not None else ''}: {len(p)} points "
+                                    f"after downsampling to {voxel * 1e3:.3g} mm voxels, expected at least "
+                                    f"{MIN_VOXELS}; use a smaller voxel (--voxel-mm) or a denser scan")
         if n is None:
             n = estimate_normals(p, k=20)
         out.append(PointCloud(p, normals=n))
@@ -215,8 +223,8 @@ def register_views(clouds: Sequence[PointCloud], *, init_T_world_view: np.ndarra
     diag = float(np.linalg.norm(np.nanmax(all_pts, axis=0) - np.nanmin(all_pts, axis=0)))
     voxel = options.voxel or diag / 110.0
     fine = options.fine_voxel or voxel / 3.0
-    coarse_clouds = _prepare(clouds, voxel)
-    fine_clouds = _prepare(clouds, fine)
+    coarse_clouds = _prepare(clouds, voxel, names)
+    fine_clouds = _prepare(clouds, fine, names)
 
     if init_T_world_view is None:
         say(f"coarse alignment of {n * (n - 1) // 2} pairs (voxel {voxel * 1e3:.2f} mm)")

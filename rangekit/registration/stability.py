@@ -82,8 +82,16 @@ class PoseConstraint:
         return describe_motions(self.unconstrained(threshold), self.centre, self.length)
 
     def held(self, threshold: float = MIN_CONSTRAINT) -> HeldMotions:
-        """The unconstrained motions, to keep a prior along them (:func:`held_step`)."""
-        return HeldMotions(self.unconstrained(threshold), self.centre, self.length)
+        """The unconstrained motions, to keep a prior along them (:func:`held_step`), expressed about the
+        point their rotations leave most nearly fixed (a sphere's centre, the nearest point of a cylinder's
+        axis): there the free rotations are pure rotations, so the steps orthogonal to them keep the
+        prior's orientation about that point (and its position along free translations)."""
+        M = self.unconstrained(threshold)
+        omega, t = M[:, :3] / self.length, M[:, 3:]
+        # x minimising sum_k |t_k + omega_k x (x - centre)|^2 (least norm: the point nearest the centre).
+        A = np.concatenate([np.cross(np.eye(3), w) for w in omega]) if len(M) else np.zeros((0, 3))
+        y = np.linalg.lstsq(A, -t.reshape(-1), rcond=1e-6)[0] if len(M) else np.zeros(3)
+        return HeldMotions(np.hstack([M[:, :3], t + np.cross(omega, y)]), self.centre + y, self.length)
 
 
 def _lever_rows(points: np.ndarray, normals: np.ndarray, weights: np.ndarray | None):

@@ -91,19 +91,27 @@ MIN_VOXELS = 30   # points a view must keep after voxel downsampling: fewer cann
                   # with any margin (and FPFH needs neighbours)
 
 
-def _prepare(clouds: Sequence[PointCloud], voxel: float, names: Sequence[str] | None = None) -> list[PointCloud]:
-    out = []
-    for k, c in enumerate(clouds):
+def _check_dense(clouds: Sequence[PointCloud], views: Sequence[int], voxel: float,
+                 names: Sequence[str] | None) -> None:
+    """RegistrationError if one of ``views`` kept fewer than MIN_VOXELS points after downsampling (checked
+    where the points are used, so scans that do not overlap at all say that instead)."""
+    for k in views:
+        if len(clouds[k]) < MIN_VOXELS:
+            raise RegistrationError(f"view {k}{f' ({names[k]})' if names is not None else ''}: {len(clouds[k])} "
+                                    f"points after downsampling to {voxel * 1e3:.3g} mm voxels, expected at least "
+                                    f"{MIN_VOXELS}; use a smaller voxel (--voxel-mm) or a denser scan")
+
+
+def _prepare(clouds: Sequence[PointCloud], voxel: float) -> list[PointCloud]:
+    for k, c in enumerate(clouds):  # every view's own faults first, then those of the voxel
         pts = np.asarray(c.points)
         if len(pts) < 50:
             raise RegistrationError(f"view {k}: {len(pts)} points; a scan needs at least 50 to register")
         if not np.all(np.isfinite(pts)):
             raise RegistrationError(f"view {k}: has NaN or infinite points; drop them first")
-        p, n = voxel_downsample(pts, voxel, normals=c.normals)
-        if len(p) < MIN_VOXELS:
-            raise RegistrationError(f"view {k}{f' ({names[k]})' if names is not None else ''}: {len(p)} points "
-                                    f"after downsampling to {voxel * 1e3:.3g} mm voxels, expected at least "
-                                    f"{MIN_VOXELS}; use a smaller voxel (--voxel-mm) or a denser scan")
+    out = []
+    for k, c in enumerate(clouds):
+        p, n = voxel_downsample(np.asarray(c.points), voxel, normals=c.normals)
         if n is None:
             n = estimate_normals(p, k=20)
         out.append(PointCloud(p, normals=n))
@@ -223,12 +231,13 @@ def register_views(clouds: Sequence[PointCloud], *, init_T_world_view: np.ndarra
     diag = float(np.linalg.norm(np.nanmax(all_pts, axis=0) - np.nanmin(all_pts, axis=0)))
     voxel = options.voxel or diag / 110.0
     fine = options.fine_voxel or voxel / 3.0
-    coarse_clouds = _prepare(clouds, voxel, names)
-    fine_clouds = _prepare(clouds, fine, names)
+    coarse_clouds = _prepare(clouds, voxel)
+    fine_clouds = _prepare(clouds, fine)
 
     if init_T_world_view is None:
         say(f"coarse alignment of {n * (n - 1) // 2} pairs (voxel {voxel * 1e3:.2f} mm)")
         copt = CoarseOptions(voxel=voxel, rng=options.rng)
+        _check_dense(coarse_clouds, range(n), voxel, names)
         feats = [compute_features(c, copt) for c in coarse_clouds]
         edges = []
         for i in range(n):
@@ -261,6 +270,7 @@ def register_views(clouds: Sequence[PointCloud], *, init_T_world_view: np.ndarra
                 ov = _mutual_overlap(level[i], level[j], trees[i], trees[j], T_i_j, 2 * v)
                 if ov < options.min_overlap:
                     continue
+                _check_dense(level, (i, j), v, names)
                 r = icp(level[j], level[i], init_T_target_source=T_i_j, options=icp_opt)
                 if prior and r.constraint is not None and r.constraint.ratio < options.min_constraint:
                     # Ambiguous: ICP wandered along the free motions; start again from the prior, held there.

@@ -133,7 +133,7 @@ def _held_basis(n: int, hold: dict, centre: np.ndarray, length: float) -> np.nda
             if Q is None:
                 Q = Z
             else:
-                U, sv, _ = np.linalg.svd(Q.T @ Z)
+                U, sv, _ = np.linalg.svd(Q.T @ Z, full_matrices=False)
                 Q = Q @ U[:, sv > 0.9]
         if Q is None or Q.shape[1] == 0:
             blocks.append(np.eye(6))

@@ -218,3 +218,36 @@ def test_cli_with_a_prior_flags_the_ambiguous_edge(cli, tmp_path):
     _, T = load_poses(out / "poses.json")
     rot, tr = _errors(T[1], _about_centre([0, 0, 1], 4.0) @ T_TRUE)
     assert rot < 0.02 and tr < 1e-4, (rot, tr)
+
+
+def test_three_sphere_caps_with_a_prior_keep_every_orientation():
+    """The joint refinement holds each view's free rotations (the intersection over its pairs)."""
+    rng = np.random.default_rng(3)
+    p, nn = _surface("sphere", 18000, rng)
+    dirs = [np.array([np.cos(a), np.sin(a), 0.0]) for a in (0.0, 2.1, 4.2)]
+    Ts = [np.eye(4), T_TRUE, _about_centre([1, 1, 0], 30.0, shift=[0.01, 0, 0])]
+    clouds = []
+    for d, T in zip(dirs, Ts):
+        m = nn @ d > -0.35
+        inv = invert_T(T)
+        clouds.append(PointCloud(apply_T(inv, p[m]), normals=nn[m] @ inv[:3, :3].T))
+    errs = [np.eye(4), _about_centre([0, 0, 1], 6.0, shift=[0.002, 0, 0]), _about_centre([1, 0, 0], -4.0)]
+    res = register_views(clouds, init_T_world_view=np.stack([E @ T for E, T in zip(errs, Ts)]))
+    for k in (1, 2):
+        R_kept = _about_centre(*(([0, 0, 1], 6.0) if k == 1 else ([1, 0, 0], -4.0))) @ Ts[k]
+        rot, tr = _errors(res.T_world_view[k], R_kept)
+        assert rot < 0.01 and tr < 5e-5, (k, rot, tr)
+    assert all(e.accepted and e.unconstrained for e in res.edges)
+
+
+def test_a_view_holds_only_the_motions_all_its_pairs_leave_free():
+    from rangekit.registration.joint import _held_basis
+    from rangekit.registration.stability import HeldMotions
+
+    rot = np.hstack([np.eye(3) * 0.05, np.zeros((3, 3))])        # rotations about CENTRE (L = 50 mm)
+    three, two = HeldMotions(rot, CENTRE, 0.05), HeldMotions(rot[:2], CENTRE, 0.05)
+    B = _held_basis(2, {1: [three, two]}, CENTRE, 0.05)
+    assert B.shape == (6, 4)                                   # rotations about x and y held, z kept free
+    assert np.allclose(B[:2], 0) and np.linalg.matrix_rank(B[2:]) == 4
+    assert _held_basis(2, {1: [HeldMotions(rot[:1], CENTRE, 0.05), HeldMotions(rot[1:2], CENTRE, 0.05)]},
+                       CENTRE, 0.05) is None                   # no motion is free for both pairs

@@ -74,12 +74,15 @@ def register_files(paths: Sequence[str | Path], out_dir: str | Path, *, init: st
     prior = parse_init(init, len(paths), [str(p) for p in paths])
     if voxel is not None:  # the caller's option, checked against the scans before any work
         check_voxel(voxel, bbox_diagonal(clouds), what=f"--voxel-mm {voxel * 1e3:g}", error=UsageError)
-    res = register_views(clouds, init_T_world_view=prior, options=MultiViewOptions(voxel=voxel), progress=say)
+    res = register_views(clouds, init_T_world_view=prior, options=MultiViewOptions(voxel=voxel), progress=say,
+                         names=[p.name for p in paths])
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     edges_of = {k: [e for e in res.edges if e.accepted and k in (e.i, e.j)] for k in range(len(paths))}
     extra = [{"edges": len(edges_of[k]),
-              "mean_edge_rmse_m": float(np.mean([e.rmse for e in edges_of[k]])) if edges_of[k] else None}
+              "mean_edge_rmse_m": float(np.mean([e.rmse for e in edges_of[k]])) if edges_of[k] else None,
+              # Edges whose overlap left motions free: the prior was kept along them (not measured).
+              "prior_kept": [f"{e.i}-{e.j}: {e.unconstrained}" for e in edges_of[k] if e.unconstrained]}
              for k in range(len(paths))]
     save_poses(out / "poses.json", [str(p) for p in paths], res.T_world_view, extra=extra)
     merged = merge_clouds(clouds, res.T_world_view)

@@ -25,6 +25,10 @@ def cmd_register(args: argparse.Namespace) -> int:
         say(f"  {e.i:2d}-{e.j:<2d} rmse {e.rmse * 1e3:7.3f} mm  overlap {e.overlap:5.2f}  "
             f"{'ok ' if e.accepted else 'rejected'}  {e.reason}")
     n_accepted = sum(e.accepted for e in res.edges)
+    held = [e for e in res.edges if e.accepted and e.unconstrained]
+    if held:
+        say(f"warning: {len(held)} accepted edges are ambiguous (their overlap leaves a motion free); the prior "
+            f"--init {args.init} was kept along it and is not checked by the data (see 'prior_kept' in poses.json)")
     rot = np.degrees(np.asarray(res.sync.edge_rotation_error))
     tr = np.asarray(res.sync.edge_translation_error) * 1e3
     say(f"synchronisation over {n_accepted} accepted edges: rotation residual mean {np.mean(rot):.4f} deg, "

@@ -120,4 +120,4 @@ def coarse_align(source: PointCloud | Features, target: PointCloud | Features, o
               init_T_target_source=best, options=verify)
     return RegistrationResult(res.T_target_source, res.rmse, res.fitness, res.n_iterations, res.converged,
                               f"ransac: {best_count} of {len(ps)} feature matches; icp: {res.reason}",
-                              res.residuals)
+                              res.residuals, res.constraint)

@@ -16,6 +16,7 @@ from rangekit.camera import PinholeCamera
 from rangekit.errors import InputError, RegistrationError
 from rangekit.geometry import apply_T, make_T, procrustes, rotation_angle, rotvec_to_R, transform_vectors
 from rangekit.surface.cloud import PointCloud, voxel_downsample
+from rangekit.registration.stability import HeldMotions, PoseConstraint, held_step, pose_constraint
 
 __all__ = ["IcpOptions", "RegistrationResult", "icp", "KERNELS", "OrganisedScan"]
 
@@ -60,6 +61,8 @@ class RegistrationResult:
     converged: bool
     reason: str = ""             # why it stopped
     residuals: np.ndarray = field(default_factory=lambda: np.zeros(0))  # (K,) final inlier residuals, metres
+    constraint: PoseConstraint | None = None  # which motions the final inliers fix (rangekit.registration.
+                                              # stability); None without target normals
 
     def __repr__(self) -> str:
         ang = np.degrees(rotation_angle(self.T_target_source[:3, :3]))
@@ -163,9 +166,10 @@ class _ProjectiveAssociation:
 
 # --------------------------------------------------------------------------- one level of ICP
 def _solve_increment(method: str, p: np.ndarray, q: np.ndarray, nq: np.ndarray | None, np_: np.ndarray | None,
-                     w: np.ndarray) -> np.ndarray | None:
+                     w: np.ndarray, hold: HeldMotions | None = None) -> np.ndarray | None:
     """(4, 4) increment applied to the (already transformed) source points, or None when the weighted
-    system is singular (e.g. every weight is 0), so there is no increment to take."""
+    system is singular (e.g. every weight is 0), so there is no increment to take. ``hold``: motions the
+    increment must not have (point-to-plane and symmetric; :func:`rangekit.registration.stability.held_step`)."""
     if method == "point_to_point":
         if np.count_nonzero(w > 0) < 3:
             return None
@@ -179,14 +183,22 @@ def _solve_increment(method: str, p: np.ndarray, q: np.ndarray, nq: np.ndarray |
         n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
         r = np.einsum("ij,ij->i", p - q, n)
         J = np.hstack([np.cross(p + q, n), n])
-    A = J.T @ (J * w[:, None])
-    b = -J.T @ (w * r)
-    try:
-        x = np.linalg.solve(A + 1e-12 * np.trace(A) / 6 * np.eye(6), b)
-    except np.linalg.LinAlgError:
-        return None
-    if not np.all(np.isfinite(x)):
-        return None
+    if hold is not None and len(hold.motions):
+        if not np.any(w > 0):
+            return None
+        x = held_step(J, r, w, p if method == "point_to_plane" else p + q, 1 if method == "point_to_plane" else 2,
+                      hold)
+        if x is None:
+            return None
+    else:
+        A = J.T @ (J * w[:, None])
+        b = -J.T @ (w * r)
+        try:
+            x = np.linalg.solve(A + 1e-12 * np.trace(A) / 6 * np.eye(6), b)
+        except np.linalg.LinAlgError:
+            return None
+        if not np.all(np.isfinite(x)):
+            return None
     if method == "point_to_plane":
         return make_T(rotvec_to_R(x[:3]), x[3:])
     # symmetric: rotate by theta = atan(|a|) about a, translate t cos(theta), rotate again (R T R)
@@ -198,11 +210,14 @@ def _solve_increment(method: str, p: np.ndarray, q: np.ndarray, nq: np.ndarray |
     return Rm @ make_T(None, t * np.cos(theta)) @ Rm
 
 
-def _icp_level(src: PointCloud, assoc, T: np.ndarray, opt: IcpOptions, rng: np.random.Generator, size: float):
+def _icp_level(src: PointCloud, assoc, T: np.ndarray, opt: IcpOptions, rng: np.random.Generator, size: float,
+               hold: HeldMotions | None = None):
     P_all = src.points
     N_all = src.normals
     n_iter, reason, converged = 0, f"max_iterations={opt.max_iterations}", False
     need_src_normals = opt.method == "symmetric"
+    if hold is not None and opt.method == "point_to_point":
+        raise InputError("icp: hold needs method='point_to_plane' or 'symmetric'")
     if need_src_normals and N_all is None:
         raise RegistrationError("symmetric ICP needs source normals; give PointCloud(points, normals=...)")
     # One random subset per level: the same points every iteration, so the updates settle and stop.
@@ -232,7 +247,7 @@ def _icp_level(src: PointCloud, assoc, T: np.ndarray, opt: IcpOptions, rng: np.r
             max(1.4826 * np.median(np.abs(r[keep] - (np.median(r[keep]) if opt.method != "point_to_point" else 0))),
                 1e-9)
         w = _weights(r, opt.kernel, scale) * keep
-        dT = _solve_increment(opt.method, p, q, nq, np_, w)
+        dT = _solve_increment(opt.method, p, q, nq, np_, w, hold)
         if dT is None:
             return T, n_iter, False, (f"singular system at iteration {n_iter}: {np.count_nonzero(w > 0)} of "
                                       f"{len(w)} correspondences have weight > 0 ({opt.kernel} kernel, scale "
@@ -246,7 +261,7 @@ def _icp_level(src: PointCloud, assoc, T: np.ndarray, opt: IcpOptions, rng: np.r
 
 
 def icp(source, target, *, init_T_target_source: np.ndarray | None = None, options: IcpOptions = IcpOptions(),
-        target_scan: OrganisedScan | None = None) -> RegistrationResult:
+        target_scan: OrganisedScan | None = None, hold: HeldMotions | None = None) -> RegistrationResult:
     """Align ``source`` to ``target``.
 
     Parameters
@@ -257,6 +272,9 @@ def icp(source, target, *, init_T_target_source: np.ndarray | None = None, optio
     options : IcpOptions.
     target_scan : OrganisedScan, optional. If given, correspondences come from projecting the source into
         the target's range map (projective association, no KD-tree); ``target`` may then be None.
+    hold : HeldMotions, optional (target frame). The pose is not updated along these motions: the initial
+        guess is kept along them (e.g. the motions a symmetric surface leaves free; see
+        :mod:`rangekit.registration.stability`).
 
     Returns
     -------
@@ -295,7 +313,7 @@ def icp(source, target, *, init_T_target_source: np.ndarray | None = None, optio
             s = src
             assoc = _ProjectiveAssociation(target_scan) if target_scan is not None else _KdAssociation(tgt)
             opt = options
-        T, n, converged, reason = _icp_level(s, assoc, T, opt, rng, size)
+        T, n, converged, reason = _icp_level(s, assoc, T, opt, rng, size, hold)
         total += n
     # Final statistics (on max_samples random source points: fitness and RMSE are estimates then).
     P = src.points
@@ -308,4 +326,8 @@ def icp(source, target, *, init_T_target_source: np.ndarray | None = None, optio
     else:
         res = np.linalg.norm(p[ok] - q[ok], axis=1)
     rmse = float(np.sqrt(np.mean(res ** 2))) if res.size else float("inf")
-    return RegistrationResult(T, rmse, float(np.count_nonzero(ok) / len(P)), total, converged, reason, res)
+    constraint = None
+    if nq is not None and np.count_nonzero(ok) >= 6:
+        constraint = pose_constraint(q[ok], nq[ok])
+    return RegistrationResult(T, rmse, float(np.count_nonzero(ok) / len(P)), total, converged, reason, res,
+                              constraint)

@@ -20,10 +20,12 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from rangekit.errors import RegistrationError
-from rangekit.geometry import apply_T, invert_T, make_T, rotation_angle, rotvec_to_R
+from rangekit.geometry import apply_T, invert_T, rotation_angle
 from rangekit.surface.cloud import PointCloud, bbox_diagonal, check_voxel, estimate_normals, voxel_downsample
 from rangekit.registration.coarse import CoarseOptions, compute_features, coarse_align
 from rangekit.registration.icp import IcpOptions, icp
+from rangekit.registration.joint import JointResult, refine_jointly
+from rangekit.registration.stability import MIN_CONSTRAINT, HeldMotions, PoseConstraint
 from rangekit.registration.sync import SyncResult, synchronise
 
 __all__ = ["MultiViewOptions", "EdgeResult", "MultiViewResult", "register_views", "pairwise_overlap",
@@ -42,6 +44,10 @@ class MultiViewOptions:
                                          # alignments (e.g. front/back flips) can keep 0.3-0.6 overlap but
                                          # not a low RMSE: on the bunny, right <= 0.36, wrong >= 0.64 voxel
     rounds: int = 1
+    min_constraint: float = MIN_CONSTRAINT  # a pair whose overlap leaves a motion with a smaller eigenvalue
+                                         # ratio free (rangekit.registration.stability) is ambiguous: with
+                                         # no prior it is not an edge; with one, the prior is kept along
+                                         # that motion and the edge is flagged
     joint_iterations: int = 60           # joint multi-view refinement after synchronisation (0: none)
     joint_tolerance: float = 1e-7        # metres: stop when no pose moves a point by more
     joint_samples: int = 50000           # points per view in the joint refinement (at most all fine points)
@@ -61,6 +67,8 @@ class EdgeResult:
     overlap: float           # fraction of view j's points with a partner in view i
     accepted: bool
     reason: str = ""
+    unconstrained: str = ""  # the motions the overlap leaves free ('' if none), see rangekit.registration.stability
+    constraint: PoseConstraint | None = None
 
     def __repr__(self) -> str:
         return (f"EdgeResult({self.i}-{self.j}, rmse={self.rmse * 1e3:.3f} mm, overlap={self.overlap:.2f}, "
@@ -79,15 +87,31 @@ class MultiViewResult:
         return f"MultiViewResult({len(self.T_world_view)} views, {acc}/{len(self.edges)} edges, rmse={self.rmse * 1e3:.3f} mm)"
 
 
+MIN_VOXELS = 30   # points a view must keep after voxel downsampling: fewer cannot fix 6 degrees of freedom
+                  # with any margin (and FPFH needs neighbours)
+
+
+def _check_dense(clouds: Sequence[PointCloud], views: Sequence[int], voxel: float,
+                 names: Sequence[str] | None) -> None:
+    """RegistrationError if one of ``views`` kept fewer than MIN_VOXELS points after downsampling (checked
+    where the points are used, so scans that do not overlap at all say that instead)."""
+    for k in views:
+        if len(clouds[k]) < MIN_VOXELS:
+            raise RegistrationError(f"view {k}{f' ({names[k]})' if names is not None else ''}: {len(clouds[k])} "
+                                    f"points after downsampling to {voxel * 1e3:.3g} mm voxels, expected at least "
+                                    f"{MIN_VOXELS}; use a smaller voxel (--voxel-mm) or a denser scan")
+
+
 def _prepare(clouds: Sequence[PointCloud], voxel: float) -> list[PointCloud]:
-    out = []
-    for k, c in enumerate(clouds):
+    for k, c in enumerate(clouds):  # every view's own faults first, then those of the voxel
         pts = np.asarray(c.points)
         if len(pts) < 50:
             raise RegistrationError(f"view {k}: {len(pts)} points; a scan needs at least 50 to register")
         if not np.all(np.isfinite(pts)):
             raise RegistrationError(f"view {k}: has NaN or infinite points; drop them first")
-        p, n = voxel_downsample(pts, voxel, normals=c.normals)
+    out = []
+    for k, c in enumerate(clouds):
+        p, n = voxel_downsample(np.asarray(c.points), voxel, normals=c.normals)
         if n is None:
             n = estimate_normals(p, k=20)
         out.append(PointCloud(p, normals=n))
@@ -113,7 +137,9 @@ def _sync(n: int, edges: list[EdgeResult]) -> SyncResult:
     return synchronise(n, acc, robust=True)
 
 
-def _check_connected(n: int, edges: list[EdgeResult]) -> None:
+def _check_connected(n: int, edges: list[EdgeResult], names: Sequence[str] | None = None) -> None:
+    """RegistrationError unless the accepted edges connect every view; the message names the views cut
+    off and why the edges to them were refused (an ambiguous overlap names the motion it leaves free)."""
     parent = list(range(n))
 
     def find(a):
@@ -130,96 +156,57 @@ def _check_connected(n: int, edges: list[EdgeResult]) -> None:
         groups.setdefault(find(k), []).append(k)
     if len(groups) > 1:
         parts = sorted(groups.values(), key=len, reverse=True)
-        raise RegistrationError(f"the scans do not all overlap: views {parts[1:]} have no reliable link to views "
-                                f"{parts[0]}; scan more views in between or register those separately")
+        main = set(parts[0])
+        cut = [e for e in edges if (e.i in main) != (e.j in main) and e.reason]
+        ambiguous = [e for e in cut if e.unconstrained]
+        why = "; ".join(f"edge {e.i}-{e.j} {e.reason}" for e in (ambiguous or cut)[:3])
+        named = f" ({', '.join(names[k] for p in parts[1:] for k in p)})" if names is not None else ""
+        hint = ("the overlap does not fix the pose (a plane, sphere, cylinder or surface of revolution slides "
+                "on itself): give a prior (--init turntable:... or a poses.json) or scan more shape in the "
+                "overlap" if ambiguous else "scan more views in between or register those separately")
+        raise RegistrationError(f"the scans do not all overlap: views {parts[1:]}{named} have no reliable link to "
+                                f"views {parts[0]}{' (' + why + ')' if why else ''}; {hint}")
 
 
-@dataclass(frozen=True, eq=False)
-class JointResult:
-    T_world_view: np.ndarray    # (n, 4, 4)
-    rmse: float                 # weighted point-to-plane RMS over all pairs, metres
-    n_iterations: int
-    converged: bool
-    pair_rmse: dict             # (i, j) -> RMS residual of that pair, metres
+def _joint_holds(n: int, pairs: list, edges: list[EdgeResult], holds: dict, T: np.ndarray) -> dict:
+    """``{view: [HeldMotions in world]}`` for the views whose every joint pair is an accepted edge that
+    kept the prior along some motions (a pair with no such edge constrains its views: no hold)."""
+    accepted = {(e.i, e.j) for e in edges if e.accepted}
+    out: dict[int, list] = {}
+    free_of: dict[int, bool] = {}
+    for i, j in pairs:
+        h = holds.get((i, j)) if (i, j) in accepted else None
+        for k in (i, j):
+            free_of[k] = free_of.get(k, True) and h is not None
+            if h is not None:
+                R, t = T[i][:3, :3], T[i][:3, 3]   # view i's frame into world
+                out.setdefault(k, []).append(HeldMotions(np.hstack([h.motions[:, :3] @ R.T, h.motions[:, 3:] @ R.T]),
+                                                         R @ h.centre + t, h.length))
+    return {k: v for k, v in out.items() if free_of.get(k)}
 
 
-def refine_jointly(clouds: Sequence[PointCloud], T_world_view: np.ndarray, pairs: Sequence[tuple[int, int]], *,
-                   max_distance: float, iterations: int = 15, samples: int = 8000, kernel_k: float = 1.345,
-                   tolerance: float = 1e-9, rng: int = 0) -> JointResult:
-    """Multi-view ICP: refine every pose at once (view 0 fixed) by Gauss-Newton on point-to-plane residuals
-    of all overlapping ``pairs`` in both directions, re-associating closest points each iteration.
-
-    The residual of a source point p (view j) and its closest target point q (view i, normal n), in world
-    coordinates, is ``n . (T_j p - T_i q)``; small motions ``xi_k = (omega_k, v_k)`` of every pose about the
-    scene centroid enter linearly, Huber weights use a MAD scale, and the 6(n-1) normal equations are solved
-    densely. Unlike synchronising pairwise results, every correspondence weighs in directly.
-    """
-    n = len(clouds)
-    T = np.array(T_world_view, dtype=np.float64, copy=True)
-    gen = np.random.default_rng(rng)
-    trees = [cKDTree(c.points) for c in clouds]
-    subs = [c.points[gen.choice(len(c.points), min(samples, len(c.points)), replace=False)] for c in clouds]
-    centre = np.mean([apply_T(T[k], c.points.mean(axis=0, keepdims=True))[0] for k, c in enumerate(clouds)], axis=0)
-    directed = [(i, j) for i, j in pairs] + [(j, i) for i, j in pairs]
-    converged, it, rmse, pair_rmse = False, 0, float("nan"), {}
-    for it in range(1, iterations + 1):
-        Hm = np.zeros((6 * n, 6 * n))
-        g = np.zeros(6 * n)
-        res_all, pair_rmse = [], {}
-        for i, j in directed:  # target i, source j
-            p_j = subs[j]
-            T_i_j = invert_T(T[i]) @ T[j]
-            d, idx = trees[i].query(apply_T(T_i_j, p_j), k=1, distance_upper_bound=max_distance, workers=-1)
-            ok = np.isfinite(d)
-            if np.count_nonzero(ok) < 10:
-                continue
-            Ri = T[i][:3, :3]
-            pw = apply_T(T[j], p_j[ok]) - centre
-            qw = apply_T(T[i], clouds[i].points[idx[ok]]) - centre
-            nw = clouds[i].normals[idx[ok]] @ Ri.T
-            r = np.einsum("ij,ij->i", pw - qw, nw)
-            Jj = np.hstack([np.cross(pw, nw), nw])
-            Ji = -np.hstack([np.cross(qw, nw), nw])
-            res_all.append((i, j, r, Ji, Jj))
-            pair_rmse[(min(i, j), max(i, j))] = float(np.sqrt(np.mean(r ** 2)))
-        if not res_all:
-            raise RegistrationError("joint refinement: no pair has correspondences within max_distance")
-        r_cat = np.concatenate([x[2] for x in res_all])
-        scale = max(1.4826 * np.median(np.abs(r_cat)), 1e-12)
-        for i, j, r, Ji, Jj in res_all:
-            a = np.abs(r) / scale
-            w = np.minimum(1.0, kernel_k / np.maximum(a, 1e-12))  # Huber
-            si, sj = slice(6 * i, 6 * i + 6), slice(6 * j, 6 * j + 6)
-            Wi, Wj = Ji * w[:, None], Jj * w[:, None]
-            Hm[si, si] += Ji.T @ Wi
-            Hm[sj, sj] += Jj.T @ Wj
-            Hm[si, sj] += Ji.T @ Wj
-            Hm[sj, si] += Jj.T @ Wi
-            g[si] += Wi.T @ r
-            g[sj] += Wj.T @ r
-        rmse = float(np.sqrt(np.mean(r_cat ** 2)))
-        free = slice(6, 6 * n)
-        A = Hm[free, free]
-        try:
-            xi = -np.linalg.solve(A + 1e-12 * np.trace(A) / len(A) * np.eye(len(A)), g[free])
-        except np.linalg.LinAlgError as exc:
-            raise RegistrationError("joint refinement: the view graph does not constrain every pose") from exc
-        step = 0.0
-        for k in range(1, n):
-            om, v = xi[6 * (k - 1): 6 * (k - 1) + 3], xi[6 * (k - 1) + 3: 6 * k]
-            R = rotvec_to_R(om)
-            dT = make_T(R, v + centre - R @ centre)  # rotation about the centroid, then translation
-            T[k] = dT @ T[k]
-            step = max(step, np.linalg.norm(v) + np.linalg.norm(om) * np.linalg.norm(np.ptp(subs[k], axis=0)))
-        if step < tolerance:
-            converged = True
-            break
-    return JointResult(T, rmse, it, converged, pair_rmse)
+def _edge(i: int, j: int, r, overlap: float, options: MultiViewOptions, max_rmse: float, prior: bool,
+          note: str = "") -> EdgeResult:
+    """Accept or refuse the registration ``r`` of view j into view i: RMSE below ``max_rmse`` (metres),
+    overlap at least ``options.min_overlap``, and an overlap that fixes every motion, unless a prior holds
+    the free ones (then the edge is accepted and its reason says the prior was kept)."""
+    free = r.constraint.describe(options.min_constraint) if r.constraint is not None else ""
+    if r.rmse >= max_rmse:
+        reason = f"rmse {r.rmse * 1e3:.3f} mm > {max_rmse * 1e3:.3f}"
+    elif overlap < options.min_overlap:
+        reason = f"overlap {overlap:.2f}"
+    elif free:
+        reason = f"prior kept along: {free}" if prior else f"ambiguous: {free} unconstrained"
+    else:
+        reason = ""
+    ok = not reason or (prior and free and reason.startswith("prior"))
+    return EdgeResult(i, j, r.T_target_source, r.rmse, overlap, bool(ok), reason + note, free, r.constraint)
 
 
 def register_views(clouds: Sequence[PointCloud], *, init_T_world_view: np.ndarray | None = None,
                    options: MultiViewOptions = MultiViewOptions(),
-                   progress: Callable[[str], None] | None = None) -> MultiViewResult:
+                   progress: Callable[[str], None] | None = None,
+                   names: Sequence[str] | None = None) -> MultiViewResult:
     """Register ``clouds`` (each in its own frame) into the first cloud's frame.
 
     Parameters
@@ -228,6 +215,13 @@ def register_views(clouds: Sequence[PointCloud], *, init_T_world_view: np.ndarra
     init_T_world_view : (n, 4, 4), optional prior poses; None runs coarse alignment of every pair.
     options : MultiViewOptions.
     progress : called with one line per stage.
+    names : the views' names for error messages (e.g. file names).
+
+    Ambiguous pairs (their overlap leaves a rigid motion free, see rangekit.registration.stability): with
+    no prior they are not edges, and a view reached only through them raises RegistrationError naming
+    the views and the free motion. With a prior, ICP solves only the constrained motions, the prior is
+    kept along the free ones (in the pairwise and the joint refinement) and the edge's ``unconstrained``
+    and ``reason`` say so.
     """
     say = progress or (lambda msg: None)
     n = len(clouds)
@@ -242,14 +236,14 @@ def register_views(clouds: Sequence[PointCloud], *, init_T_world_view: np.ndarra
     if init_T_world_view is None:
         say(f"coarse alignment of {n * (n - 1) // 2} pairs (voxel {voxel * 1e3:.2f} mm)")
         copt = CoarseOptions(voxel=voxel, rng=options.rng)
+        _check_dense(coarse_clouds, range(n), voxel, names)
         feats = [compute_features(c, copt) for c in coarse_clouds]
         edges = []
         for i in range(n):
             for j in range(i + 1, n):
                 r = coarse_align(feats[j], feats[i], copt)
-                ok = r.rmse < options.max_coarse_rmse * voxel and r.fitness >= options.min_overlap
-                edges.append(EdgeResult(i, j, r.T_target_source, r.rmse, r.fitness, bool(ok)))
-        _check_connected(n, edges)
+                edges.append(_edge(i, j, r, r.fitness, options, options.max_coarse_rmse * voxel, prior=False))
+        _check_connected(n, edges, names)
         T = _sync(n, edges).T_world_view
     else:
         T = np.asarray(init_T_world_view, dtype=np.float64).copy()
@@ -258,6 +252,8 @@ def register_views(clouds: Sequence[PointCloud], *, init_T_world_view: np.ndarra
         T = np.einsum("ij,njk->nik", invert_T(T[0]), T)  # world = first view
 
     edges: list[EdgeResult] = []
+    holds: dict = {}
+    prior = init_T_world_view is not None
     sync = None
     for rnd in range(options.rounds):
         level = coarse_clouds if rnd == 0 else fine_clouds
@@ -266,22 +262,26 @@ def register_views(clouds: Sequence[PointCloud], *, init_T_world_view: np.ndarra
         # Wide gate on a coarser level first (the prior may be degrees off), then a 2-voxel gate, so the
         # final RMSE measures the overlap only and is comparable with the coarse stage's.
         icp_opt = replace(options.icp, max_distance=2.0 * v, voxel_sizes=(2.0 * v,), rng=options.rng + rnd)
-        edges = []
+        edges, holds = [], {}
         for i in range(n):
             for j in range(i + 1, n):
                 T_i_j = invert_T(T[i]) @ T[j]
                 ov = _mutual_overlap(level[i], level[j], trees[i], trees[j], T_i_j, 2 * v)
                 if ov < options.min_overlap:
                     continue
+                _check_dense(level, (i, j), v, names)
                 r = icp(level[j], level[i], init_T_target_source=T_i_j, options=icp_opt)
+                if prior and r.constraint is not None and r.constraint.ratio < options.min_constraint:
+                    # Ambiguous: ICP wandered along the free motions; start again from the prior, held there.
+                    held = r.constraint.held(options.min_constraint)
+                    r = replace(icp(level[j], level[i], init_T_target_source=T_i_j, options=icp_opt, hold=held),
+                                constraint=r.constraint)
+                    holds[i, j] = held
                 ov = pairwise_overlap(level[j], trees[i], r.T_target_source, 2 * v)
                 moved = np.degrees(rotation_angle(r.T_target_source[:3, :3] @ T_i_j[:3, :3].T))
-                ok = r.rmse < options.max_rmse * v and ov >= options.min_overlap
-                reason = "" if ok else (f"rmse {r.rmse * 1e3:.3f} mm > {options.max_rmse * v * 1e3:.3f}"
-                                        if r.rmse >= options.max_rmse * v else f"overlap {ov:.2f}")
-                edges.append(EdgeResult(i, j, r.T_target_source, r.rmse, ov, bool(ok),
-                                        reason + (f" (moved {moved:.1f} deg)" if moved > 5 else "")))
-        _check_connected(n, edges)
+                edges.append(_edge(i, j, r, ov, options, options.max_rmse * v, prior=prior,
+                                   note=f" (moved {moved:.1f} deg)" if moved > 5 else ""))
+        _check_connected(n, edges, names)
         sync = _sync(n, edges)
         T = sync.T_world_view
         acc = [e for e in edges if e.accepted]
@@ -301,7 +301,8 @@ def register_views(clouds: Sequence[PointCloud], *, init_T_world_view: np.ndarra
                 if ov >= options.min_overlap:
                     pairs.append((i, j))
         joint = refine_jointly(fine_clouds, T, pairs, max_distance=2.5 * fine, iterations=options.joint_iterations,
-                               samples=options.joint_samples, tolerance=options.joint_tolerance, rng=options.rng)
+                               samples=options.joint_samples, tolerance=options.joint_tolerance, rng=options.rng,
+                               hold=_joint_holds(n, pairs, edges, holds, T))
         T = joint.T_world_view
         rmse = joint.rmse
         say(f"joint refinement of {n} views over {len(pairs)} pairs: rmse {joint.rmse * 1e3:.4f} mm, "

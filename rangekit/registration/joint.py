@@ -1,0 +1,152 @@
+"""Multi-view ICP (Fusiello ch. 15): every pose refined at once by Gauss-Newton on the point-to-plane
+residuals of all overlapping pairs, optionally keeping each view's start pose along the motions that no
+overlap of that view constrains (rangekit.registration.stability).
+
+Poses: ``T_world_view`` maps a view's points into the world, which is the first view's frame.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from rangekit.errors import RegistrationError
+from rangekit.geometry import apply_T, invert_T, make_T, rotvec_to_R
+from rangekit.surface.cloud import PointCloud
+
+__all__ = ["JointResult", "refine_jointly"]
+
+
+@dataclass(frozen=True, eq=False)
+class JointResult:
+    T_world_view: np.ndarray    # (n, 4, 4)
+    rmse: float                 # weighted point-to-plane RMS over all pairs, metres
+    n_iterations: int
+    converged: bool
+    pair_rmse: dict             # (i, j) -> RMS residual of that pair, metres
+
+
+def refine_jointly(clouds: Sequence[PointCloud], T_world_view: np.ndarray, pairs: Sequence[tuple[int, int]], *,
+                   max_distance: float, iterations: int = 15, samples: int = 8000, kernel_k: float = 1.345,
+                   tolerance: float = 1e-9, rng: int = 0, hold: dict | None = None) -> JointResult:
+    """Multi-view ICP: refine every pose at once (view 0 fixed) by Gauss-Newton on point-to-plane residuals
+    of all overlapping ``pairs`` in both directions, re-associating closest points each iteration.
+
+    The residual of a source point p (view j) and its closest target point q (view i, normal n), in world
+    coordinates, is ``n . (T_j p - T_i q)``; small motions ``xi_k = (omega_k, v_k)`` of every pose about the
+    scene centroid enter linearly, Huber weights use a MAD scale, and the 6(n-1) normal equations are solved
+    densely. Unlike synchronising pairwise results, every correspondence weighs in directly.
+
+    ``hold``: ``{view: [HeldMotions in world, one per pair of that view]}`` (see
+    :mod:`rangekit.registration.stability`): a view keeps its start pose along the motions that every
+    one of its pairs leaves free; every other motion is solved as usual (:func:`_held_basis`).
+    """
+    n = len(clouds)
+    T = np.array(T_world_view, dtype=np.float64, copy=True)
+    gen = np.random.default_rng(rng)
+    trees = [cKDTree(c.points) for c in clouds]
+    subs = [c.points[gen.choice(len(c.points), min(samples, len(c.points)), replace=False)] for c in clouds]
+    centre = np.mean([apply_T(T[k], c.points.mean(axis=0, keepdims=True))[0] for k, c in enumerate(clouds)], axis=0)
+    directed = [(i, j) for i, j in pairs] + [(j, i) for i, j in pairs]
+    size = float(np.sqrt(np.mean([np.sum((apply_T(T[k], s) - centre) ** 2, axis=1).mean() for k, s in enumerate(subs)])))
+    converged, it, rmse, pair_rmse = False, 0, float("nan"), {}
+    for it in range(1, iterations + 1):
+        Hm = np.zeros((6 * n, 6 * n))
+        g = np.zeros(6 * n)
+        res_all, pair_rmse = [], {}
+        for i, j in directed:  # target i, source j
+            p_j = subs[j]
+            T_i_j = invert_T(T[i]) @ T[j]
+            d, idx = trees[i].query(apply_T(T_i_j, p_j), k=1, distance_upper_bound=max_distance, workers=-1)
+            ok = np.isfinite(d)
+            if np.count_nonzero(ok) < 10:
+                continue
+            Ri = T[i][:3, :3]
+            pw = apply_T(T[j], p_j[ok]) - centre
+            qw = apply_T(T[i], clouds[i].points[idx[ok]]) - centre
+            nw = clouds[i].normals[idx[ok]] @ Ri.T
+            r = np.einsum("ij,ij->i", pw - qw, nw)
+            Jj = np.hstack([np.cross(pw, nw), nw])
+            Ji = -np.hstack([np.cross(qw, nw), nw])
+            res_all.append((i, j, r, Ji, Jj))
+            pair_rmse[(min(i, j), max(i, j))] = float(np.sqrt(np.mean(r ** 2)))
+        if not res_all:
+            raise RegistrationError("joint refinement: no pair has correspondences within max_distance")
+        r_cat = np.concatenate([x[2] for x in res_all])
+        scale = max(1.4826 * np.median(np.abs(r_cat)), 1e-12)
+        for i, j, r, Ji, Jj in res_all:
+            a = np.abs(r) / scale
+            w = np.minimum(1.0, kernel_k / np.maximum(a, 1e-12))  # Huber
+            si, sj = slice(6 * i, 6 * i + 6), slice(6 * j, 6 * j + 6)
+            Wi, Wj = Ji * w[:, None], Jj * w[:, None]
+            Hm[si, si] += Ji.T @ Wi
+            Hm[sj, sj] += Jj.T @ Wj
+            Hm[si, sj] += Ji.T @ Wj
+            Hm[sj, si] += Jj.T @ Wi
+            g[si] += Wi.T @ r
+            g[sj] += Wj.T @ r
+        rmse = float(np.sqrt(np.mean(r_cat ** 2)))
+        free = slice(6, 6 * n)
+        A = Hm[free, free]
+        B = _held_basis(n, hold, centre, size) if hold else None
+        try:
+            if B is None:
+                xi = -np.linalg.solve(A + 1e-12 * np.trace(A) / len(A) * np.eye(len(A)), g[free])
+            else:
+                Ab = B.T @ A @ B
+                xi = -B @ np.linalg.solve(Ab + 1e-12 * np.trace(Ab) / len(Ab) * np.eye(len(Ab)), B.T @ g[free])
+        except np.linalg.LinAlgError as exc:
+            raise RegistrationError("joint refinement: the view graph does not constrain every pose") from exc
+        step = 0.0
+        for k in range(1, n):
+            om, v = xi[6 * (k - 1): 6 * (k - 1) + 3], xi[6 * (k - 1) + 3: 6 * k]
+            R = rotvec_to_R(om)
+            dT = make_T(R, v + centre - R @ centre)  # rotation about the centroid, then translation
+            T[k] = dT @ T[k]
+            step = max(step, np.linalg.norm(v) + np.linalg.norm(om) * np.linalg.norm(np.ptp(subs[k], axis=0)))
+        if step < tolerance:
+            converged = True
+            break
+    return JointResult(T, rmse, it, converged, pair_rmse)
+
+
+def _held_basis(n: int, hold: dict, centre: np.ndarray, length: float) -> np.ndarray | None:
+    """(6(n-1), m) basis of the updates ``xi = (omega, v)`` (about ``centre``) of views 1..n-1 that leave
+    each held view's free motions alone, or None when no view is held.
+
+    ``hold[k]``: HeldMotions in world of every pair of view k (unit ``(L omega, t)`` about their own
+    centre). A motion is free for view k only if each of its pairs leaves it free: the held subspace is
+    the intersection of the pairs' subspaces (directions within about 25 degrees of all of them), in the
+    scaled coordinates ``z = (length * omega, v)``.
+    """
+    blocks, held = [], False
+    for k in range(1, n):
+        Q = None
+        for h in hold.get(k, []):
+            M = np.asarray(h.motions, dtype=np.float64).reshape(-1, 6)
+            omega = M[:, :3] / h.length
+            v = M[:, 3:] + np.cross(omega, centre - h.centre)  # the same motion about ``centre``
+            Z = np.linalg.svd(np.hstack([omega * length, v]).T, full_matrices=False)[0]
+            if Q is None:
+                Q = Z
+            else:
+                U, sv, _ = np.linalg.svd(Q.T @ Z, full_matrices=False)
+                Q = Q @ U[:, sv > 0.9]
+        if Q is None or Q.shape[1] == 0:
+            blocks.append(np.eye(6))
+            continue
+        B = np.linalg.svd(Q.T, full_matrices=True)[2][Q.shape[1]:].T   # the complement, z coordinates
+        B[:3] /= length                                                 # as xi = (omega, v)
+        blocks.append(B)
+        held = True
+    if not held:
+        return None
+    B = np.zeros((6 * (n - 1), sum(b.shape[1] for b in blocks)))
+    col = 0
+    for k, b in enumerate(blocks):
+        B[6 * k: 6 * k + 6, col: col + b.shape[1]] = b
+        col += b.shape[1]
+    return B

@@ -133,9 +133,9 @@ CW = {
     "rgb_samples": (_samples(lambda p: cv2.imwrite(str(p), np.zeros((24, 32, 3), np.uint16))), "samples",
                     ["expected single-channel (grey) raw samples", "(24, 32, 3)"]),
     "samples_wrong_size": (_samples(lambda p: cv2.imwrite(str(p), np.zeros((20, 32), np.uint16))), "samples",
-                           ["samples are 32x20 but the camera in rig.json is 32x24"]),
+                           ["samples are 32x20 (width x height) but the camera in rig.json is 32x24"]),
     "one_sample_8_bit": (lambda f: cv2.imwrite(str(f / "samples" / "000.png"), np.zeros((24, 32), np.uint8)),
-                         "samples/001.png", ["uint16 (24, 32), but 000.png is uint8"]),
+                         "samples/001.png", ["image is 32x24 1-channel 16-bit, but 000.png is 32x24 1-channel 8-bit"]),
     "sample_missing": (lambda f: (f / "samples" / "003.png").unlink(), "samples", ["needs 9 raw samples, found 8"]),
 }
 
@@ -170,9 +170,9 @@ def _tiny_baseline(rig: dict) -> None:
 STEREO = {
     "left_unreadable": (lambda f: (f / "left.png").write_bytes(b"\x89PNG\r\n"), "left.png",
                         ["not a readable image"]),
-    "right_missing": (lambda f: (f / "right.png").unlink(), "right.png", ["not found or not a readable image"]),
+    "right_missing": (lambda f: (f / "right.png").unlink(), "right.png", ["not found; expected an image file"]),
     "left_is_a_folder": (lambda f: ((f / "left.png").unlink(), (f / "left.png").mkdir()), "left.png",
-                         ["not a readable image"]),
+                         ["cannot read the image (Is a directory)"]),
     "sizes_differ": (lambda f: cv2.imwrite(str(f / "right.png"), np.zeros((40, 64), np.uint8)), "right.png",
                      ["is 64x40", "a stereo pair needs two images of one size"]),
     "camera_size": (lambda f: [cv2.imwrite(str(f / n), np.zeros((40, 60), np.uint8)) for n in ("left.png", "right.png")],
@@ -259,7 +259,7 @@ CAPTURES = {
                              ["patterns.json", "frame list (1 frames) does not match", "(26 frames)"]),
     "float_images_with_nan": (_float_nan, ["float32", "expected uint8 or uint16"]),
     "one_image_16_bit": (lambda f: cv2.imwrite(str(f / "005.png"), np.zeros((40, 64), np.uint16)),
-                         ["005.png", "uint16 (40, 64), but 000.png is uint8"]),
+                         ["005.png", "image is 64x40 1-channel 16-bit, but 000.png is 64x40 1-channel 8-bit"]),
 }
 
 

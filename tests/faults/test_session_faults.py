@@ -8,7 +8,6 @@ once per module); each test works on a copy.
 
 from __future__ import annotations
 
-import errno
 import json
 import os
 import resource
@@ -427,18 +426,22 @@ def test_the_lock_is_held_for_the_whole_block_and_released(tmp_path):
 
 # -- 7. process writes its outputs as a set ------------------------------------------------------------
 
-def test_a_process_that_fails_between_outputs_leaves_no_summary(cli, reference, tmp_path, monkeypatch):
-    import rangekit.app.process as process
-
+def test_a_process_that_fails_between_outputs_leaves_no_summary(cli, reference, tmp_path):
     d = copy_session(reference, tmp_path / "s")
+    assert cli("process", d, "--no-report").code == 0   # the view caches, then every output
+    sizes = {name: (d / name).stat().st_size for name in ("poses.json", "merged.ply", "mesh.ply")}
+    for name in sizes:
+        (d / name).unlink()
     (d / "summary.json").write_text('{"stale": true}')   # from an earlier run
+    limit = sizes["merged.ply"] // 2
+    assert sizes["poses.json"] < limit
 
-    def full_disk(path, *args):
-        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(path))
+    def small_files():  # files above the limit fail with EFBIG, as on a full disk: poses.json fits, merged.ply not
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+        resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
 
-    monkeypatch.setattr(process, "save_cloud", full_disk)   # merged.ply, after poses.json
-    run = cli("process", d, "--no-report")
-    assert_error(run, 1, "merged.ply", "No space left")
+    run = cli_process("process", d, "--no-report", preexec_fn=small_files)
+    assert_error(run, 1, "merged.ply", "File too large")
     assert (d / "poses.json").exists() and not (d / "summary.json").exists() and not (d / "mesh.ply").exists()
     no_leftovers(d)
 

@@ -9,7 +9,8 @@ Schema ``rangekit.rig/1`` (every field is documented in docs/rig.md)::
       "T_world_table": 4x4 | null,           # turntable frame: rotation axis = its z axis, origin on the axis
       "devices": {...},                      # how to reach each device (serial port, baud, protocol, ...)
       "capture": {...},                      # capture settings (pattern delay, turntable settle time)
-      "projector_response": {"gamma": g} | null   # optional: pattern value p -> relative radiance p ** g
+      "projector_response": {"gamma": g} | null,  # optional: pattern value p -> relative radiance p ** g
+      "lasers": [ {laser}, ... ]             # optional: line lasers (rangekit.lasers.LineLaser.to_dict)
     }
 
 All poses are ``T_world_x`` (maps x's frame to world), metres. A turntable angle theta rotates objects
@@ -34,6 +35,7 @@ from rangekit.camera import PinholeCamera
 from rangekit.errors import ConfigError, InputError
 from rangekit.geometry import axis_angle_to_R, compose, invert_T, make_T
 from rangekit.io import atomic_write_json, read_json
+from rangekit.lasers import LineLaser, laser_from_dict
 from rangekit.projector_response import ProjectorResponse
 
 __all__ = ["Rig", "SCHEMA", "RIG_FIELDS", "CAMERA_FIELDS", "load_rig", "save_rig", "template_rig", "table_motion",
@@ -41,7 +43,8 @@ __all__ = ["Rig", "SCHEMA", "RIG_FIELDS", "CAMERA_FIELDS", "load_rig", "save_rig
 
 SCHEMA = "rangekit.rig/1"
 #: The top-level fields of a rig file, in the order :meth:`Rig.to_dict` writes them.
-RIG_FIELDS = ("schema", "cameras", "projector", "T_world_table", "devices", "capture", "projector_response")
+RIG_FIELDS = ("schema", "cameras", "projector", "T_world_table", "devices", "capture", "projector_response",
+              "lasers")
 #: The fields of one camera or of the projector (:meth:`PinholeCamera.to_dict`).
 CAMERA_FIELDS = ("name", "width", "height", "K", "dist", "T_world_cam")
 _DIST_SIZES = (0, 4, 5, 8, 12, 14)
@@ -57,11 +60,15 @@ class Rig:
     devices: dict = field(default_factory=dict)
     capture: dict = field(default_factory=dict)
     projector_response: ProjectorResponse | None = None  # pattern value -> radiance; None: not measured (linear)
+    lasers: tuple[LineLaser, ...] = ()  # line lasers fixed to the rig (planes in the world frame)
 
     def __post_init__(self) -> None:
         if not self.cameras:
             raise ConfigError("rig: needs at least one camera in 'cameras'")
         object.__setattr__(self, "cameras", tuple(self.cameras))
+        object.__setattr__(self, "lasers", tuple(self.lasers))
+        if not all(isinstance(laser, LineLaser) for laser in self.lasers):
+            raise ConfigError("rig: lasers must be LineLaser objects")
         if self.T_world_table is not None:
             object.__setattr__(self, "T_world_table", _rigid(self.T_world_table, "rig", "T_world_table"))
         if self.projector_response is not None and not isinstance(self.projector_response, ProjectorResponse):
@@ -88,6 +95,7 @@ class Rig:
             "devices": self.devices,
             "capture": self.capture,
             "projector_response": None if self.projector_response is None else self.projector_response.to_dict(),
+            **({"lasers": [laser.to_dict() for laser in self.lasers]} if self.lasers else {}),
         }
 
     @classmethod
@@ -115,11 +123,17 @@ class Rig:
                 resp = ProjectorResponse.from_dict(resp, where="projector_response")
             except InputError as exc:
                 raise ConfigError(f"{where}: {exc}") from None
+        lasers = data.get("lasers", [])
+        if not isinstance(lasers, list):
+            raise _error(where, "lasers", f"must be a list of lasers, found {_show(lasers)}")
+        if len(lasers) > 8:
+            raise _error(where, "lasers", f"at most 8 lasers, found {len(lasers)}")
+        lasers = tuple(laser_from_dict(entry, where, f"lasers[{i}]") for i, entry in enumerate(lasers))
         for key in ("devices", "capture"):
             if not isinstance(data.get(key, {}), dict):
                 raise _error(where, key, f"must be an object ({{...}}), found {_show(data[key])}")
         try:
-            return cls(cameras=cameras, projector=projector, T_world_table=T, projector_response=resp,
+            return cls(cameras=cameras, projector=projector, T_world_table=T, projector_response=resp, lasers=lasers,
                        devices=dict(data.get("devices", {})), capture=dict(data.get("capture", {})))
         except ConfigError as exc:
             raise ConfigError(f"{where}: {exc}") from exc

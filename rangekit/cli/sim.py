@@ -13,17 +13,32 @@ from rangekit.errors import UsageError
 
 
 def cmd_sim_render(args: argparse.Namespace) -> int:
-    """rangekit sim render [--sensor projector|tof|tof-pulsed|stereo] [--object NAME_OR_MESH] --out DIR"""
-    from rangekit.app.simulate import render_projector_capture, render_stereo_capture, render_tof_capture
+    """rangekit sim render [--sensor projector|laser|tof|tof-pulsed|stereo] [--object NAME_OR_MESH] --out DIR"""
+    from rangekit.app.simulate import (render_laser_capture, render_projector_capture, render_stereo_capture,
+                                       render_tof_capture)
 
     t0 = time.perf_counter()
     check_output(args.out, folder=True)
-    if args.sensor != "projector":
+    if args.sensor == "laser":
+        given = [f for f, v in (("--patterns", args.patterns), ("--global-fraction", args.global_fraction))
+                 if v is not None]
+        if given:
+            raise UsageError(f"{', '.join(given)}: only for --sensor projector; the laser sensor draws line lasers "
+                             "(docs/simulator.md)")
+    elif args.mono:
+        raise UsageError(f"--mono: only for --sensor laser, found --sensor {args.sensor}")
+    if args.sensor not in ("projector", "laser"):
         given = [f for f, v in (("--object", args.object), ("--patterns", args.patterns), ("--rig", args.rig))
                  if v is not None]
         if given:
-            raise UsageError(f"{', '.join(given)}: only for --sensor projector; the {args.sensor} sensor renders its "
-                             "own scene (docs/simulator.md)")
+            raise UsageError(f"{', '.join(given)}: only for --sensor projector or laser; the {args.sensor} sensor "
+                             "renders its own scene (docs/simulator.md)")
+    if args.sensor == "laser":
+        render_laser_capture(args.out, obj=args.object or "lumpy", rig_file=args.rig,
+                             angle=np.radians(args.angle_deg), bits=args.bits, seed=args.seed,
+                             noise=not args.no_noise, colour=not args.mono, progress=say)
+        say(f"wrote {args.out} (off.png, laser<k>.png, rig.json, ground_truth.npz) in {time.perf_counter() - t0:.1f} s")
+        return 0
     if args.sensor == "stereo":
         render_stereo_capture(args.out, size=args.size or (640, 400), dots=not args.no_dots, seed=args.seed,
                               progress=say)
@@ -55,8 +70,9 @@ def add_parsers(sub) -> None:
         "render", help="render a pattern sequence on a simulated object and write captures + ground truth",
         description="Render the captures a real rig would take of an object, plus ground_truth.npz "
                     "(depth, xyz, normals, proj_col, proj_row, valid), the rig file and a preview PNG.")
-    render.add_argument("--sensor", default="projector", choices=("projector", "tof", "tof-pulsed", "stereo"),
-                        help="projector-camera rig (default), continuous-wave or pulsed time of flight, or the "
+    render.add_argument("--sensor", default="projector", choices=("projector", "laser", "tof", "tof-pulsed", "stereo"),
+                        help="projector-camera rig (default), laser-line turntable scanner (Ciclop-like: off.png "
+                             "and one image per laser), continuous-wave or pulsed time of flight, or the "
                              "active-stereo pair")
     render.add_argument("--object", default=None,
                         help="built-in object (plane, sphere, box, cylinder, torus, board, lumpy) or a mesh "
@@ -64,11 +80,14 @@ def add_parsers(sub) -> None:
     render.add_argument("--patterns", default=None, choices=PATTERN_METHODS,
                         help="pattern set to project; default: graycode (44 frames on the default rig)")
     render.add_argument("--out", required=True, help="output folder (created if missing)")
-    render.add_argument("--rig", help="rig file to simulate (default: the built-in simulated rig)")
+    render.add_argument("--rig", help="rig file to simulate (default: the built-in simulated rig; --sensor laser: "
+                                      "it plus two red line lasers; a laser rig file must list 'lasers')")
     render.add_argument("--angle-deg", type=finite_float, default=0.0, help="turntable angle in degrees (default 0)")
     render.add_argument("--bits", type=int, default=8, choices=(8, 10, 12, 16), help="camera bit depth")
     render.add_argument("--seed", type=seed, default=0, help="noise seed (default 0)")
     render.add_argument("--no-noise", action="store_true", help="disable shot and read noise")
+    render.add_argument("--mono", action="store_true",
+                        help="--sensor laser: a monochrome camera (default: RGB, the laser mostly in R)")
     render.add_argument("--global-fraction", type=non_negative_float, default=None,
                         help="interreflection term, fraction of the mean projected light (default 0)")
     tof = render.add_argument_group("time of flight (--sensor tof, tof-pulsed)")

@@ -25,6 +25,7 @@ from typing import Callable
 
 import numpy as np
 
+from rangekit.errors import SceneError
 from rangekit.io import atomic_save_npz, atomic_write_json, write_png
 from rangekit.rig import save_rig
 from rangekit.sim.laser import LaserView
@@ -38,6 +39,9 @@ def write_laser_capture(view: LaserView, out_dir: str | Path, *, seed: int = 0, 
                         progress: Callable[[str], None] | None = None) -> list[Path]:
     """Render the off frame and one frame per laser of ``view``; write the folder. Returns the image
     paths (off first)."""
+    if view.depth is None:
+        raise SceneError(f"write_laser_capture: the view was built with ambient_scale={view.ambient_scale}; the "
+                         "capture's depth truth needs ambient_scale=1")
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     say = progress or (lambda msg: None)

@@ -135,6 +135,15 @@ def test_frames_are_reproducible(lumpy_view):
     assert not np.array_equal(v2.off(), v2.frame(1).image)
 
 
+def test_coarse_ambient_keeps_the_exact_lines(lumpy_view):
+    v4 = LaserView(default_scene("lumpy"), small_rig(), np.radians(25.0), imaging=ImagingModel(colour=True), seed=3,
+                   ambient_scale=4)
+    assert v4.depth is None
+    assert np.array_equal(v4.frame(0).xyz, lumpy_view.frame(0).xyz, equal_nan=True)
+    off1, off4 = lumpy_view.off().astype(float), v4.off().astype(float)
+    assert off4.shape == off1.shape and abs(off4.mean() - off1.mean()) < 0.05 * off1.mean() + 0.5
+
+
 def test_cli_writes_the_capture_folder(tmp_path):
     rig_file = tmp_path / "rig.json"
     save_rig(small_rig(), rig_file)

@@ -49,7 +49,7 @@ class LaserLook:
     ambient: float = 0.12          # room light on a white surface facing the camera, full-scale fraction
     speckle: float = 0.15          # speckle contrast (std / mean of the multiplicative factor); 0: none
     speckle_px: float = 1.5        # speckle grain along the line, pixels
-    max_spacing_px: float = 0.25   # curve samples at most this far apart in the image
+    max_spacing_px: float = 0.5    # curve samples at most this far apart in the image (px)
     max_sigma_px: float = 4.0      # the profile's sigma is capped here (grazing surfaces)
 
 

@@ -14,7 +14,7 @@ Folder layout (every file written atomically)::
                             coded-light ground truth's xyz: the rig's world = turntable frame, object posed
                             at the angle) of the lit curve at each pixel it passes through, NaN elsewhere;
                             laser{k}_curve_uv (N, 2) distorted pixel (u, v) of the visible curve's dense
-                            samples (<= 0.25 px apart); laser{k}_curve_xyz (N, 3) their world points
+                            samples (<= 0.5 px apart); laser{k}_curve_xyz (N, 3) their world points
 """
 
 from __future__ import annotations

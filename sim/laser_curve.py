@@ -2,8 +2,8 @@
 kept where the laser and the camera both see it, projected with the camera's lens model.
 
 No full ray cast per laser frame: the plane meets each triangle it crosses in one segment (exact in
-float64: every point is on the plane to rounding and on its triangle), the segments are sampled finer
-than a quarter pixel, and only those samples are ray cast, from the emitter (shadows, fan) and from the
+float64: every point is on the plane to rounding and on its triangle), the segments are sampled at most
+half a pixel apart in the image, and only those samples are ray cast, from the emitter (shadows, fan) and from the
 camera (occlusion). Frames: world (the rig's world frame, the coded-light ground truth's ``xyz``),
 metres; image coordinates are distorted pixels (pixel centres at integers).
 """
@@ -106,7 +106,7 @@ def _clear(rc_scene, source: np.ndarray, p: np.ndarray, face: np.ndarray, eps: f
 
 
 def lit_curve(mesh: WorldMesh, rc_scene, camera: PinholeCamera, laser: LineLaser, *,
-              max_spacing_px: float = 0.25, eps: float = 2e-5) -> LitCurve:
+              max_spacing_px: float = 0.5, eps: float = 2e-5) -> LitCurve:
     """The samples of ``laser``'s curve on ``mesh`` seen by ``camera`` and lit by the laser.
 
     Parameters
@@ -124,27 +124,31 @@ def lit_curve(mesh: WorldMesh, rc_scene, camera: PinholeCamera, laser: LineLaser
                          "file) to cast its shadows")
     n_l = laser.plane[:3]
     p0, p1, face, w0, w1 = slice_mesh(mesh, laser.plane)
+    # Emitter and camera on the same side of the triangle: n . X is constant on its plane, so per face.
+    tri = mesh.triangles[face]
+    v0 = mesh.vertices[tri[:, 0]]
+    n_face = _unit(np.cross(mesh.vertices[tri[:, 1]] - v0, mesh.vertices[tri[:, 2]] - v0))
+    sl = np.einsum("ij,ij->i", n_face, laser.origin - v0)
+    sc = np.einsum("ij,ij->i", n_face, camera.center - v0)
+    keep = sl * sc > 0
+    p0, p1, face, w0, w1, n_face = p0[keep], p1[keep], face[keep], w0[keep], w1[keep], n_face[keep]
     W, H = camera.width, camera.height
     uv0, uv1 = camera.project(p0), camera.project(p1)
     len_px = np.linalg.norm(uv1 - uv0, axis=1)
     margin = 4.0
     inside = lambda uv: (uv[:, 0] > -margin) & (uv[:, 0] < W + margin) & (uv[:, 1] > -margin) & (uv[:, 1] < H + margin)
     keep = np.isfinite(len_px) & (inside(uv0) | inside(uv1))
-    p0, p1, face, w0, w1, len_px = p0[keep], p1[keep], face[keep], w0[keep], w1[keep], len_px[keep]
+    p0, p1, face, w0, w1, n_face, len_px = p0[keep], p1[keep], face[keep], w0[keep], w1[keep], n_face[keep], len_px[keep]
     count = np.maximum(np.ceil(len_px / max_spacing_px).astype(np.int64), 1)
     seg = np.repeat(np.arange(len(count)), count)
     start = np.cumsum(count) - count
     f = ((np.arange(seg.size) - start[seg]) + 0.5) / count[seg]
     p = p0[seg] + f[:, None] * (p1 - p0)[seg]
     fc = face[seg]
-    tri = mesh.triangles[fc]
-    v0 = mesh.vertices[tri[:, 0]]
-    n_face = _unit(np.cross(mesh.vertices[tri[:, 1]] - v0, mesh.vertices[tri[:, 2]] - v0))
-    to_l, to_c = laser.origin - p, camera.center - p
-    sl, sc = np.einsum("ij,ij->i", n_face, to_l), np.einsum("ij,ij->i", n_face, to_c)
+    to_l = laser.origin - p
     cos_fan = np.cos(laser.fan_angle / 2.0)
     in_fan = _unit(-to_l) @ fan_direction(laser) >= cos_fan
-    cand = np.flatnonzero((sl * sc > 0) & in_fan)
+    cand = np.flatnonzero(in_fan)
     ok = _clear(rc_scene, laser.origin, p[cand], fc[cand], eps)
     cand = cand[ok]
     ok = _clear(rc_scene, camera.center, p[cand], fc[cand], eps)
@@ -152,7 +156,8 @@ def lit_curve(mesh: WorldMesh, rc_scene, camera: PinholeCamera, laser: LineLaser
     uv = camera.project(p[cand])
     ok = (uv[:, 0] >= -0.5) & (uv[:, 0] < W - 0.5) & (uv[:, 1] >= -0.5) & (uv[:, 1] < H - 0.5)
     cand, uv = cand[ok], uv[ok]
-    p, fc, n_face, seg = p[cand], fc[cand], n_face[cand], seg[cand]
+    p, fc, seg = p[cand], fc[cand], seg[cand]
+    n_face = n_face[seg]
     tri = mesh.triangles[fc]
     # Vertex weights of the sample on its triangle: shading normal and albedo interpolated.
     wv = (1.0 - f[cand])[:, None] * w0[seg] + f[cand][:, None] * w1[seg]

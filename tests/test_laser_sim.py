@@ -178,10 +178,18 @@ def test_cli_refuses_bad_options(tmp_path, capsys):
     assert "lasers" in err and "nolaser.json" in err
 
 
-def test_plane_through_camera_laser_without_origin_is_refused():
+def test_laser_without_origin_is_refused():
     from rangekit.errors import SceneError
     rig = small_rig()
     rig = replace(rig, lasers=(replace(rig.lasers[0], origin=None),), T_world_table=make_T())
     view = LaserView(default_scene("sphere"), rig, 0.0)
     with pytest.raises(SceneError, match="origin"):
         view.frame(0)
+
+
+def test_laser_missing_the_scene_lights_nothing():
+    rig = small_rig(160, 128)
+    rig = replace(rig, lasers=(replace(rig.lasers[0], plane=np.array([1.0, 0.0, 0.0, -5.0])),))
+    frame = LaserView(default_scene("sphere"), rig, 0.0).frame(0)
+    assert frame.curve.uv.shape == (0, 2) and frame.pixels.shape == (0, 2)
+    assert not np.isfinite(frame.xyz).any() and frame.image.shape == (128, 160)

@@ -70,11 +70,20 @@ class _Faults:
 
 
 class SimTurntable:
-    """A turntable that moves instantly; ``angle`` in radians."""
+    """A turntable that moves instantly; ``angle`` in radians. Like the Horus and FabScan boards it also
+    switches the rig's line lasers (``laser(n, on)``, n = the laser's ``switch`` number)."""
 
     def __init__(self, faults: _Faults | None = None) -> None:
         self._angle = 0.0
         self._faults = faults or _Faults()
+        self.lasers_on: set[int] = set()
+
+    def laser(self, n: int, on: bool) -> None:
+        self._faults.tick("turntable")
+        if on:
+            self.lasers_on.add(int(n))
+        else:
+            self.lasers_on.discard(int(n))
 
     @property
     def angle(self) -> float:
@@ -112,7 +121,8 @@ class SimProjector:
 
 
 class SimCamera:
-    """Renders the scene as lit by the sim projector at the sim turntable's angle."""
+    """Renders the scene at the sim turntable's angle, lit by the sim projector or, on a rig made with
+    ``light="laser"``, by the line laser switched on (none on: the laser-off, ambient image)."""
 
     def __init__(self, rig: "SimRig") -> None:
         self._rig = rig
@@ -123,6 +133,8 @@ class SimCamera:
 
     def capture(self) -> np.ndarray:
         self._rig._faults.tick("camera")
+        if self._rig.light == "laser":
+            return self._rig.laser_image()
         image = self._rig.projector.image
         return self._rig.renderer().render(image, self._rig.rng_for(image))
 
@@ -136,10 +148,12 @@ class SimRig:
     rig : Rig, default :func:`default_rig`.
     imaging : ImagingModel (noise, blur, gamma, bit depth...).
     seed : int, base seed of every capture's noise.
+    light : "projector" (the camera sees the projected pattern) or "laser" (the rig's line lasers,
+        switched by the turntable; :class:`rangekit.sim.laser.LaserView` with ``laser_ambient_scale``).
     """
 
     def __init__(self, scene: Scene, rig: Rig | None = None, *, imaging: ImagingModel | None = None,
-                 seed: int = 0) -> None:
+                 seed: int = 0, light: str = "projector", laser_ambient_scale: int = 4) -> None:
         if not isinstance(scene, Scene):
             raise SceneError(f"SimRig: scene must be a rangekit.sim.Scene, found {type(scene).__name__}")
         self._scene = scene
@@ -151,9 +165,16 @@ class SimRig:
             rig = replace(rig, capture={**rig.capture, "bits": self.imaging.bits})
         self.rig = rig
         self.seed = int(seed)
+        if light not in ("projector", "laser"):
+            raise SceneError(f"SimRig: light must be 'projector' or 'laser', found {light!r}")
+        if light == "laser" and not self.rig.lasers:
+            raise SceneError("SimRig(light='laser'): the rig has no lasers (rig file 'lasers'); use "
+                             "rangekit.sim.laser_rig.laser_rig()")
+        self.light, self.laser_ambient_scale = light, int(laser_ambient_scale)
+        self._laser_key, self._laser_view = None, None
         self._faults = _Faults()
         self.camera = SimCamera(self)
-        self.projector = SimProjector(self.rig.projector, self._faults)
+        self.projector = None if self.rig.projector is None else SimProjector(self.rig.projector, self._faults)
         self.turntable = SimTurntable(self._faults) if self.rig.T_world_table is not None else None
         self._cam_rays = None
         self._corner_rays = None
@@ -218,6 +239,37 @@ class SimRig:
 
     def renderer(self) -> ViewRenderer:
         return self._view()[1]
+
+    # ---------------------------------------------------------------- line lasers
+    def laser_view(self):
+        """The :class:`rangekit.sim.laser.LaserView` of the current scene and angle (cached)."""
+        from rangekit.sim.laser import LaserView
+
+        key = (self._scene_index, self._state_angle())
+        if self._laser_key != key:
+            seed = self.seed + self._scene_index * 1_000_003
+            self._laser_view = LaserView(self._scene, self.rig, self._state_angle(), imaging=self.imaging, seed=seed,
+                                         ambient_scale=self.laser_ambient_scale)
+            self._laser_key = key
+        return self._laser_view
+
+    def laser_index(self, n: int) -> int:
+        """Index in ``rig.lasers`` of the laser the board switches as number ``n`` (its ``switch``, else
+        its position + 1)."""
+        for k, laser in enumerate(self.rig.lasers):
+            if (laser.switch if laser.switch is not None else k + 1) == n:
+                return k
+        raise SceneError(f"simulated turntable: laser {n} is not in the rig file's lasers (switch numbers "
+                         f"{[laser.switch or k + 1 for k, laser in enumerate(self.rig.lasers)]})")
+
+    def laser_image(self) -> np.ndarray:
+        """What the camera sees now: the laser that is on, or the ambient image when all are off. The same
+        state gives the same bytes (the noise is seeded by the seed, the angle and the laser)."""
+        on = sorted(self.turntable.lasers_on) if self.turntable is not None else []
+        if len(on) > 1:
+            raise SceneError(f"the simulator renders one laser at a time; lasers {on} are on")
+        view = self.laser_view()
+        return view.off() if not on else view.frame(self.laser_index(on[0])).image
 
     # ---------------------------------------------------------------- reproducible noise
     def rng_for(self, image: np.ndarray) -> np.random.Generator:

@@ -1,0 +1,121 @@
+"""Steger's ridge detector (C. Steger, "An unbiased detector of curvilinear structures", PAMI 1998) for a
+laser line of any slant or curvature: subpixel points along the line's normal.
+
+The difference image is smoothed with a Gaussian of std ``sigma`` (cv2); at every pixel brighter than
+``min_contrast`` times the smoothed noise, the Hessian H of the smoothed image (derivative-of-Gaussian filters) has
+a most negative eigenvalue lambda whose eigenvector n is the line's normal; the second-order Taylor
+expansion along n peaks at t = -(n . grad) / lambda, and the pixel keeps the point p + t n when it lies
+in the pixel's own square (|t nx|, |t ny| <= 0.5). A Gaussian profile stays a Gaussian centred on the
+same place after smoothing, so the point is unbiased for a straight line (for a circle of radius R the
+smoothed ridge moves by about sigma_total^2 / (2 R)). Every pixel the line crosses gives one point.
+
+Confidence: 1 / std(t), std(t) = noise x |first-derivative kernel| / |lambda|. Height: the smoothed
+profile's top (S at the pixel plus the Taylor step); width: 4 sqrt(S / |lambda| - sigma^2), the 1/e^2
+width of the unsmoothed Gaussian profile. Saturated: a full-scale sample of the laser-on image in the
+pixel's 3 x 3 neighbourhood. Double: a row holding two clusters of points more than ``gap`` px apart,
+the weaker above ``double_ratio`` times the stronger: all the row's points are rejected (the line of a
+turntable scanner crosses each row once; pass double_ratio=None for lines that legitimately cross a row
+twice).
+"""
+
+from __future__ import annotations
+
+import math
+
+import cv2
+import numpy as np
+
+from rangekit.errors import InputError
+
+__all__ = ["ridge_peaks", "smoothing_kernels"]
+
+
+def smoothing_kernels(sigma: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Correlation kernels (2k+1,) float64, k = ceil(4 sigma), of the Gaussian of std ``sigma`` and of its
+    first and second derivatives (sampled, the Gaussian's sum normalised to 1), for cv2.sepFilter2D."""
+    k = max(1, int(math.ceil(4.0 * sigma)))
+    x = np.arange(-k, k + 1, dtype=np.float64)
+    g = np.exp(-0.5 * (x / sigma) ** 2)
+    g /= g.sum()
+    g1 = x / sigma ** 2 * g                           # d/dx of the Gaussian, mirrored for correlation
+    g2 = (x ** 2 / sigma ** 4 - 1.0 / sigma ** 2) * g
+    return g, g1, g2 - g2.mean() * (g > 0)            # a second derivative sums to 0: flat areas give 0
+
+
+def ridge_peaks(d, on, *, noise, sigma, min_contrast, double_ratio, gap, full_scale, max_width):
+    """Steger points of the difference image ``d`` (H, W) float32 (see the module docstring); ``on`` is
+    the laser-on image's used channel(s) for the saturation test. Returns a dict of LinePeaks' fields:
+    points (N, 2), confidence, height, width (N,) and rejected (counts of points)."""
+    if not np.isfinite(sigma) or sigma < 0.5:
+        raise InputError(f"detect_peaks: the ridge method's sigma must be >= 0.5 px, found {sigma!r}")
+    H, W = d.shape
+    g, g1, g2 = smoothing_kernels(sigma)
+    dnorm = float(np.linalg.norm(g1) * np.linalg.norm(g))
+
+    def filt(kx, ky):
+        return cv2.sepFilter2D(d, cv2.CV_32F, kx, ky, borderType=cv2.BORDER_REFLECT)
+
+    S = filt(g, g)
+    s_noise = noise * float(np.linalg.norm(g)) ** 2
+    bright = S > min_contrast * s_noise
+    margin = max(1, int(math.ceil(2.0 * sigma)))     # the reflected border bends a slanted line
+    bright[:margin, :] = bright[-margin:, :] = False
+    bright[:, :margin] = bright[:, -margin:] = False
+    y, x = np.nonzero(bright)
+    c = S[y, x].astype(np.float64)
+    rx, ry = filt(g1, g)[y, x].astype(np.float64), filt(g, g1)[y, x].astype(np.float64)
+    rxx, ryy = filt(g2, g)[y, x].astype(np.float64), filt(g, g2)[y, x].astype(np.float64)
+    rxy = filt(g1, g1)[y, x].astype(np.float64)
+    half_tr = 0.5 * (rxx + ryy)
+    root = np.sqrt((0.5 * (rxx - ryy)) ** 2 + rxy ** 2)
+    lam = half_tr - root                              # the most negative eigenvalue
+    theta = 0.5 * np.arctan2(2.0 * rxy, rxx - ryy)    # direction of the other eigenvector (along the line)
+    nx, ny = -np.sin(theta), np.cos(theta)            # the normal
+    gn = rx * nx + ry * ny
+    hl = c * lam - gn ** 2                            # S^2 x the second derivative of ln S along n
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = -gn * c / hl                              # Newton on ln S: exact for a Gaussian profile
+        s2 = -c ** 2 / hl                             # the smoothed profile's variance along n
+    keep = ((lam < 0) & (np.abs(lam) > np.abs(half_tr + root)) & (hl < 0) & (np.abs(t * nx) <= 0.5)
+            & (np.abs(t * ny) <= 0.5) & (s2 - sigma ** 2 <= (0.5 * max_width) ** 2))
+    y, x, t, nx, ny, lam, c, s2 = y[keep], x[keep], t[keep], nx[keep], ny[keep], lam[keep], c[keep], s2[keep]
+    height = c * np.exp(0.5 * t ** 2 / s2)            # the Gaussian's top
+    width = 4.0 * np.sqrt(np.maximum(s2 - sigma ** 2, 0.0))
+    conf = c / (s2 * noise * dnorm)                   # 1 / std(t), t = s2 x (n . grad S) / S
+    points = np.column_stack([x + t * nx, y + t * ny])
+    rejected = {"weak": 0, "saturated": 0, "double": 0, "edge": 0}
+    good = np.ones(points.shape[0], bool)
+    if full_scale is not None and points.shape[0]:
+        oy = np.clip(y[:, None] + np.repeat(np.arange(-1, 2), 3), 0, H - 1)
+        ox = np.clip(x[:, None] + np.tile(np.arange(-1, 2), 3), 0, W - 1)
+        nb = on[oy, ox]
+        sat = nb.max(axis=tuple(range(1, nb.ndim))) >= full_scale
+        rejected["saturated"] = int(sat.sum())
+        good &= ~sat
+    if double_ratio is not None and points.shape[0]:
+        dbl = _double_rows(y, x, height, gap, double_ratio)
+        rejected["double"] = int((dbl & good).sum())
+        good &= ~dbl
+    return dict(points=points[good], confidence=conf[good], height=height[good], width=width[good],
+                rejected=rejected)
+
+
+def _double_rows(y, x, height, gap, ratio) -> np.ndarray:
+    """(N,) bool: the point's row holds two clusters of points (runs with gaps > ``gap`` px between
+    them) and the weaker cluster's top is above ``ratio`` times the row's strongest."""
+    order = np.lexsort((x, y))
+    ys, xs, hs = y[order], x[order], height[order]
+    new_row = np.r_[True, ys[1:] != ys[:-1]]
+    new_cluster = new_row | np.r_[False, (xs[1:] - xs[:-1]) > gap]
+    cstart = np.flatnonzero(new_cluster)
+    ctop = np.maximum.reduceat(hs, cstart)
+    crow = ys[cstart]
+    rstart = np.r_[True, crow[1:] != crow[:-1]]
+    rtop = np.maximum.reduceat(ctop, np.flatnonzero(rstart))
+    row_id = np.cumsum(rstart) - 1
+    strong = ctop >= ratio * rtop[row_id]
+    n_strong = np.bincount(row_id, weights=strong)
+    dbl_sorted = (n_strong[row_id] > 1)[np.cumsum(new_cluster) - 1]
+    out = np.empty_like(dbl_sorted)
+    out[order] = dbl_sorted
+    return out

@@ -34,14 +34,16 @@ def row_line(centres, width_px, height=200.0, *, W=320, noise=1.0, seed=0, backg
 
 def curve_line(distance, H, W, width_px, height=200.0, *, noise=1.0, seed=0, background=12.0, ss=6):
     """(on, off) uint8 (H, W) of a line whose distance function ``distance(u, v)`` (arrays of subpixel
-    positions -> signed px) is given: the profile averaged over ss x ss samples per pixel."""
+    positions -> signed px) is given: the profile averaged over ss x ss samples per pixel. ``height`` a
+    number or a function height(u, v) (a brightness that varies along the line)."""
     o = (np.arange(ss) + 0.5) / ss - 0.5
     v, u = np.mgrid[0:H, 0:W].astype(float)
     acc = np.zeros((H, W))
     for dv in o:
         for du in o:
-            acc += np.exp(-2.0 * distance(u + du, v + dv) ** 2 / width_px ** 2)
-    return _finish(acc / ss ** 2, np.full(H, float(height)), noise, seed, background)
+            h = height(u + du, v + dv) if callable(height) else float(height)
+            acc += h * np.exp(-2.0 * distance(u + du, v + dv) ** 2 / width_px ** 2)
+    return _finish(acc / ss ** 2, np.ones(H), noise, seed, background)
 
 
 def slanted(angle_deg, u0, v0):

@@ -1,21 +1,27 @@
 """Steger's ridge detector (C. Steger, "An unbiased detector of curvilinear structures", PAMI 1998) for a
 laser line of any slant or curvature: subpixel points along the line's normal.
 
-The difference image is smoothed with a Gaussian of std ``sigma`` (cv2); at every pixel brighter than
-``min_contrast`` times the smoothed noise, the Hessian H of the smoothed image (derivative-of-Gaussian filters) has
-a most negative eigenvalue lambda whose eigenvector n is the line's normal; the second-order Taylor
-expansion along n peaks at t = -(n . grad) / lambda, and the pixel keeps the point p + t n when it lies
-in the pixel's own square (|t nx|, |t ny| <= 0.5). A Gaussian profile stays a Gaussian centred on the
-same place after smoothing, so the point is unbiased for a straight line (for a circle of radius R the
-smoothed ridge moves by about sigma_total^2 / (2 R)). Every pixel the line crosses gives one point.
+The difference image is smoothed with a Gaussian of std ``sigma`` (cv2, derivative-of-Gaussian filters
+for the gradient and the Hessian). At every pixel where the smoothed image S is brighter than
+``min_contrast`` times its noise, the Hessian of **ln S** (not of S, as in Steger) gives the normal n
+(the eigenvector of its most negative eigenvalue lambda) and one Newton step along n gives the peak,
+t = -(n . grad ln S) / lambda. For a Gaussian profile ln S is a parabola across the line, so the step is
+exact wherever the pixel lies (Steger's Taylor step on S is biased by up to 0.04 px at half a pixel); and
+ln of a brightness that changes along the line (albedo) adds nothing across it, so it neither tilts the
+normal nor moves the point. The pixel keeps the point p + t n when it lies in the pixel's own square
+(|t nx|, |t ny| <= 0.5), S bends down across the line by more than ``min_contrast`` times the noise of
+that second derivative (Steger's curvature threshold: it drops the noise-driven tails), and the profile
+is no wider than ``max_width``. Every pixel the line crosses gives one point. Points within 2 sigma of
+the border are dropped (the reflected border bends a slanted line). For a circle of radius R the
+smoothed ridge moves inwards by about sigma_total^2 / (2 R).
 
-Confidence: 1 / std(t), std(t) = noise x |first-derivative kernel| / |lambda|. Height: the smoothed
-profile's top (S at the pixel plus the Taylor step); width: 4 sqrt(S / |lambda| - sigma^2), the 1/e^2
-width of the unsmoothed Gaussian profile. Saturated: a full-scale sample of the laser-on image in the
-pixel's 3 x 3 neighbourhood. Double: a row holding two clusters of points more than ``gap`` px apart,
-the weaker above ``double_ratio`` times the stronger: all the row's points are rejected (the line of a
-turntable scanner crosses each row once; pass double_ratio=None for lines that legitimately cross a row
-twice).
+Confidence: 1 / std(t) = S / (s^2 x noise x |first-derivative kernel|), s^2 = -1 / lambda the smoothed
+profile's variance. Height: the smoothed profile's top (below the raw peak by the factor s_line / s);
+width: 4 sqrt(s^2 - sigma^2), the 1/e^2 width of the unsmoothed profile. Saturated: a full-scale sample
+of the laser-on image in the pixel's 3 x 3 neighbourhood. Double: a row holding two clusters of points
+more than ``gap`` px apart, the weaker above ``double_ratio`` times the stronger: all the row's points
+are rejected (the line of a turntable scanner crosses each row once; pass double_ratio=None for lines
+that legitimately cross a row twice).
 """
 
 from __future__ import annotations
@@ -66,19 +72,23 @@ def ridge_peaks(d, on, *, noise, sigma, min_contrast, double_ratio, gap, full_sc
     rx, ry = filt(g1, g)[y, x].astype(np.float64), filt(g, g1)[y, x].astype(np.float64)
     rxx, ryy = filt(g2, g)[y, x].astype(np.float64), filt(g, g2)[y, x].astype(np.float64)
     rxy = filt(g1, g1)[y, x].astype(np.float64)
-    half_tr = 0.5 * (rxx + ryy)
-    root = np.sqrt((0.5 * (rxx - ryy)) ** 2 + rxy ** 2)
-    lam = half_tr - root                              # the most negative eigenvalue
-    theta = 0.5 * np.arctan2(2.0 * rxy, rxx - ryy)    # direction of the other eigenvector (along the line)
+    gx, gy = rx / c, ry / c                           # the gradient and Hessian of ln S
+    hxx, hyy, hxy = rxx / c - gx * gx, ryy / c - gy * gy, rxy / c - gx * gy
+    half_tr = 0.5 * (hxx + hyy)
+    root = np.sqrt((0.5 * (hxx - hyy)) ** 2 + hxy ** 2)
+    lam, mu = half_tr - root, half_tr + root          # across the line (most negative), along it
+    theta = 0.5 * np.arctan2(2.0 * hxy, hxx - hyy)    # direction of mu's eigenvector (along the line)
     nx, ny = -np.sin(theta), np.cos(theta)            # the normal
-    gn = rx * nx + ry * ny
-    hl = c * lam - gn ** 2                            # S^2 x the second derivative of ln S along n
     with np.errstate(divide="ignore", invalid="ignore"):
-        t = -gn * c / hl                              # Newton on ln S: exact for a Gaussian profile
-        s2 = -c ** 2 / hl                             # the smoothed profile's variance along n
-    keep = ((lam < 0) & (np.abs(lam) > np.abs(half_tr + root)) & (hl < 0) & (np.abs(t * nx) <= 0.5)
-            & (np.abs(t * ny) <= 0.5) & (s2 - sigma ** 2 <= (0.5 * max_width) ** 2))
-    y, x, t, nx, ny, lam, c, s2 = y[keep], x[keep], t[keep], nx[keep], ny[keep], lam[keep], c[keep], s2[keep]
+        t = -(gx * nx + gy * ny) / lam                # Newton on ln S: exact for a Gaussian profile
+        s2 = -1.0 / lam                               # the smoothed profile's variance along n
+    # S itself bends down across the line, by more than min_contrast x the noise of that second derivative
+    # (Steger's threshold on the curvature): in a line's tail, where S is a few DN, ln S is noise-driven
+    curv_noise = noise * float(np.linalg.norm(g2) * np.linalg.norm(g))
+    concave = rxx * nx * nx + 2.0 * rxy * nx * ny + ryy * ny * ny < -min_contrast * curv_noise
+    keep = (concave & (lam < 0) & (np.abs(lam) > np.abs(mu)) & (np.abs(t * nx) <= 0.5) & (np.abs(t * ny) <= 0.5)
+            & (s2 - sigma ** 2 <= (0.5 * max_width) ** 2))
+    y, x, t, nx, ny, c, s2 = (v[keep] for v in (y, x, t, nx, ny, c, s2))
     height = c * np.exp(0.5 * t ** 2 / s2)            # the Gaussian's top
     width = 4.0 * np.sqrt(np.maximum(s2 - sigma ** 2, 0.0))
     conf = c / (s2 * noise * dnorm)                   # 1 / std(t), t = s2 x (n . grad S) / S

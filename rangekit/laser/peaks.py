@@ -156,11 +156,12 @@ def detect_peaks(on, off=None, *, method: str = "gaussian", channel: str | None 
                  sigma: float = 1.5) -> LinePeaks:
     """The laser line's subpixel peaks in ``on - off`` (see the module docstring).
 
-    ``window`` (odd px, >= 3): the centre-of-mass window and the distance beyond which a second peak
-    makes a row double; ``min_contrast``: the smallest accepted peak height over the noise std;
+    ``window`` (px, >= 3, at least the line's 1/e^2 width): the centre-of-mass window (window // 2 either
+    side of the argmax) and the distance beyond which a second peak makes a row double (ridge: the gap
+    between two clusters of points in a row); ``min_contrast``: the smallest accepted peak height over the noise std;
     ``double_ratio``: a second peak above this fraction of the first rejects the row (None: no test);
     ``saturation``: the full-scale value of the laser-on image (default: the dtype's maximum for integer
-    images, no test for float images); ``sigma``: the ridge method's smoothing (px).
+    images, e.g. 255 or 65535: pass 4095 for a 12-bit camera stored in uint16; no test for float images); ``sigma``: the ridge method's smoothing (px).
     """
     if method not in METHODS:
         raise InputError(f"detect_peaks: method must be one of {', '.join(METHODS)}, found {method!r}")
@@ -171,6 +172,9 @@ def detect_peaks(on, off=None, *, method: str = "gaussian", channel: str | None 
     if double_ratio is not None and not 0 < double_ratio <= 1:
         raise InputError(f"detect_peaks: double_ratio must be in (0, 1] or None, found {double_ratio!r}")
     d, on_used = laser_difference(on, off, channel)
+    if np.issubdtype(np.asarray(on).dtype, np.floating) and not np.isfinite(d).all():
+        raise InputError("detect_peaks: the laser-on/off images hold NaN or infinite values; expected finite "
+                         f"intensities, found {int(np.count_nonzero(~np.isfinite(d)))} non-finite pixels")
     noise = estimate_noise(d)
     full = _full_scale(np.asarray(on), saturation)
     if method == "ridge":

@@ -72,7 +72,7 @@ def ridge_peaks(d, on, *, noise, sigma, min_contrast, double_ratio, gap, full_sc
     c = S[y, x].astype(np.float64)
     # along columns only at the bright pixels (the same reflected border as cv2's)
     rows = y[:, None] + np.arange(-(g.size // 2), g.size // 2 + 1)
-    rows = np.where(rows < 0, -rows - 1, np.where(rows >= H, 2 * H - 1 - rows, rows))
+    rows = np.clip(np.where(rows < 0, -rows - 1, np.where(rows >= H, 2 * H - 1 - rows, rows)), 0, H - 1)
     xc = x[:, None]
     cg, cg1 = Xg[rows, xc].astype(np.float64), Xg1[rows, xc].astype(np.float64)
     rx, ry, ryy = cg1 @ g, cg @ g1, cg @ g2

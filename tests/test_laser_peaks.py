@@ -150,7 +150,10 @@ def test_ridge_confidence_ranks_the_errors():
     # ridge's smoothing across rows mixes them)
     a = np.radians(15.0)
     dist = slanted(15.0, 100.3, 300.0)
-    height = lambda u, v: 8.0 + 242.0 * np.clip(((u - 100.3) * np.sin(a) + v * np.cos(a)) / 600, 0, 1) ** 2  # noqa: E731
+
+    def height(u, v):
+        return 8.0 + 242.0 * np.clip(((u - 100.3) * np.sin(a) + v * np.cos(a)) / 600, 0, 1) ** 2
+
     on, off = curve_line(dist, 600, 260, 5.0, height, noise=2.0, seed=3, ss=4)
     p = detect_peaks(on, off, method="ridge")
     assert len(p) >= 500

@@ -5,4 +5,6 @@ Modules: ``peaks`` (subpixel line peaks in a laser-on minus laser-off image), ``
 against a laser plane), ``plane_fit`` (robust plane fit, laser-plane calibration from board poses).
 """
 
-__all__: list[str] = []
+from rangekit.laser.peaks import LinePeaks, detect_peaks, require_peaks
+
+__all__ = ["LinePeaks", "detect_peaks", "require_peaks"]

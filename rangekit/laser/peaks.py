@@ -1,0 +1,309 @@
+"""Subpixel peaks of a laser line in a laser-on minus laser-off image (Fusiello 13.2.4).
+
+``detect_peaks(on, off)`` finds where the sheet of light crosses the image, to a fraction of a pixel,
+with a confidence per peak and the reason every rejected row was rejected. Methods:
+
+- ``"gaussian"`` (default): per row, the argmax and a log-parabola through the three samples around it
+  (the three-point Gaussian fit: exact for a sampled Gaussian profile); for wide lines (profile std
+  s >= 1.5 px) through the samples s px either side, where a three-point fit is most precise;
+- ``"com"``: per row, the centre of mass of ``difference - 3 noise`` (clipped at 0) in a ``window``
+  around the argmax (what Horus does; unbiased over all subpixel phases but locks towards pixel centres);
+- ``"ridge"``: Steger's line detector (1998) in :mod:`rangekit.laser.ridge`, for slanted and curved
+  lines: it returns points along the line's normal, possibly several per row;
+- ``"argmax"``: the integer column of the row maximum, the baseline the others are measured against.
+
+Input: ``on`` and ``off`` (H, W) grey or (H, W, 3) RGB, any integer or float dtype; the difference is
+taken in float32. ``channel``: None or ``"white"`` use grey (RGB through :func:`rangekit.image.to_grey`,
+the mean of the channels); ``"red"``, ``"green"``, ``"blue"`` use that channel only. That channel alone
+(not the channel minus the mean of the others): after the laser-off subtraction there is no ambient
+light left to cancel, the other channels would only add their noise, and a camera whose red laser
+leaks into green would lose signal.
+
+Output: :class:`LinePeaks`, points ``(u, v)`` in pixels with pixel centres at integers (u the column,
+v the row). Rejections (per row for the row methods, counted for all):
+
+- **weak**: the peak is less than ``min_contrast`` times the noise (no line in the row);
+- **saturated**: one of the three samples at the peak is at full scale in the laser-on image (a clipped,
+  flat top biases every fit). Rejected: lower the laser power or the exposure;
+- **double**: the row holds a second peak, at least ``window`` columns away, above ``double_ratio``
+  times the first (an interreflection or a second laser). Both are rejected: the stronger one is not
+  always the direct light (a specular interreflection can outshine a dark surface), and a point on the
+  wrong surface is worse than a missing one;
+- **edge**: the peak is on the first or last column (no sample on one side).
+
+``confidence`` is the inverse of the peak position's predicted standard deviation (1/px), first-order
+propagation of the image noise through the method's formula: it grows with the peak height over the
+noise and falls with the line's width. The noise is estimated from the image itself (a robust spread of
+horizontal pixel differences, which the line barely touches).
+
+``require_peaks(peaks, frame)`` raises :class:`~rangekit.errors.DecodeError` naming the frame when too
+few peaks were found, saying why (nothing lit, saturated, double): the scan calls it so that a frame
+without a laser line is never a silent empty profile.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from rangekit.errors import DecodeError, InputError
+from rangekit.image import to_grey
+from rangekit.laser.ridge import ridge_peaks
+
+__all__ = ["LinePeaks", "detect_peaks", "require_peaks", "laser_difference", "estimate_noise", "METHODS",
+           "STATUS_OK", "STATUS_WEAK", "STATUS_SATURATED", "STATUS_DOUBLE", "STATUS_EDGE", "STATUS_NAMES"]
+
+METHODS = ("gaussian", "com", "ridge", "argmax")
+STATUS_OK, STATUS_WEAK, STATUS_SATURATED, STATUS_DOUBLE, STATUS_EDGE = 0, 1, 2, 3, 4
+STATUS_NAMES = ("ok", "weak", "saturated", "double", "edge")
+_CHANNELS = {"red": 0, "green": 1, "blue": 2}
+#: quantisation noise of one count (std of a uniform step), the floor of the noise estimate
+_QUANTUM = 1.0 / np.sqrt(12.0)
+
+
+@dataclass(frozen=True, eq=False)
+class LinePeaks:
+    """The laser line's peaks in one frame.
+
+    ``points`` (N, 2) float64 (u, v) in pixels, pixel centres at integers, accepted peaks only;
+    ``confidence`` (N,) 1/px, the inverse of the predicted position std; ``height`` (N,) the peak above
+    the laser-off image in the input's units (DN; the smoothed profile's height for ``ridge``);
+    ``width`` (N,) the profile's 1/e^2 full width in px (NaN for ``argmax``); ``rows`` (N,) int64 the
+    row of each peak for the row methods, None for ``ridge``; ``status`` (H,) int8 per row for the row
+    methods (``STATUS_*``), None for ``ridge``; ``rejected`` counts per reason ({"weak", "saturated",
+    "double", "edge"}: rows, or points/rows for ``ridge``); ``noise`` the estimated noise std of the
+    difference image (DN); ``max_contrast`` the largest difference in the frame over ``noise``;
+    ``shape`` (H, W); ``method``.
+    """
+
+    points: np.ndarray
+    confidence: np.ndarray
+    height: np.ndarray
+    width: np.ndarray
+    rows: np.ndarray | None
+    status: np.ndarray | None
+    rejected: dict
+    noise: float
+    max_contrast: float
+    shape: tuple
+    method: str
+
+    def __len__(self) -> int:
+        return int(self.points.shape[0])
+
+    def columns(self) -> np.ndarray:
+        """(H,) float64: the subpixel column of each row's peak, NaN where none (row methods only)."""
+        if self.rows is None:
+            raise InputError("LinePeaks.columns: the ridge method has no one-column-per-row result; use .points")
+        out = np.full(self.shape[0], np.nan)
+        out[self.rows] = self.points[:, 0]
+        return out
+
+
+def laser_difference(on, off=None, channel: str | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(difference (H, W) float32 = on - off in the chosen channel, on's channel(s) used (H, W) or
+    (H, W, 3), for the saturation test). See the module docstring for ``channel``."""
+    on = np.asarray(on)
+    if on.ndim not in (2, 3) or (on.ndim == 3 and on.shape[2] != 3) or min(on.shape[:2]) < 3:
+        raise InputError(f"detect_peaks: the laser-on image must be (H, W) grey or (H, W, 3) RGB with H, W >= 3, "
+                         f"found shape {on.shape}")
+    if not (np.issubdtype(on.dtype, np.integer) or np.issubdtype(on.dtype, np.floating)):
+        raise InputError(f"detect_peaks: the laser-on image must be of an integer or float dtype, found {on.dtype}")
+    if off is not None:
+        off = np.asarray(off)
+        if off.shape != on.shape:
+            raise InputError(f"detect_peaks: the laser-off image must have the laser-on image's shape {on.shape}, "
+                             f"found {off.shape}")
+    if channel is not None and channel != "white" and channel not in _CHANNELS:
+        raise InputError(f"detect_peaks: channel must be None, 'white', 'red', 'green' or 'blue', found {channel!r}")
+    if on.ndim == 3 and channel in _CHANNELS:
+        on = on[..., _CHANNELS[channel]]
+        off = None if off is None else off[..., _CHANNELS[channel]]
+    if on.ndim == 3:
+        d = to_grey(on) if off is None else to_grey(on) - to_grey(off)
+    else:
+        d = on.astype(np.float32) if off is None else np.subtract(on, off, dtype=np.float32)
+    return d, on
+
+
+def estimate_noise(d: np.ndarray, *, row_step: int = 8) -> float:
+    """Robust noise std (input units) of a difference image: from horizontal differences of every
+    ``row_step``-th row, the RMS of those within 4 robust sigmas of zero (a line or an edge is a few
+    outliers); never below the quantisation noise of one count (0.29)."""
+    sub = d[::max(1, row_step)]
+    g = np.abs(np.diff(sub, axis=1)).ravel()
+    if g.size == 0:
+        return float(_QUANTUM)
+    k = g.size // 2
+    mad = float(np.partition(g, k)[k])
+    s0 = max(1.4826 * mad / np.sqrt(2.0), _QUANTUM)
+    inl = g[g <= 4.0 * np.sqrt(2.0) * s0]
+    s = float(np.sqrt(np.mean(inl.astype(np.float64) ** 2) / 2.0)) if inl.size else s0
+    return max(s / 0.9985, float(_QUANTUM))   # 0.9985: the RMS of a normal truncated at 4 sigma
+
+
+def _full_scale(on: np.ndarray, saturation):
+    if saturation is not None:
+        return float(saturation)
+    if np.issubdtype(on.dtype, np.integer):
+        return float(np.iinfo(on.dtype).max)
+    return None
+
+
+def detect_peaks(on, off=None, *, method: str = "gaussian", channel: str | None = None, window: int = 9,
+                 min_contrast: float = 6.0, double_ratio: float | None = 0.5, saturation: float | None = None,
+                 sigma: float = 1.5) -> LinePeaks:
+    """The laser line's subpixel peaks in ``on - off`` (see the module docstring).
+
+    ``window`` (px, >= 3, at least the line's 1/e^2 width): the centre-of-mass window (window // 2 either
+    side of the argmax) and the distance beyond which a second peak makes a row double (ridge: the gap
+    between two clusters of points in a row); ``min_contrast``: the smallest accepted peak height over
+    the noise std (ridge: of the smoothed difference, about 5x less noisy at sigma 1.5, so the ridge
+    finds fainter lines at the same value); ``double_ratio``: a second peak above this fraction of the
+    first rejects the row (None: no test); ``saturation``: the full-scale value of the laser-on image
+    (default: the dtype's maximum for integer images, 255 or 65535: pass 4095 for a 12-bit camera stored
+    in uint16; no test for float images); ``sigma``: the ridge method's smoothing (px).
+    """
+    if method not in METHODS:
+        raise InputError(f"detect_peaks: method must be one of {', '.join(METHODS)}, found {method!r}")
+    if int(window) != window or window < 3:
+        raise InputError(f"detect_peaks: window must be a whole number of pixels >= 3, found {window!r}")
+    if not np.isfinite(min_contrast) or min_contrast <= 0:
+        raise InputError(f"detect_peaks: min_contrast must be a finite number > 0, found {min_contrast!r}")
+    if double_ratio is not None and not 0 < double_ratio <= 1:
+        raise InputError(f"detect_peaks: double_ratio must be in (0, 1] or None, found {double_ratio!r}")
+    d, on_used = laser_difference(on, off, channel)
+    if np.issubdtype(np.asarray(on).dtype, np.floating) and not np.isfinite(d).all():
+        raise InputError("detect_peaks: the laser-on/off images hold NaN or infinite values; expected finite "
+                         f"intensities, found {int(np.count_nonzero(~np.isfinite(d)))} non-finite pixels")
+    noise = estimate_noise(d)
+    full = _full_scale(np.asarray(on), saturation)
+    if method == "ridge":
+        found = ridge_peaks(d, on_used, noise=noise, sigma=sigma, min_contrast=min_contrast,
+                            double_ratio=double_ratio, gap=int(window), full_scale=full,
+                            max_width=2.0 * window)
+        return LinePeaks(**found, rows=None, status=None, noise=noise, max_contrast=float(d.max() / noise),
+                         shape=d.shape, method="ridge")
+    return _row_peaks(d, on_used, method=method, noise=noise, half=int(window) // 2, min_contrast=min_contrast,
+                      double_ratio=double_ratio, full_scale=full)
+
+
+def _row_peaks(d, on, *, method, noise, half, min_contrast, double_ratio, full_scale) -> LinePeaks:
+    H, W = d.shape
+    r = np.arange(H)
+    m = d.argmax(axis=1)
+    peak = d[r, m]
+    status = np.where(peak < min_contrast * noise, STATUS_WEAK, STATUS_OK).astype(np.int8)
+    status[(status == STATUS_OK) & ((m == 0) | (m == W - 1))] = STATUS_EDGE
+    mc = np.clip(m, 1, W - 2)
+    if full_scale is not None:
+        top = on[r[:, None], mc[:, None] + np.arange(-1, 2)]
+        sat = (top.max(axis=tuple(range(1, top.ndim))) >= full_scale)
+        status[(status == STATUS_OK) & sat] = STATUS_SATURATED
+    if double_ratio is not None:
+        status[(status == STATUS_OK) & _second_peak_above(d, m, half, double_ratio * peak)] = STATUS_DOUBLE
+    ok = status == STATUS_OK
+    rows = r[ok]
+    if method == "argmax":
+        u = m[ok].astype(np.float64)
+        width = np.full(u.shape, np.nan)
+        conf = np.full(u.shape, np.sqrt(12.0))   # a uniform error over one pixel
+        height = peak[ok].astype(np.float64)
+    elif method == "gaussian":
+        u, height, width, conf = _gaussian3(d, rows, mc[ok], noise)
+    else:
+        u, height, width, conf = _centre_of_mass(d, rows, m[ok], half, noise)
+    rejected = {name: int(np.count_nonzero(status == code)) for code, name in enumerate(STATUS_NAMES) if code}
+    points = np.column_stack([u, rows.astype(np.float64)])
+    return LinePeaks(points=points, confidence=conf, height=height, width=width, rows=rows, status=status,
+                     rejected=rejected, noise=noise, max_contrast=float(peak.max() / noise), shape=(H, W),
+                     method=method)
+
+
+def _second_peak_above(d, m, half, level) -> np.ndarray:
+    """(H,) bool: a sample more than ``half`` + 1 columns from the row's argmax ``m`` reaches ``level``.
+    The samples near the argmax are set to -inf for one max and restored (no copy of the image)."""
+    H, W = d.shape
+    r = np.arange(H)[:, None]
+    cols = np.clip(m[:, None] + np.arange(-half - 1, half + 2), 0, W - 1)
+    kept = d[r, cols]
+    d[r, cols] = -np.inf
+    try:
+        second = d.max(axis=1)
+    finally:
+        d[r, cols] = kept
+    return second >= level
+
+
+def _gaussian3(d, rows, mc, noise):
+    """Three-point Gaussian fit through the samples a, b, c at m - k, m, m + k: u = m + k (ln a - ln c) /
+    (2 (ln a - 2 ln b + ln c)), exact for a Gaussian profile. First k = 1; where that fit finds a profile
+    std s >= 1.5 px the fit is repeated with k = round(s) (<= 4), where a three-point fit is most precise
+    (its std, sqrt(2) s^2 exp(k^2 / 2 s^2) / k x noise / height, is least at k = s). Width 4 s (1/e^2);
+    std of u by propagating the noise through ln a and ln c."""
+    W = d.shape[1]
+    k = np.ones_like(mc)
+    u, height, width, std = _three_point(d, rows, mc, k, noise)
+    k2 = np.clip(np.rint(width / 4.0), 1, 4).astype(mc.dtype)
+    k2 = np.minimum(k2, np.minimum(mc, W - 1 - mc))
+    redo = k2 > 1
+    if redo.any():
+        u2, h2, w2, s2 = _three_point(d, rows[redo], mc[redo], k2[redo], noise)
+        u[redo], height[redo], width[redo], std[redo] = u2, h2, w2, s2
+    return u, height, width, 1.0 / std
+
+
+def _three_point(d, rows, mc, k, noise):
+    floor = max(noise, 1e-6)
+    a = np.maximum(d[rows, mc - k], floor).astype(np.float64)
+    b = np.maximum(d[rows, mc], floor).astype(np.float64)
+    c = np.maximum(d[rows, mc + k], floor).astype(np.float64)
+    la, lb, lc = np.log(a), np.log(b), np.log(c)
+    den = np.minimum(la - 2.0 * lb + lc, -1e-6)    # a flat or dented top: the offset is clipped below
+    off = np.clip(0.5 * (la - lc) / den, -0.5, 0.5)   # in units of k
+    height = np.exp(lb - 0.25 * (la - lc) * off)      # the parabola's top
+    width = 4.0 * k / np.sqrt(-den)                   # 1/s^2 = -den / k^2
+    std = 0.5 * k * noise * np.sqrt(1.0 / a ** 2 + 1.0 / c ** 2) / -den
+    return mc + k * off, height, width, std
+
+
+def _centre_of_mass(d, rows, m, half, noise, k_noise: float = 3.0):
+    """Centre of mass of max(d - k_noise * noise, 0) over columns m - half .. m + half (clipped to the
+    image); width 4 x the weights' standard deviation; std of u by propagating the noise."""
+    W = d.shape[1]
+    offs = np.arange(-half, half + 1)
+    cols = m[:, None] + offs
+    inside = (cols >= 0) & (cols < W)
+    vals = d[rows[:, None], np.clip(cols, 0, W - 1)].astype(np.float64)
+    w = np.where(inside, np.maximum(vals - k_noise * noise, 0.0), 0.0)
+    s = w.sum(axis=1)
+    s = np.where(s > 0, s, 1.0)
+    mean_off = (w * offs).sum(axis=1) / s
+    var = (w * (offs - mean_off[:, None]) ** 2).sum(axis=1) / s
+    lit = w > 0
+    std = noise * np.sqrt((lit * (offs - mean_off[:, None]) ** 2).sum(axis=1)) / s
+    height = vals.max(axis=1)
+    return m + mean_off, height, 4.0 * np.sqrt(var), 1.0 / np.maximum(std, 1e-9)
+
+
+def require_peaks(peaks: LinePeaks, frame: str, *, min_points: int = 10) -> LinePeaks:
+    """``peaks`` when it holds at least ``min_points`` peaks, else :class:`DecodeError` naming ``frame``
+    (a file or a scan step) and why: nothing lit, a saturated line, or interreflections."""
+    n = len(peaks)
+    if n >= min_points:
+        return peaks
+    rej = {k: v for k, v in peaks.rejected.items() if v}
+    why = []
+    if rej.get("saturated"):
+        why.append(f"{rej['saturated']} saturated (the line is clipped at full scale: lower the laser power or "
+                   "the exposure)")
+    if rej.get("double"):
+        why.append(f"{rej['double']} with a double peak (interreflections or a second laser in view)")
+    if not why:
+        why.append(f"no laser line visible: the brightest laser-on minus laser-off difference is "
+                   f"{peaks.max_contrast:.1f} times the noise ({peaks.noise:.2f}), the threshold for a peak is "
+                   "min_contrast; is the laser on, pointed at the object, and the object in view?")
+    unit = "rows" if peaks.rows is not None else "points"
+    raise DecodeError(f"laser frame {frame}: found {n} line peaks ({peaks.method}), expected at least {min_points}; "
+                      f"rejected {unit}: " + "; ".join(why))

@@ -193,6 +193,28 @@ def test_pose_that_misses_the_board_is_rejected_by_name():
     assert any("rejected board pose 99" in line for line in report_lines(cal))
 
 
+def test_two_poses_one_with_most_points_and_a_wrong_pose():
+    # The points of one pose lie exactly in its board's plane: with two poses, one holding 80 % of the
+    # points, a plain least-median fit would return that board's plane (60 degrees off). Per-pose scoring
+    # does not.
+    rng = np.random.default_rng(11)
+    vs = []
+    for i, step in enumerate((1e-4, 4e-4)):
+        T = board_pose(rng)
+        uv, _ = image_points(line_on_target(T, step=step), 0.2, rng)
+        vs.append(board_view(BOARD, uv, T, name=f"board pose {i + 1}"))
+    cal = calibrate_laser_plane(CAM, vs, name="laser0")
+    assert math.degrees(plane_errors(cal.plane, TRUE_PLANE).normal_angle) < 0.1 and cal.fit.rms > 1e-5
+    # a pose whose board pose is 2 mm off along its normal: its points are outliers, named in the report
+    vs = views(8, 0.05)
+    T = vs[3].T_world_target
+    vs[3] = board_view(BOARD, vs[3].points_uv, compose(T, make_T(t=[0.0, 0.0, 0.002])), name="board pose 4")
+    cal = calibrate_laser_plane(CAM, vs, name="laser0")
+    assert cal.views[3].n_inliers < 0.1 * cal.views[3].n_on_target
+    assert math.degrees(plane_errors(cal.plane, TRUE_PLANE).normal_angle) < 0.02
+    assert any(line.startswith("  board pose 4:") and "off the plane" in line for line in report_lines(cal))
+
+
 def test_collinear_poses_are_calibration_error():
     rng = np.random.default_rng(2)
     T0 = board_pose(rng)

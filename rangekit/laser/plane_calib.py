@@ -203,11 +203,13 @@ def calibrate_laser_plane(camera: PinholeCamera, views: Sequence[TargetView], *,
     used_names = ", ".join(u.name for u in uses if not u.reason)
     what = f"laser {name!r}: the line points of {used_names}" + (f" (rejected: {rejected})" if rejected else "")
     _check_lines(chunks, what)
-    fit = fit_plane(P, seed=seed, what=what)
+    fit = fit_plane(P, seed=seed, groups=owner, what=what)
     if fit.plane[:3] @ camera.center + fit.plane[3] < 0:
         fit = dataclasses.replace(fit, plane=-fit.plane)
     counts = np.bincount(owner[fit.inliers], minlength=len(views))
     uses = [dataclasses.replace(u, n_inliers=int(counts[i])) if not u.reason else u for i, u in enumerate(uses)]
+    kept = [P[fit.inliers & (owner == i)] for i in range(len(views)) if counts[i] >= min_points]
+    _check_lines(kept, what + " (inliers of the robust fit)")
     return LaserPlaneCalibration(name=name, fit=fit, points=P, views=tuple(uses))
 
 
@@ -284,8 +286,12 @@ def report_lines(calibration: LaserPlaneCalibration, truth=None) -> list[str]:
     lines = [f"laser {calibration.name!r}: plane n = [{n[0]:+.6f}, {n[1]:+.6f}, {n[2]:+.6f}], d = "
              f"{n[3] * 1e3:+.4f} mm; RMS residual {f.rms * 1e3:.4f} mm, {f.n_inliers}/{f.n_points} points from "
              f"{len(calibration.used)} poses"]
-    for name, reason in calibration.rejected:
-        lines.append(f"  rejected {name}: {reason}")
+    for v in calibration.views:
+        if v.reason:
+            lines.append(f"  rejected {v.name}: {v.reason}")
+        elif v.n_inliers < v.n_on_target / 2:
+            lines.append(f"  {v.name}: {v.n_on_target - v.n_inliers} of {v.n_on_target} points off the plane "
+                         "(outliers: check this pose's board pose)")
     if truth is not None:
         q = truth.plane if isinstance(truth, LineLaser) else truth
         e = plane_errors(n, q, calibration.points[f.inliers])

@@ -74,11 +74,23 @@ def _svd_plane(P: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return np.append(n, -n @ c), spread, c
 
 
-def _lmeds(P: np.ndarray, rng: np.random.Generator) -> np.ndarray | None:
-    """Least-median-of-squares plane over random triples; None when every triple is degenerate."""
+def _lmeds(P: np.ndarray, rng: np.random.Generator, groups: np.ndarray | None) -> np.ndarray | None:
+    """Least-median-of-squares plane over random triples; None when every triple is degenerate.
+
+    With ``groups`` of more than one label, triples never take all three points from one group, and a
+    plane's score is the median over the groups of each group's median residual, so every group counts
+    the same whatever its number of points (a pose with most of the points cannot impose its own plane).
+    """
     n = len(P)
-    S = P if n <= _SCORE_POINTS else P[rng.choice(n, _SCORE_POINTS, replace=False)]
-    idx = rng.integers(0, n, size=(_SAMPLES, 3))
+    sub = np.arange(n) if n <= _SCORE_POINTS else rng.choice(n, _SCORE_POINTS, replace=False)
+    S = P[sub]
+    idx = rng.integers(0, n, size=(4 * _SAMPLES, 3))
+    labels = None
+    if groups is not None and len(np.unique(groups)) > 1:
+        g = groups[idx]
+        idx = idx[~((g[:, 0] == g[:, 1]) & (g[:, 1] == g[:, 2]))]
+        labels = groups[sub]
+    idx = idx[:_SAMPLES]
     a, b, c = P[idx[:, 0]], P[idx[:, 1]], P[idx[:, 2]]
     normal = np.cross(b - a, c - a)
     norm = np.linalg.norm(normal, axis=1)
@@ -87,7 +99,11 @@ def _lmeds(P: np.ndarray, rng: np.random.Generator) -> np.ndarray | None:
         return None
     normal = normal[ok] / norm[ok, None]
     d = -np.einsum("ij,ij->i", normal, a[ok])
-    med = np.median(np.abs(S @ normal.T + d), axis=0)
+    r = np.abs(S @ normal.T + d)
+    if labels is None:
+        med = np.median(r, axis=0)
+    else:
+        med = np.median([np.median(r[labels == g], axis=0) for g in np.unique(labels)], axis=0)
     k = int(np.argmin(med))
     return np.append(normal[k], d[k])
 
@@ -97,7 +113,7 @@ def _degenerate(spread: np.ndarray) -> bool:
     return not s2 > max(10.0 * s3, 1e-6 * s1)
 
 
-def fit_plane(points, *, k: float = 3.0, max_iterations: int = 10, seed: int = 0,
+def fit_plane(points, *, k: float = 3.0, max_iterations: int = 10, seed: int = 0, groups=None,
               what: str = "points") -> PlaneFit:
     """Robust plane through (N, 3) points (module doc). NaN rows are ignored.
 
@@ -107,6 +123,9 @@ def fit_plane(points, *, k: float = 3.0, max_iterations: int = 10, seed: int = 0
     k : inlier threshold in robust standard deviations.
     max_iterations : refits of the inlier set.
     seed : of the random triples (the result is reproducible).
+    groups : (N,) int labels (e.g. the board pose of each point) or None. Random planes are then never
+        drawn through three points of one group: the points of one board pose lie exactly in the board's
+        plane, which with two poses would hold half the points and win the median.
     what : names the points in errors ("laser 'laser0': points of poses 1, 2").
 
     Raises
@@ -118,12 +137,18 @@ def fit_plane(points, *, k: float = 3.0, max_iterations: int = 10, seed: int = 0
         raise InputError(f"fit_plane: {what} must be an (N, 3) array, found shape {P_all.shape}")
     finite = np.all(np.isfinite(P_all), axis=1)
     P = P_all[finite]
+    if groups is not None:
+        groups = np.asarray(groups).reshape(-1)
+        if groups.shape != (len(P_all),):
+            raise InputError(f"fit_plane: groups must hold one label per point ({len(P_all)},), found shape "
+                             f"{groups.shape}")
+        groups = groups[finite]
     if len(P) < 3:
         raise CalibrationError(f"{what}: a plane needs at least 3 points, found {len(P)}")
     plane, spread, _ = _svd_plane(P)
     if _degenerate(spread):
         raise CalibrationError(_collinear_message(what, spread, len(P)))
-    start = _lmeds(P, np.random.default_rng(seed))
+    start = _lmeds(P, np.random.default_rng(seed), groups)
     if start is not None:
         plane = start
     inl = np.ones(len(P), dtype=bool)

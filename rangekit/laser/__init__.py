@@ -2,7 +2,8 @@
 camera pixel triangulated against the laser's plane (ray-plane, eq. 13.7).
 
 Modules: ``peaks`` (subpixel line peaks in a laser-on minus laser-off image), ``triangulate`` (peak rays
-against a laser plane), ``plane_fit`` (robust plane fit, laser-plane calibration from board poses).
+against a laser plane), ``plane_fit`` (robust plane fit), ``plane_calib`` (laser-plane calibration from board
+poses and the turntable plate).
 """
 
 __all__: list[str] = []

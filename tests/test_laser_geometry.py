@@ -258,3 +258,21 @@ def test_board_pose_from_camera_and_plate_view():
     # the plate alone is one line
     with pytest.raises(CalibrationError, match="collinear"):
         calibrate_laser_plane(CAM, [plate_view(RIG.T_world_table, uv)])
+
+
+def test_bad_input_is_named():
+    from rangekit.errors import InputError
+    with pytest.raises(InputError, match=r"points_uv must be an \(N, 2\).*found shape \(3,\)"):
+        triangulate_peaks(np.zeros(3), CAM, LASER)
+    with pytest.raises(InputError, match="laser plane: must be a LineLaser or 4 finite numbers"):
+        triangulate_peaks(np.zeros((1, 2)), CAM, [0.0, 0.0, 0.0, 1.0])
+    T = np.eye(4)
+    with pytest.raises(InputError, match="board pose 7: give the board's pose as T_world_board or as T_cam_board"):
+        board_view(BOARD, np.zeros((0, 2)), T, T_cam_board=T, camera=CAM, name="board pose 7")
+    with pytest.raises(InputError, match=r"turntable plate: the laser points must be an \(N, 2\)"):
+        plate_view(T, np.zeros((4, 3)))
+    with pytest.raises(CalibrationError, match="laser 'laser1': no target poses"):
+        calibrate_laser_plane(CAM, [], name="laser1")
+    with pytest.raises(CalibrationError, match=r"laser 'laser1': no usable target pose \(rejected: board pose 1: no "
+                                               "laser points"):
+        calibrate_laser_plane(CAM, [board_view(BOARD, np.zeros((0, 2)), T, name="board pose 1")], name="laser1")

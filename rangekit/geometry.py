@@ -29,6 +29,7 @@ __all__ = [
     "nearest_rotation",
     "rotation_angle",
     "look_at",
+    "ray_plane_t",
     "ProcrustesResult",
     "procrustes",
 ]
@@ -131,6 +132,27 @@ def nearest_rotation(M: np.ndarray) -> np.ndarray:
 def rotation_angle(R: np.ndarray) -> float:
     """Angle of a rotation in radians, in [0, pi]; accurate for small angles too."""
     return float(np.linalg.norm(R_to_rotvec(nearest_rotation(R))))
+
+
+def ray_plane_t(origins: np.ndarray, directions: np.ndarray, planes: np.ndarray) -> np.ndarray:
+    """Ray parameter t where each ray ``o + t d`` meets its plane ``n . X + d = 0`` (Fusiello eq. 13.7 in
+    world form): ``t = -(n . o + d) / (n . d)``.
+
+    Parameters
+    ----------
+    origins, directions : (N, 3) float64 (directions need not be unit; t is in their units).
+    planes : (4,) one plane for every ray, or (N, 4) one per ray; ``[n, d]``.
+
+    Returns
+    -------
+    (N,) float64; +-inf or NaN where a ray is parallel to its plane. The caller decides what to refuse
+    (points behind the origin: t <= 0; grazing rays: small |n . d|).
+    """
+    planes = np.asarray(planes, dtype=np.float64)
+    n, d = planes[..., :3], planes[..., 3]
+    denom = np.einsum("...j,...j->...", n, directions)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return -(np.einsum("...j,...j->...", n, origins) + d) / denom
 
 
 def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray = (0.0, 0.0, 1.0)) -> np.ndarray:

@@ -23,7 +23,7 @@ import numpy as np
 
 from rangekit.camera import PinholeCamera, pixel_rays
 from rangekit.errors import InputError
-from rangekit.geometry import transform_vectors
+from rangekit.geometry import ray_plane_t, transform_vectors
 
 __all__ = ["TriangulationResult", "triangulate_ray_plane", "triangulate_ray_ray", "triangulate",
            "range_normals", "discontinuity_mask"]
@@ -94,10 +94,7 @@ def triangulate_ray_plane(camera: PinholeCamera, projector: PinholeCamera, proj_
     planes /= np.linalg.norm(planes[:, :3], axis=1, keepdims=True)
     X = None
     for _ in range(max(1, iterations)):
-        n, dd = planes[:, :3], planes[:, 3]
-        denom = np.einsum("ij,ij->i", n, d)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = -(np.einsum("ij,ij->i", n, o) + dd) / denom
+        t = ray_plane_t(o, d, planes)
         t[~(t > 0)] = np.nan
         X = o + t[:, None] * d
         if not np.any(projector.dist):

@@ -36,11 +36,14 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
     from rangekit.app.reconstruct import reconstruct_view
     from rangekit.errors import ConfigError, naming
     from rangekit.formats.capture import load_capture
+    from rangekit.formats.laser_capture import is_laser_capture
     from rangekit.rig import load_rig
     from rangekit.formats.clouds import save_cloud
 
     t0 = time.perf_counter()
     check_output(args.out)
+    if is_laser_capture(args.capture):
+        return _reconstruct_laser(args, t0)
     cap = load_capture(args.capture)
     if cap.spec is None:
         raise ConfigError(f"{args.capture}: no patterns.json; decode the images with 'rangekit decode' and a "
@@ -55,6 +58,22 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
     save_cloud(args.out, rec.cloud)
     say(f"{rec.decoded!r}")
     say(f"{rec.triangulated!r}")
+    say(f"wrote {len(rec.cloud)} points to {args.out} in {time.perf_counter() - t0:.1f} s")
+    return 0
+
+
+def _reconstruct_laser(args: argparse.Namespace, t0: float) -> int:
+    """``rangekit reconstruct`` of a laser capture folder (off.png, laser0.png, ...): see docs/laser.md."""
+    from rangekit.app.laser_reconstruct import reconstruct_laser_capture
+    from rangekit.formats.clouds import save_cloud
+    from rangekit.formats.laser_capture import load_laser_capture
+    from rangekit.rig import load_rig
+
+    cap = load_laser_capture(args.capture, rig=load_rig(args.rig) if args.rig else None)
+    say(f"laser capture: {len(cap.frames)} laser(s); line peaks ({args.peaks}) and ray-plane triangulation")
+    rec = reconstruct_laser_capture(cap, method=args.peaks)
+    save_cloud(args.out, rec.cloud)
+    say(rec.summary())
     say(f"wrote {len(rec.cloud)} points to {args.out} in {time.perf_counter() - t0:.1f} s")
     return 0
 
@@ -77,11 +96,15 @@ def add_parsers(sub) -> None:
 
     rec = sub.add_parser("reconstruct", help="decode and triangulate a capture folder into a point cloud",
                          description="Decode a capture folder (from 'rangekit sim render' or acquisition) and "
-                                     "triangulate it against the projector into a coloured cloud with normals.")
+                                     "triangulate it against the projector into a coloured cloud with normals; "
+                                     "a laser capture (off.png, laser0.png, ...) is triangulated against the "
+                                     "rig file's laser planes.")
     rec.add_argument("capture", metavar="CAPTURE_DIR", help="capture folder (images + patterns.json)")
     rec.add_argument("--rig", help="rig file (default: the folder's rig.json)")
     rec.add_argument("--method", default="auto", choices=("auto", "ray-plane", "ray-ray"),
                      help="triangulation; auto = ray-ray where rows are coded, else ray-plane")
     rec.add_argument("--integer", action="store_true", help="integer codes only (no subpixel refinement)")
+    rec.add_argument("--peaks", default="gaussian", choices=("gaussian", "com", "ridge", "argmax"),
+                     help="laser captures: the line peak detector (default gaussian, docs/laser.md)")
     rec.add_argument("--out", required=True, help="output cloud (.ply, .xyz or .npy)")
     rec.set_defaults(func=cmd_reconstruct)

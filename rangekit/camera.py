@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from rangekit.errors import ConfigError, InputError
-from rangekit.geometry import apply_T, invert_T, transform_vectors
+from rangekit.geometry import apply_T, invert_T, rigid_problem, transform_vectors
 
 __all__ = ["PinholeCamera", "distort", "undistort", "pixel_rays", "world_pixel_rays"]
 
@@ -146,10 +146,10 @@ class PinholeCamera:
             raise ConfigError(f"{where}: tilted-sensor distortion (tx, ty = {dist[12:].tolist()}) is not "
                               "supported; recalibrate without CALIB_TILTED_MODEL")
         T = _matrix(self.T_world_cam, (4, 4), "T_world_cam", where)
-        if not np.allclose(T[:3, :3] @ T[:3, :3].T, np.eye(3), atol=1e-9) or np.linalg.det(T[:3, :3]) < 0 \
-                or not np.allclose(T[3], [0, 0, 0, 1]):
+        problem = rigid_problem(T, tol=1e-9)
+        if problem is not None:
             raise ConfigError(f"{where}: 'T_world_cam' must be a rigid transform (orthonormal rotation, "
-                              "det +1, last row 0 0 0 1)")
+                              f"det +1, last row 0 0 0 1); found {problem}")
         if int(self.width) <= 0 or int(self.height) <= 0:
             raise ConfigError(f"{where}: width and height must be positive, found {self.width}x{self.height}")
         object.__setattr__(self, "K", K)

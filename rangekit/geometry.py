@@ -134,6 +134,27 @@ def rotation_angle(R: np.ndarray) -> float:
     return float(np.linalg.norm(R_to_rotvec(nearest_rotation(R))))
 
 
+def rigid_problem(T, *, tol: float = 1e-9) -> str | None:
+    """Why ``T`` is not a rigid transform ``[[R, t], [0, 0, 0, 1]]`` (finite, R orthonormal to ``tol``,
+    det R = +1), or None when it is one. The one rigid-transform check of rig files, cameras and poses."""
+    T = np.asarray(T, dtype=np.float64)
+    if T.shape != (4, 4):
+        return f"shape {T.shape}, expected (4, 4)"
+    if not np.all(np.isfinite(T)):
+        return "non-finite entries"
+    R = T[:3, :3]
+    if np.abs(R).max() > 2.0:  # a rotation's entries are in [-1, 1]; also keeps R @ R.T from overflowing
+        return f"entries of R up to {np.abs(R).max():.3g} (a rotation's are in [-1, 1])"
+    off = float(np.abs(R @ R.T - np.eye(3)).max())
+    if off > tol:
+        return f"max |R R^T - I| = {off:.2g} (more than {tol:g})"
+    if np.linalg.det(R) < 0:
+        return f"det R = {np.linalg.det(R):.6g} (a reflection)"
+    if not np.allclose(T[3], [0.0, 0.0, 0.0, 1.0], rtol=0.0, atol=1e-12):
+        return f"last row {T[3].tolist()}, expected [0, 0, 0, 1]"
+    return None
+
+
 def ray_plane_t(origins: np.ndarray, directions: np.ndarray, planes: np.ndarray) -> np.ndarray:
     """Ray parameter t where each ray ``o + t d`` meets its plane ``n . X + d = 0`` (Fusiello eq. 13.7 in
     world form): ``t = -(n . o + d) / (n . d)``.

@@ -33,7 +33,7 @@ import numpy as np
 from rangekit.budget import MAX_IMAGE_SIDE_PX
 from rangekit.camera import PinholeCamera
 from rangekit.errors import ConfigError, InputError
-from rangekit.geometry import axis_angle_to_R, compose, invert_T, make_T
+from rangekit.geometry import axis_angle_to_R, compose, invert_T, make_T, rigid_problem
 from rangekit.io import atomic_write_json, read_json
 from rangekit.lasers import LineLaser, laser_from_dict
 from rangekit.projector_response import ProjectorResponse
@@ -247,12 +247,10 @@ def _rigid(value, where: str, path: str) -> np.ndarray:
     """A (4, 4) rigid transform [[R, t], [0, 0, 0, 1]] (R a rotation: orthonormal, det +1)."""
     T = _array(value, (4, 4), where, path, "must be a 4x4 rigid transform [[R, t], [0, 0, 0, 1]] of finite numbers "
                "(t in metres)")
-    R = T[:3, :3]
-    off = float(np.abs(R @ R.T - np.eye(3)).max())
-    if off > 1e-9 or np.linalg.det(R) < 0 or not np.allclose(T[3], [0.0, 0.0, 0.0, 1.0]):
+    problem = rigid_problem(T, tol=1e-9)
+    if problem is not None:
         raise _error(where, path, "must be a rigid transform [[R, t], [0, 0, 0, 1]] with R a rotation "
-                     f"(orthonormal to 1e-9, det +1); found max |R R^T - I| = {off:.2g}, det R = "
-                     f"{np.linalg.det(R):.6g}, last row {T[3].tolist()}")
+                     f"(orthonormal to 1e-9, det +1); found {problem}")
     return T
 
 

@@ -134,3 +134,19 @@ def test_procrustes_bad_input_is_clear():
 def test_transform_vectors_ignores_translation_and_scale():
     T = make_T(axis_angle_to_R([0, 0, 1], np.pi / 2), [5, 5, 5], scale=3.0)
     assert np.abs(transform_vectors(T, np.array([[1.0, 0, 0]])) - [0, 1, 0]).max() < 1e-15
+
+
+def test_rigid_problem_names_what_is_wrong():
+    from rangekit.geometry import axis_angle_to_R, make_T, rigid_problem
+
+    T = make_T(axis_angle_to_R([1.0, 2.0, 3.0], 0.7), [0.1, -0.2, 0.3])
+    assert rigid_problem(T) is None
+    assert "reflection" in rigid_problem(T @ np.diag([1.0, 1.0, -1.0, 1.0]))
+    assert "non-finite" in rigid_problem(np.where(np.eye(4) > 0, np.nan, T))
+    scaled = T.copy()
+    scaled[:3, :3] *= 1.001
+    assert "R R^T - I" in rigid_problem(scaled) and rigid_problem(scaled, tol=0.01) is None
+    bottom = T.copy()
+    bottom[3, 2] = 1.0
+    assert "last row" in rigid_problem(bottom)
+    assert "shape (3, 4)" in rigid_problem(T[:3])

@@ -73,9 +73,8 @@ def finite_float(text: str) -> float:
     return _number(float, text, lambda v: True, "a finite number")
 
 
-def fraction(text: str) -> float:
-    """Argument type: a number in [0, 1]."""
-    return _number(float, text, lambda v: 0 <= v <= 1, "a number in [0, 1]")
+#: Argument type: a number in [0, 1].
+fraction = float_in(0.0, 1.0)
 
 
 def int_in(lo: int, hi: int):

@@ -14,6 +14,7 @@ from typing import Sequence
 import numpy as np
 
 from rangekit.errors import ConfigError
+from rangekit.geometry import rigid_problem
 from rangekit.io import atomic_write_json, read_json
 
 __all__ = ["save_poses", "load_poses", "POSES_SCHEMA"]
@@ -44,24 +45,13 @@ def load_poses(path: str | Path) -> tuple[list[str], np.ndarray]:
             T = np.asarray(v["T_world_view"], dtype=np.float64)
         except (KeyError, TypeError, ValueError) as exc:
             raise ConfigError(f"{path}: views[{k}] needs a numeric 'T_world_view' 4x4 list") from exc
-        if not _is_rigid(T):
-            found = f"shape {T.shape}" if T.shape != (4, 4) else f"{np.array2string(T, precision=4)}"
+        problem = rigid_problem(T, tol=1e-6)  # a poses file may be written with fewer digits
+        if problem is not None:
             raise ConfigError(f"{path}: views[{k}].T_world_view must be a 4x4 rigid transform (finite, rotation "
-                              f"with determinant +1, last row 0 0 0 1), found {found[:200]}")
+                              f"with determinant +1, last row 0 0 0 1), found {problem}")
         source = v.get("source", f"view{k}") if isinstance(v, dict) else None
         if not isinstance(source, str):
             raise ConfigError(f"{path}: views[{k}].source must be a file name, found {source!r:.80}")
         sources.append(source)
         Ts.append(T)
     return sources, np.stack(Ts)
-
-
-def _is_rigid(T: np.ndarray) -> bool:
-    """A finite 4x4 matrix whose 3x3 block is a rotation (orthonormal, det +1) and last row 0 0 0 1."""
-    if T.shape != (4, 4) or not np.all(np.isfinite(T)):
-        return False
-    R = T[:3, :3]
-    if np.abs(R).max() > 2.0:  # a rotation's entries are in [-1, 1]
-        return False
-    return (np.allclose(R @ R.T, np.eye(3), atol=1e-6) and np.linalg.det(R) > 0
-            and np.allclose(T[3], [0, 0, 0, 1], atol=1e-9))

@@ -8,7 +8,6 @@ import resource
 import signal
 import subprocess
 import sys
-import tempfile
 from pathlib import Path
 
 import pytest
@@ -62,27 +61,6 @@ def test_calibrate_refuses_an_existing_rig_file_before_calibrating(cli, tmp_path
     run = cli("calibrate", "--out", tmp_path / "rig.json")
     assert_error(run, 2, "--out", "rig.json", "exists", "--force")
     assert (tmp_path / "rig.json").read_text() == "{}" and run.out == ""  # nothing was captured first
-
-
-@pytest.fixture
-def mount_tmpfs():
-    """Mount a small tmpfs (root only; skips where mounting is not permitted) and unmount it afterwards."""
-    mounted = []
-
-    def mount(size: str, *, read_only: bool = False) -> Path:
-        where = Path(tempfile.mkdtemp(prefix="rangekit-mount-"))
-        opts = f"size={size}" + (",ro" if read_only else "")
-        res = subprocess.run(["mount", "-t", "tmpfs", "-o", opts, "tmpfs", str(where)], capture_output=True)
-        if res.returncode != 0:
-            where.rmdir()
-            pytest.skip(f"cannot mount a tmpfs here: {res.stderr.decode().strip()}")
-        mounted.append(where)
-        return where
-
-    yield mount
-    for where in mounted:
-        subprocess.run(["umount", str(where)], check=False)
-        where.rmdir()
 
 
 def test_a_read_only_output_folder_is_refused_before_any_work(cli, mount_tmpfs):

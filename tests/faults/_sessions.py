@@ -1,0 +1,68 @@
+"""Small simulated sessions for the session fault tests (issue 16): the reference session and what the
+tests do with copies of it. The ``reference`` fixture (tests/faults/conftest.py) makes it once per run.
+
+Sessions are small: 4 views of the lumpy object, Gray code, a 320x256 camera (about 3 s to acquire).
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+from dataclasses import asdict
+from pathlib import Path
+
+from rangekit.app.acquire import acquire
+from rangekit.coded.patterns import make_pattern_spec
+from rangekit.formats.session import ScanPlan, SimulatorSettings
+from rangekit.rig import Rig
+from rangekit.sim import ImagingModel, SimRig, default_rig, default_scene
+
+N_VIEWS = 4
+
+
+def small_rig() -> Rig:
+    r = default_rig()
+    return Rig(cameras=(r.camera.resized(320, 256),), projector=r.projector, T_world_table=r.T_world_table)
+
+
+def make_reference(out: Path) -> Path:
+    """A finished simulated session as ``rangekit scan`` makes it (object lumpy, seed 1, graycode)."""
+    devices = SimRig(default_scene("lumpy"), small_rig(), seed=1)
+    acquire(devices, devices.rig, make_pattern_spec("graycode", (1280, 800)), out, plan=ScanPlan(N_VIEWS),
+            simulator=SimulatorSettings("lumpy", 1, asdict(ImagingModel())))
+    return out
+
+
+def copy_session(reference: Path, dest: Path, pending=(), checksums: bool = True) -> Path:
+    """A copy of the reference session; views in ``pending`` not yet taken; without their checksums
+    (as written before rangekit recorded them) when ``checksums`` is False."""
+    shutil.copytree(reference, dest)
+    data = json.loads((dest / "session.json").read_text())
+    for v in data["views"]:
+        if v["index"] in pending:
+            v["state"] = "pending"
+            v.pop("sha256")
+            shutil.rmtree(dest / v["folder"])
+        elif not checksums:
+            v.pop("sha256")
+    (dest / "session.json").write_text(json.dumps(data, indent=2))
+    return dest
+
+
+def snapshot(folder: Path) -> dict:
+    """Every file's bytes (the lock file aside: it holds the last user's pid by design)."""
+    return {p.relative_to(folder).as_posix(): p.read_bytes() for p in sorted(folder.rglob("*"))
+            if p.is_file() and p.name != ".lock"}
+
+
+def frames(folder: Path) -> dict:
+    """Every view's frames (bytes) and the recorded checksums: what a resumed scan must reproduce."""
+    data = json.loads((folder / "session.json").read_text())
+    return {"frames": {p.relative_to(folder).as_posix(): p.read_bytes() for p in sorted(folder.glob("view_*/*.png"))},
+            "views": data["views"]}
+
+
+def no_leftovers(folder: Path) -> None:
+    assert not [p for p in folder.rglob("*") if p.name.endswith(".tmp") or p.name.endswith(".partial")]
+
+

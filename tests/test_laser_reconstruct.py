@@ -50,3 +50,15 @@ def test_a_laser_that_lights_nothing_is_named(laser_capture, tmp_path, capsys):
     (bad / "laser1.png").unlink()
     assert main(["reconstruct", str(bad), "--out", str(tmp_path / "c.ply")]) == 1
     assert "missing laser1.png" in capsys.readouterr().err
+
+
+def test_the_full_scale_comes_from_the_capture_or_the_rig(laser_capture):
+    from rangekit.formats.capture import capture_full_scale
+    from rangekit.formats.laser_capture import load_laser_capture
+    from rangekit.rig import load_rig
+
+    assert load_laser_capture(laser_capture).full_scale == 255.0   # capture.json: imaging bits 8
+    rig = load_rig(laser_capture / "rig.json")
+    assert capture_full_scale({"imaging": {"bits": 12}}, rig) == 4095.0   # a 12-bit camera in 16-bit PNGs
+    assert capture_full_scale({}, rig) == float(2 ** rig.capture["bits"] - 1)
+    assert capture_full_scale({"imaging": "junk"}, None) is None

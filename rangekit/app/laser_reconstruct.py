@@ -40,10 +40,11 @@ class LaserReconstruction:
 def reconstruct_laser_capture(capture: LaserCapture, *, method: str = "gaussian",
                               full_scale: float | None = None) -> LaserReconstruction:
     """Peaks, triangulation and merge of every laser of ``capture``; a laser whose line is not visible is a
-    :class:`DecodeError` naming its frame (never a silently empty cloud)."""
+    :class:`DecodeError` naming its frame (never a silently empty cloud). ``full_scale``: the camera's
+    largest value (saturation and colour scale), default the capture's (its bits), else the dtype's."""
     rig, camera = capture.rig, capture.rig.camera
     colour = capture.off.ndim == 3
-    saturation = full_scale if full_scale is not None else float(np.iinfo(capture.off.dtype).max)
+    saturation = full_scale or capture.full_scale or float(np.iinfo(capture.off.dtype).max)
     points, colours, which, all_peaks, counts, refused = [], [], [], [], [], []
     for k, (laser, frame) in enumerate(zip(rig.lasers, capture.frames)):
         name = str(capture.folder / capture.names[k])

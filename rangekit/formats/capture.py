@@ -75,9 +75,16 @@ class Capture:
     def full_scale(self) -> float | None:
         """The camera's largest pixel value, ``2**bits - 1``: the simulator's imaging bits in
         ``capture.json``, else the rig file's ``capture.bits``; None: the images' dtype gives it."""
-        bits = self.info.get("imaging", {}).get("bits") \
-            or (self.rig.capture.get("bits") if self.rig is not None else None)
-        return float((1 << bits) - 1) if bits else None
+        return capture_full_scale(self.info, self.rig)
+
+
+def capture_full_scale(info: dict, rig: Rig | None) -> float | None:
+    """``2**bits - 1`` of a capture folder's camera: the simulator's imaging bits in ``capture.json`` (``info``),
+    else the rig file's ``capture.bits``; None when neither says (the images' dtype gives it)."""
+    imaging = info.get("imaging") if isinstance(info, dict) else None
+    bits = (imaging.get("bits") if isinstance(imaging, dict) else None) \
+        or (rig.capture.get("bits") if rig is not None else None)
+    return float((1 << bits) - 1) if isinstance(bits, int) and 0 < bits <= 32 else None
 
 
 def load_capture(folder: str | Path, *, workers: int = 2) -> Capture:

@@ -20,7 +20,8 @@ import numpy as np
 
 from rangekit.errors import FileFormatError
 from rangekit.image_header import check_image_files
-from rangekit.io import read_png
+from rangekit.formats.capture import capture_full_scale
+from rangekit.io import read_json, read_png
 from rangekit.rig import Rig, load_rig
 
 __all__ = ["LaserCapture", "is_laser_capture", "load_laser_capture"]
@@ -34,6 +35,12 @@ class LaserCapture:
     rig: Rig
     off: np.ndarray
     frames: tuple[np.ndarray, ...]
+    info: dict   # capture.json, {} when absent
+
+    @property
+    def full_scale(self) -> float | None:
+        """The camera's largest pixel value (a 12-bit camera in 16-bit PNGs: 4095); None: the dtype's."""
+        return capture_full_scale(self.info, self.rig)
 
     @property
     def names(self) -> list[str]:
@@ -68,4 +75,5 @@ def load_laser_capture(folder: str | Path, rig: Rig | None = None) -> LaserCaptu
     if images[0].shape[:2] != (cam.height, cam.width):
         raise FileFormatError(f"{paths[0]}: image is {images[0].shape[1]}x{images[0].shape[0]} but the camera in "
                               f"rig.json is {cam.width}x{cam.height}")
-    return LaserCapture(folder, rig, images[0], tuple(images[1:]))
+    info = read_json(folder / "capture.json", what="capture description") if (folder / "capture.json").exists() else {}
+    return LaserCapture(folder, rig, images[0], tuple(images[1:]), info if isinstance(info, dict) else {})

@@ -30,6 +30,7 @@ from rangekit.geometry import apply_T, invert_T
 from rangekit.surface.mesh import TriangleMesh
 from rangekit.surface.raycast import raycasting_scene
 from rangekit.rig import Rig
+from rangekit.sim.evaluate_laser import in_image as _inside, laser_visible_samples
 from rangekit.sim.raycast import _open3d_cast
 from rangekit.sim.scene import Scene, default_scene
 
@@ -53,6 +54,9 @@ class Accuracy:
     max_incidence_deg: float # "can see" = facing camera and projector within this angle
     n_mesh_samples: int
     n_truth_samples: int
+    cloud_rms: float | None = None   # the scan's merged cloud -> true surface, when given
+    cloud_p95: float | None = None
+    n_cloud: int | None = None
 
     def to_dict(self) -> dict:
         return {k: (float(v) if isinstance(v, (float, np.floating)) else v) for k, v in self.__dict__.items()}
@@ -96,24 +100,20 @@ def _seen_from(centre: np.ndarray, P: np.ndarray, N: np.ndarray, scene_V: np.nda
     return out
 
 
-def _inside(camera, P: np.ndarray) -> np.ndarray:
-    z = apply_T(invert_T(camera.T_world_cam), P)[:, 2]
-    uv = camera.project(P)
-    return (z > 0) & (uv[:, 0] >= -0.5) & (uv[:, 0] < camera.width - 0.5) & \
-        (uv[:, 1] >= -0.5) & (uv[:, 1] < camera.height - 0.5)
-
-
 def visible_samples(truth: TriangleMesh, scene: Scene, rig: Rig, angles: np.ndarray, P: np.ndarray,
-                    face: np.ndarray, *, eps: float = 1e-5, min_cos: float = 0.0) -> np.ndarray:
+                    face: np.ndarray, *, eps: float = 1e-5, min_cos: float = 0.0, light: str = "projector") -> np.ndarray:
     """(n,) bool: which true-surface samples ``P`` (frame of the table at angle 0) some view sees lit.
 
     ``eps`` metres: how much closer than the sample a hit must be to occlude it (float32 ray casting).
-    ``min_cos``: the surface must face the camera and the projector at least this much (cosine of the
-    incidence angle; 0 = any angle short of grazing).
+    ``min_cos``: the surface must face the camera and the light at least this much (cosine of the
+    incidence angle; 0 = any angle short of grazing). ``light``: "projector", or "laser" (the rig's line
+    lasers, :func:`rangekit.sim.evaluate_laser.laser_visible_samples`).
     """
     a, b, c = (truth.vertices[truth.triangles[face, k]] for k in range(3))
     N = np.cross(b - a, c - a)
     N /= np.linalg.norm(N, axis=1, keepdims=True)
+    if light == "laser":
+        return laser_visible_samples(scene.world_mesh(np.eye(4)), rig, angles, P, N, eps=eps, min_cos=min_cos)
     seen = np.zeros(len(P), dtype=bool)
     for angle in angles:
         M = rig.T_world_rotated(float(angle)) if rig.T_world_table is not None else np.eye(4)
@@ -143,7 +143,7 @@ def _closest_on(mesh: TriangleMesh, P: np.ndarray) -> tuple[np.ndarray, np.ndarr
 
 def mesh_accuracy(mesh: TriangleMesh, scene: Scene, rig: Rig, angles, *, tolerance: float = 1e-3,
                   table_margin: float = 0.002, max_incidence_deg: float = 80.0, n_samples: int = 200_000,
-                  seed: int = 0) -> Accuracy:
+                  seed: int = 0, light: str = "projector", cloud: np.ndarray | None = None) -> Accuracy:
     """Compare ``mesh`` (session world = the first view's frame) with the scene's first object.
 
     ``angles``: the turntable angles of the views (radians); the first is the world's angle.
@@ -152,7 +152,9 @@ def mesh_accuracy(mesh: TriangleMesh, scene: Scene, rig: Rig, angles, *, toleran
     object, and is reported as ``unobserved_area``, with its own RMS). "Can see" means facing the
     camera and the projector within ``max_incidence_deg`` in at least one view, nothing in the way:
     beyond about 80 degrees coded light still decodes but the flying-pixel filter drops part of the
-    pixels (docs/tutorial.md gives the measured fractions).
+    pixels (docs/tutorial.md gives the measured fractions). ``light="laser"``: lit by one of the rig's
+    line lasers instead of the projector. ``cloud`` (N, 3) session world: the scan's merged points, whose
+    distances to the true surface give ``cloud_rms`` and ``cloud_p95``.
     """
     angles = np.asarray(angles, dtype=np.float64)
     rng = np.random.default_rng(seed)
@@ -165,7 +167,7 @@ def mesh_accuracy(mesh: TriangleMesh, scene: Scene, rig: Rig, angles, *, toleran
 
     def observed(P: np.ndarray, face: np.ndarray) -> np.ndarray:
         seen = visible_samples(truth, scene, rig, angles, P, face,
-                               min_cos=float(np.cos(np.radians(max_incidence_deg))))
+                               min_cos=float(np.cos(np.radians(max_incidence_deg))), light=light)
         if T_table_world is not None:
             seen &= apply_T(T_table_world, P)[:, 2] > table_margin
         return seen
@@ -181,12 +183,17 @@ def mesh_accuracy(mesh: TriangleMesh, scene: Scene, rig: Rig, angles, *, toleran
     d = d_mesh[on_seen]
     diag = float(np.linalg.norm(np.ptp(truth.vertices, axis=0)))
     d_fill = d_mesh[~on_seen]
+    cloud_figures = {}
+    if cloud is not None and len(cloud):
+        d_cloud = _closest_on(truth, apply_T(invert_T(M0), np.asarray(cloud, dtype=np.float64)))[0]
+        cloud_figures = {"cloud_rms": float(np.sqrt(np.mean(d_cloud ** 2))),
+                         "cloud_p95": float(np.percentile(d_cloud, 95)), "n_cloud": int(len(d_cloud))}
     return Accuracy(rms=float(np.sqrt(np.mean(d ** 2))), p95=float(np.percentile(d, 95)), max=float(d.max()),
                     completeness=float(np.mean(d_truth <= tolerance)), tolerance=tolerance, diagonal=diag,
                     visible_fraction=float(seen.mean()), unobserved_area=float(np.mean(~on_seen)),
                     unobserved_rms=float(np.sqrt(np.mean(d_fill ** 2))) if d_fill.size else 0.0,
                     rms_all=float(np.sqrt(np.mean(d_mesh ** 2))), max_incidence_deg=float(max_incidence_deg),
-                    n_mesh_samples=int(on_seen.sum()), n_truth_samples=int(seen.sum()))
+                    n_mesh_samples=int(on_seen.sum()), n_truth_samples=int(seen.sum()), **cloud_figures)
 
 
 @dataclass(frozen=True, eq=False)
@@ -204,8 +211,8 @@ def truth_evaluator(obj: str, rig: Rig, **options) -> Callable[[TriangleMesh, Se
     :func:`mesh_accuracy` (``options`` are its keywords)."""
     scene = default_scene(obj)
 
-    def evaluate(mesh: TriangleMesh, angles: Sequence[float]) -> TruthEvaluation:
-        accuracy = mesh_accuracy(mesh, scene, rig, angles, **options)
+    def evaluate(mesh: TriangleMesh, angles: Sequence[float], cloud: np.ndarray | None = None) -> TruthEvaluation:
+        accuracy = mesh_accuracy(mesh, scene, rig, angles, cloud=cloud, **options)
         ob = scene.objects[0]
         M0 = rig.T_world_rotated(float(angles[0])) if rig.T_world_table is not None else np.eye(4)
         return TruthEvaluation(accuracy, TriangleMesh(apply_T(M0, ob.world_vertices()), ob.triangles))

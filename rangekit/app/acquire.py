@@ -32,6 +32,7 @@ from rangekit.errors import ConfigError, DeviceError, StorageError
 from rangekit.formats.session import CaptureSettings, ScanPlan, Session, SimulatorSettings, view_folder
 from rangekit.formats.session_check import frame_sha256, verify_views
 from rangekit.formats.session_lock import session_lock
+from rangekit.app.lights import light_for
 from rangekit.io import atomic_write_bytes, atomic_write_json, fsync_folder, write_png
 from rangekit.progress import call_progress
 from rangekit.rig import Rig, save_rig
@@ -138,8 +139,18 @@ def _acquire(devices, rig, spec, out: Path, plan, resume, capture, simulator, ha
         session = _new_session(out, plan, spec, rig, capture, simulator, hardware, files)
     settle_s, pattern_settle_s = session.capture.turntable_settle_s, session.capture.pattern_delay_s
     done = [v.done for v in session.views]
-    frames = list(spec.frames())
-    names = spec.frame_names
+    light = light_for(devices, spec, rig)
+    names, files = spec.frame_names, spec.frame_files
+    try:
+        _views(devices, light, rig, spec, out, plan, angles, session, done, names, files, settle_s, pattern_settle_s,
+               progress)
+    finally:
+        light.close()
+    return Session.load(out)
+
+
+def _views(devices, light, rig, spec, out, plan, angles, session, done, names, files, settle_s, pattern_settle_s,
+           progress) -> None:
     for k, angle in enumerate(angles):
         if done[k]:
             continue
@@ -158,21 +169,22 @@ def _acquire(devices, rig, spec, out: Path, plan, resume, capture, simulator, ha
                 if settle_s > 0:
                     time.sleep(settle_s)
             sha256 = {}
-            for i, (name, frame) in enumerate(zip(names, frames)):
-                step = f"frame {i} ({name}): projector"
-                devices.projector.show(frame)
+            for i, (name, file) in enumerate(zip(names, files)):
+                step = f"frame {i} ({name}): {light.device}"
+                light.show(i)
                 if pattern_settle_s > 0:
                     time.sleep(pattern_settle_s)
                 step = f"frame {i} ({name}): camera"
                 image = devices.camera.capture()
-                step, target = f"frame {i} ({name}): writing", partial / f"{i:03d}.png"
-                sha256[target.name] = frame_sha256(write_png(target, image))
+                step, target = f"frame {i} ({name}): writing", partial / file
+                sha256[file] = frame_sha256(write_png(target, image))
+            light.show(None)
             step, target = "writing view.json", partial
             # Each view is a self-contained capture folder (rangekit reconstruct view_NNN works on it).
             atomic_write_json(partial / "patterns.json", spec.to_dict())
             save_rig(rig, partial / "rig.json")
             atomic_write_json(partial / "view.json", {"index": k, "angle_rad": float(angle), "started": t0,
-                                                      "finished": time.time(), "n_frames": len(frames)})
+                                                      "finished": time.time(), "n_frames": len(files)})
             partial.rename(final)
             fsync_folder(out)
             step, target = "recording the view", out / "session.json"
@@ -188,6 +200,5 @@ def _acquire(devices, rig, spec, out: Path, plan, resume, capture, simulator, ha
                                f"{target}: {exc.strerror or exc}; free some space; "
                                f"{_resume_hint(out, sum(done))}") from exc
         done[k] = True
-        call_progress(progress, f"view {k + 1}/{plan.n_views} done ({len(frames)} frames, {time.time() - t0:.1f} s)",
+        call_progress(progress, f"view {k + 1}/{plan.n_views} done ({len(files)} frames, {time.time() - t0:.1f} s)",
                       k + 1, plan.n_views)
-    return Session.load(out)

@@ -38,21 +38,25 @@ class LaserReconstruction:
 
 
 def reconstruct_laser_capture(capture: LaserCapture, *, method: str = "gaussian",
-                              full_scale: float | None = None) -> LaserReconstruction:
+                              full_scale: float | None = None, require: bool = True) -> LaserReconstruction:
     """Peaks, triangulation and merge of every laser of ``capture``; a laser whose line is not visible is a
     :class:`DecodeError` naming its frame (never a silently empty cloud). ``full_scale``: the camera's
-    largest value (saturation and colour scale), default the capture's (its bits), else the dtype's."""
+    largest value (saturation and colour scale), default the capture's (its bits), else the dtype's.
+    ``require=False`` (one step of a scan, where a line may miss everything at some angles): such a laser
+    gives no points, and the scan counts it (``n_points`` 0)."""
     rig, camera = capture.rig, capture.rig.camera
     colour = capture.off.ndim == 3
     saturation = full_scale or capture.full_scale or float(np.iinfo(capture.off.dtype).max)
     points, colours, which, all_peaks, counts, refused = [], [], [], [], [], []
     for k, (laser, frame) in enumerate(zip(rig.lasers, capture.frames)):
         name = str(capture.folder / capture.names[k])
-        peaks = require_peaks(detect_peaks(frame, capture.off, method=method,
-                                           channel=laser.channel if colour else None, saturation=saturation), name)
+        peaks = detect_peaks(frame, capture.off, method=method, channel=laser.channel if colour else None,
+                             saturation=saturation)
+        if require:
+            peaks = require_peaks(peaks, name)
         tri = triangulate_peaks(peaks.points, camera, laser)
         ok = tri.valid
-        if not ok.any():
+        if require and not ok.any():
             raise DecodeError(f"{name}: {len(peaks)} line peaks, but none triangulates against laser {laser.name!r} "
                               f"({tri.n_grazing} rays graze its plane, {tri.n_behind} meet it behind the camera)")
         uv = np.rint(peaks.points[ok]).astype(np.int64)
@@ -63,5 +67,8 @@ def reconstruct_laser_capture(capture: LaserCapture, *, method: str = "gaussian"
         all_peaks.append(peaks)
         counts.append(int(ok.sum()))
         refused.append(int((~ok).sum()))
-    cloud = PointCloud(np.concatenate(points), colours=np.clip(np.concatenate(colours), 0, 1))
+    if not sum(counts):
+        cloud = PointCloud(np.zeros((0, 3)), colours=np.zeros((0, 3), np.float32))
+    else:
+        cloud = PointCloud(np.concatenate(points), colours=np.clip(np.concatenate(colours), 0, 1))
     return LaserReconstruction(cloud, tuple(all_peaks), tuple(counts), tuple(refused), np.concatenate(which))

@@ -114,6 +114,11 @@ def _process(out: Path, fusion: str, method: str, table_margin: float, evaluate:
     if stale.exists():
         stale.unlink()
         fsync_folder(out)
+    if session.is_laser:
+        from rangekit.app.laser_process import process_laser
+
+        return process_laser(out, session, fusion=fusion, table_margin=table_margin, evaluate=evaluate, report=report,
+                             progress=progress)
     rig, spec, full_scale = session.rig, session.pattern, session.capture.full_scale
     T_table_world = invert_T(rig.T_world_table) if rig.T_world_table is not None else None
     settings = {"rangekit": __version__, "method": method, "table_margin": table_margin,

@@ -125,42 +125,15 @@ def write_report(folder: str | Path, result: "ProcessResult", *, clouds: Sequenc
     captures (as processing holds them), ``merged`` and ``mesh`` in the session world (the first view's
     frame), ``truth`` the true surface in that frame (from an evaluator) for the heat map.
     """
-    from rangekit.surface.mesh import distance_to_surface
     from rangekit.colour import colourise
-    from rangekit.app.snapshot import (colour_bar, fit_camera, render_cloud, render_mesh,
-                                   render_values_on_mesh)
+    from rangekit.app.snapshot import fit_camera, render_cloud
 
     out = Path(folder)
     rig = session.rig
-    sections = [f"<h1>rangekit scan report</h1><p class='sub'>{html.escape(str(out.resolve()))}</p>",
-                "<h2>Summary</h2>", _summary_table(result, session)]
+    sections = head_sections(out, result, mesh=mesh, session=session, truth=truth, progress=progress, size=size)
     frame_pts = mesh.vertices  # fit_camera(tight=True) frames the points themselves
-    up = rig.T_world_table[:3, 2] if rig.T_world_table is not None else np.array([0.0, -1.0, 0.0])
-    sides = [(np.radians(a), np.radians(25.0)) for a in (0, 90, 180, 270)] + [(0.0, np.radians(80.0))]
-    side_names = ["front", "right", "back", "left", "top"]
-
-    if truth is not None and result.accuracy:
-        call_progress(progress, "report: error heat map")
-        vmax = 1e-3 * max(0.2, round(result.accuracy["p95"] * 1e3 * 2, 1))
-        figs = []
-        for (az, el), name in zip(sides, side_names):
-            cam = fit_camera(frame_pts, azimuth=az, elevation=el, size=size, up=up, tight=True)
-            img, _ = render_values_on_mesh(mesh, cam, lambda X: distance_to_surface(X, truth), vmin=0.0,
-                                           vmax=vmax, cmap="turbo", smooth=True)
-            figs.append(_img(_crop(img), name, alt=f"{name}: distance to the true surface"))
-        bar = colour_bar(0.0, vmax * 1e3, label="distance to the true surface, mm", cmap="turbo")
-        a = result.accuracy
-        sections += ["<h2>Accuracy against the true surface (simulator)</h2>",
-                     f"<p>RMS {a['rms'] * 1e3:.3f} mm, 95th percentile {a['p95'] * 1e3:.3f} mm, completeness "
-                     f"{a['completeness']:.1%} within {a['tolerance'] * 1e3:g} mm. Red at the bottom is the part "
-                     "no view can see (the object stands on it): the fusion closes it smoothly.</p>",
-                     f"<div class='row'>{''.join(figs)}</div>", _img(bar, "colour scale")]
-
-    call_progress(progress, "report: mesh renders")
-    figs = [_img(_crop(render_mesh(mesh, fit_camera(frame_pts, azimuth=az, elevation=el, size=size, up=up, tight=True),
-                                   smooth=True, colour_by_vertex=False)), name)
-            for (az, el), name in zip(sides, side_names)]
-    sections += ["<h2>Mesh</h2>", f"<div class='row'>{''.join(figs)}</div>"]
+    up = table_up(rig)
+    sides, side_names = SIDES[:2], SIDE_NAMES[:2]
 
     call_progress(progress, "report: registered views")
     n = len(clouds)
@@ -196,6 +169,56 @@ def write_report(folder: str | Path, result: "ProcessResult", *, clouds: Sequenc
         call_progress(progress, f"report: view {k + 1}/{n}", k + 1, n)
     sections += ["<h2>Views</h2>", "".join(rows)]
 
+    return write_page(out, sections)
+
+
+#: The sides the mesh is shown from: (azimuth, elevation) radians about the turntable axis, and their names.
+SIDES = [(np.radians(a), np.radians(25.0)) for a in (0, 90, 180, 270)] + [(0.0, np.radians(80.0))]
+SIDE_NAMES = ["front", "right", "back", "left", "top"]
+
+
+def table_up(rig) -> np.ndarray:
+    """The up direction of the pictures: the turntable axis (else the camera's -y)."""
+    return rig.T_world_table[:3, 2] if rig.T_world_table is not None else np.array([0.0, -1.0, 0.0])
+
+
+def head_sections(out: Path, result: "ProcessResult", *, mesh: "TriangleMesh", session: "Session",
+                  truth: "TriangleMesh | None", progress: Callable | None, size: tuple[int, int]) -> list[str]:
+    """The report's title, summary, error heat map (simulator) and mesh sections, as HTML strings."""
+    from rangekit.surface.mesh import distance_to_surface
+    from rangekit.app.snapshot import colour_bar, fit_camera, render_mesh, render_values_on_mesh
+
+    sections = [f"<h1>rangekit scan report</h1><p class='sub'>{html.escape(str(out.resolve()))}</p>",
+                "<h2>Summary</h2>", _summary_table(result, session)]
+    frame_pts, up, sides, side_names = mesh.vertices, table_up(session.rig), SIDES, SIDE_NAMES
+    if truth is not None and result.accuracy:
+        call_progress(progress, "report: error heat map")
+        vmax = 1e-3 * max(0.2, round(result.accuracy["p95"] * 1e3 * 2, 1))
+        figs = []
+        for (az, el), name in zip(sides, side_names):
+            cam = fit_camera(frame_pts, azimuth=az, elevation=el, size=size, up=up, tight=True)
+            img, _ = render_values_on_mesh(mesh, cam, lambda X: distance_to_surface(X, truth), vmin=0.0,
+                                           vmax=vmax, cmap="turbo", smooth=True)
+            figs.append(_img(_crop(img), name, alt=f"{name}: distance to the true surface"))
+        bar = colour_bar(0.0, vmax * 1e3, label="distance to the true surface, mm", cmap="turbo")
+        a = result.accuracy
+        sections += ["<h2>Accuracy against the true surface (simulator)</h2>",
+                     f"<p>RMS {a['rms'] * 1e3:.3f} mm, 95th percentile {a['p95'] * 1e3:.3f} mm, completeness "
+                     f"{a['completeness']:.1%} within {a['tolerance'] * 1e3:g} mm. Red at the bottom is the part "
+                     "no view can see (the object stands on it): the fusion closes it smoothly.</p>",
+                     f"<div class='row'>{''.join(figs)}</div>", _img(bar, "colour scale")]
+
+    call_progress(progress, "report: mesh renders")
+    figs = [_img(_crop(render_mesh(mesh, fit_camera(frame_pts, azimuth=az, elevation=el, size=size, up=up, tight=True),
+                                   smooth=True, colour_by_vertex=False)), name)
+            for (az, el), name in zip(sides, side_names)]
+    sections += ["<h2>Mesh</h2>", f"<div class='row'>{''.join(figs)}</div>"]
+
+    return sections
+
+
+def write_page(out: Path, sections: Sequence[str]) -> Path:
+    """Write ``out/report.html`` (atomically) from the HTML ``sections``; returns its path."""
     page = ("<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'>"
             f"<title>rangekit report: {html.escape(out.name)}</title><style>{_CSS}</style></head><body>"
             + "".join(sections) + "</body></html>")

@@ -11,11 +11,14 @@ from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Callable
 
+import numpy as np
 from rangekit.app.process import FUSION_METHODS, Evaluator, process_session
 from rangekit.coded.patterns import PatternSpec, make_pattern_spec
 from rangekit.errors import ConfigError, RangekitError, UsageError
+from rangekit.geometry import axis_angle_to_R
 from rangekit.formats.session import CaptureSettings, Session, SimulatorSettings
 from rangekit.formats.summary import ProcessResult
+from rangekit.laser.sequence import LaserSequence
 from rangekit.rig import Rig, load_rig
 from rangekit.rig_checks import validate_rig_for_hardware
 
@@ -32,8 +35,8 @@ class ScanSetup:
     folder: Path
     devices: object                     # the rangekit.devices.Rig protocol: camera, projector, turntable
     rig: Rig
-    spec: PatternSpec
-    n_views: int
+    spec: PatternSpec | LaserSequence   # coded light: the patterns; laser: off + one frame per laser
+    n_views: int                        # turntable positions over a full turn
     resume: bool
     n_done: int                         # views already done (resume)
     capture: CaptureSettings | None     # None on resume: the session's own
@@ -47,18 +50,28 @@ class ScanSetup:
             self.devices.close()
 
 
+#: Scan methods: coded light (projector patterns, views registered) and laser lines (profiles at small
+#: turntable steps, placed by the turntable angle).
+SCAN_METHODS = ("coded", "laser")
 #: The options of a new scan when the command line does not give them.
-SCAN_DEFAULTS = {"rig": "sim", "obj": "lumpy", "n_views": 12, "patterns": "hybrid", "seed": 0}
-_OPTION = {"rig": "--rig", "obj": "--object", "n_views": "--views", "patterns": "--patterns", "seed": "--seed"}
+SCAN_DEFAULTS = {"method": "coded", "rig": "sim", "obj": "lumpy", "n_views": 12, "patterns": "hybrid", "seed": 0}
+#: Turntable steps of a laser scan over a full turn (0.9 degrees each).
+LASER_STEPS = 400
+_OPTION = {"method": "--method", "rig": "--rig", "obj": "--object", "n_views": "--views", "patterns": "--patterns",
+           "seed": "--seed"}
 
 
 def prepare_scan(*, out: str | None = None, resume: str | None = None, rig: str | None = None,
                  obj: str | None = None, n_views: int | None = None, patterns: str | None = None,
-                 seed: int | None = None, fusion: str = "poisson") -> ScanSetup:
+                 seed: int | None = None, fusion: str = "poisson", method: str | None = None,
+                 up: tuple[float, float, float] | None = None) -> ScanSetup:
     """Check the folder, the rig (file or ``"sim"``), the object and the options before anything moves,
     then open the devices. ``resume`` continues the session in that folder with its own settings; an
     option given (not None) must then equal the session's. Options left None take
-    :data:`SCAN_DEFAULTS` in a new scan.
+    :data:`SCAN_DEFAULTS` in a new scan. ``method`` "laser" scans with the rig's line lasers at
+    ``n_views`` turntable steps (default :data:`LASER_STEPS`); ``patterns`` is then not used. ``up``: the
+    direction of a mesh file's object that stands up on the turntable (``(0, 1, 0)`` for Stanford meshes);
+    the session keeps the object turned upright.
 
     Raises
     ------
@@ -72,15 +85,24 @@ def prepare_scan(*, out: str | None = None, resume: str | None = None, rig: str 
     # Everything is checked before any work starts or anything moves: the folder, the rig, the object.
     if fusion not in FUSION_METHODS:
         raise UsageError(f"--fusion must be one of {', '.join(FUSION_METHODS)}, found {fusion!r}")
-    given = {"rig": rig, "obj": obj, "n_views": n_views, "patterns": patterns, "seed": seed}
+    if method is not None and method not in SCAN_METHODS:
+        raise UsageError(f"--method must be one of {', '.join(SCAN_METHODS)}, found {method!r}")
+    if method == "laser" and patterns is not None:
+        raise UsageError("--patterns: a laser scan projects no patterns; leave --patterns out with --method laser")
+    given = {"method": method, "rig": rig, "obj": obj, "n_views": n_views, "patterns": patterns, "seed": seed}
     session, files = None, {}
+    if resume and up is not None:
+        raise UsageError("--up: a resumed scan keeps its session's object as it stands; leave --up out")
     if resume:
         session = Session.load(resume)
         _check_resume_options(session, given)
         rig_file, the_rig, spec = f"{resume}/rig.json", session.rig, session.pattern
         n_views, hardware = len(session.views), session.hardware is not None
+        method = "laser" if session.is_laser else "coded"
     else:
-        rig, obj, n_views, patterns, seed = (SCAN_DEFAULTS[k] if v is None else v for k, v in given.items())
+        if method == "laser" and n_views is None:
+            given["n_views"] = LASER_STEPS
+        method, rig, obj, n_views, patterns, seed = (SCAN_DEFAULTS[k] if v is None else v for k, v in given.items())
         folder = Path(out)
         if (folder / "session.json").exists():
             raise UsageError(f"--out {folder}: already holds a session (session.json); continue it with "
@@ -93,16 +115,27 @@ def prepare_scan(*, out: str | None = None, resume: str | None = None, rig: str 
         rig_file, the_rig, spec = rig, (load_rig(rig) if hardware else None), None
         if hardware:
             validate_rig_for_hardware(the_rig, where=rig)
+            if method == "laser" and not the_rig.lasers:
+                raise ConfigError(f"{rig}: a laser scan needs the rig file's 'lasers' (calibrate them with "
+                                  "'rangekit calibrate --lasers')")
+        object_file = None if hardware or not Path(obj).is_file() else _object_bytes(obj, up)
+        if up is not None and object_file is None:
+            raise UsageError(f"--up turns a mesh file's object upright; --object {obj!r} is "
+                             + ("a hardware scan's real object" if hardware else "a built-in object, already upright"))
+    laser = method == "laser"
     if hardware:
-        devices, simulator, hw = _open_hardware(the_rig, rig_file), None, {"rig_file": str(rig_file)}
+        devices, simulator, hw = _open_hardware(the_rig, rig_file, laser), None, {"rig_file": str(rig_file)}
     else:
-        devices, simulator = _simulator(session, obj, seed, the_rig)
-        the_rig, hw = devices.rig, None
-        if session is None and Path(obj).is_file():
+        devices, simulator = _simulator(session, obj, seed, the_rig, laser,
+                                        object_file if session is None else None)
+        the_rig, hw = (session.rig if session else _scan_rig(devices.rig, laser, seed)), None
+        if session is None and object_file is not None:
             # The session keeps its own copy of the object's mesh, named relative to its folder.
-            simulator, files = replace(simulator, object=f"{OBJECT_FOLDER}/{Path(obj).name}"), {
-                f"{OBJECT_FOLDER}/{Path(obj).name}": Path(obj).read_bytes()}
-    spec = spec or make_pattern_spec(patterns, (the_rig.projector.width, the_rig.projector.height))
+            simulator, files = replace(simulator, object=f"{OBJECT_FOLDER}/{object_file[0]}"), {
+                f"{OBJECT_FOLDER}/{object_file[0]}": object_file[1]}
+    if spec is None:
+        spec = LaserSequence(len(the_rig.lasers)) if laser else make_pattern_spec(
+            patterns, (the_rig.projector.width, the_rig.projector.height))
     capture = None if session else CaptureSettings.from_rig(the_rig, hardware=hardware)
     n_done = len(session.done_views) if session else 0
     return ScanSetup(Path(resume or out), devices, the_rig, spec, n_views, bool(resume), n_done, capture,
@@ -112,7 +145,7 @@ def prepare_scan(*, out: str | None = None, resume: str | None = None, rig: str 
 def _check_resume_options(session: Session, given: dict) -> None:
     """UsageError naming the first option given on the command line that differs from the session."""
     sim = session.simulator
-    recorded = {"rig": "sim" if sim is not None else (session.hardware or {}).get("rig_file", "rig.json"),
+    recorded = {"method": "laser" if session.is_laser else "coded", "rig": "sim" if sim is not None else (session.hardware or {}).get("rig_file", "rig.json"),
                 "obj": sim.object if sim is not None else None, "n_views": len(session.views),
                 "patterns": session.pattern.method, "seed": sim.seed if sim is not None else None}
     for key, value in given.items():
@@ -132,23 +165,65 @@ def _check_resume_options(session: Session, given: dict) -> None:
                              "start a new scan with --out")
 
 
-def _open_hardware(rig: Rig, where: str):
+def _open_hardware(rig: Rig, where: str, laser: bool = False):
     from rangekit.drivers import open_rig_devices
 
-    if rig.projector is None:
+    if rig.projector is None and not laser:
         raise ConfigError(f"{where}: a scan needs a projector (field 'projector')")
     devices = open_rig_devices(rig, where=where)
-    if devices.camera is None or devices.projector is None:
+    if laser and (devices.camera is None or devices.turntable is None):
+        devices.close()
+        raise ConfigError(f"{where}: a laser scan needs 'devices' to name a camera (type depthai) and the turntable "
+                          "board that switches the lasers (devices.turntable)")
+    if not laser and (devices.camera is None or devices.projector is None):
         devices.close()
         raise ConfigError(f"{where}: 'devices' must name a camera (type depthai) and a projector display "
                           "(devices.projector.display)")
     return devices
 
 
-def _simulator(session: Session | None, obj: str, seed: int, rig: Rig | None):
-    """The simulated rig of a new scan (object, seed, default imaging) or of a resumed one (its settings)."""
-    from rangekit.sim import ImagingModel, SimRig, default_scene
+def _object_bytes(obj: str, up) -> tuple[str, bytes]:
+    """The file name and bytes a new session keeps of a mesh file ``obj``: the file itself, or (``up`` given
+    and not +z) the mesh turned so that ``up`` points up, as binary PLY (``NAME_upright.ply``)."""
+    path = Path(obj)
+    u = None if up is None else np.asarray(up, dtype=np.float64)
+    if u is not None and (u.shape != (3,) or not np.all(np.isfinite(u)) or np.linalg.norm(u) == 0):
+        raise UsageError(f"--up: expected a non-zero direction X Y Z, found {up!r}")
+    if u is None or np.allclose(u / np.linalg.norm(u), [0.0, 0.0, 1.0]):
+        return path.name, path.read_bytes()
+    from rangekit.formats.meshes import load_mesh_file
+    from rangekit.formats.ply import mesh_ply_bytes
+    from rangekit.surface.mesh import TriangleMesh
 
+    u = u / np.linalg.norm(u)
+    axis = np.cross(u, [0.0, 0.0, 1.0])
+    R = (axis_angle_to_R(axis / np.linalg.norm(axis), float(np.arccos(np.clip(u[2], -1.0, 1.0))))
+         if np.linalg.norm(axis) > 1e-12 else np.diag([1.0, -1.0, -1.0]))
+    mesh = load_mesh_file(path)
+    return f"{path.stem}_upright.ply", mesh_ply_bytes(TriangleMesh(mesh.vertices @ R.T, mesh.triangles,
+                                                                   mesh.vertex_colours))
+
+
+def _scan_rig(true_rig: Rig, laser: bool, seed: int) -> Rig:
+    """The rig a new simulated session records: the simulator's own for coded light; for a laser scan, its
+    laser planes as calibrated from simulated board poses."""
+    return true_rig
+
+
+def _simulator(session: Session | None, obj: str, seed: int, rig: Rig | None, laser: bool = False,
+               object_file: tuple[str, bytes] | None = None):
+    """The simulated rig of a new scan (object, seed, default imaging) or of a resumed one (its settings).
+    A laser scan renders the line lasers of :func:`rangekit.sim.laser_rig.laser_rig` (the simulator's truth;
+    the session's rig holds the calibrated planes). ``object_file``: (name, bytes) the session will keep of
+    a mesh file, which the simulator then reads (turned upright by ``--up``)."""
+    import tempfile
+
+    from rangekit.sim import ImagingModel, SimRig, default_scene
+    from rangekit.sim.laser_rig import laser_rig
+
+    options = {"light": "laser"} if laser else {}
+    if laser:
+        rig = laser_rig(rig if rig is not None and not rig.lasers else None)
     if session is not None:
         settings = session.simulator
         obj, seed = session.simulator_object, settings.seed
@@ -157,10 +232,16 @@ def _simulator(session: Session | None, obj: str, seed: int, rig: Rig | None):
         except (RangekitError, TypeError, ValueError) as exc:
             raise ConfigError(f"{session.folder / 'session.json'}: simulator.imaging: expected the simulator's "
                               f"imaging model fields, found {str(exc)[:200]}") from None
-        return SimRig(default_scene(obj), rig, imaging=imaging, seed=seed), settings
+        return SimRig(default_scene(obj), rig, imaging=imaging, seed=seed, **options), settings
     # A bad object name or file fails here, before the folder is made.
     imaging = ImagingModel()
-    devices = SimRig(default_scene(obj), rig, imaging=imaging, seed=seed)
+    if object_file is not None and object_file[0] != Path(obj).name:   # turned upright by --up
+        with tempfile.TemporaryDirectory() as tmp:
+            (Path(tmp) / object_file[0]).write_bytes(object_file[1])
+            scene = default_scene(str(Path(tmp) / object_file[0]))
+    else:
+        scene = default_scene(obj)
+    devices = SimRig(scene, rig, imaging=imaging, seed=seed, **options)
     return devices, SimulatorSettings(object=obj, seed=seed, imaging=asdict(imaging))
 
 
@@ -171,7 +252,7 @@ def session_evaluator(session: Session) -> Evaluator | None:
         return None
     from rangekit.sim.evaluate import truth_evaluator
 
-    return truth_evaluator(session.simulator_object, session.rig)
+    return truth_evaluator(session.simulator_object, session.rig, light="laser" if session.is_laser else "projector")
 
 
 def process_scan(folder: str | Path, *, fusion: str = "poisson", report: bool = True,

@@ -7,11 +7,13 @@ import sys
 import time
 from pathlib import Path
 
-from rangekit.cli._common import check_output, console, int_in, say, seed
+from rangekit.cli._common import check_output, console, finite_float, int_in, say, seed
+from rangekit.errors import UsageError
 
 
 def cmd_scan(args: argparse.Namespace) -> int:
-    """rangekit scan --out DIR | --resume DIR [--rig sim|RIG.json] [--object lumpy] [--views 12] [--patterns hybrid]"""
+    """rangekit scan --out DIR | --resume DIR [--method coded|laser] [--rig sim|RIG.json] [--object lumpy]
+    [--views 12 | --steps 400] [--patterns hybrid] [--up X Y Z]"""
     from rangekit.formats.session_lock import session_lock as session_lock_of
 
     t0 = time.perf_counter()
@@ -30,8 +32,13 @@ def _scan(args: argparse.Namespace, t0: float) -> int:
     from rangekit.app.scan import prepare_scan
     from rangekit.formats.session import ScanPlan
 
-    setup = prepare_scan(out=args.out, resume=args.resume, rig=args.rig, obj=args.object, n_views=args.views,
-                         patterns=args.patterns, seed=args.seed, fusion=args.fusion)
+    if args.steps is not None and args.views is not None:
+        raise UsageError("--steps and --views both give the turntable positions; give one (--steps for a laser scan)")
+    if args.method != "laser" and args.steps is not None and not args.resume:
+        raise UsageError("--steps: turntable steps of a laser scan; with --method coded give --views")
+    setup = prepare_scan(out=args.out, resume=args.resume, rig=args.rig, obj=args.object,
+                         n_views=args.views if args.steps is None else args.steps, patterns=args.patterns,
+                         seed=args.seed, fusion=args.fusion, method=args.method, up=args.up)
     folder = args.resume or args.out
     if setup.resume:
         say(f"resuming {folder}: {setup.n_done}/{setup.n_views} views already done")
@@ -104,6 +111,13 @@ def add_parsers(sub) -> None:
     where.add_argument("--resume", metavar="DIR", help="continue the session in DIR")
     # No argparse defaults: a resumed scan takes the session's settings, and an option given with --resume
     # must equal them (rangekit.app.scan.SCAN_DEFAULTS fills in a new scan).
+    scan.add_argument("--method", choices=("coded", "laser"),
+                      help="coded (default: projector patterns, views registered) or laser (the rig's line lasers, "
+                           "switched by the turntable board, one profile per turntable step)")
+    scan.add_argument("--steps", type=int_in(2, 3600), help="turntable steps over a full turn of a laser scan "
+                                                            "(default 400)")
+    scan.add_argument("--up", type=finite_float, nargs=3, metavar=("X", "Y", "Z"),
+                      help="a mesh file object's up direction, stood upright on the turntable (Stanford scans: 0 1 0)")
     scan.add_argument("--rig", help="'sim' (default) or a rig file whose 'devices' name the turntable, projector and "
                                     "camera")
     scan.add_argument("--object", help="simulated object: built-in name (default lumpy) or mesh file (copied into "

@@ -270,6 +270,11 @@ class PatternSpec:
         return len(self.frame_names)
 
     @property
+    def frame_files(self) -> list[str]:
+        """The file of each frame in a capture folder: ``000.png``, ``001.png``, ..."""
+        return [f"{i:03d}.png" for i in range(self.n_frames)]
+
+    @property
     def is_colour(self) -> bool:
         return self.method == "debruijn"
 

@@ -36,6 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from rangekit.coded.patterns import PatternSpec
+from rangekit.laser.sequence import LASER_METHOD, LaserSequence
 from rangekit.errors import ConfigError, RangekitError
 from rangekit.formats.summary import ProcessResult
 from rangekit.io import atomic_write_json, read_json
@@ -119,7 +120,7 @@ class Session:
 
     folder: Path
     plan: ScanPlan
-    pattern: PatternSpec
+    pattern: PatternSpec | LaserSequence   # coded light: the patterns; laser lines: off + one frame per laser
     rig: Rig
     capture: CaptureSettings
     views: tuple[SessionView, ...]
@@ -127,7 +128,7 @@ class Session:
     hardware: dict | None = None       # {"rig_file": path} on hardware
 
     @classmethod
-    def new(cls, folder: str | Path, plan: ScanPlan, pattern: PatternSpec, rig: Rig, *,
+    def new(cls, folder: str | Path, plan: ScanPlan, pattern: PatternSpec | LaserSequence, rig: Rig, *,
             capture: CaptureSettings | None = None, simulator: SimulatorSettings | None = None,
             hardware: dict | None = None) -> "Session":
         """A session with every view pending; ``capture`` defaults to the rig file's settings."""
@@ -139,6 +140,11 @@ class Session:
     @property
     def is_simulated(self) -> bool:
         return self.simulator is not None
+
+    @property
+    def is_laser(self) -> bool:
+        """A laser-line session (its views are laser capture folders)."""
+        return isinstance(self.pattern, LaserSequence)
 
     @property
     def done_views(self) -> list[SessionView]:
@@ -281,10 +287,12 @@ def _plan(value, path: Path) -> ScanPlan:
                                                         MAX_ANGLE_RAD))
 
 
-def _pattern(value, path: Path) -> PatternSpec:
+def _pattern(value, path: Path) -> PatternSpec | LaserSequence:
     if not isinstance(value, dict):
         raise _error(path, "pattern", "a pattern spec (an object with method, width, height, ...)", value)
     try:
+        if value.get("method") == LASER_METHOD:
+            return LaserSequence.from_dict(value, where=f"{path}: pattern")
         return PatternSpec.from_dict(value, where=f"{path}: pattern")
     except RangekitError as exc:
         raise ConfigError(str(exc)) from None
@@ -315,10 +323,10 @@ def _simulator(value, path: Path, folder: Path) -> SimulatorSettings:
     return SimulatorSettings(object=obj, seed=_int(d["seed"], path, "simulator.seed", 0, MAX_SEED), imaging=imaging)
 
 
-def _sha256(value, path: Path, key: str, n_frames: int) -> dict:
-    names = [f"{j:03d}.png" for j in range(n_frames)]
+def _sha256(value, path: Path, key: str, names: list[str]) -> dict:
+    names = sorted(names)
     if not isinstance(value, dict) or sorted(value) != names:
-        raise _error(path, key, f"an object with the SHA-256 of each of the {n_frames} frames "
+        raise _error(path, key, f"an object with the SHA-256 of each of the {len(names)} frames "
                                 f"({names[0]} ... {names[-1]})", value)
     for name, digest in value.items():
         if not (isinstance(digest, str) and len(digest) == 64 and set(digest) <= _SHA256_HEX):
@@ -326,7 +334,7 @@ def _sha256(value, path: Path, key: str, n_frames: int) -> dict:
     return dict(value)
 
 
-def _views(value, path: Path, folder: Path, plan: ScanPlan, n_frames: int) -> tuple[SessionView, ...]:
+def _views(value, path: Path, folder: Path, plan: ScanPlan, frame_files: list[str]) -> tuple[SessionView, ...]:
     if not isinstance(value, list) or len(value) != plan.n_views:
         raise _error(path, "views", f"a list of views (index, angle_rad, state), {plan.n_views} as in "
                                     "plan.n_views", value)
@@ -348,7 +356,7 @@ def _views(value, path: Path, folder: Path, plan: ScanPlan, n_frames: int) -> tu
         if sha is not None:
             if not done:
                 raise _error(path, f"{key}.sha256", "none on a pending view", sha)
-            sha = _sha256(sha, path, f"{key}.sha256", n_frames)
+            sha = _sha256(sha, path, f"{key}.sha256", frame_files)
         views.append(SessionView(i, angle, done, view_folder(folder, i), sha))
     return tuple(views)
 
@@ -364,7 +372,7 @@ def _from_dict(data, folder: Path) -> Session:
             ("capture", "simulator", "hardware"))
     plan = _plan(data["plan"], path)
     pattern = _pattern(data["pattern"], path)
-    views = _views(data["views"], path, folder, plan, pattern.n_frames)
+    views = _views(data["views"], path, folder, plan, pattern.frame_files)
     simulator = None if data.get("simulator") is None else _simulator(data["simulator"], path, folder)
     hardware = data.get("hardware")
     if hardware is not None:

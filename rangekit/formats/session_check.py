@@ -59,8 +59,7 @@ def verify_views(session: Session, *, workers: int = 2) -> list[str]:
     recorded): only their frame count is checked. Raises FileFormatError naming the view folder and the
     first missing, extra or changed frame.
     """
-    n = session.pattern.n_frames
-    expected = {f"{j:03d}.png" for j in range(n)}
+    expected = set(session.pattern.frame_files)
     unverified, jobs = [], []
     for v in session.done_views:
         if not v.folder.is_dir():

@@ -29,6 +29,7 @@ class ProcessResult:
     mesh: dict                      # vertices, triangles, watertight, area_m2, volume_m3, fusion
     seconds: dict = field(default_factory=dict)   # wall time per stage
     accuracy: dict | None = None    # against the truth when an evaluator was given (the simulator's Accuracy)
+    laser: dict | None = None       # a laser scan: per laser its points, steps without a line, rejected rows
 
     @property
     def mesh_path(self) -> Path:
@@ -41,8 +42,8 @@ class ProcessResult:
     def to_dict(self) -> dict:
         return {"schema": SUMMARY_SCHEMA, "views": self.view_names, "n_points": self.n_points,
                 "T_world_view": self.T_world_view.tolist(), "edges": self.edges,
-                "registration_rmse_m": self.registration_rmse, "mesh": self.mesh, "seconds": self.seconds,
-                "accuracy": self.accuracy}
+                "registration_rmse_m": None if np.isnan(self.registration_rmse) else self.registration_rmse, "mesh": self.mesh, "seconds": self.seconds,
+                "accuracy": self.accuracy, **({"laser": self.laser} if self.laser is not None else {})}
 
     def summary_lines(self) -> list[str]:
         """The end-of-run summary, one line per fact, for people."""
@@ -51,10 +52,18 @@ class ProcessResult:
         tr = [e["translation_residual_mm"] for e in acc if e.get("translation_residual_mm") is not None]
         m = self.mesh
         lines = [f"views: {len(self.view_names)}, points: {sum(self.n_points):,} "
-                 f"({min(self.n_points):,} to {max(self.n_points):,} per view)",
-                 f"registration: {len(acc)}/{len(self.edges)} pairs accepted, pair ICP RMSE median "
-                 f"{np.median([e['rmse_mm'] for e in acc]):.4f} mm, joint RMS {self.registration_rmse * 1e3:.4f} mm"
-                 + (f"; synchronisation residual max {max(rot):.4f} deg, {max(tr):.4f} mm" if rot and tr else ""),
+                 f"({min(self.n_points):,} to {max(self.n_points):,} per view)"]
+        if self.laser is not None:
+            lines.append("registration: none, each laser profile placed by its turntable angle; " + "; ".join(
+                f"{d['name']}: {d['points']:,} points, no line in {d['steps_without_line']} step(s)"
+                + (f", {d['rejected_rows'].get('saturated', 0):,} saturated rows" if d["rejected_rows"].get("saturated")
+                   else "") for d in self.laser["lasers"]) + f"; {self.laser['outliers_removed']:,} outliers removed")
+        else:
+            lines.append(f"registration: {len(acc)}/{len(self.edges)} pairs accepted, pair ICP RMSE median "
+                         f"{np.median([e['rmse_mm'] for e in acc]):.4f} mm, joint RMS {self.registration_rmse * 1e3:.4f} "
+                         "mm" + (f"; synchronisation residual max {max(rot):.4f} deg, {max(tr):.4f} mm" if rot and tr
+                                 else ""))
+        lines += [
                  f"mesh ({m['fusion']}): {m['vertices']:,} vertices, {m['triangles']:,} triangles, watertight "
                  f"{m['watertight']}, area {m['area_m2'] * 1e4:.1f} cm^2"
                  + (f", volume {m['volume_m3'] * 1e6:.1f} cm^3" if m["volume_m3"] is not None else ""),
@@ -65,6 +74,9 @@ class ProcessResult:
                          f"({a['rms'] / a['diagonal']:.3%} of the {a['diagonal'] * 1e3:.0f} mm diagonal), 95th "
                          f"percentile {a['p95'] * 1e3:.3f} mm; completeness {a['completeness']:.1%} of the visible "
                          f"surface within {a['tolerance'] * 1e3:g} mm")
+            if a.get("cloud_rms") is not None:
+                lines.append(f"cloud against the true surface: RMS {a['cloud_rms'] * 1e3:.3f} mm, 95th percentile "
+                             f"{a['cloud_p95'] * 1e3:.3f} mm over {a['n_cloud']:,} points")
             lines.append(f"  ({a['visible_fraction']:.0%} of the object is visible within "
                          f"{a['max_incidence_deg']:g} deg of incidence; the other {a['unobserved_area']:.0%} of the "
                          f"mesh is filled in where no view looked, RMS {a['unobserved_rms'] * 1e3:.2f} mm there)")

@@ -1,0 +1,190 @@
+"""From a laser-line session to one mesh: each step's line peaks triangulated against their laser planes,
+each profile turned back by its turntable angle into one frame, the lasers merged, filtered and fused
+(the laser branch of :func:`rangekit.app.process.process_session`).
+
+No registration: a profile is a curve, too thin to register, and the calibrated turntable places it
+(Fusiello 13.2.4). The world is the first step's frame, as for coded light, so the poses, the accuracy
+and the report read the same.
+
+Per step (``view_NNN``, a laser capture folder): peaks of every laser (laser on minus laser off), each
+peak's ray (with the lens distortion) met with that laser's plane, points within ``table_margin`` of the
+turntable top dropped, the rest turned by ``turntable_prior`` into the world. Normals are estimated on
+the merged cloud and turned towards the camera centre each point was seen from, then points far from
+their neighbours are dropped (statistical outlier filter) before screened Poisson.
+
+A laser that gives no line in any step is a :class:`~rangekit.errors.DecodeError` naming the laser and
+its frames (laser off, unplugged, or aimed beside the object), never an empty cloud.
+"""
+
+from __future__ import annotations
+
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from rangekit.app.laser_reconstruct import reconstruct_laser_capture
+from rangekit.errors import ConfigError, DecodeError
+from rangekit.formats.clouds import save_cloud
+from rangekit.formats.poses import save_poses
+from rangekit.formats.summary import ProcessResult
+from rangekit.formats.laser_capture import load_laser_capture
+from rangekit.formats.session import Session
+from rangekit.geometry import apply_T, invert_T
+from rangekit.io import atomic_write_json
+from rangekit.progress import StageTimer, call_progress
+from rangekit.rig import turntable_prior
+from rangekit.surface.cloud import PointCloud
+
+__all__ = ["LaserProfiles", "laser_profiles", "oriented_profiles", "process_laser"]
+
+#: Steps processed at once (threads: PNG decoding and the peak finder release the GIL).
+WORKERS = 2
+
+
+@dataclass(frozen=True, eq=False)
+class LaserProfiles:
+    """Every step's points in the session world (the first step's frame).
+
+    cloud : merged points, colours from the laser-off images (no normals yet).
+    step : (N,) int, the step (view index in ``names``) of each point; laser : (N,) int, which laser lit it.
+    origins : (n_steps, 3) the camera centre of each step in the world (the points' sensor, for normals).
+    T_world_view : (n_steps, 4, 4) each step's turntable pose in the world.
+    names : the steps' folder names; n_points : (n_steps, n_lasers) points per step and laser.
+    rejected : per laser, rows rejected over the scan by reason (saturated, double, ...).
+    """
+
+    cloud: PointCloud
+    step: np.ndarray
+    laser: np.ndarray
+    origins: np.ndarray
+    T_world_view: np.ndarray
+    names: list[str]
+    n_points: np.ndarray
+    rejected: list[dict]
+
+
+def laser_profiles(session: Session, *, method: str = "gaussian", table_margin: float = 0.002,
+                   progress: Callable | None = None) -> LaserProfiles:
+    """Triangulate every done step of a laser ``session`` into the world (see the module docstring).
+
+    Raises DecodeError when a laser lights nothing in any step (naming it and its frames), FileFormatError
+    for an unreadable frame (naming it).
+    """
+    rig, views = session.rig, session.done_views
+    full_scale = session.capture.full_scale
+    T_world_view = (turntable_prior(rig.T_world_table, [v.angle for v in views]) if rig.T_world_table is not None
+                    else np.repeat(np.eye(4)[None], len(views), axis=0))
+    T_table_world = invert_T(rig.T_world_table) if rig.T_world_table is not None else None
+
+    def one(k: int):
+        v = views[k]
+        rec = reconstruct_laser_capture(load_laser_capture(v.folder, rig=rig), method=method, full_scale=full_scale,
+                                        require=False)
+        P, colours, which = rec.cloud.points, rec.cloud.colours, rec.laser_index
+        if T_table_world is not None and len(P):
+            keep = apply_T(T_table_world, P)[:, 2] > table_margin
+            P, colours, which = P[keep], colours[keep], which[keep]
+        n = np.bincount(which, minlength=len(rig.lasers))   # points per laser after the table filter
+        return apply_T(T_world_view[k], P), colours, which, n, [p.rejected for p in rec.peaks]
+
+    points, colours, steps, lasers, counts, rejected = [], [], [], [], [], [{} for _ in rig.lasers]
+    with ThreadPoolExecutor(max_workers=WORKERS) as pool:
+        for k, (P, C, which, n, rej) in enumerate(pool.map(one, range(len(views)))):
+            points.append(P)
+            colours.append(C)
+            lasers.append(which)
+            steps.append(np.full(len(P), k, dtype=np.int64))
+            counts.append(n)
+            for total, r in zip(rejected, rej):
+                for reason, m in r.items():
+                    total[reason] = total.get(reason, 0) + int(m)
+            if (k + 1) % 20 == 0 or k + 1 == len(views):
+                call_progress(progress, f"laser profiles: {k + 1}/{len(views)} steps, "
+                                        f"{sum(len(p) for p in points):,} points", k + 1, len(views))
+    n_points = np.asarray(counts, dtype=np.int64).reshape(len(views), len(rig.lasers))
+    for i, laser in enumerate(rig.lasers):
+        if n_points[:, i].sum() == 0:
+            why = "; ".join(f"{m} {reason}" for reason, m in rejected[i].items() if m) or "no line above the noise"
+            raise DecodeError(f"laser {i} ({laser.name}): no line in any of the {len(views)} steps "
+                              f"({views[0].folder / f'laser{i}.png'} ... {views[-1].folder.name}); rows rejected: "
+                              f"{why}. Is the laser on (its switch {laser.switch or i + 1}), aimed at the object, "
+                              "and the object in view?")
+    origins = T_world_view[:, :3, :3] @ rig.camera.center + T_world_view[:, :3, 3]   # (n_steps, 3)
+    cloud = PointCloud(np.concatenate(points), colours=np.concatenate(colours))
+    return LaserProfiles(cloud, np.concatenate(steps), np.concatenate(lasers), origins, T_world_view,
+                         [v.folder.name for v in views], n_points, rejected)
+
+
+def oriented_profiles(profiles: LaserProfiles, *, k: int = 20, outlier_std: float = 2.5) -> tuple[PointCloud, np.ndarray]:
+    """The merged cloud with normals (``k`` neighbours, turned towards the camera centre of each point's
+    step) after dropping the points whose mean distance to their ``k`` neighbours exceeds the mean by more
+    than ``outlier_std`` standard deviations. Returns (cloud, kept (N,) bool over ``profiles.cloud``)."""
+    import open3d as o3d
+
+    from rangekit.surface.cloud import estimate_normals, orient_normals_to_sensor
+
+    P = profiles.cloud.points
+    pc = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(P))
+    _, idx = pc.remove_statistical_outlier(nb_neighbors=k, std_ratio=outlier_std)
+    kept = np.zeros(len(P), dtype=bool)
+    kept[np.asarray(idx, dtype=np.int64)] = True
+    Q = P[kept]
+    normals = orient_normals_to_sensor(Q, estimate_normals(Q, k=k), profiles.origins[profiles.step[kept]])
+    colours = None if profiles.cloud.colours is None else profiles.cloud.colours[kept]
+    return PointCloud(Q, colours=colours, normals=normals), kept
+
+
+def process_laser(out: Path, session: Session, *, fusion: str, table_margin: float, evaluate, report: bool,
+                  progress: Callable | None, method: str = "gaussian") -> ProcessResult:
+    """The laser branch of :func:`rangekit.app.process.process_session` (same outputs, same set rule:
+    ``summary.json`` last). ``evaluate(mesh, angles, cloud=points)`` also measures the merged cloud."""
+    from rangekit.formats.meshes import save_mesh
+    from rangekit.surface.fusion import poisson_mesh
+
+    if fusion != "poisson":
+        raise ConfigError(f"--fusion {fusion}: a laser scan has profiles, not depth maps; it fuses with poisson")
+    timer = StageTimer()
+    with timer.stage("profiles"):
+        profiles = laser_profiles(session, method=method, table_margin=table_margin, progress=progress)
+        save_poses(out / "poses.json", profiles.names, profiles.T_world_view,
+                   world=f"frame of {profiles.names[0]} (the rig's world at its turntable angle); each step "
+                         "placed by its turntable angle")
+    with timer.stage("fuse"):
+        call_progress(progress, f"normals and outlier filter on {len(profiles.cloud):,} points")
+        merged, kept = oriented_profiles(profiles)
+        save_cloud(out / "merged.ply", merged)
+        call_progress(progress, f"fusing {len(merged):,} points (poisson)")
+        step = max(1, len(merged) // 400_000)
+        # One thread: Open3D's multi-threaded Poisson is not deterministic (see process.py).
+        mesh = poisson_mesh(PointCloud(merged.points[::step], merged.colours[::step], merged.normals[::step]),
+                            depth=9, n_threads=1)
+        save_mesh(out / "mesh.ply", mesh)
+        mesh_info = {"vertices": len(mesh.vertices), "triangles": len(mesh.triangles),
+                     "watertight": bool(mesh.is_watertight), "area_m2": float(mesh.area),
+                     "volume_m3": float(abs(mesh.volume)) if mesh.is_watertight else None, "fusion": fusion}
+    angles = [v.angle for v in session.done_views]
+    accuracy, truth = None, None
+    if evaluate is not None:
+        with timer.stage("evaluate"):
+            call_progress(progress, "measuring the cloud and the mesh against the true surface")
+            evaluation = evaluate(mesh, angles, cloud=merged.points)
+            accuracy, truth = evaluation.accuracy.to_dict(), evaluation.truth
+    per_step = profiles.n_points.sum(axis=1)
+    laser_info = {"lasers": [{"name": laser.name, "points": int(profiles.n_points[:, i].sum()),
+                              "steps_without_line": int((profiles.n_points[:, i] == 0).sum()),
+                              "rejected_rows": profiles.rejected[i]} for i, laser in enumerate(session.rig.lasers)],
+                  "outliers_removed": int((~kept).sum()), "peak_method": method}
+    result = ProcessResult(out, profiles.names, profiles.T_world_view, [int(n) for n in per_step], [], float("nan"),
+                           mesh_info, timer.seconds, accuracy, laser=laser_info)
+    if report:
+        with timer.stage("report"):
+            from rangekit.app.laser_report import write_laser_report
+
+            call_progress(progress, "writing report.html")
+            write_laser_report(out, result, profiles=profiles, merged=merged, mesh=mesh, session=session, truth=truth,
+                               progress=progress)
+    atomic_write_json(out / "summary.json", result.to_dict())   # last: the set is complete
+    return result

@@ -21,23 +21,10 @@ from rangekit.laser import detect_peaks
 from rangekit.sim import default_scene
 from rangekit.sim.laser import LaserLook, LaserView
 from rangekit.sim.laser_rig import laser_rig
+from rangekit.sim.laser_truth import column_errors
 from rangekit.sim.render import ImagingModel
 
 METHODS = ("gaussian", "com", "ridge")
-
-
-def column_errors(uv: np.ndarray, curve_uv: np.ndarray) -> np.ndarray:
-    """Peak column minus the curve's column at the peak's row (NaN where the curve gives no single u)."""
-    order = np.argsort(curve_uv[:, 1])
-    vs, us = curve_uv[order, 1], curve_uv[order, 0]
-    lo, hi = np.searchsorted(vs, uv[:, 1] - 0.6), np.searchsorted(vs, uv[:, 1] + 0.6)
-    err = np.full(len(uv), np.nan)
-    for i in range(len(uv)):  # a few thousand peaks: a measurement script, not the detector
-        near = np.abs(us[lo[i]:hi[i]] - uv[i, 0]) < 3.0
-        su, sv = us[lo[i]:hi[i]][near], vs[lo[i]:hi[i]][near]
-        if len(su) >= 2 and np.ptp(su) <= 3.0:
-            err[i] = uv[i, 0] - np.interp(uv[i, 1], sv, su)
-    return err
 
 
 def measure(imaging: ImagingModel, look: LaserLook) -> dict[str, tuple[float, int, int]]:

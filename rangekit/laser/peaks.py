@@ -3,9 +3,10 @@
 ``detect_peaks(on, off)`` finds where the sheet of light crosses the image, to a fraction of a pixel,
 with a confidence per peak and the reason every rejected row was rejected. Methods:
 
-- ``"gaussian"`` (default): per row, the argmax and a log-parabola through the three samples around it
-  (the three-point Gaussian fit: exact for a sampled Gaussian profile); for wide lines (profile std
-  s >= 1.5 px) through the samples s px either side, where a three-point fit is most precise;
+- ``"gaussian"`` (default): per row, a Gaussian fitted about the argmax by weighted least squares on the
+  log of the samples within about 1.5 profile stds (at least 5 samples;
+  :mod:`rangekit.laser.profile_fit`): exact for a Gaussian profile, and over five samples about half
+  the noise-driven error of the three-point fit through m - 1, m, m + 1;
 - ``"com"``: per row, the centre of mass of ``difference - 3 noise`` (clipped at 0) in a ``window``
   around the argmax (what Horus does; unbiased over all subpixel phases but locks towards pixel centres);
 - ``"ridge"``: Steger's line detector (1998) in :mod:`rangekit.laser.ridge`, for slanted and curved
@@ -49,6 +50,7 @@ import numpy as np
 
 from rangekit.errors import DecodeError, InputError
 from rangekit.image import to_grey
+from rangekit.laser.profile_fit import fit_gaussian_rows
 from rangekit.laser.ridge import ridge_peaks
 
 __all__ = ["LinePeaks", "detect_peaks", "require_peaks", "laser_difference", "estimate_noise", "METHODS",
@@ -211,7 +213,7 @@ def _row_peaks(d, on, *, method, noise, half, min_contrast, double_ratio, full_s
         conf = np.full(u.shape, np.sqrt(12.0))   # a uniform error over one pixel
         height = peak[ok].astype(np.float64)
     elif method == "gaussian":
-        u, height, width, conf = _gaussian3(d, rows, mc[ok], noise)
+        u, height, width, conf = fit_gaussian_rows(d, rows, mc[ok], noise)
     else:
         u, height, width, conf = _centre_of_mass(d, rows, m[ok], half, noise)
     rejected = {name: int(np.count_nonzero(status == code)) for code, name in enumerate(STATUS_NAMES) if code}
@@ -234,38 +236,6 @@ def _second_peak_above(d, m, half, level) -> np.ndarray:
     finally:
         d[r, cols] = kept
     return second >= level
-
-
-def _gaussian3(d, rows, mc, noise):
-    """Three-point Gaussian fit through the samples a, b, c at m - k, m, m + k: u = m + k (ln a - ln c) /
-    (2 (ln a - 2 ln b + ln c)), exact for a Gaussian profile. First k = 1; where that fit finds a profile
-    std s >= 1.5 px the fit is repeated with k = round(s) (<= 4), where a three-point fit is most precise
-    (its std, sqrt(2) s^2 exp(k^2 / 2 s^2) / k x noise / height, is least at k = s). Width 4 s (1/e^2);
-    std of u by propagating the noise through ln a and ln c."""
-    W = d.shape[1]
-    k = np.ones_like(mc)
-    u, height, width, std = _three_point(d, rows, mc, k, noise)
-    k2 = np.clip(np.rint(width / 4.0), 1, 4).astype(mc.dtype)
-    k2 = np.minimum(k2, np.minimum(mc, W - 1 - mc))
-    redo = k2 > 1
-    if redo.any():
-        u2, h2, w2, s2 = _three_point(d, rows[redo], mc[redo], k2[redo], noise)
-        u[redo], height[redo], width[redo], std[redo] = u2, h2, w2, s2
-    return u, height, width, 1.0 / std
-
-
-def _three_point(d, rows, mc, k, noise):
-    floor = max(noise, 1e-6)
-    a = np.maximum(d[rows, mc - k], floor).astype(np.float64)
-    b = np.maximum(d[rows, mc], floor).astype(np.float64)
-    c = np.maximum(d[rows, mc + k], floor).astype(np.float64)
-    la, lb, lc = np.log(a), np.log(b), np.log(c)
-    den = np.minimum(la - 2.0 * lb + lc, -1e-6)    # a flat or dented top: the offset is clipped below
-    off = np.clip(0.5 * (la - lc) / den, -0.5, 0.5)   # in units of k
-    height = np.exp(lb - 0.25 * (la - lc) * off)      # the parabola's top
-    width = 4.0 * k / np.sqrt(-den)                   # 1/s^2 = -den / k^2
-    std = 0.5 * k * noise * np.sqrt(1.0 / a ** 2 + 1.0 / c ** 2) / -den
-    return mc + k * off, height, width, std
 
 
 def _centre_of_mass(d, rows, m, half, noise, k_noise: float = 3.0):

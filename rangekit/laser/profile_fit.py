@@ -27,24 +27,35 @@ MAX_HALF = 6
 
 
 def _three_point(d, rows, mc, noise):
-    """The three-point log-parabola through m - 1, m, m + 1: (offset in (-0.5, 0.5), -1 / s^2)."""
+    """The log-parabola through the samples at m - 1, m, m + 1: (ln d(m), slope, curvature/2), i.e.
+    ln d(m + x) ~ b + l x + q x^2 with q = (ln a - 2 ln b + ln c) / 2 < 0."""
     floor = max(noise, 1e-6)
     a = np.log(np.maximum(d[rows, mc - 1], floor).astype(np.float64))
     b = np.log(np.maximum(d[rows, mc], floor).astype(np.float64))
     c = np.log(np.maximum(d[rows, mc + 1], floor).astype(np.float64))
-    den = np.minimum(a - 2.0 * b + c, -1e-6)       # a flat or dented top: clipped
-    return np.clip(0.5 * (a - c) / den, -0.5, 0.5), den
+    return b, 0.5 * (c - a), np.minimum(0.5 * (a - 2.0 * b + c), -5e-7)   # a flat or dented top: clipped
 
 
-def _weighted_fit(x, y, w):
-    """Batched weighted parabola fit y ~ c0 + c1 x + c2 x^2: (c (N, 3), inverse normal matrix (N, 3, 3))."""
-    xp = [np.ones_like(x), x, x * x, x * x * x, x ** 4]
-    S = [(w * p).sum(axis=1) for p in xp]
-    A = np.stack([np.stack([S[i], S[i + 1], S[i + 2]], axis=-1) for i in range(3)], axis=-2)
-    A += np.eye(3) * 1e-12 * np.maximum(S[0], 1e-300)[:, None, None]
-    inv = np.linalg.inv(A)
-    b = np.stack([(w * y * xp[i]).sum(axis=1) for i in range(3)], axis=-1)
-    return np.einsum("nij,nj->ni", inv, b), inv
+def _weighted_fit(w, y, powers):
+    """Batched weighted parabola fit y ~ c0 + c1 x + c2 x^2 over the columns x = ``powers[1]`` (K,):
+    (c (N, 3), the inverse normal matrix's entries (i11, i12, i22) (N,) for the std of the peak)."""
+    S0, S1, S2, S3, S4 = (w @ p for p in powers)
+    wy = w * y
+    T0, T1, T2 = (wy @ p for p in powers[:3])
+    # the symmetric 3 x 3 inverse by cofactors (one batched solve costs more than the arithmetic)
+    A00, A01, A02, A11, A12, A22 = S0, S1, S2, S2, S3, S4
+    C00 = A11 * A22 - A12 * A12
+    C01 = A02 * A12 - A01 * A22
+    C02 = A01 * A12 - A02 * A11
+    C11 = A00 * A22 - A02 * A02
+    C12 = A01 * A02 - A00 * A12
+    C22 = A00 * A11 - A01 * A01
+    det = A00 * C00 + A01 * C01 + A02 * C02
+    det = np.where(np.abs(det) > 1e-300, det, 1e-300)
+    c0 = (C00 * T0 + C01 * T1 + C02 * T2) / det
+    c1 = (C01 * T0 + C11 * T1 + C12 * T2) / det
+    c2 = (C02 * T0 + C12 * T1 + C22 * T2) / det
+    return c0, c1, c2, C11 / det, C12 / det, C22 / det
 
 
 def fit_gaussian_rows(d: np.ndarray, rows: np.ndarray, mc: np.ndarray, noise: float):
@@ -53,35 +64,34 @@ def fit_gaussian_rows(d: np.ndarray, rows: np.ndarray, mc: np.ndarray, noise: fl
     width (N,) 1/e^2 full width 4 s px, confidence (N,) 1 / predicted std of u, 1/px)."""
     W = d.shape[1]
     noise = max(float(noise), 1e-6)
-    off3, den3 = _three_point(d, rows, mc, noise)
-    s3 = 1.0 / np.sqrt(-den3)
+    b3, l3, q3 = _three_point(d, rows, mc, noise)
+    s3 = np.sqrt(-0.5 / q3)
     half = np.clip(np.rint(1.5 * s3), 2, MAX_HALF).astype(np.int64)
     offs = np.arange(-MAX_HALF, MAX_HALF + 1)
+    x = offs.astype(np.float64)
     cols = mc[:, None] + offs
     use = (np.abs(offs) <= half[:, None]) & (cols >= 0) & (cols < W)
     v = d[rows[:, None], np.clip(cols, 0, W - 1)].astype(np.float64)
     use &= v > 2.0 * noise
     use[:, MAX_HALF] = True                        # the argmax itself, always (it is above the threshold)
-    x = np.broadcast_to(offs.astype(np.float64), v.shape)
     y = np.log(np.maximum(v, noise))
-    c, _ = _weighted_fit(x, y, np.where(use, v * v, 0.0))
-    ok = c[:, 2] < -1e-6
-    model = np.exp(c[:, :1] + c[:, 1:2] * x + c[:, 2:3] * x * x)
-    c2, inv = _weighted_fit(x, y, np.where(use, np.minimum(model, 4.0 * v.max(axis=1, keepdims=True)) ** 2, 0.0))
-    ok2 = c2[:, 2] < -1e-6
-    c = np.where(ok2[:, None], c2, c)
-    ok |= ok2
+    powers = (np.ones_like(x), x, x * x, x ** 3, x ** 4)
+    # weights: the samples' values squared, then the model's (the first fit's) values squared
+    c0, c1, c2, *_ = _weighted_fit(np.where(use, v * v, 0.0), y, powers)
+    ok1 = c2 < -5e-7
+    model = np.where(ok1[:, None], c0[:, None] + c1[:, None] * x + c2[:, None] * x * x,
+                     b3[:, None] + l3[:, None] * x + q3[:, None] * x * x)
+    m2 = np.exp(2.0 * np.minimum(model, y[:, MAX_HALF:MAX_HALF + 1] + 1.0))
+    c0, c1, c2, i11, i12, i22 = _weighted_fit(np.where(use, m2, 0.0), y, powers)
     # fewer than three usable samples or a flat top: the three-point result
-    enough = use.sum(axis=1) >= 3
-    good = ok & enough
-    q = np.where(good, c[:, 2], -0.5 * -den3)      # c2 = -1 / (2 s^2) = den3 / 2
-    lin = np.where(good, c[:, 1], -2.0 * q * off3)
-    u_off = np.clip(-lin / (2.0 * q), -1.0, 1.0)
-    top = np.where(good, c[:, 0], np.log(np.maximum(d[rows, mc], noise))) - lin * lin / (4.0 * q)
+    good = (c2 < -5e-7) & (use.sum(axis=1) >= 3)
+    c0, c1, q = np.where(good, c0, b3), np.where(good, c1, l3), np.where(good, c2, q3)
+    u_off = np.clip(-c1 / (2.0 * q), -1.0, 1.0)
+    top = c0 - c1 * c1 / (4.0 * q)
     width = 4.0 * np.sqrt(-0.5 / q)
-    # std of u: var(c) = noise^2 inv (the weights are m^2, var(ln d) = noise^2 / m^2)
-    g = np.stack([np.zeros_like(q), -1.0 / (2.0 * q), lin / (2.0 * q * q)], axis=-1)
-    var = np.einsum("ni,nij,nj->n", g, inv, g) * noise ** 2
+    # std of u = -c1 / (2 c2): var(c) = noise^2 x inverse normal matrix (weights m^2, var(ln d) = noise^2 / m^2)
+    g1, g2 = -1.0 / (2.0 * q), c1 / (2.0 * q * q)
+    var = (g1 * g1 * i11 + 2.0 * g1 * g2 * i12 + g2 * g2 * i22) * noise ** 2
     std3 = noise * s3 ** 2 * np.sqrt(2.0) / np.maximum(d[rows, mc].astype(np.float64), noise)
     std = np.where(good & np.isfinite(var) & (var > 0), np.sqrt(np.abs(var)), std3)
     return mc + u_off, np.exp(top), width, 1.0 / np.maximum(std, 1e-9)

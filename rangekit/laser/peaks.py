@@ -160,9 +160,9 @@ def detect_peaks(on, off=None, *, method: str = "gaussian", channel: str | None 
 
     ``window`` (px, >= 3, at least the line's 1/e^2 width): the centre-of-mass window (window // 2 either
     side of the argmax) and the distance beyond which a second peak makes a row double (ridge: the gap
-    between two clusters of points in a row); ``min_contrast``: the smallest accepted peak height over
-    the noise std (ridge: of the smoothed difference, about 5x less noisy at sigma 1.5, so the ridge
-    finds fainter lines at the same value); ``double_ratio``: a second peak above this fraction of the
+    between two clusters of points in a row); ``min_contrast``: the smallest accepted
+    peak height over the noise std (ridge: also the first filter on the smoothed difference, about 5x
+    less noisy at sigma 1.5); ``double_ratio``: a second peak above this fraction of the
     first rejects the row (None: no test); ``saturation``: the full-scale value of the laser-on image
     (default: the dtype's maximum for integer images, 255 or 65535: pass 4095 for a 12-bit camera stored
     in uint16; no test for float images); ``sigma``: the ridge method's smoothing (px).

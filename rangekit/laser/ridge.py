@@ -20,7 +20,8 @@ the border are dropped (the reflected border bends a slanted line). For a circle
 smoothed ridge moves inwards by about sigma_total^2 / (2 R).
 
 Confidence: 1 / std(t) = S / (s^2 x noise x |first-derivative kernel|), s^2 = -1 / lambda the smoothed
-profile's variance. Height: the smoothed profile's top (below the raw peak by the factor s_line / s);
+profile's variance, combined with the point's offset along its normal from the points of its neighbouring
+pixels (``_with_neighbours``), which catches what the noise model misses (line ends, speckle). Height: the smoothed profile's top (below the raw peak by the factor s_line / s);
 width: 4 sqrt(s^2 - sigma^2), the 1/e^2 width of the unsmoothed profile. Saturated: a full-scale sample
 of the laser-on image in the pixel's 3 x 3 neighbourhood. Double: a row holding two clusters of points
 more than ``gap`` px apart, the weaker above ``double_ratio`` times the stronger: all the row's points
@@ -121,8 +122,27 @@ def ridge_peaks(d, on, *, noise, sigma, min_contrast, double_ratio, gap, full_sc
         dbl[good] = _double_rows(y[good], x[good], height[good], gap, double_ratio)
         rejected["double"] = int((dbl & good).sum())
         good &= ~dbl
-    return dict(points=points[good], confidence=conf[good], height=height[good], width=width[good],
-                rejected=rejected)
+    conf = _with_neighbours(points[good], np.column_stack([nx, ny])[good], y[good], x[good], conf[good], (H, W))
+    return dict(points=points[good], confidence=conf, height=height[good], width=width[good], rejected=rejected)
+
+
+def _with_neighbours(p, n, y, x, conf, shape) -> np.ndarray:
+    """The confidence with each point's disagreement with the points of its 8 neighbouring pixels (a line
+    crossing a pixel gives one point per pixel, so they are its neighbours along the line): r = the mean
+    of n . (p - p_j), the offset along the point's normal n from the neighbours (0 on a straight line,
+    wherever along it they are), combined as 1 / sqrt(std^2 + r^2 / (1 + 1/k)) for k neighbours (noise
+    alone gives r that variance for equal stds). No neighbour: std alone."""
+    H, W = shape
+    index = np.full((H + 2, W + 2), -1, np.int32)
+    index[y + 1, x + 1] = np.arange(len(y))
+    dy, dx = np.divmod(np.delete(np.arange(9), 4), 3)
+    nb = index[y[:, None] + dy, x[:, None] + dx]          # (N, 8) neighbour point ids, -1 none (1-padded)
+    has = nb >= 0
+    k = has.sum(axis=1)
+    diff = p[:, None, :] - p[np.maximum(nb, 0)]
+    off = np.where(has, np.einsum("nkj,nj->nk", diff, n), 0.0).sum(axis=1) / np.maximum(k, 1)
+    r2 = np.where(k > 0, off ** 2 / (1.0 + 1.0 / np.maximum(k, 1)), 0.0)
+    return 1.0 / np.sqrt(1.0 / conf ** 2 + r2)
 
 
 def _double_rows(y, x, height, gap, ratio) -> np.ndarray:

@@ -49,9 +49,9 @@ def column_errors(points: np.ndarray, curve_uv: np.ndarray, *, margin: float = 1
     du, dv = su - points[:, :1], sv - points[:, 1:]
     near = valid & (np.abs(du) < 3.0) & (np.abs(dv) <= 0.6)
     below = near & (dv <= 0)
-    above = near & (dv >= 0)
+    above = near & (dv > 0)
     ib = np.where(below, dv, -np.inf).argmax(axis=1)         # the nearest sample at or above the row (v less)
-    ia = np.where(above, dv, np.inf).argmin(axis=1)          # ... at or below it (v greater)
+    ia = np.where(above, dv, np.inf).argmin(axis=1)          # ... below it (v greater)
     r = np.arange(n)
     have = below.any(axis=1) & above.any(axis=1)
     u0, v0, u1, v1 = su[r, ib], sv[r, ib], su[r, ia], sv[r, ia]

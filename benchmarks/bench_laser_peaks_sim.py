@@ -31,7 +31,9 @@ from rangekit.sim.laser_truth import column_errors, curve_distance
 from rangekit.sim.objects import load_mesh
 from rangekit.sim.render import ImagingModel
 
-METHODS = ("gaussian", "com", "ridge")
+#: label -> (method, options)
+METHODS = {"gaussian": ("gaussian", {}), "gaussian, along=3": ("gaussian", {"along": 3}), "com": ("com", {}),
+           "ridge": ("ridge", {})}
 _ROOT = Path(__file__).resolve().parents[1]
 #: the data folder beside the checkout (ROOT/../shared), or beside the worktrees' folder (ROOT/../../shared)
 BUNNY = next((p for p in (_ROOT.parent / "shared", _ROOT.parent.parent / "shared")
@@ -57,8 +59,9 @@ def measure(scenes: dict, imaging: ImagingModel, look: LaserLook) -> dict:
             off = view.off()
             for k in range(len(rig.lasers)):
                 frame = view.frame(k)
-                for m in METHODS:
-                    peaks = detect_peaks(frame.image, off, method=m, channel="red" if imaging.colour else None)
+                for m, (method, options) in METHODS.items():
+                    peaks = detect_peaks(frame.image, off, method=method, channel="red" if imaging.colour else None,
+                                         **options)
                     e = column_errors(peaks.points, frame.curve.uv)
                     ok = np.isfinite(e)
                     a = acc[m]

@@ -29,7 +29,8 @@ V = np.arange(H)
 CENTRES = 640.0 + 250.0 * np.sin(V / 200.0) + 0.0137 * V
 METHODS = ("argmax", "com", "gaussian", "ridge")
 LABEL = {"argmax": "per-row argmax (integer column)", "com": "centre of mass, 9 px window",
-         "gaussian": "Gaussian fit (weighted log-parabola, >= 5 samples)", "ridge": "ridge (Steger on ln S, sigma 1.5 px)"}
+         "gaussian": "Gaussian fit (weighted log-parabola, >= 5 samples)",
+         "ridge": "ridge (Steger on ln S, sigma 1.5 px)"}
 
 
 def errors(p) -> np.ndarray:

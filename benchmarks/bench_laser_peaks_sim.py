@@ -3,14 +3,14 @@ peak <= 0.05 px for the Gaussian or ridge method, line width 0.8 mm, 8-bit camer
 confidence ranks the errors).
 
 Frames: the default laser rig (`rangekit.sim.laser_rig.laser_rig`), RGB 8-bit, default ImagingModel and
-LaserLook, objects lumpy, sphere and (when ../shared/data or ../../shared/data holds it) the Stanford bunny standing upright
-(y up in the file), at turntable angles 0, 40, 100 and 200 degrees, both lasers. Truth: the lit curve's
-exact image projection (`LitCurve.uv`, distorted pixels), compared by `rangekit.sim.laser_truth.column_errors`
-(the curve's column at the peak's row; rows near a curve end or gap, or where the curve runs along the
-row, are not compared). Also run with speckle off, and with speckle, shot and read noise off, to show
-where the error comes from. Per method: RMS column error, mean, peaks compared / found, the share of
-points within 1 px of the curve, and the share of the errors over 3x the RMS (and of the top-decile
-errors) that the worst decile by confidence holds.
+LaserLook, objects lumpy, sphere and (when ../shared/data or ../../shared/data holds it) the Stanford
+bunny standing upright (y up in the file), at turntable angles 0, 40, 100 and 200 degrees, both lasers.
+Truth: the lit curve's exact image projection (`LitCurve.uv`, distorted pixels), compared by
+`rangekit.sim.laser_truth.column_errors` (the curve's column at the peak's row; rows near a curve end or
+gap, or where the curve runs along the row, are not compared). Also run with speckle off, and with
+speckle, shot and read noise off, to show where the error comes from. Per method: RMS column error,
+mean, peaks compared / found, the share of points within 1 px of the curve, and the share of the errors
+over 3x the RMS (and of the top-decile errors) that the worst decile by confidence holds.
 
 Run: .venv/bin/python benchmarks/bench_laser_peaks_sim.py [--quick]   (--quick: lumpy and sphere only)
 """
@@ -85,7 +85,8 @@ def main() -> None:
     base = ImagingModel(colour=True)
     cases = [("default noise and speckle", base, LaserLook()),
              ("no speckle", base, LaserLook(speckle=0.0)),
-             ("no speckle, no shot or read noise", replace(base, full_well=0.0, read_noise=0.0), LaserLook(speckle=0.0))]
+             ("no speckle, no shot or read noise", replace(base, full_well=0.0, read_noise=0.0),
+              LaserLook(speckle=0.0))]
     print(f"objects: {', '.join(scenes)}; angles 0, 40, 100, 200 deg; both lasers\n")
     print("| frames | method | RMS px | mean px | compared / peaks | within 1 px | worst conf. decile holds: "
           "errors > 3 RMS / top-decile errors |")

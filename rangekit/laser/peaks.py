@@ -55,7 +55,8 @@ from rangekit.image import to_grey
 from rangekit.laser.profile_fit import fit_gaussian_rows
 from rangekit.laser.ridge import ridge_peaks
 
-__all__ = ["LinePeaks", "detect_peaks", "smooth_along", "require_peaks", "laser_difference", "estimate_noise", "METHODS",
+__all__ = ["LinePeaks", "detect_peaks", "smooth_along", "require_peaks", "laser_difference", "estimate_noise",
+           "METHODS",
            "STATUS_OK", "STATUS_WEAK", "STATUS_SATURATED", "STATUS_DOUBLE", "STATUS_EDGE", "STATUS_NAMES"]
 
 METHODS = ("gaussian", "com", "ridge", "argmax")
@@ -244,8 +245,8 @@ def _with_neighbours(u, rows, conf, H) -> np.ndarray:
     col[rows + 1] = u
     up, down = col[rows], col[rows + 2]
     both = 0.5 * (up + down)
-    r2 = np.where(np.isfinite(both), (u - both) ** 2 / 1.5,
-                  np.where(np.isfinite(up), (u - up) ** 2 / 2.0, np.where(np.isfinite(down), (u - down) ** 2 / 2.0, 0.0)))
+    one = np.where(np.isfinite(up), (u - up) ** 2 / 2.0, np.where(np.isfinite(down), (u - down) ** 2 / 2.0, 0.0))
+    r2 = np.where(np.isfinite(both), (u - both) ** 2 / 1.5, one)
     return 1.0 / np.sqrt(1.0 / conf ** 2 + r2)
 
 

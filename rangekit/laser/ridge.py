@@ -21,7 +21,8 @@ smoothed ridge moves inwards by about sigma_total^2 / (2 R).
 
 Confidence: 1 / std(t) = S / (s^2 x noise x |first-derivative kernel|), s^2 = -1 / lambda the smoothed
 profile's variance, combined with the point's offset along its normal from the points of its neighbouring
-pixels (``_with_neighbours``), which catches what the noise model misses (line ends, speckle). Height: the smoothed profile's top (below the raw peak by the factor s_line / s);
+pixels (``_with_neighbours``), which catches what the noise model misses (line ends, speckle).
+Height: the smoothed profile's top (below the raw peak by the factor s_line / s);
 width: 4 sqrt(s^2 - sigma^2), the 1/e^2 width of the unsmoothed profile. Saturated: a full-scale sample
 of the laser-on image in the pixel's 3 x 3 neighbourhood. Double: a row holding two clusters of points
 more than ``gap`` px apart, the weaker above ``double_ratio`` times the stronger: all the row's points

@@ -1,5 +1,5 @@
 """Laser-line peak detection on one 1280x960 8-bit frame: time per frame and RMS error against the known
-centres, for a plain per-row argmax, centre of mass, the three-point Gaussian fit and the ridge detector.
+centres, for a plain per-row argmax, centre of mass, the Gaussian fit and the ridge detector.
 
 Frames from tests/laser_lines.py: a pixel-integrated Gaussian profile at a known subpixel column per row
 (a smooth curve with every subpixel phase), 200 DN high, 1/e^2 widths 3, 5, 8 px, Gaussian noise of
@@ -29,7 +29,8 @@ V = np.arange(H)
 CENTRES = 640.0 + 250.0 * np.sin(V / 200.0) + 0.0137 * V
 METHODS = ("argmax", "com", "gaussian", "ridge")
 LABEL = {"argmax": "per-row argmax (integer column)", "com": "centre of mass, 9 px window",
-         "gaussian": "three-point Gaussian fit", "ridge": "ridge (Steger on ln S, sigma 1.5 px)"}
+         "gaussian": "Gaussian fit (weighted log-parabola, >= 5 samples)",
+         "ridge": "ridge (Steger on ln S, sigma 1.5 px)"}
 
 
 def errors(p) -> np.ndarray:

@@ -89,6 +89,23 @@ def _pixel_fractions(x: np.ndarray, inv: np.ndarray) -> np.ndarray:
     return 0.5 * np.diff(erf(x * inv), axis=1)
 
 
+#: The ambient camera's pixel rays, which do not change between turntable steps: (camera, rays) by
+#: (id(camera), width, height); the camera is held so that its id is not reused (at most two kept).
+_RAYS: dict[tuple[int, int, int], tuple[object, tuple[np.ndarray, np.ndarray]]] = {}
+
+
+def _pixel_rays(base, cam) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`rangekit.camera.world_pixel_rays` of ``cam`` (``base`` resized), cached per ``base`` object."""
+    from rangekit.camera import world_pixel_rays
+
+    key = (id(base), cam.width, cam.height)
+    if key not in _RAYS or _RAYS[key][0] is not base:
+        if len(_RAYS) >= 2:
+            _RAYS.pop(next(iter(_RAYS)))
+        _RAYS[key] = (base, world_pixel_rays(cam))
+    return _RAYS[key][1]
+
+
 def _noise_pool(seed: int, size: int) -> np.ndarray:
     """(size,) float32 standard normals for ``seed``, drawn once per process (read-only, shared by views)."""
     if (seed, size) not in _POOLS:
@@ -130,7 +147,7 @@ class LaserView:
             raise SceneError(f"LaserView: ambient_scale must be an integer >= 1, found {ambient_scale!r}")
         cam = self.camera if self.ambient_scale == 1 else self.camera.resized(
             max(W // self.ambient_scale, 1), max(H // self.ambient_scale, 1))
-        self.geometry = g = cast_view(self.mesh, cam, None)
+        self.geometry = g = cast_view(self.mesh, cam, None, cam_rays=_pixel_rays(self.camera, cam))
         view = cam.center - np.nan_to_num(g.xyz)
         view /= np.maximum(np.linalg.norm(view, axis=2, keepdims=True), 1e-12)
         shade = np.where(g.hit, 0.3 + 0.7 * np.clip(np.einsum("ijk,ijk->ij", np.nan_to_num(g.normal), view), 0, 1), 0)

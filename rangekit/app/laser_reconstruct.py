@@ -15,6 +15,7 @@ import numpy as np
 from rangekit.errors import DecodeError
 from rangekit.formats.laser_capture import LaserCapture
 from rangekit.laser import LinePeaks, detect_peaks, require_peaks, triangulate_peaks
+from rangekit.laser.profile_filter import continuous_runs
 from rangekit.surface.cloud import PointCloud
 
 __all__ = ["LaserReconstruction", "reconstruct_laser_capture"]
@@ -23,7 +24,7 @@ __all__ = ["LaserReconstruction", "reconstruct_laser_capture"]
 @dataclass(frozen=True, eq=False)
 class LaserReconstruction:
     """``cloud`` the merged points (colour from the laser-off image); per laser its ``peaks`` and how many
-    points triangulated (``n_points``) and how many rays were refused (``n_refused``: grazing, behind)."""
+    points triangulated (``n_points``) and how many rays were refused (``n_refused``: grazing, behind, or off a continuous run of the line)."""
 
     cloud: PointCloud
     peaks: tuple[LinePeaks, ...]
@@ -38,12 +39,14 @@ class LaserReconstruction:
 
 
 def reconstruct_laser_capture(capture: LaserCapture, *, method: str = "gaussian",
-                              full_scale: float | None = None, require: bool = True) -> LaserReconstruction:
+                              full_scale: float | None = None, require: bool = True,
+                              min_run: int = 5) -> LaserReconstruction:
     """Peaks, triangulation and merge of every laser of ``capture``; a laser whose line is not visible is a
     :class:`DecodeError` naming its frame (never a silently empty cloud). ``full_scale``: the camera's
     largest value (saturation and colour scale), default the capture's (its bits), else the dtype's.
     ``require=False`` (one step of a scan, where a line may miss everything at some angles): such a laser
-    gives no points, and the scan counts it (``n_points`` 0)."""
+    gives no points, and the scan counts it (``n_points`` 0). ``min_run``: row-method points are kept in
+    continuous runs of at least this many rows (:func:`rangekit.laser.profile_filter.continuous_runs`; 1: all)."""
     rig, camera = capture.rig, capture.rig.camera
     colour = capture.off.ndim == 3
     saturation = full_scale or capture.full_scale or float(np.iinfo(capture.off.dtype).max)
@@ -56,6 +59,8 @@ def reconstruct_laser_capture(capture: LaserCapture, *, method: str = "gaussian"
             peaks = require_peaks(peaks, name)
         tri = triangulate_peaks(peaks.points, camera, laser)
         ok = tri.valid
+        if peaks.rows is not None and min_run > 1:   # row methods: drop the blurred line ends' ghost peaks
+            ok &= continuous_runs(peaks.rows, tri.xyz, min_run=min_run)
         if require and not ok.any():
             raise DecodeError(f"{name}: {len(peaks)} line peaks, but none triangulates against laser {laser.name!r} "
                               f"({tri.n_grazing} rays graze its plane, {tri.n_behind} meet it behind the camera)")

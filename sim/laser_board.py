@@ -18,11 +18,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from rangekit.boards import Board
+from rangekit.camera import PinholeCamera, world_pixel_rays
 from rangekit.errors import SceneError
 from rangekit.geometry import axis_angle_to_R, make_T
 from rangekit.rig import Rig
 from rangekit.sim.calibration import board_scene, pose_problem
 from rangekit.sim.laser import LaserLook, LaserView
+from rangekit.sim.raycast import pixel_corners
 from rangekit.sim.render import ImagingModel
 
 __all__ = ["line_on_board", "laser_board_poses", "BoardLaserFrames", "render_board_pose", "CALIBRATION_LOOK"]
@@ -116,9 +118,26 @@ class BoardLaserFrames:
     T_world_board: np.ndarray
 
 
+_RAYS: dict = {}
+
+
+def _camera_rays(camera: PinholeCamera) -> tuple:
+    """(cam_rays, corner_rays) of ``camera`` for cast_view, cached for the last camera (poses share them)."""
+    key = (camera.K.tobytes(), camera.dist.tobytes(), camera.T_world_cam.tobytes(), camera.width, camera.height)
+    if key not in _RAYS:
+        _RAYS.clear()
+        _RAYS[key] = (world_pixel_rays(camera), camera.rays(pixel_corners(camera)))
+    return _RAYS[key]
+
+
 def render_board_pose(rig: Rig, board: Board, T_world_board: np.ndarray, *, seed: int = 0,
-                      imaging: ImagingModel | None = None, look: LaserLook = CALIBRATION_LOOK) -> BoardLaserFrames:
-    """The board alone at ``T_world_board`` seen by ``rig``'s camera: laser off, then each laser on."""
-    view = LaserView(board_scene(board, T_world_board), rig, 0.0, imaging=imaging, look=look, seed=seed)
-    frames = tuple(view.frame(k).image for k in range(len(rig.lasers)))
+                      imaging: ImagingModel | None = None, look: LaserLook = CALIBRATION_LOOK,
+                      ambient_scale: int = 1, lasers: bool = True) -> BoardLaserFrames:
+    """The board alone at ``T_world_board`` seen by ``rig``'s camera: laser off, then each laser on (none
+    without ``lasers``: a camera-calibration view) (``ambient_scale``: :class:`LaserView`'s; 1 renders the
+    board's texture at full resolution)."""
+    cam_rays, corner_rays = _camera_rays(rig.camera) if ambient_scale == 1 else (None, None)
+    view = LaserView(board_scene(board, T_world_board), rig, 0.0, imaging=imaging, look=look, seed=seed,
+                     ambient_scale=ambient_scale, cam_rays=cam_rays, corner_rays=corner_rays)
+    frames = tuple(view.frame(k).image for k in range(len(rig.lasers))) if lasers else ()
     return BoardLaserFrames(off=view.off(), frames=frames, T_world_board=np.asarray(T_world_board, dtype=np.float64))

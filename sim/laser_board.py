@@ -122,10 +122,12 @@ _RAYS: dict = {}
 
 
 def _camera_rays(camera: PinholeCamera) -> tuple:
-    """(cam_rays, corner_rays) of ``camera`` for cast_view, cached for the last camera (poses share them)."""
+    """(cam_rays, corner_rays) of ``camera`` for cast_view, cached for the last camera (poses share them;
+    two cameras are kept: the laser poses' and the camera-calibration poses' may differ in resolution)."""
     key = (camera.K.tobytes(), camera.dist.tobytes(), camera.T_world_cam.tobytes(), camera.width, camera.height)
     if key not in _RAYS:
-        _RAYS.clear()
+        if len(_RAYS) >= 2:
+            _RAYS.pop(next(iter(_RAYS)))
         _RAYS[key] = (world_pixel_rays(camera), camera.rays(pixel_corners(camera)))
     return _RAYS[key]
 
@@ -136,7 +138,10 @@ def render_board_pose(rig: Rig, board: Board, T_world_board: np.ndarray, *, seed
     """The board alone at ``T_world_board`` seen by ``rig``'s camera: laser off, then each laser on (none
     without ``lasers``: a camera-calibration view) (``ambient_scale``: :class:`LaserView`'s; 1 renders the
     board's texture at full resolution)."""
-    cam_rays, corner_rays = _camera_rays(rig.camera) if ambient_scale == 1 else (None, None)
+    cam = rig.camera
+    if ambient_scale > 1:
+        cam = cam.resized(max(cam.width // ambient_scale, 1), max(cam.height // ambient_scale, 1))
+    cam_rays, corner_rays = _camera_rays(cam)
     view = LaserView(board_scene(board, T_world_board), rig, 0.0, imaging=imaging, look=look, seed=seed,
                      ambient_scale=ambient_scale, cam_rays=cam_rays, corner_rays=corner_rays)
     frames = tuple(view.frame(k).image for k in range(len(rig.lasers))) if lasers else ()

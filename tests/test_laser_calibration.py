@@ -144,6 +144,14 @@ def test_a_laser_that_lights_no_pose_is_named(truth):
         calibrate_lasers(rig, poses=poses, camera=truth.camera)
 
 
+def test_a_rig_without_lasers_is_named():
+    from rangekit.errors import ConfigError
+    from rangekit.sim.devices import default_rig
+
+    with pytest.raises(ConfigError, match="no lasers"):
+        calibrate_lasers(default_rig(), n_poses=3)
+
+
 def test_cli_lasers_on_hardware_is_refused_before_any_work(tmp_path, capsys):
     rig = tmp_path / "rig.json"
     rig.write_text("{}")

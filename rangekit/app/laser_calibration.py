@@ -31,7 +31,7 @@ import numpy as np
 
 from rangekit.boards import Board, detect_board
 from rangekit.camera import PinholeCamera
-from rangekit.errors import CalibrationError, UsageError
+from rangekit.errors import CalibrationError, ConfigError, UsageError
 from rangekit.geometry import compose, invert_T, make_T, rotvec_to_R
 from rangekit.laser.peaks import detect_peaks
 from rangekit.laser.plane_calib import (LaserPlaneCalibration, PlaneErrors, board_view, calibrate_laser_plane,
@@ -168,7 +168,8 @@ def calibrate_lasers(truth: Rig | None = None, *, n_poses: int = 10, seed: int =
         raise UsageError(f"laser calibration: the number of board poses must be at least 2, found {n_poses!r}")
     truth = truth if truth is not None else laser_rig()
     if not truth.lasers:
-        raise UsageError("laser calibration: the rig has no lasers (rig file 'lasers')")
+        raise ConfigError("laser calibration: the rig has no lasers (rig file 'lasers': none); use "
+                          "rangekit.sim.laser_rig.laser_rig()")
     board = board if board is not None else Board()
     poses = list(poses) if poses is not None else laser_board_poses(truth, board, n_poses, seed=seed)
     names = [f"board pose {i + 1}" for i in range(len(poses))]
@@ -205,6 +206,8 @@ def calibrate_lasers(truth: Rig | None = None, *, n_poses: int = 10, seed: int =
                      if not v.used and (v.index >= len(views) or views[v.index] is not None)]
     else:
         T_cam = {i: _pnp(camera, obj[views[i][0].ids], views[i][0].uv) for i in found}
+        rejected += [f"{names[i]}: the board's pose was not found from its corners (solvePnP failed)"
+                     for i, T in T_cam.items() if T is None]
         T_cam = {i: T for i, T in T_cam.items() if T is not None}
     lasers, cals, errors, camera_errors = [], [], [], []
     for k, laser in enumerate(truth.lasers):

@@ -125,11 +125,15 @@ class LaserView:
     laser give the same bytes). ``ambient_scale`` 1 casts every camera pixel once per view (the ambient
     image and the ``depth`` truth, ~1 s at 1280x960); k > 1 casts a camera k times smaller and upsamples
     the ambient image (k = 4: ~16x cheaper; ``depth`` is then None): for scans of many turntable steps.
-    The laser lines and their truth are exact either way.
+    The laser lines and their truth are exact either way. ``cam_rays``, ``corner_rays``: cached rays for
+    :func:`~rangekit.sim.raycast.cast_view` of the camera cast (``camera.resized(W // k, H // k)`` when
+    ``ambient_scale`` is k > 1); views of one camera share them: 0.9 s less per view at 1280x1024.
     """
 
     def __init__(self, scene: Scene, rig: Rig, angle: float = 0.0, *, imaging: ImagingModel | None = None,
-                 look: LaserLook | None = None, seed: int = 0, ambient_scale: int = 1) -> None:
+                 look: LaserLook | None = None, seed: int = 0, ambient_scale: int = 1,
+                 cam_rays: tuple[np.ndarray, np.ndarray] | None = None,
+                 corner_rays: tuple[np.ndarray, np.ndarray] | None = None) -> None:
         if not rig.lasers:
             raise SceneError("laser rendering: the rig has no lasers (rig file 'lasers'); use "
                              "rangekit.sim.laser_rig.laser_rig()")
@@ -147,7 +151,8 @@ class LaserView:
             raise SceneError(f"LaserView: ambient_scale must be an integer >= 1, found {ambient_scale!r}")
         cam = self.camera if self.ambient_scale == 1 else self.camera.resized(
             max(W // self.ambient_scale, 1), max(H // self.ambient_scale, 1))
-        self.geometry = g = cast_view(self.mesh, cam, None, cam_rays=_pixel_rays(self.camera, cam))
+        self.geometry = g = cast_view(self.mesh, cam, None, corner_rays=corner_rays,
+                                      cam_rays=cam_rays if cam_rays is not None else _pixel_rays(self.camera, cam))
         view = cam.center - np.nan_to_num(g.xyz)
         view /= np.maximum(np.linalg.norm(view, axis=2, keepdims=True), 1e-12)
         shade = np.where(g.hit, 0.3 + 0.7 * np.clip(np.einsum("ijk,ijk->ij", np.nan_to_num(g.normal), view), 0, 1), 0)

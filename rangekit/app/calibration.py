@@ -30,20 +30,28 @@ class Calibration:
     result: object             # rangekit.calib.procedure.CalibrationResult (its rig, summary_lines())
     truth: Rig | None          # the simulator's true rig; None on hardware
     deviation: list[str]       # simulator: each parameter's deviation from the truth, one line each
+    lasers: object = None      # rangekit.app.laser_calibration.LaserCalibration with ``lasers``; else None
 
 
 def calibrate(out: str | Path, *, rig: str = "sim", board: Board, n_poses: int = 20, seed: int = 0,
               force: bool = False, interactive: bool = False, ask: Callable[[str], object] = input,
-              progress: Callable | None = None) -> Calibration:
+              progress: Callable | None = None, lasers: bool = False, laser_poses: int = 10) -> Calibration:
     """Calibrate the camera, projector, turntable axis and projector response; write the rig file ``out``.
 
     ``rig`` is "sim" or a rig file naming the devices (its geometry is replaced). On hardware,
-    ``interactive`` must be true (someone moves the board; ``ask`` prompts them).
+    ``interactive`` must be true (someone moves the board; ``ask`` prompts them). With ``lasers`` (the
+    simulator only) the simulated Ciclop rig's laser planes are calibrated too, from ``laser_poses`` board
+    poses with the calibrated camera (:func:`rangekit.app.laser_calibration.calibrate_lasers`), and written
+    into the rig file's ``lasers``.
 
     Raises
     ------
+    UsageError
+        ``out`` exists (without ``force``), fewer than 3 poses, ``lasers`` on a hardware rig file.
     ConfigError
-        ``out`` exists (without ``force``), fewer than 3 poses, hardware without a terminal, a bad rig file.
+        Hardware without a terminal, a bad rig file.
+    CalibrationError
+        A laser plane cannot be calibrated (named).
     """
     from rangekit.calib.procedure import CalibrationSettings, calibrate_rig, compare_rigs, comparison_lines
 
@@ -54,6 +62,13 @@ def calibrate(out: str | Path, *, rig: str = "sim", board: Board, n_poses: int =
         raise UsageError(f"--poses must be at least 3 (Zhang's method), found {n_poses}; 15-25 is typical")
     settings = CalibrationSettings(board=board, n_poses=n_poses)
     hardware = rig != "sim"
+    if lasers and hardware:
+        raise UsageError(f"--lasers with --rig {rig}: laser-plane calibration is implemented on the simulator only "
+                         "(--rig sim); on a Ciclop or FabScan, calibrate the camera here and measure the laser "
+                         "planes' 'plane' entries by hand for now (docs/laser.md)")
+    if lasers and laser_poses < 2:
+        raise UsageError(f"--laser-poses must be at least 2 (two board lines fix a plane), found {laser_poses}; "
+                         "10 is typical")
     if hardware:
         from rangekit.drivers import open_rig_devices
 
@@ -91,6 +106,17 @@ def calibrate(out: str | Path, *, rig: str = "sim", board: Board, n_poses: int =
     finally:
         if hardware:
             devices.close()
-    save_rig(res.rig, out)
+    laser_cal = None
+    out_rig = res.rig
+    if lasers:
+        from dataclasses import replace
+
+        from rangekit.app.laser_calibration import calibrate_lasers
+        from rangekit.sim.laser_rig import laser_rig
+
+        laser_cal = calibrate_lasers(laser_rig(truth), n_poses=laser_poses, seed=seed, board=board,
+                                     camera=res.rig.camera, progress=progress)
+        out_rig = replace(res.rig, lasers=laser_cal.rig.lasers)
+    save_rig(out_rig, out)
     deviation = comparison_lines(compare_rigs(res.rig, truth)) if truth is not None else []
-    return Calibration(res, truth, deviation)
+    return Calibration(res, truth, deviation, laser_cal)

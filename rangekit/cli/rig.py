@@ -30,7 +30,8 @@ def cmd_rig_init(args: argparse.Namespace) -> int:
 
 
 def cmd_calibrate(args: argparse.Namespace) -> int:
-    """rangekit calibrate --rig sim|RIG.json --out RIG.json: camera, projector, turntable and projector response"""
+    """rangekit calibrate --rig sim|RIG.json --out RIG.json [--lasers]: camera, projector, turntable and projector
+    response (and with --lasers, on the simulator, the line lasers' planes)"""
     from rangekit.app.calibration import calibrate
     from rangekit.boards import Board
 
@@ -38,7 +39,8 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     check_output(args.out, force=args.force)
     board = Board(kind=args.board, cols=args.cols, rows=args.rows, square=args.square_mm / 1000.0)
     cal = calibrate(args.out, rig=args.rig, board=board, n_poses=args.poses, seed=args.seed, force=args.force,
-                    interactive=sys.stdin.isatty(), ask=input, progress=console())
+                    interactive=sys.stdin.isatty(), ask=input, progress=console(), lasers=args.lasers,
+                    laser_poses=args.laser_poses)
     say("")
     say("== calibration ==")
     for line in cal.result.summary_lines():
@@ -47,6 +49,10 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         say("deviation from the simulator's true rig (rangekit rig init --sim):")
         for line in cal.deviation:
             say("  " + line)
+    if cal.lasers is not None:
+        say("== laser planes ==")
+        for line in cal.lasers.summary_lines():
+            say(line)
     say(f"wrote {args.out} in {time.perf_counter() - t0:.1f} s")
     return 0
 
@@ -85,6 +91,12 @@ def add_calibrate_parser(sub) -> None:
     cal.add_argument("--rows", type=int_in(3, 60), default=7, help="squares along its height (default 7)")
     cal.add_argument("--square-mm", type=positive_float, default=20.0, help="square side in millimetres (default 20)")
     cal.add_argument("--seed", type=seed, default=0, help="simulator: noise and pose seed")
+    cal.add_argument("--lasers", action="store_true",
+                     help="also calibrate the line lasers' planes (simulator: the Ciclop rig's two lasers) from "
+                          "board poses crossed by the lines, written to the rig file's 'lasers'; prints each "
+                          "plane's normal angle and offset error against the truth and every rejected pose")
+    cal.add_argument("--laser-poses", type=int_in(2, 200), default=10,
+                     help="with --lasers: board poses for the laser planes (default 10)")
     cal.set_defaults(func=cmd_calibrate)
 
 

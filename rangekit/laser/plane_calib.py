@@ -102,14 +102,16 @@ def plate_view(T_world_table, points_uv, radius: float = 0.15, name: str = "turn
 
 @dataclass(frozen=True)
 class ViewUse:
-    """What one pose gave: ``n_points`` finite laser points, ``n_on_target`` of them on the target,
-    ``n_inliers`` kept by the robust fit, ``reason`` why it was rejected ("" when used)."""
+    """What one pose gave: ``n_points`` finite laser points, ``n_on_target`` of them on the target and on
+    its straight line, ``n_inliers`` kept by the robust fit, ``reason`` why it was rejected ("" when used),
+    ``n_off_line`` points on the target dropped as off the pose's straight line."""
 
     name: str
     n_points: int
     n_on_target: int
     n_inliers: int = 0
     reason: str = ""
+    n_off_line: int = 0
 
 
 @dataclass(frozen=True, eq=False)
@@ -141,11 +143,13 @@ class LaserPlaneCalibration:
         return [(v.name, v.reason) for v in self.views if v.reason]
 
 
-def _target_points(camera: PinholeCamera, view: TargetView, min_angle: float) -> tuple[np.ndarray, int]:
-    """(M, 3) world points of ``view``'s laser line on its target, and the number of finite input points."""
+def _target_points(camera: PinholeCamera, view: TargetView, min_angle: float,
+                   line_tol_px: float | None) -> tuple[np.ndarray, int, int]:
+    """(M, 3) world points of ``view``'s laser line on its target, the number of finite input points and the
+    number of on-target points dropped off the line (:func:`_line_inliers`)."""
     uv = view.points_uv[np.all(np.isfinite(view.points_uv), axis=1)]
     if len(uv) == 0:
-        return np.zeros((0, 3)), 0
+        return np.zeros((0, 3)), 0, 0
     T = view.T_world_target
     n = T[:3, 2]
     plane = np.append(n, -n @ T[:3, 3])
@@ -156,12 +160,46 @@ def _target_points(camera: PinholeCamera, view: TargetView, min_angle: float) ->
     X = o + t[:, None] * d
     X[~ok] = np.nan
     local = apply_T(invert_T(T), X)
-    return X[view.on_target(local[:, :2])], len(uv)
+    on = view.on_target(local[:, :2])
+    X, xy = X[on], local[on, :2]
+    if line_tol_px is None or len(X) < 3:
+        return X, len(uv), 0
+    # one pixel at the points' depth, in metres on the target (the line's tolerance)
+    z = (apply_T(invert_T(camera.T_world_cam), X))[:, 2]
+    px = float(np.median(z)) / float(np.sqrt(camera.K[0, 0] * camera.K[1, 1]))
+    keep = _line_inliers(xy, line_tol_px * px)
+    return X[keep], len(uv), int(len(X) - keep.sum())
+
+
+def _line_inliers(xy: np.ndarray, tol: float, n_draws: int = 200, seed: int = 0) -> np.ndarray:
+    """(N,) bool: the (N, 2) points within ``tol`` of the straight line most of them lie on.
+
+    A laser plane meets a plane target in a straight line, so a pose's true line points are collinear on
+    the target; peaks found elsewhere (noise in a row where the line is too faint, e.g. on a dark square)
+    lie off it. Lines through ``n_draws`` random pairs are scored by their points within ``tol`` (one
+    vectorised pass), the best is refitted to its inliers (SVD) and the points within ``tol`` kept."""
+    rng = np.random.default_rng(seed)
+    i, j = rng.integers(0, len(xy), (2, n_draws))
+    ok = i != j
+    i, j = i[ok], j[ok]
+    if len(i) == 0:
+        return np.ones(len(xy), bool)
+    u = xy[j] - xy[i]
+    u /= np.maximum(np.linalg.norm(u, axis=1, keepdims=True), 1e-15)
+    normal = np.column_stack([-u[:, 1], u[:, 0]])                              # (K, 2)
+    dist = np.abs(np.einsum("knd,kd->kn", xy[None, :, :] - xy[i][:, None, :], normal))   # (K, N)
+    best = int(np.argmax((dist <= tol).sum(axis=1)))
+    keep = dist[best] <= tol
+    for _ in range(2):
+        c = xy[keep].mean(axis=0)
+        _, _, Vt = np.linalg.svd(xy[keep] - c, full_matrices=False)
+        keep = np.abs((xy - c) @ Vt[1]) <= tol
+    return keep
 
 
 def calibrate_laser_plane(camera: PinholeCamera, views: Sequence[TargetView], *, name: str = "laser",
                           min_points: int = 20, min_angle: float = MIN_RAY_PLANE_ANGLE,
-                          seed: int = 0) -> LaserPlaneCalibration:
+                          line_tol_px: float | None = 1.0, seed: int = 0) -> LaserPlaneCalibration:
     """Fit laser ``name``'s plane from its lines on plane targets (module doc).
 
     Parameters
@@ -170,6 +208,9 @@ def calibrate_laser_plane(camera: PinholeCamera, views: Sequence[TargetView], *,
     views : the target poses (:func:`board_view`, :func:`plate_view`), each with the laser line's points.
     min_points : a pose with fewer of its points on the target is rejected ("the line misses the board").
     min_angle : rays meeting the target's plane below this angle (radians) are dropped.
+    line_tol_px : a pose's points further than this (pixels, converted to metres at the points' depth) from
+        the straight line most of them lie on are dropped before the fit (false peaks where the line is too
+        faint, e.g. on a dark square); None keeps them.
 
     Raises
     ------
@@ -181,7 +222,7 @@ def calibrate_laser_plane(camera: PinholeCamera, views: Sequence[TargetView], *,
                                "laser lines differ")
     uses, chunks, owners = [], [], []
     for i, view in enumerate(views):
-        X, n_finite = _target_points(camera, view, min_angle)
+        X, n_finite, n_off = _target_points(camera, view, min_angle, line_tol_px)
         if n_finite == 0:
             uses.append(ViewUse(view.name, 0, 0, reason="no laser points in the image"))
         elif len(X) < min_points:
@@ -190,9 +231,10 @@ def calibrate_laser_plane(camera: PinholeCamera, views: Sequence[TargetView], *,
                      else f"plate radius {view.radius * 1e3:.1f} mm" if view.radius is not None else "its plane")
             uses.append(ViewUse(view.name, n_finite, len(X), reason=(
                 f"the laser line misses the target: {len(X)} of {n_finite} points fall on it ({where}), at "
-                f"least {min_points} needed")))
+                f"least {min_points} needed" + (f"; {n_off} more on it but off the line's straight line"
+                                                 if n_off else ""))))
         else:
-            uses.append(ViewUse(view.name, n_finite, len(X)))
+            uses.append(ViewUse(view.name, n_finite, len(X), n_off_line=n_off))
             chunks.append(X)
             owners.append(np.full(len(X), i))
     rejected = "; ".join(f"{u.name}: {u.reason}" for u in uses if u.reason)

@@ -64,7 +64,7 @@ _OPTION = {"method": "--method", "rig": "--rig", "obj": "--object", "n_views": "
 def prepare_scan(*, out: str | None = None, resume: str | None = None, rig: str | None = None,
                  obj: str | None = None, n_views: int | None = None, patterns: str | None = None,
                  seed: int | None = None, fusion: str = "poisson", method: str | None = None,
-                 up: tuple[float, float, float] | None = None) -> ScanSetup:
+                 up: tuple[float, float, float] | None = None, progress: Callable | None = None) -> ScanSetup:
     """Check the folder, the rig (file or ``"sim"``), the object and the options before anything moves,
     then open the devices. ``resume`` continues the session in that folder with its own settings; an
     option given (not None) must then equal the session's. Options left None take
@@ -128,7 +128,7 @@ def prepare_scan(*, out: str | None = None, resume: str | None = None, rig: str 
     else:
         devices, simulator = _simulator(session, obj, seed, the_rig, laser,
                                         object_file if session is None else None)
-        the_rig, hw = (session.rig if session else _scan_rig(devices.rig, laser, seed)), None
+        the_rig, hw = (session.rig if session else _scan_rig(devices.rig, laser, seed, progress)), None
         if session is None and object_file is not None:
             # The session keeps its own copy of the object's mesh, named relative to its folder.
             simulator, files = replace(simulator, object=f"{OBJECT_FOLDER}/{object_file[0]}"), {
@@ -204,10 +204,21 @@ def _object_bytes(obj: str, up) -> tuple[str, bytes]:
                                                                    mesh.vertex_colours))
 
 
-def _scan_rig(true_rig: Rig, laser: bool, seed: int) -> Rig:
+def _scan_rig(true_rig: Rig, laser: bool, seed: int, progress: Callable | None = None) -> Rig:
     """The rig a new simulated session records: the simulator's own for coded light; for a laser scan, its
-    laser planes as calibrated from simulated board poses."""
-    return true_rig
+    laser planes as calibrated from 10 simulated board poses (seeded by ``seed``; board poses by PnP with
+    the rig's camera: :func:`rangekit.app.laser_calibration.calibrate_lasers`), as a user's scan would use
+    them, so the scan's accuracy includes the calibration's error."""
+    if not laser:
+        return true_rig
+    from rangekit.app.laser_calibration import calibrate_lasers
+
+    from rangekit.progress import call_progress
+
+    cal = calibrate_lasers(true_rig, n_poses=10, seed=seed, camera=true_rig.camera)
+    for line in cal.summary_lines():
+        call_progress(progress, line)
+    return cal.rig
 
 
 def _simulator(session: Session | None, obj: str, seed: int, rig: Rig | None, laser: bool = False,

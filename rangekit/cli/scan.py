@@ -38,7 +38,7 @@ def _scan(args: argparse.Namespace, t0: float) -> int:
         raise UsageError("--steps: turntable steps of a laser scan; with --method coded give --views")
     setup = prepare_scan(out=args.out, resume=args.resume, rig=args.rig, obj=args.object,
                          n_views=args.views if args.steps is None else args.steps, patterns=args.patterns,
-                         seed=args.seed, fusion=args.fusion, method=args.method, up=args.up)
+                         seed=args.seed, fusion=args.fusion, method=args.method, up=args.up, progress=console())
     folder = args.resume or args.out
     if setup.resume:
         say(f"resuming {folder}: {setup.n_done}/{setup.n_views} views already done")
@@ -52,7 +52,8 @@ def _scan(args: argparse.Namespace, t0: float) -> int:
         return 130
     finally:
         setup.close()
-    say(f"acquired {len(session.done_views)} views x {setup.spec.n_frames} frames into {folder} in "
+    say(f"acquired {len(session.done_views)} {'steps' if session.is_laser else 'views'} x {setup.spec.n_frames} "
+        f"frames into {folder} in "
         f"{time.perf_counter() - t0:.1f} s")
     if args.no_process:
         say(f"process it later with: rangekit process {folder}")

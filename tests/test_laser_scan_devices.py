@@ -192,11 +192,13 @@ def test_a_wrong_laser_order_gives_wrong_frames(plain, tmp_path):
     assert got["view_000/laser0.png"] == plain["view_000/laser1.png"] != plain["view_000/laser0.png"]
 
 
-@pytest.mark.parametrize("where", [("move", 3), ("laser", 11)])
+@pytest.mark.parametrize("where", [("move", 3), ("laser", 11), ("laser", 13)])
 def test_unplug_mid_scan_then_resume_on_a_new_board_gives_identical_bytes(where, plain, tmp_path):
-    """The board unplugged before the 4th move (lasers off) or before the 12th laser command (step 2's
-    M70T1, just after laser 0's frame, laser 1 still on): a DeviceError naming the view and the step,
-    completed views intact, no partial view, every laser off in the simulator after the resume."""
+    """The board unplugged before the 4th move (lasers off), before the 12th laser command (step 2's
+    M70T1, just after laser 0's frame: switch 1 still on) or before the 14th (step 2's last M70T2): a
+    DeviceError naming the view and the step, completed views intact, no partial view. A board unplugged
+    with a laser on cannot be told to switch it off; the resumed scan switches every laser off first, and
+    ends with every laser off in the simulator."""
     out = tmp_path / "s"
     exc, log, _, fw, s = driven_scan("horus", out, unplug_before=where)
     assert isinstance(exc, DeviceError), exc
@@ -204,10 +206,13 @@ def test_unplug_mid_scan_then_resume_on_a_new_board_gives_identical_bytes(where,
     if where[0] == "move":
         assert message.startswith("view 3 (turntable 135.0 deg), turntable move: ")
         assert fw.lasers == {1: False, 2: False} and not s.turntable.lasers_on
-    else:
+    elif where[1] == 11:
         # 2 lasers off at the start, then 4 commands per step: the 12th is step 2's 'M70T1'.
         assert message.startswith("view 2 (turntable 90.0 deg), frame 2 (laser1): lasers: ")
         assert fw.lasers == {1: True, 2: False} and s.turntable.lasers_on == {1}   # the board lost: laser on
+    else:
+        assert message.startswith("view 2 (turntable 90.0 deg), after frame 2 (laser1): lasers off: ")
+        assert fw.lasers == {1: False, 2: True} and s.turntable.lasers_on == {2}
     assert "turntable" in message and "rangekit scan --resume" in message
     n_done = where[1] if where[0] == "move" else 2
     session = load_session(out)

@@ -103,8 +103,8 @@ def open_board(kind, fw):
         fw.port, timeout=2.0, reset_delay=0.0)
 
 
-def driven_scan(kind, out, *, s=None, resume=False, **board_options):
-    """A laser scan of N_STEPS through the ``kind`` driver on a fresh simulated board. Returns (session or
+def driven_scan(kind, out, *, s=None, resume=False, n_steps=N_STEPS, **board_options):
+    """A laser scan of ``n_steps`` through the ``kind`` driver on a fresh simulated board. Returns (session or
     the DeviceError raised, log of commands and captures, the firmware, the simulated rig)."""
     from rangekit.sim.firmware import start_firmware
 
@@ -117,7 +117,7 @@ def driven_scan(kind, out, *, s=None, resume=False, **board_options):
             board = _DrivenBoard(driver, fw, s.turntable, log, **board_options)
             devices = _Devices(_LoggedCamera(s.camera, log), board)
             try:
-                result = acquire(devices, s.rig, LaserSequence(2), out, plan=ScanPlan(n_views=N_STEPS), resume=resume)
+                result = acquire(devices, s.rig, LaserSequence(2), out, plan=ScanPlan(n_views=n_steps), resume=resume)
             except DeviceError as exc:
                 result = exc
             final_deg = fw.position_deg
@@ -229,3 +229,123 @@ def test_unplug_mid_scan_then_resume_on_a_new_board_gives_identical_bytes(where,
     assert abs(final_deg - 315.0) <= MICROSTEP_DEG
     assert pngs(out) == plain
     assert not list(out.glob("*.partial"))
+
+
+# ------------------------------------------------------------------------------------------ bad input
+
+def small_session(out, scene, rig=None, n_steps=4):
+    s = SimRig(scene, rig or small_rig(), seed=0, light="laser")
+    acquire(s, s.rig, LaserSequence(2), out, plan=ScanPlan(n_views=n_steps))
+    return out
+
+
+def test_a_dead_laser_is_named(tmp_path, capsys):
+    """Laser 2 of the board never lights (the firmware acknowledges M71T2, no light reaches the scene):
+    processing stops with a DecodeError naming that laser, its switch and its frames, exit 1."""
+    from rangekit.cli.run import main
+
+    session, log, _, fw, _ = driven_scan("horus", tmp_path / "s", n_steps=4, dead={2})
+    assert not isinstance(session, Exception), session
+    assert log.count("M71T2") == 4                          # it was switched on at every step
+    assert main(["process", str(tmp_path / "s"), "--no-report"]) == 1
+    err = capsys.readouterr().err
+    assert "laser 1 (laser1): no line in any of the 4 steps" in err
+    assert "view_000/laser1.png" in err and "its switch 2" in err and "internal error" not in err
+    assert not (tmp_path / "s" / "mesh.ply").exists()
+
+
+@pytest.mark.parametrize("case", ["table only", "object out of view"])
+def test_a_missing_object_says_the_lines_are_only_on_the_table(case, tmp_path, capsys):
+    """No object on the table, or a small one far out of view: each laser's line is found, only on the
+    turntable top; those points are dropped as table points and the error says so (exit 1)."""
+    from rangekit.cli.run import main
+    from rangekit.geometry import make_T
+    from rangekit.sim.objects import sphere
+    from rangekit.sim.scene import Scene, turntable_disc
+
+    if case == "table only":
+        scene = Scene((turntable_disc(),))
+    else:
+        ball = sphere(0.002).placed_on_table()
+        scene = Scene((ball.with_pose(make_T(t=[0.0, 0.0, 0.6]) @ ball.T_world_obj), turntable_disc()))
+    out = small_session(tmp_path / "s", scene)
+    assert main(["process", str(out), "--no-report"]) == 1
+    err = capsys.readouterr().err
+    assert "laser 0 (laser0): its line was found in the 4 steps" in err
+    assert "only on the turntable top" in err and "dropped as table points" in err and "no object" in err
+    assert "internal error" not in err and not (out / "mesh.ply").exists()
+
+
+def test_a_saturated_line_is_reported_then_refused(tmp_path, capsys):
+    """Laser power 3 (5x the default): some rows saturate; the scan is processed and the summary and the
+    laser info report the saturated rows. Power 50: the line is saturated nearly everywhere: an error
+    that says so and what to lower (exit 1), not a cloud of a few points."""
+    import json
+
+    from rangekit.cli.run import main
+
+    out = small_session(tmp_path / "bright", default_scene("lumpy"), small_rig_with(power=3.0))
+    assert main(["process", str(out), "--no-report"]) == 0
+    printed = capsys.readouterr().out
+    info = json.loads((out / "summary.json").read_text())["laser"]["lasers"]
+    saturated = [d["rejected_rows"]["saturated"] for d in info]
+    print(f"\npower 3: saturated rows {saturated}, points {[d['points'] for d in info]}")
+    assert all(n > 50 for n in saturated) and all(d["points"] > 2 * n for d, n in zip(info, saturated))
+    assert f"laser0: {info[0]['points']:,} points, no line in 0 step(s), {saturated[0]:,} saturated rows" in printed
+    out = small_session(tmp_path / "blinding", default_scene("lumpy"), small_rig_with(power=50.0))
+    assert main(["process", str(out), "--no-report"]) == 1
+    err = capsys.readouterr().err
+    assert "laser 0 (laser0): the line is saturated in" in err
+    assert "lower the laser power or the camera's exposure" in err and not (out / "mesh.ply").exists()
+
+
+def small_rig_with(**laser_options):
+    rig = laser_rig(**laser_options)
+    return replace(rig, cameras=(rig.camera.resized(320, 256),))
+
+
+def test_a_laser_plane_through_the_camera_centre_is_refused_before_any_frame(tmp_path, capsys):
+    """A rig file whose second laser's plane passes 0.2 mm from the camera centre: refused naming the rig
+    file and the laser before the devices are opened (its board's port does not exist) or a folder made."""
+    import json
+
+    from rangekit.cli.run import main
+    from rangekit.rig import template_rig
+
+    rig = template_rig()               # world = the camera frame: the camera centre is the origin
+    rig["lasers"] = [{"name": "left", "plane": [1.0, 0.0, 0.0, -0.1], "switch": 1},
+                     {"name": "right", "plane": [1.0, 0.0, 0.0, 0.0002], "switch": 2}]
+    rig["devices"]["turntable"]["port"] = str(tmp_path / "no-such-port")
+    path = tmp_path / "rig.json"
+    path.write_text(json.dumps(rig))
+    assert main(["scan", "--method", "laser", "--rig", str(path), "--out", str(tmp_path / "s")]) == 1
+    err = capsys.readouterr().err
+    assert f"{path}: lasers[1] ('right'): the plane" in err and "0.200 mm of camera 'camera'" in err
+    assert "no-such-port" not in err and not (tmp_path / "s").exists()
+    # The same check in the library, for a rig with a good plane nothing is raised.
+    from rangekit.app.scan import check_laser_planes
+    from rangekit.errors import ConfigError
+
+    check_laser_planes(small_rig(), where="sim")
+    bad = replace(small_rig(), lasers=(replace(small_rig().lasers[0], plane=np.append(
+        small_rig().lasers[0].normal, -small_rig().lasers[0].normal @ small_rig().camera.center)),))
+    with pytest.raises(ConfigError, match=r"my_rig.json: lasers\[0\] \('laser0'\): the plane .* passes within 0.000 mm"):
+        check_laser_planes(bad, where="my_rig.json")
+
+
+@pytest.mark.parametrize("options, message", [
+    (["--steps", "1"], "--steps: expected an integer in 2..3600, found '1'"),
+    (["--steps", "0"], "--steps: expected an integer in 2..3600, found '0'"),
+    (["--patterns", "graycode"], "--patterns: a laser scan projects no patterns"),
+    (["--views", "4", "--steps", "8"], "--steps and --views both give the turntable positions"),
+])
+def test_laser_scan_usage_errors_exit_2(options, message, tmp_path, capsys):
+    from rangekit.cli.run import main
+
+    try:
+        code = main(["scan", "--method", "laser", "--out", str(tmp_path / "s"), *options])
+    except SystemExit as exc:          # argparse refuses an option's value itself
+        code = exc.code
+    assert code == 2
+    assert message in capsys.readouterr().err
+    assert not (tmp_path / "s").exists()

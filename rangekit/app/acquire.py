@@ -178,6 +178,7 @@ def _views(devices, light, rig, spec, out, plan, angles, session, done, names, f
                 image = devices.camera.capture()
                 step, target = f"frame {i} ({name}): writing", partial / file
                 sha256[file] = frame_sha256(write_png(target, image))
+            step = f"after frame {len(names) - 1} ({names[-1]}): {light.device} off"
             light.show(None)
             step, target = "writing view.json", partial
             # Each view is a self-contained capture folder (rangekit reconstruct view_NNN works on it).

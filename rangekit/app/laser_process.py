@@ -13,7 +13,9 @@ the merged cloud and turned towards the camera centre each point was seen from, 
 their neighbours are dropped (statistical outlier filter) before screened Poisson.
 
 A laser that gives no line in any step is a :class:`~rangekit.errors.DecodeError` naming the laser and
-its frames (laser off, unplugged, or aimed beside the object), never an empty cloud.
+its frames (laser off, unplugged, or aimed beside the object), never an empty cloud; so is a laser whose
+lines all fall on the turntable top (the object missing or out of view) and a laser whose line is
+saturated in at least :data:`SATURATED_SHARE` of the rows where it was seen (power or exposure too high).
 """
 
 from __future__ import annotations
@@ -38,10 +40,13 @@ from rangekit.progress import StageTimer, call_progress
 from rangekit.rig import turntable_prior
 from rangekit.surface.cloud import PointCloud
 
-__all__ = ["LaserProfiles", "laser_profiles", "oriented_profiles", "process_laser"]
+__all__ = ["LaserProfiles", "laser_profiles", "oriented_profiles", "process_laser", "SATURATED_SHARE"]
 
 #: Steps processed at once (threads: PNG decoding and the peak finder release the GIL).
 WORKERS = 2
+#: A laser saturated in this share of the rows where its line was seen (saturated rows over saturated
+#: rows plus the points kept on the object) is an error: the scan's power or exposure is wrong, not a shiny patch.
+SATURATED_SHARE = 0.9
 
 
 @dataclass(frozen=True, eq=False)
@@ -54,6 +59,7 @@ class LaserProfiles:
     T_world_view : (n_steps, 4, 4) each step's turntable pose in the world.
     names : the steps' folder names; n_points : (n_steps, n_lasers) points per step and laser.
     rejected : per laser, rows rejected over the scan by reason (saturated, double, ...).
+    on_table : (n_lasers,) int, points per laser dropped as the turntable top (within ``table_margin``).
     """
 
     cloud: PointCloud
@@ -64,14 +70,16 @@ class LaserProfiles:
     names: list[str]
     n_points: np.ndarray
     rejected: list[dict]
+    on_table: np.ndarray | None = None
 
 
 def laser_profiles(session: Session, *, method: str = "gaussian", table_margin: float = 0.002,
                    progress: Callable | None = None) -> LaserProfiles:
     """Triangulate every done step of a laser ``session`` into the world (see the module docstring).
 
-    Raises DecodeError when a laser lights nothing in any step (naming it and its frames), FileFormatError
-    for an unreadable frame (naming it).
+    Raises DecodeError when a laser lights nothing but the turntable top in every step, or is saturated in
+    :data:`SATURATED_SHARE` of its rows (naming it, its frames and what to change), FileFormatError for an
+    unreadable frame (naming it).
     """
     rig, views = session.rig, session.done_views
     full_scale = session.capture.full_scale
@@ -84,15 +92,19 @@ def laser_profiles(session: Session, *, method: str = "gaussian", table_margin: 
         rec = reconstruct_laser_capture(load_laser_capture(v.folder, rig=rig), method=method, full_scale=full_scale,
                                         require=False)
         P, colours, which = rec.cloud.points, rec.cloud.colours, rec.laser_index
+        table = np.zeros(len(rig.lasers), dtype=np.int64)
         if T_table_world is not None and len(P):
             keep = apply_T(T_table_world, P)[:, 2] > table_margin
+            table = np.bincount(which[~keep], minlength=len(rig.lasers))
             P, colours, which = P[keep], colours[keep], which[keep]
         n = np.bincount(which, minlength=len(rig.lasers))   # points per laser after the table filter
-        return apply_T(T_world_view[k], P), colours, which, n, [p.rejected for p in rec.peaks]
+        return apply_T(T_world_view[k], P), colours, which, n, [p.rejected for p in rec.peaks], table
 
     points, colours, steps, lasers, counts, rejected = [], [], [], [], [], [{} for _ in rig.lasers]
+    on_table = np.zeros(len(rig.lasers), dtype=np.int64)
     with ThreadPoolExecutor(max_workers=WORKERS) as pool:
-        for k, (P, C, which, n, rej) in enumerate(pool.map(one, range(len(views)))):
+        for k, (P, C, which, n, rej, table) in enumerate(pool.map(one, range(len(views)))):
+            on_table += table
             points.append(P)
             colours.append(C)
             lasers.append(which)
@@ -105,17 +117,34 @@ def laser_profiles(session: Session, *, method: str = "gaussian", table_margin: 
                 call_progress(progress, f"laser profiles: {k + 1}/{len(views)} steps, "
                                         f"{sum(len(p) for p in points):,} points", k + 1, len(views))
     n_points = np.asarray(counts, dtype=np.int64).reshape(len(views), len(rig.lasers))
+
+    def frames(i: int) -> str:
+        return f"{views[0].folder / f'laser{i}.png'} ... {views[-1].folder.name}"
+
     for i, laser in enumerate(rig.lasers):
-        if n_points[:, i].sum() == 0:
+        n_i, saturated = int(n_points[:, i].sum()), int(rejected[i].get("saturated", 0))
+        if saturated and saturated >= SATURATED_SHARE * (saturated + n_i):
+            raise DecodeError(f"laser {i} ({laser.name}): the line is saturated in {saturated:,} rows over "
+                              f"{len(views)} steps ({frames(i)}) and only {n_i:,} points on the object could be "
+                              f"placed ({saturated / (saturated + n_i):.0%} of the two saturated, "
+                              f"under {SATURATED_SHARE:.0%} accepted); lower the laser power or the camera's exposure (or "
+                              "gain) and scan again")
+        if n_i == 0 and on_table[i]:
+            raise DecodeError(f"laser {i} ({laser.name}): its line was found in the {len(views)} steps "
+                              f"({frames(i)}) only on the turntable top ({int(on_table[i]):,} points "
+                              f"within {table_margin * 1e3:g} mm of it, dropped as table points): no object "
+                              "was scanned; is the object on the turntable, in the camera's view and in the "
+                              "laser's plane?")
+        if n_i == 0:
             why = "; ".join(f"{m} {reason}" for reason, m in rejected[i].items() if m) or "no line above the noise"
             raise DecodeError(f"laser {i} ({laser.name}): no line in any of the {len(views)} steps "
-                              f"({views[0].folder / f'laser{i}.png'} ... {views[-1].folder.name}); rows rejected: "
+                              f"({frames(i)}); rows rejected: "
                               f"{why}. Is the laser on (its switch {laser.switch or i + 1}), aimed at the object, "
                               "and the object in view?")
     origins = T_world_view[:, :3, :3] @ rig.camera.center + T_world_view[:, :3, 3]   # (n_steps, 3)
     cloud = PointCloud(np.concatenate(points), colours=np.concatenate(colours))
     return LaserProfiles(cloud, np.concatenate(steps), np.concatenate(lasers), origins, T_world_view,
-                         [v.folder.name for v in views], n_points, rejected)
+                         [v.folder.name for v in views], n_points, rejected, on_table)
 
 
 def oriented_profiles(profiles: LaserProfiles, *, k: int = 20, outlier_std: float = 2.5) -> tuple[PointCloud, np.ndarray]:
@@ -175,6 +204,7 @@ def process_laser(out: Path, session: Session, *, fusion: str, table_margin: flo
     per_step = profiles.n_points.sum(axis=1)
     laser_info = {"lasers": [{"name": laser.name, "points": int(profiles.n_points[:, i].sum()),
                               "steps_without_line": int((profiles.n_points[:, i] == 0).sum()),
+                              "table_points": int(profiles.on_table[i]),
                               "rejected_rows": profiles.rejected[i]} for i, laser in enumerate(session.rig.lasers)],
                   "outliers_removed": int((~kept).sum()), "peak_method": method}
     result = ProcessResult(out, profiles.names, profiles.T_world_view, [int(n) for n in per_step], [], float("nan"),

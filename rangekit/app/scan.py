@@ -19,10 +19,11 @@ from rangekit.geometry import axis_angle_to_R
 from rangekit.formats.session import CaptureSettings, Session, SimulatorSettings
 from rangekit.formats.summary import ProcessResult
 from rangekit.laser.sequence import LaserSequence
+from rangekit.laser.triangulate import check_plane_camera
 from rangekit.rig import Rig, load_rig
 from rangekit.rig_checks import validate_rig_for_hardware
 
-__all__ = ["ScanSetup", "SCAN_DEFAULTS", "prepare_scan", "session_evaluator", "process_scan"]
+__all__ = ["ScanSetup", "SCAN_DEFAULTS", "prepare_scan", "check_laser_planes", "session_evaluator", "process_scan"]
 
 #: Where a simulated session keeps the mesh file of its object.
 OBJECT_FOLDER = "object"
@@ -79,8 +80,8 @@ def prepare_scan(*, out: str | None = None, resume: str | None = None, rig: str 
         A bad option, a folder that is not new (without ``resume``), or (with ``resume``) an option that
         differs from the session's: the message names the option, the session's value and the given one.
     ConfigError
-        A rig file without a projector or devices, a malformed session.json; the message names the
-        folder, file or field.
+        A rig file without a projector or devices, a laser plane through the camera centre (laser scan),
+        a malformed session.json; the message names the folder, file or field.
     """
     # Everything is checked before any work starts or anything moves: the folder, the rig, the object.
     if fusion not in FUSION_METHODS:
@@ -123,6 +124,8 @@ def prepare_scan(*, out: str | None = None, resume: str | None = None, rig: str 
             raise UsageError(f"--up turns a mesh file's object upright; --object {obj!r} is "
                              + ("a hardware scan's real object" if hardware else "a built-in object, already upright"))
     laser = method == "laser"
+    if laser and the_rig is not None:
+        check_laser_planes(the_rig, where=str(rig_file))
     if hardware:
         devices, simulator, hw = _open_hardware(the_rig, rig_file, laser), None, {"rig_file": str(rig_file)}
     else:
@@ -163,6 +166,15 @@ def _check_resume_options(session: Session, given: dict) -> None:
             raise UsageError(f"{_OPTION[key]} {value!r} differs from the session in {session.folder}, which has "
                              f"{have}; a resumed scan keeps its session's settings: leave {_OPTION[key]} out or "
                              "start a new scan with --out")
+
+
+def check_laser_planes(rig: Rig, *, where: str) -> None:
+    """Refuse a rig whose laser plane passes (nearly) through the camera centre, before any frame is taken:
+    every camera ray then meets the plane at the centre itself and nothing can be triangulated (see
+    :func:`rangekit.laser.triangulate.check_plane_camera`). ConfigError naming ``where`` (the rig file) and
+    the laser."""
+    for i, laser in enumerate(rig.lasers):
+        check_plane_camera(laser.plane, rig.camera, f"{where}: lasers[{i}] ({laser.name!r})")
 
 
 def _open_hardware(rig: Rig, where: str, laser: bool = False):

@@ -25,7 +25,7 @@ def laser_scan(tmp_path_factory):
 def test_laser_scan_cloud_matches_the_true_surface(laser_scan):
     summary = json.loads((laser_scan / "summary.json").read_text())
     acc = summary["accuracy"]
-    # The merged cloud: every point's distance to the true surface (after the outlier filter).
+    # The merged cloud: every point's distance to the true surface.
     assert acc["cloud_rms"] < 0.1e-3 and acc["cloud_p95"] < 0.15e-3, acc
     assert acc["n_cloud"] > 60 * 2 * 300
     assert summary["mesh"]["watertight"]
@@ -55,7 +55,7 @@ def test_laser_session_holds_capture_folders(laser_scan, tmp_path, capsys):
     merged = load_cloud(laser_scan / "merged.ply").points
     P = P @ T[:3, :3].T + T[:3, 3]
     d = cKDTree(merged).query(P)[0]
-    assert np.median(d) < 1e-6   # the same points (the table band and outliers aside)
+    assert np.median(d) < 1e-6   # the same points (the table band aside)
 
 
 def test_interrupted_laser_acquisition_resumes_to_the_same_frames(tmp_path):

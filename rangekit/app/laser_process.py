@@ -8,9 +8,11 @@ and the report read the same.
 
 Per step (``view_NNN``, a laser capture folder): peaks of every laser (laser on minus laser off), each
 peak's ray (with the lens distortion) met with that laser's plane, points within ``table_margin`` of the
-turntable top dropped, the rest turned by ``turntable_prior`` into the world. Normals are estimated on
-the merged cloud and turned towards the camera centre each point was seen from, then points far from
-their neighbours are dropped (statistical outlier filter) before screened Poisson.
+turntable top dropped (the line on the table is not even looked for: each laser's peaks are searched
+only where its plane lies above the table top, :func:`rangekit.laser.triangulate.plane_region`), points
+off a continuous run of the line dropped (:mod:`rangekit.laser.profile_filter`), the rest turned by
+``turntable_prior`` into the world. Normals are estimated on the merged cloud and turned towards the
+camera centre each point was seen from, then screened Poisson.
 
 A laser that gives no line in any step is a :class:`~rangekit.errors.DecodeError` naming the laser and
 its frames (laser off, unplugged, or aimed beside the object), never an empty cloud; so is a laser whose
@@ -35,6 +37,7 @@ from rangekit.formats.summary import ProcessResult
 from rangekit.formats.laser_capture import load_laser_capture
 from rangekit.formats.session import Session
 from rangekit.geometry import apply_T, invert_T
+from rangekit.laser.triangulate import plane_region
 from rangekit.io import atomic_write_json
 from rangekit.progress import StageTimer, call_progress
 from rangekit.rig import turntable_prior
@@ -59,7 +62,9 @@ class LaserProfiles:
     T_world_view : (n_steps, 4, 4) each step's turntable pose in the world.
     names : the steps' folder names; n_points : (n_steps, n_lasers) points per step and laser.
     rejected : per laser, rows rejected over the scan by reason (saturated, double, ...).
-    on_table : (n_lasers,) int, points per laser dropped as the turntable top (within ``table_margin``).
+    on_table : (n_lasers,) int, points per laser dropped as the turntable top (within ``table_margin``; the
+        region mask keeps most of the table's line out; for a laser without a line above the table, the
+        points a few steps give on the table without the mask).
     """
 
     cloud: PointCloud
@@ -86,11 +91,15 @@ def laser_profiles(session: Session, *, method: str = "gaussian", table_margin: 
     T_world_view = (turntable_prior(rig.T_world_table, [v.angle for v in views]) if rig.T_world_table is not None
                     else np.repeat(np.eye(4)[None], len(views), axis=0))
     T_table_world = invert_T(rig.T_world_table) if rig.T_world_table is not None else None
+    # Where each laser's line may be: its plane above the table top. The line on the table is not looked
+    # at, so in the rows it shares with the object's line the row is not "double".
+    regions = None if T_table_world is None else [
+        plane_region(rig.camera, laser, rig.T_world_table, z_min=table_margin) for laser in rig.lasers]
 
-    def one(k: int):
+    def one(k: int, masks=regions):
         v = views[k]
         rec = reconstruct_laser_capture(load_laser_capture(v.folder, rig=rig), method=method, full_scale=full_scale,
-                                        require=False)
+                                        require=False, regions=masks)
         P, colours, which = rec.cloud.points, rec.cloud.colours, rec.laser_index
         table = np.zeros(len(rig.lasers), dtype=np.int64)
         if T_table_world is not None and len(P):
@@ -117,6 +126,10 @@ def laser_profiles(session: Session, *, method: str = "gaussian", table_margin: 
                 call_progress(progress, f"laser profiles: {k + 1}/{len(views)} steps, "
                                         f"{sum(len(p) for p in points):,} points", k + 1, len(views))
     n_points = np.asarray(counts, dtype=np.int64).reshape(len(views), len(rig.lasers))
+    if regions is not None and (n_points.sum(axis=0) == 0).any():
+        # A laser without a line above the table: is there one on the table (no object)? A few steps tell.
+        for k in sorted({0, len(views) // 2, len(views) - 1}):
+            on_table += one(k, None)[5]
 
     def frames(i: int) -> str:
         return f"{views[0].folder / f'laser{i}.png'} ... {views[-1].folder.name}"
@@ -131,7 +144,7 @@ def laser_profiles(session: Session, *, method: str = "gaussian", table_margin: 
                               "gain) and scan again")
         if n_i == 0 and on_table[i]:
             raise DecodeError(f"laser {i} ({laser.name}): its line was found in the {len(views)} steps "
-                              f"({frames(i)}) only on the turntable top ({int(on_table[i]):,} points "
+                              f"({frames(i)}) only on the turntable top ({int(on_table[i]):,} points on it "
                               f"within {table_margin * 1e3:g} mm of it, dropped as table points): no object "
                               "was scanned; is the object on the turntable, in the camera's view and in the "
                               "laser's plane?")
@@ -147,23 +160,18 @@ def laser_profiles(session: Session, *, method: str = "gaussian", table_margin: 
                          [v.folder.name for v in views], n_points, rejected, on_table)
 
 
-def oriented_profiles(profiles: LaserProfiles, *, k: int = 20, outlier_std: float = 2.5) -> tuple[PointCloud, np.ndarray]:
-    """The merged cloud with normals (``k`` neighbours, turned towards the camera centre of each point's
-    step) after dropping the points whose mean distance to their ``k`` neighbours exceeds the mean by more
-    than ``outlier_std`` standard deviations. Returns (cloud, kept (N,) bool over ``profiles.cloud``)."""
-    import open3d as o3d
+def oriented_profiles(profiles: LaserProfiles, *, k: int = 20) -> PointCloud:
+    """The merged cloud with normals from ``k`` neighbours, each turned towards the camera centre of its
+    point's step.
 
+    No statistical outlier filter: the ghosts it was meant for are gone with the profile filter, and on
+    the 400-step lumpy scan it dropped 4,417 good points of sparse, grazing parts (undersides), opening
+    holes that Poisson bridged 3-28 mm off the surface (mesh RMS 0.18 mm against 0.029 mm without it)."""
     from rangekit.surface.cloud import estimate_normals, orient_normals_to_sensor
 
     P = profiles.cloud.points
-    pc = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(P))
-    _, idx = pc.remove_statistical_outlier(nb_neighbors=k, std_ratio=outlier_std)
-    kept = np.zeros(len(P), dtype=bool)
-    kept[np.asarray(idx, dtype=np.int64)] = True
-    Q = P[kept]
-    normals = orient_normals_to_sensor(Q, estimate_normals(Q, k=k), profiles.origins[profiles.step[kept]])
-    colours = None if profiles.cloud.colours is None else profiles.cloud.colours[kept]
-    return PointCloud(Q, colours=colours, normals=normals), kept
+    normals = orient_normals_to_sensor(P, estimate_normals(P, k=k), profiles.origins[profiles.step])
+    return PointCloud(P, colours=profiles.cloud.colours, normals=normals)
 
 
 def process_laser(out: Path, session: Session, *, fusion: str, table_margin: float, evaluate, report: bool,
@@ -182,8 +190,8 @@ def process_laser(out: Path, session: Session, *, fusion: str, table_margin: flo
                    world=f"frame of {profiles.names[0]} (the rig's world at its turntable angle); each step "
                          "placed by its turntable angle")
     with timer.stage("fuse"):
-        call_progress(progress, f"normals and outlier filter on {len(profiles.cloud):,} points")
-        merged, kept = oriented_profiles(profiles)
+        call_progress(progress, f"normals of {len(profiles.cloud):,} points")
+        merged = oriented_profiles(profiles)
         save_cloud(out / "merged.ply", merged)
         call_progress(progress, f"fusing {len(merged):,} points (poisson)")
         step = max(1, len(merged) // 400_000)
@@ -206,7 +214,7 @@ def process_laser(out: Path, session: Session, *, fusion: str, table_margin: flo
                               "steps_without_line": int((profiles.n_points[:, i] == 0).sum()),
                               "table_points": int(profiles.on_table[i]),
                               "rejected_rows": profiles.rejected[i]} for i, laser in enumerate(session.rig.lasers)],
-                  "outliers_removed": int((~kept).sum()), "peak_method": method}
+                  "peak_method": method}
     result = ProcessResult(out, profiles.names, profiles.T_world_view, [int(n) for n in per_step], [], float("nan"),
                            mesh_info, timer.seconds, accuracy, laser=laser_info)
     if report:

@@ -15,7 +15,7 @@ import numpy as np
 from rangekit.errors import DecodeError
 from rangekit.formats.laser_capture import LaserCapture
 from rangekit.laser import LinePeaks, detect_peaks, require_peaks, triangulate_peaks
-from rangekit.laser.profile_filter import continuous_runs
+from rangekit.laser.profile_filter import JUMP_FOOTPRINTS, continuous_runs, pixel_footprint
 from rangekit.surface.cloud import PointCloud
 
 __all__ = ["LaserReconstruction", "reconstruct_laser_capture"]
@@ -40,13 +40,15 @@ class LaserReconstruction:
 
 def reconstruct_laser_capture(capture: LaserCapture, *, method: str = "gaussian",
                               full_scale: float | None = None, require: bool = True,
-                              min_run: int = 5) -> LaserReconstruction:
+                              min_run: int = 5, regions=None) -> LaserReconstruction:
     """Peaks, triangulation and merge of every laser of ``capture``; a laser whose line is not visible is a
     :class:`DecodeError` naming its frame (never a silently empty cloud). ``full_scale``: the camera's
     largest value (saturation and colour scale), default the capture's (its bits), else the dtype's.
     ``require=False`` (one step of a scan, where a line may miss everything at some angles): such a laser
     gives no points, and the scan counts it (``n_points`` 0). ``min_run``: row-method points are kept in
-    continuous runs of at least this many rows (:func:`rangekit.laser.profile_filter.continuous_runs`; 1: all)."""
+    continuous runs of at least this many rows (:func:`rangekit.laser.profile_filter.continuous_runs`; 1: all).
+    ``regions``: per laser an (H, W) bool mask of where its line may be, or None
+    (:func:`rangekit.laser.triangulate.plane_region`: above the turntable top)."""
     rig, camera = capture.rig, capture.rig.camera
     colour = capture.off.ndim == 3
     saturation = full_scale or capture.full_scale or float(np.iinfo(capture.off.dtype).max)
@@ -54,13 +56,14 @@ def reconstruct_laser_capture(capture: LaserCapture, *, method: str = "gaussian"
     for k, (laser, frame) in enumerate(zip(rig.lasers, capture.frames)):
         name = str(capture.folder / capture.names[k])
         peaks = detect_peaks(frame, capture.off, method=method, channel=laser.channel if colour else None,
-                             saturation=saturation)
+                             saturation=saturation, mask=None if regions is None else regions[k])
         if require:
             peaks = require_peaks(peaks, name)
         tri = triangulate_peaks(peaks.points, camera, laser)
         ok = tri.valid
         if peaks.rows is not None and min_run > 1:   # row methods: drop the blurred line ends' ghost peaks
-            ok &= continuous_runs(peaks.rows, tri.xyz, min_run=min_run)
+            ok &= continuous_runs(peaks.rows, tri.xyz, min_run=min_run,
+                                  max_jump=JUMP_FOOTPRINTS * pixel_footprint(tri.xyz, camera))
         if require and not ok.any():
             raise DecodeError(f"{name}: {len(peaks)} line peaks, but none triangulates against laser {laser.name!r} "
                               f"({tri.n_grazing} rays graze its plane, {tri.n_behind} meet it behind the camera)")

@@ -57,7 +57,7 @@ class ProcessResult:
             lines.append("registration: none, each laser profile placed by its turntable angle; " + "; ".join(
                 f"{d['name']}: {d['points']:,} points, no line in {d['steps_without_line']} step(s)"
                 + (f", {d['rejected_rows'].get('saturated', 0):,} saturated rows" if d["rejected_rows"].get("saturated")
-                   else "") for d in self.laser["lasers"]) + f"; {self.laser['outliers_removed']:,} outliers removed")
+                   else "") for d in self.laser["lasers"]))
         else:
             lines.append(f"registration: {len(acc)}/{len(self.edges)} pairs accepted, pair ICP RMSE median "
                          f"{np.median([e['rmse_mm'] for e in acc]):.4f} mm, joint RMS {self.registration_rmse * 1e3:.4f} "

@@ -160,7 +160,7 @@ def _full_scale(on: np.ndarray, saturation):
 
 def detect_peaks(on, off=None, *, method: str = "gaussian", channel: str | None = None, window: int = 9,
                  min_contrast: float = 6.0, double_ratio: float | None = 0.5, saturation: float | None = None,
-                 sigma: float = 1.5, along: int = 0) -> LinePeaks:
+                 sigma: float = 1.5, along: int = 0, mask: np.ndarray | None = None) -> LinePeaks:
     """The laser line's subpixel peaks in ``on - off`` (see the module docstring).
 
     ``window`` (px, >= 3, at least the line's 1/e^2 width): the centre-of-mass window (window // 2 either
@@ -173,7 +173,10 @@ def detect_peaks(on, off=None, *, method: str = "gaussian", channel: str | None 
     in uint16; no test for float images); ``sigma``: the ridge method's smoothing (px); ``along`` (row
     methods, 0 <= along <= 10; 0: off): smooth the columns along the line over ``along`` rows either side
     (see :func:`smooth_along`): on simulated frames ``along=3`` takes the Gaussian fit from 0.070 to
-    0.044 px RMS, at the price of detail along the line finer than ~2 along + 1 rows.
+    0.044 px RMS, at the price of detail along the line finer than ~2 along + 1 rows. ``mask``: (H, W)
+    bool, the pixels where the line may be (False: ignored, e.g. where the laser's plane lies below the
+    turntable top, :func:`rangekit.laser.triangulate.plane_region`), so a second line there does not
+    make a row double.
     """
     if method not in METHODS:
         raise InputError(f"detect_peaks: method must be one of {', '.join(METHODS)}, found {method!r}")
@@ -186,10 +189,17 @@ def detect_peaks(on, off=None, *, method: str = "gaussian", channel: str | None 
     if int(along) != along or not 0 <= along <= 10:
         raise InputError(f"detect_peaks: along must be a whole number of rows in 0..10, found {along!r}")
     d, on_used = laser_difference(on, off, channel)
+    if mask is not None:
+        m = np.asarray(mask)
+        if m.shape != d.shape or m.dtype != bool:
+            raise InputError(f"detect_peaks: mask must be a bool array of the image's shape {d.shape}, found "
+                             f"{m.dtype} {m.shape}")
     if np.issubdtype(np.asarray(on).dtype, np.floating) and not np.isfinite(d).all():
         raise InputError("detect_peaks: the laser-on/off images hold NaN or infinite values; expected finite "
                          f"intensities, found {int(np.count_nonzero(~np.isfinite(d)))} non-finite pixels")
-    noise = estimate_noise(d)
+    noise = estimate_noise(d)   # on the whole image: the masked-out pixels are noise samples too
+    if mask is not None:
+        d = np.where(m, d, np.float32(0))
     full = _full_scale(np.asarray(on), saturation)
     if method == "ridge":
         found = ridge_peaks(d, on_used, noise=noise, sigma=sigma, min_contrast=min_contrast,

@@ -33,7 +33,7 @@ from rangekit.lasers import LineLaser
 from rangekit.rig import table_motion
 
 __all__ = ["MIN_RAY_PLANE_ANGLE", "MIN_CENTRE_DISTANCE", "LaserPoints", "as_plane", "check_plane_camera",
-           "triangulate_peaks", "to_turntable_frame"]
+           "triangulate_peaks", "to_turntable_frame", "plane_region"]
 
 #: Smallest angle (radians) between a camera ray and the laser plane that is triangulated (2 degrees).
 MIN_RAY_PLANE_ANGLE = math.radians(2.0)
@@ -176,3 +176,28 @@ def to_turntable_frame(points, angle, T_world_table) -> np.ndarray:
     x = c * local[:, 0] - s * local[:, 1]
     y = s * local[:, 0] + c * local[:, 1]
     return np.column_stack([x, y, local[:, 2]]) @ R.T + t
+
+
+def plane_region(camera: PinholeCamera, laser, T_world_table, *, z_min: float) -> np.ndarray:
+    """(H, W) bool: the pixels whose ray meets the laser's plane in front of the camera at a point more than
+    ``z_min`` metres above the turntable top (table frame z). A lit pixel outside it can only be the line on
+    the table (or below it), so a peak finder can ignore it (:func:`rangekit.laser.detect_peaks`'s mask).
+
+    Parameters
+    ----------
+    camera : the calibrated camera (its lens distortion included).
+    laser : a :class:`~rangekit.lasers.LineLaser` or a (4,) plane, world frame.
+    T_world_table : (4, 4) the turntable frame (its z axis up, z = 0 its top).
+    z_min : metres above the table top.
+    """
+    from rangekit.camera import world_pixel_rays
+    from rangekit.geometry import invert_T
+
+    plane, _ = as_plane(laser)
+    o, d = world_pixel_rays(camera)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        t = ray_plane_t(o, d, plane)
+        X = o + t[:, None] * d
+        z = apply_T(invert_T(np.asarray(T_world_table, dtype=np.float64)), np.where(np.isfinite(X), X, 0.0))[:, 2]
+        inside = np.isfinite(t) & (t > 0) & (z > z_min)
+    return inside.reshape(camera.height, camera.width)

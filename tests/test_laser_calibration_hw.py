@@ -195,3 +195,16 @@ def test_devices_without_a_laser_switch_are_refused(truth):
 
     with pytest.raises(ConfigError, match="turntable board with laser switches"):
         calibrate_lasers_on_devices(NoSwitch(), _rough(truth), n_poses=2, ask=lambda p: None)
+
+
+def test_camera_calibration_of_a_rig_without_projector_is_refused(truth, tmp_path, monkeypatch, capsys, tty):
+    """A Ciclop rig file (no projector): plain ``rangekit calibrate`` needs the projector's coded light and
+    says so (exit 1, naming the field), before any device is opened."""
+    def never(*args, **kw):
+        raise AssertionError("a device was opened")
+
+    monkeypatch.setattr(rangekit.drivers, "open_rig_devices", never)
+    rig_file, out = _write_rig(tmp_path, replace(_rough(truth), projector=None)), tmp_path / "rig2.json"
+    assert main(["calibrate", "--rig", str(rig_file), "--out", str(out)]) == 1
+    err = capsys.readouterr().err
+    assert "devices.projector.display" in err and "--lasers" in err and not out.exists()

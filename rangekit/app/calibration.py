@@ -77,6 +77,11 @@ def calibrate(out: str | Path, *, rig: str = "sim", board: Board, n_poses: int =
 
         template = load_rig(rig)
         validate_rig_for_hardware(template, where=rig)
+        if template.projector is None or "display" not in ((template.devices or {}).get("projector") or {}):
+            raise ConfigError(f"{rig}: devices.projector.display: expected a projector display (the camera and "
+                              "turntable are calibrated with its coded light), found none; a rig without a "
+                              "projector (Ciclop, FabScan) takes its camera from the depthai factory calibration "
+                              "(docs/rig.md) and can then calibrate its lasers with --lasers (docs/laser.md)")
         if not interactive:
             raise ConfigError("calibrating real hardware is interactive (you move the board between captures); "
                               "run 'rangekit calibrate' in a terminal")

@@ -152,12 +152,13 @@ def test_a_rig_without_lasers_is_named():
         calibrate_lasers(default_rig(), n_poses=3)
 
 
-def test_cli_lasers_on_hardware_is_refused_before_any_work(tmp_path, capsys):
+def test_cli_lasers_with_a_bad_rig_file_is_refused_before_any_work(tmp_path, capsys):
+    """(Hardware laser calibration itself: tests/test_laser_calibration_hw.py.)"""
     rig = tmp_path / "rig.json"
     rig.write_text("{}")
-    assert main(["calibrate", "--rig", str(rig), "--lasers", "--out", str(tmp_path / "out.json")]) == 2
+    assert main(["calibrate", "--rig", str(rig), "--lasers", "--out", str(tmp_path / "out.json")]) == 1
     err = capsys.readouterr().err
-    assert "--lasers" in err and "simulator only" in err and not (tmp_path / "out.json").exists()
+    assert str(rig) in err and not (tmp_path / "out.json").exists()
     with pytest.raises(SystemExit) as exc:
         main(["calibrate", "--lasers", "--laser-poses", "1", "--out", str(tmp_path / "o.json")])
     assert exc.value.code == 2

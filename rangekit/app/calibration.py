@@ -31,6 +31,7 @@ class Calibration:
     truth: Rig | None          # the simulator's true rig; None on hardware
     deviation: list[str]       # simulator: each parameter's deviation from the truth, one line each
     lasers: object = None      # rangekit.app.laser_calibration.LaserCalibration with ``lasers``; else None
+    # ``result`` is None after ``--lasers`` on hardware (the laser planes alone are calibrated there)
 
 
 def calibrate(out: str | Path, *, rig: str = "sim", board: Board, n_poses: int = 20, seed: int = 0,
@@ -40,16 +41,19 @@ def calibrate(out: str | Path, *, rig: str = "sim", board: Board, n_poses: int =
 
     ``rig`` is "sim" or a rig file naming the devices (its geometry is replaced). On hardware,
     ``interactive`` must be true (someone moves the board; ``ask`` prompts them). With ``lasers`` (the
-    simulator only) the simulated Ciclop rig's laser planes are calibrated too, from ``laser_poses`` board
+    simulator) the simulated Ciclop rig's laser planes are calibrated too, from ``laser_poses`` board
     poses with the calibrated camera (:func:`rangekit.app.laser_calibration.calibrate_lasers`), and written
-    into the rig file's ``lasers``.
+    into the rig file's ``lasers``; on hardware ``lasers`` calibrates the laser planes alone, with the rig
+    file's calibrated camera (the person places the board, :mod:`rangekit.app.laser_calibration_hw`), and
+    writes the rig file with the fitted planes, everything else unchanged.
 
     Raises
     ------
     UsageError
-        ``out`` exists (without ``force``), fewer than 3 poses, ``lasers`` on a hardware rig file.
+        ``out`` exists (without ``force``), fewer than 3 poses, fewer than 2 laser poses.
     ConfigError
-        Hardware without a terminal, a bad rig file.
+        Hardware without a terminal, a bad rig file; with ``lasers`` on hardware: no ``lasers``, an
+        uncalibrated camera, no camera or turntable board in ``devices`` (before any device is opened).
     CalibrationError
         A laser plane cannot be calibrated (named).
     """
@@ -62,18 +66,22 @@ def calibrate(out: str | Path, *, rig: str = "sim", board: Board, n_poses: int =
         raise UsageError(f"--poses must be at least 3 (Zhang's method), found {n_poses}; 15-25 is typical")
     settings = CalibrationSettings(board=board, n_poses=n_poses)
     hardware = rig != "sim"
-    if lasers and hardware:
-        raise UsageError(f"--lasers with --rig {rig}: laser-plane calibration is implemented on the simulator only "
-                         "(--rig sim); on a Ciclop or FabScan, calibrate the camera here and measure the laser "
-                         "planes' 'plane' entries by hand for now (docs/laser.md)")
     if lasers and laser_poses < 2:
         raise UsageError(f"--laser-poses must be at least 2 (two board lines fix a plane), found {laser_poses}; "
                          "10 is typical")
+    if lasers and hardware:
+        return _calibrate_hardware_lasers(out, rig, board=board, n_poses=laser_poses, interactive=interactive,
+                                          ask=ask, progress=progress)
     if hardware:
         from rangekit.drivers import open_rig_devices
 
         template = load_rig(rig)
         validate_rig_for_hardware(template, where=rig)
+        if template.projector is None or "display" not in ((template.devices or {}).get("projector") or {}):
+            raise ConfigError(f"{rig}: devices.projector.display: expected a projector display (the camera and "
+                              "turntable are calibrated with its coded light), found none; a rig without a "
+                              "projector (Ciclop, FabScan) takes its camera from the depthai factory calibration "
+                              "(docs/rig.md) and can then calibrate its lasers with --lasers (docs/laser.md)")
         if not interactive:
             raise ConfigError("calibrating real hardware is interactive (you move the board between captures); "
                               "run 'rangekit calibrate' in a terminal")
@@ -120,3 +128,27 @@ def calibrate(out: str | Path, *, rig: str = "sim", board: Board, n_poses: int =
     save_rig(out_rig, out)
     deviation = comparison_lines(compare_rigs(res.rig, truth)) if truth is not None else []
     return Calibration(res, truth, deviation, laser_cal)
+
+
+def _calibrate_hardware_lasers(out: Path, rig: str, *, board: Board, n_poses: int, interactive: bool,
+                               ask: Callable[[str], object], progress: Callable | None) -> Calibration:
+    """``rangekit calibrate --lasers --rig RIG.json``: the laser planes of a rig whose camera is calibrated
+    (:func:`rangekit.app.laser_calibration_hw.calibrate_lasers_on_devices`); the rig file ``out`` is ``rig``
+    with the fitted planes, everything else unchanged, written only when every plane was fitted."""
+    from rangekit.app.laser_calibration_hw import calibrate_lasers_on_devices, check_laser_rig
+    from rangekit.drivers import open_rig_devices
+
+    template = load_rig(rig)
+    validate_rig_for_hardware(template, where=rig)
+    check_laser_rig(template, where=rig)
+    if not interactive:
+        raise ConfigError("calibrating the lasers on real hardware is interactive (you move the board between "
+                          "captures); run 'rangekit calibrate --lasers' in a terminal")
+    devices = open_rig_devices(template, where=rig, open_display=False)
+    try:
+        laser_cal = calibrate_lasers_on_devices(devices, template, n_poses=n_poses, ask=ask, board=board,
+                                                progress=progress, where=rig)
+    finally:
+        devices.close()
+    save_rig(laser_cal.rig, out)
+    return Calibration(None, None, [], laser_cal)

@@ -37,10 +37,12 @@ from rangekit.laser.peaks import detect_peaks
 from rangekit.laser.plane_calib import (LaserPlaneCalibration, PlaneErrors, board_view, calibrate_laser_plane,
                                         calibrated_laser, plane_errors, report_lines)
 from rangekit.laser.triangulate import MIN_RAY_PLANE_ANGLE
+from rangekit.lasers import LineLaser
 from rangekit.progress import call_progress
 from rangekit.rig import Rig
 
-__all__ = ["LaserCalibration", "calibrate_lasers", "plane_in_world", "check_rays_cross_plane"]
+__all__ = ["LaserCalibration", "calibrate_lasers", "plane_in_world", "check_rays_cross_plane", "pose_lines",
+           "pnp_board_poses", "fit_laser_planes"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -122,9 +124,51 @@ def check_rays_cross_plane(cal: LaserPlaneCalibration, camera: PinholeCamera,
             "the laser away from the camera (Ciclop: about 30 deg to either side of it)")
 
 
-def _pnp(camera: PinholeCamera, obj: np.ndarray, uv: np.ndarray) -> np.ndarray | None:
-    ok, rvec, tvec = cv2.solvePnP(obj, uv, camera.K, camera.dist, flags=cv2.SOLVEPNP_ITERATIVE)
-    return make_T(rotvec_to_R(rvec.ravel()), tvec.ravel()) if ok else None
+def pose_lines(off: np.ndarray, frames: Sequence[np.ndarray], board: Board, lasers: Sequence[LineLaser]):
+    """One board pose's corners and laser lines: ``(detection, [uv (N, 2) per laser])``, or the reason
+    (a string) when the board is not found in the laser-off image ``off``. ``frames``: one laser-on image
+    per laser, (H, W) or (H, W, 3) like ``off`` (colour: each laser's ``channel`` is used)."""
+    det = detect_board(off, board)
+    if not det.found:
+        return f"board not found in the laser-off image ({det.reason})"
+    colour = np.ndim(off) == 3
+    return det, [detect_peaks(f, off, channel=laser.channel if colour else None).points
+                 for f, laser in zip(frames, lasers)]
+
+
+def pnp_board_poses(camera: PinholeCamera, board: Board, views: Sequence, names: Sequence[str]):
+    """``({pose index: T_cam_board (4, 4)}, [rejection])``: each found pose of ``views`` (from
+    :func:`pose_lines`; None: not found) by PnP with the calibrated ``camera``; a PnP failure is rejected
+    by the pose's name."""
+    obj = board.object_points()
+    T_cam, rejected = {}, []
+    for i, v in enumerate(views):
+        if v is None:
+            continue
+        ok, rvec, tvec = cv2.solvePnP(obj[v[0].ids], v[0].uv, camera.K, camera.dist, flags=cv2.SOLVEPNP_ITERATIVE)
+        if ok:
+            T_cam[i] = make_T(rotvec_to_R(rvec.ravel()), tvec.ravel())
+        else:
+            rejected.append(f"{names[i]}: the board's pose was not found from its corners (solvePnP failed)")
+    return T_cam, rejected
+
+
+def fit_laser_planes(lasers: Sequence[LineLaser], camera: PinholeCamera, board: Board, views: Sequence,
+                     T_cam: dict, names: Sequence[str], *, min_points: int = 20, seed: int = 0):
+    """``(calibrated lasers, [LaserPlaneCalibration], [rejection])``: each laser's line on the board poses
+    ``T_cam`` (from :func:`pnp_board_poses`) fitted to its plane (world frame of ``camera``); rejections
+    read "laser0: board pose 3: reason". Raises CalibrationError (named) as :func:`calibrate_laser_plane`
+    and :func:`check_rays_cross_plane` do."""
+    out, cals, rejected = [], [], []
+    for k, laser in enumerate(lasers):
+        targets = [board_view(board, views[i][1][k], T_cam_board=T_cam[i], camera=camera, name=names[i])
+                   for i in sorted(T_cam) if i < len(views)]
+        cal = calibrate_laser_plane(camera, targets, name=laser.name, min_points=min_points, seed=seed)
+        check_rays_cross_plane(cal, camera)
+        rejected += [f"{laser.name}: {n}: {why}" for n, why in cal.rejected]
+        cals.append(cal)
+        out.append(calibrated_laser(laser, cal))
+    return out, cals, rejected
 
 
 def calibrate_lasers(truth: Rig | None = None, *, n_poses: int = 10, seed: int = 0, board: Board | None = None,
@@ -179,15 +223,12 @@ def calibrate_lasers(truth: Rig | None = None, *, n_poses: int = 10, seed: int =
     for i, T in enumerate(poses):
         call_progress(progress, "laser calibration: rendering board poses", i, len(poses))
         shot = render_board_pose(truth, board, T, seed=seed * 1000 + i, ambient_scale=ambient_scale)
-        det = detect_board(shot.off, board)
-        if not det.found:
-            rejected.append(f"{names[i]}: board not found in the laser-off image ({det.reason})")
-            views.append(None)
-            continue
-        uv = [detect_peaks(f, shot.off).points for f in shot.frames]
-        views.append((det, uv))
+        view = pose_lines(shot.off, shot.frames, board, truth.lasers)
+        if isinstance(view, str):
+            rejected.append(f"{names[i]}: {view}")
+            view = None
+        views.append(view)
     call_progress(progress, "laser calibration: rendering board poses", len(poses), len(poses))
-    found = [i for i, v in enumerate(views) if v is not None]
     camera_rms = math.nan
     if camera is None:
         corr = [Correspondences(v[0].ids, v[0].uv) if v is not None else None for v in views]
@@ -205,19 +246,13 @@ def calibrate_lasers(truth: Rig | None = None, *, n_poses: int = 10, seed: int =
         rejected += [f"{v.name}: {v.reason}" for v in dev.views
                      if not v.used and (v.index >= len(views) or views[v.index] is not None)]
     else:
-        T_cam = {i: _pnp(camera, obj[views[i][0].ids], views[i][0].uv) for i in found}
-        rejected += [f"{names[i]}: the board's pose was not found from its corners (solvePnP failed)"
-                     for i, T in T_cam.items() if T is None]
-        T_cam = {i: T for i, T in T_cam.items() if T is not None}
-    lasers, cals, errors, camera_errors = [], [], [], []
-    for k, laser in enumerate(truth.lasers):
-        targets = [board_view(board, views[i][1][k], T_cam_board=T_cam[i], camera=camera, name=names[i])
-                   for i in sorted(T_cam) if i < len(views)]
-        cal = calibrate_laser_plane(camera, targets, name=laser.name, min_points=min_points, seed=seed)
-        check_rays_cross_plane(cal, camera)
-        rejected += [f"{laser.name}: {n}: {why}" for n, why in cal.rejected]
-        cals.append(cal)
-        lasers.append(calibrated_laser(laser, cal))
+        T_cam, failed = pnp_board_poses(camera, board, views, names)
+        rejected += failed
+    lasers, cals, fit_rejected = fit_laser_planes(truth.lasers, camera, board, views, T_cam, names,
+                                                  min_points=min_points, seed=seed)
+    rejected += fit_rejected
+    errors, camera_errors = [], []
+    for cal, laser in zip(cals, truth.lasers):
         inliers = cal.points[cal.fit.inliers]
         errors.append(plane_errors(cal.plane, laser.plane, inliers))
         in_truth = plane_in_world(cal.plane, camera.T_world_cam, truth.camera.T_world_cam)

@@ -31,7 +31,8 @@ def cmd_rig_init(args: argparse.Namespace) -> int:
 
 def cmd_calibrate(args: argparse.Namespace) -> int:
     """rangekit calibrate --rig sim|RIG.json --out RIG.json [--lasers]: camera, projector, turntable and projector
-    response (and with --lasers, on the simulator, the line lasers' planes)"""
+    response (and with --lasers the line lasers' planes: on the simulator after the rest, on hardware alone with
+    the rig file's calibrated camera)"""
     from rangekit.app.calibration import calibrate
     from rangekit.boards import Board
 
@@ -42,9 +43,10 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
                     interactive=sys.stdin.isatty(), ask=input, progress=console(), lasers=args.lasers,
                     laser_poses=args.laser_poses)
     say("")
-    say("== calibration ==")
-    for line in cal.result.summary_lines():
-        say(line)
+    if cal.result is not None:
+        say("== calibration ==")
+        for line in cal.result.summary_lines():
+            say(line)
     if cal.truth is not None:
         say("deviation from the simulator's true rig (rangekit rig init --sim):")
         for line in cal.deviation:
@@ -92,9 +94,10 @@ def add_calibrate_parser(sub) -> None:
     cal.add_argument("--square-mm", type=positive_float, default=20.0, help="square side in millimetres (default 20)")
     cal.add_argument("--seed", type=seed, default=0, help="simulator: noise and pose seed")
     cal.add_argument("--lasers", action="store_true",
-                     help="also calibrate the line lasers' planes (simulator: the Ciclop rig's two lasers) from "
-                          "board poses crossed by the lines, written to the rig file's 'lasers'; prints each "
-                          "plane's normal angle and offset error against the truth and every rejected pose")
+                     help="calibrate the line lasers' planes from board poses crossed by the lines, written to "
+                          "the rig file's 'lasers'; simulator: after the camera (the Ciclop rig's two lasers), with "
+                          "each plane's error against the truth; hardware rig file: the lasers alone, with its "
+                          "calibrated camera (you place the board; docs/laser.md); prints every rejected pose")
     cal.add_argument("--laser-poses", type=int_in(2, 200), default=10,
                      help="with --lasers: board poses for the laser planes (default 10)")
     cal.set_defaults(func=cmd_calibrate)

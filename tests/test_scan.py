@@ -165,14 +165,22 @@ def test_bad_input_fails_before_any_work(tmp_path, capsys):
     assert not (tmp_path / "hw").exists()
 
 
-def test_render_command_draws_meshes_and_clouds(scanned, tmp_path):
+def test_render_command_draws_meshes_and_clouds(tmp_path):
+    """A mesh file and a cloud file (the simulator's lumpy object and its vertices; a scan's own outputs are
+    rendered by the slow scan tests through report.html)."""
+    from rangekit.formats.clouds import save_cloud
+    from rangekit.formats.meshes import save_mesh
     from rangekit.io import read_png
+    from rangekit.surface.cloud import PointCloud
 
-    assert main(["render", str(scanned / "mesh.ply"), "--out", str(tmp_path / "m.png"), "--size", "320x240"]) == 0
+    obj = default_scene("lumpy").objects[0]
+    save_mesh(tmp_path / "mesh.ply", TriangleMesh(obj.world_vertices(), obj.triangles))
+    save_cloud(tmp_path / "cloud.ply", PointCloud(obj.world_vertices()[::3]))
+    assert main(["render", str(tmp_path / "mesh.ply"), "--out", str(tmp_path / "m.png"), "--size", "320x240"]) == 0
     img = read_png(tmp_path / "m.png")
     assert img.shape == (240, 320, 3)
     assert 0.2 < np.mean(np.any(img < 250, axis=2)) < 0.95  # the object fills the frame, background around
-    assert main(["render", str(scanned / "view_000" / "cloud.ply"), "--out", str(tmp_path / "c.png"),
+    assert main(["render", str(tmp_path / "cloud.ply"), "--out", str(tmp_path / "c.png"),
                  "--azimuth", "0", "90", "--size", "200x150"]) == 0
     img = read_png(tmp_path / "c.png")
     assert img.shape[1] > 400 and np.mean(np.any(img < 250, axis=2)) > 0.1  # a montage of two views

@@ -202,6 +202,7 @@ class TruthEvaluation:
 
     accuracy: Accuracy
     truth: TriangleMesh   # the true surface in the session world (the table at the first view's angle)
+    view_errors: list | None = None   # per view, where the error comes from (rangekit.sim.view_errors)
 
 
 def truth_evaluator(obj: str, rig: Rig, **options) -> Callable[[TriangleMesh, Sequence[float]], TruthEvaluation]:
@@ -211,10 +212,18 @@ def truth_evaluator(obj: str, rig: Rig, **options) -> Callable[[TriangleMesh, Se
     :func:`mesh_accuracy` (``options`` are its keywords)."""
     scene = default_scene(obj)
 
-    def evaluate(mesh: TriangleMesh, angles: Sequence[float], cloud: np.ndarray | None = None) -> TruthEvaluation:
+    def evaluate(mesh: TriangleMesh, angles: Sequence[float], cloud: np.ndarray | None = None,
+                 views: dict | None = None) -> TruthEvaluation:
+        """``views``: the views' ``clouds``, registered ``T_world_view``, decoded ``proj_cols`` and ``names``
+        (:func:`rangekit.sim.view_errors.view_errors`), for the per-view error breakdown."""
         accuracy = mesh_accuracy(mesh, scene, rig, angles, cloud=cloud, **options)
+        per_view = None
+        if views is not None:
+            from rangekit.sim.view_errors import view_errors
+
+            per_view = view_errors(scene, rig, angles, **views)
         ob = scene.objects[0]
         M0 = rig.T_world_rotated(float(angles[0])) if rig.T_world_table is not None else np.eye(4)
-        return TruthEvaluation(accuracy, TriangleMesh(apply_T(M0, ob.world_vertices()), ob.triangles))
+        return TruthEvaluation(accuracy, TriangleMesh(apply_T(M0, ob.world_vertices()), ob.triangles), per_view)
 
     return evaluate

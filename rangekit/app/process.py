@@ -50,15 +50,20 @@ FUSION_METHODS = ("poisson", "tsdf")
 
 
 class Evaluation(Protocol):
-    """What an evaluator returns: ``accuracy`` (an object with ``to_dict()``, the summary's "accuracy")
-    and ``truth`` (the true surface as a TriangleMesh in the session world, for the report's heat map)."""
+    """What an evaluator returns: ``accuracy`` (an object with ``to_dict()``, the summary's "accuracy"),
+    ``truth`` (the true surface as a TriangleMesh in the session world, for the report's heat map) and
+    ``view_errors`` (a list of per-view dicts, the summary's "view_errors", or None)."""
 
     accuracy: object
     truth: object
+    view_errors: list | None
 
 
-#: ``evaluate(mesh, angles)``: the fused mesh (session world) and the views' turntable angles (radians)
-#: to an :class:`Evaluation`. The simulator provides one (:func:`rangekit.sim.evaluate.truth_evaluator`).
+#: ``evaluate(mesh, angles, cloud=None, views=None)``: the fused mesh (session world) and the views'
+#: turntable angles (radians) to an :class:`Evaluation`; ``cloud`` the merged points (session world),
+#: ``views`` a dict of the views' ``clouds``, registered ``T_world_view``, decoded ``proj_cols`` and
+#: ``names`` for the per-view breakdown. The simulator provides one
+#: (:func:`rangekit.sim.evaluate.truth_evaluator`).
 Evaluator = Callable[[object, Sequence[float]], Evaluation]
 
 
@@ -173,15 +178,18 @@ def _process(out: Path, fusion: str, method: str, table_margin: float, evaluate:
         call_progress(progress, f"mesh: {len(mesh.vertices):,} vertices, {len(mesh.triangles):,} triangles, "
                                 f"watertight {mesh.is_watertight}")
 
-    accuracy, truth = None, None
+    accuracy, truth, view_errors = None, None, None
     if evaluate is not None:
         with timer.stage("evaluate"):
-            call_progress(progress, "measuring the mesh against the true surface")
-            evaluation = evaluate(mesh, [v.angle for v in views])
+            call_progress(progress, "measuring the mesh and each view against the true surface")
+            evaluation = evaluate(mesh, [v.angle for v in views],
+                                  views={"clouds": clouds, "T_world_view": res.T_world_view,
+                                         "proj_cols": [m.proj_col for m in maps], "names": names})
             accuracy, truth = evaluation.accuracy.to_dict(), evaluation.truth
+            view_errors = evaluation.view_errors
 
     result = ProcessResult(out, names, res.T_world_view, [len(c) for c in clouds], edges, float(res.rmse),
-                           mesh_info, timer.seconds, accuracy)
+                           mesh_info, timer.seconds, accuracy, view_errors=view_errors)
     if report:
         with timer.stage("report"):
             from rangekit.app.report import write_report

@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING, Callable, Sequence
 
 import numpy as np
 
+from rangekit.app.report_views import view_errors_section
 from rangekit.io import atomic_write_text
 from rangekit.progress import call_progress
 
@@ -145,6 +146,7 @@ def write_report(folder: str | Path, result: "ProcessResult", *, clouds: Sequenc
             for (az, el), name in list(zip(sides, side_names))[:2]]
     figs.append(_img(view_graph_svg(n, result.edges), "view graph"))
     sections += ["<h2>Registration</h2>", f"<div class='row'>{''.join(figs)}</div>"]
+    sections += view_errors_section(result.view_errors)
 
     call_progress(progress, "report: views")
     rows = []

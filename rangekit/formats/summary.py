@@ -30,6 +30,7 @@ class ProcessResult:
     seconds: dict = field(default_factory=dict)   # wall time per stage
     accuracy: dict | None = None    # against the truth when an evaluator was given (the simulator's Accuracy)
     laser: dict | None = None       # a laser scan: per laser its points, steps without a line, rejected rows
+    view_errors: list | None = None  # simulator: per view, decoding / cloud (inside, edge) / registration errors
 
     @property
     def mesh_path(self) -> Path:
@@ -43,7 +44,8 @@ class ProcessResult:
         return {"schema": SUMMARY_SCHEMA, "views": self.view_names, "n_points": self.n_points,
                 "T_world_view": self.T_world_view.tolist(), "edges": self.edges,
                 "registration_rmse_m": None if np.isnan(self.registration_rmse) else self.registration_rmse, "mesh": self.mesh, "seconds": self.seconds,
-                "accuracy": self.accuracy, **({"laser": self.laser} if self.laser is not None else {})}
+                "accuracy": self.accuracy, **({"laser": self.laser} if self.laser is not None else {}),
+                **({"view_errors": self.view_errors} if self.view_errors is not None else {})}
 
     def summary_lines(self) -> list[str]:
         """The end-of-run summary, one line per fact, for people."""
@@ -77,6 +79,8 @@ class ProcessResult:
             if a.get("cloud_rms") is not None:
                 lines.append(f"cloud against the true surface: RMS {a['cloud_rms'] * 1e3:.3f} mm, 95th percentile "
                              f"{a['cloud_p95'] * 1e3:.3f} mm over {a['n_cloud']:,} points")
+            if self.view_errors:
+                lines.append(_view_errors_line(self.view_errors))
             lines.append(f"  ({a['visible_fraction']:.0%} of the object is visible within "
                          f"{a['max_incidence_deg']:g} deg of incidence; the other {a['unobserved_area']:.0%} of the "
                          f"mesh is filled in where no view looked, RMS {a['unobserved_rms'] * 1e3:.2f} mm there)")
@@ -86,3 +90,18 @@ class ProcessResult:
         t = ", ".join(f"{k} {v:.1f} s" for k, v in self.seconds.items())
         return (f"ProcessResult({len(self.n_points)} views, {sum(self.n_points)} points, mesh watertight "
                 f"{self.mesh_watertight}; {t})")
+
+
+def _view_errors_line(views: list[dict]) -> str:
+    """One summary line of the per-view breakdown: the ranges over the views."""
+    def span(values, fmt):
+        values = [v for v in values if v is not None]
+        return f"{min(values):{fmt}}-{max(values):{fmt}}" if values else "n/a"
+
+    cloud = [v["cloud"] for v in views]
+    reg = [v["registration"] for v in views]
+    dec = [v["decoding"]["rms_px"] for v in views if v.get("decoding")]
+    return (f"per view against the truth: cloud RMS {span([c['rms_mm'] for c in cloud], '.4f')} mm (depth-edge "
+            f"points {span([100 * c['edge_share'] for c in cloud], '.0f')}% of the squared error), decoding RMS "
+            f"{span(dec, '.3f')} px, registration within {max(r['rotation_deg'] for r in reg):.4f} deg and "
+            f"{max(r['translation_mm'] for r in reg):.4f} mm of the true turntable poses")

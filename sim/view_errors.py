@@ -1,0 +1,98 @@
+"""Where a scan's error comes from, view by view, against the simulator's truth (issue 18, point 2).
+
+For each view ``k`` (turntable angle ``a_k``) of a coded-light session:
+
+- **decoding**: the decoded projector column against the true one (the projector column of the surface
+  point each camera pixel sees, :func:`rangekit.sim.raycast.cast_view`), over the pixels where both
+  exist: RMS and 95th percentile in projector pixels;
+- **cloud**: each kept point's distance to the true surface posed at ``a_k`` (the view's own frame is the
+  rig's world at ``a_k``): RMS, 95th percentile, max. Points are split by where they were seen: at a
+  **depth edge** (within 2 pixels of a silhouette or a jump in the true depth, where a pixel mixes two
+  surfaces) or **inside** a surface; ``edge_share`` is the edge points' share of the squared error, so
+  filtering problems (mixed pixels, shadow borders) show apart from decoding noise;
+- **registration**: the registered pose against the true turntable pose (rotation in degrees,
+  translation of the object's centre in mm) and the RMS displacement it gives the view's points.
+
+Frames: clouds in their view's frame; poses ``T_world_view`` with world = the first view's frame.
+"""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+from scipy.ndimage import binary_dilation, maximum_filter, minimum_filter
+
+from rangekit.geometry import apply_T, invert_T, rotation_angle
+from rangekit.rig import Rig, turntable_prior
+from rangekit.surface.mesh import TriangleMesh, distance_to_surface
+from rangekit.sim.raycast import cast_view
+from rangekit.sim.scene import Scene
+
+__all__ = ["view_errors", "depth_edges"]
+
+#: Pixels within this many of a depth edge count as edge pixels.
+EDGE_PX = 2
+#: A jump in true depth between neighbouring pixels larger than this share of the depth is an edge.
+EDGE_JUMP = 0.01
+
+
+def depth_edges(depth: np.ndarray, *, jump: float = EDGE_JUMP, radius: int = EDGE_PX) -> np.ndarray:
+    """(H, W) bool: pixels within ``radius`` of a silhouette (hit next to no hit) or of a jump in ``depth``
+    ((H, W) metres, NaN where nothing is hit) larger than ``jump`` times the depth."""
+    d = np.where(np.isfinite(depth), depth, 0.0)
+    hit = np.isfinite(depth)
+    hi, lo = maximum_filter(d, size=3), minimum_filter(np.where(hit, d, np.inf), size=3)
+    edge = hit & ((hi - lo) > jump * np.where(hit, d, 1.0))
+    edge |= hit & binary_dilation(~hit)   # silhouette
+    return binary_dilation(edge, iterations=radius)
+
+
+def _stats(d: np.ndarray) -> dict:
+    if d.size == 0:
+        return {"rms_mm": None, "p95_mm": None, "max_mm": None, "n": 0}
+    return {"rms_mm": float(np.sqrt(np.mean(d ** 2)) * 1e3), "p95_mm": float(np.percentile(d, 95) * 1e3),
+            "max_mm": float(d.max() * 1e3), "n": int(d.size)}
+
+
+def view_errors(scene: Scene, rig: Rig, angles: Sequence[float], clouds: Sequence, T_world_view: np.ndarray,
+                proj_cols: Sequence[np.ndarray] | None = None, names: Sequence[str] | None = None) -> list[dict]:
+    """One dict per view (see the module docstring): ``decoding`` (px), ``cloud`` (mm, with ``inside`` and
+    ``edge`` parts and ``edge_share``), ``registration`` (deg, mm). ``clouds``: each view's PointCloud in
+    its own frame; ``proj_cols``: each view's decoded (H, W) projector column (NaN where undecoded), or None
+    to skip the decoding figure; ``scene``: the simulated scene (object first) at table angle 0."""
+    obj = scene.objects[0]
+    T_true = turntable_prior(rig.T_world_table, angles)
+    camera = rig.camera
+    centre = obj.world_vertices().mean(axis=0)
+    out = []
+    for k, (angle, cloud) in enumerate(zip(angles, clouds)):
+        M = rig.T_world_rotated(float(angle))
+        truth = TriangleMesh(apply_T(M, obj.world_vertices()), obj.triangles)
+        geometry = cast_view(scene.world_mesh(M), camera, rig.projector)
+        P = cloud.points
+        d = distance_to_surface(P, truth) if len(P) else np.zeros(0)
+        uv = np.rint(camera.project(P)).astype(np.int64) if len(P) else np.zeros((0, 2), np.int64)
+        inside_img = (uv[:, 0] >= 0) & (uv[:, 0] < camera.width) & (uv[:, 1] >= 0) & (uv[:, 1] < camera.height)
+        edge = np.zeros(len(P), dtype=bool)
+        edges = depth_edges(geometry.depth)
+        edge[inside_img] = edges[uv[inside_img, 1], uv[inside_img, 0]]
+        sq = float(np.sum(d ** 2))
+        cloud_stats = {**_stats(d), "inside": _stats(d[~edge]), "edge": _stats(d[edge]),
+                       "edge_share": float(np.sum(d[edge] ** 2) / sq) if sq > 0 else 0.0}
+        E = invert_T(T_true[k]) @ T_world_view[k]
+        c_view = apply_T(M, centre[None])[0]   # the object's centre in view k's frame
+        moved = np.linalg.norm(apply_T(E, P) - P, axis=1) if len(P) else np.zeros(0)
+        registration = {"rotation_deg": float(np.degrees(rotation_angle(E[:3, :3]))),
+                        "translation_mm": float(np.linalg.norm(apply_T(E, c_view[None])[0] - c_view) * 1e3),
+                        "point_rms_mm": float(np.sqrt(np.mean(moved ** 2)) * 1e3) if moved.size else None}
+        decoding = None
+        if proj_cols is not None:
+            col = proj_cols[k]
+            both = np.isfinite(col) & np.isfinite(geometry.proj_col) & (geometry.object_id == 0)
+            e = (col - geometry.proj_col)[both]
+            decoding = {"rms_px": float(np.sqrt(np.mean(e ** 2))) if e.size else None,
+                        "p95_px": float(np.percentile(np.abs(e), 95)) if e.size else None, "n": int(e.size)}
+        out.append({"view": names[k] if names is not None else k, "decoding": decoding, "cloud": cloud_stats,
+                    "registration": registration})
+    return out

@@ -150,7 +150,9 @@ def test_sim_render_object_thin(tmp_path):
     save_rig(Rig(cameras=(r.camera.resized(320, 256),), projector=r.projector, T_world_table=r.T_world_table),
              rig_file)
     out = tmp_path / "cap"
-    assert main(["sim", "render", "--object", "thin", "--rig", str(rig_file), "--out", str(out)]) == 0
+    assert main(["sim", "render", "--object", "thin", "--rig", str(rig_file), "--patterns", "white",
+                 "--out", str(out)]) == 0
+    assert (out / "000.png").is_file() and (out / "preview.png").is_file()
     gt = np.load(out / "ground_truth.npz")
     assert gt["valid"].shape == (256, 320)
     z = gt["xyz"][gt["valid"]][:, 2]

@@ -26,6 +26,7 @@ __all__ = [
     "quat_to_R",
     "R_to_quat",
     "axis_angle_to_R",
+    "R_up_to_z",
     "nearest_rotation",
     "rotation_angle",
     "look_at",
@@ -120,6 +121,20 @@ def axis_angle_to_R(axis: np.ndarray, angle: float) -> np.ndarray:
     if n == 0:
         raise InputError("axis_angle_to_R: the axis is the zero vector; give a direction such as (0, 0, 1)")
     return rotvec_to_R(axis / n * angle)
+
+
+def R_up_to_z(up) -> np.ndarray:
+    """(3, 3) rotation that turns direction ``up`` (3,) (any non-zero length) onto +z: the shortest one,
+    about ``up x z``; ``up`` = -z gives the half turn about x. The one rule that stands a mesh upright
+    (``rangekit scan --up``, the simulator's Stanford bunny: ``up`` = +y gives y -> z, z -> -y)."""
+    u = np.asarray(up, dtype=np.float64)
+    if u.shape != (3,) or not np.all(np.isfinite(u)) or np.linalg.norm(u) == 0:
+        raise InputError(f"up: expected a finite non-zero direction (x, y, z), found {up!r}")
+    u = u / np.linalg.norm(u)
+    axis = np.cross(u, [0.0, 0.0, 1.0])
+    if np.linalg.norm(axis) <= 1e-12:
+        return np.eye(3) if u[2] > 0 else np.diag([1.0, -1.0, -1.0])
+    return axis_angle_to_R(axis, float(np.arctan2(np.linalg.norm(axis), u[2])))
 
 
 def nearest_rotation(M: np.ndarray) -> np.ndarray:

@@ -18,10 +18,11 @@ import trimesh
 from rangekit.boards import Board
 from rangekit.errors import FileFormatError, InputError, SceneError
 from rangekit.sim.scene_object import PlanarTexture, SceneObject
+from rangekit.sim.zoo import bowl, bunny, steps, thin
 
 __all__ = ["plane", "sphere", "box", "cylinder", "torus", "board_object",
-           "calibration_board", "board_corners", "lumpy", "turntable_disc", "load_mesh", "BUILTIN_OBJECTS",
-           "make_object"]
+           "calibration_board", "board_corners", "lumpy", "shiny", "dark", "turntable_disc", "load_mesh",
+           "BUILTIN_OBJECTS", "OBJECT_NOTES", "make_object"]
 
 
 # --- builders ---------------------------------------------------------------------------------------
@@ -238,6 +239,17 @@ def lumpy(radius: float = 0.06, *, subdivisions: int = 5, seed: int = 0, albedo=
     return SceneObject(name, verts, np.asarray(m.faces), albedo, specular, shininess)
 
 
+def shiny(*, specular: float = 1.5, shininess: float = 60.0, albedo=0.5, name: str = "shiny", **lumpy_options) -> SceneObject:
+    """The zoo's shiny object: :func:`lumpy`'s shape with a strong Blinn-Phong lobe (``specular`` k_s, the
+    peak of the lobe, is 3x the diffuse albedo), so the default camera saturates in its highlights."""
+    return lumpy(specular=specular, shininess=shininess, albedo=albedo, name=name, **lumpy_options)
+
+
+def dark(*, albedo=0.05, name: str = "dark", **lumpy_options) -> SceneObject:
+    """The zoo's dark object: :func:`lumpy`'s shape with albedo 0.05 (the blob's is 0.8): 16x less signal."""
+    return lumpy(albedo=albedo, name=name, **lumpy_options)
+
+
 def turntable_disc(radius: float = 0.15, thickness: float = 0.02, *, albedo=0.3,
                    sections: int = 128) -> SceneObject:
     """Turntable platter: a cylinder, axis z, whose top face is the table top z = 0. Name "turntable"."""
@@ -281,6 +293,24 @@ def load_mesh(path, *, albedo=0.8, scale: float = 1.0, name: str | None = None) 
 BUILTIN_OBJECTS: dict[str, Callable[..., SceneObject]] = {
     "plane": plane, "sphere": sphere, "box": box, "cylinder": cylinder, "torus": torus,
     "board": _builtin_board, "lumpy": lumpy,
+    "bunny": bunny, "thin": thin, "bowl": bowl, "shiny": shiny, "dark": dark, "steps": steps,
+}
+
+#: One line per built-in object: what it is for, or what makes it hard to scan (``rangekit sim objects``).
+OBJECT_NOTES: dict[str, str] = {
+    "plane": "flat 400 x 300 mm rectangle: flatness, plane fits",
+    "sphere": "50 mm radius ball: symmetric, so registration alone cannot fix the turntable angle",
+    "box": "flat faces and sharp edges; the symmetric views are ambiguous",
+    "cylinder": "rotationally symmetric: registration needs the turntable prior",
+    "torus": "hole through the middle, self-occlusion",
+    "board": "calibration board (10 x 7 checkerboard), flat and textured",
+    "lumpy": "the default blob: smooth, bumpy everywhere, well conditioned for registration (the easy case)",
+    "bunny": "Stanford bunny upright: ears (thin, occluding), concave neck, open underneath",
+    "thin": "1 and 2 mm fins, 2 mm pins, a 2 x 22 mm slot: mixed pixels, parts thinner than the fusion voxel",
+    "bowl": "concave: the inside sees its own walls (interreflection), deep occlusion, rotationally symmetric",
+    "shiny": "lumpy with a strong specular lobe: highlights saturate the camera",
+    "dark": "lumpy at albedo 0.05: 16x less signal than the blob, noise-limited decoding",
+    "steps": "step gauge 5/10/15/20 mm: sharp edges and depth jumps (mixed pixels), known heights",
 }
 
 

@@ -300,7 +300,8 @@ def test_load_mesh_bad_files(tmp_path):
 
 
 def test_make_object_builtins_and_unknown():
-    assert set(BUILTIN_OBJECTS) == {"plane", "sphere", "box", "cylinder", "torus", "board", "lumpy"}
+    assert set(BUILTIN_OBJECTS) == {"plane", "sphere", "box", "cylinder", "torus", "board", "lumpy",
+                                    "bunny", "thin", "bowl", "shiny", "dark", "steps"}
     s = make_object("sphere", radius=0.03, subdivisions=2)
     assert np.allclose(np.linalg.norm(s.vertices, axis=1), 0.03)
     assert make_object("board").name == "board"

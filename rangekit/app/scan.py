@@ -15,7 +15,7 @@ import numpy as np
 from rangekit.app.process import FUSION_METHODS, Evaluator, process_session
 from rangekit.coded.patterns import PatternSpec, make_pattern_spec
 from rangekit.errors import ConfigError, RangekitError, UsageError
-from rangekit.geometry import axis_angle_to_R
+from rangekit.geometry import R_up_to_z
 from rangekit.formats.session import CaptureSettings, Session, SimulatorSettings
 from rangekit.formats.summary import ProcessResult
 from rangekit.laser.sequence import LaserSequence
@@ -207,10 +207,7 @@ def _object_bytes(obj: str, up) -> tuple[str, bytes]:
     from rangekit.formats.ply import mesh_ply_bytes
     from rangekit.surface.mesh import TriangleMesh
 
-    u = u / np.linalg.norm(u)
-    axis = np.cross(u, [0.0, 0.0, 1.0])
-    R = (axis_angle_to_R(axis / np.linalg.norm(axis), float(np.arccos(np.clip(u[2], -1.0, 1.0))))
-         if np.linalg.norm(axis) > 1e-12 else np.diag([1.0, -1.0, -1.0]))
+    R = R_up_to_z(u)
     mesh = load_mesh_file(path)
     return f"{path.stem}_upright.ply", mesh_ply_bytes(TriangleMesh(mesh.vertices @ R.T, mesh.triangles,
                                                                    mesh.vertex_colours))

@@ -1,4 +1,5 @@
-"""``rangekit sim render``: simulated captures with exact ground truth."""
+"""``rangekit sim render``: simulated captures with exact ground truth; ``rangekit sim objects``: the built-in
+objects."""
 
 from __future__ import annotations
 
@@ -59,6 +60,15 @@ def cmd_sim_render(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_sim_objects(args: argparse.Namespace) -> int:
+    """rangekit sim objects: each built-in object with its size, triangle count and what makes it hard."""
+    from rangekit.app.sim_objects import format_objects, list_objects
+
+    for line in format_objects(list_objects()):
+        say(line)
+    return 0
+
+
 def add_parsers(sub) -> None:
     from rangekit.coded.patterns import PATTERN_METHODS
 
@@ -75,8 +85,9 @@ def add_parsers(sub) -> None:
                              "and one image per laser), continuous-wave or pulsed time of flight, or the "
                              "active-stereo pair")
     render.add_argument("--object", default=None,
-                        help="built-in object (plane, sphere, box, cylinder, torus, board, lumpy) or a mesh "
-                             "file trimesh can read (metres); default: lumpy")
+                        help="built-in object (plane, sphere, box, cylinder, torus, board, lumpy, and the zoo: "
+                             "bunny, thin, bowl, shiny, dark, steps; 'rangekit sim objects' lists them) or a "
+                             "mesh file trimesh can read (metres); default: lumpy")
     render.add_argument("--patterns", default=None, choices=PATTERN_METHODS,
                         help="pattern set to project; default: graycode (44 frames on the default rig)")
     render.add_argument("--out", required=True, help="output folder (created if missing)")
@@ -106,3 +117,8 @@ def add_parsers(sub) -> None:
                     help="sensor size WIDTHxHEIGHT (default: tof 320x240, stereo 640x400)")
     sz.add_argument("--no-dots", action="store_true", help="stereo: switch the dot projector off")
     render.set_defaults(func=cmd_sim_render)
+    objects = sim_sub.add_parser(
+        "objects", help="list the built-in objects: size, triangles, what makes each hard to scan",
+        description="The simulator's built-in objects (for --object of 'rangekit sim render' and 'rangekit scan'), "
+                    "each with its bounding box in mm, its triangle count and what makes it hard to scan.")
+    objects.set_defaults(func=cmd_sim_objects)

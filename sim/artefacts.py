@@ -20,13 +20,14 @@ lies inside the volume. The artefacts float (no stand, no turntable in the scene
 not modelled (it is thin and lies outside the spheres' evaluation caps).
 
 **Spheres are icospheres** of 6 subdivisions with every vertex exactly on the sphere: the facets lie
-inside it by at most ``0.21 R / 4**6`` (1.2 um on the 45 mm sphere, 0.8 um on the 30 mm balls), which
-bounds what the tessellation adds to PF and PS.
+inside it by at most 7.1e-5 R (1.6 um on the 45 mm sphere, 1.1 um on the 30 mm balls), which bounds what
+the tessellation adds to PF and PS (``tests/test_vdi2634.py`` measures it).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import lru_cache
 
 import numpy as np
 
@@ -91,9 +92,14 @@ class Artefact:
         return Scene(self.objects)
 
 
-def _sphere(name: str, d: float, c: np.ndarray) -> SceneObject:
+@lru_cache(maxsize=8)
+def _sphere_at_origin(name: str, d: float) -> SceneObject:
     s = sphere(d / 2, subdivisions=SPHERE_SUBDIVISIONS, name=name)
-    return SceneObject(s.name, s.vertices, s.triangles, s.vertex_albedo, T_world_obj=make_T(t=c), on_turntable=False)
+    return SceneObject(s.name, s.vertices, s.triangles, s.vertex_albedo, on_turntable=False)
+
+
+def _sphere(name: str, d: float, c: np.ndarray) -> SceneObject:
+    return _sphere_at_origin(name, float(d)).with_pose(make_T(t=c))
 
 
 def _sphere_positions(r: float) -> list[tuple[str, np.ndarray]]:

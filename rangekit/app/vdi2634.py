@@ -77,12 +77,13 @@ def _measure(artefact, xyz: np.ndarray, masks: list[np.ndarray]) -> dict:
     pts = [p[np.isfinite(p).all(axis=1)] for p in pts]
     if artefact.kind == "plane":
         f = flatness(pts[0], outlier_fraction=OUTLIER_FRACTION, what=artefact.label)
-        return {"F_mm": f.F * 1e3, "points": f.n_points, "excluded": f.n_excluded}
+        return {"F_mm": f.F * 1e3, "rms_mm": f.fit.rms * 1e3, "points": f.n_points, "excluded": f.n_excluded}
     res = [probing(p, artefact.diameter, outlier_fraction=OUTLIER_FRACTION, what=f"{artefact.label} sphere {i + 1}")
            for i, p in enumerate(pts)]
     if artefact.kind == "sphere":
         r = res[0]
-        return {"PF_mm": r.PF * 1e3, "PS_mm": r.PS * 1e3, "points": r.n_points, "excluded": r.n_excluded}
+        return {"PF_mm": r.PF * 1e3, "PS_mm": r.PS * 1e3, "rms_mm": r.fit.rms * 1e3, "points": r.n_points,
+                "excluded": r.n_excluded}
     sd = sphere_spacing(res[0].fit.centre, res[1].fit.centre, artefact.length)
     return {"SD_mm": sd * 1e3, "points": [r.n_points for r in res], "excluded": [r.n_excluded for r in res]}
 

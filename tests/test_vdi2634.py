@@ -5,6 +5,7 @@ slow: the guideline's positions with a rig from ``rangekit calibrate``)."""
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -117,6 +118,14 @@ def test_scan_artefact_cli_one_ball_bar_with_the_true_rig(tmp_path):
 def test_scan_artefact_usage_errors(tmp_path, capsys, argv, message):
     assert main(["scan", "--artefact", "vdi2634", "--out", str(tmp_path / "o"), *argv]) == 2
     assert message in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()
+
+
+def test_scan_artefact_refuses_a_rig_without_projector(tmp_path, capsys):
+    rig_file = tmp_path / "no_projector.json"
+    save_rig(replace(default_rig(), projector=None), rig_file)
+    assert main(["scan", "--artefact", "vdi2634", "--out", str(tmp_path / "o"), "--rig", str(rig_file)]) == 1
+    assert "found no projector" in capsys.readouterr().err
     assert not (tmp_path / "o").exists()
 
 

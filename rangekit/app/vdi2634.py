@@ -23,6 +23,7 @@ from typing import Callable
 
 import numpy as np
 
+from rangekit.errors import ConfigError
 from rangekit.io import atomic_write_json
 from rangekit.progress import call_progress
 from rangekit.rig import Rig, load_rig
@@ -95,6 +96,16 @@ def _worst(values: list[float], signed: bool) -> float | None:
     return float(max(values, key=abs)) if signed else float(max(values))
 
 
+def _checked_rig(rig_file: str, true_rig: Rig) -> Rig:
+    """The rig file, refused unless it has a projector and the simulated camera's size."""
+    rig = load_rig(rig_file)
+    if rig.projector is None or rig.camera.size != true_rig.camera.size:
+        found = "no projector" if rig.projector is None else f"a {rig.camera.width}x{rig.camera.height} camera"
+        raise ConfigError(f"{rig_file}: expected the simulated rig calibrated by 'rangekit calibrate' (a projector and "
+                          f"a {true_rig.camera.width}x{true_rig.camera.height} camera), found {found}")
+    return rig
+
+
 def run_vdi2634(out: str | Path, *, rig_file: str | None = None, n_spheres: int = 10, n_bars: int = 7,
                 n_planes: int = 6, seed: int = 0, progress: Callable | None = None) -> Vdi2634Result:
     """Scan the artefacts on the simulator and write ``out/vdi2634.json`` (module doc).
@@ -109,8 +120,10 @@ def run_vdi2634(out: str | Path, *, rig_file: str | None = None, n_spheres: int 
     from rangekit.sim.artefacts import MEASURING_VOLUME, L0, artefact_sizes, vdi2634_artefacts
 
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
     true_rig = default_rig()
+    if rig_file is not None:
+        cal_rig = _checked_rig(rig_file, true_rig)     # before the folder is made
+    out.mkdir(parents=True, exist_ok=True)
     if rig_file is None:
         from rangekit.app.calibration import calibrate
         from rangekit.boards import Board
@@ -119,7 +132,7 @@ def run_vdi2634(out: str | Path, *, rig_file: str | None = None, n_spheres: int 
         call_progress(progress, f"calibrating the simulated rig (rangekit calibrate) into {rig_file}")
         calibrate(rig_file, rig="sim", board=Board(kind="checkerboard", cols=10, rows=7, square=0.02), seed=seed,
                   force=True, progress=progress)
-    cal_rig: Rig = load_rig(rig_file)
+        cal_rig = _checked_rig(rig_file, true_rig)
     rigs = {"calibrated": cal_rig, "true": true_rig}
     same = json.dumps(cal_rig.to_dict(), sort_keys=True) == json.dumps(true_rig.to_dict(), sort_keys=True)
     spec = make_pattern_spec("hybrid", (true_rig.projector.width, true_rig.projector.height))

@@ -20,7 +20,7 @@ FOLDERS = {"rangekit": "rangekit", "sim": "rangekit.sim", "drivers": "rangekit.d
 #: Core modules (errors, geometry, camera, io, ...) are the top-level modules of rangekit/.
 LAYERS = {
     "core": 0,
-    "coded": 1, "stereo": 1, "photometric": 1, "tof": 1, "surface": 1, "registration": 1, "laser": 1,
+    "coded": 1, "stereo": 1, "photometric": 1, "tof": 1, "surface": 1, "registration": 1, "laser": 1, "metrology": 1,
     "formats": 2,
     "sim": 3, "drivers": 3, "calib": 3,
     "app": 4,

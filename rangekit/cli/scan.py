@@ -17,6 +17,10 @@ def cmd_scan(args: argparse.Namespace) -> int:
     from rangekit.formats.session_lock import session_lock as session_lock_of
 
     t0 = time.perf_counter()
+    if args.artefact:
+        return _scan_artefacts(args, t0)
+    if args.positions is not None:
+        raise UsageError("--positions: artefact positions of --artefact vdi2634; give --artefact vdi2634 or leave it out")
     check_output(args.out or args.resume, option="--out" if args.out else "--resume", folder=True,
                  session=bool(args.resume))
     if args.resume and Path(args.resume, "session.json").is_file():
@@ -25,6 +29,42 @@ def cmd_scan(args: argparse.Namespace) -> int:
         with session_lock_of(args.resume):
             return _scan(args, t0)
     return _scan(args, t0)
+
+
+#: Options of a turntable scan that --artefact (one view per artefact position, coded light) does not take.
+_NOT_WITH_ARTEFACT = {"resume": "--resume", "method": "--method", "steps": "--steps", "up": "--up", "object": "--object",
+                      "views": "--views", "patterns": "--patterns", "no_process": "--no-process"}
+
+
+def _scan_artefacts(args: argparse.Namespace, t0: float) -> int:
+    """rangekit scan --artefact vdi2634 --out DIR [--rig RIG.json] [--positions S B P] [--seed N]"""
+    from rangekit.app.vdi2634 import figure_lines, run_vdi2634
+    from rangekit.sim.artefacts import GUIDELINE_POSITIONS
+
+    given = [opt for key, opt in _NOT_WITH_ARTEFACT.items() if getattr(args, key, None) not in (None, False)]
+    if given:
+        raise UsageError(f"{', '.join(given)}: not used by --artefact {args.artefact} (one single-view coded-light "
+                         "capture per artefact position on the simulator); leave them out")
+    if not args.out:
+        raise UsageError(f"--artefact {args.artefact}: expected --out DIR, found none")
+    check_output(args.out, option="--out", folder=True)
+    counts = tuple(args.positions) if args.positions is not None else GUIDELINE_POSITIONS
+    for n, most, what in zip(counts, GUIDELINE_POSITIONS, ("sphere", "ball bar", "plane")):
+        if not 0 <= n <= most:
+            raise UsageError(f"--positions: {what} positions must be in 0..{most}, found {n}")
+    if not any(counts):
+        raise UsageError(f"--positions: expected at least one artefact position, found {' '.join(map(str, counts))}")
+    rig = None if args.rig in (None, "sim") else args.rig
+    if rig is not None and not Path(rig).is_file():
+        raise UsageError(f"--rig {rig}: expected a rig file from 'rangekit calibrate', found "
+                         f"{'a folder' if Path(rig).is_dir() else 'no such file'}")
+    res = run_vdi2634(args.out, rig_file=rig, n_spheres=counts[0], n_bars=counts[1], n_planes=counts[2],
+                      seed=0 if args.seed is None else args.seed, progress=console())
+    say("")
+    for line in figure_lines(res):
+        say(line)
+    say(f"wrote {args.out}/vdi2634.json in {time.perf_counter() - t0:.1f} s")
+    return 0
 
 
 def _scan(args: argparse.Namespace, t0: float) -> int:
@@ -107,7 +147,7 @@ def add_parsers(sub) -> None:
                           description="Acquire a crash-safe scan session (every turntable view, every pattern; "
                                       "--resume continues an interrupted one without redoing finished views), then "
                                       "decode, register and fuse it into DIR/mesh.ply.")
-    where = scan.add_mutually_exclusive_group(required=True)
+    where = scan.add_mutually_exclusive_group(required=True)  # --artefact takes --out
     where.add_argument("--out", help="new session folder")
     where.add_argument("--resume", metavar="DIR", help="continue the session in DIR")
     # No argparse defaults: a resumed scan takes the session's settings, and an option given with --resume
@@ -127,6 +167,12 @@ def add_parsers(sub) -> None:
     scan.add_argument("--patterns", choices=PATTERN_METHODS, help="pattern set (default hybrid: Gray code + phase "
                                                                   "shift)")
     scan.add_argument("--seed", type=seed, help="simulator noise seed (default 0)")
+    scan.add_argument("--artefact", choices=("vdi2634",),
+                      help="simulator: scan the VDI/VDE 2634-2 artefacts (sphere, ball bar, plane; one view per "
+                           "position) with the rig calibrated by 'rangekit calibrate' (--rig RIG.json, else calibrated "
+                           "first, ~4 min) and the true rig, print PF, PS, SD, F and write DIR/vdi2634.json")
+    scan.add_argument("--positions", type=int, nargs=3, metavar=("SPHERES", "BARS", "PLANES"),
+                      help="with --artefact: positions of each artefact (default the guideline's 10 7 6)")
     scan.add_argument("--no-process", action="store_true", help="acquire only (process later with 'rangekit process')")
     _processing_options(scan)
     scan.set_defaults(func=cmd_scan)

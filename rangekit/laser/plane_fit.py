@@ -21,7 +21,7 @@ import numpy as np
 
 from rangekit.errors import CalibrationError, InputError
 
-__all__ = ["PlaneFit", "fit_plane", "RESIDUAL_FLOOR"]
+__all__ = ["PlaneFit", "fit_plane", "tls_plane", "RESIDUAL_FLOOR"]
 
 #: Smallest inlier threshold (metres), for noise-free data.
 RESIDUAL_FLOOR = 1e-9
@@ -64,7 +64,7 @@ class PlaneFit:
                 f"{np.round(self.spread * 1e3, 3).tolist()} mm)")
 
 
-def _svd_plane(P: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def tls_plane(P: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Total least squares plane of (N, 3) points: (plane (4,), spread (3,), centroid (3,))."""
     c = P.mean(axis=0)
     _, s, Vt = np.linalg.svd(P - c, full_matrices=False)
@@ -145,7 +145,7 @@ def fit_plane(points, *, k: float = 3.0, max_iterations: int = 10, seed: int = 0
         groups = groups[finite]
     if len(P) < 3:
         raise CalibrationError(f"{what}: a plane needs at least 3 points, found {len(P)}")
-    plane, spread, _ = _svd_plane(P)
+    plane, spread, _ = tls_plane(P)
     if _degenerate(spread):
         raise CalibrationError(_collinear_message(what, spread, len(P)))
     start = _lmeds(P, np.random.default_rng(seed), groups)
@@ -161,8 +161,8 @@ def fit_plane(points, *, k: float = 3.0, max_iterations: int = 10, seed: int = 0
         if it > 0 and np.array_equal(new, inl):
             break
         inl = new
-        plane, _, _ = _svd_plane(P[inl])
-    plane, spread, centroid = _svd_plane(P[inl])
+        plane, _, _ = tls_plane(P[inl])
+    plane, spread, centroid = tls_plane(P[inl])
     if _degenerate(spread):
         raise CalibrationError(_collinear_message(what, spread, int(inl.sum())))
     r = P[inl] @ plane[:3] + plane[3]

@@ -119,9 +119,9 @@ class FusedMeshes:
 
 
 def split_observed(surface: TriangleMesh, points: np.ndarray, *, spacing: np.ndarray | None = None,
-                   factor: float = OBSERVED_FACTOR) -> FusedMeshes:
-    """The observed part of an open fused ``surface`` and the surface closed and flagged (see
-    :class:`FusedMeshes`); ``points`` (N, 3) the fused input points, ``spacing`` and ``factor`` as in
+                   factor: float = OBSERVED_FACTOR, closing: TriangleMesh | None = None) -> FusedMeshes:
+    """The observed part of a fused ``surface`` and ``closing`` (default ``surface``) closed and flagged
+    (see :class:`FusedMeshes`); ``points`` (N, 3) the fused input points, ``spacing`` and ``factor`` as in
     :func:`observed_vertices`.
 
     Raises MeshError when no observed triangle is left (the surface is nowhere near the points) or the
@@ -138,6 +138,6 @@ def split_observed(surface: TriangleMesh, points: np.ndarray, *, spacing: np.nda
     if len(observed.triangles) == 0:
         raise MeshError(f"no triangle of the fused surface ({len(surface.triangles)} triangles) lies within "
                         f"{factor:g} point spacings of the {len(P)} input points")
-    closed = make_watertight(surface)
+    closed = make_watertight(surface if closing is None else closing)
     flags = observed_vertices(closed.vertices, P, spacing=s, factor=factor)
     return FusedMeshes(observed, TriangleMesh(closed.vertices, closed.triangles, closed.vertex_colours, flags))

@@ -28,7 +28,8 @@ def test_laser_scan_cloud_matches_the_true_surface(laser_scan):
     # The merged cloud: every point's distance to the true surface.
     assert acc["cloud_rms"] < 0.1e-3 and acc["cloud_p95"] < 0.15e-3, acc
     assert acc["n_cloud"] > 24 * 2 * 300
-    assert summary["mesh"]["watertight"]
+    assert summary["mesh_watertight"]["watertight"] and summary["mesh"]["file"] == "mesh.ply"
+    assert (laser_scan / "mesh_watertight.ply").is_file()
     lasers = summary["laser"]["lasers"]
     assert [d["name"] for d in lasers] == ["laser0", "laser1"]
     assert all(d["points"] > 24 * 300 and d["steps_without_line"] == 0 for d in lasers)
@@ -119,7 +120,7 @@ def test_full_laser_scan_with_calibrated_planes(obj, tmp_path):
     assert main(["scan", "--method", "laser", "--out", str(out), "--no-report", *args]) == 0
     summary = json.loads((out / "summary.json").read_text())
     acc = summary["accuracy"]
-    assert acc["cloud_rms"] <= 0.1e-3 and summary["mesh"]["watertight"], acc
+    assert acc["cloud_rms"] <= 0.1e-3 and summary["mesh_watertight"]["watertight"], acc
     assert len(summary["views"]) == 400 and acc["n_cloud"] > 250_000
     # The lasers were calibrated, not copied from the simulator's truth.
     from rangekit.rig import load_rig

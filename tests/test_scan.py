@@ -1,4 +1,4 @@
-"""The main job end to end: ``rangekit scan`` to a watertight mesh, its summary and report, interruption
+"""The main job end to end: ``rangekit scan`` to an observed and a watertight mesh, its summary and report, interruption
 and resume, and the errors that must come before any work."""
 
 import json
@@ -26,19 +26,24 @@ def scanned(tmp_path_factory):
     # Kept apart: later tests reprocess this session with other settings.
     (out.parent / "poisson_mesh.ply").write_bytes((out / "mesh.ply").read_bytes())
     (out.parent / "poisson_summary.json").write_bytes((out / "summary.json").read_bytes())
+    (out.parent / "poisson_mesh_watertight.ply").write_bytes((out / "mesh_watertight.ply").read_bytes())
     return out
 
 
 @pytest.mark.slow
 def test_scan_gives_a_watertight_mesh_close_to_the_true_surface(scanned):
-    mesh = load_mesh_file(scanned.parent / "poisson_mesh.ply")
+    mesh = load_mesh_file(scanned.parent / "poisson_mesh.ply")   # the observed surface
+    closed = load_mesh_file(scanned.parent / "poisson_mesh_watertight.ply")
     summary = json.loads((scanned.parent / "poisson_summary.json").read_text())
     acc = summary["accuracy"]
-    print(f"\n6-view scan: watertight {mesh.is_watertight}, RMS {acc['rms'] * 1e3:.3f} mm = "
+    print(f"\n6-view scan: observed mesh RMS {acc['rms'] * 1e3:.4f} mm = "
           f"{acc['rms'] / acc['diagonal']:.3%} of the diagonal, p95 {acc['p95'] * 1e3:.3f} mm, completeness "
-          f"{acc['completeness']:.1%}; time {summary['seconds']}")
-    assert mesh.is_watertight and summary["mesh"]["watertight"]
+          f"{acc['completeness']:.1%}; closed mesh RMS {acc['watertight']['rms'] * 1e3:.3f} mm; time {summary['seconds']}")
+    assert closed.is_watertight and summary["mesh_watertight"]["watertight"] and not summary["mesh"]["watertight"]
+    assert closed.observed is not None and 0 < (~closed.observed).sum() == summary["mesh_watertight"]["unobserved_vertices"]
     assert acc["rms"] <= 0.001 * acc["diagonal"] and acc["completeness"] >= 0.95
+    # The observed mesh invents nothing: no surface where no view can see, and closer than the closed mesh.
+    assert acc["unobserved_area"] < 0.01 and acc["rms"] < acc["watertight"]["rms"]
     # An independent check of the same claim: every mesh vertex against the true surface.
     obj = default_scene("lumpy").objects[0]
     d = distance_to_surface(mesh.vertices, TriangleMesh(obj.world_vertices(), obj.triangles))
@@ -60,8 +65,8 @@ def test_report_opens_in_headless_chromium_with_every_image_loaded(scanned, tmp_
                     "when run as root)")
     page = open_page(scanned / "report.html", screenshot=tmp_path / "report.png")
     images = page["images"]
-    # 5 heat maps + colour bar + 5 mesh sides + 2 registered clouds + view graph + 5 per view.
-    assert len(images) == 5 + 1 + 5 + 2 + 1 + 5 * 6
+    # 5 heat maps + colour bar + 5 mesh sides + 5 closed mesh sides + 2 registered clouds + view graph + 5 per view.
+    assert len(images) == 5 + 1 + 5 + 5 + 2 + 1 + 5 * 6
     broken = [im for im in images if not (im["complete"] and im["naturalWidth"] > 0)]
     assert not broken, broken
     assert page["screenshot"] and Path(page["screenshot"]).stat().st_size > 10_000
@@ -74,7 +79,7 @@ def test_reprocess_with_tsdf_fusion(scanned, capsys):
     out = capsys.readouterr().out
     assert "mesh (tsdf)" in out and "\r" not in out and "\x1b" not in out
     summary = json.loads((scanned / "summary.json").read_text())
-    assert summary["mesh"]["fusion"] == "tsdf" and summary["mesh"]["watertight"]
+    assert summary["mesh"]["fusion"] == "tsdf" and summary["mesh_watertight"]["watertight"]
     assert summary["accuracy"]["rms"] <= 0.002 * summary["accuracy"]["diagonal"]
     # The views' clouds came from the cache: none was decoded and written again.
     assert caches and {p: p.stat().st_mtime_ns for p in caches} == caches
@@ -131,6 +136,7 @@ def test_interrupt_during_acquisition_and_processing_then_resume_gives_the_same_
                         capture_output=True, text=True, cwd=tmp_path)
     assert rc.returncode == 0, rc.stderr
     assert (out / "mesh.ply").read_bytes() == (scanned.parent / "poisson_mesh.ply").read_bytes()
+    assert (out / "mesh_watertight.ply").read_bytes() == (scanned.parent / "poisson_mesh_watertight.ply").read_bytes()
     # Non-interactive output: plain lines, no carriage returns or escape codes.
     for text in (log, log2, rc.stdout):
         assert "\r" not in text and "\x1b" not in text

@@ -43,7 +43,7 @@ from rangekit.progress import StageTimer, call_progress
 from rangekit.rig import turntable_prior
 from rangekit.surface.cloud import PointCloud
 
-__all__ = ["LaserProfiles", "laser_profiles", "oriented_profiles", "process_laser", "SATURATED_SHARE"]
+__all__ = ["LaserProfiles", "laser_profiles", "oriented_profiles", "profile_spacing", "process_laser", "SATURATED_SHARE"]
 
 #: Steps processed at once (threads: PNG decoding and the peak finder release the GIL).
 WORKERS = 2
@@ -174,12 +174,36 @@ def oriented_profiles(profiles: LaserProfiles, *, k: int = 20) -> PointCloud:
     return PointCloud(P, colours=profiles.cloud.colours, normals=normals)
 
 
+def profile_spacing(profiles: LaserProfiles, T_world_table: np.ndarray | None) -> np.ndarray:
+    """(N,) metres: each point's sampling distance for :func:`rangekit.surface.observed.observed_vertices`: the
+    larger of its mean distance to its 6 nearest neighbours (along its own line, mostly) and the arc a
+    turntable step moves it (its distance from the turntable axis times the median step angle), the gap
+    between two profiles that the nearest neighbours do not see. ``T_world_table``: the rig's turntable
+    (its z axis is the rotation axis, in the session world too: a turn about the axis keeps it); None:
+    the nearest-neighbour spacing alone."""
+    from rangekit.surface.observed import point_spacing
+
+    P = profiles.cloud.points
+    s = point_spacing(P)
+    T = profiles.T_world_view
+    if len(T) < 2 or T_world_table is None:
+        return s
+    # Step angle: the rotation between consecutive steps' poses; axis: their common rotation axis.
+    R = np.einsum("kji,kjl->kil", T[:-1, :3, :3], T[1:, :3, :3])
+    angles = np.arccos(np.clip((np.trace(R, axis1=1, axis2=2) - 1) / 2, -1.0, 1.0))
+    step = float(np.median(angles))
+    if step <= 0:
+        return s
+    local = apply_T(invert_T(T_world_table), P)
+    return np.maximum(s, np.hypot(local[:, 0], local[:, 1]) * step)
+
+
 def process_laser(out: Path, session: Session, *, fusion: str, table_margin: float, evaluate, report: bool,
                   progress: Callable | None, method: str = "gaussian") -> ProcessResult:
     """The laser branch of :func:`rangekit.app.process.process_session` (same outputs, same set rule:
     ``summary.json`` last). ``evaluate(mesh, angles, cloud=points)`` also measures the merged cloud."""
-    from rangekit.formats.meshes import save_mesh
-    from rangekit.surface.fusion import poisson_mesh
+    from rangekit.app.fused_outputs import evaluate_fused, save_fused
+    from rangekit.surface.fusion import poisson_meshes
 
     if fusion != "poisson":
         raise ConfigError(f"--fusion {fusion}: a laser scan has profiles, not depth maps; it fuses with poisson")
@@ -196,19 +220,16 @@ def process_laser(out: Path, session: Session, *, fusion: str, table_margin: flo
         call_progress(progress, f"fusing {len(merged):,} points (poisson)")
         step = max(1, len(merged) // 400_000)
         # One thread: Open3D's multi-threaded Poisson is not deterministic (see process.py).
-        mesh = poisson_mesh(PointCloud(merged.points[::step], merged.colours[::step], merged.normals[::step]),
-                            depth=9, n_threads=1)
-        save_mesh(out / "mesh.ply", mesh)
-        mesh_info = {"vertices": len(mesh.vertices), "triangles": len(mesh.triangles),
-                     "watertight": bool(mesh.is_watertight), "area_m2": float(mesh.area),
-                     "volume_m3": float(abs(mesh.volume)) if mesh.is_watertight else None, "fusion": fusion}
+        fused = poisson_meshes(PointCloud(merged.points[::step], merged.colours[::step], merged.normals[::step]),
+                               depth=9, n_threads=1, spacing=profile_spacing(profiles, session.rig.T_world_table)[::step])
+        mesh_info, watertight_info = save_fused(out, fused, fusion)
+        mesh = fused.observed
     angles = [v.angle for v in session.done_views]
     accuracy, truth = None, None
     if evaluate is not None:
         with timer.stage("evaluate"):
-            call_progress(progress, "measuring the cloud and the mesh against the true surface")
-            evaluation = evaluate(mesh, angles, cloud=merged.points)
-            accuracy, truth = evaluation.accuracy.to_dict(), evaluation.truth
+            call_progress(progress, "measuring the cloud and the meshes against the true surface")
+            accuracy, truth, _ = evaluate_fused(evaluate, fused, angles, cloud=merged.points)
     per_step = profiles.n_points.sum(axis=1)
     laser_info = {"lasers": [{"name": laser.name, "points": int(profiles.n_points[:, i].sum()),
                               "steps_without_line": int((profiles.n_points[:, i] == 0).sum()),
@@ -216,13 +237,13 @@ def process_laser(out: Path, session: Session, *, fusion: str, table_margin: flo
                               "rejected_rows": profiles.rejected[i]} for i, laser in enumerate(session.rig.lasers)],
                   "peak_method": method}
     result = ProcessResult(out, profiles.names, profiles.T_world_view, [int(n) for n in per_step], [], float("nan"),
-                           mesh_info, timer.seconds, accuracy, laser=laser_info)
+                           mesh_info, timer.seconds, accuracy, laser=laser_info, watertight_mesh=watertight_info)
     if report:
         with timer.stage("report"):
             from rangekit.app.laser_report import write_laser_report
 
             call_progress(progress, "writing report.html")
             write_laser_report(out, result, profiles=profiles, merged=merged, mesh=mesh, session=session, truth=truth,
-                               progress=progress)
+                               progress=progress, watertight=fused.watertight)
     atomic_write_json(out / "summary.json", result.to_dict())   # last: the set is complete
     return result

@@ -72,14 +72,17 @@ def _frame_with_peaks(folder: Path, session, k: int, full_scale: float | None) -
 
 
 def write_laser_report(folder: str | Path, result, *, profiles, merged, mesh, session, truth=None,
-                       progress: Callable | None = None, size: tuple[int, int] = (230, 230), n_frames: int = 4) -> Path:
+                       progress: Callable | None = None, size: tuple[int, int] = (230, 230), n_frames: int = 4,
+                       watertight=None) -> Path:
     """Write ``folder/report.html`` of a laser scan (see the module docstring); returns its path.
     ``profiles``: :class:`rangekit.app.laser_process.LaserProfiles`; ``merged`` and ``mesh`` in the session
-    world; ``truth`` the true surface there (simulator) for the heat map; ``n_frames`` steps shown."""
+    world (``mesh`` the observed surface, ``watertight`` the closed one with its ``observed`` flag); ``truth``
+    the true surface there (simulator) for the heat map; ``n_frames`` steps shown."""
     from rangekit.app.snapshot import fit_camera, render_cloud
 
     out = Path(folder)
-    sections = head_sections(out, result, mesh=mesh, session=session, truth=truth, progress=progress, size=size)
+    sections = head_sections(out, result, mesh=mesh, session=session, truth=truth, progress=progress, size=size,
+                             watertight=watertight)
     call_progress(progress, "report: laser profiles")
     up = table_up(session.rig)
     P, step_of = profiles.cloud.points, profiles.step.astype(np.float64)

@@ -8,7 +8,9 @@ Writes into the session folder (atomically):
     view_NNN/cloud.ply, maps.npz, cloud.json   each view's cloud, its decoded maps and depth (cache,
                                                rangekit.app.view_cache)
     poses.json                                 registered poses, world = the first view's frame
-    merged.ply, mesh.ply                       all views in one frame; the fused watertight mesh
+    merged.ply                                 all views in one frame
+    mesh.ply, mesh_watertight.ply              the fused surface the views observed (open), and closed with
+                                               a per-vertex ``observed`` flag (rangekit.app.fused_outputs)
     summary.json                               what the end-of-run summary prints, as data
     report.html                                the visual report (rangekit.app.report)
 
@@ -70,7 +72,8 @@ Evaluator = Callable[[object, Sequence[float]], Evaluation]
 def process_session(folder: str | Path, *, fusion: str = "poisson", method: str = "auto",
                     table_margin: float = 0.002, evaluate: Evaluator | None = None, report: bool = True,
                     progress: Callable | None = None) -> ProcessResult:
-    """Process the completed views of a session into ``mesh.ply`` (and ``summary.json``, ``report.html``).
+    """Process the completed views of a session into ``mesh.ply`` (the observed surface) and
+    ``mesh_watertight.ply`` (closed, flagged; and ``summary.json``, ``report.html``).
 
     Parameters
     ----------
@@ -102,8 +105,9 @@ def process_session(folder: str | Path, *, fusion: str = "poisson", method: str 
 
 def _process(out: Path, fusion: str, method: str, table_margin: float, evaluate: Evaluator | None, report: bool,
              progress: Callable | None) -> ProcessResult:
-    from rangekit.formats.meshes import save_mesh
-    from rangekit.surface.fusion import poisson_mesh, tsdf_fuse
+    from rangekit.app.fused_outputs import evaluate_fused, save_fused
+    from rangekit.surface.fusion import poisson_meshes, tsdf_fuse
+    from rangekit.surface.observed import split_observed
     from rangekit.registration.multiview import register_views
 
     session = Session.load(out)
@@ -161,41 +165,41 @@ def _process(out: Path, fusion: str, method: str, table_margin: float, evaluate:
         merged = merge_clouds(clouds, T)
         save_cloud(out / "merged.ply", merged)
         call_progress(progress, f"fusing {len(merged):,} points ({fusion})")
+        step = max(1, len(merged) // 400_000)
         if fusion == "poisson":
-            step = max(1, len(merged) // 400_000)
             # One thread: Open3D's multi-threaded Poisson is not deterministic, and a resumed scan must
             # give the same mesh as an uninterrupted one (on 2 cores it is no slower).
-            mesh = poisson_mesh(PointCloud(merged.points[::step], merged.colours[::step], merged.normals[::step]),
-                                depth=9, n_threads=1)
+            fused = poisson_meshes(PointCloud(merged.points[::step], merged.colours[::step], merged.normals[::step]),
+                                   depth=9, n_threads=1)
         else:
             # Each view's camera-frame depth map as stored, seen by the camera at its registered pose.
-            mesh = tsdf_fuse([(m.depth, None, rig.camera.with_pose(compose(Tk, rig.camera.T_world_cam)))
-                              for m, Tk in zip(maps, T)])
-        save_mesh(out / "mesh.ply", mesh)
-        mesh_info = {"vertices": len(mesh.vertices), "triangles": len(mesh.triangles),
-                     "watertight": bool(mesh.is_watertight), "area_m2": float(mesh.area),
-                     "volume_m3": float(abs(mesh.volume)) if mesh.is_watertight else None, "fusion": fusion}
-        call_progress(progress, f"mesh: {len(mesh.vertices):,} vertices, {len(mesh.triangles):,} triangles, "
-                                f"watertight {mesh.is_watertight}")
+            surface = tsdf_fuse([(m.depth, None, rig.camera.with_pose(compose(Tk, rig.camera.T_world_cam)))
+                                 for m, Tk in zip(maps, T)], watertight=False)
+            fused = split_observed(surface, merged.points[::step])
+        mesh_info, watertight_info = save_fused(out, fused, fusion)
+        mesh = fused.observed
+        call_progress(progress, f"mesh: {len(mesh.vertices):,} vertices, {len(mesh.triangles):,} triangles observed; "
+                                f"closed: {watertight_info['unobserved_vertices']:,} of "
+                                f"{watertight_info['vertices']:,} vertices unobserved")
 
     accuracy, truth, view_errors = None, None, None
     if evaluate is not None:
         with timer.stage("evaluate"):
-            call_progress(progress, "measuring the mesh and each view against the true surface")
-            evaluation = evaluate(mesh, [v.angle for v in views],
-                                  views={"clouds": clouds, "T_world_view": res.T_world_view,
-                                         "proj_cols": [m.proj_col for m in maps], "names": names})
-            accuracy, truth = evaluation.accuracy.to_dict(), evaluation.truth
-            view_errors = evaluation.view_errors
+            call_progress(progress, "measuring the observed and the closed mesh and each view against the true "
+                                    "surface")
+            accuracy, truth, view_errors = evaluate_fused(
+                evaluate, fused, [v.angle for v in views],
+                views={"clouds": clouds, "T_world_view": res.T_world_view, "proj_cols": [m.proj_col for m in maps],
+                       "names": names})
 
     result = ProcessResult(out, names, res.T_world_view, [len(c) for c in clouds], edges, float(res.rmse),
-                           mesh_info, timer.seconds, accuracy, view_errors=view_errors)
+                           mesh_info, timer.seconds, accuracy, watertight_mesh=watertight_info, view_errors=view_errors)
     if report:
         with timer.stage("report"):
             from rangekit.app.report import write_report
 
             call_progress(progress, "writing report.html")
             write_report(out, result, clouds=clouds, maps=maps, merged=merged, mesh=mesh, session=session,
-                         truth=truth, progress=progress)
+                         truth=truth, progress=progress, watertight=fused.watertight)
     atomic_write_json(out / "summary.json", result.to_dict())   # last: the set is complete
     return result

@@ -119,19 +119,21 @@ def _summary_table(result: "ProcessResult", session: "Session") -> str:
 def write_report(folder: str | Path, result: "ProcessResult", *, clouds: Sequence["PointCloud"],
                  maps: Sequence["ViewMaps"], merged: "PointCloud", mesh: "TriangleMesh", session: "Session",
                  truth: "TriangleMesh | None" = None, progress: Callable | None = None,
-                 size: tuple[int, int] = (230, 230)) -> Path:
+                 size: tuple[int, int] = (230, 230), watertight: "TriangleMesh | None" = None) -> Path:
     """Write ``folder/report.html`` and return its path; reads nothing from disk.
 
     ``clouds`` are the views' clouds in their own frames and ``maps`` their decoded maps and white
-    captures (as processing holds them), ``merged`` and ``mesh`` in the session world (the first view's
-    frame), ``truth`` the true surface in that frame (from an evaluator) for the heat map.
+    captures (as processing holds them), ``merged`` and ``mesh`` (the observed surface) in the session world
+    (the first view's frame), ``watertight`` the closed mesh there with its ``observed`` flag (shown with the
+    invented part in grey), ``truth`` the true surface in that frame (from an evaluator) for the heat map.
     """
     from rangekit.colour import colourise
     from rangekit.app.snapshot import fit_camera, render_cloud
 
     out = Path(folder)
     rig = session.rig
-    sections = head_sections(out, result, mesh=mesh, session=session, truth=truth, progress=progress, size=size)
+    sections = head_sections(out, result, mesh=mesh, session=session, truth=truth, progress=progress, size=size,
+                             watertight=watertight)
     frame_pts = mesh.vertices  # fit_camera(tight=True) frames the points themselves
     up = table_up(rig)
     sides, side_names = SIDES[:2], SIDE_NAMES[:2]
@@ -184,9 +186,18 @@ def table_up(rig) -> np.ndarray:
     return rig.T_world_table[:3, 2] if rig.T_world_table is not None else np.array([0.0, -1.0, 0.0])
 
 
+#: The report's colours of a closed mesh: surface some view observed, and surface the fusion invented.
+OBSERVED_COLOUR = (0.35, 0.62, 0.85)
+INVENTED_COLOUR = (0.55, 0.55, 0.55)
+
+
 def head_sections(out: Path, result: "ProcessResult", *, mesh: "TriangleMesh", session: "Session",
-                  truth: "TriangleMesh | None", progress: Callable | None, size: tuple[int, int]) -> list[str]:
-    """The report's title, summary, error heat map (simulator) and mesh sections, as HTML strings."""
+                  truth: "TriangleMesh | None", progress: Callable | None, size: tuple[int, int],
+                  watertight: "TriangleMesh | None" = None) -> list[str]:
+    """The report's title, summary, error heat map (simulator) and mesh sections, as HTML strings.
+
+    ``mesh`` is the observed surface (heat map and shaded renders); ``watertight``, when given with its
+    ``observed`` flag, is shown apart: observed surface in blue, the part no view observed in grey."""
     from rangekit.surface.mesh import distance_to_surface
     from rangekit.app.snapshot import colour_bar, fit_camera, render_mesh, render_values_on_mesh
 
@@ -206,15 +217,32 @@ def head_sections(out: Path, result: "ProcessResult", *, mesh: "TriangleMesh", s
         a = result.accuracy
         sections += ["<h2>Accuracy against the true surface (simulator)</h2>",
                      f"<p>RMS {a['rms'] * 1e3:.3f} mm, 95th percentile {a['p95'] * 1e3:.3f} mm, completeness "
-                     f"{a['completeness']:.1%} within {a['tolerance'] * 1e3:g} mm. Red at the bottom is the part "
-                     "no view can see (the object stands on it): the fusion closes it smoothly.</p>",
+                     f"{a['completeness']:.1%} within {a['tolerance'] * 1e3:g} mm, on the observed mesh (mesh.ply: "
+                     "only surface some view's points support)"
+                     + (f"; the closed mesh (mesh_watertight.ply): RMS {a['watertight']['rms'] * 1e3:.3f} mm, 95th "
+                        f"percentile {a['watertight']['p95'] * 1e3:.3f} mm, "
+                        f"{a['watertight']['unobserved_area']:.0%} of its area where no view can see"
+                        if a.get("watertight") else "") + ".</p>",
                      f"<div class='row'>{''.join(figs)}</div>", _img(bar, "colour scale")]
 
     call_progress(progress, "report: mesh renders")
     figs = [_img(_crop(render_mesh(mesh, fit_camera(frame_pts, azimuth=az, elevation=el, size=size, up=up, tight=True),
                                    smooth=True, colour_by_vertex=False)), name)
             for (az, el), name in zip(sides, side_names)]
-    sections += ["<h2>Mesh</h2>", f"<div class='row'>{''.join(figs)}</div>"]
+    sections += ["<h2>Mesh (observed surface)</h2>", f"<div class='row'>{''.join(figs)}</div>"]
+    if watertight is not None and watertight.observed is not None:
+        call_progress(progress, "report: closed mesh renders")
+        colours = np.where(watertight.observed[:, None], np.array(OBSERVED_COLOUR), np.array(INVENTED_COLOUR))
+        figs = [_img(_crop(render_mesh(watertight, fit_camera(watertight.vertices, azimuth=az, elevation=el, size=size,
+                                                              up=up, tight=True),
+                                       vertex_colours=colours, smooth=True)), name,
+                     alt=f"{name}: closed mesh, grey where no view observed the surface")
+                for (az, el), name in zip(sides, side_names)]
+        invented = 1.0 - float(watertight.observed.mean())
+        sections += ["<h2>Closed mesh</h2>",
+                     f"<p>mesh_watertight.ply: blue where some view observed the surface, grey where the fusion "
+                     f"closed it with surface no view saw ({invented:.1%} of its vertices, flagged "
+                     "<code>observed = 0</code> in the file).</p>", f"<div class='row'>{''.join(figs)}</div>"]
 
     return sections
 

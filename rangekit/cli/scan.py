@@ -121,7 +121,7 @@ def _process(folder: str, args: argparse.Namespace, *, acquisition_s: float | No
     for line in res.summary_lines():
         say(line)
     total = time.perf_counter() - t0 + (acquisition_s or 0.0)
-    say(f"wrote {folder}/mesh.ply, merged.ply, poses.json, summary.json"
+    say(f"wrote {folder}/mesh.ply (observed surface), mesh_watertight.ply (closed), merged.ply, poses.json, summary.json"
         + ("" if args.no_report else ", report.html") + f" in {format_seconds(total)}")
     return 0
 

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from rangekit.errors import FileFormatError
-from rangekit.formats.ply import mesh_ply_bytes, ply_vertex_attributes, read_ply
+from rangekit.formats.ply import mesh_ply_bytes, ply_observed, ply_vertex_attributes, read_ply
 from rangekit.io import atomic_write_bytes
 from rangekit.surface.mesh import TriangleMesh
 
@@ -73,7 +73,8 @@ def _read_ply_mesh(path: Path) -> TriangleMesh:
     if not np.all(np.isfinite(points)):
         raise FileFormatError(f"{path}: expected finite vertices, found "
                               f"{np.count_nonzero(~np.isfinite(points).all(axis=1))} that are not")
-    return TriangleMesh(points, triangles, None if colours is None else colours.astype(np.float32))
+    return TriangleMesh(points, triangles, None if colours is None else colours.astype(np.float32),
+                        ply_observed(header, elements["vertex"]))
 
 
 def load_mesh_file(path: str | Path) -> TriangleMesh:

@@ -26,7 +26,7 @@ from rangekit.formats.parsing import ascii_rows, read_bytes, truncated_error
 from rangekit.surface.cloud import PointCloud
 from rangekit.surface.mesh import TriangleMesh
 
-__all__ = ["PlyLists", "PlyHeader", "read_ply", "ply_points", "ply_vertex_attributes", "cloud_ply_bytes",
+__all__ = ["PlyLists", "PlyHeader", "read_ply", "ply_points", "ply_observed", "ply_vertex_attributes", "cloud_ply_bytes",
            "mesh_ply_bytes"]
 
 
@@ -287,6 +287,14 @@ def ply_points(path: Path, header: PlyHeader, vertex: dict) -> np.ndarray:
     return np.column_stack([np.asarray(vertex[c], dtype=np.float64) for c in "xyz"])
 
 
+def ply_observed(header: PlyHeader, vertex: dict) -> np.ndarray | None:
+    """(N,) bool of a PLY vertex element's ``observed`` property (non-zero = observed), or None without it."""
+    props = {p.name: p for p in header.element("vertex").properties}
+    if "observed" not in props or props["observed"].count_dtype is not None:
+        return None
+    return np.asarray(vertex["observed"]) != 0
+
+
 def ply_vertex_attributes(path: Path, header: PlyHeader, vertex: dict
                           ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
     """(points (N, 3) float64, normals (N, 3) float64 or None, colours (N, 3) float64 in [0, 1] or None)
@@ -331,14 +339,18 @@ def _ply_bytes(comment: str, vertex: np.ndarray, faces: np.ndarray | None = None
     return ("\n".join(header) + "\n").encode("ascii") + body
 
 
-def _vertex_records(points: np.ndarray, normals: np.ndarray | None, colours: np.ndarray | None) -> np.ndarray:
-    """Structured vertex rows: float64 x y z, float32 nx ny nz, uint8 red green blue (the optional ones
-    only when given; colours in [0, 1] are rounded to 8 bits)."""
+def _vertex_records(points: np.ndarray, normals: np.ndarray | None, colours: np.ndarray | None,
+                    observed: np.ndarray | None = None) -> np.ndarray:
+    """Structured vertex rows: float64 x y z, float32 nx ny nz, uint8 red green blue, uint8 observed (1 where
+    a view's points support the vertex, 0 where the fusion invented it) (the optional ones only when given;
+    colours in [0, 1] are rounded to 8 bits)."""
     fields = [("x", "<f8"), ("y", "<f8"), ("z", "<f8")]
     if normals is not None:
         fields += [("nx", "<f4"), ("ny", "<f4"), ("nz", "<f4")]
     if colours is not None:
         fields += [("red", "u1"), ("green", "u1"), ("blue", "u1")]
+    if observed is not None:
+        fields += [("observed", "u1")]
     rec = np.empty(len(points), dtype=fields)
     rec["x"], rec["y"], rec["z"] = points.T
     if normals is not None:
@@ -346,6 +358,8 @@ def _vertex_records(points: np.ndarray, normals: np.ndarray | None, colours: np.
     if colours is not None:
         rgb = np.clip(np.rint(colours * 255), 0, 255).astype(np.uint8)
         rec["red"], rec["green"], rec["blue"] = rgb.T
+    if observed is not None:
+        rec["observed"] = np.asarray(observed, dtype=bool)
     return rec
 
 
@@ -355,6 +369,7 @@ def cloud_ply_bytes(cloud: PointCloud) -> bytes:
 
 
 def mesh_ply_bytes(mesh: TriangleMesh) -> bytes:
-    """A triangle mesh as binary PLY: float64 xyz, uint8 RGB, faces as ``list uchar int``, comment "metres"."""
-    return _ply_bytes("rangekit mesh, metres", _vertex_records(mesh.vertices, None, mesh.vertex_colours),
-                      mesh.triangles)
+    """A triangle mesh as binary PLY: float64 xyz, uint8 RGB, uint8 ``observed`` (when the mesh has the flag),
+    faces as ``list uchar int``, comment "metres"."""
+    return _ply_bytes("rangekit mesh, metres", _vertex_records(mesh.vertices, None, mesh.vertex_colours,
+                                                               mesh.observed), mesh.triangles)

@@ -30,6 +30,7 @@ class ProcessResult:
     seconds: dict = field(default_factory=dict)   # wall time per stage
     accuracy: dict | None = None    # against the truth when an evaluator was given (the simulator's Accuracy)
     laser: dict | None = None       # a laser scan: per laser its points, steps without a line, rejected rows
+    watertight_mesh: dict | None = None   # the closed mesh (mesh_watertight.ply), as ``mesh`` plus unobserved_*
     view_errors: list | None = None  # simulator: per view, decoding / cloud (inside, edge) / registration errors
 
     @property
@@ -38,13 +39,15 @@ class ProcessResult:
 
     @property
     def mesh_watertight(self) -> bool:
-        return bool(self.mesh["watertight"])
+        """A closed mesh was written (``mesh_watertight.ply``, or ``mesh.ply`` itself when closed)."""
+        return bool((self.watertight_mesh or self.mesh)["watertight"])
 
     def to_dict(self) -> dict:
         return {"schema": SUMMARY_SCHEMA, "views": self.view_names, "n_points": self.n_points,
                 "T_world_view": self.T_world_view.tolist(), "edges": self.edges,
                 "registration_rmse_m": None if np.isnan(self.registration_rmse) else self.registration_rmse, "mesh": self.mesh, "seconds": self.seconds,
                 "accuracy": self.accuracy, **({"laser": self.laser} if self.laser is not None else {}),
+                **({"mesh_watertight": self.watertight_mesh} if self.watertight_mesh is not None else {}),
                 **({"view_errors": self.view_errors} if self.view_errors is not None else {})}
 
     def summary_lines(self) -> list[str]:
@@ -66,10 +69,16 @@ class ProcessResult:
                          "mm" + (f"; synchronisation residual max {max(rot):.4f} deg, {max(tr):.4f} mm" if rot and tr
                                  else ""))
         lines += [
-                 f"mesh ({m['fusion']}): {m['vertices']:,} vertices, {m['triangles']:,} triangles, watertight "
-                 f"{m['watertight']}, area {m['area_m2'] * 1e4:.1f} cm^2"
-                 + (f", volume {m['volume_m3'] * 1e6:.1f} cm^3" if m["volume_m3"] is not None else ""),
-                 "time: " + ", ".join(f"{k} {v:.1f} s" for k, v in self.seconds.items())]
+                 f"mesh ({m['fusion']}{', observed surface' if self.watertight_mesh else ''}): {m['vertices']:,} "
+                 f"vertices, {m['triangles']:,} triangles, watertight {m['watertight']}, area {m['area_m2'] * 1e4:.1f} cm^2"
+                 + (f", volume {m['volume_m3'] * 1e6:.1f} cm^3" if m["volume_m3"] is not None else "")]
+        w = self.watertight_mesh
+        if w:
+            lines.append(f"closed mesh (mesh_watertight.ply): {w['vertices']:,} vertices, watertight {w['watertight']}"
+                         + (f", volume {w['volume_m3'] * 1e6:.1f} cm^3" if w["volume_m3"] is not None else "")
+                         + f"; {w['unobserved_vertices']:,} vertices ({w['unobserved_area_m2'] * 1e4:.1f} cm^2) no "
+                           "view observed")
+        lines.append("time: " + ", ".join(f"{k} {v:.1f} s" for k, v in self.seconds.items()))
         if self.accuracy:
             a = self.accuracy
             lines.append(f"accuracy against the true surface: RMS {a['rms'] * 1e3:.3f} mm "
@@ -82,8 +91,13 @@ class ProcessResult:
             if self.view_errors:
                 lines.append(_view_errors_line(self.view_errors))
             lines.append(f"  ({a['visible_fraction']:.0%} of the object is visible within "
-                         f"{a['max_incidence_deg']:g} deg of incidence; the other {a['unobserved_area']:.0%} of the "
-                         f"mesh is filled in where no view looked, RMS {a['unobserved_rms'] * 1e3:.2f} mm there)")
+                         f"{a['max_incidence_deg']:g} deg of incidence; {a['unobserved_area']:.1%} of the "
+                         f"mesh lies where no view can see, RMS {a['unobserved_rms'] * 1e3:.2f} mm there)")
+            if a.get("watertight"):
+                c = a["watertight"]
+                lines.append(f"closed mesh against the true surface: RMS {c['rms'] * 1e3:.3f} mm, 95th percentile "
+                             f"{c['p95'] * 1e3:.3f} mm, completeness {c['completeness']:.1%}; {c['unobserved_area']:.0%} "
+                             f"of it filled in where no view looked, RMS {c['unobserved_rms'] * 1e3:.2f} mm there")
         return lines
 
     def __repr__(self) -> str:

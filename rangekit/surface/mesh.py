@@ -25,6 +25,7 @@ class TriangleMesh:
     vertices: np.ndarray                      # (V, 3) float64 metres
     triangles: np.ndarray                     # (F, 3) int64 indices into ``vertices``
     vertex_colours: np.ndarray | None = None  # (V, 3) float32 linear RGB in [0, 1]
+    observed: np.ndarray | None = None        # (V,) bool: some view's points support the vertex (fusion)
 
     def __post_init__(self) -> None:
         V = np.asarray(self.vertices, dtype=np.float64)
@@ -48,6 +49,11 @@ class TriangleMesh:
             if C.shape != V.shape:
                 raise InputError(f"TriangleMesh: vertex_colours must be {V.shape}, found {C.shape}")
             object.__setattr__(self, "vertex_colours", C)
+        if self.observed is not None:
+            O = np.asarray(self.observed)
+            if O.shape != (len(V),):
+                raise InputError(f"TriangleMesh: observed must be ({len(V)},) bool, found shape {O.shape}")
+            object.__setattr__(self, "observed", O.astype(bool))
 
     def __repr__(self) -> str:
         ext = np.ptp(self.vertices, axis=0) if len(self.vertices) else np.zeros(3)

@@ -1,0 +1,59 @@
+"""A fusion's two meshes as processing keeps them (coded light and laser sessions alike):
+
+    mesh.ply              the observed surface only (open): what some view's points support
+    mesh_watertight.ply   the same surface closed, with the PLY vertex property ``observed`` (uchar, 0 where
+                          no view's points support the vertex: the closing, the balloon, a web across a gap)
+
+:func:`save_fused` writes both and returns their ``summary.json`` entries; :func:`evaluate_fused` measures
+both against the truth (the summary's accuracy is the observed mesh's, the closed one's figures are kept
+under ``accuracy["watertight"]``).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Callable
+
+from rangekit.surface.mesh import TriangleMesh
+from rangekit.surface.observed import FusedMeshes
+
+__all__ = ["MESH_FILE", "WATERTIGHT_FILE", "WATERTIGHT_FIGURES", "mesh_info", "save_fused", "evaluate_fused"]
+
+MESH_FILE = "mesh.ply"
+WATERTIGHT_FILE = "mesh_watertight.ply"
+#: The closed mesh's accuracy figures kept in the summary (``accuracy["watertight"]``).
+WATERTIGHT_FIGURES = ("rms", "p95", "max", "completeness", "unobserved_area", "unobserved_rms", "rms_all")
+
+
+def mesh_info(mesh: TriangleMesh, fusion: str, file: str) -> dict:
+    """A mesh's ``summary.json`` entry: file, vertices, triangles, watertight, area_m2, volume_m3 (closed
+    meshes only), fusion; with an ``observed`` flag also unobserved_vertices and unobserved_area_m2."""
+    info = {"file": file, "vertices": len(mesh.vertices), "triangles": len(mesh.triangles),
+            "watertight": bool(mesh.is_watertight), "area_m2": float(mesh.area),
+            "volume_m3": float(abs(mesh.volume)) if mesh.is_watertight else None, "fusion": fusion}
+    if mesh.observed is not None:
+        info["unobserved_vertices"] = int((~mesh.observed).sum())
+        info["unobserved_area_m2"] = FusedMeshes(mesh, mesh).unobserved_area
+    return info
+
+
+def save_fused(out: Path, fused: FusedMeshes, fusion: str) -> tuple[dict, dict]:
+    """Write ``out/mesh.ply`` (observed) and ``out/mesh_watertight.ply`` (closed, flagged), atomically;
+    return their summary entries (:func:`mesh_info`)."""
+    from rangekit.formats.meshes import save_mesh
+
+    save_mesh(out / MESH_FILE, fused.observed)
+    save_mesh(out / WATERTIGHT_FILE, fused.watertight)
+    return (mesh_info(fused.observed, fusion, MESH_FILE), mesh_info(fused.watertight, fusion, WATERTIGHT_FILE))
+
+
+def evaluate_fused(evaluate: Callable, fused: FusedMeshes, angles, *, views: dict | None = None,
+                   **options) -> tuple[dict, object, list | None]:
+    """``(accuracy dict, truth, view errors)``: ``evaluate(mesh, angles, **options)`` on the observed mesh
+    (with ``views``, the per-view breakdown, once), with the watertight mesh's :data:`WATERTIGHT_FIGURES`
+    under ``"watertight"``."""
+    evaluation = evaluate(fused.observed, angles, **options, **({"views": views} if views is not None else {}))
+    accuracy = evaluation.accuracy.to_dict()
+    closed = evaluate(fused.watertight, angles, **options).accuracy.to_dict()
+    accuracy["watertight"] = {k: closed[k] for k in WATERTIGHT_FIGURES}
+    return accuracy, evaluation.truth, evaluation.view_errors

@@ -1,0 +1,143 @@
+"""What part of a fused surface the views observed: distance of each vertex to the input points, against
+the points' local spacing.
+
+A fusion (Poisson, TSDF) returns a surface also where no view looked: the balloon under an object, the web
+Poisson stretches across the gap between two thin parts (the bunny's ears). A vertex is *observed* when an
+input point lies within ``factor x`` that point's local spacing of it; everything else is invented.
+
+- :func:`point_spacing`: per point, the mean distance to its ``k`` nearest neighbours (metres).
+- :func:`observed_vertices`: (V,) bool, the vertices some input point supports.
+- :func:`keep_observed`: the mesh without its unobserved vertices and every triangle touching one.
+- :func:`split_observed`: a fusion's two outputs (:class:`FusedMeshes`): the observed surface, and the
+  surface closed with a per-vertex ``observed`` flag.
+
+Units are metres; the mesh and the points share one frame. Deterministic (scipy's k-d tree, no threads).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from rangekit.errors import InputError
+from rangekit.surface.mesh import TriangleMesh
+
+__all__ = ["OBSERVED_FACTOR", "SPACING_NEIGHBOURS", "FusedMeshes", "point_spacing", "observed_vertices", "keep_observed",
+           "split_observed"]
+
+#: A vertex is observed within this many local point spacings of an input point. 3: a vertex between
+#: points on an observed patch is at most about half a spacing from one (plus the noise Poisson smooths
+#: away), so 3 keeps the whole observed surface and its rim, and drops a web a few spacings off the data.
+OBSERVED_FACTOR = 3.0
+#: Neighbours whose mean distance is a point's local spacing.
+SPACING_NEIGHBOURS = 6
+
+
+def _points(points, what: str) -> np.ndarray:
+    P = np.asarray(points, dtype=np.float64)
+    if P.ndim != 2 or P.shape[1] != 3:
+        raise InputError(f"{what}: points must be (N, 3), found shape {P.shape}")
+    P = P[np.all(np.isfinite(P), axis=1)]
+    if len(P) < 2:
+        raise InputError(f"{what}: expected at least 2 finite points, found {len(P)}")
+    return P
+
+
+def point_spacing(points: np.ndarray, *, k: int = SPACING_NEIGHBOURS) -> np.ndarray:
+    """(N,) metres: each point's mean distance to its ``k`` nearest other points of ``points`` (N, 3)
+    (non-finite rows dropped first: the result is per finite point, in order)."""
+    P = _points(points, "point_spacing")
+    k = int(min(k, len(P) - 1))
+    d, _ = cKDTree(P).query(P, k=k + 1)
+    return d[:, 1:].mean(axis=1)
+
+
+def observed_vertices(vertices: np.ndarray, points: np.ndarray, *, spacing: np.ndarray | None = None,
+                      factor: float = OBSERVED_FACTOR, k: int = SPACING_NEIGHBOURS) -> np.ndarray:
+    """(V,) bool: vertex ``v`` of ``vertices`` (V, 3) is observed when its nearest point ``p`` of
+    ``points`` (N, 3, finite) lies within ``factor * spacing[p]``.
+
+    ``spacing`` (N,) metres, per point: its local sampling distance; default :func:`point_spacing` with
+    ``k`` neighbours. Give it when the sampling is anisotropic in a way the nearest neighbours do not see
+    (a laser scan's profiles: dense along a line, a turntable step apart between lines).
+    """
+    V = np.asarray(vertices, dtype=np.float64)
+    if V.ndim != 2 or V.shape[1] != 3:
+        raise InputError(f"observed_vertices: vertices must be (V, 3), found shape {V.shape}")
+    if not (np.isfinite(factor) and factor > 0):
+        raise InputError(f"observed_vertices: factor must be finite and > 0, found {factor!r}")
+    P = np.asarray(points, dtype=np.float64)
+    if P.ndim == 2 and P.shape[1] == 3 and not np.all(np.isfinite(P)):
+        raise InputError(f"observed_vertices: points must be finite, found "
+                         f"{np.count_nonzero(~np.isfinite(P).all(axis=1))} rows that are not")
+    P = _points(P, "observed_vertices")
+    s = point_spacing(P, k=k) if spacing is None else np.asarray(spacing, dtype=np.float64)
+    if s.shape != (len(P),) or not np.all(np.isfinite(s) & (s >= 0)):
+        raise InputError(f"observed_vertices: spacing must be ({len(P)},) finite and >= 0, found shape {s.shape}")
+    if len(V) == 0:
+        return np.zeros(0, dtype=bool)
+    d, nearest = cKDTree(P).query(V, k=1)
+    return d <= factor * s[nearest]
+
+
+def keep_observed(mesh: TriangleMesh, observed: np.ndarray) -> TriangleMesh:
+    """``mesh`` without the vertices where ``observed`` (V,) bool is False, nor any triangle touching one;
+    unreferenced vertices dropped, order kept. Colours follow their vertices."""
+    observed = np.asarray(observed, dtype=bool)
+    if observed.shape != (len(mesh.vertices),):
+        raise InputError(f"keep_observed: observed must be ({len(mesh.vertices)},) bool, found shape {observed.shape}")
+    F = mesh.triangles[np.all(observed[mesh.triangles], axis=1)]
+    used = np.zeros(len(mesh.vertices), dtype=bool)
+    used[F] = True
+    remap = np.cumsum(used) - 1
+    C = mesh.vertex_colours
+    return TriangleMesh(mesh.vertices[used], remap[F], None if C is None else C[used])
+
+
+@dataclass(frozen=True, eq=False)
+class FusedMeshes:
+    """A fusion's two outputs, in the points' frame.
+
+    observed : the surface the views saw: the fused surface without its unobserved vertices (open; every
+        component the points support).
+    watertight : the same surface closed (:func:`rangekit.surface.watertight.make_watertight`), its
+        ``observed`` flag False on every vertex no input point supports (the closing, the balloon).
+    """
+
+    observed: TriangleMesh
+    watertight: TriangleMesh
+
+    @property
+    def unobserved_area(self) -> float:
+        """m^2 of the watertight mesh's triangles with an unobserved corner (what the fusion invented)."""
+        m = self.watertight
+        invented = ~np.all(m.observed[m.triangles], axis=1)
+        a, b, c = (m.vertices[m.triangles[invented, i]] for i in range(3))
+        return float(0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1).sum())
+
+
+def split_observed(surface: TriangleMesh, points: np.ndarray, *, spacing: np.ndarray | None = None,
+                   factor: float = OBSERVED_FACTOR, closing: TriangleMesh | None = None) -> FusedMeshes:
+    """The observed part of a fused ``surface`` and ``closing`` (default ``surface``) closed and flagged
+    (see :class:`FusedMeshes`); ``points`` (N, 3) the fused input points, ``spacing`` and ``factor`` as in
+    :func:`observed_vertices`.
+
+    Raises MeshError when no observed triangle is left (the surface is nowhere near the points) or the
+    surface cannot be closed.
+    """
+    from rangekit.errors import MeshError
+    from rangekit.surface.watertight import make_watertight
+
+    P = np.asarray(points, dtype=np.float64)
+    s = point_spacing(P) if spacing is None else np.asarray(spacing, dtype=np.float64)
+    # Every component the points support is kept (two ears apart are two components), unlike the closed
+    # mesh, which is the largest component closed.
+    observed = keep_observed(surface, observed_vertices(surface.vertices, P, spacing=s, factor=factor))
+    if len(observed.triangles) == 0:
+        raise MeshError(f"no triangle of the fused surface ({len(surface.triangles)} triangles) lies within "
+                        f"{factor:g} point spacings of the {len(P)} input points")
+    closed = make_watertight(surface if closing is None else closing)
+    flags = observed_vertices(closed.vertices, P, spacing=s, factor=factor)
+    return FusedMeshes(observed, TriangleMesh(closed.vertices, closed.triangles, closed.vertex_colours, flags))

@@ -12,6 +12,9 @@ light then costs a vectorised shading pass. For each pixel that sees a surface a
   direction to the camera; ``k_s``, ``shininess`` come from each object's :class:`SceneObject` fields.
 * Attached shadow: ``n.l_i <= 0`` (shading normal). Cast shadow: a ray from ``x + shadow_eps * n``
   towards the light hits any triangle (before the light, for point lights); the light term is then 0.
+* Interreflection (``bounce_samples > 0``): one diffuse bounce, ``gain * albedo * (1/K) sum_k albedo(y_k)
+  E_i(y_k)`` over K cosine-weighted rays per pixel (:mod:`rangekit.sim.lightstage_bounce`): a concave
+  object lights itself; on a convex one the rays escape and the term is 0.
 * Then, as in :mod:`rangekit.sim.render`: camera lens blur (``camera_blur``), shot + read noise
   (:meth:`ImagingModel.noise_std`), clipping and quantisation to ``bits``. The projector-only fields
   (gamma, black_level, projector_blur, global_fraction, global_blur) do not apply.
@@ -31,12 +34,13 @@ from rangekit.camera import PinholeCamera
 from rangekit.errors import InputError
 from rangekit.geometry import make_T
 from rangekit.sim.objects import make_object
+from rangekit.sim.lightstage_bounce import one_bounce
 from rangekit.sim.raycast import cast_view
 from rangekit.sim.render import ImagingModel
 from rangekit.sim.scene import Scene
 from rangekit.surface.raycast import raycasting_scene
 
-__all__ = ["LightStageCapture", "LIGHT_STAGE_MODEL", "light_stage_camera", "light_stage_lights",
+__all__ = ["LightStageCapture", "LIGHT_STAGE_MODEL", "PLATE_OBJECTS", "light_stage_camera", "light_stage_lights",
            "light_stage_scene", "render_light_stage"]
 
 #: Default sensor of the light stage: 16-bit like DiLiGenT, no room light, otherwise ImagingModel's defaults.
@@ -109,16 +113,30 @@ def light_stage_lights(n: int = 96, *, min_angle: float = np.radians(5.0), max_a
     return np.column_stack([sin_t * np.cos(phi), sin_t * np.sin(phi), -cos_t])
 
 
+#: Objects built standing on the turntable plate (lowest point at z = 0, z up): the light stage turns their
+#: up axis towards the camera, so it looks into the bowl and down on the steps, the fins and the bunny.
+PLATE_OBJECTS = ("bowl", "thin", "steps", "bunny")
+
+
 def light_stage_scene(obj: str = "sphere", *, distance: float = 0.5, occluder: bool = False,
-                      **object_options) -> Scene:
+                      face_camera: bool | None = None, **object_options) -> Scene:
     """A scene for :func:`light_stage_camera`: ``obj`` (builtin name) centred ``distance`` metres in
     front of the camera (world = camera frame), nothing behind it.
+
+    ``face_camera`` turns the object's up axis (+z) towards the camera (a half turn about x) and puts
+    the centre of its bounding box on the optical axis; default: True for :data:`PLATE_OBJECTS` (the
+    camera then looks into the ``bowl``), False otherwise (the object's origin goes to the axis).
 
     ``occluder=True`` adds a box (4 x 12 x 20 cm along x, y, z; albedo 0.5) beside it, centred at
     x = +0.1 m, out of the camera's line of sight to a 5 cm sphere: a light from the +x side (e.g.
     direction (0.97, 0, -0.24)) casts its shadow on the object's right side.
     """
-    objects = [make_object(obj, **object_options).with_pose(make_T(t=[0.0, 0.0, distance]))]
+    o = make_object(obj, **object_options)
+    T = make_T(t=[0.0, 0.0, distance])
+    if obj in PLATE_OBJECTS if face_camera is None else face_camera:
+        R = np.diag([1.0, -1.0, -1.0])
+        T = make_T(R, [0.0, 0.0, distance] - R @ (o.vertices.min(axis=0) + o.vertices.max(axis=0)) / 2)
+    objects = [o.with_pose(T)]
     if occluder:
         objects.append(make_object("box", extents=(0.04, 0.12, 0.2), albedo=0.5)
                        .with_pose(make_T(t=[0.1, 0.0, distance])))
@@ -128,7 +146,8 @@ def light_stage_scene(obj: str = "sphere", *, distance: float = 0.5, occluder: b
 def render_light_stage(scene: Scene, lights: np.ndarray, *, camera: PinholeCamera | None = None,
                        kind: str = "directional", intensities: np.ndarray | None = None,
                        model: ImagingModel = LIGHT_STAGE_MODEL, rng: int | np.random.Generator = 0,
-                       specular: bool = True, shadows: bool = True, shadow_eps: float = 1e-4) -> LightStageCapture:
+                       specular: bool = True, shadows: bool = True, shadow_eps: float = 1e-4,
+                       bounce_samples: int = 32) -> LightStageCapture:
     """Render one image per light, and the truth, for a fixed camera.
 
     Parameters
@@ -143,6 +162,7 @@ def render_light_stage(scene: Scene, lights: np.ndarray, *, camera: PinholeCamer
     specular : add each object's Blinn-Phong term (False: purely Lambertian).
     shadows : cast shadow rays (False: only attached shadows, ``n.l <= 0``).
     shadow_eps : metres; shadow rays start this far off the surface along the normal.
+    bounce_samples : rays per pixel for the one-bounce interreflection; 0 leaves it out.
 
     Returns
     -------
@@ -167,6 +187,8 @@ def render_light_stage(scene: Scene, lights: np.ndarray, *, camera: PinholeCamer
     s = np.ones(f) if intensities is None else np.asarray(intensities, dtype=np.float64).reshape(-1)
     if s.shape != (f,) or not np.all(np.isfinite(s) & (s >= 0)):
         raise InputError(f"render_light_stage: intensities must be {f} finite values >= 0, found shape {s.shape}")
+    if int(bounce_samples) != bounce_samples or not 0 <= bounce_samples <= 4096:
+        raise InputError(f"render_light_stage: bounce_samples must be an integer in 0..4096, found {bounce_samples!r}")
     camera = light_stage_camera() if camera is None else camera
     rng = np.random.default_rng(rng)
     H, W = camera.height, camera.width
@@ -213,6 +235,10 @@ def render_light_stage(scene: Scene, lights: np.ndarray, *, camera: PinholeCamer
     alb_c = albedo if model.colour else albedo.mean(axis=1, keepdims=True)  # (N, C)
     direct = (alb_c[None] * np.where(lit, cos_i, 0.0)[..., None] + np.where(lit, spec, 0.0)[..., None]) \
         * (model.gain * s[:, None] * falloff)[..., None]    # (f, N, C)
+    if bounce_samples > 0:
+        direct += model.gain * alb_c[None] * one_bounce(
+            mesh, camera.T_cam_world, x, n, L, kind, s, model.ref_distance, samples=int(bounce_samples), rng=rng.spawn(1)[0],
+            eps=shadow_eps, colour=model.colour)
     img = np.zeros((f, H * W, C), np.float32)
     img[:, idx] = direct + model.gain * model.ambient * alb_c[None]
     img = img.reshape(f, H, W, C)

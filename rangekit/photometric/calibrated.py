@@ -25,8 +25,10 @@ def photometric_stereo(images, lights, mask=None, *, method: str = "ls",
         Pixels to solve; default every pixel that is non-zero in some image.
     method : {"ls", "robust"}
         ``"ls"``: plain least squares, exact for Lambertian pixels lit by every light.
-        ``"robust"``: trimmed start then shadow-aware IRLS with Tukey weights (see :func:`_robust_solve`);
-        use it when shadows or specular highlights are present.
+        ``"robust"``: trimmed start then shadow-aware IRLS with Tukey weights (see :func:`_robust_solve`),
+        then the light a concave object reflects onto itself, measured in its cast shadows, removed and
+        the fit repeated (:func:`~rangekit.photometric.solve.global_light`); use it when shadows, specular
+        highlights or interreflections are present.
     channels : {"grey", "per-channel"}
         For RGB input: solve the grey image (:func:`rangekit.image.to_grey`), or each channel (normals from the summed
         albedo-scaled normals, albedo (H, W, 3) per channel).

@@ -137,8 +137,9 @@ def weighted_solve(B: np.ndarray, W: np.ndarray | None, S: np.ndarray) -> np.nda
 
 def _robust_solve(B: np.ndarray, S: np.ndarray, *, dark_fraction: float = 0.4,
                   bright_fraction: float = 0.3, n_iterations: int = 8, c_bright: float = 2.5,
-                  c_dark: float = 4.685) -> np.ndarray:
-    """Shadow- and highlight-robust per-pixel fit; returns (p, 3) albedo-scaled normals.
+                  c_dark: float = 4.685) -> tuple[np.ndarray, np.ndarray]:
+    """Shadow- and highlight-robust per-pixel fit; returns (p, 3) albedo-scaled normals and the (p, f)
+    observations found in cast shadow (predicted clearly lit, observed under half the prediction, weight 0).
 
     1. Trimmed start: per pixel drop the darkest ``dark_fraction`` (attached/cast shadows) and the
        brightest ``bright_fraction`` (highlights) observations and solve least squares.
@@ -170,15 +171,64 @@ def _robust_solve(B: np.ndarray, S: np.ndarray, *, dark_fraction: float = 0.4,
         W = np.where(lit & (u < 1.0), (1.0 - u * u) ** 2, 0.0)
         G_new = weighted_solve(B, W, S)
         G = np.where(np.isfinite(G_new), G_new, G)
-    return np.where(np.isfinite(G), G, G0)
+    G = np.where(np.isfinite(G), G, G0)
+    pred = np.nan_to_num(G) @ S
+    # Cast shadows: lights the fit puts clearly in front of the surface that left under half the light.
+    shadow = (pred > 0.1 * np.linalg.norm(np.nan_to_num(G), axis=1, keepdims=True)) & (B < 0.5 * pred) & (W == 0)
+    return G, shadow
 
 
-def solve_chunks(B: np.ndarray, S: np.ndarray, method: str) -> np.ndarray:
-    out = np.empty((len(B), 3))
-    for i in range(0, len(B), CHUNK):
-        b = np.asarray(B[i:i + CHUNK], dtype=np.float64)
-        out[i:i + CHUNK] = weighted_solve(b, None, S) if method == "ls" else _robust_solve(b, S)
-    return out
+def global_light(B: np.ndarray, rho: np.ndarray, shadow: np.ndarray, S: np.ndarray, *, min_pixels: int = 20,
+                 min_fraction: float = 0.02) -> np.ndarray:
+    """(f,) light each image adds everywhere in proportion to the albedo: interreflection in a cavity.
+
+    A pixel in cast shadow from light i still receives what the object's walls reflect; inside a
+    spherical cavity that light is exactly ``albedo(x) * beta_i`` for every pixel, and ``beta_i`` is
+    proportional to the light entering the opening, linear in the light direction: ``beta_i = k . s_i``.
+    ``beta_i`` is measured as the median of ``B / rho`` over the pixels in cast shadow from light i
+    (``shadow`` (p, f), ``rho`` (p,) albedo) on lights that shadow at least ``min_pixels`` pixels and
+    ``min_fraction`` of them; ``k`` (3,) is fitted to them by least squares (``S`` (3, f) the lights).
+    Returns zeros when fewer than 6 lights cast enough shadow (a convex object: nothing to measure
+    it on, and nothing to correct).
+    """
+    n = shadow.sum(axis=0)
+    measured = np.flatnonzero(n >= max(min_pixels, min_fraction * len(B)))
+    if measured.size < 6:
+        return np.zeros(B.shape[1])
+    sub = shadow[:, measured] & (rho[:, None] > 0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        ratio = np.where(sub, B[:, measured] / rho[:, None], np.nan)
+    beta = np.nanmedian(ratio, axis=0)
+    k = np.linalg.lstsq(S[:, measured].T, beta, rcond=None)[0]
+    return np.maximum(k @ S, 0.0)
+
+
+def solve_chunks(B: np.ndarray, S: np.ndarray, method: str, *, global_rounds: int = 3) -> np.ndarray:
+    """(p, 3) albedo-scaled normals of (p, f) intensities B under lights S (3, f).
+
+    ``"robust"`` then removes the light each image adds in proportion to the albedo (interreflection,
+    :func:`global_light`, measured in the cast shadows of all pixels together) and fits again,
+    ``global_rounds`` times; an image with no cast shadow to measure it keeps its intensities.
+    """
+    def robust(B_: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        G_, sh = np.empty((len(B_), 3)), np.zeros(B_.shape, dtype=bool)
+        for i in range(0, len(B_), CHUNK):
+            G_[i:i + CHUNK], sh[i:i + CHUNK] = _robust_solve(np.asarray(B_[i:i + CHUNK], dtype=np.float64), S)
+        return G_, sh
+
+    if method == "ls":
+        out = np.empty((len(B), 3))
+        for i in range(0, len(B), CHUNK):
+            out[i:i + CHUNK] = weighted_solve(np.asarray(B[i:i + CHUNK], dtype=np.float64), None, S)
+        return out
+    G, shadow = robust(B)
+    beta = np.zeros(B.shape[1])
+    for _ in range(global_rounds):
+        beta = global_light(B, np.nan_to_num(np.linalg.norm(G, axis=1)), shadow, S)
+        if not np.any(beta > 0):
+            break
+        G, shadow = robust(np.asarray(B, dtype=np.float64) - np.linalg.norm(np.nan_to_num(G), axis=1)[:, None] * beta[None])
+    return G
 
 
 def to_maps(G: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -55,40 +55,42 @@ class NoiseModel:
         return np.sqrt(np.maximum(self.a + self.b * np.asarray(signal, dtype=np.float32), 1e-12)).astype(np.float32)
 
 
-def fit_noise_model(pairs: list[tuple[np.ndarray, np.ndarray]], white: np.ndarray, black: np.ndarray,
-                    usable: np.ndarray, *, bins: int = 24) -> NoiseModel:
-    """Fit :class:`NoiseModel` to Gray-code pattern/inverse ``pairs`` and the white and black captures.
+def fit_noise_model(signal: np.ndarray, variance: np.ndarray, *, ka: float = 1.0, kb: float = 1.0,
+                    bins: int = 24) -> NoiseModel:
+    """Fit :class:`NoiseModel` to per-pixel noise samples: ``E[variance] = ka a + kb b signal``.
 
     Parameters
     ----------
-    pairs : list of (pattern, inverse), each (H, W) in raw DN (any real dtype).
-    white, black : (H, W) raw DN.
-    usable : (H, W) bool, pixels to use (lit, not saturated).
-    bins : quantile bins of ``W + B``.
+    signal, variance : (N,) samples (DN and DN^2): for Gray-code pairs ``signal = W + B`` and
+        ``variance = (P + P_inv - W - B)**2`` with ka = 4, kb = 2 (module doc); for phase-shift residuals
+        ``signal = A`` and ``variance`` = residual sum of squares / (N - 3) with ka = kb = 1.
+    bins : quantile bins of ``signal``; the fit is weighted least squares on the bin means.
 
     Returns
     -------
-    NoiseModel with ``a >= 0`` and ``b >= 0`` (a fit on too few pixels returns the mean variance as ``a``).
+    NoiseModel with ``a >= 0`` and ``b >= 0`` (too few samples: the mean variance as ``a``).
     """
-    L = (white.astype(np.float64) + black)[usable]
-    if L.size == 0 or not pairs:
+    L = np.asarray(signal, dtype=np.float64).ravel()
+    V = np.asarray(variance, dtype=np.float64).ravel()
+    ok = np.isfinite(L) & np.isfinite(V)
+    L, V = L[ok], V[ok]
+    if L.size == 0:
         return NoiseModel(0.0, 0.0)
-    D2 = np.mean([((p.astype(np.float64) + q)[usable] - L) ** 2 for p, q in pairs], axis=0)
+    flat = NoiseModel(max(float(V.mean()) / ka, 0.0), 0.0)
     if L.size < 20 * bins:
-        return NoiseModel(max(float(D2.mean()) / 4, 0.0), 0.0)
+        return flat
     edges = np.quantile(L, np.linspace(0, 1, bins + 1))
     k = np.clip(np.searchsorted(edges, L, side="right") - 1, 0, bins - 1)
-    n = np.bincount(k, minlength=bins)
-    ok = n > 0
-    Lm = np.bincount(k, L, bins)[ok] / n[ok]
-    Vm = np.bincount(k, D2, bins)[ok] / n[ok]
-    A = np.column_stack([np.full(Lm.size, 4.0), 2.0 * Lm]) * np.sqrt(n[ok])[:, None]
-    a, b = np.linalg.lstsq(A, Vm * np.sqrt(n[ok]), rcond=None)[0]
+    n = np.bincount(k, minlength=bins).astype(np.float64)
+    use = n > 0
+    Lm = np.bincount(k, L, bins)[use] / n[use]
+    Vm = np.bincount(k, V, bins)[use] / n[use]
+    w = np.sqrt(n[use])
+    a, b = np.linalg.lstsq(np.column_stack([np.full(Lm.size, ka), kb * Lm]) * w[:, None], Vm * w, rcond=None)[0]
     if b < 0:
-        return NoiseModel(max(float(np.average(Vm, weights=n[ok])) / 4, 0.0), 0.0)
+        return flat
     if a < 0:
-        b = float(np.sum(n[ok] * Vm * Lm) / np.sum(n[ok] * 2 * Lm * Lm))
-        a = 0.0
+        return NoiseModel(0.0, float(np.sum(n[use] * Vm * Lm) / np.sum(n[use] * kb * Lm * Lm)))
     return NoiseModel(float(a), float(b))
 
 

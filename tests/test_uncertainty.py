@@ -135,3 +135,31 @@ def test_sigma_field_survives_merge_transform_and_the_ply_round_trip(tmp_path):
     assert load_cloud(tmp_path / "plain.ply").sigma is None
     with pytest.raises(InputError, match=r"sigma must be \(50,\), found \(3,\)"):
         PointCloud(c.points, sigma=np.zeros(3))
+
+
+def test_quality_map_measures_the_disagreement_of_overlapping_views():
+    """A flat mesh seen by three views at heights +d, 0 and -d (the third only over x < 0): the
+    disagreement is d where all three see it, d / sqrt(2) where two do, NaN outside every view."""
+    from rangekit.surface.quality import vertex_normals, view_disagreement
+
+    g = np.linspace(-0.05, 0.05, 21)
+    X, Y = np.meshgrid(g, g)
+    V = np.column_stack([X.ravel(), Y.ravel(), np.zeros(X.size)])
+    i = np.arange(20)[:, None] * 21 + np.arange(20)[None, :]
+    F = np.concatenate([np.stack([i, i + 1, i + 22], -1).reshape(-1, 3), np.stack([i, i + 22, i + 21], -1).reshape(-1, 3)])
+    n = vertex_normals(V, F)
+    np.testing.assert_allclose(np.abs(n[:, 2]), 1.0)
+    f = np.linspace(-0.06, 0.06, 241)
+    FX, FY = np.meshgrid(f, f)
+    P = np.column_stack([FX.ravel(), FY.ravel(), np.zeros(FX.size)])
+    d = 2e-4
+    views = [P + [0, 0, d], P, (P - [0, 0, d])[P[:, 0] < 0.0]]
+    q = view_disagreement(V, n, views, radius=2e-3)
+    left, right = V[:, 0] < -0.002, V[:, 0] > 0.002
+    np.testing.assert_allclose(q.disagreement[left], d, rtol=1e-9)
+    np.testing.assert_allclose(q.disagreement[right], d / np.sqrt(2), rtol=1e-9)
+    assert np.all(q.n_views[left] == 3) and np.all(q.n_views[right] == 2)
+    far = view_disagreement(V + [1.0, 0, 0], n, views, radius=2e-3)
+    assert np.all(np.isnan(far.disagreement)) and np.all(far.n_views == 0)
+    with pytest.raises(InputError, match="radius must be"):
+        view_disagreement(V, n, views, radius=0.0)

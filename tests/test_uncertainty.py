@@ -81,12 +81,13 @@ def test_noise_model_fit_recovers_shot_and_read_noise():
     assert fit_noise_model(L[:10], D[:10] ** 2).b == 0.0        # too few samples: a constant
 
 
-def test_sigma_on_a_plane_matches_a_monte_carlo_of_decoder_noise():
-    """A hybrid capture of a plane synthesised from the projected frames at the exact projector coordinates,
+@pytest.mark.parametrize("method", ["hybrid", "phase"])
+def test_sigma_on_a_plane_matches_a_monte_carlo_of_decoder_noise(method):
+    """A hybrid (noise measured on the Gray-code pairs) or phase (on the alternating sum) capture of a plane synthesised from the projected frames at the exact projector coordinates,
     12-bit, with shot + read noise of known size: the spread of the triangulated points over noise draws
     matches the predicted sigma, in the dark and in the bright half of the image."""
     cam, proj, col, row, rays = _plane_view(W=40, H=30)
-    spec = make_pattern_spec("hybrid", proj.size)
+    spec = make_pattern_spec(method, proj.size)
     inside = np.isfinite(col)
     rc = [np.nan_to_num(row).ravel(), np.nan_to_num(col).ravel()]
     frames = np.stack([map_coordinates(f.astype(np.float32), rc, order=1).reshape(col.shape) * inside

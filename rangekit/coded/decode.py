@@ -27,7 +27,7 @@ mapped back through :func:`rangekit.coded.response.phase_correction` before unwr
 
 Predicted std of each decoded coordinate (``col_std``, ``row_std``; :mod:`rangekit.coded.uncertainty`):
 phase methods from the camera noise (measured on the Gray-code pairs for hybrid, on the sinusoid fit's
-residuals for phase) and the fringe modulation; integer Gray codes 1/sqrt(12) px; subpixel edges NaN.
+alternating sum for phase) and the fringe modulation; integer Gray codes 1/sqrt(12) px; subpixel edges NaN.
 
 Direct/global separation (Nayar et al. 2006): in the finest binary stripes half the projector is lit,
 so ``direct = max - min`` and ``global = 2 (min - black)`` over the finest pattern/inverse pairs. Pixels

@@ -40,7 +40,7 @@ def phase_from_steps(frames: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarr
 def _decode_phase(fr: CaptureStack, spec: PatternSpec, axis: str, region, coarse: np.ndarray | None,
                   corrections: dict[int, PhaseCorrection]):
     """Unwrapped projector coordinate, the weakest modulation, and the finest level's modulation B, offset
-    A, residual variance (sum of squared residuals of the sinusoid fit / (N - 3)) and correction slope, for
+    A, noise variance estimate (:func:`_noise_variance`) and correction slope, for
     one chunk (wrapped phases mapped through ``corrections[steps]`` where given)."""
     prefix = "col" if axis == "columns" else "row"
     value = coarse
@@ -61,11 +61,25 @@ def _decode_phase(fr: CaptureStack, spec: PatternSpec, axis: str, region, coarse
             k = np.rint((value - wrapped) / np.float32(period))
             value = wrapped + k * np.float32(period)
         mod_min = B if mod_min is None else np.minimum(mod_min, B)
+    fine = (B, A, _noise_variance(frames, A, B, phi), np.broadcast_to(slope, B.shape))
+    return value.astype(np.float32), mod_min, fine
+
+
+def _noise_variance(frames, A: np.ndarray, B: np.ndarray, phi: np.ndarray) -> np.ndarray:
+    """Per-pixel estimate of the image noise variance of N phase-shifted frames (unbiased for noise of
+    variance a + b I). Even N: the alternating sum ``(sum (-1)^s I_s)^2 / N``, which no harmonic below N / 2
+    of the fringe reaches (a projector gamma makes harmonics 2, 3, ...; they are not noise). Odd N: the
+    residual of the sinusoid fit / (N - 3), which such harmonics inflate."""
+    n = len(frames)
+    if n % 2 == 0:
+        alt = np.zeros_like(A)
+        for s, f in enumerate(frames):
+            alt += f.astype(np.float32) if s % 2 == 0 else -f.astype(np.float32)
+        return alt * alt / np.float32(n)
     rss = np.zeros_like(A)
     for s, f in enumerate(frames):
-        rss += (f.astype(np.float32) - A - B * np.cos(phi - np.float32(2 * np.pi * s / steps))) ** 2
-    fine = (B, A, rss / np.float32(max(steps - 3, 1)), np.broadcast_to(slope, B.shape))
-    return value.astype(np.float32), mod_min, fine
+        rss += (f.astype(np.float32) - A - B * np.cos(phi - np.float32(2 * np.pi * s / n))) ** 2
+    return rss / np.float32(max(n - 3, 1))
 
 
 def decode_phase_maps(fr: CaptureStack, spec: PatternSpec, shadow, low, glob_mask, conf, t_low: float, fs: float,
@@ -118,7 +132,7 @@ def decode_phase_maps(fr: CaptureStack, spec: PatternSpec, shadow, low, glob_mas
 
 def _coordinate_stds(fr: CaptureStack, spec: PatternSpec, fines: dict, ok: np.ndarray, fs: float) -> dict:
     """Predicted std (projector pixels) of each axis's decoded coordinate: the camera noise model from the
-    Gray-code pairs (hybrid) or from the finest level's fit residuals (phase), through
+    Gray-code pairs (hybrid) or from the finest level's frames (phase, :func:`_noise_variance`), through
     :func:`rangekit.coded.uncertainty.phase_coordinate_std`."""
     W_img = fr.get("white", (slice(None), slice(None))).astype(np.float32)
     usable = ok & (W_img < 0.98 * fs)
@@ -129,7 +143,8 @@ def _coordinate_stds(fr: CaptureStack, spec: PatternSpec, fines: dict, ok: np.nd
         B_img = fr.get("black", sub).astype(np.float32)[use]
         L = W_img[sub][use] + B_img
         prefix = "col" if spec.axes[0] == "columns" else "row"
-        bits = [b for b in (2, 3, 4) if b < spec.bits(spec.axes[0])]
+        n_bits = spec.bits(spec.axes[0])
+        bits = [b for b in (2, 3, 4) if b < n_bits] or list(range(n_bits))
         D2 = np.mean([(fr.get(f"{prefix}_b{b}", sub).astype(np.float32)[use]
                        + fr.get(f"{prefix}_b{b}_inv", sub).astype(np.float32)[use] - L) ** 2 for b in bits], axis=0)
         noise = fit_noise_model(L, D2, ka=4.0, kb=2.0)

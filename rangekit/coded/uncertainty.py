@@ -63,7 +63,7 @@ def fit_noise_model(signal: np.ndarray, variance: np.ndarray, *, ka: float = 1.0
     ----------
     signal, variance : (N,) samples (DN and DN^2): for Gray-code pairs ``signal = W + B`` and
         ``variance = (P + P_inv - W - B)**2`` with ka = 4, kb = 2 (module doc); for phase-shift residuals
-        ``signal = A`` and ``variance`` = residual sum of squares / (N - 3) with ka = kb = 1.
+        ``signal = A`` and ``variance`` a per-pixel noise estimate of the phase frames with ka = kb = 1.
     bins : quantile bins of ``signal``; the fit is weighted least squares on the bin means.
 
     Returns

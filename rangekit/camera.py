@@ -20,7 +20,7 @@ import numpy as np
 from rangekit.errors import ConfigError, InputError
 from rangekit.geometry import apply_T, invert_T, rigid_problem, transform_vectors
 
-__all__ = ["PinholeCamera", "distort", "undistort", "pixel_rays", "world_pixel_rays"]
+__all__ = ["PinholeCamera", "distort", "distort_jacobian", "undistort", "pixel_rays", "world_pixel_rays"]
 
 _N_COEFFS = 12  # k1 k2 p1 p2 k3 k4 k5 k6 s1 s2 s3 s4
 
@@ -60,6 +60,11 @@ def _distort_jacobian(xy: np.ndarray, d: np.ndarray) -> np.ndarray:
     J[:, 1, 0] = 2 * x * y * drad + 2 * p1 * x + 2 * p2 * y + 2 * s3 * x + 4 * s4 * r2 * x
     J[:, 1, 1] = radial + 2 * y * y * drad + 6 * p1 * y + 2 * p2 * x + 2 * s3 * y + 4 * s4 * r2 * y
     return J
+
+
+def distort_jacobian(xy: np.ndarray, dist: np.ndarray) -> np.ndarray:
+    """(N, 2, 2) Jacobian of :func:`distort` at (N, 2) normalised coordinates (x/z, y/z)."""
+    return _distort_jacobian(np.asarray(xy, dtype=np.float64), _full_coeffs(np.asarray(dist, dtype=np.float64)))
 
 
 def undistort(xy_distorted: np.ndarray, dist: np.ndarray, *, tol: float = 1e-14,

@@ -13,6 +13,7 @@ from rangekit.errors import ConfigError, DecodeError
 from rangekit.coded.patterns import PatternSpec
 from rangekit.surface.cloud import PointCloud
 from rangekit.projector_response import ProjectorResponse
+from rangekit.coded.uncertainty import point_sigma
 from rangekit.coded.triangulate import TriangulationResult, discontinuity_mask, range_normals, triangulate
 
 __all__ = ["Reconstruction", "reconstruct_view"]
@@ -24,7 +25,10 @@ class Reconstruction:
 
     decoded: DecodeResult
     triangulated: TriangulationResult  # organised (H, W, 3), world frame, flying pixels removed
-    cloud: PointCloud                  # valid points with colour (white capture) and normals (facing camera)
+    cloud: PointCloud                  # valid points with colour (white capture), normals (facing camera)
+                                       # and sigma where the decoder predicts its coordinates' std
+    sigma: np.ndarray | None = None    # (H, W) float32 metres: predicted std along the camera ray, NaN where
+                                       # no point or no prediction (rangekit.coded.uncertainty.point_sigma)
 
     def __repr__(self) -> str:
         return f"Reconstruction({self.decoded!r}, {self.cloud!r})"
@@ -69,4 +73,11 @@ def reconstruct_view(images, spec: PatternSpec, camera: PinholeCamera, projector
     white = np.asarray(dec.white, dtype=np.float32)
     white /= 255.0 if dec.white.dtype == np.uint8 else float(full_scale or 65535)
     colours = white[valid] if white.ndim == 3 else np.repeat(white[valid][:, None], 3, axis=1)
-    return Reconstruction(dec, tri, PointCloud(xyz[valid], np.clip(colours, 0, 1), normals))
+    sigma = None
+    if dec.col_std is not None:
+        if tri.method == "ray-ray":
+            sigma = point_sigma(camera, projector, xyz, dec.col_std, dec.row_std, cols, rows)
+        else:
+            sigma = point_sigma(camera, projector, xyz, dec.col_std)
+    return Reconstruction(dec, tri, PointCloud(xyz[valid], np.clip(colours, 0, 1), normals,
+                                               None if sigma is None else sigma[valid]), sigma)

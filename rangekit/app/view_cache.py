@@ -1,7 +1,8 @@
 """One view of a session decoded, triangulated and filtered, with its cache in the view folder.
 
 Writes into ``view_NNN/`` (atomically): ``cloud.ply`` (the filtered cloud, session-world frame of that
-view), ``maps.npz`` (decoded projector column, confidence, camera-frame depth) and ``cloud.json`` (the
+view, with each point's predicted ``sigma``), ``maps.npz`` (decoded projector column, confidence,
+camera-frame depth, predicted sigma along the camera ray) and ``cloud.json`` (the
 settings they were made with and the SHA-256 of the other two). A view whose ``cloud.json`` holds the
 same settings is read back instead of decoded again, so interrupted processing gives the same mesh as an
 uninterrupted run. A damaged cache (a file missing, truncated, edited or unreadable) is rebuilt.
@@ -37,6 +38,8 @@ class ViewMaps:
     confidence: np.ndarray   # (H, W) float32 in [0, 1]
     depth: np.ndarray        # (H, W) float32 camera-frame z in metres, NaN where no point was kept
     capture: np.ndarray      # (H, W[, 3]) the capture under the white pattern, as read
+    sigma: np.ndarray | None = None  # (H, W) float32 metres: predicted std along the camera ray, NaN where
+                                     # no point was kept or no prediction (rangekit.coded.uncertainty)
 
 
 def white_frame_index(spec: PatternSpec) -> int:
@@ -56,7 +59,7 @@ def _read_cache(v: SessionView, settings: dict, shape: tuple[int, int]) -> tuple
             return None
         cloud = load_cloud(v.folder / "cloud.ply")
         with np.load(v.folder / "maps.npz") as npz:
-            maps = {k: np.asarray(npz[k], dtype=np.float32) for k in ("proj_col", "confidence", "depth")}
+            maps = {k: np.asarray(npz[k], dtype=np.float32) for k in _MAP_NAMES}
     except (RangekitError, OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):
         return None
     if any(m.shape != shape for m in maps.values()):
@@ -65,6 +68,7 @@ def _read_cache(v: SessionView, settings: dict, shape: tuple[int, int]) -> tuple
 
 
 _CACHE_FILES = ("cloud.ply", "maps.npz")
+_MAP_NAMES = ("proj_col", "confidence", "depth", "sigma")  # a cache without one of them is rebuilt
 
 
 def view_cloud(v: SessionView, spec: PatternSpec, rig: Rig, settings: dict, full_scale: float | None,
@@ -79,7 +83,8 @@ def view_cloud(v: SessionView, spec: PatternSpec, rig: Rig, settings: dict, full
     cached = _read_cache(v, settings, (rig.camera.height, rig.camera.width))
     if cached is not None:
         cloud, m = cached
-        return cloud, ViewMaps(m["proj_col"], m["confidence"], m["depth"], read_png(v.folder / f"{white:03d}.png"))
+        return cloud, ViewMaps(m["proj_col"], m["confidence"], m["depth"], read_png(v.folder / f"{white:03d}.png"),
+                               m["sigma"])
     images = read_stack(list_images(v.folder))
     rec = reconstruct_view(images, spec, rig.camera, rig.projector, method=settings["method"],
                            full_scale=full_scale, response=rig.projector_response)
@@ -90,15 +95,19 @@ def view_cloud(v: SessionView, spec: PatternSpec, rig: Rig, settings: dict, full
         keep = apply_T(T_table_world, c.points)[:, 2] > table_margin
         idx = np.flatnonzero(valid.ravel())
         valid.ravel()[idx[~keep]] = False
-        c = PointCloud(c.points[keep], c.colours[keep], c.normals[keep])
+        c = c.take(keep)
     # Normals as stored (float32), so a run from the cache and a fresh one see the same numbers.
-    c = PointCloud(c.points, c.colours, c.normals.astype(np.float32))
+    c = PointCloud(c.points, c.colours, c.normals.astype(np.float32), c.sigma)
     depth = np.full(valid.shape, np.nan, dtype=np.float32)
     depth[valid] = apply_T(invert_T(rig.camera.T_world_cam), xyz[valid])[:, 2]
+    sigma = np.full(valid.shape, np.nan, dtype=np.float32)
+    if rec.sigma is not None:
+        sigma[valid] = rec.sigma[valid]
     maps = ViewMaps(rec.decoded.proj_col.astype(np.float32), rec.decoded.confidence.astype(np.float32), depth,
-                    images[white])
+                    images[white], sigma)
     save_cloud(v.folder / "cloud.ply", c)
-    atomic_save_npz(v.folder / "maps.npz", proj_col=maps.proj_col, confidence=maps.confidence, depth=depth)
+    atomic_save_npz(v.folder / "maps.npz", proj_col=maps.proj_col, confidence=maps.confidence, depth=depth,
+                    sigma=sigma)
     # cloud.json last, with the others' checksums: it vouches for a complete cache.
     atomic_write_json(v.folder / "cloud.json", {"settings": settings, "points": len(c),
                                                 "sha256": {name: file_sha256(v.folder / name) for name in _CACHE_FILES}})

@@ -25,6 +25,10 @@ the two disagree by more than ``max_disagreement`` columns. Under a projector re
 (``response``) the measured phase is a fixed, known function of the true phase; each wrapped phase is
 mapped back through :func:`rangekit.coded.response.phase_correction` before unwrapping.
 
+Predicted std of each decoded coordinate (``col_std``, ``row_std``; :mod:`rangekit.coded.uncertainty`):
+phase methods from the camera noise (measured on the Gray-code pairs for hybrid, on the sinusoid fit's
+alternating sum for phase) and the fringe modulation; integer Gray codes 1/sqrt(12) px; subpixel edges NaN.
+
 Direct/global separation (Nayar et al. 2006): in the finest binary stripes half the projector is lit,
 so ``direct = max - min`` and ``global = 2 (min - black)`` over the finest pattern/inverse pairs. Pixels
 whose global light exceeds ``max_global_ratio`` times the direct light are rejected as
@@ -46,6 +50,7 @@ from rangekit.coded.patterns import PatternSpec
 from rangekit.coded.phase import decode_phase_maps
 from rangekit.coded.response import phase_correction
 from rangekit.coded.result import DecodeResult
+from rangekit.coded.uncertainty import GRAY_CODE_STD
 from rangekit.projector_response import ProjectorResponse
 
 __all__ = ["decode"]
@@ -146,13 +151,17 @@ def decode(stack, spec: PatternSpec, *, order: str = "rangekit", subpixel: bool 
         K.finalise_binary(codes.get("columns", empty_i), subs.get("columns", empty_f), codes.get("rows", empty_i),
                           subs.get("rows", empty_f), "columns" in codes, "rows" in codes, edges, shadow, low,
                           glob_mask, conf, proj_col, proj_row, incons)
+        # Integer codes are uniform within their stripe; subpixel edges have no noise model yet (NaN).
+        std = np.float32(GRAY_CODE_STD if not edges else np.nan)
+        col_std = np.where(np.isfinite(proj_col), std, np.float32(np.nan))
+        row_std = np.where(np.isfinite(proj_row), std, np.float32(np.nan))
     else:
         corrections = {}
         if response is not None and not response.is_linear:
             for axis in spec.axes:
                 for _, steps in spec.phase_plan(axis):
                     corrections[steps] = phase_correction(response, steps)
-        proj_col, proj_row, conf, incons = decode_phase_maps(
+        proj_col, proj_row, conf, incons, col_std, row_std = decode_phase_maps(
             fr, spec, shadow, low, glob_mask, conf, min_contrast * fs, fs, max_disagreement, corrections, workers,
             chunk_rows)
     lit = ~shadow
@@ -171,5 +180,5 @@ def decode(stack, spec: PatternSpec, *, order: str = "rangekit", subpixel: bool 
     return DecodeResult(proj_col=proj_col, proj_row=proj_row, confidence=conf, shadow=shadow, low_contrast=low,
                         global_dominated=glob_mask, inconsistent=incons,
                         direct=direct if binary else None, global_light=glob if binary else None,
-                        white=fr.colour_white if fr.colour else w_all)
+                        white=fr.colour_white if fr.colour else w_all, col_std=col_std, row_std=row_std)
 

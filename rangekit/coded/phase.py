@@ -13,6 +13,7 @@ from rangekit.coded.binary import axis_code
 from rangekit.coded.frames import CaptureStack, row_chunks, run_parallel
 from rangekit.coded.patterns import PatternSpec
 from rangekit.coded.response import PhaseCorrection
+from rangekit.coded.uncertainty import fit_noise_model, phase_coordinate_std
 
 __all__ = ["phase_from_steps", "decode_phase_maps"]
 
@@ -38,35 +39,58 @@ def phase_from_steps(frames: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarr
 
 def _decode_phase(fr: CaptureStack, spec: PatternSpec, axis: str, region, coarse: np.ndarray | None,
                   corrections: dict[int, PhaseCorrection]):
-    """Unwrapped projector coordinate and the weakest modulation for one chunk (wrapped phases mapped
-    through ``corrections[steps]`` where given)."""
+    """Unwrapped projector coordinate, the weakest modulation, and the finest level's modulation B, offset
+    A, noise variance estimate (:func:`_noise_variance`) and correction slope, for
+    one chunk (wrapped phases mapped through ``corrections[steps]`` where given)."""
     prefix = "col" if axis == "columns" else "row"
     value = coarse
     mod_min = None
     for period, steps in spec.phase_plan(axis):
         frames = [fr.get(f"{prefix}_p{period:g}_s{s}", region) for s in range(steps)]
-        phi, B, _ = phase_from_steps(frames)
+        phi, B, A = phase_from_steps(frames)
+        slope = np.float32(1.0)
         if steps in corrections:
-            phi = corrections[steps](phi)
-        wrapped = phi * np.float32(period / (2 * np.pi))
+            slope = corrections[steps].slope(phi)
+            phi_true = corrections[steps](phi)
+        else:
+            phi_true = phi
+        wrapped = phi_true * np.float32(period / (2 * np.pi))
         if value is None:
             value = wrapped  # period >= size: absolute
         else:
             k = np.rint((value - wrapped) / np.float32(period))
             value = wrapped + k * np.float32(period)
         mod_min = B if mod_min is None else np.minimum(mod_min, B)
-    return value.astype(np.float32), mod_min
+    fine = (B, A, _noise_variance(frames, A, B, phi), np.broadcast_to(slope, B.shape))
+    return value.astype(np.float32), mod_min, fine
 
+
+def _noise_variance(frames, A: np.ndarray, B: np.ndarray, phi: np.ndarray) -> np.ndarray:
+    """Per-pixel estimate of the image noise variance of N phase-shifted frames (unbiased for noise of
+    variance a + b I). Even N: the alternating sum ``(sum (-1)^s I_s)^2 / N``, which no harmonic below N / 2
+    of the fringe reaches (a projector gamma makes harmonics 2, 3, ...; they are not noise). Odd N: the
+    residual of the sinusoid fit / (N - 3), which such harmonics inflate."""
+    n = len(frames)
+    if n % 2 == 0:
+        alt = np.zeros_like(A)
+        for s, f in enumerate(frames):
+            alt += f.astype(np.float32) if s % 2 == 0 else -f.astype(np.float32)
+        return alt * alt / np.float32(n)
+    rss = np.zeros_like(A)
+    for s, f in enumerate(frames):
+        rss += (f.astype(np.float32) - A - B * np.cos(phi - np.float32(2 * np.pi * s / n))) ** 2
+    return rss / np.float32(max(n - 3, 1))
 
 
 def decode_phase_maps(fr: CaptureStack, spec: PatternSpec, shadow, low, glob_mask, conf, t_low: float, fs: float,
                        max_disagreement: float, corrections: dict[int, PhaseCorrection], workers: int,
                        chunk_rows: int):
-    """Phase and hybrid methods: unwrapped phase per axis (Gray-code coarse values for hybrid)."""
+    """Phase and hybrid methods: unwrapped phase per axis (Gray-code coarse values for hybrid), and the
+    predicted std of each decoded coordinate (:mod:`rangekit.coded.uncertainty`)."""
     H, W = fr.shape
     reject = shadow | low | glob_mask
     incons = np.zeros((H, W), bool)
-    values = {}
+    values, fines = {}, {}
     for axis in spec.axes:
         size = spec.width if axis == "columns" else spec.height
         coarse = None
@@ -76,11 +100,14 @@ def decode_phase_maps(fr: CaptureStack, spec: PatternSpec, shadow, low, glob_mas
             coarse = code.astype(np.float32)
         ph = np.empty((H, W), np.float32)
         mod = np.empty((H, W), np.float32)
+        fine = np.empty((4, H, W), np.float32)
 
-        def run(rs: slice, axis=axis, coarse=coarse, ph=ph, mod=mod) -> None:
-            p, m = _decode_phase(fr, spec, axis, (rs, slice(None)), None if coarse is None else coarse[rs],
-                                 corrections)
+        def run(rs: slice, axis=axis, coarse=coarse, ph=ph, mod=mod, fine=fine) -> None:
+            p, m, f = _decode_phase(fr, spec, axis, (rs, slice(None)), None if coarse is None else coarse[rs],
+                                    corrections)
             ph[rs], mod[rs] = p, m
+            for i, a in enumerate(f):
+                fine[i, rs] = a
 
         run_parallel(run, row_chunks(H, chunk_rows), workers)
         if coarse is not None:
@@ -90,11 +117,42 @@ def decode_phase_maps(fr: CaptureStack, spec: PatternSpec, shadow, low, glob_mas
         low |= weak
         reject |= weak
         conf = np.minimum(conf, np.clip(2 * mod / np.float32(fs), 0, 1))
-        values[axis] = ph
+        values[axis], fines[axis] = ph, fine
     incons &= ~reject
     ok = ~(reject | incons)
     nan = np.float32(np.nan)
-    proj_col = np.where(ok, values["columns"], nan) if "columns" in values else np.full((H, W), nan)
-    proj_row = np.where(ok, values["rows"], nan) if "rows" in values else np.full((H, W), nan)
-    return proj_col, proj_row, np.where(ok, conf, 0).astype(np.float32), incons
+    stds = _coordinate_stds(fr, spec, fines, ok, fs)
+    out = []
+    for axis in ("columns", "rows"):
+        out += [np.where(ok, values[axis], nan) if axis in values else np.full((H, W), nan),
+                np.where(ok, stds[axis], nan) if axis in stds else np.full((H, W), nan)]
+    proj_col, col_std, proj_row, row_std = out
+    return proj_col, proj_row, np.where(ok, conf, 0).astype(np.float32), incons, col_std, row_std
 
+
+def _coordinate_stds(fr: CaptureStack, spec: PatternSpec, fines: dict, ok: np.ndarray, fs: float) -> dict:
+    """Predicted std (projector pixels) of each axis's decoded coordinate: the camera noise model from the
+    Gray-code pairs (hybrid) or from the finest level's frames (phase, :func:`_noise_variance`), through
+    :func:`rangekit.coded.uncertainty.phase_coordinate_std`."""
+    W_img = fr.get("white", (slice(None), slice(None))).astype(np.float32)
+    usable = ok & (W_img < 0.98 * fs)
+    step = max(1, int(np.sqrt(usable.sum() / 200000)))
+    sub = (slice(None, None, step), slice(None, None, step))
+    use = usable[sub]
+    if spec.method == "hybrid":
+        B_img = fr.get("black", sub).astype(np.float32)[use]
+        L = W_img[sub][use] + B_img
+        prefix = "col" if spec.axes[0] == "columns" else "row"
+        n_bits = spec.bits(spec.axes[0])
+        bits = [b for b in (2, 3, 4) if b < n_bits] or list(range(n_bits))
+        D2 = np.mean([(fr.get(f"{prefix}_b{b}", sub).astype(np.float32)[use]
+                       + fr.get(f"{prefix}_b{b}_inv", sub).astype(np.float32)[use] - L) ** 2 for b in bits], axis=0)
+        noise = fit_noise_model(L, D2, ka=4.0, kb=2.0)
+    else:
+        f = next(iter(fines.values()))
+        noise = fit_noise_model(f[1][sub][use], f[2][sub][use])
+    out = {}
+    for axis, f in fines.items():
+        period, steps = spec.phase_plan(axis)[-1]
+        out[axis] = phase_coordinate_std(f[0], f[1], noise, steps, period, f[3])
+    return out

@@ -217,6 +217,14 @@ class PhaseCorrection:
         out %= two_pi
         return out
 
+    def slope(self, phase: np.ndarray) -> np.ndarray:
+        """d(true phase) / d(measured phase) at the measured ``phase`` (the table's piecewise slope), float32:
+        how much the correction stretches a phase error."""
+        m = self.offset.size - 1
+        x = np.mod(np.asarray(phase, dtype=np.float32), np.float32(2 * np.pi)) * np.float32(m / (2 * np.pi))
+        i = np.minimum(x.astype(np.int32), m - 1)
+        return 1 + (self.offset[i + 1] - self.offset[i]) * np.float32(m / (2 * np.pi))
+
     @property
     def max_offset(self) -> float:
         """Largest |true - measured| phase, radians."""

@@ -25,6 +25,9 @@ class DecodeResult:
     direct: np.ndarray | None = None        # (H, W) float32 direct light, fraction of full scale
     global_light: np.ndarray | None = None  # (H, W) float32 global light, fraction of full scale
     white: np.ndarray | None = None         # (H, W[, 3]) the white capture, for colour
+    col_std: np.ndarray | None = None       # (H, W) float32 predicted std of proj_col, projector px; NaN where
+                                            # invalid or unknown (rangekit.coded.uncertainty)
+    row_std: np.ndarray | None = None       # (H, W) float32 the same for proj_row
 
     @property
     def valid(self) -> np.ndarray:

@@ -1,8 +1,9 @@
 """Point cloud files, chosen by extension.
 
 Writers (:data:`CLOUD_WRITERS`, :func:`save_cloud`): ``.ply`` (binary little-endian, float64 xyz, float32
-normals, uint8 RGB; :mod:`rangekit.formats.ply`), ``.xyz`` (text ``x y z [nx ny nz]``), ``.npy`` ((N, 3),
-(N, 6) points + normals or (N, 9) points + normals + colours). Writes are atomic.
+normals, uint8 RGB, float32 ``sigma`` when the cloud has it; :mod:`rangekit.formats.ply`), ``.xyz`` (text
+``x y z [nx ny nz]``), ``.npy`` ((N, 3), (N, 6) points + normals or (N, 9) points + normals + colours).
+Only PLY keeps ``sigma``. Writes are atomic.
 
 Readers (:data:`CLOUD_READERS`, :func:`load_cloud`): ``.ply`` (ASCII and binary of either byte order;
 extra elements such as faces or a Stanford ``range_grid`` are skipped), ``.pcd`` (PCL, ASCII and binary),
@@ -22,7 +23,7 @@ import numpy as np
 from rangekit.errors import FileFormatError
 from rangekit.formats.parsing import cloud_of_finite_rows, read_bytes
 from rangekit.formats.pcd import read_pcd
-from rangekit.formats.ply import cloud_ply_bytes, ply_points, ply_vertex_attributes, read_ply
+from rangekit.formats.ply import cloud_ply_bytes, ply_points, ply_vertex_attributes, ply_vertex_scalar, read_ply
 from rangekit.io import atomic_write_bytes
 from rangekit.surface.cloud import PointCloud
 
@@ -74,7 +75,7 @@ def load_cloud(path: str | Path) -> PointCloud:
     Parameters
     ----------
     path : str or Path
-        ``.ply`` (ASCII or binary; vertex ``x y z`` [``nx ny nz``] [``red green blue``]; other elements
+        ``.ply`` (ASCII or binary; vertex ``x y z`` [``nx ny nz``] [``red green blue``] [``sigma``]; other elements
         such as faces or a range grid are skipped), ``.pcd`` (ASCII or binary; ``x y z``
         [``normal_x normal_y normal_z``] [``rgb``/``rgba``]), ``.xyz`` / ``.txt`` (3 or 6 columns, ``#``
         comments) or ``.npy`` ((N, 3), (N, 6) points + normals, (N, 9) points + normals + colours).
@@ -164,7 +165,8 @@ def load_range_grid(path: str | Path) -> RangeGrid:
 def _read_ply_cloud(path: Path) -> PointCloud:
     header, elements = read_ply(path, ("vertex",))
     points, normals, colours = ply_vertex_attributes(path, header, elements["vertex"])
-    return cloud_of_finite_rows(path, points, normals, colours)
+    sigma = ply_vertex_scalar(header, elements["vertex"], "sigma")
+    return cloud_of_finite_rows(path, points, normals, colours, sigma)
 
 
 def _read_xyz(path: Path) -> PointCloud:

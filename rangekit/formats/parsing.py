@@ -25,7 +25,7 @@ def read_bytes(path: Path, what: str = "point cloud") -> bytes:
 
 
 def cloud_of_finite_rows(path: Path, points: np.ndarray, normals: np.ndarray | None = None,
-                colours: np.ndarray | None = None) -> PointCloud:
+                colours: np.ndarray | None = None, sigma: np.ndarray | None = None) -> PointCloud:
     """A PointCloud of the rows whose point is finite; FileFormatError if none is."""
     points = np.asarray(points, dtype=np.float64)
     keep = np.isfinite(points).all(axis=1)
@@ -33,10 +33,11 @@ def cloud_of_finite_rows(path: Path, points: np.ndarray, normals: np.ndarray | N
         points = points[keep]
         normals = None if normals is None else normals[keep]
         colours = None if colours is None else colours[keep]
+        sigma = None if sigma is None else sigma[keep]
     if len(points) == 0:
         found = "an empty cloud" if keep.size == 0 else f"{keep.size} points, none of them finite"
         raise FileFormatError(f"{path}: expected at least one point, found {found}")
-    return PointCloud(points, colours=colours, normals=normals)
+    return PointCloud(points, colours=colours, normals=normals, sigma=sigma)
 
 
 def truncated_error(path: Path, element: str, declared: int, found: int) -> FileFormatError:

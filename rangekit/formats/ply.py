@@ -26,7 +26,8 @@ from rangekit.formats.parsing import ascii_rows, read_bytes, truncated_error
 from rangekit.surface.cloud import PointCloud
 from rangekit.surface.mesh import TriangleMesh
 
-__all__ = ["PlyLists", "PlyHeader", "read_ply", "ply_points", "ply_observed", "ply_vertex_attributes", "cloud_ply_bytes",
+__all__ = ["PlyLists", "PlyHeader", "read_ply", "ply_points", "ply_observed", "ply_vertex_attributes", "ply_vertex_scalar",
+           "cloud_ply_bytes",
            "mesh_ply_bytes"]
 
 
@@ -319,6 +320,14 @@ def ply_vertex_attributes(path: Path, header: PlyHeader, vertex: dict
     return ply_points(path, header, vertex), normals, colours
 
 
+def ply_vertex_scalar(header: PlyHeader, vertex: dict, name: str) -> np.ndarray | None:
+    """(N,) float64 values of the scalar vertex property ``name`` (e.g. ``sigma``), or None if absent."""
+    props = {p.name: p for p in header.element("vertex").properties}
+    if name in props and props[name].count_dtype is None:
+        return np.asarray(vertex[name], dtype=np.float64)
+    return None
+
+
 # ----------------------------------------------------------------------------------------- writer
 
 _PLY_NAMES = {"float64": "double", "float32": "float", "uint8": "uchar", "int32": "int"}
@@ -340,15 +349,17 @@ def _ply_bytes(comment: str, vertex: np.ndarray, faces: np.ndarray | None = None
 
 
 def _vertex_records(points: np.ndarray, normals: np.ndarray | None, colours: np.ndarray | None,
-                    observed: np.ndarray | None = None) -> np.ndarray:
-    """Structured vertex rows: float64 x y z, float32 nx ny nz, uint8 red green blue, uint8 observed (1 where
-    a view's points support the vertex, 0 where the fusion invented it) (the optional ones only when given;
-    colours in [0, 1] are rounded to 8 bits)."""
+                    sigma: np.ndarray | None = None, observed: np.ndarray | None = None) -> np.ndarray:
+    """Structured vertex rows: float64 x y z, float32 nx ny nz, uint8 red green blue, float32 sigma
+    (metres), uint8 observed (1 where a view's points support the vertex, 0 where the fusion invented it)
+    (the optional ones only when given; colours in [0, 1] are rounded to 8 bits)."""
     fields = [("x", "<f8"), ("y", "<f8"), ("z", "<f8")]
     if normals is not None:
         fields += [("nx", "<f4"), ("ny", "<f4"), ("nz", "<f4")]
     if colours is not None:
         fields += [("red", "u1"), ("green", "u1"), ("blue", "u1")]
+    if sigma is not None:
+        fields += [("sigma", "<f4")]
     if observed is not None:
         fields += [("observed", "u1")]
     rec = np.empty(len(points), dtype=fields)
@@ -358,18 +369,22 @@ def _vertex_records(points: np.ndarray, normals: np.ndarray | None, colours: np.
     if colours is not None:
         rgb = np.clip(np.rint(colours * 255), 0, 255).astype(np.uint8)
         rec["red"], rec["green"], rec["blue"] = rgb.T
+    if sigma is not None:
+        rec["sigma"] = sigma
     if observed is not None:
         rec["observed"] = np.asarray(observed, dtype=bool)
     return rec
 
 
 def cloud_ply_bytes(cloud: PointCloud) -> bytes:
-    """A point cloud as binary PLY: float64 xyz, float32 normals, uint8 RGB, comment "metres"."""
-    return _ply_bytes("rangekit point cloud, metres", _vertex_records(cloud.points, cloud.normals, cloud.colours))
+    """A point cloud as binary PLY: float64 xyz, float32 normals, uint8 RGB, float32 ``sigma`` (the
+    predicted std along the camera ray, metres), comment "metres"."""
+    return _ply_bytes("rangekit point cloud, metres",
+                      _vertex_records(cloud.points, cloud.normals, cloud.colours, cloud.sigma))
 
 
 def mesh_ply_bytes(mesh: TriangleMesh) -> bytes:
     """A triangle mesh as binary PLY: float64 xyz, uint8 RGB, uint8 ``observed`` (when the mesh has the flag),
     faces as ``list uchar int``, comment "metres"."""
     return _ply_bytes("rangekit mesh, metres", _vertex_records(mesh.vertices, None, mesh.vertex_colours,
-                                                               mesh.observed), mesh.triangles)
+                                                               observed=mesh.observed), mesh.triangles)

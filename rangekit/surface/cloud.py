@@ -20,11 +20,13 @@ __all__ = ["PointCloud", "to_open3d", "voxel_downsample", "MAX_VOXELS_PER_DIAGON
 
 @dataclass(frozen=True, eq=False)
 class PointCloud:
-    """Points in metres with optional per-point colour and unit normal."""
+    """Points in metres with optional per-point colour, unit normal and predicted uncertainty."""
 
     points: np.ndarray                 # (N, 3) float64 metres
     colours: np.ndarray | None = None  # (N, 3) float32 linear RGB in [0, 1]
     normals: np.ndarray | None = None  # (N, 3) float64 unit vectors
+    sigma: np.ndarray | None = None    # (N,) float32 metres: predicted std of each point along its camera ray
+                                       # (rangekit.coded.uncertainty); NaN where unknown
 
     def __post_init__(self) -> None:
         P = np.asarray(self.points, dtype=np.float64)
@@ -38,12 +40,22 @@ class PointCloud:
                 if a.shape != P.shape:
                     raise InputError(f"PointCloud: {name} must be {P.shape}, found {a.shape}")
                 object.__setattr__(self, name, a)
+        if self.sigma is not None:
+            sg = np.asarray(self.sigma, dtype=np.float32)
+            if sg.shape != (len(P),):
+                raise InputError(f"PointCloud: sigma must be ({len(P)},), found {sg.shape}")
+            object.__setattr__(self, "sigma", sg)
+
+    def take(self, index) -> "PointCloud":
+        """The points selected by ``index`` (a boolean mask or integer indices), every field kept."""
+        pick = (lambda a: None if a is None else a[index])
+        return PointCloud(self.points[index], pick(self.colours), pick(self.normals), pick(self.sigma))
 
     def __len__(self) -> int:
         return len(self.points)
 
     def __repr__(self) -> str:
-        extra = [n for n in ("colours", "normals") if getattr(self, n) is not None]
+        extra = [n for n in ("colours", "normals", "sigma") if getattr(self, n) is not None]
         return f"PointCloud({len(self)} points{', ' + ', '.join(extra) if extra else ''})"
 
 
@@ -239,13 +251,14 @@ def oriented_normals_cloud(points: np.ndarray, *, voxel: float | None = None) ->
 
 
 def transform_cloud(cloud: PointCloud, T_a_b: np.ndarray) -> PointCloud:
-    """``cloud`` (frame b) in frame a: points mapped by ``T_a_b``, normals rotated, colours kept."""
+    """``cloud`` (frame b) in frame a: points mapped by ``T_a_b``, normals rotated, colours and sigma kept
+    (a rigid motion does not change a length)."""
     T = np.asarray(T_a_b, dtype=np.float64)
     if T.shape != (4, 4):
         raise InputError(f"transform_cloud: T_a_b must be (4, 4), found {T.shape}")
     points = cloud.points @ T[:3, :3].T + T[:3, 3]
     normals = None if cloud.normals is None else cloud.normals @ T[:3, :3].T
-    return PointCloud(points, cloud.colours, normals)
+    return PointCloud(points, cloud.colours, normals, cloud.sigma)
 
 
 def merge_clouds(clouds: Sequence[PointCloud], T_world_view: np.ndarray | Sequence[np.ndarray]) -> PointCloud:
@@ -259,7 +272,7 @@ def merge_clouds(clouds: Sequence[PointCloud], T_world_view: np.ndarray | Sequen
     Returns
     -------
     PointCloud with all points in view order; normals (float64) when every view has normals, colours
-    when every view has colours, otherwise None.
+    when every view has colours, sigma when every view has sigma, otherwise None.
     """
     clouds = list(clouds)
     T = np.asarray(T_world_view, dtype=np.float64)
@@ -274,4 +287,7 @@ def merge_clouds(clouds: Sequence[PointCloud], T_world_view: np.ndarray | Sequen
     colours = None
     if all(c.colours is not None for c in moved):
         colours = np.concatenate([c.colours for c in moved])
-    return PointCloud(points, colours, normals)
+    sigma = None
+    if all(c.sigma is not None for c in moved):
+        sigma = np.concatenate([c.sigma for c in moved])
+    return PointCloud(points, colours, normals, sigma)

@@ -125,6 +125,7 @@ def _fit_plane_rms(P):
     return np.linalg.svd(P - c, full_matrices=False)[1][-1] / np.sqrt(len(P))
 
 
+@pytest.mark.slow   # 21 s: in make test-slow, so make test stays under its 8 minutes
 def test_sphere_and_plane_fits_from_reconstructed_points(scenes):
     lines = []
     for method, subpixel in (("graycode", False), ("graycode", True), ("hybrid", True)):

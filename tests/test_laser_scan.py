@@ -1,8 +1,8 @@
 """``rangekit scan --method laser`` (issue 17): a turntable laser-line session, acquired crash-safe and
 resumable like coded light, processed into a cloud and a mesh measured against the simulator's truth.
 
-The full 400-step scans of lumpy and of the upright bunny run in ``make test-slow``; here a 12-step scan
-(30 degrees per step) checks the chain end to end and the session's contents."""
+The full 400-step scans of lumpy and of the upright bunny run in ``make test-slow``, and so does a 12-step
+scan (30 degrees per step, 18 s: ``make test`` keeps to its 8 minutes) that checks the chain end to end and the session's contents."""
 
 from __future__ import annotations
 
@@ -22,6 +22,7 @@ def laser_scan(tmp_path_factory):
     return out
 
 
+@pytest.mark.slow
 def test_laser_scan_cloud_matches_the_true_surface(laser_scan):
     summary = json.loads((laser_scan / "summary.json").read_text())
     acc = summary["accuracy"]
@@ -37,6 +38,7 @@ def test_laser_scan_cloud_matches_the_true_surface(laser_scan):
     assert len(summary["views"]) == 12
 
 
+@pytest.mark.slow
 def test_laser_session_holds_capture_folders(laser_scan, tmp_path, capsys):
     session = Session.load(laser_scan)
     assert session.is_laser and session.pattern.frame_files == ["off.png", "laser0.png", "laser1.png"]
@@ -100,6 +102,7 @@ def test_laser_scan_options(tmp_path, capsys):
     assert not any((tmp_path / n).exists() for n in "abcd")
 
 
+@pytest.mark.slow
 def test_laser_session_refuses_tsdf(laser_scan, capsys):
     assert main(["process", str(laser_scan), "--fusion", "tsdf", "--no-report"]) == 1
     assert "fuses with poisson" in capsys.readouterr().err

@@ -71,6 +71,16 @@ def kept_after_outliers(residuals, fraction: float) -> np.ndarray:
     return keep
 
 
+def _fit_with_outlier_rule(fit_fn, P: np.ndarray, outlier_fraction: float, what: str):
+    """``(fit, keep)``: ``fit_fn`` on all points, then again without the points the guideline's outlier rule
+    drops (:func:`kept_after_outliers`), if any."""
+    fit = fit_fn(P, what=what)
+    keep = kept_after_outliers(fit.residuals, outlier_fraction)
+    if not keep.all():
+        fit = fit_fn(P[keep], what=what)
+    return fit, keep
+
+
 def probing(points, calibrated_diameter: float, *, outlier_fraction: float = 0.0,
             what: str = "sphere points") -> ProbingResult:
     """PF and PS of one sphere measurement ((N, 3) points, metres; the calibrated diameter in metres)."""
@@ -78,10 +88,7 @@ def probing(points, calibrated_diameter: float, *, outlier_fraction: float = 0.0
     if not (np.isfinite(d) and d > 0):
         raise InputError(f"{what}: calibrated diameter must be a positive length in metres, found {calibrated_diameter!r}")
     P = np.asarray(points, dtype=np.float64)
-    fit = fit_sphere(P, what=what)
-    keep = kept_after_outliers(fit.residuals, outlier_fraction)
-    if not keep.all():
-        fit = fit_sphere(P[keep], what=what)
+    fit, keep = _fit_with_outlier_rule(fit_sphere, P, outlier_fraction, what)
     e = fit.residuals
     return ProbingResult(fit, float(e.max() - e.min()), 2.0 * fit.radius - d, len(P), int((~keep).sum()))
 
@@ -98,9 +105,6 @@ def sphere_spacing(centre_a, centre_b, calibrated_distance: float) -> float:
 def flatness(points, *, outlier_fraction: float = 0.0, what: str = "plane points") -> FlatnessResult:
     """F of one plane measurement ((N, 3) points, metres)."""
     P = np.asarray(points, dtype=np.float64)
-    fit = fit_plane_lsq(P, what=what)
-    keep = kept_after_outliers(fit.residuals, outlier_fraction)
-    if not keep.all():
-        fit = fit_plane_lsq(P[keep], what=what)
+    fit, keep = _fit_with_outlier_rule(fit_plane_lsq, P, outlier_fraction, what)
     r = fit.residuals
     return FlatnessResult(fit, float(r.max() - r.min()), len(P), int((~keep).sum()))

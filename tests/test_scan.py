@@ -42,12 +42,14 @@ def test_scan_gives_a_watertight_mesh_close_to_the_true_surface(scanned):
     assert closed.is_watertight and summary["mesh_watertight"]["watertight"] and not summary["mesh"]["watertight"]
     assert closed.observed is not None and 0 < (~closed.observed).sum() == summary["mesh_watertight"]["unobserved_vertices"]
     assert acc["rms"] <= 0.001 * acc["diagonal"] and acc["completeness"] >= 0.95
-    # The observed mesh invents nothing: no surface where no view can see, and closer than the closed mesh.
-    assert acc["unobserved_area"] < 0.01 and acc["rms"] < acc["watertight"]["rms"]
-    # An independent check of the same claim: every mesh vertex against the true surface.
+    # The observed mesh invents nothing: far less of it lies where no view sees within 80 deg of incidence
+    # than of the closed mesh (what is left was seen at grazing angles or near the plate), and it is closer.
+    assert acc["unobserved_area"] < 0.05 < acc["watertight"]["unobserved_area"]
+    assert acc["rms"] < acc["watertight"]["rms"] and acc["rms_all"] < acc["watertight"]["rms_all"]
+    # An independent check of the same claim: every mesh vertex against the true surface, none 1 mm off.
     obj = default_scene("lumpy").objects[0]
     d = distance_to_surface(mesh.vertices, TriangleMesh(obj.world_vertices(), obj.triangles))
-    assert np.sqrt(np.mean(d ** 2)) <= 0.001 * acc["diagonal"]
+    assert np.sqrt(np.mean(d ** 2)) <= 0.001 * acc["diagonal"] and d.max() < 1e-3, d.max()
     assert summary["views"] == [f"view_{k:03d}" for k in range(6)]
     assert set(summary["seconds"]) >= {"decode", "register", "fuse", "evaluate", "report"}
     assert all(e["accepted"] for e in summary["edges"] if abs(e["i"] - e["j"]) in (1, 5))
@@ -65,8 +67,10 @@ def test_report_opens_in_headless_chromium_with_every_image_loaded(scanned, tmp_
                     "when run as root)")
     page = open_page(scanned / "report.html", screenshot=tmp_path / "report.png")
     images = page["images"]
-    # 5 heat maps + colour bar + 5 mesh sides + 5 closed mesh sides + 2 registered clouds + view graph + 5 per view.
-    assert len(images) == 5 + 1 + 5 + 5 + 2 + 1 + 5 * 6
+    # 5 heat maps + colour bar + 5 mesh sides + 5 closed mesh sides + 2 registered clouds + view graph
+    # + 2 sides of the views' agreement and its colour bar + 6 per view (with the predicted sigma).
+    assert len(images) == 5 + 1 + 5 + 5 + 2 + 1 + 3 + 6 * 6
+    assert "Views' agreement" in html and "predicted sigma" in html
     broken = [im for im in images if not (im["complete"] and im["naturalWidth"] > 0)]
     assert not broken, broken
     assert page["screenshot"] and Path(page["screenshot"]).stat().st_size > 10_000
@@ -77,7 +81,7 @@ def test_reprocess_with_tsdf_fusion(scanned, capsys):
     caches = {p: p.stat().st_mtime_ns for p in sorted(scanned.glob("view_*/cloud.ply"))}
     assert main(["process", str(scanned), "--fusion", "tsdf", "--no-report"]) == 0
     out = capsys.readouterr().out
-    assert "mesh (tsdf)" in out and "\r" not in out and "\x1b" not in out
+    assert "mesh (tsdf, observed surface)" in out and "\r" not in out and "\x1b" not in out
     summary = json.loads((scanned / "summary.json").read_text())
     assert summary["mesh"]["fusion"] == "tsdf" and summary["mesh_watertight"]["watertight"]
     assert summary["accuracy"]["rms"] <= 0.002 * summary["accuracy"]["diagonal"]

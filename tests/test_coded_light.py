@@ -240,3 +240,24 @@ def test_decode_bad_input_is_explained(scenes):
         decode(np.zeros_like(imgs), spec)
     with pytest.raises(DecodeError, match="uint8 or uint16"):
         decode(imgs.astype(np.float32), spec)
+
+
+def test_discontinuity_mask_drops_the_rim_jumps_and_a_margin_around_them():
+    from rangekit.coded.triangulate import discontinuity_mask
+
+    # A 9x12 plane 1 m away with a 10 mm step between columns 5 and 6, and one hole at (4, 2).
+    xyz = np.zeros((9, 12, 3))
+    xyz[:, :, 2] = np.where(np.arange(12) < 6, 1.0, 1.01)[None, :]
+    xyz[4, 2] = np.nan
+    drop = discontinuity_mask(xyz, np.zeros(3))
+    rim = np.zeros((9, 12), bool)
+    rim[[0, -1], :] = rim[:, [0, -1]] = True
+    rim[:, 5:7] = True
+    rim[[3, 5, 4, 4], [2, 2, 1, 3]] = True
+    assert np.array_equal(drop, rim)
+    # margin 1: every point within one pixel (8-neighbourhood) of those or of the hole; the hole stays valid-free.
+    from scipy.ndimage import binary_dilation
+    grown = binary_dilation(rim | ~np.isfinite(xyz[:, :, 2]), np.ones((3, 3), bool), border_value=1)
+    grown[4, 2] = False
+    assert np.array_equal(discontinuity_mask(xyz, np.zeros(3), margin=1), grown)
+    assert discontinuity_mask(xyz, np.zeros(3), margin=1).sum() > drop.sum() + 20

@@ -106,6 +106,7 @@ def process_session(folder: str | Path, *, fusion: str = "poisson", method: str 
 def _process(out: Path, fusion: str, method: str, table_margin: float, evaluate: Evaluator | None, report: bool,
              progress: Callable | None) -> ProcessResult:
     from rangekit.app.fused_outputs import evaluate_fused, save_fused
+    from rangekit.app.reconstruct import EDGE_MARGIN_PX
     from rangekit.surface.fusion import poisson_meshes, tsdf_fuse
     from rangekit.surface.observed import split_observed
     from rangekit.registration.multiview import register_views
@@ -131,6 +132,7 @@ def _process(out: Path, fusion: str, method: str, table_margin: float, evaluate:
     rig, spec, full_scale = session.rig, session.pattern, session.capture.full_scale
     T_table_world = invert_T(rig.T_world_table) if rig.T_world_table is not None else None
     settings = {"rangekit": __version__, "method": method, "table_margin": table_margin,
+                "edge_margin_px": EDGE_MARGIN_PX,
                 "pattern": spec.to_dict()["method"], "full_scale": full_scale,
                 "projector_response": None if rig.projector_response is None else rig.projector_response.to_dict()}
     timer = StageTimer()

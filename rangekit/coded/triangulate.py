@@ -169,7 +169,7 @@ def range_normals(xyz: np.ndarray, viewpoint: np.ndarray) -> np.ndarray:
 
 
 def discontinuity_mask(xyz: np.ndarray, viewpoint: np.ndarray, *, max_jump: float = 0.004,
-                       min_neighbours: int = 4) -> np.ndarray:
+                       min_neighbours: int = 4, margin: int = 0) -> np.ndarray:
     """(H, W) bool: points to drop as "flying pixels" at depth discontinuities.
 
     A point is dropped when its distance to ``viewpoint`` differs from a 4-neighbour's by more than
@@ -177,7 +177,9 @@ def discontinuity_mask(xyz: np.ndarray, viewpoint: np.ndarray, *, max_jump: floa
     of its 4-neighbours are valid (default: all four, so the one-pixel rim of every region goes). Mixed
     pixels at silhouettes (half foreground, half background) decode to codes of the wrong surface and
     land between the two; at the rim of a surface the camera blur is cut off by the background and biases
-    the code by up to half a column. This removes both.
+    the code by up to half a column. This removes both. ``margin`` (pixels) also drops every point within
+    that many pixels (a square) of a dropped point or of an invalid pixel: the camera blur reaches past
+    the one-pixel rim.
     """
     r = np.linalg.norm(np.asarray(xyz, dtype=np.float64) - viewpoint, axis=2)
     H, W = r.shape
@@ -186,4 +188,11 @@ def discontinuity_mask(xyz: np.ndarray, viewpoint: np.ndarray, *, max_jump: floa
     with np.errstate(invalid="ignore"):
         jump = np.any(np.abs(neigh - r) > max_jump * r, axis=0)
     n_valid = np.sum(np.isfinite(neigh), axis=0)
-    return np.isfinite(r) & (jump | (n_valid < min_neighbours))
+    valid = np.isfinite(r)
+    drop = valid & (jump | (n_valid < min_neighbours))
+    if margin > 0:
+        from scipy.ndimage import binary_dilation
+
+        size = 2 * int(margin) + 1
+        drop = valid & binary_dilation(drop | ~valid, structure=np.ones((size, size), bool), border_value=1)
+    return drop

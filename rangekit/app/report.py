@@ -149,6 +149,17 @@ def write_report(folder: str | Path, result: "ProcessResult", *, clouds: Sequenc
     figs.append(_img(view_graph_svg(n, result.edges), "view graph"))
     sections += ["<h2>Registration</h2>", f"<div class='row'>{''.join(figs)}</div>"]
     sections += view_errors_section(result.view_errors)
+    from rangekit.app.report_quality import quality_section, sigma_scale
+    from rangekit.geometry import apply_T
+
+    clouds_world = [apply_T(T, c.points) for T, c in zip(result.T_world_view, clouds)]
+    sections += quality_section(mesh, clouds_world, up=up, sides=sides, side_names=side_names, size=size,
+                                progress=progress)
+    def has_sigma(m) -> bool:
+        return m.sigma is not None and bool(np.isfinite(m.sigma).any())
+
+    sigma_maps = [m.sigma for m in maps if has_sigma(m)]
+    smax = sigma_scale(sigma_maps) if sigma_maps else None
 
     call_progress(progress, "report: views")
     rows = []
@@ -169,6 +180,9 @@ def write_report(folder: str | Path, result: "ProcessResult", *, clouds: Sequenc
                                       cmap="grey")), "confidence"),
                 _img(_thumb(colourise(depth, dlo, dhi, cmap="viridis")), f"depth {dlo * 1e3:.0f}-{dhi * 1e3:.0f} mm"),
                 _img(_crop(render_cloud(cloud, ccam)), f"cloud: {len(cloud):,} points")]
+        if smax is not None and has_sigma(view_maps):
+            figs.insert(4, _img(_thumb(colourise(view_maps.sigma, 0.0, smax, cmap="turbo")),
+                                f"predicted sigma 0-{smax * 1e3:.3f} mm"))
         rows.append(f"<div class='row'>{''.join(figs)}</div>")
         call_progress(progress, f"report: view {k + 1}/{n}", k + 1, n)
     sections += ["<h2>Views</h2>", "".join(rows)]

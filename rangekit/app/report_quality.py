@@ -1,0 +1,87 @@
+"""The report's uncertainty section: what a scan says about its own quality, without any truth.
+
+- **View agreement**: the observed mesh coloured by the quality map
+  (:func:`rangekit.surface.quality.view_disagreement`): per vertex, the standard deviation of the offsets
+  along the normal of the registered views that see it. Noise, registration and calibration errors between
+  views show up as views that put the surface at different heights; grey where fewer than two views see it.
+- **Predicted sigma**: each view's map of the predicted standard deviation of its points along the camera
+  ray (:mod:`rangekit.coded.uncertainty`), one colour scale for all views, in the views' rows.
+
+Units in the pictures and text are mm; the computation is in metres in the session world.
+"""
+
+from __future__ import annotations
+
+from typing import Callable, Sequence
+
+import numpy as np
+
+from rangekit.progress import call_progress
+
+__all__ = ["QUALITY_VERTICES", "mesh_quality", "quality_section", "sigma_scale"]
+
+#: The quality map is computed on at most this many mesh vertices (evenly taken) and shown by nearest
+#: vertex: its structure is smooth at that density and the report stays a few seconds.
+QUALITY_VERTICES = 60_000
+#: A view sees a vertex when its 4 nearest points lie within this many median point spacings of a view.
+SEEN_SPACINGS = 3.0
+
+
+def mesh_quality(vertices: np.ndarray, triangles: np.ndarray, clouds_world: Sequence[np.ndarray]):
+    """``(vertices used (M, 3), QualityMap)``: the views' disagreement on up to :data:`QUALITY_VERTICES`
+    vertices of the mesh; ``clouds_world`` each view's points (N_i, 3) in the mesh's frame, metres."""
+    from scipy.spatial import cKDTree
+
+    from rangekit.surface.quality import vertex_normals, view_disagreement
+
+    normals = vertex_normals(vertices, triangles)
+    step = max(1, len(vertices) // QUALITY_VERTICES)
+    V, N = vertices[::step], normals[::step]
+    # Each view's point spacing: the median distance from a tenth of its points to their nearest other point.
+    spacing = [float(np.median(cKDTree(c).query(c[::10], k=2)[0][:, 1])) for c in clouds_world if len(c) > 20]
+    radius = SEEN_SPACINGS * float(np.median(spacing))
+    return V, view_disagreement(V, N, clouds_world, radius=radius)
+
+
+def sigma_scale(sigma_maps: Sequence[np.ndarray]) -> float:
+    """Metres: the common top of the views' sigma colour scale (99th percentile over all views)."""
+    finite = np.concatenate([s[np.isfinite(s)].ravel() for s in sigma_maps] or [np.zeros(0)])
+    return float(np.percentile(finite, 99)) if finite.size else 1e-3
+
+
+def quality_section(mesh, clouds_world: Sequence[np.ndarray], *, up: np.ndarray, sides, side_names,
+                    size: tuple[int, int], progress: Callable | None = None) -> list[str]:
+    """HTML of the view-agreement pictures of ``mesh`` (observed surface, session world) from ``sides``
+    (list of (azimuth, elevation) radians), with a colour bar and the figures in the text."""
+    from scipy.spatial import cKDTree
+
+    from rangekit.app.report import _crop, _img
+    from rangekit.app.snapshot import colour_bar, fit_camera, render_values_on_mesh
+
+    call_progress(progress, "report: views' agreement (quality map)")
+    V, q = mesh_quality(mesh.vertices, mesh.triangles, clouds_world)
+    d = q.disagreement
+    seen = np.isfinite(d)
+    if not seen.any():
+        return ["<h2>Views' agreement</h2><p>No part of the mesh is seen by two views: nothing to compare.</p>"]
+    vmax = float(np.percentile(d[seen], 99))
+    tree = cKDTree(V)
+
+    def value(X: np.ndarray) -> np.ndarray:
+        return d[tree.query(X, k=1)[1]]
+
+    figs = []
+    for (az, el), name in zip(sides, side_names):
+        cam = fit_camera(mesh.vertices, azimuth=az, elevation=el, size=size, up=up, tight=True)
+        img, vals = render_values_on_mesh(mesh, cam, value, vmin=0.0, vmax=vmax, cmap="turbo", smooth=True)
+        img[np.isnan(vals) & np.any(img != 255, axis=2)] = 160   # seen by fewer than two views: grey
+        figs.append(_img(_crop(img), name, alt=f"{name}: disagreement between the views"))
+    bar = colour_bar(0.0, vmax * 1e3, label="views' disagreement (std along the normal), mm", cmap="turbo")
+    rms = float(np.sqrt(np.mean(d[seen] ** 2)))
+    return ["<h2>Views' agreement (no truth needed)</h2>",
+            f"<p>Per vertex of the observed mesh, the standard deviation of the heights at which the registered "
+            f"views that see it put the surface: RMS {rms * 1e3:.4f} mm, 95th percentile "
+            f"{np.percentile(d[seen], 95) * 1e3:.4f} mm, over the {seen.mean():.1%} of the mesh seen by two or "
+            "more views (grey: fewer). Noise, registration and calibration errors between views all raise it; "
+            "compare with the views' predicted sigma below.</p>",
+            f"<div class='row'>{''.join(figs)}</div>", _img(bar, "colour scale")]

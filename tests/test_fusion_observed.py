@@ -148,18 +148,21 @@ def test_observed_vertices_rule_and_explicit_spacing():
         observed_vertices(np.zeros(3), P)
 
 
-def test_an_isolated_point_observes_no_more_than_three_median_spacings_around_it():
+def test_an_isolated_point_observes_no_more_than_its_capped_spacing_around_it():
+    from rangekit.surface.observed import MAX_SPACING_RATIO
+
     # A row of points 1 mm apart and one isolated point 20 mm off it (its own spacing about 20 mm).
     row = np.column_stack([np.arange(50) * 1e-3, np.zeros(50), np.zeros(50)])
     P = np.vstack([row, [[0.0, 20e-3, 0]]])
     s = point_spacing(P, k=2)
     assert s[-1] > 19e-3 and np.median(s) == pytest.approx(1e-3)
-    # 8 mm from the isolated point: within 3 of its own spacings, but not within 3 x 3 median spacings (9 mm)...
-    V = np.array([[0.0, 28e-3, 0], [0.0, 30e-3, 0], [25e-3, 2.9e-3, 0]])
-    assert observed_vertices(V, P, spacing=s, factor=3.0).tolist() == [True, False, True]
-    # ...and with factor 1 the isolated point observes 3 mm around it, a point of the row its own 1 mm.
-    V = np.array([[0.0, 22.9e-3, 0], [0.0, 23.1e-3, 0], [25e-3, 0.9e-3, 0], [25e-3, 1.1e-3, 0]])
-    assert observed_vertices(V, P, spacing=s, factor=1.0).tolist() == [True, False, True, False]
+    # The isolated point observes factor x MAX_SPACING_RATIO x 1 mm around it, not factor x 20 mm; a point of
+    # the row factor x its own 1 mm.
+    for factor in (1.0, 2.0, 3.0):
+        r = factor * MAX_SPACING_RATIO * 1e-3
+        V = np.array([[0.0, 20e-3 + 0.98 * r, 0], [0.0, 20e-3 + 1.02 * r, 0], [25e-3, 0.98 * factor * 1e-3, 0],
+                      [25e-3, 1.02 * factor * 1e-3, 0]])
+        assert observed_vertices(V, P, spacing=s, factor=factor).tolist() == [True, False, True, False]
 
 
 def test_keep_observed_drops_the_triangles_touching_an_unobserved_vertex():

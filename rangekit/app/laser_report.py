@@ -13,7 +13,8 @@ from typing import Callable
 
 import numpy as np
 
-from rangekit.app.report import SIDE_NAMES, SIDES, THUMB_W, _crop, _img, head_sections, table_up, write_page
+from rangekit.app.report import SIDE_NAMES, SIDES, head_sections, table_up, write_page
+from rangekit.app.report_figures import THUMB_W, crop as _crop, figure as _img
 from rangekit.progress import call_progress
 
 __all__ = ["write_laser_report", "points_chart_svg"]

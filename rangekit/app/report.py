@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING, Callable, Sequence
 
 import numpy as np
 
+from rangekit.app.report_figures import THUMB_W, crop as _crop, figure as _img, thumb as _thumb
 from rangekit.app.report_views import view_errors_section
 from rangekit.io import atomic_write_text
 from rangekit.progress import call_progress
@@ -30,8 +31,6 @@ if TYPE_CHECKING:
 
 __all__ = ["write_report", "view_graph_svg"]
 
-THUMB_W = 256
-
 _CSS = """
 body{font-family:system-ui,-apple-system,Segoe UI,Helvetica,Arial,sans-serif;margin:24px auto;max-width:1400px;
 color:#222;padding:0 16px}
@@ -42,33 +41,6 @@ figure{margin:0} figcaption{font-size:12px;color:#555;text-align:center}
 table{border-collapse:collapse;font-size:13px} td,th{padding:3px 6px;border-bottom:1px solid #eee;text-align:left}
 img{display:block}
 """
-
-
-def _uri(image: np.ndarray) -> str:
-    from rangekit.app.snapshot import data_uri
-
-    return data_uri(image)
-
-
-def _img(image: np.ndarray | str, caption: str, alt: str | None = None) -> str:
-    src = image if isinstance(image, str) else _uri(image)
-    cap = html.escape(caption)
-    return f'<figure><img src="{src}" alt="{html.escape(alt or caption)}"><figcaption>{cap}</figcaption></figure>'
-
-
-def _thumb(image: np.ndarray, width: int = THUMB_W) -> np.ndarray:
-    import cv2
-
-    h, w = image.shape[:2]
-    return cv2.resize(image, (width, max(1, round(h * width / w))), interpolation=cv2.INTER_AREA)
-
-
-def _crop(image: np.ndarray, pad: int = 6) -> np.ndarray:
-    """``image`` cut to its non-white content plus ``pad`` pixels (renders frame a bounding sphere)."""
-    ys, xs = np.nonzero(np.any(image < 250, axis=2))
-    if ys.size == 0:
-        return image
-    return image[max(0, ys.min() - pad):ys.max() + pad + 1, max(0, xs.min() - pad):xs.max() + pad + 1]
 
 
 def view_graph_svg(n: int, edges: Sequence[dict], *, size: int = 460) -> str:

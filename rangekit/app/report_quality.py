@@ -55,7 +55,7 @@ def quality_section(mesh, clouds_world: Sequence[np.ndarray], *, up: np.ndarray,
     (list of (azimuth, elevation) radians), with a colour bar and the figures in the text."""
     from scipy.spatial import cKDTree
 
-    from rangekit.app.report import _crop, _img
+    from rangekit.app.report_figures import crop as _crop, figure as _img
     from rangekit.app.snapshot import colour_bar, fit_camera, render_values_on_mesh
 
     call_progress(progress, "report: views' agreement (quality map)")

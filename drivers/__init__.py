@@ -6,8 +6,12 @@ a full-screen projector display (pygame, optional) and Luxonis depthai cameras.
     "devices": {
       "turntable": {"protocol": "horus" | "fabscan", "port": "/dev/ttyUSB0", "baud": 115200},
       "projector": {"display": 1, "control": {"protocol": "escvp21" | "pjlink", "port": "/dev/ttyUSB1"}},
-      "camera": {"type": "depthai", "id": null, "socket": "CAM_A"}
+      "camera": {"type": "depthai", "id": null, "socket": "CAM_A", "search_timeout_s": 3}
     }
+
+The camera is opened with the rig's ``capture.camera`` controls (:func:`rangekit.camera_controls.
+controls_from_capture`), and for coded light (a projector display is opened) auto-exposure is refused
+unless ``allow_auto_exposure``.
 
 :func:`rangekit.rig_checks.validate_rig_for_hardware` (``devices`` and ``capture``) runs first and opens
 nothing, so a typo in the rig file is reported before any device moves. Any section may instead be ``{"type": "sim"}`` (not
@@ -18,8 +22,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from rangekit.camera_controls import controls_from_capture
 from rangekit.errors import ConfigError
-from rangekit.rig_checks import validate_rig_for_hardware
+from rangekit.rig_checks import DEFAULT_SEARCH_S, validate_rig_for_hardware
 
 __all__ = ["HardwareRig", "open_rig_devices"]
 
@@ -45,9 +50,13 @@ def _section(devices: dict, key: str) -> dict | None:
     return None if sec is None or sec.get("type") == "sim" else sec
 
 
-def open_rig_devices(rig, *, where: str = "rig file", open_camera: bool = True,
-                     open_display: bool = True) -> HardwareRig:
+def open_rig_devices(rig, *, where: str = "rig file", open_camera: bool = True, open_display: bool = True,
+                     coded_light: bool | None = None) -> HardwareRig:
     """Open the turntable, projector (display + control) and camera named in ``rig.devices``.
+
+    The camera gets ``rig.capture["camera"]``'s controls and ``devices.camera.search_timeout_s``;
+    ``coded_light`` (None: whether a projector display is opened) makes it refuse auto-exposure unless
+    the rig file allows it.
 
     The rig is checked first (:func:`validate_rig_for_hardware`), so a bad field is reported before any
     device is opened. Errors name the rig-file field (``devices.turntable.protocol``...) or the device's
@@ -91,7 +100,10 @@ def open_rig_devices(rig, *, where: str = "rig file", open_camera: bool = True,
             from rangekit.drivers.depthai_camera import DepthaiCamera
 
             camera = DepthaiCamera(sec.get("id"), socket=sec.get("socket", "CAM_A"),
-                                   size=(rig.camera.width, rig.camera.height))
+                                   size=(rig.camera.width, rig.camera.height),
+                                   controls=controls_from_capture(rig.capture, where=where),
+                                   coded_light=projector is not None if coded_light is None else coded_light,
+                                   search_timeout_s=sec.get("search_timeout_s", DEFAULT_SEARCH_S), where=where)
             opened.append(camera)
         return HardwareRig(camera, projector, turntable, control)
     except BaseException:

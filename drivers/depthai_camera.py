@@ -28,10 +28,12 @@ import time
 import numpy as np
 
 from rangekit.camera import PinholeCamera
+from rangekit.camera_controls import CameraControls, require_locked
+from rangekit.drivers.depthai_controls import AUTO_CONTROLS, CONTROL_NAMES, apply_controls, check_frame_period
 from rangekit.drivers.discovery import check_search_timeout, search_depthai
 from rangekit.errors import ConfigError, DeviceDisconnected, DeviceError, DeviceTimeout
 from rangekit.rig import Rig
-from rangekit.rig_checks import DEPTHAI_SOCKETS
+from rangekit.rig_checks import DEFAULT_SEARCH_S, DEPTHAI_SOCKETS
 
 __all__ = ["DepthaiCamera", "DEPTHAI_NAMES", "calibration_to_rig", "pinhole_from_calibration",
            "scale_intrinsics", "SOCKETS"]
@@ -42,13 +44,13 @@ SOCKETS = DEPTHAI_SOCKETS
 DEPTHAI_NAMES = [
     "Pipeline", "Pipeline.create", "Pipeline.start", "Pipeline.stop", "Pipeline.isRunning",
     "node.Camera", "node.Camera.build", "node.Camera.requestOutput", "node.Camera.requestFullResolutionOutput",
-    "node.Camera.initialControl",
+    "node.Camera.initialControl", *CONTROL_NAMES,
     "node.StereoDepth", "node.StereoDepth.build", "node.StereoDepth.depth", "node.StereoDepth.setDepthAlign",
     "node.StereoDepth.setOutputSize", "node.StereoDepth.PresetMode.DEFAULT",
     "Node.Output.createOutputQueue", "MessageQueue.get", "MessageQueue.QueueException",
     "ImgFrame.Type.RGB888i", "ImgFrame.Type.GRAY8", "ImgFrame.getFrame", "ImgFrame.getWidth",
     "ImgFrame.getHeight", "ImgFrame.getTimestamp", "CameraExposureOffset.START", "ImgResizeMode.CROP",
-    "CameraControl.setManualExposure", "Clock.now",
+    "Clock.now",
     "Device", "Device.close", "Device.readCalibration", "Device.getConnectedCameras", "Device.getDeviceId",
     "Device.setIrLaserDotProjectorIntensity", "Device.setIrFloodLightIntensity",
     "XLinkConnection.getAllConnectedDevices", "XLinkDeviceState.X_LINK_BOOTED",
@@ -188,7 +190,7 @@ def _open_device(dai, device_id: str | None, search_timeout_s: float):
             raise DeviceDisconnected(f"{who}: none answered within search_timeout_s={search_timeout_s:g} s "
                                      f"(searched {time.monotonic() - t0:.2f} s){found}; check the USB/PoE cable "
                                      "and power and that no other program holds it, list devices with "
-                                     "'rangekit devices', or raise search_timeout_s")
+                                     "'rangekit devices', or raise the rig file's devices.camera.search_timeout_s")
         time.sleep(min(0.05, max(0.0, deadline - time.monotonic())))
     try:
         return dai.Device(free[0])
@@ -207,32 +209,43 @@ class DepthaiCamera:
     socket : str
         Camera to capture from: "CAM_A" (colour on OAK-D), "CAM_B", "CAM_C", ...
     size : (width, height) of captured frames; intrinsics are rescaled to it.
-    mono : bool
-        Return (H, W) uint8 grey instead of (H, W, 3) RGB.
-    exposure_us, iso : manual exposure (microseconds, ISO 100..1600); auto exposure when None.
-    search_timeout_s : how long to look for the device.
+    controls : CameraControls, optional
+        Exposure, ISO, white balance (``mono``: (H, W) uint8 grey frames instead of (H, W, 3) RGB), focus
+        and frame rate (the rig file's ``capture.camera``; mapping: :mod:`rangekit.drivers.depthai_controls`),
+        applied before the first frame; None: the camera's own automatic controls at 30 fps.
+    coded_light : bool
+        Opened for coded light: auto-exposure is refused (ConfigError) unless ``controls.allow_auto_exposure``.
+    search_timeout_s : how long to look for the device (the rig file's ``devices.camera.search_timeout_s``).
     depth : bool
         Also run on-device ``StereoDepth`` (CAM_B/CAM_C, aligned to ``socket``) for :meth:`depth`, when
-        the device has both cameras.
+        the device has both cameras. Off by default: coded light needs no stereo, and it costs the
+        device's bandwidth and the dot projector's attention.
+    where : str
+        Names the controls' origin (the rig file) in errors.
 
     Raises
     ------
-    DeviceDisconnected if no device answers; DeviceError if it cannot be opened or lacks ``socket``.
+    DeviceDisconnected if no device answers; DeviceError if it cannot be opened, lacks ``socket`` or cannot
+    apply a control; ConfigError for auto-exposure with ``coded_light``.
     """
 
     def __init__(self, device_id: str | None = None, *, socket: str = "CAM_A", size: tuple[int, int] = (1280, 800),
-                 mono: bool = False, exposure_us: int | None = None, iso: int | None = None,
-                 search_timeout_s: float = 3.0, depth: bool = True, frame_timeout_s: float = 2.0) -> None:
+                 controls: CameraControls | None = None, coded_light: bool = False,
+                 search_timeout_s: float = DEFAULT_SEARCH_S, depth: bool = False, frame_timeout_s: float = 2.0,
+                 where: str = "DepthaiCamera") -> None:
         import depthai as dai
 
         self._dai = dai
         self._socket_name = socket
         sock = _socket(dai, socket)
         self.size = (int(size[0]), int(size[1]))
-        self.mono = mono
+        self.controls = AUTO_CONTROLS if controls is None else controls
+        self.mono = self.controls.mono
+        self.coded_light, self._where = coded_light, where
         self.frame_timeout_s = frame_timeout_s
-        if (exposure_us is None) != (iso is None):
-            raise ConfigError("DepthaiCamera: give both exposure_us and iso for manual exposure, or neither")
+        if coded_light:
+            require_locked(self.controls, where=where)
+        check_frame_period(self.controls, name=where)
         self._device = _open_device(dai, device_id, search_timeout_s)
         self.device_id = self._device.getDeviceId()
         self._name = f"depthai {self.device_id} {socket}"
@@ -243,16 +256,17 @@ class DepthaiCamera:
                                   f"{sorted(s.name for s in connected)}")
             self._handler = self._device.readCalibration()
             self._pipeline = dai.Pipeline(self._device)
-            cam = self._pipeline.create(dai.node.Camera).build(sock)
-            if exposure_us is not None:
-                cam.initialControl.setManualExposure(int(exposure_us), int(iso))
-            kind = dai.ImgFrame.Type.GRAY8 if mono else dai.ImgFrame.Type.RGB888i
-            out = cam.requestOutput(self.size, kind, dai.ImgResizeMode.CROP)
+            fps = float(self.controls.fps)
+            cam = self._pipeline.create(dai.node.Camera).build(sock, sensorFps=fps)
+            apply_controls(cam.initialControl, self.controls, dai, name=self._name)
+            self._control = cam.inputControl.createInputQueue()
+            kind = dai.ImgFrame.Type.GRAY8 if self.mono else dai.ImgFrame.Type.RGB888i
+            out = cam.requestOutput(self.size, kind, dai.ImgResizeMode.CROP, fps=fps)
             self._frames = out.createOutputQueue(maxSize=4, blocking=False)
             self._depth = None
             stereo_socks = (dai.CameraBoardSocket.CAM_B, dai.CameraBoardSocket.CAM_C)
             if depth and all(s in connected for s in stereo_socks):
-                left, right = (cam if s == sock else self._pipeline.create(dai.node.Camera).build(s)
+                left, right = (cam if s == sock else self._pipeline.create(dai.node.Camera).build(s, sensorFps=fps)
                                for s in stereo_socks)
                 stereo = self._pipeline.create(dai.node.StereoDepth).build(
                     left.requestFullResolutionOutput(), right.requestFullResolutionOutput(),
@@ -264,7 +278,7 @@ class DepthaiCamera:
         except RuntimeError as exc:
             self._device.close()
             raise DeviceError(f"{self._name}: could not start the pipeline: {exc}") from exc
-        except DeviceError:
+        except (DeviceError, ConfigError):
             self._device.close()
             raise
 
@@ -287,6 +301,26 @@ class DepthaiCamera:
         w, h = frame.getWidth(), frame.getHeight()
         data = np.asarray(frame.getFrame())
         return data.reshape(h, w) if self.mono else data.reshape(h, w, 3)
+
+    def set_controls(self, controls: CameraControls) -> None:
+        """Apply exposure, ISO, white balance and focus now (one ``CameraControl`` message; frames exposed
+        before it arrives keep the old settings). The frame rate and mono/colour are fixed when the camera
+        is opened: a different ``fps`` or ``mono`` raises DeviceError; auto-exposure for coded light raises
+        ConfigError unless allowed."""
+        if self.coded_light:
+            require_locked(controls, where=self._where)
+        for field, now in (("fps", self.controls.fps), ("mono", self.controls.mono)):
+            if getattr(controls, field) != now:
+                raise DeviceError(f"{self._name}: capture.camera.{field} is set when the camera is opened "
+                                  f"({now!r}), found {getattr(controls, field)!r}; reopen the camera to change it")
+        ctrl = self._dai.CameraControl()
+        apply_controls(ctrl, controls, self._dai, name=self._name)
+        try:
+            self._control.send(ctrl)
+        except RuntimeError as exc:
+            raise DeviceDisconnected(f"{self._name}: could not send the camera controls: {exc}; replug the "
+                                     "device and reopen it") from exc
+        self.controls = controls
 
     def depth(self) -> np.ndarray:
         """(H, W) float32 depth in metres along the optical axis of the capture camera, NaN where invalid.

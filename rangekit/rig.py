@@ -32,11 +32,13 @@ import numpy as np
 
 from rangekit.budget import MAX_IMAGE_SIDE_PX
 from rangekit.camera import PinholeCamera
+from rangekit.camera_controls import CameraControls
 from rangekit.errors import ConfigError, InputError
 from rangekit.geometry import axis_angle_to_R, compose, invert_T, make_T, rigid_problem
 from rangekit.io import atomic_write_json, read_json
 from rangekit.lasers import LineLaser, laser_from_dict
 from rangekit.projector_response import ProjectorResponse
+from rangekit.rig_checks import DEFAULT_SEARCH_S
 
 __all__ = ["Rig", "SCHEMA", "RIG_FIELDS", "CAMERA_FIELDS", "load_rig", "save_rig", "template_rig", "table_motion",
            "turntable_prior", "table_frame"]
@@ -186,8 +188,10 @@ def template_rig() -> dict:
     0.2 m to the camera's right, turned towards a point 0.5 m in front of the camera; a turntable
     0.5 m in front of the camera, its top 5 cm below the optical axis, its z axis pointing up (world -y);
     no measured projector response (null: decoded as linear).
-    ``devices`` names a Horus turntable, an ESC/VP21 projector on display 1 and a depthai camera;
-    ``capture`` holds every capture setting rangekit reads, at its default. See docs/rig.md.
+    ``devices`` names a Horus turntable, an ESC/VP21 projector on display 1 refreshing at 60 Hz and a
+    depthai camera; ``capture`` holds every capture setting rangekit reads, at its default, the camera's
+    controls locked (``CameraControls()``: 33333 us = two 60 Hz periods, ISO 100, 5600 K, lens 130).
+    See docs/rig.md.
     """
     camera = {"name": "camera", "width": 1280, "height": 800,
               "K": [[1000.0, 0.0, 639.5], [0.0, 1000.0, 399.5], [0.0, 0.0, 1.0]],
@@ -211,10 +215,11 @@ def template_rig() -> dict:
         "T_world_table": T_world_table,
         "devices": {
             "turntable": {"protocol": "horus", "port": "/dev/ttyUSB0", "baud": 115200},
-            "projector": {"display": 1, "control": {"protocol": "escvp21", "port": "/dev/ttyUSB1", "baud": 9600}},
-            "camera": {"type": "depthai", "id": None, "socket": "CAM_A"},
+            "projector": {"display": 1, "refresh_hz": 60.0,
+                          "control": {"protocol": "escvp21", "port": "/dev/ttyUSB1", "baud": 9600}},
+            "camera": {"type": "depthai", "id": None, "socket": "CAM_A", "search_timeout_s": DEFAULT_SEARCH_S},
         },
-        "capture": {"pattern_delay_s": 0.1, "turntable_settle_s": 0.5},
+        "capture": {"pattern_delay_s": 0.1, "turntable_settle_s": 0.5, "camera": CameraControls().to_dict()},
         "projector_response": None,
     }
 

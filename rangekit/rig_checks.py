@@ -12,10 +12,12 @@ from __future__ import annotations
 import math
 
 from rangekit.budget import MAX_IMAGE_SIDE_PX
+from rangekit.camera_controls import check_refresh, controls_from_capture
 from rangekit.errors import ConfigError
 
 __all__ = ["validate_devices", "validate_capture", "validate_rig_for_hardware", "DEVICE_FIELDS", "CAPTURE_FIELDS",
-           "CAPTURE_BITS", "TURNTABLE_PROTOCOLS", "PROJECTOR_PROTOCOLS", "DEPTHAI_SOCKETS"]
+           "CAPTURE_BITS", "TURNTABLE_PROTOCOLS", "PROJECTOR_PROTOCOLS", "DEPTHAI_SOCKETS", "MAX_SEARCH_S",
+           "REFRESH_HZ", "DEFAULT_SEARCH_S"]
 
 #: Serial turntable protocols (rangekit.drivers.turntable): Horus (Ciclop) and FabScan boards.
 TURNTABLE_PROTOCOLS = ("horus", "fabscan")
@@ -23,19 +25,26 @@ TURNTABLE_PROTOCOLS = ("horus", "fabscan")
 PROJECTOR_PROTOCOLS = ("escvp21", "pjlink")
 #: depthai camera board sockets (rangekit.drivers.depthai_camera).
 DEPTHAI_SOCKETS = ("CAM_A", "CAM_B", "CAM_C", "CAM_D", "CAM_E", "CAM_F", "CAM_G", "CAM_H")
+#: The longest depthai device search accepted (seconds; depthai takes it as a C int of milliseconds), and
+#: the search a camera opened from a rig file gets without ``devices.camera.search_timeout_s``.
+MAX_SEARCH_S = 600.0
+DEFAULT_SEARCH_S = 3.0
+#: ``devices.projector.refresh_hz``: the projector's refresh rate, Hz (smallest, largest).
+REFRESH_HZ = (1.0, 480.0)
 
 #: Allowed fields of each object in a rig file's ``devices`` section, by dotted path.
 DEVICE_FIELDS = {
     "devices": ("turntable", "projector", "camera", "depthai"),
     "devices.turntable": ("type", "protocol", "port", "baud"),
-    "devices.projector": ("type", "display", "control"),
+    "devices.projector": ("type", "display", "control", "refresh_hz"),
     "devices.projector.control": ("protocol", "port", "baud", "timeout", "password"),
-    "devices.camera": ("type", "id", "socket"),
+    "devices.camera": ("type", "id", "socket", "search_timeout_s"),
     "devices.depthai": ("device_id", "sockets", "size"),  # written by depthai_camera.calibration_to_rig
 }
 #: The ``capture`` settings: name -> (smallest, largest allowed value, unit). ``bits`` is the camera's
 #: ADC bit depth, one of CAPTURE_BITS; a session records it once (rangekit.formats.session.CaptureSettings)
-#: and decodes with full scale 2**bits - 1.
+#: and decodes with full scale 2**bits - 1. ``capture.camera`` (the camera's controls) is checked by
+#: :func:`rangekit.camera_controls.controls_from_capture`.
 CAPTURE_FIELDS = {
     "pattern_delay_s": (0.0, 10.0, "seconds"),
     "turntable_settle_s": (0.0, 60.0, "seconds"),
@@ -107,9 +116,18 @@ def _check_turntable(sec, where: str) -> None:
     _baud(sec, where, path)
 
 
+def _number_in(sec: dict, key: str, lo: float, hi: float, where: str, path: str, unit: str) -> None:
+    """``sec[key]``, when present, must be a finite number in lo..hi (``unit`` says what it is)."""
+    value = sec.get(key)
+    if key in sec and not (isinstance(value, (int, float)) and not isinstance(value, bool)
+                           and math.isfinite(value) and lo <= value <= hi):
+        raise _error(where, f"{path}.{key}", f"must be a number of {unit} from {lo:g} to {hi:g}, found {_show(value)}")
+
+
 def _check_projector(sec, where: str) -> None:
     path = "devices.projector"
     sec = _object(sec, where, path)
+    _number_in(sec, "refresh_hz", *REFRESH_HZ, where, path, "hertz (the projector's refresh rate, e.g. 60)")
     if _is_sim(sec, where, path, "a real projector is named by 'display' and 'control'"):
         return
     if "display" in sec and not (_is_int(sec["display"]) and sec["display"] >= 0):
@@ -157,6 +175,7 @@ def _check_camera(sec, where: str) -> None:
                      f"first device found, found {_show(sec['id'])}")
     if sec.get("socket", "CAM_A") not in DEPTHAI_SOCKETS:
         raise _error(where, f"{path}.socket", f"must be one of {', '.join(DEPTHAI_SOCKETS)}, found {_show(sec['socket'])}")
+    _number_in(sec, "search_timeout_s", 0.0, MAX_SEARCH_S, where, path, "seconds (how long to look for the device)")
 
 
 def _check_depthai_record(sec, where: str) -> None:
@@ -191,15 +210,19 @@ def validate_devices(devices: dict, *, where: str) -> None:
 
 
 def validate_capture(capture: dict, *, where: str) -> None:
-    """Check a rig file's ``capture`` section: known fields (``CAPTURE_FIELDS``), numbers in range."""
+    """Check a rig file's ``capture`` section: known fields (``CAPTURE_FIELDS`` and ``camera``), numbers in
+    range."""
     path = "capture"
     if capture is None:
         return
     if not isinstance(capture, dict):
         raise _error(where, path, f"must be an object ({{...}}), found {_show(capture)}")
+    controls_from_capture(capture, where=where)
     for key, value in capture.items():
+        if key == "camera":
+            continue
         if key not in CAPTURE_FIELDS:
-            raise _error(where, f"{path}.{key}", f"unknown field; capture has only {', '.join(CAPTURE_FIELDS)}")
+            raise _error(where, f"{path}.{key}", f"unknown field; capture has only camera, {', '.join(CAPTURE_FIELDS)}")
         if key == "bits":
             if not (_is_int(value) and value in CAPTURE_BITS):
                 raise _error(where, f"{path}.bits", f"must be {', '.join(map(str, CAPTURE_BITS[:-1]))} or "
@@ -215,10 +238,13 @@ def validate_capture(capture: dict, *, where: str) -> None:
 
 def validate_rig_for_hardware(rig, *, where: str) -> None:
     """Everything :func:`open_rig_devices` and a hardware scan read from ``rig``, checked before any device
-    is opened: ``devices``, ``capture``, and that a projector display has a projector calibration."""
+    is opened: ``devices``, ``capture``, that a manual exposure is a whole number of the projector's
+    refresh periods (``devices.projector.refresh_hz``, :func:`rangekit.camera_controls.check_refresh`) and
+    that a projector display has a projector calibration."""
     validate_devices(rig.devices, where=where)
     validate_capture(rig.capture, where=where)
     projector = (rig.devices or {}).get("projector") or {}
+    check_refresh(controls_from_capture(rig.capture, where=where), projector.get("refresh_hz"), where=where)
     if "display" in projector and projector.get("type") != "sim" and rig.projector is None:
         raise _error(where, "devices.projector.display", "a projector display needs the projector's calibration "
                      "(field 'projector' is null)")

@@ -156,7 +156,7 @@ def test_open_device_or_skip_quickly():
 
     t0 = time.monotonic()
     try:
-        cam = DepthaiCamera(search_timeout_s=0.5, size=(640, 400))
+        cam = DepthaiCamera(search_timeout_s=0.5, size=(640, 400), depth=True)
     except DeviceError as exc:
         elapsed = time.monotonic() - t0
         assert elapsed < 3.0, f"giving up on a missing device took {elapsed:.1f} s"

@@ -98,12 +98,13 @@ def _capture(devices, frames: Sequence[np.ndarray], delay_s: float = 0.0) -> lis
     sequence at once)."""
     fast = getattr(devices, "capture_sequence", None)
     if fast is not None:
-        return fast(frames)
+        return fast(frames, delay_s)
+    sleep = getattr(devices, "sleep", time.sleep)    # the devices' clock (the simulator's is virtual)
     out = []
     for f in frames:
         devices.projector.show(f)
         if delay_s > 0:
-            time.sleep(delay_s)
+            sleep(delay_s)
         out.append(devices.camera.capture())
     return out
 

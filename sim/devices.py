@@ -25,7 +25,9 @@ from rangekit.errors import DeviceDisconnected, SceneError
 from rangekit.geometry import look_at, make_T
 from rangekit.rig import Rig
 from rangekit.sim.raycast import ViewGeometry, cast_view, pixel_corners
+from rangekit.sim.clock import TICK_EPS_S, SimClock
 from rangekit.sim.render import ImagingModel, ViewRenderer
+from rangekit.sim.sim_camera import SimCamera
 from rangekit.sim.scene import Scene
 
 __all__ = ["default_rig", "SimCamera", "SimProjector", "SimTurntable", "SimRig"]
@@ -95,12 +97,25 @@ class SimTurntable:
 
 
 class SimProjector:
-    """Holds the image being shown; black until the first :meth:`show`."""
+    """Holds the image being shown; black until the first :meth:`show`.
 
-    def __init__(self, model: PinholeCamera, faults: _Faults | None = None) -> None:
+    ``latency_s``: the display's latency (seconds, >= 0). A pattern shown at time t (``clock.now()``)
+    is seen by camera frames exposed at or after t + latency_s; frames before see the previous pattern
+    (:meth:`image_at`). ``clock``: the clock shared with the camera (:mod:`rangekit.sim.clock`).
+    """
+
+    def __init__(self, model: PinholeCamera, faults: _Faults | None = None, *, latency_s: float = 0.0,
+                 clock=None) -> None:
         self._model = model
         self._image = np.zeros((model.height, model.width), np.uint8)
         self._faults = faults or _Faults()
+        latency = float(latency_s)
+        if not np.isfinite(latency) or latency < 0:
+            raise SceneError(f"SimProjector: latency_s must be a finite number of seconds >= 0, found {latency_s!r}")
+        self.latency_s = latency
+        self.clock = clock if clock is not None else SimClock()
+        self._shown: list[tuple[float, np.ndarray]] = []    # (time shown, image), oldest first
+        self._seen = self._image                              # what the light showed before self._shown
 
     @property
     def calibration(self) -> PinholeCamera:
@@ -112,31 +127,21 @@ class SimProjector:
 
     @property
     def image(self) -> np.ndarray:
+        """The image last passed to :meth:`show` (what the projector will show once its latency passed)."""
         return self._image
 
     def show(self, image: np.ndarray) -> None:
         self._faults.tick("projector")
         img = check_pattern(image, self.resolution, self._model.name)
         self._image = img
+        self._shown.append((self.clock.now(), img))
 
-
-class SimCamera:
-    """Renders the scene at the sim turntable's angle, lit by the sim projector or, on a rig made with
-    ``light="laser"``, by the line laser switched on (none on: the laser-off, ambient image)."""
-
-    def __init__(self, rig: "SimRig") -> None:
-        self._rig = rig
-
-    @property
-    def calibration(self) -> PinholeCamera:
-        return self._rig.rig.camera
-
-    def capture(self) -> np.ndarray:
-        self._rig._faults.tick("camera")
-        if self._rig.light == "laser":
-            return self._rig.laser_image()
-        image = self._rig.projector.image
-        return self._rig.renderer().render(image, self._rig.rng_for(image))
+    def image_at(self, t: float) -> np.ndarray:
+        """The image on the object at time ``t`` (seconds; times only move forwards): the last one shown
+        at or before ``t - latency_s``."""
+        while self._shown and self._shown[0][0] + self.latency_s <= t + TICK_EPS_S:
+            self._seen = self._shown.pop(0)[1]
+        return self._seen
 
 
 class SimRig:
@@ -150,10 +155,15 @@ class SimRig:
     seed : int, base seed of every capture's noise.
     light : "projector" (the camera sees the projected pattern) or "laser" (the rig's line lasers,
         switched by the turntable; :class:`rangekit.sim.laser.LaserView` with ``laser_ambient_scale``).
+    latency_s : the projector's display latency, seconds (:class:`SimProjector`); a simulator setting, not
+        a rig file field (a real rig's is measured, and written as ``capture.pattern_delay_s``).
+    clock : the clock the devices share (:mod:`rangekit.sim.clock`); default a virtual :class:`SimClock`.
+        ``sim.sleep`` waits on it (acquisition and calibration wait through ``devices.sleep``).
     """
 
     def __init__(self, scene: Scene, rig: Rig | None = None, *, imaging: ImagingModel | None = None,
-                 seed: int = 0, light: str = "projector", laser_ambient_scale: int = 4) -> None:
+                 seed: int = 0, light: str = "projector", laser_ambient_scale: int = 4, latency_s: float = 0.0,
+                 clock=None) -> None:
         if not isinstance(scene, Scene):
             raise SceneError(f"SimRig: scene must be a rangekit.sim.Scene, found {type(scene).__name__}")
         self._scene = scene
@@ -173,8 +183,11 @@ class SimRig:
         self.light, self.laser_ambient_scale = light, int(laser_ambient_scale)
         self._laser_key, self._laser_view = None, None
         self._faults = _Faults()
+        self.clock = clock if clock is not None else SimClock()
+        self.sleep = self.clock.sleep
         self.camera = SimCamera(self)
-        self.projector = None if self.rig.projector is None else SimProjector(self.rig.projector, self._faults)
+        self.projector = None if self.rig.projector is None else SimProjector(
+            self.rig.projector, self._faults, latency_s=latency_s, clock=self.clock)
         self.turntable = SimTurntable(self._faults) if self.rig.T_world_table is not None else None
         self._cam_rays = None
         self._corner_rays = None
@@ -286,11 +299,23 @@ class SimRig:
         scene_key = (self._scene_index,) if self._scene_index else ()
         return np.random.default_rng(np.random.SeedSequence(self.seed, spawn_key=(*key, count, *scene_key)))
 
-    def capture_sequence(self, patterns) -> list[np.ndarray]:
-        """Show each pattern and capture it; renders on two threads. Same bytes as show()/capture() in turn."""
-        images, rngs = [], []
+    def capture_sequence(self, patterns, delay_s: float = 0.0) -> list[np.ndarray]:
+        """Show each pattern, wait ``delay_s`` on the clock and capture it: the same bytes as show(),
+        sleep() and capture() in turn. Renders on two threads when no frame depends on the one before
+        (no projector latency, no auto-exposure)."""
+        if self.camera.auto_exposure or self.projector.latency_s > 0:
+            out = []
+            for p in patterns:
+                self.projector.show(p)
+                self.sleep(delay_s)
+                out.append(self.camera.capture())
+            return out
+        images, rngs, exposures = [], [], []
         for p in patterns:
             self.projector.show(p)
-            images.append(self.projector.image)
-            rngs.append(self.rng_for(self.projector.image))
-        return self.renderer().render_many(images, rngs)
+            self.sleep(delay_s)
+            exposures.append(self.camera.exposure())
+            images.append(self.projector.image_at(self.camera.next_frame()))
+            self.camera.last_exposure = exposures[-1]
+            rngs.append(self.rng_for(images[-1]))
+        return self.renderer().render_many(images, rngs, exposures=exposures)

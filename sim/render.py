@@ -10,7 +10,8 @@ For each camera pixel that sees a surface (ground truth from :mod:`rangekit.sim.
   ``black_level + (1 - black_level) * p ** gamma``, blurred by the projector's defocus (Gaussian,
   ``projector_blur`` projector pixels), sampled bilinearly at the exact projector coordinate of the hit.
 * ``E`` is in fractions of the camera's full scale; then the camera lens blurs it (Gaussian,
-  ``camera_blur`` camera pixels), the sensor adds shot noise (``E * full_well`` electrons, Poisson,
+  ``camera_blur`` camera pixels), the sensor (:mod:`rangekit.sim.sensor`: exposure and ISO scale it,
+  at the reference controls E is unscaled) adds shot noise (``E * full_well`` electrons, Poisson,
   drawn as its normal approximation with the same mean and variance) and Gaussian read noise
   (``read_noise`` electrons RMS), and the ADC clips and rounds to ``bits`` bits.
 * The global term models interreflection and subsurface light, whether or not the projector lights the
@@ -33,6 +34,7 @@ import numpy as np
 
 from rangekit.errors import InputError, PatternError
 from rangekit.sim.raycast import ViewGeometry
+from rangekit.sim.sensor import Exposure, digitise
 
 __all__ = ["ImagingModel", "ViewRenderer"]
 
@@ -41,7 +43,8 @@ __all__ = ["ImagingModel", "ViewRenderer"]
 class ImagingModel:
     """Parameters of the simulated projector response and camera sensor. Defaults: a realistic rig."""
 
-    gain: float = 1.0              # full-scale fraction from white light on albedo 1, facing, at ref_distance
+    gain: float = 1.0              # full-scale fraction from white light on albedo 1, facing, at ref_distance,
+                                   # at the reference controls CameraControls() (33333 us, ISO 100; sim/sensor.py)
     ref_distance: float = 0.5      # metres; projector irradiance falls off as (ref_distance / d)^2
     ambient: float = 0.01          # room light, as a fraction of the projector's white
     global_fraction: float = 0.0   # global light: fraction of the (local) direct light added everywhere
@@ -211,23 +214,18 @@ class ViewRenderer:
         avg = cv2.resize(avg, (W, H), interpolation=cv2.INTER_LINEAR).reshape(H, W, C)
         return np.float32(self.model.global_fraction) * avg * self._hit_mask[:, :, None]
 
-    def render(self, pattern: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-        """One noisy, quantised capture: (H, W) or (H, W, 3), uint8 for 8 bits else uint16 (LSB-aligned)."""
-        m = self.model
-        img = self.expected(pattern)
-        if m.full_well > 0:
-            std = np.sqrt(np.maximum(img, 0) * np.float32(m.full_well) + np.float32(m.read_noise ** 2))
-            img += std * rng.standard_normal(img.shape, dtype=np.float32) / np.float32(m.full_well)
-        img *= np.float32(m.max_value)
-        np.clip(img, 0, m.max_value, out=img)
-        return np.rint(img).astype(m.dtype)
+    def render(self, pattern: np.ndarray, rng: np.random.Generator, exposure: Exposure | None = None) -> np.ndarray:
+        """One noisy, quantised capture: (H, W) or (H, W, 3), uint8 for 8 bits else uint16 (LSB-aligned).
+        ``exposure``: the camera's exposure and ISO (:mod:`rangekit.sim.sensor`; default the reference)."""
+        return digitise(self.expected(pattern), self.model, exposure or Exposure(), rng)
 
     def render_many(self, patterns: list[np.ndarray], rngs: list[np.random.Generator], *,
-                    workers: int = 2) -> list[np.ndarray]:
+                    workers: int = 2, exposures: list[Exposure] | None = None) -> list[np.ndarray]:
         """Render several patterns on ``workers`` threads (numpy and OpenCV release the GIL)."""
         if len(patterns) != len(rngs):
             raise InputError(f"render_many: {len(patterns)} patterns but {len(rngs)} generators")
+        exposures = exposures if exposures is not None else [Exposure()] * len(patterns)
         if workers <= 1 or len(patterns) < 2:
-            return [self.render(p, r) for p, r in zip(patterns, rngs)]
+            return [self.render(p, r, e) for p, r, e in zip(patterns, rngs, exposures)]
         with ThreadPoolExecutor(max_workers=workers) as pool:
-            return list(pool.map(self.render, patterns, rngs))
+            return list(pool.map(self.render, patterns, rngs, exposures))

@@ -21,12 +21,15 @@ from __future__ import annotations
 
 import shutil
 import time
+from dataclasses import replace
 from pathlib import Path
 from typing import Callable
 
 import numpy as np
 
+from rangekit.camera_controls import controls_from_capture, require_locked
 from rangekit.coded.patterns import PatternSpec
+from rangekit.laser.sequence import LaserSequence
 from rangekit.devices import Rig as RigDevices
 from rangekit.errors import ConfigError, DeviceError, StorageError
 from rangekit.formats.session import CaptureSettings, ScanPlan, Session, SimulatorSettings, view_folder
@@ -43,7 +46,8 @@ __all__ = ["acquire"]
 def acquire(devices: RigDevices, rig: Rig, spec: PatternSpec, out_dir: str | Path, *, plan: ScanPlan = ScanPlan(),
             resume: bool = False, capture: CaptureSettings | None = None,
             simulator: SimulatorSettings | None = None, hardware: dict | None = None,
-            files: dict[str, bytes] | None = None, progress: Callable[[str], None] | None = None) -> Session:
+            files: dict[str, bytes] | None = None, progress: Callable[[str], None] | None = None,
+            allow_auto_exposure: bool = False) -> Session:
     """Acquire (or resume) a session.
 
     Parameters
@@ -62,6 +66,9 @@ def acquire(devices: RigDevices, rig: Rig, spec: PatternSpec, out_dir: str | Pat
     simulator, hardware : how the views are taken, recorded in session.json (see :class:`Session`).
     files : files a new session keeps, relative name -> bytes (a simulated object's mesh, ``object/NAME``).
     progress : ``progress(msg, done=None, total=None)`` (see :mod:`rangekit.progress`).
+    allow_auto_exposure : scan although the rig's ``capture.camera.exposure_us`` is "auto" (``rangekit scan
+        --allow-auto-exposure``); otherwise that is refused before any frame. The rig's camera controls
+        are applied (``camera.set_controls``, where the camera has it) before the first frame.
 
     Returns
     -------
@@ -84,6 +91,11 @@ def acquire(devices: RigDevices, rig: Rig, spec: PatternSpec, out_dir: str | Pat
         disk and ``resume=True`` continues.
     """
     out = Path(out_dir)
+    controls = controls_from_capture(rig.capture, where="rig file")
+    if allow_auto_exposure:
+        controls = replace(controls, allow_auto_exposure=True)
+    require_locked(controls, where="rig file", method="laser-line scanning" if isinstance(spec, LaserSequence)
+                   else "coded light")
     if (out / "session.json").exists():
         if not resume:
             raise ConfigError(f"{out}: already holds a session (session.json); use resume to continue it or "
@@ -97,6 +109,9 @@ def acquire(devices: RigDevices, rig: Rig, spec: PatternSpec, out_dir: str | Pat
             raise StorageError(f"{out}: cannot create the session folder: {exc.strerror or exc}") from exc
         fsync_folder(out.parent)
     with session_lock(out):
+        set_controls = getattr(devices.camera, "set_controls", None)
+        if set_controls is not None:
+            set_controls(controls)
         return _acquire(devices, rig, spec, out, plan, resume, capture, simulator, hardware, files or {}, progress)
 
 
@@ -157,6 +172,7 @@ def _views(devices, light, rig, spec, out, plan, angles, session, done, names, f
         final = view_folder(out, k)
         partial = out / f"view_{k:03d}.partial"
         t0 = time.time()
+        sleep = getattr(devices, "sleep", time.sleep)    # the simulator's virtual clock, else the real one
         step, target = "turntable move", partial
         try:
             shutil.rmtree(partial, ignore_errors=True)
@@ -167,13 +183,13 @@ def _views(devices, light, rig, spec, out, plan, angles, session, done, names, f
                               k, plan.n_views)
                 devices.turntable.rotate_to(float(angle))
                 if settle_s > 0:
-                    time.sleep(settle_s)
+                    sleep(settle_s)
             sha256 = {}
             for i, (name, file) in enumerate(zip(names, files)):
                 step = f"frame {i} ({name}): {light.device}"
                 light.show(i)
                 if pattern_settle_s > 0:
-                    time.sleep(pattern_settle_s)
+                    sleep(pattern_settle_s)
                 step = f"frame {i} ({name}): camera"
                 image = devices.camera.capture()
                 step, target = f"frame {i} ({name}): writing", partial / file

@@ -13,7 +13,7 @@ from rangekit.errors import UsageError
 
 def cmd_scan(args: argparse.Namespace) -> int:
     """rangekit scan --out DIR | --resume DIR [--method coded|laser] [--rig sim|RIG.json] [--object lumpy]
-    [--views 12 | --steps 400] [--patterns hybrid] [--up X Y Z]"""
+    [--views 12 | --steps 400] [--patterns hybrid] [--up X Y Z] [--allow-auto-exposure]"""
     from rangekit.formats.session_lock import session_lock as session_lock_of
 
     t0 = time.perf_counter()
@@ -85,7 +85,8 @@ def _scan(args: argparse.Namespace, t0: float) -> int:
     try:
         session = acquire(setup.devices, setup.rig, setup.spec, folder, plan=ScanPlan(n_views=setup.n_views),
                           resume=setup.resume, capture=setup.capture, simulator=setup.simulator,
-                          hardware=setup.hardware, files=setup.files, progress=console())
+                          hardware=setup.hardware, files=setup.files, progress=console(),
+                          allow_auto_exposure=args.allow_auto_exposure)
     except KeyboardInterrupt:
         print(f"rangekit: interrupted; completed views are safe. Continue with: rangekit scan --resume {folder}",
               file=sys.stderr)
@@ -173,6 +174,9 @@ def add_parsers(sub) -> None:
                            "first, ~4 min) and the true rig, print PF, PS, SD, F and write DIR/vdi2634.json")
     scan.add_argument("--positions", type=int, nargs=3, metavar=("SPHERES", "BARS", "PLANES"),
                       help="with --artefact: positions of each artefact (default the guideline's 10 7 6)")
+    scan.add_argument("--allow-auto-exposure", action="store_true",
+                      help="scan although the rig file's capture.camera.exposure_us is 'auto' (refused otherwise: "
+                           "auto-exposure changes the brightness between frames and breaks decoding)")
     scan.add_argument("--no-process", action="store_true", help="acquire only (process later with 'rangekit process')")
     _processing_options(scan)
     scan.set_defaults(func=cmd_scan)

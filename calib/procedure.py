@@ -29,6 +29,7 @@ import numpy as np
 
 from rangekit.boards import Board, detect_board
 from rangekit.calib.camera import Correspondences, DeviceCalibration, calibrate_device
+from rangekit.calib.pose_feedback import FeedbackLimits, PoseCheck, check_pose, coverage_image
 from rangekit.calib.projector import BundleResult, bundle_adjust, corner_projector_coords, initial_T_proj_cam
 from rangekit.calib.response import measure_response
 from rangekit.calib.turntable import AxisFit, fit_turntable_axis, turntable_frame
@@ -56,6 +57,8 @@ class CalibrationSettings:
     response_levels: int = 17              # grey levels for the projector response (0 and 1 included)
     corner_radius: int = 8                 # half-window (camera px) of the corner's local fit
     measure_response: bool = True
+    feedback: FeedbackLimits = field(default_factory=FeedbackLimits)   # when a board pose is rejected
+    max_attempts: int = 10                 # captures of one pose at most (retakes asked for by ``on_pose``)
 
 
 @dataclass(frozen=True, eq=False)
@@ -70,11 +73,17 @@ class RigCalibration:
     response: ResponseFit | None
     corner_std_projector: float            # median standard error of a corner's projector coordinates, px
     seconds: dict
+    pose_checks: tuple[PoseCheck, ...] = ()    # the verdict on each board pose (the last capture of it)
+    retaken: int = 0                           # captures retaken after a rejection
 
     def summary_lines(self) -> list[str]:
         b = self.bundle
         base = np.linalg.norm(b.T_cam_proj[:3, 3])
-        lines = [f"camera: {len(self.camera.used)}/{len(self.camera.views)} board poses used; "
+        checks = self.pose_checks
+        kept = sum(c.accepted for c in checks)
+        lines = [f"board poses: {kept} of {len(checks)} kept ({len(checks) - kept} skipped, {self.retaken} retaken)"]
+        lines += [f"  {c.line()}" for c in checks if not c.accepted]
+        lines += [f"camera: {len(self.camera.used)}/{len(self.camera.views)} board poses used; "
                  f"reprojection RMS {b.rms_camera:.4f} px (bundle adjusted; {self.camera.rms:.4f} px alone)",
                  f"projector: reprojection RMS {b.rms_projector:.4f} px (bundle adjusted; {self.projector.rms:.4f} "
                  f"px alone); corner coordinates +- {self.corner_std_projector:.4f} px (median standard error)",
@@ -119,8 +128,8 @@ def _pose_from_corners(camera: PinholeCamera, obj: np.ndarray, ids: np.ndarray, 
 
 def calibrate_rig(devices, *, settings: CalibrationSettings = CalibrationSettings(),
                   place_board: Callable[[int, int], None], place_on_turntable: Callable[[], None] | None = None,
-                  template: Rig | None = None,
-                  progress: Callable | None = None) -> RigCalibration:
+                  template: Rig | None = None, progress: Callable | None = None,
+                  on_pose: Callable[[PoseCheck, np.ndarray], bool] | None = None) -> RigCalibration:
     """Run the whole calibration (module doc) and return the calibrated rig.
 
     Parameters
@@ -133,6 +142,10 @@ def calibrate_rig(devices, *, settings: CalibrationSettings = CalibrationSetting
     template : a rig whose ``devices`` and ``capture`` sections are copied into the result; its
         ``capture.pattern_delay_s`` and ``capture.turntable_settle_s`` are waited on real hardware.
     progress : ``progress(msg, done=None, total=None)``.
+    on_pose : ``on_pose(check, coverage)`` after each capture of a board pose, with its verdict
+        (:func:`rangekit.calib.pose_feedback.check_pose`) and the coverage picture so far ((H, W, 3) uint8,
+        :func:`~rangekit.calib.pose_feedback.coverage_image`); a rejected pose is captured again (after
+        ``place_board(i, n)``) when it returns True, else skipped. Rejected poses never enter the solve.
 
     Raises
     ------
@@ -163,37 +176,50 @@ def calibrate_rig(devices, *, settings: CalibrationSettings = CalibrationSetting
         seconds["response"] = time.time() - t0
 
     t1 = time.time()
-    detections, decoded = [], []
+    cam_views, decoded, checks, kept, retaken = [], [], [], [], 0
+    size = devices.camera.calibration.size
     for i in range(n):
         if i > 0:
             place_board(i, n)
-        call_progress(progress, f"board pose {i + 1}/{n}: {len(frames)} frames", i, n)
-        images = _capture(devices, frames, delay_s)
-        det = detect_board(images[white_index], board)
-        detections.append(det)
-        if det.found:
+        for attempt in range(max(1, settings.max_attempts)):
+            call_progress(progress, f"board pose {i + 1}/{n}: {len(frames)} frames", i, n)
+            images = _capture(devices, frames, delay_s)
+            det = detect_board(images[white_index], board)
+            check = check_pose(i, det, board, size, kept=kept, limits=settings.feedback)
+            retake = False
+            if on_pose is not None:
+                shown = kept + [(det.ids, det.uv)] if check.accepted else kept
+                retake = bool(on_pose(check, coverage_image(shown, size, det.uv, check.accepted)))
+            if check.accepted or not retake or attempt == settings.max_attempts - 1:
+                break
+            retaken += 1
+            place_board(i, n)
+        checks.append(check)
+        if check.accepted:
+            kept.append((det.ids, det.uv))
+            cam_views.append(Correspondences(det.ids, det.uv))
             dec = decode(images, spec, response=response)
             decoded.append((dec.proj_col, dec.proj_row, dec.confidence))
         else:
+            cam_views.append(Correspondences(np.zeros(0, np.int64), np.zeros((0, 2)), check.reason))
             decoded.append(None)
     call_progress(progress, f"captured {n} board poses", n, n)
     seconds["capture"] = time.time() - t1
 
     t2 = time.time()
     names = [f"pose {i + 1}" for i in range(n)]
-    cam_views = [Correspondences(d.ids, d.uv, d.reason) for d in detections]
     cam_cal = calibrate_device(cam_views, obj, devices.camera.calibration.size, name="camera", names=names)
     proj_views: list[Correspondences | None] = []
     stds = []
-    for i, (det, maps) in enumerate(zip(detections, decoded)):
+    for i, (view, maps) in enumerate(zip(cam_views, decoded)):
         if maps is None or i not in cam_cal.T_dev_board:
             proj_views.append(Correspondences(np.zeros(0, np.int64), np.zeros((0, 2)),
-                                              det.reason or "not used for the camera"))
+                                              view.reason or "not used for the camera"))
             continue
-        fit = corner_projector_coords(*maps, det.uv, radius=settings.corner_radius)
+        fit = corner_projector_coords(*maps, view.uv, radius=settings.corner_radius)
         ok = fit.ok
         stds.append(fit.std[ok].ravel())
-        proj_views.append(Correspondences(det.ids[ok], fit.proj_uv[ok],
+        proj_views.append(Correspondences(view.ids[ok], fit.proj_uv[ok],
                                           "" if ok.any() else "no corner lit by the projector"))
     proj_cal = calibrate_device(proj_views, obj, (W, H), name="projector", names=names)
     T_proj_cam = initial_T_proj_cam(cam_cal.T_dev_board, proj_cal.T_dev_board)
@@ -251,7 +277,8 @@ def calibrate_rig(devices, *, settings: CalibrationSettings = CalibrationSetting
               projector_response=response)
     seconds["total"] = time.time() - t0
     return RigCalibration(rig=rig, camera=cam_cal, projector=proj_cal, bundle=bundle, axis=axis,
-                          response=response_fit, corner_std_projector=corner_std, seconds=seconds)
+                          response=response_fit, corner_std_projector=corner_std, seconds=seconds,
+                          pose_checks=tuple(checks), retaken=retaken)
 
 
 def _axis_in_camera(rig: Rig) -> tuple[np.ndarray, np.ndarray]:

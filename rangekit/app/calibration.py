@@ -13,6 +13,7 @@ from typing import Callable
 
 from rangekit.boards import Board
 from rangekit.errors import ConfigError, UsageError
+from rangekit.io import write_png
 from rangekit.rig import Rig, load_rig, save_rig
 from rangekit.rig_checks import validate_rig_for_hardware
 
@@ -36,7 +37,8 @@ class Calibration:
 
 def calibrate(out: str | Path, *, rig: str = "sim", board: Board, n_poses: int = 20, seed: int = 0,
               force: bool = False, interactive: bool = False, ask: Callable[[str], object] = input,
-              progress: Callable | None = None, lasers: bool = False, laser_poses: int = 10) -> Calibration:
+              progress: Callable | None = None, lasers: bool = False, laser_poses: int = 10,
+              report: Callable[[str], object] | None = None) -> Calibration:
     """Calibrate the camera, projector, turntable axis and projector response; write the rig file ``out``.
 
     ``rig`` is "sim" or a rig file naming the devices (its geometry is replaced). On hardware,
@@ -46,6 +48,12 @@ def calibrate(out: str | Path, *, rig: str = "sim", board: Board, n_poses: int =
     into the rig file's ``lasers``; on hardware ``lasers`` calibrates the laser planes alone, with the rig
     file's calibrated camera (the person places the board, :mod:`rangekit.app.laser_calibration_hw`), and
     writes the rig file with the fitted planes, everything else unchanged.
+
+    Each board pose is checked as it is captured (:mod:`rangekit.calib.pose_feedback`): ``report`` gets
+    one line per capture (kept, or rejected and why), and ``coverage.png`` beside ``out`` shows which parts
+    of the camera image the kept poses' corners have covered (rewritten atomically after each pose). A
+    rejected pose is skipped and counted, or on hardware with ``interactive`` the person is asked whether
+    to retake it.
 
     Raises
     ------
@@ -108,9 +116,19 @@ def calibrate(out: str | Path, *, rig: str = "sim", board: Board, n_poses: int =
 
         def on_turntable() -> None:
             devices.set_scene(turntable_board_scene(truth, board))
+    coverage_png = out.parent / "coverage.png"
+
+    def on_pose(check, coverage) -> bool:
+        write_png(coverage_png, coverage)
+        if report is not None:
+            report(check.line())
+        if check.accepted or not (hardware and interactive):
+            return False
+        answer = ask(f"pose {check.index + 1} rejected ({check.reason}); retake it? [Y/n] ")
+        return not str(answer).strip().lower().startswith("n")
     try:
         res = calibrate_rig(devices, settings=settings, place_board=place, place_on_turntable=on_turntable,
-                            template=template, progress=progress)
+                            template=template, progress=progress, on_pose=on_pose)
     finally:
         if hardware:
             devices.close()

@@ -6,7 +6,8 @@ import argparse
 import math
 import time
 
-from rangekit.cli._common import check_output, fraction, int_in, non_negative_float, positive_float, say
+from rangekit.cli._common import check_output, fraction, int_in, non_negative_float, positive_float, say, size
+from rangekit.errors import UsageError
 
 
 def cmd_tof(args: argparse.Namespace) -> int:
@@ -23,13 +24,40 @@ def cmd_tof(args: argparse.Namespace) -> int:
 
 
 def cmd_stereo(args: argparse.Namespace) -> int:
-    """rangekit stereo LEFT RIGHT --rig RIG.json --out OUT: depth of the left camera from a stereo pair."""
+    """rangekit stereo LEFT RIGHT --rig RIG.json --out OUT: depth of the left camera from a stereo pair;
+    rangekit stereo --device [--dots 0..1] [--on-device] --out OUT: from a pair captured on an attached OAK-D."""
     from rangekit.app.range_runs import stereo_depth_files
 
+    if args.device:
+        given = [n for n, v in (("LEFT", args.left), ("RIGHT", args.right), ("--rig", args.rig)) if v is not None]
+        if given:
+            raise UsageError(f"--device captures the pair and reads the device's calibration; drop "
+                             f"{', '.join(given)} (found {' '.join(str(v) for v in (args.left, args.right, args.rig) if v)})")
+        return _stereo_device(args)
+    device_only = [n for n, v in (("--dots", args.dots), ("--flood", args.flood), ("--device-id", args.device_id),
+                                  ("--size", args.size)) if v is not None] + (["--on-device"] if args.on_device else [])
+    if device_only:
+        raise UsageError(f"{', '.join(device_only)}: only with --device (live capture from an OAK-D)")
+    missing = [n for n, v in (("LEFT", args.left), ("RIGHT", args.right), ("--rig", args.rig)) if v is None]
+    if missing:
+        raise UsageError(f"stereo: expected LEFT RIGHT --rig RIG.json (or --device), missing {', '.join(missing)}")
     check_output(args.out, folder=True)
     run = stereo_depth_files(args.left, args.right, args.rig, args.out, method=args.method,
                              min_depth=args.min_depth, alpha=args.alpha, num_disparities=args.num_disparities,
                              progress=say)
+    say(f"wrote {args.out}/{', '.join(run.names)} ({run.n_points:,} points)")
+    return 0
+
+
+def _stereo_device(args: argparse.Namespace) -> int:
+    from rangekit.app.stereo_live import stereo_depth_device
+
+    check_output(args.out, folder=True)
+    run = stereo_depth_device(args.out, device_id=args.device_id, size=args.size or (640, 400),
+                              dots=0.8 if args.dots is None else args.dots,
+                              flood=0.0 if args.flood is None else args.flood, on_device=args.on_device,
+                              method=args.method, min_depth=args.min_depth, alpha=args.alpha,
+                              num_disparities=args.num_disparities, progress=say)
     say(f"wrote {args.out}/{', '.join(run.names)} ({run.n_points:,} points)")
     return 0
 
@@ -51,14 +79,25 @@ def add_parsers(sub) -> None:
                                                                     "covered at depth edges)")
     tofp.set_defaults(func=cmd_tof)
 
-    stp = sub.add_parser("stereo", help="active stereo: depth of the left camera from a stereo pair",
+    stp = sub.add_parser("stereo", help="active stereo: depth of the left camera from a stereo pair (files or an OAK-D)",
                          description="Rectify a raw stereo pair with the rig file's two cameras (cameras[0] = left, "
                                      "cameras[1] = right), match it (census + semi-global matching, or OpenCV "
                                      "StereoSGBM), check left-right consistency, refine to subpixel and convert to "
-                                     "depth on the left camera's own pixel grid (docs/stereo.md).")
-    stp.add_argument("left", metavar="LEFT", help="left image (PNG, 8 or 16 bit, grey or RGB)")
-    stp.add_argument("right", metavar="RIGHT", help="right image, same size")
-    stp.add_argument("--rig", required=True, help="rig file with two cameras (left first)")
+                                     "depth on the left camera's own pixel grid (docs/stereo.md). With --device the "
+                                     "pair is captured from an attached OAK-D and matched the same way.")
+    stp.add_argument("left", metavar="LEFT", nargs="?", help="left image (PNG, 8 or 16 bit, grey or RGB)")
+    stp.add_argument("right", metavar="RIGHT", nargs="?", help="right image, same size")
+    stp.add_argument("--rig", help="rig file with two cameras (left first); not with --device")
+    stp.add_argument("--device", action="store_true",
+                     help="capture a synchronised pair from an attached OAK-D (CAM_B left, CAM_C right, dot projector "
+                          "on, flood off) with its own calibration; writes left.png, right.png and rig.json too")
+    stp.add_argument("--device-id", help="with --device: device id (MXID), name or IP (default the first found)")
+    stp.add_argument("--dots", type=fraction, help="with --device: IR dot projector power 0..1 (default 0.8)")
+    stp.add_argument("--flood", type=fraction, help="with --device: IR flood light power 0..1 (default 0: off)")
+    stp.add_argument("--size", type=size, help="with --device: WxH of both mono frames (default 640x400)")
+    stp.add_argument("--on-device", action="store_true",
+                     help="with --device: also run the camera's own StereoDepth; saves device_depth.npy/png next to "
+                          "ours and prints the difference")
     stp.add_argument("--out", required=True, help="output folder: depth.npy (left z, metres, NaN invalid), depth.png, "
                                                    "confidence.npy/png, cloud.ply")
     stp.add_argument("--method", default="census-sgm", choices=("census-sgm", "sgbm"),

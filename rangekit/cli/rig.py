@@ -7,6 +7,7 @@ import errno
 import json
 import sys
 import time
+from pathlib import Path
 
 from rangekit.cli._common import check_output, console, float_in, int_in, positive_float, say, seed
 from rangekit.drivers.discovery import MAX_SEARCH_S
@@ -41,12 +42,13 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     board = Board(kind=args.board, cols=args.cols, rows=args.rows, square=args.square_mm / 1000.0)
     cal = calibrate(args.out, rig=args.rig, board=board, n_poses=args.poses, seed=args.seed, force=args.force,
                     interactive=sys.stdin.isatty(), ask=input, progress=console(), lasers=args.lasers,
-                    laser_poses=args.laser_poses)
+                    laser_poses=args.laser_poses, report=say)
     say("")
     if cal.result is not None:
         say("== calibration ==")
         for line in cal.result.summary_lines():
             say(line)
+        say(f"coverage of the camera image: {Path(args.out).parent / 'coverage.png'}")
     if cal.truth is not None:
         say("deviation from the simulator's true rig (rangekit rig init --sim):")
         for line in cal.deviation:
@@ -81,8 +83,11 @@ def add_calibrate_parser(sub) -> None:
                          description="Capture a board at several poses under coded light (the simulator moves it; "
                                      "on hardware you do, pose by pose), calibrate the camera and the projector "
                                      "(bundle adjusted together), the turntable axis and the projector's gamma, and "
-                                     "write a rig file. On the simulator it also prints each parameter's deviation "
-                                     "from the true rig.")
+                                     "write a rig file. Each pose is checked as it is captured (board found, corners, "
+                                     "size in the image, tilt, reprojection error): a rejected pose says why and is "
+                                     "skipped, or on hardware in a terminal you may retake it; coverage.png beside --out "
+                                     "shows the parts of the image covered so far. On the simulator it also prints "
+                                     "each parameter's deviation from the true rig.")
     cal.add_argument("--rig", default="sim", help="'sim' (default) or a rig file naming the devices (its geometry "
                                                    "is replaced)")
     cal.add_argument("--out", required=True, help="rig file to write")

@@ -44,9 +44,6 @@ class MultiViewOptions:
                                          # alignments (e.g. front/back flips) can keep 0.3-0.6 overlap but
                                          # not a low RMSE: on the bunny, right <= 0.36, wrong >= 0.64 voxel
     rounds: int = 1
-    max_prior_move_deg: float = 5.0      # with a prior: a pair whose ICP turned it farther from the prior is
-                                         # refused (noisy, nearly round overlaps let ICP slide: the dark
-                                         # zoo object's pairs moved up to 20 deg at under 0.2 mm RMSE)
     min_constraint: float = MIN_CONSTRAINT  # a pair whose overlap leaves a motion with a smaller eigenvalue
                                          # ratio free (rangekit.registration.stability) is ambiguous: with
                                          # no prior it is not an edge; with one, the prior is kept along
@@ -189,15 +186,11 @@ def _joint_holds(n: int, pairs: list, edges: list[EdgeResult], holds: dict, T: n
 
 
 def _edge(i: int, j: int, r, overlap: float, options: MultiViewOptions, max_rmse: float, prior: bool,
-          note: str = "", moved_deg: float = 0.0) -> EdgeResult:
+          note: str = "") -> EdgeResult:
     """Accept or refuse the registration ``r`` of view j into view i: RMSE below ``max_rmse`` (metres),
-    overlap at least ``options.min_overlap``, with a prior a rotation within ``options.max_prior_move_deg``
-    of it (``moved_deg``), and an overlap that fixes every motion, unless a prior holds the free ones (then
-    the edge is accepted and its reason says the prior was kept)."""
+    overlap at least ``options.min_overlap``, and an overlap that fixes every motion, unless a prior holds
+    the free ones (then the edge is accepted and its reason says the prior was kept)."""
     free = r.constraint.describe(options.min_constraint) if r.constraint is not None else ""
-    if prior and moved_deg > options.max_prior_move_deg:
-        reason = f"turned {moved_deg:.1f} deg from the prior (> {options.max_prior_move_deg:g})"
-        return EdgeResult(i, j, r.T_target_source, r.rmse, overlap, False, reason, free, r.constraint)
     if r.rmse >= max_rmse:
         reason = f"rmse {r.rmse * 1e3:.3f} mm > {max_rmse * 1e3:.3f}"
     elif overlap < options.min_overlap:
@@ -287,7 +280,7 @@ def register_views(clouds: Sequence[PointCloud], *, init_T_world_view: np.ndarra
                 ov = pairwise_overlap(level[j], trees[i], r.T_target_source, 2 * v)
                 moved = np.degrees(rotation_angle(r.T_target_source[:3, :3] @ T_i_j[:3, :3].T))
                 edges.append(_edge(i, j, r, ov, options, options.max_rmse * v, prior=prior,
-                                   note=f" (moved {moved:.1f} deg)" if moved > 5 else "", moved_deg=moved))
+                                   note=f" (moved {moved:.1f} deg)" if moved > 5 else ""))
         _check_connected(n, edges, names)
         sync = _sync(n, edges)
         T = sync.T_world_view

@@ -145,3 +145,32 @@ def test_voxel_downsample_returns_a_pair_whatever_its_flags():
         p2, n2 = voxel_downsample(P, voxel, normals=N)
         assert np.array_equal(p, p2) and n2.shape == p2.shape
     assert len(voxel_downsample(P, 0.002)[0]) < len(P)
+
+
+def test_icp_does_not_match_the_back_face_of_a_thin_part():
+    """A fin 1.5 mm thick whose target view saw the front face (normal +z) on one half and only the back
+    face (normal -z) on the other, both within the 2 mm gate of a source view of the whole front face.
+    Correspondences whose normals differ by more than 60 degrees do not count, so the source stays on
+    the front face; without source normals the back face pulls it off."""
+    rng = np.random.default_rng(0)
+    x, y = rng.uniform(-0.01, 0.01, size=(2, 6000))
+    # Bumps (0.3 mm, 10 mm period) so that every motion is constrained; normals exact.
+    k, a = 2 * np.pi / 0.01, 0.3e-3
+    z = a * np.sin(k * x) * np.sin(k * y)
+    up = np.column_stack([-a * k * np.cos(k * x) * np.sin(k * y), -a * k * np.sin(k * x) * np.cos(k * y),
+                          np.ones_like(x)])
+    up /= np.linalg.norm(up, axis=1, keepdims=True)
+    front = np.column_stack([x, y, z])
+    seen = x < 0   # the target view saw the front face here, only the back face elsewhere
+    target = PointCloud(np.where(seen[:, None], front, front - [0.0, 0.0, 1.5e-3]),
+                        normals=np.where(seen[:, None], up, -up))
+    source = front + rng.normal(scale=2e-4, size=(len(x), 3)) * [1, 1, 0]   # other samples of the surface
+    source[:, 2] = a * np.sin(k * source[:, 0]) * np.sin(k * source[:, 1])
+    n_src = np.column_stack([-a * k * np.cos(k * source[:, 0]) * np.sin(k * source[:, 1]),
+                             -a * k * np.sin(k * source[:, 0]) * np.cos(k * source[:, 1]), np.ones(len(x))])
+    n_src /= np.linalg.norm(n_src, axis=1, keepdims=True)
+    opt = IcpOptions(method="point_to_plane", kernel="none", max_distance=2e-3, max_iterations=30)
+    r = icp(PointCloud(source, normals=n_src), target, options=opt)
+    assert np.linalg.norm(r.T_target_source[:3, 3]) < 2e-5 and rotation_angle(r.T_target_source[:3, :3]) < 3e-4
+    r = icp(PointCloud(source), target, options=opt)
+    assert np.linalg.norm(r.T_target_source[:3, 3]) > 2e-4, r.T_target_source[:3, 3]

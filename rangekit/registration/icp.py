@@ -18,10 +18,13 @@ from rangekit.geometry import apply_T, make_T, procrustes, rotation_angle, rotve
 from rangekit.surface.cloud import PointCloud, voxel_downsample
 from rangekit.registration.stability import HeldMotions, PoseConstraint, held_step, pose_constraint
 
-__all__ = ["IcpOptions", "RegistrationResult", "icp", "KERNELS", "OrganisedScan"]
+__all__ = ["IcpOptions", "RegistrationResult", "icp", "KERNELS", "MIN_NORMAL_COS", "OrganisedScan"]
 
 KERNELS = ("none", "huber", "cauchy", "tukey", "geman_mcclure", "welsch")
 METHODS = ("point_to_point", "point_to_plane", "symmetric")
+#: A correspondence counts only when its two normals are within 60 degrees (when both clouds have
+#: normals): the front and back faces of a thin part (a 1-2 mm fin) lie within the distance gate.
+MIN_NORMAL_COS = 0.5
 
 
 @dataclass(frozen=True)
@@ -230,6 +233,14 @@ def _icp_level(src: PointCloud, assoc, T: np.ndarray, opt: IcpOptions, rng: np.r
         ok, q, nq = assoc(p, opt.max_distance)
         if np.count_nonzero(ok) < 6:
             return T, n_iter, False, f"degenerate: {np.count_nonzero(ok)} correspondences within {opt.max_distance} m"
+        if nq is not None and N_all is not None:
+            # Only surfaces facing the same way: the two faces of a thin part are closer than the gate.
+            facing = np.einsum("ij,ij->i", transform_vectors(T, N_all[sel][ok]), nq[ok]) > MIN_NORMAL_COS
+            ok = ok.copy()
+            ok[np.flatnonzero(ok)[~facing]] = False
+            if np.count_nonzero(ok) < 6:
+                return T, n_iter, False, (f"degenerate: {np.count_nonzero(ok)} correspondences within "
+                                          f"{opt.max_distance} m with normals within 60 deg")
         p, q = p[ok], q[ok]
         nq = None if nq is None else nq[ok]
         np_ = transform_vectors(T, N_all[sel][ok]) if need_src_normals else None

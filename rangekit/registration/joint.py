@@ -15,6 +15,7 @@ from scipy.spatial import cKDTree
 
 from rangekit.errors import RegistrationError
 from rangekit.geometry import apply_T, invert_T, make_T, rotvec_to_R
+from rangekit.registration.icp import MIN_NORMAL_COS
 from rangekit.surface.cloud import PointCloud
 
 __all__ = ["JointResult", "refine_jointly"]
@@ -48,7 +49,9 @@ def refine_jointly(clouds: Sequence[PointCloud], T_world_view: np.ndarray, pairs
     T = np.array(T_world_view, dtype=np.float64, copy=True)
     gen = np.random.default_rng(rng)
     trees = [cKDTree(c.points) for c in clouds]
-    subs = [c.points[gen.choice(len(c.points), min(samples, len(c.points)), replace=False)] for c in clouds]
+    picks = [gen.choice(len(c.points), min(samples, len(c.points)), replace=False) for c in clouds]
+    subs = [c.points[k] for c, k in zip(clouds, picks)]
+    sub_normals = [None if c.normals is None else c.normals[k] for c, k in zip(clouds, picks)]
     centre = np.mean([apply_T(T[k], c.points.mean(axis=0, keepdims=True))[0] for k, c in enumerate(clouds)], axis=0)
     directed = [(i, j) for i, j in pairs] + [(j, i) for i, j in pairs]
     size = float(np.sqrt(np.mean([np.sum((apply_T(T[k], s) - centre) ** 2, axis=1).mean() for k, s in enumerate(subs)])))
@@ -62,6 +65,11 @@ def refine_jointly(clouds: Sequence[PointCloud], T_world_view: np.ndarray, pairs
             T_i_j = invert_T(T[i]) @ T[j]
             d, idx = trees[i].query(apply_T(T_i_j, p_j), k=1, distance_upper_bound=max_distance, workers=-1)
             ok = np.isfinite(d)
+            if sub_normals[j] is not None:
+                # Only surfaces facing the same way: the two faces of a thin part (a fin, a sheet) are
+                # closer than the gate but are not the same surface.
+                n_src = sub_normals[j] @ T_i_j[:3, :3].T
+                ok[ok] = np.einsum("ij,ij->i", n_src[ok], clouds[i].normals[idx[ok]]) > MIN_NORMAL_COS
             if np.count_nonzero(ok) < 10:
                 continue
             Ri = T[i][:3, :3]

@@ -52,13 +52,15 @@ class MultiViewOptions:
                                          # that motion and the edge is flagged
     joint_iterations: int = 60           # joint multi-view refinement after synchronisation (0: none)
     joint_tolerance: float = 1e-7        # metres: stop when no pose moves a point by more
-    joint_samples: int = 20000           # points per view in the joint refinement (at most all fine points);
-                                         # 20k gives the 50k poses to 1e-3 deg (docs/benchmarks.md)
+    joint_samples: int = 10000           # points per view in the joint refinement (at most all fine points);
+                                         # 10k: the 50k poses to 1e-3 deg on the 12-view scan (docs/benchmarks.md)
     pairs: PairChooser | None = None     # the candidate pairs (rangekit.registration.pairs): None = the
                                          # nearest views in rotation with a prior, all pairs without; only
                                          # candidates that overlap become edges
     icp: IcpOptions = field(default_factory=lambda: IcpOptions(method="point_to_plane", kernel="huber",
-                                                               max_iterations=60))
+                                                               max_iterations=60, tolerance=1e-6, max_samples=5000))
+                                         # pairwise runs only start the joint refinement: 1 um and 5k
+                                         # points suffice (the joint step ends at the same poses)
     rng: int = 0
 
 
@@ -124,9 +126,15 @@ def _prepare(clouds: Sequence[PointCloud], voxel: float) -> list[PointCloud]:
     return out
 
 
+OVERLAP_SAMPLES = 5000   # points of a view that estimate its overlap (every k-th point): a fraction within
+                         # about 1% (binomial), for a threshold of 0.15
+
+
 def pairwise_overlap(src: PointCloud, tgt_tree: cKDTree, T_tgt_src: np.ndarray, radius: float) -> float:
-    """Fraction of ``src`` points that land within ``radius`` of the target after ``T_tgt_src``."""
-    d, _ = tgt_tree.query(apply_T(T_tgt_src, src.points), k=1, distance_upper_bound=radius, workers=1)
+    """Fraction of ``src`` points (at most about OVERLAP_SAMPLES of them, evenly strided) that land within
+    ``radius`` of the target after ``T_tgt_src``."""
+    pts = src.points[::max(1, len(src.points) // OVERLAP_SAMPLES)]
+    d, _ = tgt_tree.query(apply_T(T_tgt_src, pts), k=1, distance_upper_bound=radius, workers=1)
     return float(np.mean(np.isfinite(d)))
 
 

@@ -52,8 +52,8 @@ class MultiViewOptions:
                                          # that motion and the edge is flagged
     joint_iterations: int = 60           # joint multi-view refinement after synchronisation (0: none)
     joint_tolerance: float = 1e-7        # metres: stop when no pose moves a point by more
-    joint_samples: int = 10000           # points per view in the joint refinement (at most all fine points);
-                                         # 10k: the 50k poses to 1e-3 deg on the 12-view scan (docs/benchmarks.md)
+    joint_samples: int = 20000           # points per view in the joint refinement (at most all fine points);
+                                         # 20k: the 50k poses to 1e-3 deg on the 12-view scan (docs/benchmarks.md)
     pairs: PairChooser | None = None     # the candidate pairs (rangekit.registration.pairs): None = the
                                          # nearest views in rotation with a prior, all pairs without; only
                                          # candidates that overlap become edges

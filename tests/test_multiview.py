@@ -156,3 +156,23 @@ def test_registration_bad_input():
     far = PointCloud(blob.points + [5.0, 0, 0])
     with pytest.raises(RegistrationError, match=r"do not all overlap: views \[\[1\]\]"):
         register_views([blob, far], init_T_world_view=np.stack([np.eye(4), np.eye(4)]))
+
+
+
+@pytest.mark.slow
+def test_prior_chosen_pairs_register_to_ground_truth():
+    """With a prior, registration tries only the views nearest in rotation (rangekit.registration.pairs),
+    not every pair, and still lands within 0.01 deg (mean) of the simulator's poses."""
+    from rangekit.registration.pairs import all_pairs, default_pairs, nearest_in_rotation
+
+    scans = turntable_scans(n_views=12, noise=0.0002, resolution=(640, 480), rng=3)
+    prior = perturb_poses(scans.T_world_view, max_angle=np.radians(1), max_translation=0.005 * scans.diag, rng=2)
+    chosen = default_pairs(prior, True)
+    # 12 views 30 deg apart: each with its neighbours at 30 and 60 deg, 24 of the 66 pairs
+    assert len(chosen) == 24 and all(min(j - i, 12 - (j - i)) <= 2 for i, j in chosen)
+    assert default_pairs(prior, False) == all_pairs(prior) and len(all_pairs(prior)) == 66
+    assert nearest_in_rotation(2)(prior, True) == sorted({(min(k, (k + 1) % 12), max(k, (k + 1) % 12)) for k in range(12)})
+    res = register_views(scans.clouds, init_T_world_view=prior)
+    assert {(e.i, e.j) for e in res.edges} <= set(chosen)
+    rot, tr = pose_errors(res.T_world_view, scans.T_world_view)
+    assert rot[1:].mean() <= 0.01 and rot.max() <= 0.02 and tr[1:].mean() <= 2e-4 * scans.diag

@@ -84,8 +84,8 @@ def coarse_align(source: PointCloud | Features, target: PointCloud | Features, o
     ft = target if isinstance(target, Features) else compute_features(target, options)
     # Mutual nearest neighbours in feature space.
     tree_t = cKDTree(ft.fpfh)
-    _, s2t = tree_t.query(fs.fpfh, k=1, workers=-1)
-    _, t2s = cKDTree(fs.fpfh).query(ft.fpfh, k=1, workers=-1)
+    _, s2t = tree_t.query(fs.fpfh, k=1, workers=1)
+    _, t2s = cKDTree(fs.fpfh).query(ft.fpfh, k=1, workers=1)
     mutual = t2s[s2t] == np.arange(len(fs.points))
     src_idx = np.flatnonzero(mutual)
     if len(src_idx) < 3:

@@ -128,7 +128,7 @@ class _KdAssociation:
         self.tree = cKDTree(target.points, leafsize=16, balanced_tree=False, compact_nodes=False)
 
     def __call__(self, p: np.ndarray, max_distance: float):
-        d, idx = self.tree.query(p, k=1, distance_upper_bound=max_distance, workers=-1)
+        d, idx = self.tree.query(p, k=1, distance_upper_bound=max_distance, workers=1)
         ok = np.isfinite(d)
         idx = np.where(ok, idx, 0)
         return ok, self.points[idx], None if self.normals is None else self.normals[idx]

@@ -63,7 +63,7 @@ def refine_jointly(clouds: Sequence[PointCloud], T_world_view: np.ndarray, pairs
         for i, j in directed:  # target i, source j
             p_j = subs[j]
             T_i_j = invert_T(T[i]) @ T[j]
-            d, idx = trees[i].query(apply_T(T_i_j, p_j), k=1, distance_upper_bound=max_distance, workers=-1)
+            d, idx = trees[i].query(apply_T(T_i_j, p_j), k=1, distance_upper_bound=max_distance, workers=1)
             ok = np.isfinite(d)
             if sub_normals[j] is not None:
                 # Only surfaces facing the same way: the two faces of a thin part (a fin, a sheet) are

@@ -2,7 +2,8 @@
 
 1. Initial poses: a prior (e.g. the turntable's axis and angles) or, with none, coarse alignment of
    every pair (FPFH + RANSAC, ICP-verified) followed by robust synchronisation of the accepted pairs.
-2. Refinement rounds: with the current poses, find the pairs that overlap, register each pair by ICP
+2. Refinement rounds: with the current poses, find the candidate pairs (``options.pairs``, by default
+   the nearest views in rotation when there is a prior, all pairs without) that overlap, register each pair by ICP
    starting from the current relative pose, accept an edge only if its inlier RMSE is small and its
    overlap large enough (ICP "fitness" alone accepts symmetric flips), and synchronise rotations and
    translations robustly over the accepted edges.
@@ -25,6 +26,7 @@ from rangekit.surface.cloud import PointCloud, bbox_diagonal, check_voxel, estim
 from rangekit.registration.coarse import CoarseOptions, compute_features, coarse_align
 from rangekit.registration.icp import IcpOptions, icp
 from rangekit.registration.joint import JointResult, refine_jointly
+from rangekit.registration.pairs import PairChooser, default_pairs
 from rangekit.registration.stability import MIN_CONSTRAINT, HeldMotions, PoseConstraint
 from rangekit.registration.sync import SyncResult, synchronise
 
@@ -50,9 +52,15 @@ class MultiViewOptions:
                                          # that motion and the edge is flagged
     joint_iterations: int = 60           # joint multi-view refinement after synchronisation (0: none)
     joint_tolerance: float = 1e-7        # metres: stop when no pose moves a point by more
-    joint_samples: int = 50000           # points per view in the joint refinement (at most all fine points)
+    joint_samples: int = 20000           # points per view in the joint refinement (at most all fine points);
+                                         # 20k: the 50k poses to 1e-3 deg on the 12-view scan (docs/benchmarks.md)
+    pairs: PairChooser | None = None     # the candidate pairs (rangekit.registration.pairs): None = the
+                                         # nearest views in rotation with a prior, all pairs without; only
+                                         # candidates that overlap become edges
     icp: IcpOptions = field(default_factory=lambda: IcpOptions(method="point_to_plane", kernel="huber",
-                                                               max_iterations=60))
+                                                               max_iterations=60, tolerance=1e-6, max_samples=5000))
+                                         # pairwise runs only start the joint refinement: 1 um and 5k
+                                         # points suffice (the joint step ends at the same poses)
     rng: int = 0
 
 
@@ -118,9 +126,15 @@ def _prepare(clouds: Sequence[PointCloud], voxel: float) -> list[PointCloud]:
     return out
 
 
+OVERLAP_SAMPLES = 5000   # points of a view that estimate its overlap (every k-th point): a fraction within
+                         # about 1% (binomial), for a threshold of 0.15
+
+
 def pairwise_overlap(src: PointCloud, tgt_tree: cKDTree, T_tgt_src: np.ndarray, radius: float) -> float:
-    """Fraction of ``src`` points that land within ``radius`` of the target after ``T_tgt_src``."""
-    d, _ = tgt_tree.query(apply_T(T_tgt_src, src.points), k=1, distance_upper_bound=radius, workers=-1)
+    """Fraction of ``src`` points (at most about OVERLAP_SAMPLES of them, evenly strided) that land within
+    ``radius`` of the target after ``T_tgt_src``."""
+    pts = src.points[::max(1, len(src.points) // OVERLAP_SAMPLES)]
+    d, _ = tgt_tree.query(apply_T(T_tgt_src, pts), k=1, distance_upper_bound=radius, workers=1)
     return float(np.mean(np.isfinite(d)))
 
 
@@ -254,6 +268,7 @@ def register_views(clouds: Sequence[PointCloud], *, init_T_world_view: np.ndarra
     edges: list[EdgeResult] = []
     holds: dict = {}
     prior = init_T_world_view is not None
+    choose = options.pairs or default_pairs
     sync = None
     for rnd in range(options.rounds):
         level = coarse_clouds if rnd == 0 else fine_clouds
@@ -263,24 +278,23 @@ def register_views(clouds: Sequence[PointCloud], *, init_T_world_view: np.ndarra
         # final RMSE measures the overlap only and is comparable with the coarse stage's.
         icp_opt = replace(options.icp, max_distance=2.0 * v, voxel_sizes=(2.0 * v,), rng=options.rng + rnd)
         edges, holds = [], {}
-        for i in range(n):
-            for j in range(i + 1, n):
-                T_i_j = invert_T(T[i]) @ T[j]
-                ov = _mutual_overlap(level[i], level[j], trees[i], trees[j], T_i_j, 2 * v)
-                if ov < options.min_overlap:
-                    continue
-                _check_dense(level, (i, j), v, names)
-                r = icp(level[j], level[i], init_T_target_source=T_i_j, options=icp_opt)
-                if prior and r.constraint is not None and r.constraint.ratio < options.min_constraint:
-                    # Ambiguous: ICP wandered along the free motions; start again from the prior, held there.
-                    held = r.constraint.held(options.min_constraint)
-                    r = replace(icp(level[j], level[i], init_T_target_source=T_i_j, options=icp_opt, hold=held),
-                                constraint=r.constraint)
-                    holds[i, j] = held
-                ov = pairwise_overlap(level[j], trees[i], r.T_target_source, 2 * v)
-                moved = np.degrees(rotation_angle(r.T_target_source[:3, :3] @ T_i_j[:3, :3].T))
-                edges.append(_edge(i, j, r, ov, options, options.max_rmse * v, prior=prior,
-                                   note=f" (moved {moved:.1f} deg)" if moved > 5 else ""))
+        for i, j in choose(T, prior):
+            T_i_j = invert_T(T[i]) @ T[j]
+            ov = _mutual_overlap(level[i], level[j], trees[i], trees[j], T_i_j, 2 * v)
+            if ov < options.min_overlap:
+                continue
+            _check_dense(level, (i, j), v, names)
+            r = icp(level[j], level[i], init_T_target_source=T_i_j, options=icp_opt)
+            if prior and r.constraint is not None and r.constraint.ratio < options.min_constraint:
+                # Ambiguous: ICP wandered along the free motions; start again from the prior, held there.
+                held = r.constraint.held(options.min_constraint)
+                r = replace(icp(level[j], level[i], init_T_target_source=T_i_j, options=icp_opt, hold=held),
+                            constraint=r.constraint)
+                holds[i, j] = held
+            ov = pairwise_overlap(level[j], trees[i], r.T_target_source, 2 * v)
+            moved = np.degrees(rotation_angle(r.T_target_source[:3, :3] @ T_i_j[:3, :3].T))
+            edges.append(_edge(i, j, r, ov, options, options.max_rmse * v, prior=prior,
+                               note=f" (moved {moved:.1f} deg)" if moved > 5 else ""))
         _check_connected(n, edges, names)
         sync = _sync(n, edges)
         T = sync.T_world_view
@@ -293,13 +307,9 @@ def register_views(clouds: Sequence[PointCloud], *, init_T_world_view: np.ndarra
         # Pairs by overlap at the synchronised poses (not by which pairwise runs passed), so the same data
         # gives the same problem whatever the starting poses were.
         trees = [cKDTree(c.points) for c in fine_clouds]
-        pairs = []
-        for i in range(n):
-            for j in range(i + 1, n):
-                ov = _mutual_overlap(fine_clouds[i], fine_clouds[j], trees[i], trees[j], invert_T(T[i]) @ T[j],
-                                     2 * fine)
-                if ov >= options.min_overlap:
-                    pairs.append((i, j))
+        pairs = [(i, j) for i, j in choose(T, prior)
+                 if _mutual_overlap(fine_clouds[i], fine_clouds[j], trees[i], trees[j], invert_T(T[i]) @ T[j],
+                                    2 * fine) >= options.min_overlap]
         joint = refine_jointly(fine_clouds, T, pairs, max_distance=2.5 * fine, iterations=options.joint_iterations,
                                samples=options.joint_samples, tolerance=options.joint_tolerance, rng=options.rng,
                                hold=_joint_holds(n, pairs, edges, holds, T))
@@ -321,7 +331,7 @@ def overlap_rms(clouds: Sequence[PointCloud], T_world_view: np.ndarray, *, radiu
         for j in range(len(world)):
             if i == j:
                 continue
-            d, _ = trees[i].query(world[j], k=1, distance_upper_bound=radius, workers=-1)
+            d, _ = trees[i].query(world[j], k=1, distance_upper_bound=radius, workers=1)
             d = d[np.isfinite(d)]
             sq += float(np.sum(d ** 2))
             count += d.size

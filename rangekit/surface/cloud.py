@@ -135,13 +135,15 @@ def voxel_downsample(points: np.ndarray, voxel: float, *,
     dims = keys.max(axis=0) + 1
     flat = (keys[:, 0] * dims[1] + keys[:, 1]) * dims[2] + keys[:, 2]
     _, inv, counts = np.unique(flat, return_inverse=True, return_counts=True)
-    out = np.zeros((len(counts), 3))
-    np.add.at(out, inv, P)
+    inv = inv.reshape(-1)
+    m = len(counts)
+    # Per-voxel sums by bincount, one column at a time (np.add.at is about 10x slower).
+    out = np.stack([np.bincount(inv, weights=P[:, a], minlength=m) for a in range(3)], axis=1)
     out /= counts[:, None]
     if normals is None:
         return out, None
-    n = np.zeros((len(counts), 3))
-    np.add.at(n, inv, normals)
+    N = np.asarray(normals, dtype=np.float64)
+    n = np.stack([np.bincount(inv, weights=N[:, a], minlength=m) for a in range(3)], axis=1)
     n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
     return out, n
 

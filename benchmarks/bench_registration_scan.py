@@ -1,0 +1,133 @@
+"""Registration of a simulated 12-view scan's clouds: rangekit vs Open3D's multiway recipe (issue 20).
+
+    PYTHONPATH=. .venv/bin/python -m rangekit scan --out /tmp/scan12 --no-report    # once, ~3 min
+    PYTHONPATH=. .venv/bin/python benchmarks/bench_registration_scan.py /tmp/scan12
+
+The clouds are the session's ``view_*/cloud.ply`` (what ``rangekit process`` registers); the truth is the
+simulator's turntable poses (the rig's ``T_world_table`` and the session's angles), which is also the
+prior ``rangekit process`` gives. Every method runs in this one process on the same clouds and is
+charged CPU seconds (user + sys of all its threads, ``resource.getrusage``), not wall time: the machine is
+shared. Rotation errors are against the truth, over views 1..n-1 (view 0 is the frame).
+
+1. rangekit ``register_views`` with the prior (the defaults ``rangekit process`` uses), and with the
+   pre-issue-20 settings (all pairs, 50k joint samples) for the ratio.
+2. Open3D's multiway-registration tutorial as written: all pairs, coarse ICP from the identity at 15
+   voxels then fine at 1.5, odometry nodes, pose graph (Levenberg-Marquardt, prune 0.25).
+3. The same with the turntable prior: nodes and every ICP start at the prior, coarse step at 4 voxels.
+4. The same with FPFH + RANSAC (Open3D's global-registration tutorial) as every pair's coarse step.
+"""
+
+from __future__ import annotations
+
+import argparse
+import resource
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from rangekit.formats.clouds import load_cloud
+from rangekit.formats.session import Session
+from rangekit.geometry import invert_T, rotation_angle
+from rangekit.rig import turntable_prior
+from rangekit.surface.cloud import bbox_diagonal
+
+
+def cpu_seconds() -> float:
+    r = resource.getrusage(resource.RUSAGE_SELF)
+    return r.ru_utime + r.ru_stime
+
+
+def charged(fn):
+    """(CPU seconds of ``fn()``, its result)."""
+    c = cpu_seconds()
+    out = fn()
+    return cpu_seconds() - c, out
+
+
+def rotation_errors(T_est: np.ndarray, T_true: np.ndarray) -> np.ndarray:
+    """(n-1,) degrees, views 1.. (both sets of poses in view 0's frame)."""
+    return np.array([np.degrees(rotation_angle(a[:3, :3] @ b[:3, :3].T)) for a, b in zip(T_est[1:], T_true[1:])])
+
+
+def o3d_multiway(clouds, voxel: float, prior: np.ndarray | None = None, coarse: float = 15.0,
+                 fpfh: bool = False) -> np.ndarray:
+    """Open3D's multiway registration tutorial (pairwise ICP coarse then fine, pose graph, global
+    optimisation). ``prior``: (n, 4, 4) start poses (else the identity and odometry, as the tutorial);
+    ``coarse``: the coarse ICP distance in voxels (tutorial: 15); ``fpfh``: FPFH + RANSAC first (global
+    registration tutorial). Returns (n, 4, 4) poses in view 0's frame."""
+    import open3d as o3d
+
+    reg = o3d.pipelines.registration
+    pcds = []
+    for c in clouds:
+        pc = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(c.points)).voxel_down_sample(voxel)
+        pc.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=voxel * 2, max_nn=30))
+        pcds.append(pc)
+    feats = [reg.compute_fpfh_feature(pc, o3d.geometry.KDTreeSearchParamHybrid(radius=voxel * 5, max_nn=100))
+             for pc in pcds] if fpfh else None
+    d_coarse, d_fine = voxel * coarse, voxel * 1.5
+    n = len(pcds)
+    graph = reg.PoseGraph()
+    odometry = np.eye(4)
+    graph.nodes.append(reg.PoseGraphNode(np.eye(4) if prior is None else prior[0]))
+    for s in range(n):
+        for t in range(s + 1, n):
+            init = np.eye(4) if prior is None else invert_T(prior[t]) @ prior[s]   # source s into target t
+            if fpfh:
+                init = reg.registration_ransac_based_on_feature_matching(
+                    pcds[s], pcds[t], feats[s], feats[t], True, d_fine,
+                    reg.TransformationEstimationPointToPoint(False), 3,
+                    [reg.CorrespondenceCheckerBasedOnEdgeLength(0.9), reg.CorrespondenceCheckerBasedOnDistance(d_fine)],
+                    reg.RANSACConvergenceCriteria(100000, 0.999)).transformation
+            else:
+                init = reg.registration_icp(pcds[s], pcds[t], d_coarse, init,
+                                            reg.TransformationEstimationPointToPlane()).transformation
+            r = reg.registration_icp(pcds[s], pcds[t], d_fine, init, reg.TransformationEstimationPointToPlane())
+            info = reg.get_information_matrix_from_point_clouds(pcds[s], pcds[t], d_fine, r.transformation)
+            if t == s + 1:
+                odometry = np.asarray(r.transformation) @ odometry
+                graph.nodes.append(reg.PoseGraphNode(np.linalg.inv(odometry) if prior is None else prior[t]))
+            graph.edges.append(reg.PoseGraphEdge(s, t, r.transformation, info, uncertain=t != s + 1))
+    reg.global_optimization(graph, reg.GlobalOptimizationLevenbergMarquardt(), reg.GlobalOptimizationConvergenceCriteria(),
+                            reg.GlobalOptimizationOption(max_correspondence_distance=d_fine, edge_prune_threshold=0.25,
+                                                         reference_node=0))
+    T = np.stack([np.asarray(nd.pose) for nd in graph.nodes])
+    return np.einsum("ij,njk->nik", invert_T(T[0]), T)
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("session", type=Path, help="a simulated session folder (rangekit scan --out ...)")
+    ap.add_argument("--skip-fpfh", action="store_true", help="leave out the FPFH + RANSAC recipe (about 1 min)")
+    args = ap.parse_args()
+    from rangekit.registration.multiview import MultiViewOptions, register_views
+    from rangekit.registration.pairs import all_pairs
+
+    session = Session.load(args.session)
+    views = session.done_views
+    clouds = [load_cloud(v.folder / "cloud.ply") for v in views]
+    truth = turntable_prior(session.rig.T_world_table, [v.angle for v in views])
+    voxel = bbox_diagonal(clouds) / 110.0   # rangekit's coarse voxel
+    cases = [
+        ("rangekit `register_views`, prior (defaults)", lambda: register_views(clouds, init_T_world_view=truth).T_world_view),
+        ("rangekit before issue 20 (all pairs, 50k joint samples)",
+         lambda: register_views(clouds, init_T_world_view=truth,
+                                options=MultiViewOptions(pairs=all_pairs, joint_samples=50000)).T_world_view),
+        ("Open3D multiway, as the tutorial writes it", lambda: o3d_multiway(clouds, voxel)),
+        ("Open3D multiway, turntable prior, coarse ICP at 4 voxels", lambda: o3d_multiway(clouds, voxel, truth, 4.0)),
+    ]
+    if not args.skip_fpfh:
+        cases.append(("Open3D multiway, FPFH + RANSAC coarse step", lambda: o3d_multiway(clouds, voxel, fpfh=True)))
+    print(f"{len(clouds)} clouds, {sum(len(c) for c in clouds):,} points; Open3D voxel {voxel * 1e3:.2f} mm\n")
+    print("| method | CPU s | mean rotation error | max |")
+    print("|---|---|---|---|")
+    for name, fn in cases:
+        secs, T = charged(fn)
+        e = rotation_errors(T, truth)
+        print(f"| {name} | {secs:.2f} | {e.mean():.4f} deg | {e.max():.4f} deg |", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

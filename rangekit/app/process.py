@@ -109,7 +109,7 @@ def _process(out: Path, fusion: str, method: str, table_margin: float, evaluate:
     from rangekit.app.reconstruct import EDGE_MARGIN_PX
     from rangekit.surface.fusion import poisson_meshes, tsdf_fuse
     from rangekit.surface.observed import split_observed
-    from rangekit.registration.multiview import register_views
+    from rangekit.registration.multiview import MultiViewOptions, register_views
 
     session = Session.load(out)
     views = session.done_views
@@ -148,7 +148,9 @@ def _process(out: Path, fusion: str, method: str, table_margin: float, evaluate:
 
     with timer.stage("register"):
         prior = None if rig.T_world_table is None else turntable_prior(rig.T_world_table, [v.angle for v in views])
-        res = register_views(clouds, init_T_world_view=prior, progress=progress)
+        # On the rig's turntable the views are rotations about one axis: the joint refinement keeps them so.
+        res = register_views(clouds, init_T_world_view=prior, progress=progress,
+                             options=MultiViewOptions(turntable=prior is not None))
         names = [v.folder.name for v in views]
         save_poses(out / "poses.json", names, res.T_world_view,
                    world=f"frame of {views[0].folder.name} (the rig's world at its turntable angle)")

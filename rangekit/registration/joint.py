@@ -8,7 +8,7 @@ Poses: ``T_world_view`` maps a view's points into the world, which is the first 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Sequence
+from typing import Callable, Sequence
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -32,7 +32,8 @@ class JointResult:
 
 def refine_jointly(clouds: Sequence[PointCloud], T_world_view: np.ndarray, pairs: Sequence[tuple[int, int]], *,
                    max_distance: float, iterations: int = 15, samples: int = 8000, kernel_k: float = 1.345,
-                   tolerance: float = 1e-9, rng: int = 0, hold: dict | None = None) -> JointResult:
+                   tolerance: float = 1e-9, rng: int = 0, hold: dict | None = None,
+                   basis: Callable[[np.ndarray, np.ndarray, float], np.ndarray] | None = None) -> JointResult:
     """Multi-view ICP: refine every pose at once (view 0 fixed) by Gauss-Newton on point-to-plane residuals
     of all overlapping ``pairs`` in both directions, re-associating closest points each iteration.
 
@@ -44,6 +45,10 @@ def refine_jointly(clouds: Sequence[PointCloud], T_world_view: np.ndarray, pairs
     ``hold``: ``{view: [HeldMotions in world, one per pair of that view]}`` (see
     :mod:`rangekit.registration.stability`): a view keeps its start pose along the motions that every
     one of its pairs leaves free; every other motion is solved as usual (:func:`_held_basis`).
+
+    ``basis(T_world_view, centre, length)``: instead, the updates lie in the span of the (6(n-1), m)
+    matrix it returns at each iteration (e.g. :func:`rangekit.registration.turntable.turntable_basis`:
+    every view rotated about one common axis); ``hold`` is then not used.
     """
     n = len(clouds)
     T = np.array(T_world_view, dtype=np.float64, copy=True)
@@ -99,7 +104,7 @@ def refine_jointly(clouds: Sequence[PointCloud], T_world_view: np.ndarray, pairs
         rmse = float(np.sqrt(np.mean(r_cat ** 2)))
         free = slice(6, 6 * n)
         A = Hm[free, free]
-        B = _held_basis(n, hold, centre, size) if hold else None
+        B = basis(T, centre, size) if basis is not None else (_held_basis(n, hold, centre, size) if hold else None)
         try:
             if B is None:
                 xi = -np.linalg.solve(A + 1e-12 * np.trace(A) / len(A) * np.eye(len(A)), g[free])

@@ -61,6 +61,9 @@ class MultiViewOptions:
                                                                max_iterations=60, tolerance=1e-6, max_samples=5000))
                                          # pairwise runs only start the joint refinement: 1 um and 5k
                                          # points suffice (the joint step ends at the same poses)
+    turntable: bool = False              # with a prior: the views are on a turntable, and the joint
+                                         # refinement keeps them rotations about one common axis (its
+                                         # 4 parameters and each view's angle: rangekit.registration.turntable)
     rng: int = 0
 
 
@@ -310,9 +313,14 @@ def register_views(clouds: Sequence[PointCloud], *, init_T_world_view: np.ndarra
         pairs = [(i, j) for i, j in choose(T, prior)
                  if _mutual_overlap(fine_clouds[i], fine_clouds[j], trees[i], trees[j], invert_T(T[i]) @ T[j],
                                     2 * fine) >= options.min_overlap]
+        basis = None
+        if options.turntable and prior:
+            from rangekit.registration.turntable import onto_turntable, turntable_basis
+
+            T, basis = onto_turntable(T), turntable_basis
         joint = refine_jointly(fine_clouds, T, pairs, max_distance=2.5 * fine, iterations=options.joint_iterations,
                                samples=options.joint_samples, tolerance=options.joint_tolerance, rng=options.rng,
-                               hold=_joint_holds(n, pairs, edges, holds, T))
+                               hold=_joint_holds(n, pairs, edges, holds, T), basis=basis)
         T = joint.T_world_view
         rmse = joint.rmse
         say(f"joint refinement of {n} views over {len(pairs)} pairs: rmse {joint.rmse * 1e3:.4f} mm, "

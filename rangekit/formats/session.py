@@ -80,10 +80,11 @@ class CaptureSettings:
 
     @classmethod
     def from_rig(cls, rig: Rig, *, hardware: bool) -> "CaptureSettings":
-        """The rig file's ``capture`` section; waits only on hardware (defaults 0.1 s and 0.5 s)."""
+        """The rig file's ``capture`` section; waits on hardware (defaults 0.1 s and 0.5 s), and on the
+        simulator the pattern delay the rig file states (``rangekit check``'s measured latency), else none."""
         c = rig.capture
         if not hardware:
-            return cls(bits=c.get("bits"))
+            return cls(bits=c.get("bits"), pattern_delay_s=float(c.get("pattern_delay_s", 0.0)))
         return cls(bits=c.get("bits"), pattern_delay_s=float(c.get("pattern_delay_s", DEFAULT_PATTERN_DELAY_S)),
                    turntable_settle_s=float(c.get("turntable_settle_s", DEFAULT_TURNTABLE_SETTLE_S)))
 

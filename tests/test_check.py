@@ -107,8 +107,8 @@ def test_exposure_rounding_and_auto_exposures():
     assert round_to_refresh(8000.0, 120.0) == pytest.approx(1e6 / 120)
     assert round_to_refresh(100.0, 120.0) == pytest.approx(1e6 / 120)      # at least one period
     assert round_to_refresh(8000.0, None) == 8000.0
-    assert auto_exposures(2000.0, 40000.0, 30.0) == (2000, 8000, 32000)
-    assert max(auto_exposures(20000.0, 40000.0, 30.0)) <= 1e6 / 30         # one frame period at most
+    assert auto_exposures(2000.0, 30.0) == (2000, 8000, 32000)
+    assert auto_exposures(20000.0, 30.0) == (2083, 8333, 33333)            # one frame period at most
 
 
 def test_cli_check_on_the_simulator(monkeypatch, tmp_path, capsys):

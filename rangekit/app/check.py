@@ -27,7 +27,8 @@ from rangekit.app.check_stats import DARK_TARGET, TARGET_P99, ImageStats, image_
 from rangekit.camera_controls import CONTROL_FIELDS, CameraControls, round_to_refresh
 from rangekit.errors import DeviceError
 
-__all__ = ["SETTLE_S", "CheckResult", "run_check", "measure_latency", "pattern_delay_for", "auto_exposures"]
+__all__ = ["SETTLE_S", "CheckResult", "run_check", "measure_latency", "pattern_delay_for", "auto_exposures",
+           "exposures_from_check"]
 
 #: Wait after showing a pattern before a settled capture (seconds, the devices' clock): longer than any
 #: projector's latency.
@@ -162,12 +163,36 @@ def _suggest(devices, controls: CameraControls, stats: ImageStats, mask, full_sc
     return round_to_refresh(min(max(e * scale, _MIN_US), _MAX_US), refresh_hz)
 
 
-def auto_exposures(suggested_us: float, dark_us: float, fps: float, n: int = 3) -> tuple[int, ...]:
-    """``--exposures auto``: ``n`` exposures 4x apart from the highlights' (``suggested_us``) upwards, so
-    they span the dark parts' (``dark_us``) where 4**(n-1) covers it; each at most one frame period."""
-    period = 1e6 / fps
-    lo = min(suggested_us, period)
-    return tuple(sorted({int(round(min(lo * 4 ** k, period))) for k in range(n)}))
+def auto_exposures(suggested_us: float, fps: float, n: int = 3) -> tuple[int, ...]:
+    """``--exposures auto``: ``n`` exposures 4x apart, the longest ``4**(n-1)`` times the highlights'
+    exposure (``suggested_us``) but at most one frame period (``1e6 / fps``), so the shortest never
+    saturates the highlights and the longest lifts the dark parts as far as the frame rate allows."""
+    top = min(suggested_us * 4 ** (n - 1), 1e6 / fps)
+    return tuple(int(round(max(top / 4 ** k, _MIN_US))) for k in reversed(range(n)))
+
+
+def _exposure_stats(devices, rig, controls: CameraControls, full_scale: float, mask=None):
+    """Steps 1-3 of the module docstring: (controls used, white, black, mask, stats, suggested us, dark us)."""
+    if controls.auto_exposure:
+        controls = replace(controls, exposure_us=CameraControls().exposure_us)
+    set_controls = getattr(devices.camera, "set_controls", None)
+    if set_controls is not None:
+        set_controls(controls)
+    white, black = _shot(devices, _flat(devices, 255)), _shot(devices, _flat(devices, 0))
+    mask = lit_mask(white, black, full_scale) if mask is None else np.asarray(mask, dtype=bool)
+    stats = image_stats(white, black, full_scale, mask, MIN_CONFIDENCE)
+    refresh = ((rig.devices or {}).get("projector") or {}).get("refresh_hz")
+    suggested = _suggest(devices, controls, stats, mask, full_scale, refresh)
+    p5 = max(stats.contrast_percentiles["p5"], 1e-3)
+    dark = round_to_refresh(min(controls.exposure_us * DARK_TARGET / p5, _MAX_US), refresh)
+    return controls, white, black, mask, stats, suggested, dark
+
+
+def exposures_from_check(devices, rig, controls: CameraControls, full_scale: float) -> tuple[int, ...]:
+    """``rangekit scan --exposures auto``: check's suggested exposures for the highlights and the dark parts
+    measured on ``devices``, made into :func:`auto_exposures`."""
+    controls, *_, suggested, _ = _exposure_stats(devices, rig, controls, full_scale)
+    return auto_exposures(suggested, controls.fps)
 
 
 def run_check(devices, rig, controls: CameraControls, *, full_scale: float, mask=None, truth=None,
@@ -183,19 +208,9 @@ def run_check(devices, rig, controls: CameraControls, *, full_scale: float, mask
 
     if controls.auto_exposure:
         call_progress(progress, "the rig's exposure is auto: the check locks it at 33333 us (set it in the rig file)")
-        controls = replace(controls, exposure_us=CameraControls().exposure_us)
-    set_controls = getattr(devices.camera, "set_controls", None)
-    if set_controls is not None:
-        set_controls(controls)
     call_progress(progress, "white, black and checker")
-    white, black = _shot(devices, _flat(devices, 255)), _shot(devices, _flat(devices, 0))
+    controls, white, black, mask, stats, suggested, dark = _exposure_stats(devices, rig, controls, full_scale, mask)
     checker = _shot(devices, _checker(devices))
-    mask = lit_mask(white, black, full_scale) if mask is None else np.asarray(mask, dtype=bool)
-    stats = image_stats(white, black, full_scale, mask, MIN_CONFIDENCE)
-    refresh = ((rig.devices or {}).get("projector") or {}).get("refresh_hz")
-    suggested = _suggest(devices, controls, stats, mask, full_scale, refresh)
-    p5 = max(stats.contrast_percentiles["p5"], 1e-3)
-    dark = round_to_refresh(min(controls.exposure_us * DARK_TARGET / p5, _MAX_US), refresh)
     mid = (white.astype(np.float64) + black) / 2
     half = np.maximum((white.astype(np.float64) - black) / 2, 1.0)
     cc = np.abs(checker - mid) / half

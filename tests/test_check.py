@@ -16,7 +16,7 @@ from rangekit.cli import main
 from rangekit.coded.patterns import make_pattern_spec
 from rangekit.formats.session import ScanPlan
 from rangekit.io import read_png
-from rangekit.rig import load_rig, save_rig, template_rig
+from rangekit.rig import load_rig, template_rig
 from rangekit.sim import SimRig, default_rig, default_scene
 from rangekit.sim import devices as sim_devices
 from rangekit.sim.sensor import Exposure, saturated

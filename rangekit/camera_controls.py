@@ -28,7 +28,8 @@ from dataclasses import asdict, dataclass
 
 from rangekit.errors import ConfigError
 
-__all__ = ["CameraControls", "CONTROL_FIELDS", "controls_from_capture", "check_refresh", "require_locked"]
+__all__ = ["CameraControls", "CONTROL_FIELDS", "controls_from_capture", "check_refresh", "require_locked",
+           "round_to_refresh"]
 
 #: The fields of ``capture.camera`` and their ranges: name -> (smallest, largest, unit, words allowed).
 CONTROL_FIELDS = {
@@ -120,6 +121,15 @@ def check_refresh(controls: CameraControls, refresh_hz: float | None, *, where: 
                           f"refresh periods ({period_us:.1f} us at devices.projector.refresh_hz {refresh_hz:g}), "
                           f"found {controls.exposure_us:g} us = {n:.3f} periods; use {k * period_us:.0f} or "
                           f"{(k + 1) * period_us:.0f}")
+
+
+def round_to_refresh(exposure_us: float, refresh_hz: float | None) -> float:
+    """``exposure_us`` rounded to the nearest whole number (at least 1) of the projector's refresh periods
+    (microseconds; unchanged without ``refresh_hz``), so that :func:`check_refresh` accepts it."""
+    if refresh_hz is None:
+        return float(exposure_us)
+    period_us = 1e6 / float(refresh_hz)
+    return float(max(1, round(float(exposure_us) / period_us)) * period_us)
 
 
 def require_locked(controls: CameraControls, *, where: str, method: str = "coded light") -> None:

@@ -39,7 +39,7 @@ import numpy as np
 from rangekit.camera_controls import CONTROL_FIELDS, CameraControls
 
 __all__ = ["REF_EXPOSURE_US", "REF_ISO", "AE_TARGET", "AE_RATE", "AE_MAX_ISO", "Exposure", "exposure_for",
-           "auto_exposure_step", "digitise", "noise_std"]
+           "auto_exposure_step", "digitise", "noise_std", "saturated"]
 
 REF_EXPOSURE_US: float = CameraControls().exposure_us
 REF_ISO: int = CameraControls().iso
@@ -109,3 +109,14 @@ def noise_std(model, signal: np.ndarray, exposure: Exposure) -> np.ndarray:
     if model.full_well == 0:
         return np.zeros_like(s)
     return np.sqrt(s * model.full_well + model.read_noise ** 2) / model.full_well * exposure.iso_gain
+
+
+def saturated(signal: np.ndarray, model, exposure: Exposure) -> np.ndarray:
+    """Where the noise-free image of the reference signal ``signal`` (full-scale fractions, (H, W[, 3]))
+    reaches full scale at ``exposure``: the truth a saturation measurement is compared against. The image
+    :func:`digitise` records without noise is ``rint(min(signal * ratio, 1) * iso_gain * max_value)``
+    clipped at ``max_value``, so a pixel is at full scale when ``signal * ratio * iso_gain`` is at least
+    ``(max_value - 0.5) / max_value`` (and the full well is reached)."""
+    s = np.asarray(signal, dtype=np.float64) * exposure.ratio
+    level = (model.max_value - 0.5) / model.max_value
+    return np.minimum(s, 1.0) * exposure.iso_gain >= level

@@ -32,7 +32,8 @@ from rangekit.coded.patterns import PatternSpec
 from rangekit.laser.sequence import LaserSequence
 from rangekit.devices import Rig as RigDevices
 from rangekit.errors import ConfigError, DeviceError, StorageError
-from rangekit.formats.session import CaptureSettings, ScanPlan, Session, SimulatorSettings, view_folder
+from rangekit.formats.session import (CaptureSettings, ScanPlan, Session, SimulatorSettings, exposure_folder,
+                                      view_folder)
 from rangekit.formats.session_check import frame_sha256, verify_views
 from rangekit.formats.session_lock import session_lock
 from rangekit.app.lights import light_for
@@ -112,7 +113,8 @@ def acquire(devices: RigDevices, rig: Rig, spec: PatternSpec, out_dir: str | Pat
         set_controls = getattr(devices.camera, "set_controls", None)
         if set_controls is not None:
             set_controls(controls)
-        return _acquire(devices, rig, spec, out, plan, resume, capture, simulator, hardware, files or {}, progress)
+        return _acquire(devices, rig, spec, out, plan, resume, capture, simulator, hardware, files or {}, progress,
+                        controls)
 
 
 def _resume_hint(out: Path, n_done: int) -> str:
@@ -137,7 +139,7 @@ def _new_session(out: Path, plan, spec, rig, capture, simulator, hardware, files
 
 
 def _acquire(devices, rig, spec, out: Path, plan, resume, capture, simulator, hardware, files,
-             progress) -> Session:
+             progress, controls) -> Session:
     angles = plan.angles()
     if resume:
         session = Session.load(out)
@@ -153,19 +155,27 @@ def _acquire(devices, rig, spec, out: Path, plan, resume, capture, simulator, ha
     else:
         session = _new_session(out, plan, spec, rig, capture, simulator, hardware, files)
     settle_s, pattern_settle_s = session.capture.turntable_settle_s, session.capture.pattern_delay_s
+    exposures = session.capture.exposures_us or (None,)
+    if exposures[0] is not None and (isinstance(spec, LaserSequence) or
+                                     getattr(devices.camera, "set_controls", None) is None):
+        raise ConfigError(f"{out}: capture.exposures_us (multi-exposure) needs a coded-light scan and a camera "
+                          f"that sets its exposure (set_controls); found {type(devices.camera).__name__}"
+                          + (" and a laser scan" if isinstance(spec, LaserSequence) else ""))
     done = [v.done for v in session.views]
     light = light_for(devices, spec, rig)
     names, files = spec.frame_names, spec.frame_files
     try:
         _views(devices, light, rig, spec, out, plan, angles, session, done, names, files, settle_s, pattern_settle_s,
-               progress)
+               progress, [(e, None if e is None else replace(controls, exposure_us=float(e))) for e in exposures])
     finally:
         light.close()
     return Session.load(out)
 
 
 def _views(devices, light, rig, spec, out, plan, angles, session, done, names, files, settle_s, pattern_settle_s,
-           progress) -> None:
+           progress, exposures) -> None:
+    """Each view not done: turn, then for each exposure (``(us, CameraControls)``; ``(None, None)``: the
+    rig's one exposure) every frame, into the view folder or its exposure sub-folder ``e<us>/``."""
     for k, angle in enumerate(angles):
         if done[k]:
             continue
@@ -185,15 +195,21 @@ def _views(devices, light, rig, spec, out, plan, angles, session, done, names, f
                 if settle_s > 0:
                     sleep(settle_s)
             sha256 = {}
-            for i, (name, file) in enumerate(zip(names, files)):
-                step = f"frame {i} ({name}): {light.device}"
-                light.show(i)
-                if pattern_settle_s > 0:
-                    sleep(pattern_settle_s)
-                step = f"frame {i} ({name}): camera"
-                image = devices.camera.capture()
-                step, target = f"frame {i} ({name}): writing", partial / file
-                sha256[file] = frame_sha256(write_png(target, image))
+            for exposure, controls in exposures:
+                sub = "" if exposure is None else f"{exposure_folder(exposure)}/"
+                if exposure is not None:
+                    step = f"exposure {exposure} us: camera controls"
+                    (partial / sub).mkdir()
+                    devices.camera.set_controls(controls)
+                for i, (name, file) in enumerate(zip(names, files)):
+                    step = f"{sub}frame {i} ({name}): {light.device}"
+                    light.show(i)
+                    if pattern_settle_s > 0:
+                        sleep(pattern_settle_s)
+                    step = f"{sub}frame {i} ({name}): camera"
+                    image = devices.camera.capture()
+                    step, target = f"{sub}frame {i} ({name}): writing", partial / sub / file
+                    sha256[sub + file] = frame_sha256(write_png(target, image))
             step = f"after frame {len(names) - 1} ({names[-1]}): {light.device} off"
             light.show(None)
             step, target = "writing view.json", partial
@@ -201,7 +217,7 @@ def _views(devices, light, rig, spec, out, plan, angles, session, done, names, f
             atomic_write_json(partial / "patterns.json", spec.to_dict())
             save_rig(rig, partial / "rig.json")
             atomic_write_json(partial / "view.json", {"index": k, "angle_rad": float(angle), "started": t0,
-                                                      "finished": time.time(), "n_frames": len(files)})
+                                                      "finished": time.time(), "n_frames": len(sha256)})
             partial.rename(final)
             fsync_folder(out)
             step, target = "recording the view", out / "session.json"
@@ -217,5 +233,5 @@ def _views(devices, light, rig, spec, out, plan, angles, session, done, names, f
                                f"{target}: {exc.strerror or exc}; free some space; "
                                f"{_resume_hint(out, sum(done))}") from exc
         done[k] = True
-        call_progress(progress, f"view {k + 1}/{plan.n_views} done ({len(files)} frames, {time.time() - t0:.1f} s)",
+        call_progress(progress, f"view {k + 1}/{plan.n_views} done ({len(sha256)} frames, {time.time() - t0:.1f} s)",
                       k + 1, plan.n_views)

@@ -135,6 +135,8 @@ def _process(out: Path, fusion: str, method: str, table_margin: float, evaluate:
                 "edge_margin_px": EDGE_MARGIN_PX,
                 "pattern": spec.to_dict()["method"], "full_scale": full_scale,
                 "projector_response": None if rig.projector_response is None else rig.projector_response.to_dict()}
+    if session.capture.exposures_us:      # multi-exposure: each exposure decoded, merged per pixel
+        settings["exposures_us"] = list(session.capture.exposures_us)
     timer = StageTimer()
 
     with timer.stage("decode"):

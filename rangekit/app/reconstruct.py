@@ -8,6 +8,7 @@ import numpy as np
 
 from rangekit.camera import PinholeCamera
 from rangekit.coded.decode import decode
+from rangekit.coded.hdr import merge_decodes
 from rangekit.coded.result import DecodeResult
 from rangekit.errors import ConfigError, DecodeError
 from rangekit.coded.patterns import PatternSpec
@@ -45,7 +46,8 @@ def reconstruct_view(images, spec: PatternSpec, camera: PinholeCamera, projector
                      order: str = "rangekit", subpixel: bool = True, method: str = "auto",
                      max_jump: float = 0.004, max_residual: float = 0.002, min_confidence: float = 0.03,
                      edge_margin: int = EDGE_MARGIN_PX,
-                     full_scale: float | None = None, response: ProjectorResponse | None = None) -> Reconstruction:
+                     full_scale: float | None = None, response: ProjectorResponse | None = None,
+                     exposures_us=None) -> Reconstruction:
     """Decode ``images`` and triangulate against ``projector``.
 
     ``max_jump`` (relative range step, see :func:`rangekit.coded.triangulate.discontinuity_mask`) removes flying
@@ -55,14 +57,24 @@ def reconstruct_view(images, spec: PatternSpec, camera: PinholeCamera, projector
     of full scale) is lower: at 1-2% of full scale noise moves stripe edges by a large fraction of a
     column, which at grazing angles is millimetres. ``response`` is the projector's response (the rig's
     ``projector_response``), which phase methods correct for (see :func:`rangekit.coded.decode.decode`).
+    ``exposures_us`` (increasing): ``images`` is then one stack per exposure (multi-exposure capture), each
+    decoded and merged per pixel (:func:`rangekit.coded.hdr.merge_decodes`).
     """
-    if camera.size != (np.asarray(images[0]).shape[1], np.asarray(images[0]).shape[0]):
-        raise ConfigError(f"the captures are {np.asarray(images[0]).shape[1]}x{np.asarray(images[0]).shape[0]} "
+    probe = np.asarray(images[0][0] if exposures_us is not None else images[0])
+    if camera.size != (probe.shape[1], probe.shape[0]):
+        raise ConfigError(f"the captures are {probe.shape[1]}x{probe.shape[0]} "
                           f"but the rig's camera {camera.name!r} is {camera.width}x{camera.height}")
     if projector.size != (spec.width, spec.height):
         raise ConfigError(f"the pattern spec is for a {spec.width}x{spec.height} projector but the rig's "
                           f"projector is {projector.width}x{projector.height}")
-    dec = decode(images, spec, order=order, subpixel=subpixel, full_scale=full_scale, response=response)
+    if exposures_us is not None:
+        stacks = list(images)
+        decs = [decode(st, spec, order=order, subpixel=subpixel, full_scale=full_scale, response=response)
+                for st in stacks]
+        top = full_scale or (255.0 if np.asarray(stacks[0][0]).dtype == np.uint8 else 65535.0)
+        dec = merge_decodes(decs, exposures_us, top)[0]
+    else:
+        dec = decode(images, spec, order=order, subpixel=subpixel, full_scale=full_scale, response=response)
     weak = dec.confidence < min_confidence
     cols = np.where(weak, np.nan, dec.proj_col)
     rows = np.where(weak, np.nan, dec.proj_row) if np.any(np.isfinite(dec.proj_row)) else None

@@ -19,7 +19,7 @@ from rangekit.app.reconstruct import reconstruct_view
 from rangekit.coded.patterns import PatternSpec
 from rangekit.errors import RangekitError
 from rangekit.formats.capture import list_images, read_stack
-from rangekit.formats.session import SessionView
+from rangekit.formats.session import SessionView, exposure_folder
 from rangekit.geometry import apply_T, invert_T
 from rangekit.io import atomic_save_npz, atomic_write_json, read_json, read_png
 from rangekit.rig import Rig
@@ -75,19 +75,24 @@ def view_cloud(v: SessionView, spec: PatternSpec, rig: Rig, settings: dict, full
                T_table_world: np.ndarray | None, table_margin: float) -> tuple[PointCloud, ViewMaps]:
     """Decode, triangulate and filter one view, or reuse its cache when made with the same ``settings``.
 
-    ``settings["method"]`` is the triangulation method; ``full_scale`` the camera's largest pixel value
+    ``settings["method"]`` is the triangulation method, ``settings["exposures_us"]`` (when present) the
+    exposures of a multi-exposure session, each decoded from its ``e<us>/`` folder and merged per pixel; ``full_scale`` the camera's largest pixel value
     (None: the images' dtype). Points less than ``table_margin`` metres above the turntable top
     (``T_table_world`` maps world points to the table frame; None: no table) are dropped.
     """
     white = white_frame_index(spec)
+    exposures = settings.get("exposures_us")
+    # multi-exposure: one stack per exposure sub-folder; the capture shown is the shortest exposure's white
+    folders = [v.folder] if not exposures else [v.folder / exposure_folder(e) for e in exposures]
     cached = _read_cache(v, settings, (rig.camera.height, rig.camera.width))
     if cached is not None:
         cloud, m = cached
-        return cloud, ViewMaps(m["proj_col"], m["confidence"], m["depth"], read_png(v.folder / f"{white:03d}.png"),
+        return cloud, ViewMaps(m["proj_col"], m["confidence"], m["depth"], read_png(folders[0] / f"{white:03d}.png"),
                                m["sigma"])
-    images = read_stack(list_images(v.folder))
-    rec = reconstruct_view(images, spec, rig.camera, rig.projector, method=settings["method"],
-                           full_scale=full_scale, response=rig.projector_response)
+    stacks = [read_stack(list_images(f)) for f in folders]
+    images = stacks[0]
+    rec = reconstruct_view(stacks if exposures else images, spec, rig.camera, rig.projector, method=settings["method"],
+                           full_scale=full_scale, response=rig.projector_response, exposures_us=exposures)
     xyz = rec.triangulated.xyz.copy()
     valid = np.isfinite(xyz[:, :, 0])
     c = rec.cloud

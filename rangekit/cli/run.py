@@ -12,6 +12,7 @@ import errno
 import os
 import sys
 
+from rangekit.cli.check import add_parsers as add_check
 from rangekit.cli.coded import add_parsers as add_coded
 from rangekit.cli.photometric import add_parsers as add_photometric
 from rangekit.cli.range import add_parsers as add_range
@@ -46,6 +47,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_coded(sub)
     add_registration(sub)
     add_scan(sub)
+    add_check(sub)
     add_render(sub)
     add_calibrate_parser(sub)
     add_photometric(sub)

@@ -9,6 +9,7 @@ from pathlib import Path
 
 from rangekit.cli._common import check_output, console, finite_float, int_in, say, seed
 from rangekit.errors import UsageError
+from rangekit.laser.sequence import LaserSequence
 
 
 def cmd_scan(args: argparse.Namespace) -> int:
@@ -80,6 +81,8 @@ def _scan(args: argparse.Namespace, t0: float) -> int:
                          n_views=args.views if args.steps is None else args.steps, patterns=args.patterns,
                          seed=args.seed, fusion=args.fusion, method=args.method, up=args.up, progress=console())
     folder = args.resume or args.out
+    if args.exposures is not None:
+        setup = _with_exposures(setup, args.exposures)
     if setup.resume:
         say(f"resuming {folder}: {setup.n_done}/{setup.n_views} views already done")
     try:
@@ -101,6 +104,42 @@ def _scan(args: argparse.Namespace, t0: float) -> int:
         return 0
     t_acq = time.perf_counter() - t0
     return _process(folder, args, acquisition_s=t_acq, resume_cmd=f"rangekit scan --resume {folder}")
+
+
+def _exposures(text: str):
+    """Argument type of --exposures: 'auto' or microseconds 1..1000000."""
+    return text if text == "auto" else int_in(1, 1_000_000)(text)
+
+
+def _with_exposures(setup, given: list):
+    """The scan set-up with ``--exposures`` (a new coded-light scan only): the exposures given, increasing,
+    or with 'auto' those of rangekit check's statistics on the devices."""
+    from dataclasses import replace
+
+    from rangekit.app.check import exposures_from_check
+    from rangekit.camera_controls import controls_from_capture
+
+    if setup.resume:
+        setup.close()
+        raise UsageError("--exposures: a resumed scan keeps its session's exposures; leave --exposures out")
+    if isinstance(setup.spec, LaserSequence):
+        setup.close()
+        raise UsageError("--exposures: multi-exposure capture is for coded light; leave it out with --method laser")
+    if "auto" in given:
+        if len(given) != 1:
+            setup.close()
+            raise UsageError(f"--exposures: expected 'auto' alone or 2 to 8 exposures in microseconds, found "
+                             f"{' '.join(map(str, given))}")
+        full_scale = setup.capture.full_scale or 255.0
+        exps = exposures_from_check(setup.devices, setup.rig, controls_from_capture(setup.rig.capture, where="rig file"),
+                                    full_scale)
+        say(f"--exposures auto: {' '.join(map(str, exps))} us (from rangekit check's statistics)")
+    else:
+        exps = tuple(sorted(set(given)))
+    if not 2 <= len(exps) <= 8:
+        setup.close()
+        raise UsageError(f"--exposures: expected 2 to 8 different exposures, found {' '.join(map(str, given))}")
+    return replace(setup, capture=replace(setup.capture, exposures_us=tuple(int(e) for e in exps)))
 
 
 def _process(folder: str, args: argparse.Namespace, *, acquisition_s: float | None = None,
@@ -177,6 +216,10 @@ def add_parsers(sub) -> None:
     scan.add_argument("--allow-auto-exposure", action="store_true",
                       help="scan although the rig file's capture.camera.exposure_us is 'auto' (refused otherwise: "
                            "auto-exposure changes the brightness between frames and breaks decoding)")
+    scan.add_argument("--exposures", nargs="+", type=_exposures, metavar="US",
+                      help="multi-exposure (HDR): capture every pattern at each exposure (microseconds, e.g. 2000 "
+                           "8000 32000) and decode each pixel from its longest unsaturated one; 'auto' picks three "
+                           "4x apart from rangekit check's statistics")
     scan.add_argument("--no-process", action="store_true", help="acquire only (process later with 'rangekit process')")
     _processing_options(scan)
     scan.set_defaults(func=cmd_scan)

@@ -41,9 +41,10 @@ from rangekit.errors import ConfigError, RangekitError
 from rangekit.formats.summary import ProcessResult
 from rangekit.io import atomic_write_json, read_json
 from rangekit.rig import Rig, load_rig
+from rangekit.formats.session_object import object_source
 
 __all__ = ["SESSION_SCHEMA", "ScanPlan", "CaptureSettings", "SimulatorSettings", "SessionView", "Session",
-           "load_session", "view_folder", "ProcessResult"]
+           "load_session", "view_folder", "exposure_folder", "ProcessResult"]
 
 SESSION_SCHEMA = "rangekit.session/1"
 #: Waits on hardware when the rig file's ``capture`` section does not set them, seconds.
@@ -72,6 +73,8 @@ class CaptureSettings:
     bits: int | None = None             # camera ADC bit depth (8, 10, 12 or 16); None: the images' dtype
     pattern_delay_s: float = 0.0        # wait after showing each pattern (projector latency)
     turntable_settle_s: float = 0.0     # wait after each turntable move (vibration)
+    exposures_us: tuple | None = None   # multi-exposure (HDR): each pattern at each of these exposures (us,
+                                        # increasing), frames in view_NNN/e<us>/; None: one exposure
 
     @property
     def full_scale(self) -> float | None:
@@ -80,10 +83,11 @@ class CaptureSettings:
 
     @classmethod
     def from_rig(cls, rig: Rig, *, hardware: bool) -> "CaptureSettings":
-        """The rig file's ``capture`` section; waits only on hardware (defaults 0.1 s and 0.5 s)."""
+        """The rig file's ``capture`` section; waits on hardware (defaults 0.1 s and 0.5 s), and on the
+        simulator the pattern delay the rig file states (``rangekit check``'s measured latency), else none."""
         c = rig.capture
         if not hardware:
-            return cls(bits=c.get("bits"))
+            return cls(bits=c.get("bits"), pattern_delay_s=float(c.get("pattern_delay_s", 0.0)))
         return cls(bits=c.get("bits"), pattern_delay_s=float(c.get("pattern_delay_s", DEFAULT_PATTERN_DELAY_S)),
                    turntable_settle_s=float(c.get("turntable_settle_s", DEFAULT_TURNTABLE_SETTLE_S)))
 
@@ -107,6 +111,17 @@ class SessionView:
     done: bool
     folder: Path
     sha256: dict | None = field(default=None, hash=False)
+
+
+def exposure_folder(exposure_us: int) -> str:
+    """The sub-folder of a view holding the frames at one exposure of a multi-exposure session: ``e2000``."""
+    return f"e{int(exposure_us)}"
+
+
+def frame_files(pattern, exposures_us) -> list[str]:
+    """A view's frame files: the pattern's, or each exposure's folder of them (``e2000/000.png ...``)."""
+    files = pattern.frame_files
+    return files if not exposures_us else [f"{exposure_folder(e)}/{f}" for e in exposures_us for f in files]
 
 
 def view_folder(folder: str | Path, index: int) -> Path:
@@ -136,6 +151,12 @@ class Session:
             capture = CaptureSettings.from_rig(rig, hardware=hardware is not None)
         views = tuple(SessionView(k, float(a), False, view_folder(folder, k)) for k, a in enumerate(plan.angles()))
         return cls(Path(folder), plan, pattern, rig, capture, views, simulator, hardware)
+
+    @property
+    def frame_files(self) -> list[str]:
+        """The frame files of a view, relative to its folder: ``000.png ...``, or with several exposures
+        ``e2000/000.png ... e8000/000.png ...`` (:func:`exposure_folder`)."""
+        return frame_files(self.pattern, self.capture.exposures_us)
 
     @property
     def is_simulated(self) -> bool:
@@ -170,7 +191,8 @@ class Session:
                 "views": [{"index": v.index, "angle_rad": v.angle, "state": "done" if v.done else "pending",
                            "folder": v.folder.name, **({"sha256": dict(v.sha256)} if v.sha256 else {})}
                           for v in self.views],
-                "capture": asdict(self.capture)}
+                "capture": {k: v for k, v in asdict(self.capture).items()
+                            if k != "exposures_us" or v is not None}}
         if self.simulator is not None:
             data["simulator"] = asdict(self.simulator)
         if self.hardware is not None:
@@ -208,35 +230,8 @@ MAX_VIEWS = 3600
 MAX_SEED = 2**32 - 1
 MAX_WAIT_S = 3600.0
 MAX_ANGLE_RAD = 1e3
+MAX_EXPOSURES = 8
 _SHA256_HEX = frozenset("0123456789abcdef")
-
-
-def object_source(folder: Path, value: str, path: Path) -> str:
-    """A simulated session's ``simulator.object`` as the simulator takes it: a built-in name (no ``/``,
-    no ``.``) as is, else the path of a mesh file inside ``folder`` (``value`` relative to it, no ``..``,
-    no symbolic link out of it). ConfigError naming ``path`` and the reason otherwise."""
-    if not any(c in value for c in "/\\."):
-        return value
-    p = Path(value)
-    why = None
-    if p.is_absolute():
-        why = "an absolute path"
-    elif ".." in p.parts:
-        why = "a path with '..'"
-    else:
-        full = folder / p
-        try:
-            inside = full.resolve().is_relative_to(folder.resolve())
-        except (OSError, RuntimeError, ValueError):
-            inside = False
-        if not inside:
-            why = "a link out of the session folder"
-        elif not full.is_file():
-            why = "not a file in the session folder"
-    if why is not None:
-        raise _error(path, "simulator.object", "a built-in object name or a mesh file inside the session folder "
-                     f"(such as 'object/bunny.ply'), not {why}", value)
-    return str(folder / p)
 
 
 def _show(found) -> str:
@@ -302,13 +297,20 @@ def _pattern(value, path: Path) -> PatternSpec | LaserSequence:
 
 
 def _capture(value, path: Path) -> CaptureSettings:
-    d = _fields(value, path, "capture", (), ("bits", "pattern_delay_s", "turntable_settle_s"))
-    bits = d.get("bits")
+    d = _fields(value, path, "capture", (), ("bits", "pattern_delay_s", "turntable_settle_s", "exposures_us"))
+    bits, exps = d.get("bits"), d.get("exposures_us")
+    if exps is not None:
+        ok = isinstance(exps, list) and 2 <= len(exps) <= MAX_EXPOSURES
+        exps = tuple(_int(e, path, f"capture.exposures_us[{i}]", 1, 1_000_000) for i, e in enumerate(exps)) if ok else 0
+        if not ok or list(exps) != sorted(set(exps)):
+            raise _error(path, "capture.exposures_us", f"2..{MAX_EXPOSURES} increasing exposures in microseconds",
+                         d["exposures_us"])
     return CaptureSettings(bits=None if bits is None else _int(bits, path, "capture.bits", 1, 16),
                            pattern_delay_s=_number(d.get("pattern_delay_s", 0.0), path, "capture.pattern_delay_s",
                                                    0.0, MAX_WAIT_S),
                            turntable_settle_s=_number(d.get("turntable_settle_s", 0.0), path,
-                                                      "capture.turntable_settle_s", 0.0, MAX_WAIT_S))
+                                                      "capture.turntable_settle_s", 0.0, MAX_WAIT_S),
+                           exposures_us=exps)
 
 
 def _simulator(value, path: Path, folder: Path) -> SimulatorSettings:
@@ -372,7 +374,8 @@ def _from_dict(data, folder: Path) -> Session:
             ("capture", "simulator", "hardware"))
     plan = _plan(data["plan"], path)
     pattern = _pattern(data["pattern"], path)
-    views = _views(data["views"], path, folder, plan, pattern.frame_files)
+    early = _capture(data["capture"], path) if data.get("capture") is not None else None
+    views = _views(data["views"], path, folder, plan, frame_files(pattern, early and early.exposures_us))
     simulator = None if data.get("simulator") is None else _simulator(data["simulator"], path, folder)
     hardware = data.get("hardware")
     if hardware is not None:
@@ -382,8 +385,8 @@ def _from_dict(data, folder: Path) -> Session:
         if simulator is not None:
             raise ConfigError(f"{path}: expected either simulator or hardware, found both")
     rig = load_rig(folder / "rig.json")
-    if data.get("capture") is not None:
-        capture = _capture(data["capture"], path)
+    if early is not None:
+        capture = early
     else:  # written before capture settings were recorded
         capture = CaptureSettings.from_rig(rig, hardware=hardware is not None)
         bits = simulator.imaging.get("bits") if simulator is not None else None

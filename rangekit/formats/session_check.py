@@ -15,7 +15,7 @@ from pathlib import Path
 
 from rangekit.errors import FileFormatError
 from rangekit.formats.capture import IMAGE_SUFFIXES
-from rangekit.formats.session import Session, SessionView
+from rangekit.formats.session import Session, SessionView, exposure_folder
 
 __all__ = ["frame_sha256", "file_sha256", "verify_views"]
 
@@ -37,13 +37,17 @@ def file_sha256(path: Path) -> str | None:
     return h.hexdigest()
 
 
-def _frame_files(v: SessionView) -> set[str]:
-    """Names of the image files in a view folder (those a capture folder reader would take)."""
-    try:
-        return {p.name for p in v.folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES
-                and not p.name.startswith(".") and p.stem != "preview"}
-    except OSError:
-        return set()
+def _frame_files(v: SessionView, subfolders: tuple[str, ...] = ()) -> set[str]:
+    """Names of the image files in a view folder (those a capture folder reader would take), and in its
+    exposure ``subfolders`` (``e2000/000.png``) for a multi-exposure session."""
+    out = set()
+    for sub in ("", *subfolders):
+        try:
+            out |= {f"{sub}/{p.name}" if sub else p.name for p in (v.folder / sub).iterdir()
+                    if p.suffix.lower() in IMAGE_SUFFIXES and not p.name.startswith(".") and p.stem != "preview"}
+        except OSError:
+            pass
+    return out
 
 
 def _problem(session: Session, v: SessionView, frame: str, what: str) -> FileFormatError:
@@ -59,12 +63,13 @@ def verify_views(session: Session, *, workers: int = 2) -> list[str]:
     recorded): only their frame count is checked. Raises FileFormatError naming the view folder and the
     first missing, extra or changed frame.
     """
-    expected = set(session.pattern.frame_files)
+    expected = set(session.frame_files)
+    subfolders = tuple(exposure_folder(e) for e in session.capture.exposures_us or ())
     unverified, jobs = [], []
     for v in session.done_views:
         if not v.folder.is_dir():
             raise _problem(session, v, "folder", "is missing (the whole view folder)")
-        present = _frame_files(v)
+        present = _frame_files(v, subfolders)
         recorded = set(v.sha256) if v.sha256 else expected
         for name in sorted(recorded - present):
             raise _problem(session, v, name, "is missing" + (f" (recorded sha256 {v.sha256[name][:16]}...)"

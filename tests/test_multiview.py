@@ -10,7 +10,7 @@ import pytest
 from rangekit.errors import RegistrationError
 from rangekit.geometry import axis_angle_to_R, make_T, rotation_angle
 from rangekit.surface.cloud import PointCloud
-from rangekit.registration.multiview import overlap_rms, refine_jointly, register_views, _prepare
+from rangekit.registration.multiview import MultiViewOptions, overlap_rms, refine_jointly, register_views, _prepare
 from rangekit.registration.sync import synchronise
 from rangekit.sim.scans import perturb_poses, turntable_scans
 
@@ -161,8 +161,8 @@ def test_registration_bad_input():
 
 @pytest.mark.slow
 def test_prior_chosen_pairs_register_to_ground_truth():
-    """With a prior, registration tries only the views nearest in rotation (rangekit.registration.pairs),
-    not every pair, and still lands within 0.01 deg (mean) of the simulator's poses."""
+    """With a turntable prior, registration tries only the views nearest in rotation
+    (rangekit.registration.pairs), not every pair, and still lands within 0.01 deg of the simulator's poses."""
     from rangekit.registration.pairs import all_pairs, default_pairs, nearest_in_rotation
 
     scans = turntable_scans(n_views=12, noise=0.0002, resolution=(640, 480), rng=3)
@@ -172,7 +172,7 @@ def test_prior_chosen_pairs_register_to_ground_truth():
     assert len(chosen) == 24 and all(min(j - i, 12 - (j - i)) <= 2 for i, j in chosen)
     assert default_pairs(prior, False) == all_pairs(prior) and len(all_pairs(prior)) == 66
     assert nearest_in_rotation(2)(prior, True) == sorted({(min(k, (k + 1) % 12), max(k, (k + 1) % 12)) for k in range(12)})
-    res = register_views(scans.clouds, init_T_world_view=prior)
+    res = register_views(scans.clouds, init_T_world_view=prior, options=MultiViewOptions(turntable=True))
     assert {(e.i, e.j) for e in res.edges} <= set(chosen)
     rot, tr = pose_errors(res.T_world_view, scans.T_world_view)
     assert rot[1:].mean() <= 0.01 and rot.max() <= 0.02 and tr[1:].mean() <= 2e-4 * scans.diag

@@ -26,7 +26,7 @@ from rangekit.surface.cloud import PointCloud, bbox_diagonal, check_voxel, estim
 from rangekit.registration.coarse import CoarseOptions, compute_features, coarse_align
 from rangekit.registration.icp import IcpOptions, icp
 from rangekit.registration.joint import JointResult, refine_jointly
-from rangekit.registration.pairs import PairChooser, default_pairs
+from rangekit.registration.pairs import PairChooser, all_pairs, default_pairs
 from rangekit.registration.stability import MIN_CONSTRAINT, HeldMotions, PoseConstraint
 from rangekit.registration.sync import SyncResult, synchronise
 
@@ -55,8 +55,8 @@ class MultiViewOptions:
     joint_samples: int = 20000           # points per view in the joint refinement (at most all fine points);
                                          # 20k: the 50k poses to 1e-3 deg on the 12-view scan (docs/benchmarks.md)
     pairs: PairChooser | None = None     # the candidate pairs (rangekit.registration.pairs): None = the
-                                         # nearest views in rotation with a prior, all pairs without; only
-                                         # candidates that overlap become edges
+                                         # nearest views in rotation with a turntable prior (turntable=True),
+                                         # all pairs otherwise; only candidates that overlap become edges
     icp: IcpOptions = field(default_factory=lambda: IcpOptions(method="point_to_plane", kernel="huber",
                                                                max_iterations=60, tolerance=1e-6, max_samples=5000))
                                          # pairwise runs only start the joint refinement: 1 um and 5k
@@ -271,7 +271,9 @@ def register_views(clouds: Sequence[PointCloud], *, init_T_world_view: np.ndarra
     edges: list[EdgeResult] = []
     holds: dict = {}
     prior = init_T_world_view is not None
-    choose = options.pairs or default_pairs
+    # On the turntable the neighbours in angle; any other prior may be rough (poses from another tool,
+    # degrees off), so every pair is tried.
+    choose = options.pairs or (default_pairs if options.turntable else all_pairs)
     sync = None
     for rnd in range(options.rounds):
         level = coarse_clouds if rnd == 0 else fine_clouds

@@ -122,7 +122,7 @@ def o3d_multiway(clouds, init, voxel):
 
 
 def bench_multiview(scans) -> list[str]:
-    from rangekit.registration.multiview import MultiViewOptions, register_views
+    from rangekit.registration.multiview import register_views
     from rangekit.registration.sync import synchronise
     from rangekit.sim.scans import perturb_poses
 

@@ -3,10 +3,11 @@ and a scan that uses the written pattern delay records the frames of a latency-f
 fraction against the simulator's noise-free truth on the shiny zoo object, the outputs and the CLI."""
 
 import json
-from dataclasses import replace
 
 import numpy as np
 import pytest
+
+from small_rigs import small_projector_rig
 
 from rangekit.app.acquire import acquire
 from rangekit.app.check import auto_exposures, pattern_delay_for
@@ -17,7 +18,7 @@ from rangekit.coded.patterns import make_pattern_spec
 from rangekit.formats.session import ScanPlan
 from rangekit.io import read_png
 from rangekit.rig import load_rig, template_rig
-from rangekit.sim import SimRig, default_rig, default_scene
+from rangekit.sim import SimRig, default_scene
 from rangekit.sim import devices as sim_devices
 from rangekit.sim.sensor import Exposure, saturated
 
@@ -25,8 +26,7 @@ LATENCY_S = 0.05
 
 
 def small_rig():
-    r = default_rig()
-    return replace(r, cameras=(r.camera.resized(320, 256),), projector=r.projector.resized(320, 200))
+    return small_projector_rig()
 
 
 @pytest.fixture(scope="module")

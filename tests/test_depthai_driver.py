@@ -36,14 +36,9 @@ def test_every_depthai_name_exists():
     dai = pytest.importorskip("depthai")
     from rangekit.drivers.depthai_camera import DEPTHAI_NAMES
 
-    missing = []
-    for path in DEPTHAI_NAMES:
-        obj = dai
-        for part in path.split("."):
-            if not hasattr(obj, part):
-                missing.append(path)
-                break
-            obj = getattr(obj, part)
+    from depthai_names import missing_names
+
+    missing = missing_names(dai, DEPTHAI_NAMES)
     assert not missing, f"depthai {dai.__version__} lacks {missing}"
 
 

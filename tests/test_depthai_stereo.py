@@ -322,14 +322,9 @@ def test_every_depthai_stereo_name_exists():
     dai = pytest.importorskip("depthai")
     from rangekit.drivers.depthai_stereo import DEPTHAI_STEREO_NAMES
 
-    missing = []
-    for path in DEPTHAI_STEREO_NAMES:
-        obj = dai
-        for part in path.split("."):
-            if not hasattr(obj, part):
-                missing.append(path)
-                break
-            obj = getattr(obj, part)
+    from depthai_names import missing_names
+
+    missing = missing_names(dai, DEPTHAI_STEREO_NAMES)
     assert not missing, f"depthai {dai.__version__} lacks {missing}"
 
 

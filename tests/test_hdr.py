@@ -2,10 +2,11 @@
 the per-pixel merge rule, and the shiny simulated object decoded over >= 95% of its lit pixels."""
 
 import json
-from dataclasses import replace
 
 import numpy as np
 import pytest
+
+from small_rigs import small_projector_rig
 
 from rangekit.app.acquire import acquire
 from rangekit.app.view_cache import view_cloud
@@ -16,15 +17,14 @@ from rangekit.coded.result import DecodeResult
 from rangekit.errors import DeviceError
 from rangekit.formats.session import CaptureSettings, ScanPlan, Session
 from rangekit.formats.session_check import verify_views
-from rangekit.sim import SimRig, default_rig, default_scene
+from rangekit.sim import SimRig, default_scene
 from rangekit.sim import devices as sim_devices
 
 EXPOSURES = (2000, 8000, 32000)
 
 
 def small_rig():
-    r = default_rig()
-    return replace(r, cameras=(r.camera.resized(320, 256),), projector=r.projector.resized(320, 200))
+    return small_projector_rig()
 
 
 @pytest.fixture(scope="module")

@@ -8,6 +8,8 @@ import cv2
 import numpy as np
 import pytest
 
+from small_rigs import small_projector_rig
+
 from rangekit.app.acquire import acquire
 from rangekit.app.reconstruct import reconstruct_view
 from rangekit.camera_controls import CameraControls
@@ -23,8 +25,7 @@ AUTO = CameraControls(exposure_us=None, allow_auto_exposure=True)
 
 
 def small_rig():
-    r = default_rig()
-    return replace(r, cameras=(r.camera.resized(320, 256),), projector=r.projector.resized(320, 200))
+    return small_projector_rig()
 
 
 @pytest.fixture(scope="module")

@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from rangekit.errors import RegistrationError
-from rangekit.geometry import R_to_rotvec
+from rangekit.geometry import R_to_rotvec, make_T, rotvec_to_R
 
 __all__ = ["common_axis", "onto_turntable", "turntable_basis"]
 
@@ -48,8 +48,6 @@ def common_axis(T_world_view: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def onto_turntable(T_world_view: np.ndarray) -> np.ndarray:
     """(n, 4, 4): each pose replaced by the rotation about :func:`common_axis` by its own rotation's
     component along that axis (``X -> R (X - o) + o``)."""
-    from rangekit.geometry import make_T, rotvec_to_R
-
     T = np.asarray(T_world_view, dtype=np.float64)
     a, o = common_axis(T)
     out = []

@@ -1,0 +1,11 @@
+"""Small simulated rigs shared by tests: the default rig at a fraction of its resolution."""
+
+from dataclasses import replace
+
+from rangekit.sim import default_rig
+
+
+def small_projector_rig():
+    """The default simulated rig with a 320x256 camera and a 320x200 projector (same poses and lenses)."""
+    r = default_rig()
+    return replace(r, cameras=(r.camera.resized(320, 256),), projector=r.projector.resized(320, 200))

@@ -45,6 +45,7 @@ from rangekit.io import atomic_write_json, fsync_folder
 from rangekit.progress import StageTimer, call_progress
 from rangekit.rig import turntable_prior
 from rangekit.surface.cloud import PointCloud, merge_clouds
+from rangekit.threads import one_blas_thread
 
 __all__ = ["FUSION_METHODS", "Evaluation", "Evaluator", "process_session"]
 
@@ -99,7 +100,7 @@ def process_session(folder: str | Path, *, fusion: str = "poisson", method: str 
     out = Path(folder)
     if not (out / "session.json").is_file():
         raise ConfigError(f"{out}: not a session folder (no session.json)")
-    with session_lock(out):
+    with session_lock(out), one_blas_thread():   # thin products: rangekit.threads
         return _process(out, fusion, method, table_margin, evaluate, report, progress)
 
 

@@ -22,6 +22,7 @@ from rangekit.cli.rig import add_calibrate_parser, add_parsers as add_rig
 from rangekit.cli.scan import add_parsers as add_scan
 from rangekit.cli.sim import add_parsers as add_sim
 from rangekit.errors import RangekitError, UsageError
+from rangekit.threads import one_blas_thread
 
 __all__ = ["build_parser", "main", "EXIT_OK", "EXIT_FAILURE", "EXIT_USAGE", "EXIT_INTERRUPTED"]
 
@@ -62,7 +63,8 @@ def main(argv: list[str] | None = None) -> int:
     environment sets ``RANGEKIT_DEBUG=1`` (then unexpected exceptions propagate)."""
     try:
         args = build_parser().parse_args(argv)
-        return args.func(args)
+        with one_blas_thread():     # thin products dominate: see rangekit.threads
+            return args.func(args)
     except UsageError as exc:
         return _fail(str(exc), EXIT_USAGE)
     except RangekitError as exc:

@@ -28,13 +28,14 @@ import numpy as np
 from rangekit.errors import InputError
 from rangekit.geometry import apply_T, invert_T
 from rangekit.surface.mesh import TriangleMesh
-from rangekit.surface.raycast import raycasting_scene
+from rangekit.surface.raycast import mesh_scene, raycasting_scene
 from rangekit.rig import Rig
 from rangekit.sim.evaluate_laser import in_image as _inside, laser_visible_samples
-from rangekit.sim.raycast import _open3d_cast
+from rangekit.sim.raycast import _cast
 from rangekit.sim.scene import Scene, default_scene
 
-__all__ = ["Accuracy", "TruthEvaluation", "sample_surface", "visible_samples", "mesh_accuracy", "truth_evaluator"]
+__all__ = ["Accuracy", "TruthEvaluation", "TruthSamples", "sample_surface", "visible_samples", "truth_samples",
+           "mesh_accuracy", "truth_evaluator"]
 
 
 @dataclass(frozen=True)
@@ -84,18 +85,17 @@ def sample_surface(V: np.ndarray, F: np.ndarray, n: int, rng: np.random.Generato
     return P, face
 
 
-def _seen_from(centre: np.ndarray, P: np.ndarray, N: np.ndarray, scene_V: np.ndarray, scene_F: np.ndarray,
-               eps: float, min_cos: float) -> np.ndarray:
-    """(n,) bool: P faces ``centre`` (cosine above ``min_cos``) and the first scene hit along the ray from
-    the centre is P itself."""
+def _seen_from(centre: np.ndarray, P: np.ndarray, N: np.ndarray, cast_scene, eps: float,
+               min_cos: float) -> np.ndarray:
+    """(n,) bool: P faces ``centre`` (cosine above ``min_cos``) and the first hit along the ray from the
+    centre in ``cast_scene`` (an Open3D scene in P's coordinates) is P itself."""
     to_c = centre - P
     dist = np.linalg.norm(to_c, axis=1)
     facing = np.einsum("ij,ij->i", N, to_c) > min_cos * dist
     out = np.zeros(len(P), dtype=bool)
     idx = np.flatnonzero(facing)
     if idx.size:
-        t, _ = _open3d_cast(scene_V, scene_F, np.broadcast_to(centre, (idx.size, 3)),
-                            -to_c[idx] / dist[idx, None])
+        t, _ = _cast(cast_scene, np.broadcast_to(centre, (idx.size, 3)), -to_c[idx] / dist[idx, None])
         out[idx] = t >= dist[idx] - eps
     return out
 
@@ -108,6 +108,9 @@ def visible_samples(truth: TriangleMesh, scene: Scene, rig: Rig, angles: np.ndar
     ``min_cos``: the surface must face the camera and the light at least this much (cosine of the
     incidence angle; 0 = any angle short of grazing). ``light``: "projector", or "laser" (the rig's line
     lasers, :func:`rangekit.sim.evaluate_laser.laser_visible_samples`).
+
+    When every object of the scene turns with the table, one ray-casting scene (the table at angle 0)
+    serves every view: the camera and projector centres are moved into it instead of the scene to them.
     """
     a, b, c = (truth.vertices[truth.triangles[face, k]] for k in range(3))
     N = np.cross(b - a, c - a)
@@ -115,35 +118,81 @@ def visible_samples(truth: TriangleMesh, scene: Scene, rig: Rig, angles: np.ndar
     if light == "laser":
         return laser_visible_samples(scene.world_mesh(np.eye(4)), rig, angles, P, N, eps=eps, min_cos=min_cos)
     seen = np.zeros(len(P), dtype=bool)
+    rigid = all(o.on_turntable for o in scene.objects)
+    if rigid:
+        still = scene.world_mesh(np.eye(4))
+        cast_scene = raycasting_scene(still.vertices, still.triangles)
     for angle in angles:
         M = rig.T_world_rotated(float(angle)) if rig.T_world_table is not None else np.eye(4)
-        world = scene.world_mesh(M)
-        Pk, Nk = apply_T(M, P), N @ M[:3, :3].T
+        Pk = apply_T(M, P)
         todo = np.flatnonzero(~seen & _inside(rig.camera, Pk) & _inside(rig.projector, Pk))
         if todo.size == 0:
             continue
-        ok = _seen_from(rig.camera.center, Pk[todo], Nk[todo], world.vertices, world.triangles, eps, min_cos)
-        todo = todo[ok]
-        ok = _seen_from(rig.projector.center, Pk[todo], Nk[todo], world.vertices, world.triangles, eps, min_cos)
+        if rigid:      # cast in the table's frame at angle 0: the samples as given, the centres moved back
+            M_inv = invert_T(M)
+            Pq, Nq = P[todo], N[todo]
+            centres = apply_T(M_inv, np.stack([rig.camera.center, rig.projector.center]))
+        else:
+            world = scene.world_mesh(M)
+            cast_scene = raycasting_scene(world.vertices, world.triangles)
+            Pq, Nq = Pk[todo], N[todo] @ M[:3, :3].T
+            centres = np.stack([rig.camera.center, rig.projector.center])
+        ok = _seen_from(centres[0], Pq, Nq, cast_scene, eps, min_cos)
+        todo, Pq, Nq = todo[ok], Pq[ok], Nq[ok]
+        ok = _seen_from(centres[1], Pq, Nq, cast_scene, eps, min_cos)
         seen[todo[ok]] = True
     return seen
 
 
 def _closest_on(mesh: TriangleMesh, P: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Closest point of ``mesh`` to each of ``P``: (distance (n,), point (n, 3), face (n,)); Open3D, float32
-    inside, relative to the mesh's centre."""
+    inside, relative to the mesh's centre (its scene built once per mesh object)."""
     import open3d as o3d
 
-    c = (mesh.vertices.min(axis=0) + mesh.vertices.max(axis=0)) / 2
-    scene = raycasting_scene(mesh.vertices - c, mesh.triangles)
+    scene, c = mesh_scene(mesh)
     ans = scene.compute_closest_points(o3d.core.Tensor((P - c).astype(np.float32)))
     Q = ans["points"].numpy().astype(np.float64) + c
     return np.linalg.norm(P - Q, axis=1), Q, ans["primitive_ids"].numpy().astype(np.int64)
 
 
+@dataclass(frozen=True, eq=False)
+class TruthSamples:
+    """The mesh-independent half of :func:`mesh_accuracy`, the same for every mesh of one scan: the true
+    surface at table angle 0, its uniform samples and which of them the views see."""
+
+    truth: TriangleMesh     # the scene's first object, table at angle 0
+    M0: np.ndarray          # (4, 4) the table's motion to the first view's angle (session world)
+    samples: np.ndarray     # (n, 3) true-surface samples, table at angle 0
+    seen: np.ndarray        # (n,) bool: some view sees the sample (see :func:`mesh_accuracy`)
+    observed: Callable      # (P (m, 3), face (m,)) -> (m,) bool, the same rule for any true-surface points
+
+
+def truth_samples(scene: Scene, rig: Rig, angles, *, table_margin: float = 0.002, max_incidence_deg: float = 80.0,
+                  n_samples: int = 200_000, seed: int = 0, light: str = "projector") -> TruthSamples:
+    """The true surface's samples and their visibility for :func:`mesh_accuracy` (keywords as there)."""
+    angles = np.asarray(angles, dtype=np.float64)
+    obj = scene.objects[0]
+    M0 = rig.T_world_rotated(float(angles[0])) if rig.T_world_table is not None else np.eye(4)
+    truth = TriangleMesh(obj.world_vertices(), obj.triangles)
+    T_table_world = invert_T(rig.T_world_table) if rig.T_world_table is not None else None
+
+    def observed(P: np.ndarray, face: np.ndarray) -> np.ndarray:
+        seen = visible_samples(truth, scene, rig, angles, P, face,
+                               min_cos=float(np.cos(np.radians(max_incidence_deg))), light=light)
+        if T_table_world is not None:
+            seen &= apply_T(T_table_world, P)[:, 2] > table_margin
+        return seen
+
+    rng = np.random.default_rng(seed)
+    rng.random(3 * n_samples)   # the mesh's samples come first in the stream (3 n doubles, any mesh)
+    Pt, face = sample_surface(truth.vertices, truth.triangles, n_samples, rng)
+    return TruthSamples(truth, M0, Pt, observed(Pt, face), observed)
+
+
 def mesh_accuracy(mesh: TriangleMesh, scene: Scene, rig: Rig, angles, *, tolerance: float = 1e-3,
                   table_margin: float = 0.002, max_incidence_deg: float = 80.0, n_samples: int = 200_000,
-                  seed: int = 0, light: str = "projector", cloud: np.ndarray | None = None) -> Accuracy:
+                  seed: int = 0, light: str = "projector", cloud: np.ndarray | None = None,
+                  truth: TruthSamples | None = None) -> Accuracy:
     """Compare ``mesh`` (session world = the first view's frame) with the scene's first object.
 
     ``angles``: the turntable angles of the views (radians); the first is the world's angle.
@@ -154,38 +203,28 @@ def mesh_accuracy(mesh: TriangleMesh, scene: Scene, rig: Rig, angles, *, toleran
     beyond about 80 degrees coded light still decodes but the flying-pixel filter drops part of the
     pixels (docs/tutorial.md gives the measured fractions). ``light="laser"``: lit by one of the rig's
     line lasers instead of the projector. ``cloud`` (N, 3) session world: the scan's merged points, whose
-    distances to the true surface give ``cloud_rms`` and ``cloud_p95``.
+    distances to the true surface give ``cloud_rms`` and ``cloud_p95``. ``truth``: the
+    :func:`truth_samples` of the same scene, rig, angles and keywords, computed once for several meshes.
     """
-    angles = np.asarray(angles, dtype=np.float64)
+    if truth is None:
+        truth = truth_samples(scene, rig, angles, table_margin=table_margin, max_incidence_deg=max_incidence_deg,
+                              n_samples=n_samples, seed=seed, light=light)
     rng = np.random.default_rng(seed)
-    obj = scene.objects[0]
-    M0 = rig.T_world_rotated(float(angles[0])) if rig.T_world_table is not None else np.eye(4)
-    # Truth at table angle 0 (the scene's frame); the mesh is brought there by inv(M0).
-    truth = TriangleMesh(obj.world_vertices(), obj.triangles)
-    mesh0 = TriangleMesh(apply_T(invert_T(M0), mesh.vertices), mesh.triangles)
-    T_table_world = invert_T(rig.T_world_table) if rig.T_world_table is not None else None
-
-    def observed(P: np.ndarray, face: np.ndarray) -> np.ndarray:
-        seen = visible_samples(truth, scene, rig, angles, P, face,
-                               min_cos=float(np.cos(np.radians(max_incidence_deg))), light=light)
-        if T_table_world is not None:
-            seen &= apply_T(T_table_world, P)[:, 2] > table_margin
-        return seen
-
+    # The mesh is brought to the truth's frame (table at angle 0) by inv(M0).
+    mesh0 = TriangleMesh(apply_T(invert_T(truth.M0), mesh.vertices), mesh.triangles)
     Pm, _ = sample_surface(mesh0.vertices, mesh0.triangles, n_samples, rng)
-    d_mesh, Q, q_face = _closest_on(truth, Pm)
-    on_seen = observed(Q, q_face)
-    Pt, face = sample_surface(truth.vertices, truth.triangles, n_samples, rng)
-    seen = observed(Pt, face)
+    d_mesh, Q, q_face = _closest_on(truth.truth, Pm)
+    on_seen = truth.observed(Q, q_face)
+    seen = truth.seen
     if not seen.any() or not on_seen.any():
         raise InputError("mesh_accuracy: no view sees the object")
-    d_truth, _, _ = _closest_on(mesh0, Pt[seen])
+    d_truth, _, _ = _closest_on(mesh0, truth.samples[seen])
     d = d_mesh[on_seen]
-    diag = float(np.linalg.norm(np.ptp(truth.vertices, axis=0)))
+    diag = float(np.linalg.norm(np.ptp(truth.truth.vertices, axis=0)))
     d_fill = d_mesh[~on_seen]
     cloud_figures = {}
     if cloud is not None and len(cloud):
-        d_cloud = _closest_on(truth, apply_T(invert_T(M0), np.asarray(cloud, dtype=np.float64)))[0]
+        d_cloud = _closest_on(truth.truth, apply_T(invert_T(truth.M0), np.asarray(cloud, dtype=np.float64)))[0]
         cloud_figures = {"cloud_rms": float(np.sqrt(np.mean(d_cloud ** 2))),
                          "cloud_p95": float(np.percentile(d_cloud, 95)), "n_cloud": int(len(d_cloud))}
     return Accuracy(rms=float(np.sqrt(np.mean(d ** 2))), p95=float(np.percentile(d, 95)), max=float(d.max()),
@@ -194,6 +233,9 @@ def mesh_accuracy(mesh: TriangleMesh, scene: Scene, rig: Rig, angles, *, toleran
                     unobserved_rms=float(np.sqrt(np.mean(d_fill ** 2))) if d_fill.size else 0.0,
                     rms_all=float(np.sqrt(np.mean(d_mesh ** 2))), max_incidence_deg=float(max_incidence_deg),
                     n_mesh_samples=int(on_seen.sum()), n_truth_samples=int(seen.sum()), **cloud_figures)
+
+
+_TRUTH_OPTIONS = ("table_margin", "max_incidence_deg", "n_samples", "seed", "light")
 
 
 @dataclass(frozen=True, eq=False)
@@ -211,12 +253,17 @@ def truth_evaluator(obj: str, rig: Rig, **options) -> Callable[[TriangleMesh, Se
     mesh file, as in :func:`default_scene`) scanned on ``rig`` at turntable ``angles`` (radians), with
     :func:`mesh_accuracy` (``options`` are its keywords)."""
     scene = default_scene(obj)
+    memo: dict = {}
 
     def evaluate(mesh: TriangleMesh, angles: Sequence[float], cloud: np.ndarray | None = None,
                  views: dict | None = None) -> TruthEvaluation:
         """``views``: the views' ``clouds``, registered ``T_world_view``, decoded ``proj_cols`` and ``names``
         (:func:`rangekit.sim.view_errors.view_errors`), for the per-view error breakdown."""
-        accuracy = mesh_accuracy(mesh, scene, rig, angles, cloud=cloud, **options)
+        key = tuple(float(a) for a in angles)
+        if memo.get("key") != key:     # the observed and the closed mesh of one scan share the truth's half
+            memo.update(key=key, truth=truth_samples(scene, rig, angles, **{k: v for k, v in options.items()
+                                                                             if k in _TRUTH_OPTIONS}))
+        accuracy = mesh_accuracy(mesh, scene, rig, angles, cloud=cloud, truth=memo["truth"], **options)
         per_view = None
         if views is not None:
             from rangekit.sim.view_errors import view_errors

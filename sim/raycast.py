@@ -72,9 +72,13 @@ class ViewGeometry:
 def _open3d_cast(vertices: np.ndarray, triangles: np.ndarray, origins: np.ndarray,
                  directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """First hit of each ray: (t_hit float32 with inf for misses, primitive id int64 with -1 for misses)."""
+    return _cast(raycasting_scene(vertices, triangles), origins, directions)
+
+
+def _cast(scene, origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """As :func:`_open3d_cast` on a scene already built (:func:`rangekit.surface.raycast.raycasting_scene`)."""
     import open3d as o3d  # imported here: it takes ~2 s and most of rangekit never needs it
 
-    scene = raycasting_scene(vertices, triangles)
     rays = np.concatenate([origins, directions], axis=1).astype(np.float32)
     out = scene.cast_rays(o3d.core.Tensor(rays))
     t_hit = out["t_hit"].numpy()

@@ -1,7 +1,7 @@
 """Headless snapshots of meshes and point clouds as RGB uint8 images (reports, ``rangekit render``).
 
 No display and no GPU: meshes are ray cast with Open3D's ``RaycastingScene``
-(:func:`rangekit.surface.raycast.raycasting_scene`, open3d imported inside the functions that need it), clouds are splatted into a z-buffer with numpy. Frames and units follow
+(:func:`rangekit.surface.raycast.mesh_scene`, one scene per mesh, open3d imported inside the functions that need it), clouds are splatted into a z-buffer with numpy. Frames and units follow
 docs/ARCHITECTURE.md: world points in metres, OpenCV camera frame (x right, y down, z forward),
 ``T_world_cam`` maps camera to world, pixels ``(u, v) = (column, row)``; images are (H, W, 3) uint8 RGB.
 """
@@ -21,7 +21,7 @@ from rangekit.colour import colourise
 from rangekit.errors import InputError
 from rangekit.geometry import apply_T, look_at
 from rangekit.surface.mesh import TriangleMesh
-from rangekit.surface.raycast import raycasting_scene
+from rangekit.surface.raycast import mesh_scene
 from rangekit.surface.cloud import PointCloud
 
 __all__ = ["MESH_RENDER_BYTES_PER_PIXEL", "CLOUD_RENDER_BYTES_PER_PIXEL",
@@ -145,8 +145,7 @@ def raycast_mesh(mesh: TriangleMesh, camera: PinholeCamera) -> MeshHits:
     o, d = world_pixel_rays(camera)
     ok = np.all(np.isfinite(d), axis=1)
     d_cast = np.where(ok[:, None], d, [0.0, 0.0, 1.0])
-    c = (mesh.vertices.min(axis=0) + mesh.vertices.max(axis=0)) / 2
-    scene = raycasting_scene(mesh.vertices - c, mesh.triangles)
+    scene, c = mesh_scene(mesh)      # built once per mesh: the report renders one mesh ten times
     out = scene.cast_rays(o3d.core.Tensor(np.concatenate([o - c, d_cast], axis=1).astype(np.float32)))
     t32 = out["t_hit"].numpy().astype(np.float64)
     hit = ok & np.isfinite(t32)
@@ -167,11 +166,7 @@ def raycast_mesh(mesh: TriangleMesh, camera: PinholeCamera) -> MeshHits:
     n /= np.linalg.norm(n, axis=1, keepdims=True)
     n *= -np.sign(np.einsum("ij,ij->i", n, dh) + 1e-300)[:, None]  # face the camera
     # Smooth normals: area-weighted vertex normals (unnormalised face cross products summed per vertex).
-    F = mesh.triangles
-    fn = np.cross(mesh.vertices[F[:, 1]] - mesh.vertices[F[:, 0]], mesh.vertices[F[:, 2]] - mesh.vertices[F[:, 0]])
-    vn = np.zeros_like(mesh.vertices)
-    for k in range(3):
-        np.add.at(vn, F[:, k], fn)
+    F, vn = mesh.triangles, mesh.normal_sums
     w = np.column_stack([1 - b.sum(axis=1), b])
     ns = np.einsum("mk,mkc->mc", w, vn[F[tri[hit]]])
     with np.errstate(invalid="ignore", divide="ignore"):

@@ -69,6 +69,17 @@ class TriangleMesh:
         tm.merge_vertices()
         return bool(tm.is_watertight and tm.is_winding_consistent)
 
+    @cached_property
+    def normal_sums(self) -> np.ndarray:
+        """(V, 3) float64: per vertex, the sum of its triangles' unnormalised normals (area-weighted vertex
+        normals before normalising; zero for a vertex without a triangle)."""
+        F, V = self.triangles, self.vertices
+        fn = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+        out = np.zeros_like(V)
+        for k in range(3):
+            np.add.at(out, F[:, k], fn)
+        return out
+
     @property
     def area(self) -> float:
         """Surface area in square metres."""
@@ -125,7 +136,7 @@ def distance_to_surface(points: np.ndarray, mesh: TriangleMesh) -> np.ndarray:
     """
     import open3d as o3d
 
-    from rangekit.surface.raycast import raycasting_scene
+    from rangekit.surface.raycast import mesh_scene
 
     P = np.asarray(points, dtype=np.float64)
     if P.ndim != 2 or P.shape[1] != 3:
@@ -134,7 +145,6 @@ def distance_to_surface(points: np.ndarray, mesh: TriangleMesh) -> np.ndarray:
         raise InputError("distance_to_surface: the mesh has no triangles")
     if len(P) == 0:
         return np.zeros(0)
-    c = (mesh.vertices.min(axis=0) + mesh.vertices.max(axis=0)) / 2
-    scene = raycasting_scene(mesh.vertices - c, mesh.triangles)
+    scene, c = mesh_scene(mesh)
     return scene.compute_distance(o3d.core.Tensor((P - c).astype(np.float32))).numpy().astype(np.float64)
 

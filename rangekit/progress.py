@@ -74,13 +74,15 @@ class Console:
 
 
 class StageTimer:
-    """Wall time per named stage, in the order the stages ran (a stage run twice adds up)."""
+    """Wall time per named stage, in the order the stages started (a stage run twice, or inside another,
+    adds up)."""
 
     def __init__(self) -> None:
         self.seconds: dict[str, float] = {}
 
     @contextmanager
     def stage(self, name: str) -> Iterator[None]:
+        self.seconds.setdefault(name, 0.0)   # listed in the order the stages started
         t0 = time.perf_counter()
         try:
             yield

@@ -35,7 +35,7 @@ from rangekit.sim.raycast import _cast
 from rangekit.sim.scene import Scene, default_scene
 
 __all__ = ["Accuracy", "TruthEvaluation", "TruthSamples", "sample_surface", "visible_samples", "truth_samples",
-           "mesh_accuracy", "truth_evaluator"]
+           "mesh_accuracy", "truth_evaluator", "TruthEvaluator"]
 
 
 @dataclass(frozen=True)
@@ -247,30 +247,44 @@ class TruthEvaluation:
     view_errors: list | None = None   # per view, where the error comes from (rangekit.sim.view_errors)
 
 
-def truth_evaluator(obj: str, rig: Rig, **options) -> Callable[[TriangleMesh, Sequence[float]], TruthEvaluation]:
+def truth_evaluator(obj: str, rig: Rig, **options) -> "TruthEvaluator":
     """The evaluator a simulated session passes to :func:`rangekit.app.process.process_session`:
     ``evaluate(mesh, angles)`` measures ``mesh`` (session world) against object ``obj`` (built-in name or
     mesh file, as in :func:`default_scene`) scanned on ``rig`` at turntable ``angles`` (radians), with
     :func:`mesh_accuracy` (``options`` are its keywords)."""
-    scene = default_scene(obj)
-    memo: dict = {}
+    return TruthEvaluator(default_scene(obj), rig, options)
 
-    def evaluate(mesh: TriangleMesh, angles: Sequence[float], cloud: np.ndarray | None = None,
-                 views: dict | None = None) -> TruthEvaluation:
-        """``views``: the views' ``clouds``, registered ``T_world_view``, decoded ``proj_cols`` and ``names``
-        (:func:`rangekit.sim.view_errors.view_errors`), for the per-view error breakdown."""
+
+class TruthEvaluator:
+    """``evaluate(mesh, angles, cloud=None, views=None)`` -> :class:`TruthEvaluation` (see
+    :func:`truth_evaluator`); ``evaluate.prepare(angles, views)`` computes the half that does not depend on
+    the mesh ahead: the truth's samples and their visibility, and the per-view errors. Processing runs it
+    beside the fusion; a later call with the same angles (and the same ``views`` object) reuses it.
+
+    ``views``: the views' ``clouds``, registered ``T_world_view``, decoded ``proj_cols`` and ``names``
+    (:func:`rangekit.sim.view_errors.view_errors`), for the per-view error breakdown.
+    """
+
+    def __init__(self, scene: Scene, rig: Rig, options: dict) -> None:
+        self.scene, self.rig, self.options = scene, rig, dict(options)
+        self._key, self._truth, self._views, self._view_errors = None, None, None, None
+
+    def prepare(self, angles: Sequence[float], views: dict | None = None) -> None:
         key = tuple(float(a) for a in angles)
-        if memo.get("key") != key:     # the observed and the closed mesh of one scan share the truth's half
-            memo.update(key=key, truth=truth_samples(scene, rig, angles, **{k: v for k, v in options.items()
-                                                                             if k in _TRUTH_OPTIONS}))
-        accuracy = mesh_accuracy(mesh, scene, rig, angles, cloud=cloud, truth=memo["truth"], **options)
-        per_view = None
-        if views is not None:
+        if self._key != key:
+            self._truth = truth_samples(self.scene, self.rig, angles,
+                                        **{k: v for k, v in self.options.items() if k in _TRUTH_OPTIONS})
+            self._key, self._views, self._view_errors = key, None, None
+        if views is not None and views is not self._views:
             from rangekit.sim.view_errors import view_errors
 
-            per_view = view_errors(scene, rig, angles, **views)
-        ob = scene.objects[0]
-        M0 = rig.T_world_rotated(float(angles[0])) if rig.T_world_table is not None else np.eye(4)
-        return TruthEvaluation(accuracy, TriangleMesh(apply_T(M0, ob.world_vertices()), ob.triangles), per_view)
+            self._views, self._view_errors = views, view_errors(self.scene, self.rig, angles, **views)
 
-    return evaluate
+    def __call__(self, mesh: TriangleMesh, angles: Sequence[float], cloud: np.ndarray | None = None,
+                 views: dict | None = None) -> TruthEvaluation:
+        self.prepare(angles, views)
+        accuracy = mesh_accuracy(mesh, self.scene, self.rig, angles, cloud=cloud, truth=self._truth, **self.options)
+        ob = self.scene.objects[0]
+        M0 = self._truth.M0
+        return TruthEvaluation(accuracy, TriangleMesh(apply_T(M0, ob.world_vertices()), ob.triangles),
+                               self._view_errors if views is not None else None)

@@ -26,6 +26,7 @@ SHA-256s (:func:`rangekit.formats.session_check.verify_views`).
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Callable, Protocol, Sequence
 
@@ -43,8 +44,9 @@ from rangekit.formats.summary import ProcessResult
 from rangekit.geometry import compose, invert_T
 from rangekit.io import atomic_write_json, fsync_folder
 from rangekit.progress import StageTimer, call_progress
-from rangekit.rig import turntable_prior
+from rangekit.rig import Rig, turntable_prior
 from rangekit.surface.cloud import PointCloud, merge_clouds
+from rangekit.surface.observed import FusedMeshes
 from rangekit.threads import one_blas_thread
 
 __all__ = ["FUSION_METHODS", "Evaluation", "Evaluator", "process_session"]
@@ -108,8 +110,6 @@ def _process(out: Path, fusion: str, method: str, table_margin: float, evaluate:
              progress: Callable | None) -> ProcessResult:
     from rangekit.app.fused_outputs import evaluate_fused, save_fused
     from rangekit.app.reconstruct import EDGE_MARGIN_PX
-    from rangekit.surface.fusion import poisson_meshes, tsdf_fuse
-    from rangekit.surface.observed import split_observed
     from rangekit.registration.multiview import MultiViewOptions, register_views
 
     session = Session.load(out)
@@ -167,22 +167,23 @@ def _process(out: Path, fusion: str, method: str, table_margin: float, evaluate:
                 k_acc += 1
             edges.append(row)
 
+    angles = [v.angle for v in views]
+    views_info = {"clouds": clouds, "T_world_view": res.T_world_view, "proj_cols": [m.proj_col for m in maps],
+                  "names": names}
     with timer.stage("fuse"):
-        T = res.T_world_view
-        merged = merge_clouds(clouds, T)
-        save_cloud(out / "merged.ply", merged)
-        call_progress(progress, f"fusing {len(merged):,} points ({fusion})")
-        step = max(1, len(merged) // 400_000)
-        if fusion == "poisson":
-            # One thread: Open3D's multi-threaded Poisson is not deterministic, and a resumed scan must
-            # give the same mesh as an uninterrupted one (on 2 cores it is no slower).
-            fused = poisson_meshes(PointCloud(merged.points[::step], merged.colours[::step], merged.normals[::step]),
-                                   depth=9, n_threads=1)
-        else:
-            # Each view's camera-frame depth map as stored, seen by the camera at its registered pose.
-            surface = tsdf_fuse([(m.depth, None, rig.camera.with_pose(compose(Tk, rig.camera.T_world_cam)))
-                                 for m, Tk in zip(maps, T)], watertight=False)
-            fused = split_observed(surface, merged.points[::step])
+        merged = merge_clouds(clouds, res.T_world_view)
+        prepare = getattr(evaluate, "prepare", None)
+        call_progress(progress, f"fusing {len(merged):,} points ({fusion})"
+                                + ("; measuring the views against the true surface alongside" if prepare else ""))
+        # The fusion runs on a thread of its own (Open3D releases the GIL; one thread keeps its mesh
+        # deterministic) while this one writes the merged cloud and evaluates what does not need the mesh.
+        with ThreadPoolExecutor(max_workers=1) as pool:
+            fusing = pool.submit(_fuse, merged, fusion, maps, res.T_world_view, rig)
+            save_cloud(out / "merged.ply", merged)
+            if prepare is not None:
+                with timer.stage("evaluate"):
+                    prepare(angles, views_info)
+            fused = fusing.result()
         mesh_info, watertight_info = save_fused(out, fused, fusion)
         mesh = fused.observed
         call_progress(progress, f"mesh: {len(mesh.vertices):,} vertices, {len(mesh.triangles):,} triangles observed; "
@@ -194,11 +195,9 @@ def _process(out: Path, fusion: str, method: str, table_margin: float, evaluate:
         with timer.stage("evaluate"):
             call_progress(progress, "measuring the observed and the closed mesh and each view against the true "
                                     "surface")
-            accuracy, truth, view_errors = evaluate_fused(
-                evaluate, fused, [v.angle for v in views],
-                views={"clouds": clouds, "T_world_view": res.T_world_view, "proj_cols": [m.proj_col for m in maps],
-                       "names": names})
+            accuracy, truth, view_errors = evaluate_fused(evaluate, fused, angles, views=views_info)
 
+    # Stage times are wall seconds; "evaluate" includes the part done beside the fusion (inside "fuse").
     result = ProcessResult(out, names, res.T_world_view, [len(c) for c in clouds], edges, float(res.rmse),
                            mesh_info, timer.seconds, accuracy, watertight_mesh=watertight_info, view_errors=view_errors)
     if report:
@@ -210,3 +209,21 @@ def _process(out: Path, fusion: str, method: str, table_margin: float, evaluate:
                          truth=truth, progress=progress, watertight=fused.watertight)
     atomic_write_json(out / "summary.json", result.to_dict())   # last: the set is complete
     return result
+
+
+def _fuse(merged: PointCloud, fusion: str, maps: list[ViewMaps], T_world_view: np.ndarray, rig: Rig) -> FusedMeshes:
+    """The merged cloud (session world) fused into the observed and the closed mesh (``fusion`` "poisson" or
+    "tsdf"; see :func:`process_session`)."""
+    from rangekit.surface.fusion import poisson_meshes, tsdf_fuse
+    from rangekit.surface.observed import split_observed
+
+    step = max(1, len(merged) // 400_000)
+    if fusion == "poisson":
+        # One thread: Open3D's multi-threaded Poisson is not deterministic (a resumed scan must give the
+        # same mesh as an uninterrupted one); the other core evaluates beside it.
+        return poisson_meshes(PointCloud(merged.points[::step], merged.colours[::step], merged.normals[::step]),
+                              depth=9, n_threads=1)
+    # Each view's camera-frame depth map as stored, seen by the camera at its registered pose.
+    surface = tsdf_fuse([(m.depth, None, rig.camera.with_pose(compose(Tk, rig.camera.T_world_cam)))
+                         for m, Tk in zip(maps, T_world_view)], watertight=False)
+    return split_observed(surface, merged.points[::step])

@@ -15,7 +15,7 @@ from numba import njit, prange
 
 numba.config.THREADING_LAYER_PRIORITY = ["omp", "workqueue", "tbb"]
 
-__all__ = ["census", "hamming_cost", "aggregate", "winner_take_all", "right_winner",
+__all__ = ["popcount", "census", "hamming_cost", "aggregate", "winner_take_all", "right_winner",
            "lr_check", "median3"]
 
 _M1 = np.uint64(0x5555555555555555)
@@ -25,7 +25,7 @@ _H01 = np.uint64(0x0101010101010101)
 
 
 @njit(inline="always")
-def _popcount(x):  # pragma: no cover - compiled
+def popcount(x):  # pragma: no cover - compiled
     """Bits set in a uint64 (SWAR; LLVM turns it into one popcnt where the CPU has it)."""
     x = x - ((x >> np.uint64(1)) & _M1)
     x = (x & _M2) + ((x >> np.uint64(2)) & _M2)
@@ -36,20 +36,23 @@ def _popcount(x):  # pragma: no cover - compiled
 @njit(parallel=True, cache=True, nogil=True)
 def census(img, rx, ry, out):  # pragma: no cover - compiled
     """out[y, x] = bit string of (neighbour < centre) over the (2rx+1) x (2ry+1) window, centre skipped,
-    row-major; the image border is replicated."""
+    row-major; the image border is replicated. Each row is built one window offset at a time over all x
+    (from a row padded by rx replicated pixels each side), so the loop over x is packed."""
     H, W = img.shape
     for y in prange(H):
-        for x in range(W):
-            c = img[y, x]
-            code = np.uint64(0)
-            for j in range(-ry, ry + 1):
-                yy = min(max(y + j, 0), H - 1)
-                for i in range(-rx, rx + 1):
-                    if i == 0 and j == 0:
-                        continue
-                    xx = min(max(x + i, 0), W - 1)
-                    code = (code << np.uint64(1)) | np.uint64(1 if img[yy, xx] < c else 0)
-            out[y, x] = code
+        pad = np.empty(W + 2 * rx, np.float32)
+        code = np.zeros(W, np.uint64)
+        c = img[y]
+        for j in range(-ry, ry + 1):
+            src = img[min(max(y + j, 0), H - 1)]
+            for x in range(W + 2 * rx):
+                pad[x] = src[min(max(x - rx, 0), W - 1)]
+            for i in range(-rx, rx + 1):
+                if i == 0 and j == 0:
+                    continue
+                for x in range(W):
+                    code[x] = (code[x] << np.uint64(1)) | np.uint64(pad[x + rx + i] < c[x])
+        out[y] = code
 
 
 @njit(parallel=True, cache=True, nogil=True)
@@ -65,7 +68,7 @@ def hamming_cost(cl, cr, min_d, invalid, out):  # pragma: no cover - compiled
                 if xr < 0 or xr >= W:
                     out[y, x, k] = invalid
                 else:
-                    out[y, x, k] = np.uint8(_popcount(a ^ cr[y, xr]))
+                    out[y, x, k] = np.uint8(popcount(a ^ cr[y, xr]))
 
 
 @njit(inline="always")

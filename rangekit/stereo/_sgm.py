@@ -70,22 +70,28 @@ def _cost_row(cl, cr, y, min_d, invalid, rr, out):  # pragma: no cover - compile
         rr[j] = cr[y, min(max(W - 1 - min_d - j, 0), W - 1)]
     for x in range(W):
         a = cl[y, x]
-        hi = x - min_d  # k <= hi: x - d >= 0
-        lo = hi - W + 1  # k >= lo: x - d <= W - 1
+        hi = min(x - min_d, D - 1)  # k <= hi: x - d >= 0
+        lo = max(x - min_d - W + 1, 0)  # k >= lo: x - d <= W - 1
         base = W - 1 - x
         o = out[x]
-        for k in range(D):
-            v = np.int16(popcount(a ^ rr[base + k]))
-            o[k] = v if (k <= hi and k >= lo) else invalid
+        for k in range(lo):
+            o[k] = invalid
+        ov = o[lo:]  # loops from 0 over views: numba drops the negative-index wraparound, LLVM packs them
+        rv = rr[base + lo:]
+        for k in range(hi + 1 - lo):
+            ov[k] = np.int16(popcount(a ^ rv[k]))
+        ov = o[max(hi + 1, lo):]
+        for k in range(ov.shape[0]):
+            ov[k] = invalid
 
 
 @njit(inline="always")
-def _wta_row(S, y, min_d, uniqueness, mode, max_diff, rk, dint, dright, disp, conf):  # pragma: no cover
+def _wta_row(S, y, min_d, uniqueness, mode, max_diff, keys, rk, dint, dright, disp, conf):  # pragma: no cover
     """Winner-take-all, uniqueness, sub-pixel offset, the right image's winner and the left-right check on
     one row of the aggregated cost S (W, D) int16 (the rules of the float kernel this replaces, to the bit).
 
     Keys ``S * 256 + k`` make every argmin a packed minimum (ties go to the smaller k, as a first-minimum
-    scan). rk : (W + D - 1,) int32 scratch for the right winner, indexed ``W - 1 - x + k``.
+    scan). keys : (D,) int32 scratch; rk : (W + D - 1,) int32 scratch for the right winner, indexed ``W - 1 - x + k``.
     """
     W, D = S.shape
     for j in range(W + D - 1):
@@ -93,8 +99,11 @@ def _wta_row(S, y, min_d, uniqueness, mode, max_diff, rk, dint, dright, disp, co
     for x in range(W):
         a = S[x]
         base = W - 1 - x
+        for k in range(D):  # int32 keys, packed
+            keys[k] = np.int32(a[k] * 256 + k)
+        rv = rk[base:]
         for k in range(D):  # right image: every (x, k) is a candidate for xr = x - d
-            rk[base + k] = min(rk[base + k], np.int32(a[k]) * 256 + k)
+            rv[k] = min(rv[k], keys[k])
         kmax = min(D - 1, x - min_d)  # x - d >= 0
         if kmax < 0:
             dint[x] = _BAD
@@ -103,13 +112,16 @@ def _wta_row(S, y, min_d, uniqueness, mode, max_diff, rk, dint, dright, disp, co
             continue
         key = _NOKEY
         for k in range(kmax + 1):
-            key = min(key, np.int32(a[k]) * 256 + k)
+            key = min(key, keys[k])
         kb = key & 255
         best = key >> 8
-        second = _NOKEY
-        for k in range(kmax + 1):
-            v = np.int32(a[k])
-            second = min(second, v if (k < kb - 1 or k > kb + 1) else _NOKEY)
+        second = np.int16(32767)  # the best at |k - kb| > 1
+        for k in range(kb - 1):
+            second = min(second, a[k])
+        av = a[kb + 2:]
+        for k in range(kmax - kb - 1):
+            second = min(second, av[k])
+        second = np.int32(second) if second < 32767 else _NOKEY
         if second == _NOKEY:
             second = best
         conf[y, x] = 1.0 - best / second if second > 0 else 0.0
@@ -168,6 +180,7 @@ def _pass(cl, cr, min_d, invalid, P1, P2, reverse, diagonals, i0, i1, Lb, Mb, vo
     zero[1:D + 1] = 0
     rr = np.empty(W + D - 1, np.uint64)
     rk = np.empty(W + D - 1, np.int32)
+    keys = np.empty(D, np.int32)
     dint = np.empty(W, np.int32)
     dright = np.empty(W, np.int32)
     for i in range(i0, i1):
@@ -203,7 +216,7 @@ def _pass(cl, cr, min_d, invalid, P1, P2, reverse, diagonals, i0, i1, Lb, Mb, vo
                 for k in range(D):
                     o[k] = np.int16(o[k] + v[k])
         if finish:
-            _wta_row(srow, y, min_d, uniqueness, mode, max_diff, rk, dint, dright, disp, conf)
+            _wta_row(srow, y, min_d, uniqueness, mode, max_diff, keys, rk, dint, dright, disp, conf)
 
 
 @njit(parallel=True, cache=True, nogil=True)

@@ -48,12 +48,11 @@ def step(prev, pmin, c, cur, P1, P2):  # pragma: no cover - compiled
     """
     D = c.shape[0]
     jump = np.int16(pmin + P2)
+    m = np.int16(32767)
     for k in range(D):
-        cur[k + 1] = np.int16(min(min(prev[k + 1], np.int16(min(prev[k], prev[k + 2]) + P1)), jump)
-                              + c[k] - pmin)
-    m = cur[1]
-    for k in range(2, D + 1):
-        m = min(m, cur[k])
+        v = np.int16(min(min(prev[k + 1], np.int16(min(prev[k], prev[k + 2]) + P1)), jump) + c[k] - pmin)
+        cur[k + 1] = v
+        m = min(m, v)
     return m
 
 
@@ -115,13 +114,12 @@ def _wta_row(S, y, min_d, uniqueness, mode, max_diff, keys, rk, dint, dright, di
             key = min(key, keys[k])
         kb = key & 255
         best = key >> 8
-        second = np.int16(32767)  # the best at |k - kb| > 1
-        for k in range(kb - 1):
-            second = min(second, a[k])
-        av = a[kb + 2:]
-        for k in range(kmax - kb - 1):
-            second = min(second, av[k])
-        second = np.int32(second) if second < 32767 else _NOKEY
+        for k in range(max(kb - 1, 0), min(kb + 2, D)):  # the best at |k - kb| > 1: kb's neighbours out
+            keys[k] = _NOKEY
+        second = _NOKEY
+        for k in range(kmax + 1):
+            second = min(second, keys[k])
+        second = second >> 8 if second != _NOKEY else _NOKEY
         if second == _NOKEY:
             second = best
         conf[y, x] = 1.0 - best / second if second > 0 else 0.0

@@ -64,9 +64,9 @@ def step(prev, pmin, c, cur, P1, P2):  # pragma: no cover - compiled
 
 
 @njit(inline="always")
-def step4(ph, mh, pv, mv, pa, ma, pb, mb, c, ch, cv, ca, cb, o, P1, P2):  # pragma: no cover - compiled
+def step4(ph, mh, pv, mv, pa, ma, pb, mb, c, ch, cv, ca, cb, e, o, P1, P2):  # pragma: no cover - compiled
     """:func:`step` for the 4 paths of one pass at once (horizontal, vertical, both diagonals) in one packed
-    loop over the disparities, o[k] = their sum; returns the 4 new minima. Measured 20 % faster than 4
+    loop over the disparities, o[k] = their sum + e[k]; returns the 4 new minima. Measured 20 % faster than 4
     calls of :func:`step` and a sum loop: each cost lane is loaded once and each L lane stored once."""
     D = c.shape[0]
     jh = np.int16(mh + P2)
@@ -84,7 +84,7 @@ def step4(ph, mh, pv, mv, pa, ma, pb, mb, c, ch, cv, ca, cb, o, P1, P2):  # prag
         cv[k + 1] = vv
         ca[k + 1] = va
         cb[k + 1] = vb
-        o[k] = np.int16(vh + vv + va + vb)
+        o[k] = np.int16(vh + vv + va + vb + e[k])
         nh = min(nh, vh)
         nv = min(nv, vv)
         na = min(na, va)
@@ -217,6 +217,7 @@ def _pass(cl, cr, min_d, invalid, P1, P2, reverse, diagonals, i0, i1, Lb, Mb, vo
     hb = np.full((2, D + 2), _PAD, np.int16)
     zero = np.full(D + 2, _PAD, np.int16)
     zero[1:D + 1] = 0
+    zk = np.zeros(D, np.int16)
     rr = np.empty(W + D - 1, np.uint64)
     rk = np.empty(W + D - 1, np.int32)
     keys = np.empty(D, np.int32)
@@ -241,17 +242,14 @@ def _pass(cl, cr, min_d, invalid, P1, P2, reverse, diagonals, i0, i1, Lb, Mb, vo
                 a, b = xv - s, xv + s
                 hmin, Mb[q, 0, xv], Mb[q, 1, xv], Mb[q, 2, xv] = step4(
                     hprev, hmin, Lb[p, 0, xv], Mb[p, 0, xv], Lb[p, 1, a], Mb[p, 1, a], Lb[p, 2, b], Mb[p, 2, b],
-                    c, hcur, cv, Lb[q, 1, xv], Lb[q, 2, xv], o, P1, P2)
+                    c, hcur, cv, Lb[q, 1, xv], Lb[q, 2, xv], vol[y, x] if finish else zk, o, P1, P2)
             else:
                 hmin = step(hprev, hmin, c, hcur, P1, P2)
                 Mb[q, 0, xv] = step(Lb[p, 0, xv], Mb[p, 0, xv], c, cv, P1, P2)
+                e = vol[y, x] if finish else zk
                 for k in range(D):
-                    o[k] = np.int16(hcur[k + 1] + cv[k + 1])
+                    o[k] = np.int16(hcur[k + 1] + cv[k + 1] + e[k])
             hprev = hcur
-            if finish:
-                v = vol[y, x]
-                for k in range(D):
-                    o[k] = np.int16(o[k] + v[k])
         if finish:
             _wta_row(srow, y, min_d, uniqueness, mode, max_diff, keys, rk, dint, dright, disp, conf)
 

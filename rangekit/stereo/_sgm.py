@@ -33,7 +33,7 @@ from numba import njit, prange
 
 from rangekit.stereo._kernels import popcount
 
-__all__ = ["sgm_match", "step"]
+__all__ = ["sgm_match", "step", "step4"]
 
 _PAD = 16000  # > any L; + P1 <= 4000 still fits int16
 _BAD = -(1 << 30)

@@ -9,9 +9,12 @@ P1 = 10, P2 = 120, uniqueness 0.05, LR check 1 px, equiangular sub-pixel, 3x3 me
 
 Accuracy is against the simulator's exact left-camera depth, on the raw left grid
 (:func:`depth_in_camera`), over the "matchable" pixels: seen by both cameras, true disparity < 63, at
-least 5 px from the border. Median of 5 runs, on 1 thread and on all threads.
+least 5 px from the border. Times: the minimum wall (and CPU) of 15 alternating runs of the three
+matchers, on 1 and on 2 threads (numba.set_num_threads and cv2.setNumThreads); census-SGM must give the
+same disparities on both.
 
 Run: .venv/bin/python benchmarks/bench_stereo.py
+     .venv/bin/python benchmarks/bench_stereo.py --asm      (packed int16 instructions in the aggregation)
      .venv/bin/python benchmarks/bench_stereo.py --tables   (docs/stereo.md's accuracy tables: 320x200 and
      640x400, dots on and off, both matchers through stereo_depth)
 """
@@ -19,6 +22,7 @@ Run: .venv/bin/python benchmarks/bench_stereo.py
 from __future__ import annotations
 
 import sys
+import time
 
 import cv2
 import numba
@@ -27,10 +31,43 @@ import numpy as np
 from rangekit.sim.stereo import render_stereo, stereo_rig, stereo_scene
 from rangekit.stereo import depth_in_camera, rectify, rectify_images, sgbm_disparity, sgm_disparity, stereo_depth
 
-from _timing import timed  # benchmarks/_timing.py (the script's folder is on sys.path)
 
 N_DISP = 64
+REPEAT = 15
 
+
+def min_of_runs(fns, repeat, outs):
+    """{name: (min wall s, min CPU s)} over ``repeat`` rounds calling every fn once per round (alternating,
+    so that load on a shared machine hits all alike), after one warm-up round; outs[name] = last result."""
+    for name, fn in fns.items():
+        outs[name] = fn()
+    best = {name: [np.inf, np.inf] for name in fns}
+    for _ in range(repeat):
+        for name, fn in fns.items():
+            w, c = time.perf_counter(), time.process_time()
+            outs[name] = fn()
+            best[name][0] = min(best[name][0], time.perf_counter() - w)
+            best[name][1] = min(best[name][1], time.process_time() - c)
+    return {name: tuple(v) for name, v in best.items()}
+
+
+def packed_ops() -> None:
+    """Count the packed int16 minimum/add instructions numba emits for the aggregation pass (a fresh,
+    uncached compilation of rangekit.stereo._sgm._pass: a cached one carries no assembly)."""
+    import re
+    from collections import Counter
+
+    from rangekit.stereo import _sgm
+    H, W, D = 8, 40, 16
+    cl = np.zeros((H, W), np.uint64)
+    fresh = numba.njit(nogil=True)(_sgm._pass.py_func)
+    Lb, Mb = np.zeros((2, 3, W + 2, D + 2), np.int16), np.zeros((2, 3, W + 2), np.int16)
+    out = np.empty((H, W), np.float32)
+    fresh(cl, cl, 0, np.int16(62), np.int16(10), np.int16(120), False, True, 0, H, Lb, Mb,
+          np.zeros((H, W, D), np.int16), True, 0.05, 2, 1, out, out.copy())
+    asm = next(iter(fresh.inspect_asm().values()))
+    ops = Counter(re.findall(r"^\s+(vpminsw|vpaddw|vpsubw|vpminsd|vpopcntq|vminss|vminsd)\s", asm, re.M))
+    print("instructions in _sgm._pass:", dict(ops), "(packed int16: vpminsw / vpaddw / vpsubw; scalar: vminss)")
 
 
 def accuracy(dmap, rect, left, cap, mask):
@@ -56,24 +93,33 @@ def main() -> None:
     ours = lambda: sgm_disparity(Lr, Rr, num_disparities=N_DISP)  # noqa: E731
     peer = lambda: sgbm_disparity(Lr, Rr, num_disparities=N_DISP, P1=200, P2=800)  # noqa: E731
     peer_hh = lambda: sgbm_disparity(Lr, Rr, num_disparities=N_DISP, P1=200, P2=800, mode="hh")  # noqa: E731
-    rows = []
     n_all = numba.get_num_threads()
-    for threads in (1, n_all):
-        numba.set_num_threads(threads)
+    rows, outs = [], {}
+    for threads in (1, 2):
+        numba.set_num_threads(min(threads, n_all))
         cv2.setNumThreads(threads)
-        t_ours, d_ours = timed(ours, 5, warmup=1)
-        t_peer, d_peer = timed(peer, 5, warmup=1)
-        t_hh, d_hh = timed(peer_hh, 5, warmup=1)
-        rows.append((threads, t_ours, t_peer, t_hh))
+        best = min_of_runs({"ours": ours, "sgbm": peer, "hh": peer_hh}, REPEAT, outs)
+        rows.append((threads, best))
+        if threads == 1:
+            d_one = outs["ours"].disparity
+        elif not np.array_equal(d_one, outs["ours"].disparity, equal_nan=True):
+            raise SystemExit("census-SGM gave different disparities on 1 and 2 threads")
     numba.set_num_threads(n_all)
     cv2.setNumThreads(n_all)
+    d_ours, d_peer, d_hh = outs["ours"], outs["sgbm"], outs["hh"]
 
+    print(f"wall: min of {REPEAT} alternating runs after a warm-up (CPU = user + sys of the process, min)")
     print("| threads | rangekit census-SGM (8 paths) | OpenCV SGBM (5 paths) | ratio | OpenCV SGBM HH (8 paths) "
           "| ratio |")
     print("|---|---|---|---|---|---|")
-    for threads, t_ours, t_peer, t_hh in rows:
-        print(f"| {threads} | {t_ours * 1e3:.0f} ms | {t_peer * 1e3:.0f} ms | {t_ours / t_peer:.1f}x slower | "
-              f"{t_hh * 1e3:.0f} ms | {t_ours / t_hh:.1f}x slower |")
+    for threads, b in rows:
+        (wo, co), (wp, cp), (wh, ch) = b["ours"], b["sgbm"], b["hh"]
+        print(f"| {threads} | {wo * 1e3:.0f} ms ({co * 1e3:.0f} CPU) | {wp * 1e3:.0f} ms ({cp * 1e3:.0f} CPU) | "
+              f"{wo / wp:.2f}x | {wh * 1e3:.0f} ms ({ch * 1e3:.0f} CPU) | {wo / wh:.2f}x |")
+    one, two = rows[0][1], rows[1][1]
+    print(f"\ntargets (issue 20): 1 thread census-SGM / SGBM HH = {one['ours'][0] / one['hh'][0]:.2f} (<= 1.5), "
+          f"2 threads census-SGM / SGBM = {two['ours'][0] / two['sgbm'][0]:.2f} (<= 1); "
+          f"same disparities on 1 and 2 threads")
     print()
     print("| matcher | coverage | RMS depth error | median abs error | within 1 cm | off by > 5 cm |")
     print("|---|---|---|---|---|---|")
@@ -105,4 +151,9 @@ def tables() -> None:
 
 
 if __name__ == "__main__":
-    tables() if "--tables" in sys.argv[1:] else main()
+    if "--tables" in sys.argv[1:]:
+        tables()
+    elif "--asm" in sys.argv[1:]:
+        packed_ops()
+    else:
+        main()

@@ -11,6 +11,7 @@ import numpy as np
 from rangekit.errors import InputError
 from rangekit.image import to_grey
 from rangekit.stereo import _kernels as _k
+from rangekit.stereo import _sgm
 
 __all__ = ["DisparityMap", "census_transform", "census_cost", "sgm_disparity", "sgbm_disparity"]
 
@@ -171,26 +172,16 @@ def sgm_disparity(left_rect: np.ndarray, right_rect: np.ndarray, *, min_disparit
     if prefilter > 0:
         left_rect = cv2.GaussianBlur(left_rect, (0, 0), prefilter, borderType=cv2.BORDER_REPLICATE)
         right_rect = cv2.GaussianBlur(right_rect, (0, 0), prefilter, borderType=cv2.BORDER_REPLICATE)
-    # Matching cost: Hamming distance of census bit strings.
-    cost = census_cost(left_rect, right_rect, min_disparity=min_disparity, num_disparities=num_disparities,
-                       window=window)
-    H, W, D = cost.shape
-    min_d = int(min_disparity)
-    # Semi-global aggregation: S(p, d) = sum_r L_r(p, d).
-    acc_f = np.empty((H, W, D), np.uint16)
-    acc_r = np.empty((H, W, D), np.uint16)
-    _k.aggregate(cost, np.int32(P1), np.int32(P2), paths == 8, acc_f, acc_r)
-    del cost
-    # Winner-take-all, uniqueness, sub-pixel fit.
+    L, R = _pair(left_rect, right_rect)
+    min_d, D = _search_range(min_disparity, num_disparities, L.shape[1])
+    # Census codes; the Hamming cost, the aggregation over the paths (S(p, d) = sum_r L_r(p, d)),
+    # winner-take-all and the left-right check run fused in rangekit.stereo._sgm, row by row.
+    cl, cr = census_transform(L, window), census_transform(R, window)
+    H, W = L.shape
     disp = np.empty((H, W), np.float32)
-    dint = np.empty((H, W), np.int32)
     conf = np.empty((H, W), np.float32)
-    _k.winner_take_all(acc_f, acc_r, min_d, float(uniqueness), _SUBPIXEL[subpixel], disp, dint, conf)
-    # Left-right consistency (occlusions and mismatches).
-    if lr_max_diff >= 0:
-        dright = np.empty((H, W), np.int32)
-        _k.right_winner(acc_f, acc_r, min_d, dright)
-        _k.lr_check(dint, dright, int(lr_max_diff), disp)
+    _sgm.sgm_match(cl, cr, min_d, D, np.int16(window[0] * window[1] - 1), np.int16(P1), np.int16(P2), paths == 8,
+                   float(uniqueness), _SUBPIXEL[subpixel], int(lr_max_diff), disp, conf)
     if median:
         out = np.empty_like(disp)
         _k.median3(disp, out)

@@ -162,7 +162,7 @@ def _texture_albedo(tex: PlanarTexture, T_world_obj: np.ndarray, p: np.ndarray, 
 def cast_view(mesh: WorldMesh, camera: PinholeCamera, projector: PinholeCamera | None, *,
               cam_rays: tuple[np.ndarray, np.ndarray] | None = None,
               corner_rays: tuple[np.ndarray, np.ndarray] | None = None,
-              shadow_eps: float = 2e-5) -> ViewGeometry:
+              shadow_eps: float = 2e-5, pixels: np.ndarray | None = None) -> ViewGeometry:
     """Cast every camera pixel into the scene and trace its shadow ray to the projector.
 
     Albedo: the vertex albedo interpolated at the hit, except on the front side of an object's
@@ -183,6 +183,8 @@ def cast_view(mesh: WorldMesh, camera: PinholeCamera, projector: PinholeCamera |
         only the corners of textured pixels are back-projected.
     shadow_eps : float
         Metres: an occluder must be at least this much closer to the projector than the point to shadow it.
+    pixels : optional (K,) flat pixel indices (row * W + column) to cast; the maps hold nothing (as where
+        nothing is hit) at the other pixels. Default every pixel.
 
     Raises
     ------
@@ -193,8 +195,16 @@ def cast_view(mesh: WorldMesh, camera: PinholeCamera, projector: PinholeCamera |
         raise SceneError("the scene has no triangles; add at least one object")
     H, W = camera.height, camera.width
     o_all, d_all = cam_rays if cam_rays is not None else world_pixel_rays(camera)
-    _, prim_all = _open3d_cast(mesh.vertices, mesh.triangles, o_all, d_all)
-    hit_idx = np.flatnonzero(prim_all >= 0)
+    scene = raycasting_scene(mesh.vertices, mesh.triangles)   # one BVH for the camera and the shadow rays
+    if pixels is None:
+        _, prim_all = _cast(scene, o_all, d_all)
+        hit_idx = np.flatnonzero(prim_all >= 0)
+    else:
+        pixels = np.asarray(pixels, dtype=np.int64)
+        _, prim_sub = _cast(scene, o_all[pixels], d_all[pixels])
+        hit_idx = pixels[prim_sub >= 0]
+        prim_all = np.full(H * W, -1, np.int64)
+        prim_all[hit_idx] = prim_sub[prim_sub >= 0]
     if hit_idx.size == 0:
         raise SceneError(f"camera {camera.name!r} sees nothing: none of its {H * W} rays hits the scene "
                          f"(objects: {', '.join(mesh.object_names)}); check T_world_cam and where the objects "
@@ -256,8 +266,7 @@ def cast_view(mesh: WorldMesh, camera: PinholeCamera, projector: PinholeCamera |
         facing = (np.einsum("ij,ij->i", n_face, l_dir) > 0) & (cos_i > 0)
         cand = np.flatnonzero(inside & facing)
         # Shadow rays from the projector centre towards each candidate point.
-        t_s, prim_s = _open3d_cast(mesh.vertices, mesh.triangles,
-                                   np.broadcast_to(c_p, (cand.size, 3)), -l_dir[cand])
+        t_s, prim_s = _cast(scene, np.broadcast_to(c_p, (cand.size, 3)), -l_dir[cand])
         blocked = (prim_s != prim[cand]) & (t_s < dist_p[cand] - shadow_eps)
         ok = cand[~blocked]
         lit_idx = hit_idx[ok]

@@ -81,12 +81,13 @@ def read_json(path: str | Path, *, what: str = "JSON file") -> dict:
         raise FileFormatError(f"{path}: cannot read {what}: {str(exc)[:200]}") from exc
 
 
-def atomic_save_npz(path: str | Path, **arrays: np.ndarray) -> None:
-    """``np.savez_compressed`` to ``path``, atomically."""
+def atomic_save_npz(path: str | Path, *, compress: bool = True, **arrays: np.ndarray) -> None:
+    """``np.savez_compressed`` (``compress=False``: ``np.savez``, 20x faster for float maps that deflate
+    poorly) to ``path``, atomically."""
     import io
 
     buf = io.BytesIO()
-    np.savez_compressed(buf, **arrays)
+    (np.savez_compressed if compress else np.savez)(buf, **arrays)
     atomic_write_bytes(path, buf.getvalue())
 
 

@@ -1,7 +1,7 @@
 """One view of a session decoded, triangulated and filtered, with its cache in the view folder.
 
 Writes into ``view_NNN/`` (atomically): ``cloud.ply`` (the filtered cloud, session-world frame of that
-view, with each point's predicted ``sigma``), ``maps.npz`` (decoded projector column, confidence,
+view, with each point's predicted ``sigma``), ``maps.npz`` (uncompressed: decoded projector column, confidence,
 camera-frame depth, predicted sigma along the camera ray) and ``cloud.json`` (the
 settings they were made with and the SHA-256 of the other two). A view whose ``cloud.json`` holds the
 same settings is read back instead of decoded again, so interrupted processing gives the same mesh as an
@@ -111,7 +111,8 @@ def view_cloud(v: SessionView, spec: PatternSpec, rig: Rig, settings: dict, full
     maps = ViewMaps(rec.decoded.proj_col.astype(np.float32), rec.decoded.confidence.astype(np.float32), depth,
                     images[white], sigma)
     save_cloud(v.folder / "cloud.ply", c)
-    atomic_save_npz(v.folder / "maps.npz", proj_col=maps.proj_col, confidence=maps.confidence, depth=depth,
+    # uncompressed: deflating the float maps cost 0.18 CPU-s a view (21 MB instead of 4 MB on disk)
+    atomic_save_npz(v.folder / "maps.npz", compress=False, proj_col=maps.proj_col, confidence=maps.confidence, depth=depth,
                     sigma=sigma)
     # cloud.json last, with the others' checksums: it vouches for a complete cache.
     atomic_write_json(v.folder / "cloud.json", {"settings": settings, "points": len(c),

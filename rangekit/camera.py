@@ -26,9 +26,7 @@ _N_COEFFS = 12  # k1 k2 p1 p2 k3 k4 k5 k6 s1 s2 s3 s4
 
 
 def _full_coeffs(dist: np.ndarray) -> np.ndarray:
-    d = np.zeros(_N_COEFFS)
-    d[: min(len(dist), _N_COEFFS)] = dist[:_N_COEFFS]
-    return d
+    return np.concatenate([dist[:_N_COEFFS], np.zeros(_N_COEFFS - min(len(dist), _N_COEFFS))])
 
 
 def distort(xy: np.ndarray, dist: np.ndarray) -> np.ndarray:
@@ -165,7 +163,6 @@ class PinholeCamera:
         for arr in (K, dist, T):
             arr.flags.writeable = False
 
-    # ---------------------------------------------------------------- basic facts
     @property
     def size(self) -> tuple[int, int]:
         """(width, height) in pixels."""
@@ -199,7 +196,6 @@ class PinholeCamera:
         v, u = np.mgrid[0: self.height, 0: self.width]
         return np.column_stack([u.ravel(), v.ravel()]).astype(np.float64)
 
-    # ---------------------------------------------------------------- projection
     def normalized_to_pixels(self, xy: np.ndarray) -> np.ndarray:
         """(N, 2) undistorted normalised coordinates -> (N, 2) pixels (applies distortion and K)."""
         xd = distort(np.asarray(xy, dtype=np.float64), self.dist)
@@ -235,25 +231,18 @@ class PinholeCamera:
         return self.project_cam(apply_T(self.T_cam_world, points_world))
 
     def rays(self, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Back-project pixels to world rays.
+        """Back-project (N, 2) pixels ``uv`` (u = column, v = row; distorted, as seen in the image) to world
+        rays: ``origins`` (N, 3) float64, the optical centre in world coordinates (metres), and ``directions``
+        (N, 3) float64 unit vectors in world coordinates, NaN where the lens model could not be inverted."""
+        return self.rays_from_normalized(self.pixels_to_normalized(uv))
 
-        Parameters
-        ----------
-        uv : (N, 2) pixels (u = column, v = row), distorted (as seen in the image).
-
-        Returns
-        -------
-        origins : (N, 3) float64, the optical centre in world coordinates (metres).
-        directions : (N, 3) float64 unit vectors in world coordinates; NaN where the lens model could not
-            be inverted.
-        """
-        xy = self.pixels_to_normalized(uv)
+    def rays_from_normalized(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`rays` from (N, 2) undistorted normalised coordinates (:meth:`pixels_to_normalized`)."""
         d = np.column_stack([xy, np.ones(len(xy))])
         d /= np.linalg.norm(d, axis=1, keepdims=True)
         d_world = transform_vectors(self.T_world_cam, d)
         return np.broadcast_to(self.center, d_world.shape).copy(), d_world
 
-    # ---------------------------------------------------------------- projector light planes
     def column_planes(self, cols: np.ndarray | None = None, *, rows: np.ndarray | None = None,
                       n_samples: int = 65) -> np.ndarray:
         """World planes of projector columns, as (N, 4) ``[n, d]`` with ``n . X + d = 0``, |n| = 1.
@@ -305,7 +294,6 @@ class PinholeCamera:
         d = -n_world @ self.center
         return np.column_stack([n_world, d])
 
-    # ---------------------------------------------------------------- serialisation
     def to_dict(self) -> dict:
         """A JSON-ready dict (lists of floats), the rig-file form of this device."""
         return {
@@ -372,28 +360,34 @@ def pixel_rays(camera: PinholeCamera) -> np.ndarray:
     rays are ``transform_vectors(camera.T_world_cam, d.reshape(-1, 3))`` from ``camera.center``, bit for
     bit what ``camera.rays(camera.pixel_grid())`` returns.
 
-    Depends only on the lens (K, dist, size), not on the pose, and is cached for the last four lenses:
-    undoing the distortion of every pixel is costly, and a lens does not change between views.
-    """
-    lens = [camera.K.ravel(), camera.dist.ravel(), [camera.dist.size, camera.width, camera.height]]
-    key = np.concatenate(lens).tobytes()
-    d = _RAY_CACHE.get(key)
-    if d is None:
+    Depends only on the lens (K, dist, size), not on the pose, and is cached (with the world rays, the last
+    eight): undoing the distortion of every pixel is costly, and a lens does not change between views."""
+    key = _lens_key(camera)
+    if key not in _RAY_CACHE:
         xy = camera.pixels_to_normalized(camera.pixel_grid())
         d = np.column_stack([xy, np.ones(len(xy))])
         d /= np.linalg.norm(d, axis=1, keepdims=True)
-        d = d.reshape(camera.height, camera.width, 3)
-        d.flags.writeable = False
-        if len(_RAY_CACHE) >= 4:
-            _RAY_CACHE.pop(next(iter(_RAY_CACHE)))
-        _RAY_CACHE[key] = d
-    return d
+        _cache_rays(key, d.reshape(camera.height, camera.width, 3))
+    return _RAY_CACHE[key]
 
 
 def world_pixel_rays(camera: PinholeCamera) -> tuple[np.ndarray, np.ndarray]:
-    """The rays of every pixel centre in world coordinates, row by row: ``(origins, directions)``, each
-    (H * W, 3) float64 (origins the optical centre, directions unit vectors, NaN where the lens model
-    cannot be inverted). The same numbers as ``camera.rays(camera.pixel_grid())``, from the cached
-    :func:`pixel_rays`."""
-    d = transform_vectors(camera.T_world_cam, pixel_rays(camera).reshape(-1, 3))
+    """World rays of every pixel centre, row by row: ``(origins, directions)``, (H * W, 3) float64 each (the
+    optical centre; unit vectors, NaN where the lens cannot be inverted), as ``camera.rays(camera.pixel_grid())``.
+    The directions are read-only, cached per lens and pose (a turntable scan's views share the pose)."""
+    key = b"world" + camera.T_world_cam.tobytes() + _lens_key(camera)
+    if key not in _RAY_CACHE:
+        _cache_rays(key, transform_vectors(camera.T_world_cam, pixel_rays(camera).reshape(-1, 3)))
+    d = _RAY_CACHE[key]
     return np.broadcast_to(camera.center, d.shape).copy(), d
+
+
+def _lens_key(camera: PinholeCamera) -> bytes:
+    return np.concatenate([camera.K.ravel(), camera.dist.ravel(), [camera.dist.size, *camera.size]]).tobytes()
+
+
+def _cache_rays(key: bytes, d: np.ndarray) -> None:
+    d.flags.writeable = False  # kept read-only; the oldest of eight goes
+    if len(_RAY_CACHE) >= 8:
+        _RAY_CACHE.pop(next(iter(_RAY_CACHE)))
+    _RAY_CACHE[key] = d

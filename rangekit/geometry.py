@@ -11,7 +11,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from rangekit.errors import InputError
 
@@ -102,21 +101,29 @@ def _rotate(P: np.ndarray, A: np.ndarray) -> np.ndarray:
 
 def rotvec_to_R(rotvec: np.ndarray) -> np.ndarray:
     """Rotation vector (axis * angle, radians) to a (3, 3) rotation matrix."""
+    from scipy.spatial.transform import Rotation  # scipy.spatial takes 0.6 s to import
+
     return Rotation.from_rotvec(np.asarray(rotvec, dtype=np.float64)).as_matrix()
 
 
 def R_to_rotvec(R: np.ndarray) -> np.ndarray:
     """(3, 3) rotation matrix to rotation vector (axis * angle, radians, angle in [0, pi])."""
+    from scipy.spatial.transform import Rotation  # scipy.spatial takes 0.6 s to import
+
     return Rotation.from_matrix(np.asarray(R, dtype=np.float64)).as_rotvec()
 
 
 def quat_to_R(quat_xyzw: np.ndarray) -> np.ndarray:
     """Unit quaternion, scalar last ``(x, y, z, w)``, to a (3, 3) rotation matrix."""
+    from scipy.spatial.transform import Rotation  # scipy.spatial takes 0.6 s to import
+
     return Rotation.from_quat(np.asarray(quat_xyzw, dtype=np.float64)).as_matrix()
 
 
 def R_to_quat(R: np.ndarray) -> np.ndarray:
     """(3, 3) rotation matrix to a unit quaternion ``(x, y, z, w)`` with ``w >= 0``."""
+    from scipy.spatial.transform import Rotation  # scipy.spatial takes 0.6 s to import
+
     q = Rotation.from_matrix(np.asarray(R, dtype=np.float64)).as_quat()
     return q if q[3] >= 0 else -q
 

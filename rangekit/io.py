@@ -81,12 +81,23 @@ def read_json(path: str | Path, *, what: str = "JSON file") -> dict:
         raise FileFormatError(f"{path}: cannot read {what}: {str(exc)[:200]}") from exc
 
 
-def atomic_save_npz(path: str | Path, **arrays: np.ndarray) -> None:
-    """``np.savez_compressed`` to ``path``, atomically."""
+def atomic_save_npz(path: str | Path, *, level: int = 6, **arrays: np.ndarray) -> None:
+    """The arrays as an ``.npz`` (``np.load`` reads it) at ``path``, atomically. ``level``: zlib's deflate level,
+    6 as ``np.savez_compressed``; 1 takes half its time for files about 5% larger (decoded maps); 0 stores
+    them (``np.savez``: 7-20x faster than 6 for float maps, files 5-7x larger)."""
     import io
+    import zipfile
 
     buf = io.BytesIO()
-    np.savez_compressed(buf, **arrays)
+    if level == 6:
+        np.savez_compressed(buf, **arrays)
+    elif level == 0:
+        np.savez(buf, **arrays)
+    else:
+        with zipfile.ZipFile(buf, "w", compression=zipfile.ZIP_DEFLATED, compresslevel=level) as zf:
+            for name, arr in arrays.items():
+                with zf.open(name + ".npy", "w", force_zip64=True) as f:
+                    np.lib.format.write_array(f, np.asanyarray(arr), allow_pickle=False)
     atomic_write_bytes(path, buf.getvalue())
 
 

@@ -15,7 +15,7 @@ from rangekit.coded.patterns import PatternSpec
 from rangekit.surface.cloud import PointCloud
 from rangekit.projector_response import ProjectorResponse
 from rangekit.coded.uncertainty import point_sigma
-from rangekit.coded.triangulate import TriangulationResult, discontinuity_mask, range_normals, triangulate
+from rangekit.coded.triangulate import TriangulationResult, filter_range_map, triangulate
 
 __all__ = ["EDGE_MARGIN_PX", "Reconstruction", "reconstruct_view"]
 
@@ -50,7 +50,8 @@ def reconstruct_view(images, spec: PatternSpec, camera: PinholeCamera, projector
                      exposures_us=None) -> Reconstruction:
     """Decode ``images`` and triangulate against ``projector``.
 
-    ``max_jump`` (relative range step, see :func:`rangekit.coded.triangulate.discontinuity_mask`) removes flying
+    ``max_jump`` (relative range step, see :func:`rangekit.coded.triangulate.discontinuity_mask`, applied with
+    the normals by :func:`rangekit.coded.triangulate.filter_range_map`) removes flying
     pixels at depth edges, and ``edge_margin`` pixels more around them and around every region's rim (mixed
     pixels under the camera blur); ``max_residual`` (metres) removes ray-ray points whose rays miss each other;
     ``min_confidence`` drops pixels whose decoded confidence (about the white - black signal as a fraction
@@ -79,17 +80,16 @@ def reconstruct_view(images, spec: PatternSpec, camera: PinholeCamera, projector
     cols = np.where(weak, np.nan, dec.proj_col)
     rows = np.where(weak, np.nan, dec.proj_row) if np.any(np.isfinite(dec.proj_row)) else None
     tri = triangulate(camera, projector, cols, rows, method=method)
-    xyz = tri.xyz.copy()
-    drop = discontinuity_mask(xyz, camera.center, max_jump=max_jump, margin=edge_margin)
-    if tri.method == "ray-ray":
-        drop |= ~(tri.residual <= max_residual)
-    xyz[drop] = np.nan
-    tri = TriangulationResult(xyz, np.where(np.isfinite(xyz[:, :, 0]), tri.residual, np.nan), tri.method)
+    # flying pixels (and ray-ray points whose rays miss) dropped, normals of what is left: one compiled pass
+    xyz, normals = filter_range_map(tri.xyz, camera.center, max_jump=max_jump, margin=edge_margin,
+                                    extra_drop=~(tri.residual <= max_residual) if tri.method == "ray-ray" else None)
+    tri = TriangulationResult(xyz, np.where(np.isfinite(xyz[:, :, 0]), tri.residual, np.nan), tri.method,
+                              tri.proj_xy)
     valid = tri.valid
     if not np.any(valid):
         raise DecodeError("no 3D point survived decoding and triangulation; check the rig file and that the "
                           "captures show the object lit by the projector")
-    normals = range_normals(xyz, camera.center)[valid]
+    normals = normals[valid]
     normals = np.where(np.isfinite(normals), normals, 0.0)
     white = np.asarray(dec.white, dtype=np.float32)
     white /= 255.0 if dec.white.dtype == np.uint8 else float(full_scale or 65535)
@@ -97,7 +97,7 @@ def reconstruct_view(images, spec: PatternSpec, camera: PinholeCamera, projector
     sigma = None
     if dec.col_std is not None:
         if tri.method == "ray-ray":
-            sigma = point_sigma(camera, projector, xyz, dec.col_std, dec.row_std, cols, rows)
+            sigma = point_sigma(camera, projector, xyz, dec.col_std, dec.row_std, cols, rows, proj_xy=tri.proj_xy)
         else:
             sigma = point_sigma(camera, projector, xyz, dec.col_std)
     return Reconstruction(dec, tri, PointCloud(xyz[valid], np.clip(colours, 0, 1), normals,

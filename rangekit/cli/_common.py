@@ -119,3 +119,26 @@ def check_output(path: str | os.PathLike, *, option: str = "--out", folder: bool
         raise UsageError(f"{option} {out}: only {free / 2**20:.1f} MB free on the disk of {parent}; "
                          f"expected at least {MIN_FREE_BYTES / 2**20:.0f} MB")
     return out
+
+
+class LazyChoices:
+    """argparse ``choices`` read from ``module.name`` only when an option is checked or help is shown, so
+    building the parser does not import the module (give the option a ``metavar``: argparse lists plain
+    choices at ``add_argument``). ``rangekit decode`` starts without importing ``rangekit.app``."""
+
+    def __init__(self, module: str, name: str):
+        self.module, self.name = module, name
+
+    def _values(self):
+        import importlib
+
+        return getattr(importlib.import_module(self.module), self.name)
+
+    def __contains__(self, value) -> bool:
+        return value in self._values()
+
+    def __iter__(self):
+        return iter(self._values())
+
+    def __len__(self) -> int:
+        return len(self._values())

@@ -7,9 +7,8 @@ import sys
 import time
 from pathlib import Path
 
-from rangekit.cli._common import check_output, console, finite_float, int_in, say, seed
+from rangekit.cli._common import LazyChoices, check_output, console, finite_float, int_in, say, seed
 from rangekit.errors import UsageError
-from rangekit.laser.sequence import LaserSequence
 
 
 def cmd_scan(args: argparse.Namespace) -> int:
@@ -122,6 +121,8 @@ def _with_exposures(setup, given: list):
     if setup.resume:
         setup.close()
         raise UsageError("--exposures: a resumed scan keeps its session's exposures; leave --exposures out")
+    from rangekit.laser.sequence import LaserSequence
+
     if isinstance(setup.spec, LaserSequence):
         setup.close()
         raise UsageError("--exposures: multi-exposure capture is for coded light; leave it out with --method laser")
@@ -173,9 +174,8 @@ def cmd_process(args: argparse.Namespace) -> int:
 
 
 def _processing_options(p: argparse.ArgumentParser) -> None:
-    from rangekit.app.process import FUSION_METHODS
-
-    p.add_argument("--fusion", default="poisson", choices=FUSION_METHODS,
+    p.add_argument("--fusion", default="poisson", choices=LazyChoices("rangekit.app.process", "FUSION_METHODS"),
+                   metavar="{poisson,tsdf}",
                    help="fusion into one mesh: poisson (default, screened Poisson of the merged cloud) or tsdf")
     p.add_argument("--no-report", action="store_true", help="skip report.html")
 

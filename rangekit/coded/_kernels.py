@@ -15,7 +15,7 @@ from numba import njit, prange
 # OpenMP or numba's own workqueue; skips the TBB probe (and its warning where TBB is too old).
 numba.config.THREADING_LAYER_PRIORITY = ["omp", "workqueue", "tbb"]
 
-__all__ = ["gray_rows", "masks_rows", "crossings", "interp_along_rows", "interp_along_cols"]
+__all__ = ["gray_rows", "masks_rows", "crossings", "interp_along_rows", "interp_along_cols", "range_filter_normals"]
 
 
 @njit(parallel=True, cache=True, nogil=True)
@@ -236,3 +236,86 @@ def finalise_binary(code_c, sub_c, code_r, sub_r, has_c, has_r, use_sub, shadow,
                 proj_row[y, x] = nan
             if miss_c or miss_r:
                 conf[y, x] *= 0.5
+
+
+@njit(parallel=True, cache=True, nogil=True, error_model="numpy")
+def range_filter_normals(xyz, vp, max_jump, min_neighbours, margin, extra, use_extra,
+                         out, normals):  # pragma: no cover - compiled
+    """Flying-pixel filter and normals of an organised (H, W, 3) range map in compiled passes, the same
+    numbers as ``discontinuity_mask`` + ``range_normals`` of :mod:`rangekit.coded.triangulate` (same
+    operations in the same order, no fused multiply-add): ``out`` = ``xyz`` with NaN where dropped (or where
+    ``extra`` is True, when ``use_extra``), ``normals`` those of ``out`` facing ``vp``, NaN where undefined."""
+    H, W = xyz.shape[0], xyz.shape[1]
+    r = np.empty((H, W))
+    for y in prange(H):
+        for x in range(W):
+            a = xyz[y, x, 0] - vp[0]
+            b = xyz[y, x, 1] - vp[1]
+            c = xyz[y, x, 2] - vp[2]
+            r[y, x] = np.sqrt(a * a + b * b + c * c)
+    bad = np.empty((H, W), np.bool_)  # dropped by the jump test or invalid
+    for y in prange(H):
+        for x in range(W):
+            ry = r[y, x]
+            if not np.isfinite(ry):
+                bad[y, x] = True
+                continue
+            lim = max_jump * ry
+            jump = False
+            nv = 0
+            for k in range(4):
+                yy = y + (-1, 1, 0, 0)[k]
+                xx = x + (0, 0, -1, 1)[k]
+                if 0 <= yy < H and 0 <= xx < W:
+                    q = r[yy, xx]
+                    if np.isfinite(q):
+                        nv += 1
+                        if np.abs(q - ry) > lim:
+                            jump = True
+            bad[y, x] = jump or nv < min_neighbours
+    drop = bad
+    if margin > 0:  # square dilation of `bad`, outside the image counting as bad (scipy's border_value=1)
+        rows = np.empty((H, W), np.bool_)
+        for y in prange(H):
+            for x in range(W):
+                v = x - margin < 0 or x + margin >= W
+                for xx in range(max(0, x - margin), min(W, x + margin + 1)):
+                    v = v or bad[y, xx]
+                rows[y, x] = v
+        drop = np.empty((H, W), np.bool_)
+        for y in prange(H):
+            for x in range(W):
+                v = y - margin < 0 or y + margin >= H
+                for yy in range(max(0, y - margin), min(H, y + margin + 1)):
+                    v = v or rows[yy, x]
+                drop[y, x] = v
+    for y in prange(H):
+        for x in range(W):
+            gone = drop[y, x] or (use_extra and extra[y, x])
+            for k in range(3):
+                out[y, x, k] = np.nan if gone else xyz[y, x, k]
+    for y in prange(H):
+        for x in range(W):
+            if y == 0 or y == H - 1 or x == 0 or x == W - 1:
+                for k in range(3):
+                    normals[y, x, k] = np.nan
+                continue
+            ax = out[y, x + 1, 0] - out[y, x - 1, 0]
+            ay = out[y, x + 1, 1] - out[y, x - 1, 1]
+            az = out[y, x + 1, 2] - out[y, x - 1, 2]
+            bx = out[y + 1, x, 0] - out[y - 1, x, 0]
+            by = out[y + 1, x, 1] - out[y - 1, x, 1]
+            bz = out[y + 1, x, 2] - out[y - 1, x, 2]
+            n0 = ay * bz - az * by
+            n1 = az * bx - ax * bz
+            n2 = ax * by - ay * bx
+            s = np.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
+            n0 /= s
+            n1 /= s
+            n2 /= s
+            f = n0 * (vp[0] - out[y, x, 0]) + n1 * (vp[1] - out[y, x, 1]) + n2 * (vp[2] - out[y, x, 2])
+            if f < 0:
+                n0, n1, n2 = -n0, -n1, -n2
+            normals[y, x, 0] = n0
+            normals[y, x, 1] = n1
+            normals[y, x, 2] = n2

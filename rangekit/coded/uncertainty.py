@@ -32,9 +32,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rangekit.camera import PinholeCamera, distort_jacobian, pixel_rays
+from rangekit.camera import PinholeCamera, distort_jacobian, world_pixel_rays
 from rangekit.errors import InputError
-from rangekit.geometry import apply_T, transform_vectors
+from rangekit.geometry import apply_T
 
 __all__ = ["NoiseModel", "fit_noise_model", "phase_coordinate_std", "GRAY_CODE_STD", "along_ray_jacobian",
            "point_sigma"]
@@ -122,8 +122,8 @@ def _projection_jacobian(projector: PinholeCamera, X: np.ndarray) -> np.ndarray:
 
 
 def along_ray_jacobian(camera: PinholeCamera, projector: PinholeCamera, xyz: np.ndarray,
-                       proj_row: np.ndarray | None = None, proj_col: np.ndarray | None = None
-                       ) -> tuple[np.ndarray, np.ndarray | None]:
+                       proj_row: np.ndarray | None = None, proj_col: np.ndarray | None = None, *,
+                       proj_xy: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray | None]:
     """Derivatives (metres per projector pixel) of each point's position along its unit camera ray with
     respect to its decoded projector column and row.
 
@@ -133,6 +133,9 @@ def along_ray_jacobian(camera: PinholeCamera, projector: PinholeCamera, xyz: np.
     xyz : (H, W, 3) triangulated world points (NaN where invalid).
     proj_row, proj_col : (H, W) decoded projector coordinates; give both for a ray-ray triangulation
         (:func:`rangekit.coded.triangulate.triangulate_ray_ray`), neither for ray-plane.
+    proj_xy : optional (H, W, 2) undistorted normalised projector coordinates of (proj_col, proj_row), as
+        the ray-ray triangulation returns them (``TriangulationResult.proj_xy``): saves undoing the
+        projector's distortion again.
 
     Returns
     -------
@@ -149,7 +152,7 @@ def along_ray_jacobian(camera: PinholeCamera, projector: PinholeCamera, xyz: np.
     if not np.any(valid):
         return d_col, d_row
     X = xyz[valid]
-    d1 = transform_vectors(camera.T_world_cam, pixel_rays(camera)[valid])
+    d1 = world_pixel_rays(camera)[1][valid.ravel()]
     d1 /= np.linalg.norm(d1, axis=1, keepdims=True)
     if proj_row is None:
         du_dt = np.einsum("nj,nj->n", _projection_jacobian(projector, X)[:, 0], d1)
@@ -157,7 +160,7 @@ def along_ray_jacobian(camera: PinholeCamera, projector: PinholeCamera, xyz: np.
             d_col[valid] = 1.0 / du_dt
         return d_col, d_row
     uv = np.column_stack([np.asarray(proj_col, np.float64)[valid], np.asarray(proj_row, np.float64)[valid]])
-    xy = projector.pixels_to_normalized(uv)
+    xy = projector.pixels_to_normalized(uv) if proj_xy is None else np.asarray(proj_xy, np.float64)[valid]
     R = projector.T_world_cam[:3, :3]
     d2 = np.column_stack([xy, np.ones(len(xy))]) @ R.T          # unnormalised projector ray
     # d(x, y)/d(u, v) = inverse distortion Jacobian / focal lengths
@@ -182,17 +185,17 @@ def along_ray_jacobian(camera: PinholeCamera, projector: PinholeCamera, xyz: np.
 
 def point_sigma(camera: PinholeCamera, projector: PinholeCamera, xyz: np.ndarray, col_std: np.ndarray,
                 row_std: np.ndarray | None = None, proj_col: np.ndarray | None = None,
-                proj_row: np.ndarray | None = None) -> np.ndarray:
+                proj_row: np.ndarray | None = None, *, proj_xy: np.ndarray | None = None) -> np.ndarray:
     """(H, W) float32 predicted std (metres) of each triangulated point along its camera ray.
 
     ``col_std`` / ``row_std``: (H, W) std of the decoded projector column / row (projector pixels, as
     :class:`rangekit.coded.result.DecodeResult` carries them). Give ``row_std``, ``proj_col`` and
-    ``proj_row`` for a ray-ray triangulation; leave them out for ray-plane. NaN where a point or a std is
-    missing.
+    ``proj_row`` for a ray-ray triangulation (and its ``proj_xy``, see :func:`along_ray_jacobian`); leave
+    them out for ray-plane. NaN where a point or a std is missing.
     """
     ray_ray = proj_row is not None
     g_col, g_row = along_ray_jacobian(camera, projector, xyz, proj_row if ray_ray else None,
-                                      proj_col if ray_ray else None)
+                                      proj_col if ray_ray else None, proj_xy=proj_xy if ray_ray else None)
     var = (g_col * np.asarray(col_std, np.float64)) ** 2
     if ray_ray:
         var = var + (g_row * np.asarray(row_std, np.float64)) ** 2

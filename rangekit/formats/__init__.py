@@ -1,18 +1,27 @@
 """Files a user keeps: point clouds (PLY, PCD, XYZ, NPY) and meshes (PLY, OBJ, STL) with one PLY reader and
-writer, capture folders, poses.json, ToF capture folders, scan sessions (session.json, summary.json)."""
+writer, capture folders, poses.json, ToF capture folders, scan sessions (session.json, summary.json).
 
-from rangekit.formats.capture import (IMAGE_SUFFIXES, Capture, list_images, load_capture, pattern_spec_for,
-                                      read_stack, save_decoded)
-from rangekit.formats.clouds import CLOUD_READERS, CLOUD_WRITERS, RangeGrid, load_cloud, load_range_grid, save_cloud
-from rangekit.formats.meshes import MESH_FORMATS, load_mesh_file, save_mesh
-from rangekit.formats.ply import cloud_ply_bytes, mesh_ply_bytes, read_ply
-from rangekit.formats.poses import POSES_SCHEMA, load_poses, save_poses
-from rangekit.formats.range_files import ToFFolder, load_ground_truth, load_tof_folder
-from rangekit.formats.session import (SESSION_SCHEMA, CaptureSettings, ScanPlan, Session, SessionView,
-                                      SimulatorSettings, load_session, view_folder)
-from rangekit.formats.session_check import verify_views
-from rangekit.formats.session_lock import SessionLocked, session_lock
-from rangekit.formats.summary import SUMMARY_SCHEMA, ProcessResult
+The names below are loaded on first use (PEP 562): importing one module of this package, e.g.
+``rangekit.formats.capture`` for ``rangekit decode``, does not import the others (clouds and meshes pull in
+``rangekit.surface`` and scipy.spatial, about 0.6 s)."""
+
+import importlib
+
+_EXPORTS = {
+    "capture": ("IMAGE_SUFFIXES", "Capture", "list_images", "load_capture", "pattern_spec_for", "read_stack",
+                "save_decoded"),
+    "clouds": ("CLOUD_READERS", "CLOUD_WRITERS", "RangeGrid", "load_cloud", "load_range_grid", "save_cloud"),
+    "meshes": ("MESH_FORMATS", "load_mesh_file", "save_mesh"),
+    "ply": ("cloud_ply_bytes", "mesh_ply_bytes", "read_ply"),
+    "poses": ("POSES_SCHEMA", "load_poses", "save_poses"),
+    "range_files": ("ToFFolder", "load_ground_truth", "load_tof_folder"),
+    "session": ("SESSION_SCHEMA", "CaptureSettings", "ScanPlan", "Session", "SessionView", "SimulatorSettings",
+                "load_session", "view_folder"),
+    "session_check": ("verify_views",),
+    "session_lock": ("SessionLocked", "session_lock"),
+    "summary": ("SUMMARY_SCHEMA", "ProcessResult"),
+}
+_MODULE_OF = {name: module for module, names in _EXPORTS.items() for name in names}
 
 __all__ = ["load_cloud", "save_cloud", "CLOUD_READERS", "CLOUD_WRITERS", "RangeGrid", "load_range_grid",
            "load_mesh_file", "save_mesh", "MESH_FORMATS", "read_ply", "cloud_ply_bytes", "mesh_ply_bytes",
@@ -21,3 +30,21 @@ __all__ = ["load_cloud", "save_cloud", "CLOUD_READERS", "CLOUD_WRITERS", "RangeG
            "load_tof_folder", "SESSION_SCHEMA", "CaptureSettings", "ProcessResult",
            "ScanPlan", "Session", "SessionView", "SimulatorSettings", "load_session", "view_folder", "verify_views",
            "SessionLocked", "session_lock", "SUMMARY_SCHEMA"]
+
+
+def __getattr__(name: str):
+    """A name of ``__all__`` from its module, or a submodule, imported on first use."""
+    if name in _MODULE_OF:
+        value = getattr(importlib.import_module(f"rangekit.formats.{_MODULE_OF[name]}"), name)
+        globals()[name] = value
+        return value
+    try:
+        return importlib.import_module(f"rangekit.formats.{name}")
+    except ModuleNotFoundError as exc:
+        if exc.name != f"rangekit.formats.{name}":
+            raise
+        raise AttributeError(f"module 'rangekit.formats' has no attribute {name!r}") from None
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))

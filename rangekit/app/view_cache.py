@@ -14,7 +14,7 @@ import zipfile
 from dataclasses import dataclass
 
 import numpy as np
-from threadpoolctl import threadpool_limits
+from rangekit.threads import one_blas_thread
 
 from rangekit.app.reconstruct import reconstruct_view
 from rangekit.coded.patterns import PatternSpec
@@ -92,7 +92,7 @@ def view_cloud(v: SessionView, spec: PatternSpec, rig: Rig, settings: dict, full
                                m["sigma"])
     stacks = [read_stack(list_images(f)) for f in folders]
     images = stacks[0]
-    with threadpool_limits(limits=1, user_api="blas"):
+    with one_blas_thread():      # thin products: rangekit.threads
         return _decode_view(v, stacks if exposures else images, images[white], spec, rig, settings, full_scale,
                             T_table_world, table_margin)
 

@@ -70,11 +70,12 @@ class ViewGeometry:
 
 
 def _open3d_cast(vertices: np.ndarray, triangles: np.ndarray, origins: np.ndarray,
-                 directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """First hit of each ray: (t_hit float32 with inf for misses, primitive id int64 with -1 for misses)."""
+                 directions: np.ndarray, *, scene=None) -> tuple[np.ndarray, np.ndarray]:
+    """First hit of each ray: (t_hit float32 with inf for misses, primitive id int64 with -1 for misses).
+    ``scene``: the ray-casting scene of these triangles, when the caller has built it already."""
     import open3d as o3d  # imported here: it takes ~2 s and most of rangekit never needs it
 
-    scene = raycasting_scene(vertices, triangles)
+    scene = scene if scene is not None else raycasting_scene(vertices, triangles)
     rays = np.concatenate([origins, directions], axis=1).astype(np.float32)
     out = scene.cast_rays(o3d.core.Tensor(rays))
     t_hit = out["t_hit"].numpy()
@@ -189,7 +190,8 @@ def cast_view(mesh: WorldMesh, camera: PinholeCamera, projector: PinholeCamera |
         raise SceneError("the scene has no triangles; add at least one object")
     H, W = camera.height, camera.width
     o_all, d_all = cam_rays if cam_rays is not None else world_pixel_rays(camera)
-    _, prim_all = _open3d_cast(mesh.vertices, mesh.triangles, o_all, d_all)
+    scene = raycasting_scene(mesh.vertices, mesh.triangles)   # one per view: camera and shadow rays
+    _, prim_all = _open3d_cast(mesh.vertices, mesh.triangles, o_all, d_all, scene=scene)
     hit_idx = np.flatnonzero(prim_all >= 0)
     if hit_idx.size == 0:
         raise SceneError(f"camera {camera.name!r} sees nothing: none of its {H * W} rays hits the scene "
@@ -252,8 +254,8 @@ def cast_view(mesh: WorldMesh, camera: PinholeCamera, projector: PinholeCamera |
         facing = (np.einsum("ij,ij->i", n_face, l_dir) > 0) & (cos_i > 0)
         cand = np.flatnonzero(inside & facing)
         # Shadow rays from the projector centre towards each candidate point.
-        t_s, prim_s = _open3d_cast(mesh.vertices, mesh.triangles,
-                                   np.broadcast_to(c_p, (cand.size, 3)), -l_dir[cand])
+        t_s, prim_s = _open3d_cast(mesh.vertices, mesh.triangles, np.broadcast_to(c_p, (cand.size, 3)),
+                                   -l_dir[cand], scene=scene)
         blocked = (prim_s != prim[cand]) & (t_s < dist_p[cand] - shadow_eps)
         ok = cand[~blocked]
         lit_idx = hit_idx[ok]

@@ -9,8 +9,9 @@ release the GIL) while the next frames are taken, and the next view's turntable 
 
 At most ``max_pending`` frames wait (a waiting simulated frame holds no image, a real one its image), so
 memory stays flat. A view is finished (``finish(sha256)``: view.json, the rename, session.json) by one
-finishing thread, in view order, only after every one of its frames is on disk: the crash safety of
-:mod:`rangekit.app.acquire` is unchanged. The first failure (a write, a render) is kept as a
+finishing thread, in view order, only after every one of its frames is on disk, and not after a view
+that failed: the crash safety of :mod:`rangekit.app.acquire` is unchanged (a failure in one view leaves
+the views before it finished). The first failure (a write, a render) is kept as a
 :class:`FrameError` naming the view and the step, raised by the next :meth:`FrameWriter.check`;
 :meth:`FrameWriter.close` waits for the work handed over (the views whose frames were all taken are
 finished, also after an error elsewhere or Ctrl-C) and raises it.
@@ -49,6 +50,7 @@ class FrameWriter:
         self._frames: list[tuple[str, Future]] = []      # the view being taken: (file key, future of its SHA-256)
         self._views: list[Future] = []
         self._error: FrameError | None = None
+        self._broken = False                              # a view failed: the later ones are not finished
         self._lock = threading.Lock()
 
     def _fail(self, error: FrameError) -> None:
@@ -101,15 +103,17 @@ class FrameWriter:
         for key, future in frames:
             try:
                 sha256[key] = future.result()
-            except FrameError:
-                return                        # kept by _fail; this view is not finished
-        if self._error is not None:
+            except FrameError:                # kept by _fail: this view and the later ones are not finished
+                self._broken = True
+        if self._broken:
             return
         try:
             finish(sha256)
         except FrameError as exc:
+            self._broken = True
             self._fail(exc)
         except Exception as exc:
+            self._broken = True
             self._fail(FrameError(view, angle, "finishing the view", target, exc))
 
     def cancel_view(self) -> None:

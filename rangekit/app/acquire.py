@@ -20,6 +20,7 @@ captured is removed, the finished ones stay.
 from __future__ import annotations
 
 import shutil
+import threading
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -180,6 +181,12 @@ def _views(devices, light, rig, spec, out, plan, angles, session, done, names, f
     taken here in order and written behind by :class:`FrameWriter` (a simulated one rendered there too);
     a view is recorded done only once all its frames are on disk."""
     writer, current, state = FrameWriter(), [-1], {"session": session}
+    if progress is not None:        # views are reported done from the writer's thread
+        lock, report = threading.Lock(), progress
+
+        def progress(*args, **kwargs):
+            with lock:
+                report(*args, **kwargs)
     try:
         for k, angle in enumerate(angles):
             if not done[k]:
@@ -241,7 +248,6 @@ def _view(devices, light, rig, spec, out, plan, k, angle, state, done, names, fi
             devices.turntable.rotate_to(float(angle))
             if settle_s > 0:
                 sleep(settle_s)
-        n_frames = 0
         for exposure, controls in exposures:
             sub = "" if exposure is None else f"{exposure_folder(exposure)}/"
             if exposure is not None:
@@ -257,7 +263,6 @@ def _view(devices, light, rig, spec, out, plan, k, angle, state, done, names, fi
                 image = capture()
                 step, target = f"{sub}frame {i} ({name}): writing", partial / sub / file
                 writer.frame(k, angle, sub + file, f"{sub}frame {i} ({name})", target, image)
-                n_frames += 1
         step = f"after frame {len(names) - 1} ({names[-1]}): {light.device} off"
         light.show(None)
     except (DeviceError, OSError) as exc:

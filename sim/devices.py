@@ -14,6 +14,7 @@ records the same bytes for the same sequence of ``set_scene`` and capture calls.
 
 from __future__ import annotations
 
+import contextlib
 import zlib
 from dataclasses import replace
 
@@ -52,6 +53,17 @@ def default_rig() -> Rig:
     return Rig(cameras=(cam,), projector=proj, T_world_table=make_T(),
                devices={"camera": {"type": "sim"}, "projector": {"type": "sim"}, "turntable": {"type": "sim"}},
                capture={"bits": 8}, projector_response=ProjectorResponse(gamma=ImagingModel.gamma))
+
+
+def _one_blas_thread():
+    """BLAS on one thread while a view is cast: its products are thin (N x 3 @ 3 x 3), which a second BLAS
+    thread only slows (0.97 -> 0.62 CPU-s per view), and acquisition renders frames on the other core
+    meanwhile. A no-op without threadpoolctl."""
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:
+        return contextlib.nullcontext()
+    return threadpool_limits(limits=1, user_api="blas")
 
 
 class _Faults:
@@ -240,9 +252,10 @@ class SimRig:
             if self._corner_rays is None and any(o.texture is not None for o in self._scene.objects):
                 self._corner_rays = cam.rays(pixel_corners(cam))
             motion = self.rig.T_world_rotated(angle) if self.turntable is not None else None
-            geom = cast_view(self._scene.world_mesh(motion), cam, self.rig.projector,
-                             cam_rays=self._cam_rays, corner_rays=self._corner_rays)
-            self._cache = (geom, ViewRenderer(geom, self.imaging, self.projector.resolution))
+            with _one_blas_thread():
+                geom = cast_view(self._scene.world_mesh(motion), cam, self.rig.projector,
+                                 cam_rays=self._cam_rays, corner_rays=self._corner_rays)
+                self._cache = (geom, ViewRenderer(geom, self.imaging, self.projector.resolution))
             self._cache_key = key
         return self._cache
 

@@ -55,7 +55,7 @@ def stages(session: Path) -> dict[str, float]:
     sim = SimRig(default_scene(s.simulator.object), s.rig, seed=s.simulator.seed)
     frames = list(s.pattern.frames())
     sim.turntable.rotate_to(0.0)
-    sim.renderer()
+    sim.renderer().render(frames[0], sim.rng_for(frames[0]))      # warm up (compiled kernels loaded)
     sim.turntable.rotate_to(float(s.plan.angles()[1]))
     t = _cpu()
     r = sim.renderer()

@@ -24,6 +24,7 @@ from rangekit.devices import check_pattern
 from rangekit.errors import DeviceDisconnected, SceneError
 from rangekit.geometry import look_at, make_T
 from rangekit.rig import Rig
+from rangekit.threads import one_blas_thread
 from rangekit.sim.raycast import ViewGeometry, cast_view, pixel_corners
 from rangekit.sim.clock import TICK_EPS_S, SimClock
 from rangekit.sim.render import ImagingModel, ViewRenderer
@@ -240,9 +241,10 @@ class SimRig:
             if self._corner_rays is None and any(o.texture is not None for o in self._scene.objects):
                 self._corner_rays = cam.rays(pixel_corners(cam))
             motion = self.rig.T_world_rotated(angle) if self.turntable is not None else None
-            geom = cast_view(self._scene.world_mesh(motion), cam, self.rig.projector,
-                             cam_rays=self._cam_rays, corner_rays=self._corner_rays)
-            self._cache = (geom, ViewRenderer(geom, self.imaging, self.projector.resolution))
+            with one_blas_thread():     # thin products; frames render on the other core
+                geom = cast_view(self._scene.world_mesh(motion), cam, self.rig.projector,
+                                 cam_rays=self._cam_rays, corner_rays=self._corner_rays)
+                self._cache = (geom, ViewRenderer(geom, self.imaging, self.projector.resolution))
             self._cache_key = key
         return self._cache
 

@@ -33,6 +33,7 @@ import cv2
 import numpy as np
 
 from rangekit.errors import InputError, PatternError
+from rangekit.sim._kernels import add_direct
 from rangekit.sim.raycast import ViewGeometry
 from rangekit.sim.sensor import Exposure, digitise
 
@@ -99,6 +100,8 @@ class ImagingModel:
         p = np.asarray(pattern)
         if p.dtype == np.uint8:
             lut = self.black_level + (1 - self.black_level) * (np.arange(256) / 255.0) ** self.gamma
+            if p.size and (p.ndim == 2 or (p.ndim == 3 and p.shape[2] in (3, 4))):
+                return cv2.LUT(np.ascontiguousarray(p), lut.astype(np.float32))   # the same lookup, faster
             return lut.astype(np.float32)[p]
         if p.dtype == np.uint16:
             values = p.astype(np.float32) / 65535.0
@@ -176,17 +179,22 @@ class ViewRenderer:
             L = L.mean(axis=1, keepdims=True)  # flat spectral response of a mono sensor
             mean_L = mean_L.mean(keepdims=True)
         w00, w10, w01, w11 = self._w
-        i = self._i00
-        vals = (L[i] * w00[:, None] + L[i + self._dx] * w10[:, None]
-                + L[i + self._dy] * w01[:, None] + L[i + self._dy + self._dx] * w11[:, None])
         C = self.n_channels
         H, W = self.shape
         local = self.model.global_fraction > 0 and self.model.global_blur > 0
         img = self._ambient + (0 if local else self._global * mean_L.astype(np.float32))
         if img.shape[1] != C:
             img = np.repeat(img, C, axis=1)
-        img[self._lit_idx] += self._direct * vals
-        if local:
+        if not local:   # img[lit] += direct * bilinear(L), in one compiled pass
+            if L.shape[1] != C:   # a grey pattern on a colour camera
+                L = np.repeat(L, C, axis=1)
+            add_direct(img, np.ascontiguousarray(L, dtype=np.float32), self._i00, self._dx, self._dy,
+                       w00, w10, w01, w11, self._direct, self._lit_idx)
+        else:
+            i = self._i00
+            vals = (L[i] * w00[:, None] + L[i + self._dx] * w10[:, None]
+                    + L[i + self._dy] * w01[:, None] + L[i + self._dy + self._dx] * w11[:, None])
+            img[self._lit_idx] += self._direct * vals
             direct = np.zeros((H * W, C), np.float32)
             direct[self._lit_idx] = self._direct * vals
             img += self._local_global(direct.reshape(H, W, C)).reshape(H * W, C)

@@ -37,6 +37,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from rangekit.camera_controls import CONTROL_FIELDS, CameraControls
+from rangekit.sim._kernels import noise_and_adc
 
 __all__ = ["REF_EXPOSURE_US", "REF_ISO", "AE_TARGET", "AE_RATE", "AE_MAX_ISO", "Exposure", "exposure_for",
            "auto_exposure_step", "digitise", "noise_std", "saturated"]
@@ -87,19 +88,19 @@ def auto_exposure_step(value_us: float, mean: float, max_value: int) -> float:
 def digitise(signal: np.ndarray, model, exposure: Exposure, rng: np.random.Generator) -> np.ndarray:
     """Signal ``E`` (full-scale fractions at the reference controls, float32; modified in place) -> the
     quantised image at ``exposure`` (see the module docstring). ``model``: an ImagingModel."""
-    img = signal
+    img = np.ascontiguousarray(signal, dtype=np.float32)
     if exposure.ratio != 1.0:
         img *= np.float32(exposure.ratio)
-    if model.full_well > 0:
-        std = np.sqrt(np.maximum(img, 0) * np.float32(model.full_well) + np.float32(model.read_noise ** 2))
-        img += std * rng.standard_normal(img.shape, dtype=np.float32) / np.float32(model.full_well)
-    if exposure.iso_gain != 1.0:
-        np.clip(img, 0, 1, out=img)       # the full well
-        img *= np.float32(model.max_value * exposure.iso_gain)
-    else:                                 # the reference: full well and ADC clip together
-        img *= np.float32(model.max_value)
-    np.clip(img, 0, model.max_value, out=img)
-    return np.rint(img).astype(model.dtype)
+    # One compiled pass (sim/_kernels.py), the same float32 operations as numpy's:
+    #   std = sqrt(max(img, 0) * full_well + read_noise^2); img += std * N(0, 1) / full_well
+    #   iso gain: clip(img, 0, 1) (the full well), img *= max_value * iso_gain; else img *= max_value (the
+    #   reference: full well and ADC clip together); then clip(img, 0, max_value) and round half to even.
+    z = rng.standard_normal(img.shape, dtype=np.float32).reshape(-1) if model.full_well > 0 else None
+    out = np.empty(img.shape, model.dtype)
+    noise_and_adc(img.reshape(-1), z, np.float32(model.full_well), np.float32(model.read_noise ** 2),
+                  exposure.iso_gain != 1.0, np.float32(model.max_value * exposure.iso_gain),
+                  np.float32(model.max_value), out.reshape(-1))
+    return out
 
 
 def noise_std(model, signal: np.ndarray, exposure: Exposure) -> np.ndarray:

@@ -79,13 +79,24 @@ class SimCamera:
             self._ae_value = auto_exposure_step(self._ae_value, float(image.mean()) / m, m)
 
     def capture(self) -> np.ndarray:
+        return self.capture_deferred()()
+
+    def capture_deferred(self):
+        """Take the next frame now (fault, clock, pattern seen, noise generator, exposure: the state a
+        :meth:`capture` would use) and return a function that renders it: the same bytes as
+        :meth:`capture`, wherever and whenever it is called (acquisition renders on worker threads). Under
+        auto-exposure, or with the lasers, the frame is rendered at once (the next frame depends on it)."""
         self._rig._faults.tick("camera")
         exposure = self.exposure()
         t = self.next_frame()
         self.last_exposure = exposure
         if self._rig.light == "laser":
-            return self._rig.laser_image()
+            out = self._rig.laser_image()
+            return lambda: out
         image = self._rig.projector.image_at(t)
-        out = self._rig.renderer().render(image, self._rig.rng_for(image), exposure)
+        renderer, rng = self._rig.renderer(), self._rig.rng_for(image)
+        if not self.auto_exposure:
+            return lambda: renderer.render(image, rng, exposure)
+        out = renderer.render(image, rng, exposure)
         self.observe(out)
-        return out
+        return lambda: out

@@ -20,6 +20,7 @@ captured is removed, the finished ones stay.
 from __future__ import annotations
 
 import shutil
+import threading
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -34,10 +35,11 @@ from rangekit.devices import Rig as RigDevices
 from rangekit.errors import ConfigError, DeviceError, StorageError
 from rangekit.formats.session import (CaptureSettings, ScanPlan, Session, SimulatorSettings, exposure_folder,
                                       view_folder)
-from rangekit.formats.session_check import frame_sha256, verify_views
+from rangekit.formats.session_check import verify_views
 from rangekit.formats.session_lock import session_lock
+from rangekit.app.frame_writer import FrameError, FrameWriter
 from rangekit.app.lights import light_for
-from rangekit.io import atomic_write_bytes, atomic_write_json, fsync_folder, write_png
+from rangekit.io import atomic_write_bytes, atomic_write_json, fsync_folder
 from rangekit.progress import call_progress
 from rangekit.rig import Rig, save_rig
 
@@ -175,44 +177,100 @@ def _acquire(devices, rig, spec, out: Path, plan, resume, capture, simulator, ha
 def _views(devices, light, rig, spec, out, plan, angles, session, done, names, files, settle_s, pattern_settle_s,
            progress, exposures) -> None:
     """Each view not done: turn, then for each exposure (``(us, CameraControls)``; ``(None, None)``: the
-    rig's one exposure) every frame, into the view folder or its exposure sub-folder ``e<us>/``."""
-    for k, angle in enumerate(angles):
-        if done[k]:
-            continue
-        final = view_folder(out, k)
-        partial = out / f"view_{k:03d}.partial"
-        t0 = time.time()
-        sleep = getattr(devices, "sleep", time.sleep)    # the simulator's virtual clock, else the real one
-        step, target = "turntable move", partial
+    rig's one exposure) every frame, into the view folder or its exposure sub-folder ``e<us>/``. Frames are
+    taken here in order and written behind by :class:`FrameWriter` (a simulated one rendered there too);
+    a view is recorded done only once all its frames are on disk."""
+    writer, current, state = FrameWriter(), [-1], {"session": session}
+    if progress is not None:        # views are reported done from the writer's thread
+        lock, report = threading.Lock(), progress
+
+        def progress(*args, **kwargs):
+            with lock:
+                report(*args, **kwargs)
+    try:
+        for k, angle in enumerate(angles):
+            if not done[k]:
+                current[0] = k
+                _view(devices, light, rig, spec, out, plan, k, angle, state, done, names, files, settle_s,
+                      pattern_settle_s, progress, exposures, writer)
+        current[0] = -1
+        writer.close()
+    except BaseException as exc:
+        # An error or Ctrl-C: the current view's waiting frames are dropped, the views whose frames were all
+        # taken are finished (recorded done) before the error is raised.
+        writer.cancel_view()
+        writer.close(raise_error=False)
+        if isinstance(exc, FrameError):
+            _fail(out, current[0], exc, done)
+        raise
+
+
+def _fail(out, k, exc: FrameError, done) -> None:
+    """Raise the error of ``exc.step`` of view ``exc.view`` as acquisition states it; the unfinished views'
+    partial folders (that view's and the current one, ``k``) are removed."""
+    for index in {exc.view, k} - {-1}:
+        shutil.rmtree(out / f"view_{index:03d}.partial", ignore_errors=True)
+    where, error = f"view {exc.view} (turntable {np.degrees(exc.angle):.1f} deg), {exc.step}", exc.error
+    if isinstance(error, DeviceError):
+        raise type(error)(f"{where}: {error}; {_resume_hint(out, sum(done))}") from error
+    if isinstance(error, OSError):
+        raise StorageError(f"{where}: cannot write {exc.target}: {error.strerror or error}; free some space; "
+                           f"{_resume_hint(out, sum(done))}") from error
+    raise error
+
+
+def _taken(camera):
+    """A camera without deferred capture: its frame taken now (a copy: a driver may reuse its buffer)."""
+    def capture():
+        image = camera.capture()
+        image = image.copy() if isinstance(image, np.ndarray) else image
+        return lambda: image
+    return capture
+
+
+def _view(devices, light, rig, spec, out, plan, k, angle, state, done, names, files, settle_s, pattern_settle_s,
+          progress, exposures, writer) -> None:
+    """Take view ``k``'s frames and hand them to ``writer``, with the view's finishing step."""
+    final = view_folder(out, k)
+    partial = out / f"view_{k:03d}.partial"
+    t0 = time.time()
+    sleep = getattr(devices, "sleep", time.sleep)    # the simulator's virtual clock, else the real one
+    deferred = getattr(devices.camera, "capture_deferred", None)
+    capture = deferred if deferred is not None else _taken(devices.camera)
+    step, target = "turntable move", partial
+    try:
+        shutil.rmtree(partial, ignore_errors=True)
+        shutil.rmtree(final, ignore_errors=True)
+        partial.mkdir(parents=True)
+        if devices.turntable is not None:
+            call_progress(progress, f"view {k + 1}/{plan.n_views}: turntable to {np.degrees(angle):.1f} deg",
+                          k, plan.n_views)
+            devices.turntable.rotate_to(float(angle))
+            if settle_s > 0:
+                sleep(settle_s)
+        for exposure, controls in exposures:
+            sub = "" if exposure is None else f"{exposure_folder(exposure)}/"
+            if exposure is not None:
+                step = f"exposure {exposure} us: camera controls"
+                (partial / sub).mkdir()
+                devices.camera.set_controls(controls)
+            for i, (name, file) in enumerate(zip(names, files)):
+                step = f"{sub}frame {i} ({name}): {light.device}"
+                light.show(i)
+                if pattern_settle_s > 0:
+                    sleep(pattern_settle_s)
+                step = f"{sub}frame {i} ({name}): camera"
+                image = capture()
+                step, target = f"{sub}frame {i} ({name}): writing", partial / sub / file
+                writer.frame(k, angle, sub + file, f"{sub}frame {i} ({name})", target, image)
+        step = f"after frame {len(names) - 1} ({names[-1]}): {light.device} off"
+        light.show(None)
+    except (DeviceError, OSError) as exc:
+        raise FrameError(k, angle, step, target, exc) from exc
+
+    def finish(sha256: dict) -> None:
+        step, target = "writing view.json", partial
         try:
-            shutil.rmtree(partial, ignore_errors=True)
-            shutil.rmtree(final, ignore_errors=True)
-            partial.mkdir(parents=True)
-            if devices.turntable is not None:
-                call_progress(progress, f"view {k + 1}/{plan.n_views}: turntable to {np.degrees(angle):.1f} deg",
-                              k, plan.n_views)
-                devices.turntable.rotate_to(float(angle))
-                if settle_s > 0:
-                    sleep(settle_s)
-            sha256 = {}
-            for exposure, controls in exposures:
-                sub = "" if exposure is None else f"{exposure_folder(exposure)}/"
-                if exposure is not None:
-                    step = f"exposure {exposure} us: camera controls"
-                    (partial / sub).mkdir()
-                    devices.camera.set_controls(controls)
-                for i, (name, file) in enumerate(zip(names, files)):
-                    step = f"{sub}frame {i} ({name}): {light.device}"
-                    light.show(i)
-                    if pattern_settle_s > 0:
-                        sleep(pattern_settle_s)
-                    step = f"{sub}frame {i} ({name}): camera"
-                    image = devices.camera.capture()
-                    step, target = f"{sub}frame {i} ({name}): writing", partial / sub / file
-                    sha256[sub + file] = frame_sha256(write_png(target, image))
-            step = f"after frame {len(names) - 1} ({names[-1]}): {light.device} off"
-            light.show(None)
-            step, target = "writing view.json", partial
             # Each view is a self-contained capture folder (rangekit reconstruct view_NNN works on it).
             atomic_write_json(partial / "patterns.json", spec.to_dict())
             save_rig(rig, partial / "rig.json")
@@ -221,17 +279,12 @@ def _views(devices, light, rig, spec, out, plan, angles, session, done, names, f
             partial.rename(final)
             fsync_folder(out)
             step, target = "recording the view", out / "session.json"
-            session = session.with_view_done(k, sha256)
-            session.save()
-        except DeviceError as exc:
-            shutil.rmtree(partial, ignore_errors=True)
-            raise type(exc)(f"view {k} (turntable {np.degrees(angle):.1f} deg), {step}: {exc}; "
-                            f"{_resume_hint(out, sum(done))}") from exc
+            state["session"] = state["session"].with_view_done(k, sha256)
+            state["session"].save()
         except OSError as exc:
-            shutil.rmtree(partial, ignore_errors=True)
-            raise StorageError(f"view {k} (turntable {np.degrees(angle):.1f} deg), {step}: cannot write "
-                               f"{target}: {exc.strerror or exc}; free some space; "
-                               f"{_resume_hint(out, sum(done))}") from exc
+            raise FrameError(k, angle, step, target, exc) from exc
         done[k] = True
-        call_progress(progress, f"view {k + 1}/{plan.n_views} done ({len(sha256)} frames, {time.time() - t0:.1f} s)",
-                      k + 1, plan.n_views)
+        call_progress(progress, f"view {k + 1}/{plan.n_views} done ({len(sha256)} frames, "
+                                f"{time.time() - t0:.1f} s)", k + 1, plan.n_views)
+
+    writer.finish_view(k, angle, partial, finish)

@@ -1,0 +1,108 @@
+"""Frames written behind the capture (issue 20): the same bytes, the same errors, the same crash safety."""
+
+import errno
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+import rangekit.app.frame_writer as frame_writer
+from rangekit.app.acquire import acquire
+from rangekit.coded.patterns import make_pattern_spec
+from rangekit.errors import DeviceDisconnected, StorageError
+from rangekit.formats.session import ScanPlan, load_session
+from rangekit.io import write_png
+from tests.test_acquire import pngs, sim, small_rig
+
+SPEC = make_pattern_spec("graycode", (1280, 800))
+PLAN = ScanPlan(n_views=3)
+
+
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory):
+    """An uninterrupted scan: the bytes every other run must give."""
+    folder = tmp_path_factory.mktemp("ref") / "scan"
+    acquire(sim(), small_rig(), SPEC, folder, plan=PLAN)
+    return pngs(folder)
+
+
+def test_a_full_disk_on_a_worker_names_the_frame_and_keeps_the_finished_views(tmp_path, monkeypatch, reference):
+    def full_disk(path, image):           # view 1, frame 5
+        if path.parent.name == "view_001.partial" and path.name == SPEC.frame_files[5]:
+            raise OSError(errno.ENOSPC, "No space left on device", str(path))
+        return write_png(path, image)
+
+    monkeypatch.setattr(frame_writer, "write_png", full_disk)
+    out = tmp_path / "scan"
+    with pytest.raises(StorageError, match=r"view 1 \(turntable 120\.0 deg\), frame 5 \(.*\): writing: cannot "
+                                           r"write .*view_001\.partial.*No space left.*rangekit scan --resume"):
+        acquire(sim(), small_rig(), SPEC, out, plan=PLAN)
+    assert [v.done for v in load_session(out).views] == [True, False, False]
+    assert not list(out.glob("*.partial"))
+    monkeypatch.undo()
+    acquire(sim(), small_rig(), SPEC, out, plan=PLAN, resume=True)
+    assert pngs(out) == reference
+
+
+def test_ctrl_c_finishes_the_views_taken_and_the_resume_gives_the_same_bytes(tmp_path, reference):
+    s = sim()
+    real, taken = s.camera.capture_deferred, {"n": 0}
+
+    def interrupted():
+        taken["n"] += 1
+        if taken["n"] == 2 * SPEC.n_frames + 3:    # view 2, frame 2: views 0 and 1 are still being written
+            raise KeyboardInterrupt
+        return real()
+
+    s.camera.capture_deferred = interrupted
+    out = tmp_path / "scan"
+    with pytest.raises(KeyboardInterrupt):
+        acquire(s, small_rig(), SPEC, out, plan=PLAN)
+    assert [v.done for v in load_session(out).views] == [True, True, False]
+    acquire(sim(), small_rig(), SPEC, out, plan=PLAN, resume=True)
+    assert pngs(out) == reference
+
+
+def test_a_frame_failing_to_render_on_a_worker_is_the_cameras_error(tmp_path):
+    s = sim()
+    real, taken = s.camera.capture_deferred, {"n": 0}
+
+    def unplugged_later():
+        taken["n"] += 1
+        render = real()
+        if taken["n"] != SPEC.n_frames + 2:
+            return render
+
+        def fail():
+            raise DeviceDisconnected("camera (simulated): unplugged")
+        return fail
+
+    s.camera.capture_deferred = unplugged_later
+    out = tmp_path / "scan"
+    with pytest.raises(DeviceDisconnected, match=r"view 1 \(turntable 120\.0 deg\), frame 1 \(.*\): camera: "
+                                                 r"camera \(simulated\): unplugged; 1 completed view"):
+        acquire(s, small_rig(), SPEC, out, plan=PLAN)
+    assert [v.done for v in load_session(out).views] == [True, False, False]
+    assert not list(out.glob("*.partial"))
+
+
+def test_a_camera_that_reuses_its_buffer_records_every_frame_as_taken(tmp_path, reference):
+    """A hardware-style camera (no deferred capture) that returns the same array every time: each frame is
+    copied when taken, so writing it later on a worker records the frame, not the next one."""
+    s = sim()
+    buffer = {}
+
+    class ReusingCamera:
+        calibration = s.camera.calibration
+
+        def capture(self):
+            image = s.camera.capture()
+            if "img" not in buffer:
+                buffer["img"] = image.copy()
+            np.copyto(buffer["img"], image)
+            return buffer["img"]
+
+    devices = SimpleNamespace(camera=ReusingCamera(), projector=s.projector, turntable=s.turntable, sleep=s.sleep)
+    out = tmp_path / "scan"
+    acquire(devices, small_rig(), SPEC, out, plan=PLAN)
+    assert pngs(out) == reference

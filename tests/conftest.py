@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from rangekit.geometry import axis_angle_to_R, make_T
-from rangekit.sim import ImagingModel, Scene, SimRig, default_rig
+from rangekit.sim import ImagingModel, Scene, default_rig
 from rangekit.sim.objects import box, plane
 
 

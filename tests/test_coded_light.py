@@ -16,7 +16,7 @@ from rangekit.coded.decode import decode
 from rangekit.errors import DecodeError
 from rangekit.coded.patterns import make_pattern_spec
 from rangekit.app.reconstruct import reconstruct_view
-from rangekit.sim import ImagingModel, Scene, SimRig, default_scene
+from rangekit.sim import ImagingModel, SimRig, default_scene
 from rangekit.coded.triangulate import triangulate_ray_plane, triangulate_ray_ray
 
 ISSUE_MODEL = ImagingModel(full_well=5000.0, projector_blur=1.0, gamma=2.2, bits=8)

@@ -1,6 +1,5 @@
 """The pygame projector backend, on SDL's dummy video driver (no screen needed)."""
 
-import os
 import subprocess
 import sys
 

@@ -5,10 +5,10 @@ import numpy as np
 import pytest
 
 from rangekit.errors import FileFormatError, PatternError, SceneError
-from rangekit.geometry import apply_T, invert_T, look_at, make_T
+from rangekit.geometry import apply_T, invert_T, look_at
 from rangekit.coded.patterns import make_pattern_spec
-from rangekit.sim import ImagingModel, Scene, SimRig, default_rig, default_scene, load_mesh
-from rangekit.sim.objects import plane, sphere
+from rangekit.sim import ImagingModel, Scene, SimRig, load_mesh
+from rangekit.sim.objects import sphere
 
 
 def _opencv_undistort(cam, uv):

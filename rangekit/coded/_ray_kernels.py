@@ -1,10 +1,12 @@
-"""Compiled along-ray Jacobian of ray-ray triangulation, one pass per point (numba; cached on disk).
+"""Compiled ray-ray triangulation and its along-ray Jacobian, one pass per point (numba; cached on disk).
 
-:func:`rangekit.coded.uncertainty.along_ray_jacobian` in numpy made about 30 passes over the decoded
-points, a LAPACK inverse of each 2x2 distortion Jacobian among them: 0.2 CPU-s a view at 1280x1024
-(issue 20). Here each point is done at once with the same formulas in the same order (no fused
-multiply-add); the 2x2 inverse is the closed form rather than LAPACK's (last bits of the float64
-derivative; the float32 sigma came out identical on the simulated 12-view scan).
+In numpy the midpoints of the common perpendiculars and then
+:func:`rangekit.coded.uncertainty.along_ray_jacobian` (a LAPACK inverse of each 2x2 distortion Jacobian
+among them) made about 50 passes over the decoded points: 0.3 CPU-s a view at 1280x1024 (issue 20). Here
+each point is done at once with the same formulas in the same order (no fused multiply-add; numpy's
+einsum order for the dot products): the same points, bit for bit. The 2x2 inverse is the closed form
+rather than LAPACK's (last bits of the float64 derivative; the float32 sigma came out identical on the
+simulated 12-view scan).
 """
 
 from __future__ import annotations
@@ -17,7 +19,7 @@ from rangekit._lens_kernels import distort_jacobian_point
 
 numba.config.THREADING_LAYER_PRIORITY = ["omp", "workqueue", "tbb"]
 
-__all__ = ["ray_ray_gains"]
+__all__ = ["ray_ray_points"]
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -36,34 +38,60 @@ def _gain(m0, m1, Rg, a0, a1, a2, e0, e1, e2, w0x, w0y, w0z, ss, tt, a12, a22, d
 
 
 @njit(parallel=True, cache=True, nogil=True, error_model="numpy")
-def ray_ray_gains(d1, o1, o2, xy, kp, dist, Rg, gains):  # pragma: no cover - compiled
-    """Along-ray derivatives of N ray-ray points (rangekit.coded.uncertainty.along_ray_jacobian, the same
-    formulas in the same order).
+def ray_ray_points(d1, o1, d2, o2, xy, kp, dist, Rg, X, residual, gains):  # pragma: no cover - compiled
+    """Ray-ray triangulation of N decoded pixels and the along-ray derivatives of each point.
 
-    d1 : (N, 3) world directions of the camera rays from ``o1`` (3,); xy : (N, 2) undistorted normalised
-    projector coordinates, from the projector's centre ``o2``; kp : (fx, fy, cx, cy) of the projector, dist
-    its 12 OpenCV coefficients, Rg its rotation to world. gains (N, 2) out: metres per projector pixel
-    along the unit camera ray for the column and the row.
+    d1 : (N, 3) world unit directions of the camera rays, from ``o1`` (3,); d2 : (N, 3) the projector's
+    (unit, world) from ``o2`` through the undistorted normalised projector coordinates ``xy`` (N, 2).
+    kp : (fx, fy, cx, cy) of the projector, dist its 12 OpenCV coefficients, Rg its rotation to world.
+    Outputs (NaN where the rays do not meet in front of both): X (N, 3) midpoints of the common
+    perpendicular (world metres), residual (N,) its length, gains (N, 2) metres per projector pixel along
+    the unit camera ray for the column and the row (rangekit.coded.uncertainty.along_ray_jacobian).
+    The dot products are summed as numpy's einsum sums three terms, ``(p0 + p2) + p1``.
     """
+    nan = np.nan
     w0x, w0y, w0z = o1[0] - o2[0], o1[1] - o2[1], o1[2] - o2[2]
     for i in prange(d1.shape[0]):
         a0, a1, a2 = d1[i, 0], d1[i, 1], d1[i, 2]
-        x, y = xy[i, 0], xy[i, 1]
-        na = np.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
-        a0, a1, a2 = a0 / na, a1 / na, a2 / na
-        e0 = x * Rg[0, 0] + y * Rg[0, 1] + Rg[0, 2]
-        e1 = x * Rg[1, 0] + y * Rg[1, 1] + Rg[1, 2]
-        e2 = x * Rg[2, 0] + y * Rg[2, 1] + Rg[2, 2]
-        a12 = a0 * e0 + a1 * e1 + a2 * e2
-        a22 = e0 * e0 + e1 * e1 + e2 * e2
-        det = a22 - a12 * a12
-        d1w = a0 * w0x + a1 * w0y + a2 * w0z
-        d2w = e0 * w0x + e1 * w0y + e2 * w0z
-        ss = (a12 * d2w - a22 * d1w) / det
-        tt = (d2w - a12 * d1w) / det
-        j00, j01, j10, j11 = distort_jacobian_point(x, y, dist)
-        jd = j00 * j11 - j01 * j10
-        gains[i, 0] = _gain(j11 / jd / kp[0], -j10 / jd / kp[0], Rg, a0, a1, a2, e0, e1, e2, w0x, w0y, w0z,
-                            ss, tt, a12, a22, det)
-        gains[i, 1] = _gain(-j01 / jd / kp[1], j00 / jd / kp[1], Rg, a0, a1, a2, e0, e1, e2, w0x, w0y, w0z,
-                            ss, tt, a12, a22, det)
+        b0, b1, b2 = d2[i, 0], d2[i, 1], d2[i, 2]
+        b = (a0 * b0 + a2 * b2) + a1 * b1
+        dd = (a0 * w0x + a2 * w0z) + a1 * w0y
+        e = (b0 * w0x + b2 * w0z) + b1 * w0y
+        denom = 1.0 - b * b
+        s = (b * e - dd) / denom
+        t = (e - b * dd) / denom
+        if not (s > 0 and t > 0 and denom > 1e-12):
+            X[i, 0] = X[i, 1] = X[i, 2] = residual[i] = gains[i, 0] = gains[i, 1] = nan
+            continue
+        p0, p1, p2 = o1[0] + s * a0, o1[1] + s * a1, o1[2] + s * a2
+        q0, q1, q2 = o2[0] + t * b0, o2[1] + t * b1, o2[2] + t * b2
+        X[i, 0] = 0.5 * (p0 + q0)
+        X[i, 1] = 0.5 * (p1 + q1)
+        X[i, 2] = 0.5 * (p2 + q2)
+        r0, r1, r2 = p0 - q0, p1 - q1, p2 - q2
+        residual[i] = np.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
+        gains[i, 0], gains[i, 1] = _gains(a0, a1, a2, xy[i, 0], xy[i, 1], w0x, w0y, w0z, kp, dist, Rg)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _gains(a0, a1, a2, x, y, w0x, w0y, w0z, kp, dist, Rg):  # pragma: no cover - compiled
+    """uncertainty.along_ray_jacobian of one point: camera ray a (renormalised), projector coordinates (x, y)."""
+    na = np.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
+    a0, a1, a2 = a0 / na, a1 / na, a2 / na
+    e0 = x * Rg[0, 0] + y * Rg[0, 1] + Rg[0, 2]
+    e1 = x * Rg[1, 0] + y * Rg[1, 1] + Rg[1, 2]
+    e2 = x * Rg[2, 0] + y * Rg[2, 1] + Rg[2, 2]
+    a12 = a0 * e0 + a1 * e1 + a2 * e2
+    a22 = e0 * e0 + e1 * e1 + e2 * e2
+    det = a22 - a12 * a12
+    d1w = a0 * w0x + a1 * w0y + a2 * w0z
+    d2w = e0 * w0x + e1 * w0y + e2 * w0z
+    ss = (a12 * d2w - a22 * d1w) / det
+    tt = (d2w - a12 * d1w) / det
+    j00, j01, j10, j11 = distort_jacobian_point(x, y, dist)
+    jd = j00 * j11 - j01 * j10
+    g_col = _gain(j11 / jd / kp[0], -j10 / jd / kp[0], Rg, a0, a1, a2, e0, e1, e2, w0x, w0y, w0z, ss, tt, a12,
+                  a22, det)
+    g_row = _gain(-j01 / jd / kp[1], j00 / jd / kp[1], Rg, a0, a1, a2, e0, e1, e2, w0x, w0y, w0z, ss, tt, a12,
+                  a22, det)
+    return g_col, g_row

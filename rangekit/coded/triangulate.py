@@ -139,35 +139,23 @@ def triangulate_ray_ray(camera: PinholeCamera, projector: PinholeCamera, proj_co
     residual = np.full((H, W), np.nan)
     if not np.any(valid):
         return TriangulationResult(xyz, residual, "ray-ray")
-    from rangekit.coded._ray_kernels import ray_ray_gains
+    from rangekit.coded._ray_kernels import ray_ray_points
 
-    o1, d1 = _camera_rays(camera, valid)
+    d1 = world_pixel_rays(camera)[1][valid.ravel()]  # cached per rig: the views share the camera's pose
     xy = projector.pixels_to_normalized(np.column_stack([cols[valid], rows[valid]]))  # compiled Newton
-    o2, d2 = projector.rays_from_normalized(xy)
-    w0 = o1 - o2
-    b = np.einsum("ij,ij->i", d1, d2)
-    dd = np.einsum("ij,ij->i", d1, w0)
-    e = np.einsum("ij,ij->i", d2, w0)
-    denom = 1.0 - b * b  # unit directions
-    with np.errstate(divide="ignore", invalid="ignore"):
-        s = (b * e - dd) / denom
-        t = (e - b * dd) / denom
-    P1 = o1 + s[:, None] * d1
-    P2 = o2 + t[:, None] * d2
-    ok = (s > 0) & (t > 0) & (denom > 1e-12)
-    X = np.where(ok[:, None], 0.5 * (P1 + P2), np.nan)
-    xyz[valid] = X
-    residual[valid] = np.where(ok, np.linalg.norm(P1 - P2, axis=1), np.nan)
-    proj_xy = np.full((H, W, 2), np.nan)
-    proj_xy[valid] = xy
-    # the derivatives for point_sigma, in one compiled pass (rangekit.coded._ray_kernels)
+    d2 = projector.rays_from_normalized(xy)[1]
     d = np.concatenate([projector.dist[:12], np.zeros(12 - min(projector.dist.size, 12))])
     kp = np.array([projector.K[0, 0], projector.K[1, 1], projector.K[0, 2], projector.K[1, 2]])
-    g = np.empty((len(xy), 2))
-    ray_ray_gains(d1, camera.center, projector.center, xy, kp, d,
-                  np.ascontiguousarray(projector.T_world_cam[:3, :3]), g)
+    X, res, g = np.empty((len(xy), 3)), np.empty(len(xy)), np.empty((len(xy), 2))
+    # midpoints, residuals and the derivatives for point_sigma in one compiled pass (rangekit.coded._ray_kernels)
+    ray_ray_points(d1, camera.center, d2, projector.center, xy, kp, d,
+                   np.ascontiguousarray(projector.T_world_cam[:3, :3]), X, res, g)
+    xyz[valid] = X
+    residual[valid] = res
+    proj_xy = np.full((H, W, 2), np.nan)
+    proj_xy[valid] = xy
     gains = np.full((H, W, 2), np.nan)
-    gains[valid] = np.where(ok[:, None], g, np.nan)
+    gains[valid] = g
     return TriangulationResult(xyz, residual, "ray-ray", proj_xy, gains)
 
 

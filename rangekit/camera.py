@@ -236,10 +236,14 @@ class PinholeCamera:
 
     def rays_from_normalized(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`rays` from (N, 2) undistorted normalised coordinates (:meth:`pixels_to_normalized`)."""
+        d_world = self.directions_from_normalized(xy)
+        return np.broadcast_to(self.center, d_world.shape).copy(), d_world
+
+    def directions_from_normalized(self, xy: np.ndarray) -> np.ndarray:
+        """The (N, 3) world unit directions of :meth:`rays_from_normalized`, without the (N, 3) origins."""
         d = np.column_stack([xy, np.ones(len(xy))])
         d /= np.linalg.norm(d, axis=1, keepdims=True)
-        d_world = transform_vectors(self.T_world_cam, d)
-        return np.broadcast_to(self.center, d_world.shape).copy(), d_world
+        return transform_vectors(self.T_world_cam, d)
 
     def column_planes(self, cols: np.ndarray | None = None, *, rows: np.ndarray | None = None,
                       n_samples: int = 65) -> np.ndarray:

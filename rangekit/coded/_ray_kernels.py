@@ -38,39 +38,52 @@ def _gain(m0, m1, Rg, a0, a1, a2, e0, e1, e2, w0x, w0y, w0z, ss, tt, a12, a22, d
 
 
 @njit(parallel=True, cache=True, nogil=True, error_model="numpy")
-def ray_ray_points(d1, o1, d2, o2, xy, kp, dist, Rg, X, residual, gains):  # pragma: no cover - compiled
-    """Ray-ray triangulation of N decoded pixels and the along-ray derivatives of each point.
+def ray_ray_points(valid, row_start, dirs, o1, d2, o2, xy, kp, dist, Rg,
+                   xyz, residual, proj_xy, gains):  # pragma: no cover - compiled
+    """Ray-ray triangulation of the decoded pixels of an (H, W) view and the along-ray derivatives of each point.
 
-    d1 : (N, 3) world unit directions of the camera rays, from ``o1`` (3,); d2 : (N, 3) the projector's
-    (unit, world) from ``o2`` through the undistorted normalised projector coordinates ``xy`` (N, 2).
-    kp : (fx, fy, cx, cy) of the projector, dist its 12 OpenCV coefficients, Rg its rotation to world.
-    Outputs (NaN where the rays do not meet in front of both): X (N, 3) midpoints of the common
-    perpendicular (world metres), residual (N,) its length, gains (N, 2) metres per projector pixel along
-    the unit camera ray for the column and the row (rangekit.coded.uncertainty.along_ray_jacobian).
-    The dot products are summed as numpy's einsum sums three terms, ``(p0 + p2) + p1``.
+    valid : (H, W) bool decoded pixels, row_start (H + 1,) the number of them before each row; dirs :
+    (H * W, 3) world unit directions of the camera's pixel rays, from ``o1`` (3,); d2 : (N, 3) the
+    projector's rays (unit, world, row-major over the valid pixels) from ``o2`` through the undistorted
+    normalised projector coordinates ``xy`` (N, 2). kp : (fx, fy, cx, cy) of the projector, dist its 12
+    OpenCV coefficients, Rg its rotation to world.
+    Outputs, organised, NaN where no point (undecoded, or rays that do not meet in front of both): xyz
+    (H, W, 3) midpoints of the common perpendicular (world metres), residual (H, W) its length, proj_xy
+    (H, W, 2) = xy, gains (H, W, 2) metres per projector pixel along the unit camera ray for the column and
+    the row (rangekit.coded.uncertainty.along_ray_jacobian). The dot products are summed as numpy's einsum
+    sums three terms, ``(p0 + p2) + p1``.
     """
     nan = np.nan
+    H, W = valid.shape
     w0x, w0y, w0z = o1[0] - o2[0], o1[1] - o2[1], o1[2] - o2[2]
-    for i in prange(d1.shape[0]):
-        a0, a1, a2 = d1[i, 0], d1[i, 1], d1[i, 2]
-        b0, b1, b2 = d2[i, 0], d2[i, 1], d2[i, 2]
-        b = (a0 * b0 + a2 * b2) + a1 * b1
-        dd = (a0 * w0x + a2 * w0z) + a1 * w0y
-        e = (b0 * w0x + b2 * w0z) + b1 * w0y
-        denom = 1.0 - b * b
-        s = (b * e - dd) / denom
-        t = (e - b * dd) / denom
-        if not (s > 0 and t > 0 and denom > 1e-12):
-            X[i, 0] = X[i, 1] = X[i, 2] = residual[i] = gains[i, 0] = gains[i, 1] = nan
-            continue
-        p0, p1, p2 = o1[0] + s * a0, o1[1] + s * a1, o1[2] + s * a2
-        q0, q1, q2 = o2[0] + t * b0, o2[1] + t * b1, o2[2] + t * b2
-        X[i, 0] = 0.5 * (p0 + q0)
-        X[i, 1] = 0.5 * (p1 + q1)
-        X[i, 2] = 0.5 * (p2 + q2)
-        r0, r1, r2 = p0 - q0, p1 - q1, p2 - q2
-        residual[i] = np.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
-        gains[i, 0], gains[i, 1] = _gains(a0, a1, a2, xy[i, 0], xy[i, 1], w0x, w0y, w0z, kp, dist, Rg)
+    for y in prange(H):
+        i = row_start[y]
+        for x in range(W):
+            xyz[y, x, 0] = xyz[y, x, 1] = xyz[y, x, 2] = residual[y, x] = nan
+            proj_xy[y, x, 0] = proj_xy[y, x, 1] = gains[y, x, 0] = gains[y, x, 1] = nan
+            if not valid[y, x]:
+                continue
+            proj_xy[y, x, 0], proj_xy[y, x, 1] = xy[i, 0], xy[i, 1]
+            k = y * W + x
+            a0, a1, a2 = dirs[k, 0], dirs[k, 1], dirs[k, 2]
+            b0, b1, b2 = d2[i, 0], d2[i, 1], d2[i, 2]
+            b = (a0 * b0 + a2 * b2) + a1 * b1
+            dd = (a0 * w0x + a2 * w0z) + a1 * w0y
+            e = (b0 * w0x + b2 * w0z) + b1 * w0y
+            denom = 1.0 - b * b
+            s = (b * e - dd) / denom
+            t = (e - b * dd) / denom
+            if s > 0 and t > 0 and denom > 1e-12:
+                p0, p1, p2 = o1[0] + s * a0, o1[1] + s * a1, o1[2] + s * a2
+                q0, q1, q2 = o2[0] + t * b0, o2[1] + t * b1, o2[2] + t * b2
+                xyz[y, x, 0] = 0.5 * (p0 + q0)
+                xyz[y, x, 1] = 0.5 * (p1 + q1)
+                xyz[y, x, 2] = 0.5 * (p2 + q2)
+                r0, r1, r2 = p0 - q0, p1 - q1, p2 - q2
+                residual[y, x] = np.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
+                gains[y, x, 0], gains[y, x, 1] = _gains(a0, a1, a2, xy[i, 0], xy[i, 1], w0x, w0y, w0z, kp, dist,
+                                                        Rg)
+            i += 1
 
 
 @njit(cache=True, nogil=True, inline="always")

@@ -135,27 +135,21 @@ def triangulate_ray_ray(camera: PinholeCamera, projector: PinholeCamera, proj_co
     rows = _check_map("proj_row", proj_row, camera)
     valid = np.isfinite(cols) & np.isfinite(rows)
     H, W = cols.shape
-    xyz = np.full((H, W, 3), np.nan)
-    residual = np.full((H, W), np.nan)
     if not np.any(valid):
-        return TriangulationResult(xyz, residual, "ray-ray")
+        return TriangulationResult(np.full((H, W, 3), np.nan), np.full((H, W), np.nan), "ray-ray")
     from rangekit.coded._ray_kernels import ray_ray_points
 
-    d1 = world_pixel_rays(camera)[1][valid.ravel()]  # cached per rig: the views share the camera's pose
     xy = projector.pixels_to_normalized(np.column_stack([cols[valid], rows[valid]]))  # compiled Newton
-    d2 = projector.rays_from_normalized(xy)[1]
+    d2 = projector.directions_from_normalized(xy)
     d = np.concatenate([projector.dist[:12], np.zeros(12 - min(projector.dist.size, 12))])
     kp = np.array([projector.K[0, 0], projector.K[1, 1], projector.K[0, 2], projector.K[1, 2]])
-    X, res, g = np.empty((len(xy), 3)), np.empty(len(xy)), np.empty((len(xy), 2))
-    # midpoints, residuals and the derivatives for point_sigma in one compiled pass (rangekit.coded._ray_kernels)
-    ray_ray_points(d1, camera.center, d2, projector.center, xy, kp, d,
-                   np.ascontiguousarray(projector.T_world_cam[:3, :3]), X, res, g)
-    xyz[valid] = X
-    residual[valid] = res
-    proj_xy = np.full((H, W, 2), np.nan)
-    proj_xy[valid] = xy
-    gains = np.full((H, W, 2), np.nan)
-    gains[valid] = g
+    row_start = np.concatenate([[0], np.cumsum(np.count_nonzero(valid, axis=1))])
+    xyz, residual = np.empty((H, W, 3)), np.empty((H, W))
+    proj_xy, gains = np.empty((H, W, 2)), np.empty((H, W, 2))
+    # midpoints, residuals and the derivatives for point_sigma in one compiled pass (rangekit.coded._ray_kernels);
+    # the camera rays are cached per rig (the views share the camera's pose)
+    ray_ray_points(valid, row_start, world_pixel_rays(camera)[1], camera.center, d2, projector.center, xy, kp, d,
+                   np.ascontiguousarray(projector.T_world_cam[:3, :3]), xyz, residual, proj_xy, gains)
     return TriangulationResult(xyz, residual, "ray-ray", proj_xy, gains)
 
 

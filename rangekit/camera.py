@@ -83,23 +83,21 @@ def undistort(xy_distorted: np.ndarray, dist: np.ndarray, *, tol: float = 1e-14,
     (N, 2) float64 undistorted normalised coordinates; NaN rows where Newton did not converge (far outside
     the region where the distortion polynomial is invertible).
     """
+    from rangekit import _lens_kernels as LK
+
     d = _full_coeffs(np.asarray(dist, dtype=np.float64))
-    target = np.asarray(xy_distorted, dtype=np.float64)
+    target = np.ascontiguousarray(xy_distorted, dtype=np.float64)
     xy = target.copy()
-    if not np.any(d):
+    if not np.any(d) or len(xy) == 0:
         return xy
+    # Compiled passes (rangekit._lens_kernels), numpy's numbers: every point steps until the worst converges.
+    nxt, res = np.empty_like(xy), np.empty(len(xy))
     for _ in range(max_iterations):
-        res = distort(xy, d) - target
-        if not np.nanmax(np.abs(res), initial=0.0) >= tol:
+        LK.newton_pass(xy, target, d, nxt, res)
+        if not res.max() >= tol:
             break
-        J = _distort_jacobian(xy, d)
-        # Closed-form 2x2 Newton step (np.linalg.solve on (N, 2, 2) is ~10x slower).
-        det = J[:, 0, 0] * J[:, 1, 1] - J[:, 0, 1] * J[:, 1, 0]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            xy[:, 0] -= (J[:, 1, 1] * res[:, 0] - J[:, 0, 1] * res[:, 1]) / det
-            xy[:, 1] -= (J[:, 0, 0] * res[:, 1] - J[:, 1, 0] * res[:, 0]) / det
-    res = np.max(np.abs(distort(xy, d) - target), axis=1)
-    xy[~(res < 1e3 * tol)] = np.nan
+        xy, nxt = nxt, xy
+    LK.newton_check(xy, target, d, 1e3 * tol)
     return xy
 
 
@@ -238,10 +236,14 @@ class PinholeCamera:
 
     def rays_from_normalized(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`rays` from (N, 2) undistorted normalised coordinates (:meth:`pixels_to_normalized`)."""
+        d_world = self.directions_from_normalized(xy)
+        return np.broadcast_to(self.center, d_world.shape).copy(), d_world
+
+    def directions_from_normalized(self, xy: np.ndarray) -> np.ndarray:
+        """The (N, 3) world unit directions of :meth:`rays_from_normalized`, without the (N, 3) origins."""
         d = np.column_stack([xy, np.ones(len(xy))])
         d /= np.linalg.norm(d, axis=1, keepdims=True)
-        d_world = transform_vectors(self.T_world_cam, d)
-        return np.broadcast_to(self.center, d_world.shape).copy(), d_world
+        return transform_vectors(self.T_world_cam, d)
 
     def column_planes(self, cols: np.ndarray | None = None, *, rows: np.ndarray | None = None,
                       n_samples: int = 65) -> np.ndarray:

@@ -33,7 +33,7 @@ from typing import Callable, Protocol, Sequence
 import numpy as np
 
 from rangekit import __version__
-from rangekit.app.view_cache import ViewMaps, view_cloud
+from rangekit.app.view_cache import ViewMaps, view_clouds
 from rangekit.errors import ConfigError
 from rangekit.formats.clouds import save_cloud
 from rangekit.formats.poses import save_poses
@@ -143,8 +143,10 @@ def _process(out: Path, fusion: str, method: str, table_margin: float, evaluate:
     with timer.stage("decode"):
         clouds: list[PointCloud] = []
         maps: list[ViewMaps] = []
-        for k, v in enumerate(views):
-            cloud, view_maps = view_cloud(v, spec, rig, settings, full_scale, T_table_world, table_margin)
+        # the next view's frames are read while this one decodes (view_clouds)
+        decoded = view_clouds(views, spec, rig, settings, full_scale, T_table_world, table_margin)
+        for k, (cloud, view_maps) in enumerate(decoded):
+            v = views[k]
             clouds.append(cloud)
             maps.append(view_maps)
             call_progress(progress, f"decoded {v.folder.name}: {len(clouds[-1]):,} points", k + 1, len(views))

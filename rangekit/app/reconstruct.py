@@ -84,7 +84,7 @@ def reconstruct_view(images, spec: PatternSpec, camera: PinholeCamera, projector
     xyz, normals = filter_range_map(tri.xyz, camera.center, max_jump=max_jump, margin=edge_margin,
                                     extra_drop=~(tri.residual <= max_residual) if tri.method == "ray-ray" else None)
     tri = TriangulationResult(xyz, np.where(np.isfinite(xyz[:, :, 0]), tri.residual, np.nan), tri.method,
-                              tri.proj_xy)
+                              tri.proj_xy, tri.gains)
     valid = tri.valid
     if not np.any(valid):
         raise DecodeError("no 3D point survived decoding and triangulation; check the rig file and that the "
@@ -97,7 +97,8 @@ def reconstruct_view(images, spec: PatternSpec, camera: PinholeCamera, projector
     sigma = None
     if dec.col_std is not None:
         if tri.method == "ray-ray":
-            sigma = point_sigma(camera, projector, xyz, dec.col_std, dec.row_std, cols, rows, proj_xy=tri.proj_xy)
+            sigma = point_sigma(camera, projector, xyz, dec.col_std, dec.row_std, cols, rows, proj_xy=tri.proj_xy,
+                                gains=tri.gains)
         else:
             sigma = point_sigma(camera, projector, xyz, dec.col_std)
     return Reconstruction(dec, tri, PointCloud(xyz[valid], np.clip(colours, 0, 1), normals,

@@ -11,6 +11,8 @@ uninterrupted run. A damaged cache (a file missing, truncated, edited or unreada
 from __future__ import annotations
 
 import zipfile
+from collections.abc import Iterator, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -28,7 +30,7 @@ from rangekit.formats.clouds import load_cloud, save_cloud
 from rangekit.formats.session_check import file_sha256
 from rangekit.surface.cloud import PointCloud
 
-__all__ = ["ViewMaps", "view_cloud", "white_frame_index"]
+__all__ = ["ViewMaps", "view_cloud", "view_clouds", "white_frame_index"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -81,20 +83,55 @@ def view_cloud(v: SessionView, spec: PatternSpec, rig: Rig, settings: dict, full
     (None: the images' dtype). Points less than ``table_margin`` metres above the turntable top
     (``T_table_world`` maps world points to the table frame; None: no table) are dropped.
     """
+    return next(view_clouds([v], spec, rig, settings, full_scale, T_table_world, table_margin))
+
+
+def view_clouds(views: Sequence[SessionView], spec: PatternSpec, rig: Rig, settings: dict,
+                full_scale: float | None, T_table_world: np.ndarray | None,
+                table_margin: float) -> Iterator[tuple[PointCloud, ViewMaps]]:
+    """:func:`view_cloud` of each view in turn, yielded in order; the frames of the next view to decode are
+    read (PNG inflate on two threads) on a background thread while this one decodes, which overlaps the
+    stage's I/O with its compute (issue 20). A read error is raised when its view's turn comes."""
+    shape = (rig.camera.height, rig.camera.width)
     white = white_frame_index(spec)
+    cached = [None] * len(views)
+    with ThreadPoolExecutor(max_workers=1, thread_name_prefix="rangekit-frames") as pool:
+        pending = None
+        for k, v in enumerate(views):
+            folders = _frame_folders(v, settings)
+            if k == 0:
+                cached[0] = _read_cache(v, settings, shape)
+            if cached[k] is not None:
+                cloud, m = cached[k]
+                cached[k] = None
+                yield cloud, ViewMaps(m["proj_col"], m["confidence"], m["depth"],
+                                      read_png(folders[0] / f"{white:03d}.png"), m["sigma"])
+                if k + 1 < len(views):
+                    cached[k + 1] = _read_cache(views[k + 1], settings, shape)
+                continue
+            stacks = pending.result() if pending is not None else _read_stacks(folders)
+            pending = None
+            if k + 1 < len(views):
+                cached[k + 1] = _read_cache(views[k + 1], settings, shape)
+                if cached[k + 1] is None:
+                    pending = pool.submit(_read_stacks, _frame_folders(views[k + 1], settings))
+            images = stacks[0]
+            with one_blas_thread():      # thin products: rangekit.threads
+                out = _decode_view(v, stacks if settings.get("exposures_us") else images, images[white], spec, rig,
+                                   settings, full_scale, T_table_world, table_margin)
+            del stacks, images
+            yield out
+
+
+def _frame_folders(v: SessionView, settings: dict) -> list:
+    """The folders of a view's stacks: the view's, or (multi-exposure) one ``e<us>/`` per exposure, the
+    shortest first (its white capture is the one shown)."""
     exposures = settings.get("exposures_us")
-    # multi-exposure: one stack per exposure sub-folder; the capture shown is the shortest exposure's white
-    folders = [v.folder] if not exposures else [v.folder / exposure_folder(e) for e in exposures]
-    cached = _read_cache(v, settings, (rig.camera.height, rig.camera.width))
-    if cached is not None:
-        cloud, m = cached
-        return cloud, ViewMaps(m["proj_col"], m["confidence"], m["depth"], read_png(folders[0] / f"{white:03d}.png"),
-                               m["sigma"])
-    stacks = [read_stack(list_images(f)) for f in folders]
-    images = stacks[0]
-    with one_blas_thread():      # thin products: rangekit.threads
-        return _decode_view(v, stacks if exposures else images, images[white], spec, rig, settings, full_scale,
-                            T_table_world, table_margin)
+    return [v.folder] if not exposures else [v.folder / exposure_folder(e) for e in exposures]
+
+
+def _read_stacks(folders: list) -> list:
+    return [read_stack(list_images(f)) for f in folders]
 
 
 def _decode_view(v: SessionView, stacks, white_image: np.ndarray, spec: PatternSpec, rig: Rig, settings: dict,

@@ -319,3 +319,51 @@ def range_filter_normals(xyz, vp, max_jump, min_neighbours, margin, extra, use_e
             normals[y, x, 0] = n0
             normals[y, x, 1] = n1
             normals[y, x, 2] = n2
+
+
+@njit(cache=True, nogil=True)  # called per chunk on the decoder's threads
+def phase_correct(phase, offset, out, slope):  # pragma: no cover - compiled
+    """PhaseCorrection.__call__ and .slope of a (h, w) float32 phase in one pass, the same float32 operations
+    (rangekit.coded.response): ``out`` the true phase in [0, 2 pi), ``slope`` d(true) / d(measured)."""
+    two_pi = np.float32(2 * np.pi)
+    m = offset.size - 1
+    scale = np.float32(m / (2 * np.pi))
+    one = np.float32(1.0)
+    for y in range(phase.shape[0]):
+        for x in range(phase.shape[1]):
+            ph = phase[y, x]
+            if not (ph >= 0 and ph < two_pi):  # np.mod is the identity on [0, 2 pi): skip its fmod there
+                ph = np.mod(ph, two_pi)
+            t = ph * scale
+            if not t >= 0:  # NaN (numpy's table look-up would fail): never from atan2 of finite sums
+                out[y, x] = slope[y, x] = np.float32(np.nan)
+                continue
+            i = min(np.int32(t), m - 1)
+            f = t - np.float32(i)
+            v = ph + offset[i] * (one - f) + offset[i + 1] * f
+            out[y, x] = v if (v >= 0 and v < two_pi) else np.mod(v, two_pi)
+            slope[y, x] = one + (offset[i + 1] - offset[i]) * scale
+
+
+@njit(cache=True, nogil=True)  # called per chunk on the decoder's threads
+def phase_sums(stack, idx, r0, sn, cs, S, C, A, alt):  # pragma: no cover - compiled
+    """Sums of N phase-shifted frames ``stack[idx[s]]`` over rows r0 .. r0 + h, float32 in the order of
+    rangekit.coded.phase.phase_from_steps and _noise_variance: S = sum sn[s] I_s, C = sum cs[s] I_s,
+    A = sum I_s, alt = sum (-1)^s I_s (all (h, W))."""
+    n = idx.shape[0]
+    for y in range(S.shape[0]):
+        for x in range(S.shape[1]):
+            s_ = np.float32(0.0)
+            c_ = np.float32(0.0)
+            a_ = np.float32(0.0)
+            l_ = np.float32(0.0)
+            for s in range(n):
+                f = np.float32(stack[idx[s], r0 + y, x])
+                s_ = s_ + sn[s] * f
+                c_ = c_ + cs[s] * f
+                a_ = a_ + f
+                l_ = l_ + f if s % 2 == 0 else l_ - f
+            S[y, x] = s_
+            C[y, x] = c_
+            A[y, x] = a_
+            alt[y, x] = l_

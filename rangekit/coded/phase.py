@@ -9,6 +9,7 @@ from typing import Sequence
 
 import numpy as np
 
+from rangekit.coded import _kernels as K
 from rangekit.coded.binary import axis_code
 from rangekit.coded.frames import CaptureStack, row_chunks, run_parallel
 from rangekit.coded.patterns import PatternSpec
@@ -37,6 +38,22 @@ def phase_from_steps(frames: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarr
     return phi, np.float32(2.0 / n) * np.hypot(S, C), A / np.float32(n)
 
 
+def _stack_phase(fr: CaptureStack, idx: list[int], region) -> tuple[np.ndarray, ...]:
+    """:func:`phase_from_steps` of the frames ``fr.stack[idx]`` in ``region`` (a slice of rows, all columns),
+    their sums in one compiled pass (the same float32 numbers), and their alternating sum
+    ``sum (-1)^s I_s`` (:func:`_noise_variance`): (phi, B, A, alt)."""
+    n = len(idx)
+    rows = region[0]
+    h = len(range(*rows.indices(fr.shape[0])))
+    S, C, A, alt = (np.empty((h, fr.shape[1]), np.float32) for _ in range(4))
+    sn = np.array([np.float32(np.sin(2 * np.pi * s / n)) for s in range(n)], np.float32)
+    cs = np.array([np.float32(np.cos(2 * np.pi * s / n)) for s in range(n)], np.float32)
+    K.phase_sums(fr.stack, np.asarray(idx, np.int64), rows.indices(fr.shape[0])[0], sn, cs, S, C, A, alt)
+    phi = np.arctan2(S, C)
+    phi[phi < 0] += np.float32(2 * np.pi)
+    return phi, np.float32(2.0 / n) * np.hypot(S, C), A / np.float32(n), alt
+
+
 def _decode_phase(fr: CaptureStack, spec: PatternSpec, axis: str, region, coarse: np.ndarray | None,
                   corrections: dict[int, PhaseCorrection]):
     """Unwrapped projector coordinate, the weakest modulation, and the finest level's modulation B, offset
@@ -47,11 +64,11 @@ def _decode_phase(fr: CaptureStack, spec: PatternSpec, axis: str, region, coarse
     mod_min = None
     for period, steps in spec.phase_plan(axis):
         frames = [fr.get(f"{prefix}_p{period:g}_s{s}", region) for s in range(steps)]
-        phi, B, A = phase_from_steps(frames)
+        phi, B, A, alt = _stack_phase(fr, [fr.index[f"{prefix}_p{period:g}_s{s}"] for s in range(steps)], region)
         slope = np.float32(1.0)
-        if steps in corrections:
-            slope = corrections[steps].slope(phi)
-            phi_true = corrections[steps](phi)
+        if steps in corrections:  # PhaseCorrection's call and slope in one compiled pass, the same numbers
+            phi_true, slope = np.empty_like(phi), np.empty_like(phi)
+            K.phase_correct(phi, corrections[steps].offset, phi_true, slope)
         else:
             phi_true = phi
         wrapped = phi_true * np.float32(period / (2 * np.pi))
@@ -61,7 +78,8 @@ def _decode_phase(fr: CaptureStack, spec: PatternSpec, axis: str, region, coarse
             k = np.rint((value - wrapped) / np.float32(period))
             value = wrapped + k * np.float32(period)
         mod_min = B if mod_min is None else np.minimum(mod_min, B)
-    fine = (B, A, _noise_variance(frames, A, B, phi), np.broadcast_to(slope, B.shape))
+    noise = alt * alt / np.float32(steps) if steps % 2 == 0 else _noise_variance(frames, A, B, phi)
+    fine = (B, A, noise, np.broadcast_to(slope, B.shape))
     return value.astype(np.float32), mod_min, fine
 
 

@@ -38,6 +38,8 @@ class TriangulationResult:
     method: str           # "ray-plane" or "ray-ray"
     proj_xy: np.ndarray | None = None  # (H, W, 2) ray-ray: undistorted normalised projector coordinates of the
                                        # decoded (column, row), NaN where undecoded (for point_sigma)
+    gains: np.ndarray | None = None    # (H, W, 2) ray-ray: metres per projector pixel along the unit camera
+                                       # ray for the column and the row (along_ray_jacobian), NaN where no point
 
     @property
     def valid(self) -> np.ndarray:
@@ -133,30 +135,22 @@ def triangulate_ray_ray(camera: PinholeCamera, projector: PinholeCamera, proj_co
     rows = _check_map("proj_row", proj_row, camera)
     valid = np.isfinite(cols) & np.isfinite(rows)
     H, W = cols.shape
-    xyz = np.full((H, W, 3), np.nan)
-    residual = np.full((H, W), np.nan)
     if not np.any(valid):
-        return TriangulationResult(xyz, residual, "ray-ray")
-    o1, d1 = _camera_rays(camera, valid)
-    xy = projector.pixels_to_normalized(np.column_stack([cols[valid], rows[valid]]))
-    o2, d2 = projector.rays_from_normalized(xy)
-    w0 = o1 - o2
-    b = np.einsum("ij,ij->i", d1, d2)
-    dd = np.einsum("ij,ij->i", d1, w0)
-    e = np.einsum("ij,ij->i", d2, w0)
-    denom = 1.0 - b * b  # unit directions
-    with np.errstate(divide="ignore", invalid="ignore"):
-        s = (b * e - dd) / denom
-        t = (e - b * dd) / denom
-    P1 = o1 + s[:, None] * d1
-    P2 = o2 + t[:, None] * d2
-    ok = (s > 0) & (t > 0) & (denom > 1e-12)
-    X = np.where(ok[:, None], 0.5 * (P1 + P2), np.nan)
-    xyz[valid] = X
-    residual[valid] = np.where(ok, np.linalg.norm(P1 - P2, axis=1), np.nan)
-    proj_xy = np.full((H, W, 2), np.nan)
-    proj_xy[valid] = xy
-    return TriangulationResult(xyz, residual, "ray-ray", proj_xy)
+        return TriangulationResult(np.full((H, W, 3), np.nan), np.full((H, W), np.nan), "ray-ray")
+    from rangekit.coded._ray_kernels import ray_ray_points
+
+    xy = projector.pixels_to_normalized(np.column_stack([cols[valid], rows[valid]]))  # compiled Newton
+    d2 = projector.directions_from_normalized(xy)
+    d = np.concatenate([projector.dist[:12], np.zeros(12 - min(projector.dist.size, 12))])
+    kp = np.array([projector.K[0, 0], projector.K[1, 1], projector.K[0, 2], projector.K[1, 2]])
+    row_start = np.concatenate([[0], np.cumsum(np.count_nonzero(valid, axis=1))])
+    xyz, residual = np.empty((H, W, 3)), np.empty((H, W))
+    proj_xy, gains = np.empty((H, W, 2)), np.empty((H, W, 2))
+    # midpoints, residuals and the derivatives for point_sigma in one compiled pass (rangekit.coded._ray_kernels);
+    # the camera rays are cached per rig (the views share the camera's pose)
+    ray_ray_points(valid, row_start, world_pixel_rays(camera)[1], camera.center, d2, projector.center, xy, kp, d,
+                   np.ascontiguousarray(projector.T_world_cam[:3, :3]), xyz, residual, proj_xy, gains)
+    return TriangulationResult(xyz, residual, "ray-ray", proj_xy, gains)
 
 
 def triangulate(camera: PinholeCamera, projector: PinholeCamera, proj_col: np.ndarray,

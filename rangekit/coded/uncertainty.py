@@ -185,17 +185,30 @@ def along_ray_jacobian(camera: PinholeCamera, projector: PinholeCamera, xyz: np.
 
 def point_sigma(camera: PinholeCamera, projector: PinholeCamera, xyz: np.ndarray, col_std: np.ndarray,
                 row_std: np.ndarray | None = None, proj_col: np.ndarray | None = None,
-                proj_row: np.ndarray | None = None, *, proj_xy: np.ndarray | None = None) -> np.ndarray:
+                proj_row: np.ndarray | None = None, *, proj_xy: np.ndarray | None = None,
+                gains: np.ndarray | None = None) -> np.ndarray:
     """(H, W) float32 predicted std (metres) of each triangulated point along its camera ray.
 
     ``col_std`` / ``row_std``: (H, W) std of the decoded projector column / row (projector pixels, as
     :class:`rangekit.coded.result.DecodeResult` carries them). Give ``row_std``, ``proj_col`` and
     ``proj_row`` for a ray-ray triangulation (and its ``proj_xy``, see :func:`along_ray_jacobian`); leave
-    them out for ray-plane. NaN where a point or a std is missing.
+    them out for ray-plane. ``gains``: the ray-ray triangulation's (H, W, 2) derivatives
+    (``TriangulationResult.gains``, computed in its compiled pass), which saves :func:`along_ray_jacobian`.
+    NaN where a point or a std is missing.
     """
     ray_ray = proj_row is not None
-    g_col, g_row = along_ray_jacobian(camera, projector, xyz, proj_row if ray_ray else None,
-                                      proj_col if ray_ray else None, proj_xy=proj_xy if ray_ray else None)
+    if ray_ray and gains is not None:
+        xyz = np.asarray(xyz, dtype=np.float64)
+        if xyz.shape != (camera.height, camera.width, 3) or np.shape(gains) != xyz.shape[:2] + (2,):
+            raise InputError(f"xyz has shape {xyz.shape} and gains {np.shape(gains)}; camera {camera.name!r} is "
+                             f"{camera.width}x{camera.height}, so they must be ({camera.height}, {camera.width}, 3)"
+                             f" and ({camera.height}, {camera.width}, 2)")
+        invalid = ~np.isfinite(xyz).all(axis=2)
+        g_col = np.where(invalid, np.nan, gains[:, :, 0])
+        g_row = gains[:, :, 1]
+    else:
+        g_col, g_row = along_ray_jacobian(camera, projector, xyz, proj_row if ray_ray else None,
+                                          proj_col if ray_ray else None, proj_xy=proj_xy if ray_ray else None)
     var = (g_col * np.asarray(col_std, np.float64)) ** 2
     if ray_ray:
         var = var + (g_row * np.asarray(row_std, np.float64)) ** 2

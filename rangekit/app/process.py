@@ -43,6 +43,7 @@ from rangekit.formats.session_lock import session_lock
 from rangekit.formats.summary import ProcessResult
 from rangekit.geometry import compose, invert_T
 from rangekit.io import atomic_write_json, fsync_folder
+from rangekit.memory import release_free_memory
 from rangekit.progress import StageTimer, call_progress
 from rangekit.rig import Rig, turntable_prior
 from rangekit.surface.cloud import PointCloud, merge_clouds
@@ -150,6 +151,7 @@ def _process(out: Path, fusion: str, method: str, table_margin: float, evaluate:
             clouds.append(cloud)
             maps.append(view_maps)
             call_progress(progress, f"decoded {v.folder.name}: {len(clouds[-1]):,} points", k + 1, len(views))
+        release_free_memory()   # the image stacks and decoding temporaries (rangekit.memory)
 
     with timer.stage("register"):
         prior = None if rig.T_world_table is None else turntable_prior(rig.T_world_table, [v.angle for v in views])
@@ -174,18 +176,25 @@ def _process(out: Path, fusion: str, method: str, table_margin: float, evaluate:
                   "names": names}
     with timer.stage("fuse"):
         merged = merge_clouds(clouds, res.T_world_view)
+        n_merged = len(merged)
+        step = max(1, n_merged // 400_000)
+        sample = PointCloud(merged.points[::step].copy(), merged.colours[::step].copy(), merged.normals[::step].copy())
         prepare = getattr(evaluate, "prepare", None)
-        call_progress(progress, f"fusing {len(merged):,} points ({fusion})"
+        call_progress(progress, f"fusing {n_merged:,} points ({fusion})"
                                 + ("; measuring the views against the true surface alongside" if prepare else ""))
         # The fusion runs on a thread of its own (Open3D releases the GIL; one thread keeps its mesh
         # deterministic) while this one writes the merged cloud and evaluates what does not need the mesh.
         with ThreadPoolExecutor(max_workers=1) as pool:
-            fusing = pool.submit(_fuse, merged, fusion, maps, res.T_world_view, rig)
+            fusing = pool.submit(_fuse, sample, fusion, maps, res.T_world_view, rig)
             save_cloud(out / "merged.ply", merged)
+            # Not kept beside Poisson's octree and the evaluator (2M points, 130 MB): the report remakes it.
+            del merged
             if prepare is not None:
                 with timer.stage("evaluate"):
                     prepare(angles, views_info)
             fused = fusing.result()
+        del sample
+        release_free_memory()   # the fusion's and the evaluator's temporaries
         mesh_info, watertight_info = save_fused(out, fused, fusion)
         mesh = fused.observed
         call_progress(progress, f"mesh: {len(mesh.vertices):,} vertices, {len(mesh.triangles):,} triangles observed; "
@@ -207,25 +216,24 @@ def _process(out: Path, fusion: str, method: str, table_margin: float, evaluate:
             from rangekit.app.report import write_report
 
             call_progress(progress, "writing report.html")
-            write_report(out, result, clouds=clouds, maps=maps, merged=merged, mesh=mesh, session=session,
+            write_report(out, result, clouds=clouds, maps=maps, merged=merge_clouds(clouds, res.T_world_view),
+                         mesh=mesh, session=session,
                          truth=truth, progress=progress, watertight=fused.watertight)
     atomic_write_json(out / "summary.json", result.to_dict())   # last: the set is complete
     return result
 
 
-def _fuse(merged: PointCloud, fusion: str, maps: list[ViewMaps], T_world_view: np.ndarray, rig: Rig) -> FusedMeshes:
-    """The merged cloud (session world) fused into the observed and the closed mesh (``fusion`` "poisson" or
-    "tsdf"; see :func:`process_session`)."""
+def _fuse(sample: PointCloud, fusion: str, maps: list[ViewMaps], T_world_view: np.ndarray, rig: Rig) -> FusedMeshes:
+    """The merged cloud's ``sample`` (every k-th point, at most about 400k; session world) fused into the
+    observed and the closed mesh (``fusion`` "poisson" or "tsdf"; see :func:`process_session`)."""
     from rangekit.surface.fusion import poisson_meshes, tsdf_fuse
     from rangekit.surface.observed import split_observed
 
-    step = max(1, len(merged) // 400_000)
     if fusion == "poisson":
         # One thread: Open3D's multi-threaded Poisson is not deterministic (a resumed scan must give the
         # same mesh as an uninterrupted one); the other core evaluates beside it.
-        return poisson_meshes(PointCloud(merged.points[::step], merged.colours[::step], merged.normals[::step]),
-                              depth=9, n_threads=1)
+        return poisson_meshes(sample, depth=9, n_threads=1)
     # Each view's camera-frame depth map as stored, seen by the camera at its registered pose.
     surface = tsdf_fuse([(m.depth, None, rig.camera.with_pose(compose(Tk, rig.camera.T_world_cam)))
                          for m, Tk in zip(maps, T_world_view)], watertight=False)
-    return split_observed(surface, merged.points[::step])
+    return split_observed(surface, sample.points)

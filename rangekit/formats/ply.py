@@ -334,18 +334,19 @@ _PLY_NAMES = {"float64": "double", "float32": "float", "uint8": "uchar", "int32"
 
 
 def _ply_bytes(comment: str, vertex: np.ndarray, faces: np.ndarray | None = None) -> bytes:
-    """Binary little-endian PLY of a structured vertex array and optional (F, 3) int32 triangles."""
+    """Binary little-endian PLY of a structured vertex array and optional (F, 3) int32 triangles (the
+    header and the records joined in one copy: a 2M-point cloud's body is 86 MB)."""
     header = ["ply", "format binary_little_endian 1.0", f"comment {comment}", f"element vertex {len(vertex)}"]
     header += [f"property {_PLY_NAMES[vertex.dtype[n].name]} {n}" for n in vertex.dtype.names]
-    body = vertex.tobytes()
+    parts = [memoryview(vertex).cast("B")]
     if faces is not None:
         rec = np.empty(len(faces), dtype=[("n", "u1"), ("idx", "<i4", (3,))])
         rec["n"] = 3
         rec["idx"] = faces
         header += [f"element face {len(rec)}", "property list uchar int vertex_indices"]
-        body += rec.tobytes()
+        parts.append(memoryview(rec).cast("B"))
     header.append("end_header")
-    return ("\n".join(header) + "\n").encode("ascii") + body
+    return b"".join([("\n".join(header) + "\n").encode("ascii"), *parts])
 
 
 def _vertex_records(points: np.ndarray, normals: np.ndarray | None, colours: np.ndarray | None,

@@ -18,6 +18,7 @@ import numpy as np
 from rangekit.camera import PinholeCamera, pixel_rays
 from rangekit.errors import InputError, MeshError
 from rangekit.geometry import transform_vectors
+from rangekit.memory import release_free_memory
 from rangekit.surface.cloud import PointCloud, spread_problem
 from rangekit.surface.cloud import to_open3d as _cloud_to_open3d
 from rangekit.surface.mesh import TriangleMesh, mesh_from_open3d
@@ -104,6 +105,7 @@ def _poisson_surface(cloud: PointCloud, depth: int, density_quantile: float, wat
     # Screened Poisson: indicator function whose gradient fits the normals, iso-surface at the samples.
     m, density = o3d.geometry.TriangleMesh.create_from_point_cloud_poisson(
         _cloud_to_open3d(cloud), depth=int(depth), n_threads=int(n_threads))
+    release_free_memory()   # the octree (about 0.5 GB at depth 9) is freed: do not stack the next stage on it
     density = np.asarray(density)
     full = mesh_from_open3d(m)
     # Trim the balloon: vertices few samples support.

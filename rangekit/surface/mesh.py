@@ -62,12 +62,20 @@ class TriangleMesh:
 
     @cached_property
     def is_watertight(self) -> bool:
-        """Every edge shared by exactly two faces and the winding consistent (trimesh, vertices merged)."""
-        if len(self.triangles) == 0:
-            return False
-        tm = self.to_trimesh()
-        tm.merge_vertices()
-        return bool(tm.is_watertight and tm.is_winding_consistent)
+        """Every edge shared by exactly two faces and the winding consistent, vertices within 1e-8 m merged
+        (trimesh's ``is_watertight and is_winding_consistent``; :func:`rangekit.surface.topology.is_closed_manifold`)."""
+        from rangekit.surface.topology import is_closed_manifold
+
+        return is_closed_manifold(self.vertices, self.triangles)
+
+    def with_observed(self, observed: np.ndarray) -> "TriangleMesh":
+        """The same mesh with the per-vertex ``observed`` flag (V,) bool; what was already computed of its
+        geometry (``is_watertight``, ``normal_sums``) is carried over, not recomputed."""
+        out = TriangleMesh(self.vertices, self.triangles, self.vertex_colours, observed)
+        for name in ("is_watertight", "normal_sums"):
+            if name in self.__dict__:
+                out.__dict__[name] = self.__dict__[name]   # cached_property's slot: same arrays, same answer
+        return out
 
     @cached_property
     def normal_sums(self) -> np.ndarray:

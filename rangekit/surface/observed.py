@@ -57,9 +57,22 @@ def point_spacing(points: np.ndarray, *, k: int = SPACING_NEIGHBOURS) -> np.ndar
     """(N,) metres: each point's mean distance to its ``k`` nearest other points of ``points`` (N, 3)
     (non-finite rows dropped first: the result is per finite point, in order)."""
     P = _points(points, "point_spacing")
-    k = int(min(k, len(P) - 1))
-    d, _ = cKDTree(P).query(P, k=k + 1)
+    return _spacing(cKDTree(P), k)
+
+
+def _spacing(tree: cKDTree, k: int) -> np.ndarray:
+    """:func:`point_spacing` of the (finite) points ``tree`` was built on."""
+    k = int(min(k, tree.n - 1))
+    d, _ = tree.query(tree.data, k=k + 1)
     return d[:, 1:].mean(axis=1)
+
+
+def _within(vertices: np.ndarray, tree: cKDTree, s: np.ndarray, factor: float, median: float) -> np.ndarray:
+    """The rule of :func:`observed_vertices` on a tree of the points, their spacing and its median."""
+    if len(vertices) == 0:
+        return np.zeros(0, dtype=bool)
+    d, nearest = tree.query(vertices, k=1)
+    return d <= factor * np.minimum(s[nearest], MAX_SPACING_RATIO * median)
 
 
 def observed_vertices(vertices: np.ndarray, points: np.ndarray, *, spacing: np.ndarray | None = None,
@@ -74,20 +87,24 @@ def observed_vertices(vertices: np.ndarray, points: np.ndarray, *, spacing: np.n
     V = np.asarray(vertices, dtype=np.float64)
     if V.ndim != 2 or V.shape[1] != 3:
         raise InputError(f"observed_vertices: vertices must be (V, 3), found shape {V.shape}")
+    tree, s = _spaced_tree(points, spacing, factor, k)
+    return _within(V, tree, s, factor, float(np.median(s)))
+
+
+def _spaced_tree(points: np.ndarray, spacing: np.ndarray | None, factor: float, k: int) -> tuple[cKDTree, np.ndarray]:
+    """A k-d tree of ``points`` and their spacing (given or :func:`point_spacing`), checked as
+    :func:`observed_vertices` documents."""
     if not (np.isfinite(factor) and factor > 0):
         raise InputError(f"observed_vertices: factor must be finite and > 0, found {factor!r}")
     P = np.asarray(points, dtype=np.float64)
     if P.ndim == 2 and P.shape[1] == 3 and not np.all(np.isfinite(P)):
         raise InputError(f"observed_vertices: points must be finite, found "
                          f"{np.count_nonzero(~np.isfinite(P).all(axis=1))} rows that are not")
-    P = _points(P, "observed_vertices")
-    s = point_spacing(P, k=k) if spacing is None else np.asarray(spacing, dtype=np.float64)
-    if s.shape != (len(P),) or not np.all(np.isfinite(s) & (s >= 0)):
-        raise InputError(f"observed_vertices: spacing must be ({len(P)},) finite and >= 0, found shape {s.shape}")
-    if len(V) == 0:
-        return np.zeros(0, dtype=bool)
-    d, nearest = cKDTree(P).query(V, k=1)
-    return d <= factor * np.minimum(s[nearest], MAX_SPACING_RATIO * np.median(s))
+    tree = cKDTree(_points(P, "observed_vertices"))
+    s = _spacing(tree, k) if spacing is None else np.asarray(spacing, dtype=np.float64)
+    if s.shape != (tree.n,) or not np.all(np.isfinite(s) & (s >= 0)):
+        raise InputError(f"observed_vertices: spacing must be ({tree.n},) finite and >= 0, found shape {s.shape}")
+    return tree, s
 
 
 def keep_observed(mesh: TriangleMesh, observed: np.ndarray) -> TriangleMesh:
@@ -138,14 +155,15 @@ def split_observed(surface: TriangleMesh, points: np.ndarray, *, spacing: np.nda
     from rangekit.errors import MeshError
     from rangekit.surface.watertight import make_watertight
 
-    P = np.asarray(points, dtype=np.float64)
-    s = point_spacing(P) if spacing is None else np.asarray(spacing, dtype=np.float64)
+    # One k-d tree of the points serves their spacing and both meshes' nearest points.
+    tree, s = _spaced_tree(points, spacing, factor, SPACING_NEIGHBOURS)
+    median = float(np.median(s))
     # Every component the points support is kept (two ears apart are two components), unlike the closed
     # mesh, which is the largest component closed.
-    observed = keep_observed(surface, observed_vertices(surface.vertices, P, spacing=s, factor=factor))
+    observed = keep_observed(surface, _within(surface.vertices, tree, s, factor, median))
     if len(observed.triangles) == 0:
         raise MeshError(f"no triangle of the fused surface ({len(surface.triangles)} triangles) lies within "
-                        f"{factor:g} point spacings of the {len(P)} input points")
+                        f"{factor:g} point spacings of the {tree.n} input points")
     closed = make_watertight(surface if closing is None else closing)
-    flags = observed_vertices(closed.vertices, P, spacing=s, factor=factor)
-    return FusedMeshes(observed, TriangleMesh(closed.vertices, closed.triangles, closed.vertex_colours, flags))
+    flags = _within(closed.vertices, tree, s, factor, median)
+    return FusedMeshes(observed, closed.with_observed(flags))

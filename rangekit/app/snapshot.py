@@ -75,7 +75,8 @@ def fit_camera(points: np.ndarray, *, azimuth: float, elevation: float, size: tu
     P = np.asarray(points, dtype=np.float64)
     if P.ndim != 2 or P.shape[1] != 3:
         raise InputError(f"fit_camera: expected (N, 3) points or (2, 3) bounds, found shape {P.shape}")
-    P = P[np.all(np.isfinite(P), axis=1)]
+    if not np.isfinite(P).all():   # the copy only when needed: the report frames a 455k-vertex mesh 17 times
+        P = P[np.all(np.isfinite(P), axis=1)]
     width, height = (int(s) for s in size)
     if len(P) == 0 or width <= 0 or height <= 0 or not 0 < fov_deg < 180 or not margin > 0:
         raise InputError(f"fit_camera: expected finite points, positive (width, height), 0 < fov_deg < 180 and "
@@ -85,7 +86,8 @@ def fit_camera(points: np.ndarray, *, azimuth: float, elevation: float, size: tu
         raise InputError(f"fit_camera: expected elevation strictly inside (-pi/2, pi/2) radians and a non-zero "
                          f"'up' 3-vector, found elevation {elevation}, up {up!r}")
     u = u / np.linalg.norm(u)
-    lo, hi = P.min(axis=0), P.max(axis=0)
+    # Per column: numpy reduces an (N, 3) array along axis 0 several times slower than three strided columns.
+    lo, hi = (np.array([f(P[:, k]) for k in range(3)]) for f in (np.min, np.max))
     # A single point (or all at one point) still gets a picture: a sphere of a millionth of its distance
     # from the origin (at least 1 micrometre) is framed instead.
     centre = (lo + hi) / 2

@@ -256,19 +256,28 @@ def render_cloud(cloud: PointCloud | np.ndarray, camera: PinholeCamera, *, value
                           & (uv[:, 1] >= -r) & (uv[:, 1] < H + r))
     if keep.size == 0:
         return image
-    # Points with the same centre pixel have the same footprint: only the nearest can win anywhere.
-    centre = (uv[keep, 1].astype(np.int64) + r) * (W + 2 * r) + (uv[keep, 0].astype(np.int64) + r)
-    order = np.lexsort((z[keep], centre))
-    _, first = np.unique(centre[order], return_index=True)
-    idx = keep[order[first]]  # nearest point per centre pixel
+    # Points with the same centre pixel have the same footprint: only the nearest can win anywhere (ties:
+    # the first point). Z-buffers by np.minimum.at instead of sorting: the same winners, a third of the CPU.
+    cw = W + 2 * r
+    centre = (uv[keep, 1].astype(np.int64) + r) * cw + (uv[keep, 0].astype(np.int64) + r)
+    zk = z[keep]
+    zbuf = np.full((H + 2 * r) * cw, np.inf)
+    np.minimum.at(zbuf, centre, zk)
+    near = np.flatnonzero(zk == zbuf[centre])
+    first = np.full(zbuf.size, keep.size)
+    np.minimum.at(first, centre[near], near)
+    idx = keep[first[first < keep.size]]  # nearest point per centre pixel, by centre pixel
     idx = idx[np.argsort(z[idx], kind="stable")]  # near to far
     du, dv = (g.ravel() for g in np.meshgrid(np.arange(-r, r + 1), np.arange(-r, r + 1)))
     pu = uv[idx, 0].astype(np.int64)[:, None] + du
     pv = uv[idx, 1].astype(np.int64)[:, None] + dv
     inside = (pu >= 0) & (pu < W) & (pv >= 0) & (pv < H)
-    owner = np.broadcast_to(np.arange(idx.size)[:, None], pu.shape)[inside]  # row-major: nearer first
-    pix, win = np.unique(pv[inside] * W + pu[inside], return_index=True)
-    winners = idx[owner[win]]
+    # Each image pixel takes its nearest footprint: the lowest rank in the near-to-far order.
+    rank = np.broadcast_to(np.arange(idx.size)[:, None], pu.shape)[inside]
+    best = np.full(H * W, idx.size)
+    np.minimum.at(best, pv[inside] * W + pu[inside], rank)
+    pix = np.flatnonzero(best < idx.size)
+    winners = idx[best[pix]]
     if values is not None:
         finite = values[np.isfinite(values)] if np.isfinite(values).any() else np.zeros(1)
         lo, hi = finite.min() if vmin is None else vmin, finite.max() if vmax is None else vmax

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from rangekit.geometry import apply_T, axis_angle_to_R, compose, make_T
+from rangekit.geometry import axis_angle_to_R, compose, make_T
 from rangekit.rig import Rig, turntable_prior
 from rangekit.sim import default_rig, default_scene
 from rangekit.sim.raycast import cast_view

@@ -14,7 +14,6 @@ from rangekit.app.snapshot import fit_camera, render_cloud
 from rangekit.app.snapshot_hits import HITS_PER_MESH, _cast_mesh, raycast_mesh
 from rangekit.colour import colour_table, colourise
 from rangekit.geometry import apply_T
-from rangekit.surface.cloud import PointCloud
 from rangekit.surface.mesh import TriangleMesh
 from rangekit.surface.quality import view_disagreement, view_trees
 

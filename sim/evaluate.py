@@ -125,7 +125,9 @@ def visible_samples(truth: TriangleMesh, scene: Scene, rig: Rig, angles: np.ndar
     for angle in angles:
         M = rig.T_world_rotated(float(angle)) if rig.T_world_table is not None else np.eye(4)
         Pk = apply_T(M, P)
-        todo = np.flatnonzero(~seen & _inside(rig.camera, Pk) & _inside(rig.projector, Pk))
+        todo = np.flatnonzero(~seen)     # only samples no earlier view saw are projected and cast
+        todo = todo[_inside(rig.camera, Pk[todo])]
+        todo = todo[_inside(rig.projector, Pk[todo])]
         if todo.size == 0:
             continue
         if rigid:      # cast in the table's frame at angle 0: the samples as given, the centres moved back

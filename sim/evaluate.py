@@ -125,7 +125,9 @@ def visible_samples(truth: TriangleMesh, scene: Scene, rig: Rig, angles: np.ndar
     for angle in angles:
         M = rig.T_world_rotated(float(angle)) if rig.T_world_table is not None else np.eye(4)
         Pk = apply_T(M, P)
-        todo = np.flatnonzero(~seen & _inside(rig.camera, Pk) & _inside(rig.projector, Pk))
+        todo = np.flatnonzero(~seen)     # only samples no earlier view saw are projected and cast
+        todo = todo[_inside(rig.camera, Pk[todo])]
+        todo = todo[_inside(rig.projector, Pk[todo])]
         if todo.size == 0:
             continue
         if rigid:      # cast in the table's frame at angle 0: the samples as given, the centres moved back
@@ -153,6 +155,11 @@ def _closest_on(mesh: TriangleMesh, P: np.ndarray) -> tuple[np.ndarray, np.ndarr
     ans = scene.compute_closest_points(o3d.core.Tensor((P - c).astype(np.float32)))
     Q = ans["points"].numpy().astype(np.float64) + c
     return np.linalg.norm(P - Q, axis=1), Q, ans["primitive_ids"].numpy().astype(np.int64)
+
+
+def _identity(T: np.ndarray) -> bool:
+    """``T`` is exactly the identity: moving points by it would change no bit."""
+    return bool(np.array_equal(T, np.eye(4)))
 
 
 @dataclass(frozen=True, eq=False)
@@ -210,8 +217,10 @@ def mesh_accuracy(mesh: TriangleMesh, scene: Scene, rig: Rig, angles, *, toleran
         truth = truth_samples(scene, rig, angles, table_margin=table_margin, max_incidence_deg=max_incidence_deg,
                               n_samples=n_samples, seed=seed, light=light)
     rng = np.random.default_rng(seed)
-    # The mesh is brought to the truth's frame (table at angle 0) by inv(M0).
-    mesh0 = TriangleMesh(apply_T(invert_T(truth.M0), mesh.vertices), mesh.triangles)
+    # The mesh is brought to the truth's frame (table at angle 0) by inv(M0). When that is the identity (the
+    # first view at table angle 0, the usual case) the mesh object itself is used: the same coordinates, and
+    # the ray-casting scene built here (rangekit.surface.raycast.mesh_scene) serves the report's renders.
+    mesh0 = mesh if _identity(truth.M0) else TriangleMesh(apply_T(invert_T(truth.M0), mesh.vertices), mesh.triangles)
     Pm, _ = sample_surface(mesh0.vertices, mesh0.triangles, n_samples, rng)
     d_mesh, Q, q_face = _closest_on(truth.truth, Pm)
     on_seen = truth.observed(Q, q_face)
@@ -224,7 +233,8 @@ def mesh_accuracy(mesh: TriangleMesh, scene: Scene, rig: Rig, angles, *, toleran
     d_fill = d_mesh[~on_seen]
     cloud_figures = {}
     if cloud is not None and len(cloud):
-        d_cloud = _closest_on(truth.truth, apply_T(invert_T(truth.M0), np.asarray(cloud, dtype=np.float64)))[0]
+        cloud = np.asarray(cloud, dtype=np.float64)
+        d_cloud = _closest_on(truth.truth, cloud if _identity(truth.M0) else apply_T(invert_T(truth.M0), cloud))[0]
         cloud_figures = {"cloud_rms": float(np.sqrt(np.mean(d_cloud ** 2))),
                          "cloud_p95": float(np.percentile(d_cloud, 95)), "n_cloud": int(len(d_cloud))}
     return Accuracy(rms=float(np.sqrt(np.mean(d ** 2))), p95=float(np.percentile(d, 95)), max=float(d.max()),
@@ -284,7 +294,7 @@ class TruthEvaluator:
                  views: dict | None = None) -> TruthEvaluation:
         self.prepare(angles, views)
         accuracy = mesh_accuracy(mesh, self.scene, self.rig, angles, cloud=cloud, truth=self._truth, **self.options)
-        ob = self.scene.objects[0]
-        M0 = self._truth.M0
-        return TruthEvaluation(accuracy, TriangleMesh(apply_T(M0, ob.world_vertices()), ob.triangles),
-                               self._view_errors if views is not None else None)
+        ob, M0 = self.scene.objects[0], self._truth.M0
+        # At the identity, the truth's own mesh object: its scene (built for the accuracy) serves the report.
+        truth = self._truth.truth if _identity(M0) else TriangleMesh(apply_T(M0, ob.world_vertices()), ob.triangles)
+        return TruthEvaluation(accuracy, truth, self._view_errors if views is not None else None)

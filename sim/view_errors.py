@@ -48,22 +48,47 @@ def depth_edges(depth: np.ndarray, *, jump: float = EDGE_JUMP, radius: int = EDG
     return binary_dilation(edge, iterations=radius)
 
 
+#: Margin of the cast box around the cloud's pixels, pixels: wider than the edge radius.
+_MARGIN = EDGE_PX + 3
+#: How far :func:`depth_edges` looks from a pixel: its 3x3 filters, the silhouette's and the edge's dilations.
+_EDGE_REACH = 2 + EDGE_PX
+
+
+def _box(uv: np.ndarray, camera, margin: int) -> tuple[slice, slice] | None:
+    """(rows, columns) slices of the pixel box around the cloud's pixels ``uv`` (N, 2) inside the image,
+    ``margin`` pixels wider (clipped to the image); None when no point falls in the image."""
+    H, W = camera.height, camera.width
+    cols, rows = uv[:, 0], uv[:, 1]
+    inside = (cols >= 0) & (cols < W) & (rows >= 0) & (rows < H)
+    if not inside.any():
+        return None
+    return (slice(max(0, rows[inside].min() - margin), min(H, rows[inside].max() + margin + 1)),
+            slice(max(0, cols[inside].min() - margin), min(W, cols[inside].max() + margin + 1)))
+
+
 def _around(uv: np.ndarray, camera) -> np.ndarray | None:
     """Flat indices of the pixel box around the cloud's pixels ``uv`` (N, 2), with a margin wider than the
     edge radius: the truth is cast only there, at a fraction of the rays. The edges of the cloud's pixels
     come out as with the whole image; the decoding errors leave out the object's pixels outside the box
     (its foot in the table band the cloud drops: 2 of 186,034 pixels in one view of the 12-view scan, none
     in the others). None (the whole image) when no point falls in the image."""
-    H, W = camera.height, camera.width
-    cols, rows = uv[:, 0], uv[:, 1]
-    inside = (cols >= 0) & (cols < W) & (rows >= 0) & (rows < H)
-    if not inside.any():
+    box = _box(uv, camera, _MARGIN)
+    if box is None:
         return None
-    m = EDGE_PX + 3
-    r0, r1 = max(0, rows[inside].min() - m), min(H, rows[inside].max() + m + 1)
-    c0, c1 = max(0, cols[inside].min() - m), min(W, cols[inside].max() + m + 1)
-    rr, cc = np.mgrid[r0:r1, c0:c1]
-    return (rr * W + cc).ravel()
+    rr, cc = np.mgrid[box]
+    return (rr * camera.width + cc).ravel()
+
+
+def _edges_around(depth: np.ndarray, uv: np.ndarray, camera) -> np.ndarray:
+    """(H, W) bool :func:`depth_edges` of the truth cast over the box of :func:`_around` (NaN outside it),
+    computed on the box widened by the edges' reach only: outside the cast box the depth is NaN all the
+    way, so the filters see there what they see in the whole image, at a fraction of the pixels."""
+    box = _box(uv, camera, _MARGIN + _EDGE_REACH)
+    if box is None:
+        return depth_edges(depth)
+    edges = np.zeros(depth.shape, dtype=bool)
+    edges[box] = depth_edges(depth[box])
+    return edges
 
 
 def _stats(d: np.ndarray) -> dict:
@@ -94,7 +119,7 @@ def view_errors(scene: Scene, rig: Rig, angles: Sequence[float], clouds: Sequenc
                              pixels=_around(uv, camera))
         inside_img = (uv[:, 0] >= 0) & (uv[:, 0] < camera.width) & (uv[:, 1] >= 0) & (uv[:, 1] < camera.height)
         edge = np.zeros(len(P), dtype=bool)
-        edges = depth_edges(geometry.depth)
+        edges = _edges_around(geometry.depth, uv, camera)
         edge[inside_img] = edges[uv[inside_img, 1], uv[inside_img, 0]]
         sq = float(np.sum(d ** 2))
         cloud_stats = {**_stats(d), "inside": _stats(d[~edge]), "edge": _stats(d[edge]),

@@ -137,16 +137,17 @@ def write_report(folder: str | Path, result: "ProcessResult", *, clouds: Sequenc
     rows = []
     for k, (name, cloud, view_maps) in enumerate(zip(result.view_names, clouds, maps)):
         capture = view_maps.capture
-        capture = capture if capture.ndim == 3 else np.repeat(capture[:, :, None], 3, axis=2)
         if capture.dtype != np.uint8:
             capture = (capture / max(1, capture.max()) * 255).astype(np.uint8)
+        capture = _thumb(capture)   # a grey capture is shrunk before it is made RGB: the same pixels
+        capture = capture if capture.ndim == 3 else np.repeat(capture[:, :, None], 3, axis=2)
         col = view_maps.proj_col
         depth = view_maps.depth
         finite = np.isfinite(depth)
         dlo, dhi = (np.percentile(depth[finite], [1, 99]) if finite.any() else (0.0, 1.0))
         ccam = fit_camera(cloud.points, azimuth=np.radians(20),
                           elevation=np.radians(20), size=(THUMB_W * 5 // 4, THUMB_W), up=up, tight=True)
-        figs = [_img(_thumb(capture), f"{name}: capture (white)"),
+        figs = [_img(capture, f"{name}: capture (white)"),
                 _img(_thumb(colourise(col, 0, rig.projector.width - 1, cmap="turbo")), "projector column"),
                 _img(_thumb(colourise(view_maps.confidence, 0, max(1e-6, float(np.nanpercentile(view_maps.confidence, 99))),
                                       cmap="grey")), "confidence"),

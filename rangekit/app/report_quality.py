@@ -27,20 +27,21 @@ QUALITY_VERTICES = 60_000
 SEEN_SPACINGS = 3.0
 
 
-def mesh_quality(vertices: np.ndarray, triangles: np.ndarray, clouds_world: Sequence[np.ndarray]):
+def mesh_quality(vertices: np.ndarray, triangles: np.ndarray, clouds_world: Sequence[np.ndarray], *,
+                 normal_sums: np.ndarray | None = None):
     """``(vertices used (M, 3), QualityMap)``: the views' disagreement on up to :data:`QUALITY_VERTICES`
-    vertices of the mesh; ``clouds_world`` each view's points (N_i, 3) in the mesh's frame, metres."""
-    from scipy.spatial import cKDTree
+    vertices of the mesh; ``clouds_world`` each view's points (N_i, 3) in the mesh's frame, metres;
+    ``normal_sums`` the mesh's :attr:`~rangekit.surface.mesh.TriangleMesh.normal_sums` when computed already."""
+    from rangekit.surface.quality import vertex_normals, view_disagreement, view_trees
 
-    from rangekit.surface.quality import vertex_normals, view_disagreement
-
-    normals = vertex_normals(vertices, triangles)
+    normals = vertex_normals(vertices, triangles, sums=normal_sums)
     step = max(1, len(vertices) // QUALITY_VERTICES)
     V, N = vertices[::step], normals[::step]
+    trees = view_trees(clouds_world)   # one tree per view: the spacing and the disagreement query it
     # Each view's point spacing: the median distance from a tenth of its points to their nearest other point.
-    spacing = [float(np.median(cKDTree(c).query(c[::10], k=2)[0][:, 1])) for c in clouds_world if len(c) > 20]
+    spacing = [float(np.median(t.query(t.data[::10], k=2)[0][:, 1])) for t in trees if t is not None and t.n > 20]
     radius = SEEN_SPACINGS * float(np.median(spacing))
-    return V, view_disagreement(V, N, clouds_world, radius=radius)
+    return V, view_disagreement(V, N, radius=radius, trees=trees)
 
 
 def sigma_scale(sigma_maps: Sequence[np.ndarray]) -> float:
@@ -59,7 +60,7 @@ def quality_section(mesh, clouds_world: Sequence[np.ndarray], *, up: np.ndarray,
     from rangekit.app.snapshot import colour_bar, fit_camera, render_values_on_mesh
 
     call_progress(progress, "report: views' agreement (quality map)")
-    V, q = mesh_quality(mesh.vertices, mesh.triangles, clouds_world)
+    V, q = mesh_quality(mesh.vertices, mesh.triangles, clouds_world, normal_sums=mesh.normal_sums)
     d = q.disagreement
     seen = np.isfinite(d)
     if not seen.any():

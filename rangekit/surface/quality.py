@@ -17,7 +17,7 @@ import numpy as np
 
 from rangekit.errors import InputError
 
-__all__ = ["QualityMap", "vertex_normals", "view_disagreement"]
+__all__ = ["QualityMap", "vertex_normals", "view_trees", "view_disagreement"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -34,19 +34,31 @@ class QualityMap:
         return f"QualityMap({len(self.n_views)} vertices, {d.size} seen by >= 2 views{rms})"
 
 
-def vertex_normals(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
-    """(V, 3) unit area-weighted vertex normals of a triangle mesh (zero for unused vertices)."""
-    V = np.asarray(vertices, dtype=np.float64)
-    F = np.asarray(triangles, dtype=np.int64)
-    fn = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])   # length = 2 x area
-    n = np.zeros_like(V)
-    for k in range(3):
-        np.add.at(n, F[:, k], fn)
+def vertex_normals(vertices: np.ndarray, triangles: np.ndarray, *, sums: np.ndarray | None = None) -> np.ndarray:
+    """(V, 3) unit area-weighted vertex normals of a triangle mesh (zero for unused vertices); ``sums``: the
+    mesh's :attr:`rangekit.surface.mesh.TriangleMesh.normal_sums` when it has them already."""
+    from rangekit.surface.mesh import TriangleMesh
+
+    n = TriangleMesh(vertices, triangles).normal_sums if sums is None else np.asarray(sums, dtype=np.float64)
     return n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
 
 
-def view_disagreement(vertices: np.ndarray, normals: np.ndarray, views: Sequence[np.ndarray], *, radius: float,
-                      k: int = 4) -> QualityMap:
+def view_trees(views: Sequence[np.ndarray]) -> list:
+    """Each view's k-d tree (``scipy.spatial.cKDTree`` over its finite points (N_i, 3), float64 metres, in
+    ``tree.data``), or None for a view without points: built once for :func:`view_disagreement` and any
+    spacing query on the same views. Unbalanced (sliding midpoint): the same neighbours, half the build time."""
+    from scipy.spatial import cKDTree
+
+    trees = []
+    for P in views:
+        P = np.asarray(P, dtype=np.float64).reshape(-1, 3)
+        P = P[np.isfinite(P).all(axis=1)]
+        trees.append(cKDTree(P, balanced_tree=False) if len(P) else None)
+    return trees
+
+
+def view_disagreement(vertices: np.ndarray, normals: np.ndarray, views: Sequence[np.ndarray] | None = None, *,
+                      radius: float, k: int = 4, trees: Sequence | None = None) -> QualityMap:
     """Per-vertex disagreement of registered ``views`` (module doc).
 
     Parameters
@@ -56,26 +68,28 @@ def view_disagreement(vertices: np.ndarray, normals: np.ndarray, views: Sequence
     radius : metres; a view sees a vertex when its ``k`` nearest points are all within it (a few times
         the point spacing).
     k : points averaged per view and vertex.
+    trees : instead of ``views``, their :func:`view_trees` (built once by a caller that also queries them).
 
     Returns
     -------
     QualityMap
     """
-    from scipy.spatial import cKDTree
-
     Vx = np.asarray(vertices, dtype=np.float64)
     N = np.asarray(normals, dtype=np.float64)
     if Vx.ndim != 2 or Vx.shape[1] != 3 or N.shape != Vx.shape:
         raise InputError(f"view_disagreement: vertices and normals must both be (V, 3), found {Vx.shape} and {N.shape}")
     if not (np.isfinite(radius) and radius > 0):
         raise InputError(f"view_disagreement: radius must be a finite number of metres > 0, found {radius!r}")
-    offsets = np.full((len(views), len(Vx)), np.nan)
-    for i, P in enumerate(views):
-        P = np.asarray(P, dtype=np.float64).reshape(-1, 3)
-        P = P[np.isfinite(P).all(axis=1)]
-        if len(P) < k:
+    if (views is None) == (trees is None):
+        raise InputError("view_disagreement: expected either the views' points or their trees, found "
+                         + ("neither" if views is None else "both"))
+    trees = view_trees(views) if trees is None else trees
+    offsets = np.full((len(trees), len(Vx)), np.nan)
+    for i, tree in enumerate(trees):
+        if tree is None or tree.n < k:
             continue
-        dist, idx = cKDTree(P).query(Vx, k=k, distance_upper_bound=radius)
+        P = tree.data
+        dist, idx = tree.query(Vx, k=k, distance_upper_bound=radius)
         dist, idx = dist.reshape(len(Vx), k), idx.reshape(len(Vx), k)
         seen = np.all(np.isfinite(dist), axis=1)
         off = np.einsum("vkj,vj->v", P[idx[seen]] - Vx[seen, None, :], N[seen]) / k

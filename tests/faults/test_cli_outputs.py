@@ -87,6 +87,9 @@ def _file_size_limit(n_bytes: int):
 
 def test_a_write_that_fails_midway_names_the_file_and_leaves_no_partial_file(tmp_path):
     # Files are capped at 20 kB: the small files fit, the ground truth does not (EFBIG, as on a full disk).
+    # A first run without the cap fills numba's on-disk cache: on a fresh clone the capped run would
+    # otherwise fail writing a compiled kernel's cache file, not the command's own output.
+    assert cli_process("sim", "render", "--sensor", "stereo", "--size", "160x100", "--out", tmp_path / "warm").code == 0
     out = tmp_path / "pair"
     run = cli_process("sim", "render", "--sensor", "stereo", "--size", "160x100", "--out", out,
                       preexec_fn=_file_size_limit(20_000))

@@ -5,7 +5,7 @@ folder (wall and CPU seconds of the child, user + sys, and its peak memory), che
 SHA-256 equals the one recorded by ``--same-as`` (a session made before, e.g. by the code before issue 20),
 then times the stages of one view in this process (CPU seconds: the machine may be shared):
 
-    .venv/bin/python benchmarks/bench_acquire.py [--runs 1] [--same-as /work/sess12]
+    .venv/bin/python benchmarks/bench_acquire.py [--runs 1] [--same-as SESSION]
 
 Prints a table and exits non-zero if the target is missed or a frame differs.
 """

@@ -23,6 +23,7 @@ from typing import Sequence
 import numpy as np
 from scipy.ndimage import binary_dilation, maximum_filter, minimum_filter
 
+from rangekit.camera import PinholeCamera, world_pixel_rays
 from rangekit.geometry import apply_T, invert_T, rotation_angle
 from rangekit.rig import Rig, turntable_prior
 from rangekit.surface.mesh import TriangleMesh, distance_to_surface
@@ -66,29 +67,38 @@ def _box(uv: np.ndarray, camera, margin: int) -> tuple[slice, slice] | None:
             slice(max(0, cols[inside].min() - margin), min(W, cols[inside].max() + margin + 1)))
 
 
-def _around(uv: np.ndarray, camera) -> np.ndarray | None:
-    """Flat indices of the pixel box around the cloud's pixels ``uv`` (N, 2), with a margin wider than the
-    edge radius: the truth is cast only there, at a fraction of the rays. The edges of the cloud's pixels
-    come out as with the whole image; the decoding errors leave out the object's pixels outside the box
-    (its foot in the table band the cloud drops: 2 of 186,034 pixels in one view of the 12-view scan, none
-    in the others). None (the whole image) when no point falls in the image."""
-    box = _box(uv, camera, _MARGIN)
+def _truth_in_box(world, camera: PinholeCamera, projector, box: tuple[slice, slice] | None):
+    """``(geometry, edges)`` of the truth cast over the pixel ``box`` only (None: the whole image), both the
+    box's size: :func:`rangekit.sim.raycast.cast_view` through a camera cropped to the box (the same K shifted
+    by the box's corner, the same rays: sliced from the whole camera's), and :func:`depth_edges` of its depth
+    with NaN around it, as if the whole image had been cast with nothing outside the box. The decoding
+    errors leave out the object's pixels outside the box (its foot in the table band the cloud drops: 2 of
+    186,034 pixels in one view of the 12-view scan, none in the others). Memory and rays scale with the box."""
     if box is None:
-        return None
-    rr, cc = np.mgrid[box]
-    return (rr * camera.width + cc).ravel()
+        geometry = cast_view(world, camera, projector)
+        return geometry, depth_edges(geometry.depth)
+    rows, cols = box
+    h, w = rows.stop - rows.start, cols.stop - cols.start
+    K = camera.K.copy()
+    K[0, 2] -= cols.start
+    K[1, 2] -= rows.start
+    crop = PinholeCamera(K, w, h, camera.dist, camera.T_world_cam, name=camera.name)
+    o, d = world_pixel_rays(camera)
+    d_box = d.reshape(camera.height, camera.width, 3)[rows, cols].reshape(-1, 3)
+    geometry = cast_view(world, crop, projector, cam_rays=(o[: h * w], d_box))
+    return geometry, _box_edges(geometry.depth, box, camera)
 
 
-def _edges_around(depth: np.ndarray, uv: np.ndarray, camera) -> np.ndarray:
-    """(H, W) bool :func:`depth_edges` of the truth cast over the box of :func:`_around` (NaN outside it),
-    computed on the box widened by the edges' reach only: outside the cast box the depth is NaN all the
-    way, so the filters see there what they see in the whole image, at a fraction of the pixels."""
-    box = _box(uv, camera, _MARGIN + _EDGE_REACH)
-    if box is None:
-        return depth_edges(depth)
-    edges = np.zeros(depth.shape, dtype=bool)
-    edges[box] = depth_edges(depth[box])
-    return edges
+def _box_edges(depth_box: np.ndarray, box: tuple[slice, slice], camera) -> np.ndarray:
+    """The box's part of :func:`depth_edges` of the whole image whose depth is ``depth_box`` inside ``box``
+    and NaN (nothing hit) outside: the box padded with NaN by the edges' reach on every side that is not
+    the image's border, filtered, the padding cut off."""
+    rows, cols = box
+    r = _EDGE_REACH
+    pad = ((r if rows.start > 0 else 0, r if rows.stop < camera.height else 0),
+           (r if cols.start > 0 else 0, r if cols.stop < camera.width else 0))
+    edges = depth_edges(np.pad(depth_box, pad, constant_values=np.nan))
+    return edges[pad[0][0]: edges.shape[0] - pad[0][1], pad[1][0]: edges.shape[1] - pad[1][1]]
 
 
 def _stats(d: np.ndarray) -> dict:
@@ -115,12 +125,14 @@ def view_errors(scene: Scene, rig: Rig, angles: Sequence[float], clouds: Sequenc
         P = cloud.points
         d = distance_to_surface(P, truth) if len(P) else np.zeros(0)
         uv = np.rint(camera.project(P)).astype(np.int64) if len(P) else np.zeros((0, 2), np.int64)
-        geometry = cast_view(scene.world_mesh(M), camera, rig.projector,
-                             pixels=_around(uv, camera))
-        inside_img = (uv[:, 0] >= 0) & (uv[:, 0] < camera.width) & (uv[:, 1] >= 0) & (uv[:, 1] < camera.height)
+        box = _box(uv, camera, _MARGIN)
+        geometry, edges = _truth_in_box(scene.world_mesh(M), camera, rig.projector, box)
+        r0, c0 = (box[0].start, box[1].start) if box is not None else (0, 0)
+        H, W = edges.shape
+        u, v = uv[:, 0] - c0, uv[:, 1] - r0
+        inside_img = (u >= 0) & (u < W) & (v >= 0) & (v < H)
         edge = np.zeros(len(P), dtype=bool)
-        edges = _edges_around(geometry.depth, uv, camera)
-        edge[inside_img] = edges[uv[inside_img, 1], uv[inside_img, 0]]
+        edge[inside_img] = edges[v[inside_img], u[inside_img]]
         sq = float(np.sum(d ** 2))
         cloud_stats = {**_stats(d), "inside": _stats(d[~edge]), "edge": _stats(d[edge]),
                        "edge_share": float(np.sum(d[edge] ** 2) / sq) if sq > 0 else 0.0}
@@ -132,7 +144,7 @@ def view_errors(scene: Scene, rig: Rig, angles: Sequence[float], clouds: Sequenc
                         "point_rms_mm": float(np.sqrt(np.mean(moved ** 2)) * 1e3) if moved.size else None}
         decoding = None
         if proj_cols is not None:
-            col = proj_cols[k]
+            col = proj_cols[k] if box is None else proj_cols[k][box]
             both = np.isfinite(col) & np.isfinite(geometry.proj_col) & (geometry.object_id == 0)
             e = (col - geometry.proj_col)[both]
             decoding = {"rms_px": float(np.sqrt(np.mean(e ** 2))) if e.size else None,

@@ -126,7 +126,7 @@ def test_mesh_casts_are_kept_per_mesh_and_camera():
 
 
 def test_depth_edges_on_the_cast_box_are_the_whole_image_edges():
-    from rangekit.sim.view_errors import _MARGIN, _box, _edges_around, depth_edges
+    from rangekit.sim.view_errors import _MARGIN, _box, _box_edges, depth_edges
 
     class Cam:
         width, height = 90, 70
@@ -138,9 +138,25 @@ def test_depth_edges_on_the_cast_box_are_the_whole_image_edges():
     uv = np.column_stack([rng.integers(22, 70, 300), rng.integers(12, 45, 300)])
     box = _box(uv, Cam, _MARGIN)
     cast = np.full_like(depth, np.nan)
-    cast[box] = depth[box]                             # as cast_view leaves it: NaN outside the cast box
-    assert np.array_equal(_edges_around(cast, uv, Cam), depth_edges(cast))
+    cast[box] = depth[box]                             # as a whole-image cast over the box leaves it
+    assert np.array_equal(_box_edges(cast[box], box, Cam), depth_edges(cast)[box])
     edge_uv = np.column_stack([np.arange(0, 40), np.zeros(40, int)])   # at the image border
+    box = _box(edge_uv, Cam, _MARGIN)
     cast = np.full_like(depth, np.nan)
-    cast[_box(edge_uv, Cam, _MARGIN)] = 0.5
-    assert np.array_equal(_edges_around(cast, edge_uv, Cam), depth_edges(cast))
+    cast[box] = 0.5
+    assert np.array_equal(_box_edges(cast[box], box, Cam), depth_edges(cast)[box])
+
+
+def test_the_truth_cast_through_a_cropped_camera_is_the_whole_casts_box():
+    from rangekit.sim import default_rig, default_scene
+    from rangekit.sim.raycast import cast_view
+    from rangekit.sim.view_errors import _truth_in_box
+
+    rig = default_rig()
+    cam = rig.camera.resized(320, 256)
+    world = default_scene().world_mesh(rig.T_world_rotated(0.3))
+    whole = cast_view(world, cam, rig.projector)
+    box = (slice(60, 200), slice(90, 250))
+    part, _ = _truth_in_box(world, cam, rig.projector, box)
+    for name in ("depth", "proj_col", "object_id", "xyz"):
+        assert np.array_equal(getattr(part, name), getattr(whole, name)[box], equal_nan=True), name

@@ -33,7 +33,7 @@ from typing import Callable, Protocol, Sequence
 import numpy as np
 
 from rangekit import __version__
-from rangekit.app.view_cache import ViewMaps, view_clouds
+from rangekit.app.view_cache import ViewMaps, reload_maps, view_clouds
 from rangekit.errors import ConfigError
 from rangekit.formats.clouds import save_cloud
 from rangekit.formats.poses import save_poses
@@ -151,6 +151,9 @@ def _process(out: Path, fusion: str, method: str, table_margin: float, evaluate:
             clouds.append(cloud)
             maps.append(view_maps)
             call_progress(progress, f"decoded {v.folder.name}: {len(clouds[-1]):,} points", k + 1, len(views))
+        proj_cols = [m.proj_col for m in maps]
+        if fusion != "tsdf":   # the TSDF fuses the depth maps; otherwise the report reads them back (230 MB)
+            maps = None
         release_free_memory()   # the image stacks and decoding temporaries (rangekit.memory)
 
     with timer.stage("register"):
@@ -172,8 +175,7 @@ def _process(out: Path, fusion: str, method: str, table_margin: float, evaluate:
             edges.append(row)
 
     angles = [v.angle for v in views]
-    views_info = {"clouds": clouds, "T_world_view": res.T_world_view, "proj_cols": [m.proj_col for m in maps],
-                  "names": names}
+    views_info = {"clouds": clouds, "T_world_view": res.T_world_view, "proj_cols": proj_cols, "names": names}
     with timer.stage("fuse"):
         merged = merge_clouds(clouds, res.T_world_view)
         n_merged = len(merged)
@@ -216,6 +218,8 @@ def _process(out: Path, fusion: str, method: str, table_margin: float, evaluate:
             from rangekit.app.report import write_report
 
             call_progress(progress, "writing report.html")
+            if maps is None:
+                maps = [reload_maps(v, spec, settings) for v in views]
             write_report(out, result, clouds=clouds, maps=maps, merged=merge_clouds(clouds, res.T_world_view),
                          mesh=mesh, session=session,
                          truth=truth, progress=progress, watertight=fused.watertight)
@@ -223,7 +227,7 @@ def _process(out: Path, fusion: str, method: str, table_margin: float, evaluate:
     return result
 
 
-def _fuse(sample: PointCloud, fusion: str, maps: list[ViewMaps], T_world_view: np.ndarray, rig: Rig) -> FusedMeshes:
+def _fuse(sample: PointCloud, fusion: str, maps: list[ViewMaps] | None, T_world_view: np.ndarray, rig: Rig) -> FusedMeshes:
     """The merged cloud's ``sample`` (every k-th point, at most about 400k; session world) fused into the
     observed and the closed mesh (``fusion`` "poisson" or "tsdf"; see :func:`process_session`)."""
     from rangekit.surface.fusion import poisson_meshes, tsdf_fuse

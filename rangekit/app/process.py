@@ -173,6 +173,7 @@ def _process(out: Path, fusion: str, method: str, table_margin: float, evaluate:
                 row["translation_residual_mm"] = float(res.sync.edge_translation_error[k_acc] * 1e3)
                 k_acc += 1
             edges.append(row)
+        release_free_memory()   # the registration's k-d trees and samples
 
     angles = [v.angle for v in views]
     views_info = {"clouds": clouds, "T_world_view": res.T_world_view, "proj_cols": proj_cols, "names": names}
@@ -218,6 +219,7 @@ def _process(out: Path, fusion: str, method: str, table_margin: float, evaluate:
             from rangekit.app.report import write_report
 
             call_progress(progress, "writing report.html")
+            release_free_memory()   # the evaluation's temporaries, before the maps come back
             if maps is None:
                 maps = [reload_maps(v, spec, settings) for v in views]
             write_report(out, result, clouds=clouds, maps=maps, merged=merge_clouds(clouds, res.T_world_view),

@@ -109,12 +109,18 @@ def main() -> int:
     clouds = [load_cloud(v.folder / "cloud.ply") for v in views]
     truth = turntable_prior(session.rig.T_world_table, [v.angle for v in views])
     voxel = bbox_diagonal(clouds) / 110.0   # rangekit's coarse voxel
+    joint_lines: dict[str, str] = {}
+
+    def ours(name: str, options):
+        say = lambda msg: joint_lines.__setitem__(name, msg) if msg.startswith("joint refinement") else None
+        return name, lambda: register_views(clouds, init_T_world_view=truth, options=options, progress=say).T_world_view
+
     cases = [
-        ("rangekit `register_views`, turntable prior (as `rangekit process`)",
-         lambda: register_views(clouds, init_T_world_view=truth, options=MultiViewOptions(turntable=True)).T_world_view),
-        ("rangekit before issue 20 (all pairs, 50k joint samples)",
-         lambda: register_views(clouds, init_T_world_view=truth,
-                                options=MultiViewOptions(pairs=all_pairs, joint_samples=50000)).T_world_view),
+        ours("rangekit `register_views`, turntable prior (as `rangekit process`)", MultiViewOptions(turntable=True)),
+        ours("rangekit, the same with the joint refinement stopped at 0.1 um (before issue 20's last stop)",
+             MultiViewOptions(turntable=True, joint_tolerance=1e-7)),
+        ours("rangekit before issue 20 (all pairs, 50k joint samples, joint stop 0.1 um)",
+             MultiViewOptions(pairs=all_pairs, joint_samples=50000, joint_tolerance=1e-7)),
         ("Open3D multiway, as the tutorial writes it", lambda: o3d_multiway(clouds, voxel)),
         ("Open3D multiway, turntable prior, coarse ICP at 4 voxels", lambda: o3d_multiway(clouds, voxel, truth, 4.0)),
     ]
@@ -127,6 +133,9 @@ def main() -> int:
         secs, T = charged(fn)
         e = rotation_errors(T, truth)
         print(f"| {name} | {secs:.2f} | {e.mean():.4f} deg | {e.max():.4f} deg |", flush=True)
+    print()
+    for name, line in joint_lines.items():
+        print(f"{name}: {line}")
     return 0
 
 

@@ -104,8 +104,7 @@ def view_clouds(views: Sequence[SessionView], spec: PatternSpec, rig: Rig, setti
             if cached[k] is not None:
                 cloud, m = cached[k]
                 cached[k] = None
-                yield cloud, ViewMaps(m["proj_col"], m["confidence"], m["depth"],
-                                      read_png(folders[0] / f"{white:03d}.png"), m["sigma"])
+                yield cloud, _stored_maps(m, folders, white)
                 if k + 1 < len(views):
                     cached[k + 1] = _read_cache(views[k + 1], settings, shape)
                 continue
@@ -130,8 +129,13 @@ def reload_maps(v: SessionView, spec: PatternSpec, settings: dict) -> ViewMaps:
     maps the decoding returned (float32, as stored)."""
     with np.load(v.folder / "maps.npz") as npz:
         m = {k: np.asarray(npz[k], dtype=np.float32) for k in _MAP_NAMES}
-    capture = read_png(_frame_folders(v, settings)[0] / f"{white_frame_index(spec):03d}.png")
-    return ViewMaps(m["proj_col"], m["confidence"], m["depth"], capture, m["sigma"])
+    return _stored_maps(m, _frame_folders(v, settings), white_frame_index(spec))
+
+
+def _stored_maps(m: dict, folders: list, white: int) -> ViewMaps:
+    """:class:`ViewMaps` of the cache's arrays ``m`` (:data:`_MAP_NAMES`) and the white capture of the view's
+    first frame folder (the shortest exposure's)."""
+    return ViewMaps(m["proj_col"], m["confidence"], m["depth"], read_png(folders[0] / f"{white:03d}.png"), m["sigma"])
 
 
 def _frame_folders(v: SessionView, settings: dict) -> list:

@@ -44,6 +44,24 @@ def test_a_full_disk_on_a_worker_names_the_frame_and_keeps_the_finished_views(tm
     assert pngs(out) == reference
 
 
+def test_the_error_named_is_the_earliest_frame_that_failed_whichever_thread_failed_first(tmp_path, monkeypatch):
+    """Every frame of view 1 from frame 3 on fails, frame 3 last of all (it is slow): the error still names
+    frame 3, as a one-thread writer would (CI once saw frame 1 named for a write cap that fails frame 0)."""
+    import time
+
+    def full_disk_from_frame_3(path, image):
+        if path.parent.name == "view_001.partial" and path.name in SPEC.frame_files[3:]:
+            if path.name == SPEC.frame_files[3]:
+                time.sleep(0.5)           # the next frames fail first on the other thread
+            raise OSError(errno.EFBIG, "File too large", str(path))
+        return write_png(path, image)
+
+    monkeypatch.setattr(frame_writer, "write_png", full_disk_from_frame_3)
+    with pytest.raises(StorageError, match=r"view 1 \(turntable 120\.0 deg\), frame 3 \(.*\): writing: .*"
+                                           + SPEC.frame_files[3] + ": File too large"):
+        acquire(sim(), small_rig(), SPEC, tmp_path / "scan", plan=PLAN)
+
+
 def test_ctrl_c_finishes_the_views_taken_and_the_resume_gives_the_same_bytes(tmp_path, reference):
     s = sim()
     real, taken = s.camera.capture_deferred, {"n": 0}

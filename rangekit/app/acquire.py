@@ -200,8 +200,8 @@ def _views(devices, light, rig, spec, out, plan, angles, session, done, names, f
         # taken are finished (recorded done) before the error is raised.
         writer.cancel_view()
         writer.close(raise_error=False)
-        if isinstance(exc, FrameError):
-            _fail(out, current[0], exc, done)
+        if isinstance(exc, FrameError):     # the earliest failure, whichever thread failed first
+            _fail(out, current[0], writer.error or exc, done)
         raise
 
 

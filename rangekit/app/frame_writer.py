@@ -11,8 +11,9 @@ At most ``max_pending`` frames wait (a waiting simulated frame holds no image, a
 memory stays flat. A view is finished (``finish(sha256)``: view.json, the rename, session.json) by one
 finishing thread, in view order, only after every one of its frames is on disk, and not after a view
 that failed: the crash safety of :mod:`rangekit.app.acquire` is unchanged (a failure in one view leaves
-the views before it finished). The first failure (a write, a render) is kept as a
-:class:`FrameError` naming the view and the step, raised by the next :meth:`FrameWriter.check`;
+the views before it finished). The failure (a write, a render) earliest in capture order is kept as a
+:class:`FrameError` naming the view and the step (the same one whichever thread fails first: frames
+after it are skipped, frames before it still written), raised by the next :meth:`FrameWriter.check`;
 :meth:`FrameWriter.close` waits for the work handed over (the views whose frames were all taken are
 finished, also after an error elsewhere or Ctrl-C) and raises it.
 """
@@ -33,11 +34,14 @@ __all__ = ["FrameError", "FrameWriter"]
 class FrameError(Exception):
     """A frame or view that failed behind the capture: ``view`` (index), ``angle`` (radians), ``step`` (the
     same words acquisition uses: ``frame 3 (x_bit03): writing``), ``target`` (the file or folder) and the
-    original exception ``error``."""
+    original exception ``error``; ``order`` its place in capture order (frames numbered from 0, a view's
+    finishing after its frames)."""
 
-    def __init__(self, view: int, angle: float, step: str, target: Path, error: BaseException) -> None:
+    def __init__(self, view: int, angle: float, step: str, target: Path, error: BaseException,
+                 order: float = float("inf")) -> None:
         super().__init__(f"view {view}, {step}: {error}")
         self.view, self.angle, self.step, self.target, self.error = view, angle, step, target, error
+        self.order = order
 
 
 class FrameWriter:
@@ -49,17 +53,23 @@ class FrameWriter:
         self._slots = threading.BoundedSemaphore(max_pending)
         self._frames: list[tuple[str, Future]] = []      # the view being taken: (file key, future of its SHA-256)
         self._views: list[Future] = []
-        self._error: FrameError | None = None
+        self._error: FrameError | None = None          # the failure earliest in capture order
+        self._order = 0                                   # frames handed over so far
         self._broken = False                              # a view failed: the later ones are not finished
         self._lock = threading.Lock()
 
     def _fail(self, error: FrameError) -> None:
         with self._lock:
-            if self._error is None:
+            if self._error is None or error.order < self._error.order:
                 self._error = error
 
+    @property
+    def error(self) -> FrameError | None:
+        """The failure earliest in capture order so far (after :meth:`close`: of all the work), or None."""
+        return self._error
+
     def check(self) -> None:
-        """Raise the first failure behind the capture, if any."""
+        """Raise the earliest failure behind the capture, if any."""
         if self._error is not None:
             raise self._error
 
@@ -74,11 +84,13 @@ class FrameWriter:
         except BaseException:
             self._slots.release()
             raise
-        self._frames.append((key, self._pool.submit(self._write, view, angle, name, target, image)))
+        order, self._order = self._order, self._order + 1
+        self._frames.append((key, self._pool.submit(self._write, view, angle, name, target, image, order)))
 
-    def _write(self, view: int, angle: float, name: str, target: Path, image: Callable) -> str:
+    def _write(self, view: int, angle: float, name: str, target: Path, image: Callable, order: int) -> str:
         try:
-            if self._error is not None:      # a failure before: nothing more is written
+            failed = self._error
+            if failed is not None and failed.order < order:     # an earlier frame failed: skip this one
                 raise FrameError(view, angle, f"{name}: skipped", target, RuntimeError("an earlier frame failed"))
             step = f"{name}: camera"
             try:
@@ -86,7 +98,7 @@ class FrameWriter:
                 step = f"{name}: writing"
                 return frame_sha256(write_png(target, img))
             except Exception as exc:
-                error = FrameError(view, angle, step, target, exc)
+                error = FrameError(view, angle, step, target, exc, order)
                 self._fail(error)
                 raise error from exc
         finally:
@@ -96,9 +108,11 @@ class FrameWriter:
         """Once every frame queued since the last call is on disk, call ``finish(sha256)`` (file key ->
         SHA-256 hex, in frame order) on the finishing thread, after the views before."""
         frames, self._frames = self._frames, []
-        self._views.append(self._finisher.submit(self._finish, view, angle, target, frames, finish))
+        order = self._order - 0.5                         # after the view's frames, before the next view's
+        self._views.append(self._finisher.submit(self._finish, view, angle, target, frames, finish, order))
 
-    def _finish(self, view: int, angle: float, target: Path, frames, finish: Callable[[dict], None]) -> None:
+    def _finish(self, view: int, angle: float, target: Path, frames, finish: Callable[[dict], None],
+                order: float) -> None:
         sha256 = {}
         for key, future in frames:
             try:
@@ -111,10 +125,11 @@ class FrameWriter:
             finish(sha256)
         except FrameError as exc:
             self._broken = True
+            exc.order = order
             self._fail(exc)
         except Exception as exc:
             self._broken = True
-            self._fail(FrameError(view, angle, "finishing the view", target, exc))
+            self._fail(FrameError(view, angle, "finishing the view", target, exc, order))
 
     def cancel_view(self) -> None:
         """Drop the frames of the view being taken that have not started (its view is not finished)."""

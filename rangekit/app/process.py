@@ -26,7 +26,6 @@ SHA-256s (:func:`rangekit.formats.session_check.verify_views`).
 
 from __future__ import annotations
 
-from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Callable, Protocol, Sequence
 
@@ -34,6 +33,7 @@ import numpy as np
 
 from rangekit import __version__
 from rangekit.app.view_cache import ViewMaps, reload_maps, view_clouds
+from rangekit.child import call_beside
 from rangekit.errors import ConfigError
 from rangekit.formats.clouds import save_cloud
 from rangekit.formats.poses import save_poses
@@ -53,6 +53,10 @@ from rangekit.threads import one_blas_thread
 __all__ = ["FUSION_METHODS", "Evaluation", "Evaluator", "process_session"]
 
 FUSION_METHODS = ("poisson", "tsdf")
+
+#: Fewest sampled points whose Poisson runs in a child process: below, it takes less than the child's start
+#: (about 1 s of imports, on the other core).
+CHILD_MIN_POINTS = 100_000
 
 
 class Evaluation(Protocol):
@@ -112,6 +116,7 @@ def _process(out: Path, fusion: str, method: str, table_margin: float, evaluate:
     from rangekit.app.fused_outputs import evaluate_fused, save_fused
     from rangekit.app.reconstruct import EDGE_MARGIN_PX
     from rangekit.registration.multiview import MultiViewOptions, register_views
+    from rangekit.surface.fusion import poisson_meshes
 
     session = Session.load(out)
     views = session.done_views
@@ -185,10 +190,15 @@ def _process(out: Path, fusion: str, method: str, table_margin: float, evaluate:
         prepare = getattr(evaluate, "prepare", None)
         call_progress(progress, f"fusing {n_merged:,} points ({fusion})"
                                 + ("; measuring the views against the true surface alongside" if prepare else ""))
-        # The fusion runs on a thread of its own (Open3D releases the GIL; one thread keeps its mesh
-        # deterministic) while this one writes the merged cloud and evaluates what does not need the mesh.
-        with ThreadPoolExecutor(max_workers=1) as pool:
-            fusing = pool.submit(_fuse, sample, fusion, maps, res.T_world_view, rig)
+        # The fusion runs beside this thread, which writes the merged cloud and evaluates what does not need
+        # the mesh. Open3D's Poisson holds the GIL for its whole run, so a large one runs in a child process
+        # (rangekit.child); a small one, shorter than a child's start, and the TSDF (its input is the
+        # 230 MB of depth maps) on a thread.
+        # One Poisson thread: Open3D's multi-threaded Poisson is not deterministic (a resumed scan must give
+        # the same mesh as an uninterrupted one); the other core evaluates beside it.
+        fusing = (call_beside(poisson_meshes, sample, depth=9, n_threads=1, in_child=len(sample) >= CHILD_MIN_POINTS)
+                  if fusion == "poisson" else call_beside(_tsdf, sample, maps, res.T_world_view, rig, in_child=False))
+        with fusing:
             save_cloud(out / "merged.ply", merged)
             # Not kept beside Poisson's octree and the evaluator (2M points, 130 MB): the report remakes it.
             del merged
@@ -229,17 +239,12 @@ def _process(out: Path, fusion: str, method: str, table_margin: float, evaluate:
     return result
 
 
-def _fuse(sample: PointCloud, fusion: str, maps: list[ViewMaps] | None, T_world_view: np.ndarray, rig: Rig) -> FusedMeshes:
-    """The merged cloud's ``sample`` (every k-th point, at most about 400k; session world) fused into the
-    observed and the closed mesh (``fusion`` "poisson" or "tsdf"; see :func:`process_session`)."""
-    from rangekit.surface.fusion import poisson_meshes, tsdf_fuse
+def _tsdf(sample: PointCloud, maps: list[ViewMaps], T_world_view: np.ndarray, rig: Rig) -> FusedMeshes:
+    """Each view's camera-frame depth map as stored, seen by the camera at its registered pose, fused into
+    the observed and the closed mesh; ``sample`` (session world) decides what was observed."""
+    from rangekit.surface.fusion import tsdf_fuse
     from rangekit.surface.observed import split_observed
 
-    if fusion == "poisson":
-        # One thread: Open3D's multi-threaded Poisson is not deterministic (a resumed scan must give the
-        # same mesh as an uninterrupted one); the other core evaluates beside it.
-        return poisson_meshes(sample, depth=9, n_threads=1)
-    # Each view's camera-frame depth map as stored, seen by the camera at its registered pose.
     surface = tsdf_fuse([(m.depth, None, rig.camera.with_pose(compose(Tk, rig.camera.T_world_cam)))
                          for m, Tk in zip(maps, T_world_view)], watertight=False)
     return split_observed(surface, sample.points)

@@ -1,0 +1,84 @@
+"""A call in a child process (rangekit.child): the same answer as in-process, errors carried back, a dead
+child reported, an interrupted parent leaves no child behind. Real spawned processes, no mocks."""
+
+import os
+import signal
+import time
+
+import numpy as np
+import pytest
+
+from rangekit.child import call_beside, child_call
+from rangekit.errors import MeshError, RangekitError
+from rangekit.surface.cloud import PointCloud
+from rangekit.surface.fusion import poisson_meshes
+
+
+def sphere_cloud(n=20_000, seed=0):
+    rng = np.random.default_rng(seed)
+    p = rng.normal(size=(n, 3))
+    p /= np.linalg.norm(p, axis=1, keepdims=True)
+    return PointCloud(0.05 * p, np.full((n, 3), 0.5), p)
+
+
+def killed_by_a_signal():
+    os.kill(os.getpid(), signal.SIGKILL)
+
+
+def sleeping(seconds):
+    time.sleep(seconds)
+    return seconds
+
+
+def mesh_arrays(fused):
+    return [np.asarray(a) for m in (fused.observed, fused.watertight) for a in (m.vertices, m.triangles)]
+
+
+def test_poisson_in_a_child_gives_the_same_meshes_as_on_a_thread_bit_for_bit():
+    cloud = sphere_cloud()
+    answers = []
+    for in_child in (True, False):
+        with call_beside(poisson_meshes, cloud, depth=6, n_threads=1, in_child=in_child) as call:
+            answers.append(mesh_arrays(call.result()))
+    assert len(answers[0][0]) > 1000
+    for a, b in zip(*answers):
+        assert a.dtype == b.dtype and np.array_equal(a, b)
+
+
+def test_a_rangekit_error_in_the_child_is_raised_as_it_was():
+    with child_call(poisson_meshes, sphere_cloud(5)) as call:
+        with pytest.raises(MeshError, match="5 points with a normal"):
+            call.result()
+
+
+def test_another_error_carries_the_childs_traceback():
+    with child_call(np.zeros, (-1,)) as call:
+        with pytest.raises(RuntimeError, match=r"(?s)ValueError: negative dimensions.*in the child process"):
+            call.result()
+
+
+def test_a_child_that_dies_without_an_answer_is_an_error_naming_the_call_and_the_signal():
+    with child_call(killed_by_a_signal) as call:
+        with pytest.raises(RangekitError, match=r"test_child\.killed_by_a_signal in a child process ended without "
+                                                r"an answer \(exit code -9"):
+            call.result()
+
+
+def test_an_error_in_the_parent_ends_the_child_at_once():
+    with pytest.raises(KeyboardInterrupt):
+        with child_call(sleeping, 60) as call:
+            raise KeyboardInterrupt
+    assert not call._process.is_alive() and call._process.exitcode == -signal.SIGTERM   # ended, not waited for
+
+
+def kind_of_call_in_this_process():
+    with call_beside(os.getpid, in_child=True) as call:
+        return type(call).__name__, call.result() == os.getpid()
+
+
+def test_a_daemonic_process_such_as_a_dask_worker_runs_the_call_on_a_thread():
+    import multiprocessing
+
+    with multiprocessing.get_context("spawn").Pool(1) as pool:    # a pool's workers are daemonic
+        assert pool.apply(kind_of_call_in_this_process) == ("ThreadCall", True)
+    assert kind_of_call_in_this_process() == ("ChildCall", False)   # here: a child, another pid

@@ -116,18 +116,22 @@ def _stamp(path: Path) -> tuple[int, int] | None:
     return st.st_ino, st.st_mtime_ns
 
 
-def finish_session_task(folder: str, views: Sequence[ViewDone], fusion: str = "poisson",
-                        report: bool = True) -> tuple[str, ...]:
-    """Register, fuse, evaluate (simulated sessions) and report the session in ``folder`` once its
-    ``views`` are decoded (a Dask task; they come from the cache). Returns the end-of-run summary lines."""
+def finish_session_task(folder: str, views: Sequence[ViewDone], fusion: str = "poisson", report: bool = True,
+                        evaluate: bool = True) -> tuple[str, ...]:
+    """Register, fuse, evaluate (a simulated session, unless ``evaluate`` is False) and report the session in
+    ``folder`` once its ``views`` are decoded (a Dask task; they come from the cache). Returns the end-of-run
+    summary lines."""
+    from rangekit.app.process import process_session
     from rangekit.app.scan import process_scan
 
-    return tuple(process_scan(folder, fusion=fusion, report=report).summary_lines())
+    if evaluate:
+        return tuple(process_scan(folder, fusion=fusion, report=report).summary_lines())
+    return tuple(process_session(folder, fusion=fusion, report=report).summary_lines())
 
 
 def process_sessions(folders: Sequence[str | Path], *, scheduler: str = "local", workers: int = 2,
-                     fusion: str = "poisson", report: bool = True, progress: Callable | None = None,
-                     timeout: float = CONNECT_TIMEOUT_S) -> BatchResult:
+                     fusion: str = "poisson", report: bool = True, evaluate: bool = True,
+                     progress: Callable | None = None, timeout: float = CONNECT_TIMEOUT_S) -> BatchResult:
     """Process every session folder on Dask; each into its ``mesh.ply`` etc. as
     :func:`rangekit.app.process.process_session` does (the same bytes).
 
@@ -135,6 +139,7 @@ def process_sessions(folders: Sequence[str | Path], *, scheduler: str = "local",
     ----------
     scheduler : "local" (a ``LocalCluster`` of ``workers`` processes on 127.0.0.1, one thread each) or the
         address of a running ``dask scheduler`` (``tcp://host:port``; ``workers`` is then unused).
+    evaluate : measure simulated sessions against their truth (as ``rangekit process`` does).
     progress : ``progress(msg, done=None, total=None)``: a line per view and per session done or failed.
     timeout : seconds to wait for the scheduler at an address.
 
@@ -162,7 +167,7 @@ def process_sessions(folders: Sequence[str | Path], *, scheduler: str = "local",
             call_progress(progress, f"{f}: failed: {e}")
     if plans:
         with _client(scheduler, workers, timeout) as client:
-            _run(client, plans, folders, outcome, fusion, report, progress)
+            _run(client, plans, folders, outcome, fusion, report, evaluate, progress)
     return BatchResult(tuple(SessionOutcome(**o) for o in outcome.values()), time.perf_counter() - t0)
 
 
@@ -176,7 +181,7 @@ def _view_indices(folder: Path) -> list[int] | None:
     return None if session.is_laser else [v.index for v in session.done_views]
 
 
-def _run(client, plans, folders, outcome, fusion, report, progress) -> None:
+def _run(client, plans, folders, outcome, fusion, report, evaluate, progress) -> None:
     """Submit every view task, then each session's task on its views; report them as they finish."""
     from distributed import as_completed
 
@@ -188,7 +193,7 @@ def _run(client, plans, folders, outcome, fusion, report, progress) -> None:
         name = folders[k].name
         views = [client.submit(decode_view_task, str(folders[k]), i, key=f"decode-{name}-{i:03d}-{k}-{run}",
                                pure=False) for i in indices or ()]
-        session = client.submit(finish_session_task, str(folders[k]), views, fusion, report,
+        session = client.submit(finish_session_task, str(folders[k]), views, fusion, report, evaluate,
                                 key=f"session-{name}-{k}-{run}", pure=False)
         owner.update({f.key: (k, "view") for f in views})
         owner[session.key] = (k, "session")

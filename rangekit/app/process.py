@@ -31,8 +31,7 @@ from typing import Callable, Protocol, Sequence
 
 import numpy as np
 
-from rangekit import __version__
-from rangekit.app.view_cache import ViewMaps, reload_maps, view_clouds
+from rangekit.app.view_cache import ViewMaps, cache_settings, reload_maps, table_transform, view_clouds
 from rangekit.child import call_beside
 from rangekit.errors import ConfigError
 from rangekit.formats.clouds import save_cloud
@@ -41,7 +40,7 @@ from rangekit.formats.session import Session
 from rangekit.formats.session_check import verify_views
 from rangekit.formats.session_lock import session_lock
 from rangekit.formats.summary import ProcessResult
-from rangekit.geometry import compose, invert_T
+from rangekit.geometry import compose
 from rangekit.io import atomic_write_json, fsync_folder
 from rangekit.memory import release_free_memory
 from rangekit.progress import StageTimer, call_progress
@@ -114,7 +113,6 @@ def process_session(folder: str | Path, *, fusion: str = "poisson", method: str 
 def _process(out: Path, fusion: str, method: str, table_margin: float, evaluate: Evaluator | None, report: bool,
              progress: Callable | None) -> ProcessResult:
     from rangekit.app.fused_outputs import evaluate_fused, save_fused
-    from rangekit.app.reconstruct import EDGE_MARGIN_PX
     from rangekit.registration.multiview import MultiViewOptions, register_views
     from rangekit.surface.fusion import poisson_meshes
 
@@ -137,13 +135,8 @@ def _process(out: Path, fusion: str, method: str, table_margin: float, evaluate:
         return process_laser(out, session, fusion=fusion, table_margin=table_margin, evaluate=evaluate, report=report,
                              progress=progress)
     rig, spec, full_scale = session.rig, session.pattern, session.capture.full_scale
-    T_table_world = invert_T(rig.T_world_table) if rig.T_world_table is not None else None
-    settings = {"rangekit": __version__, "method": method, "table_margin": table_margin,
-                "edge_margin_px": EDGE_MARGIN_PX,
-                "pattern": spec.to_dict()["method"], "full_scale": full_scale,
-                "projector_response": None if rig.projector_response is None else rig.projector_response.to_dict()}
-    if session.capture.exposures_us:      # multi-exposure: each exposure decoded, merged per pixel
-        settings["exposures_us"] = list(session.capture.exposures_us)
+    T_table_world = table_transform(rig)
+    settings = cache_settings(session, method, table_margin)
     timer = StageTimer()
 
     with timer.stage("decode"):

@@ -18,11 +18,12 @@ from dataclasses import dataclass
 import numpy as np
 from rangekit.threads import one_blas_thread
 
-from rangekit.app.reconstruct import reconstruct_view
+from rangekit import __version__
+from rangekit.app.reconstruct import EDGE_MARGIN_PX, reconstruct_view
 from rangekit.coded.patterns import PatternSpec
 from rangekit.errors import RangekitError
 from rangekit.formats.capture import list_images, read_stack
-from rangekit.formats.session import SessionView, exposure_folder
+from rangekit.formats.session import Session, SessionView, exposure_folder
 from rangekit.geometry import apply_T, invert_T
 from rangekit.io import atomic_save_npz, atomic_write_json, read_json, read_png
 from rangekit.rig import Rig
@@ -30,7 +31,7 @@ from rangekit.formats.clouds import load_cloud, save_cloud
 from rangekit.formats.session_check import file_sha256
 from rangekit.surface.cloud import PointCloud
 
-__all__ = ["ViewMaps", "reload_maps", "view_cloud", "view_clouds", "white_frame_index"]
+__all__ = ["ViewMaps", "cache_settings", "reload_maps", "table_transform", "view_cloud", "view_clouds", "white_frame_index"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -43,6 +44,27 @@ class ViewMaps:
     capture: np.ndarray      # (H, W[, 3]) the capture under the white pattern, as read
     sigma: np.ndarray | None = None  # (H, W) float32 metres: predicted std along the camera ray, NaN where
                                      # no point was kept or no prediction (rangekit.coded.uncertainty)
+
+
+def cache_settings(session: Session, method: str, table_margin: float) -> dict:
+    """The settings a coded-light session's views are decoded with, as ``cloud.json`` records them: a view's
+    cache is reused only when they are equal. ``method`` is the triangulation method, ``table_margin`` in
+    metres (see :func:`view_cloud`). The one place they are built, for processing in one process
+    (:mod:`rangekit.app.process`) and as Dask tasks (:mod:`rangekit.app.batch`)."""
+    rig, spec, full_scale = session.rig, session.pattern, session.capture.full_scale
+    settings = {"rangekit": __version__, "method": method, "table_margin": table_margin,
+                "edge_margin_px": EDGE_MARGIN_PX,
+                "pattern": spec.to_dict()["method"], "full_scale": full_scale,
+                "projector_response": None if rig.projector_response is None else rig.projector_response.to_dict()}
+    if session.capture.exposures_us:      # multi-exposure: each exposure decoded, merged per pixel
+        settings["exposures_us"] = list(session.capture.exposures_us)
+    return settings
+
+
+def table_transform(rig: Rig) -> np.ndarray | None:
+    """``T_table_world`` (4, 4): world points to the turntable frame, z up from the table top; None without
+    a turntable."""
+    return invert_T(rig.T_world_table) if rig.T_world_table is not None else None
 
 
 def white_frame_index(spec: PatternSpec) -> int:

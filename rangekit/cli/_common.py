@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import re
 import shutil
 import sys
 from pathlib import Path
@@ -75,6 +76,13 @@ def finite_float(text: str) -> float:
 
 #: Argument type: a number in [0, 1].
 fraction = float_in(0.0, 1.0)
+
+
+def scheduler_address(text: str) -> str:
+    """Argument type of --scheduler: 'local' or a Dask scheduler address, tcp://HOST:PORT."""
+    if text == "local" or re.fullmatch(r"(tcp|tls|ws|wss|inproc)://\[?[\w.:-]+\]?:\d{1,5}", text):
+        return text
+    raise argparse.ArgumentTypeError(f"expected 'local' or a Dask scheduler address tcp://HOST:PORT, found {text!r}")
 
 
 def int_in(lo: int, hi: int):

@@ -7,7 +7,8 @@ import sys
 import time
 from pathlib import Path
 
-from rangekit.cli._common import LazyChoices, check_output, console, finite_float, int_in, say, seed
+from rangekit.cli._common import (LazyChoices, check_output, console, finite_float, int_in, say, scheduler_address,
+                                  seed)
 from rangekit.errors import UsageError
 
 
@@ -168,9 +169,50 @@ def _process(folder: str, args: argparse.Namespace, *, acquisition_s: float | No
 
 
 def cmd_process(args: argparse.Namespace) -> int:
-    """rangekit process DIR [--fusion poisson|tsdf]: decode, register and fuse a session into DIR/mesh.ply"""
-    check_output(args.session, option="DIR", folder=True, session=True)
-    return _process(args.session, args)
+    """rangekit process DIR [DIR ...] [--fusion poisson|tsdf] [--scheduler local|ADDRESS] [--workers N]: decode,
+    register and fuse each session into DIR/mesh.ply; several sessions (or --scheduler) on Dask"""
+    if len(args.session) == 1 and args.scheduler is None:
+        if args.workers is not None:
+            raise UsageError(f"--workers: Dask workers for several sessions or --scheduler; found {args.workers} "
+                             "with one session and no --scheduler (give --scheduler local, or leave --workers out)")
+        check_output(args.session[0], option="DIR", folder=True, session=True)
+        return _process(args.session[0], args)
+    return _process_batch(args)
+
+
+def _process_batch(args: argparse.Namespace) -> int:
+    """Several sessions on Dask (rangekit.app.batch): a line per view and session, then each session done or
+    failed; exit 1 when any failed."""
+    from rangekit.app.batch import process_sessions
+    from rangekit.progress import format_seconds
+
+    scheduler = args.scheduler or "local"
+    if scheduler != "local" and args.workers is not None:
+        raise UsageError(f"--workers: the number of workers of --scheduler local; the scheduler at {scheduler} has "
+                         f"its own workers, found --workers {args.workers}; leave it out")
+    if len(set(Path(s).resolve() for s in args.session)) != len(args.session):
+        raise UsageError(f"DIR: expected different session folders, found one given twice in {' '.join(args.session)}")
+    for s in args.session:
+        check_output(s, option="DIR", folder=True)
+    where = f"a local cluster of {args.workers or 2} worker processes" if scheduler == "local" else scheduler
+    say(f"processing {len(args.session)} session(s) on {where}")
+    try:
+        res = process_sessions(args.session, scheduler=scheduler, workers=args.workers or 2, fusion=args.fusion,
+                               report=not args.no_report, progress=console())
+    except KeyboardInterrupt:
+        print(f"rangekit: interrupted; the views decoded so far are cached. Continue with: rangekit process "
+              f"{' '.join(args.session)}", file=sys.stderr)
+        return 130
+    say("")
+    say(f"== {len(res.sessions) - len(res.failed)} of {len(res.sessions)} session(s) processed in "
+        f"{format_seconds(res.seconds)} ==")
+    for o in res.sessions:
+        if o.ok:
+            say(f"{o.folder}: done ({o.views_decoded} views decoded, {o.views_cached} from the cache); "
+                + (o.summary[0] if o.summary else ""))
+        else:
+            say(f"{o.folder}: FAILED: {o.error}")
+    return 1 if res.failed else 0
 
 
 def _processing_options(p: argparse.ArgumentParser) -> None:
@@ -226,7 +268,16 @@ def add_parsers(sub) -> None:
 
     proc = sub.add_parser("process", help="decode, register and fuse an acquired session into a mesh",
                           description="Process a session folder (from 'rangekit scan'): every view decoded and "
-                                      "triangulated, registered from the turntable angles, fused into mesh.ply.")
-    proc.add_argument("session", metavar="DIR", help="session folder")
+                                      "triangulated, registered from the turntable angles, fused into mesh.ply. "
+                                      "Several folders are processed on Dask: every view's decoding and then "
+                                      "each session's registration and fusion are tasks of a local cluster or "
+                                      "of a running 'dask scheduler' (--scheduler).")
+    proc.add_argument("session", metavar="DIR", nargs="+",
+                      help="session folder; several are processed on Dask (a view's decoding per task)")
+    proc.add_argument("--scheduler", type=scheduler_address, metavar="local|ADDRESS",
+                      help="Dask scheduler: 'local' (default with several sessions: a local cluster of --workers "
+                           "processes) or the address tcp://HOST:PORT of a running 'dask scheduler' (docs/scale.md)")
+    proc.add_argument("--workers", type=int_in(1, 256), metavar="N",
+                      help="worker processes of --scheduler local, one thread each (default 2)")
     _processing_options(proc)
     proc.set_defaults(func=cmd_process)

@@ -56,8 +56,9 @@ def _problem(session: Session, v: SessionView, frame: str, what: str) -> FileFor
                            "the original frame, or scan the view again into a new session")
 
 
-def verify_views(session: Session, *, workers: int = 2) -> list[str]:
-    """Check every done view's frames against the recorded SHA-256s.
+def verify_views(session: Session, *, workers: int = 2, views: list[SessionView] | None = None) -> list[str]:
+    """Check every done view's frames (or those of ``views``, some of the done views: one view's Dask task,
+    :mod:`rangekit.app.batch`) against the recorded SHA-256s.
 
     Returns the names of the done views without recorded checksums (a session written before they were
     recorded): only their frame count is checked. Raises FileFormatError naming the view folder and the
@@ -66,7 +67,7 @@ def verify_views(session: Session, *, workers: int = 2) -> list[str]:
     expected = set(session.frame_files)
     subfolders = tuple(exposure_folder(e) for e in session.capture.exposures_us or ())
     unverified, jobs = [], []
-    for v in session.done_views:
+    for v in session.done_views if views is None else views:
         if not v.folder.is_dir():
             raise _problem(session, v, "folder", "is missing (the whole view folder)")
         present = _frame_files(v, subfolders)

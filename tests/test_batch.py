@@ -1,0 +1,194 @@
+"""Many sessions on Dask (issue 21, rangekit.app.batch): real worker processes, no mocks. The outputs are the
+bytes of serial processing; a failing session is reported by name while the others finish; a worker
+killed in the middle loses nothing and no view is decoded twice; an unreachable scheduler is a clear
+error within 10 s."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+from faults._sessions import N_VIEWS, make_reference
+from rangekit.app.batch import WORKER_ENV, SchedulerUnreachable, process_sessions
+from rangekit.app.process import process_session
+from rangekit.cli import main
+
+ROOT = Path(__file__).resolve().parents[1]
+OUTPUTS = ("mesh.ply", "mesh_watertight.ply", "poses.json", "merged.ply")
+
+
+@pytest.fixture(scope="module")
+def sessions(tmp_path_factory):
+    """The small reference session (4 views, 320x256) and its outputs processed serially, in one process."""
+    root = tmp_path_factory.mktemp("batch")
+    ref = make_reference(root / "reference")
+    serial = shutil.copytree(ref, root / "serial")
+    process_session(serial, report=False)
+    return root, ref, {name: (serial / name).read_bytes() for name in OUTPUTS}
+
+
+@pytest.fixture(scope="module")
+def local_batch(sessions):
+    """Four sessions on a LocalCluster of 2 workers: two good, one with a missing frame, one with a bad
+    session.json."""
+    root, ref, _ = sessions
+    good = [shutil.copytree(ref, root / name) for name in ("good_a", "good_b")]
+    missing = shutil.copytree(ref, root / "missing_frame")
+    (missing / "view_002" / "003.png").unlink()
+    bad = shutil.copytree(ref, root / "bad_json")
+    (bad / "session.json").write_text('{"schema": "rangekit.session/1", "views": 3}')
+    lines = []
+    res = process_sessions([good[0], missing, good[1], bad], workers=2, report=False, evaluate=False,
+                           progress=lambda msg, *counts: lines.append(msg))
+    return res, good, missing, bad, lines
+
+
+def test_two_sessions_on_a_local_cluster_give_the_bytes_of_serial_processing(sessions, local_batch):
+    _, _, serial = sessions
+    res, good, _, _, lines = local_batch
+    by_folder = {o.folder: o for o in res.sessions}
+    for folder in good:
+        assert by_folder[folder].ok, by_folder[folder].error
+        assert by_folder[folder].views_decoded == N_VIEWS and by_folder[folder].views_cached == 0
+        for name in OUTPUTS:
+            assert (folder / name).read_bytes() == serial[name], f"{folder.name}/{name} differs from serial"
+        assert f"{folder}: done" in " ".join(lines)
+    # progress: a line per view decoded
+    assert sum("/view_" in line for line in lines) >= 2 * N_VIEWS
+
+
+def test_a_failing_session_is_reported_by_name_while_the_others_finish(local_batch):
+    res, good, missing, bad, lines = local_batch
+    assert [o.folder for o in res.sessions] == [good[0], missing, good[1], bad]   # in the order given
+    assert [o.folder for o in res.failed] == [missing, bad]
+    failed = {o.folder: o.error for o in res.failed}
+    assert "view_002" in failed[missing] and "003.png" in failed[missing] and "missing" in failed[missing]
+    assert "session.json" in failed[bad]
+    assert not (missing / "mesh.ply").exists() and all((g / "mesh.ply").is_file() for g in good)
+    assert any(str(missing) in line and "failed" in line for line in lines)
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_an_unreachable_scheduler_is_a_clear_error_within_10_s(sessions, capsys):
+    _, ref, _ = sessions
+    address = f"tcp://127.0.0.1:{_free_port()}"   # nothing listens there
+    t0 = time.monotonic()
+    with pytest.raises(SchedulerUnreachable, match=address):
+        process_sessions([ref], scheduler=address, timeout=2)
+    capsys.readouterr()
+    assert main(["process", str(ref), str(ref.parent / "serial"), "--scheduler", address]) == 1
+    err = capsys.readouterr().err
+    assert address in err and "dask scheduler" in err
+    assert time.monotonic() - t0 < 10 + 2   # the CLI's 5 s timeout and the library call's 2 s
+
+
+def test_process_options_are_checked_before_any_work(sessions, capsys):
+    _, ref, _ = sessions
+    for args, expected in ((["--scheduler", "nowhere"], "--scheduler"), (["--workers", "0"], "--workers")):
+        with pytest.raises(SystemExit) as e:
+            main(["process", str(ref), str(ref), *args])
+        assert e.value.code == 2 and expected in capsys.readouterr().err
+    assert main(["process", str(ref), "--workers", "2"]) == 2              # one session: no Dask, no workers
+    assert main(["process", str(ref), str(ref)]) == 2                      # the same folder twice
+    assert main(["process", str(ref), str(ref.parent / "serial"), "--scheduler", "tcp://127.0.0.1:1",
+                 "--workers", "2"]) == 2
+
+
+def _spawn(args: list[str]) -> subprocess.Popen:
+    env = {**os.environ, **WORKER_ENV, "PYTHONPATH": str(ROOT)}
+    return subprocess.Popen([sys.executable, "-m", *args], env=env, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL, start_new_session=True)
+
+
+class _CacheWrites(threading.Thread):
+    """Every distinct (inode, mtime) of each view's cloud.json seen while it runs: one per cache write
+    (written atomically: a new file each time)."""
+
+    def __init__(self, folders):
+        super().__init__(daemon=True)
+        self.files = [f / f"view_{i:03d}" / "cloud.json" for f in folders for i in range(N_VIEWS)]
+        self.seen = {p: set() for p in self.files}
+        self.stop = threading.Event()
+
+    def run(self):
+        while not self.stop.is_set():
+            self.poll()
+            time.sleep(0.005)
+
+    def poll(self):
+        for p in self.files:
+            try:
+                st = os.stat(p)
+            except OSError:
+                continue
+            self.seen[p].add((st.st_ino, st.st_mtime_ns))
+
+    def written(self) -> int:
+        return sum(bool(s) for s in self.seen.values())
+
+
+@pytest.mark.slow
+def test_a_worker_killed_in_the_middle_loses_nothing_and_decodes_no_view_twice(sessions):
+    from distributed import Client
+
+    root, ref, serial = sessions
+    folders = [shutil.copytree(ref, root / f"cluster_{k}") for k in range(3)]
+    port = _free_port()
+    address = f"tcp://127.0.0.1:{port}"
+    procs = [_spawn(["distributed.cli.dask_scheduler", "--host", "127.0.0.1", "--port", str(port),
+                     "--dashboard-address", ":0", "--no-dashboard"])]
+    try:
+        procs += [_spawn(["distributed.cli.dask_worker", address, "--nthreads", "1", "--no-nanny",
+                          "--no-dashboard", "--host", "127.0.0.1"]) for _ in range(2)]
+        with Client(address, timeout="30s") as client:
+            client.wait_for_workers(2, timeout=60)
+        writes = _CacheWrites(folders)
+        writes.start()
+        out = {}
+        batch = threading.Thread(target=lambda: out.update(res=process_sessions(
+            folders, scheduler=address, report=False, evaluate=False)), daemon=True)
+        batch.start()
+        deadline = time.monotonic() + 120
+        while writes.written() < 1 and time.monotonic() < deadline:   # the first view is cached: kill a worker
+            time.sleep(0.01)
+        victim = procs[1]
+        os.killpg(victim.pid, signal.SIGKILL)
+        victim.wait(10)
+        killed_after = writes.written()
+        batch.join(300)
+        writes.stop.set()
+        writes.join()
+        writes.poll()
+    finally:
+        for p in procs:
+            if p.poll() is None:
+                os.killpg(p.pid, signal.SIGTERM)
+        for p in procs:
+            try:
+                p.wait(15)
+            except subprocess.TimeoutExpired:
+                os.killpg(p.pid, signal.SIGKILL)
+    res = out["res"]
+    assert killed_after < 3 * N_VIEWS, "the worker was killed after all the views were decoded"
+    assert not res.failed, [o.error for o in res.failed]
+    for folder in folders:
+        for name in OUTPUTS:
+            assert (folder / name).read_bytes() == serial[name], f"{folder.name}/{name}"
+    # nothing lost (every view cached), nothing done twice (each cache written once)
+    assert {p: len(s) for p, s in writes.seen.items()} == {p: 1 for p in writes.files}
+    assert all(json.loads(p.read_text())["points"] > 0 for p in writes.files)

@@ -27,7 +27,8 @@ from rangekit.registration.coarse import CoarseOptions, compute_features, coarse
 from rangekit.registration.icp import IcpOptions, icp
 from rangekit.registration.joint import JointResult, refine_jointly
 from rangekit.registration.coarse_graph import coarse_graph, descriptor_distances, view_descriptor
-from rangekit.registration.pairs import PairChooser, PairsTried, all_pairs, chooser_label, default_pairs
+from rangekit.registration.pairs import (PairChooser, PairsTried, all_pairs, chooser_label, nearest_and_long_links,
+                                         nearest_in_rotation)
 from rangekit.registration.stability import MIN_CONSTRAINT, HeldMotions, PoseConstraint
 from rangekit.registration.sync import SyncResult, synchronise
 from rangekit.threads import one_blas_thread
@@ -59,7 +60,9 @@ class MultiViewOptions:
     joint_samples: int = 20000           # points per view in the joint refinement (at most all fine points);
                                          # 20k: the 50k poses to 1e-3 deg on the 12-view scan (docs/benchmarks.md)
     pairs: PairChooser | None = None     # the refinement's candidate pairs (rangekit.registration.pairs):
-                                         # None = default_pairs (the 4 nearest in rotation + 4 long links);
+                                         # None = default_pairs (the 4 nearest in rotation, + 4 long links
+                                         # without a prior) with a turntable prior or none, all pairs with
+                                         # any other prior;
                                          # only candidates that overlap become edges
     coarse_neighbours: int | None = 4    # no prior: coarse alignment of each view with its k most similar
                                          # by a global descriptor (rangekit.registration.coarse_graph),
@@ -294,9 +297,11 @@ def _register_views(clouds, init_T_world_view, options, progress, names) -> Mult
     edges: list[EdgeResult] = []
     holds: dict = {}
     prior = init_T_world_view is not None
-    # The neighbours in rotation (on a turntable: in angle) and a few long links, whatever gave the poses
-    # (a prior from another tool may be degrees off: neighbours in rotation stay neighbours).
-    choose = options.pairs or default_pairs
+    # On the turntable the neighbours in angle; after the coarse alignment's synchronisation the neighbours
+    # in rotation and a few long links (O(n k): pairs.default_pairs). Any other prior may be rough (poses
+    # from another tool, degrees off): every pair is tried, as before issue 21 (options.pairs bounds it).
+    choose = options.pairs or (nearest_and_long_links() if init_T_world_view is None else
+                               nearest_in_rotation() if options.turntable else all_pairs)
     n_candidates = n_refined = 0
     sync = None
     for rnd in range(options.rounds):

@@ -78,10 +78,10 @@ def add_parsers(sub) -> None:
                           "turntable:AX,AY,AZ:STEP_DEG[:PX,PY,PZ] (view i turned i*STEP degrees about the axis)")
     reg.add_argument("--voxel-mm", type=positive_float, default=None,
                      help="voxel for features and the first ICP round, mm (default: scene diagonal / 80)")
-    reg.add_argument("--neighbours", type=int_in(0, 1000), default=4, metavar="K",
+    reg.add_argument("--neighbours", type=int_in(0, 1000), default=None, metavar="K",
                      help="view graph: each view paired with its K nearest in rotation (+ 4 long links) and, "
                           "with no prior, coarse-aligned with its K most similar (widened until connected); "
-                          "0 tries every pair (default 4)")
+                          "0 tries every pair (default: 4 with --init none, every pair with a prior)")
     reg.add_argument("--no-mesh", action="store_true", help="skip meshing")
     reg.add_argument("--out", required=True, help="output folder")
     reg.set_defaults(func=cmd_register)

@@ -26,6 +26,7 @@ from rangekit.surface.cloud import PointCloud, bbox_diagonal, check_voxel, estim
 from rangekit.registration.coarse import CoarseOptions, compute_features, coarse_align
 from rangekit.registration.icp import IcpOptions, icp
 from rangekit.registration.joint import JointResult, refine_jointly
+from rangekit.registration.overlap_estimate import overlapping_pairs
 from rangekit.registration.coarse_graph import coarse_graph, descriptor_distances, view_descriptor
 from rangekit.registration.pairs import (PairChooser, PairsTried, all_pairs, chooser_label, nearest_and_long_links,
                                          nearest_in_rotation)
@@ -139,6 +140,8 @@ def _prepare(clouds: Sequence[PointCloud], voxel: float) -> list[PointCloud]:
         out.append(PointCloud(p, normals=n))
     return out
 
+
+OVERLAP_NEIGHBOURS = 8   # no prior: each view's most overlapping views (estimated) added to the candidates
 
 OVERLAP_SAMPLES = 5000   # points of a view that estimate its overlap (every k-th point): a fraction within
                          # about 1% (binomial), for a threshold of 0.15
@@ -297,12 +300,20 @@ def _register_views(clouds, init_T_world_view, options, progress, names) -> Mult
     edges: list[EdgeResult] = []
     holds: dict = {}
     prior = init_T_world_view is not None
-    # On the turntable the neighbours in angle; after the coarse alignment's synchronisation the neighbours
-    # in rotation and a few long links (O(n k): pairs.default_pairs). Any other prior may be rough (poses
-    # from another tool, degrees off): every pair is tried, as before issue 21 (options.pairs bounds it).
+    # On the turntable the neighbours in angle; with no prior the neighbours in rotation, long links and the
+    # most overlapping (O(n k)). Any other prior may be degrees off: every pair (options.pairs bounds it).
     choose = options.pairs or (nearest_and_long_links() if init_T_world_view is None else
                                nearest_in_rotation() if options.turntable else all_pairs)
     n_candidates = n_refined = 0
+
+    estimate = options.pairs is None and not prior   # + the most overlapping, as a prior's all pairs would
+
+    def candidates_at(T: np.ndarray, level: list, v: float) -> list:
+        pairs = choose(T, prior)
+        if estimate:
+            pairs = sorted(set(pairs) | set(overlapping_pairs([apply_T(T[k], level[k].points) for k in range(n)],
+                                                              2 * v, OVERLAP_NEIGHBOURS, options.min_overlap)))
+        return pairs
     sync = None
     for rnd in range(options.rounds):
         level = coarse_clouds if rnd == 0 else fine_clouds
@@ -312,7 +323,7 @@ def _register_views(clouds, init_T_world_view, options, progress, names) -> Mult
         # final RMSE measures the overlap only and is comparable with the coarse stage's.
         icp_opt = replace(options.icp, max_distance=2.0 * v, voxel_sizes=(2.0 * v,), rng=options.rng + rnd)
         edges, holds = [], {}
-        candidates = choose(T, prior)
+        candidates = candidates_at(T, level, v)
         seen |= set(candidates)
         n_candidates = len(candidates)
         for i, j in candidates:
@@ -340,8 +351,7 @@ def _register_views(clouds, init_T_world_view, options, progress, names) -> Mult
         say(f"round {rnd + 1}: {len(acc)}/{len(edges)} overlapping pairs accepted, mean rmse "
             f"{np.mean([e.rmse for e in acc]) * 1e3:.3f} mm")
     acc = [e for e in edges if e.accepted]
-    rmse = float(np.mean([e.rmse for e in acc]))
-    n_joint = 0
+    rmse, n_joint = float(np.mean([e.rmse for e in acc])), 0
     if options.joint_iterations > 0:
         basis = None
         if options.turntable and prior:
@@ -354,7 +364,7 @@ def _register_views(clouds, init_T_world_view, options, progress, names) -> Mult
         # Pairs by overlap at the synchronised poses (not by which pairwise runs passed), so the same data
         # gives the same problem whatever the starting poses were.
         trees = [cKDTree(c.points) for c in fine_clouds]
-        joint_candidates = choose(T, prior)
+        joint_candidates = candidates_at(T, fine_clouds, fine)
         seen |= set(joint_candidates)
         pairs = [(i, j) for i, j in joint_candidates
                  if _mutual_overlap(fine_clouds[i], fine_clouds[j], trees[i], trees[j], invert_T(T[i]) @ T[j],
@@ -366,7 +376,8 @@ def _register_views(clouds, init_T_world_view, options, progress, names) -> Mult
         rmse, n_joint = joint.rmse, len(pairs)
         say(f"joint refinement of {n} views over {len(pairs)} pairs: rmse {joint.rmse * 1e3:.4f} mm, "
             f"{joint.n_iterations} iterations{'' if joint.converged else ' (not converged)'}")
-    tried = PairsTried(n, len(seen), n_coarse, n_candidates, n_refined, n_joint, chooser_label(choose), coarse_label)
+    label = chooser_label(choose) + (f" + {OVERLAP_NEIGHBOURS} most overlapping (estimated)" if estimate else "")
+    tried = PairsTried(n, len(seen), n_coarse, n_candidates, n_refined, n_joint, label, coarse_label)
     say(tried.summary())
     return MultiViewResult(T, tuple(edges), sync, rmse, tried)
 

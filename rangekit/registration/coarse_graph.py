@@ -18,9 +18,9 @@ from typing import Callable
 
 import numpy as np
 
-from rangekit.errors import InputError
+from rangekit.errors import InputError, RegistrationError
 
-__all__ = ["view_descriptor", "descriptor_distances", "similar_pairs", "coarse_graph", "Components"]
+__all__ = ["view_descriptor", "descriptor_distances", "similar_pairs", "coarse_graph", "widen_until_settled", "Components"]
 
 
 def view_descriptor(fpfh: np.ndarray) -> np.ndarray:
@@ -108,3 +108,30 @@ def coarse_graph(dist: np.ndarray, k: int, align: Callable[[int, int], object]) 
             if comp.find(i) != comp.find(j):
                 run(i, j)
     return out
+
+
+def widen_until_settled(dist: np.ndarray, k: int, align: Callable[[int, int], object],
+                        settle: Callable[[list], object]) -> tuple[list, object, int]:
+    """:func:`coarse_graph` with ``k``, then 2k, 4k, ... (each pair aligned once) until ``settle(results)``
+    (the connectivity check and the robust synchronisation, over every pair aligned so far) stops raising
+    RegistrationError; re-raises it when k has reached n - 1. Returns (results, settle's value, k used).
+
+    A connected graph can still fail the robust synchronisation: on the 36-view turntable the 4 most
+    similar gave a chain with bridges, and rejecting 4 inconsistent edges cut views 9-31 off."""
+    cache: dict = {}
+
+    def once(i: int, j: int):
+        if (i, j) not in cache:
+            cache[i, j] = align(i, j)
+        return cache[i, j]
+
+    n = len(dist)
+    while True:
+        coarse_graph(dist, k, once)
+        results = [cache[p] for p in sorted(cache)]
+        try:
+            return results, settle(results), k
+        except RegistrationError:
+            if k >= n - 1:
+                raise
+            k = min(2 * k, n - 1)

@@ -27,7 +27,7 @@ from rangekit.registration.coarse import CoarseOptions, compute_features, coarse
 from rangekit.registration.icp import IcpOptions, icp
 from rangekit.registration.joint import JointResult, refine_jointly
 from rangekit.registration.overlap_estimate import overlapping_pairs
-from rangekit.registration.coarse_graph import coarse_graph, descriptor_distances, view_descriptor
+from rangekit.registration.coarse_graph import descriptor_distances, view_descriptor, widen_until_settled
 from rangekit.registration.pairs import (PairChooser, PairsTried, all_pairs, chooser_label, nearest_and_long_links,
                                          nearest_in_rotation)
 from rangekit.registration.stability import MIN_CONSTRAINT, HeldMotions, PoseConstraint
@@ -60,14 +60,11 @@ class MultiViewOptions:
                                          # same poses within 0.0001 deg, 1/10 of the points' 13 um noise)
     joint_samples: int = 20000           # points per view in the joint refinement (at most all fine points);
                                          # 20k: the 50k poses to 1e-3 deg on the 12-view scan (docs/benchmarks.md)
-    pairs: PairChooser | None = None     # the refinement's candidate pairs (rangekit.registration.pairs):
-                                         # None = default_pairs (the 4 nearest in rotation, + 4 long links
-                                         # without a prior) with a turntable prior or none, all pairs with
-                                         # any other prior;
-                                         # only candidates that overlap become edges
+    pairs: PairChooser | None = None     # refinement candidates (rangekit.registration.pairs), None: the
+                                         # 4 nearest in rotation (+ long links and the most overlapping with
+                                         # no prior; all pairs with a non-turntable prior); see _register_views
     coarse_neighbours: int | None = 4    # no prior: coarse alignment of each view with its k most similar
-                                         # by a global descriptor (rangekit.registration.coarse_graph),
-                                         # widened until connected; None = every pair
+                                         # (registration.coarse_graph), widened as needed; None = all pairs
     icp: IcpOptions = field(default_factory=lambda: IcpOptions(method="point_to_plane", kernel="huber",
                                                                max_iterations=60, tolerance=1e-6, max_samples=5000))
                                          # pairwise runs only start the joint refinement: 1 um and 5k
@@ -142,7 +139,6 @@ def _prepare(clouds: Sequence[PointCloud], voxel: float) -> list[PointCloud]:
 
 
 OVERLAP_NEIGHBOURS = 8   # no prior: each view's most overlapping views (estimated) added to the candidates
-
 OVERLAP_SAMPLES = 5000   # points of a view that estimate its overlap (every k-th point): a fraction within
                          # about 1% (binomial), for a threshold of 0.15
 
@@ -279,17 +275,21 @@ def _register_views(clouds, init_T_world_view, options, progress, names) -> Mult
             r = coarse_align(feats[j], feats[i], copt)
             return _edge(i, j, r, r.fitness, options, options.max_coarse_rmse * voxel, prior=False)
 
+        def settle(edges: list) -> np.ndarray:
+            _check_connected(n, edges, names)
+            return _sync(n, edges).T_world_view
+
         k = options.coarse_neighbours
         if k is None:
             edges, coarse_label = [align(i, j) for i, j in all_pairs(coarse_clouds)], "all pairs"
+            T = settle(edges)
         else:
             dist = descriptor_distances(np.stack([view_descriptor(f.fpfh) for f in feats]))
-            edges, coarse_label = coarse_graph(dist, k, align), f"k={k} most similar by FPFH histogram"
+            edges, T, k = widen_until_settled(dist, k, align, settle)
+            coarse_label = f"k={k} most similar by FPFH histogram"
         n_coarse, seen = len(edges), {(e.i, e.j) for e in edges}
         say(f"coarse alignment of {n_coarse} of {n * (n - 1) // 2} pairs ({coarse_label}, voxel "
             f"{voxel * 1e3:.2f} mm): {sum(e.accepted for e in edges)} accepted")
-        _check_connected(n, edges, names)
-        T = _sync(n, edges).T_world_view
     else:
         T = np.asarray(init_T_world_view, dtype=np.float64).copy()
         if T.shape != (n, 4, 4):

@@ -2,6 +2,8 @@
 
     PYTHONPATH=. .venv/bin/python -m rangekit scan --out /tmp/scan12 --no-report    # once, ~3 min
     PYTHONPATH=. .venv/bin/python benchmarks/bench_registration_scan.py /tmp/scan12
+    ... --ours-only --no-prior      # issue 21: also no prior, the view graph against every pair
+    ... --graph-only                # issue 21: per-view cost (e.g. 12 against 36 views)
 
 The clouds are the session's ``view_*/cloud.ply`` (what ``rangekit process`` registers); the truth is the
 simulator's turntable poses (the rig's ``T_world_table`` and the session's angles), which is also the
@@ -100,9 +102,14 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("session", type=Path, help="a simulated session folder (rangekit scan --out ...)")
     ap.add_argument("--skip-fpfh", action="store_true", help="leave out the FPFH + RANSAC recipe (about 1 min)")
+    ap.add_argument("--ours-only", action="store_true", help="leave out the Open3D recipes")
+    ap.add_argument("--no-prior", action="store_true",
+                    help="add rangekit with no prior: the view graph's coarse pairs (k=4 most similar) and all pairs")
+    ap.add_argument("--graph-only", action="store_true",
+                    help="only the default with the prior and the view graph with none (per-view cost at many views)")
     args = ap.parse_args()
     from rangekit.registration.multiview import MultiViewOptions, register_views
-    from rangekit.registration.pairs import all_pairs
+    from rangekit.registration.pairs import all_pairs, nearest_and_long_links
 
     session = Session.load(args.session)
     views = session.done_views
@@ -111,20 +118,35 @@ def main() -> int:
     voxel = bbox_diagonal(clouds) / 110.0   # rangekit's coarse voxel
     joint_lines: dict[str, str] = {}
 
-    def ours(name: str, options):
-        say = lambda msg: joint_lines.__setitem__(name, msg) if msg.startswith("joint refinement") else None
-        return name, lambda: register_views(clouds, init_T_world_view=truth, options=options, progress=say).T_world_view
+    def ours(name: str, options, prior: bool = True):
+        def say(msg: str) -> None:
+            if msg.startswith(("joint refinement", "view graph")):
+                joint_lines[name] = joint_lines.get(name, "") + msg + "; "
+        return name, lambda: register_views(clouds, init_T_world_view=truth if prior else None, options=options,
+                                            progress=say).T_world_view
 
     cases = [
         ours("rangekit `register_views`, turntable prior (as `rangekit process`)", MultiViewOptions(turntable=True)),
         ours("rangekit, the same with the joint refinement stopped at 0.1 um (before issue 20's last stop)",
              MultiViewOptions(turntable=True, joint_tolerance=1e-7)),
+        ours("rangekit, turntable prior, k=4 nearest + 4 long links (not the default: issue 21)",
+             MultiViewOptions(turntable=True, pairs=nearest_and_long_links(4))),
         ours("rangekit before issue 20 (all pairs, 50k joint samples, joint stop 0.1 um)",
              MultiViewOptions(pairs=all_pairs, joint_samples=50000, joint_tolerance=1e-7)),
-        ("Open3D multiway, as the tutorial writes it", lambda: o3d_multiway(clouds, voxel)),
-        ("Open3D multiway, turntable prior, coarse ICP at 4 voxels", lambda: o3d_multiway(clouds, voxel, truth, 4.0)),
     ]
-    if not args.skip_fpfh:
+    if args.graph_only:
+        cases = cases[:1] + [ours("rangekit, no prior: view graph (coarse k=4 most similar, k=4 nearest + 4 long links)",
+                                  MultiViewOptions(), prior=False)]
+    elif args.no_prior:
+        cases += [ours("rangekit, no prior: view graph (coarse k=4 most similar, k=4 nearest + 4 long links)",
+                       MultiViewOptions(), prior=False),
+                  ours("rangekit, no prior: every pair (before issue 21)",
+                       MultiViewOptions(coarse_neighbours=None, pairs=all_pairs), prior=False)]
+    if not args.ours_only and not args.graph_only:
+        cases += [("Open3D multiway, as the tutorial writes it", lambda: o3d_multiway(clouds, voxel)),
+                  ("Open3D multiway, turntable prior, coarse ICP at 4 voxels",
+                   lambda: o3d_multiway(clouds, voxel, truth, 4.0))]
+    if not args.skip_fpfh and not args.ours_only and not args.graph_only:
         cases.append(("Open3D multiway, FPFH + RANSAC coarse step", lambda: o3d_multiway(clouds, voxel, fpfh=True)))
     print(f"{len(clouds)} clouds, {sum(len(c) for c in clouds):,} points; Open3D voxel {voxel * 1e3:.2f} mm\n")
     print("| method | CPU s | mean rotation error | max |")
@@ -132,7 +154,8 @@ def main() -> int:
     for name, fn in cases:
         secs, T = charged(fn)
         e = rotation_errors(T, truth)
-        print(f"| {name} | {secs:.2f} | {e.mean():.4f} deg | {e.max():.4f} deg |", flush=True)
+        print(f"| {name} | {secs:.2f} ({secs / len(clouds):.3f} per view) | {e.mean():.4f} deg | {e.max():.4f} deg |",
+              flush=True)
     print()
     for name, line in joint_lines.items():
         print(f"{name}: {line}")

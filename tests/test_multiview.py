@@ -168,9 +168,12 @@ def test_prior_chosen_pairs_register_to_ground_truth():
     scans = turntable_scans(n_views=12, noise=0.0002, resolution=(640, 480), rng=3)
     prior = perturb_poses(scans.T_world_view, max_angle=np.radians(1), max_translation=0.005 * scans.diag, rng=2)
     chosen = default_pairs(prior, True)
-    # 12 views 30 deg apart: each with its neighbours at 30 and 60 deg, 24 of the 66 pairs
+    # 12 views 30 deg apart: each with its neighbours at 30 and 60 deg, 24 of the 66 pairs; without a prior
+    # also 4 long links 90 deg apart (issue 21)
     assert len(chosen) == 24 and all(min(j - i, 12 - (j - i)) <= 2 for i, j in chosen)
-    assert default_pairs(prior, False) == all_pairs(prior) and len(all_pairs(prior)) == 66
+    unprimed = default_pairs(prior, False)
+    assert len(unprimed) == 28 and set(chosen) <= set(unprimed) and len(all_pairs(prior)) == 66
+    assert all(min(j - i, 12 - (j - i)) == 3 for i, j in set(unprimed) - set(chosen))
     assert nearest_in_rotation(2)(prior, True) == sorted({(min(k, (k + 1) % 12), max(k, (k + 1) % 12)) for k in range(12)})
     res = register_views(scans.clouds, init_T_world_view=prior, options=MultiViewOptions(turntable=True))
     assert {(e.i, e.j) for e in res.edges} <= set(chosen)

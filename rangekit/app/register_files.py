@@ -13,6 +13,7 @@ from rangekit.formats.clouds import load_cloud, save_cloud
 from rangekit.surface.cloud import PointCloud, bbox_diagonal, check_voxel, merge_clouds
 from rangekit.formats.poses import load_poses, save_poses
 from rangekit.registration.multiview import MultiViewOptions, MultiViewResult, register_views
+from rangekit.registration.pairs import all_pairs, nearest_and_long_links
 from rangekit.rig import table_frame, turntable_prior
 
 __all__ = ["parse_init", "RegisterReport", "register_files"]
@@ -63,8 +64,12 @@ class RegisterReport:
 
 def register_files(paths: Sequence[str | Path], out_dir: str | Path, *, init: str | None = None,
                    voxel: float | None = None, mesh: bool = True,
-                   progress: Callable[[str], None] | None = None) -> RegisterReport:
-    """Read the scans, register them (world = first scan's frame), write poses.json, merged.ply and mesh.ply."""
+                   progress: Callable[[str], None] | None = None, neighbours: int | None = None) -> RegisterReport:
+    """Read the scans, register them (world = first scan's frame), write poses.json, merged.ply and mesh.ply.
+
+    ``neighbours``: the view graph's k (each view with its k nearest in rotation plus a few long links,
+    and with no prior coarse alignment of its k most similar); 0 = every pair; None = register_views'
+    defaults (k = 4; with a prior from a file or --init turntable:..., every pair)."""
     say = progress or (lambda msg: None)
     paths = [Path(p) for p in paths]
     clouds = []
@@ -74,8 +79,12 @@ def register_files(paths: Sequence[str | Path], out_dir: str | Path, *, init: st
     prior = parse_init(init, len(paths), [str(p) for p in paths])
     if voxel is not None:  # the caller's option, checked against the scans before any work
         check_voxel(voxel, bbox_diagonal(clouds), what=f"--voxel-mm {voxel * 1e3:g}", error=UsageError)
-    res = register_views(clouds, init_T_world_view=prior, options=MultiViewOptions(voxel=voxel), progress=say,
-                         names=[p.name for p in paths])
+    if neighbours is not None and not (isinstance(neighbours, (int, np.integer)) and neighbours >= 0):
+        raise UsageError(f"--neighbours: expected an integer >= 0, found {neighbours!r}")
+    graph = ({} if neighbours is None else dict(pairs=all_pairs, coarse_neighbours=None) if neighbours == 0 else
+             dict(pairs=nearest_and_long_links(int(neighbours)), coarse_neighbours=int(neighbours)))
+    res = register_views(clouds, init_T_world_view=prior, options=MultiViewOptions(voxel=voxel, **graph),
+                         progress=say, names=[p.name for p in paths])
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     edges_of = {k: [e for e in res.edges if e.accepted and k in (e.i, e.j)] for k in range(len(paths))}

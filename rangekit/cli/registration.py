@@ -18,7 +18,8 @@ def cmd_register(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     check_output(args.out, folder=True)
     voxel = args.voxel_mm * 1e-3 if args.voxel_mm else None
-    rep = register_files(args.scans, args.out, init=args.init, voxel=voxel, mesh=not args.no_mesh, progress=say)
+    rep = register_files(args.scans, args.out, init=args.init, voxel=voxel, mesh=not args.no_mesh, progress=say,
+                         neighbours=args.neighbours)
     res = rep.result
     say("edges (view i - view j): ICP inlier RMSE, overlap, accepted, synchronisation residual")
     for e in res.edges:
@@ -73,10 +74,14 @@ def add_parsers(sub) -> None:
                                      "the first scan's frame; writes DIR/poses.json, DIR/merged.ply, DIR/mesh.ply.")
     reg.add_argument("scans", nargs="+", metavar="SCAN", help="scan files")
     reg.add_argument("--init", default="none",
-                     help="prior poses: none (coarse alignment of all pairs), a poses.json, or "
+                     help="prior poses: none (coarse alignment, see --neighbours), a poses.json, or "
                           "turntable:AX,AY,AZ:STEP_DEG[:PX,PY,PZ] (view i turned i*STEP degrees about the axis)")
     reg.add_argument("--voxel-mm", type=positive_float, default=None,
                      help="voxel for features and the first ICP round, mm (default: scene diagonal / 80)")
+    reg.add_argument("--neighbours", type=int_in(0, 1000), default=None, metavar="K",
+                     help="view graph: each view paired with its K nearest in rotation (+ 4 long links) and, "
+                          "with no prior, coarse-aligned with its K most similar (widened until connected); "
+                          "0 tries every pair (default: 4 with --init none, every pair with a prior)")
     reg.add_argument("--no-mesh", action="store_true", help="skip meshing")
     reg.add_argument("--out", required=True, help="output folder")
     reg.set_defaults(func=cmd_register)

@@ -26,7 +26,10 @@ from rangekit.surface.cloud import PointCloud, bbox_diagonal, check_voxel, estim
 from rangekit.registration.coarse import CoarseOptions, compute_features, coarse_align
 from rangekit.registration.icp import IcpOptions, icp
 from rangekit.registration.joint import JointResult, refine_jointly
-from rangekit.registration.pairs import PairChooser, all_pairs, default_pairs
+from rangekit.registration.overlap_estimate import overlapping_pairs
+from rangekit.registration.coarse_graph import descriptor_distances, view_descriptor, widen_until_settled
+from rangekit.registration.pairs import (PairChooser, PairsTried, all_pairs, chooser_label, nearest_and_long_links,
+                                         nearest_in_rotation)
 from rangekit.registration.stability import MIN_CONSTRAINT, HeldMotions, PoseConstraint
 from rangekit.registration.sync import SyncResult, synchronise
 from rangekit.threads import one_blas_thread
@@ -57,9 +60,11 @@ class MultiViewOptions:
                                          # same poses within 0.0001 deg, 1/10 of the points' 13 um noise)
     joint_samples: int = 20000           # points per view in the joint refinement (at most all fine points);
                                          # 20k: the 50k poses to 1e-3 deg on the 12-view scan (docs/benchmarks.md)
-    pairs: PairChooser | None = None     # the candidate pairs (rangekit.registration.pairs): None = the
-                                         # nearest views in rotation with a turntable prior (turntable=True),
-                                         # all pairs otherwise; only candidates that overlap become edges
+    pairs: PairChooser | None = None     # refinement candidates (rangekit.registration.pairs), None: the
+                                         # 4 nearest in rotation (+ long links and the most overlapping with
+                                         # no prior; all pairs with a non-turntable prior); see _register_views
+    coarse_neighbours: int | None = 4    # no prior: coarse alignment of each view with its k most similar
+                                         # (registration.coarse_graph), widened as needed; None = all pairs
     icp: IcpOptions = field(default_factory=lambda: IcpOptions(method="point_to_plane", kernel="huber",
                                                                max_iterations=60, tolerance=1e-6, max_samples=5000))
                                          # pairwise runs only start the joint refinement: 1 um and 5k
@@ -95,6 +100,7 @@ class MultiViewResult:
     edges: tuple[EdgeResult, ...]     # last round's pairs
     sync: SyncResult                  # last synchronisation (edge residuals, inliers)
     rmse: float                       # RMS point-to-plane residual of the final poses, metres; lower is better
+    pairs: PairsTried | None = None   # how many pairs each stage tried
 
     def __repr__(self) -> str:
         acc = sum(e.accepted for e in self.edges)
@@ -132,6 +138,7 @@ def _prepare(clouds: Sequence[PointCloud], voxel: float) -> list[PointCloud]:
     return out
 
 
+OVERLAP_NEIGHBOURS = 8   # no prior: each view's most overlapping views (estimated) added to the candidates
 OVERLAP_SAMPLES = 5000   # points of a view that estimate its overlap (every k-th point): a fraction within
                          # about 1% (binomial), for a threshold of 0.15
 
@@ -258,18 +265,31 @@ def _register_views(clouds, init_T_world_view, options, progress, names) -> Mult
     coarse_clouds = _prepare(clouds, voxel)
     fine_clouds = _prepare(clouds, fine)
 
+    n_coarse, coarse_label, seen = 0, "", set()
     if init_T_world_view is None:
-        say(f"coarse alignment of {n * (n - 1) // 2} pairs (voxel {voxel * 1e3:.2f} mm)")
         copt = CoarseOptions(voxel=voxel, rng=options.rng)
         _check_dense(coarse_clouds, range(n), voxel, names)
         feats = [compute_features(c, copt) for c in coarse_clouds]
-        edges = []
-        for i in range(n):
-            for j in range(i + 1, n):
-                r = coarse_align(feats[j], feats[i], copt)
-                edges.append(_edge(i, j, r, r.fitness, options, options.max_coarse_rmse * voxel, prior=False))
-        _check_connected(n, edges, names)
-        T = _sync(n, edges).T_world_view
+
+        def align(i: int, j: int) -> EdgeResult:
+            r = coarse_align(feats[j], feats[i], copt)
+            return _edge(i, j, r, r.fitness, options, options.max_coarse_rmse * voxel, prior=False)
+
+        def settle(edges: list) -> np.ndarray:
+            _check_connected(n, edges, names)
+            return _sync(n, edges).T_world_view
+
+        k = options.coarse_neighbours
+        if k is None:
+            edges, coarse_label = [align(i, j) for i, j in all_pairs(coarse_clouds)], "all pairs"
+            T = settle(edges)
+        else:
+            dist = descriptor_distances(np.stack([view_descriptor(f.fpfh) for f in feats]))
+            edges, T, k = widen_until_settled(dist, k, align, settle)
+            coarse_label = f"k={k} most similar by FPFH histogram"
+        n_coarse, seen = len(edges), {(e.i, e.j) for e in edges}
+        say(f"coarse alignment of {n_coarse} of {n * (n - 1) // 2} pairs ({coarse_label}, voxel "
+            f"{voxel * 1e3:.2f} mm): {sum(e.accepted for e in edges)} accepted")
     else:
         T = np.asarray(init_T_world_view, dtype=np.float64).copy()
         if T.shape != (n, 4, 4):
@@ -280,9 +300,20 @@ def _register_views(clouds, init_T_world_view, options, progress, names) -> Mult
     edges: list[EdgeResult] = []
     holds: dict = {}
     prior = init_T_world_view is not None
-    # On the turntable the neighbours in angle; any other prior may be rough (poses from another tool,
-    # degrees off), so every pair is tried.
-    choose = options.pairs or (default_pairs if options.turntable else all_pairs)
+    # On the turntable the neighbours in angle; with no prior the neighbours in rotation, long links and the
+    # most overlapping (O(n k)). Any other prior may be degrees off: every pair (options.pairs bounds it).
+    choose = options.pairs or (nearest_and_long_links() if init_T_world_view is None else
+                               nearest_in_rotation() if options.turntable else all_pairs)
+    n_candidates = n_refined = 0
+
+    estimate = options.pairs is None and not prior   # + the most overlapping, as a prior's all pairs would
+
+    def candidates_at(T: np.ndarray, level: list, v: float) -> list:
+        pairs = choose(T, prior)
+        if estimate:
+            pairs = sorted(set(pairs) | set(overlapping_pairs([apply_T(T[k], level[k].points) for k in range(n)],
+                                                              2 * v, OVERLAP_NEIGHBOURS, options.min_overlap)))
+        return pairs
     sync = None
     for rnd in range(options.rounds):
         level = coarse_clouds if rnd == 0 else fine_clouds
@@ -292,7 +323,10 @@ def _register_views(clouds, init_T_world_view, options, progress, names) -> Mult
         # final RMSE measures the overlap only and is comparable with the coarse stage's.
         icp_opt = replace(options.icp, max_distance=2.0 * v, voxel_sizes=(2.0 * v,), rng=options.rng + rnd)
         edges, holds = [], {}
-        for i, j in choose(T, prior):
+        candidates = candidates_at(T, level, v)
+        seen |= set(candidates)
+        n_candidates = len(candidates)
+        for i, j in candidates:
             T_i_j = invert_T(T[i]) @ T[j]
             ov = _mutual_overlap(level[i], level[j], trees[i], trees[j], T_i_j, 2 * v)
             if ov < options.min_overlap:
@@ -309,6 +343,7 @@ def _register_views(clouds, init_T_world_view, options, progress, names) -> Mult
             moved = np.degrees(rotation_angle(r.T_target_source[:3, :3] @ T_i_j[:3, :3].T))
             edges.append(_edge(i, j, r, ov, options, options.max_rmse * v, prior=prior,
                                note=f" (moved {moved:.1f} deg)" if moved > 5 else ""))
+        n_refined = len(edges)
         _check_connected(n, edges, names)
         sync = _sync(n, edges)
         T = sync.T_world_view
@@ -316,7 +351,7 @@ def _register_views(clouds, init_T_world_view, options, progress, names) -> Mult
         say(f"round {rnd + 1}: {len(acc)}/{len(edges)} overlapping pairs accepted, mean rmse "
             f"{np.mean([e.rmse for e in acc]) * 1e3:.3f} mm")
     acc = [e for e in edges if e.accepted]
-    rmse = float(np.mean([e.rmse for e in acc]))
+    rmse, n_joint = float(np.mean([e.rmse for e in acc])), 0
     if options.joint_iterations > 0:
         basis = None
         if options.turntable and prior:
@@ -329,17 +364,22 @@ def _register_views(clouds, init_T_world_view, options, progress, names) -> Mult
         # Pairs by overlap at the synchronised poses (not by which pairwise runs passed), so the same data
         # gives the same problem whatever the starting poses were.
         trees = [cKDTree(c.points) for c in fine_clouds]
-        pairs = [(i, j) for i, j in choose(T, prior)
+        joint_candidates = candidates_at(T, fine_clouds, fine)
+        seen |= set(joint_candidates)
+        pairs = [(i, j) for i, j in joint_candidates
                  if _mutual_overlap(fine_clouds[i], fine_clouds[j], trees[i], trees[j], invert_T(T[i]) @ T[j],
                                     2 * fine) >= options.min_overlap]
         joint = refine_jointly(fine_clouds, T, pairs, max_distance=2.5 * fine, iterations=options.joint_iterations,
                                samples=options.joint_samples, tolerance=options.joint_tolerance, rng=options.rng,
                                hold=_joint_holds(n, pairs, edges, holds, T), basis=basis)
         T = joint.T_world_view
-        rmse = joint.rmse
+        rmse, n_joint = joint.rmse, len(pairs)
         say(f"joint refinement of {n} views over {len(pairs)} pairs: rmse {joint.rmse * 1e3:.4f} mm, "
             f"{joint.n_iterations} iterations{'' if joint.converged else ' (not converged)'}")
-    return MultiViewResult(T, tuple(edges), sync, rmse)
+    label = chooser_label(choose) + (f" + {OVERLAP_NEIGHBOURS} most overlapping (estimated)" if estimate else "")
+    tried = PairsTried(n, len(seen), n_coarse, n_candidates, n_refined, n_joint, label, coarse_label)
+    say(tried.summary())
+    return MultiViewResult(T, tuple(edges), sync, rmse, tried)
 
 
 def overlap_rms(clouds: Sequence[PointCloud], T_world_view: np.ndarray, *, radius: float = 0.001) -> float:

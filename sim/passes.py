@@ -15,7 +15,8 @@ from rangekit.geometry import apply_T, axis_angle_to_R, compose, invert_T, make_
 from rangekit.rig import Rig
 from rangekit.sim.scene import Scene
 
-__all__ = ["TURN_OVER_YAW_RAD", "TURN_OVER_SHIFT_M", "turn_over_motion", "pass_motions", "pass_scene"]
+__all__ = ["TURN_OVER_YAW_RAD", "TURN_OVER_SHIFT_M", "turn_over_motion", "pass_motions", "pass_scene", "split_views",
+           "view_motions"]
 
 #: After the half-turn about the table's x axis, a turn about its z axis (radians) and a shift along the table
 #: (metres): the second pass's pose is not the first's mirrored about an obvious axis.
@@ -48,3 +49,21 @@ def pass_scene(scene: Scene, motion: np.ndarray) -> Scene:
     """The scene with its first object (the scanned one) moved by ``motion`` (4, 4, world); the table stays."""
     obj = scene.objects[0]
     return Scene((obj.with_pose(compose(np.asarray(motion, dtype=np.float64), obj.T_world_obj)),) + scene.objects[1:])
+
+
+def split_views(angles, pass_motions=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(angles (n,), passes (n,) int, motions (P, 4, 4))`` of the views: ``angles`` are turntable angles
+    (radians; one pass, motions the identity) or, with ``pass_motions``, ``(angle, pass)`` pairs."""
+    if pass_motions is None:
+        a = np.asarray(angles, dtype=np.float64).reshape(-1)
+        return a, np.zeros(len(a), np.int64), np.eye(4)[None]
+    pairs = np.asarray(angles, dtype=np.float64).reshape(-1, 2)
+    return pairs[:, 0].copy(), pairs[:, 1].astype(np.int64), np.asarray(pass_motions, dtype=np.float64)
+
+
+def view_motions(rig: Rig, angles, pass_motions=None) -> np.ndarray:
+    """(n, 4, 4) how each view saw the object moved from its pose at table angle 0 in the first pass:
+    the pass's turn-over, then the table's turn (``rig.T_world_rotated(angle) @ pass_motions[pass]``)."""
+    a, vp, F = split_views(angles, pass_motions)
+    return np.stack([(rig.T_world_rotated(float(x)) if rig.T_world_table is not None else np.eye(4)) @ F[p]
+                     for x, p in zip(a, vp)])

@@ -292,7 +292,9 @@ def session_evaluator(session: Session) -> Evaluator | None:
         return None
     from rangekit.sim.evaluate import truth_evaluator
 
-    return truth_evaluator(session.simulator_object, session.rig, light="laser" if session.is_laser else "projector")
+    motions = session.simulator.pass_motions    # the truth of a multi-pass scan: how the object was turned over
+    return truth_evaluator(session.simulator_object, session.rig, light="laser" if session.is_laser else "projector",
+                           **({"pass_motions": np.array(motions)} if motions is not None else {}))
 
 
 def process_scan(folder: str | Path, *, fusion: str = "poisson", report: bool = True,

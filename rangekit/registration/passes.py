@@ -129,13 +129,14 @@ def _align_pass(source: PointCloud, target: PointCloud, voxel: float, fine: floa
             r = coarse_align(coarse_s, coarse_t, CoarseOptions(voxel=voxel, rng=options.rng + seed))
         except RegistrationError:
             continue
-        ok = r.rmse < options.max_coarse_rmse * voxel
+        ok = r.rmse < options.max_coarse_rmse * voxel and r.fitness >= options.min_overlap
         if best is None or (ok, r.fitness) > (best[0], best[1].fitness):
             best = (ok, r)
     if best is None or not best[0]:
         found = "no fit" if best is None else f"ICP RMSE {best[1].rmse * 1e3:.3f} mm, fitness {best[1].fitness:.2f}"
         raise RegistrationError(f"pass {p + 1}: no alignment to pass 1 found without a prior (expected an ICP-verified "
-                                f"RMSE below {options.max_coarse_rmse * voxel * 1e3:.3f} mm, found {found}); the passes "
+                                f"RMSE below {options.max_coarse_rmse * voxel * 1e3:.3f} mm and a fitness of at least "
+                                f"{options.min_overlap:.2f}, found {found}); the passes "
                                 "may not overlap: turn the object less far over or scan more views")
     fine_s, fine_t = _prepare([source], fine)[0], _prepare([target], fine)[0]
     r = icp(fine_s, fine_t, init_T_target_source=best[1].T_target_source,

@@ -5,11 +5,11 @@ Within a pass the views are turntable rotations, registered from the pass's prio
 is known: the object was turned over by hand. So:
 
 1. each pass is registered on its own, world = its first view's frame;
-2. each later pass is aligned to the first with **no prior**: its views merged at their poses,
-   downsampled, FPFH + RANSAC (:func:`~rangekit.registration.coarse.coarse_align`, three seeds, the best
+2. each later pass is aligned to the first with **no prior**: its views (at the fine voxel, kept for step
+   3) merged at their poses and downsampled again, FPFH + RANSAC (:func:`~rangekit.registration.coarse.coarse_align`, three seeds, the best
    ICP-verified fit kept), then point-to-plane ICP on the merged clouds at the fine voxel;
 3. one joint refinement (:func:`~rangekit.registration.joint.refine_jointly`) of every view over the pairs
-   of :func:`pass_pairs`: each view's nearest neighbours in its own pass and the views of other passes
+   of :func:`pass_pairs`: each view's 2 nearest neighbours in its own pass and the 2 views of other passes
    that overlap it most at the poses found (an occupancy estimate, no ICP), so the pairs are linear in
    the views. The joint step is the plain 6-dof one: a pass is a turntable family about its own axis in
    the first view's frame, which the one-axis basis (:mod:`rangekit.registration.turntable`) cannot hold.
@@ -27,17 +27,22 @@ from scipy import sparse
 
 from rangekit.errors import RegistrationError
 from rangekit.geometry import apply_T, rotation_angle
-from rangekit.registration.coarse import CoarseOptions, coarse_align
+from rangekit.registration.coarse import CoarseOptions, coarse_align, compute_features
 from rangekit.registration.icp import IcpOptions, icp
 from rangekit.registration.joint import refine_jointly
 from rangekit.registration.multiview import EdgeResult, MultiViewOptions, MultiViewResult, register_views
-from rangekit.registration.pairs import PRIOR_NEIGHBOURS, nearest_in_rotation
+from rangekit.registration.pairs import nearest_in_rotation
 from rangekit.surface.cloud import PointCloud, bbox_diagonal, estimate_normals, merge_clouds, voxel_downsample
 
 __all__ = ["PassesResult", "register_passes", "pass_pairs", "CROSS_NEIGHBOURS"]
 
-#: Views of other passes paired with each view in the joint refinement (the most overlapping ones).
-CROSS_NEIGHBOURS = 3
+#: Views of other passes paired with each view in the joint refinement (the most overlapping ones), and views
+#: of its own pass (the nearest in rotation): the passes' own registrations already used 4 (pairs.py).
+CROSS_NEIGHBOURS = 2
+SAME_NEIGHBOURS = 2
+#: Points per view in the joint refinement over all passes: the passes' own joint refinements (20k) fixed
+#: their views already; this one mainly fixes the passes to each other, with every view in several pairs.
+JOINT_SAMPLES = 10000
 #: Seeds of the RANSAC between two passes' merged clouds; the best verified fit is kept.
 COARSE_SEEDS = 3
 
@@ -75,7 +80,7 @@ def _keys(points: np.ndarray, normals: np.ndarray | None, cell: float) -> np.nda
 
 
 def pass_pairs(clouds: Sequence[PointCloud], view_pass: Sequence[int], *, cell: float,
-               k_same: int = PRIOR_NEIGHBOURS, k_cross: int = CROSS_NEIGHBOURS,
+               k_same: int = SAME_NEIGHBOURS, k_cross: int = CROSS_NEIGHBOURS,
                min_overlap: float = 0.05) -> Callable[[np.ndarray, bool], list]:
     """A pair chooser (:mod:`rangekit.registration.pairs`) for a multi-pass scan: each view with its
     ``k_same`` nearest views in rotation of its own pass, and with the ``k_cross`` views of other passes
@@ -121,12 +126,14 @@ def _prepare(clouds: Sequence[PointCloud], voxel: float) -> list[PointCloud]:
 
 def _align_pass(source: PointCloud, target: PointCloud, voxel: float, fine: float, p: int,
                 options: MultiViewOptions) -> tuple[np.ndarray, EdgeResult]:
-    """``T_first_p`` (pass p's merged cloud into the first pass's) with no prior, and its edge record."""
-    coarse_s, coarse_t = _prepare([source], voxel)[0], _prepare([target], voxel)[0]
+    """``T_first_p`` (pass p's merged cloud into the first pass's; both merged from the views' clouds at
+    the fine voxel) with no prior, and its edge record."""
+    copt = CoarseOptions(voxel=voxel, rng=options.rng)
+    coarse_s, coarse_t = (compute_features(c, copt) for c in (source, target))   # features once for every seed
     best = None
     for seed in range(COARSE_SEEDS):
         try:
-            r = coarse_align(coarse_s, coarse_t, CoarseOptions(voxel=voxel, rng=options.rng + seed))
+            r = coarse_align(coarse_s, coarse_t, replace(copt, rng=options.rng + seed))
         except RegistrationError:
             continue
         ok = r.rmse < options.max_coarse_rmse * voxel and r.fitness >= options.min_overlap
@@ -138,8 +145,7 @@ def _align_pass(source: PointCloud, target: PointCloud, voxel: float, fine: floa
                                 f"RMSE below {options.max_coarse_rmse * voxel * 1e3:.3f} mm and a fitness of at least "
                                 f"{options.min_overlap:.2f}, found {found}); the passes "
                                 "may not overlap: turn the object less far over or scan more views")
-    fine_s, fine_t = _prepare([source], fine)[0], _prepare([target], fine)[0]
-    r = icp(fine_s, fine_t, init_T_target_source=best[1].T_target_source,
+    r = icp(source, target, init_T_target_source=best[1].T_target_source,
             options=IcpOptions(method="point_to_plane", kernel="huber", max_distance=2 * fine, max_iterations=60,
                                tolerance=1e-7, max_samples=20000))
     edge = EdgeResult(-1, -1, r.T_target_source, r.rmse, r.fitness, True,
@@ -179,7 +185,9 @@ def register_passes(clouds: Sequence[PointCloud], view_pass: Sequence[int], prio
     diag = bbox_diagonal(clouds)
     voxel = diag / 110.0 if options.voxel is None else options.voxel
     fine = voxel / 3.0 if options.fine_voxel is None else options.fine_voxel
-    merged = [merge_clouds([clouds[k] for k in g], r.T_world_view) for g, r in zip(groups, results)]
+    fine_clouds = _prepare(clouds, fine)
+    merged = [_prepare([merge_clouds([fine_clouds[k] for k in g], r.T_world_view)], fine)[0]
+              for g, r in zip(groups, results)]
     T_first = [np.eye(4)]
     for p in range(1, n_passes):
         T, edge = _align_pass(merged[p], merged[0], voxel, fine, p, options)
@@ -190,11 +198,11 @@ def register_passes(clouds: Sequence[PointCloud], view_pass: Sequence[int], prio
     T = np.zeros((len(clouds), 4, 4))
     for g, r, Tp in zip(groups, results, T_first):
         T[g] = np.einsum("ij,njk->nik", Tp, r.T_world_view)
-    fine_clouds = _prepare(clouds, fine)
-    pairs = pass_pairs(fine_clouds, vp, cell=4 * fine)(T, True)
+    pairs = pass_pairs(fine_clouds, vp, cell=4 * fine, k_same=SAME_NEIGHBOURS)(T, True)
     if options.joint_iterations > 0:
         joint = refine_jointly(fine_clouds, T, pairs, max_distance=2.5 * fine, iterations=options.joint_iterations,
-                               samples=options.joint_samples, tolerance=options.joint_tolerance, rng=options.rng)
+                               samples=min(JOINT_SAMPLES, options.joint_samples), tolerance=options.joint_tolerance,
+                               rng=options.rng)
         T, rmse = joint.T_world_view, joint.rmse
         n_cross = sum(vp[i] != vp[j] for i, j in pairs)
         say(f"joint refinement of {len(clouds)} views over {len(pairs)} pairs ({n_cross} across passes): rmse "

@@ -5,9 +5,10 @@ Within a pass the views are turntable rotations, registered from the pass's prio
 is known: the object was turned over by hand. So:
 
 1. each pass is registered on its own, world = its first view's frame;
-2. each later pass is aligned to the first with **no prior**: its views (at the fine voxel, kept for step
-   3) merged at their poses and downsampled again, FPFH + RANSAC (:func:`~rangekit.registration.coarse.coarse_align`, three seeds, the best
-   ICP-verified fit kept), then point-to-plane ICP on the merged clouds at the fine voxel;
+2. each later pass is aligned to the first with **no prior**: its views (at the fine voxel, kept for
+   step 3) merged at their poses and downsampled again, FPFH + RANSAC
+   (:func:`~rangekit.registration.coarse.coarse_align`; up to three seeds, until one ICP-verified fit
+   passes the RMSE and fitness gates), then point-to-plane ICP on the merged clouds at the fine voxel;
 3. one joint refinement (:func:`~rangekit.registration.joint.refine_jointly`) of every view over the pairs
    of :func:`pass_pairs`: each view's 2 nearest neighbours in its own pass and the 2 views of other passes
    that overlap it most at the poses found (an occupancy estimate, no ICP), so the pairs are linear in
@@ -43,7 +44,7 @@ SAME_NEIGHBOURS = 2
 #: Points per view in the joint refinement over all passes: the passes' own joint refinements (20k) fixed
 #: their views already; this one mainly fixes the passes to each other, with every view in several pairs.
 JOINT_SAMPLES = 10000
-#: Seeds of the RANSAC between two passes' merged clouds; the best verified fit is kept.
+#: Seeds of the RANSAC between two passes' merged clouds, tried in turn until one fit passes the gates.
 COARSE_SEEDS = 3
 
 
@@ -139,6 +140,8 @@ def _align_pass(source: PointCloud, target: PointCloud, voxel: float, fine: floa
         ok = r.rmse < options.max_coarse_rmse * voxel and r.fitness >= options.min_overlap
         if best is None or (ok, r.fitness) > (best[0], best[1].fitness):
             best = (ok, r)
+        if ok:      # verified: the later seeds only run when this one failed
+            break
     if best is None or not best[0]:
         found = "no fit" if best is None else f"ICP RMSE {best[1].rmse * 1e3:.3f} mm, fitness {best[1].fitness:.2f}"
         raise RegistrationError(f"pass {p + 1}: no alignment to pass 1 found without a prior (expected an ICP-verified "

@@ -160,11 +160,13 @@ class SimRig:
         a rig file field (a real rig's is measured, and written as ``capture.pattern_delay_s``).
     clock : the clock the devices share (:mod:`rangekit.sim.clock`); default a virtual :class:`SimClock`.
         ``sim.sleep`` waits on it (acquisition and calibration wait through ``devices.sleep``).
+    pass_motions : (passes, 4, 4) a multi-pass scan's motion of the object in each pass
+        (:func:`rangekit.sim.passes.pass_motions`); :meth:`start_pass` turns it over between passes.
     """
 
     def __init__(self, scene: Scene, rig: Rig | None = None, *, imaging: ImagingModel | None = None,
                  seed: int = 0, light: str = "projector", laser_ambient_scale: int = 4, latency_s: float = 0.0,
-                 clock=None) -> None:
+                 clock=None, pass_motions=None) -> None:
         if not isinstance(scene, Scene):
             raise SceneError(f"SimRig: scene must be a rangekit.sim.Scene, found {type(scene).__name__}")
         self._scene = scene
@@ -195,6 +197,22 @@ class SimRig:
         self._cache_key = None
         self._cache = None
         self._counts: dict[tuple[int, int, int], int] = {}
+        self.pass_motions = None if pass_motions is None else np.asarray(pass_motions, dtype=np.float64)
+        self._pass, self._pass0_scene = 0, scene
+
+    def start_pass(self, p: int) -> None:
+        """Put the object in its pose of pass ``p`` (acquisition calls it before each view): the first scene
+        moved by ``pass_motions[p]``, set (:meth:`set_scene`) only when the pass changes, so a scan resumed
+        in a later pass records the same bytes as one that ran through."""
+        if p == self._pass:
+            return
+        if self.pass_motions is None or not 0 <= p < len(self.pass_motions):
+            raise SceneError(f"SimRig.start_pass: pass {p} has no motion (pass_motions has "
+                             f"{0 if self.pass_motions is None else len(self.pass_motions)})")
+        from rangekit.sim.passes import pass_scene
+
+        self.set_scene(pass_scene(self._pass0_scene, self.pass_motions[p]))
+        self._pass = p
 
     # ---------------------------------------------------------------- scene
     @property

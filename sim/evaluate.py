@@ -32,6 +32,7 @@ from rangekit.surface.raycast import mesh_scene, raycasting_scene
 from rangekit.rig import Rig
 from rangekit.sim.evaluate_laser import in_image as _inside, laser_visible_samples
 from rangekit.sim.raycast import _cast
+from rangekit.sim.passes import pass_scene, split_views, view_motions
 from rangekit.sim.scene import Scene, default_scene
 
 __all__ = ["Accuracy", "TruthEvaluation", "TruthSamples", "sample_surface", "visible_samples", "truth_samples",
@@ -58,6 +59,7 @@ class Accuracy:
     cloud_rms: float | None = None   # the scan's merged cloud -> true surface, when given
     cloud_p95: float | None = None
     n_cloud: int | None = None
+    completeness_whole: float | None = None   # fraction of the object's WHOLE surface within ``tolerance``
 
     def to_dict(self) -> dict:
         return {k: (float(v) if isinstance(v, (float, np.floating)) else v) for k, v in self.__dict__.items()}
@@ -65,7 +67,9 @@ class Accuracy:
     def __str__(self) -> str:
         return (f"RMS {self.rms * 1e3:.3f} mm ({self.rms / self.diagonal:.3%} of the {self.diagonal * 1e3:.0f} mm "
                 f"diagonal), 95th percentile {self.p95 * 1e3:.3f} mm, max {self.max * 1e3:.3f} mm; completeness "
-                f"{self.completeness:.1%} of the visible surface within {self.tolerance * 1e3:g} mm "
+                f"{self.completeness:.1%} of the visible surface within {self.tolerance * 1e3:g} mm"
+                + (f", {self.completeness_whole:.1%} of the whole surface " if self.completeness_whole is not None
+                   else " ") +
                 f"({self.visible_fraction:.0%} of the object is visible); {self.unobserved_area:.0%} of the mesh "
                 f"fills unseen parts (RMS {self.unobserved_rms * 1e3:.2f} mm there; whole mesh "
                 f"{self.rms_all * 1e3:.3f} mm)")
@@ -175,19 +179,29 @@ class TruthSamples:
 
 
 def truth_samples(scene: Scene, rig: Rig, angles, *, table_margin: float = 0.002, max_incidence_deg: float = 80.0,
-                  n_samples: int = 200_000, seed: int = 0, light: str = "projector") -> TruthSamples:
-    """The true surface's samples and their visibility for :func:`mesh_accuracy` (keywords as there)."""
-    angles = np.asarray(angles, dtype=np.float64)
+                  n_samples: int = 200_000, seed: int = 0, light: str = "projector",
+                  pass_motions=None) -> TruthSamples:
+    """The true surface's samples and their visibility for :func:`mesh_accuracy` (keywords as there).
+    A multi-pass scan (``pass_motions`` (P, 4, 4), :mod:`rangekit.sim.passes`; ``angles`` then
+    ``(angle, pass)`` pairs): a sample is seen when some pass's views see it with the object turned over
+    as in that pass, and above the table margin there."""
+    a, vp, F = split_views(angles, pass_motions)
     obj = scene.objects[0]
-    M0 = rig.T_world_rotated(float(angles[0])) if rig.T_world_table is not None else np.eye(4)
+    M0 = view_motions(rig, angles, pass_motions)[0]
     truth = TriangleMesh(obj.world_vertices(), obj.triangles)
     T_table_world = invert_T(rig.T_world_table) if rig.T_world_table is not None else None
 
     def observed(P: np.ndarray, face: np.ndarray) -> np.ndarray:
-        seen = visible_samples(truth, scene, rig, angles, P, face,
-                               min_cos=float(np.cos(np.radians(max_incidence_deg))), light=light)
-        if T_table_world is not None:
-            seen &= apply_T(T_table_world, P)[:, 2] > table_margin
+        seen = np.zeros(len(P), dtype=bool)
+        for p in np.unique(vp):
+            one = p == 0 and _identity(F[p])
+            truth_p = truth if one else TriangleMesh(apply_T(F[p], truth.vertices), truth.triangles)
+            P_p = P if one else apply_T(F[p], P)
+            s = visible_samples(truth_p, scene if one else pass_scene(scene, F[p]), rig, a[vp == p], P_p, face,
+                                min_cos=float(np.cos(np.radians(max_incidence_deg))), light=light)
+            if T_table_world is not None:
+                s &= apply_T(T_table_world, P_p)[:, 2] > table_margin
+            seen |= s
         return seen
 
     rng = np.random.default_rng(seed)
@@ -227,7 +241,7 @@ def mesh_accuracy(mesh: TriangleMesh, scene: Scene, rig: Rig, angles, *, toleran
     seen = truth.seen
     if not seen.any() or not on_seen.any():
         raise InputError("mesh_accuracy: no view sees the object")
-    d_truth, _, _ = _closest_on(mesh0, truth.samples[seen])
+    d_truth, _, _ = _closest_on(mesh0, truth.samples)     # every sample: the whole surface's completeness
     d = d_mesh[on_seen]
     diag = float(np.linalg.norm(np.ptp(truth.truth.vertices, axis=0)))
     d_fill = d_mesh[~on_seen]
@@ -238,14 +252,15 @@ def mesh_accuracy(mesh: TriangleMesh, scene: Scene, rig: Rig, angles, *, toleran
         cloud_figures = {"cloud_rms": float(np.sqrt(np.mean(d_cloud ** 2))),
                          "cloud_p95": float(np.percentile(d_cloud, 95)), "n_cloud": int(len(d_cloud))}
     return Accuracy(rms=float(np.sqrt(np.mean(d ** 2))), p95=float(np.percentile(d, 95)), max=float(d.max()),
-                    completeness=float(np.mean(d_truth <= tolerance)), tolerance=tolerance, diagonal=diag,
+                    completeness=float(np.mean(d_truth[seen] <= tolerance)), tolerance=tolerance, diagonal=diag,
                     visible_fraction=float(seen.mean()), unobserved_area=float(np.mean(~on_seen)),
                     unobserved_rms=float(np.sqrt(np.mean(d_fill ** 2))) if d_fill.size else 0.0,
                     rms_all=float(np.sqrt(np.mean(d_mesh ** 2))), max_incidence_deg=float(max_incidence_deg),
-                    n_mesh_samples=int(on_seen.sum()), n_truth_samples=int(seen.sum()), **cloud_figures)
+                    n_mesh_samples=int(on_seen.sum()), n_truth_samples=int(seen.sum()),
+                    completeness_whole=float(np.mean(d_truth <= tolerance)), **cloud_figures)
 
 
-_TRUTH_OPTIONS = ("table_margin", "max_incidence_deg", "n_samples", "seed", "light")
+_TRUTH_OPTIONS = ("table_margin", "max_incidence_deg", "n_samples", "seed", "light", "pass_motions")
 
 
 @dataclass(frozen=True, eq=False)
@@ -280,7 +295,7 @@ class TruthEvaluator:
         self._key, self._truth, self._views, self._view_errors = None, None, None, None
 
     def prepare(self, angles: Sequence[float], views: dict | None = None) -> None:
-        key = tuple(float(a) for a in angles)
+        key = tuple(np.asarray(angles, dtype=np.float64).reshape(-1).tolist())
         if self._key != key:
             self._truth = truth_samples(self.scene, self.rig, angles,
                                         **{k: v for k, v in self.options.items() if k in _TRUTH_OPTIONS})
@@ -288,12 +303,14 @@ class TruthEvaluator:
         if views is not None and views is not self._views:
             from rangekit.sim.view_errors import view_errors
 
-            self._views, self._view_errors = views, view_errors(self.scene, self.rig, angles, **views)
+            self._views, self._view_errors = views, view_errors(self.scene, self.rig, angles, **views,
+                                                                pass_motions=self.options.get("pass_motions"))
 
     def __call__(self, mesh: TriangleMesh, angles: Sequence[float], cloud: np.ndarray | None = None,
                  views: dict | None = None) -> TruthEvaluation:
         self.prepare(angles, views)
-        accuracy = mesh_accuracy(mesh, self.scene, self.rig, angles, cloud=cloud, truth=self._truth, **self.options)
+        options = {k: v for k, v in self.options.items() if k != "pass_motions"}
+        accuracy = mesh_accuracy(mesh, self.scene, self.rig, angles, cloud=cloud, truth=self._truth, **options)
         ob, M0 = self.scene.objects[0], self._truth.M0
         # At the identity, the truth's own mesh object: its scene (built for the accuracy) serves the report.
         truth = self._truth.truth if _identity(M0) else TriangleMesh(apply_T(M0, ob.world_vertices()), ob.triangles)

@@ -26,9 +26,10 @@ from scipy.ndimage import binary_dilation, maximum_filter, minimum_filter
 from rangekit.camera import PinholeCamera, world_pixel_rays
 from rangekit.geometry import apply_T, invert_T, rotation_angle
 from rangekit.memory import release_free_memory
-from rangekit.rig import Rig, turntable_prior
+from rangekit.rig import Rig
 from rangekit.surface.mesh import TriangleMesh, distance_to_surface
 from rangekit.sim.raycast import cast_view
+from rangekit.sim.passes import pass_scene, split_views, view_motions
 from rangekit.sim.scene import Scene
 
 __all__ = ["view_errors", "depth_edges"]
@@ -110,24 +111,31 @@ def _stats(d: np.ndarray) -> dict:
 
 
 def view_errors(scene: Scene, rig: Rig, angles: Sequence[float], clouds: Sequence, T_world_view: np.ndarray,
-                proj_cols: Sequence[np.ndarray] | None = None, names: Sequence[str] | None = None) -> list[dict]:
+                proj_cols: Sequence[np.ndarray] | None = None, names: Sequence[str] | None = None,
+                pass_motions=None) -> list[dict]:
     """One dict per view (see the module docstring): ``decoding`` (px), ``cloud`` (mm, with ``inside`` and
     ``edge`` parts and ``edge_share``), ``registration`` (deg, mm). ``clouds``: each view's PointCloud in
     its own frame; ``proj_cols``: each view's decoded (H, W) projector column (NaN where undecoded), or None
-    to skip the decoding figure; ``scene``: the simulated scene (object first) at table angle 0."""
+    to skip the decoding figure; ``scene``: the simulated scene (object first) at table angle 0. A multi-pass
+    scan: ``pass_motions`` (P, 4, 4) and ``angles`` as ``(angle, pass)`` pairs (:mod:`rangekit.sim.passes`);
+    the true pose of each view then includes its pass's turn-over."""
     obj = scene.objects[0]
-    T_true = turntable_prior(rig.T_world_table, angles)
+    motions = view_motions(rig, angles, pass_motions)
+    angles, passes, F = split_views(angles, pass_motions)
+    T_true = np.stack([motions[0] @ invert_T(Mk) for Mk in motions])
+    scenes = {p: scene if p == 0 else pass_scene(scene, F[p]) for p in np.unique(passes).tolist()}
     camera = rig.camera
     centre = obj.world_vertices().mean(axis=0)
     out = []
     for k, (angle, cloud) in enumerate(zip(angles, clouds)):
-        M = rig.T_world_rotated(float(angle))
+        M = motions[k]
         truth = TriangleMesh(apply_T(M, obj.world_vertices()), obj.triangles)
         P = cloud.points
         d = distance_to_surface(P, truth) if len(P) else np.zeros(0)
         uv = np.rint(camera.project(P)).astype(np.int64) if len(P) else np.zeros((0, 2), np.int64)
         box = _box(uv, camera, _MARGIN)
-        geometry, edges = _truth_in_box(scene.world_mesh(M), camera, rig.projector, box)
+        geometry, edges = _truth_in_box(scenes[int(passes[k])].world_mesh(rig.T_world_rotated(float(angle))), camera,
+                                        rig.projector, box)
         r0, c0 = (box[0].start, box[1].start) if box is not None else (0, 0)
         H, W = edges.shape
         u, v = uv[:, 0] - c0, uv[:, 1] - r0

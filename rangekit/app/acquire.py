@@ -50,7 +50,7 @@ def acquire(devices: RigDevices, rig: Rig, spec: PatternSpec, out_dir: str | Pat
             resume: bool = False, capture: CaptureSettings | None = None,
             simulator: SimulatorSettings | None = None, hardware: dict | None = None,
             files: dict[str, bytes] | None = None, progress: Callable[[str], None] | None = None,
-            allow_auto_exposure: bool = False) -> Session:
+            allow_auto_exposure: bool = False, turn_over: Callable[[int], None] | None = None) -> Session:
     """Acquire (or resume) a session.
 
     Parameters
@@ -59,7 +59,7 @@ def acquire(devices: RigDevices, rig: Rig, spec: PatternSpec, out_dir: str | Pat
     rig : the rig file written with the session (calibration).
     spec : the pattern set projected at every view.
     out_dir : session folder. A folder that already holds a session is refused unless ``resume``.
-    plan : turntable angles.
+    plan : turntable angles and passes.
     resume : continue the session in ``out_dir``; its plan and pattern must equal these. The session's
         own capture settings, simulator and hardware records are kept.
     capture : bit depth and waits; default :meth:`CaptureSettings.from_rig` (waits only on hardware).
@@ -72,6 +72,11 @@ def acquire(devices: RigDevices, rig: Rig, spec: PatternSpec, out_dir: str | Pat
     allow_auto_exposure : scan although the rig's ``capture.camera.exposure_us`` is "auto" (``rangekit scan
         --allow-auto-exposure``); otherwise that is refused before any frame. The rig's camera controls
         are applied (``camera.set_controls``, where the camera has it) before the first frame.
+    turn_over : a multi-pass plan (``plan.passes`` > 1): ``turn_over(p)`` is called before the first view of
+        pass ``p`` (p >= 1) when no view of that pass is done yet, once every earlier view is on disk: on
+        hardware it asks the user to turn the object over (:func:`rangekit.app.passes.turn_over_prompt`);
+        an error it raises stops the scan there, resumable. Devices with ``start_pass(p)`` (the simulator)
+        are told each view's pass before it is taken (they turn the object over themselves).
 
     Returns
     -------
@@ -116,7 +121,7 @@ def acquire(devices: RigDevices, rig: Rig, spec: PatternSpec, out_dir: str | Pat
         if set_controls is not None:
             set_controls(controls)
         return _acquire(devices, rig, spec, out, plan, resume, capture, simulator, hardware, files or {}, progress,
-                        controls)
+                        controls, turn_over)
 
 
 def _resume_hint(out: Path, n_done: int) -> str:
@@ -141,14 +146,16 @@ def _new_session(out: Path, plan, spec, rig, capture, simulator, hardware, files
 
 
 def _acquire(devices, rig, spec, out: Path, plan, resume, capture, simulator, hardware, files,
-             progress, controls) -> Session:
+             progress, controls, turn_over=None) -> Session:
     angles = plan.angles()
     if resume:
         session = Session.load(out)
         old = session.plan.angles()
-        if session.pattern != spec or old.shape != angles.shape or not np.allclose(old, angles):
+        if (session.pattern != spec or old.shape != angles.shape or not np.allclose(old, angles)
+                or session.plan.passes != plan.passes):
             raise ConfigError(f"{out}: the session was taken with another plan or pattern "
-                              f"({len(old)} views, pattern {session.pattern.method!r}); "
+                              f"({len(old)} views in {session.plan.passes} pass(es), pattern "
+                              f"{session.pattern.method!r}); "
                               "resume it with the same settings")
         unverified = verify_views(session)
         if unverified:
@@ -168,18 +175,20 @@ def _acquire(devices, rig, spec, out: Path, plan, resume, capture, simulator, ha
     names, files = spec.frame_names, spec.frame_files
     try:
         _views(devices, light, rig, spec, out, plan, angles, session, done, names, files, settle_s, pattern_settle_s,
-               progress, [(e, None if e is None else replace(controls, exposure_us=float(e))) for e in exposures])
+               progress, [(e, None if e is None else replace(controls, exposure_us=float(e))) for e in exposures],
+               turn_over)
     finally:
         light.close()
     return Session.load(out)
 
 
 def _views(devices, light, rig, spec, out, plan, angles, session, done, names, files, settle_s, pattern_settle_s,
-           progress, exposures) -> None:
+           progress, exposures, turn_over=None) -> None:
     """Each view not done: turn, then for each exposure (``(us, CameraControls)``; ``(None, None)``: the
     rig's one exposure) every frame, into the view folder or its exposure sub-folder ``e<us>/``. Frames are
     taken here in order and written behind by :class:`FrameWriter` (a simulated one rendered there too);
-    a view is recorded done only once all its frames are on disk."""
+    a view is recorded done only once all its frames are on disk. Before the first view of a pass none of
+    whose views is done, every earlier view is finished and ``turn_over(pass)`` is called (hardware)."""
     writer, current, state = FrameWriter(), [-1], {"session": session}
     if progress is not None:        # views are reported done from the writer's thread
         lock, report = threading.Lock(), progress
@@ -187,9 +196,20 @@ def _views(devices, light, rig, spec, out, plan, angles, session, done, names, f
         def progress(*args, **kwargs):
             with lock:
                 report(*args, **kwargs)
+    passes, start_pass, begun = plan.view_passes(), getattr(devices, "start_pass", None), set()
     try:
         for k, angle in enumerate(angles):
             if not done[k]:
+                p = int(passes[k])
+                if (p > 0 and turn_over is not None and p not in begun
+                        and not any(done[i] for i in np.flatnonzero(passes == p))):
+                    writer.close()      # every earlier view on disk before the object is touched
+                    call_progress(progress, f"pass {p} of {plan.passes} done; the object is to be turned over")
+                    turn_over(p)
+                    writer = FrameWriter()
+                begun.add(p)
+                if start_pass is not None:
+                    start_pass(p)
                 current[0] = k
                 _view(devices, light, rig, spec, out, plan, k, angle, state, done, names, files, settle_s,
                       pattern_settle_s, progress, exposures, writer)

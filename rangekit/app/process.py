@@ -154,14 +154,21 @@ def _process(out: Path, fusion: str, method: str, table_margin: float, evaluate:
             maps = None
         release_free_memory()   # the image stacks and decoding temporaries (rangekit.memory)
 
+    view_passes = [v.scan_pass for v in views] if session.plan.passes > 1 else None
     with timer.stage("register"):
-        prior = None if rig.T_world_table is None else turntable_prior(rig.T_world_table, [v.angle for v in views])
-        # On the rig's turntable the views are rotations about one axis: the joint refinement keeps them so.
-        res = register_views(clouds, init_T_world_view=prior, progress=progress,
-                             options=MultiViewOptions(turntable=prior is not None))
         names = [v.folder.name for v in views]
+        if view_passes is not None:    # each pass from its turntable prior, the passes to each other without one
+            from rangekit.app.passes import register_session_passes
+
+            res = register_session_passes(clouds, views, rig, progress=progress)
+        else:
+            prior = None if rig.T_world_table is None else turntable_prior(rig.T_world_table, [v.angle for v in views])
+            # On the rig's turntable the views are rotations about one axis: the joint refinement keeps them so.
+            res = register_views(clouds, init_T_world_view=prior, progress=progress,
+                                 options=MultiViewOptions(turntable=prior is not None))
         save_poses(out / "poses.json", names, res.T_world_view,
-                   world=f"frame of {views[0].folder.name} (the rig's world at its turntable angle)")
+                   world=f"frame of {views[0].folder.name} (the rig's world at its turntable angle)",
+                   extra=None if view_passes is None else [{"pass": p} for p in view_passes])
         edges, k_acc = [], 0
         for e in res.edges:
             row = {"i": e.i, "j": e.j, "rmse_mm": e.rmse * 1e3, "overlap": e.overlap, "accepted": e.accepted,
@@ -173,7 +180,8 @@ def _process(out: Path, fusion: str, method: str, table_margin: float, evaluate:
             edges.append(row)
         release_free_memory()   # the registration's k-d trees and samples
 
-    angles = [v.angle for v in views]
+    # The evaluator's key of each view: its turntable angle, with its pass in a multi-pass scan.
+    angles = [v.angle for v in views] if view_passes is None else [(v.angle, v.scan_pass) for v in views]
     views_info = {"clouds": clouds, "T_world_view": res.T_world_view, "proj_cols": proj_cols, "names": names}
     with timer.stage("fuse"):
         merged = merge_clouds(clouds, res.T_world_view)
@@ -216,7 +224,8 @@ def _process(out: Path, fusion: str, method: str, table_margin: float, evaluate:
 
     # Stage times are wall seconds; "evaluate" includes the part done beside the fusion (inside "fuse").
     result = ProcessResult(out, names, res.T_world_view, [len(c) for c in clouds], edges, float(res.rmse),
-                           mesh_info, timer.seconds, accuracy, watertight_mesh=watertight_info, view_errors=view_errors)
+                           mesh_info, timer.seconds, accuracy, watertight_mesh=watertight_info, view_errors=view_errors,
+                           view_passes=view_passes)
     if report:
         with timer.stage("report"):
             from rangekit.app.report import write_report

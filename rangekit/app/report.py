@@ -120,6 +120,9 @@ def write_report(folder: str | Path, result: "ProcessResult", *, clouds: Sequenc
             for (az, el), name in list(zip(sides, side_names))[:2]]
     figs.append(_img(view_graph_svg(n, result.edges), "view graph"))
     sections += ["<h2>Registration</h2>", f"<div class='row'>{''.join(figs)}</div>"]
+    from rangekit.app.report_passes import passes_section
+
+    sections += passes_section(result.view_passes, clouds, merged, frame_pts, up, size)
     sections += view_errors_section(result.view_errors)
     from rangekit.app.report_quality import quality_section, sigma_scale
     from rangekit.geometry import apply_T

@@ -37,13 +37,14 @@ class ScanSetup:
     devices: object                     # the rangekit.devices.Rig protocol: camera, projector, turntable
     rig: Rig
     spec: PatternSpec | LaserSequence   # coded light: the patterns; laser: off + one frame per laser
-    n_views: int                        # turntable positions over a full turn
+    n_views: int                        # turntable positions in all (over a full turn in each pass)
     resume: bool
     n_done: int                         # views already done (resume)
     capture: CaptureSettings | None     # None on resume: the session's own
     simulator: SimulatorSettings | None
     hardware: dict | None
     files: dict = field(default_factory=dict)   # files a new session keeps: relative name -> bytes
+    passes: int = 1                     # turntable passes, the object turned over between them
 
     def close(self) -> None:
         """Close the hardware devices (the simulator has nothing to close)."""
@@ -55,24 +56,28 @@ class ScanSetup:
 #: turntable steps, placed by the turntable angle).
 SCAN_METHODS = ("coded", "laser")
 #: The options of a new scan when the command line does not give them.
-SCAN_DEFAULTS = {"method": "coded", "rig": "sim", "obj": "lumpy", "n_views": 12, "patterns": "hybrid", "seed": 0}
+SCAN_DEFAULTS = {"method": "coded", "rig": "sim", "obj": "lumpy", "n_views": 12, "patterns": "hybrid", "seed": 0,
+                 "passes": 1}
 #: Turntable steps of a laser scan over a full turn (0.9 degrees each).
 LASER_STEPS = 400
 _OPTION = {"method": "--method", "rig": "--rig", "obj": "--object", "n_views": "--views", "patterns": "--patterns",
-           "seed": "--seed"}
+           "seed": "--seed", "passes": "--passes"}
 
 
 def prepare_scan(*, out: str | None = None, resume: str | None = None, rig: str | None = None,
                  obj: str | None = None, n_views: int | None = None, patterns: str | None = None,
                  seed: int | None = None, fusion: str = "poisson", method: str | None = None,
-                 up: tuple[float, float, float] | None = None, progress: Callable | None = None) -> ScanSetup:
+                 up: tuple[float, float, float] | None = None, progress: Callable | None = None,
+                 passes: int | None = None) -> ScanSetup:
     """Check the folder, the rig (file or ``"sim"``), the object and the options before anything moves,
     then open the devices. ``resume`` continues the session in that folder with its own settings; an
     option given (not None) must then equal the session's. Options left None take
     :data:`SCAN_DEFAULTS` in a new scan. ``method`` "laser" scans with the rig's line lasers at
     ``n_views`` turntable steps (default :data:`LASER_STEPS`); ``patterns`` is then not used. ``up``: the
     direction of a mesh file's object that stands up on the turntable (``(0, 1, 0)`` for Stanford meshes);
-    the session keeps the object turned upright.
+    the session keeps the object turned upright. ``passes`` (coded light): that many passes of ``n_views``
+    views each, the object turned over between them (on the simulator by a known motion,
+    :mod:`rangekit.sim.passes`; on hardware by the user, :func:`rangekit.app.passes.turn_over_prompt`).
 
     Raises
     ------
@@ -90,7 +95,10 @@ def prepare_scan(*, out: str | None = None, resume: str | None = None, rig: str 
         raise UsageError(f"--method must be one of {', '.join(SCAN_METHODS)}, found {method!r}")
     if method == "laser" and patterns is not None:
         raise UsageError("--patterns: a laser scan projects no patterns; leave --patterns out with --method laser")
-    given = {"method": method, "rig": rig, "obj": obj, "n_views": n_views, "patterns": patterns, "seed": seed}
+    if method == "laser" and passes not in (None, 1):
+        raise UsageError(f"--passes: a laser scan takes one pass, found {passes}; leave --passes out with --method laser")
+    given = {"method": method, "rig": rig, "obj": obj, "n_views": n_views, "patterns": patterns, "seed": seed,
+             "passes": passes}
     session, files = None, {}
     if resume and up is not None:
         raise UsageError("--up: a resumed scan keeps its session's object as it stands; leave --up out")
@@ -98,12 +106,13 @@ def prepare_scan(*, out: str | None = None, resume: str | None = None, rig: str 
         session = Session.load(resume)
         _check_resume_options(session, given)
         rig_file, the_rig, spec = f"{resume}/rig.json", session.rig, session.pattern
-        n_views, hardware = len(session.views), session.hardware is not None
+        n_views, hardware, passes = len(session.views), session.hardware is not None, session.plan.passes
         method = "laser" if session.is_laser else "coded"
     else:
         if method == "laser" and n_views is None:
             given["n_views"] = LASER_STEPS
-        method, rig, obj, n_views, patterns, seed = (SCAN_DEFAULTS[k] if v is None else v for k, v in given.items())
+        method, rig, obj, n_views, patterns, seed, passes = (SCAN_DEFAULTS[k] if v is None else v
+                                                             for k, v in given.items())
         folder = Path(out)
         if (folder / "session.json").exists():
             raise UsageError(f"--out {folder}: already holds a session (session.json); continue it with "
@@ -112,6 +121,7 @@ def prepare_scan(*, out: str | None = None, resume: str | None = None, rig: str 
             raise UsageError(f"--out {folder}: exists and is not an empty folder; choose a new or empty folder")
         if n_views < 2:
             raise UsageError(f"--views must be at least 2 to register a scan, found {n_views}")
+        n_views *= passes
         hardware = rig != "sim"
         rig_file, the_rig, spec = rig, (load_rig(rig) if hardware else None), None
         if hardware:
@@ -130,7 +140,7 @@ def prepare_scan(*, out: str | None = None, resume: str | None = None, rig: str 
         devices, simulator, hw = _open_hardware(the_rig, rig_file, laser), None, {"rig_file": str(rig_file)}
     else:
         devices, simulator = _simulator(session, obj, seed, the_rig, laser,
-                                        object_file if session is None else None)
+                                        object_file if session is None else None, passes)
         the_rig, hw = (session.rig if session else _scan_rig(devices.rig, laser, seed, progress)), None
         if session is None and object_file is not None:
             # The session keeps its own copy of the object's mesh, named relative to its folder.
@@ -142,14 +152,15 @@ def prepare_scan(*, out: str | None = None, resume: str | None = None, rig: str 
     capture = None if session else CaptureSettings.from_rig(the_rig, hardware=hardware)
     n_done = len(session.done_views) if session else 0
     return ScanSetup(Path(resume or out), devices, the_rig, spec, n_views, bool(resume), n_done, capture,
-                     simulator, hw, files)
+                     simulator, hw, files, passes)
 
 
 def _check_resume_options(session: Session, given: dict) -> None:
     """UsageError naming the first option given on the command line that differs from the session."""
     sim = session.simulator
     recorded = {"method": "laser" if session.is_laser else "coded", "rig": "sim" if sim is not None else (session.hardware or {}).get("rig_file", "rig.json"),
-                "obj": sim.object if sim is not None else None, "n_views": len(session.views),
+                "obj": sim.object if sim is not None else None, "n_views": session.plan.views_per_pass,
+                "passes": session.plan.passes,
                 "patterns": session.pattern.method, "seed": sim.seed if sim is not None else None}
     for key, value in given.items():
         if value is None:
@@ -231,11 +242,12 @@ def _scan_rig(true_rig: Rig, laser: bool, seed: int, progress: Callable | None =
 
 
 def _simulator(session: Session | None, obj: str, seed: int, rig: Rig | None, laser: bool = False,
-               object_file: tuple[str, bytes] | None = None):
+               object_file: tuple[str, bytes] | None = None, passes: int = 1):
     """The simulated rig of a new scan (object, seed, default imaging) or of a resumed one (its settings).
     A laser scan renders the line lasers of :func:`rangekit.sim.laser_rig.laser_rig` (the simulator's truth;
     the session's rig holds the calibrated planes). ``object_file``: (name, bytes) the session will keep of
-    a mesh file, which the simulator then reads (turned upright by ``--up``)."""
+    a mesh file, which the simulator then reads (turned upright by ``--up``). ``passes`` > 1: the object
+    is turned over between passes (:func:`rangekit.sim.passes.pass_motions`, recorded for the truth)."""
     import tempfile
 
     from rangekit.sim import ImagingModel, SimRig, default_scene
@@ -252,7 +264,8 @@ def _simulator(session: Session | None, obj: str, seed: int, rig: Rig | None, la
         except (RangekitError, TypeError, ValueError) as exc:
             raise ConfigError(f"{session.folder / 'session.json'}: simulator.imaging: expected the simulator's "
                               f"imaging model fields, found {str(exc)[:200]}") from None
-        return SimRig(default_scene(obj), rig, imaging=imaging, seed=seed, **options), settings
+        return SimRig(default_scene(obj), rig, imaging=imaging, seed=seed, pass_motions=settings.pass_motions,
+                      **options), settings
     # A bad object name or file fails here, before the folder is made.
     imaging = ImagingModel()
     if object_file is not None and object_file[0] != Path(obj).name:   # turned upright by --up
@@ -261,8 +274,15 @@ def _simulator(session: Session | None, obj: str, seed: int, rig: Rig | None, la
             scene = default_scene(str(Path(tmp) / object_file[0]))
     else:
         scene = default_scene(obj)
-    devices = SimRig(scene, rig, imaging=imaging, seed=seed, **options)
-    return devices, SimulatorSettings(object=obj, seed=seed, imaging=asdict(imaging))
+    motions = None
+    if passes > 1:
+        from rangekit.sim.devices import default_rig
+        from rangekit.sim.passes import pass_motions
+
+        motions = pass_motions(scene, rig if rig is not None else default_rig(), passes)
+    devices = SimRig(scene, rig, imaging=imaging, seed=seed, pass_motions=motions, **options)
+    return devices, SimulatorSettings(object=obj, seed=seed, imaging=asdict(imaging), pass_motions=None if motions is None
+                                      else tuple(tuple(map(tuple, m.tolist())) for m in motions))
 
 
 def session_evaluator(session: Session) -> Evaluator | None:
@@ -272,7 +292,9 @@ def session_evaluator(session: Session) -> Evaluator | None:
         return None
     from rangekit.sim.evaluate import truth_evaluator
 
-    return truth_evaluator(session.simulator_object, session.rig, light="laser" if session.is_laser else "projector")
+    motions = session.simulator.pass_motions    # the truth of a multi-pass scan: how the object was turned over
+    return truth_evaluator(session.simulator_object, session.rig, light="laser" if session.is_laser else "projector",
+                           **({"pass_motions": np.array(motions)} if motions is not None else {}))
 
 
 def process_scan(folder: str | Path, *, fusion: str = "poisson", report: bool = True,

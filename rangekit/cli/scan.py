@@ -14,7 +14,7 @@ from rangekit.errors import UsageError
 
 def cmd_scan(args: argparse.Namespace) -> int:
     """rangekit scan --out DIR | --resume DIR [--method coded|laser] [--rig sim|RIG.json] [--object lumpy]
-    [--views 12 | --steps 400] [--patterns hybrid] [--up X Y Z] [--allow-auto-exposure]"""
+    [--views 12 | --steps 400] [--passes 2 [--flipped]] [--patterns hybrid] [--up X Y Z] [--allow-auto-exposure]"""
     from rangekit.formats.session_lock import session_lock as session_lock_of
 
     t0 = time.perf_counter()
@@ -34,7 +34,8 @@ def cmd_scan(args: argparse.Namespace) -> int:
 
 #: Options of a turntable scan that --artefact (one view per artefact position, coded light) does not take.
 _NOT_WITH_ARTEFACT = {"resume": "--resume", "method": "--method", "steps": "--steps", "up": "--up", "object": "--object",
-                      "views": "--views", "patterns": "--patterns", "no_process": "--no-process"}
+                      "views": "--views", "patterns": "--patterns", "no_process": "--no-process", "passes": "--passes",
+                      "flipped": "--flipped"}
 
 
 def _scan_artefacts(args: argparse.Namespace, t0: float) -> int:
@@ -77,19 +78,29 @@ def _scan(args: argparse.Namespace, t0: float) -> int:
         raise UsageError("--steps and --views both give the turntable positions; give one (--steps for a laser scan)")
     if args.method != "laser" and args.steps is not None and not args.resume:
         raise UsageError("--steps: turntable steps of a laser scan; with --method coded give --views")
+    if args.flipped and not args.resume:
+        raise UsageError("--flipped confirms, when resuming a multi-pass scan, that the object was turned over; "
+                         "give it with --resume DIR")
     setup = prepare_scan(out=args.out, resume=args.resume, rig=args.rig, obj=args.object,
                          n_views=args.views if args.steps is None else args.steps, patterns=args.patterns,
-                         seed=args.seed, fusion=args.fusion, method=args.method, up=args.up, progress=console())
+                         seed=args.seed, fusion=args.fusion, method=args.method, up=args.up, progress=console(),
+                         passes=args.passes)
     folder = args.resume or args.out
     if args.exposures is not None:
         setup = _with_exposures(setup, args.exposures)
     if setup.resume:
         say(f"resuming {folder}: {setup.n_done}/{setup.n_views} views already done")
     try:
-        session = acquire(setup.devices, setup.rig, setup.spec, folder, plan=ScanPlan(n_views=setup.n_views),
+        turn_over = None
+        if setup.hardware is not None and setup.passes > 1:   # the simulator turns its object over itself
+            from rangekit.app.passes import turn_over_prompt
+
+            turn_over = turn_over_prompt(folder, setup.passes, flipped=args.flipped)
+        session = acquire(setup.devices, setup.rig, setup.spec, folder,
+                          plan=ScanPlan(n_views=setup.n_views, passes=setup.passes),
                           resume=setup.resume, capture=setup.capture, simulator=setup.simulator,
                           hardware=setup.hardware, files=setup.files, progress=console(),
-                          allow_auto_exposure=args.allow_auto_exposure)
+                          allow_auto_exposure=args.allow_auto_exposure, turn_over=turn_over)
     except KeyboardInterrupt:
         print(f"rangekit: interrupted; completed views are safe. Continue with: rangekit scan --resume {folder}",
               file=sys.stderr)
@@ -246,6 +257,11 @@ def add_parsers(sub) -> None:
     scan.add_argument("--object", help="simulated object: built-in name (default lumpy) or mesh file (copied into "
                                        "the session)")
     scan.add_argument("--views", type=int_in(2, 720), help="turntable views over a full turn (default 12)")
+    scan.add_argument("--passes", type=int_in(1, 8),
+                      help="turntable passes of --views views each, the object turned over between them to see its "
+                           "bottom (default 1; the simulator turns it over itself, a real rig asks)")
+    scan.add_argument("--flipped", action="store_true",
+                      help="with --resume: the object has been turned over for the next pass (no terminal to ask on)")
     scan.add_argument("--patterns", choices=PATTERN_METHODS, help="pattern set (default hybrid: Gray code + phase "
                                                                   "shift)")
     scan.add_argument("--seed", type=seed, help="simulator noise seed (default 0)")

@@ -54,16 +54,28 @@ DEFAULT_TURNTABLE_SETTLE_S = 0.5
 
 @dataclass(frozen=True)
 class ScanPlan:
-    """What to acquire: ``n_views`` turntable angles ``start + k * step`` (radians)."""
+    """What to acquire: ``n_views`` turntable angles in all, ``passes`` passes of ``n_views / passes`` views
+    each (the object turned over between passes, :mod:`rangekit.app.passes`); view ``k`` of a pass is at
+    ``start + k * step`` (radians)."""
 
     n_views: int = 12
-    step: float | None = None     # radians; default a full turn / n_views
+    step: float | None = None     # radians; default a full turn / views per pass
     start: float = 0.0            # radians
+    passes: int = 1               # turntable passes; n_views is a multiple of it
+
+    @property
+    def views_per_pass(self) -> int:
+        return self.n_views // self.passes
 
     def angles(self) -> np.ndarray:
-        """(n_views,) float64 turntable angles, radians."""
-        step = self.step if self.step is not None else 2 * np.pi / self.n_views
-        return self.start + step * np.arange(self.n_views)
+        """(n_views,) float64 turntable angles, radians (each pass's in turn)."""
+        per = self.views_per_pass
+        step = self.step if self.step is not None else 2 * np.pi / per
+        return self.start + step * (np.arange(self.n_views) % per)
+
+    def view_passes(self) -> np.ndarray:
+        """(n_views,) int: the pass (0, 1, ...) of each view."""
+        return np.arange(self.n_views) // self.views_per_pass
 
 
 @dataclass(frozen=True)
@@ -94,11 +106,15 @@ class CaptureSettings:
 
 @dataclass(frozen=True)
 class SimulatorSettings:
-    """A simulated session: the object (built-in name or mesh file), noise seed and imaging model."""
+    """A simulated session: the object (built-in name or mesh file), noise seed and imaging model.
+    ``pass_motions``: in a multi-pass scan, each pass's rigid motion (4, 4, world frame, nested tuples) of
+    the object from its pose in the first pass (the first is the identity): how the simulator turned it
+    over. Ground truth only: processing never reads it (it finds the passes' poses from the data)."""
 
     object: str
     seed: int
     imaging: dict = field(default_factory=dict)   # rangekit.sim.ImagingModel fields
+    pass_motions: tuple | None = None
 
 
 @dataclass(frozen=True)
@@ -111,6 +127,7 @@ class SessionView:
     done: bool
     folder: Path
     sha256: dict | None = field(default=None, hash=False)
+    scan_pass: int = 0    # the turntable pass (0, 1, ...) the view belongs to
 
 
 def exposure_folder(exposure_us: int) -> str:
@@ -149,7 +166,8 @@ class Session:
         """A session with every view pending; ``capture`` defaults to the rig file's settings."""
         if capture is None:
             capture = CaptureSettings.from_rig(rig, hardware=hardware is not None)
-        views = tuple(SessionView(k, float(a), False, view_folder(folder, k)) for k, a in enumerate(plan.angles()))
+        views = tuple(SessionView(k, float(a), False, view_folder(folder, k), scan_pass=int(p))
+                      for k, (a, p) in enumerate(zip(plan.angles(), plan.view_passes())))
         return cls(Path(folder), plan, pattern, rig, capture, views, simulator, hardware)
 
     @property
@@ -186,15 +204,19 @@ class Session:
 
     def to_dict(self) -> dict:
         """The ``session.json`` manifest."""
-        data = {"schema": SESSION_SCHEMA, "plan": {**asdict(self.plan), "angles_rad": self.plan.angles().tolist()},
+        multi = self.plan.passes > 1    # single-pass sessions keep the manifest they had before passes
+        plan = {k: v for k, v in asdict(self.plan).items() if k != "passes" or multi}
+        data = {"schema": SESSION_SCHEMA, "plan": {**plan, "angles_rad": self.plan.angles().tolist()},
                 "pattern": self.pattern.to_dict(),
                 "views": [{"index": v.index, "angle_rad": v.angle, "state": "done" if v.done else "pending",
-                           "folder": v.folder.name, **({"sha256": dict(v.sha256)} if v.sha256 else {})}
+                           "folder": v.folder.name, **({"pass": v.scan_pass} if multi else {}),
+                           **({"sha256": dict(v.sha256)} if v.sha256 else {})}
                           for v in self.views],
                 "capture": {k: v for k, v in asdict(self.capture).items()
                             if k != "exposures_us" or v is not None}}
         if self.simulator is not None:
-            data["simulator"] = asdict(self.simulator)
+            data["simulator"] = {k: ([[list(r) for r in m] for m in v] if k == "pass_motions" else v)
+                                 for k, v in asdict(self.simulator).items() if k != "pass_motions" or v is not None}
         if self.hardware is not None:
             data["hardware"] = dict(self.hardware)
         return data
@@ -224,62 +246,22 @@ def load_session(folder: str | Path) -> Session:
     return Session.load(folder)
 
 
-#: Bounds of the manifest's numbers: views per session, the noise seed (numpy's range), the camera's bit
-#: depth, a wait in seconds, an angle in radians.
-MAX_VIEWS = 3600
-MAX_SEED = 2**32 - 1
-MAX_WAIT_S = 3600.0
-MAX_ANGLE_RAD = 1e3
-MAX_EXPOSURES = 8
-_SHA256_HEX = frozenset("0123456789abcdef")
-
-
-def _show(found) -> str:
-    try:
-        text = repr(found)
-    except ValueError:  # an integer too long to print
-        return "an integer of more than 4300 digits"
-    return text if len(text) <= 80 else text[:77] + "..."
-
-
-def _error(path: Path, key: str, expected: str, found) -> ConfigError:
-    return ConfigError(f"{path}: {key}: expected {expected}, found {_show(found)}")
-
-
-def _fields(value, path: Path, key: str, required: tuple[str, ...], optional: tuple[str, ...] = ()) -> dict:
-    """``value`` as an object holding every ``required`` key and no key beyond ``optional``."""
-    expected = "an object with " + ", ".join(required) + (f" (and {', '.join(optional)})" if optional else "")
-    if not isinstance(value, dict):
-        raise _error(path, key, expected, value)
-    missing = [k for k in required if k not in value]
-    unknown = [k for k in value if k not in required + optional]
-    if missing or unknown:
-        problem = (f"missing {', '.join(map(repr, missing))}" if missing else
-                   f"unknown field(s) {', '.join(_show(k) for k in unknown)}")
-        raise ConfigError(f"{path}: {key}: expected {expected}; {problem}")
-    return value
-
-
-def _int(value, path: Path, key: str, lo: int, hi: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, int) or not lo <= value <= hi:
-        raise _error(path, key, f"an integer in {lo}..{hi}", value)
-    return value
-
-
-def _number(value, path: Path, key: str, lo: float, hi: float) -> float:
-    """A finite JSON number in [lo, hi] (lo, hi finite), as float."""
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not lo <= value <= hi:
-        raise _error(path, key, f"a finite number in [{lo:g}, {hi:g}]", value)
-    return float(value)
+from rangekit.formats.session_fields import (MAX_ANGLE_RAD, MAX_EXPOSURES, MAX_PASSES, MAX_SEED,  # noqa: E402
+                                             MAX_VIEWS, MAX_WAIT_S, SHA256_HEX as _SHA256_HEX, error as _error,
+                                             fields as _fields, integer as _int, number as _number,
+                                             pass_motions as _pass_motions, show as _show)
 
 
 def _plan(value, path: Path) -> ScanPlan:
-    d = _fields(value, path, "plan", ("n_views",), ("step", "start", "angles_rad"))
+    d = _fields(value, path, "plan", ("n_views",), ("step", "start", "angles_rad", "passes"))
     n = _int(d["n_views"], path, "plan.n_views", 1, MAX_VIEWS)
     step = d.get("step")
     step = None if step is None else _number(step, path, "plan.step", -2 * np.pi, 2 * np.pi)
+    passes = _int(d.get("passes", 1), path, "plan.passes", 1, MAX_PASSES)   # before passes: one
+    if n % passes:
+        raise _error(path, "plan.n_views", f"a multiple of plan.passes ({passes})", n)
     return ScanPlan(n_views=n, step=step, start=_number(d.get("start", 0.0), path, "plan.start", -MAX_ANGLE_RAD,
-                                                        MAX_ANGLE_RAD))
+                                                        MAX_ANGLE_RAD), passes=passes)
 
 
 def _pattern(value, path: Path) -> PatternSpec | LaserSequence:
@@ -313,8 +295,8 @@ def _capture(value, path: Path) -> CaptureSettings:
                            exposures_us=exps)
 
 
-def _simulator(value, path: Path, folder: Path) -> SimulatorSettings:
-    d = _fields(value, path, "simulator", ("object", "seed"), ("imaging",))
+def _simulator(value, path: Path, folder: Path, plan: ScanPlan) -> SimulatorSettings:
+    d = _fields(value, path, "simulator", ("object", "seed"), ("imaging", "pass_motions"))
     obj = d["object"]
     if not isinstance(obj, str) or not obj or len(obj) > 1024:
         raise _error(path, "simulator.object", "a built-in object name or a mesh file in the session folder", obj)
@@ -322,7 +304,11 @@ def _simulator(value, path: Path, folder: Path) -> SimulatorSettings:
     imaging = d.get("imaging", {})
     if not isinstance(imaging, dict):
         raise _error(path, "simulator.imaging", "an object (the simulator's imaging model)", imaging)
-    return SimulatorSettings(object=obj, seed=_int(d["seed"], path, "simulator.seed", 0, MAX_SEED), imaging=imaging)
+    motions = d.get("pass_motions")
+    if motions is not None:
+        motions = _pass_motions(motions, path, "simulator.pass_motions", plan.passes)
+    return SimulatorSettings(object=obj, seed=_int(d["seed"], path, "simulator.seed", 0, MAX_SEED), imaging=imaging,
+                             pass_motions=motions)
 
 
 def _sha256(value, path: Path, key: str, names: list[str]) -> dict:
@@ -340,11 +326,11 @@ def _views(value, path: Path, folder: Path, plan: ScanPlan, frame_files: list[st
     if not isinstance(value, list) or len(value) != plan.n_views:
         raise _error(path, "views", f"a list of views (index, angle_rad, state), {plan.n_views} as in "
                                     "plan.n_views", value)
-    angles = plan.angles()
+    angles, passes = plan.angles(), plan.view_passes()
     views = []
     for i, v in enumerate(value):
         key = f"views[{i}]"
-        d = _fields(v, path, key, ("index", "angle_rad", "state"), ("folder", "sha256"))
+        d = _fields(v, path, key, ("index", "angle_rad", "state"), ("folder", "sha256", "pass"))
         _int(d["index"], path, f"{key}.index", i, i)
         angle = _number(d["angle_rad"], path, f"{key}.angle_rad", -MAX_ANGLE_RAD, MAX_ANGLE_RAD)
         if abs(angle - angles[i]) > 1e-9:
@@ -354,12 +340,15 @@ def _views(value, path: Path, folder: Path, plan: ScanPlan, frame_files: list[st
         name = view_folder(folder, i).name
         if d.get("folder", name) != name:
             raise _error(path, f"{key}.folder", repr(name), d["folder"])
+        scan_pass = int(passes[i])
+        if d.get("pass", scan_pass) != scan_pass:
+            raise _error(path, f"{key}.pass", f"{scan_pass} (the plan's pass of view {i})", d["pass"])
         done, sha = d["state"] == "done", d.get("sha256")
         if sha is not None:
             if not done:
                 raise _error(path, f"{key}.sha256", "none on a pending view", sha)
             sha = _sha256(sha, path, f"{key}.sha256", frame_files)
-        views.append(SessionView(i, angle, done, view_folder(folder, i), sha))
+        views.append(SessionView(i, angle, done, view_folder(folder, i), sha, scan_pass))
     return tuple(views)
 
 
@@ -376,7 +365,7 @@ def _from_dict(data, folder: Path) -> Session:
     pattern = _pattern(data["pattern"], path)
     early = _capture(data["capture"], path) if data.get("capture") is not None else None
     views = _views(data["views"], path, folder, plan, frame_files(pattern, early and early.exposures_us))
-    simulator = None if data.get("simulator") is None else _simulator(data["simulator"], path, folder)
+    simulator = None if data.get("simulator") is None else _simulator(data["simulator"], path, folder, plan)
     hardware = data.get("hardware")
     if hardware is not None:
         d = _fields(hardware, path, "hardware", (), ("rig_file",))

@@ -32,6 +32,7 @@ class ProcessResult:
     laser: dict | None = None       # a laser scan: per laser its points, steps without a line, rejected rows
     watertight_mesh: dict | None = None   # the closed mesh (mesh_watertight.ply), as ``mesh`` plus unobserved_*
     view_errors: list | None = None  # simulator: per view, decoding / cloud (inside, edge) / registration errors
+    view_passes: list | None = None  # a multi-pass scan: each view's turntable pass (0, 1, ...)
 
     @property
     def mesh_path(self) -> Path:
@@ -48,7 +49,8 @@ class ProcessResult:
                 "registration_rmse_m": None if np.isnan(self.registration_rmse) else self.registration_rmse, "mesh": self.mesh, "seconds": self.seconds,
                 "accuracy": self.accuracy, **({"laser": self.laser} if self.laser is not None else {}),
                 **({"mesh_watertight": self.watertight_mesh} if self.watertight_mesh is not None else {}),
-                **({"view_errors": self.view_errors} if self.view_errors is not None else {})}
+                **({"view_errors": self.view_errors} if self.view_errors is not None else {}),
+                **({"view_passes": self.view_passes} if self.view_passes is not None else {})}
 
     def summary_lines(self) -> list[str]:
         """The end-of-run summary, one line per fact, for people."""
@@ -58,6 +60,8 @@ class ProcessResult:
         m = self.mesh
         lines = [f"views: {len(self.view_names)}, points: {sum(self.n_points):,} "
                  f"({min(self.n_points):,} to {max(self.n_points):,} per view)"]
+        if self.view_passes is not None:
+            lines[-1] += f"; {max(self.view_passes) + 1} passes of {self.view_passes.count(0)} views"
         if self.laser is not None:
             lines.append("registration: none, each laser profile placed by its turntable angle; " + "; ".join(
                 f"{d['name']}: {d['points']:,} points, no line in {d['steps_without_line']} step(s)"
@@ -84,7 +88,9 @@ class ProcessResult:
             lines.append(f"accuracy against the true surface: RMS {a['rms'] * 1e3:.3f} mm "
                          f"({a['rms'] / a['diagonal']:.3%} of the {a['diagonal'] * 1e3:.0f} mm diagonal), 95th "
                          f"percentile {a['p95'] * 1e3:.3f} mm; completeness {a['completeness']:.1%} of the visible "
-                         f"surface within {a['tolerance'] * 1e3:g} mm")
+                         f"surface within {a['tolerance'] * 1e3:g} mm"
+                         + (f", {a['completeness_whole']:.1%} of the whole surface" if a.get("completeness_whole")
+                            is not None else ""))
             if a.get("cloud_rms") is not None:
                 lines.append(f"cloud against the true surface: RMS {a['cloud_rms'] * 1e3:.3f} mm, 95th percentile "
                              f"{a['cloud_p95'] * 1e3:.3f} mm over {a['n_cloud']:,} points")

@@ -184,7 +184,8 @@ def test_ply_elements_before_and_after_vertices_are_skipped(tmp_path, fmt, faces
     face = ("face", [("list uchar int", "vertex_indices"), ("ushort", "flags")], face_rows)
     camera = ("camera", [("float", "fx"), ("float", "fy")], [(500.0, 501.0)])
     path = tmp_path / "mesh.ply"
-    path.write_bytes(_ply_bytes(fmt, [camera, face, ("vertex", VERTEX_PROPS, VERTS), face]))
+    edge = ("edge", face[1], face_rows)  # element names are unique in a PLY file (plyfile refuses repeats)
+    path.write_bytes(_ply_bytes(fmt, [camera, face, ("vertex", VERTEX_PROPS, VERTS), edge]))
     back = load_cloud(path)
     np.testing.assert_allclose(back.points, np.array(VERTS)[:, :3], rtol=0, atol=1e-15)
     np.testing.assert_allclose(back.colours, np.array(VERTS)[:, 3:] / 255, atol=1e-7)

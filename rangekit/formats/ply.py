@@ -7,7 +7,7 @@ bodies by a vectorised numpy parser, because plyfile parses ASCII row by row in 
 bun000.ply, ASCII with a ragged ``range_grid``: 0.05 s here against 1.6 s, docs/benchmarks.md). Malformed
 and truncated files raise FileFormatError naming the file, the expected and the found value. Writer
 (:func:`cloud_ply_bytes`, :func:`mesh_ply_bytes`): binary little-endian from one structured array per
-element (plyfile writes list properties row by row in Python: 2 s for a 900k-triangle mesh).
+element (plyfile writes list properties row by row in Python: 1.4 CPU-s for 897k triangles, against 0.02).
 """
 
 from __future__ import annotations
@@ -22,6 +22,7 @@ from rangekit.errors import FileFormatError
 from rangekit.formats.parsing import ascii_rows, read_bytes, truncated_error
 from rangekit.surface.cloud import PointCloud
 from rangekit.surface.mesh import TriangleMesh
+from rangekit.surface.quality import vertex_normals
 
 __all__ = ["PlyLists", "PlyHeader", "read_ply", "ply_points", "ply_observed", "ply_vertex_attributes", "ply_vertex_scalar",
            "cloud_ply_bytes",
@@ -374,7 +375,9 @@ def cloud_ply_bytes(cloud: PointCloud) -> bytes:
 
 
 def mesh_ply_bytes(mesh: TriangleMesh) -> bytes:
-    """A triangle mesh as binary PLY: float64 xyz, uint8 RGB, uint8 ``observed`` (when the mesh has the flag),
-    faces as ``list uchar int``, comment "metres"."""
-    return _ply_bytes("rangekit mesh, metres", _vertex_records(mesh.vertices, None, mesh.vertex_colours,
+    """A triangle mesh as binary PLY: float64 xyz, float32 unit area-weighted vertex normals ``nx ny nz`` (what
+    MeshLab, Open3D and trimesh shade with), uint8 RGB, uint8 ``observed`` (when the mesh has the flag), faces
+    as ``list uchar int``, comment "metres"."""
+    normals = vertex_normals(mesh.vertices, mesh.triangles, sums=mesh.normal_sums)
+    return _ply_bytes("rangekit mesh, metres", _vertex_records(mesh.vertices, normals, mesh.vertex_colours,
                                                                observed=mesh.observed), mesh.triangles)

@@ -2,7 +2,7 @@
 
 Writers (:data:`CLOUD_WRITERS`, :func:`save_cloud`): ``.ply`` (binary little-endian, float64 xyz, float32
 normals, uint8 RGB, float32 ``sigma`` when the cloud has it; :mod:`rangekit.formats.ply`), ``.pcd`` (binary,
-float64 xyz, normals, rgb, sigma; :mod:`rangekit.formats.pcd`), ``.xyz`` (text ``x y z [nx ny nz]``),
+float32 xyz as PCL and Open3D read them, normals, rgb, sigma; :mod:`rangekit.formats.pcd`), ``.xyz`` (text ``x y z [nx ny nz]``),
 ``.npy`` ((N, 3), (N, 6) points + normals or (N, 9) points + normals + colours), ``.e57`` (points and
 colours through pye57; :mod:`rangekit.formats.e57`). PLY and PCD keep ``sigma``. Writes are atomic.
 

@@ -3,8 +3,9 @@
 Reading: ASCII and binary bodies with vectorised numpy (their errors name the file, the expected and the
 found value; Open3D's reader prints a warning and returns an empty cloud instead); ``binary_compressed``
 (LZF, what ``open3d.io.write_point_cloud(..., compressed=True)`` and PCL write) through ``open3d.io``.
-Writing (:func:`pcd_bytes`): binary, float64 ``x y z`` (metres), float32 normals, packed ``rgb`` (U4,
-0x00RRGGBB as Open3D writes it) and float32 ``sigma``; PCL, Open3D and CloudCompare read it.
+Writing (:func:`pcd_bytes`): binary, float32 ``x y z`` (metres), float32 normals, packed ``rgb`` (U4,
+0x00RRGGBB as Open3D writes it) and float32 ``sigma``. float32 coordinates as PCL's ``PointXYZ`` and Open3D
+write them: Open3D 0.19's ``o3d.io.read_point_cloud`` reads ``SIZE 8`` coordinates as zeros, silently.
 """
 
 from __future__ import annotations
@@ -124,9 +125,9 @@ def _read_compressed(path: Path, names: list[str], n: int) -> PointCloud:
 
 
 def pcd_bytes(cloud: PointCloud) -> bytes:
-    """``cloud`` as a binary PCD (v0.7): float64 x y z, float32 normal_x/y/z, U4 rgb, float32 sigma (the
+    """``cloud`` as a binary PCD (v0.7): float32 x y z, float32 normal_x/y/z, U4 rgb, float32 sigma (the
     optional ones when the cloud has them)."""
-    fields = [("x", "<f8"), ("y", "<f8"), ("z", "<f8")]
+    fields = [("x", "<f4"), ("y", "<f4"), ("z", "<f4")]
     if cloud.normals is not None:
         fields += [("normal_x", "<f4"), ("normal_y", "<f4"), ("normal_z", "<f4")]
     if cloud.colours is not None:

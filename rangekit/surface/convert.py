@@ -6,8 +6,7 @@ accept rangekit's own types, numpy arrays, ``open3d.geometry.PointCloud`` / ``Tr
 ``trimesh.Trimesh`` / ``PointCloud`` / ``Scene``; anything else is an InputError naming the type found.
 Open3D and trimesh objects are recognised by their class's module, so neither library is imported
 here unless the object came from it. :func:`from_open3d` and :func:`from_trimesh` convert one object of
-those libraries; :func:`to_trimesh` is the way back for both kinds (Open3D's: :func:`rangekit.surface.cloud.to_open3d`,
-:meth:`TriangleMesh.to_open3d`).
+those libraries; :func:`to_open3d` and :func:`to_trimesh` are the way back, for both kinds.
 """
 
 from __future__ import annotations
@@ -16,10 +15,11 @@ import numpy as np
 
 from rangekit.errors import InputError
 from rangekit.surface.cloud import PointCloud
+from rangekit.surface.cloud import to_open3d as _cloud_to_open3d
 from rangekit.surface.mesh import TriangleMesh, mesh_from_open3d
 from rangekit.surface.quality import vertex_normals
 
-__all__ = ["as_cloud", "as_mesh", "from_open3d", "from_trimesh", "to_trimesh", "CLOUD_KINDS", "MESH_KINDS"]
+__all__ = ["as_cloud", "as_mesh", "from_open3d", "from_trimesh", "to_open3d", "to_trimesh", "CLOUD_KINDS", "MESH_KINDS"]
 
 CLOUD_KINDS = ("an (N, 3) array of points in metres (or (N, 6) with normals), a rangekit PointCloud or TriangleMesh, an "
                "open3d.geometry.PointCloud or TriangleMesh, or a trimesh.PointCloud or Trimesh")
@@ -88,6 +88,15 @@ def to_trimesh(x):
     if cloud.colours is not None:
         colours = np.clip(np.rint(cloud.colours * 255), 0, 255).astype(np.uint8)
     return trimesh.PointCloud(cloud.points, colors=colours)
+
+
+def to_open3d(x):
+    """An ``open3d.geometry.TriangleMesh`` of a mesh (:meth:`TriangleMesh.to_open3d`) or an
+    ``open3d.geometry.PointCloud`` of a cloud (:func:`rangekit.surface.cloud.to_open3d`); anything
+    :func:`as_mesh` / :func:`as_cloud` accepts."""
+    if isinstance(x, TriangleMesh) or (_library(x) and type(x).__name__ in ("TriangleMesh", "Trimesh", "Scene")):
+        return as_mesh(x).to_open3d()
+    return _cloud_to_open3d(as_cloud(x))
 
 
 def as_cloud(x, what: str = "cloud") -> PointCloud:

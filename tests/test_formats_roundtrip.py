@@ -265,3 +265,45 @@ def test_import_rangekit_stays_light():
             "from rangekit.formats.clouds import load_cloud; assert rk.load_cloud is load_cloud; "
             "assert {'icp', 'register_views', 'poisson_mesh', 'render', 'load_mesh'} <= set(dir(rk))")
     subprocess.run([sys.executable, "-c", code], check=True)
+
+
+# ------------------------------------------------- scan / process: --format and merged.ply's view field
+
+def test_merged_ply_view_field_read_by_plyfile(tmp_path):
+    import plyfile
+
+    from rangekit.surface.cloud import merge_clouds, view_index
+
+    views = [_lumpy(30, seed=k) for k in range(3)]
+    merged = merge_clouds(views, np.stack([np.eye(4)] * 3))
+    rk.save_cloud(tmp_path / "merged.ply", merged, fields={"view": view_index(views)})
+    v = plyfile.PlyData.read(str(tmp_path / "merged.ply"))["vertex"].data
+    assert v.dtype["view"] == np.dtype("<u2")
+    np.testing.assert_array_equal(v["view"], np.repeat([0, 1, 2], 30))
+    np.testing.assert_array_equal(rk.load_cloud(tmp_path / "merged.ply").points, merged.points)
+    with pytest.raises(FileFormatError, match=r"merged\.pcd: extra point fields \(view\) are written to '\.ply' only"):
+        rk.save_cloud(tmp_path / "merged.pcd", merged, fields={"view": view_index(views)})
+    with pytest.raises(InputError, match=r"PLY field 'view': expected a \(90,\) array"):
+        rk.save_cloud(tmp_path / "merged.ply", merged, fields={"view": np.zeros(5, np.uint16)})
+
+
+@pytest.mark.parametrize("fmt", ["obj", "stl", "glb"])
+def test_export_meshes_beside_the_ply_files(tmp_path, fmt):
+    from rangekit.app.fused_outputs import MESH_FILE, WATERTIGHT_FILE, export_meshes
+
+    mesh = _sphere_mesh()
+    rk.save_mesh(tmp_path / MESH_FILE, mesh)
+    rk.save_mesh(tmp_path / WATERTIGHT_FILE, mesh)
+    assert export_meshes(tmp_path, fmt) == [f"mesh.{fmt}", f"mesh_watertight.{fmt}"]
+    back = trimesh.load(tmp_path / f"mesh_watertight.{fmt}", process=False, force="mesh")
+    np.testing.assert_allclose(back.vertices[back.faces], mesh.vertices[mesh.triangles], rtol=0, atol=1e-6)
+    assert export_meshes(tmp_path, "ply") == []
+
+
+def test_format_option_refuses_other_formats_before_any_work(tmp_path, capsys):
+    from rangekit.cli import main
+
+    with pytest.raises(SystemExit) as stop:   # argparse's choices: exit 2 before anything is read
+        main(["process", str(tmp_path / "no-session"), "--format", "pcd"])
+    assert stop.value.code == 2
+    assert "--format: invalid choice: 'pcd' (choose from 'ply', 'obj', 'stl', 'glb')" in capsys.readouterr().err

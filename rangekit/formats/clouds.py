@@ -57,16 +57,21 @@ CLOUD_WRITERS = {".ply": cloud_ply_bytes, ".pcd": pcd_bytes, ".xyz": _write_xyz,
                  ".e57": e57_bytes}
 
 
-def save_cloud(path: str | Path, cloud) -> None:
+def save_cloud(path: str | Path, cloud, *, fields: dict[str, np.ndarray] | None = None) -> None:
     """Write ``cloud`` (any cloud :func:`rangekit.surface.convert.as_cloud` takes: a PointCloud, an (N, 3)
     array, an Open3D or trimesh cloud) in the format given by the file extension (:data:`CLOUD_WRITERS`),
-    atomically."""
+    atomically. ``fields``: extra per-point properties (name -> (N,) array), PLY only (e.g. merged.ply's
+    ``view``, :func:`rangekit.surface.cloud.view_index`)."""
     path = Path(path)
     writer = CLOUD_WRITERS.get(path.suffix.lower())
     if writer is None:
         raise FileFormatError(f"{path}: unknown point cloud format {path.suffix!r}; known: "
                               f"{', '.join(CLOUD_WRITERS)}")
-    atomic_write_bytes(path, writer(as_cloud(cloud, "save_cloud")))
+    cloud = as_cloud(cloud, "save_cloud")
+    if fields and writer is not cloud_ply_bytes:
+        raise FileFormatError(f"{path}: extra point fields ({', '.join(fields)}) are written to '.ply' only, "
+                              f"found {path.suffix!r}")
+    atomic_write_bytes(path, cloud_ply_bytes(cloud, fields) if fields else writer(cloud))
 
 
 class RangeGrid(NamedTuple):

@@ -18,15 +18,14 @@ from pathlib import Path
 
 import numpy as np
 
-from rangekit.errors import FileFormatError
+from rangekit.errors import FileFormatError, InputError
 from rangekit.formats.parsing import ascii_rows, read_bytes, truncated_error
 from rangekit.surface.cloud import PointCloud
 from rangekit.surface.mesh import TriangleMesh
 from rangekit.surface.quality import vertex_normals
 
 __all__ = ["PlyLists", "PlyHeader", "read_ply", "ply_points", "ply_observed", "ply_vertex_attributes", "ply_vertex_scalar",
-           "cloud_ply_bytes",
-           "mesh_ply_bytes"]
+           "cloud_ply_bytes", "mesh_ply_bytes"]
 
 
 @dataclass(frozen=True)
@@ -42,8 +41,6 @@ def _ragged_index(starts: np.ndarray, counts: np.ndarray, step: int = 1) -> np.n
     total = int(counts.sum())
     first = np.repeat(np.cumsum(counts) - counts, counts)
     return np.repeat(starts, counts) + (np.arange(total) - first) * step
-
-
 
 
 _PLY_TYPES = {"char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1", "short": "i2", "int16": "i2",
@@ -320,7 +317,8 @@ def ply_vertex_scalar(header: PlyHeader, vertex: dict, name: str) -> np.ndarray 
 
 # ----------------------------------------------------------------------------------------- writer
 
-_PLY_NAMES = {"float64": "double", "float32": "float", "uint8": "uchar", "int32": "int"}
+_PLY_NAMES = {"float64": "double", "float32": "float", "uint8": "uchar", "int32": "int", "uint16": "ushort",
+              "int16": "short", "uint32": "uint"}
 
 
 def _ply_bytes(comment: str, vertex: np.ndarray, faces: np.ndarray | None = None) -> bytes:
@@ -340,7 +338,8 @@ def _ply_bytes(comment: str, vertex: np.ndarray, faces: np.ndarray | None = None
 
 
 def _vertex_records(points: np.ndarray, normals: np.ndarray | None, colours: np.ndarray | None,
-                    sigma: np.ndarray | None = None, observed: np.ndarray | None = None) -> np.ndarray:
+                    sigma: np.ndarray | None = None, observed: np.ndarray | None = None,
+                    extra: dict[str, np.ndarray] | None = None) -> np.ndarray:
     """Structured vertex rows: float64 x y z, float32 nx ny nz, uint8 red green blue, float32 sigma
     (metres), uint8 observed (1 where a view's points support the vertex, 0 where the fusion invented it)
     (the optional ones only when given; colours in [0, 1] are rounded to 8 bits)."""
@@ -353,7 +352,14 @@ def _vertex_records(points: np.ndarray, normals: np.ndarray | None, colours: np.
         fields += [("sigma", "<f4")]
     if observed is not None:
         fields += [("observed", "u1")]
+    extra = extra or {}
+    taken = {f[0] for f in fields} & set(extra)
+    if taken:
+        raise InputError(f"PLY fields {sorted(taken)}: expected names other than the vertex's own, found them again")
+    fields += [(name, "<" + values.dtype.str[1:]) for name, values in extra.items()]
     rec = np.empty(len(points), dtype=fields)
+    for name, values in extra.items():
+        rec[name] = values
     rec["x"], rec["y"], rec["z"] = points.T
     if normals is not None:
         rec["nx"], rec["ny"], rec["nz"] = normals.T
@@ -367,11 +373,18 @@ def _vertex_records(points: np.ndarray, normals: np.ndarray | None, colours: np.
     return rec
 
 
-def cloud_ply_bytes(cloud: PointCloud) -> bytes:
+def cloud_ply_bytes(cloud: PointCloud, fields: dict[str, np.ndarray] | None = None) -> bytes:
     """A point cloud as binary PLY: float64 xyz, float32 normals, uint8 RGB, float32 ``sigma`` (the
-    predicted std along the camera ray, metres), comment "metres"."""
-    return _ply_bytes("rangekit point cloud, metres",
-                      _vertex_records(cloud.points, cloud.normals, cloud.colours, cloud.sigma))
+    predicted std along the camera ray, metres), then ``fields``: extra per-point properties, name -> (N,)
+    array of its own type (e.g. ``view`` uint16: the view each point of a merged cloud came from);
+    comment "metres"."""
+    fields = {name: np.asarray(values) for name, values in (fields or {}).items()}
+    for name, values in fields.items():
+        if values.shape != (len(cloud),) or values.dtype.name not in _PLY_NAMES:
+            raise InputError(f"PLY field {name!r}: expected a ({len(cloud)},) array of {', '.join(_PLY_NAMES)}, "
+                             f"found {values.dtype} {values.shape}")
+    rec = _vertex_records(cloud.points, cloud.normals, cloud.colours, cloud.sigma, extra=fields)
+    return _ply_bytes("rangekit point cloud, metres", rec)
 
 
 def mesh_ply_bytes(mesh: TriangleMesh) -> bytes:

@@ -1,7 +1,16 @@
 """rangekit: active 3D scanning, from the rig's captures to one watertight mesh.
 
-Import what you need from its modules (``rangekit.camera``, ``rangekit.geometry``, ``rangekit.sim``...);
-importing the package itself is fast and loads no heavy dependency.
+The functions a notebook reaches for first are here (README "In Python")::
+
+    import rangekit as rk
+    cloud = rk.load_cloud("scan.e57")                  # .ply .pcd .xyz .npy .e57
+    result = rk.icp(source, target)                    # arrays, PointClouds, Open3D or trimesh objects
+    mesh = rk.poisson_mesh(cloud)
+    rk.save_mesh("mesh.glb", mesh)                     # .ply .obj .stl .glb
+    picture = rk.render(mesh).image                    # (H, W, 3) uint8
+
+They are imported on first use (module ``__getattr__``), so ``import rangekit`` stays fast and loads no
+heavy dependency; everything else is in its module (``rangekit.camera``, ``rangekit.sim``...).
 """
 
 import os as _os
@@ -14,3 +23,37 @@ __version__ = "0.1.0"
 # machine; ``OMP_WAIT_POLICY=X python benchmarks/bench_decode_stage.py SESSION``, alternating). Set before
 # any OpenMP runtime starts; a user's own setting wins. See rangekit.threads.
 _os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+
+# name -> module that defines it; imported on first access (PEP 562), so ``import rangekit`` stays light.
+_LAZY = {
+    "load_cloud": "rangekit.formats.clouds", "save_cloud": "rangekit.formats.clouds",
+    "load_range_grid": "rangekit.formats.clouds",
+    "load_mesh": "rangekit.formats.meshes", "save_mesh": "rangekit.formats.meshes",
+    "PointCloud": "rangekit.surface.cloud", "TriangleMesh": "rangekit.surface.mesh",
+    "as_cloud": "rangekit.surface.convert", "as_mesh": "rangekit.surface.convert",
+    "from_open3d": "rangekit.surface.convert", "from_trimesh": "rangekit.surface.convert",
+    "to_trimesh": "rangekit.surface.convert", "to_open3d": "rangekit.surface.convert",
+    "estimate_normals": "rangekit.surface.cloud", "voxel_downsample": "rangekit.surface.cloud",
+    "merge_clouds": "rangekit.surface.cloud", "transform_cloud": "rangekit.surface.cloud",
+    "poisson_mesh": "rangekit.surface.fusion", "make_watertight": "rangekit.surface.watertight",
+    "icp": "rangekit.registration.icp", "IcpOptions": "rangekit.registration.icp",
+    "register_views": "rangekit.registration.multiview", "MultiViewOptions": "rangekit.registration.multiview",
+    "render": "rangekit.app.picture",
+}
+__all__ = ["__version__", *_LAZY]
+
+
+def __getattr__(name: str):
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module 'rangekit' has no attribute {name!r}")
+    import importlib
+
+    attr = "load_mesh_file" if name == "load_mesh" else name
+    value = getattr(importlib.import_module(module), attr)
+    globals()[name] = value   # the next access is a plain attribute
+    return value
+
+
+def __dir__():
+    return sorted([*globals(), *_LAZY])

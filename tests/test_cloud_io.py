@@ -116,11 +116,18 @@ def test_pcd_written_by_open3d(tmp_path, o3d_cloud, ascii):
     np.testing.assert_allclose(back.colours, _quantised(cloud.colours), atol=1e-6)
 
 
-def test_pcd_binary_compressed_is_refused(tmp_path, o3d_cloud):
-    o3d, pc, _ = o3d_cloud
+def test_pcd_binary_compressed_written_by_open3d(tmp_path, o3d_cloud):
+    o3d, pc, cloud = o3d_cloud
     path = tmp_path / "packed.pcd"
     assert o3d.io.write_point_cloud(str(path), pc, write_ascii=False, compressed=True)
-    with pytest.raises(FileFormatError, match=r"packed\.pcd.*binary_compressed.*not supported.*convert"):
+    assert b"DATA binary_compressed" in path.read_bytes()[:400]
+    back = load_cloud(path)  # LZF body read through open3d.io; float32 coordinates as Open3D writes them
+    np.testing.assert_allclose(back.points, cloud.points, rtol=0, atol=1e-7)
+    np.testing.assert_allclose(back.normals, cloud.normals, rtol=0, atol=1e-7)
+    np.testing.assert_allclose(back.colours, _quantised(cloud.colours), atol=1e-6)
+    data = path.read_bytes()
+    path.write_bytes(data[:len(data) // 2])
+    with pytest.raises(FileFormatError, match=r"packed\.pcd: header declares \d+ points but Open3D read 0"):
         load_cloud(path)
 
 
@@ -184,7 +191,8 @@ def test_ply_elements_before_and_after_vertices_are_skipped(tmp_path, fmt, faces
     face = ("face", [("list uchar int", "vertex_indices"), ("ushort", "flags")], face_rows)
     camera = ("camera", [("float", "fx"), ("float", "fy")], [(500.0, 501.0)])
     path = tmp_path / "mesh.ply"
-    path.write_bytes(_ply_bytes(fmt, [camera, face, ("vertex", VERTEX_PROPS, VERTS), face]))
+    edge = ("edge", face[1], face_rows)  # element names are unique in a PLY file (plyfile refuses repeats)
+    path.write_bytes(_ply_bytes(fmt, [camera, face, ("vertex", VERTEX_PROPS, VERTS), edge]))
     back = load_cloud(path)
     np.testing.assert_allclose(back.points, np.array(VERTS)[:, :3], rtol=0, atol=1e-15)
     np.testing.assert_allclose(back.colours, np.array(VERTS)[:, 3:] / 255, atol=1e-7)
@@ -358,5 +366,5 @@ def test_wrong_columns(tmp_path):
 def test_unknown_suffix_lists_known_ones(tmp_path):
     (tmp_path / "scan.obj").write_text("v 0 0 0\n")
     with pytest.raises(FileFormatError, match=r"scan\.obj: unknown point cloud format '\.obj'; known: "
-                                              r"\.ply, \.pcd, \.xyz, \.txt, \.npy"):
+                                              r"\.ply, \.pcd, \.xyz, \.txt, \.npy, \.e57"):
         load_cloud(tmp_path / "scan.obj")

@@ -152,8 +152,10 @@ def test_poisson_mesh_bad_input():
         poisson_mesh(PointCloud(np.zeros((0, 3)), normals=np.zeros((0, 3))))
     with pytest.raises(MeshError, match="at least 10 points"):
         poisson_mesh(PointCloud(np.full((50, 3), np.nan), normals=np.ones((50, 3))))
-    with pytest.raises(InputError, match="PointCloud"):
+    with pytest.raises(InputError, match="no normals"):  # an (N, 3) array is a cloud (as_cloud), without normals
         poisson_mesh(np.zeros((100, 3)))
+    with pytest.raises(InputError, match="poisson_mesh cloud: expected .* found builtins.str"):
+        poisson_mesh("cloud.ply")
 
 
 # ------------------------------------------------------------------------------------------ TSDF

@@ -6,7 +6,8 @@
 
 :func:`save_fused` writes both and returns their ``summary.json`` entries; :func:`evaluate_fused` measures
 both against the truth (the summary's accuracy is the observed mesh's, the closed one's figures are kept
-under ``accuracy["watertight"]``).
+under ``accuracy["watertight"]``). :func:`export_meshes` writes both again in another format beside them
+(``--format obj|stl|glb``: what MeshLab, Blender or a slicer opens; only PLY keeps ``observed``).
 """
 
 from __future__ import annotations
@@ -17,10 +18,13 @@ from typing import Callable
 from rangekit.surface.mesh import TriangleMesh
 from rangekit.surface.observed import FusedMeshes
 
-__all__ = ["MESH_FILE", "WATERTIGHT_FILE", "WATERTIGHT_FIGURES", "mesh_info", "save_fused", "evaluate_fused"]
+__all__ = ["MESH_FILE", "WATERTIGHT_FILE", "WATERTIGHT_FIGURES", "MESH_EXPORT_FORMATS", "mesh_info", "save_fused",
+           "export_meshes", "evaluate_fused"]
 
 MESH_FILE = "mesh.ply"
 WATERTIGHT_FILE = "mesh_watertight.ply"
+#: ``--format`` of scan and process: the mesh files' format (PLY always written; the others beside it).
+MESH_EXPORT_FORMATS = ("ply", "obj", "stl", "glb")
 #: The closed mesh's accuracy figures kept in the summary (``accuracy["watertight"]``).
 WATERTIGHT_FIGURES = ("rms", "p95", "max", "completeness", "unobserved_area", "unobserved_rms", "rms_all")
 
@@ -45,6 +49,21 @@ def save_fused(out: Path, fused: FusedMeshes, fusion: str) -> tuple[dict, dict]:
     save_mesh(out / MESH_FILE, fused.observed)
     save_mesh(out / WATERTIGHT_FILE, fused.watertight)
     return (mesh_info(fused.observed, fusion, MESH_FILE), mesh_info(fused.watertight, fusion, WATERTIGHT_FILE))
+
+
+def export_meshes(out: Path, fmt: str) -> list[str]:
+    """``out/mesh.FMT`` and ``out/mesh_watertight.FMT`` written from the two PLY files :func:`save_fused`
+    wrote (``fmt`` one of :data:`MESH_EXPORT_FORMATS`; nothing to do for ``ply``); the names written."""
+    from rangekit.formats.meshes import load_mesh_file, save_mesh
+
+    if fmt == "ply":
+        return []
+    names = []
+    for ply in (MESH_FILE, WATERTIGHT_FILE):
+        name = f"{Path(ply).stem}.{fmt}"
+        save_mesh(Path(out) / name, load_mesh_file(Path(out) / ply))
+        names.append(name)
+    return names
 
 
 def evaluate_fused(evaluate: Callable, fused: FusedMeshes, angles, *, views: dict | None = None,

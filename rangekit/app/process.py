@@ -45,7 +45,7 @@ from rangekit.io import atomic_write_json, fsync_folder
 from rangekit.memory import release_free_memory
 from rangekit.progress import StageTimer, call_progress
 from rangekit.rig import Rig, turntable_prior
-from rangekit.surface.cloud import PointCloud, merge_clouds
+from rangekit.surface.cloud import PointCloud, merge_clouds, view_index
 from rangekit.surface.observed import FusedMeshes
 from rangekit.threads import one_blas_thread
 
@@ -200,7 +200,7 @@ def _process(out: Path, fusion: str, method: str, table_margin: float, evaluate:
         fusing = (call_beside(poisson_meshes, sample, depth=9, n_threads=1, in_child=len(sample) >= CHILD_MIN_POINTS)
                   if fusion == "poisson" else call_beside(_tsdf, sample, maps, res.T_world_view, rig, in_child=False))
         with fusing:
-            save_cloud(out / "merged.ply", merged)
+            save_cloud(out / "merged.ply", merged, fields={"view": view_index(clouds)})
             # Not kept beside Poisson's octree and the evaluator (2M points, 130 MB): the report remakes it.
             del merged
             if prepare is not None:

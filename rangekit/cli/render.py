@@ -26,8 +26,8 @@ def cmd_render(args: argparse.Namespace) -> int:
 def add_parsers(sub) -> None:
     ren = sub.add_parser("render", help="render a mesh or point cloud to a PNG (no display needed)",
                          description="Shade a mesh (ray cast) or a cloud (z-buffer splats) from one or more sides.")
-    ren.add_argument("input", metavar="MESH_OR_CLOUD", help="mesh (.ply with faces, .obj, .stl, .off) or cloud "
-                                                            "(.ply, .xyz, .npy, .pcd, .txt)")
+    ren.add_argument("input", metavar="MESH_OR_CLOUD", help="mesh (.ply with faces, .obj, .stl, .off, .glb) or "
+                                                            "cloud (.ply, .xyz, .npy, .pcd, .txt, .e57)")
     ren.add_argument("--out", required=True, help="output PNG")
     ren.add_argument("--azimuth", type=finite_float, nargs="+", default=[30.0],
                      help="viewing azimuth(s) in degrees about --up; several give a montage (default 30)")

@@ -157,6 +157,7 @@ def _with_exposures(setup, given: list):
 
 def _process(folder: str, args: argparse.Namespace, *, acquisition_s: float | None = None,
              resume_cmd: str | None = None) -> int:
+    from rangekit.app.fused_outputs import export_meshes
     from rangekit.app.scan import process_scan
     from rangekit.progress import format_seconds
 
@@ -174,7 +175,9 @@ def _process(folder: str, args: argparse.Namespace, *, acquisition_s: float | No
     for line in res.summary_lines():
         say(line)
     total = time.perf_counter() - t0 + (acquisition_s or 0.0)
-    say(f"wrote {folder}/mesh.ply (observed surface), mesh_watertight.ply (closed), merged.ply, poses.json, summary.json"
+    exported = export_meshes(Path(folder), args.format)
+    say(f"wrote {folder}/mesh.ply (observed surface), mesh_watertight.ply (closed), "
+        + "".join(f"{name}, " for name in exported) + "merged.ply, poses.json, summary.json"
         + ("" if args.no_report else ", report.html") + f" in {format_seconds(total)}")
     return 0
 
@@ -195,6 +198,7 @@ def _process_batch(args: argparse.Namespace) -> int:
     """Several sessions on Dask (rangekit.app.batch): a line per view and session, then each session done or
     failed; exit 1 when any failed."""
     from rangekit.app.batch import process_sessions
+    from rangekit.app.fused_outputs import export_meshes
     from rangekit.progress import format_seconds
 
     scheduler = args.scheduler or "local"
@@ -219,6 +223,7 @@ def _process_batch(args: argparse.Namespace) -> int:
         f"{format_seconds(res.seconds)} ==")
     for o in res.sessions:
         if o.ok:
+            export_meshes(Path(o.folder), args.format)
             say(f"{o.folder}: done ({o.views_decoded} views decoded, {o.views_cached} from the cache); "
                 + (o.summary[0] if o.summary else ""))
         else:
@@ -231,6 +236,10 @@ def _processing_options(p: argparse.ArgumentParser) -> None:
                    metavar="{poisson,tsdf}",
                    help="fusion into one mesh: poisson (default, screened Poisson of the merged cloud) or tsdf")
     p.add_argument("--no-report", action="store_true", help="skip report.html")
+    p.add_argument("--format", default="ply", choices=LazyChoices("rangekit.app.fused_outputs", "MESH_EXPORT_FORMATS"),
+                   metavar="{ply,obj,stl,glb}",
+                   help="mesh files: ply (default; mesh.ply and mesh_watertight.ply, with vertex normals and the "
+                        "'observed' flag) or obj, stl, glb written beside them as mesh.FMT and mesh_watertight.FMT")
 
 
 def add_parsers(sub) -> None:

@@ -1,14 +1,16 @@
 """Point cloud files, chosen by extension.
 
 Writers (:data:`CLOUD_WRITERS`, :func:`save_cloud`): ``.ply`` (binary little-endian, float64 xyz, float32
-normals, uint8 RGB, float32 ``sigma`` when the cloud has it; :mod:`rangekit.formats.ply`), ``.xyz`` (text
-``x y z [nx ny nz]``), ``.npy`` ((N, 3), (N, 6) points + normals or (N, 9) points + normals + colours).
-Only PLY keeps ``sigma``. Writes are atomic.
+normals, uint8 RGB, float32 ``sigma`` when the cloud has it; :mod:`rangekit.formats.ply`), ``.pcd`` (binary,
+float32 xyz as PCL and Open3D read them, normals, rgb, sigma; :mod:`rangekit.formats.pcd`), ``.xyz`` (text ``x y z [nx ny nz]``),
+``.npy`` ((N, 3), (N, 6) points + normals or (N, 9) points + normals + colours), ``.e57`` (points and
+colours through pye57; :mod:`rangekit.formats.e57`). PLY and PCD keep ``sigma``. Writes are atomic.
 
 Readers (:data:`CLOUD_READERS`, :func:`load_cloud`): ``.ply`` (ASCII and binary of either byte order;
-extra elements such as faces or a Stanford ``range_grid`` are skipped), ``.pcd`` (PCL, ASCII and binary),
-``.xyz`` / ``.txt`` and ``.npy``. Rows whose point is not finite are dropped. :func:`load_range_grid`
-reads a Stanford/Cyberware range-grid PLY as an organised scan. All parsing is vectorised numpy.
+extra elements such as faces or a Stanford ``range_grid`` are skipped), ``.pcd`` (PCL, ASCII, binary and
+binary_compressed), ``.xyz`` / ``.txt``, ``.npy`` and ``.e57`` (every scan, poses applied). Rows whose point
+is not finite are dropped. :func:`load_range_grid` reads a Stanford/Cyberware range-grid PLY as an
+organised scan.
 """
 
 from __future__ import annotations
@@ -22,10 +24,12 @@ import numpy as np
 
 from rangekit.errors import FileFormatError
 from rangekit.formats.parsing import cloud_of_finite_rows, read_bytes
-from rangekit.formats.pcd import read_pcd
+from rangekit.formats.e57 import e57_bytes, read_e57
+from rangekit.formats.pcd import pcd_bytes, read_pcd
 from rangekit.formats.ply import cloud_ply_bytes, ply_points, ply_vertex_attributes, ply_vertex_scalar, read_ply
 from rangekit.io import atomic_write_bytes
 from rangekit.surface.cloud import PointCloud
+from rangekit.surface.convert import as_cloud
 
 __all__ = ["save_cloud", "CLOUD_WRITERS", "load_cloud", "CLOUD_READERS", "RangeGrid", "load_range_grid"]
 
@@ -49,17 +53,25 @@ def _write_npy(cloud: PointCloud) -> bytes:
     return buf.getvalue()
 
 
-CLOUD_WRITERS = {".ply": cloud_ply_bytes, ".xyz": _write_xyz, ".npy": _write_npy}
+CLOUD_WRITERS = {".ply": cloud_ply_bytes, ".pcd": pcd_bytes, ".xyz": _write_xyz, ".npy": _write_npy,
+                 ".e57": e57_bytes}
 
 
-def save_cloud(path: str | Path, cloud: PointCloud) -> None:
-    """Write ``cloud`` in the format given by the file extension, atomically."""
+def save_cloud(path: str | Path, cloud, *, fields: dict[str, np.ndarray] | None = None) -> None:
+    """Write ``cloud`` (any cloud :func:`rangekit.surface.convert.as_cloud` takes: a PointCloud, an (N, 3)
+    array, an Open3D or trimesh cloud) in the format given by the file extension (:data:`CLOUD_WRITERS`),
+    atomically. ``fields``: extra per-point properties (name -> (N,) array), PLY only (e.g. merged.ply's
+    ``view``, :func:`rangekit.surface.cloud.view_index`)."""
     path = Path(path)
     writer = CLOUD_WRITERS.get(path.suffix.lower())
     if writer is None:
         raise FileFormatError(f"{path}: unknown point cloud format {path.suffix!r}; known: "
                               f"{', '.join(CLOUD_WRITERS)}")
-    atomic_write_bytes(path, writer(cloud))
+    cloud = as_cloud(cloud, "save_cloud")
+    if fields and writer is not cloud_ply_bytes:
+        raise FileFormatError(f"{path}: extra point fields ({', '.join(fields)}) are written to '.ply' only, "
+                              f"found {path.suffix!r}")
+    atomic_write_bytes(path, cloud_ply_bytes(cloud, fields) if fields else writer(cloud))
 
 
 class RangeGrid(NamedTuple):
@@ -75,8 +87,8 @@ def load_cloud(path: str | Path) -> PointCloud:
     Parameters
     ----------
     path : str or Path
-        ``.ply`` (ASCII or binary; vertex ``x y z`` [``nx ny nz``] [``red green blue``] [``sigma``]; other elements
-        such as faces or a range grid are skipped), ``.pcd`` (ASCII or binary; ``x y z``
+        ``.e57`` (every scan, placed by its pose; colours), ``.ply`` (ASCII or binary; vertex ``x y z`` [``nx ny nz``] [``red green blue``] [``sigma``]; other elements
+        such as faces or a range grid are skipped), ``.pcd`` (ASCII, binary or binary_compressed; ``x y z``
         [``normal_x normal_y normal_z``] [``rgb``/``rgba``]), ``.xyz`` / ``.txt`` (3 or 6 columns, ``#``
         comments) or ``.npy`` ((N, 3), (N, 6) points + normals, (N, 9) points + normals + colours).
         Coordinates in metres.
@@ -205,5 +217,5 @@ def _read_npy(path: Path) -> PointCloud:
 
 
 CLOUD_READERS = {".ply": _read_ply_cloud, ".pcd": read_pcd, ".xyz": _read_xyz, ".txt": _read_xyz,
-                 ".npy": _read_npy}
+                 ".npy": _read_npy, ".e57": read_e57}
 

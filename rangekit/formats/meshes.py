@@ -1,5 +1,6 @@
-"""Mesh files, chosen by extension: ``.ply`` (read and written by :mod:`rangekit.formats.ply`), ``.obj``
-and ``.stl`` (via trimesh), ``.off`` (read only, via trimesh). Writes are atomic."""
+"""Mesh files, chosen by extension: ``.ply`` (read and written by :mod:`rangekit.formats.ply`, with vertex
+normals), ``.obj``, ``.stl`` and ``.glb`` (binary glTF 2.0: float32 vertices) via trimesh, ``.off`` (read
+only, via trimesh). Writes are atomic."""
 
 from __future__ import annotations
 
@@ -10,19 +11,22 @@ import numpy as np
 from rangekit.errors import FileFormatError
 from rangekit.formats.ply import mesh_ply_bytes, ply_observed, ply_vertex_attributes, read_ply
 from rangekit.io import atomic_write_bytes
+from rangekit.surface.convert import as_mesh
 from rangekit.surface.mesh import TriangleMesh
 
 __all__ = ["save_mesh", "load_mesh_file", "MESH_FORMATS"]
 
 
-def _write_via_trimesh(file_type: str):
+def _write_via_trimesh(file_type: str, **options):
     def write(mesh: TriangleMesh) -> bytes:
-        data = mesh.to_trimesh().export(file_type=file_type)
+        data = mesh.to_trimesh().export(file_type=file_type, **options)
         return data.encode("utf-8") if isinstance(data, str) else bytes(data)
     return write
 
 
-MESH_FORMATS = {".ply": mesh_ply_bytes, ".obj": _write_via_trimesh("obj"), ".stl": _write_via_trimesh("stl")}
+# OBJ: 12 decimals (1e-12 m; trimesh's default 8 rounds to 1e-8 m).
+MESH_FORMATS = {".ply": mesh_ply_bytes, ".obj": _write_via_trimesh("obj", digits=12), ".stl": _write_via_trimesh("stl"),
+                ".glb": _write_via_trimesh("glb")}
 _READ_ONLY = (".off",)  # read by trimesh, never written
 
 
@@ -33,14 +37,17 @@ def _check_suffix(path: Path, known=MESH_FORMATS) -> str:
     return suffix
 
 
-def save_mesh(path: str | Path, mesh: TriangleMesh) -> None:
-    """Write ``mesh`` in the format given by the extension (``.ply`` binary with colours, ``.obj``, ``.stl``).
+def save_mesh(path: str | Path, mesh) -> None:
+    """Write ``mesh`` (any mesh :func:`rangekit.surface.convert.as_mesh` takes: TriangleMesh, Open3D, trimesh)
+    in the format given by the extension (``.ply`` binary with vertex normals and colours, ``.obj``, ``.stl``,
+    ``.glb``).
 
-    The write is atomic (temporary file + rename). STL keeps no colours; OBJ keeps them as vertex colours.
+    The write is atomic (temporary file + rename). STL keeps no colours; OBJ and GLB keep them as vertex
+    colours.
     """
     path = Path(path)
     suffix = _check_suffix(path)
-    atomic_write_bytes(path, MESH_FORMATS[suffix](mesh))
+    atomic_write_bytes(path, MESH_FORMATS[suffix](as_mesh(mesh, "save_mesh")))
 
 
 def _read_ply_mesh(path: Path) -> TriangleMesh:
@@ -78,8 +85,8 @@ def _read_ply_mesh(path: Path) -> TriangleMesh:
 
 
 def load_mesh_file(path: str | Path) -> TriangleMesh:
-    """Read a ``.ply`` (:mod:`rangekit.formats.ply`), ``.obj``, ``.stl`` or ``.off`` (trimesh) mesh; vertex
-    order kept, nothing merged.
+    """Read a ``.ply`` (:mod:`rangekit.formats.ply`), ``.obj``, ``.stl``, ``.off`` or ``.glb`` (trimesh; a glTF
+    scene's meshes concatenated in the scene frame) mesh; vertex order kept, nothing merged.
 
     Raises
     ------

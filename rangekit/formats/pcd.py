@@ -1,4 +1,12 @@
-"""PCD files (Point Cloud Library), ASCII and binary, read with vectorised numpy."""
+"""PCD files (Point Cloud Library).
+
+Reading: ASCII and binary bodies with vectorised numpy (their errors name the file, the expected and the
+found value; Open3D's reader prints a warning and returns an empty cloud instead); ``binary_compressed``
+(LZF, what ``open3d.io.write_point_cloud(..., compressed=True)`` and PCL write) through ``open3d.io``.
+Writing (:func:`pcd_bytes`): binary, float32 ``x y z`` (metres), float32 normals, packed ``rgb`` (U4,
+0x00RRGGBB as Open3D writes it) and float32 ``sigma``. float32 coordinates as PCL's ``PointXYZ`` and Open3D
+write them: Open3D 0.19's ``o3d.io.read_point_cloud`` reads ``SIZE 8`` coordinates as zeros, silently.
+"""
 
 from __future__ import annotations
 
@@ -10,7 +18,7 @@ from rangekit.errors import FileFormatError
 from rangekit.formats.parsing import ascii_rows, cloud_of_finite_rows, read_bytes, truncated_error
 from rangekit.surface.cloud import PointCloud
 
-__all__ = ["read_pcd"]
+__all__ = ["read_pcd", "pcd_bytes"]
 
 _PCD_KEYS = ("VERSION", "FIELDS", "SIZE", "TYPE", "COUNT", "WIDTH", "HEIGHT", "VIEWPOINT", "POINTS", "DATA")
 
@@ -81,10 +89,9 @@ def read_pcd(path: Path) -> PointCloud:
                 col = col.astype(np.float32).view(np.uint32) if dt == "f4" else col.astype(np.uint32)
             columns.setdefault(name, col)
     elif kind == "binary_compressed":
-        raise FileFormatError(f"{path}: PCD 'DATA binary_compressed' is not supported; convert the file to "
-                              f"binary or ascii first (e.g. pcl_convert_pcd_ascii_binary in.pcd out.pcd 1)")
+        return _read_compressed(path, names, n)
     else:
-        raise FileFormatError(f"{path}: expected PCD 'DATA ascii' or 'DATA binary', found {' '.join(header['DATA'])!r}")
+        raise FileFormatError(f"{path}: expected PCD 'DATA ascii', 'binary' or 'binary_compressed', found {' '.join(header['DATA'])!r}")
 
     if not all(c in columns for c in "xyz"):
         raise FileFormatError(f"{path}: expected PCD fields x, y, z, found {' '.join(names)}")
@@ -97,5 +104,50 @@ def read_pcd(path: Path) -> PointCloud:
     if packed is not None:
         packed = packed.astype(np.uint32)
         colours = np.column_stack([(packed >> s) & 0xFF for s in (16, 8, 0)]).astype(np.float32) / 255
-    return cloud_of_finite_rows(path, points, normals, colours)
+    sigma = columns["sigma"].astype(np.float64) if "sigma" in columns else None
+    return cloud_of_finite_rows(path, points, normals, colours, sigma)
 
+
+
+def _read_compressed(path: Path, names: list[str], n: int) -> PointCloud:
+    """A ``DATA binary_compressed`` PCD through ``open3d.io`` (points float64, normals, colours)."""
+    import open3d as o3d
+
+    if not all(c in names for c in "xyz"):
+        raise FileFormatError(f"{path}: expected PCD fields x, y, z, found {' '.join(names)}")
+    pc = o3d.io.read_point_cloud(str(path), format="pcd", remove_nan_points=False, remove_infinite_points=False)
+    if len(pc.points) != n:
+        raise FileFormatError(f"{path}: header declares {n} points but Open3D read {len(pc.points)} from the "
+                              f"binary_compressed body (truncated or corrupt)")
+    colours = np.asarray(pc.colors) if pc.has_colors() else None
+    return cloud_of_finite_rows(path, np.asarray(pc.points), np.asarray(pc.normals) if pc.has_normals() else None,
+                                colours)
+
+
+def pcd_bytes(cloud: PointCloud) -> bytes:
+    """``cloud`` as a binary PCD (v0.7): float32 x y z, float32 normal_x/y/z, U4 rgb, float32 sigma (the
+    optional ones when the cloud has them)."""
+    fields = [("x", "<f4"), ("y", "<f4"), ("z", "<f4")]
+    if cloud.normals is not None:
+        fields += [("normal_x", "<f4"), ("normal_y", "<f4"), ("normal_z", "<f4")]
+    if cloud.colours is not None:
+        fields += [("rgb", "<u4")]
+    if cloud.sigma is not None:
+        fields += [("sigma", "<f4")]
+    rec = np.empty(len(cloud), dtype=fields)
+    rec["x"], rec["y"], rec["z"] = cloud.points.T
+    if cloud.normals is not None:
+        rec["normal_x"], rec["normal_y"], rec["normal_z"] = cloud.normals.T
+    if cloud.colours is not None:
+        rgb = np.clip(np.rint(cloud.colours * 255), 0, 255).astype(np.uint32)
+        rec["rgb"] = (rgb[:, 0] << 16) | (rgb[:, 1] << 8) | rgb[:, 2]
+    if cloud.sigma is not None:
+        rec["sigma"] = cloud.sigma
+    kinds = {"f": "F", "u": "U", "i": "I"}
+    header = ["# .PCD v0.7 - Point Cloud Data file format (rangekit, metres)", "VERSION 0.7",
+              "FIELDS " + " ".join(rec.dtype.names),
+              "SIZE " + " ".join(str(rec.dtype[f].itemsize) for f in rec.dtype.names),
+              "TYPE " + " ".join(kinds[rec.dtype[f].kind] for f in rec.dtype.names),
+              "COUNT " + " ".join("1" for _ in rec.dtype.names),
+              f"WIDTH {len(rec)}", "HEIGHT 1", "VIEWPOINT 0 0 0 1 0 0 0", f"POINTS {len(rec)}", "DATA binary"]
+    return b"".join([("\n".join(header) + "\n").encode("ascii"), memoryview(rec).cast("B")])

@@ -1,34 +1,31 @@
 """PLY files (Stanford polygon format) of point clouds and meshes: one reader and one writer.
 
-Reader (:func:`read_ply`): ASCII and binary of either byte order, any elements (vertices, faces, a
-Stanford/Cyberware ``range_grid`` with ragged ``list uchar int vertex_indices``), comments and ``obj_info``
-lines; vectorised numpy (a Python loop over rows only for binary lists of varying length, and only to
-find row offsets). Malformed and truncated files raise FileFormatError naming the file, the expected
-and the found value. Writer (:func:`cloud_ply_bytes`, :func:`mesh_ply_bytes`): binary little-endian.
-
-Why not ``plyfile`` (1.1.5): it reads these files too, but its ASCII path parses row by row in Python:
-the Stanford scan bun000.ply (ASCII, ragged range grid) takes 2.5 s against 0.12 s here. On a binary
-897k-triangle mesh it memory-maps (0.001 s with ``known_list_len``, 4.3 s without) against 0.011 s here;
-and its errors would need wrapping to name the expected and found values.
+Reader (:func:`read_ply`): the header is parsed here (its errors name the line, the expected and the found
+text); binary bodies of either byte order are read by ``plyfile`` (memory-mapped: each list property's
+length taken from the element's first row, plyfile's own row-by-row reader when lengths vary); ASCII
+bodies by a vectorised numpy parser, because plyfile parses ASCII row by row in Python (the Stanford scan
+bun000.ply, ASCII with a ragged ``range_grid``: 0.05 s here against 1.6 s, docs/benchmarks.md). Malformed
+and truncated files raise FileFormatError naming the file, the expected and the found value. Writer
+(:func:`cloud_ply_bytes`, :func:`mesh_ply_bytes`): binary little-endian from one structured array per
+element (plyfile writes list properties row by row in Python: 1.4 CPU-s for 897k triangles, against 0.02).
 """
 
 from __future__ import annotations
 
 import re
-import struct
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from rangekit.errors import FileFormatError
+from rangekit.errors import FileFormatError, InputError
 from rangekit.formats.parsing import ascii_rows, read_bytes, truncated_error
 from rangekit.surface.cloud import PointCloud
 from rangekit.surface.mesh import TriangleMesh
+from rangekit.surface.quality import vertex_normals
 
 __all__ = ["PlyLists", "PlyHeader", "read_ply", "ply_points", "ply_observed", "ply_vertex_attributes", "ply_vertex_scalar",
-           "cloud_ply_bytes",
-           "mesh_ply_bytes"]
+           "cloud_ply_bytes", "mesh_ply_bytes"]
 
 
 @dataclass(frozen=True)
@@ -44,8 +41,6 @@ def _ragged_index(starts: np.ndarray, counts: np.ndarray, step: int = 1) -> np.n
     total = int(counts.sum())
     first = np.repeat(np.cumsum(counts) - counts, counts)
     return np.repeat(starts, counts) + (np.arange(total) - first) * step
-
-
 
 
 _PLY_TYPES = {"char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1", "short": "i2", "int16": "i2",
@@ -103,6 +98,8 @@ def _parse_ply_header(path: Path, data: bytes) -> PlyHeader:
             elif words[0] == "element":
                 if len(words) != 3 or not words[2].isdigit():
                     raise ValueError("'element <name> <count>'")
+                if words[1] in {e.name for e in elements}:
+                    raise ValueError(f"one element {words[1]!r} per file")
                 elements.append(_PlyElement(words[1], int(words[2]), ()))
             elif words[0] == "property":
                 if not elements:
@@ -128,34 +125,49 @@ def _parse_ply_header(path: Path, data: bytes) -> PlyHeader:
     return PlyHeader(_PLY_FORMATS[fmt], tuple(elements), obj_info, end.end(), len(lines) + 1)
 
 
+def _read_head(path: Path) -> bytes:
+    """The file's first bytes, at least up to the line 'end_header' (or the whole file when it has none)."""
+    try:
+        with open(path, "rb") as f:
+            head = b""
+            while True:
+                chunk = f.read(1 << 16)
+                head += chunk
+                if not chunk or _END_HEADER.search(head) or len(head) > (1 << 24):
+                    return head
+    except FileNotFoundError as exc:
+        raise FileFormatError(f"{path}: point cloud file not found") from exc
+    except OSError as exc:
+        raise FileFormatError(f"{path}: cannot read point cloud file: {exc.strerror or exc}") from exc
+
+
 def read_ply(path: Path, wanted: tuple[str, ...]) -> tuple[PlyHeader, dict[str, dict]]:
     """Header and the ``wanted`` elements (property name -> (n,) array or PlyLists) of a PLY file.
 
-    Elements before the last wanted one are parsed and skipped; those after it are not read.
+    ASCII: elements before the last wanted one are parsed and skipped, those after it are not read.
+    Binary: read by plyfile (see the module's docstring).
     """
-    data = read_bytes(path)
-    header = _parse_ply_header(path, data)
+    head = _read_head(path)
+    header = _parse_ply_header(path, head)
     names = [e.name for e in header.elements]
     for name in wanted:
         if name not in names:
             raise FileFormatError(f"{path}: expected a PLY element {name!r}, found elements {names}")
+    if header.byte_order is not None:
+        return header, _read_binary(path, header, wanted)
+    data = read_bytes(path)
     elements = header.elements[:max(names.index(name) for name in wanted) + 1]
     out = {}
-    if header.byte_order is None:
-        n_rows = sum(e.count for e in elements)
-        values, counts, lines = ascii_rows(path, data, header.data_start, n_rows, header.n_lines + 1)
-        row = start = 0
-        for e in elements:
-            if len(counts) < row + e.count:
-                raise truncated_error(path, e.name, e.count, len(counts) - row)
-            rows = slice(row, row + e.count)
-            out[e.name] = _splitascii_rows(path, e, values, counts[rows], lines[rows], start)
-            start += int(counts[rows].sum())
-            row += e.count
-    else:
-        offset = header.data_start
-        for e in elements:
-            out[e.name], offset = _read_binary_element(path, data, offset, e, header.byte_order)
+    n_rows = sum(e.count for e in elements)
+    values, counts, lines = ascii_rows(path, data, header.data_start, n_rows, header.n_lines + 1)
+    row = start = 0
+    for e in elements:
+        if len(counts) < row + e.count:
+            raise truncated_error(path, e.name, e.count, len(counts) - row)
+        rows = slice(row, row + e.count)
+        out[e.name] = _splitascii_rows(path, e, values, counts[rows], lines[rows], start)
+        start += int(counts[rows].sum())
+        row += e.count
     return header, {name: out[name] for name in wanted}
 
 
@@ -189,95 +201,70 @@ def _splitascii_rows(path: Path, e: _PlyElement, values: np.ndarray, counts: np.
     return out
 
 
-def _read_binary_element(path: Path, data: bytes, offset: int, e: _PlyElement, bo: str
-                         ) -> tuple[dict, int]:
-    """Element ``e`` starting at byte ``offset``: (property name -> array or PlyLists, offset after it)."""
-    if not e.properties or e.count == 0:
-        empty = {p.name: np.empty(0, p.dtype) if p.count_dtype is None
-                 else PlyLists(np.empty(0, np.int64), np.empty(0, p.dtype)) for p in e.properties}
-        return empty, offset
-    available = len(data) - offset
-    if all(p.count_dtype is None for p in e.properties):
-        dt = np.dtype([(p.name, bo + p.dtype) for p in e.properties])
-        if available < e.count * dt.itemsize:
-            raise truncated_error(path, e.name, e.count, max(available, 0) // dt.itemsize)
-        rec = np.frombuffer(data, dtype=dt, count=e.count, offset=offset)
-        return {p.name: rec[p.name] for p in e.properties}, offset + e.count * dt.itemsize
-
-    # Fast path: every row's lists are as long as the first row's (a triangle mesh, say).
-    first, _ = _walk_binary_rows(path, data, offset, e, bo, 1)
-    u8 = np.frombuffer(data, dtype=np.uint8)
-    lengths = [int(_gather(u8, first[:, j], bo + p.count_dtype)[0]) if p.count_dtype else 0
-               for j, p in enumerate(e.properties)]
-    fields = []
-    for j, (p, k) in enumerate(zip(e.properties, lengths)):
-        if p.count_dtype is None:
-            fields.append((f"v{j}", bo + p.dtype))
-        else:
-            fields.append((f"n{j}", bo + p.count_dtype))
-            if k > 0:
-                fields.append((f"v{j}", bo + p.dtype, (k,)))
-    dt = np.dtype(fields)
-    if available >= e.count * dt.itemsize:
-        rec = np.frombuffer(data, dtype=dt, count=e.count, offset=offset)
-        if all(p.count_dtype is None or np.all(rec[f"n{j}"] == k)
-               for j, (p, k) in enumerate(zip(e.properties, lengths))):
-            out = {}
-            for j, (p, k) in enumerate(zip(e.properties, lengths)):
+def _first_row_list_lengths(path: Path, header: PlyHeader) -> dict[str, dict[str, int]]:
+    """plyfile's ``known_list_len``: each list property's length in its element's first row, found while
+    the elements before it have fixed-size rows (a vertex element before the faces); later ones are left
+    to plyfile's row-by-row reader."""
+    known, offset, bo = {}, header.data_start, header.byte_order
+    with open(path, "rb") as f:
+        for e in header.elements:
+            lengths, row_size = {}, 0
+            f.seek(offset)
+            for p in e.properties:
                 if p.count_dtype is None:
-                    out[p.name] = rec[f"v{j}"]
-                else:
-                    items = rec[f"v{j}"].reshape(-1) if k > 0 else np.empty(0, bo + p.dtype)
-                    out[p.name] = PlyLists(np.full(e.count, k, dtype=np.int64), items)
-            return out, offset + e.count * dt.itemsize
+                    row_size += np.dtype(p.dtype).itemsize
+                    f.seek(np.dtype(p.dtype).itemsize, 1)
+                    continue
+                size = np.dtype(p.count_dtype).itemsize
+                raw = f.read(size)
+                if len(raw) < size or e.count == 0:
+                    return known
+                n = int(np.frombuffer(raw, bo + p.count_dtype)[0])
+                lengths[p.name] = n
+                row_size += size + n * np.dtype(p.dtype).itemsize
+                f.seek(n * np.dtype(p.dtype).itemsize, 1)
+            if lengths:
+                known[e.name] = lengths
+            offset += e.count * row_size
+    return known
 
-    # General path: lists of varying length. Walk the rows for their offsets, then gather vectorised.
-    offsets, end = _walk_binary_rows(path, data, offset, e, bo, e.count)
+
+def _read_binary(path: Path, header: PlyHeader, wanted: tuple[str, ...]) -> dict[str, dict]:
+    """The ``wanted`` elements of a binary PLY, read by plyfile (memory-mapped when every list of an element
+    is as long as in its first row)."""
+    import plyfile
+
+    known = _first_row_list_lengths(path, header)
+    try:
+        try:
+            ply = plyfile.PlyData.read(str(path), mmap="c", known_list_len=known)
+        except plyfile.PlyElementParseError:
+            if not known:
+                raise
+            ply = plyfile.PlyData.read(str(path), mmap=False)   # ragged lists: plyfile's row-by-row reader
+    except plyfile.PlyElementParseError as exc:
+        if exc.message == "early end-of-file":
+            raise truncated_error(path, exc.element.name, exc.element.count, exc.row or 0) from None
+        raise FileFormatError(f"{path}: PLY element {exc.element.name!r} row {exc.row}: expected "
+                              f"{len(exc.element.properties)} properties, found {exc.message}") from None
+    except (plyfile.PlyParseError, ValueError) as exc:
+        raise FileFormatError(f"{path}: expected a readable binary PLY body, found: {exc}") from None
     out = {}
-    for j, p in enumerate(e.properties):
-        if p.count_dtype is None:
-            out[p.name] = _gather(u8, offsets[:, j], bo + p.dtype)
-        else:
-            n = _gather(u8, offsets[:, j], bo + p.count_dtype).astype(np.int64)
-            size = np.dtype(p.dtype).itemsize
-            starts = offsets[:, j] + np.dtype(p.count_dtype).itemsize
-            out[p.name] = PlyLists(n, _gather(u8, _ragged_index(starts, n, size), bo + p.dtype))
-    return out, end
-
-
-def _walk_binary_rows(path: Path, data: bytes, offset: int, e: _PlyElement, bo: str, n_rows: int
-                      ) -> tuple[np.ndarray, int]:
-    """Byte offset of each property in each of the first ``n_rows`` rows, and the offset after them.
-
-    A Python loop over rows: only used when list lengths vary from row to row, where the position of
-    a row depends on every list before it.
-    """
-    steps = [(np.dtype(p.dtype).itemsize, None, 0) if p.count_dtype is None else
-             (np.dtype(p.count_dtype).itemsize, struct.Struct(bo + np.dtype(p.count_dtype).char),
-              np.dtype(p.dtype).itemsize) for p in e.properties]
-    end = len(data)
-    offsets = []
-    pos = offset
-    for row in range(n_rows):
-        for size, length, item_size in steps:
-            offsets.append(pos)
-            if length is not None:
-                if pos + size > end:
-                    raise truncated_error(path, e.name, e.count, row)
-                n = length.unpack_from(data, pos)[0]
-                if n < 0:
-                    raise FileFormatError(f"{path}: {e.name!r} row {row}: expected a list length >= 0, found {n}")
-                pos += n * item_size
-            pos += size
-        if pos > end:
-            raise truncated_error(path, e.name, e.count, row)
-    return np.array(offsets, dtype=np.int64).reshape(n_rows, len(steps)), pos
-
-
-def _gather(u8: np.ndarray, offsets: np.ndarray, dtype: str) -> np.ndarray:
-    """Values of ``dtype`` at byte ``offsets`` of the uint8 buffer ``u8`` (vectorised)."""
-    dt = np.dtype(dtype)
-    return u8[offsets[:, None] + np.arange(dt.itemsize)].view(dt).reshape(-1)
+    for name in wanted:
+        e, data = header.element(name), ply[name].data
+        out[name] = {}
+        for p in e.properties:
+            col = data[p.name]
+            if p.count_dtype is None:
+                out[name][p.name] = col   # a view of the mapped file: the readers copy what they keep
+            elif col.dtype != object:  # memory-mapped: (n, k)
+                out[name][p.name] = PlyLists(np.full(len(col), col.shape[1] if col.ndim == 2 else 0, np.int64),
+                                             np.array(col).reshape(-1))
+            else:
+                counts = np.fromiter((len(r) for r in col), np.int64, len(col))
+                items = np.concatenate(list(col)) if len(col) else np.empty(0, p.dtype)
+                out[name][p.name] = PlyLists(counts, items.astype(p.dtype, copy=False))
+    return out
 
 
 def ply_points(path: Path, header: PlyHeader, vertex: dict) -> np.ndarray:
@@ -330,7 +317,8 @@ def ply_vertex_scalar(header: PlyHeader, vertex: dict, name: str) -> np.ndarray 
 
 # ----------------------------------------------------------------------------------------- writer
 
-_PLY_NAMES = {"float64": "double", "float32": "float", "uint8": "uchar", "int32": "int"}
+_PLY_NAMES = {"float64": "double", "float32": "float", "uint8": "uchar", "int32": "int", "uint16": "ushort",
+              "int16": "short", "uint32": "uint"}
 
 
 def _ply_bytes(comment: str, vertex: np.ndarray, faces: np.ndarray | None = None) -> bytes:
@@ -350,7 +338,8 @@ def _ply_bytes(comment: str, vertex: np.ndarray, faces: np.ndarray | None = None
 
 
 def _vertex_records(points: np.ndarray, normals: np.ndarray | None, colours: np.ndarray | None,
-                    sigma: np.ndarray | None = None, observed: np.ndarray | None = None) -> np.ndarray:
+                    sigma: np.ndarray | None = None, observed: np.ndarray | None = None,
+                    extra: dict[str, np.ndarray] | None = None) -> np.ndarray:
     """Structured vertex rows: float64 x y z, float32 nx ny nz, uint8 red green blue, float32 sigma
     (metres), uint8 observed (1 where a view's points support the vertex, 0 where the fusion invented it)
     (the optional ones only when given; colours in [0, 1] are rounded to 8 bits)."""
@@ -363,7 +352,14 @@ def _vertex_records(points: np.ndarray, normals: np.ndarray | None, colours: np.
         fields += [("sigma", "<f4")]
     if observed is not None:
         fields += [("observed", "u1")]
+    extra = extra or {}
+    taken = {f[0] for f in fields} & set(extra)
+    if taken:
+        raise InputError(f"PLY fields {sorted(taken)}: expected names other than the vertex's own, found them again")
+    fields += [(name, "<" + values.dtype.str[1:]) for name, values in extra.items()]
     rec = np.empty(len(points), dtype=fields)
+    for name, values in extra.items():
+        rec[name] = values
     rec["x"], rec["y"], rec["z"] = points.T
     if normals is not None:
         rec["nx"], rec["ny"], rec["nz"] = normals.T
@@ -377,15 +373,24 @@ def _vertex_records(points: np.ndarray, normals: np.ndarray | None, colours: np.
     return rec
 
 
-def cloud_ply_bytes(cloud: PointCloud) -> bytes:
+def cloud_ply_bytes(cloud: PointCloud, fields: dict[str, np.ndarray] | None = None) -> bytes:
     """A point cloud as binary PLY: float64 xyz, float32 normals, uint8 RGB, float32 ``sigma`` (the
-    predicted std along the camera ray, metres), comment "metres"."""
-    return _ply_bytes("rangekit point cloud, metres",
-                      _vertex_records(cloud.points, cloud.normals, cloud.colours, cloud.sigma))
+    predicted std along the camera ray, metres), then ``fields``: extra per-point properties, name -> (N,)
+    array of its own type (e.g. ``view`` uint16: the view each point of a merged cloud came from);
+    comment "metres"."""
+    fields = {name: np.asarray(values) for name, values in (fields or {}).items()}
+    for name, values in fields.items():
+        if values.shape != (len(cloud),) or values.dtype.name not in _PLY_NAMES:
+            raise InputError(f"PLY field {name!r}: expected a ({len(cloud)},) array of {', '.join(_PLY_NAMES)}, "
+                             f"found {values.dtype} {values.shape}")
+    rec = _vertex_records(cloud.points, cloud.normals, cloud.colours, cloud.sigma, extra=fields)
+    return _ply_bytes("rangekit point cloud, metres", rec)
 
 
 def mesh_ply_bytes(mesh: TriangleMesh) -> bytes:
-    """A triangle mesh as binary PLY: float64 xyz, uint8 RGB, uint8 ``observed`` (when the mesh has the flag),
-    faces as ``list uchar int``, comment "metres"."""
-    return _ply_bytes("rangekit mesh, metres", _vertex_records(mesh.vertices, None, mesh.vertex_colours,
+    """A triangle mesh as binary PLY: float64 xyz, float32 unit area-weighted vertex normals ``nx ny nz`` (what
+    MeshLab, Open3D and trimesh shade with), uint8 RGB, uint8 ``observed`` (when the mesh has the flag), faces
+    as ``list uchar int``, comment "metres"."""
+    normals = vertex_normals(mesh.vertices, mesh.triangles, sums=mesh.normal_sums)
+    return _ply_bytes("rangekit mesh, metres", _vertex_records(mesh.vertices, normals, mesh.vertex_colours,
                                                                observed=mesh.observed), mesh.triangles)

@@ -16,6 +16,7 @@ from rangekit.camera import PinholeCamera
 from rangekit.errors import InputError, RegistrationError
 from rangekit.geometry import apply_T, make_T, procrustes, rotation_angle, rotvec_to_R, transform_vectors
 from rangekit.surface.cloud import PointCloud, voxel_downsample
+from rangekit.surface.convert import as_cloud
 from rangekit.registration.stability import HeldMotions, PoseConstraint, held_step, pose_constraint
 
 __all__ = ["IcpOptions", "RegistrationResult", "icp", "KERNELS", "MIN_NORMAL_COS", "OrganisedScan"]
@@ -94,7 +95,7 @@ class OrganisedScan:
 
 # --------------------------------------------------------------------------- helpers
 def _as_cloud(x, name: str) -> PointCloud:
-    cloud = x if isinstance(x, PointCloud) else PointCloud(np.asarray(x, dtype=np.float64))
+    cloud = as_cloud(x, f"icp {name}")
     ok = np.all(np.isfinite(cloud.points), axis=1)
     if not np.all(ok):
         cloud = PointCloud(cloud.points[ok], None if cloud.colours is None else cloud.colours[ok],
@@ -277,7 +278,8 @@ def icp(source, target, *, init_T_target_source: np.ndarray | None = None, optio
 
     Parameters
     ----------
-    source, target : PointCloud or (N, 3) array, metres. Point-to-plane needs target normals, symmetric
+    source, target : PointCloud, (N, 3) array (metres) or any cloud :func:`rangekit.surface.convert.as_cloud`
+        takes (Open3D, trimesh). Point-to-plane needs target normals, symmetric
         needs both clouds' normals.
     init_T_target_source : (4, 4) initial guess (default identity).
     options : IcpOptions.

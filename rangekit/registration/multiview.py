@@ -238,7 +238,8 @@ def register_views(clouds: Sequence[PointCloud], *, init_T_world_view: np.ndarra
 
     Parameters
     ----------
-    clouds : PointClouds in metres; normals are used when present (else estimated).
+    clouds : PointClouds in metres (or any cloud :func:`rangekit.surface.convert.as_cloud` takes); normals are
+        used when present (else estimated).
     init_T_world_view : (n, 4, 4), optional prior poses; None runs coarse alignment of every pair.
     options : MultiViewOptions.
     progress : called with one line per stage.
@@ -250,8 +251,11 @@ def register_views(clouds: Sequence[PointCloud], *, init_T_world_view: np.ndarra
     kept along the free ones (in the pairwise and the joint refinement) and the edge's ``unconstrained``
     and ``reason`` say so.
     """
+    from rangekit.surface.convert import as_cloud
+
     with one_blas_thread():    # thin (n, 6) and (N, 3) products: rangekit.threads
-        return _register_views(clouds, init_T_world_view, options, progress, names)
+        return _register_views([as_cloud(c, f"register_views clouds[{i}]") for i, c in enumerate(clouds)],
+                               init_T_world_view, options, progress, names)
 
 
 def _register_views(clouds, init_T_world_view, options, progress, names) -> MultiViewResult:

@@ -15,7 +15,7 @@ from rangekit.errors import InputError, MeshError
 
 __all__ = ["PointCloud", "to_open3d", "voxel_downsample", "MAX_VOXELS_PER_DIAGONAL", "bbox_diagonal",
            "check_voxel", "estimate_normals", "orient_normals_to_sensor", "oriented_normals_cloud", "transform_cloud",
-           "merge_clouds", "affine_dimension", "spread_problem"]
+           "merge_clouds", "view_index", "affine_dimension", "spread_problem"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -293,3 +293,11 @@ def merge_clouds(clouds: Sequence[PointCloud], T_world_view: np.ndarray | Sequen
     if all(c.sigma is not None for c in moved):
         sigma = np.concatenate([c.sigma for c in moved])
     return PointCloud(points, colours, normals, sigma)
+
+
+def view_index(clouds: Sequence[PointCloud]) -> np.ndarray:
+    """(N,) uint16: for each point of :func:`merge_clouds` of ``clouds``, the index of the cloud it came from
+    (merged.ply's ``view`` property)."""
+    if len(clouds) > np.iinfo(np.uint16).max + 1:
+        raise InputError(f"view_index: at most 65536 clouds fit a uint16 index, found {len(clouds)}")
+    return np.repeat(np.arange(len(clouds), dtype=np.uint16), [len(c) for c in clouds])

@@ -21,6 +21,7 @@ from rangekit.geometry import transform_vectors
 from rangekit.memory import release_free_memory
 from rangekit.surface.cloud import PointCloud, spread_problem
 from rangekit.surface.cloud import to_open3d as _cloud_to_open3d
+from rangekit.surface.convert import as_cloud
 from rangekit.surface.mesh import TriangleMesh, mesh_from_open3d
 from rangekit.surface.observed import OBSERVED_FACTOR, FusedMeshes, split_observed
 from rangekit.surface.watertight import clean_mesh, make_watertight
@@ -46,7 +47,8 @@ def poisson_mesh(cloud: PointCloud, *, depth: int = 9, density_quantile: float =
 
     Parameters
     ----------
-    cloud : PointCloud with ``normals`` (unit, pointing out of the object, e.g. from
+    cloud : PointCloud (or any cloud :func:`rangekit.surface.convert.as_cloud` takes: an (N, 6) array, Open3D's,
+        a mesh's vertices) with ``normals`` (unit, pointing out of the object, e.g. from
         :func:`rangekit.coded.triangulate.range_normals` per view or :func:`rangekit.surface.cloud.orient_normals_to_sensor`).
         Colours, if present, are carried to the vertices.
     depth : octree depth; the finest cell is ``1.1 * bounding-cube side / 2**depth``. Each step up
@@ -71,6 +73,7 @@ def poisson_mesh(cloud: PointCloud, *, depth: int = 9, density_quantile: float =
         purpose: on a cloud merged from many views their sign cannot be recovered reliably; orient them
         towards the sensor per view before merging.
     """
+    cloud = as_cloud(cloud, "poisson_mesh cloud")
     mesh, _, _ = _poisson_surface(cloud, depth, density_quantile, watertight, n_threads)
     return make_watertight(mesh) if watertight else clean_mesh(mesh, fill=False)
 

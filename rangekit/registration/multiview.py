@@ -23,6 +23,7 @@ from scipy.spatial import cKDTree
 from rangekit.errors import RegistrationError
 from rangekit.geometry import apply_T, invert_T, rotation_angle
 from rangekit.surface.cloud import PointCloud, bbox_diagonal, check_voxel, estimate_normals, voxel_downsample
+from rangekit.surface.convert import as_cloud
 from rangekit.registration.coarse import CoarseOptions, compute_features, coarse_align
 from rangekit.registration.icp import IcpOptions, icp
 from rangekit.registration.joint import JointResult, refine_jointly
@@ -231,8 +232,7 @@ def _edge(i: int, j: int, r, overlap: float, options: MultiViewOptions, max_rmse
 
 
 def register_views(clouds: Sequence[PointCloud], *, init_T_world_view: np.ndarray | None = None,
-                   options: MultiViewOptions = MultiViewOptions(),
-                   progress: Callable[[str], None] | None = None,
+                   options: MultiViewOptions = MultiViewOptions(), progress: Callable[[str], None] | None = None,
                    names: Sequence[str] | None = None) -> MultiViewResult:
     """Register ``clouds`` (each in its own frame) into the first cloud's frame.
 
@@ -245,14 +245,10 @@ def register_views(clouds: Sequence[PointCloud], *, init_T_world_view: np.ndarra
     progress : called with one line per stage.
     names : the views' names for error messages (e.g. file names).
 
-    Ambiguous pairs (their overlap leaves a rigid motion free, see rangekit.registration.stability): with
-    no prior they are not edges, and a view reached only through them raises RegistrationError naming
-    the views and the free motion. With a prior, ICP solves only the constrained motions, the prior is
-    kept along the free ones (in the pairwise and the joint refinement) and the edge's ``unconstrained``
-    and ``reason`` say so.
+    Ambiguous pairs (a rigid motion left free, rangekit.registration.stability): with no prior not edges (a
+    view reached only through them: RegistrationError naming the views and the motion); with a prior, ICP
+    solves the constrained motions, keeps the prior along the free ones and the edge's ``reason`` says so.
     """
-    from rangekit.surface.convert import as_cloud
-
     with one_blas_thread():    # thin (n, 6) and (N, 3) products: rangekit.threads
         return _register_views([as_cloud(c, f"register_views clouds[{i}]") for i, c in enumerate(clouds)],
                                init_T_world_view, options, progress, names)

@@ -248,7 +248,8 @@ def _read_binary(path: Path, header: PlyHeader, wanted: tuple[str, ...]) -> dict
         raise FileFormatError(f"{path}: PLY element {exc.element.name!r} row {exc.row}: expected "
                               f"{len(exc.element.properties)} properties, found {exc.message}") from None
     except (plyfile.PlyParseError, ValueError) as exc:
-        raise FileFormatError(f"{path}: expected a readable binary PLY body, found: {exc}") from None
+        why = "a list of negative length" if "smaller then zero" in str(exc) else str(exc)   # numpy's words
+        raise FileFormatError(f"{path}: expected a readable binary PLY body (list lengths >= 0), found {why}") from None
     out = {}
     for name in wanted:
         e, data = header.element(name), ply[name].data

@@ -50,7 +50,8 @@ FILES = {
     "float_indices.ply": (_ply(3, extra=_FACE.format("float")) + _TRI + struct.pack("<B3f", 3, 0, 1, 2),
                           ["whole-number vertex indices", "float32"]),
     "negative_list.ply": (_ply(3, extra=_FACE.replace("uchar", "int").format("int")) + _TRI
-                          + struct.pack("<i3i", -1, 0, 1, 2), ["'face' row 0", "list length >= 0", "found -1"]),
+                          + struct.pack("<i3i", -1, 0, 1, 2), ["binary PLY body", "list lengths >= 0",
+                                                                 "a list of negative length"]),
     "index_out_of_range.ply": (_ply(3, extra=_FACE.format("int")) + _TRI + struct.pack("<B3i", 3, 0, 1, 7),
                                ["face indices in [0, 3)", "[0, 7]"]),
     "ragged.xyz": (b"1 2 3\n4 5\n", ["rows of 3 (x y z) or 6", "changed from 3 to 2 at row 2"]),
@@ -69,7 +70,7 @@ FILES = {
     "points_negative.pcd": (_pcd(points=-5, data="binary", body=b""), ["POINTS >= 0", "-5 points"]),
     "bad_type.pcd": (_pcd(type_="F F Q"), ["TYPE (F, I or U)"]),
     "truncated.pcd": (_pcd(points=2, data="binary", body=b"\0" * 8), ["header declares 2 points", "ends after 0"]),
-    "compressed.pcd": (_pcd(data="binary_compressed", body=b""), ["binary_compressed", "not supported"]),
+    "compressed.pcd": (_pcd(data="binary_compressed", body=b""), ["1 points", "binary_compressed", "truncated or corrupt"]),
     "empty.pcd": (b"", ["'DATA ascii|binary'", "found none"]),
     "nan_vertex.obj": (b"v 0 0 nan\nv 1 0 0\nv 0 1 0\nf 1 2 3\n", ["expected finite vertices", "1 that are not"]),
     "bad_index.obj": (b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n", ["cannot read OBJ mesh"]),

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import time
 
-from rangekit.cli._common import check_output, say, size
+from rangekit.cli._common import check_output, note, result, say, size
 
 
 def cmd_decode(args: argparse.Namespace) -> int:
@@ -20,14 +20,14 @@ def cmd_decode(args: argparse.Namespace) -> int:
     check_output(args.out)
     paths = list_images(args.images[0] if len(args.images) == 1 else args.images)
     spec = pattern_spec_for(args.pattern, args.projector)
-    say(f"reading {len(paths)} images")
+    note(f"reading {len(paths)} images")
     images = read_stack(paths)
-    say(f"decoding {spec.method} ({'subpixel' if not args.integer else 'integer'})")
+    note(f"decoding {spec.method} ({'subpixel' if not args.integer else 'integer'})")
     with naming(args.images[0] if len(args.images) == 1 else f"{len(paths)} images from {paths[0]}"):
         res = decode(images, spec, order=args.order, subpixel=not args.integer)
     save_decoded(args.out, res)
     say(f"{res!r}")
-    say(f"wrote {Path(args.out)} in {time.perf_counter() - t0:.1f} s")
+    result(f"wrote {Path(args.out)} in {time.perf_counter() - t0:.1f} s")
     return 0
 
 
@@ -51,14 +51,14 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
     rig = load_rig(args.rig) if args.rig else cap.rig
     if rig is None or rig.projector is None:
         raise ConfigError(f"{args.capture}: no rig.json with a projector; pass --rig RIG.json")
-    say(f"decoding {len(cap.images)} images ({cap.spec.method})")
+    note(f"decoding {len(cap.images)} images ({cap.spec.method})")
     with naming(args.capture):
         rec = reconstruct_view(cap.images, cap.spec, rig.camera, rig.projector, subpixel=not args.integer,
                                method=args.method, full_scale=cap.full_scale, response=rig.projector_response)
     save_cloud(args.out, rec.cloud)
     say(f"{rec.decoded!r}")
     say(f"{rec.triangulated!r}")
-    say(f"wrote {len(rec.cloud)} points to {args.out} in {time.perf_counter() - t0:.1f} s")
+    result(f"wrote {len(rec.cloud)} points to {args.out} in {time.perf_counter() - t0:.1f} s")
     return 0
 
 
@@ -70,11 +70,11 @@ def _reconstruct_laser(args: argparse.Namespace, t0: float) -> int:
     from rangekit.rig import load_rig
 
     cap = load_laser_capture(args.capture, rig=load_rig(args.rig) if args.rig else None)
-    say(f"laser capture: {len(cap.frames)} laser(s); line peaks ({args.peaks}) and ray-plane triangulation")
+    note(f"laser capture: {len(cap.frames)} laser(s); line peaks ({args.peaks}) and ray-plane triangulation")
     rec = reconstruct_laser_capture(cap, method=args.peaks)
     save_cloud(args.out, rec.cloud)
     say(rec.summary())
-    say(f"wrote {len(rec.cloud)} points to {args.out} in {time.perf_counter() - t0:.1f} s")
+    result(f"wrote {len(rec.cloud)} points to {args.out} in {time.perf_counter() - t0:.1f} s")
     return 0
 
 

@@ -7,7 +7,7 @@ import time
 
 import numpy as np
 
-from rangekit.cli._common import check_output, int_in, positive_float, say
+from rangekit.cli._common import check_output, console, int_in, note, positive_float, result, say
 
 
 def cmd_register(args: argparse.Namespace) -> int:
@@ -18,7 +18,7 @@ def cmd_register(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     check_output(args.out, folder=True)
     voxel = args.voxel_mm * 1e-3 if args.voxel_mm else None
-    rep = register_files(args.scans, args.out, init=args.init, voxel=voxel, mesh=not args.no_mesh, progress=say,
+    rep = register_files(args.scans, args.out, init=args.init, voxel=voxel, mesh=not args.no_mesh, progress=console(),
                          neighbours=args.neighbours)
     res = rep.result
     say("edges (view i - view j): ICP inlier RMSE, overlap, accepted, synchronisation residual")
@@ -37,7 +37,7 @@ def cmd_register(args: argparse.Namespace) -> int:
     for k, T in enumerate(res.T_world_view):
         say(f"  view {k}: {rep.sources[k]}: rotation {np.degrees(rotation_angle(T[:3, :3])):8.3f} deg, "
             f"translation {np.linalg.norm(T[:3, 3]) * 1e3:8.2f} mm")
-    say(f"wrote {args.out}/poses.json, merged.ply{', mesh.ply' if rep.mesh_path else ''} in "
+    result(f"wrote {args.out}/poses.json, merged.ply{', mesh.ply' if rep.mesh_path else ''} in "
         f"{time.perf_counter() - t0:.1f} s")
     return 0
 
@@ -58,12 +58,12 @@ def cmd_mesh(args: argparse.Namespace) -> int:
         raise MeshError(f"{args.cloud}: cannot build a closed surface: {problem}")
     with naming(args.cloud):
         if cloud.normals is None:
-            say(f"read {len(cloud)} points without normals: estimating outward normals")
+            note(f"read {len(cloud)} points without normals: estimating outward normals")
             cloud = oriented_normals_cloud(cloud.points)
-        say(f"{len(cloud)} points; screened Poisson, depth {args.depth}")
+        note(f"{len(cloud)} points; screened Poisson, depth {args.depth}")
         mesh = poisson_mesh(cloud, depth=args.depth)
     save_mesh(args.out, mesh)
-    say(f"wrote {args.out}: {len(mesh.vertices)} vertices, {len(mesh.triangles)} triangles, watertight "
+    result(f"wrote {args.out}: {len(mesh.vertices)} vertices, {len(mesh.triangles)} triangles, watertight "
         f"{mesh.is_watertight}, in {time.perf_counter() - t0:.1f} s")
     return 0
 

@@ -6,7 +6,7 @@ import argparse
 
 import numpy as np
 
-from rangekit.cli._common import check_output, finite_float, say, size
+from rangekit.cli._common import check_output, finite_float, result, size
 
 
 def cmd_render(args: argparse.Namespace) -> int:
@@ -18,7 +18,7 @@ def cmd_render(args: argparse.Namespace) -> int:
     pic = render_file(args.input, azimuths=[np.radians(az) for az in args.azimuth],
                       elevation=np.radians(args.elevation), size=args.size, up=args.up, colour=args.colour)
     write_png(args.out, pic.image)
-    say(f"wrote {args.out}: {'mesh' if pic.is_mesh else 'cloud'} of {pic.n_points:,} "
+    result(f"wrote {args.out}: {'mesh' if pic.is_mesh else 'cloud'} of {pic.n_points:,} "
         f"{'vertices' if pic.is_mesh else 'points'}, {pic.n_views} view(s)")
     return 0
 

@@ -9,7 +9,7 @@ import sys
 import time
 from pathlib import Path
 
-from rangekit.cli._common import check_output, console, float_in, int_in, positive_float, say, seed
+from rangekit.cli._common import check_output, console, float_in, int_in, positive_float, result, say, seed
 from rangekit.drivers.discovery import MAX_SEARCH_S
 
 
@@ -57,7 +57,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         say("== laser planes ==")
         for line in cal.lasers.summary_lines():
             say(line)
-    say(f"wrote {args.out} in {time.perf_counter() - t0:.1f} s")
+    result(f"wrote {args.out} in {time.perf_counter() - t0:.1f} s")
     return 0
 
 
@@ -66,15 +66,15 @@ def cmd_devices(args: argparse.Namespace) -> int:
     from rangekit.drivers.discovery import list_depthai_devices, list_serial_ports
 
     ports = list_serial_ports()
-    say("serial ports:" if ports else "serial ports: none found")
+    result("serial ports:" if ports else "serial ports: none found")
     for p in ports:
-        say(f"  {p['device']}  {p['description']}  USB {p['vid_pid'] or '-'}  serial {p['serial_number'] or '-'}")
+        result(f"  {p['device']}  {p['description']}  USB {p['vid_pid'] or '-'}  serial {p['serial_number'] or '-'}")
     t0 = time.monotonic()
     cams = list_depthai_devices(timeout_s=args.timeout)
     searched = f"(search limit {args.timeout:g} s; {time.monotonic() - t0:.2f} s with loading depthai)"
-    say(f"depthai devices: {searched}" if cams else f"depthai devices: none found {searched}")
+    result(f"depthai devices: {searched}" if cams else f"depthai devices: none found {searched}")
     for c in cams:
-        say(f"  {c['device_id']}  {c['name']}  {c['state']}  {c['protocol']}")
+        result(f"  {c['device_id']}  {c['name']}  {c['state']}  {c['protocol']}")
     return 0
 
 

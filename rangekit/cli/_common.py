@@ -153,13 +153,17 @@ def seed(text: str) -> int:
 
 
 def check_output(path: str | os.PathLike, *, option: str = "--out", folder: bool = False,
-                 force: bool = True, session: bool = False) -> Path:
+                 force: bool = True, session: bool = False, suffixes=None, what: str = "output") -> Path:
     """Check before any work that ``path`` can be written: a file where a file is expected (not an existing
     folder), a folder where a folder is expected, its nearest existing parent a writable folder with at
     least :data:`MIN_FREE_BYTES` free. Raises :class:`UsageError` naming the option and the path; with
     ``session=True`` the folder is also read (a session to resume or process), so a file there is bad data
-    (:class:`FileFormatError`, exit 1)."""
+    (:class:`FileFormatError`, exit 1). ``suffixes``: the extensions a file output may have (the formats
+    module's own list, e.g. ``MESH_FORMATS``), ``what`` names them in the error."""
     out = Path(path)
+    if suffixes is not None and out.suffix.lower() not in suffixes:
+        raise UsageError(f"{option} {out}: expected a {what} file ({', '.join(suffixes)}), found "
+                         f"{repr(out.suffix) if out.suffix else 'no extension'}")
     if folder and out.exists() and not out.is_dir():
         if session:
             raise FileFormatError(f"{out}: expected a session folder (with session.json), found a file")

@@ -17,7 +17,9 @@ def cmd_decode(args: argparse.Namespace) -> int:
     from rangekit.formats.capture import list_images, pattern_spec_for, read_stack, save_decoded
 
     t0 = time.perf_counter()
-    check_output(args.out)
+    from rangekit.formats.capture import DECODED_SUFFIXES
+
+    check_output(args.out, suffixes=DECODED_SUFFIXES, what="decoded maps")
     paths = list_images(args.images[0] if len(args.images) == 1 else args.images)
     spec = pattern_spec_for(args.pattern, args.projector)
     note(f"reading {len(paths)} images")
@@ -38,10 +40,10 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
     from rangekit.formats.capture import load_capture
     from rangekit.formats.laser_capture import is_laser_capture
     from rangekit.rig import load_rig
-    from rangekit.formats.clouds import save_cloud
+    from rangekit.formats.clouds import CLOUD_WRITERS, save_cloud
 
     t0 = time.perf_counter()
-    check_output(args.out)
+    check_output(args.out, suffixes=CLOUD_WRITERS, what="point cloud")
     if is_laser_capture(args.capture):
         return _reconstruct_laser(args, t0)
     cap = load_capture(args.capture)
@@ -106,5 +108,5 @@ def add_parsers(sub) -> None:
     rec.add_argument("--integer", action="store_true", help="integer codes only (no subpixel refinement)")
     rec.add_argument("--peaks", default="gaussian", choices=("gaussian", "com", "ridge", "argmax"),
                      help="laser captures: the line peak detector (default gaussian, docs/laser.md)")
-    rec.add_argument("--out", required=True, help="output cloud (.ply, .xyz or .npy)")
+    rec.add_argument("--out", required=True, help="output cloud (.ply, .pcd, .xyz, .npy or .e57; checked before any work)")
     rec.set_defaults(func=cmd_reconstruct)

@@ -46,12 +46,12 @@ def cmd_mesh(args: argparse.Namespace) -> int:
     """rangekit mesh CLOUD --out MESH"""
     from rangekit.errors import MeshError, naming
     from rangekit.formats.clouds import load_cloud
-    from rangekit.formats.meshes import save_mesh
+    from rangekit.formats.meshes import MESH_FORMATS, save_mesh
     from rangekit.surface.cloud import oriented_normals_cloud
     from rangekit.surface.fusion import poisson_input_problem, poisson_mesh
 
     t0 = time.perf_counter()
-    check_output(args.out)
+    check_output(args.out, suffixes=MESH_FORMATS, what="mesh")
     cloud = load_cloud(args.cloud)
     problem = poisson_input_problem(cloud.points)
     if problem:  # before estimating normals, which needs less
@@ -90,5 +90,5 @@ def add_parsers(sub) -> None:
                           description="Screened Poisson reconstruction with low-density trimming and hole closing.")
     mesh.add_argument("cloud", metavar="CLOUD", help="point cloud file (normals are estimated if missing)")
     mesh.add_argument("--depth", type=int_in(4, 12), default=9, help="octree depth (default 9)")
-    mesh.add_argument("--out", required=True, help="output mesh (.ply, .obj, .stl)")
+    mesh.add_argument("--out", required=True, help="output mesh (.ply, .obj, .stl or .glb; checked before any work)")
     mesh.set_defaults(func=cmd_mesh)

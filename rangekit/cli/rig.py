@@ -36,9 +36,10 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     the rig file's calibrated camera)"""
     from rangekit.app.calibration import calibrate
     from rangekit.boards import Board
+    from rangekit.rig import RIG_SUFFIXES
 
     t0 = time.perf_counter()
-    check_output(args.out, force=args.force)
+    check_output(args.out, force=args.force, suffixes=RIG_SUFFIXES, what="rig")
     board = Board(kind=args.board, cols=args.cols, rows=args.rows, square=args.square_mm / 1000.0)
     cal = calibrate(args.out, rig=args.rig, board=board, n_poses=args.poses, seed=args.seed, force=args.force,
                     interactive=sys.stdin.isatty(), ask=input, progress=console(), lasers=args.lasers,

@@ -110,8 +110,9 @@ class Console:
         if self._new_step(done, total) or self._bar is None:
             self.close()
             self._total, self._done = total, done
+            # explicit sizes: a terminal that reports 0 x 0 (a bare pty) would hide tqdm's bar
             self._bar = tqdm(total=total, initial=min(done, total), desc=msg, file=self.stream,
-                             ncols=self.width + 60, bar_format=BAR_FORMAT, mininterval=0.1, leave=True)
+                             ncols=self.width + 60, nrows=50, bar_format=BAR_FORMAT, mininterval=0.1, leave=True)
         else:
             self._bar.set_description_str(msg, refresh=False)
             self._bar.update(min(done, total) - self._bar.n)

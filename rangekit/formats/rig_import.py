@@ -102,9 +102,10 @@ def _read_opencv(path: Path) -> dict:
 
     try:
         fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
-    except cv2.error as exc:
+    except (cv2.error, SystemError) as exc:     # SystemError: cv2's binding over a parse error
+        cause = exc.__cause__ or exc
         raise ConfigError(f"{path}: expected an OpenCV FileStorage file (YAML/XML), found one OpenCV cannot "
-                          f"read ({str(exc).strip().splitlines()[-1]})") from None
+                          f"read ({(str(cause).strip().splitlines() or ['?'])[-1]})") from None
     if not fs.isOpened():
         raise ConfigError(f"{path}: expected an OpenCV FileStorage file (YAML/XML), found one OpenCV cannot open")
     try:
@@ -124,13 +125,13 @@ def _first(values: dict, field: str, path: Path, *, required: bool = True):
     return None, None
 
 
-def _size(values: dict, field: str, prefix: str, given, option: str, path: Path) -> tuple[int, int]:
+def _size(values: dict, field: str, prefix: str, label: str, given, option: str, path: Path) -> tuple[int, int]:
     key, v = _first(values, field, path, required=False)
     if v is None and values.get(f"{prefix}_width") is not None and values.get(f"{prefix}_height") is not None:
         key, v = f"{prefix}_width/{prefix}_height", np.array([values[f"{prefix}_width"], values[f"{prefix}_height"]])
     if v is None:
         if given is None:
-            raise ConfigError(f"{path}: expected the {prefix} image size (keys {', '.join(OPENCV_KEYS[field])} or "
+            raise ConfigError(f"{path}: expected the {label} size (keys {', '.join(OPENCV_KEYS[field])} or "
                               f"{prefix}_width and {prefix}_height), found none; give it with {option} WxH")
         return given
     v = np.asarray(v, dtype=np.float64).ravel()
@@ -159,8 +160,8 @@ def opencv_rig(path: Path, *, size=None, projector_size=None, unit: str = "m") -
     if t.size != 3 or not np.all(np.isfinite(t)):
         raise ConfigError(f"{path}: {tkey}: expected 3 finite numbers, found {t.tolist()}")
     T_proj_cam = rigid(R, t * UNITS[unit])
-    cam_size = _size(values, "camera_size", "image", size, "--size", path)
-    proj_size = _size(values, "projector_size", "projector", projector_size, "--projector-size", path)
+    cam_size = _size(values, "camera_size", "image", "camera image", size, "--size", path)
+    proj_size = _size(values, "projector_size", "projector", "projector", projector_size, "--projector-size", path)
     camera = camera_entry("camera", keys["camera_K"][1], keys["camera_dist"][1], cam_size, np.eye(4),
                           f"{path}: {keys['camera_K'][0]}")
     projector = camera_entry("projector", keys["projector_K"][1], keys["projector_dist"][1], proj_size,

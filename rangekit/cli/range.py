@@ -6,7 +6,7 @@ import argparse
 import math
 import time
 
-from rangekit.cli._common import check_output, console, fraction, int_in, non_negative_float, positive_float, result, size
+from rangekit.cli._common import check_output, fraction, int_in, non_negative_float, positive_float, result, say, size
 from rangekit.errors import UsageError
 
 
@@ -18,7 +18,7 @@ def cmd_tof(args: argparse.Namespace) -> int:
     check_output(args.out, folder=True)
     run = tof_depth_files(args.raw_dir, args.out, min_snr=args.min_snr,
                           flying_angle=None if args.keep_flying else math.radians(args.flying_angle_deg),
-                          max_range=args.max_range, min_fill=None if args.keep_flying else 0.5, progress=console())
+                          max_range=args.max_range, min_fill=None if args.keep_flying else 0.5, progress=say)
     result(f"wrote {args.out}/{', '.join(run.names)} ({run.n_points:,} points) in {time.perf_counter() - t0:.1f} s")
     return 0
 
@@ -44,7 +44,7 @@ def cmd_stereo(args: argparse.Namespace) -> int:
     check_output(args.out, folder=True)
     run = stereo_depth_files(args.left, args.right, args.rig, args.out, method=args.method,
                              min_depth=args.min_depth, alpha=args.alpha, num_disparities=args.num_disparities,
-                             progress=console())
+                             progress=say)
     result(f"wrote {args.out}/{', '.join(run.names)} ({run.n_points:,} points)")
     return 0
 
@@ -57,7 +57,7 @@ def _stereo_device(args: argparse.Namespace) -> int:
                               dots=0.8 if args.dots is None else args.dots,
                               flood=0.0 if args.flood is None else args.flood, on_device=args.on_device,
                               method=args.method, min_depth=args.min_depth, alpha=args.alpha,
-                              num_disparities=args.num_disparities, progress=console())
+                              num_disparities=args.num_disparities, progress=say)
     result(f"wrote {args.out}/{', '.join(run.names)} ({run.n_points:,} points)")
     return 0
 

@@ -7,7 +7,7 @@ import time
 
 import numpy as np
 
-from rangekit.cli._common import check_output, console, int_in, note, positive_float, result, say
+from rangekit.cli._common import check_output, int_in, note, positive_float, result, say
 
 
 def cmd_register(args: argparse.Namespace) -> int:
@@ -18,7 +18,7 @@ def cmd_register(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     check_output(args.out, folder=True)
     voxel = args.voxel_mm * 1e-3 if args.voxel_mm else None
-    rep = register_files(args.scans, args.out, init=args.init, voxel=voxel, mesh=not args.no_mesh, progress=console(),
+    rep = register_files(args.scans, args.out, init=args.init, voxel=voxel, mesh=not args.no_mesh, progress=say,
                          neighbours=args.neighbours)
     res = rep.result
     say("edges (view i - view j): ICP inlier RMSE, overlap, accepted, synchronisation residual")

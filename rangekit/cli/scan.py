@@ -146,7 +146,7 @@ def _with_exposures(setup, given: list):
         full_scale = setup.capture.full_scale or 255.0
         exps = exposures_from_check(setup.devices, setup.rig, controls_from_capture(setup.rig.capture, where="rig file"),
                                     full_scale)
-        note(f"--exposures auto: {' '.join(map(str, exps))} us (from rangekit check's statistics)")
+        say(f"--exposures auto: {' '.join(map(str, exps))} us (from rangekit check's statistics)")
     else:
         exps = tuple(sorted(set(given)))
     if not 2 <= len(exps) <= 8:

@@ -161,15 +161,15 @@ def check_output(path: str | os.PathLike, *, option: str = "--out", folder: bool
     (:class:`FileFormatError`, exit 1). ``suffixes``: the extensions a file output may have (the formats
     module's own list, e.g. ``MESH_FORMATS``), ``what`` names them in the error."""
     out = Path(path)
-    if suffixes is not None and out.suffix.lower() not in suffixes:
-        raise UsageError(f"{option} {out}: expected a {what} file ({', '.join(suffixes)}), found "
-                         f"{repr(out.suffix) if out.suffix else 'no extension'}")
     if folder and out.exists() and not out.is_dir():
         if session:
             raise FileFormatError(f"{out}: expected a session folder (with session.json), found a file")
         raise UsageError(f"{option} {out}: expected a folder, found an existing file")
     if not folder and out.is_dir():
         raise UsageError(f"{option} {out}: expected a file name, found an existing folder")
+    if suffixes is not None and out.suffix.lower() not in suffixes:
+        raise UsageError(f"{option} {out}: expected a {what} file ({', '.join(suffixes)}), found "
+                         f"{repr(out.suffix) if out.suffix else 'no extension'}")
     if not folder and out.exists() and not force:
         raise UsageError(f"{option} {out}: exists; choose another file or pass --force to overwrite it")
     parent = out if folder and out.is_dir() else out.parent

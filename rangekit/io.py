@@ -110,6 +110,10 @@ def atomic_save_npy(path: str | Path, array: np.ndarray) -> None:
     atomic_write_bytes(path, buf.getvalue())
 
 
+#: The extension of :func:`write_png`'s files.
+PNG_SUFFIXES = (".png",)
+
+
 def write_png(path: str | Path, image: np.ndarray) -> bytes:
     """Write an (H, W) or (H, W, 3) RGB uint8/uint16 image as a lossless PNG, atomically; returns the
     file's bytes (for a checksum without reading the file back)."""

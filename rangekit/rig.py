@@ -170,6 +170,10 @@ def table_frame(axis, point=(0.0, 0.0, 0.0)) -> np.ndarray:
     return make_T(np.column_stack([x, np.cross(z, x), z]), np.asarray(point, dtype=np.float64))
 
 
+#: The extension of a rig file.
+RIG_SUFFIXES = (".json",)
+
+
 def save_rig(rig: Rig, path: str | Path) -> None:
     """Write the rig file atomically."""
     atomic_write_json(path, rig.to_dict())

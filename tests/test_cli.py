@@ -136,7 +136,7 @@ def test_scan_command_acquires_and_resumes(tmp_path, capsys):
     assert main(["scan", "--out", str(out), "--views", "2"]) == 2
     assert "already holds a session" in capsys.readouterr().err
     assert main(["scan", "--resume", str(out), "--no-process"]) == 0
-    assert "2/2 views already done" in capsys.readouterr().out
+    assert "2/2 views already done" in capsys.readouterr().err    # progress: on stderr
     # Each view is a capture folder that reconstructs on its own.
     assert main(["reconstruct", str(out / "view_001"), "--out", str(tmp_path / "v1.ply")]) == 0
     from rangekit.formats.clouds import load_cloud

@@ -1,6 +1,7 @@
 """Progress output: a bar on a terminal, plain lines elsewhere."""
 
 import io
+import logging
 
 from rangekit.progress import Console, StageTimer, call_progress
 
@@ -15,16 +16,34 @@ def test_plain_lines_when_not_a_terminal():
     assert buf.getvalue() == "view 1/3 done\nregistering\nview 3/3 done\n"
 
 
-def test_bar_redraws_in_place_on_a_terminal_and_ends_its_line():
+def test_bar_on_a_terminal_has_an_eta_and_messages_go_above_it():
     buf = io.StringIO()
     con = Console(buf, tty=True, width=10)
     con("decoding", 1, 4)
     con("decoding", 2, 4)
-    con("a message")          # ends the open bar line first
-    con("decoding", 4, 4)     # complete: the bar line is ended
+    con("a message")          # printed above the open bar
+    con("decoding", 4, 4)     # complete: the bar is closed
     out = buf.getvalue()
-    assert out.count("\r") == 3 and "[##--------] 1/4 decoding" in out and "[#####-----] 2/4" in out
-    assert "\na message\n" in out and out.endswith("[##########] 4/4 decoding\x1b[K\n")
+    assert "\r" in out and "ETA" in out and "2/4" in out and "4/4" in out and "a message\n" in out
+    assert out.rstrip().endswith("ETA 00:00]")
+
+
+def test_plain_lines_at_each_tenth_and_nothing_when_quiet():
+    buf = io.StringIO()
+    con = Console(buf, tty=False)
+    for i in range(1, 401):
+        con(f"frame {i}/400", i, 400)
+    lines = buf.getvalue().splitlines()
+    assert lines == [f"frame {i}/400" for i in (1, 40, 80, 120, 160, 200, 240, 280, 320, 360, 400)]
+    quiet = io.StringIO()
+    Console(quiet, tty=True, level=logging.WARNING)("decoding", 1, 2)
+    Console(quiet, level=logging.WARNING)("a message")
+    assert quiet.getvalue() == ""
+    verbose = io.StringIO()
+    con = Console(verbose, level=logging.DEBUG)
+    for i in range(1, 401):
+        con(f"frame {i}/400", i, 400)
+    assert len(verbose.getvalue().splitlines()) == 400
 
 
 def test_call_progress_accepts_plain_callables_and_none():

@@ -90,19 +90,20 @@ def test_reprocess_with_tsdf_fusion(scanned, capsys):
 
 
 def _run_until(args, pattern, cwd):
-    """Start ``rangekit ARGS`` with stdout to a pipe, send SIGINT when a line contains ``pattern``."""
+    """Start ``rangekit ARGS`` with stdout and stderr to pipes, send SIGINT when a progress line (stderr)
+    contains ``pattern``. Returns the exit code, the progress log (stderr) and stdout."""
     # A suite started in the background hands its children an ignored SIGINT: give the child the default.
     proc = subprocess.Popen([sys.executable, "-m", "rangekit", *args], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True, cwd=cwd, env={**os.environ, "PYTHONUNBUFFERED": "1"},
                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     lines = []
-    for line in proc.stdout:
+    for line in proc.stderr:
         lines.append(line)
         if pattern in line:
             proc.send_signal(signal.SIGINT)
             break
     out, err = proc.communicate(timeout=300)
-    return proc.returncode, "".join(lines) + out, err
+    return proc.returncode, "".join(lines) + err, out
 
 
 def test_interrupted_acquisition_resumes_to_the_same_frames(tmp_path):
@@ -112,8 +113,8 @@ def test_interrupted_acquisition_resumes_to_the_same_frames(tmp_path):
     small = ["--views", "3", "--patterns", "graycode", "--object", "sphere", "--seed", "1", "--no-process"]
     ref, out = tmp_path / "ref", tmp_path / "scan"
     assert main(["scan", "--out", str(ref), *small]) == 0
-    rc, log, err = _run_until(["scan", "--out", str(out), *small], "view 1/3 done", tmp_path)
-    assert rc == 130 and f"rangekit scan --resume {out}" in err, err
+    rc, log, stdout = _run_until(["scan", "--out", str(out), *small], "view 1/3 done", tmp_path)
+    assert rc == 130 and f"rangekit scan --resume {out}" in log, log
     state = json.loads((out / "session.json").read_text())
     assert 1 <= sum(v["state"] == "done" for v in state["views"]) < 3
     rc = subprocess.run([sys.executable, "-m", "rangekit", "scan", "--resume", str(out), "--no-process"],
@@ -124,17 +125,17 @@ def test_interrupted_acquisition_resumes_to_the_same_frames(tmp_path):
     assert sorted(p.relative_to(out) for p in out.glob("view_*/*.png")) == frames
     assert all((out / f).read_bytes() == (ref / f).read_bytes() for f in frames)
     assert not list(out.glob("*.partial"))
-    assert "\r" not in log and "\x1b" not in log
+    assert "\r" not in log + stdout and "\x1b" not in log + stdout
 
 
 @pytest.mark.slow
 def test_interrupt_during_acquisition_and_processing_then_resume_gives_the_same_mesh(scanned, tmp_path):
     out = tmp_path / "scan1"
-    rc, log, err = _run_until(["scan", "--out", str(out), *SCAN], "view 3/6 done", tmp_path)
-    assert rc == 130 and f"rangekit scan --resume {out}" in err
+    rc, log, _ = _run_until(["scan", "--out", str(out), *SCAN], "view 3/6 done", tmp_path)
+    assert rc == 130 and f"rangekit scan --resume {out}" in log
     state = json.loads((out / "session.json").read_text())
     assert 3 <= sum(v["state"] == "done" for v in state["views"]) < 6
-    rc, log2, err = _run_until(["scan", "--resume", str(out)], "decoded view_002", tmp_path)
+    rc, log2, _ = _run_until(["scan", "--resume", str(out)], "decoded view_002", tmp_path)
     assert rc == 130 and not (out / "mesh.ply").exists()
     rc = subprocess.run([sys.executable, "-m", "rangekit", "scan", "--resume", str(out), "--no-report"],
                         capture_output=True, text=True, cwd=tmp_path)
@@ -142,7 +143,7 @@ def test_interrupt_during_acquisition_and_processing_then_resume_gives_the_same_
     assert (out / "mesh.ply").read_bytes() == (scanned.parent / "poisson_mesh.ply").read_bytes()
     assert (out / "mesh_watertight.ply").read_bytes() == (scanned.parent / "poisson_mesh_watertight.ply").read_bytes()
     # Non-interactive output: plain lines, no carriage returns or escape codes.
-    for text in (log, log2, rc.stdout):
+    for text in (log, log2, rc.stdout, rc.stderr):
         assert "\r" not in text and "\x1b" not in text
     assert "summary" in rc.stdout and "accuracy against the true surface" in rc.stdout
 

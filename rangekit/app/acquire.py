@@ -40,7 +40,7 @@ from rangekit.formats.session_lock import session_lock
 from rangekit.app.frame_writer import FrameError, FrameWriter
 from rangekit.app.lights import light_for
 from rangekit.io import atomic_write_bytes, atomic_write_json, fsync_folder
-from rangekit.progress import call_progress
+from rangekit.progress import LOGGER, call_progress
 from rangekit.rig import Rig, save_rig
 
 __all__ = ["acquire"]
@@ -190,6 +190,8 @@ def _views(devices, light, rig, spec, out, plan, angles, session, done, names, f
     a view is recorded done only once all its frames are on disk. Before the first view of a pass none of
     whose views is done, every earlier view is finished and ``turn_over(pass)`` is called (hardware)."""
     writer, current, state = FrameWriter(), [-1], {"session": session}
+    # one bar over every frame still to take (with the exposures): per frame, with an ETA on a terminal
+    state["frames"] = [0, int(np.count_nonzero(~np.asarray(done, bool))) * len(exposures) * len(names)]
     if progress is not None:        # views are reported done from the writer's thread
         lock, report = threading.Lock(), progress
 
@@ -263,8 +265,7 @@ def _view(devices, light, rig, spec, out, plan, k, angle, state, done, names, fi
         shutil.rmtree(final, ignore_errors=True)
         partial.mkdir(parents=True)
         if devices.turntable is not None:
-            call_progress(progress, f"view {k + 1}/{plan.n_views}: turntable to {np.degrees(angle):.1f} deg",
-                          k, plan.n_views)
+            LOGGER.debug("view %d/%d: turntable to %.1f deg", k + 1, plan.n_views, np.degrees(angle))
             devices.turntable.rotate_to(float(angle))
             if settle_s > 0:
                 sleep(settle_s)
@@ -281,6 +282,9 @@ def _view(devices, light, rig, spec, out, plan, k, angle, state, done, names, fi
                     sleep(pattern_settle_s)
                 step = f"{sub}frame {i} ({name}): camera"
                 image = capture()
+                state["frames"][0] += 1
+                call_progress(progress, f"view {k + 1}/{plan.n_views}: {sub}frame {i + 1}/{len(names)}",
+                              *state["frames"])
                 step, target = f"{sub}frame {i} ({name}): writing", partial / sub / file
                 writer.frame(k, angle, sub + file, f"{sub}frame {i} ({name})", target, image)
         step = f"after frame {len(names) - 1} ({names[-1]}): {light.device} off"
@@ -305,6 +309,6 @@ def _view(devices, light, rig, spec, out, plan, k, angle, state, done, names, fi
             raise FrameError(k, angle, step, target, exc) from exc
         done[k] = True
         call_progress(progress, f"view {k + 1}/{plan.n_views} done ({len(sha256)} frames, "
-                                f"{time.time() - t0:.1f} s)", k + 1, plan.n_views)
+                                f"{time.time() - t0:.1f} s)")
 
     writer.finish_view(k, angle, partial, finish)

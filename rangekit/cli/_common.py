@@ -4,6 +4,7 @@ at parse time (exit 2), and the check that an output path can be written before 
 from __future__ import annotations
 
 import argparse
+import logging
 import math
 import os
 import re
@@ -18,15 +19,68 @@ from rangekit.errors import FileFormatError, UsageError
 MIN_FREE_BYTES = 64 * 2**20
 
 
+def configure_logging(verbose: int = 0, quiet: bool = False) -> int:
+    """Set the ``rangekit`` logger for one command: ``quiet`` (``-q``) WARNING: only errors and the final result
+    line; default INFO: progress on standard error, reports on standard output; ``verbose`` (``-v``) DEBUG:
+    every progress step and the library's details. Its one handler writes to the current standard error
+    (above an open progress bar). Returns the level."""
+    from rangekit.progress import LOGGER
+
+    level = logging.WARNING if quiet else logging.DEBUG if verbose else logging.INFO
+    LOGGER.setLevel(level)
+    for h in [h for h in LOGGER.handlers if isinstance(h, _StderrHandler)]:
+        LOGGER.removeHandler(h)
+    LOGGER.addHandler(_StderrHandler())
+    LOGGER.propagate = False
+    return level
+
+
+class _StderrHandler(logging.Handler):
+    """Log records as lines on the standard error of the moment (tqdm.write: above an open bar); warnings
+    and errors as ``rangekit: warning: ...``."""
+
+    def emit(self, record: logging.LogRecord) -> None:
+        try:
+            msg = record.getMessage()
+            if record.levelno >= logging.WARNING:
+                msg = f"rangekit: {record.levelname.lower()}: {msg}"
+            from tqdm import tqdm
+
+            tqdm.write(msg, file=sys.stderr)
+        except Exception:  # noqa: BLE001 - logging must never end a command
+            self.handleError(record)
+
+
+def _informative() -> bool:
+    from rangekit.progress import LOGGER
+
+    return LOGGER.isEnabledFor(logging.INFO)
+
+
 def say(msg: str) -> None:
+    """A report line on standard output (a table row, a figure); none with ``-q``."""
+    if _informative():
+        print(msg, flush=True)
+
+
+def result(msg: str) -> None:
+    """A command's final result line on standard output, printed even with ``-q``."""
     print(msg, flush=True)
 
 
+def note(msg: str) -> None:
+    """A progress message on standard error (``progress=note`` for steps without counts); none with ``-q``."""
+    from rangekit.progress import LOGGER
+
+    LOGGER.info(msg)
+
+
 def console():
-    """Progress for long stages: a bar on a terminal, plain lines in CI, pipes and files."""
+    """Progress for long stages on standard error: a tqdm bar with an ETA on a terminal, plain lines in CI,
+    pipes and files, nothing with ``-q`` (:class:`rangekit.progress.Console`)."""
     from rangekit.progress import Console
 
-    return Console(sys.stdout)
+    return Console(sys.stderr)
 
 
 def size(text: str) -> tuple[int, int]:
@@ -99,12 +153,13 @@ def seed(text: str) -> int:
 
 
 def check_output(path: str | os.PathLike, *, option: str = "--out", folder: bool = False,
-                 force: bool = True, session: bool = False) -> Path:
+                 force: bool = True, session: bool = False, suffixes=None, what: str = "output") -> Path:
     """Check before any work that ``path`` can be written: a file where a file is expected (not an existing
     folder), a folder where a folder is expected, its nearest existing parent a writable folder with at
     least :data:`MIN_FREE_BYTES` free. Raises :class:`UsageError` naming the option and the path; with
     ``session=True`` the folder is also read (a session to resume or process), so a file there is bad data
-    (:class:`FileFormatError`, exit 1)."""
+    (:class:`FileFormatError`, exit 1). ``suffixes``: the extensions a file output may have (the formats
+    module's own list, e.g. ``MESH_FORMATS``), ``what`` names them in the error."""
     out = Path(path)
     if folder and out.exists() and not out.is_dir():
         if session:
@@ -112,6 +167,9 @@ def check_output(path: str | os.PathLike, *, option: str = "--out", folder: bool
         raise UsageError(f"{option} {out}: expected a folder, found an existing file")
     if not folder and out.is_dir():
         raise UsageError(f"{option} {out}: expected a file name, found an existing folder")
+    if suffixes is not None and out.suffix.lower() not in suffixes:
+        raise UsageError(f"{option} {out}: expected a {what} file ({', '.join(suffixes)}), found "
+                         f"{repr(out.suffix) if out.suffix else 'no extension'}")
     if not folder and out.exists() and not force:
         raise UsageError(f"{option} {out}: exists; choose another file or pass --force to overwrite it")
     parent = out if folder and out.is_dir() else out.parent

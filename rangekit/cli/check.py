@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 import time
 
-from rangekit.cli._common import check_output, console, float_in, say, seed
+from rangekit.cli._common import check_output, console, float_in, result as final, say, seed
 from rangekit.errors import UsageError
 
 
@@ -61,7 +61,7 @@ def cmd_check(args: argparse.Namespace) -> int:
         names = write_check(args.out, result, images, full_scale, out_rig)
         say(f"wrote {', '.join(f'{args.out}/{n}' for n in names)}")
     say(rig_note)
-    say(f"check took {time.perf_counter() - t0:.1f} s")
+    final(f"check took {time.perf_counter() - t0:.1f} s")
     return 0
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import time
 
-from rangekit.cli._common import check_output, say, size
+from rangekit.cli._common import check_output, note, result, say, size
 
 
 def cmd_decode(args: argparse.Namespace) -> int:
@@ -17,17 +17,19 @@ def cmd_decode(args: argparse.Namespace) -> int:
     from rangekit.formats.capture import list_images, pattern_spec_for, read_stack, save_decoded
 
     t0 = time.perf_counter()
-    check_output(args.out)
+    from rangekit.formats.capture import DECODED_SUFFIXES
+
+    check_output(args.out, suffixes=DECODED_SUFFIXES, what="decoded maps")
     paths = list_images(args.images[0] if len(args.images) == 1 else args.images)
     spec = pattern_spec_for(args.pattern, args.projector)
-    say(f"reading {len(paths)} images")
+    note(f"reading {len(paths)} images")
     images = read_stack(paths)
-    say(f"decoding {spec.method} ({'subpixel' if not args.integer else 'integer'})")
+    note(f"decoding {spec.method} ({'subpixel' if not args.integer else 'integer'})")
     with naming(args.images[0] if len(args.images) == 1 else f"{len(paths)} images from {paths[0]}"):
         res = decode(images, spec, order=args.order, subpixel=not args.integer)
     save_decoded(args.out, res)
     say(f"{res!r}")
-    say(f"wrote {Path(args.out)} in {time.perf_counter() - t0:.1f} s")
+    result(f"wrote {Path(args.out)} in {time.perf_counter() - t0:.1f} s")
     return 0
 
 
@@ -38,10 +40,10 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
     from rangekit.formats.capture import load_capture
     from rangekit.formats.laser_capture import is_laser_capture
     from rangekit.rig import load_rig
-    from rangekit.formats.clouds import save_cloud
+    from rangekit.formats.clouds import CLOUD_WRITERS, save_cloud
 
     t0 = time.perf_counter()
-    check_output(args.out)
+    check_output(args.out, suffixes=CLOUD_WRITERS, what="point cloud")
     if is_laser_capture(args.capture):
         return _reconstruct_laser(args, t0)
     cap = load_capture(args.capture)
@@ -51,14 +53,14 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
     rig = load_rig(args.rig) if args.rig else cap.rig
     if rig is None or rig.projector is None:
         raise ConfigError(f"{args.capture}: no rig.json with a projector; pass --rig RIG.json")
-    say(f"decoding {len(cap.images)} images ({cap.spec.method})")
+    note(f"decoding {len(cap.images)} images ({cap.spec.method})")
     with naming(args.capture):
         rec = reconstruct_view(cap.images, cap.spec, rig.camera, rig.projector, subpixel=not args.integer,
                                method=args.method, full_scale=cap.full_scale, response=rig.projector_response)
     save_cloud(args.out, rec.cloud)
     say(f"{rec.decoded!r}")
     say(f"{rec.triangulated!r}")
-    say(f"wrote {len(rec.cloud)} points to {args.out} in {time.perf_counter() - t0:.1f} s")
+    result(f"wrote {len(rec.cloud)} points to {args.out} in {time.perf_counter() - t0:.1f} s")
     return 0
 
 
@@ -70,11 +72,11 @@ def _reconstruct_laser(args: argparse.Namespace, t0: float) -> int:
     from rangekit.rig import load_rig
 
     cap = load_laser_capture(args.capture, rig=load_rig(args.rig) if args.rig else None)
-    say(f"laser capture: {len(cap.frames)} laser(s); line peaks ({args.peaks}) and ray-plane triangulation")
+    note(f"laser capture: {len(cap.frames)} laser(s); line peaks ({args.peaks}) and ray-plane triangulation")
     rec = reconstruct_laser_capture(cap, method=args.peaks)
     save_cloud(args.out, rec.cloud)
     say(rec.summary())
-    say(f"wrote {len(rec.cloud)} points to {args.out} in {time.perf_counter() - t0:.1f} s")
+    result(f"wrote {len(rec.cloud)} points to {args.out} in {time.perf_counter() - t0:.1f} s")
     return 0
 
 
@@ -106,5 +108,5 @@ def add_parsers(sub) -> None:
     rec.add_argument("--integer", action="store_true", help="integer codes only (no subpixel refinement)")
     rec.add_argument("--peaks", default="gaussian", choices=("gaussian", "com", "ridge", "argmax"),
                      help="laser captures: the line peak detector (default gaussian, docs/laser.md)")
-    rec.add_argument("--out", required=True, help="output cloud (.ply, .xyz or .npy)")
+    rec.add_argument("--out", required=True, help="output cloud (.ply, .pcd, .xyz, .npy or .e57; checked before any work)")
     rec.set_defaults(func=cmd_reconstruct)

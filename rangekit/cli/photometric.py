@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import time
 
-from rangekit.cli._common import check_output, say
+from rangekit.cli._common import check_output, result, say
 
 
 def cmd_photometric(args: argparse.Namespace) -> int:
@@ -15,7 +15,7 @@ def cmd_photometric(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     check_output(args.out, folder=True)
     out = photometric_files(args.folder, args.out, method=args.method, progress=say)
-    say(f"wrote {out}/normals.npy, normals.png, albedo.png, depth.npy, mesh.ply (pixel units, orthographic) in "
+    result(f"wrote {out}/normals.npy, normals.png, albedo.png, depth.npy, mesh.ply (pixel units, orthographic) in "
         f"{time.perf_counter() - t0:.1f} s")
     return 0
 

@@ -6,7 +6,7 @@ import argparse
 import math
 import time
 
-from rangekit.cli._common import check_output, fraction, int_in, non_negative_float, positive_float, say, size
+from rangekit.cli._common import check_output, fraction, int_in, non_negative_float, positive_float, result, say, size
 from rangekit.errors import UsageError
 
 
@@ -19,7 +19,7 @@ def cmd_tof(args: argparse.Namespace) -> int:
     run = tof_depth_files(args.raw_dir, args.out, min_snr=args.min_snr,
                           flying_angle=None if args.keep_flying else math.radians(args.flying_angle_deg),
                           max_range=args.max_range, min_fill=None if args.keep_flying else 0.5, progress=say)
-    say(f"wrote {args.out}/{', '.join(run.names)} ({run.n_points:,} points) in {time.perf_counter() - t0:.1f} s")
+    result(f"wrote {args.out}/{', '.join(run.names)} ({run.n_points:,} points) in {time.perf_counter() - t0:.1f} s")
     return 0
 
 
@@ -45,7 +45,7 @@ def cmd_stereo(args: argparse.Namespace) -> int:
     run = stereo_depth_files(args.left, args.right, args.rig, args.out, method=args.method,
                              min_depth=args.min_depth, alpha=args.alpha, num_disparities=args.num_disparities,
                              progress=say)
-    say(f"wrote {args.out}/{', '.join(run.names)} ({run.n_points:,} points)")
+    result(f"wrote {args.out}/{', '.join(run.names)} ({run.n_points:,} points)")
     return 0
 
 
@@ -58,7 +58,7 @@ def _stereo_device(args: argparse.Namespace) -> int:
                               flood=0.0 if args.flood is None else args.flood, on_device=args.on_device,
                               method=args.method, min_depth=args.min_depth, alpha=args.alpha,
                               num_disparities=args.num_disparities, progress=say)
-    say(f"wrote {args.out}/{', '.join(run.names)} ({run.n_points:,} points)")
+    result(f"wrote {args.out}/{', '.join(run.names)} ({run.n_points:,} points)")
     return 0
 
 

@@ -7,7 +7,7 @@ import time
 
 import numpy as np
 
-from rangekit.cli._common import check_output, int_in, positive_float, say
+from rangekit.cli._common import check_output, int_in, note, positive_float, result, say
 
 
 def cmd_register(args: argparse.Namespace) -> int:
@@ -37,7 +37,7 @@ def cmd_register(args: argparse.Namespace) -> int:
     for k, T in enumerate(res.T_world_view):
         say(f"  view {k}: {rep.sources[k]}: rotation {np.degrees(rotation_angle(T[:3, :3])):8.3f} deg, "
             f"translation {np.linalg.norm(T[:3, 3]) * 1e3:8.2f} mm")
-    say(f"wrote {args.out}/poses.json, merged.ply{', mesh.ply' if rep.mesh_path else ''} in "
+    result(f"wrote {args.out}/poses.json, merged.ply{', mesh.ply' if rep.mesh_path else ''} in "
         f"{time.perf_counter() - t0:.1f} s")
     return 0
 
@@ -46,24 +46,24 @@ def cmd_mesh(args: argparse.Namespace) -> int:
     """rangekit mesh CLOUD --out MESH"""
     from rangekit.errors import MeshError, naming
     from rangekit.formats.clouds import load_cloud
-    from rangekit.formats.meshes import save_mesh
+    from rangekit.formats.meshes import MESH_FORMATS, save_mesh
     from rangekit.surface.cloud import oriented_normals_cloud
     from rangekit.surface.fusion import poisson_input_problem, poisson_mesh
 
     t0 = time.perf_counter()
-    check_output(args.out)
+    check_output(args.out, suffixes=MESH_FORMATS, what="mesh")
     cloud = load_cloud(args.cloud)
     problem = poisson_input_problem(cloud.points)
     if problem:  # before estimating normals, which needs less
         raise MeshError(f"{args.cloud}: cannot build a closed surface: {problem}")
     with naming(args.cloud):
         if cloud.normals is None:
-            say(f"read {len(cloud)} points without normals: estimating outward normals")
+            note(f"read {len(cloud)} points without normals: estimating outward normals")
             cloud = oriented_normals_cloud(cloud.points)
-        say(f"{len(cloud)} points; screened Poisson, depth {args.depth}")
+        note(f"{len(cloud)} points; screened Poisson, depth {args.depth}")
         mesh = poisson_mesh(cloud, depth=args.depth)
     save_mesh(args.out, mesh)
-    say(f"wrote {args.out}: {len(mesh.vertices)} vertices, {len(mesh.triangles)} triangles, watertight "
+    result(f"wrote {args.out}: {len(mesh.vertices)} vertices, {len(mesh.triangles)} triangles, watertight "
         f"{mesh.is_watertight}, in {time.perf_counter() - t0:.1f} s")
     return 0
 
@@ -90,5 +90,5 @@ def add_parsers(sub) -> None:
                           description="Screened Poisson reconstruction with low-density trimming and hole closing.")
     mesh.add_argument("cloud", metavar="CLOUD", help="point cloud file (normals are estimated if missing)")
     mesh.add_argument("--depth", type=int_in(4, 12), default=9, help="octree depth (default 9)")
-    mesh.add_argument("--out", required=True, help="output mesh (.ply, .obj, .stl)")
+    mesh.add_argument("--out", required=True, help="output mesh (.ply, .obj, .stl or .glb; checked before any work)")
     mesh.set_defaults(func=cmd_mesh)

@@ -6,19 +6,19 @@ import argparse
 
 import numpy as np
 
-from rangekit.cli._common import check_output, finite_float, say, size
+from rangekit.cli._common import check_output, finite_float, result, size
 
 
 def cmd_render(args: argparse.Namespace) -> int:
     """rangekit render MESH_OR_CLOUD --out PNG: a shaded picture of a mesh or a cloud"""
     from rangekit.app.picture import render_file
-    from rangekit.io import write_png
+    from rangekit.io import PNG_SUFFIXES, write_png
 
-    check_output(args.out)
+    check_output(args.out, suffixes=PNG_SUFFIXES, what="PNG image")
     pic = render_file(args.input, azimuths=[np.radians(az) for az in args.azimuth],
                       elevation=np.radians(args.elevation), size=args.size, up=args.up, colour=args.colour)
     write_png(args.out, pic.image)
-    say(f"wrote {args.out}: {'mesh' if pic.is_mesh else 'cloud'} of {pic.n_points:,} "
+    result(f"wrote {args.out}: {'mesh' if pic.is_mesh else 'cloud'} of {pic.n_points:,} "
         f"{'vertices' if pic.is_mesh else 'points'}, {pic.n_views} view(s)")
     return 0
 

@@ -4,12 +4,11 @@ from __future__ import annotations
 
 import argparse
 import errno
-import json
 import sys
 import time
 from pathlib import Path
 
-from rangekit.cli._common import check_output, console, float_in, int_in, positive_float, say, seed
+from rangekit.cli._common import check_output, console, float_in, int_in, positive_float, result, say, seed, size
 from rangekit.drivers.discovery import MAX_SEARCH_S
 
 
@@ -23,10 +22,38 @@ def cmd_rig_init(args: argparse.Namespace) -> int:
         from rangekit.rig import template_rig
 
         data = template_rig()
+    _print_rig(data, "rangekit rig init > rig.json")
+    return 0
+
+
+def _print_rig(data: dict, example: str) -> None:
+    """A rig file on standard output, each matrix on one line (:func:`rangekit.formats.rig_json.rig_json_text`)."""
+    from rangekit.formats.rig_json import rig_json_text
+
     if sys.stdout is None:
-        raise OSError(errno.EBADF, "standard output is closed; redirect it to a file: rangekit rig init > rig.json",
-                      "<stdout>")
-    sys.stdout.write(json.dumps(data, indent=2) + "\n")
+        raise OSError(errno.EBADF, f"standard output is closed; redirect it to a file: {example}", "<stdout>")
+    sys.stdout.write(rig_json_text(data))
+
+
+def cmd_rig_import(args: argparse.Namespace) -> int:
+    """rangekit rig import FILE [--out RIG.json]: a rig file from an OpenCV stereo calibration (YAML/XML), a
+    depthai EEPROM calibration JSON or a Horus calibration.json"""
+    from rangekit.formats.rig_import import import_rig
+    from rangekit.formats.rig_json import rig_json_text
+    from rangekit.io import atomic_write_text
+    from rangekit.rig import RIG_SUFFIXES
+
+    if args.out is not None:
+        check_output(args.out, force=args.force, suffixes=RIG_SUFFIXES, what="rig")
+    data = import_rig(args.file, size=args.size, projector_size=args.projector_size, unit=args.unit)
+    if args.out is None:
+        _print_rig(data, f"rangekit rig import {args.file} > rig.json")
+        return 0
+    atomic_write_text(args.out, rig_json_text(data))
+    kinds = [f"{len(data['cameras'])} camera(s)"] + (["a projector"] if data["projector"] else []) + (
+        [f"{len(data['lasers'])} laser(s)"] if data.get("lasers") else []) + (
+        ["the turntable"] if data["T_world_table"] is not None else ["no turntable (rangekit calibrate measures it)"])
+    result(f"wrote {args.out}: {', '.join(kinds)} from {args.file}")
     return 0
 
 
@@ -36,9 +63,10 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     the rig file's calibrated camera)"""
     from rangekit.app.calibration import calibrate
     from rangekit.boards import Board
+    from rangekit.rig import RIG_SUFFIXES
 
     t0 = time.perf_counter()
-    check_output(args.out, force=args.force)
+    check_output(args.out, force=args.force, suffixes=RIG_SUFFIXES, what="rig")
     board = Board(kind=args.board, cols=args.cols, rows=args.rows, square=args.square_mm / 1000.0)
     cal = calibrate(args.out, rig=args.rig, board=board, n_poses=args.poses, seed=args.seed, force=args.force,
                     interactive=sys.stdin.isatty(), ask=input, progress=console(), lasers=args.lasers,
@@ -57,7 +85,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         say("== laser planes ==")
         for line in cal.lasers.summary_lines():
             say(line)
-    say(f"wrote {args.out} in {time.perf_counter() - t0:.1f} s")
+    result(f"wrote {args.out} in {time.perf_counter() - t0:.1f} s")
     return 0
 
 
@@ -66,15 +94,15 @@ def cmd_devices(args: argparse.Namespace) -> int:
     from rangekit.drivers.discovery import list_depthai_devices, list_serial_ports
 
     ports = list_serial_ports()
-    say("serial ports:" if ports else "serial ports: none found")
+    result("serial ports:" if ports else "serial ports: none found")
     for p in ports:
-        say(f"  {p['device']}  {p['description']}  USB {p['vid_pid'] or '-'}  serial {p['serial_number'] or '-'}")
+        result(f"  {p['device']}  {p['description']}  USB {p['vid_pid'] or '-'}  serial {p['serial_number'] or '-'}")
     t0 = time.monotonic()
     cams = list_depthai_devices(timeout_s=args.timeout)
     searched = f"(search limit {args.timeout:g} s; {time.monotonic() - t0:.2f} s with loading depthai)"
-    say(f"depthai devices: {searched}" if cams else f"depthai devices: none found {searched}")
+    result(f"depthai devices: {searched}" if cams else f"depthai devices: none found {searched}")
     for c in cams:
-        say(f"  {c['device_id']}  {c['name']}  {c['state']}  {c['protocol']}")
+        result(f"  {c['device_id']}  {c['name']}  {c['state']}  {c['protocol']}")
     return 0
 
 
@@ -109,7 +137,7 @@ def add_calibrate_parser(sub) -> None:
 
 
 def add_parsers(sub) -> None:
-    rig = sub.add_parser("rig", help="rig files: write a template",
+    rig = sub.add_parser("rig", help="rig files: write a template, import a calibration",
                          description="Rig files (docs/rig.md documents every field).")
     rig_sub = rig.add_subparsers(dest="rig_command", metavar="SUBCOMMAND")
     rig_sub.required = True
@@ -119,6 +147,23 @@ def add_parsers(sub) -> None:
                                           "parameters).")
     init.add_argument("--sim", action="store_true", help="print the simulator's default rig instead")
     init.set_defaults(func=cmd_rig_init)
+    imp = rig_sub.add_parser("import", help="a rig file from an OpenCV stereo calibration, a depthai EEPROM JSON or "
+                                            "a Horus calibration.json",
+                             description="Convert a calibration you already have into a rig file: an OpenCV "
+                                         "stereo calibration written by cv2.FileStorage (YAML/XML; the camera, "
+                                         "then the projector as the second device: K1/D1/K2/D2/R/T or "
+                                         "cameraMatrix1/distCoeffs1/..., docs/rig.md lists the keys), a depthai "
+                                         "EEPROM calibration (CalibrationHandler.eepromToJson()) or a Horus "
+                                         "calibration.json (Ciclop: camera, laser planes, platform). Printed, "
+                                         "or written to --out.")
+    imp.add_argument("file", metavar="FILE", help="the calibration file (.yaml, .yml, .xml or .json)")
+    imp.add_argument("--out", help="rig file to write (default: print it)")
+    imp.add_argument("--force", action="store_true", help="overwrite --out if it exists")
+    imp.add_argument("--size", type=size, help="camera image size WxH where the file has none (Horus)")
+    imp.add_argument("--projector-size", type=size, help="projector size WxH where the OpenCV file has none")
+    imp.add_argument("--unit", choices=("m", "mm"), default="m",
+                     help="unit of the OpenCV file's T (default m; depthai's cm and Horus's mm are known)")
+    imp.set_defaults(func=cmd_rig_import)
 
     dev = sub.add_parser("devices", help="list serial ports and depthai cameras",
                          description="List serial ports (device, USB VID:PID, serial number) and depthai cameras.")

@@ -12,6 +12,7 @@ import errno
 import os
 import sys
 
+from rangekit.cli._common import configure_logging
 from rangekit.cli.check import add_parsers as add_check
 from rangekit.cli.coded import add_parsers as add_coded
 from rangekit.cli.photometric import add_parsers as add_photometric
@@ -42,6 +43,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="rangekit", description="Active 3D scanning: simulate, capture, "
                                      "decode, register and fuse range data.")
     parser.add_argument("--version", action="version", version=f"rangekit {__import__('rangekit').__version__}")
+    _add_verbosity(parser, argparse.SUPPRESS)
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
     add_sim(sub)
@@ -54,7 +56,34 @@ def build_parser() -> argparse.ArgumentParser:
     add_photometric(sub)
     add_range(sub)
     add_rig(sub)
+    for command in _leaf_parsers(parser):
+        _add_verbosity(command, argparse.SUPPRESS)
     return parser
+
+
+def _add_verbosity(parser: argparse.ArgumentParser, default) -> None:
+    """``-v/--verbose`` and ``-q/--quiet``, before the command or after it (``default=SUPPRESS``: a command
+    that does not repeat them keeps the values given before it)."""
+    parser.add_argument("-v", "--verbose", action="store_true", default=default,
+                        help="debug details: every progress step and the library's log")
+    parser.add_argument("-q", "--quiet", action="store_true", default=default,
+                        help="only errors and the final result line")
+
+
+def _leaf_parsers(parser: argparse.ArgumentParser):
+    """Every parser below ``parser`` that runs a command (``rangekit rig init``, not ``rangekit rig``)."""
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for child in dict.fromkeys(action.choices.values()):    # aliases share their parser
+                yield child
+                yield from _leaf_parsers(child)
+
+
+def _verbosity(args: argparse.Namespace) -> None:
+    verbose, quiet = getattr(args, "verbose", False), getattr(args, "quiet", False)
+    if verbose and quiet:
+        raise UsageError("-v/--verbose and -q/--quiet: expected one of them, found both")
+    configure_logging(verbose=verbose, quiet=quiet)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -63,6 +92,7 @@ def main(argv: list[str] | None = None) -> int:
     environment sets ``RANGEKIT_DEBUG=1`` (then unexpected exceptions propagate)."""
     try:
         args = build_parser().parse_args(argv)
+        _verbosity(args)
         with one_blas_thread():     # thin products dominate: see rangekit.threads
             return args.func(args)
     except UsageError as exc:

@@ -7,7 +7,7 @@ import sys
 import time
 from pathlib import Path
 
-from rangekit.cli._common import (LazyChoices, check_output, console, finite_float, int_in, say, scheduler_address,
+from rangekit.cli._common import (LazyChoices, check_output, console, finite_float, note, result, int_in, say, scheduler_address,
                                   seed)
 from rangekit.errors import UsageError
 
@@ -65,7 +65,7 @@ def _scan_artefacts(args: argparse.Namespace, t0: float) -> int:
     say("")
     for line in figure_lines(res):
         say(line)
-    say(f"wrote {args.out}/vdi2634.json in {time.perf_counter() - t0:.1f} s")
+    result(f"wrote {args.out}/vdi2634.json in {time.perf_counter() - t0:.1f} s")
     return 0
 
 
@@ -89,7 +89,7 @@ def _scan(args: argparse.Namespace, t0: float) -> int:
     if args.exposures is not None:
         setup = _with_exposures(setup, args.exposures)
     if setup.resume:
-        say(f"resuming {folder}: {setup.n_done}/{setup.n_views} views already done")
+        note(f"resuming {folder}: {setup.n_done}/{setup.n_views} views already done")
     try:
         turn_over = None
         if setup.hardware is not None and setup.passes > 1:   # the simulator turns its object over itself
@@ -107,7 +107,7 @@ def _scan(args: argparse.Namespace, t0: float) -> int:
         return 130
     finally:
         setup.close()
-    say(f"acquired {len(session.done_views)} {'steps' if session.is_laser else 'views'} x {setup.spec.n_frames} "
+    (say if not args.no_process else result)(f"acquired {len(session.done_views)} {'steps' if session.is_laser else 'views'} x {setup.spec.n_frames} "
         f"frames into {folder} in "
         f"{time.perf_counter() - t0:.1f} s")
     if args.no_process:
@@ -176,7 +176,7 @@ def _process(folder: str, args: argparse.Namespace, *, acquisition_s: float | No
         say(line)
     total = time.perf_counter() - t0 + (acquisition_s or 0.0)
     exported = export_meshes(Path(folder), args.format)
-    say(f"wrote {folder}/mesh.ply (observed surface), mesh_watertight.ply (closed), "
+    result(f"wrote {folder}/mesh.ply (observed surface), mesh_watertight.ply (closed), "
         + "".join(f"{name}, " for name in exported) + "merged.ply, poses.json, summary.json"
         + ("" if args.no_report else ", report.html") + f" in {format_seconds(total)}")
     return 0
@@ -210,7 +210,7 @@ def _process_batch(args: argparse.Namespace) -> int:
     for s in args.session:
         check_output(s, option="DIR", folder=True)
     where = f"a local cluster of {args.workers or 2} worker processes" if scheduler == "local" else scheduler
-    say(f"processing {len(args.session)} session(s) on {where}")
+    note(f"processing {len(args.session)} session(s) on {where}")
     try:
         res = process_sessions(args.session, scheduler=scheduler, workers=args.workers or 2, fusion=args.fusion,
                                report=not args.no_report, progress=console())
@@ -219,7 +219,7 @@ def _process_batch(args: argparse.Namespace) -> int:
               f"{' '.join(args.session)}", file=sys.stderr)
         return 130
     say("")
-    say(f"== {len(res.sessions) - len(res.failed)} of {len(res.sessions)} session(s) processed in "
+    result(f"== {len(res.sessions) - len(res.failed)} of {len(res.sessions)} session(s) processed in "
         f"{format_seconds(res.seconds)} ==")
     for o in res.sessions:
         if o.ok:
@@ -227,7 +227,7 @@ def _process_batch(args: argparse.Namespace) -> int:
             say(f"{o.folder}: done ({o.views_decoded} views decoded, {o.views_cached} from the cache); "
                 + (o.summary[0] if o.summary else ""))
         else:
-            say(f"{o.folder}: FAILED: {o.error}")
+            result(f"{o.folder}: FAILED: {o.error}")
     return 1 if res.failed else 0
 
 

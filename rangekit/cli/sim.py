@@ -8,8 +8,8 @@ import time
 
 import numpy as np
 
-from rangekit.cli._common import (check_output, finite_float, int_in, non_negative_float, positive_float, say,
-                                  seed, size)
+from rangekit.cli._common import (check_output, console, finite_float, int_in, non_negative_float, positive_float,
+                                  result, seed, size)
 from rangekit.errors import UsageError
 
 
@@ -37,26 +37,26 @@ def cmd_sim_render(args: argparse.Namespace) -> int:
     if args.sensor == "laser":
         render_laser_capture(args.out, obj=args.object or "lumpy", rig_file=args.rig,
                              angle=np.radians(args.angle_deg), bits=args.bits, seed=args.seed,
-                             noise=not args.no_noise, colour=not args.mono, progress=say)
-        say(f"wrote {args.out} (off.png, laser<k>.png, rig.json, ground_truth.npz) in {time.perf_counter() - t0:.1f} s")
+                             noise=not args.no_noise, colour=not args.mono, progress=console())
+        result(f"wrote {args.out} (off.png, laser<k>.png, rig.json, ground_truth.npz) in {time.perf_counter() - t0:.1f} s")
         return 0
     if args.sensor == "stereo":
         render_stereo_capture(args.out, size=args.size or (640, 400), dots=not args.no_dots, seed=args.seed,
-                              progress=say)
-        say(f"wrote {args.out} (left.png, right.png, rig.json, ground_truth.npz) in {time.perf_counter() - t0:.1f} s")
+                              progress=console())
+        result(f"wrote {args.out} (left.png, right.png, rig.json, ground_truth.npz) in {time.perf_counter() - t0:.1f} s")
         return 0
     if args.sensor in ("tof", "tof-pulsed"):
         render_tof_capture(args.out, pulsed=args.sensor == "tof-pulsed", near=args.near, far=args.far,
                            size=args.size or (320, 240), plan=args.plan,
                            frequencies=[f * 1e6 for f in args.frequencies_mhz] if args.frequencies_mhz else None,
                            steps=args.steps, multipath=args.multipath, jitter=args.jitter_ps * 1e-12,
-                           noise=not args.no_noise, seed=args.seed, progress=say)
-        say(f"wrote {args.out} (tof.json, rig.json, ground_truth.npz, preview.png) in {time.perf_counter() - t0:.1f} s")
+                           noise=not args.no_noise, seed=args.seed, progress=console())
+        result(f"wrote {args.out} (tof.json, rig.json, ground_truth.npz, preview.png) in {time.perf_counter() - t0:.1f} s")
         return 0
     render_projector_capture(args.out, obj=args.object or "lumpy", patterns=args.patterns or "graycode",
                              rig_file=args.rig, angle=np.radians(args.angle_deg), bits=args.bits, seed=args.seed,
-                             noise=not args.no_noise, global_fraction=args.global_fraction, progress=say)
-    say(f"done in {time.perf_counter() - t0:.1f} s")
+                             noise=not args.no_noise, global_fraction=args.global_fraction, progress=console())
+    result(f"done in {time.perf_counter() - t0:.1f} s")
     return 0
 
 
@@ -65,7 +65,7 @@ def cmd_sim_objects(args: argparse.Namespace) -> int:
     from rangekit.app.sim_objects import format_objects, list_objects
 
     for line in format_objects(list_objects()):
-        say(line)
+        result(line)
     return 0
 
 

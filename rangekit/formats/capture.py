@@ -126,6 +126,10 @@ def pattern_spec_for(pattern: str, projector: tuple[int, int] | None) -> Pattern
     return spec
 
 
+#: The extension of :func:`save_decoded`'s file.
+DECODED_SUFFIXES = (".npz",)
+
+
 def save_decoded(path: str | Path, decoded) -> None:
     """Write a :class:`rangekit.coded.decode.DecodeResult`'s maps to ``path`` (.npz, atomically):
     proj_col, proj_row, confidence and the masks shadow, low_contrast, global_dominated, inconsistent; deflated

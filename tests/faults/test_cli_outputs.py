@@ -126,7 +126,7 @@ def test_sigint_during_a_render_exits_130_and_leaves_no_partial_file(tmp_path):
     proc = subprocess.Popen([sys.executable, "-m", "rangekit", "sim", "render", "--out", str(out)],
                             stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             env=env, preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
-    for line in proc.stdout:  # interrupt while the frames are rendered and written (about 5 s)
+    for line in proc.stderr:  # progress (stderr): interrupt while the frames are rendered and written (about 5 s)
         if line.startswith("rendering"):
             break
     time.sleep(1.0)

@@ -97,9 +97,10 @@ def test_a_bad_cloud_or_mesh_file_is_a_clear_error(cli, tmp_path, name):
 ])
 def test_a_folder_given_for_a_file_is_named(cli, tmp_path, command, name, what):
     (tmp_path / name).mkdir()
-    run = cli(command, tmp_path / name, "--out", tmp_path / "out.png")
+    out = tmp_path / ("out.png" if command == "render" else "out.ply")   # an extension the command writes
+    run = cli(command, tmp_path / name, "--out", out)
     assert_error(run, 1, name, f"is a folder, expected {what}")
-    assert not (tmp_path / "out.png").exists()
+    assert not out.exists()
 
 
 def test_register_names_the_bad_scan(cli, tmp_path):

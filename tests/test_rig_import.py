@@ -1,0 +1,158 @@
+"""``rangekit rig import``: OpenCV stereo calibrations written by cv2.FileStorage, depthai EEPROM JSON and
+Horus calibration.json become rig files with the same numbers; ``rig init`` prints matrices on one line."""
+
+import json
+
+import cv2
+import numpy as np
+import pytest
+
+from rangekit.cli import main
+from rangekit.errors import ConfigError
+from rangekit.formats.rig_import import import_rig
+from rangekit.rig import load_rig
+
+K1 = np.array([[1234.5678901234567, 0.0, 640.123456789], [0.0, 1233.987654321, 401.5], [0.0, 0.0, 1.0]])
+D1 = np.array([[-0.123456789012345, 0.0987654321, 1.5e-4, -2.5e-4, 0.01234567]])
+K2 = np.array([[1500.25, 0.0, 639.75], [0.0, 1501.125, 399.25], [0.0, 0.0, 1.0]])
+D2 = np.array([[0.0312, -0.0456, 3e-5, 4e-5, 0.00123]])
+R = cv2.Rodrigues(np.array([[0.0123456789], [-0.3812345678], [0.0234567891]]))[0]
+T = np.array([[-0.201234567891], [0.00312345678], [0.0412345678]])
+
+
+def _write_opencv(path, **extra):
+    fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_WRITE)
+    for k, v in dict(K1=K1, D1=D1, K2=K2, D2=D2, R=R, T=T, **extra).items():
+        fs.write(k, v)
+    fs.release()
+
+
+@pytest.mark.parametrize("suffix", [".yaml", ".xml"])
+def test_opencv_filestorage_values_come_back_to_1e_12(tmp_path, suffix):
+    src = tmp_path / f"stereo{suffix}"
+    _write_opencv(src, imageSize=np.array([[1280], [800]], float), projectorSize=np.array([[1920], [1080]], float))
+    assert main(["rig", "import", str(src), "--out", str(tmp_path / "rig.json")]) == 0
+    rig = load_rig(tmp_path / "rig.json")
+    cam, proj = rig.camera, rig.projector
+    assert (cam.width, cam.height, proj.width, proj.height) == (1280, 800, 1920, 1080)
+    np.testing.assert_allclose(cam.K, K1, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(proj.K, K2, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(cam.dist, D1.ravel(), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(proj.dist, D2.ravel(), rtol=0, atol=1e-12)
+    T_proj_cam = np.linalg.inv(rig.projector.T_world_cam) @ rig.camera.T_world_cam     # X_proj = R X_cam + T
+    np.testing.assert_allclose(T_proj_cam[:3, :3], R, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(T_proj_cam[:3, 3], T.ravel(), rtol=0, atol=1e-12)
+    assert np.array_equal(rig.camera.T_world_cam, np.eye(4)) and rig.T_world_table is None
+
+
+def test_opencv_sizes_units_and_printing(tmp_path, capsys):
+    src = tmp_path / "calib.yml"
+    _write_opencv(src)
+    assert main(["rig", "import", str(src)]) == 1          # no size in the file, none given
+    assert ("calib.yml: expected the camera image size (keys imageSize, image_size, cam_size or image_width and "
+            "image_height), found none; give it with --size WxH") in capsys.readouterr().err
+    assert main(["rig", "import", str(src), "--size", "640x480", "--projector-size", "800x600", "--unit", "mm"]) == 0
+    text = capsys.readouterr().out
+    data = json.loads(text)
+    assert '"K": [[1234.5678901234567, 0.0, 640.123456789], [0.0, 1233.987654321, 401.5], [0.0, 0.0, 1.0]]' in text
+    assert (data["cameras"][0]["width"], data["projector"]["height"]) == (640, 600)
+    T_world_proj = np.array(data["projector"]["T_world_cam"])
+    np.testing.assert_allclose(-R.T @ T.ravel() * 1e-3, T_world_proj[:3, 3], atol=1e-15)
+
+
+def test_opencv_errors_name_the_file_the_key_and_what_was_found(tmp_path):
+    src = tmp_path / "calib.yaml"
+    fs = cv2.FileStorage(str(src), cv2.FILE_STORAGE_WRITE)
+    fs.write("K1", K1)
+    fs.release()
+    with pytest.raises(ConfigError, match=r"calib.yaml: expected one of the keys D1, distCoeffs1.*found none; the "
+                                          r"file has K1"):
+        import_rig(src, size=(640, 480), projector_size=(640, 480))
+    _write_opencv(src, imageSize=np.array([[1280.5], [800]]))
+    with pytest.raises(ConfigError, match=r"imageSize: expected \[width, height\] in pixels, found \[1280.5, 800"):
+        import_rig(src, projector_size=(640, 480))
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("not: [an, opencv\n")
+    with pytest.raises(ConfigError, match="bad.yaml: expected an OpenCV FileStorage file"):
+        import_rig(bad)
+    with pytest.raises(ConfigError, match=r"calib.txt: expected a calibration file \(.yaml, .yml, .xml, .json\), "
+                                          r"found '.txt'"):
+        import_rig(tmp_path / "calib.txt")
+
+
+def _depthai_camera(K, width, height, to, R, t_cm):
+    dist = [0.01, -0.02, 0.001, 0.002, 0.003, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]
+    return {"cameraType": 0, "distortionCoeff": dist, "height": height, "width": width, "intrinsicMatrix": K,
+            "lensPosition": 0, "specHfovDeg": 71.86,
+            "extrinsics": {"rotationMatrix": R, "specTranslation": {"x": -7.5, "y": 0.0, "z": 0.0},
+                           "toCameraSocket": to, "translation": dict(zip("xyz", t_cm))}}
+
+
+def test_depthai_eeprom_json_chains_the_extrinsics_into_the_rgb_camera_frame(tmp_path):
+    """An OAK-D layout: CAM_B (left) -> CAM_C (right) -> CAM_A (rgb), translations in cm."""
+    R_bc = cv2.Rodrigues(np.array([0.001, 0.02, -0.003]))[0]
+    R_ca = cv2.Rodrigues(np.array([-0.002, -0.01, 0.004]))[0]
+    t_bc, t_ca = [-7.5, 0.01, 0.02], [3.75, -0.02, 0.01]
+    I = np.eye(3).tolist()
+    data = {"batchName": "", "boardName": "OAK-D", "productName": "OAK-D", "version": 7, "cameraData": [
+        [2, _depthai_camera([[800.0, 0, 640.0], [0, 800.0, 400.0], [0, 0, 1]], 1280, 800, 0, R_ca.tolist(), t_ca)],
+        [1, _depthai_camera([[801.0, 0, 641.0], [0, 801.0, 401.0], [0, 0, 1]], 1280, 800, 2, R_bc.tolist(), t_bc)],
+        [0, _depthai_camera([[3000.0, 0, 1920.0], [0, 3000.0, 1080.0], [0, 0, 1]], 3840, 2160, -1, I, [0, 0, 0])],
+    ], "stereoRectificationData": {"leftCameraSocket": 1, "rightCameraSocket": 2}}
+    src = tmp_path / "eeprom.json"
+    src.write_text(json.dumps(data))
+    rig = load_rig_dict(import_rig(src))
+    assert [c.name for c in rig.cameras] == ["CAM_A", "CAM_B", "CAM_C"] and rig.projector is None
+    T_a_c = np.eye(4)
+    T_a_c[:3, :3], T_a_c[:3, 3] = R_ca, np.array(t_ca) / 100
+    T_c_b = np.eye(4)
+    T_c_b[:3, :3], T_c_b[:3, 3] = R_bc, np.array(t_bc) / 100
+    np.testing.assert_allclose(rig.cameras[2].T_world_cam, T_a_c, atol=1e-12)
+    np.testing.assert_allclose(rig.cameras[1].T_world_cam, T_a_c @ T_c_b, atol=1e-12)
+    assert np.allclose(rig.cameras[0].T_world_cam, np.eye(4)) and rig.cameras[0].width == 3840
+    np.testing.assert_allclose(rig.cameras[1].dist, [0.01, -0.02, 0.001, 0.002, 0.003], atol=0)
+    data["cameraData"][0][1]["distortionCoeff"] = [0.0] * 5
+    src.write_text(json.dumps(data))
+    with pytest.raises(ConfigError, match=r"eeprom.json: cameraData\[socket 2\].distortionCoeff: expected 14 "
+                                          r"numbers, found 5"):
+        import_rig(src)
+
+
+def load_rig_dict(data):
+    from rangekit.rig import Rig
+
+    return Rig.from_dict(data)
+
+
+def test_horus_calibration_json_gives_camera_lasers_and_turntable(tmp_path):
+    """Horus's profile layout: calibration_settings, each value under "value"; millimetres."""
+    K = [[1430.0, 0.0, 480.0], [0.0, 1430.0, 620.0], [0.0, 0.0, 1.0]]
+    Rp = cv2.Rodrigues(np.array([1.5, 0.01, -0.02]))[0]
+    tp = [5.0, 80.0, 320.0]
+    nl = np.array([0.86, 0.0, 0.51]) / np.linalg.norm([0.86, 0.0, 0.51])
+    settings = {"camera_matrix": K, "distortion_vector": [0.1, -0.2, 0.0, 0.001, 0.3],
+                "distance_left": 160.5, "normal_left": nl.tolist(), "distance_right": 158.25,
+                "normal_right": [-0.85, 0.01, 0.52], "rotation_matrix": Rp.tolist(), "translation_vector": tp}
+    src = tmp_path / "calibration.json"
+    src.write_text(json.dumps({"calibration_settings": {k: {"value": v} for k, v in settings.items()}}))
+    with pytest.raises(ConfigError, match=r"calibration.json: expected the camera's image size.*--size WxH"):
+        import_rig(src)
+    assert main(["rig", "import", str(src), "--size", "960x1280", "--out", str(tmp_path / "rig.json")]) == 0
+    rig = load_rig(tmp_path / "rig.json")
+    np.testing.assert_allclose(rig.camera.K, K, atol=0)
+    np.testing.assert_allclose(rig.T_world_table[:3, :3], Rp, atol=1e-15)
+    np.testing.assert_allclose(rig.T_world_table[:3, 3], np.array(tp) / 1000, atol=1e-15)
+    left = rig.lasers[0]
+    X = nl * 0.1605                                  # a point of n . X = d (mm -> m)
+    assert abs(left.plane[:3] @ X + left.plane[3]) < 1e-12 and left.plane[3] > 0   # camera-side normal
+    del settings["normal_right"]
+    src.write_text(json.dumps(settings))             # the flat layout too
+    with pytest.raises(ConfigError, match="calibration.json: normal_right: expected it"):
+        import_rig(src, size=(960, 1280))
+
+
+def test_rig_init_prints_each_matrix_on_one_line(capsys):
+    assert main(["rig", "init"]) == 0
+    text = capsys.readouterr().out
+    assert '      "K": [[1000.0, 0.0, 639.5], [0.0, 1000.0, 399.5], [0.0, 0.0, 1.0]],\n' in text
+    assert json.loads(text)["cameras"][0]["K"][2] == [0.0, 0.0, 1.0]

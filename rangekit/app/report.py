@@ -135,7 +135,7 @@ def write_report(folder: str | Path, result: "ProcessResult", *, clouds: Sequenc
     up = table_up(rig)
     sides, side_names = SIDES[:2], SIDE_NAMES[:2]
     from rangekit.app.report_quality import mesh_quality
-    from rangekit.geometry import apply_T
+    from rangekit.geometry import apply_T, compose
 
     call_progress(progress, "report: views' agreement and coverage")
     clouds_world = [apply_T(T, c.points) for T, c in zip(result.T_world_view, clouds)]
@@ -144,7 +144,8 @@ def write_report(folder: str | Path, result: "ProcessResult", *, clouds: Sequenc
     n = len(clouds)
     view_id = np.concatenate([np.full(len(c), k, dtype=np.float64) for k, c in enumerate(clouds)])
     call_progress(progress, "report: 3D view")
-    sections[3:3] = mesh_viewer(mesh, merged.points, view_id, V, q.n_views, up=up)   # after the summary
+    cameras = np.array([compose(T, rig.camera.T_world_cam)[:3, 3] for T in result.T_world_view])   # centres
+    sections[3:3] = mesh_viewer(mesh, V, q, cameras, up=up)   # after the summary
 
     call_progress(progress, "report: registered views")
     step = max(1, len(merged) // 600_000)
@@ -205,26 +206,31 @@ def write_report(folder: str | Path, result: "ProcessResult", *, clouds: Sequenc
     return write_page(out, sections)
 
 
-def mesh_viewer(mesh: "TriangleMesh", points: np.ndarray, view_id: np.ndarray, V: np.ndarray, n_views: np.ndarray,
-                *, up: np.ndarray) -> list[str]:
-    """The 3D view's HTML (:func:`rangekit.app.report_viewer.viewer_section`) of ``mesh`` decimated, coloured
-    by view (the view of the nearest of the merged ``points`` (N, 3), ``view_id`` (N,)) or by the number of
-    views that see it (``n_views`` on the quality map's vertices ``V``), with a legend for each."""
+def mesh_viewer(mesh: "TriangleMesh", V: np.ndarray, q, cameras: np.ndarray, *, up: np.ndarray) -> list[str]:
+    """The 3D view's HTML (:func:`rangekit.app.report_viewer.viewer_section`) of ``mesh`` decimated, coloured by
+    view (of the views that see a vertex, the one that sees it most squarely: its camera centre, ``cameras``
+    (n, 3) in the session world, closest to the vertex normal's direction) or by the number of views that see it;
+    which views see a vertex comes from the quality map ``q`` on its vertices ``V`` (:func:`mesh_quality`)."""
     from scipy.spatial import cKDTree
 
     from rangekit.app.report_quality import count_colours
     from rangekit.app.report_viewer import decimate, swatch_legend, viewer_section
     from rangekit.colour import colourise
+    from rangekit.surface.quality import vertex_normals
 
     Vd, Fd = decimate(mesh.vertices, mesh.triangles)
-    n = int(view_id.max()) + 1 if len(view_id) else 1
-    step = max(1, len(points) // 300_000)
-    near = cKDTree(points[::step], balanced_tree=False).query(Vd, k=1)[1]
-    by_view = colourise(view_id[::step][near], 0, max(1, n - 1), cmap="turbo")   # as the registered-views figures
-    top = int(n_views.max()) if len(n_views) else 1
-    by_count = count_colours(n_views[cKDTree(V).query(Vd, k=1)[1]], top)
+    n = len(cameras)
+    near = cKDTree(V).query(Vd, k=1)[1]
+    seen = np.isfinite(q.offsets[:, near]).T                                     # (Vd, n)
+    to_cam = cameras[None, :, :] - Vd[:, None, :]
+    facing = np.einsum("vj,vkj->vk", vertex_normals(Vd, Fd), to_cam) / np.linalg.norm(to_cam, axis=2)
+    best = np.where(seen, facing, -np.inf).argmax(axis=1)
+    best = np.where(seen.any(axis=1), best, facing.argmax(axis=1))             # seen by none: the facing camera
+    by_view = colourise(best, 0, max(1, n - 1), cmap="turbo")                   # as the registered-views figures
+    top = int(q.n_views.max()) if len(q.n_views) else 1
+    by_count = count_colours(q.n_views[near], top)
     legends = [swatch_legend(colourise(np.arange(n), 0, max(1, n - 1), cmap="turbo"), [str(k) for k in range(n)],
-                             title="colour = view:", name="view"),
+                             title="colour = view (the one that sees the surface most squarely):", name="view"),
                swatch_legend(count_colours(np.arange(top + 1), top), [str(k) for k in range(top + 1)],
                              title="colour = number of views that see the surface:", name="views that see it")]
     return viewer_section(Vd, Fd, {"view": by_view, "views that see it": by_count}, up=up, legends=legends,

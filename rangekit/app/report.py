@@ -170,6 +170,7 @@ def write_report(folder: str | Path, result: "ProcessResult", *, clouds: Sequenc
     sections += coverage_section(mesh, V, q, up=up, sides=sides, side_names=side_names, size=size)
     sections += residual_section(merged.points, mesh)
     sections += view_table_section(result.view_names, [len(c) for c in clouds], maps, session.capture.full_scale)
+
     def has_sigma(m) -> bool:
         return m.sigma is not None and bool(np.isfinite(m.sigma).any())
 

@@ -25,7 +25,7 @@ import urllib.error
 import urllib.request
 from pathlib import Path
 
-__all__ = ["chromium_paths", "open_page"]
+__all__ = ["chromium_paths", "open_page", "Page"]
 
 _BROWSERS = ("chromium", "chromium-browser")
 _DRIVERS = ("chromedriver",)
@@ -142,6 +142,31 @@ return {
 """
 
 
+class Page:
+    """The open page, for an ``interact`` callback of :func:`open_page`: run scripts, find elements, drag."""
+
+    def __init__(self, client: _Client, sid: str):
+        self._client, self._sid = client, sid
+
+    def execute(self, script: str, *args):
+        """Run ``script`` (a function body; ``arguments[i]`` are ``args``) in the page; returns its value."""
+        return self._client.call("POST", f"/session/{self._sid}/execute/sync", {"script": script, "args": list(args)})
+
+    def element(self, css: str) -> dict:
+        """The WebDriver reference of the first element matching the CSS selector ``css``."""
+        return self._client.call("POST", f"/session/{self._sid}/element", {"using": "css selector", "value": css})
+
+    def drag(self, element: dict, dx: int, dy: int, steps: int = 10) -> None:
+        """Press the mouse at the centre of ``element``, move by (dx, dy) pixels in ``steps``, release."""
+        moves = [{"type": "pointerMove", "duration": 20, "origin": "pointer", "x": round(dx / steps), "y": round(dy / steps)}
+                 for _ in range(steps)]
+        self._client.call("POST", f"/session/{self._sid}/actions", {"actions": [{
+            "type": "pointer", "id": "mouse", "parameters": {"pointerType": "mouse"},
+            "actions": [{"type": "pointerMove", "duration": 0, "origin": element, "x": 0, "y": 0},
+                        {"type": "pointerDown", "button": 0}, *moves, {"type": "pointerUp", "button": 0}]}]})
+        self._client.call("DELETE", f"/session/{self._sid}/actions")
+
+
 def _poll(client: _Client, sid: str, script: str, deadline: float) -> bool:
     while True:
         if client.call("POST", f"/session/{sid}/execute/sync", {"script": script, "args": []}):
@@ -171,12 +196,14 @@ def _screenshot(client: _Client, sid: str, out: Path, width: int, height: int, f
 
 def open_page(html_path, *, width: int = 1280, height: int = 900,
               screenshot: str | Path | None = None, full_page: bool = True,
-              timeout_s: float = 60) -> dict:
+              timeout_s: float = 60, interact=None) -> dict:
     """Load ``html_path`` in headless Chromium; report on its images, optionally screenshot it.
 
     Returns ``{"images": [{"index", "src_prefix", "complete", "naturalWidth",
     "naturalHeight", "alt"}, ...], "svg_count", "title", "scroll_height",
-    "screenshot"}``; an image that failed to load has ``naturalWidth == 0``.
+    "screenshot", "interaction"}``; an image that failed to load has ``naturalWidth == 0``. ``interact``:
+    called with a :class:`Page` once the page has loaded (before the screenshot); its return value is
+    "interaction".
     """
     paths = chromium_paths()
     if paths is None:
@@ -219,13 +246,15 @@ def open_page(html_path, *, width: int = 1280, height: int = 900,
         _poll(client, sid, "return document.readyState === 'complete';", deadline)
         _poll(client, sid, _ALL_IMAGES_COMPLETE, deadline)
         info = client.call("POST", f"/session/{sid}/execute/sync", {"script": _COLLECT, "args": []})
+        interaction = interact(Page(client, sid)) if interact is not None else None
         shot = None
         if screenshot is not None:
             shot = Path(screenshot)
             page_h = max(height, int(info["scroll_height"] or 0))
             _screenshot(client, sid, shot, width, page_h, full_page)
         return {"images": info["images"], "svg_count": info["svg_count"], "title": info["title"],
-                "scroll_height": info["scroll_height"], "screenshot": str(shot) if shot else None}
+                "scroll_height": info["scroll_height"], "screenshot": str(shot) if shot else None,
+                "interaction": interaction}
     finally:
         if sid is not None:
             try:

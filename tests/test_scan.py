@@ -68,8 +68,9 @@ def test_report_opens_in_headless_chromium_with_every_image_loaded(scanned, tmp_
     page = open_page(scanned / "report.html", screenshot=tmp_path / "report.png")
     images = page["images"]
     # 5 heat maps + colour bar + 5 mesh sides + 5 closed mesh sides + 2 registered clouds + view graph
-    # + 2 sides of the views' agreement and its colour bar + 6 per view (with the predicted sigma).
-    assert len(images) == 5 + 1 + 5 + 5 + 2 + 1 + 3 + 6 * 6
+    # + 2 sides of the views' agreement and its colour bar + 2 sides of the coverage count + the residuals'
+    # histogram + 6 per view (with the predicted sigma).
+    assert len(images) == 5 + 1 + 5 + 5 + 2 + 1 + 3 + 2 + 1 + 6 * 6
     assert "Views' agreement" in html and "predicted sigma" in html
     broken = [im for im in images if not (im["complete"] and im["naturalWidth"] > 0)]
     assert not broken, broken

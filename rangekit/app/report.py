@@ -1,16 +1,23 @@
-"""``report.html``: one self-contained page (every image embedded) showing what a scan did.
+"""``report.html``: one self-contained page (every image and script embedded) showing what a scan did.
 
-Sections: the summary; on the simulator, the error heat map of the mesh against the true surface; the
-mesh shaded from several sides; the registered views; the view graph with each pair's residual; and
-per view its capture, decoded projector column and confidence, depth and cloud. Every picture is a
-PNG in a ``data:`` URI (the view graph is an SVG, also in a ``data:`` URI), rendered by the ray caster
-and z-buffer of :mod:`rangekit.app.snapshot`: no display, browser or GPU is needed to write it.
+Sections: the summary (with the rangekit version and the command line); an interactive 3D view of the
+mesh (:mod:`rangekit.app.report_viewer`: WebGL, coloured by view or by the number of views that see it);
+on the simulator, the error heat map of the mesh against the true surface; the mesh shaded from several
+sides; the registered views; the view graph with each pair's residual; and, with no truth needed, the
+views' agreement (quality map), the coverage-count map, the histogram of the point-to-mesh residuals and
+the per-view table (points, decoded share, saturation); per view its capture, decoded projector column and
+confidence, depth and cloud. Every picture is a PNG in a ``data:`` URI (the view graph and histogram are
+SVGs, also in ``data:`` URIs), rendered by the ray caster and z-buffer of :mod:`rangekit.app.snapshot`: no
+display, browser or GPU is needed to write it. The page's Content-Security-Policy (``default-src 'none'``)
+forbids any request: it works offline and never phones anywhere.
 """
 
 from __future__ import annotations
 
 import base64
 import html
+import shlex
+import sys
 import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Callable, Sequence
@@ -39,8 +46,13 @@ h1{font-size:26px;margin-bottom:4px} h2{font-size:20px;margin-top:32px;border-bo
 .row{display:flex;flex-wrap:wrap;gap:10px;align-items:flex-start}
 figure{margin:0} figcaption{font-size:12px;color:#555;text-align:center}
 table{border-collapse:collapse;font-size:13px} td,th{padding:3px 6px;border-bottom:1px solid #eee;text-align:left}
-img{display:block}
+img{display:block} .tw{overflow-x:auto;max-width:100%} td,th{white-space:nowrap}
+.sw{display:inline-block;margin:2px 10px 2px 0;font-size:13px} .sw i{display:inline-block;width:12px;height:12px;
+margin-right:4px;vertical-align:-1px;border:1px solid #999}
 """
+
+#: The page may load nothing: images are ``data:`` URIs, styles and scripts inline.
+CSP = "default-src 'none'; img-src data:; style-src 'unsafe-inline'; script-src 'unsafe-inline'"
 
 
 def view_graph_svg(n: int, edges: Sequence[dict], *, size: int = 460) -> str:
@@ -78,14 +90,26 @@ def view_graph_svg(n: int, edges: Sequence[dict], *, size: int = 460) -> str:
     return "data:image/svg+xml;base64," + base64.b64encode(svg.encode()).decode()
 
 
+def command_line(argv: Sequence[str] | None = None) -> str:
+    """The command that is running, as a shell would take it (``rangekit ...`` when run as rangekit or
+    ``python -m rangekit``); ``argv`` defaults to ``sys.argv``."""
+    argv = list(sys.argv if argv is None else argv)
+    if argv and (Path(argv[0]).name == "rangekit" or Path(argv[0]).parent.name == "rangekit"):
+        argv[0] = "rangekit"
+    return shlex.join(argv)
+
+
 def _summary_table(result: "ProcessResult", session: "Session") -> str:
+    from rangekit import __version__
+
     sim = session.simulator
     rows = [("session", str(result.folder)), ("written", time.strftime("%Y-%m-%d %H:%M:%S")),
+            ("rangekit", __version__), ("command", command_line()),
             ("rig", "simulated" if sim else "hardware"), ("pattern", session.pattern.method)]
     if sim:
         rows += [("object", str(sim.object)), ("noise seed", str(sim.seed))]
     body = "".join(f"<tr><th>{html.escape(k)}</th><td>{html.escape(v)}</td></tr>" for k, v in rows)
-    return f"<table>{body}</table><pre>{html.escape(chr(10).join(result.summary_lines()))}</pre>"
+    return f"<div class='tw'><table>{body}</table></div><pre>{html.escape(chr(10).join(result.summary_lines()))}</pre>"
 
 
 def write_report(folder: str | Path, result: "ProcessResult", *, clouds: Sequence["PointCloud"],
@@ -100,6 +124,7 @@ def write_report(folder: str | Path, result: "ProcessResult", *, clouds: Sequenc
     invented part in grey), ``truth`` the true surface in that frame (from an evaluator) for the heat map.
     """
     from rangekit.colour import colourise
+    from rangekit.app.report_viewer import swatch_legend
     from rangekit.app.snapshot import fit_camera, render_cloud
 
     out = Path(folder)
@@ -109,27 +134,43 @@ def write_report(folder: str | Path, result: "ProcessResult", *, clouds: Sequenc
     frame_pts = mesh.vertices  # fit_camera(tight=True) frames the points themselves
     up = table_up(rig)
     sides, side_names = SIDES[:2], SIDE_NAMES[:2]
+    from rangekit.app.report_quality import mesh_quality
+    from rangekit.geometry import apply_T, compose
 
-    call_progress(progress, "report: registered views")
+    call_progress(progress, "report: views' agreement and coverage")
+    clouds_world = [apply_T(T, c.points) for T, c in zip(result.T_world_view, clouds)]
+    V, q = mesh_quality(mesh.vertices, mesh.triangles, clouds_world, normal_sums=mesh.normal_sums)
+    del clouds_world
     n = len(clouds)
     view_id = np.concatenate([np.full(len(c), k, dtype=np.float64) for k, c in enumerate(clouds)])
+    call_progress(progress, "report: 3D view")
+    cameras = np.array([compose(T, rig.camera.T_world_cam)[:3, 3] for T in result.T_world_view])   # centres
+    sections[3:3] = mesh_viewer(mesh, V, q, cameras, up=up)   # after the summary
+
+    call_progress(progress, "report: registered views")
     step = max(1, len(merged) // 600_000)
     figs = [_img(_crop(render_cloud(merged.points[::step], fit_camera(frame_pts, azimuth=az, elevation=el, size=size,
                                                                       up=up, tight=True),
                                     values=view_id[::step], vmin=0, vmax=max(1, n - 1))), f"{name}: colour = view")
             for (az, el), name in list(zip(sides, side_names))[:2]]
     figs.append(_img(view_graph_svg(n, result.edges), "view graph"))
-    sections += ["<h2>Registration</h2>", f"<div class='row'>{''.join(figs)}</div>"]
+    sections += ["<h2>Registration</h2>", f"<div class='row'>{''.join(figs)}</div>",
+                 swatch_legend(colourise(np.arange(n), 0, max(1, n - 1), cmap="turbo"), [str(k) for k in range(n)],
+                               title="colour = view:")]
     from rangekit.app.report_passes import passes_section
 
     sections += passes_section(result.view_passes, clouds, merged, frame_pts, up, size)
     sections += view_errors_section(result.view_errors)
-    from rangekit.app.report_quality import quality_section, sigma_scale
-    from rangekit.geometry import apply_T
+    from rangekit.app.report_quality import coverage_section, quality_section, sigma_scale
+    from rangekit.app.report_residuals import residual_section
+    from rangekit.app.report_views import view_table_section
 
-    clouds_world = [apply_T(T, c.points) for T, c in zip(result.T_world_view, clouds)]
-    sections += quality_section(mesh, clouds_world, up=up, sides=sides, side_names=side_names, size=size,
-                                progress=progress)
+    sections += quality_section(mesh, V, q, up=up, sides=sides, side_names=side_names, size=size)
+    call_progress(progress, "report: coverage and residuals")
+    sections += coverage_section(mesh, V, q, up=up, sides=sides, side_names=side_names, size=size)
+    sections += residual_section(merged.points, mesh)
+    sections += view_table_section(result.view_names, [len(c) for c in clouds], maps, session.capture.full_scale)
+
     def has_sigma(m) -> bool:
         return m.sigma is not None and bool(np.isfinite(m.sigma).any())
 
@@ -164,6 +205,37 @@ def write_report(folder: str | Path, result: "ProcessResult", *, clouds: Sequenc
     sections += ["<h2>Views</h2>", "".join(rows)]
 
     return write_page(out, sections)
+
+
+def mesh_viewer(mesh: "TriangleMesh", V: np.ndarray, q, cameras: np.ndarray, *, up: np.ndarray) -> list[str]:
+    """The 3D view's HTML (:func:`rangekit.app.report_viewer.viewer_section`) of ``mesh`` decimated, coloured by
+    view (of the views that see a vertex, the one that sees it most squarely: its camera centre, ``cameras``
+    (n, 3) in the session world, closest to the vertex normal's direction) or by the number of views that see it;
+    which views see a vertex comes from the quality map ``q`` on its vertices ``V`` (:func:`mesh_quality`)."""
+    from scipy.spatial import cKDTree
+
+    from rangekit.app.report_quality import count_colours
+    from rangekit.app.report_viewer import decimate, swatch_legend, viewer_section
+    from rangekit.colour import colourise
+    from rangekit.surface.quality import vertex_normals
+
+    Vd, Fd = decimate(mesh.vertices, mesh.triangles)
+    n = len(cameras)
+    near = cKDTree(V).query(Vd, k=1)[1]
+    seen = np.isfinite(q.offsets[:, near]).T                                     # (Vd, n)
+    to_cam = cameras[None, :, :] - Vd[:, None, :]
+    facing = np.einsum("vj,vkj->vk", vertex_normals(Vd, Fd), to_cam) / np.linalg.norm(to_cam, axis=2)
+    best = np.where(seen, facing, -np.inf).argmax(axis=1)
+    best = np.where(seen.any(axis=1), best, facing.argmax(axis=1))             # seen by none: the facing camera
+    by_view = colourise(best, 0, max(1, n - 1), cmap="turbo")                   # as the registered-views figures
+    top = int(q.n_views.max()) if len(q.n_views) else 1
+    by_count = count_colours(q.n_views[near], top)
+    legends = [swatch_legend(colourise(np.arange(n), 0, max(1, n - 1), cmap="turbo"), [str(k) for k in range(n)],
+                             title="colour = view (the one that sees the surface most squarely):", name="view"),
+               swatch_legend(count_colours(np.arange(top + 1), top), [str(k) for k in range(top + 1)],
+                             title="colour = number of views that see the surface:", name="views that see it")]
+    return viewer_section(Vd, Fd, {"view": by_view, "views that see it": by_count}, up=up, legends=legends,
+                          of=len(mesh.triangles))
 
 
 #: The sides the mesh is shown from: (azimuth, elevation) radians about the turntable axis, and their names.
@@ -240,6 +312,7 @@ def head_sections(out: Path, result: "ProcessResult", *, mesh: "TriangleMesh", s
 def write_page(out: Path, sections: Sequence[str]) -> Path:
     """Write ``out/report.html`` (atomically) from the HTML ``sections``; returns its path."""
     page = ("<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'>"
+            f"<meta http-equiv='Content-Security-Policy' content=\"{CSP}\">"
             f"<title>rangekit report: {html.escape(out.name)}</title><style>{_CSS}</style></head><body>"
             + "".join(sections) + "</body></html>")
     path = out / "report.html"

@@ -4,6 +4,8 @@
   (:func:`rangekit.surface.quality.view_disagreement`): per vertex, the standard deviation of the offsets
   along the normal of the registered views that see it. Noise, registration and calibration errors between
   views show up as views that put the surface at different heights; grey where fewer than two views see it.
+- **Coverage**: the observed mesh coloured by how many views see each part (the quality map's ``n_views``),
+  with a legend per count.
 - **Predicted sigma**: each view's map of the predicted standard deviation of its points along the camera
   ray (:mod:`rangekit.coded.uncertainty`), one colour scale for all views, in the views' rows.
 
@@ -12,13 +14,11 @@ Units in the pictures and text are mm; the computation is in metres in the sessi
 
 from __future__ import annotations
 
-from typing import Callable, Sequence
+from typing import Sequence
 
 import numpy as np
 
-from rangekit.progress import call_progress
-
-__all__ = ["QUALITY_VERTICES", "mesh_quality", "quality_section", "sigma_scale"]
+__all__ = ["QUALITY_VERTICES", "count_colours", "coverage_section", "mesh_quality", "quality_section", "sigma_scale"]
 
 #: The quality map is computed on at most this many mesh vertices (evenly taken) and shown by nearest
 #: vertex: its structure is smooth at that density and the report stays a few seconds.
@@ -50,32 +50,21 @@ def sigma_scale(sigma_maps: Sequence[np.ndarray]) -> float:
     return float(np.percentile(finite, 99)) if finite.size else 1e-3
 
 
-def quality_section(mesh, clouds_world: Sequence[np.ndarray], *, up: np.ndarray, sides, side_names,
-                    size: tuple[int, int], progress: Callable | None = None) -> list[str]:
+def quality_section(mesh, V: np.ndarray, q, *, up: np.ndarray, sides, side_names, size: tuple[int, int]
+                    ) -> list[str]:
     """HTML of the view-agreement pictures of ``mesh`` (observed surface, session world) from ``sides``
-    (list of (azimuth, elevation) radians), with a colour bar and the figures in the text."""
-    from scipy.spatial import cKDTree
-
+    (list of (azimuth, elevation) radians), with a colour bar and the figures in the text; ``V, q`` from
+    :func:`mesh_quality`."""
     from rangekit.app.report_figures import crop as _crop, figure as _img
-    from rangekit.app.snapshot import colour_bar, fit_camera, render_values_on_mesh
+    from rangekit.app.snapshot import colour_bar
 
-    call_progress(progress, "report: views' agreement (quality map)")
-    V, q = mesh_quality(mesh.vertices, mesh.triangles, clouds_world, normal_sums=mesh.normal_sums)
     d = q.disagreement
     seen = np.isfinite(d)
     if not seen.any():
         return ["<h2>Views' agreement</h2><p>No part of the mesh is seen by two views: nothing to compare.</p>"]
     vmax = float(np.percentile(d[seen], 99))
-    tree = cKDTree(V)
-
-    def value(X: np.ndarray) -> np.ndarray:
-        return d[tree.query(X, k=1)[1]]
-
     figs = []
-    for (az, el), name in zip(sides, side_names):
-        cam = fit_camera(mesh.vertices, azimuth=az, elevation=el, size=size, up=up, tight=True)
-        img, vals = render_values_on_mesh(mesh, cam, value, vmin=0.0, vmax=vmax, cmap="turbo", smooth=True)
-        img[np.isnan(vals) & np.any(img != 255, axis=2)] = 160   # seen by fewer than two views: grey
+    for name, img in _renders(mesh, V, d, vmax, up=up, sides=sides, side_names=side_names, size=size):
         figs.append(_img(_crop(img), name, alt=f"{name}: disagreement between the views"))
     bar = colour_bar(0.0, vmax * 1e3, label="views' disagreement (std along the normal), mm", cmap="turbo")
     rms = float(np.sqrt(np.mean(d[seen] ** 2)))
@@ -86,3 +75,51 @@ def quality_section(mesh, clouds_world: Sequence[np.ndarray], *, up: np.ndarray,
             "more views (grey: fewer). Noise, registration and calibration errors between views all raise it; "
             "compare with the views' predicted sigma below.</p>",
             f"<div class='row'>{''.join(figs)}</div>", _img(bar, "colour scale")]
+
+
+def count_colours(counts: np.ndarray, top: int) -> np.ndarray:
+    """(..., 3) uint8 RGB of view counts 0..``top`` (``turbo``, 0 dark blue): the coverage map's colours."""
+    from rangekit.colour import colourise
+
+    return colourise(np.asarray(counts, dtype=np.float64), 0.0, max(1, top), cmap="turbo")
+
+
+def coverage_section(mesh, V: np.ndarray, q, *, up: np.ndarray, sides, side_names, size: tuple[int, int]
+                     ) -> list[str]:
+    """HTML of the coverage-count map: ``mesh`` coloured by how many views see each part (``q.n_views`` on
+    the vertices ``V``, :func:`mesh_quality`), from ``sides``, with a legend per count."""
+    from rangekit.app.report_figures import crop as _crop, figure as _img
+    from rangekit.app.report_viewer import swatch_legend
+
+    counts = q.n_views.astype(np.float64)
+    top = max(1, int(counts.max()) if counts.size else 1)
+    figs = [_img(_crop(img), name, alt=f"{name}: number of views that see the surface")
+            for name, img in _renders(mesh, V, counts, float(top), up=up, sides=sides, side_names=side_names,
+                                      size=size, grey_nan=False)]
+    shares = np.bincount(q.n_views, minlength=top + 1) / max(1, len(q.n_views))
+    legend = swatch_legend(count_colours(np.arange(top + 1), top),
+                           [f"{k}: {s:.0%}" for k, s in enumerate(shares)], title="views (share of the mesh):")
+    return ["<h2>Coverage (no truth needed)</h2>",
+            f"<p>How many views see each part of the observed mesh (a view sees a vertex when its points lie "
+            f"within {SEEN_SPACINGS:g} point spacings): {np.mean(q.n_views >= 2):.1%} of the mesh is seen by two or "
+            "more views, the rest rests on one view alone (no cross-check).</p>",
+            f"<div class='row'>{''.join(figs)}</div>", legend]
+
+
+def _renders(mesh, V: np.ndarray, values: np.ndarray, vmax: float, *, up, sides, side_names, size, grey_nan=True):
+    """(name, image) of ``mesh`` coloured by ``values`` on its vertices ``V`` (nearest), 0 to ``vmax``."""
+    from scipy.spatial import cKDTree
+
+    from rangekit.app.snapshot import fit_camera, render_values_on_mesh
+
+    tree = cKDTree(V)
+
+    def value(X: np.ndarray) -> np.ndarray:
+        return values[tree.query(X, k=1)[1]]
+
+    for (az, el), name in zip(sides, side_names):
+        cam = fit_camera(mesh.vertices, azimuth=az, elevation=el, size=size, up=up, tight=True)
+        img, vals = render_values_on_mesh(mesh, cam, value, vmin=0.0, vmax=vmax, cmap="turbo", smooth=True)
+        if grey_nan:
+            img[np.isnan(vals) & np.any(img != 255, axis=2)] = 160   # seen by fewer than two views: grey
+        yield name, img

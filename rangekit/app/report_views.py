@@ -1,6 +1,10 @@
-"""The report's per-view error table (simulator): where each view's error comes from.
+"""The report's per-view tables: what each view gave (always) and, on the simulator, where its error comes from.
 
-One row per view: decoding (projector pixels against the true columns), the view's cloud against the true
+:func:`view_table_section` (no truth needed): per view, its points, the share of the camera's pixels decoded
+(a projector column found), the share kept as points, and the share of saturated pixels in the white capture
+(at the camera's full scale: decoding there is unreliable; lower the exposure or the projector's brightness).
+
+:func:`view_errors_section`, one row per view: decoding (projector pixels against the true columns), the view's cloud against the true
 surface (RMS, 95th percentile, max; inside a surface and at depth edges, and the edge points' share of the
 squared error) and registration (the registered pose against the true turntable pose). The figures come
 from :func:`rangekit.sim.view_errors.view_errors` through the session's evaluator.
@@ -9,8 +13,42 @@ from :func:`rangekit.sim.view_errors.view_errors` through the session's evaluato
 from __future__ import annotations
 
 import html
+from typing import Sequence
 
-__all__ = ["view_errors_section"]
+import numpy as np
+
+__all__ = ["saturated_fraction", "view_errors_section", "view_table_section"]
+
+
+def saturated_fraction(capture: np.ndarray, full_scale: float | None) -> float:
+    """Share of the pixels of ``capture`` ((H, W) or (H, W, 3)) at or above ``full_scale`` in any channel; None
+    full scale: the dtype's largest value (1.0 for a float image)."""
+    img = np.asarray(capture)
+    if full_scale is None:
+        full_scale = float(np.iinfo(img.dtype).max) if img.dtype.kind in "ui" else 1.0
+    sat = img >= full_scale
+    return float((sat.any(axis=2) if sat.ndim == 3 else sat).mean()) if sat.size else 0.0
+
+
+def view_table_section(names: Sequence[str], n_points: Sequence[int], maps: Sequence, full_scale: float | None
+                       ) -> list[str]:
+    """HTML of the per-view table: ``names``, their clouds' point counts and their decoded
+    :class:`~rangekit.app.view_cache.ViewMaps` (``proj_col``, ``depth``, the white ``capture``); ``full_scale``
+    the camera's largest pixel value (None: the images' dtype's)."""
+    head = ("<tr><th>view</th><th>points</th><th>decoded pixels</th><th>kept as points</th>"
+            "<th>saturated (white frame)</th></tr>")
+    rows = []
+    for name, n, m in zip(names, n_points, maps):
+        sat = saturated_fraction(m.capture, full_scale)
+        cells = (name, f"{n:,}", f"{np.isfinite(m.proj_col).mean():.1%}", f"{np.isfinite(m.depth).mean():.1%}",
+                 f"{sat:.2%}")
+        style = " style='color:#b00'" if sat > 0.01 else ""
+        rows.append(f"<tr{style}>" + "".join(f"<td>{html.escape(c)}</td>" for c in cells) + "</tr>")
+    return ["<h2>Per view (no truth needed)</h2>",
+            "<p>Decoded: share of the camera's pixels with a projector column; kept: share that became points "
+            "(after the table, edge and confidence filters); saturated: share of the white capture's pixels at the "
+            "camera's full scale (red above 1%: lower the exposure or the projector's brightness).</p>",
+            f"<div class='tw'><table>{head}{''.join(rows)}</table></div>"]
 
 
 def _f(value, fmt: str) -> str:
@@ -36,4 +74,4 @@ def view_errors_section(view_errors: list[dict] | None) -> list[str]:
             "within 2 pixels of a silhouette or a depth jump (mixed pixels); decoding compares the decoded "
             "projector column with the true one; the pose error is the registered pose against the true "
             "turntable pose (translation of the object's centre).</p>")
-    return ["<h2>Where the error comes from (simulator)</h2>", note, f"<table>{head}{''.join(rows)}</table>"]
+    return ["<h2>Where the error comes from (simulator)</h2>", note, f"<div class='tw'><table>{head}{''.join(rows)}</table></div>"]

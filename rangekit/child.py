@@ -2,10 +2,12 @@
 
 Open3D's screened Poisson holds the GIL for its whole run (12-14 s at depth 9 on the 12-view scan): a
 thread beside it cannot run a line of Python, so the work meant to overlap it (the evaluation, writing the
-merged cloud) only waited. :func:`child_call` starts the call in a fresh (spawned, not forked: the parent
-has OpenMP and BLAS threads) Python process and returns at once; the parent goes on and collects the
-answer with :meth:`ChildCall.result`. :func:`call_beside` chooses a child or a thread (for small work,
-whose run is shorter than a child's start: about 1 s of imports) behind the same interface.
+merged cloud) only waited. :func:`child_call` starts the call in a fresh Python process (``python -c``
+with this interpreter: not forked, the parent has OpenMP and BLAS threads; not multiprocessing's spawn,
+which runs the caller's main script again in the child: without an ``if __name__ == "__main__"`` guard
+that script would process the session a second time) and returns at once; the parent goes on and
+collects the answer with :meth:`ChildCall.result`. :func:`call_beside` chooses a child or a thread (for
+small work, whose run is shorter than a child's start: about 1 s of imports) behind the same interface.
 
 - The child ignores Ctrl-C: the parent's ``with`` block ends it on any exception (Ctrl-C included), so
   an interrupted run leaves no process behind and prints no second traceback.
@@ -13,15 +15,20 @@ whose run is shorter than a child's start: about 1 s of imports) behind the same
   :class:`rangekit.errors.RangekitError` naming the call and its exit code, not a hang.
 - The child's exception is raised again in the parent: a rangekit error as it was, anything else as a
   RuntimeError carrying the child's traceback.
-- Arguments and results travel pickled: numpy arrays and frozen dataclasses of them, tens of MB in
-  tenths of a second. The function must be importable (module level).
+- The call travels pickled on the child's standard input (written by a thread, so a slow child never
+  blocks the parent), the answer on a private copy of its standard output; the child's own prints go to
+  the parent's stderr. Numpy arrays and frozen dataclasses of them, tens of MB, take tenths of a second.
+  The function must be importable (module level).
 """
 
 from __future__ import annotations
 
 import multiprocessing
+import os
 import pickle
-import signal
+import subprocess
+import sys
+import threading
 import traceback
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any, Callable
@@ -30,23 +37,31 @@ from rangekit.errors import RangekitError
 
 __all__ = ["ChildCall", "ThreadCall", "call_beside", "child_call"]
 
+# The child's first lines: no Ctrl-C, the parent's import path, then serve the call.
+_BOOT = ("import pickle, signal, sys; signal.signal(signal.SIGINT, signal.SIG_IGN); "
+         "sys.path[:] = pickle.load(sys.stdin.buffer); import rangekit.child as c; c._serve()")
 
-def _run(conn, fn: Callable, args: tuple, kwargs: dict) -> None:
-    """The child: run ``fn`` on one BLAS thread, send ``("ok", result)`` or ``("error", exception)``."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+def _serve() -> None:
+    """The child: read ``(fn, args, kwargs)`` from stdin, run it on one BLAS thread, write ``("ok", result)``
+    or ``("error", exception)`` to the original stdout (fd 1 then points at stderr for any prints)."""
+    answer_fd = os.dup(1)
+    os.dup2(2, 1)
     from rangekit.threads import one_blas_thread
 
     try:
+        fn, args, kwargs = pickle.load(sys.stdin.buffer)
         with one_blas_thread():
             answer = ("ok", fn(*args, **kwargs))
     except BaseException as exc:      # sent to the parent, which raises it
         answer = ("error", exc if isinstance(exc, RangekitError) else
                   RuntimeError(f"{type(exc).__name__}: {exc}\nin the child process:\n{traceback.format_exc()}"))
-    try:
-        conn.send(answer)
-    except (pickle.PicklingError, TypeError, AttributeError) as exc:
-        conn.send(("error", RuntimeError(f"the child process's answer cannot be sent back: {exc}")))
-    conn.close()
+    with os.fdopen(answer_fd, "wb") as out:
+        try:
+            data = pickle.dumps(answer, protocol=pickle.HIGHEST_PROTOCOL)
+        except (pickle.PicklingError, TypeError, AttributeError) as exc:
+            data = pickle.dumps(("error", RuntimeError(f"the child process's answer cannot be sent back: {exc}")))
+        out.write(data)
 
 
 class ChildCall:
@@ -54,48 +69,46 @@ class ChildCall:
     child if the block raises."""
 
     def __init__(self, fn: Callable, args: tuple, kwargs: dict) -> None:
-        ctx = multiprocessing.get_context("spawn")
         self._name = f"{fn.__module__}.{fn.__qualname__}"
-        self._conn, child_conn = ctx.Pipe(duplex=False)
-        self._process = ctx.Process(target=_run, args=(child_conn, fn, args, kwargs), daemon=True,
-                                    name=f"rangekit-{fn.__name__}")
-        self._process.start()
-        child_conn.close()     # the parent's copy: EOF once the child's end closes
+        payload = pickle.dumps(list(sys.path)) + pickle.dumps((fn, args, kwargs), protocol=pickle.HIGHEST_PROTOCOL)
+        self._proc = subprocess.Popen([sys.executable, "-c", _BOOT], stdin=subprocess.PIPE, stdout=subprocess.PIPE)
+        self._writer = threading.Thread(target=self._send, args=(payload,), daemon=True,
+                                        name=f"rangekit-{fn.__name__}-send")
+        self._writer.start()
+
+    def _send(self, payload: bytes) -> None:
+        try:
+            self._proc.stdin.write(payload)
+            self._proc.stdin.close()
+        except (BrokenPipeError, ValueError):   # the child died or was ended: result() says so
+            pass
 
     def result(self) -> Any:
         """Wait for the child's answer; return it, or raise its exception."""
-        try:
-            status, value = self._conn.recv()
-        except EOFError:
-            self._process.join()
-            raise RangekitError(f"{self._name} in a child process ended without an answer (exit code "
-                                f"{self._process.exitcode}; a negative code is the signal that ended it, "
-                                "-9 often the system out of memory)") from None
-        finally:
-            self._conn.close()
-        self._process.join()
+        data = self._proc.stdout.read()
+        code = self._proc.wait()
+        self._writer.join()
+        if not data:
+            raise RangekitError(f"{self._name} in a child process ended without an answer (exit code {code}; a "
+                                "negative code is the signal that ended it, -9 often the system out of memory)")
+        status, value = pickle.loads(data)
         if status == "error":
             raise value
         return value
 
     def terminate(self) -> None:
         """End the child if it is still running."""
-        if self._process.is_alive():
-            self._process.terminate()
-        self._process.join()
-        self._conn.close()
+        if self._proc.poll() is None:
+            self._proc.terminate()
+        self._proc.wait()
+        self._writer.join()
+        self._proc.stdout.close()
 
     def __enter__(self) -> "ChildCall":
         return self
 
     def __exit__(self, exc_type, exc, tb) -> None:
         self.terminate()
-
-
-def child_call(fn: Callable, *args, **kwargs) -> ChildCall:
-    """Start ``fn(*args, **kwargs)`` in a spawned child process and return at once; use as
-    ``with child_call(f, x) as call: ...; y = call.result()``."""
-    return ChildCall(fn, args, kwargs)
 
 
 class ThreadCall:
@@ -119,7 +132,13 @@ class ThreadCall:
 
 def call_beside(fn: Callable, *args, in_child: bool, **kwargs) -> ChildCall | ThreadCall:
     """Start ``fn(*args, **kwargs)`` beside this thread, in a child process (``in_child``: for a call that
-    holds the GIL) or on a thread; use as ``with call_beside(f, x, in_child=...) as call: ...``. A daemonic
-    process (a Dask worker, a multiprocessing pool's worker) may not start children: there it is a thread."""
+    holds the GIL) or on a thread; use as ``with call_beside(f, x, in_child=...) as call: ...``. In a daemonic
+    process (a Dask worker: the unit of parallelism there, one per core) it is a thread."""
     in_child = in_child and not multiprocessing.current_process().daemon
     return ChildCall(fn, args, kwargs) if in_child else ThreadCall(fn, args, kwargs)
+
+
+def child_call(fn: Callable, *args, **kwargs) -> ChildCall:
+    """Start ``fn(*args, **kwargs)`` in a child process and return at once; use as
+    ``with child_call(f, x) as call: ...; y = call.result()``."""
+    return ChildCall(fn, args, kwargs)

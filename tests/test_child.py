@@ -3,6 +3,8 @@ child reported, an interrupted parent leaves no child behind. Real spawned proce
 
 import os
 import signal
+import subprocess
+import sys
 import time
 
 import numpy as np
@@ -68,7 +70,7 @@ def test_an_error_in_the_parent_ends_the_child_at_once():
     with pytest.raises(KeyboardInterrupt):
         with child_call(sleeping, 60) as call:
             raise KeyboardInterrupt
-    assert not call._process.is_alive() and call._process.exitcode == -signal.SIGTERM   # ended, not waited for
+    assert call._proc.returncode == -signal.SIGTERM   # ended, not waited for
 
 
 def kind_of_call_in_this_process():
@@ -82,3 +84,26 @@ def test_a_daemonic_process_such_as_a_dask_worker_runs_the_call_on_a_thread():
     with multiprocessing.get_context("spawn").Pool(1) as pool:    # a pool's workers are daemonic
         assert pool.apply(kind_of_call_in_this_process) == ("ThreadCall", True)
     assert kind_of_call_in_this_process() == ("ChildCall", False)   # here: a child, another pid
+
+
+def test_a_script_without_a_main_guard_is_not_run_again_in_the_child(tmp_path):
+    """multiprocessing's spawn would import the caller's script again in the child; a plain child does not."""
+    script = tmp_path / "unguarded.py"
+    marker = tmp_path / "runs.txt"
+    script.write_text(f"""
+import os
+from rangekit.child import child_call
+with open({str(marker)!r}, "a") as f:
+    f.write("run\\n")
+with child_call(os.getpid) as call:
+    print(call.result() != os.getpid())
+""")
+    out = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=120,
+                         env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)})
+    assert out.returncode == 0 and out.stdout.strip() == "True", out.stderr
+    assert marker.read_text().splitlines() == ["run"]
+
+
+def test_prints_in_the_child_go_to_stderr_and_leave_the_answer_intact():
+    with child_call(print, "a line from the child") as call:
+        assert call.result() is None

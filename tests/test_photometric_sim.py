@@ -109,6 +109,8 @@ def test_photometric_command_on_a_simulated_folder(tmp_path, capsys, method, lim
     assert abs(e.mean_deg - mean) < 1e-3          # the normals written are those measured, in our frame
     for name in ("normals.png", "albedo.png", "depth.npy", "mesh.ply"):
         assert (tmp_path / "out" / name).stat().st_size > 0
+    header = (tmp_path / "out" / "mesh.ply").read_bytes().split(b"end_header")[0]
+    assert b"comment rangekit mesh, pixels" in header and b"metres" not in header   # no camera: pixel units
 
 
 def test_photometric_command_bad_input(tmp_path, capsys):

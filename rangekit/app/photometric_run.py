@@ -64,5 +64,5 @@ def photometric_files(folder: str | Path, out: str | Path, *, method: str = "rob
     albedo = np.nan_to_num(res.albedo if res.albedo.ndim == 2 else res.albedo.mean(axis=2))
     scale = np.percentile(albedo[data.mask], 99) if data.mask.any() else 1.0
     write_png(out / "albedo.png", np.rint(np.clip(albedo / max(scale, 1e-12), 0, 1) * 255).astype(np.uint8))
-    save_mesh(out / "mesh.ply", TriangleMesh(V, F))
+    save_mesh(out / "mesh.ply", TriangleMesh(V, F), units="pixels (x, y on the image grid, z integrated depth)")
     return out

@@ -37,17 +37,18 @@ def _check_suffix(path: Path, known=MESH_FORMATS) -> str:
     return suffix
 
 
-def save_mesh(path: str | Path, mesh) -> None:
+def save_mesh(path: str | Path, mesh, *, units: str = "metres") -> None:
     """Write ``mesh`` (any mesh :func:`rangekit.surface.convert.as_mesh` takes: TriangleMesh, Open3D, trimesh)
     in the format given by the extension (``.ply`` binary with vertex normals and colours, ``.obj``, ``.stl``,
     ``.glb``).
 
-    The write is atomic (temporary file + rename). STL keeps no colours; OBJ and GLB keep them as vertex
+    ``units`` names the coordinates' unit in a PLY's comment. The write is atomic (temporary file + rename). STL keeps no colours; OBJ and GLB keep them as vertex
     colours.
     """
     path = Path(path)
     suffix = _check_suffix(path)
-    atomic_write_bytes(path, MESH_FORMATS[suffix](as_mesh(mesh, "save_mesh")))
+    mesh = as_mesh(mesh, "save_mesh")
+    atomic_write_bytes(path, mesh_ply_bytes(mesh, units) if suffix == ".ply" else MESH_FORMATS[suffix](mesh))
 
 
 def _read_ply_mesh(path: Path) -> TriangleMesh:

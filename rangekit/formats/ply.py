@@ -388,10 +388,11 @@ def cloud_ply_bytes(cloud: PointCloud, fields: dict[str, np.ndarray] | None = No
     return _ply_bytes("rangekit point cloud, metres", rec)
 
 
-def mesh_ply_bytes(mesh: TriangleMesh) -> bytes:
+def mesh_ply_bytes(mesh: TriangleMesh, units: str = "metres") -> bytes:
     """A triangle mesh as binary PLY: float64 xyz, float32 unit area-weighted vertex normals ``nx ny nz`` (what
     MeshLab, Open3D and trimesh shade with), uint8 RGB, uint8 ``observed`` (when the mesh has the flag), faces
-    as ``list uchar int``, comment "metres"."""
+    as ``list uchar int``, comment "rangekit mesh, UNITS" (``units``: metres, or pixels for a photometric
+    surface whose camera is not known)."""
     normals = vertex_normals(mesh.vertices, mesh.triangles, sums=mesh.normal_sums)
-    return _ply_bytes("rangekit mesh, metres", _vertex_records(mesh.vertices, normals, mesh.vertex_colours,
+    return _ply_bytes(f"rangekit mesh, {units}", _vertex_records(mesh.vertices, normals, mesh.vertex_colours,
                                                                observed=mesh.observed), mesh.triangles)

@@ -98,7 +98,7 @@ def load_tof_folder(folder: str | Path) -> ToFFolder:
     if headers and headers[0] is not None and (headers[0].width, headers[0].height) != (cam.width, cam.height):
         raise FileFormatError(f"{files[0]}: samples are {headers[0].width}x{headers[0].height} (width x height) "
                               f"but the camera in rig.json is {cam.width}x{cam.height}")
-    stack = read_stack(files, what="ToF raw samples")
+    stack = np.stack(read_stack(files, what="ToF raw samples"))
     if stack.ndim != 3:
         raise FileFormatError(f"{folder / 'samples'}: expected single-channel (grey) raw samples, found images of "
                               f"shape {stack.shape[1:]} ({files[0].name})")

@@ -249,7 +249,8 @@ class _client:
 
             # Dask's nanny sets MALLOC_TRIM_THRESHOLD_=65536 in its workers; that fixes glibc's mmap threshold
             # too, so every large array is a fresh mmap: 9.9 against 4.2 s of system time for one
-            # `rangekit process` of the 12-view scan. rangekit trims at its stage ends (rangekit.memory).
+            # `rangekit process --no-report` of the 12-view scan (docs/scale.md). rangekit trims at its stage
+            # ends (rangekit.memory).
             with dask.config.set({"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}):
                 self.cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
                                             host="127.0.0.1", dashboard_address=None, env=dict(WORKER_ENV),

@@ -1,5 +1,5 @@
 """The pieces of an imported rig file (:mod:`rangekit.formats.rig_import`): a camera entry, the rig around
-it, rigid transforms and their exact inverse."""
+it (rigid transforms: rangekit.geometry make_T, invert_T)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import numpy as np
 from rangekit.errors import ConfigError
 from rangekit.rig import template_rig
 
-__all__ = ["camera_entry", "rig_dict", "rigid", "inverse_rigid"]
+__all__ = ["camera_entry", "rig_dict"]
 
 
 def camera_entry(name: str, K, dist, size, T_world_cam, where: str) -> dict:
@@ -35,15 +35,3 @@ def rig_dict(cameras: list[dict], projector: dict | None, T_world_table, devices
     if lasers:
         rig["lasers"] = list(lasers)
     return rig
-
-
-def rigid(R, t) -> np.ndarray:
-    T = np.eye(4)
-    T[:3, :3], T[:3, 3] = R, t
-    return T
-
-
-def inverse_rigid(T: np.ndarray) -> np.ndarray:
-    """The inverse of a rigid (4, 4) transform: R^T, -R^T t (exact to rounding, no general inverse)."""
-    R, t = T[:3, :3], T[:3, 3]
-    return rigid(R.T, -R.T @ t)

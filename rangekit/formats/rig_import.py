@@ -35,7 +35,8 @@ from pathlib import Path
 import numpy as np
 
 from rangekit.errors import ConfigError
-from rangekit.formats.rig_entries import camera_entry, inverse_rigid, rig_dict, rigid
+from rangekit.formats.rig_entries import camera_entry, rig_dict
+from rangekit.geometry import invert_T, make_T
 from rangekit.rig import Rig, template_rig
 
 __all__ = ["import_rig", "IMPORT_SUFFIXES", "OPENCV_KEYS"]
@@ -159,12 +160,12 @@ def opencv_rig(path: Path, *, size=None, projector_size=None, unit: str = "m") -
     t = np.asarray(t, dtype=np.float64).ravel()
     if t.size != 3 or not np.all(np.isfinite(t)):
         raise ConfigError(f"{path}: {tkey}: expected 3 finite numbers, found {t.tolist()}")
-    T_proj_cam = rigid(R, t * UNITS[unit])
+    T_proj_cam = make_T(R, t * UNITS[unit])
     cam_size = _size(values, "camera_size", "image", "camera image", size, "--size", path)
     proj_size = _size(values, "projector_size", "projector", "projector", projector_size, "--projector-size", path)
     camera = camera_entry("camera", keys["camera_K"][1], keys["camera_dist"][1], cam_size, np.eye(4),
                           f"{path}: {keys['camera_K'][0]}")
     projector = camera_entry("projector", keys["projector_K"][1], keys["projector_dist"][1], proj_size,
-                             inverse_rigid(T_proj_cam), f"{path}: {keys['projector_K'][0]}")
+                             invert_T(T_proj_cam), f"{path}: {keys['projector_K'][0]}")
     devices = {k: v for k, v in template_rig()["devices"].items()}
     return rig_dict([camera], projector, None, devices)

@@ -20,7 +20,8 @@ from __future__ import annotations
 import numpy as np
 
 from rangekit.errors import ConfigError
-from rangekit.formats.rig_entries import camera_entry, inverse_rigid, rig_dict, rigid
+from rangekit.formats.rig_entries import camera_entry, rig_dict
+from rangekit.geometry import invert_T, make_T
 from rangekit.lasers import LineLaser, laser_plane
 
 __all__ = ["depthai_rig", "horus_rig", "DEPTHAI_SOCKETS"]
@@ -65,8 +66,8 @@ def depthai_rig(data: dict, where: str) -> dict:
         if isinstance(to, int) and to >= 0:
             R = _array(ext.get("rotationMatrix"), (3, 3), where, f"{key}.extrinsics.rotationMatrix")
             t = _xyz(ext.get("translation"), where, f"{key}.extrinsics.translation") * 0.01   # cm -> m
-            links[(to, socket)] = rigid(R, t)                 # T_to_this
-            links[(socket, to)] = inverse_rigid(links[(to, socket)])
+            links[(to, socket)] = make_T(R, t)                 # T_to_this
+            links[(socket, to)] = invert_T(links[(to, socket)])
     world = 0 if 0 in cams else min(cams)
     T_world = {world: np.eye(4)}
     frontier = [world]
@@ -124,4 +125,4 @@ def horus_rig(data: dict, where: str, *, size: tuple[int, int] | None) -> dict:
         lasers.append(LineLaser(plane=plane, name=side).to_dict())
     camera = camera_entry("camera", K, dist, size, np.eye(4), f"{where}: camera_matrix")
     devices = {"turntable": {"protocol": "horus", "port": "/dev/ttyUSB0", "baud": 115200}}   # a UVC camera: no driver
-    return rig_dict([camera], None, rigid(R, t), devices, lasers)
+    return rig_dict([camera], None, make_T(R, t), devices, lasers)

@@ -22,7 +22,7 @@ from scipy.spatial import cKDTree
 
 from rangekit.errors import RegistrationError
 from rangekit.geometry import apply_T, invert_T, rotation_angle
-from rangekit.surface.cloud import PointCloud, bbox_diagonal, check_voxel, estimate_normals, voxel_downsample
+from rangekit.surface.cloud import PointCloud, bbox_diagonal, check_voxel, downsample_with_normals
 from rangekit.surface.convert import as_cloud
 from rangekit.registration.coarse import CoarseOptions, compute_features, coarse_align
 from rangekit.registration.icp import IcpOptions, icp
@@ -130,13 +130,7 @@ def _prepare(clouds: Sequence[PointCloud], voxel: float) -> list[PointCloud]:
             raise RegistrationError(f"view {k}: {len(pts)} points; a scan needs at least 50 to register")
         if not np.all(np.isfinite(pts)):
             raise RegistrationError(f"view {k}: has NaN or infinite points; drop them first")
-    out = []
-    for k, c in enumerate(clouds):
-        p, n = voxel_downsample(np.asarray(c.points), voxel, normals=c.normals)
-        if n is None:
-            n = estimate_normals(p, k=20)
-        out.append(PointCloud(p, normals=n))
-    return out
+    return [downsample_with_normals(c, voxel) for c in clouds]
 
 
 OVERLAP_NEIGHBOURS = 8   # no prior: each view's most overlapping views (estimated) added to the candidates

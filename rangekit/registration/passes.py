@@ -29,7 +29,7 @@ from rangekit.geometry import rotation_angle
 from rangekit.registration.coarse import CoarseOptions, coarse_align, compute_features
 from rangekit.registration.icp import IcpOptions, icp
 from rangekit.registration.multiview import EdgeResult, MultiViewOptions, MultiViewResult, register_views
-from rangekit.surface.cloud import PointCloud, bbox_diagonal, estimate_normals, merge_clouds, voxel_downsample
+from rangekit.surface.cloud import PointCloud, bbox_diagonal, downsample_with_normals, merge_clouds
 
 __all__ = ["PassesResult", "register_passes"]
 
@@ -56,14 +56,6 @@ class PassesResult:
 class _Residuals:
     edge_rotation_error: np.ndarray
     edge_translation_error: np.ndarray
-
-
-def _prepare(clouds: Sequence[PointCloud], voxel: float) -> list[PointCloud]:
-    out = []
-    for c in clouds:
-        p, n = voxel_downsample(np.asarray(c.points), voxel, normals=c.normals)
-        out.append(PointCloud(p, normals=n if n is not None else estimate_normals(p, k=20)))
-    return out
 
 
 def _align_pass(source: PointCloud, target: PointCloud, voxel: float, fine: float, p: int,
@@ -130,8 +122,8 @@ def register_passes(clouds: Sequence[PointCloud], view_pass: Sequence[int], prio
     diag = bbox_diagonal(clouds)
     voxel = diag / 110.0 if options.voxel is None else options.voxel
     fine = voxel / 3.0 if options.fine_voxel is None else options.fine_voxel
-    fine_clouds = _prepare(clouds, fine)
-    merged = [_prepare([merge_clouds([fine_clouds[k] for k in g], r.T_world_view)], fine)[0]
+    fine_clouds = [downsample_with_normals(c, fine) for c in clouds]
+    merged = [downsample_with_normals(merge_clouds([fine_clouds[k] for k in g], r.T_world_view), fine)
               for g, r in zip(groups, results)]
     T_first = [np.eye(4)]
     for p in range(1, n_passes):

@@ -14,7 +14,7 @@ import numpy as np
 from rangekit.errors import InputError, MeshError
 
 __all__ = ["PointCloud", "to_open3d", "voxel_downsample", "MAX_VOXELS_PER_DIAGONAL", "bbox_diagonal",
-           "check_voxel", "estimate_normals", "orient_normals_to_sensor", "oriented_normals_cloud", "transform_cloud",
+           "check_voxel", "estimate_normals", "downsample_with_normals", "orient_normals_to_sensor", "oriented_normals_cloud", "transform_cloud",
            "merge_clouds", "view_index", "affine_dimension", "spread_problem"]
 
 
@@ -170,6 +170,13 @@ def check_voxel(voxel, diagonal: float, *, what: str = "voxel", error: type[Inpu
     found = f"{voxel * 1e3:.4g} mm" if ok else repr(voxel)
     raise error(f"{what}: expected a voxel of at least {diagonal / MAX_VOXELS_PER_DIAGONAL * 1e3:.4g} mm (the "
                 f"scene's {diagonal * 1e3:.4g} mm bounding-box diagonal / {MAX_VOXELS_PER_DIAGONAL}), found {found}")
+
+
+def downsample_with_normals(cloud: PointCloud, voxel: float) -> PointCloud:
+    """``cloud`` (metres) voxel-downsampled by :func:`voxel_downsample` with its normals averaged, or, when it
+    has none, estimated from 20 neighbours: the points and normals registration works on."""
+    p, n = voxel_downsample(np.asarray(cloud.points), voxel, normals=cloud.normals)
+    return PointCloud(p, normals=n if n is not None else estimate_normals(p, k=20))
 
 
 def estimate_normals(points: np.ndarray, *, k: int = 20, viewpoint: np.ndarray | None = None) -> np.ndarray:

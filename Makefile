@@ -8,7 +8,7 @@ VENV   ?= .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.rangekit-installed
 
-.PHONY: setup test test-slow scan bench clean browser
+.PHONY: setup test test-slow scan bench clean browser docs-figures
 
 setup: $(STAMP)
 
@@ -52,3 +52,8 @@ bench: $(STAMP)
 
 clean:
 	rm -rf $(VENV) *.egg-info .pytest_cache
+
+docs-figures: $(STAMP) browser
+	@# Reruns every figure quoted in README.md and docs/ (the blocks between <!-- figure: COMMAND --> and
+	@# <!-- /figure -->) and writes the fresh output in place; about N minutes on an idle 2-core machine.
+	$(BIN)/python benchmarks/docs_figures.py

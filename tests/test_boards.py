@@ -143,11 +143,11 @@ def test_set_scene_reproducible_and_new_noise_per_scene(small_rig):
 
 def test_checkerboard_detection_accuracy(sim):
     board = Board()
-    err, counts = _errors(sim, board, board_poses(sim.rig, board, 15, seed=0))
+    err, counts = _errors(sim, board, board_poses(sim.rig, board, 8, seed=0))
     rms = float(np.sqrt(np.mean(err ** 2)))
-    print(f"\ncheckerboard, 15 poses x 54 corners: RMS {rms:.4f} px, max {err.max():.4f} px")
-    assert counts == [54] * 15
-    assert rms <= 0.032 and err.max() <= 0.085  # measured: RMS 0.0262 px, max 0.0663 px
+    print(f"\ncheckerboard, 8 poses x 54 corners: RMS {rms:.4f} px, max {err.max():.4f} px")
+    assert counts == [54] * 8
+    assert rms <= 0.032 and err.max() <= 0.07  # measured: RMS 0.0245 px, max 0.0505 px (8 poses)
 
 
 def test_charuco_detection_accuracy(sim):

@@ -1,6 +1,7 @@
 """Registration inside the turntable family: every view a rotation about one common axis."""
 
 import numpy as np
+import pytest
 
 from rangekit.geometry import apply_T, axis_angle_to_R, invert_T, make_T, rotation_angle, rotvec_to_R
 from rangekit.registration.multiview import MultiViewOptions, register_views
@@ -53,6 +54,7 @@ def test_the_basis_moves_poses_only_within_the_family():
     assert np.linalg.norm(e - B @ (B.T @ e)) > 0.5
 
 
+@pytest.mark.slow     # 18 s: make test-slow (CI) runs it
 def test_a_step_gauge_registers_on_the_turntable_where_free_poses_slide():
     scans = turntable_scans("steps", n_views=12, resolution=(480, 384), noise=0.0002)
     prior = perturb_poses(scans.T_world_view, max_angle=np.radians(0.3), max_translation=0.0005, rng=1)

@@ -32,18 +32,20 @@ def ensure_scan() -> dict:
     """{wall_s, peak_gb, acquisition_s} of the shared scan, running it first when it is not there."""
     if RUN.exists() and (SCAN / "summary.json").exists():
         return json.loads(RUN.read_text())
+    shutil.rmtree(SCAN, ignore_errors=True)         # a half-made one from an interrupted run
     WORK.mkdir(parents=True, exist_ok=True)
     done = subprocess.run([sys.executable, str(REPO / "benchmarks" / "tree_peak.py"), "--",
                            sys.executable, "-m", "rangekit", "scan", "--out", str(SCAN)],
-                          cwd=REPO, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+                          cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                           stdin=subprocess.DEVNULL)
+    output = done.stdout + done.stderr
     if done.returncode:
-        raise SystemExit(f"rangekit scan --out {SCAN} failed (exit {done.returncode}):\n{done.stderr[-3000:]}")
-    timing = re.search(r"run: ([\d.]+) s wall, .* peak of the process tree ([\d.]+) GB", done.stderr)
-    acquisition = re.search(r"acquisition: (?:(\d+) min )?([\d.]+) s", done.stderr)
+        raise SystemExit(f"rangekit scan --out {SCAN} failed (exit {done.returncode}):\n{output[-3000:]}")
+    timing = re.search(r"run: ([\d.]+) s wall, .* peak of the process tree ([\d.]+) GB", output)
+    acquisition = re.search(r"acquisition: (?:(\d+) min )?([\d.]+) s", output)
     if not timing or not acquisition:
         raise SystemExit("could not read the wall time, peak or acquisition time from the scan's output:\n"
-                         + done.stderr[-2000:])
+                         + output[-2000:])
     run = {"wall_s": float(timing[1]), "peak_gb": float(timing[2]),
            "acquisition_s": 60 * int(acquisition[1] or 0) + float(acquisition[2])}
     RUN.write_text(json.dumps(run))

@@ -77,7 +77,12 @@ def test_decode_and_reconstruct_commands(tmp_path):
         assert np.nanmedian(np.abs(err)) < 0.1 and np.isfinite(err).mean() > 0.95
     # The same images as a list of files with a method name and projector size.
     files = [str(p) for p in sorted(cap.glob("[0-9][0-9][0-9].png"))]
-    assert main(["decode", *files, "--pattern", "hybrid", "--projector", "1280x800", "--out", str(maps)]) == 0
+    packed = tmp_path / "packed.npz"
+    assert main(["decode", *files, "--pattern", "hybrid", "--projector", "1280x800", "--compress",
+                 "--out", str(packed)]) == 0
+    with np.load(maps) as m, np.load(packed) as p:       # the same maps, deflated
+        assert m.files == p.files and all(np.array_equal(m[k], p[k], equal_nan=True) for k in m.files)
+    assert packed.stat().st_size < maps.stat().st_size / 3
     cloud = tmp_path / "sphere.ply"
     assert main(["reconstruct", str(cap), "--out", str(cloud)]) == 0
     import open3d as o3d

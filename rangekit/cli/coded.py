@@ -27,7 +27,7 @@ def cmd_decode(args: argparse.Namespace) -> int:
     note(f"decoding {spec.method} ({'subpixel' if not args.integer else 'integer'})")
     with naming(args.images[0] if len(args.images) == 1 else f"{len(paths)} images from {paths[0]}"):
         res = decode(images, spec, order=args.order, subpixel=not args.integer)
-    save_decoded(args.out, res)
+    save_decoded(args.out, res, compress=args.compress)
     say(f"{res!r}")
     result(f"wrote {Path(args.out)} in {time.perf_counter() - t0:.1f} s")
     return 0
@@ -93,6 +93,8 @@ def add_parsers(sub) -> None:
     dec.add_argument("--order", default="rangekit", choices=("rangekit", "opencv"),
                      help="capture order; 'opencv' = GrayCodePattern (pairs, then white, black)")
     dec.add_argument("--integer", action="store_true", help="integer codes only (no subpixel refinement)")
+    dec.add_argument("--compress", action="store_true",
+                     help="deflate the .npz (6x smaller, 0.2 CPU-s more at 2048x1500); default: stored as np.savez")
     dec.add_argument("--out", required=True, help="output .npz with proj_col, proj_row, confidence and masks")
     dec.set_defaults(func=cmd_decode)
 

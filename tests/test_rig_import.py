@@ -118,6 +118,48 @@ def test_depthai_eeprom_json_chains_the_extrinsics_into_the_rgb_camera_frame(tmp
         import_rig(src)
 
 
+def test_a_calibration_written_by_depthai_itself_gives_depthais_own_extrinsics(tmp_path):
+    """depthai's CalibrationHandler (the library an OAK's EEPROM dump comes from) writes the JSON from known
+    values; the imported rig has those intrinsics and, for each camera, the pose depthai itself computes
+    (``getCameraExtrinsics(camera, CAM_A)``, cm) in metres. depthai stores float32: 1e-6 relative."""
+    dai = pytest.importorskip("depthai")
+    A, B, C = dai.CameraBoardSocket.CAM_A, dai.CameraBoardSocket.CAM_B, dai.CameraBoardSocket.CAM_C
+    cal = dai.CalibrationHandler()
+    K = {A: [[3012.5, 0, 1921.25], [0, 3011.75, 1079.5], [0, 0, 1]],
+         B: [[801.5, 0, 641.25], [0, 800.75, 401.5], [0, 0, 1]], C: [[799.25, 0, 639.5], [0, 799.5, 399.25], [0, 0, 1]]}
+    size = {A: (3840, 2160), B: (1280, 800), C: (1280, 800)}
+    dist = {A: [0.05, -0.1, 0.001, -0.002, 0.02], B: [-0.01, 0.02, 0.0005, 0.0004, -0.003],
+            C: [0.015, -0.025, -0.0003, 0.0002, 0.004]}
+    for s in (A, B, C):
+        cal.setCameraIntrinsics(s, K[s], *size[s])
+        cal.setDistortionCoefficients(s, dist[s] + [0.0] * 9)
+    R_bc = cv2.Rodrigues(np.array([0.001, 0.02, -0.003]))[0]
+    R_ca = cv2.Rodrigues(np.array([-0.002, -0.01, 0.004]))[0]
+    cal.setCameraExtrinsics(B, C, R_bc.tolist(), [-7.5, 0.01, 0.02], [-7.5, 0, 0])
+    cal.setCameraExtrinsics(C, A, R_ca.tolist(), [3.75, -0.02, 0.01], [3.75, 0, 0])
+    cal.setStereoLeft(B, np.eye(3).tolist())
+    cal.setStereoRight(C, np.eye(3).tolist())
+    src = tmp_path / "eeprom.json"
+    cal.eepromToJsonFile(str(src))
+    rig = load_rig_dict(import_rig(src))
+    cams = {c.name: c for c in rig.cameras}
+    assert set(cams) == {"CAM_A", "CAM_B", "CAM_C"} and rig.projector is None
+    for name, s in (("CAM_A", A), ("CAM_B", B), ("CAM_C", C)):
+        cam = cams[name]
+        assert (cam.width, cam.height) == size[s]
+        np.testing.assert_allclose(cam.K, K[s], rtol=1e-6)
+        np.testing.assert_allclose(cam.dist, dist[s], rtol=1e-6, atol=1e-9)
+        T_dai = np.array(cal.getCameraExtrinsics(s, A), float)       # camera -> CAM_A, translation in cm
+        T_dai[:3, 3] /= 100
+        np.testing.assert_allclose(cam.T_world_cam, T_dai, atol=1e-6)
+    data = json.loads(src.read_text())                       # a rotation that is not one is refused by name
+    data["cameraData"][1][1]["extrinsics"]["rotationMatrix"][0][0] *= 1.01
+    src.write_text(json.dumps(data))
+    with pytest.raises(ConfigError, match=r"eeprom.json: cameraData\[1\].extrinsics.rotationMatrix: expected a "
+                                          r"rotation \(orthonormal, det \+1\), found max \|R R\^T - I\| = 0.02"):
+        import_rig(src)
+
+
 def load_rig_dict(data):
     from rangekit.rig import Rig
 

@@ -3,7 +3,7 @@
 **depthai** (``CalibrationHandler.eepromToJson()``, e.g. an OAK-D's EEPROM): ``cameraData`` is a list of
 ``[socket, camera]`` pairs (socket 0 = CAM_A, 1 = CAM_B, 2 = CAM_C, ...); each camera has ``width``,
 ``height``, ``intrinsicMatrix`` (3x3 pixels), ``distortionCoeff`` (14, OpenCV order) and ``extrinsics``
-with ``rotationMatrix``, ``translation`` {x, y, z} in **centimetres** and ``toCameraSocket`` (-1: none):
+with ``rotationMatrix`` (float32 on the device: projected onto the nearest rotation), ``translation`` {x, y, z} in **centimetres** and ``toCameraSocket`` (-1: none):
 ``X_to = R X_this + t``. World = CAM_A's frame (else the lowest socket); every camera linked to it through
 the extrinsics is listed, the world camera first. No projector, no turntable.
 
@@ -21,7 +21,7 @@ import numpy as np
 
 from rangekit.errors import ConfigError
 from rangekit.formats.rig_entries import camera_entry, rig_dict
-from rangekit.geometry import invert_T, make_T
+from rangekit.geometry import invert_T, make_T, nearest_rotation
 from rangekit.lasers import LineLaser, laser_plane
 
 __all__ = ["depthai_rig", "horus_rig", "DEPTHAI_SOCKETS"]
@@ -46,6 +46,17 @@ def _xyz(value, where: str, key: str) -> np.ndarray:
     return _array([value["x"], value["y"], value["z"]], (3,), where, key)
 
 
+def _rotation(value, where: str, key: str) -> np.ndarray:
+    """A 3x3 rotation stored in float32 (depthai's EEPROM): orthonormal to about 1e-7, so projected onto the
+    nearest rotation (a rig file asks for 1e-9); one off by more than 1e-4 is refused."""
+    R = _array(value, (3, 3), where, key)
+    off = float(np.abs(R @ R.T - np.eye(3)).max())
+    if off > 1e-4 or np.linalg.det(R) <= 0:
+        raise ConfigError(f"{where}: {key}: expected a rotation (orthonormal, det +1), found max |R R^T - I| = "
+                          f"{off:.2g}, det {np.linalg.det(R):.4g}")
+    return nearest_rotation(R)
+
+
 def depthai_rig(data: dict, where: str) -> dict:
     """The rig of a depthai EEPROM calibration (module doc)."""
     entries = data.get("cameraData")
@@ -64,7 +75,7 @@ def depthai_rig(data: dict, where: str) -> dict:
         ext = cam.get("extrinsics") or {}
         to = ext.get("toCameraSocket", -1)
         if isinstance(to, int) and to >= 0:
-            R = _array(ext.get("rotationMatrix"), (3, 3), where, f"{key}.extrinsics.rotationMatrix")
+            R = _rotation(ext.get("rotationMatrix"), where, f"{key}.extrinsics.rotationMatrix")
             t = _xyz(ext.get("translation"), where, f"{key}.extrinsics.translation") * 0.01   # cm -> m
             links[(to, socket)] = make_T(R, t)                 # T_to_this
             links[(socket, to)] = invert_T(links[(to, socket)])

@@ -12,7 +12,7 @@ whether the bunny's target (<= 90 s) was met.
    and 2% of the diagonal: rangekit multi-view vs Open3D multiway registration (pose graph).
 4. The same pairwise edges with 15% replaced by wrong relative poses (>= 30 deg off): robust vs plain
    spectral synchronisation.
-5. Stanford bunny (10 scans, ../shared/data): --init none, time and agreement with bun.conf.
+5. Stanford bunny (10 scans, ``rangekit.sim.zoo.data_folders``: $RANGEKIT_DATA or ../shared/data): --init none, time and agreement with bun.conf.
 """
 
 from __future__ import annotations
@@ -29,7 +29,15 @@ from rangekit.registration.icp import IcpOptions, OrganisedScan, icp
 
 from _timing import timed  # benchmarks/_timing.py (the script's folder is on sys.path)
 
-DATA = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "stanford-bunny"
+
+
+def bunny_folder() -> Path:
+    """stanford-bunny/ in the first of rangekit.sim.zoo's data folders ($RANGEKIT_DATA, ../shared/data beside
+    the checkout or beside the folder holding it) that has it."""
+    from rangekit.sim.zoo import data_folders
+
+    folders = [f / "stanford-bunny" for f in data_folders()]
+    return next((f for f in folders if (f / "bun.conf").is_file()), folders[0])
 
 
 def pose_errors(T_est: np.ndarray, T_true: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -168,8 +176,9 @@ def bench_bunny(verdict: bool = False) -> list[str]:
     from rangekit.registration.multiview import register_views
     from scipy.spatial.transform import Rotation
 
+    DATA = bunny_folder()
     if not DATA.is_dir():
-        return ["| Stanford bunny | skipped: ../shared/data absent | | |"]
+        return [f"| Stanford bunny | skipped: {DATA} absent (set RANGEKIT_DATA) | | |"]
     names, poses = [], []
     for line in (DATA / "bun.conf").read_text().splitlines():
         p = line.split()

@@ -1,6 +1,6 @@
 """The decode stage of ``rangekit process``, sub-step by sub-step, in CPU seconds (issue 20).
 
-    PYTHONPATH=. python benchmarks/bench_decode_stage.py SESSION [--views N] [--repeat R] [--profile]
+    PYTHONPATH=. python benchmarks/bench_decode_stage.py SESSION [--views N] [--repeat R] [--profile] [--markdown]
 
 SESSION is a session folder (e.g. one made by ``rangekit scan --out S --no-process``); it is not changed
 (each run decodes copies of its views' frames in a temporary folder, with no cache). For each of the views
@@ -19,7 +19,8 @@ threads counts both threads):
 CPU seconds, not wall: the machine may be shared (the stage's wall clock is printed too). The views run
 through ``view_clouds`` as ``rangekit process`` runs them (the next view's frames are read while one
 decodes; with ``--profile``, or a tree without it, one ``view_cloud`` at a time). ``--repeat`` runs the whole stage R times and reports the
-minimum per sub-step. ``--code TREE`` times another checkout. ``--profile`` prints a cProfile (CPU-time) of the second view (the first fills the per-rig caches).
+minimum per sub-step. ``--markdown`` prints docs/benchmarks.md's table (a ``make docs-figures`` block).
+``--code TREE`` times another checkout. ``--profile`` prints a cProfile (CPU-time) of the second view (the first fills the per-rig caches).
 """
 
 from __future__ import annotations
@@ -122,6 +123,23 @@ def run_stage(folder: Path, n_views: int, profile: bool) -> tuple[dict, float, i
     return totals, total, points
 
 
+LABELS = {"png": "PNG loading", "decode": "decoding (hybrid, incl. numba's cache load once)",
+          "triangulate": "triangulation (ray-ray)", "sigma": "predicted sigma", "filter+normals": "filter + normals",
+          "write": "writing the cache", "other": "the rest (masks, depth map, table cut)"}
+TARGET_CPU_S = 8.0
+
+
+def markdown(best: dict, total: float, points: int, a) -> str:
+    """docs/benchmarks.md's table: each sub-step's CPU seconds, the stage's CPU and wall, the target."""
+    mode = "`--serial`" if a.serial else "read-ahead"
+    rows = [f"| sub-step, {a.views} views | CPU s ({mode}, min of {a.repeat}) |", "|---|---|"]
+    rows += [f"| {LABELS.get(k, k)} | {v:.2f} |" for k, v in best.items() if k != "wall"]
+    rows += [f"| **stage, CPU s** | **{total:.2f}** |", f"| **stage, wall s** | {best['wall']:.2f} |", "",
+             f"{points:,} points. Target {TARGET_CPU_S:g} CPU-s: {'met' if total <= TARGET_CPU_S else 'not met'} "
+             "in this run."]
+    return "\n".join(rows)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("session", type=Path)
@@ -130,6 +148,7 @@ def main() -> None:
     ap.add_argument("--profile", action="store_true")
     ap.add_argument("--serial", action="store_true", help="no read-ahead of the next view's frames")
     ap.add_argument("--code", type=Path, default=ROOT, help="rangekit tree to time (default: this one)")
+    ap.add_argument("--markdown", action="store_true", help="print docs/benchmarks.md's table")
     a = ap.parse_args()
     best, best_total, points = None, float("inf"), 0
     with tempfile.TemporaryDirectory(prefix="bench_decode_stage_") as tmp:
@@ -141,6 +160,9 @@ def main() -> None:
             best = totals if best is None else {k: min(best[k], totals[k]) for k in totals}
             best_total = min(best_total, total)
             shutil.rmtree(work)
+    if a.markdown:
+        print(markdown(best, best_total, points, a))
+        return
     print(f"rangekit from {CODE}")
     print(f"decode stage of {a.session}: {a.views} views, {points:,} points, min of {a.repeat} run(s), CPU-s")
     for k, v in best.items():

@@ -3,6 +3,12 @@
     PYTHONPATH=. python benchmarks/bench_report.py capture SESSION_COPY   # once: process, keep the inputs
     PYTHONPATH=. python benchmarks/bench_report.py time [--part report|evaluate] [--code OTHER_TREE] [--warm]
         [--repeat R]
+    PYTHONPATH=. python benchmarks/bench_report.py markdown SESSION   # docs/benchmarks.md's block
+
+``markdown`` copies SESSION (left unchanged) into ``$RANGEKIT_DOCS_WORK/report12``, captures there (the
+pickles too: ``BENCH_REPORT_STORE``, default the temporary folder, names where they go), then times
+``time --warm --repeat 2`` and ``time --part evaluate --repeat 2`` in two child processes and prints the
+table (a ``make docs-figures`` block).
 
 ``capture`` processes SESSION_COPY (a copy of a ``rangekit scan --no-process`` session: processing writes its
 caches and outputs there) with this tree, pickling what :func:`rangekit.app.report.write_report` and the
@@ -20,7 +26,11 @@ and the report reuses them); a tree before that change builds them in the report
 
 from __future__ import annotations
 
+import os
 import pickle
+import re
+import shutil
+import subprocess
 import sys
 import tempfile
 import time
@@ -29,7 +39,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 CODE = Path(sys.argv[sys.argv.index("--code") + 1]) if "--code" in sys.argv[:-1] else ROOT
 sys.path.insert(0, str(CODE))
-STORE = Path(tempfile.gettempdir())
+STORE = Path(os.environ.get("BENCH_REPORT_STORE") or tempfile.gettempdir())
+REPORT_TARGET_S = 3.0
 REPORT, EVAL = STORE / "bench_report_inputs.pkl", STORE / "bench_report_eval.pkl"
 
 
@@ -89,9 +100,42 @@ def run_once(part: str, warm: bool) -> dict:
     return out
 
 
+def markdown(session: str) -> str:
+    """Capture on a copy of SESSION in $RANGEKIT_DOCS_WORK, time the report and the evaluation (min of 2,
+    each in a child process), and return docs/benchmarks.md's table."""
+    work = Path(os.environ.get("RANGEKIT_DOCS_WORK") or ROOT / "build" / "docs-figures")
+    copy, store = work / "report12", work / "report_inputs"
+    shutil.rmtree(copy, ignore_errors=True)
+    shutil.copytree(session, copy)
+    store.mkdir(parents=True, exist_ok=True)
+    env = dict(os.environ, BENCH_REPORT_STORE=str(store))
+    me = [sys.executable, str(Path(__file__).resolve())]
+    try:
+        subprocess.run([*me, "capture", str(copy)], env=env, check=True, stdout=sys.stderr, stdin=subprocess.DEVNULL)
+        cpu = {}
+        for extra in (["--warm"], ["--part", "evaluate"]):
+            done = subprocess.run([*me, "time", *extra, "--repeat", "2"], env=env, check=True, text=True,
+                                  stdout=subprocess.PIPE, stdin=subprocess.DEVNULL)
+            cpu.update({m[1].strip(): float(m[2]) for m in re.finditer(r"^(.+?)\s+([\d.]+) CPU s", done.stdout, re.M)})
+    finally:
+        shutil.rmtree(store, ignore_errors=True)   # about 800 MB of pickles
+        shutil.rmtree(copy, ignore_errors=True)
+    report = cpu["report"]
+    return "\n".join([
+        "| part | CPU s (min of 2) |", "|---|---|",
+        f"| `write_report` (the meshes' ray-casting scenes already built, as in `rangekit process`) | {report:.2f} |",
+        f"| evaluator `prepare` (truth samples + per-view errors) | {cpu['evaluate: prepare']:.2f} |",
+        f"| accuracy of the two meshes | {cpu['evaluate: two meshes']:.2f} |", "",
+        f"Report target {REPORT_TARGET_S:g} CPU-s: {'met' if report <= REPORT_TARGET_S else 'not met'} in this run.",
+    ])
+
+
 def main() -> None:
     if len(sys.argv) >= 3 and sys.argv[1] == "capture":
         return capture(sys.argv[2])
+    if len(sys.argv) >= 3 and sys.argv[1] == "markdown":
+        print(markdown(sys.argv[2]))
+        return
     from rangekit.threads import one_blas_thread
 
     part = sys.argv[sys.argv.index("--part") + 1] if "--part" in sys.argv[:-1] else "report"

@@ -15,8 +15,8 @@ same disparities on both.
 
 Run: .venv/bin/python benchmarks/bench_stereo.py
      .venv/bin/python benchmarks/bench_stereo.py --asm      (packed int16 instructions in the aggregation)
-     .venv/bin/python benchmarks/bench_stereo.py --tables   (docs/stereo.md's accuracy tables: 320x200 and
-     640x400, dots on and off, both matchers through stereo_depth)
+     .venv/bin/python benchmarks/bench_stereo.py --tables   (docs/stereo.md's accuracy tables, a make
+     docs-figures block: 320x200 and 640x400, dots on and off, both matchers through stereo_depth)
      .venv/bin/python benchmarks/bench_stereo.py --markdown            (docs/benchmarks.md's timing table and
      its targets sentence; with ``--markdown accuracy`` its accuracy table, one run of each matcher, no timing)
 """
@@ -152,15 +152,20 @@ def timing_table(rows, markdown: bool) -> None:
               f"2 threads census-SGM / SGBM = {r2:.2f} (<= 1); same disparities on 1 and 2 threads")
 
 
+def _length(x: float, mm_below: float) -> str:
+    """A depth error in mm under ``mm_below`` metres, else in m."""
+    return f"{x * 1e3:.1f} mm" if x < mm_below else f"{x:.{0 if x >= 10 else 2}f} m"
+
+
 def tables() -> None:
-    """Coverage and errors of both matchers with and without dots (stereo_depth picks the disparities)."""
+    """docs/stereo.md's tables (a ``make docs-figures`` block): coverage and errors of both matchers with
+    and without dots (stereo_depth picks the disparities), at 320x200 and 640x400."""
     for W, H in ((320, 200), (640, 400)):
         rig = stereo_rig(W, H)
-        print(f"\n| {W}x{H} | coverage | RMS | median abs error | within 1 cm | occluded band invalidated |")
-        print("|---|---|---|---|---|---|")
+        rows = []
         for dots in (True, False):
             cap = render_stereo(stereo_scene(), rig, dots=dots, seed=0)
-            for method in ("census-sgm", "sgbm"):
+            for method, label in (("census-sgm", "census-SGM"), ("sgbm", "OpenCV SGBM")):
                 res = stereo_depth(cap.left, cap.right, *rig.cameras, method=method)
                 rect, n_disp = res.rectification, res.disparity.num_disparities
                 mask = cap.visible & (rect.focal * rect.baseline / cap.depth < n_disp - 1)
@@ -168,9 +173,15 @@ def tables() -> None:
                 ok = mask & np.isfinite(res.depth)
                 e = np.abs(res.depth - cap.depth)[ok]
                 occluded = cap.hit & ~cap.visible
-                print(f"| {method}, {'dots' if dots else 'no dots'} ({n_disp} disparities) | "
-                      f"{ok.sum() / mask.sum():.1%} | {np.sqrt(np.mean(e ** 2)) * 1e3:.1f} mm | {np.median(e) * 1e3:.1f} mm | "
-                      f"{(e < 0.01).sum() / mask.sum():.1%} | {np.isnan(res.depth[occluded]).mean():.1%} |")
+                rows.append(f"| {label}, {'dots' if dots else 'no dots'} | {ok.sum() / mask.sum():.1%} | "
+                            f"{_length(float(np.sqrt(np.mean(e ** 2))), 1.0)} | {_length(float(np.median(e)), 0.1)} | "
+                            f"{(e < 0.01).sum() / mask.sum():.1%} | {np.isnan(res.depth[occluded]).mean():.1%} |")
+        if W != 320:
+            print()
+        print(f"| {W}x{H}, {n_disp} disparities | coverage | RMS | median abs error | within 1 cm | "
+              "occluded band invalidated |")
+        print("|---|---|---|---|---|---|")
+        print("\n".join(rows))
 
 
 if __name__ == "__main__":

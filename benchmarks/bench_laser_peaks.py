@@ -8,6 +8,9 @@ is the distance to the curve along its normal; the row methods' the column error
 frame holds a line at 45 degrees for the ridge detector (the row methods refuse most of its rows).
 
 Run: .venv/bin/python benchmarks/bench_laser_peaks.py
+
+The output is markdown: docs/benchmarks.md quotes it whole (a ``make docs-figures`` block, no
+``--markdown`` flag needed).
 """
 
 from __future__ import annotations

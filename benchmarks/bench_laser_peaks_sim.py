@@ -13,6 +13,9 @@ mean, peaks compared / found, the share of points within 1 px of the curve, and 
 over 3x the RMS (and of the top-decile errors) that the worst decile by confidence holds.
 
 Run: .venv/bin/python benchmarks/bench_laser_peaks_sim.py [--quick]   (--quick: lumpy and sphere only)
+
+The output is markdown: docs/benchmarks.md quotes it whole (a ``make docs-figures`` block, no
+``--markdown`` flag needed).
 """
 
 from __future__ import annotations

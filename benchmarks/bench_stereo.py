@@ -15,8 +15,10 @@ same disparities on both.
 
 Run: .venv/bin/python benchmarks/bench_stereo.py
      .venv/bin/python benchmarks/bench_stereo.py --asm      (packed int16 instructions in the aggregation)
-     .venv/bin/python benchmarks/bench_stereo.py --tables   (docs/stereo.md's accuracy tables: 320x200 and
-     640x400, dots on and off, both matchers through stereo_depth)
+     .venv/bin/python benchmarks/bench_stereo.py --tables   (docs/stereo.md's accuracy tables, a make
+     docs-figures block: 320x200 and 640x400, dots on and off, both matchers through stereo_depth)
+     .venv/bin/python benchmarks/bench_stereo.py --markdown            (docs/benchmarks.md's timing table and
+     its targets sentence; with ``--markdown accuracy`` its accuracy table, one run of each matcher, no timing)
 """
 
 from __future__ import annotations
@@ -78,7 +80,9 @@ def accuracy(dmap, rect, left, cap, mask):
         (np.abs(e) < 0.01).sum() / mask.sum(), (np.abs(e) > 0.05).sum() / mask.sum()
 
 
-def main() -> None:
+def main(markdown: str | None = None) -> None:
+    """Timing and accuracy tables; ``markdown``: None (all, with headers), "timing" or "accuracy" (one
+    docs/benchmarks.md block each)."""
     rig = stereo_rig(640, 400)
     left, right = rig.cameras
     cap = render_stereo(stereo_scene(), rig, dots=True, seed=0)
@@ -87,15 +91,20 @@ def main() -> None:
     d_true = rect.focal * rect.baseline / cap.depth
     mask = cap.visible & (d_true < N_DISP - 1)
     mask[:5], mask[-5:], mask[:, :5], mask[:, -5:] = False, False, False, False
-    print(f"640x400, {N_DISP} disparities, {int(mask.sum()):,} matchable pixels, "
-          f"{numba.get_num_threads()} threads available")
+    if markdown is None:
+        print(f"640x400, {N_DISP} disparities, {int(mask.sum()):,} matchable pixels, "
+              f"{numba.get_num_threads()} threads available")
 
     ours = lambda: sgm_disparity(Lr, Rr, num_disparities=N_DISP)  # noqa: E731
     peer = lambda: sgbm_disparity(Lr, Rr, num_disparities=N_DISP, P1=200, P2=800)  # noqa: E731
     peer_hh = lambda: sgbm_disparity(Lr, Rr, num_disparities=N_DISP, P1=200, P2=800, mode="hh")  # noqa: E731
     n_all = numba.get_num_threads()
     rows, outs = [], {}
-    for threads in (1, 2):
+    if markdown == "accuracy":
+        outs = {"ours": ours(), "sgbm": peer(), "hh": peer_hh()}
+        print(f"Accuracy is measured against the exact depth on the raw left grid, over the {int(mask.sum()):,} "
+              "matchable pixels:\nseen by both cameras, true disparity < 63, and at least 5 px from the border.\n")
+    for threads in (1, 2) if markdown != "accuracy" else ():
         numba.set_num_threads(min(threads, n_all))
         cv2.setNumThreads(threads)
         best = min_of_runs({"ours": ours, "sgbm": peer, "hh": peer_hh}, REPEAT, outs)
@@ -107,20 +116,12 @@ def main() -> None:
     numba.set_num_threads(n_all)
     cv2.setNumThreads(n_all)
     d_ours, d_peer, d_hh = outs["ours"], outs["sgbm"], outs["hh"]
-
-    print(f"wall: min of {REPEAT} alternating runs after a warm-up (CPU = user + sys of the process, min)")
-    print("| threads | rangekit census-SGM (8 paths) | OpenCV SGBM (5 paths) | ratio | OpenCV SGBM HH (8 paths) "
-          "| ratio |")
-    print("|---|---|---|---|---|---|")
-    for threads, b in rows:
-        (wo, co), (wp, cp), (wh, ch) = b["ours"], b["sgbm"], b["hh"]
-        print(f"| {threads} | {wo * 1e3:.0f} ms ({co * 1e3:.0f} CPU) | {wp * 1e3:.0f} ms ({cp * 1e3:.0f} CPU) | "
-              f"{wo / wp:.2f}x | {wh * 1e3:.0f} ms ({ch * 1e3:.0f} CPU) | {wo / wh:.2f}x |")
-    one, two = rows[0][1], rows[1][1]
-    print(f"\ntargets (issue 20): 1 thread census-SGM / SGBM HH = {one['ours'][0] / one['hh'][0]:.2f} (<= 1.5), "
-          f"2 threads census-SGM / SGBM = {two['ours'][0] / two['sgbm'][0]:.2f} (<= 1); "
-          f"same disparities on 1 and 2 threads")
-    print()
+    if markdown != "accuracy":
+        timing_table(rows, markdown == "timing")
+    if markdown == "timing":
+        return
+    if markdown is None:
+        print()
     print("| matcher | coverage | RMS depth error | median abs error | within 1 cm | off by > 5 cm |")
     print("|---|---|---|---|---|---|")
     for name, dm in (("rangekit census-SGM", d_ours), ("OpenCV SGBM", d_peer), ("OpenCV SGBM HH", d_hh)):
@@ -129,15 +130,42 @@ def main() -> None:
               f"{gross * 100:.2f}% |")
 
 
+def timing_table(rows, markdown: bool) -> None:
+    """The min-of-runs table per thread count and the issue-20 targets."""
+    if not markdown:
+        print(f"wall: min of {REPEAT} alternating runs after a warm-up (CPU = user + sys of the process, min)")
+    print("| threads | rangekit census-SGM (8 paths) | OpenCV SGBM (5 paths) | ratio | OpenCV SGBM HH (8 paths) "
+          "| ratio |")
+    print("|---|---|---|---|---|---|")
+    for threads, b in rows:
+        (wo, co), (wp, cp), (wh, ch) = b["ours"], b["sgbm"], b["hh"]
+        print(f"| {threads} | {wo * 1e3:.0f} ms ({co * 1e3:.0f} CPU) | {wp * 1e3:.0f} ms ({cp * 1e3:.0f} CPU) | "
+              f"{wo / wp:.2f}x | {wh * 1e3:.0f} ms ({ch * 1e3:.0f} CPU) | {wo / wh:.2f}x |")
+    one, two = rows[0][1], rows[1][1]
+    r1, r2 = one["ours"][0] / one["hh"][0], two["ours"][0] / two["sgbm"][0]
+    if markdown:
+        print(f"\nTargets: census-SGM on 1 thread <= 1.5x SGBM HH ({r1:.2f}x: {'met' if r1 <= 1.5 else 'MISSED'}), "
+              f"on 2 threads <= 1x SGBM ({r2:.2f}x: {'met' if r2 <= 1 else 'MISSED'}); the disparities are the "
+              "same on 1 and 2 threads (the benchmark checks it).")
+    else:
+        print(f"\ntargets (issue 20): 1 thread census-SGM / SGBM HH = {r1:.2f} (<= 1.5), "
+              f"2 threads census-SGM / SGBM = {r2:.2f} (<= 1); same disparities on 1 and 2 threads")
+
+
+def _length(x: float, mm_below: float) -> str:
+    """A depth error in mm under ``mm_below`` metres, else in m."""
+    return f"{x * 1e3:.1f} mm" if x < mm_below else f"{x:.{0 if x >= 10 else 2}f} m"
+
+
 def tables() -> None:
-    """Coverage and errors of both matchers with and without dots (stereo_depth picks the disparities)."""
+    """docs/stereo.md's tables (a ``make docs-figures`` block): coverage and errors of both matchers with
+    and without dots (stereo_depth picks the disparities), at 320x200 and 640x400."""
     for W, H in ((320, 200), (640, 400)):
         rig = stereo_rig(W, H)
-        print(f"\n| {W}x{H} | coverage | RMS | median abs error | within 1 cm | occluded band invalidated |")
-        print("|---|---|---|---|---|---|")
+        rows = []
         for dots in (True, False):
             cap = render_stereo(stereo_scene(), rig, dots=dots, seed=0)
-            for method in ("census-sgm", "sgbm"):
+            for method, label in (("census-sgm", "census-SGM"), ("sgbm", "OpenCV SGBM")):
                 res = stereo_depth(cap.left, cap.right, *rig.cameras, method=method)
                 rect, n_disp = res.rectification, res.disparity.num_disparities
                 mask = cap.visible & (rect.focal * rect.baseline / cap.depth < n_disp - 1)
@@ -145,9 +173,15 @@ def tables() -> None:
                 ok = mask & np.isfinite(res.depth)
                 e = np.abs(res.depth - cap.depth)[ok]
                 occluded = cap.hit & ~cap.visible
-                print(f"| {method}, {'dots' if dots else 'no dots'} ({n_disp} disparities) | "
-                      f"{ok.sum() / mask.sum():.1%} | {np.sqrt(np.mean(e ** 2)) * 1e3:.1f} mm | {np.median(e) * 1e3:.1f} mm | "
-                      f"{(e < 0.01).sum() / mask.sum():.1%} | {np.isnan(res.depth[occluded]).mean():.1%} |")
+                rows.append(f"| {label}, {'dots' if dots else 'no dots'} | {ok.sum() / mask.sum():.1%} | "
+                            f"{_length(float(np.sqrt(np.mean(e ** 2))), 1.0)} | {_length(float(np.median(e)), 0.1)} | "
+                            f"{(e < 0.01).sum() / mask.sum():.1%} | {np.isnan(res.depth[occluded]).mean():.1%} |")
+        if W != 320:
+            print()
+        print(f"| {W}x{H}, {n_disp} disparities | coverage | RMS | median abs error | within 1 cm | "
+              "occluded band invalidated |")
+        print("|---|---|---|---|---|---|")
+        print("\n".join(rows))
 
 
 if __name__ == "__main__":
@@ -155,5 +189,7 @@ if __name__ == "__main__":
         tables()
     elif "--asm" in sys.argv[1:]:
         packed_ops()
+    elif "--markdown" in sys.argv[1:]:
+        main("accuracy" if "accuracy" in sys.argv[1:] else "timing")
     else:
         main()

@@ -55,5 +55,5 @@ clean:
 
 docs-figures: $(STAMP) browser
 	@# Reruns every figure quoted in README.md and docs/ (the blocks between <!-- figure: COMMAND --> and
-	@# <!-- /figure -->) and writes the fresh output in place; about N minutes on an idle 2-core machine.
+	@# <!-- /figure -->) and writes the fresh output in place; about 25 minutes on an idle 2-core machine.
 	$(BIN)/python benchmarks/docs_figures.py

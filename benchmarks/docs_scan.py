@@ -4,12 +4,13 @@
     python benchmarks/docs_scan.py report-png   # docs/img/report.png from the same scan's report.html
     python benchmarks/docs_scan.py session      # prints the path of a default 12-view session, unprocessed
 
+The first two share one default scan, ``$RANGEKIT_DOCS_WORK/scan1`` (build/docs-figures/scan1 when the
+variable is unset), made on first use by ``rangekit scan --out scan1`` (run in that folder, so that the
+report reads as ``make scan``'s) under benchmarks/tree_peak.py (wall time, peak memory of the process tree).
+Run it on an otherwise idle machine: the times are wall times.
+
 The session (``$RANGEKIT_DOCS_WORK/session12``, ``rangekit scan --out ... --no-process``, made on first use)
 is the input of the benchmarks that time ``rangekit process`` and its stages: they must work on a copy.
-
-Both share one default scan, ``$RANGEKIT_DOCS_WORK/scan1`` (build/docs-figures/scan1 when the variable is
-unset), made on first use by ``rangekit scan --out`` under benchmarks/tree_peak.py (wall time, peak memory
-of the process tree). Run it on an otherwise idle machine: the times are wall times.
 """
 
 from __future__ import annotations
@@ -35,9 +36,9 @@ def ensure_scan() -> dict:
     shutil.rmtree(SCAN, ignore_errors=True)         # a half-made one from an interrupted run
     WORK.mkdir(parents=True, exist_ok=True)
     done = subprocess.run([sys.executable, str(REPO / "benchmarks" / "tree_peak.py"), "--",
-                           sys.executable, "-m", "rangekit", "scan", "--out", str(SCAN)],
-                          cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                          stdin=subprocess.DEVNULL)
+                           sys.executable, "-m", "rangekit", "scan", "--out", SCAN.name],
+                          cwd=WORK, env=dict(os.environ, PYTHONPATH=str(REPO)), stdout=subprocess.PIPE,
+                          stderr=subprocess.PIPE, text=True, stdin=subprocess.DEVNULL)
     output = done.stdout + done.stderr
     if done.returncode:
         raise SystemExit(f"rangekit scan --out {SCAN} failed (exit {done.returncode}):\n{output[-3000:]}")
@@ -73,26 +74,27 @@ def summary() -> str:
     s = json.loads((SCAN / "summary.json").read_text())
     sec, acc = s["seconds"], s["accuracy"]
     closed = acc["watertight"]
-    stages = ", ".join(f"{k} {v:.1f}" for k, v in sec.items())
+    stages = ", ".join(f"{k} {v:.1f}" + (" (beside the fusion)" if k == "evaluate" else "") for k, v in sec.items())
+    processing = run["wall_s"] - run["acquisition_s"]
     n_views = len(s["views"])
     return "\n".join([
-        f"`make scan` runs `rangekit scan --out scan1` on the simulated rig. It took {run['wall_s']:.0f} s on 2",
-        f"cores, with a peak of {run['peak_gb']:.1f} GB over its processes (`make docs-figures`, an idle machine):",
+        f"`make scan` runs `rangekit scan --out scan1` on the simulated rig. It took {run['wall_s']:.0f} s on 2 cores,",
+        f"with a peak of {run['peak_gb']:.1f} GB over its processes (`make docs-figures`, an idle machine):",
         "",
         f"- **Acquisition, {run['acquisition_s']:.0f} s**: {n_views} turntable views of the `lumpy` object, 60 hybrid "
         "frames each (Gray",
         "  code + phase shift), rendered, encoded and written on both cores.",
-        f"- **Processing, {sum(sec.values()):.0f} s** ({stages} s): every view decoded and triangulated, then",
-        "  registered from the turntable angles and refined, then fused into `scan1/mesh.ply`, the surface the views",
-        "  observed (nothing invented), and `scan1/mesh_watertight.ply`, the same surface closed, each vertex",
-        "  flagged `observed` or not; both measured against the true surface and drawn into the report.",
+        f"- **Processing, {processing:.0f} s** (stages, s: {stages}): every view decoded and",
+        "  triangulated, then registered from the turntable angles and refined, then fused into `scan1/mesh.ply`,",
+        "  the surface the views observed (nothing invented), and `scan1/mesh_watertight.ply`, the same surface",
+        "  closed, each vertex flagged `observed` or not; both measured against the true surface and drawn into",
+        "  the report.",
         "",
         "It also writes `summary.json` and `report.html`. Where the views can see the object, `mesh.ply` is",
         f"{acc['rms'] * 1e3:.3f} mm RMS ({acc['rms'] / acc['diagonal'] * 100:.3f}% of the object's diagonal, 95th "
-        f"percentile {acc['p95'] * 1e3:.3f} mm,",
-        f"completeness {acc['completeness'] * 100:.1f}%) from the true surface; the closed mesh "
-        f"{closed['rms'] * 1e3:.2f} mm RMS, set by the part",
-        "it fills in.",
+        f"percentile {acc['p95'] * 1e3:.3f} mm, completeness",
+        f"{acc['completeness'] * 100:.1f}%) from the true surface; the closed mesh {closed['rms'] * 1e3:.2f} mm RMS, "
+        "set by the part it fills in.",
     ])
 
 

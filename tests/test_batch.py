@@ -38,6 +38,14 @@ def sessions(tmp_path_factory):
 
 
 @pytest.fixture(scope="module")
+def two_unprocessed(tmp_path_factory):
+    """The small reference session and a copy, neither processed (for the tests that stop before any work)."""
+    root = tmp_path_factory.mktemp("batch_options")
+    ref = make_reference(root / "reference")
+    return ref, shutil.copytree(ref, root / "copy")
+
+
+@pytest.fixture(scope="module")
 def local_batch(sessions):
     """Four sessions on a LocalCluster of 2 workers: two good, one with a missing frame, one with a bad
     session.json."""
@@ -53,6 +61,7 @@ def local_batch(sessions):
     return res, good, missing, bad, lines
 
 
+@pytest.mark.slow     # the LocalCluster run behind these two tests: 17 s; make test-slow (CI) runs them
 def test_two_sessions_on_a_local_cluster_give_the_bytes_of_serial_processing(sessions, local_batch):
     _, _, serial = sessions
     res, good, _, _, lines = local_batch
@@ -67,6 +76,7 @@ def test_two_sessions_on_a_local_cluster_give_the_bytes_of_serial_processing(ses
     assert sum("/view_" in line for line in lines) >= 2 * N_VIEWS
 
 
+@pytest.mark.slow
 def test_a_failing_session_is_reported_by_name_while_the_others_finish(local_batch):
     res, good, missing, bad, lines = local_batch
     assert [o.folder for o in res.sessions] == [good[0], missing, good[1], bad]   # in the order given
@@ -84,28 +94,28 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
-def test_an_unreachable_scheduler_is_a_clear_error_within_10_s(sessions, capsys):
-    _, ref, _ = sessions
+def test_an_unreachable_scheduler_is_a_clear_error_within_10_s(two_unprocessed, capsys):
+    ref, other = two_unprocessed
     address = f"tcp://127.0.0.1:{_free_port()}"   # nothing listens there
     t0 = time.monotonic()
     with pytest.raises(SchedulerUnreachable, match=address):
         process_sessions([ref], scheduler=address, timeout=2)
     capsys.readouterr()
-    assert main(["process", str(ref), str(ref.parent / "serial"), "--scheduler", address]) == 1
+    assert main(["process", str(ref), str(other), "--scheduler", address]) == 1
     err = capsys.readouterr().err
     assert address in err and "dask scheduler" in err
     assert time.monotonic() - t0 < 10 + 2   # the CLI's 5 s timeout and the library call's 2 s
 
 
-def test_process_options_are_checked_before_any_work(sessions, capsys):
-    _, ref, _ = sessions
+def test_process_options_are_checked_before_any_work(two_unprocessed, capsys):
+    ref, other = two_unprocessed
     for args, expected in ((["--scheduler", "nowhere"], "--scheduler"), (["--workers", "0"], "--workers")):
         with pytest.raises(SystemExit) as e:
             main(["process", str(ref), str(ref), *args])
         assert e.value.code == 2 and expected in capsys.readouterr().err
     assert main(["process", str(ref), "--workers", "2"]) == 2              # one session: no Dask, no workers
     assert main(["process", str(ref), str(ref)]) == 2                      # the same folder twice
-    assert main(["process", str(ref), str(ref.parent / "serial"), "--scheduler", "tcp://127.0.0.1:1",
+    assert main(["process", str(ref), str(other), "--scheduler", "tcp://127.0.0.1:1",
                  "--workers", "2"]) == 2
 
 

@@ -107,6 +107,7 @@ def _run_until(args, pattern, cwd):
     return proc.returncode, "".join(lines) + err, out
 
 
+@pytest.mark.slow     # 15 s; make test-slow (CI) runs it
 def test_interrupted_acquisition_resumes_to_the_same_frames(tmp_path):
     """SIGINT mid-acquisition (also when the suite runs in the background, where a child inherits an
     ignored SIGINT): exit 130, completed views kept, and the resumed session holds the same bytes as an

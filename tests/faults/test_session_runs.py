@@ -115,6 +115,7 @@ def test_the_lock_is_held_for_the_whole_block_and_released(tmp_path):
 
 # -- 7. process writes its outputs as a set ------------------------------------------------------------
 
+@pytest.mark.slow     # 14 s (two processings); make test-slow (CI) runs it
 def test_a_process_that_fails_between_outputs_leaves_no_summary(cli, reference, tmp_path):
     d = copy_session(reference, tmp_path / "s")
     assert cli("process", d, "--no-report").code == 0   # the view caches, then every output

@@ -177,9 +177,22 @@ def test_horus_calibration_json_gives_camera_lasers_and_turntable(tmp_path):
                 "normal_right": [-0.85, 0.01, 0.52], "rotation_matrix": Rp.tolist(), "translation_vector": tp}
     src = tmp_path / "calibration.json"
     src.write_text(json.dumps({"calibration_settings": {k: {"value": v} for k, v in settings.items()}}))
-    with pytest.raises(ConfigError, match=r"calibration.json: expected the camera's image size.*--size WxH"):
+    with pytest.raises(ConfigError, match=r"calibration.json: expected the camera's image size \(camera_width, "
+                                          r"camera_height\), found none; give it with --size WxH"):
         import_rig(src)
     assert main(["rig", "import", str(src), "--size", "960x1280", "--out", str(tmp_path / "rig.json")]) == 0
+    # Horus's own camera settings, as its profile writes them (checked against Horus's Settings.save_settings):
+    # the capture size, transposed when camera_rotate is on (its default).
+    camera = {"camera_width": {"max_value": 10000, "min_value": 1, "value": 1280},
+              "camera_height": {"max_value": 10000, "min_value": 1, "value": 960},
+              "camera_rotate": {"value": True}, "camera_hflip": {"value": True}, "camera_vflip": {"value": False}}
+    doc = {"settings_version": "0.2", "calibration_settings": {**{k: {"value": v} for k, v in settings.items()},
+                                                                **camera}}
+    src.write_text(json.dumps(doc))
+    assert load_rig_dict(import_rig(src)).camera.width == 960 and load_rig_dict(import_rig(src)).camera.height == 1280
+    doc["calibration_settings"]["camera_rotate"]["value"] = False
+    src.write_text(json.dumps(doc))
+    assert (load_rig_dict(import_rig(src)).camera.width, load_rig_dict(import_rig(src)).camera.height) == (1280, 960)
     rig = load_rig(tmp_path / "rig.json")
     np.testing.assert_allclose(rig.camera.K, K, atol=0)
     np.testing.assert_allclose(rig.T_world_table[:3, :3], Rp, atol=1e-15)

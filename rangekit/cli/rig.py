@@ -159,7 +159,7 @@ def add_parsers(sub) -> None:
     imp.add_argument("file", metavar="FILE", help="the calibration file (.yaml, .yml, .xml or .json)")
     imp.add_argument("--out", help="rig file to write (default: print it)")
     imp.add_argument("--force", action="store_true", help="overwrite --out if it exists")
-    imp.add_argument("--size", type=size, help="camera image size WxH where the file has none (Horus)")
+    imp.add_argument("--size", type=size, help="camera image size WxH where the file has none (Horus: read from camera_width, camera_height)")
     imp.add_argument("--projector-size", type=size, help="projector size WxH where the OpenCV file has none")
     imp.add_argument("--unit", choices=("m", "mm"), default="m",
                      help="unit of the OpenCV file's T (default m; depthai's cm and Horus's mm are known)")

@@ -12,7 +12,9 @@ the extrinsics is listed, the world camera first. No projector, no turntable.
 ``camera_matrix`` (3x3), ``distortion_vector`` (5), ``distance_left``/``normal_left`` and
 ``distance_right``/``normal_right`` (the laser planes in the camera frame, ``n . X = distance``, mm),
 ``rotation_matrix`` and ``translation_vector`` (the platform: ``X_cam = R X_platform + t``, mm; the
-turntable's axis is the platform's z). World = the camera's frame. The file has no image size: give it.
+turntable's axis is the platform's z). World = the camera's frame. The image size is Horus's
+``camera_width`` x ``camera_height``, transposed with ``camera_rotate`` (on by default: Horus transposes and
+flips every frame and calibrates on the result; a rangekit driver must deliver the frames the same way).
 """
 
 from __future__ import annotations
@@ -110,14 +112,27 @@ def _horus_value(settings: dict, key: str, where: str):
     return v["value"] if isinstance(v, dict) and "value" in v else v
 
 
+def _horus_size(settings: dict, where: str) -> tuple[int, int]:
+    """The size of the images Horus calibrated on: its capture size ``camera_width`` x ``camera_height``,
+    transposed when ``camera_rotate`` is on (Horus transposes every frame, then flips it as ``camera_hflip``
+    / ``camera_vflip`` say; the intrinsics are those of the transformed image)."""
+    if "camera_width" not in settings or "camera_height" not in settings:
+        raise ConfigError(f"{where}: expected the camera's image size (camera_width, camera_height), found "
+                          "none; give it with --size WxH (Ciclop's camera: 1280x960, 960x1280 rotated)")
+    w, h = (_horus_value(settings, k, where) for k in ("camera_width", "camera_height"))
+    if not all(isinstance(v, int) and v > 0 for v in (w, h)):
+        raise ConfigError(f"{where}: camera_width, camera_height: expected positive whole numbers, found "
+                          f"{w!r}, {h!r}")
+    rotate = "camera_rotate" not in settings or bool(_horus_value(settings, "camera_rotate", where))  # Horus: on
+    return (h, w) if rotate else (w, h)
+
+
 def horus_rig(data: dict, where: str, *, size: tuple[int, int] | None) -> dict:
     """The rig of a Horus ``calibration.json`` (module doc): camera, two line lasers, the turntable."""
     settings = data.get("calibration_settings", data)
     if not isinstance(settings, dict):
         raise ConfigError(f"{where}: calibration_settings: expected an object, found {settings!r:.80}")
-    if size is None:
-        raise ConfigError(f"{where}: expected the camera's image size, found none (a Horus calibration.json "
-                          "has none); give it with --size WxH (Ciclop's camera: 1280x960)")
+    size = size or _horus_size(settings, where)
     K = _array(_horus_value(settings, "camera_matrix", where), (3, 3), where, "camera_matrix")
     dist = np.asarray(_horus_value(settings, "distortion_vector", where), dtype=np.float64).ravel()
     if dist.size not in (4, 5, 8, 12, 14) or not np.all(np.isfinite(dist)):

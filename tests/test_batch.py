@@ -202,3 +202,60 @@ def test_a_worker_killed_in_the_middle_loses_nothing_and_decodes_no_view_twice(s
     # nothing lost (every view cached), nothing done twice (each cache written once)
     assert {p: len(s) for p, s in writes.seen.items()} == {p: 1 for p in writes.files}
     assert all(json.loads(p.read_text())["points"] > 0 for p in writes.files)
+
+
+@pytest.mark.slow     # a LocalCluster and three small sessions: about 15 s
+def test_sessions_are_finished_in_groups_one_a_worker(sessions):
+    """With 2 workers, sessions a and b form the first group: neither session task exists until every view of
+    both is decoded (so both start together); c's waits for c's views. Read from the scheduler's own log."""
+    import logging
+
+    from distributed import LocalCluster
+
+    root, ref, serial = sessions
+    folders = [shutil.copytree(ref, root / f"group_{name}") for name in "abc"]
+    environ = dict(os.environ)   # Dask's nanny leaves its pre-spawn variables in this process: put it back
+    try:
+        with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
+                          dashboard_address=None, env=dict(WORKER_ENV), silence_logs=logging.ERROR) as cluster:
+            res = process_sessions(folders, scheduler=cluster.scheduler_address, report=False, evaluate=False)
+            log = list(cluster.scheduler.transition_log)
+    finally:
+        os.environ.clear()
+        os.environ.update(environ)
+    assert not res.failed, [o.error for o in res.failed]
+    assert all((f / "mesh.ply").read_bytes() == serial["mesh.ply"] for f in folders)
+    first_seen, decoded = {}, {}
+    for t in log:
+        first_seen.setdefault(t.key, t.timestamp)
+        if t.key.startswith("decode-") and t.finish == "memory":
+            decoded[t.key] = t.timestamp
+    views = {f.name: [ts for k, ts in decoded.items() if k.startswith(f"decode-{f.name}-")] for f in folders}
+    session = {f.name: next(ts for k, ts in first_seen.items() if k.startswith(f"session-{f.name}-")) for f in folders}
+    assert all(len(v) == N_VIEWS for v in views.values())
+    group = max(views["group_a"] + views["group_b"])
+    assert session["group_a"] >= group and session["group_b"] >= group
+    assert session["group_c"] >= max(views["group_c"])
+
+
+def test_local_workers_keep_their_pages_and_quiet_housekeeping():
+    """The local cluster's workers start with one malloc arena that is never trimmed (rangekit.memory then
+    keeps freed pages for the next task) and Dask's periodic housekeeping slowed down (rangekit.app.batch)."""
+    from rangekit.app.batch import QUIET_DASK, WORKER_MALLOC, _client
+
+    def inside():
+        import dask
+
+        import rangekit.memory
+
+        return ({k: os.environ.get(k) for k in WORKER_MALLOC}, rangekit.memory._ONE_ARENA,
+                {k: dask.config.get(k) for k in QUIET_DASK})
+
+    os.environ["MALLOC_TRIM_THRESHOLD_"] = "65536"   # as an earlier Dask cluster in this process leaves it
+    try:
+        with _client("local", 1, 5) as client:
+            (found,) = client.run(inside).values()
+        assert os.environ["MALLOC_TRIM_THRESHOLD_"] == "65536" and "MALLOC_ARENA_MAX" not in os.environ  # put back
+    finally:
+        os.environ.pop("MALLOC_TRIM_THRESHOLD_")
+    assert found == (WORKER_MALLOC, True, QUIET_DASK)

@@ -37,6 +37,23 @@ __all__ = ["WORKER_ENV", "BatchResult", "SchedulerUnreachable", "SessionOutcome"
 #: of parallelism; give a cluster's workers the same, docs/scale.md).
 WORKER_ENV = {"NUMBA_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
 
+#: glibc's malloc in each local worker process, set before it starts (glibc reads them then): one arena, and
+#: arrays up to 1 GB from it, never trimmed back on free. A worker runs task after task of the same sizes;
+#: so every task reuses the pages the one before freed instead of faulting fresh ones in (on this 2-core VM,
+#: zeroing fresh pages is a sixth of the CPU), and :func:`rangekit.memory.release_free_memory` leaves them
+#: (with one arena every thread reuses them). Replaces the nanny's MALLOC_TRIM_THRESHOLD_=65536, which
+#: made every large array a fresh mmap. The batch of docs/scale.md: 186 against 213 CPU-s, peak of the tree
+#: 3.5 GB as before.
+WORKER_MALLOC = {"MALLOC_ARENA_MAX": "1", "MALLOC_MMAP_THRESHOLD_": str(1 << 30), "MALLOC_TRIM_THRESHOLD_": str(1 << 30)}
+
+#: Dask settings of the local cluster: its periodic housekeeping slowed down (the event loop's tick, the
+#: system and memory monitors, work stealing) and the workers' statistical profiler off. Together they cost
+#: an idle cluster of 2 workers 10.0 CPU-s every 100 s, against 1.2 with these (docs/scale.md): a tenth of a
+#: core taken from tasks that each run for seconds. Nothing here reads the dashboard they feed.
+QUIET_DASK = {"distributed.admin.tick.interval": "1s", "distributed.admin.system-monitor.interval": "5s",
+              "distributed.scheduler.work-stealing-interval": "5s", "distributed.worker.memory.monitor-interval": "1s",
+              "distributed.worker.profile.enabled": False}
+
 #: Seconds to wait for a scheduler at an address before giving up.
 CONNECT_TIMEOUT_S = 5.0
 
@@ -182,48 +199,70 @@ def _view_indices(folder: Path) -> list[int] | None:
 
 
 def _run(client, plans, folders, outcome, fusion, report, evaluate, progress) -> None:
-    """Submit every view task, then each session's task on its views; report them as they finish."""
+    """Submit every view task, then each group's session tasks once the group's views are done; report them
+    as they finish.
+
+    The sessions go in groups of as many as the cluster has threads. Every view task is submitted at once,
+    earlier groups first (Dask runs the higher priority first); a group's session tasks are submitted
+    when all its views are done, ahead of any view. So the long session tasks of a group start together,
+    one a thread, and end together, while the next group's views wait: on 2 workers, 4 sessions finish in
+    two rounds of two instead of one worker finishing the last session alone (docs/scale.md)."""
     from distributed import as_completed
 
     run = uuid.uuid4().hex[:8]
     owner = {}   # future key -> (session number, "view" | "session")
-    futures = []
-    n_views = sum(len(p) for _, p in plans if p)
-    for k, indices in plans:
-        name = folders[k].name
-        views = [client.submit(decode_view_task, str(folders[k]), i, key=f"decode-{name}-{i:03d}-{k}-{run}",
-                               pure=False) for i in indices or ()]
-        session = client.submit(finish_session_task, str(folders[k]), views, fusion, report, evaluate,
-                                key=f"session-{name}-{k}-{run}", pure=False)
-        owner.update({f.key: (k, "view") for f in views})
-        owner[session.key] = (k, "session")
-        futures += [*views, session]
+    slots = max(1, sum(client.nthreads().values()))
+    groups = [plans[g: g + slots] for g in range(0, len(plans), slots)]
+    group_of, views_of, left = {}, {}, []   # session -> group; session -> its view futures; views left a group
+    for g, group in enumerate(groups):
+        for k, indices in group:
+            name = folders[k].name
+            group_of[k] = g
+            views_of[k] = [client.submit(decode_view_task, str(folders[k]), i, key=f"decode-{name}-{i:03d}-{k}-{run}",
+                                         pure=False, priority=len(groups) - g) for i in indices or ()]
+            owner.update({f.key: (k, "view") for f in views_of[k]})
+        left.append(sum(len(views_of[k]) for k, _ in group))
+    queue = as_completed([f for fs in views_of.values() for f in fs])
+
+    def finish_group(g: int) -> None:
+        for k, _ in groups[g]:
+            session = client.submit(finish_session_task, str(folders[k]), views_of[k], fusion, report, evaluate,
+                                    key=f"session-{folders[k].name}-{k}-{run}", pure=False, priority=len(groups) + 1)
+            owner[session.key] = (k, "session")
+            queue.add(session)
+
+    for g, n in enumerate(left):
+        if n == 0:   # laser sessions only
+            finish_group(g)
     views_done = sessions_done = 0
-    for fut in as_completed(futures):
+    n_views = sum(left)
+    for fut in queue:
         k, kind = owner[fut.key]
         o, folder = outcome[k], folders[k]
-        if fut.status == "error":
-            err = _message(fut.exception())
-            if kind == "session":
-                sessions_done += 1
-                o.setdefault("error", err)
-                call_progress(progress, f"{folder}: failed: {o['error']}", sessions_done, len(plans))
-            elif "error" not in o:
-                o["error"] = err
-            continue
         if kind == "view":
-            done = fut.result()
             views_done += 1
-            key = "views_decoded" if done.decoded else "views_cached"
-            o[key] = o.get(key, 0) + 1
-            call_progress(progress, f"{folder}/{done.view}: {done.points:,} points"
-                                    + ("" if done.decoded else " (from the cache)"), views_done, n_views)
+            left[group_of[k]] -= 1
+            if fut.status == "error":
+                o.setdefault("error", _message(fut.exception()))
+            else:
+                done = fut.result()
+                key = "views_decoded" if done.decoded else "views_cached"
+                o[key] = o.get(key, 0) + 1
+                call_progress(progress, f"{folder}/{done.view}: {done.points:,} points"
+                                        + ("" if done.decoded else " (from the cache)"), views_done, n_views)
+            if left[group_of[k]] == 0:
+                finish_group(group_of[k])
+            continue
+        sessions_done += 1
+        if fut.status == "error":
+            o.setdefault("error", _message(fut.exception()))
+            call_progress(progress, f"{folder}: failed: {o['error']}", sessions_done, len(plans))
         else:
-            sessions_done += 1
             o["summary"] = fut.result()
             call_progress(progress, f"{folder}: done ({sessions_done}/{len(plans)} sessions)", sessions_done,
                           len(plans))
-        fut.release()
+        for f in (*views_of[k], fut):
+            f.release()
 
 
 def _message(e: BaseException) -> str:
@@ -247,14 +286,23 @@ class _client:
         if self.scheduler == "local":
             import dask
 
-            # Dask's nanny sets MALLOC_TRIM_THRESHOLD_=65536 in its workers; that fixes glibc's mmap threshold
-            # too, so every large array is a fresh mmap: 9.9 against 4.2 s of system time for one
-            # `rangekit process --no-report` of the 12-view scan (docs/scale.md). rangekit trims at its stage
-            # ends (rangekit.memory).
-            with dask.config.set({"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}):
-                self.cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
-                                            host="127.0.0.1", dashboard_address=None, env=dict(WORKER_ENV),
-                                            silence_logs=logging.ERROR)
+            # The workers inherit WORKER_MALLOC from this process's environment, set while they are spawned and
+            # put back after: Dask's own way (its nanny's pre-spawn-environ) leaves it in this process for good,
+            # and an earlier cluster's value there would win over the config. The nanny's default
+            # MALLOC_TRIM_THRESHOLD_=65536 is dropped.
+            saved = {k: os.environ.get(k) for k in WORKER_MALLOC}
+            os.environ.update(WORKER_MALLOC)
+            try:
+                with dask.config.set({"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None, **QUIET_DASK}):
+                    self.cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
+                                                host="127.0.0.1", dashboard_address=None, env=dict(WORKER_ENV),
+                                                silence_logs=logging.ERROR)
+            finally:
+                for k, v in saved.items():
+                    if v is None:
+                        os.environ.pop(k, None)
+                    else:
+                        os.environ[k] = v
             self.client = Client(self.cluster)
             return self.client
         try:

@@ -55,6 +55,6 @@ clean:
 
 docs-figures: $(STAMP) browser
 	@# Reruns every figure quoted in README.md and docs/ (the blocks between <!-- figure: COMMAND --> and
-	@# <!-- /figure -->) and writes the fresh output in place: 13.5 minutes on an idle 2-core machine (the first run
+	@# <!-- /figure -->) and writes the fresh output in place: about 19 minutes on an idle 2-core machine (the first run
 	@# also installs OpenCV-contrib into .venv-bench for the decoding benchmark's peer: it needs the package index).
 	$(BIN)/python benchmarks/docs_figures.py

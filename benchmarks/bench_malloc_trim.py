@@ -57,7 +57,7 @@ def main() -> int:
     with_sys, with_all = run(args.session, WORK / "trim_with", True)
     without_sys, without_all = run(args.session, WORK / "trim_without", False)
     if args.markdown:
-        print(f"The nanny's `MALLOC_TRIM_THRESHOLD_={THRESHOLD}` (dropped by `--scheduler local`, see above) "
+        print(f"The nanny's `MALLOC_TRIM_THRESHOLD_={THRESHOLD}` (replaced by `--scheduler local`'s malloc settings, see above) "
               f"multiplies the system time of\none `rangekit process --no-report` of a processed session (its "
               f"views cached) by {with_sys / without_sys:.1f}: {with_sys:.1f} against {without_sys:.1f} s "
               f"({with_all:.1f} against {without_all:.1f} CPU-s in all;\n`PYTHONPATH=. python "

@@ -20,14 +20,13 @@ from __future__ import annotations
 
 import argparse
 import json
-import re
 import shutil
-import subprocess
 import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import docs_scan  # noqa: E402  (the shared session of make docs-figures)
+import tree_peak  # noqa: E402
 
 COPY = docs_scan.WORK / "process12"
 TARGETS = {"wall_s": 30.0, "cpu_s": 40.0, "peak_gb": 1.5}
@@ -38,17 +37,11 @@ def process_copy() -> dict:
     session = docs_scan.ensure_session()
     shutil.rmtree(COPY, ignore_errors=True)
     shutil.copytree(session, COPY)
-    done = subprocess.run([sys.executable, str(docs_scan.REPO / "benchmarks" / "tree_peak.py"), "--",
-                           sys.executable, "-m", "rangekit", "-q", "process", str(COPY)],
-                          cwd=docs_scan.REPO, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
-                          stdin=subprocess.DEVNULL)
-    if done.returncode:
+    run = tree_peak.measured([sys.executable, "-m", "rangekit", "-q", "process", str(COPY)], cwd=docs_scan.REPO)
+    if run["exit"]:
         shutil.rmtree(COPY, ignore_errors=True)
-        raise SystemExit(f"rangekit process {COPY} failed (exit {done.returncode}):\n{done.stderr[-3000:]}")
-    m = re.search(r"run: ([\d.]+) s wall, ([\d.]+) CPU-s .* peak of the process tree ([\d.]+) GB", done.stderr)
-    if not m:
-        raise SystemExit("could not read tree_peak's line from the output:\n" + done.stderr[-2000:])
-    return {"wall_s": float(m[1]), "cpu_s": float(m[2]), "peak_gb": float(m[3])}
+        raise SystemExit(f"rangekit process {COPY} failed (exit {run['exit']}):\n{run['stderr'][-3000:]}")
+    return {k: run[k] for k in ("wall_s", "cpu_s", "peak_gb")}
 
 
 def processed() -> Path:

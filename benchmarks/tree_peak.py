@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import re
 import subprocess
 import sys
 import threading
@@ -35,6 +36,21 @@ def _tree_rss(root: psutil.Process) -> int:
         except psutil.NoSuchProcess:
             pass
     return total
+
+
+_LINE = re.compile(r": ([\d.]+) s wall, ([\d.]+) CPU-s .* peak of the process tree ([\d.]+) GB, exit (-?\d+)")
+
+
+def measured(command: list[str], **popen) -> dict:
+    """Run ``command`` under this script (``popen``: subprocess.run's keywords, e.g. ``cwd``, ``env``):
+    {wall_s, cpu_s, peak_gb, exit, stderr}. Its own output is dropped but for stderr."""
+    done = subprocess.run([sys.executable, __file__, "--", *command], stdout=subprocess.DEVNULL,
+                          stderr=subprocess.PIPE, text=True, stdin=subprocess.DEVNULL, **popen)
+    m = _LINE.search(done.stderr.splitlines()[-1] if done.stderr else "")
+    if not m:
+        raise SystemExit(f"{' '.join(command)}: no timing line in its output:\n{done.stderr[-2000:]}")
+    return {"wall_s": float(m[1]), "cpu_s": float(m[2]), "peak_gb": float(m[3]), "exit": int(m[4]),
+            "stderr": done.stderr}
 
 
 def main() -> int:

@@ -259,3 +259,17 @@ def test_local_workers_keep_their_pages_and_quiet_housekeeping():
     finally:
         os.environ.pop("MALLOC_TRIM_THRESHOLD_")
     assert found == (WORKER_MALLOC, True, QUIET_DASK)
+
+
+def test_the_cluster_recipe_in_docs_matches_the_local_workers():
+    """docs/scale.md's worker command and Dask configuration for a cluster give what the local cluster sets."""
+    import dask
+    import yaml
+
+    from rangekit.app.batch import QUIET_DASK, WORKER_MALLOC
+
+    page = (ROOT / "docs" / "scale.md").read_text()
+    assert all(f"{k}={v}" in page for k, v in WORKER_MALLOC.items())
+    block = page[page.index("    distributed:\n"):].split("\n\n")[0]
+    config = yaml.safe_load("\n".join(line[4:] for line in block.splitlines()))
+    assert {k: dask.config.get(k, config=config) for k in QUIET_DASK} == QUIET_DASK

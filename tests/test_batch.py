@@ -207,7 +207,8 @@ def test_a_worker_killed_in_the_middle_loses_nothing_and_decodes_no_view_twice(s
 @pytest.mark.slow     # a LocalCluster and three small sessions: about 15 s
 def test_sessions_are_finished_in_groups_one_a_worker(sessions):
     """With 2 workers, sessions a and b form the first group: neither session task exists until every view of
-    both is decoded (so both start together); c's waits for c's views. Read from the scheduler's own log."""
+    both is decoded (so both start together); c's waits for c's views; the pairs are tasks of their own. Read
+    from the scheduler's own log."""
     import logging
 
     from distributed import LocalCluster
@@ -236,6 +237,9 @@ def test_sessions_are_finished_in_groups_one_a_worker(sessions):
     group = max(views["group_a"] + views["group_b"])
     assert session["group_a"] >= group and session["group_b"] >= group
     assert session["group_c"] >= max(views["group_c"])
+    # each view pair's registration ran as a task of its own (rangekit.app.batch_pairs), none redone in a session
+    pairs = {t.key for t in log if t.key.startswith("refine_pair-") and t.finish == "memory"}
+    assert len(pairs) >= 3 * (N_VIEWS - 1), len(pairs)
 
 
 def test_local_workers_keep_their_pages_and_quiet_housekeeping():
@@ -273,3 +277,37 @@ def test_the_cluster_recipe_in_docs_matches_the_local_workers():
     block = page[page.index("    distributed:\n"):].split("\n\n")[0]
     config = yaml.safe_load("\n".join(line[4:] for line in block.splitlines()))
     assert {k: dask.config.get(k, config=config) for k in QUIET_DASK} == QUIET_DASK
+
+
+def test_pairs_shipped_away_and_back_give_the_bits_of_serial_registration():
+    """A round's pairs pickled as a cluster would ship them, refined with k-d trees built anew: the poses of
+    serial registration, bit for bit; the Dask mapper outside any cluster redoes the round here, the same."""
+    import pickle
+
+    import numpy as np
+
+    from rangekit.app.batch_pairs import dask_pair_mapper
+    from rangekit.registration.multiview import MultiViewOptions, register_views
+    from rangekit.registration.pair_refine import refine_pair
+    from rangekit.sim.scans import perturb_poses, turntable_scans
+
+    scans = turntable_scans(n_views=6, noise=0.0002, resolution=(320, 240), rng=3)
+    prior = perturb_poses(scans.T_world_view, max_angle=np.radians(1), max_translation=0.005 * scans.diag, rng=2)
+    options = MultiViewOptions(turntable=True)
+    shipped = []
+
+    def away(jobs, clouds):
+        jobs, clouds = pickle.loads(pickle.dumps((list(jobs), list(clouds))))
+        shipped.append(len(jobs))
+        return [refine_pair(job, clouds[job.i], clouds[job.j]) for job in jobs]
+
+    said = []
+    serial = register_views(scans.clouds, init_T_world_view=prior, options=options)
+    remote = register_views(scans.clouds, init_T_world_view=prior, options=options, map_pairs=away)
+    here = register_views(scans.clouds, init_T_world_view=prior, options=options,
+                          map_pairs=dask_pair_mapper(progress=said.append))
+    assert shipped and sum(shipped) >= 6
+    assert np.array_equal(serial.T_world_view, remote.T_world_view)
+    assert np.array_equal(serial.T_world_view, here.T_world_view)
+    assert [(e.i, e.j, e.rmse) for e in serial.edges] == [(e.i, e.j, e.rmse) for e in remote.edges]
+    assert said and "redone here" in said[0]

@@ -4,8 +4,9 @@ Each coded-light view's decoding is one task (:func:`decode_view_task`): it chec
 against their SHA-256s, then decodes, triangulates and filters the view into its cache in the view folder
 (:mod:`rangekit.app.view_cache`: ``cloud.json`` is written last and vouches for the rest). Then, per
 session, one task (:func:`finish_session_task`) runs :func:`rangekit.app.scan.process_scan` (registration,
-fusion, evaluation on the simulator, report), which finds every view in the cache: its outputs are the
-bytes of processing the session in one process. A laser session is one task.
+fusion, evaluation on the simulator, report), which finds every view in the cache; each view pair's
+registration within it is a task of its own (:mod:`rangekit.app.batch_pairs`). Its outputs are the bytes of
+processing the session in one process. A laser session is one task.
 
 Tasks are idempotent through the cache: a task retried after its worker died, or a rerun of the whole
 batch, reads what was finished and redoes only what was not. A worker holds one view's image stack at a
@@ -13,9 +14,7 @@ time (a view task returns the number of points, not the cloud). The session fold
 and writable by every worker at the same path (one machine, or a shared file system on a cluster).
 
 A session that fails (a bad ``session.json``, a missing or changed frame, ...) is recorded with its error
-while the others finish (:class:`BatchResult`). Next step (not done here): each pair's registration as a
-task too, which needs :func:`rangekit.registration.multiview.register_views` split into its pair stage
-and its synchronisation.
+while the others finish (:class:`BatchResult`).
 """
 
 from __future__ import annotations
@@ -138,12 +137,14 @@ def finish_session_task(folder: str, views: Sequence[ViewDone], fusion: str = "p
     """Register, fuse, evaluate (a simulated session, unless ``evaluate`` is False) and report the session in
     ``folder`` once its ``views`` are decoded (a Dask task; they come from the cache). Returns the end-of-run
     summary lines."""
+    from rangekit.app.batch_pairs import dask_pair_mapper
     from rangekit.app.process import process_session
     from rangekit.app.scan import process_scan
 
+    pairs = dask_pair_mapper()   # each view pair's registration a task of its own (rangekit.app.batch_pairs)
     if evaluate:
-        return tuple(process_scan(folder, fusion=fusion, report=report).summary_lines())
-    return tuple(process_session(folder, fusion=fusion, report=report).summary_lines())
+        return tuple(process_scan(folder, fusion=fusion, report=report, map_pairs=pairs).summary_lines())
+    return tuple(process_session(folder, fusion=fusion, report=report, map_pairs=pairs).summary_lines())
 
 
 def process_sessions(folders: Sequence[str | Path], *, scheduler: str = "local", workers: int = 2,

@@ -55,10 +55,11 @@ def turn_over_prompt(folder: str | Path, passes: int, *, flipped: bool = False, 
     return turn_over
 
 
-def register_session_passes(clouds, views, rig, *, progress=None):
+def register_session_passes(clouds, views, rig, *, progress=None, map_pairs=None):
     """Register a multi-pass session's views (:func:`rangekit.registration.passes.register_passes`): each
     pass from the turntable prior of its angles (None without a turntable in the rig), the passes to each
-    other without a prior. ``views``: the session's done views (``scan_pass``, ``angle``)."""
+    other without a prior. ``views``: the session's done views (``scan_pass``, ``angle``); ``map_pairs``: see
+    :func:`rangekit.registration.multiview.register_views`."""
     import numpy as np
 
     from rangekit.registration.multiview import MultiViewOptions
@@ -72,4 +73,4 @@ def register_session_passes(clouds, views, rig, *, progress=None):
               turntable_prior(rig.T_world_table, [v.angle for v in views if v.scan_pass == p]) for p in passes]
     return register_passes(clouds, [remap[p] for p in vp.tolist()], priors, progress=progress,
                            names=[v.folder.name for v in views],
-                           options=MultiViewOptions(turntable=rig.T_world_table is not None))
+                           options=MultiViewOptions(turntable=rig.T_world_table is not None), map_pairs=map_pairs)

@@ -27,7 +27,7 @@ SHA-256s (:func:`rangekit.formats.session_check.verify_views`).
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Callable, Protocol, Sequence
+from typing import TYPE_CHECKING, Callable, Protocol, Sequence
 
 import numpy as np
 
@@ -48,6 +48,9 @@ from rangekit.rig import Rig, turntable_prior
 from rangekit.surface.cloud import PointCloud, merge_clouds, view_index
 from rangekit.surface.observed import FusedMeshes
 from rangekit.threads import one_blas_thread
+
+if TYPE_CHECKING:
+    from rangekit.registration.pair_refine import PairMapper
 
 __all__ = ["FUSION_METHODS", "Evaluation", "Evaluator", "process_session"]
 
@@ -78,7 +81,7 @@ Evaluator = Callable[[object, Sequence[float]], Evaluation]
 
 def process_session(folder: str | Path, *, fusion: str = "poisson", method: str = "auto",
                     table_margin: float = 0.002, evaluate: Evaluator | None = None, report: bool = True,
-                    progress: Callable | None = None) -> ProcessResult:
+                    progress: Callable | None = None, map_pairs: PairMapper | None = None) -> ProcessResult:
     """Process the completed views of a session into ``mesh.ply`` (the observed surface) and
     ``mesh_watertight.ply`` (closed, flagged; and ``summary.json``, ``report.html``).
 
@@ -93,6 +96,8 @@ def process_session(folder: str | Path, *, fusion: str = "poisson", method: str 
         itself never imports the simulator.
     report : write ``report.html``.
     progress : ``progress(msg, done=None, total=None)`` (see :mod:`rangekit.progress`).
+    map_pairs : runs the registration's pair refinements (:func:`rangekit.registration.multiview.register_views`;
+        the Dask batch maps them onto its workers); None: here, one after another.
 
     Raises
     ------
@@ -107,11 +112,11 @@ def process_session(folder: str | Path, *, fusion: str = "poisson", method: str 
     if not (out / "session.json").is_file():
         raise ConfigError(f"{out}: not a session folder (no session.json)")
     with session_lock(out), one_blas_thread():   # thin products: rangekit.threads
-        return _process(out, fusion, method, table_margin, evaluate, report, progress)
+        return _process(out, fusion, method, table_margin, evaluate, report, progress, map_pairs)
 
 
 def _process(out: Path, fusion: str, method: str, table_margin: float, evaluate: Evaluator | None, report: bool,
-             progress: Callable | None) -> ProcessResult:
+             progress: Callable | None, map_pairs: PairMapper | None) -> ProcessResult:
     from rangekit.app.fused_outputs import evaluate_fused, save_fused
     from rangekit.registration.multiview import MultiViewOptions, register_views
     from rangekit.surface.fusion import poisson_meshes
@@ -160,12 +165,12 @@ def _process(out: Path, fusion: str, method: str, table_margin: float, evaluate:
         if view_passes is not None:    # each pass from its turntable prior, the passes to each other without one
             from rangekit.app.passes import register_session_passes
 
-            res = register_session_passes(clouds, views, rig, progress=progress)
+            res = register_session_passes(clouds, views, rig, progress=progress, map_pairs=map_pairs)
         else:
             prior = None if rig.T_world_table is None else turntable_prior(rig.T_world_table, [v.angle for v in views])
             # On the rig's turntable the views are rotations about one axis: the joint refinement keeps them so.
             res = register_views(clouds, init_T_world_view=prior, progress=progress,
-                                 options=MultiViewOptions(turntable=prior is not None))
+                                 options=MultiViewOptions(turntable=prior is not None), map_pairs=map_pairs)
         save_poses(out / "poses.json", names, res.T_world_view,
                    world=f"frame of {views[0].folder.name} (the rig's world at its turntable angle)",
                    extra=None if view_passes is None else [{"pass": p} for p in view_passes])

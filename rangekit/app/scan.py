@@ -298,7 +298,7 @@ def session_evaluator(session: Session) -> Evaluator | None:
 
 
 def process_scan(folder: str | Path, *, fusion: str = "poisson", report: bool = True,
-                 progress: Callable | None = None) -> ProcessResult:
+                 progress: Callable | None = None, map_pairs=None) -> ProcessResult:
     """:func:`process_session` with the simulator's truth as evaluator when the session is simulated."""
     return process_session(folder, fusion=fusion, report=report, evaluate=session_evaluator(Session.load(folder)),
-                           progress=progress)
+                           progress=progress, map_pairs=map_pairs)

@@ -21,17 +21,19 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from rangekit.errors import RegistrationError
-from rangekit.geometry import apply_T, invert_T, rotation_angle
+from rangekit.geometry import apply_T, invert_T
 from rangekit.surface.cloud import PointCloud, bbox_diagonal, check_voxel, downsample_with_normals
 from rangekit.surface.convert import as_cloud
 from rangekit.registration.coarse import CoarseOptions, compute_features, coarse_align
-from rangekit.registration.icp import IcpOptions, icp
+from rangekit.registration.icp import IcpOptions
 from rangekit.registration.joint import JointResult, refine_jointly
 from rangekit.registration.overlap_estimate import overlapping_pairs
 from rangekit.registration.coarse_graph import descriptor_distances, view_descriptor, widen_until_settled
+from rangekit.registration.pair_refine import (EdgeResult, PairJob, PairMapper, check_dense, edge_result,
+                                               mutual_overlap, pairwise_overlap, refine_pair)
 from rangekit.registration.pairs import (PairChooser, PairsTried, all_pairs, chooser_label, nearest_and_long_links,
                                          nearest_in_rotation)
-from rangekit.registration.stability import MIN_CONSTRAINT, HeldMotions, PoseConstraint
+from rangekit.registration.stability import MIN_CONSTRAINT, HeldMotions
 from rangekit.registration.sync import SyncResult, synchronise
 from rangekit.threads import one_blas_thread
 
@@ -77,25 +79,6 @@ class MultiViewOptions:
 
 
 @dataclass(frozen=True, eq=False)
-class EdgeResult:
-    """One pairwise registration in the view graph."""
-
-    i: int
-    j: int
-    T_i_j: np.ndarray        # (4, 4) maps view j into view i
-    rmse: float              # ICP inlier RMSE, metres
-    overlap: float           # fraction of view j's points with a partner in view i
-    accepted: bool
-    reason: str = ""
-    unconstrained: str = ""  # the motions the overlap leaves free ('' if none), see rangekit.registration.stability
-    constraint: PoseConstraint | None = None
-
-    def __repr__(self) -> str:
-        return (f"EdgeResult({self.i}-{self.j}, rmse={self.rmse * 1e3:.3f} mm, overlap={self.overlap:.2f}, "
-                f"accepted={self.accepted}{', ' + self.reason if self.reason else ''})")
-
-
-@dataclass(frozen=True, eq=False)
 class MultiViewResult:
     T_world_view: np.ndarray          # (n, 4, 4)
     edges: tuple[EdgeResult, ...]     # last round's pairs
@@ -106,21 +89,6 @@ class MultiViewResult:
     def __repr__(self) -> str:
         acc = sum(e.accepted for e in self.edges)
         return f"MultiViewResult({len(self.T_world_view)} views, {acc}/{len(self.edges)} edges, rmse={self.rmse * 1e3:.3f} mm)"
-
-
-MIN_VOXELS = 30   # points a view must keep after voxel downsampling: fewer cannot fix 6 degrees of freedom
-                  # with any margin (and FPFH needs neighbours)
-
-
-def _check_dense(clouds: Sequence[PointCloud], views: Sequence[int], voxel: float,
-                 names: Sequence[str] | None) -> None:
-    """RegistrationError if one of ``views`` kept fewer than MIN_VOXELS points after downsampling (checked
-    where the points are used, so scans that do not overlap at all say that instead)."""
-    for k in views:
-        if len(clouds[k]) < MIN_VOXELS:
-            raise RegistrationError(f"view {k}{f' ({names[k]})' if names is not None else ''}: {len(clouds[k])} "
-                                    f"points after downsampling to {voxel * 1e3:.3g} mm voxels, expected at least "
-                                    f"{MIN_VOXELS}; use a smaller voxel (--voxel-mm) or a denser scan")
 
 
 def _prepare(clouds: Sequence[PointCloud], voxel: float) -> list[PointCloud]:
@@ -134,24 +102,6 @@ def _prepare(clouds: Sequence[PointCloud], voxel: float) -> list[PointCloud]:
 
 
 OVERLAP_NEIGHBOURS = 8   # no prior: each view's most overlapping views (estimated) added to the candidates
-OVERLAP_SAMPLES = 5000   # points of a view that estimate its overlap (every k-th point): a fraction within
-                         # about 1% (binomial), for a threshold of 0.15
-
-
-def pairwise_overlap(src: PointCloud, tgt_tree: cKDTree, T_tgt_src: np.ndarray, radius: float) -> float:
-    """Fraction of ``src`` points (at most about OVERLAP_SAMPLES of them, evenly strided) that land within
-    ``radius`` of the target after ``T_tgt_src``."""
-    pts = src.points[::max(1, len(src.points) // OVERLAP_SAMPLES)]
-    d, _ = tgt_tree.query(apply_T(T_tgt_src, pts), k=1, distance_upper_bound=radius, workers=1)
-    return float(np.mean(np.isfinite(d)))
-
-
-def _mutual_overlap(a: PointCloud, b: PointCloud, tree_a: cKDTree, tree_b: cKDTree, T_a_b: np.ndarray,
-                    radius: float) -> float:
-    """The larger of the two directed overlaps of views a and b (b's points in a, a's points in b)."""
-    return max(pairwise_overlap(b, tree_a, T_a_b, radius), pairwise_overlap(a, tree_b, invert_T(T_a_b), radius))
-
-
 def _sync(n: int, edges: list[EdgeResult]) -> SyncResult:
     acc = [(e.i, e.j, e.T_i_j) for e in edges if e.accepted]
     if not acc:
@@ -207,27 +157,9 @@ def _joint_holds(n: int, pairs: list, edges: list[EdgeResult], holds: dict, T: n
     return {k: v for k, v in out.items() if free_of.get(k)}
 
 
-def _edge(i: int, j: int, r, overlap: float, options: MultiViewOptions, max_rmse: float, prior: bool,
-          note: str = "") -> EdgeResult:
-    """Accept or refuse the registration ``r`` of view j into view i: RMSE below ``max_rmse`` (metres),
-    overlap at least ``options.min_overlap``, and an overlap that fixes every motion, unless a prior holds
-    the free ones (then the edge is accepted and its reason says the prior was kept)."""
-    free = r.constraint.describe(options.min_constraint) if r.constraint is not None else ""
-    if r.rmse >= max_rmse:
-        reason = f"rmse {r.rmse * 1e3:.3f} mm > {max_rmse * 1e3:.3f}"
-    elif overlap < options.min_overlap:
-        reason = f"overlap {overlap:.2f}"
-    elif free:
-        reason = f"prior kept along: {free}" if prior else f"ambiguous: {free} unconstrained"
-    else:
-        reason = ""
-    ok = not reason or (prior and free and reason.startswith("prior"))
-    return EdgeResult(i, j, r.T_target_source, r.rmse, overlap, bool(ok), reason + note, free, r.constraint)
-
-
 def register_views(clouds: Sequence[PointCloud], *, init_T_world_view: np.ndarray | None = None,
                    options: MultiViewOptions = MultiViewOptions(), progress: Callable[[str], None] | None = None,
-                   names: Sequence[str] | None = None) -> MultiViewResult:
+                   names: Sequence[str] | None = None, map_pairs: PairMapper | None = None) -> MultiViewResult:
     """Register ``clouds`` (each in its own frame) into the first cloud's frame.
 
     Parameters
@@ -238,6 +170,8 @@ def register_views(clouds: Sequence[PointCloud], *, init_T_world_view: np.ndarra
     options : MultiViewOptions.
     progress : called with one line per stage.
     names : the views' names for error messages (e.g. file names).
+    map_pairs : runs each refinement round's pair jobs (:data:`rangekit.registration.pair_refine.PairMapper`);
+        None: one after another here. The Dask batch maps them onto its workers (the same bits).
 
     Ambiguous pairs (a rigid motion left free, rangekit.registration.stability): with no prior not edges (a
     view reached only through them: RegistrationError naming the views and the motion); with a prior, ICP
@@ -245,10 +179,10 @@ def register_views(clouds: Sequence[PointCloud], *, init_T_world_view: np.ndarra
     """
     with one_blas_thread():    # thin (n, 6) and (N, 3) products: rangekit.threads
         return _register_views([as_cloud(c, f"register_views clouds[{i}]") for i, c in enumerate(clouds)],
-                               init_T_world_view, options, progress, names)
+                               init_T_world_view, options, progress, names, map_pairs)
 
 
-def _register_views(clouds, init_T_world_view, options, progress, names) -> MultiViewResult:
+def _register_views(clouds, init_T_world_view, options, progress, names, map_pairs) -> MultiViewResult:
     say = progress or (lambda msg: None)
     n = len(clouds)
     if n < 2:
@@ -262,12 +196,13 @@ def _register_views(clouds, init_T_world_view, options, progress, names) -> Mult
     n_coarse, coarse_label, seen = 0, "", set()
     if init_T_world_view is None:
         copt = CoarseOptions(voxel=voxel, rng=options.rng)
-        _check_dense(coarse_clouds, range(n), voxel, names)
+        check_dense(coarse_clouds, range(n), voxel, names)
         feats = [compute_features(c, copt) for c in coarse_clouds]
 
         def align(i: int, j: int) -> EdgeResult:
             r = coarse_align(feats[j], feats[i], copt)
-            return _edge(i, j, r, r.fitness, options, options.max_coarse_rmse * voxel, prior=False)
+            return edge_result(i, j, r, r.fitness, options.min_overlap, options.min_constraint,
+                               options.max_coarse_rmse * voxel, prior=False)
 
         def settle(edges: list) -> np.ndarray:
             _check_connected(n, edges, names)
@@ -320,23 +255,18 @@ def _register_views(clouds, init_T_world_view, options, progress, names) -> Mult
         candidates = candidates_at(T, level, v)
         seen |= set(candidates)
         n_candidates = len(candidates)
-        for i, j in candidates:
-            T_i_j = invert_T(T[i]) @ T[j]
-            ov = _mutual_overlap(level[i], level[j], trees[i], trees[j], T_i_j, 2 * v)
-            if ov < options.min_overlap:
-                continue
-            _check_dense(level, (i, j), v, names)
-            r = icp(level[j], level[i], init_T_target_source=T_i_j, options=icp_opt)
-            if prior and r.constraint is not None and r.constraint.ratio < options.min_constraint:
-                # Ambiguous: ICP wandered along the free motions; start again from the prior, held there.
-                held = r.constraint.held(options.min_constraint)
-                r = replace(icp(level[j], level[i], init_T_target_source=T_i_j, options=icp_opt, hold=held),
-                            constraint=r.constraint)
-                holds[i, j] = held
-            ov = pairwise_overlap(level[j], trees[i], r.T_target_source, 2 * v)
-            moved = np.degrees(rotation_angle(r.T_target_source[:3, :3] @ T_i_j[:3, :3].T))
-            edges.append(_edge(i, j, r, ov, options, options.max_rmse * v, prior=prior,
-                               note=f" (moved {moved:.1f} deg)" if moved > 5 else ""))
+        jobs = [PairJob(i, j, invert_T(T[i]) @ T[j], v, icp_opt, options.min_overlap, options.min_constraint,
+                        options.max_rmse * v, prior, None if names is None else (names[i], names[j]))
+                for i, j in candidates]
+        if map_pairs is None:
+            refined = [refine_pair(job, level[job.i], level[job.j], trees[job.i], trees[job.j]) for job in jobs]
+        else:
+            refined = map_pairs(jobs, level)
+        for job, out in zip(jobs, refined):
+            if out is not None:
+                edges.append(out[0])
+                if out[1] is not None:
+                    holds[job.i, job.j] = out[1]
         n_refined = len(edges)
         _check_connected(n, edges, names)
         sync = _sync(n, edges)
@@ -361,7 +291,7 @@ def _register_views(clouds, init_T_world_view, options, progress, names) -> Mult
         joint_candidates = candidates_at(T, fine_clouds, fine)
         seen |= set(joint_candidates)
         pairs = [(i, j) for i, j in joint_candidates
-                 if _mutual_overlap(fine_clouds[i], fine_clouds[j], trees[i], trees[j], invert_T(T[i]) @ T[j],
+                 if mutual_overlap(fine_clouds[i], fine_clouds[j], trees[i], trees[j], invert_T(T[i]) @ T[j],
                                     2 * fine) >= options.min_overlap]
         joint = refine_jointly(fine_clouds, T, pairs, max_distance=2.5 * fine, iterations=options.joint_iterations,
                                samples=options.joint_samples, tolerance=options.joint_tolerance, rng=options.rng,

@@ -92,14 +92,15 @@ def _align_pass(source: PointCloud, target: PointCloud, voxel: float, fine: floa
 def register_passes(clouds: Sequence[PointCloud], view_pass: Sequence[int], priors: Sequence[np.ndarray | None], *,
                     options: MultiViewOptions = MultiViewOptions(turntable=True),
                     progress: Callable[[str], None] | None = None,
-                    names: Sequence[str] | None = None) -> PassesResult:
+                    names: Sequence[str] | None = None, map_pairs=None) -> PassesResult:
     """Register a multi-pass scan (see the module docstring).
 
     ``clouds``: every view in its own frame; ``view_pass`` (n,) each view's pass (0, 1, ...; every pass
     non-empty, in order); ``priors``: per pass the (m_p, 4, 4) prior of its views (the turntable's), or
     None (coarse alignment within the pass too). ``options``: those of each pass's registration (its
     ``voxel``, ``fine_voxel``, ``max_coarse_rmse``, ``min_overlap`` and ``rng`` also those of the alignment
-    between passes). Raises RegistrationError when a pass cannot be aligned to the first.
+    between passes). ``map_pairs``: runs each pass's pair refinements (see :func:`register_views`).
+    Raises RegistrationError when a pass cannot be aligned to the first.
     """
     say = progress or (lambda msg: None)
     vp = np.asarray(view_pass, dtype=np.int64)
@@ -114,7 +115,7 @@ def register_passes(clouds: Sequence[PointCloud], view_pass: Sequence[int], prio
         say(f"pass {p + 1} of {n_passes}: registering its {len(g)} views")
         res = register_views([clouds[k] for k in g], init_T_world_view=priors[p], progress=progress,
                              options=options if priors[p] is not None else replace(options, turntable=False),
-                             names=None if names is None else [names[k] for k in g])
+                             names=None if names is None else [names[k] for k in g], map_pairs=map_pairs)
         results.append(res)
         edges += [replace(e, i=int(g[e.i]), j=int(g[e.j])) for e in res.edges]
         rot.append(res.sync.edge_rotation_error)

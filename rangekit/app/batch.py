@@ -38,17 +38,18 @@ WORKER_ENV = {"NUMBA_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_TH
 
 #: glibc's malloc in each local worker process, set before it starts (glibc reads them then): one arena, and
 #: arrays up to 1 GB from it, never trimmed back on free. A worker runs task after task of the same sizes;
-#: so every task reuses the pages the one before freed instead of faulting fresh ones in (on this 2-core VM,
-#: zeroing fresh pages is a sixth of the CPU), and :func:`rangekit.memory.release_free_memory` leaves them
-#: (with one arena every thread reuses them). Replaces the nanny's MALLOC_TRIM_THRESHOLD_=65536, which
-#: made every large array a fresh mmap. The batch of docs/scale.md: 186 against 213 CPU-s, peak of the tree
-#: 3.5 GB as before.
+#: so every task reuses the pages the one before freed instead of faulting fresh ones in (which the kernel
+#: must zero), and :func:`rangekit.memory.release_free_memory` leaves them (with one arena every thread
+#: reuses them). Replaces the nanny's MALLOC_TRIM_THRESHOLD_=65536, which made every large array a fresh
+#: mmap. The batch of docs/scale.md: 170-174 against 198-203 CPU-s with glibc's defaults, peak of the tree
+#: 3.5 GB either way (recorded at 0339c3a).
 WORKER_MALLOC = {"MALLOC_ARENA_MAX": "1", "MALLOC_MMAP_THRESHOLD_": str(1 << 30), "MALLOC_TRIM_THRESHOLD_": str(1 << 30)}
 
 #: Dask settings of the local cluster: its periodic housekeeping slowed down (the event loop's tick, the
 #: system and memory monitors, work stealing) and the workers' statistical profiler off. Together they cost
-#: an idle cluster of 2 workers 10.0 CPU-s every 100 s, against 1.2 with these (docs/scale.md): a tenth of a
-#: core taken from tasks that each run for seconds. Nothing here reads the dashboard they feed.
+#: an idle cluster of 2 workers 6.5-7.1 CPU-s every 100 s, against 1.1 with these
+#: (benchmarks/bench_dask_idle.py): CPU taken from tasks that each run for seconds. Nothing here reads the
+#: dashboard they feed.
 QUIET_DASK = {"distributed.admin.tick.interval": "1s", "distributed.admin.system-monitor.interval": "5s",
               "distributed.scheduler.work-stealing-interval": "5s", "distributed.worker.memory.monitor-interval": "1s",
               "distributed.worker.profile.enabled": False}

@@ -10,7 +10,7 @@ its two clouds, so the poses are the bits of serial processing.
 
 If the cluster loses a round (a worker holding the scattered clouds dies), the round is redone in the
 session task, one pair after another: the same results, later. A pair that fails for a reason of its own
-(a view too sparse) fails the same way there, and its error is the session's.
+(a view too sparse) is the session's error, as in serial processing.
 """
 
 from __future__ import annotations
@@ -31,6 +31,7 @@ def dask_pair_mapper(progress=None):
     def map_pairs(jobs: Sequence, clouds: Sequence) -> list:
         from distributed import worker_client
 
+        from rangekit.errors import RangekitError
         from rangekit.registration.pair_refine import refine_pair
 
         if not jobs:
@@ -42,7 +43,9 @@ def dask_pair_mapper(progress=None):
                 futures = [client.submit(refine_pair, job, scattered[job.i], scattered[job.j], pure=False,
                                          priority=PAIR_PRIORITY) for job in jobs]
                 return client.gather(futures)
-        except Exception as e:   # the round, lost or failed on the cluster: redone here (the same results)
+        except RangekitError:    # a pair's own failure (a view too sparse): the session's error, as serially
+            raise
+        except Exception as e:   # the round lost on the cluster (a worker died, ...): redone here, the same results
             if progress is not None:
                 progress(f"pair tasks lost ({type(e).__name__}): the round's {len(jobs)} pairs are redone here")
             return [refine_pair(job, clouds[job.i], clouds[job.j]) for job in jobs]

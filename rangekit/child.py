@@ -19,23 +19,31 @@ small work, whose run is shorter than a child's start: about 1 s of imports) beh
   blocks the parent), the answer on a private copy of its standard output; the child's own prints go to
   the parent's stderr. Numpy arrays and frozen dataclasses of them, tens of MB, take tenths of a second.
   The function must be importable (module level).
+- A child can be started ahead of its call (:func:`spawn_child`, with the modules the call will need
+  imported while the parent still works: Open3D alone takes 0.6 s) and given the call later
+  (:meth:`ChildCall.start`).
+- A call that returns a generator sends each item as it is made: :meth:`ChildCall.results` hands them to
+  the parent one by one, which works on the first while the child makes the next.
 """
 
 from __future__ import annotations
 
+import inspect
+import importlib
 import multiprocessing
 import os
 import pickle
+import queue
 import subprocess
 import sys
 import threading
 import traceback
 from concurrent.futures import ThreadPoolExecutor
-from typing import Any, Callable
+from typing import Any, Callable, Iterator, Sequence
 
 from rangekit.errors import RangekitError
 
-__all__ = ["ChildCall", "ThreadCall", "call_beside", "child_call"]
+__all__ = ["ChildCall", "ThreadCall", "call_beside", "child_call", "spawn_child"]
 
 # The child's first lines: no Ctrl-C, the parent's import path, then serve the call.
 _BOOT = ("import pickle, signal, sys; signal.signal(signal.SIGINT, signal.SIG_IGN); "
@@ -43,65 +51,114 @@ _BOOT = ("import pickle, signal, sys; signal.signal(signal.SIGINT, signal.SIG_IG
 
 
 def _serve() -> None:
-    """The child: read ``(fn, args, kwargs)`` from stdin, run it on one BLAS thread, write ``("ok", result)``
-    or ``("error", exception)`` to the original stdout (fd 1 then points at stderr for any prints)."""
+    """The child: import the modules named first on stdin, then read ``(fn, args, kwargs)`` and run it on one
+    BLAS thread. On the original stdout (fd 1 then points at stderr for any prints) it writes
+    ``("item", x)`` for each item of a generator ``fn`` returned, then ``("ok", result)`` or
+    ``("error", exception)``."""
     answer_fd = os.dup(1)
     os.dup2(2, 1)
     from rangekit.threads import one_blas_thread
 
-    try:
-        fn, args, kwargs = pickle.load(sys.stdin.buffer)
-        with one_blas_thread():
-            answer = ("ok", fn(*args, **kwargs))
-    except BaseException as exc:      # sent to the parent, which raises it
-        answer = ("error", exc if isinstance(exc, RangekitError) else
-                  RuntimeError(f"{type(exc).__name__}: {exc}\nin the child process:\n{traceback.format_exc()}"))
     with os.fdopen(answer_fd, "wb") as out:
+        def send(answer) -> None:
+            try:
+                data = pickle.dumps(answer, protocol=pickle.HIGHEST_PROTOCOL)
+            except (pickle.PicklingError, TypeError, AttributeError) as exc:
+                data = pickle.dumps(("error", RuntimeError(f"the child process's answer cannot be sent back: {exc}")))
+            out.write(data)
+            out.flush()
+
         try:
-            data = pickle.dumps(answer, protocol=pickle.HIGHEST_PROTOCOL)
-        except (pickle.PicklingError, TypeError, AttributeError) as exc:
-            data = pickle.dumps(("error", RuntimeError(f"the child process's answer cannot be sent back: {exc}")))
-        out.write(data)
+            for name in pickle.load(sys.stdin.buffer):
+                importlib.import_module(name)
+            fn, args, kwargs = pickle.load(sys.stdin.buffer)
+            with one_blas_thread():
+                value = fn(*args, **kwargs)
+                if inspect.isgenerator(value):
+                    for item in value:
+                        send(("item", item))
+                    value = None
+            answer = ("ok", value)
+        except BaseException as exc:      # sent to the parent, which raises it
+            answer = ("error", exc if isinstance(exc, RangekitError) else
+                      RuntimeError(f"{type(exc).__name__}: {exc}\nin the child process:\n{traceback.format_exc()}"))
+        send(answer)
 
 
 class ChildCall:
     """A call running in a child process (see the module docstring); a context manager that ends the
-    child if the block raises."""
+    child if the block raises. ``ChildCall(imports)`` starts the child, which imports ``imports`` (module
+    names) and waits; :meth:`start` gives it the call."""
 
-    def __init__(self, fn: Callable, args: tuple, kwargs: dict) -> None:
-        self._name = f"{fn.__module__}.{fn.__qualname__}"
-        payload = pickle.dumps(list(sys.path)) + pickle.dumps((fn, args, kwargs), protocol=pickle.HIGHEST_PROTOCOL)
+    def __init__(self, imports: Sequence[str] = ()) -> None:
+        self._name = "a call"
         self._proc = subprocess.Popen([sys.executable, "-c", _BOOT], stdin=subprocess.PIPE, stdout=subprocess.PIPE)
+        self._writer: threading.Thread | None = None
+        self._send(pickle.dumps(list(sys.path)) + pickle.dumps(list(imports)), close=False)   # a few hundred bytes
+
+    def start(self, fn: Callable, args: tuple = (), kwargs: dict | None = None) -> "ChildCall":
+        """Send the call ``fn(*args, **kwargs)`` (once); return self."""
+        if self._writer is not None:
+            raise RuntimeError(f"{self._name} was already sent to this child process")
+        self._name = f"{fn.__module__}.{fn.__qualname__}"
+        payload = pickle.dumps((fn, args, kwargs or {}), protocol=pickle.HIGHEST_PROTOCOL)
         self._writer = threading.Thread(target=self._send, args=(payload,), daemon=True,
                                         name=f"rangekit-{fn.__name__}-send")
         self._writer.start()
+        return self
 
-    def _send(self, payload: bytes) -> None:
+    def _send(self, payload: bytes, close: bool = True) -> None:
         try:
             self._proc.stdin.write(payload)
-            self._proc.stdin.close()
+            self._proc.stdin.flush()
+            if close:
+                self._proc.stdin.close()
         except (BrokenPipeError, ValueError):   # the child died or was ended: result() says so
             pass
 
+    def _answers(self) -> Iterator[tuple[str, Any]]:
+        """The child's answers as they come: ``("item", x)``..., then ``("ok", value)``; raises the child's
+        error, or a RangekitError when it ended without a final answer."""
+        while True:
+            try:
+                status, value = pickle.load(self._proc.stdout)
+            except EOFError:
+                code = self._proc.wait()
+                if self._writer is not None:
+                    self._writer.join()
+                raise RangekitError(f"{self._name} in a child process ended without an answer (exit code {code}; a "
+                                    "negative code is the signal that ended it, -9 often the system out of memory)")\
+                    from None
+            if status == "error":
+                raise value
+            yield status, value
+            if status == "ok":
+                self._proc.wait()
+                self._writer.join()
+                return
+
     def result(self) -> Any:
-        """Wait for the child's answer; return it, or raise its exception."""
-        data = self._proc.stdout.read()
-        code = self._proc.wait()
-        self._writer.join()
-        if not data:
-            raise RangekitError(f"{self._name} in a child process ended without an answer (exit code {code}; a "
-                                "negative code is the signal that ended it, -9 often the system out of memory)")
-        status, value = pickle.loads(data)
-        if status == "error":
-            raise value
-        return value
+        """Wait for the child's answer; return it (the last item for a generator), or raise its exception."""
+        items, value = [], None
+        for status, value in self._answers():
+            if status == "item":
+                items[:] = [value]
+        return items[0] if items else value
+
+    def results(self) -> Iterator[Any]:
+        """The items of the generator the call returned, each as soon as the child sends it (raises as
+        :meth:`result`)."""
+        for status, value in self._answers():
+            if status == "item":
+                yield value
 
     def terminate(self) -> None:
         """End the child if it is still running."""
         if self._proc.poll() is None:
             self._proc.terminate()
         self._proc.wait()
-        self._writer.join()
+        if self._writer is not None:
+            self._writer.join()
         self._proc.stdout.close()
 
     def __enter__(self) -> "ChildCall":
@@ -115,13 +172,33 @@ class ThreadCall:
     """The same interface as :class:`ChildCall` for a call on a thread of this process (its ``with``
     block waits for the call on exit: a thread cannot be ended)."""
 
+    _END = object()
+
     def __init__(self, fn: Callable, args: tuple, kwargs: dict) -> None:
+        self._items: queue.Queue = queue.Queue()
         self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix=f"rangekit-{fn.__name__}")
-        self._future = self._pool.submit(fn, *args, **kwargs)
+        self._future = self._pool.submit(self._run, fn, args, kwargs)
+
+    def _run(self, fn: Callable, args: tuple, kwargs: dict) -> Any:
+        try:
+            value = fn(*args, **kwargs)
+            if inspect.isgenerator(value):
+                for item in value:
+                    self._items.put(item)
+                    value = item
+            return value
+        finally:
+            self._items.put(self._END)
 
     def result(self) -> Any:
-        """Wait for the call; return its value or raise its exception."""
+        """Wait for the call; return its value (the last item for a generator) or raise its exception."""
         return self._future.result()
+
+    def results(self) -> Iterator[Any]:
+        """The items of the generator the call returned, each as soon as it is made."""
+        while (item := self._items.get()) is not self._END:
+            yield item
+        self._future.result()   # its exception, if it ended with one
 
     def __enter__(self) -> "ThreadCall":
         return self
@@ -130,15 +207,29 @@ class ThreadCall:
         self._pool.shutdown(wait=True)
 
 
-def call_beside(fn: Callable, *args, in_child: bool, **kwargs) -> ChildCall | ThreadCall:
+def call_beside(fn: Callable, *args, in_child: bool, child: ChildCall | None = None,
+                **kwargs) -> ChildCall | ThreadCall:
     """Start ``fn(*args, **kwargs)`` beside this thread, in a child process (``in_child``: for a call that
-    holds the GIL) or on a thread; use as ``with call_beside(f, x, in_child=...) as call: ...``. In a daemonic
-    process (a Dask worker: the unit of parallelism there, one per core) it is a thread."""
+    holds the GIL; in ``child`` when one was spawned ahead, :func:`spawn_child`) or on a thread; use as
+    ``with call_beside(f, x, in_child=...) as call: ...``. In a daemonic process (a Dask worker: the unit of
+    parallelism there, one per core) it is a thread. A ``child`` not used is ended."""
     in_child = in_child and not multiprocessing.current_process().daemon
-    return ChildCall(fn, args, kwargs) if in_child else ThreadCall(fn, args, kwargs)
+    if not in_child:
+        if child is not None:
+            child.terminate()
+        return ThreadCall(fn, args, kwargs)
+    return (child or ChildCall()).start(fn, args, kwargs)
+
+
+def spawn_child(imports: Sequence[str] = ()) -> ChildCall | None:
+    """A child process started now, importing ``imports`` while this process goes on, for a later
+    :func:`call_beside`; None in a daemonic process (where calls run on threads)."""
+    if multiprocessing.current_process().daemon:
+        return None
+    return ChildCall(imports)
 
 
 def child_call(fn: Callable, *args, **kwargs) -> ChildCall:
     """Start ``fn(*args, **kwargs)`` in a child process and return at once; use as
     ``with child_call(f, x) as call: ...; y = call.result()``."""
-    return ChildCall(fn, args, kwargs)
+    return ChildCall().start(fn, args, kwargs)

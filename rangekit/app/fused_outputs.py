@@ -4,9 +4,10 @@
     mesh_watertight.ply   the same surface closed, with the PLY vertex property ``observed`` (uchar, 0 where
                           no view's points support the vertex: the closing, the balloon, a web across a gap)
 
-:func:`save_fused` writes both and returns their ``summary.json`` entries; :func:`evaluate_fused` measures
-both against the truth (the summary's accuracy is the observed mesh's, the closed one's figures are kept
-under ``accuracy["watertight"]``). :func:`export_meshes` writes both again in another format beside them
+:func:`save_fused` writes both and returns their ``summary.json`` entries (:func:`save_one` one of them);
+:func:`evaluate_fused` measures both against the truth (the summary's accuracy is the observed mesh's, the
+closed one's figures are kept under ``accuracy["watertight"]``); in two halves, :func:`evaluate_observed` then
+:func:`with_closed`, the observed mesh is measured while the closed one is made. :func:`export_meshes` writes both again in another format beside them
 (``--format obj|stl|glb``: what MeshLab, Blender or a slicer opens; only PLY keeps ``observed``).
 """
 
@@ -19,7 +20,7 @@ from rangekit.surface.mesh import TriangleMesh
 from rangekit.surface.observed import FusedMeshes
 
 __all__ = ["MESH_FILE", "WATERTIGHT_FILE", "WATERTIGHT_FIGURES", "MESH_EXPORT_FORMATS", "mesh_info", "save_fused",
-           "export_meshes", "evaluate_fused"]
+           "save_one", "export_meshes", "evaluate_fused", "evaluate_observed", "with_closed"]
 
 MESH_FILE = "mesh.ply"
 WATERTIGHT_FILE = "mesh_watertight.ply"
@@ -44,11 +45,16 @@ def mesh_info(mesh: TriangleMesh, fusion: str, file: str) -> dict:
 def save_fused(out: Path, fused: FusedMeshes, fusion: str) -> tuple[dict, dict]:
     """Write ``out/mesh.ply`` (observed) and ``out/mesh_watertight.ply`` (closed, flagged), atomically;
     return their summary entries (:func:`mesh_info`)."""
+    return save_one(out, fused.observed, fusion, MESH_FILE), save_one(out, fused.watertight, fusion, WATERTIGHT_FILE)
+
+
+def save_one(out: Path, mesh: TriangleMesh, fusion: str, file: str) -> dict:
+    """Write one of the two (``file``: :data:`MESH_FILE` or :data:`WATERTIGHT_FILE`) atomically; its summary
+    entry (:func:`mesh_info`)."""
     from rangekit.formats.meshes import save_mesh
 
-    save_mesh(out / MESH_FILE, fused.observed)
-    save_mesh(out / WATERTIGHT_FILE, fused.watertight)
-    return (mesh_info(fused.observed, fusion, MESH_FILE), mesh_info(fused.watertight, fusion, WATERTIGHT_FILE))
+    save_mesh(out / file, mesh)
+    return mesh_info(mesh, fusion, file)
 
 
 def export_meshes(out: Path, fmt: str) -> list[str]:
@@ -71,8 +77,21 @@ def evaluate_fused(evaluate: Callable, fused: FusedMeshes, angles, *, views: dic
     """``(accuracy dict, truth, view errors)``: ``evaluate(mesh, angles, **options)`` on the observed mesh
     (with ``views``, the per-view breakdown, once), with the watertight mesh's :data:`WATERTIGHT_FIGURES`
     under ``"watertight"``."""
-    evaluation = evaluate(fused.observed, angles, **options, **({"views": views} if views is not None else {}))
+    evaluation = evaluate_observed(evaluate, fused.observed, angles, views=views, **options)
+    return with_closed(evaluate, evaluation, fused.watertight, angles, **options)
+
+
+def evaluate_observed(evaluate: Callable, mesh: TriangleMesh, angles, *, views: dict | None = None, **options):
+    """The first half of :func:`evaluate_fused`: the evaluator's answer for the observed mesh alone (the
+    closed one can still be in the making)."""
+    return evaluate(mesh, angles, **options, **({"views": views} if views is not None else {}))
+
+
+def with_closed(evaluate: Callable, evaluation, watertight: TriangleMesh, angles,
+                **options) -> tuple[dict, object, list | None]:
+    """The second half of :func:`evaluate_fused`: ``evaluation`` (of the observed mesh) with the closed
+    mesh's figures under ``"watertight"``, as :func:`evaluate_fused` returns it."""
     accuracy = evaluation.accuracy.to_dict()
-    closed = evaluate(fused.watertight, angles, **options).accuracy.to_dict()
+    closed = evaluate(watertight, angles, **options).accuracy.to_dict()
     accuracy["watertight"] = {k: closed[k] for k in WATERTIGHT_FIGURES}
     return accuracy, evaluation.truth, evaluation.view_errors

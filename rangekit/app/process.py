@@ -26,13 +26,14 @@ SHA-256s (:func:`rangekit.formats.session_check.verify_views`).
 
 from __future__ import annotations
 
+from contextlib import ExitStack
 from pathlib import Path
 from typing import TYPE_CHECKING, Callable, Protocol, Sequence
 
 import numpy as np
 
 from rangekit.app.view_cache import ViewMaps, cache_settings, reload_maps, table_transform, view_clouds
-from rangekit.child import call_beside
+from rangekit.child import call_beside, spawn_child
 from rangekit.errors import ConfigError
 from rangekit.formats.clouds import save_cloud
 from rangekit.formats.poses import save_poses
@@ -46,7 +47,6 @@ from rangekit.memory import release_free_memory
 from rangekit.progress import StageTimer, call_progress
 from rangekit.rig import Rig, turntable_prior
 from rangekit.surface.cloud import PointCloud, merge_clouds, view_index
-from rangekit.surface.observed import FusedMeshes
 from rangekit.threads import one_blas_thread
 
 if TYPE_CHECKING:
@@ -59,6 +59,10 @@ FUSION_METHODS = ("poisson", "tsdf")
 #: Fewest sampled points whose Poisson runs in a child process: below, it takes less than the child's start
 #: (about 1 s of imports, on the other core).
 CHILD_MIN_POINTS = 100_000
+#: Poisson's input: every k-th merged point, k the smallest that leaves at most this many.
+POISSON_POINTS = 400_000
+#: What the Poisson child imports while the views are registered (Open3D alone: 0.6 s).
+CHILD_IMPORTS = ("open3d", "rangekit.surface.fusion")
 
 
 class Evaluation(Protocol):
@@ -111,15 +115,16 @@ def process_session(folder: str | Path, *, fusion: str = "poisson", method: str 
     out = Path(folder)
     if not (out / "session.json").is_file():
         raise ConfigError(f"{out}: not a session folder (no session.json)")
-    with session_lock(out), one_blas_thread():   # thin products: rangekit.threads
-        return _process(out, fusion, method, table_margin, evaluate, report, progress, map_pairs)
+    with session_lock(out), one_blas_thread(), ExitStack() as children:   # thin products: rangekit.threads
+        return _process(out, fusion, method, table_margin, evaluate, report, progress, map_pairs, children)
 
 
 def _process(out: Path, fusion: str, method: str, table_margin: float, evaluate: Evaluator | None, report: bool,
-             progress: Callable | None, map_pairs: PairMapper | None) -> ProcessResult:
-    from rangekit.app.fused_outputs import evaluate_fused, save_fused
+             progress: Callable | None, map_pairs: PairMapper | None, children: ExitStack) -> ProcessResult:
+    from rangekit.app.fused_outputs import MESH_FILE, WATERTIGHT_FILE, evaluate_observed, save_one, with_closed
     from rangekit.registration.multiview import MultiViewOptions, register_views
-    from rangekit.surface.fusion import poisson_meshes
+    from rangekit.surface.fusion import poisson_input, poisson_surfaces
+    from rangekit.surface.observed import observed_rule
 
     session = Session.load(out)
     views = session.done_views
@@ -160,6 +165,13 @@ def _process(out: Path, fusion: str, method: str, table_margin: float, evaluate:
         release_free_memory()   # the image stacks and decoding temporaries (rangekit.memory)
 
     view_passes = [v.scan_pass for v in views] if session.plan.passes > 1 else None
+    step = max(1, sum(len(c) for c in clouds) // POISSON_POINTS)   # Poisson's sample: every step-th merged point
+    in_child = fusion == "poisson" and -(-sum(len(c) for c in clouds) // step) >= CHILD_MIN_POINTS
+    child = None
+    if in_child:   # Poisson's child starts now and imports what it needs on the other core while this one registers
+        child = spawn_child(CHILD_IMPORTS)
+        if child is not None:
+            children.enter_context(child)    # ended if anything below fails
     with timer.stage("register"):
         names = [v.folder.name for v in views]
         if view_passes is not None:    # each pass from its turntable prior, the passes to each other without one
@@ -191,7 +203,6 @@ def _process(out: Path, fusion: str, method: str, table_margin: float, evaluate:
     with timer.stage("fuse"):
         merged = merge_clouds(clouds, res.T_world_view)
         n_merged = len(merged)
-        step = max(1, n_merged // 400_000)
         sample = PointCloud(merged.points[::step].copy(), merged.colours[::step].copy(), merged.normals[::step].copy())
         prepare = getattr(evaluate, "prepare", None)
         call_progress(progress, f"fusing {n_merged:,} points ({fusion})"
@@ -202,8 +213,11 @@ def _process(out: Path, fusion: str, method: str, table_margin: float, evaluate:
         # 230 MB of depth maps) on a thread.
         # One Poisson thread: Open3D's multi-threaded Poisson is not deterministic (a resumed scan must give
         # the same mesh as an uninterrupted one); the other core evaluates beside it.
-        fusing = (call_beside(poisson_meshes, sample, depth=9, n_threads=1, in_child=len(sample) >= CHILD_MIN_POINTS)
-                  if fusion == "poisson" else call_beside(_tsdf, sample, maps, res.T_world_view, rig, in_child=False))
+        # The fusion gives its whole surface first, cut here to the observed mesh, which is saved and measured
+        # while the closed one is made.
+        fusing = (call_beside(poisson_surfaces, sample, depth=9, n_threads=1, in_child=in_child, child=child)
+                  if fusion == "poisson" else call_beside(_tsdf_surfaces, maps, res.T_world_view, rig, in_child=False))
+        evaluation = None
         with fusing:
             save_cloud(out / "merged.ply", merged, fields={"view": view_index(clouds)})
             # Not kept beside Poisson's octree and the evaluator (2M points, 130 MB): the report remakes it.
@@ -211,11 +225,21 @@ def _process(out: Path, fusion: str, method: str, table_margin: float, evaluate:
             if prepare is not None:
                 with timer.stage("evaluate"):
                     prepare(angles, views_info)
-            fused = fusing.result()
-        del sample
+            # What the views observed: Poisson's input points (the TSDF's: the sample), their spacing.
+            rule = observed_rule(sample.points[poisson_input(sample)] if fusion == "poisson" else sample.points)
+            del sample
+            surfaces = fusing.results()
+            mesh = rule.observed_part(next(surfaces))
+            mesh_info = save_one(out, mesh, fusion, MESH_FILE)
+            if evaluate is not None:
+                with timer.stage("evaluate"):
+                    call_progress(progress, "measuring the observed mesh and each view against the true surface")
+                    evaluation = evaluate_observed(evaluate, mesh, angles, views=views_info)
+            watertight = rule.flagged(next(surfaces))
+            next(surfaces, None)   # the child's end
+        del rule
         release_free_memory()   # the fusion's and the evaluator's temporaries
-        mesh_info, watertight_info = save_fused(out, fused, fusion)
-        mesh = fused.observed
+        watertight_info = save_one(out, watertight, fusion, WATERTIGHT_FILE)
         call_progress(progress, f"mesh: {len(mesh.vertices):,} vertices, {len(mesh.triangles):,} triangles observed; "
                                 f"closed: {watertight_info['unobserved_vertices']:,} of "
                                 f"{watertight_info['vertices']:,} vertices unobserved")
@@ -223,9 +247,8 @@ def _process(out: Path, fusion: str, method: str, table_margin: float, evaluate:
     accuracy, truth, view_errors = None, None, None
     if evaluate is not None:
         with timer.stage("evaluate"):
-            call_progress(progress, "measuring the observed and the closed mesh and each view against the true "
-                                    "surface")
-            accuracy, truth, view_errors = evaluate_fused(evaluate, fused, angles, views=views_info)
+            call_progress(progress, "measuring the closed mesh against the true surface")
+            accuracy, truth, view_errors = with_closed(evaluate, evaluation, watertight, angles)
 
     # Stage times are wall seconds; "evaluate" includes the part done beside the fusion (inside "fuse").
     result = ProcessResult(out, names, res.T_world_view, [len(c) for c in clouds], edges, float(res.rmse),
@@ -241,17 +264,19 @@ def _process(out: Path, fusion: str, method: str, table_margin: float, evaluate:
                 maps = [reload_maps(v, spec, settings) for v in views]
             write_report(out, result, clouds=clouds, maps=maps, merged=merge_clouds(clouds, res.T_world_view),
                          mesh=mesh, session=session,
-                         truth=truth, progress=progress, watertight=fused.watertight)
+                         truth=truth, progress=progress, watertight=watertight)
     atomic_write_json(out / "summary.json", result.to_dict())   # last: the set is complete
     return result
 
 
-def _tsdf(sample: PointCloud, maps: list[ViewMaps], T_world_view: np.ndarray, rig: Rig) -> FusedMeshes:
-    """Each view's camera-frame depth map as stored, seen by the camera at its registered pose, fused into
-    the observed and the closed mesh; ``sample`` (session world) decides what was observed."""
+def _tsdf_surfaces(maps: list[ViewMaps], T_world_view: np.ndarray, rig: Rig):
+    """Each view's camera-frame depth map as stored, seen by the camera at its registered pose, fused: a
+    generator of the surface (session world), then the surface closed (unflagged), as
+    :func:`rangekit.surface.fusion.poisson_surfaces`."""
     from rangekit.surface.fusion import tsdf_fuse
-    from rangekit.surface.observed import split_observed
+    from rangekit.surface.watertight import make_watertight
 
     surface = tsdf_fuse([(m.depth, None, rig.camera.with_pose(compose(Tk, rig.camera.T_world_cam)))
                          for m, Tk in zip(maps, T_world_view)], watertight=False)
-    return split_observed(surface, sample.points)
+    yield surface
+    yield make_watertight(surface)

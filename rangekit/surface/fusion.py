@@ -23,10 +23,10 @@ from rangekit.surface.cloud import PointCloud, spread_problem
 from rangekit.surface.cloud import to_open3d as _cloud_to_open3d
 from rangekit.surface.convert import as_cloud
 from rangekit.surface.mesh import TriangleMesh, mesh_from_open3d
-from rangekit.surface.observed import OBSERVED_FACTOR, FusedMeshes, split_observed
+from rangekit.surface.observed import OBSERVED_FACTOR, FusedMeshes, observed_rule
 from rangekit.surface.watertight import clean_mesh, make_watertight
 
-__all__ = ["poisson_mesh", "poisson_meshes", "poisson_input_problem", "tsdf_fuse"]
+__all__ = ["poisson_mesh", "poisson_meshes", "poisson_surfaces", "poisson_input", "poisson_input_problem", "tsdf_fuse"]
 
 #: Fewest oriented points :func:`poisson_mesh` accepts.
 MIN_POISSON_POINTS = 10
@@ -92,8 +92,7 @@ def _poisson_surface(cloud: PointCloud, depth: int, density_quantile: float, wat
         raise InputError(f"poisson_mesh: depth must be in [1, 12], found {depth}")
     if not 0.0 <= density_quantile < 1.0:
         raise InputError(f"poisson_mesh: density_quantile must be in [0, 1), found {density_quantile}")
-    with np.errstate(invalid="ignore"):
-        ok = np.all(np.isfinite(cloud.points), axis=1) & (np.linalg.norm(cloud.normals, axis=1) > 0)
+    ok = poisson_input(cloud)
     problem = poisson_input_problem(cloud.points[ok], watertight=watertight,
                                     noun=("point with a normal", "points with a normal"))
     if problem:
@@ -132,17 +131,35 @@ def poisson_meshes(cloud: PointCloud, *, depth: int = 9, density_quantile: float
     of the visible surface against 99.7%). ``watertight``: the density-trimmed surface closed by
     :func:`make_watertight` (as :func:`poisson_mesh`), each vertex flagged ``observed`` or not by the same rule. ``spacing`` (N,) per point of ``cloud`` (metres), default
     the mean distance to its 6 nearest neighbours (see :func:`rangekit.surface.observed.observed_vertices`).
+    In steps, for a caller that works on the observed mesh while the closed one is made:
+    :func:`poisson_surfaces`, :func:`poisson_input` and :func:`rangekit.surface.observed.observed_rule`.
 
     Raises as :func:`poisson_mesh` (MeshError, InputError).
     """
     if spacing is not None and np.shape(spacing) != (len(cloud),):
         raise InputError(f"poisson_meshes: spacing must be ({len(cloud)},), one per point, found {np.shape(spacing)}")
-    surface, full, used = _poisson_surface(cloud, depth, density_quantile, True, n_threads)
-    if spacing is not None and len(used) != len(cloud):
-        with np.errstate(invalid="ignore"):
-            ok = np.all(np.isfinite(cloud.points), axis=1) & (np.linalg.norm(cloud.normals, axis=1) > 0)
-        spacing = np.asarray(spacing)[ok]
-    return split_observed(full, used.points, spacing=spacing, factor=factor, closing=surface)
+    steps = poisson_surfaces(cloud, depth=depth, density_quantile=density_quantile, n_threads=n_threads)
+    full = next(steps)
+    ok = poisson_input(cloud)
+    rule = observed_rule(cloud.points[ok], spacing=None if spacing is None else np.asarray(spacing)[ok], factor=factor)
+    observed = rule.observed_part(full)
+    return FusedMeshes(observed, rule.flagged(next(steps)))
+
+
+def poisson_input(cloud: PointCloud) -> np.ndarray:
+    """(N,) bool: the points of ``cloud`` Poisson uses (finite, with a non-zero normal)."""
+    with np.errstate(invalid="ignore"):
+        return np.all(np.isfinite(cloud.points), axis=1) & (np.linalg.norm(cloud.normals, axis=1) > 0)
+
+
+def poisson_surfaces(cloud: PointCloud, *, depth: int = 9, density_quantile: float = 0.02, n_threads: int = -1):
+    """A generator of Poisson's two surfaces (session frame), each as soon as it is made: the whole
+    (untrimmed) surface, which the points' :class:`~rangekit.surface.observed.ObservedRule` cuts to the
+    observed mesh, then the density-trimmed surface closed by :func:`make_watertight` (unflagged)."""
+    surface, full, _ = _poisson_surface(cloud, depth, density_quantile, True, n_threads)
+    yield full
+    del full
+    yield make_watertight(surface)
 
 
 def _depth_image(depth: np.ndarray, colour: np.ndarray | None, camera: PinholeCamera):

@@ -10,6 +10,8 @@ input point lies within ``factor x`` that point's local spacing of it; everythin
 - :func:`keep_observed`: the mesh without its unobserved vertices and every triangle touching one.
 - :func:`split_observed`: a fusion's two outputs (:class:`FusedMeshes`): the observed surface, and the
   surface closed with a per-vertex ``observed`` flag.
+- :func:`observed_rule`: the rule made once for a set of points (:class:`ObservedRule`), to judge a
+  fusion's meshes as they come.
 
 Units are metres; the mesh and the points share one frame. Deterministic (scipy's k-d tree, no threads).
 """
@@ -25,7 +27,8 @@ from rangekit.errors import InputError
 from rangekit.surface.mesh import TriangleMesh
 
 __all__ = ["OBSERVED_FACTOR", "SPACING_NEIGHBOURS", "MAX_SPACING_RATIO", "FusedMeshes", "point_spacing",
-           "observed_vertices", "keep_observed", "split_observed"]
+           "observed_vertices", "keep_observed", "split_observed",
+           "ObservedRule", "observed_rule"]
 
 #: A vertex is observed within this many local point spacings of an input point. A vertex between points
 #: on an observed patch is at most about half a spacing from one (plus the noise Poisson smooths away), so
@@ -152,18 +155,48 @@ def split_observed(surface: TriangleMesh, points: np.ndarray, *, spacing: np.nda
     Raises MeshError when no observed triangle is left (the surface is nowhere near the points) or the
     surface cannot be closed.
     """
-    from rangekit.errors import MeshError
     from rangekit.surface.watertight import make_watertight
 
-    # One k-d tree of the points serves their spacing and both meshes' nearest points.
-    tree, s = _spaced_tree(points, spacing, factor, SPACING_NEIGHBOURS)
-    median = float(np.median(s))
-    # Every component the points support is kept (two ears apart are two components), unlike the closed
-    # mesh, which is the largest component closed.
-    observed = keep_observed(surface, _within(surface.vertices, tree, s, factor, median))
-    if len(observed.triangles) == 0:
-        raise MeshError(f"no triangle of the fused surface ({len(surface.triangles)} triangles) lies within "
-                        f"{factor:g} point spacings of the {tree.n} input points")
-    closed = make_watertight(surface if closing is None else closing)
-    flags = _within(closed.vertices, tree, s, factor, median)
-    return FusedMeshes(observed, closed.with_observed(flags))
+    rule = observed_rule(points, spacing=spacing, factor=factor)
+    observed = rule.observed_part(surface)
+    return FusedMeshes(observed, rule.flagged(make_watertight(surface if closing is None else closing)))
+
+
+@dataclass(frozen=True, eq=False)
+class ObservedRule:
+    """The rule of :func:`observed_vertices` made once for a set of points (:func:`observed_rule`): one k-d
+    tree of the points serves their spacing and every mesh's nearest points, so a fusion's two meshes are
+    judged as they come (the observed part first, the closed mesh when it is made)."""
+
+    tree: cKDTree         # of the (finite) points
+    spacing: np.ndarray   # (N,) metres, per point
+    median: float         # metres, the median spacing
+    factor: float
+
+    def flags(self, vertices: np.ndarray) -> np.ndarray:
+        """(V,) bool: the vertices (V, 3) some point supports."""
+        return _within(np.asarray(vertices, dtype=np.float64), self.tree, self.spacing, self.factor, self.median)
+
+    def observed_part(self, surface: TriangleMesh) -> TriangleMesh:
+        """``surface`` without its unobserved vertices (:func:`keep_observed`): every component the points
+        support is kept (two ears apart are two components), unlike a closed mesh, its largest component
+        closed. MeshError when no triangle is left."""
+        from rangekit.errors import MeshError
+
+        observed = keep_observed(surface, self.flags(surface.vertices))
+        if len(observed.triangles) == 0:
+            raise MeshError(f"no triangle of the fused surface ({len(surface.triangles)} triangles) lies within "
+                            f"{self.factor:g} point spacings of the {self.tree.n} input points")
+        return observed
+
+    def flagged(self, closed: TriangleMesh) -> TriangleMesh:
+        """``closed`` with its per-vertex ``observed`` flag."""
+        return closed.with_observed(self.flags(closed.vertices))
+
+
+def observed_rule(points: np.ndarray, *, spacing: np.ndarray | None = None, factor: float = OBSERVED_FACTOR,
+                  k: int = SPACING_NEIGHBOURS) -> ObservedRule:
+    """The :class:`ObservedRule` of ``points`` (N, 3), ``spacing`` (N,) and ``factor`` as in
+    :func:`observed_vertices`."""
+    tree, s = _spaced_tree(points, spacing, factor, k)
+    return ObservedRule(tree, s, float(np.median(s)), float(factor))

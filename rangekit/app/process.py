@@ -228,6 +228,15 @@ def _process(out: Path, fusion: str, method: str, table_margin: float, evaluate:
             # What the views observed: Poisson's input points (the TSDF's: the sample), their spacing.
             rule = observed_rule(sample.points[poisson_input(sample)] if fusion == "poisson" else sample.points)
             del sample
+            rows = None
+            if report:   # the report's per-view part, each view's maps read back (or, for the TSDF, as held)
+                with timer.stage("report"):
+                    from rangekit.app.report import table_up
+                    from rangekit.app.report_view_rows import view_rows
+
+                    rows = view_rows(names, clouds, (lambda k: maps[k]) if maps is not None else
+                                     (lambda k: reload_maps(views[k], spec, settings)), rig=rig,
+                                     full_scale=session.capture.full_scale, up=table_up(rig), progress=progress)
             surfaces = fusing.results()
             mesh = rule.observed_part(next(surfaces))
             mesh_info = save_one(out, mesh, fusion, MESH_FILE)
@@ -259,12 +268,10 @@ def _process(out: Path, fusion: str, method: str, table_margin: float, evaluate:
             from rangekit.app.report import write_report
 
             call_progress(progress, "writing report.html")
-            release_free_memory()   # the evaluation's temporaries, before the maps come back
-            if maps is None:
-                maps = [reload_maps(v, spec, settings) for v in views]
-            write_report(out, result, clouds=clouds, maps=maps, merged=merge_clouds(clouds, res.T_world_view),
-                         mesh=mesh, session=session,
-                         truth=truth, progress=progress, watertight=watertight)
+            release_free_memory()   # the evaluation's temporaries
+            write_report(out, result, clouds=clouds, maps=None, rows=rows,
+                         merged=merge_clouds(clouds, res.T_world_view), mesh=mesh, session=session, truth=truth,
+                         progress=progress, watertight=watertight)
     atomic_write_json(out / "summary.json", result.to_dict())   # last: the set is complete
     return result
 

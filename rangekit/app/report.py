@@ -24,12 +24,13 @@ from typing import TYPE_CHECKING, Callable, Sequence
 
 import numpy as np
 
-from rangekit.app.report_figures import THUMB_W, crop as _crop, figure as _img, thumb as _thumb
+from rangekit.app.report_figures import crop as _crop, figure as _img
 from rangekit.app.report_views import view_errors_section
 from rangekit.io import atomic_write_text
 from rangekit.progress import call_progress
 
 if TYPE_CHECKING:
+    from rangekit.app.report_view_rows import ViewRows
     from rangekit.app.view_cache import ViewMaps
     from rangekit.formats.session import Session
     from rangekit.formats.summary import ProcessResult
@@ -113,13 +114,15 @@ def _summary_table(result: "ProcessResult", session: "Session") -> str:
 
 
 def write_report(folder: str | Path, result: "ProcessResult", *, clouds: Sequence["PointCloud"],
-                 maps: Sequence["ViewMaps"], merged: "PointCloud", mesh: "TriangleMesh", session: "Session",
+                 maps: Sequence["ViewMaps"] | None, merged: "PointCloud", mesh: "TriangleMesh", session: "Session",
                  truth: "TriangleMesh | None" = None, progress: Callable | None = None,
-                 size: tuple[int, int] = (230, 230), watertight: "TriangleMesh | None" = None) -> Path:
+                 size: tuple[int, int] = (230, 230), watertight: "TriangleMesh | None" = None,
+                 rows: "ViewRows | None" = None) -> Path:
     """Write ``folder/report.html`` and return its path; reads nothing from disk.
 
     ``clouds`` are the views' clouds in their own frames and ``maps`` their decoded maps and white
-    captures (as processing holds them), ``merged`` and ``mesh`` (the observed surface) in the session world
+    captures (as processing holds them), or None with ``rows``, the per-view part already made from them
+    (:func:`rangekit.app.report_view_rows.view_rows`), ``merged`` and ``mesh`` (the observed surface) in the session world
     (the first view's frame), ``watertight`` the closed mesh there with its ``observed`` flag (shown with the
     invented part in grey), ``truth`` the true surface in that frame (from an evaluator) for the heat map.
     """
@@ -161,48 +164,20 @@ def write_report(folder: str | Path, result: "ProcessResult", *, clouds: Sequenc
 
     sections += passes_section(result.view_passes, clouds, merged, frame_pts, up, size)
     sections += view_errors_section(result.view_errors)
-    from rangekit.app.report_quality import coverage_section, quality_section, sigma_scale
+    from rangekit.app.report_quality import coverage_section, quality_section
     from rangekit.app.report_residuals import residual_section
-    from rangekit.app.report_views import view_table_section
 
     sections += quality_section(mesh, V, q, up=up, sides=sides, side_names=side_names, size=size)
     call_progress(progress, "report: coverage and residuals")
     sections += coverage_section(mesh, V, q, up=up, sides=sides, side_names=side_names, size=size)
     sections += residual_section(merged.points, mesh)
-    sections += view_table_section(result.view_names, [len(c) for c in clouds], maps, session.capture.full_scale)
+    if rows is None:
+        from rangekit.app.report_view_rows import view_rows
 
-    def has_sigma(m) -> bool:
-        return m.sigma is not None and bool(np.isfinite(m.sigma).any())
-
-    sigma_maps = [m.sigma for m in maps if has_sigma(m)]
-    smax = sigma_scale(sigma_maps) if sigma_maps else None
-
-    call_progress(progress, "report: views")
-    rows = []
-    for k, (name, cloud, view_maps) in enumerate(zip(result.view_names, clouds, maps)):
-        capture = view_maps.capture
-        if capture.dtype != np.uint8:
-            capture = (capture / max(1, capture.max()) * 255).astype(np.uint8)
-        capture = _thumb(capture)   # a grey capture is shrunk before it is made RGB: the same pixels
-        capture = capture if capture.ndim == 3 else np.repeat(capture[:, :, None], 3, axis=2)
-        col = view_maps.proj_col
-        depth = view_maps.depth
-        finite = np.isfinite(depth)
-        dlo, dhi = (np.percentile(depth[finite], [1, 99]) if finite.any() else (0.0, 1.0))
-        ccam = fit_camera(cloud.points, azimuth=np.radians(20),
-                          elevation=np.radians(20), size=(THUMB_W * 5 // 4, THUMB_W), up=up, tight=True)
-        figs = [_img(capture, f"{name}: capture (white)"),
-                _img(_thumb(colourise(col, 0, rig.projector.width - 1, cmap="turbo")), "projector column"),
-                _img(_thumb(colourise(view_maps.confidence, 0, max(1e-6, float(np.nanpercentile(view_maps.confidence, 99))),
-                                      cmap="grey")), "confidence"),
-                _img(_thumb(colourise(depth, dlo, dhi, cmap="viridis")), f"depth {dlo * 1e3:.0f}-{dhi * 1e3:.0f} mm"),
-                _img(_crop(render_cloud(cloud, ccam)), f"cloud: {len(cloud):,} points")]
-        if smax is not None and has_sigma(view_maps):
-            figs.insert(4, _img(_thumb(colourise(view_maps.sigma, 0.0, smax, cmap="turbo")),
-                                f"predicted sigma 0-{smax * 1e3:.3f} mm"))
-        rows.append(f"<div class='row'>{''.join(figs)}</div>")
-        call_progress(progress, f"report: view {k + 1}/{n}", k + 1, n)
-    sections += ["<h2>Views</h2>", "".join(rows)]
+        rows = view_rows(result.view_names, clouds, lambda k: maps[k], rig=rig, full_scale=session.capture.full_scale,
+                         up=up, progress=progress)
+    sections += rows.table
+    sections += rows.views
 
     return write_page(out, sections)
 

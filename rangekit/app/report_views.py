@@ -1,6 +1,6 @@
 """The report's per-view tables: what each view gave (always) and, on the simulator, where its error comes from.
 
-:func:`view_table_section` (no truth needed): per view, its points, the share of the camera's pixels decoded
+:func:`view_table_section` (no truth needed; :func:`view_table_figures` of each view): per view, its points, the share of the camera's pixels decoded
 (a projector column found), the share kept as points, and the share of saturated pixels in the white capture
 (at the camera's full scale: decoding there is unreliable; lower the exposure or the projector's brightness).
 
@@ -17,7 +17,7 @@ from typing import Sequence
 
 import numpy as np
 
-__all__ = ["saturated_fraction", "view_errors_section", "view_table_section"]
+__all__ = ["saturated_fraction", "view_errors_section", "view_table_figures", "view_table_section"]
 
 
 def saturated_fraction(capture: np.ndarray, full_scale: float | None) -> float:
@@ -30,18 +30,24 @@ def saturated_fraction(capture: np.ndarray, full_scale: float | None) -> float:
     return float((sat.any(axis=2) if sat.ndim == 3 else sat).mean()) if sat.size else 0.0
 
 
-def view_table_section(names: Sequence[str], n_points: Sequence[int], maps: Sequence, full_scale: float | None
-                       ) -> list[str]:
-    """HTML of the per-view table: ``names``, their clouds' point counts and their decoded
-    :class:`~rangekit.app.view_cache.ViewMaps` (``proj_col``, ``depth``, the white ``capture``); ``full_scale``
-    the camera's largest pixel value (None: the images' dtype's)."""
+def view_table_figures(maps, full_scale: float | None) -> tuple[float, float, float]:
+    """One view's figures in the per-view table, from its decoded
+    :class:`~rangekit.app.view_cache.ViewMaps` (``proj_col``, ``depth``, the white ``capture``): the shares of
+    its pixels decoded and kept as points, and of its white capture saturated at ``full_scale`` (None: the
+    images' dtype's largest value)."""
+    return (float(np.isfinite(maps.proj_col).mean()), float(np.isfinite(maps.depth).mean()),
+            saturated_fraction(maps.capture, full_scale))
+
+
+def view_table_section(names: Sequence[str], n_points: Sequence[int],
+                       figures: Sequence[tuple[float, float, float]]) -> list[str]:
+    """HTML of the per-view table: ``names``, their clouds' point counts and each view's
+    :func:`view_table_figures`."""
     head = ("<tr><th>view</th><th>points</th><th>decoded pixels</th><th>kept as points</th>"
             "<th>saturated (white frame)</th></tr>")
     rows = []
-    for name, n, m in zip(names, n_points, maps):
-        sat = saturated_fraction(m.capture, full_scale)
-        cells = (name, f"{n:,}", f"{np.isfinite(m.proj_col).mean():.1%}", f"{np.isfinite(m.depth).mean():.1%}",
-                 f"{sat:.2%}")
+    for name, n, (decoded, kept, sat) in zip(names, n_points, figures):
+        cells = (name, f"{n:,}", f"{decoded:.1%}", f"{kept:.1%}", f"{sat:.2%}")
         style = " style='color:#b00'" if sat > 0.01 else ""
         rows.append(f"<tr{style}>" + "".join(f"<td>{html.escape(c)}</td>" for c in cells) + "</tr>")
     return ["<h2>Per view (no truth needed)</h2>",

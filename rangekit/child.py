@@ -22,24 +22,20 @@ small work, whose run is shorter than a child's start: about 1 s of imports) beh
 - A child can be started ahead of its call (:func:`spawn_child`, with the modules the call will need
   imported while the parent still works: Open3D alone takes 0.6 s) and given the call later
   (:meth:`ChildCall.start`).
-- A call that returns a generator sends each item as it is made: :meth:`ChildCall.results` hands them to
-  the parent one by one, which works on the first while the child makes the next.
 """
 
 from __future__ import annotations
 
-import inspect
 import importlib
 import multiprocessing
 import os
 import pickle
-import queue
 import subprocess
 import sys
 import threading
 import traceback
 from concurrent.futures import ThreadPoolExecutor
-from typing import Any, Callable, Iterator, Sequence
+from typing import Any, Callable, Sequence
 
 from rangekit.errors import RangekitError
 
@@ -52,37 +48,27 @@ _BOOT = ("import pickle, signal, sys; signal.signal(signal.SIGINT, signal.SIG_IG
 
 def _serve() -> None:
     """The child: import the modules named first on stdin, then read ``(fn, args, kwargs)`` and run it on one
-    BLAS thread. On the original stdout (fd 1 then points at stderr for any prints) it writes
-    ``("item", x)`` for each item of a generator ``fn`` returned, then ``("ok", result)`` or
-    ``("error", exception)``."""
+    BLAS thread; write ``("ok", result)`` or ``("error", exception)`` to the original stdout (fd 1 then points
+    at stderr for any prints)."""
     answer_fd = os.dup(1)
     os.dup2(2, 1)
     from rangekit.threads import one_blas_thread
 
+    try:
+        for name in pickle.load(sys.stdin.buffer):
+            importlib.import_module(name)
+        fn, args, kwargs = pickle.load(sys.stdin.buffer)
+        with one_blas_thread():
+            answer = ("ok", fn(*args, **kwargs))
+    except BaseException as exc:      # sent to the parent, which raises it
+        answer = ("error", exc if isinstance(exc, RangekitError) else
+                  RuntimeError(f"{type(exc).__name__}: {exc}\nin the child process:\n{traceback.format_exc()}"))
     with os.fdopen(answer_fd, "wb") as out:
-        def send(answer) -> None:
-            try:
-                data = pickle.dumps(answer, protocol=pickle.HIGHEST_PROTOCOL)
-            except (pickle.PicklingError, TypeError, AttributeError) as exc:
-                data = pickle.dumps(("error", RuntimeError(f"the child process's answer cannot be sent back: {exc}")))
-            out.write(data)
-            out.flush()
-
         try:
-            for name in pickle.load(sys.stdin.buffer):
-                importlib.import_module(name)
-            fn, args, kwargs = pickle.load(sys.stdin.buffer)
-            with one_blas_thread():
-                value = fn(*args, **kwargs)
-                if inspect.isgenerator(value):
-                    for item in value:
-                        send(("item", item))
-                    value = None
-            answer = ("ok", value)
-        except BaseException as exc:      # sent to the parent, which raises it
-            answer = ("error", exc if isinstance(exc, RangekitError) else
-                      RuntimeError(f"{type(exc).__name__}: {exc}\nin the child process:\n{traceback.format_exc()}"))
-        send(answer)
+            data = pickle.dumps(answer, protocol=pickle.HIGHEST_PROTOCOL)
+        except (pickle.PicklingError, TypeError, AttributeError) as exc:
+            data = pickle.dumps(("error", RuntimeError(f"the child process's answer cannot be sent back: {exc}")))
+        out.write(data)
 
 
 class ChildCall:
@@ -116,41 +102,19 @@ class ChildCall:
         except (BrokenPipeError, ValueError):   # the child died or was ended: result() says so
             pass
 
-    def _answers(self) -> Iterator[tuple[str, Any]]:
-        """The child's answers as they come: ``("item", x)``..., then ``("ok", value)``; raises the child's
-        error, or a RangekitError when it ended without a final answer."""
-        while True:
-            try:
-                status, value = pickle.load(self._proc.stdout)
-            except EOFError:
-                code = self._proc.wait()
-                if self._writer is not None:
-                    self._writer.join()
-                raise RangekitError(f"{self._name} in a child process ended without an answer (exit code {code}; a "
-                                    "negative code is the signal that ended it, -9 often the system out of memory)")\
-                    from None
-            if status == "error":
-                raise value
-            yield status, value
-            if status == "ok":
-                self._proc.wait()
-                self._writer.join()
-                return
-
     def result(self) -> Any:
-        """Wait for the child's answer; return it (the last item for a generator), or raise its exception."""
-        items, value = [], None
-        for status, value in self._answers():
-            if status == "item":
-                items[:] = [value]
-        return items[0] if items else value
-
-    def results(self) -> Iterator[Any]:
-        """The items of the generator the call returned, each as soon as the child sends it (raises as
-        :meth:`result`)."""
-        for status, value in self._answers():
-            if status == "item":
-                yield value
+        """Wait for the child's answer; return it, or raise its exception."""
+        data = self._proc.stdout.read()
+        code = self._proc.wait()
+        if self._writer is not None:
+            self._writer.join()
+        if not data:
+            raise RangekitError(f"{self._name} in a child process ended without an answer (exit code {code}; a "
+                                "negative code is the signal that ended it, -9 often the system out of memory)")
+        status, value = pickle.loads(data)
+        if status == "error":
+            raise value
+        return value
 
     def terminate(self) -> None:
         """End the child if it is still running."""
@@ -172,33 +136,13 @@ class ThreadCall:
     """The same interface as :class:`ChildCall` for a call on a thread of this process (its ``with``
     block waits for the call on exit: a thread cannot be ended)."""
 
-    _END = object()
-
     def __init__(self, fn: Callable, args: tuple, kwargs: dict) -> None:
-        self._items: queue.Queue = queue.Queue()
         self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix=f"rangekit-{fn.__name__}")
-        self._future = self._pool.submit(self._run, fn, args, kwargs)
-
-    def _run(self, fn: Callable, args: tuple, kwargs: dict) -> Any:
-        try:
-            value = fn(*args, **kwargs)
-            if inspect.isgenerator(value):
-                for item in value:
-                    self._items.put(item)
-                    value = item
-            return value
-        finally:
-            self._items.put(self._END)
+        self._future = self._pool.submit(fn, *args, **kwargs)
 
     def result(self) -> Any:
-        """Wait for the call; return its value (the last item for a generator) or raise its exception."""
+        """Wait for the call; return its value or raise its exception."""
         return self._future.result()
-
-    def results(self) -> Iterator[Any]:
-        """The items of the generator the call returned, each as soon as it is made."""
-        while (item := self._items.get()) is not self._END:
-            yield item
-        self._future.result()   # its exception, if it ended with one
 
     def __enter__(self) -> "ThreadCall":
         return self

@@ -113,47 +113,11 @@ def imported(name):
     return name in sys.modules
 
 
-def two_items(gate, fail=False):
-    """Yields 1, waits until the parent has made the file ``gate`` (so it got 1 while this still ran), yields 2."""
-    from pathlib import Path
-
-    yield 1
-    deadline = time.monotonic() + 60
-    while not Path(gate).exists():
-        if time.monotonic() > deadline:
-            raise TimeoutError("the parent never saw the first item")
-        time.sleep(0.01)
-    if fail:
-        raise MeshError("made after the first item")
-    yield 2
-
-
 def test_a_child_spawned_ahead_imports_its_modules_before_the_call_arrives():
     with spawn_child(("colorsys",)) as child:
         assert call_beside(imported, "colorsys", in_child=True, child=child).result() is True
     with child_call(imported, "colorsys") as call:     # a plain child has not imported it
         assert call.result() is False
-
-
-@pytest.mark.parametrize("in_child", [True, False])
-def test_a_generators_items_reach_the_parent_one_by_one(tmp_path, in_child):
-    gate = tmp_path / "gate"
-    with call_beside(two_items, str(gate), in_child=in_child) as call:
-        items = call.results()
-        assert next(items) == 1        # while the call still waits for the gate
-        gate.touch()
-        assert list(items) == [2]
-
-
-@pytest.mark.parametrize("in_child", [True, False])
-def test_an_error_after_the_first_item_is_raised_after_it(tmp_path, in_child):
-    gate = tmp_path / "gate"
-    with call_beside(two_items, str(gate), fail=True, in_child=in_child) as call:
-        items = call.results()
-        assert next(items) == 1
-        gate.touch()
-        with pytest.raises(MeshError, match="made after the first item"):
-            next(items)
 
 
 def test_a_spawned_child_not_used_is_ended_with_its_block():

@@ -63,6 +63,8 @@ CHILD_MIN_POINTS = 100_000
 POISSON_POINTS = 400_000
 #: What the Poisson child imports while the views are registered (Open3D alone: 0.6 s).
 CHILD_IMPORTS = ("open3d", "rangekit.surface.fusion")
+#: What the closing's child imports while Poisson runs (no Open3D: 0.2 GB less resident while it closes).
+CLOSER_IMPORTS = ("rangekit.surface.watertight",)
 
 
 class Evaluation(Protocol):
@@ -125,6 +127,7 @@ def _process(out: Path, fusion: str, method: str, table_margin: float, evaluate:
     from rangekit.registration.multiview import MultiViewOptions, register_views
     from rangekit.surface.fusion import poisson_input, poisson_surfaces
     from rangekit.surface.observed import observed_rule
+    from rangekit.surface.watertight import make_watertight
 
     session = Session.load(out)
     views = session.done_views
@@ -213,12 +216,15 @@ def _process(out: Path, fusion: str, method: str, table_margin: float, evaluate:
         # 230 MB of depth maps) on a thread.
         # One Poisson thread: Open3D's multi-threaded Poisson is not deterministic (a resumed scan must give
         # the same mesh as an uninterrupted one); the other core evaluates beside it.
-        # The fusion gives its whole surface first, cut here to the observed mesh, which is saved and measured
-        # while the closed one is made.
+        # The fusion gives its whole surface, cut here to the observed mesh, and the surface to close, closed
+        # beside this process (in a second, lighter child: no Open3D) while the observed mesh is saved and measured.
         fusing = (call_beside(poisson_surfaces, sample, depth=9, n_threads=1, in_child=in_child, child=child)
-                  if fusion == "poisson" else call_beside(_tsdf_surfaces, maps, res.T_world_view, rig, in_child=False))
+                  if fusion == "poisson" else call_beside(_tsdf_surface, maps, res.T_world_view, rig, in_child=False))
         evaluation = None
         with fusing:
+            closer = spawn_child(CLOSER_IMPORTS) if in_child else None
+            if closer is not None:
+                children.enter_context(closer)
             save_cloud(out / "merged.ply", merged, fields={"view": view_index(clouds)})
             # Not kept beside Poisson's octree and the evaluator (2M points, 130 MB): the report remakes it.
             del merged
@@ -237,15 +243,17 @@ def _process(out: Path, fusion: str, method: str, table_margin: float, evaluate:
                     rows = view_rows(names, clouds, (lambda k: maps[k]) if maps is not None else
                                      (lambda k: reload_maps(views[k], spec, settings)), rig=rig,
                                      full_scale=session.capture.full_scale, up=table_up(rig), progress=progress)
-            surfaces = fusing.results()
-            mesh = rule.observed_part(next(surfaces))
+            full, trimmed = fusing.result()
+        with call_beside(make_watertight, trimmed, in_child=in_child, child=closer) as closing:
+            del trimmed
+            mesh = rule.observed_part(full)
+            del full
             mesh_info = save_one(out, mesh, fusion, MESH_FILE)
             if evaluate is not None:
                 with timer.stage("evaluate"):
                     call_progress(progress, "measuring the observed mesh and each view against the true surface")
                     evaluation = evaluate_observed(evaluate, mesh, angles, views=views_info)
-            watertight = rule.flagged(next(surfaces))
-            next(surfaces, None)   # the child's end
+            watertight = rule.flagged(closing.result())
         del rule
         release_free_memory()   # the fusion's and the evaluator's temporaries
         watertight_info = save_one(out, watertight, fusion, WATERTIGHT_FILE)
@@ -276,14 +284,12 @@ def _process(out: Path, fusion: str, method: str, table_margin: float, evaluate:
     return result
 
 
-def _tsdf_surfaces(maps: list[ViewMaps], T_world_view: np.ndarray, rig: Rig):
-    """Each view's camera-frame depth map as stored, seen by the camera at its registered pose, fused: a
-    generator of the surface (session world), then the surface closed (unflagged), as
-    :func:`rangekit.surface.fusion.poisson_surfaces`."""
+def _tsdf_surface(maps: list[ViewMaps], T_world_view: np.ndarray, rig: Rig) -> tuple:
+    """Each view's camera-frame depth map as stored, seen by the camera at its registered pose, fused: the
+    surface (session world) twice, as :func:`rangekit.surface.fusion.poisson_surfaces` gives the surface to cut
+    to the observed mesh and the one to close."""
     from rangekit.surface.fusion import tsdf_fuse
-    from rangekit.surface.watertight import make_watertight
 
     surface = tsdf_fuse([(m.depth, None, rig.camera.with_pose(compose(Tk, rig.camera.T_world_cam)))
                          for m, Tk in zip(maps, T_world_view)], watertight=False)
-    yield surface
-    yield make_watertight(surface)
+    return surface, surface

@@ -138,12 +138,10 @@ def poisson_meshes(cloud: PointCloud, *, depth: int = 9, density_quantile: float
     """
     if spacing is not None and np.shape(spacing) != (len(cloud),):
         raise InputError(f"poisson_meshes: spacing must be ({len(cloud)},), one per point, found {np.shape(spacing)}")
-    steps = poisson_surfaces(cloud, depth=depth, density_quantile=density_quantile, n_threads=n_threads)
-    full = next(steps)
+    full, trimmed = poisson_surfaces(cloud, depth=depth, density_quantile=density_quantile, n_threads=n_threads)
     ok = poisson_input(cloud)
     rule = observed_rule(cloud.points[ok], spacing=None if spacing is None else np.asarray(spacing)[ok], factor=factor)
-    observed = rule.observed_part(full)
-    return FusedMeshes(observed, rule.flagged(next(steps)))
+    return FusedMeshes(rule.observed_part(full), rule.flagged(make_watertight(trimmed)))
 
 
 def poisson_input(cloud: PointCloud) -> np.ndarray:
@@ -152,14 +150,13 @@ def poisson_input(cloud: PointCloud) -> np.ndarray:
         return np.all(np.isfinite(cloud.points), axis=1) & (np.linalg.norm(cloud.normals, axis=1) > 0)
 
 
-def poisson_surfaces(cloud: PointCloud, *, depth: int = 9, density_quantile: float = 0.02, n_threads: int = -1):
-    """A generator of Poisson's two surfaces (session frame), each as soon as it is made: the whole
-    (untrimmed) surface, which the points' :class:`~rangekit.surface.observed.ObservedRule` cuts to the
-    observed mesh, then the density-trimmed surface closed by :func:`make_watertight` (unflagged)."""
+def poisson_surfaces(cloud: PointCloud, *, depth: int = 9, density_quantile: float = 0.02,
+                     n_threads: int = -1) -> tuple[TriangleMesh, TriangleMesh]:
+    """Poisson's two open surfaces (the cloud's frame): the whole (untrimmed) one, which the points'
+    :class:`~rangekit.surface.observed.ObservedRule` cuts to the observed mesh, and the density-trimmed
+    one, which :func:`make_watertight` closes."""
     surface, full, _ = _poisson_surface(cloud, depth, density_quantile, True, n_threads)
-    yield full
-    del full
-    yield make_watertight(surface)
+    return full, surface
 
 
 def _depth_image(depth: np.ndarray, colour: np.ndarray | None, camera: PinholeCamera):

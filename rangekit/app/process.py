@@ -43,7 +43,7 @@ from rangekit.formats.session_lock import session_lock
 from rangekit.formats.summary import ProcessResult
 from rangekit.geometry import compose
 from rangekit.io import atomic_write_json, fsync_folder
-from rangekit.memory import release_free_memory
+from rangekit.memory import release_free_memory, reuse_freed_memory
 from rangekit.progress import StageTimer, call_progress
 from rangekit.rig import Rig, turntable_prior
 from rangekit.surface.cloud import PointCloud, merge_clouds, view_index
@@ -152,7 +152,7 @@ def _process(out: Path, fusion: str, method: str, table_margin: float, evaluate:
     settings = cache_settings(session, method, table_margin)
     timer = StageTimer()
 
-    with timer.stage("decode"):
+    with timer.stage("decode"), reuse_freed_memory():   # each view's stacks reuse the last one's pages
         clouds: list[PointCloud] = []
         maps: list[ViewMaps] = []
         # the next view's frames are read while this one decodes (view_clouds)

@@ -15,6 +15,7 @@ def cmd_decode(args: argparse.Namespace) -> int:
     from rangekit.coded.decode import decode
     from rangekit.errors import naming
     from rangekit.formats.capture import list_images, pattern_spec_for, read_stack, save_decoded
+    from rangekit.memory import reuse_freed_memory
 
     t0 = time.perf_counter()
     from rangekit.formats.capture import DECODED_SUFFIXES
@@ -23,10 +24,12 @@ def cmd_decode(args: argparse.Namespace) -> int:
     paths = list_images(args.images[0] if len(args.images) == 1 else args.images)
     spec = pattern_spec_for(args.pattern, args.projector)
     note(f"reading {len(paths)} images")
-    images = read_stack(paths)
-    note(f"decoding {spec.method} ({'subpixel' if not args.integer else 'integer'})")
-    with naming(args.images[0] if len(args.images) == 1 else f"{len(paths)} images from {paths[0]}"):
-        res = decode(images, spec, order=args.order, subpixel=not args.integer)
+    with reuse_freed_memory():   # the decoder's temporaries reuse pages (rangekit.memory)
+        images = read_stack(paths)
+        note(f"decoding {spec.method} ({'subpixel' if not args.integer else 'integer'})")
+        with naming(args.images[0] if len(args.images) == 1 else f"{len(paths)} images from {paths[0]}"):
+            res = decode(images, spec, order=args.order, subpixel=not args.integer)
+        del images
     save_decoded(args.out, res, compress=args.compress)
     say(f"{res!r}")
     result(f"wrote {Path(args.out)} in {time.perf_counter() - t0:.1f} s")

@@ -94,11 +94,11 @@ def load_tof_folder(folder: str | Path) -> ToFFolder:
         raise FileFormatError(f"{folder / 'samples'}: the frequency plan in tof.json ({plan.describe()}) needs "
                               f"{plan.n_samples} raw samples, found {len(files)}"
                               + (f" ({files[0].name} ... {files[-1].name})" if files else ""))
-    headers = check_image_files(files, what="ToF raw samples", copies=2)  # read_stack's list, then np.stack
+    headers = check_image_files(files, what="ToF raw samples")  # read_stack checks them again; cheap
     if headers and headers[0] is not None and (headers[0].width, headers[0].height) != (cam.width, cam.height):
         raise FileFormatError(f"{files[0]}: samples are {headers[0].width}x{headers[0].height} (width x height) "
                               f"but the camera in rig.json is {cam.width}x{cam.height}")
-    stack = np.stack(read_stack(files, what="ToF raw samples"))
+    stack = read_stack(files, what="ToF raw samples")
     if stack.ndim != 3:
         raise FileFormatError(f"{folder / 'samples'}: expected single-channel (grey) raw samples, found images of "
                               f"shape {stack.shape[1:]} ({files[0].name})")

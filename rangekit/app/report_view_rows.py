@@ -61,10 +61,12 @@ def view_rows(names: Sequence[str], clouds: Sequence["PointCloud"], maps: Callab
         ccam = fit_camera(cloud.points, azimuth=np.radians(20),
                           elevation=np.radians(20), size=(THUMB_W * 5 // 4, THUMB_W), up=up, tight=True)
         conf_top = max(1e-6, float(np.nanpercentile(m.confidence, 99)))
+        col = colourise(m.proj_col, 0, rig.projector.width - 1, cmap="turbo")
         figures.append([_img(capture, f"{name}: capture (white)"),
-                        _img(_thumb(colourise(m.proj_col, 0, rig.projector.width - 1, cmap="turbo")), "projector column"),
+                        _img(_thumb(col), "projector column"),
                         _img(_thumb(colourise(m.confidence, 0, conf_top, cmap="grey")), "confidence"),
-                        _img(_thumb(colourise(depth, dlo, dhi, cmap="viridis")), f"depth {dlo * 1e3:.0f}-{dhi * 1e3:.0f} mm"),
+                        _img(_thumb(colourise(depth, dlo, dhi, cmap="viridis")),
+                             f"depth {dlo * 1e3:.0f}-{dhi * 1e3:.0f} mm"),
                         _img(_crop(render_cloud(cloud, ccam)), f"cloud: {len(cloud):,} points")])
         sigmas.append(_compact(m.sigma))
         del m    # not kept: the next view's maps take its place

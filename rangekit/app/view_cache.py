@@ -138,8 +138,9 @@ def view_clouds(views: Sequence[SessionView], spec: PatternSpec, rig: Rig, setti
                     pending = pool.submit(_read_stacks, _frame_folders(views[k + 1], settings))
             images = stacks[0]
             with one_blas_thread():      # thin products: rangekit.threads
-                out = _decode_view(v, stacks if settings.get("exposures_us") else images, images[white], spec, rig,
-                                   settings, full_scale, T_table_world, table_margin)
+                # the white capture copied out: a view of it would keep the view's whole stack alive
+                out = _decode_view(v, stacks if settings.get("exposures_us") else images, images[white].copy(), spec,
+                                   rig, settings, full_scale, T_table_world, table_margin)
             del stacks, images
             yield out
 

@@ -12,10 +12,9 @@ only make the next stage or task fault them in again.
 
 The other way round, :func:`reuse_freed_memory`: inside its block arrays up to a threshold come from the heap
 and freed ones stay there, so a decoder's temporaries (tens of MB each, allocated and freed many times per
-view) reuse pages instead of mapping fresh ones that the kernel must zero: ``rangekit decode`` of 46 images
-of 2048x1500 spent 0.26-0.47 s of system time in decoding, 0.08-0.11 s inside the block, at the same peak
-(``PYTHONPATH=. python benchmarks/bench_decode_cli.py``). On leaving, glibc's limits are set to where its own
-adjustment takes them (32 MB) and the free pages are returned.
+view) reuse pages instead of mapping fresh ones that the kernel must fault in and zero (the system time and
+"Minor page faults" of ``/usr/bin/time -v rangekit decode ...`` show it). On leaving, glibc's limits are set
+to where its own adjustment takes them (32 MB) and the free pages are returned.
 """
 
 from __future__ import annotations

@@ -7,8 +7,9 @@
 :func:`save_fused` writes both and returns their ``summary.json`` entries (:func:`save_one` one of them);
 :func:`evaluate_fused` measures both against the truth (the summary's accuracy is the observed mesh's, the
 closed one's figures are kept under ``accuracy["watertight"]``); in two halves, :func:`evaluate_observed` then
-:func:`with_closed`, the observed mesh is measured while the closed one is made. :func:`export_meshes` writes both again in another format beside them
-(``--format obj|stl|glb``: what MeshLab, Blender or a slicer opens; only PLY keeps ``observed``).
+:func:`with_closed`, the observed mesh is measured while the closed one is made. :func:`export_meshes` writes
+both again in another format beside them (``--format obj|stl|glb``: what MeshLab, Blender or a slicer opens;
+only PLY keeps ``observed``).
 """
 
 from __future__ import annotations

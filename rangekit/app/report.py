@@ -122,8 +122,8 @@ def write_report(folder: str | Path, result: "ProcessResult", *, clouds: Sequenc
 
     ``clouds`` are the views' clouds in their own frames and ``maps`` their decoded maps and white
     captures (as processing holds them), or None with ``rows``, the per-view part already made from them
-    (:func:`rangekit.app.report_view_rows.view_rows`), ``merged`` and ``mesh`` (the observed surface) in the session world
-    (the first view's frame), ``watertight`` the closed mesh there with its ``observed`` flag (shown with the
+    (:func:`rangekit.app.report_view_rows.view_rows`), ``merged`` and ``mesh`` (the observed surface) in the
+    session world (the first view's frame), ``watertight`` the closed mesh there with its ``observed`` flag (shown with the
     invented part in grey), ``truth`` the true surface in that frame (from an evaluator) for the heat map.
     """
     from rangekit.colour import colourise

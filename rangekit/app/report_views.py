@@ -1,8 +1,9 @@
 """The report's per-view tables: what each view gave (always) and, on the simulator, where its error comes from.
 
-:func:`view_table_section` (no truth needed; :func:`view_table_figures` of each view): per view, its points, the share of the camera's pixels decoded
-(a projector column found), the share kept as points, and the share of saturated pixels in the white capture
-(at the camera's full scale: decoding there is unreliable; lower the exposure or the projector's brightness).
+:func:`view_table_section` (no truth needed; :func:`view_table_figures` of each view): per view, its points,
+the share of the camera's pixels decoded (a projector column found), the share kept as points, and the share
+of saturated pixels in the white capture (at the camera's full scale: decoding there is unreliable; lower the
+exposure or the projector's brightness).
 
 :func:`view_errors_section`, one row per view: decoding (projector pixels against the true columns), the view's cloud against the true
 surface (RMS, 95th percentile, max; inside a surface and at depth edges, and the edge points' share of the

@@ -90,8 +90,7 @@ def observed_vertices(vertices: np.ndarray, points: np.ndarray, *, spacing: np.n
     V = np.asarray(vertices, dtype=np.float64)
     if V.ndim != 2 or V.shape[1] != 3:
         raise InputError(f"observed_vertices: vertices must be (V, 3), found shape {V.shape}")
-    tree, s = _spaced_tree(points, spacing, factor, k)
-    return _within(V, tree, s, factor, float(np.median(s)))
+    return observed_rule(points, spacing=spacing, factor=factor, k=k).flags(V)
 
 
 def _spaced_tree(points: np.ndarray, spacing: np.ndarray | None, factor: float, k: int) -> tuple[cKDTree, np.ndarray]:

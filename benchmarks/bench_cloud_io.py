@@ -82,7 +82,7 @@ def main() -> int:
         import io
 
         from rangekit.formats.clouds import save_cloud
-        from rangekit.formats.ply import _vertex_records
+        from rangekit.formats.ply_write import _vertex_records
         from rangekit.surface.cloud import PointCloud
 
         rng = np.random.default_rng(0)

@@ -26,7 +26,7 @@ def main() -> int:
 
     from rangekit.app.fused_outputs import mesh_info
     from rangekit.formats.clouds import load_cloud
-    from rangekit.formats.ply import mesh_ply_bytes
+    from rangekit.formats.ply_write import mesh_ply_bytes
     from rangekit.surface.cloud import PointCloud
     from rangekit.surface.fusion import _poisson_surface
     from rangekit.surface.observed import split_observed

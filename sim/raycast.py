@@ -79,7 +79,8 @@ def _cast(scene, origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarra
     """As :func:`_open3d_cast` on a scene already built (:func:`rangekit.surface.raycast.raycasting_scene`)."""
     import open3d as o3d  # imported here: it takes ~2 s and most of rangekit never needs it
 
-    rays = np.concatenate([origins, directions], axis=1).astype(np.float32)
+    rays = np.empty((len(directions), 6), np.float32)   # filled in place: no (N, 6) float64 copy on the way
+    rays[:, :3], rays[:, 3:] = origins, directions
     out = scene.cast_rays(o3d.core.Tensor(rays))
     t_hit = out["t_hit"].numpy()
     prim = out["primitive_ids"].numpy().astype(np.int64)

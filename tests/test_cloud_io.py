@@ -54,6 +54,26 @@ def test_round_trip(tmp_path, suffix, tol_points, tol_normals, keeps_colours, no
         assert back.colours is None
 
 
+def test_ply_written_a_chunk_at_a_time_is_the_whole_cloud_written_at_once(tmp_path):
+    """save_cloud writes a PLY's records a chunk at a time (a merged cloud is 86 MB of records): the bytes
+    must be those of one structured array of every point, whatever the chunk, fields and sigma included."""
+    import io
+
+    from rangekit.formats.ply_write import _ply_header, _vertex_records, write_cloud_ply
+
+    cloud = _cloud(normals=True, colours=True)
+    cloud = PointCloud(cloud.points, cloud.colours, cloud.normals, np.linspace(1e-5, 2e-5, len(cloud)))
+    view = (np.arange(len(cloud)) % 5).astype(np.uint16)
+    rec = _vertex_records(cloud.points, cloud.normals, cloud.colours, cloud.sigma, extra={"view": view})
+    whole = _ply_header("rangekit point cloud, metres", rec.dtype, len(rec)) + rec.tobytes()
+    for chunk in (1, 7, len(cloud) - 1, len(cloud), 1 << 18):
+        out = io.BytesIO()
+        write_cloud_ply(out, cloud, {"view": view}, chunk=chunk)
+        assert out.getvalue() == whole, chunk
+    save_cloud(tmp_path / "c.ply", cloud, fields={"view": view})
+    assert (tmp_path / "c.ply").read_bytes() == whole
+
+
 def test_every_writer_has_a_reader():
     assert set(CLOUD_WRITERS) <= set(CLOUD_READERS)
 

@@ -33,6 +33,7 @@ from typing import TYPE_CHECKING, Callable, Protocol, Sequence
 import numpy as np
 
 from rangekit.app.view_cache import ViewMaps, cache_settings, reload_maps, table_transform, view_clouds
+from rangekit.camera import forget_pixel_rays
 from rangekit.child import call_beside, spawn_child
 from rangekit.errors import ConfigError
 from rangekit.formats.clouds import save_cloud
@@ -63,8 +64,6 @@ CHILD_MIN_POINTS = 100_000
 POISSON_POINTS = 400_000
 #: What the Poisson child imports while the views are registered (Open3D alone: 0.6 s).
 CHILD_IMPORTS = ("open3d", "rangekit.surface.fusion")
-#: What the closing's child imports while Poisson runs (no Open3D: 0.2 GB less resident while it closes).
-CLOSER_IMPORTS = ("rangekit.surface.watertight",)
 
 
 class Evaluation(Protocol):
@@ -80,8 +79,9 @@ class Evaluation(Protocol):
 #: ``evaluate(mesh, angles, cloud=None, views=None)``: the fused mesh (session world) and the views'
 #: turntable angles (radians) to an :class:`Evaluation`; ``cloud`` the merged points (session world),
 #: ``views`` a dict of the views' ``clouds``, registered ``T_world_view``, decoded ``proj_cols`` and
-#: ``names`` for the per-view breakdown. The simulator provides one
-#: (:func:`rangekit.sim.evaluate.truth_evaluator`).
+#: ``names`` for the per-view breakdown. An evaluator may have ``prepare(angles, views)``, run beside the
+#: fusion, after which ``views["proj_cols"]`` is emptied (made into the per-view errors, not kept).
+#: The simulator provides one (:func:`rangekit.sim.evaluate.truth_evaluator`).
 Evaluator = Callable[[object, Sequence[float]], Evaluation]
 
 
@@ -216,21 +216,21 @@ def _process(out: Path, fusion: str, method: str, table_margin: float, evaluate:
         # 230 MB of depth maps) on a thread.
         # One Poisson thread: Open3D's multi-threaded Poisson is not deterministic (a resumed scan must give
         # the same mesh as an uninterrupted one); the other core evaluates beside it.
-        # The fusion gives its whole surface, cut here to the observed mesh, and the surface to close, closed
-        # beside this process (in a second, lighter child: no Open3D) while the observed mesh is saved and measured.
+        # The fusion gives its whole surface, cut here to the observed mesh, and the surface to close, closed on
+        # a thread (its numpy, scipy and numba work lets the GIL go) while the observed mesh is saved and measured.
+        # A second child process took as long and 0.1-0.3 GB more at the peak (docs/benchmarks.md).
         fusing = (call_beside(poisson_surfaces, sample, depth=9, n_threads=1, in_child=in_child, child=child)
                   if fusion == "poisson" else call_beside(_tsdf_surface, maps, res.T_world_view, rig, in_child=False))
         evaluation = None
         with fusing:
-            closer = spawn_child(CLOSER_IMPORTS) if in_child else None
-            if closer is not None:
-                children.enter_context(closer)
             save_cloud(out / "merged.ply", merged, fields={"view": view_index(clouds)})
             # Not kept beside Poisson's octree and the evaluator (2M points, 130 MB): the report remakes it.
             del merged
             if prepare is not None:
                 with timer.stage("evaluate"):
                     prepare(angles, views_info)
+                proj_cols.clear()   # made into the per-view errors (12 decoded maps, 65 MB): not kept beside Poisson
+            forget_pixel_rays()   # the camera's rays (63 MB), used by the decoding and the per-view errors
             # What the views observed: Poisson's input points (the TSDF's: the sample), their spacing.
             rule = observed_rule(sample.points[poisson_input(sample)] if fusion == "poisson" else sample.points)
             del sample
@@ -243,8 +243,9 @@ def _process(out: Path, fusion: str, method: str, table_margin: float, evaluate:
                     rows = view_rows(names, clouds, (lambda k: maps[k]) if maps is not None else
                                      (lambda k: reload_maps(views[k], spec, settings)), rig=rig,
                                      full_scale=session.capture.full_scale, up=table_up(rig), progress=progress)
+            release_free_memory()   # what this process freed beside Poisson, before the closing and the evaluation
             full, trimmed = fusing.result()
-        with call_beside(make_watertight, trimmed, in_child=in_child, child=closer) as closing:
+        with call_beside(make_watertight, trimmed, in_child=False) as closing:
             del trimmed
             mesh = rule.observed_part(full)
             del full

@@ -215,7 +215,7 @@ def _object_bytes(obj: str, up) -> tuple[str, bytes]:
     if u is None or np.allclose(u / np.linalg.norm(u), [0.0, 0.0, 1.0]):
         return path.name, path.read_bytes()
     from rangekit.formats.meshes import load_mesh_file
-    from rangekit.formats.ply import mesh_ply_bytes
+    from rangekit.formats.ply_write import mesh_ply_bytes
     from rangekit.surface.mesh import TriangleMesh
 
     R = R_up_to_z(u)

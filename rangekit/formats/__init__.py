@@ -12,7 +12,8 @@ _EXPORTS = {
                 "save_decoded"),
     "clouds": ("CLOUD_READERS", "CLOUD_WRITERS", "RangeGrid", "load_cloud", "load_range_grid", "save_cloud"),
     "meshes": ("MESH_FORMATS", "load_mesh_file", "save_mesh"),
-    "ply": ("cloud_ply_bytes", "mesh_ply_bytes", "read_ply"),
+    "ply": ("read_ply",),
+    "ply_write": ("cloud_ply_bytes", "mesh_ply_bytes", "write_cloud_ply"),
     "poses": ("POSES_SCHEMA", "load_poses", "save_poses"),
     "range_files": ("ToFFolder", "load_ground_truth", "load_tof_folder"),
     "session": ("SESSION_SCHEMA", "CaptureSettings", "ScanPlan", "Session", "SessionView", "SimulatorSettings",
@@ -25,6 +26,7 @@ _MODULE_OF = {name: module for module, names in _EXPORTS.items() for name in nam
 
 __all__ = ["load_cloud", "save_cloud", "CLOUD_READERS", "CLOUD_WRITERS", "RangeGrid", "load_range_grid",
            "load_mesh_file", "save_mesh", "MESH_FORMATS", "read_ply", "cloud_ply_bytes", "mesh_ply_bytes",
+           "write_cloud_ply",
            "IMAGE_SUFFIXES", "Capture", "list_images", "load_capture", "pattern_spec_for", "read_stack",
            "save_decoded", "POSES_SCHEMA", "load_poses", "save_poses", "ToFFolder", "load_ground_truth",
            "load_tof_folder", "SESSION_SCHEMA", "CaptureSettings", "ProcessResult",

@@ -26,8 +26,9 @@ from rangekit.errors import FileFormatError
 from rangekit.formats.parsing import cloud_of_finite_rows, read_bytes
 from rangekit.formats.e57 import e57_bytes, read_e57
 from rangekit.formats.pcd import pcd_bytes, read_pcd
-from rangekit.formats.ply import cloud_ply_bytes, ply_points, ply_vertex_attributes, ply_vertex_scalar, read_ply
-from rangekit.io import atomic_write_bytes
+from rangekit.formats.ply import ply_points, ply_vertex_attributes, ply_vertex_scalar, read_ply
+from rangekit.formats.ply_write import cloud_ply_bytes, write_cloud_ply
+from rangekit.io import atomic_write_bytes, atomic_write_with
 from rangekit.surface.cloud import PointCloud
 from rangekit.surface.convert import as_cloud
 
@@ -71,7 +72,10 @@ def save_cloud(path: str | Path, cloud, *, fields: dict[str, np.ndarray] | None 
     if fields and writer is not cloud_ply_bytes:
         raise FileFormatError(f"{path}: extra point fields ({', '.join(fields)}) are written to '.ply' only, "
                               f"found {path.suffix!r}")
-    atomic_write_bytes(path, cloud_ply_bytes(cloud, fields) if fields else writer(cloud))
+    if writer is cloud_ply_bytes:   # straight into the file, a chunk of records at a time
+        atomic_write_with(path, lambda f: write_cloud_ply(f, cloud, fields))
+    else:
+        atomic_write_bytes(path, writer(cloud))
 
 
 class RangeGrid(NamedTuple):

@@ -9,7 +9,8 @@ from pathlib import Path
 import numpy as np
 
 from rangekit.errors import FileFormatError
-from rangekit.formats.ply import mesh_ply_bytes, ply_observed, ply_vertex_attributes, read_ply
+from rangekit.formats.ply import ply_observed, ply_vertex_attributes, read_ply
+from rangekit.formats.ply_write import mesh_ply_bytes
 from rangekit.io import atomic_write_bytes
 from rangekit.surface.convert import as_mesh
 from rangekit.surface.mesh import TriangleMesh

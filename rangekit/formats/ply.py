@@ -1,13 +1,12 @@
-"""PLY files (Stanford polygon format) of point clouds and meshes: one reader and one writer.
+"""PLY files (Stanford polygon format) of point clouds and meshes: the one reader.
 
 Reader (:func:`read_ply`): the header is parsed here (its errors name the line, the expected and the found
 text); binary bodies of either byte order are read by ``plyfile`` (memory-mapped: each list property's
 length taken from the element's first row, plyfile's own row-by-row reader when lengths vary); ASCII
 bodies by a vectorised numpy parser, because plyfile parses ASCII row by row in Python (the Stanford scan
 bun000.ply, ASCII with a ragged ``range_grid``: 0.05 s here against 1.6 s, docs/benchmarks.md). Malformed
-and truncated files raise FileFormatError naming the file, the expected and the found value. Writer
-(:func:`cloud_ply_bytes`, :func:`mesh_ply_bytes`): binary little-endian from one structured array per
-element (plyfile writes list properties row by row in Python: 1.4 CPU-s for 897k triangles, against 0.02).
+and truncated files raise FileFormatError naming the file, the expected and the found value. The writer
+is :mod:`rangekit.formats.ply_write`.
 """
 
 from __future__ import annotations
@@ -18,14 +17,10 @@ from pathlib import Path
 
 import numpy as np
 
-from rangekit.errors import FileFormatError, InputError
+from rangekit.errors import FileFormatError
 from rangekit.formats.parsing import ascii_rows, read_bytes, truncated_error
-from rangekit.surface.cloud import PointCloud
-from rangekit.surface.mesh import TriangleMesh
-from rangekit.surface.quality import vertex_normals
 
-__all__ = ["PlyLists", "PlyHeader", "read_ply", "ply_points", "ply_observed", "ply_vertex_attributes", "ply_vertex_scalar",
-           "cloud_ply_bytes", "mesh_ply_bytes"]
+__all__ = ["PlyLists", "PlyHeader", "read_ply", "ply_points", "ply_observed", "ply_vertex_attributes", "ply_vertex_scalar"]
 
 
 @dataclass(frozen=True)
@@ -317,82 +312,3 @@ def ply_vertex_scalar(header: PlyHeader, vertex: dict, name: str) -> np.ndarray 
 
 
 # ----------------------------------------------------------------------------------------- writer
-
-_PLY_NAMES = {"float64": "double", "float32": "float", "uint8": "uchar", "int32": "int", "uint16": "ushort",
-              "int16": "short", "uint32": "uint"}
-
-
-def _ply_bytes(comment: str, vertex: np.ndarray, faces: np.ndarray | None = None) -> bytes:
-    """Binary little-endian PLY of a structured vertex array and optional (F, 3) int32 triangles (the
-    header and the records joined in one copy: a 2M-point cloud's body is 86 MB)."""
-    header = ["ply", "format binary_little_endian 1.0", f"comment {comment}", f"element vertex {len(vertex)}"]
-    header += [f"property {_PLY_NAMES[vertex.dtype[n].name]} {n}" for n in vertex.dtype.names]
-    parts = [memoryview(vertex).cast("B")]
-    if faces is not None:
-        rec = np.empty(len(faces), dtype=[("n", "u1"), ("idx", "<i4", (3,))])
-        rec["n"] = 3
-        rec["idx"] = faces
-        header += [f"element face {len(rec)}", "property list uchar int vertex_indices"]
-        parts.append(memoryview(rec).cast("B"))
-    header.append("end_header")
-    return b"".join([("\n".join(header) + "\n").encode("ascii"), *parts])
-
-
-def _vertex_records(points: np.ndarray, normals: np.ndarray | None, colours: np.ndarray | None,
-                    sigma: np.ndarray | None = None, observed: np.ndarray | None = None,
-                    extra: dict[str, np.ndarray] | None = None) -> np.ndarray:
-    """Structured vertex rows: float64 x y z, float32 nx ny nz, uint8 red green blue, float32 sigma
-    (metres), uint8 observed (1 where a view's points support the vertex, 0 where the fusion invented it)
-    (the optional ones only when given; colours in [0, 1] are rounded to 8 bits)."""
-    fields = [("x", "<f8"), ("y", "<f8"), ("z", "<f8")]
-    if normals is not None:
-        fields += [("nx", "<f4"), ("ny", "<f4"), ("nz", "<f4")]
-    if colours is not None:
-        fields += [("red", "u1"), ("green", "u1"), ("blue", "u1")]
-    if sigma is not None:
-        fields += [("sigma", "<f4")]
-    if observed is not None:
-        fields += [("observed", "u1")]
-    extra = extra or {}
-    taken = {f[0] for f in fields} & set(extra)
-    if taken:
-        raise InputError(f"PLY fields {sorted(taken)}: expected names other than the vertex's own, found them again")
-    fields += [(name, "<" + values.dtype.str[1:]) for name, values in extra.items()]
-    rec = np.empty(len(points), dtype=fields)
-    for name, values in extra.items():
-        rec[name] = values
-    rec["x"], rec["y"], rec["z"] = points.T
-    if normals is not None:
-        rec["nx"], rec["ny"], rec["nz"] = normals.T
-    if colours is not None:
-        rgb = np.clip(np.rint(colours * 255), 0, 255).astype(np.uint8)
-        rec["red"], rec["green"], rec["blue"] = rgb.T
-    if sigma is not None:
-        rec["sigma"] = sigma
-    if observed is not None:
-        rec["observed"] = np.asarray(observed, dtype=bool)
-    return rec
-
-
-def cloud_ply_bytes(cloud: PointCloud, fields: dict[str, np.ndarray] | None = None) -> bytes:
-    """A point cloud as binary PLY: float64 xyz, float32 normals, uint8 RGB, float32 ``sigma`` (the
-    predicted std along the camera ray, metres), then ``fields``: extra per-point properties, name -> (N,)
-    array of its own type (e.g. ``view`` uint16: the view each point of a merged cloud came from);
-    comment "metres"."""
-    fields = {name: np.asarray(values) for name, values in (fields or {}).items()}
-    for name, values in fields.items():
-        if values.shape != (len(cloud),) or values.dtype.name not in _PLY_NAMES:
-            raise InputError(f"PLY field {name!r}: expected a ({len(cloud)},) array of {', '.join(_PLY_NAMES)}, "
-                             f"found {values.dtype} {values.shape}")
-    rec = _vertex_records(cloud.points, cloud.normals, cloud.colours, cloud.sigma, extra=fields)
-    return _ply_bytes("rangekit point cloud, metres", rec)
-
-
-def mesh_ply_bytes(mesh: TriangleMesh, units: str = "metres") -> bytes:
-    """A triangle mesh as binary PLY: float64 xyz, float32 unit area-weighted vertex normals ``nx ny nz`` (what
-    MeshLab, Open3D and trimesh shade with), uint8 RGB, uint8 ``observed`` (when the mesh has the flag), faces
-    as ``list uchar int``, comment "rangekit mesh, UNITS" (``units``: metres, or pixels for a photometric
-    surface whose camera is not known)."""
-    normals = vertex_normals(mesh.vertices, mesh.triangles, sums=mesh.normal_sums)
-    return _ply_bytes(f"rangekit mesh, {units}", _vertex_records(mesh.vertices, normals, mesh.vertex_colours,
-                                                               observed=mesh.observed), mesh.triangles)

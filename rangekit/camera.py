@@ -354,10 +354,7 @@ _RAY_CACHE: dict[bytes, np.ndarray] = {}
 
 
 def pixel_rays(camera: PinholeCamera) -> np.ndarray:
-    """Unit ray directions of every pixel centre, in the camera's own frame (lens distortion undone).
-
-    Returns
-    -------
+    """Unit ray directions of every pixel centre, in the camera's own frame (lens distortion undone):
     (H, W, 3) float64, read-only: ``d[v, u]`` is the unit direction (x right, y down, z forward) of the
     ray through pixel centre ``(u, v)``; NaN where the lens model cannot be inverted. The world-frame
     rays are ``transform_vectors(camera.T_world_cam, d.reshape(-1, 3))`` from ``camera.center``, bit for
@@ -377,9 +374,8 @@ def pixel_rays(camera: PinholeCamera) -> np.ndarray:
 def world_pixel_rays(camera: PinholeCamera) -> tuple[np.ndarray, np.ndarray]:
     """World rays of every pixel centre, row by row: ``(origins, directions)``, (H * W, 3) float64 each (the
     optical centre; unit vectors, NaN where the lens cannot be inverted), as ``camera.rays(camera.pixel_grid())``.
-    Both are read-only. The directions are cached per lens and pose (a turntable scan's views share the pose);
-    the origins are the centre broadcast to every row, no memory (a copy was 74 MB per call at 2048x1500,
-    made and dropped by most callers, which read only the directions)."""
+    Both read-only: the directions cached per lens and pose (a turntable scan's views share the pose), the
+    origins the centre broadcast to every row (no memory: most callers read only the directions)."""
     key = b"world" + camera.T_world_cam.tobytes() + _lens_key(camera)
     if key not in _RAY_CACHE:
         _cache_rays(key, transform_vectors(camera.T_world_cam, pixel_rays(camera).reshape(-1, 3)))
@@ -392,8 +388,7 @@ def _lens_key(camera: PinholeCamera) -> bytes:
 
 
 def forget_pixel_rays() -> None:
-    """Drop the cached rays of :func:`pixel_rays` and :func:`world_pixel_rays` (63 MB for a 1280x1024
-    camera): processing calls it when the views are decoded and measured, before the fusion's peak."""
+    """Drop the cached rays (63 MB at 1280x1024): processing's views are decoded and measured."""
     _RAY_CACHE.clear()
 
 

@@ -5,7 +5,7 @@ The names below are loaded on first use (PEP 562): importing one module of this 
 ``rangekit.formats.capture`` for ``rangekit decode``, does not import the others (clouds and meshes pull in
 ``rangekit.surface`` and scipy.spatial, about 0.6 s)."""
 
-import importlib
+from rangekit.lazy import lazy_exports
 
 _EXPORTS = {
     "capture": ("IMAGE_SUFFIXES", "Capture", "list_images", "load_capture", "pattern_spec_for", "read_stack",
@@ -33,20 +33,4 @@ __all__ = ["load_cloud", "save_cloud", "CLOUD_READERS", "CLOUD_WRITERS", "RangeG
            "ScanPlan", "Session", "SessionView", "SimulatorSettings", "load_session", "view_folder", "verify_views",
            "SessionLocked", "session_lock", "SUMMARY_SCHEMA"]
 
-
-def __getattr__(name: str):
-    """A name of ``__all__`` from its module, or a submodule, imported on first use."""
-    if name in _MODULE_OF:
-        value = getattr(importlib.import_module(f"rangekit.formats.{_MODULE_OF[name]}"), name)
-        globals()[name] = value
-        return value
-    try:
-        return importlib.import_module(f"rangekit.formats.{name}")
-    except ModuleNotFoundError as exc:
-        if exc.name != f"rangekit.formats.{name}":
-            raise
-        raise AttributeError(f"module 'rangekit.formats' has no attribute {name!r}") from None
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(__all__))
+__getattr__, __dir__ = lazy_exports(__name__, _MODULE_OF, __all__)

@@ -24,7 +24,9 @@ from rangekit.surface.cloud import to_open3d as _cloud_to_open3d
 from rangekit.surface.convert import as_cloud
 from rangekit.surface.mesh import TriangleMesh, mesh_from_open3d
 from rangekit.surface.observed import OBSERVED_FACTOR, FusedMeshes, observed_rule
-from rangekit.surface.watertight import clean_mesh, make_watertight
+
+# rangekit.surface.watertight (numba's kernels, 90 MB with scipy) is imported where a surface is closed:
+# Poisson's child process (rangekit.app.process) imports this module and never closes one.
 
 __all__ = ["poisson_mesh", "poisson_meshes", "poisson_surfaces", "poisson_input", "poisson_input_problem", "tsdf_fuse"]
 
@@ -75,6 +77,8 @@ def poisson_mesh(cloud: PointCloud, *, depth: int = 9, density_quantile: float =
     """
     cloud = as_cloud(cloud, "poisson_mesh cloud")
     mesh, _, _ = _poisson_surface(cloud, depth, density_quantile, watertight, n_threads)
+    from rangekit.surface.watertight import clean_mesh, make_watertight
+
     return make_watertight(mesh) if watertight else clean_mesh(mesh, fill=False)
 
 
@@ -141,6 +145,8 @@ def poisson_meshes(cloud: PointCloud, *, depth: int = 9, density_quantile: float
     full, trimmed = poisson_surfaces(cloud, depth=depth, density_quantile=density_quantile, n_threads=n_threads)
     ok = poisson_input(cloud)
     rule = observed_rule(cloud.points[ok], spacing=None if spacing is None else np.asarray(spacing)[ok], factor=factor)
+    from rangekit.surface.watertight import make_watertight
+
     return FusedMeshes(rule.observed_part(full), rule.flagged(make_watertight(trimmed)))
 
 
@@ -293,5 +299,7 @@ def tsdf_fuse(views: Sequence[tuple[np.ndarray, np.ndarray | None, PinholeCamera
     if len(mesh.triangles) == 0:
         raise MeshError(f"tsdf_fuse: the volume holds no surface after {len(checked)} views (voxel "
                             f"{voxel:.4g} m, sdf_trunc {trunc:.4g} m); check the camera poses")
+    from rangekit.surface.watertight import clean_mesh, make_watertight
+
     return make_watertight(mesh) if watertight else clean_mesh(mesh, fill=False)
 

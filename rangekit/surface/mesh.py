@@ -132,7 +132,10 @@ def signed_volume(V: np.ndarray, F: np.ndarray) -> float:
     if len(F) == 0:
         return 0.0
     c = V.mean(axis=0)
-    a, b, d = V[F[:, 0]] - c, V[F[:, 1]] - c, V[F[:, 2]] - c
+    a, b, d = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
+    a -= c   # in place: three (F, 3) arrays, not six
+    b -= c
+    d -= c
     return float(np.einsum("ij,ij->i", a, np.cross(b, d)).sum() / 6.0)
 
 

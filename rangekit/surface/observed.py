@@ -19,12 +19,15 @@ Units are metres; the mesh and the points share one frame. Deterministic (scipy'
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from rangekit.errors import InputError
 from rangekit.surface.mesh import TriangleMesh
+
+if TYPE_CHECKING:   # scipy.spatial is imported where a tree is built: Poisson's child imports this module only
+    from scipy.spatial import cKDTree
 
 __all__ = ["OBSERVED_FACTOR", "SPACING_NEIGHBOURS", "MAX_SPACING_RATIO", "FusedMeshes", "point_spacing",
            "observed_vertices", "keep_observed", "split_observed",
@@ -60,6 +63,8 @@ def point_spacing(points: np.ndarray, *, k: int = SPACING_NEIGHBOURS) -> np.ndar
     """(N,) metres: each point's mean distance to its ``k`` nearest other points of ``points`` (N, 3)
     (non-finite rows dropped first: the result is per finite point, in order)."""
     P = _points(points, "point_spacing")
+    from scipy.spatial import cKDTree
+
     return _spacing(cKDTree(P), k)
 
 
@@ -102,6 +107,8 @@ def _spaced_tree(points: np.ndarray, spacing: np.ndarray | None, factor: float, 
     if P.ndim == 2 and P.shape[1] == 3 and not np.all(np.isfinite(P)):
         raise InputError(f"observed_vertices: points must be finite, found "
                          f"{np.count_nonzero(~np.isfinite(P).all(axis=1))} rows that are not")
+    from scipy.spatial import cKDTree
+
     tree = cKDTree(_points(P, "observed_vertices"))
     s = _spacing(tree, k) if spacing is None else np.asarray(spacing, dtype=np.float64)
     if s.shape != (tree.n,) or not np.all(np.isfinite(s) & (s >= 0)):

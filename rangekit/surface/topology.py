@@ -101,8 +101,13 @@ def is_closed_manifold(V: np.ndarray, F: np.ndarray) -> bool:
     ids[used] = merged_vertex_ids(np.asarray(V, dtype=np.float64)[used])[1]  # only referenced ones, as trimesh
     E = ids[directed_edges(F)]
     n = int(ids.max()) + 1
-    lo, hi = np.minimum(E[:, 0], E[:, 1]), np.maximum(E[:, 0], E[:, 1])
-    s = np.sort((lo * n + hi) * 2 + (E[:, 0] > E[:, 1]))   # undirected key, then the direction bit
+    s = np.minimum(E[:, 0], E[:, 1])   # the undirected key (lo * n + hi), then the direction bit, in place
+    s *= n
+    s += np.maximum(E[:, 0], E[:, 1])
+    s *= 2
+    s += E[:, 0] > E[:, 1]
+    del E
+    s.sort()
     if len(s) % 2:
         return False
     k = s >> 1

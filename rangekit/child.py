@@ -52,7 +52,10 @@ def _serve() -> None:
     at stderr for any prints)."""
     answer_fd = os.dup(1)
     os.dup2(2, 1)
+    from rangekit.open3d_viewer import defer_plotly_viewer
     from rangekit.threads import one_blas_thread
+
+    defer_plotly_viewer()   # Poisson's child imports Open3D: not its plotly viewer (0.2 CPU-s, 42 MB)
 
     try:
         for name in pickle.load(sys.stdin.buffer):
@@ -104,14 +107,16 @@ class ChildCall:
 
     def result(self) -> Any:
         """Wait for the child's answer; return it, or raise its exception."""
-        data = self._proc.stdout.read()
+        try:   # unpickled as it arrives: the answer's bytes (66 MB for Poisson's two meshes) are never held whole
+            status, value = pickle.load(self._proc.stdout)
+        except (EOFError, pickle.UnpicklingError):
+            status = None
         code = self._proc.wait()
         if self._writer is not None:
             self._writer.join()
-        if not data:
+        if status is None:
             raise RangekitError(f"{self._name} in a child process ended without an answer (exit code {code}; a "
                                 "negative code is the signal that ended it, -9 often the system out of memory)")
-        status, value = pickle.loads(data)
         if status == "error":
             raise value
         return value

@@ -124,3 +124,18 @@ def test_a_spawned_child_not_used_is_ended_with_its_block():
     with spawn_child(("colorsys",)) as child:
         pass
     assert child._proc.returncode is not None
+
+
+def loaded(*names):
+    return [name for name in names if name in sys.modules]
+
+
+def test_poissons_child_loads_open3d_and_the_fusion_without_numba_scipy_or_plotly():
+    """Processing's Poisson child holds its octree beside the main process: what it imports counts at the
+    peak (numba and scipy came with rangekit.surface's package import: 89 MB; plotly with Open3D: 42 MB)."""
+    from rangekit.app.process import CHILD_IMPORTS
+
+    with spawn_child(CHILD_IMPORTS) as child:
+        got = call_beside(loaded, "open3d", "rangekit.surface.fusion", "numba", "scipy", "plotly", "dash",
+                          in_child=True, child=child).result()
+    assert got == ["open3d", "rangekit.surface.fusion"]

@@ -55,7 +55,7 @@ def _serve() -> None:
     from rangekit.open3d_viewer import defer_plotly_viewer
     from rangekit.threads import one_blas_thread
 
-    defer_plotly_viewer()   # Poisson's child imports Open3D: not its plotly viewer (0.2 CPU-s, 42 MB)
+    defer_plotly_viewer()   # Poisson's child imports Open3D: not its plotly viewer (0.2-0.4 CPU-s, 42 MB)
 
     try:
         for name in pickle.load(sys.stdin.buffer):

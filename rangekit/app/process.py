@@ -229,7 +229,7 @@ def _process(out: Path, fusion: str, method: str, table_margin: float, evaluate:
             if prepare is not None:
                 with timer.stage("evaluate"):
                     prepare(angles, views_info)
-                proj_cols.clear()   # made into the per-view errors (12 decoded maps, 65 MB): not kept beside Poisson
+                proj_cols.clear()   # made into the per-view errors (12 decoded maps, 63 MB): not kept beside Poisson
             forget_pixel_rays()   # the camera's rays (63 MB), used by the decoding and the per-view errors
             # What the views observed: Poisson's input points (the TSDF's: the sample), their spacing.
             rule = observed_rule(sample.points[poisson_input(sample)] if fusion == "poisson" else sample.points)

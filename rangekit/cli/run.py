@@ -91,7 +91,7 @@ def main(argv: list[str] | None = None) -> int:
     """Run one command; return its exit code: 0 done, 1 runtime failure (bad data, device fault, I/O),
     2 usage error (bad option, unusable output path), 130 interrupted. Never a traceback, unless the
     environment sets ``RANGEKIT_DEBUG=1`` (then unexpected exceptions propagate)."""
-    defer_plotly_viewer()   # rangekit's process: Open3D's plotly viewer imported only if called (0.2 CPU-s, 42 MB)
+    defer_plotly_viewer()   # rangekit's process: Open3D's plotly viewer imported only if called (0.2-0.4 CPU-s, 42 MB)
     try:
         args = build_parser().parse_args(argv)
         _verbosity(args)

@@ -26,7 +26,7 @@ import numpy as np
 from rangekit.errors import InputError
 from rangekit.surface.mesh import TriangleMesh
 
-if TYPE_CHECKING:   # scipy.spatial is imported where a tree is built: Poisson's child imports this module only
+if TYPE_CHECKING:   # scipy.spatial is imported where a tree is built: Poisson's child imports this module, builds none
     from scipy.spatial import cKDTree
 
 __all__ = ["OBSERVED_FACTOR", "SPACING_NEIGHBOURS", "MAX_SPACING_RATIO", "FusedMeshes", "point_spacing",

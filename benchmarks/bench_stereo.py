@@ -14,7 +14,8 @@ matchers, on 1 and on 2 threads (numba.set_num_threads and cv2.setNumThreads); c
 same disparities on both.
 
 Run: .venv/bin/python benchmarks/bench_stereo.py
-     .venv/bin/python benchmarks/bench_stereo.py --asm      (packed int16 instructions in the aggregation)
+     .venv/bin/python benchmarks/bench_stereo.py --asm      (packed int16 instructions and overlap tests in
+     the aggregation of one row, compiled noalias and not)
      .venv/bin/python benchmarks/bench_stereo.py --tables   (docs/stereo.md's accuracy tables, a make
      docs-figures block: 320x200 and 640x400, dots on and off, both matchers through stereo_depth)
      .venv/bin/python benchmarks/bench_stereo.py --markdown            (docs/benchmarks.md's timing table and
@@ -54,22 +55,34 @@ def min_of_runs(fns, repeat, outs):
 
 
 def packed_ops() -> None:
-    """Count the packed int16 minimum/add instructions numba emits for the aggregation pass (a fresh,
-    uncached compilation of rangekit.stereo._sgm._pass: a cached one carries no assembly)."""
+    """Count the packed int16 minimum/add instructions numba emits for one row of the 8-path aggregation
+    (rangekit.stereo._sgm._row, compiled afresh: a cached function carries no assembly), compiled
+    ``noalias`` as rangekit does and without it; ``setb`` counts the run-time overlap tests LLVM adds when
+    it cannot rule out that the row buffers overlap."""
     import re
     from collections import Counter
 
+    from numba.core.compiler import Compiler
+
+    from rangekit.noalias import NoAliasCompiler
     from rangekit.stereo import _sgm
-    H, W, D = 8, 40, 16
-    cl = np.zeros((H, W), np.uint64)
-    fresh = numba.njit(nogil=True)(_sgm._pass.py_func)
-    Lb, Mb = np.zeros((2, 3, W + 2, D + 2), np.int16), np.zeros((2, 3, W + 2), np.int16)
-    out = np.empty((H, W), np.float32)
-    fresh(cl, cl, 0, np.int16(62), np.int16(10), np.int16(120), False, True, 0, H, Lb, Mb,
-          np.zeros((H, W, D), np.int16), True, 0.05, 2, 1, out, out.copy())
-    asm = next(iter(fresh.inspect_asm().values()))
-    ops = Counter(re.findall(r"^\s+(vpminsw|vpaddw|vpsubw|vpminsd|vpopcntq|vminss|vminsd)\s", asm, re.M))
-    print("instructions in _sgm._pass:", dict(ops), "(packed int16: vpminsw / vpaddw / vpsubw; scalar: vminss)")
+    W, lanes = 40, 32
+    crow, e, o = (np.zeros((W, lanes), np.int16) for _ in range(3))
+    Lp, Lc = (np.zeros((3, W + 2, lanes + 2), np.int16) for _ in range(2))
+    Mp, Mc = (np.zeros((3, W + 2), np.int16) for _ in range(2))
+    h0, h1 = (np.zeros(lanes + 2, np.int16) for _ in range(2))
+    for label, pipeline in (("noalias (rangekit)", NoAliasCompiler), ("plain njit", Compiler)):
+        row = numba.njit(nogil=True, pipeline_class=pipeline)(_sgm._row.py_func)
+
+        @numba.njit
+        def call(crow, Lp, Mp, Lc, Mc, h0, h1, e, o):
+            row(crow, Lp, Mp, Lc, Mc, h0, h1, e, o, False, True, np.int16(10), np.int16(120))
+
+        call(crow, Lp, Mp, Lc, Mc, h0, h1, e, o)
+        asm = next(iter(row.inspect_asm().values()))
+        ops = Counter(re.findall(r"^\s+(vpminsw|vpaddw|vpsubw|vminss|setb)\s", asm, re.M))
+        print(f"instructions in _sgm._row, {label}:", dict(ops))
+    print("(packed int16: vpminsw / vpaddw / vpsubw; scalar: vminss; setb: run-time overlap tests)")
 
 
 def accuracy(dmap, rect, left, cap, mask):

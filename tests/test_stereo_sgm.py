@@ -86,12 +86,14 @@ def _pair(H=14, W=40, shift=5, seed=0):
     return base[:, :W], base[:, shift:W + shift]
 
 
-@pytest.mark.parametrize("paths, P1, P2, window, lr", [(8, 10, 120, (9, 7), True), (4, 3, 40, (5, 3), False),
-                                                       (8, 30, 4000, (13, 5), True)])
-def test_fused_kernel_matches_the_equations(paths, P1, P2, window, lr):
-    L, R = _pair()
-    ref_d, ref_c = _reference(L, R, 16, window, P1, P2, paths, 0.05, lr)
-    got = sgm_disparity(L, R, num_disparities=16, window=window, P1=P1, P2=P2, paths=paths, prefilter=0,
+@pytest.mark.parametrize("paths, P1, P2, window, lr, D, W", [
+    (8, 10, 120, (9, 7), True, 16, 40), (4, 3, 40, (5, 3), False, 16, 40), (8, 30, 4000, (13, 5), True, 16, 40),
+    (8, 10, 120, (9, 7), True, 48, 61), (4, 10, 120, (9, 7), True, 48, 61)])
+def test_fused_kernel_matches_the_equations(paths, P1, P2, window, lr, D, W):
+    """Also at 48 disparities (padded to 64 lanes inside the kernel) and an odd width (rows go in pixel pairs)."""
+    L, R = _pair(W=W)
+    ref_d, ref_c = _reference(L, R, D, window, P1, P2, paths, 0.05, lr)
+    got = sgm_disparity(L, R, num_disparities=D, window=window, P1=P1, P2=P2, paths=paths, prefilter=0,
                         subpixel="none", median=False, lr_max_diff=1 if lr else -1)
     np.testing.assert_array_equal(got.disparity, ref_d)
     ok = np.isfinite(ref_d)

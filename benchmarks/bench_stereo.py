@@ -16,6 +16,8 @@ same disparities on both.
 Run: .venv/bin/python benchmarks/bench_stereo.py
      .venv/bin/python benchmarks/bench_stereo.py --asm      (packed int16 instructions and overlap tests in
      the aggregation of one row, compiled noalias and not)
+     .venv/bin/python benchmarks/bench_stereo.py --parts    (census-SGM's stages timed apart: census of both
+     images, sgm_match, the 3x3 median; min of 15 on 1 and 2 threads)
      .venv/bin/python benchmarks/bench_stereo.py --tables   (docs/stereo.md's accuracy tables, a make
      docs-figures block: 320x200 and 640x400, dots on and off, both matchers through stereo_depth)
      .venv/bin/python benchmarks/bench_stereo.py --markdown            (docs/benchmarks.md's timing table and
@@ -83,6 +85,32 @@ def packed_ops() -> None:
         ops = Counter(re.findall(r"^\s+(vpminsw|vpaddw|vpsubw|vminss|setb)\s", asm, re.M))
         print(f"instructions in _sgm._row, {label}:", dict(ops))
     print("(packed int16: vpminsw / vpaddw / vpsubw; scalar: vminss; setb: run-time overlap tests)")
+
+
+def parts() -> None:
+    """census-SGM's stages on the benchmark pair, each timed alone (min of REPEAT after a warm-up)."""
+    from rangekit.stereo import _kernels, _sgm
+    from rangekit.stereo.matching import census_transform
+    rig = stereo_rig(640, 400)
+    cap = render_stereo(stereo_scene(), rig, dots=True, seed=0)
+    L, R = (np.asarray(im, np.uint8) for im in rectify_images(rectify(*rig.cameras), cap.left, cap.right))
+    cl, cr = census_transform(L, (9, 7)), census_transform(R, (9, 7))
+    disp, conf = np.empty(L.shape, np.float32), np.empty(L.shape, np.float32)
+    stages = {
+        "census, both images": lambda: (census_transform(L, (9, 7)), census_transform(R, (9, 7))),
+        "sgm_match (cost, 8 paths, winner-take-all, left-right check)": lambda: _sgm.sgm_match(
+            cl, cr, 0, N_DISP, np.int16(62), np.int16(10), np.int16(120), True, 0.05, 2, 1, disp, conf),
+        "3x3 median": lambda: _kernels.median3(disp, np.empty_like(disp)),
+    }
+    n_all = numba.get_num_threads()
+    print("| stage | 1 thread | 2 threads |\n|---|---|---|")
+    for name, fn in stages.items():
+        times = []
+        for threads in (1, 2):
+            numba.set_num_threads(min(threads, n_all))
+            times.append(min_of_runs({name: fn}, REPEAT, {})[name][0])
+        print(f"| {name} | {times[0] * 1e3:.1f} ms | {times[1] * 1e3:.1f} ms |")
+    numba.set_num_threads(n_all)
 
 
 def accuracy(dmap, rect, left, cap, mask):
@@ -200,6 +228,8 @@ def tables() -> None:
 if __name__ == "__main__":
     if "--tables" in sys.argv[1:]:
         tables()
+    elif "--parts" in sys.argv[1:]:
+        parts()
     elif "--asm" in sys.argv[1:]:
         packed_ops()
     elif "--markdown" in sys.argv[1:]:

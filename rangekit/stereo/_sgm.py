@@ -66,12 +66,13 @@ def _rec(p, k, m, jump, ck, P1):  # pragma: no cover - compiled
 def step4(ph, mh, pv, mv, pa, ma, pb, mb, c, ch, cv, ca, cb, e, o, P1, P2, diagonals):  # pragma: no cover
     """One SGM recurrence (Hirschmuller 2008, eq. 13) for the paths of one pass at one pixel, all
     disparities, in one packed loop: horizontal (h), vertical (v) and, when ``diagonals`` (a compile-time
-    constant), both diagonals (a, b). Path r reads its previous L ``p_r`` (D + 2,) int16 with pad lanes 0
-    and D + 1 (value ``_PAD``) and minimum ``m_r``, and writes its new L into ``c_r``:
+    constant), both diagonals (a, b). With n = c.shape[0] (the padded lanes), path r reads its previous L
+    ``p_r`` (n + 2,) int16 with pad lanes 0 and n + 1 (value ``_PAD``) and minimum ``m_r``, and writes its
+    new L into ``c_r``:
 
         c_r[k + 1] = c[k] + min(p_r[k + 1], p_r[k] + P1, p_r[k + 2] + P1, m_r + P2) - m_r
 
-    c : (D,) int16 matching cost; o[k] = the paths' sum + e[k]. Returns the new minima (h, v, a, b; a and
+    c : (n,) int16 matching cost; o[k] = the paths' sum + e[k]. Returns the new minima (h, v, a, b; a and
     b are 0 without diagonals). One loop for all paths: each cost lane is loaded once, each L lane stored
     once (measured 20 % faster than one loop per path and a sum loop).
     """

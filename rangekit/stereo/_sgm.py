@@ -15,9 +15,9 @@ Why it is laid out this way (issue 20):
   :func:`rangekit.noalias.njit_noalias`: its arguments are distinct buffers (the previous and the current
   row's state, the horizontal path's two scratch rows, the cost, the other pass's sum, the output), so
   LLVM packs the disparity loop without checking at every pixel that 13 arrays do not overlap. Those
-  checks, and reloading the addresses they compare, took more time than the loop itself: the
-  aggregation of the 640x400 benchmark pair went from 41 to 22 ms on one thread with the same
-  disparities. Pixels go in pairs so that the horizontal path reads from one scratch argument and writes
+  checks, and reloading the addresses they compare, took more time than the loop itself: ``sgm_match``
+  on the 640x400 benchmark pair went from 41 to 22 ms on one thread with the same disparities
+  (``benchmarks/bench_stereo.py --parts``). Pixels go in pairs so that the horizontal path reads from one scratch argument and writes
   to the other (h1 -> h0, then h0 -> h1).
 - **Lanes in whole registers.** The disparities are padded to ``lanes``, a multiple of 32 (one 512-bit
   register of int16): LLVM packs the loop by 32 and leaves the rest to scalar code, which made 48

@@ -47,11 +47,11 @@ def scan_once(out: Path) -> tuple[float, float, float]:
 
 def stages(session: Path) -> dict[str, float]:
     """CPU ms of each stage of one view (after a first view that warms the caches), in this process."""
-    from rangekit.formats.session import Session
+    from rangekit.formats.sessions.session import Session
     from rangekit.io import atomic_write_bytes, encode_png
-    from rangekit.formats.session_check import frame_sha256
+    from rangekit.formats.sessions.check import frame_sha256
     from rangekit.sim import SimRig, default_scene
-    from rangekit.sim.sensor import Exposure, digitise
+    from rangekit.sim.imaging.sensor import Exposure, digitise
 
     s = Session.load(session)
     sim = SimRig(default_scene(s.simulator.object), s.rig, seed=s.simulator.seed)

@@ -24,8 +24,8 @@ from rangekit.boards import Board
 from rangekit.calib.camera import Correspondences, calibrate_device
 from rangekit.calib.projector import bundle_adjust, initial_T_proj_cam
 from rangekit.geometry import apply_T, make_T, rotation_angle
-from rangekit.sim.calibration import board_poses
-from rangekit.sim.devices import default_rig
+from rangekit.sim.writers.calibration import board_poses
+from rangekit.sim.devices.sim_rig import default_rig
 
 
 def main() -> None:

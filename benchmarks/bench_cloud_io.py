@@ -24,7 +24,7 @@ sys.path.insert(0, str(Path(__file__).parent))
 from _timing import timed  # noqa: E402
 
 def _bunny() -> Path:
-    from rangekit.sim.zoo import data_folders  # $RANGEKIT_DATA, ../shared/data of a checkout or a worktree
+    from rangekit.sim.scene.zoo import data_folders  # $RANGEKIT_DATA, ../shared/data of a checkout or a worktree
     paths = [folder / "stanford-bunny" / "bun000.ply" for folder in data_folders()]
     return next((p for p in paths if p.is_file()), paths[0])
 

@@ -121,7 +121,7 @@ def build_stack(cache: Path, patterns: np.ndarray, *, rebuild: bool) -> tuple[np
                 truth = {k: t[k] for k in t.files}
             return np.load(stack_path), truth, None
 
-    from rangekit.rig import Rig
+    from rangekit.rig.rig_file import Rig
     from rangekit.sim import ImagingModel, SimRig, default_rig, default_scene
 
     t0 = time.perf_counter()

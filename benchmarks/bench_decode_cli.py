@@ -44,8 +44,8 @@ def build_folder(folder: Path) -> None:
     if len(list(folder.glob("[0-9][0-9][0-9].png"))) == 46 and (folder / "patterns.json").exists():
         return
     sys.path.insert(0, str(ROOT))
-    from rangekit.rig import save_rig
-    from rangekit.sim.devices import default_rig
+    from rangekit.rig.rig_file import save_rig
+    from rangekit.sim.devices.sim_rig import default_rig
 
     rig = default_rig()
     rig = dataclasses.replace(rig, cameras=(rig.camera.resized(*CAM),), projector=rig.projector.resized(*PROJ))

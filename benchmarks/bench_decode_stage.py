@@ -4,7 +4,7 @@
 
 SESSION is a session folder (e.g. one made by ``rangekit scan --out S --no-process``); it is not changed
 (each run decodes copies of its views' frames in a temporary folder, with no cache). For each of the views
-the stage's own function, :func:`rangekit.app.view_cache.view_cloud`, runs with every sub-step's function
+the stage's own function, :func:`rangekit.app.process.view_cache.view_cloud`, runs with every sub-step's function
 wrapped in a ``time.process_time()`` counter (user + sys of the whole process, so PNG loading on two
 threads counts both threads):
 
@@ -41,10 +41,10 @@ CODE = Path(sys.argv[sys.argv.index("--code") + 1]) if "--code" in sys.argv[:-1]
 sys.path.insert(0, str(CODE))
 
 from rangekit import __version__  # noqa: E402
-from rangekit.app import reconstruct as rec_mod  # noqa: E402
-from rangekit.app import view_cache as vc_mod  # noqa: E402
-from rangekit.app.reconstruct import EDGE_MARGIN_PX  # noqa: E402
-from rangekit.formats.session import Session  # noqa: E402
+from rangekit.coded import reconstruct as rec_mod  # noqa: E402
+from rangekit.app.process import view_cache as vc_mod  # noqa: E402
+from rangekit.coded.reconstruct import EDGE_MARGIN_PX  # noqa: E402
+from rangekit.formats.sessions.session import Session  # noqa: E402
 from rangekit.geometry import invert_T  # noqa: E402
 
 #: --serial: one view_cloud at a time (no read-ahead), to compare

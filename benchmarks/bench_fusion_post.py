@@ -24,13 +24,13 @@ def main() -> int:
     parser.add_argument("--repeat", type=int, default=3)
     args = parser.parse_args()
 
-    from rangekit.app.fused_outputs import mesh_info
+    from rangekit.app.process.fused_outputs import mesh_info
     from rangekit.formats.clouds import load_cloud
     from rangekit.formats.ply_write import mesh_ply_bytes
     from rangekit.surface.cloud import PointCloud
     from rangekit.surface.fusion import _poisson_surface
     from rangekit.surface.observed import split_observed
-    from rangekit.threads import one_blas_thread
+    from rangekit._runtime.threads import one_blas_thread
 
     merged = load_cloud(f"{args.session}/merged.ply")
     step = max(1, len(merged) // 400_000)

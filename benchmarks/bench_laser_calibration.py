@@ -1,7 +1,7 @@
 """Laser-plane calibration on the simulator's rendered board frames (issue 17's acceptance: from 10 board
 poses, each plane's normal within 0.02 deg and offset within 0.02 mm of the truth).
 
-`rangekit.app.laser_calibration.calibrate_lasers` on the default laser rig (two lasers at +-30 deg), 10 board
+`rangekit.app.laser.calibration.calibrate_lasers` on the default laser rig (two lasers at +-30 deg), 10 board
 poses, seeds 0-4, three ways of getting the board poses from the detected corners: PnP with the camera's
 intrinsics (the laser calibration alone), the same with the board texture rendered at full resolution, and
 the default: the camera calibrated (Zhang) from the same images plus 10 camera poses, placed at the true
@@ -20,8 +20,8 @@ import statistics
 import sys
 import time
 
-from rangekit.app.laser_calibration import calibrate_lasers
-from rangekit.sim.laser_rig import laser_rig
+from rangekit.app.laser.calibration import calibrate_lasers
+from rangekit.sim.laser.rig import laser_rig
 
 
 def main() -> None:

@@ -2,11 +2,11 @@
 peak <= 0.05 px for the Gaussian or ridge method, line width 0.8 mm, 8-bit camera, default noise; the
 confidence ranks the errors).
 
-Frames: the default laser rig (`rangekit.sim.laser_rig.laser_rig`), RGB 8-bit, default ImagingModel and
+Frames: the default laser rig (`rangekit.sim.laser.rig.laser_rig`), RGB 8-bit, default ImagingModel and
 LaserLook, objects lumpy, sphere and (when ../shared/data or ../../shared/data holds it) the Stanford
 bunny standing upright (y up in the file), at turntable angles 0, 40, 100 and 200 degrees, both lasers.
 Truth: the lit curve's exact image projection (`LitCurve.uv`, distorted pixels), compared by
-`rangekit.sim.laser_truth.column_errors` (the curve's column at the peak's row; rows near a curve end or
+`rangekit.sim.laser.truth.column_errors` (the curve's column at the peak's row; rows near a curve end or
 gap, or where the curve runs along the row, are not compared). Also run with speckle off, and with
 speckle, shot and read noise off, to show where the error comes from. Per method: RMS column error,
 mean, peaks compared / found, the share of points within 1 px of the curve, and the share of the errors
@@ -28,11 +28,11 @@ import numpy as np
 
 from rangekit.laser import detect_peaks
 from rangekit.sim import default_scene
-from rangekit.sim.laser import LaserLook, LaserView
-from rangekit.sim.laser_rig import laser_rig
-from rangekit.sim.laser_truth import column_errors, curve_distance
-from rangekit.sim.objects import load_mesh
-from rangekit.sim.render import ImagingModel
+from rangekit.sim.laser.frames import LaserLook, LaserView
+from rangekit.sim.laser.rig import laser_rig
+from rangekit.sim.laser.truth import column_errors, curve_distance
+from rangekit.sim.scene.objects import load_mesh
+from rangekit.sim.imaging.render import ImagingModel
 
 #: label -> (method, options)
 METHODS = {"gaussian": ("gaussian", {}), "gaussian, along=3": ("gaussian", {"along": 3}), "com": ("com", {}),

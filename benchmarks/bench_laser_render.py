@@ -1,6 +1,6 @@
 """Simulator speed: one laser-line frame at 1280x960 (issue 17, target <= 30 ms per laser frame).
 
-The default laser rig (:func:`rangekit.sim.laser_rig.laser_rig`, two red lasers) with its camera resized
+The default laser rig (:func:`rangekit.sim.laser.rig.laser_rig`, two red lasers) with its camera resized
 to 1280x960, RGB 8-bit camera, default noise, lumpy object on the turntable. Per view (turntable angle):
 the camera ray cast and the ambient (laser-off) image; per laser frame: slice + ray casts along the curve
 + splat + blur + noise + quantisation. A new turntable angle is timed per frame by rebuilding only the
@@ -40,8 +40,8 @@ def main() -> int:
     import open3d  # noqa: F401  (import cost reported separately)
 
     from rangekit.sim import ImagingModel, default_scene
-    from rangekit.sim.laser import LaserView
-    from rangekit.sim.laser_rig import laser_rig
+    from rangekit.sim.laser.frames import LaserView
+    from rangekit.sim.laser.rig import laser_rig
 
     t_import = time.perf_counter() - t0
     rig = laser_rig()

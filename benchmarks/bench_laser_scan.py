@@ -43,7 +43,7 @@ def scan(obj: str, up, steps: int):
 
 def markdown(steps: int) -> int:
     """docs/benchmarks.md's table: lumpy and the upright bunny, one row each."""
-    from rangekit.sim.zoo import bunny_path
+    from rangekit.sim.scene.zoo import bunny_path
 
     objects = [("lumpy", "lumpy")] + ([("Stanford bunny upright (`--object bunny`)", "bunny")]
                                       if bunny_path().is_file() else [])

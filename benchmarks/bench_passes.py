@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from rangekit.formats.clouds import load_cloud
-from rangekit.formats.session import Session
+from rangekit.formats.sessions.session import Session
 from rangekit.geometry import invert_T, rotation_angle
 
 
@@ -33,9 +33,9 @@ def cpu_seconds() -> float:
 
 
 def register(session: Session, clouds):
-    from rangekit.app.passes import register_session_passes
+    from rangekit.app.scan.passes import register_session_passes
     from rangekit.registration.multiview import MultiViewOptions, register_views
-    from rangekit.rig import turntable_prior
+    from rangekit.rig.rig_file import turntable_prior
 
     views = session.done_views
     if session.plan.passes > 1:
@@ -45,7 +45,7 @@ def register(session: Session, clouds):
 
 
 def truth(session: Session) -> np.ndarray:
-    from rangekit.sim.passes import view_motions
+    from rangekit.sim.scene.passes import view_motions
 
     views, F = session.done_views, session.simulator.pass_motions
     keys = [v.angle for v in views] if F is None else [(v.angle, v.scan_pass) for v in views]

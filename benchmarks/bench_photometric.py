@@ -17,7 +17,7 @@ import argparse
 import numpy as np
 
 from rangekit.photometric import angular_error, integrate_normals, photometric_stereo
-from rangekit.sim.lightstage import light_stage_lights
+from rangekit.sim.sensors.lightstage import light_stage_lights
 
 from _timing import timed  # benchmarks/_timing.py (the script's folder is on sys.path)
 

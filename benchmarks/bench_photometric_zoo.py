@@ -19,7 +19,7 @@ import cv2
 import numpy as np
 
 from rangekit.photometric import angular_error, photometric_stereo
-from rangekit.sim.lightstage import light_stage_camera, light_stage_lights, light_stage_scene, render_light_stage
+from rangekit.sim.sensors.lightstage import light_stage_camera, light_stage_lights, light_stage_scene, render_light_stage
 
 
 def main() -> int:

@@ -1,4 +1,4 @@
-"""Does Open3D's Poisson let Python run beside it? (why rangekit.child runs it in a child process, issue 20)
+"""Does Open3D's Poisson let Python run beside it? (why rangekit._runtime.child runs it in a child process, issue 20)
 
     PYTHONPATH=. python benchmarks/bench_poisson_gil.py [--points 200000] [--depth 8]
 

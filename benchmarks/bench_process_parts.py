@@ -4,7 +4,7 @@
 
 1. ``apply_T`` (an (N, 3) @ (3, 3) product plus a translation) on 200k and 1.3M points: OpenBLAS on one
    thread and on two (CPU seconds, both threads counted), and numpy's einsum loop: why the CLI and
-   processing run BLAS on one thread (:mod:`rangekit.threads`) and why ``geometry._rotate`` stays a matmul.
+   processing run BLAS on one thread (:mod:`rangekit._runtime.threads`) and why ``geometry._rotate`` stays a matmul.
 2. With a processed SESSION (its ``mesh.ply``): building Open3D's ray-casting scene of the mesh against one
    640x480 cast on it, why :func:`rangekit.surface.raycast.mesh_scene` keeps the scene per mesh.
 """
@@ -47,7 +47,7 @@ def main() -> int:
     if len(sys.argv) > 1:
         import open3d as o3d
 
-        from rangekit.app.snapshot import fit_camera
+        from rangekit.rendering.snapshot import fit_camera
         from rangekit.camera import world_pixel_rays
         from rangekit.formats.meshes import load_mesh_file
         from rangekit.surface.raycast import raycasting_scene

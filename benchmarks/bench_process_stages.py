@@ -2,7 +2,7 @@
 
     PYTHONPATH=. .venv/bin/python benchmarks/bench_process_stages.py SESSION [--no-report] [--serial-evaluation]
 
-Runs :func:`rangekit.app.scan.process_scan` (the work of ``rangekit process``, one BLAS thread as the CLI)
+Runs :func:`rangekit.app.scan.scan.process_scan` (the work of ``rangekit process``, one BLAS thread as the CLI)
 on SESSION, which it changes (caches, outputs): give it a fresh copy of a session made by ``rangekit scan
 --out S --no-process`` for a run without the view cache. Prints, per stage, the resident and the peak
 memory at its start and end; the stage times the summary records (wall) and the CPU seconds (user + sys
@@ -59,10 +59,10 @@ def main() -> int:
         print(f"end {name}: resident {_mb('VmRSS')} MB, peak {_mb('VmHWM')} MB", flush=True)
 
     progress_module.StageTimer.stage = stage
-    import rangekit.app.scan as scan_module
-    import rangekit.sim.evaluate as evaluate_module
-    import rangekit.sim.view_errors as view_errors_module
-    from rangekit.threads import one_blas_thread
+    import rangekit.app.scan.scan as scan_module
+    import rangekit.sim.truth.evaluate as evaluate_module
+    import rangekit.sim.truth.view_errors as view_errors_module
+    from rangekit._runtime.threads import one_blas_thread
 
     parts: dict[str, float] = {}
     _timed(evaluate_module, "truth_samples", parts)

@@ -12,7 +12,7 @@ whether the bunny's target (<= 90 s) was met.
    and 2% of the diagonal: rangekit multi-view vs Open3D multiway registration (pose graph).
 4. The same pairwise edges with 15% replaced by wrong relative poses (>= 30 deg off): robust vs plain
    spectral synchronisation.
-5. Stanford bunny (10 scans, ``rangekit.sim.zoo.data_folders``: $RANGEKIT_DATA or ../shared/data): --init none, time and agreement with bun.conf.
+5. Stanford bunny (10 scans, ``rangekit.sim.scene.zoo.data_folders``: $RANGEKIT_DATA or ../shared/data): --init none, time and agreement with bun.conf.
 """
 
 from __future__ import annotations
@@ -32,9 +32,9 @@ from _timing import timed  # benchmarks/_timing.py (the script's folder is on sy
 
 
 def bunny_folder() -> Path:
-    """stanford-bunny/ in the first of rangekit.sim.zoo's data folders ($RANGEKIT_DATA, ../shared/data beside
+    """stanford-bunny/ in the first of rangekit.sim.scene.zoo's data folders ($RANGEKIT_DATA, ../shared/data beside
     the checkout or beside the folder holding it) that has it."""
-    from rangekit.sim.zoo import data_folders
+    from rangekit.sim.scene.zoo import data_folders
 
     folders = [f / "stanford-bunny" for f in data_folders()]
     return next((f for f in folders if (f / "bun.conf").is_file()), folders[0])
@@ -61,7 +61,7 @@ def bench_pairwise() -> list[str]:
     import open3d as o3d
     import trimesh
 
-    from rangekit.sim.objects import lumpy
+    from rangekit.sim.scene.objects import lumpy
 
     tm = lumpy().to_trimesh()
     a, fa = trimesh.sample.sample_surface(tm, 100000, seed=1)
@@ -135,7 +135,7 @@ def o3d_multiway(clouds, init, voxel):
 def bench_multiview(scans) -> list[str]:
     from rangekit.registration.multiview import register_views
     from rangekit.registration.sync import synchronise
-    from rangekit.sim.scans import perturb_poses
+    from rangekit.sim.writers.scans import perturb_poses
 
     diag = scans.diag
     prior = perturb_poses(scans.T_world_view, max_angle=np.radians(3), max_translation=0.02 * diag, rng=1)
@@ -198,7 +198,7 @@ def main() -> int:
     ap.add_argument("--skip-bunny", action="store_true")
     ap.add_argument("--markdown", action="store_true", help="docs/benchmarks.md's block: the bunny's target too")
     args = ap.parse_args()
-    from rangekit.sim.scans import turntable_scans
+    from rangekit.sim.writers.scans import turntable_scans
 
     print("| case | rangekit | Open3D / baseline | speed ratio |")
     print("|---|---|---|---|")

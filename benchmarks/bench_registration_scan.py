@@ -30,9 +30,9 @@ from pathlib import Path
 import numpy as np
 
 from rangekit.formats.clouds import load_cloud
-from rangekit.formats.session import Session
+from rangekit.formats.sessions.session import Session
 from rangekit.geometry import invert_T, rotation_angle
-from rangekit.rig import turntable_prior
+from rangekit.rig.rig_file import turntable_prior
 from rangekit.surface.cloud import bbox_diagonal
 
 

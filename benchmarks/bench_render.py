@@ -35,7 +35,7 @@ def main() -> int:
 
     from rangekit.coded.patterns import make_pattern_spec
     from rangekit.sim import SimRig, cast_view, default_scene
-    from rangekit.sim.render import ViewRenderer
+    from rangekit.sim.imaging.render import ViewRenderer
 
     t_import = time.perf_counter() - t0
     sim = SimRig(default_scene("lumpy"), seed=0)

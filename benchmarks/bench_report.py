@@ -11,8 +11,8 @@ pickles too: ``BENCH_REPORT_STORE``, default the temporary folder, names where t
 table (a ``make docs-figures`` block).
 
 ``capture`` processes SESSION_COPY (a copy of a ``rangekit scan --no-process`` session: processing writes its
-caches and outputs there) with this tree, pickling what :func:`rangekit.app.report.write_report` and the
-simulator's evaluator (:class:`rangekit.sim.evaluate.TruthEvaluator`) receive into the temporary folder
+caches and outputs there) with this tree, pickling what :func:`rangekit.app.report.page.write_report` and the
+simulator's evaluator (:class:`rangekit.sim.truth.evaluate.TruthEvaluator`) receive into the temporary folder
 (``bench_report_*.pkl``, about 800 MB). ``time`` then runs on those inputs either (``--part report``, the
 default) ``write_report`` into a temporary folder, or (``--part evaluate``; a separate process: Open3D's
 worker threads left busy by one part inflate the other's CPU) the evaluator's mesh-independent half
@@ -45,10 +45,10 @@ REPORT, EVAL = STORE / "bench_report_inputs.pkl", STORE / "bench_report_eval.pkl
 
 
 def capture(session: str) -> None:
-    import rangekit.app.report as report
-    import rangekit.sim.evaluate as evaluate
-    from rangekit.app.scan import process_scan
-    from rangekit.threads import one_blas_thread
+    import rangekit.app.report.page as report
+    import rangekit.sim.truth.evaluate as evaluate
+    from rangekit.app.scan.scan import process_scan
+    from rangekit._runtime.threads import one_blas_thread
 
     write, prepare = report.write_report, evaluate.TruthEvaluator.prepare
 
@@ -79,8 +79,8 @@ def run_once(part: str, warm: bool) -> dict:
     import numpy as np
     import open3d as o3d
 
-    from rangekit.app.report import write_report
-    from rangekit.sim.evaluate import TruthEvaluator
+    from rangekit.app.report.page import write_report
+    from rangekit.sim.truth.evaluate import TruthEvaluator
     from rangekit.surface.raycast import mesh_scene
 
     result, kw = pickle.load(open(REPORT, "rb"))
@@ -136,7 +136,7 @@ def main() -> None:
     if len(sys.argv) >= 3 and sys.argv[1] == "markdown":
         print(markdown(sys.argv[2]))
         return
-    from rangekit.threads import one_blas_thread
+    from rangekit._runtime.threads import one_blas_thread
 
     part = sys.argv[sys.argv.index("--part") + 1] if "--part" in sys.argv[:-1] else "report"
     repeat = int(sys.argv[sys.argv.index("--repeat") + 1]) if "--repeat" in sys.argv[:-1] else 3

@@ -1,6 +1,6 @@
 """Active stereo speed and accuracy: rangekit census + SGM vs OpenCV StereoSGBM on the same rectified pair.
 
-Input: the simulated OAK-D-Pro-like pair (:func:`rangekit.sim.stereo.stereo_rig`, 640x400, baseline 75 mm)
+Input: the simulated OAK-D-Pro-like pair (:func:`rangekit.sim.sensors.stereo.stereo_rig`, 640x400, baseline 75 mm)
 looking at the textureless box + sphere + wall of :func:`stereo_scene` (0.6-1.1 m) under the random-dot
 projector; both images rectified once (:func:`rectify_images`), then each matcher runs on the same input
 with 64 disparities. Peer: ``cv2.StereoSGBM`` (MODE_SGBM, 5 paths, block 5, P1 = 200, P2 = 800,
@@ -33,7 +33,7 @@ import cv2
 import numba
 import numpy as np
 
-from rangekit.sim.stereo import render_stereo, stereo_rig, stereo_scene
+from rangekit.sim.sensors.stereo import render_stereo, stereo_rig, stereo_scene
 from rangekit.stereo import depth_in_camera, rectify, rectify_images, sgbm_disparity, sgm_disparity, stereo_depth
 
 
@@ -66,7 +66,7 @@ def packed_ops() -> None:
 
     from numba.core.compiler import Compiler
 
-    from rangekit.noalias import NoAliasCompiler
+    from rangekit._runtime.noalias import NoAliasCompiler
     from rangekit.stereo import _sgm
     W, lanes = 40, 32
     crow, e, o = (np.zeros((W, lanes), np.int16) for _ in range(3))

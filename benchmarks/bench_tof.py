@@ -18,7 +18,7 @@ import itertools
 
 import numpy as np
 
-from rangekit.sim.tof import KINECT_V2_PLAN, render_tof, tof_camera, tof_scene
+from rangekit.sim.sensors.tof import KINECT_V2_PLAN, render_tof, tof_camera, tof_scene
 from rangekit.tof import decode_cw, phase_amplitude_offset
 
 from _timing import timed  # benchmarks/_timing.py (the script's folder is on sys.path)

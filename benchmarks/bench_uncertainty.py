@@ -4,15 +4,15 @@
                                                        [--patterns hybrid]
 
 For each object and turntable angle (radians): one view of the default simulated rig (the object's default
-scene) captured with ``--patterns``, reconstructed by :func:`rangekit.app.reconstruct.reconstruct_view`
+scene) captured with ``--patterns``, reconstructed by :func:`rangekit.coded.reconstruct.reconstruct_view`
 (decode, triangulate, edge filter: what ``rangekit scan`` does per view) with the predicted sigma of every
 point (:mod:`rangekit.coded.uncertainty`). The observed error of a point is its offset from the exact
 surface point of its pixel (the simulator's ground-truth ``xyz``) along the camera ray, on the object's
 pixels. The points of all angles are split into deciles of predicted sigma; each row prints the decile's
 sigma range, the RMS predicted sigma, the RMS observed error and their ratio (acceptance: every ratio in
 0.8..1.2), then the same ratio for the points away from depth edges (``inside``: farther than
-:data:`rangekit.sim.view_errors.EDGE_PX` pixels from a silhouette or depth jump of the true depth map,
-:func:`rangekit.sim.view_errors.depth_edges`), and the share of edge points in the decile.
+:data:`rangekit.sim.truth.view_errors.EDGE_PX` pixels from a silhouette or depth jump of the true depth map,
+:func:`rangekit.sim.truth.view_errors.depth_edges`), and the share of edge points in the decile.
 The table is quoted in docs/metrology.md ("Predicted uncertainty").
 """
 
@@ -23,12 +23,12 @@ import time
 
 import numpy as np
 
-from rangekit.app.reconstruct import reconstruct_view
+from rangekit.coded.reconstruct import reconstruct_view
 from rangekit.camera import pixel_rays
 from rangekit.coded.patterns import make_pattern_spec
 from rangekit.geometry import transform_vectors
 from rangekit.sim import SimRig, default_scene
-from rangekit.sim.view_errors import depth_edges
+from rangekit.sim.truth.view_errors import depth_edges
 
 
 def measure(obj: str, angle: float, seed: int, patterns: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

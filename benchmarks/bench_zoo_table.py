@@ -17,7 +17,7 @@ import json
 from pathlib import Path
 
 from rangekit.formats.meshes import load_mesh_file
-from rangekit.formats.session import Session
+from rangekit.formats.sessions.session import Session
 from rangekit.sim import default_scene
 from rangekit.surface.mesh import TriangleMesh, distance_to_surface
 

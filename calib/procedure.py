@@ -1,6 +1,6 @@
 """The whole rig calibration: projector response, camera, projector, their extrinsics, turntable axis.
 
-:func:`calibrate_rig` drives the devices (simulated or real, through :mod:`rangekit.devices`):
+:func:`calibrate_rig` drives the devices (simulated or real, through :mod:`rangekit.rig.devices`):
 
 1. projector response: uniform grey levels on the board at its first pose (:mod:`rangekit.calib.response`);
 2. for each board pose (``place_board(i, n)`` puts it there: the simulator moves it, on hardware the user
@@ -12,7 +12,7 @@
    each angle; board poses by PnP, the axis fit (:mod:`rangekit.calib.turntable`), the table top from the
    triangulated scene at the middle angle.
 
-The result is a :class:`rangekit.rig.Rig` whose world is the turntable frame (z up the axis, origin on the
+The result is a :class:`rangekit.rig.rig_file.Rig` whose world is the turntable frame (z up the axis, origin on the
 axis at the table top, y horizontal from the camera to the axis), the simulator's convention, or the
 camera frame when there is no turntable. :func:`compare_rigs` gives each parameter's deviation from a
 reference rig (the simulator's truth).
@@ -40,7 +40,7 @@ from rangekit.geometry import compose, invert_T, make_T, rotation_angle, rotvec_
 from rangekit.coded.patterns import make_pattern_spec
 from rangekit.progress import call_progress
 from rangekit.coded.response import ResponseFit
-from rangekit.rig import Rig
+from rangekit.rig.rig_file import Rig
 from rangekit.coded.triangulate import triangulate
 
 __all__ = ["CalibrationSettings", "RigCalibration", "calibrate_rig", "compare_rigs"]
@@ -135,7 +135,7 @@ def calibrate_rig(devices, *, settings: CalibrationSettings = CalibrationSetting
     Parameters
     ----------
     devices : has ``camera``, ``projector`` and ``turntable`` (None: no turntable step), as in
-        :mod:`rangekit.devices` (a :class:`rangekit.sim.SimRig` or the opened hardware).
+        :mod:`rangekit.rig.devices` (a :class:`rangekit.sim.SimRig` or the opened hardware).
     settings : board, number of poses, patterns, turntable angles.
     place_board : ``place_board(i, n)`` puts the board in pose i of n before it is captured.
     place_on_turntable : puts the board on the turntable (required when ``devices.turntable`` is set).

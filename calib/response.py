@@ -16,7 +16,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from rangekit.devices import Camera, Projector
+from rangekit.rig.devices import Camera, Projector
 from rangekit.errors import InputError
 from rangekit.progress import call_progress
 from rangekit.coded.response import ResponseFit, fit_response
@@ -33,9 +33,9 @@ def measure_response(projector: Projector, camera: Camera, *, levels: Sequence[f
 
     Parameters
     ----------
-    projector : rangekit.devices.Projector
+    projector : rangekit.rig.devices.Projector
         Shows (height, width) uint8 images of its ``resolution``.
-    camera : rangekit.devices.Camera
+    camera : rangekit.rig.devices.Camera
     levels : (K,) sequence of float in [0, 1], optional
         Pattern values to show; must include 0 and 1. Default :data:`DEFAULT_LEVELS` (17 levels). Each
         is shown as the uint8 value ``round(255 * level)`` and fitted at that quantised value.

@@ -9,11 +9,11 @@ a full-screen projector display (pygame, optional) and Luxonis depthai cameras.
       "camera": {"type": "depthai", "id": null, "socket": "CAM_A", "search_timeout_s": 3}
     }
 
-The camera is opened with the rig's ``capture.camera`` controls (:func:`rangekit.camera_controls.
+The camera is opened with the rig's ``capture.camera`` controls (:func:`rangekit.rig.camera_controls.
 controls_from_capture`), and for coded light (a projector display is opened) auto-exposure is refused
 unless ``allow_auto_exposure``.
 
-:func:`rangekit.rig_checks.validate_rig_for_hardware` (``devices`` and ``capture``) runs first and opens
+:func:`rangekit.rig.checks.validate_rig_for_hardware` (``devices`` and ``capture``) runs first and opens
 nothing, so a typo in the rig file is reported before any device moves. Any section may instead be ``{"type": "sim"}`` (not
 opened here; the simulator provides it).
 """
@@ -22,16 +22,16 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from rangekit.camera_controls import controls_from_capture
+from rangekit.rig.camera_controls import controls_from_capture
 from rangekit.errors import ConfigError
-from rangekit.rig_checks import DEFAULT_SEARCH_S, validate_rig_for_hardware
+from rangekit.rig.checks import DEFAULT_SEARCH_S, validate_rig_for_hardware
 
 __all__ = ["HardwareRig", "open_rig_devices"]
 
 
 @dataclass
 class HardwareRig:
-    """The opened devices of a rig (the :class:`rangekit.devices.Rig` protocol), plus projector control."""
+    """The opened devices of a rig (the :class:`rangekit.rig.devices.Rig` protocol), plus projector control."""
 
     camera: object
     projector: object

@@ -28,12 +28,12 @@ import time
 import numpy as np
 
 from rangekit.camera import PinholeCamera
-from rangekit.camera_controls import CameraControls, require_locked
+from rangekit.rig.camera_controls import CameraControls, require_locked
 from rangekit.drivers.depthai_controls import AUTO_CONTROLS, CONTROL_NAMES, apply_controls, check_frame_period
 from rangekit.drivers.discovery import check_search_timeout, search_depthai
 from rangekit.errors import ConfigError, DeviceDisconnected, DeviceError, DeviceTimeout
-from rangekit.rig import Rig
-from rangekit.rig_checks import DEFAULT_SEARCH_S, DEPTHAI_SOCKETS
+from rangekit.rig.rig_file import Rig
+from rangekit.rig.checks import DEFAULT_SEARCH_S, DEPTHAI_SOCKETS
 
 __all__ = ["DepthaiCamera", "DEPTHAI_NAMES", "calibration_to_rig", "pinhole_from_calibration",
            "scale_intrinsics", "SOCKETS"]
@@ -200,7 +200,7 @@ def _open_device(dai, device_id: str | None, search_timeout_s: float):
 
 
 class DepthaiCamera:
-    """An OAK camera implementing :class:`rangekit.devices.Camera`, plus IR emitters and stereo depth.
+    """An OAK camera implementing :class:`rangekit.rig.devices.Camera`, plus IR emitters and stereo depth.
 
     Parameters
     ----------

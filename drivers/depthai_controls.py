@@ -1,4 +1,4 @@
-"""The rig file's camera controls (:class:`rangekit.camera_controls.CameraControls`) as depthai v3 commands.
+"""The rig file's camera controls (:class:`rangekit.rig.camera_controls.CameraControls`) as depthai v3 commands.
 
 A depthai ``CameraControl`` message carries the commands; :class:`~rangekit.drivers.depthai_camera.
 DepthaiCamera` fills the camera node's ``initialControl`` with them before the pipeline starts, and
@@ -26,7 +26,7 @@ cut it or drop the rate) and is refused. Fixed-focus modules ignore the focus co
 
 from __future__ import annotations
 
-from rangekit.camera_controls import CameraControls
+from rangekit.rig.camera_controls import CameraControls
 from rangekit.errors import DeviceError
 
 __all__ = ["AUTO_CONTROLS", "CONTROL_NAMES", "apply_controls", "check_frame_period"]

@@ -15,12 +15,12 @@ import math
 import time
 
 from rangekit.errors import ConfigError
-from rangekit.rig_checks import MAX_SEARCH_S
+from rangekit.rig.checks import MAX_SEARCH_S
 
 __all__ = ["list_serial_ports", "list_depthai_devices", "search_depthai", "check_search_timeout",
            "MAX_SEARCH_S"]
 
-#: MAX_SEARCH_S (rangekit.rig_checks): the longest depthai search accepted, seconds.
+#: MAX_SEARCH_S (rangekit.rig.checks): the longest depthai search accepted, seconds.
 #: The longest single depthai search call (seconds): a longer search is several calls.
 SEARCH_CHUNK_S = 0.5
 

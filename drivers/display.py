@@ -13,14 +13,14 @@ import time
 import numpy as np
 
 from rangekit.camera import PinholeCamera
-from rangekit.devices import check_pattern
+from rangekit.rig.devices import check_pattern
 from rangekit.errors import DeviceError
 
 __all__ = ["PygameProjector"]
 
 
 class PygameProjector:
-    """A :class:`rangekit.devices.Projector` that shows images full-screen on one monitor.
+    """A :class:`rangekit.rig.devices.Projector` that shows images full-screen on one monitor.
 
     Parameters
     ----------

@@ -15,7 +15,7 @@ import time
 
 from rangekit.drivers.serial_link import MAX_REPLY_BYTES, SerialLink
 from rangekit.errors import CommandError, ConfigError, DeviceDisconnected, DeviceTimeout, ProtocolError, quote
-from rangekit.rig_checks import PROJECTOR_PROTOCOLS
+from rangekit.rig.checks import PROJECTOR_PROTOCOLS
 
 __all__ = ["EscVp21Projector", "PJLinkProjector", "make_projector_control", "PROJECTOR_PROTOCOLS"]
 

@@ -1,7 +1,7 @@
 """A line-oriented serial link with a deadline on every read and rangekit errors.
 
 Works over anything :func:`serial.serial_for_url` opens: real ports (``/dev/ttyUSB0``, ``COM3``),
-pty paths (the simulated firmware of :mod:`rangekit.sim.firmware`) and ``socket://host:port``.
+pty paths (the simulated firmware of :mod:`rangekit.sim.devices.firmware`) and ``socket://host:port``.
 
 Every failure is raised from :mod:`rangekit.errors` with the device, the port, the last command, what
 was expected and the bytes that did arrive:

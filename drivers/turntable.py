@@ -1,6 +1,6 @@
 """Serial turntable drivers: Horus/Ciclop (Grbl-based) and FabScan.
 
-Both implement :class:`rangekit.devices.Turntable`: angles are radians in and out; degrees and
+Both implement :class:`rangekit.rig.devices.Turntable`: angles are radians in and out; degrees and
 microsteps exist only in the bytes sent to the firmware. ``rotate_to`` returns once the motion is
 *finished*, not once it was accepted:
 
@@ -28,7 +28,7 @@ from typing import Iterator
 from rangekit.drivers.serial_link import SerialLink
 from rangekit.errors import (ConfigError, DeviceError, DeviceDisconnected, DeviceTimeout, InputError, ProtocolError,
                              quote)
-from rangekit.rig_checks import TURNTABLE_PROTOCOLS
+from rangekit.rig.checks import TURNTABLE_PROTOCOLS
 
 __all__ = ["HorusTurntable", "FabScanTurntable", "make_turntable", "TURNTABLE_PROTOCOLS"]
 
@@ -341,7 +341,7 @@ class FabScanTurntable(_SerialTurntable):
         self._command(f"M{19 + 2 * (n - 1) + (0 if on else 1)}")
 
 
-_DRIVERS = {"horus": HorusTurntable, "fabscan": FabScanTurntable}  # one per rangekit.rig_checks.TURNTABLE_PROTOCOLS
+_DRIVERS = {"horus": HorusTurntable, "fabscan": FabScanTurntable}  # one per rangekit.rig.checks.TURNTABLE_PROTOCOLS
 
 
 def make_turntable(protocol: str, url: str, baud: int | None = None, **kw) -> HorusTurntable | FabScanTurntable:

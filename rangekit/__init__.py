@@ -21,7 +21,7 @@ __version__ = "0.1.0"
 # PNG reading and Open3D's Poisson on the other core that spinning costs CPU (the decode stage of the
 # 12-view scan: 11.1-11.7 CPU-s passive against 11.9-12.7 by default, 16.8-37.8 with ACTIVE on a loaded
 # machine; ``OMP_WAIT_POLICY=X python benchmarks/bench_decode_stage.py SESSION``, alternating). Set before
-# any OpenMP runtime starts; a user's own setting wins. See rangekit.threads.
+# any OpenMP runtime starts; a user's own setting wins. See rangekit._runtime.threads.
 _os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 # name -> module that defines it; imported on first access (PEP 562), so ``import rangekit`` stays light.
@@ -38,7 +38,7 @@ _LAZY = {
     "poisson_mesh": "rangekit.surface.fusion", "make_watertight": "rangekit.surface.watertight",
     "icp": "rangekit.registration.icp", "IcpOptions": "rangekit.registration.icp",
     "register_views": "rangekit.registration.multiview", "MultiViewOptions": "rangekit.registration.multiview",
-    "render": "rangekit.app.picture",
+    "render": "rangekit.app.commands.picture",
 }
 __all__ = ["__version__", *_LAZY]
 

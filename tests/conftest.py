@@ -8,7 +8,7 @@ import pytest
 
 from rangekit.geometry import axis_angle_to_R, make_T
 from rangekit.sim import ImagingModel, Scene, default_rig
-from rangekit.sim.objects import box, plane
+from rangekit.sim.scene.objects import box, plane
 
 
 @pytest.fixture(scope="session")

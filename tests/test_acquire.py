@@ -5,11 +5,11 @@ import time
 import numpy as np
 import pytest
 
-from rangekit.app.acquire import acquire
-from rangekit.formats.session import ScanPlan, Session, SimulatorSettings, load_session
+from rangekit.app.acquire.acquire import acquire
+from rangekit.formats.sessions.session import ScanPlan, Session, SimulatorSettings, load_session
 from rangekit.errors import ConfigError, DecodeError, DeviceDisconnected
 from rangekit.coded.patterns import make_pattern_spec
-from rangekit.rig import Rig
+from rangekit.rig.rig_file import Rig
 from rangekit.sim import SimRig, default_rig, default_scene
 
 
@@ -91,7 +91,7 @@ class _Devices:
 @pytest.mark.slow
 def test_twelve_view_scan_with_44_patterns_through_the_horus_driver(tmp_path):
     from rangekit.drivers.turntable import HorusTurntable
-    from rangekit.sim.firmware import start_firmware
+    from rangekit.sim.devices.firmware import start_firmware
 
     spec = make_pattern_spec("graycode", (1280, 800))
     s = SimRig(default_scene("lumpy"), seed=0)  # full 1280x1024 camera
@@ -157,7 +157,7 @@ def test_a_12_bit_session_decodes_with_full_scale_4095(tmp_path):
     PNG's 65535 the confidence threshold is 16x too high and most of the object is rejected."""
     from dataclasses import replace
 
-    from rangekit.app.reconstruct import reconstruct_view
+    from rangekit.coded.reconstruct import reconstruct_view
     from rangekit.formats.capture import list_images, read_stack
     from rangekit.sim import ImagingModel
 

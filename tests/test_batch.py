@@ -1,4 +1,4 @@
-"""Many sessions on Dask (issue 21, rangekit.app.batch): real worker processes, no mocks. The outputs are the
+"""Many sessions on Dask (issue 21, rangekit.app.process.batch): real worker processes, no mocks. The outputs are the
 bytes of serial processing; a failing session is reported by name while the others finish; a worker
 killed in the middle loses nothing and no view is decoded twice; an unreachable scheduler is a clear
 error within 10 s."""
@@ -19,8 +19,8 @@ from pathlib import Path
 import pytest
 
 from faults._sessions import N_VIEWS, make_reference
-from rangekit.app.batch import WORKER_ENV, SchedulerUnreachable, process_sessions
-from rangekit.app.process import process_session
+from rangekit.app.process.batch import WORKER_ENV, SchedulerUnreachable, process_sessions
+from rangekit.app.process.process import process_session
 from rangekit.cli import main
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -237,22 +237,22 @@ def test_sessions_are_finished_in_groups_one_a_worker(sessions):
     group = max(views["group_a"] + views["group_b"])
     assert session["group_a"] >= group and session["group_b"] >= group
     assert session["group_c"] >= max(views["group_c"])
-    # each view pair's registration ran as a task of its own (rangekit.app.batch_pairs), none redone in a session
+    # each view pair's registration ran as a task of its own (rangekit.app.process.batch_pairs), none redone in a session
     pairs = {t.key for t in log if t.key.startswith("refine_pair-") and t.finish == "memory"}
     assert len(pairs) >= 3 * (N_VIEWS - 1), len(pairs)
 
 
 def test_local_workers_keep_their_pages_and_quiet_housekeeping():
-    """The local cluster's workers start with one malloc arena that is never trimmed (rangekit.memory then
-    keeps freed pages for the next task) and Dask's periodic housekeeping slowed down (rangekit.app.batch)."""
-    from rangekit.app.batch import QUIET_DASK, WORKER_MALLOC, _client
+    """The local cluster's workers start with one malloc arena that is never trimmed (rangekit._runtime.memory then
+    keeps freed pages for the next task) and Dask's periodic housekeeping slowed down (rangekit.app.process.batch)."""
+    from rangekit.app.process.batch import QUIET_DASK, WORKER_MALLOC, _client
 
     def inside():
         import dask
 
-        import rangekit.memory
+        import rangekit._runtime.memory
 
-        return ({k: os.environ.get(k) for k in WORKER_MALLOC}, rangekit.memory._ONE_ARENA,
+        return ({k: os.environ.get(k) for k in WORKER_MALLOC}, rangekit._runtime.memory._ONE_ARENA,
                 {k: dask.config.get(k) for k in QUIET_DASK})
 
     os.environ["MALLOC_TRIM_THRESHOLD_"] = "65536"   # as an earlier Dask cluster in this process leaves it
@@ -270,7 +270,7 @@ def test_the_cluster_recipe_in_docs_matches_the_local_workers():
     import dask
     import yaml
 
-    from rangekit.app.batch import QUIET_DASK, WORKER_MALLOC
+    from rangekit.app.process.batch import QUIET_DASK, WORKER_MALLOC
 
     page = (ROOT / "docs" / "scale.md").read_text()
     assert all(f"{k}={v}" in page for k, v in WORKER_MALLOC.items())
@@ -286,10 +286,10 @@ def test_pairs_shipped_away_and_back_give_the_bits_of_serial_registration():
 
     import numpy as np
 
-    from rangekit.app.batch_pairs import dask_pair_mapper
+    from rangekit.app.process.batch_pairs import dask_pair_mapper
     from rangekit.registration.multiview import MultiViewOptions, register_views
     from rangekit.registration.pair_refine import refine_pair
-    from rangekit.sim.scans import perturb_poses, turntable_scans
+    from rangekit.sim.writers.scans import perturb_poses, turntable_scans
 
     scans = turntable_scans(n_views=6, noise=0.0002, resolution=(320, 240), rng=3)
     prior = perturb_poses(scans.T_world_view, max_angle=np.radians(1), max_translation=0.005 * scans.diag, rng=2)

@@ -12,8 +12,8 @@ from rangekit.camera import PinholeCamera
 from rangekit.errors import InputError, SceneError
 from rangekit.geometry import R_to_quat, apply_T, axis_angle_to_R, compose, make_T
 from rangekit.sim import Scene, SimRig, cast_view, default_rig, default_scene
-from rangekit.sim.calibration import board_poses, board_scene, turntable_board_scene
-from rangekit.sim.objects import board_object
+from rangekit.sim.writers.calibration import board_poses, board_scene, turntable_board_scene
+from rangekit.sim.scene.objects import board_object
 
 WHITE = np.full((800, 1280), 255, np.uint8)
 

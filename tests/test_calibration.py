@@ -2,7 +2,7 @@
 
 One module fixture runs the whole simulated calibration (8-bit captures, ~1% noise, lens and projector
 blur, projector gamma 2.2): 20 hand-held board poses plus one pose where the board is out of view, then
-9 turntable angles. Every figure is compared with :func:`rangekit.sim.devices.default_rig`, the truth.
+9 turntable angles. Every figure is compared with :func:`rangekit.sim.devices.sim_rig.default_rig`, the truth.
 """
 
 from __future__ import annotations
@@ -24,8 +24,8 @@ pytestmark = pytest.mark.filterwarnings("ignore::rangekit.calib.camera.Calibrati
 
 @pytest.fixture(scope="module")
 def calibrated():
-    from rangekit.sim.calibration import board_poses, board_scene, turntable_board_scene
-    from rangekit.sim.devices import SimRig, default_rig
+    from rangekit.sim.writers.calibration import board_poses, board_scene, turntable_board_scene
+    from rangekit.sim.devices.sim_rig import SimRig, default_rig
 
     truth = default_rig()
     board = Board()
@@ -111,10 +111,10 @@ def test_calibrated_rig_has_the_simulator_schema(calibrated):
 def test_round_trip_sphere_radius_with_the_calibrated_rig(calibrated):
     """Scan a sphere in the simulator (true rig) and reconstruct with the calibrated rig."""
     from rangekit.coded.patterns import make_pattern_spec
-    from rangekit.app.reconstruct import reconstruct_view
-    from rangekit.sim.devices import SimRig
-    from rangekit.sim.objects import make_object
-    from rangekit.sim.scene import Scene
+    from rangekit.coded.reconstruct import reconstruct_view
+    from rangekit.sim.devices.sim_rig import SimRig
+    from rangekit.sim.scene.objects import make_object
+    from rangekit.sim.scene.scene import Scene
 
     truth, res, _, _ = calibrated
     radius = 0.05
@@ -135,8 +135,8 @@ def test_round_trip_sphere_radius_with_the_calibrated_rig(calibrated):
 
 # ----------------------------------------------------------------------------- bad input, synthetic corners
 def _synthetic_views(n: int, *, seed: int = 0, parallel: bool = False):
-    from rangekit.sim.calibration import board_poses
-    from rangekit.sim.devices import default_rig
+    from rangekit.sim.writers.calibration import board_poses
+    from rangekit.sim.devices.sim_rig import default_rig
 
     truth = default_rig()
     board = Board()
@@ -202,9 +202,9 @@ def test_depthai_converted_rig_triangulates_in_the_simulator(tmp_path):
     from rangekit.drivers.depthai_camera import calibration_to_rig
     from rangekit.geometry import invert_T
     from rangekit.coded.patterns import make_pattern_spec
-    from rangekit.app.reconstruct import reconstruct_view
+    from rangekit.coded.reconstruct import reconstruct_view
     from rangekit.sim import SimRig, default_scene
-    from rangekit.sim.devices import default_rig
+    from rangekit.sim.devices.sim_rig import default_rig
 
     truth = default_rig()
     cam = truth.camera

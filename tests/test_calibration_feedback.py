@@ -28,7 +28,7 @@ def _small_rig():
     """The simulator's default rig on a 480 x 384 camera and a 480 x 300 projector (same lenses): fast."""
     import dataclasses
 
-    from rangekit.sim.devices import default_rig
+    from rangekit.sim.devices.sim_rig import default_rig
 
     t = default_rig()
     return dataclasses.replace(t, cameras=(t.camera.resized(480, 384),), projector=t.projector.resized(480, 300))
@@ -36,8 +36,8 @@ def _small_rig():
 
 @pytest.fixture(scope="module")
 def sim_setup():
-    from rangekit.sim.calibration import board_poses, board_scene
-    from rangekit.sim.devices import SimRig
+    from rangekit.sim.writers.calibration import board_poses, board_scene
+    from rangekit.sim.devices.sim_rig import SimRig
 
     truth = _small_rig()
     board = Board()
@@ -55,7 +55,7 @@ def calibrated(sim_setup, tmp_path_factory):
     """calibrate_rig on 5 good and 3 bad simulated poses, no terminal (every rejected pose skipped)."""
     from rangekit.calib.procedure import CalibrationSettings, calibrate_rig
     from rangekit.io import write_png
-    from rangekit.sim.calibration import board_scene
+    from rangekit.sim.writers.calibration import board_scene
 
     truth, board, good, bad, sim = sim_setup
     poses = good[:2] + [bad["board not found"]] + good[2:4] + [bad["too oblique"]] + good[4:] + [bad["too small"]]
@@ -136,7 +136,7 @@ def test_too_few_corners_and_reprojection_limit():
 
 def test_a_rejected_pose_is_retaken_when_asked(sim_setup):
     from rangekit.calib.procedure import CalibrationSettings, calibrate_rig
-    from rangekit.sim.calibration import board_scene
+    from rangekit.sim.writers.calibration import board_scene
 
     truth, board, good, bad, sim = sim_setup
     placed = []

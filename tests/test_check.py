@@ -9,18 +9,18 @@ import pytest
 
 from small_rigs import small_projector_rig
 
-from rangekit.app.acquire import acquire
-from rangekit.app.check import auto_exposures, pattern_delay_for
-from rangekit.app.check_run import check_simulated, simulated_check_rig, write_check, write_pattern_delay
-from rangekit.camera_controls import round_to_refresh
+from rangekit.app.acquire.acquire import acquire
+from rangekit.app.check.steps import auto_exposures, pattern_delay_for
+from rangekit.app.check.run import check_simulated, simulated_check_rig, write_check, write_pattern_delay
+from rangekit.rig.camera_controls import round_to_refresh
 from rangekit.cli import main
 from rangekit.coded.patterns import make_pattern_spec
-from rangekit.formats.session import ScanPlan
+from rangekit.formats.sessions.session import ScanPlan
 from rangekit.io import read_png
-from rangekit.rig import load_rig, template_rig
+from rangekit.rig.rig_file import load_rig, template_rig
 from rangekit.sim import SimRig, default_scene
-from rangekit.sim import devices as sim_devices
-from rangekit.sim.sensor import Exposure, saturated
+from rangekit.sim.devices import sim_rig as sim_devices
+from rangekit.sim.imaging.sensor import Exposure, saturated
 
 LATENCY_S = 0.05
 

@@ -1,4 +1,4 @@
-"""A call in a child process (rangekit.child): the same answer as in-process, errors carried back, a dead
+"""A call in a child process (rangekit._runtime.child): the same answer as in-process, errors carried back, a dead
 child reported, an interrupted parent leaves no child behind. Real spawned processes, no mocks."""
 
 import os
@@ -10,7 +10,7 @@ import time
 import numpy as np
 import pytest
 
-from rangekit.child import call_beside, child_call, spawn_child
+from rangekit._runtime.child import call_beside, child_call, spawn_child
 from rangekit.errors import MeshError, RangekitError
 from rangekit.surface.cloud import PointCloud
 from rangekit.surface.fusion import poisson_meshes
@@ -92,7 +92,7 @@ def test_a_script_without_a_main_guard_is_not_run_again_in_the_child(tmp_path):
     marker = tmp_path / "runs.txt"
     script.write_text(f"""
 import os
-from rangekit.child import child_call
+from rangekit._runtime.child import child_call
 with open({str(marker)!r}, "a") as f:
     f.write("run\\n")
 with child_call(os.getpid) as call:
@@ -133,7 +133,7 @@ def loaded(*names):
 def test_poissons_child_loads_open3d_and_the_fusion_without_numba_scipy_or_plotly():
     """Processing's Poisson child holds its octree beside the main process: what it imports counts at the
     peak (numba and scipy came with rangekit.surface's package import: 89 MB; plotly with Open3D: 42 MB)."""
-    from rangekit.app.process import CHILD_IMPORTS
+    from rangekit.app.process.process import CHILD_IMPORTS
 
     with spawn_child(CHILD_IMPORTS) as child:
         got = call_beside(loaded, "open3d", "rangekit.surface.fusion", "numba", "scipy", "plotly", "dash",

@@ -15,7 +15,7 @@ from scipy.ndimage import binary_erosion
 from rangekit.coded.decode import decode
 from rangekit.errors import DecodeError
 from rangekit.coded.patterns import make_pattern_spec
-from rangekit.app.reconstruct import reconstruct_view
+from rangekit.coded.reconstruct import reconstruct_view
 from rangekit.sim import ImagingModel, SimRig, default_scene
 from rangekit.coded.triangulate import triangulate_ray_plane, triangulate_ray_ray
 

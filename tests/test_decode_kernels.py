@@ -5,7 +5,7 @@ Covered: the compiled undistortion (rangekit._lens_kernels) against the vectoris
 replaced; the ray-ray kernel (points, residuals, along-ray derivatives) against the numpy midpoint formula
 and :func:`rangekit.coded.uncertainty.along_ray_jacobian`, and against points on a known plane; the phase
 sums and the projector-response correction against :func:`rangekit.coded.phase.phase_from_steps` and
-:class:`rangekit.coded.response.PhaseCorrection`; the read-ahead of :func:`rangekit.app.view_cache.view_clouds`.
+:class:`rangekit.coded.response.PhaseCorrection`; the read-ahead of :func:`rangekit.app.process.view_cache.view_clouds`.
 """
 
 from __future__ import annotations
@@ -167,12 +167,12 @@ def test_view_clouds_reads_ahead_and_gives_view_clouds_results_in_order(tmp_path
     and a view whose frames cannot be read fails at its turn, after the views before it."""
     import shutil
 
-    from rangekit.app.acquire import acquire
-    from rangekit.app.view_cache import view_cloud, view_clouds
+    from rangekit.app.acquire.acquire import acquire
+    from rangekit.app.process.view_cache import view_cloud, view_clouds
     from rangekit.errors import RangekitError
-    from rangekit.formats.session import ScanPlan, Session
+    from rangekit.formats.sessions.session import ScanPlan, Session
     from rangekit.geometry import invert_T
-    from rangekit.rig import Rig
+    from rangekit.rig.rig_file import Rig
     from rangekit.sim import SimRig, default_rig, default_scene
 
     r = default_rig()

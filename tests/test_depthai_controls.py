@@ -14,10 +14,10 @@ import types
 import numpy as np
 import pytest
 
-from rangekit.camera_controls import CameraControls
+from rangekit.rig.camera_controls import CameraControls
 from rangekit.errors import ConfigError, DeviceDisconnected, DeviceError
-from rangekit.rig import Rig, template_rig
-from rangekit.rig_checks import validate_rig_for_hardware
+from rangekit.rig.rig_file import Rig, template_rig
+from rangekit.rig.checks import validate_rig_for_hardware
 
 
 # ----------------------------------------------------------------------------- the fake depthai

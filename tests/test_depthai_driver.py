@@ -106,7 +106,7 @@ def test_tilted_lens_refused(handler):
 
 def test_rig_extrinsics_in_metres(handler, tmp_path):
     from rangekit.drivers.depthai_camera import calibration_to_rig
-    from rangekit.rig import load_rig, save_rig
+    from rangekit.rig.rig_file import load_rig, save_rig
 
     rig = calibration_to_rig(handler, size=(640, 400), sockets=("CAM_A", "CAM_B", "CAM_C"), device_id="X")
     a, b, c = rig.cameras

@@ -1,7 +1,7 @@
 """``rangekit stereo --device`` (issue 19, point 6) against a fake ``depthai`` module at the API boundary.
 
 The fake records every node, link and emitter call and streams a simulated OAK-D-Pro-like pair
-(:func:`rangekit.sim.stereo.render_stereo`, 320 x 200) through a Sync node's message groups, with the
+(:func:`rangekit.sim.sensors.stereo.render_stereo`, 320 x 200) through a Sync node's message groups, with the
 simulator's true depth as the "device's StereoDepth". So the tests check the pipeline the driver builds
 (synchronised left/right mono frames, dot projector and flood as asked, StereoDepth only with
 --on-device) and that the matcher's depth of the captured pair agrees with the truth.
@@ -211,7 +211,7 @@ def _fake_depthai(truth, rig, *, dot_projector: bool = True):
 
 @pytest.fixture(scope="module")
 def sim_pair():
-    from rangekit.sim.stereo import render_stereo, stereo_rig, stereo_scene
+    from rangekit.sim.sensors.stereo import render_stereo, stereo_rig, stereo_scene
 
     rig = stereo_rig(W, H)
     return rig, render_stereo(stereo_scene(), rig, dots=True, seed=0)
@@ -281,7 +281,7 @@ def test_on_device_starts_stereodepth_and_compares(fake, sim_pair, tmp_path, cap
 
 
 def test_the_comparison_summary_against_a_known_offset():
-    from rangekit.app.stereo_live import compare_depths
+    from rangekit.app.commands.stereo_live import compare_depths
 
     a = np.full((4, 5), 1.0)
     b = a - 0.002

@@ -24,7 +24,7 @@ def projector(monkeypatch):
 
 
 def test_patterns_are_shown_pixel_exact(projector):
-    from rangekit import devices
+    from rangekit.rig import devices
 
     assert isinstance(projector, devices.Projector)
     spec = make_pattern_spec("graycode", projector.resolution)

@@ -5,7 +5,7 @@ import pytest
 
 from rangekit.surface.mesh import TriangleMesh
 from rangekit.sim import default_rig, default_scene
-from rangekit.sim.evaluate import mesh_accuracy, sample_surface, visible_samples
+from rangekit.sim.truth.evaluate import mesh_accuracy, sample_surface, visible_samples
 
 ANGLES = np.radians(np.arange(0, 360, 30))
 

@@ -289,7 +289,7 @@ def test_merged_ply_view_field_read_by_plyfile(tmp_path):
 
 @pytest.mark.parametrize("fmt", ["obj", "stl", "glb"])
 def test_export_meshes_beside_the_ply_files(tmp_path, fmt):
-    from rangekit.app.fused_outputs import MESH_FILE, WATERTIGHT_FILE, export_meshes
+    from rangekit.app.process.fused_outputs import MESH_FILE, WATERTIGHT_FILE, export_meshes
 
     mesh = _sphere_mesh()
     rk.save_mesh(tmp_path / MESH_FILE, mesh)

@@ -6,11 +6,11 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-import rangekit.app.frame_writer as frame_writer
-from rangekit.app.acquire import acquire
+import rangekit.app.acquire.frame_writer as frame_writer
+from rangekit.app.acquire.acquire import acquire
 from rangekit.coded.patterns import make_pattern_spec
 from rangekit.errors import DeviceDisconnected, StorageError
-from rangekit.formats.session import ScanPlan, load_session
+from rangekit.formats.sessions.session import ScanPlan, load_session
 from rangekit.io import write_png
 from tests.test_acquire import pngs, sim, small_rig
 

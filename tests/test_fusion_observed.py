@@ -10,7 +10,7 @@ from scipy.spatial import cKDTree
 
 from rangekit.errors import InputError, MeshError
 from rangekit.formats.meshes import load_mesh_file, save_mesh
-from rangekit.formats.summary import ProcessResult
+from rangekit.formats.sessions.summary import ProcessResult
 from rangekit.surface.cloud import PointCloud
 from rangekit.surface.fusion import poisson_meshes
 from rangekit.surface.mesh import TriangleMesh

@@ -8,17 +8,17 @@ import pytest
 
 from small_rigs import small_projector_rig
 
-from rangekit.app.acquire import acquire
-from rangekit.app.view_cache import view_cloud
+from rangekit.app.acquire.acquire import acquire
+from rangekit.app.process.view_cache import view_cloud
 from rangekit.cli import main
 from rangekit.coded.hdr import choose_exposure, merge_decodes
 from rangekit.coded.patterns import make_pattern_spec
 from rangekit.coded.result import DecodeResult
 from rangekit.errors import DeviceError
-from rangekit.formats.session import CaptureSettings, ScanPlan, Session
-from rangekit.formats.session_check import verify_views
+from rangekit.formats.sessions.session import CaptureSettings, ScanPlan, Session
+from rangekit.formats.sessions.check import verify_views
 from rangekit.sim import SimRig, default_scene
-from rangekit.sim import devices as sim_devices
+from rangekit.sim.devices import sim_rig as sim_devices
 
 EXPOSURES = (2000, 8000, 32000)
 

@@ -9,8 +9,8 @@ from rangekit.geometry import apply_T, axis_angle_to_R, invert_T, make_T, rotati
 from rangekit.surface.cloud import PointCloud
 from rangekit.registration.coarse import CoarseOptions, coarse_align
 from rangekit.registration.icp import KERNELS, IcpOptions, OrganisedScan, icp
-from rangekit.sim.objects import lumpy
-from rangekit.sim.scans import turntable_scans
+from rangekit.sim.scene.objects import lumpy
+from rangekit.sim.writers.scans import turntable_scans
 
 
 @pytest.fixture(scope="module")

@@ -8,15 +8,15 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from rangekit.app.laser_calibration import calibrate_lasers, plane_in_world
+from rangekit.app.laser.calibration import calibrate_lasers, plane_in_world
 from rangekit.boards import Board
 from rangekit.cli import main
 from rangekit.errors import CalibrationError
 from rangekit.geometry import apply_T, axis_angle_to_R, compose, invert_T, make_T
-from rangekit.lasers import LineLaser, laser_plane
-from rangekit.sim.calibration import pose_problem
-from rangekit.sim.laser_board import laser_board_poses, line_on_board
-from rangekit.sim.laser_rig import laser_rig
+from rangekit.rig.lasers import LineLaser, laser_plane
+from rangekit.sim.writers.calibration import pose_problem
+from rangekit.sim.laser.board import laser_board_poses, line_on_board
+from rangekit.sim.laser.rig import laser_rig
 
 BOARD = Board()
 
@@ -146,7 +146,7 @@ def test_a_laser_that_lights_no_pose_is_named(truth):
 
 def test_a_rig_without_lasers_is_named():
     from rangekit.errors import ConfigError
-    from rangekit.sim.devices import default_rig
+    from rangekit.sim.devices.sim_rig import default_rig
 
     with pytest.raises(ConfigError, match="no lasers"):
         calibrate_lasers(default_rig(), n_poses=3)
@@ -170,7 +170,7 @@ def test_cli_calibrate_lasers_on_the_simulator(tmp_path, capsys):
     as today, then the laser planes from 10 board poses with that camera; the rig file's planes (in the
     calibrated turntable frame) against the true ones: measured 0.0020 deg and 0.0049 mm worst."""
     from rangekit.laser.plane_calib import plane_errors
-    from rangekit.rig import load_rig
+    from rangekit.rig.rig_file import load_rig
 
     out = tmp_path / "rig.json"
     assert main(["calibrate", "--rig", "sim", "--lasers", "--out", str(out)]) == 0

@@ -13,18 +13,18 @@ import numpy as np
 import pytest
 
 import rangekit.drivers
-from rangekit.app.laser_calibration_hw import calibrate_lasers_on_devices
+from rangekit.app.laser.calibration_hw import calibrate_lasers_on_devices
 from rangekit.boards import Board
 from rangekit.cli import main
 from rangekit.errors import ConfigError
 from rangekit.geometry import axis_angle_to_R, make_T
 from rangekit.laser.plane_calib import plane_errors
-from rangekit.lasers import laser_plane
-from rangekit.rig import load_rig, save_rig, template_rig
-from rangekit.sim.calibration import board_scene, pose_problem
-from rangekit.sim.devices import SimRig
-from rangekit.sim.laser_board import laser_board_poses, line_on_board
-from rangekit.sim.laser_rig import laser_rig
+from rangekit.rig.lasers import laser_plane
+from rangekit.rig.rig_file import load_rig, save_rig, template_rig
+from rangekit.sim.writers.calibration import board_scene, pose_problem
+from rangekit.sim.devices.sim_rig import SimRig
+from rangekit.sim.laser.board import laser_board_poses, line_on_board
+from rangekit.sim.laser.rig import laser_rig
 
 BOARD = Board()
 DEVICES = {"camera": {"type": "depthai", "id": None, "socket": "CAM_A"},

@@ -8,8 +8,8 @@ import pytest
 
 from rangekit.errors import SceneError
 from rangekit.sim import SimRig, default_scene
-from rangekit.sim.laser import LaserView
-from rangekit.sim.laser_rig import laser_rig
+from rangekit.sim.laser.frames import LaserView
+from rangekit.sim.laser.rig import laser_rig
 
 
 @pytest.fixture(scope="module")

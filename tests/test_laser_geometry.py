@@ -21,8 +21,8 @@ from rangekit.laser.plane_calib import (board_view, calibrate_laser_plane, calib
                                         plate_view, report_lines)
 from rangekit.laser.plane_fit import fit_plane
 from rangekit.laser.triangulate import to_turntable_frame, triangulate_peaks
-from rangekit.lasers import LineLaser, laser_plane
-from rangekit.rig import table_frame, table_motion
+from rangekit.rig.lasers import LineLaser, laser_plane
+from rangekit.rig.rig_file import table_frame, table_motion
 from rangekit.sim import default_rig
 
 BOARD = Board()

@@ -1,6 +1,6 @@
 """Peak detection on the simulator's own laser frames (issue 17, point 2's acceptance): the default laser
 rig, RGB 8-bit camera, line width 0.8 mm, default noise and speckle, against the exact image projection of
-the lit curve (:func:`rangekit.sim.laser_truth.column_errors`). benchmarks/bench_laser_peaks_sim.py
+the lit curve (:func:`rangekit.sim.laser.truth.column_errors`). benchmarks/bench_laser_peaks_sim.py
 measures the same over more objects and angles (docs/laser.md)."""
 
 from __future__ import annotations
@@ -14,9 +14,9 @@ from laser_lines import row_line
 from rangekit.errors import InputError
 from rangekit.laser import detect_peaks
 from rangekit.sim import ImagingModel, default_scene
-from rangekit.sim.laser import LaserLook, LaserView
-from rangekit.sim.laser_rig import laser_rig
-from rangekit.sim.laser_truth import column_errors, curve_distance
+from rangekit.sim.laser.frames import LaserLook, LaserView
+from rangekit.sim.laser.rig import laser_rig
+from rangekit.sim.laser.truth import column_errors, curve_distance
 
 CASES = (("lumpy", 0.0), ("lumpy", 100.0), ("sphere", 40.0), ("sphere", 200.0))
 

@@ -22,7 +22,7 @@ def laser_capture(tmp_path_factory):
 
 def test_reconstruct_triangulates_each_laser_on_its_plane(laser_capture, tmp_path, capsys):
     from rangekit.formats.clouds import load_cloud
-    from rangekit.rig import load_rig
+    from rangekit.rig.rig_file import load_rig
 
     assert main(["reconstruct", str(laser_capture), "--out", str(tmp_path / "c.ply")]) == 0
     assert "laser 0:" in capsys.readouterr().out
@@ -55,7 +55,7 @@ def test_a_laser_that_lights_nothing_is_named(laser_capture, tmp_path, capsys):
 def test_the_full_scale_comes_from_the_capture_or_the_rig(laser_capture):
     from rangekit.formats.capture import capture_full_scale
     from rangekit.formats.laser_capture import load_laser_capture
-    from rangekit.rig import load_rig
+    from rangekit.rig.rig_file import load_rig
 
     assert load_laser_capture(laser_capture).full_scale == 255.0   # capture.json: imaging bits 8
     rig = load_rig(laser_capture / "rig.json")

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from rangekit.cli import main
-from rangekit.formats.session import Session
+from rangekit.formats.sessions.session import Session
 
 
 @pytest.fixture(scope="module")
@@ -64,12 +64,12 @@ def test_laser_session_holds_capture_folders(laser_scan, tmp_path, capsys):
 def test_interrupted_laser_acquisition_resumes_to_the_same_frames(tmp_path):
     """A camera unplugged mid-step: the finished steps stay, no laser is left on, and the resumed session
     holds the same bytes as an uninterrupted one."""
-    from rangekit.app.acquire import acquire
+    from rangekit.app.acquire.acquire import acquire
     from rangekit.errors import DeviceError
-    from rangekit.formats.session import ScanPlan
+    from rangekit.formats.sessions.session import ScanPlan
     from rangekit.laser.sequence import LaserSequence
     from rangekit.sim import SimRig, default_scene
-    from rangekit.sim.laser_rig import laser_rig
+    from rangekit.sim.laser.rig import laser_rig
 
     def devices():
         return SimRig(default_scene("sphere"), laser_rig(), light="laser", seed=3)
@@ -126,8 +126,8 @@ def test_full_laser_scan_with_calibrated_planes(obj, tmp_path):
     assert acc["cloud_rms"] <= 0.1e-3 and summary["mesh_watertight"]["watertight"], acc
     assert len(summary["views"]) == 400 and acc["n_cloud"] > 250_000
     # The lasers were calibrated, not copied from the simulator's truth.
-    from rangekit.rig import load_rig
-    from rangekit.sim.laser_rig import laser_rig
+    from rangekit.rig.rig_file import load_rig
+    from rangekit.sim.laser.rig import laser_rig
 
     planes = [laser.plane for laser in load_rig(out / "rig.json").lasers]
     true = [laser.plane for laser in laser_rig().lasers]

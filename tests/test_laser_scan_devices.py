@@ -14,12 +14,12 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from rangekit.app.acquire import acquire
+from rangekit.app.acquire.acquire import acquire
 from rangekit.errors import DeviceError
-from rangekit.formats.session import ScanPlan, load_session
+from rangekit.formats.sessions.session import ScanPlan, load_session
 from rangekit.laser.sequence import LaserSequence
 from rangekit.sim import SimRig, default_scene
-from rangekit.sim.laser_rig import laser_rig
+from rangekit.sim.laser.rig import laser_rig
 
 N_STEPS = 8                      # 45 degree steps: whole microsteps, exact in the board's 3-decimal reports
 MICROSTEP_DEG = 360.0 / 3200
@@ -106,7 +106,7 @@ def open_board(kind, fw):
 def driven_scan(kind, out, *, s=None, resume=False, n_steps=N_STEPS, **board_options):
     """A laser scan of ``n_steps`` through the ``kind`` driver on a fresh simulated board. Returns (session or
     the DeviceError raised, log of commands and captures, the firmware, the simulated rig)."""
-    from rangekit.sim.firmware import start_firmware
+    from rangekit.sim.devices.firmware import start_firmware
 
     s = s or sim()
     fw = start_firmware(kind, time_scale=0.01)
@@ -176,7 +176,7 @@ def test_a_wrong_laser_order_gives_wrong_frames(plain, tmp_path):
         def laser(self, n, on):
             super().laser(3 - n, on)
 
-    from rangekit.sim.firmware import start_firmware
+    from rangekit.sim.devices.firmware import start_firmware
 
     s = sim()
     fw = start_firmware("horus", time_scale=0.01)
@@ -263,8 +263,8 @@ def test_a_missing_object_says_the_lines_are_only_on_the_table(case, tmp_path, c
     turntable top; those points are dropped as table points and the error says so (exit 1)."""
     from rangekit.cli.run import main
     from rangekit.geometry import make_T
-    from rangekit.sim.objects import sphere
-    from rangekit.sim.scene import Scene, turntable_disc
+    from rangekit.sim.scene.objects import sphere
+    from rangekit.sim.scene.scene import Scene, turntable_disc
 
     if case == "table only":
         scene = Scene((turntable_disc(),))
@@ -308,7 +308,7 @@ def test_a_laser_plane_through_the_camera_centre_is_refused_before_any_frame(tmp
     import json
 
     from rangekit.cli.run import main
-    from rangekit.rig import template_rig
+    from rangekit.rig.rig_file import template_rig
 
     rig = template_rig()               # world = the camera frame: the camera centre is the origin
     rig["lasers"] = [{"name": "left", "plane": [1.0, 0.0, 0.0, -0.1], "switch": 1},
@@ -321,7 +321,7 @@ def test_a_laser_plane_through_the_camera_centre_is_refused_before_any_frame(tmp
     assert f"{path}: lasers[1] ('right'): the plane" in err and "0.200 mm of camera 'camera'" in err
     assert "no-such-port" not in err and not (tmp_path / "s").exists()
     # The same check in the library, for a rig with a good plane nothing is raised.
-    from rangekit.app.scan import check_laser_planes
+    from rangekit.app.scan.scan import check_laser_planes
     from rangekit.errors import ConfigError
 
     check_laser_planes(small_rig(), where="sim")

@@ -12,12 +12,12 @@ import pytest
 
 from rangekit.cli import main
 from rangekit.geometry import make_T
-from rangekit.rig import save_rig
+from rangekit.rig.rig_file import save_rig
 from rangekit.sim import ImagingModel, Scene, default_scene
-from rangekit.sim.laser import LaserView
-from rangekit.sim.laser_curve import lit_curve
-from rangekit.sim.laser_rig import laser_rig
-from rangekit.sim.objects import box, turntable_disc
+from rangekit.sim.laser.frames import LaserView
+from rangekit.sim.laser.curve import lit_curve
+from rangekit.sim.laser.rig import laser_rig
+from rangekit.sim.scene.objects import box, turntable_disc
 
 
 def small_rig(width=320, height=256):

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from rangekit.errors import ConfigError
-from rangekit.lasers import LineLaser, laser_plane
-from rangekit.rig import Rig, load_rig, save_rig
+from rangekit.rig.lasers import LineLaser, laser_plane
+from rangekit.rig.rig_file import Rig, load_rig, save_rig
 
 
 def test_a_rig_with_lasers_round_trips(tmp_path, rig):

@@ -1,18 +1,22 @@
-"""The package's shape: no import cycle, imports only go down the layers, no file over 400 lines.
+"""The package's shape: no import cycle, imports only go down the layers, no module over 600 lines (a warning
+over 400: split a file by idea, not by length), no folder of more than 15 modules, every package installed.
 
 Every ``import`` and ``from ... import`` statement of every module is read with ``ast``, including
 imports inside functions and under ``if TYPE_CHECKING:`` (a cycle hidden in a function is still a
-cycle). Module names are the installed ones: ``sim/raycast.py`` is ``rangekit.sim.raycast``.
+cycle). Module names are the installed ones: ``sim/scene/raycast.py`` is ``rangekit.sim.scene.raycast``.
 """
 
 from __future__ import annotations
 
 import ast
+import re
+import warnings
 from pathlib import Path
 
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
+PYPROJECT = ROOT / "pyproject.toml"
 #: Source folders and the package each one installs as (pyproject's package-dir).
 FOLDERS = {"rangekit": "rangekit", "sim": "rangekit.sim", "drivers": "rangekit.drivers", "calib": "rangekit.calib"}
 
@@ -21,6 +25,7 @@ FOLDERS = {"rangekit": "rangekit", "sim": "rangekit.sim", "drivers": "rangekit.d
 LAYERS = {
     "core": 0,
     "coded": 1, "stereo": 1, "photometric": 1, "tof": 1, "surface": 1, "registration": 1, "laser": 1, "metrology": 1,
+    "rendering": 1,
     "formats": 2,
     "sim": 3, "drivers": 3, "calib": 3,
     "app": 4,
@@ -28,7 +33,11 @@ LAYERS = {
 }
 #: Pairs of parts on one layer that must not import each other either way.
 APART = [("sim", "drivers"), ("sim", "calib"), ("drivers", "calib")]
-MAX_LINES = 400
+#: A module over LONG_LINES lines is reported as a warning; one over MAX_LINES fails.
+LONG_LINES = 400
+MAX_LINES = 600
+#: The most modules (``.py`` files, ``__init__.py`` included) one folder may hold: more wants a room of its own.
+MAX_MODULES_PER_FOLDER = 15
 
 
 def _module_name(path: Path) -> str:
@@ -95,7 +104,7 @@ def graph() -> dict[str, set[str]]:
 def test_the_tree_is_read(graph):
     # The walk must see the package (so the other tests cannot pass on an empty graph).
     assert len(graph) > 60
-    for m in ("rangekit.camera", "rangekit.sim.raycast", "rangekit.drivers.turntable", "rangekit.calib.camera",
+    for m in ("rangekit.camera", "rangekit.sim.scene.raycast", "rangekit.drivers.turntable", "rangekit.calib.camera",
               "rangekit.registration.icp", "rangekit.cli"):
         assert m in graph, m
     assert "rangekit.geometry" in graph["rangekit.camera"]
@@ -147,11 +156,41 @@ def test_imports_go_down_the_layers(graph):
 
 
 def test_layer_check_catches_an_upward_import():
-    assert LAYERS[_part("rangekit.app.process")] > LAYERS[_part("rangekit.surface.mesh")]
-    assert _part("rangekit.camera") == "core" and _part("rangekit.sim.devices") == "sim"
+    assert LAYERS[_part("rangekit.app.process.process")] > LAYERS[_part("rangekit.surface.mesh")]
+    assert _part("rangekit.camera") == "core" and _part("rangekit.sim.devices.sim_rig") == "sim"
 
 
-def test_no_file_over_400_lines():
-    long = [f"{p.relative_to(ROOT)}: {n} lines" for p in _sources().values()
-            if (n := len(p.read_text().splitlines())) > MAX_LINES]
-    assert not long, "files over 400 lines:\n" + "\n".join(long)
+def test_no_module_over_600_lines():
+    lengths = {p: len(p.read_text().splitlines()) for p in _sources().values()}
+    long = [f"{p.relative_to(ROOT)}: {n} lines" for p, n in lengths.items() if LONG_LINES < n <= MAX_LINES]
+    if long:
+        warnings.warn("modules over 400 lines (split by idea if they hold more than one):\n" + "\n".join(long))
+    too_long = [f"{p.relative_to(ROOT)}: {n} lines" for p, n in lengths.items() if n > MAX_LINES]
+    assert not too_long, "modules over 600 lines:\n" + "\n".join(too_long)
+
+
+def _folders() -> dict[Path, int]:
+    """Every source folder (rangekit/, sim/, drivers/, calib/ and below) with how many modules it holds."""
+    counts: dict[Path, int] = {}
+    for top in FOLDERS:
+        for p in (ROOT / top).rglob("*.py"):
+            if "__pycache__" in p.parts or (top == "rangekit" and p.parts[len(ROOT.parts) + 1] in FOLDERS):
+                continue
+            counts[p.parent] = counts.get(p.parent, 0) + 1
+    return counts
+
+
+def test_no_folder_over_15_modules():
+    counts = _folders()
+    assert ROOT / "rangekit" / "app" / "report" in counts
+    crowded = [f"{d.relative_to(ROOT)}: {n} modules" for d, n in sorted(counts.items()) if n > MAX_MODULES_PER_FOLDER]
+    assert not crowded, "folders over 15 modules (give a family its own folder):\n" + "\n".join(crowded)
+
+
+def test_every_package_is_installed():
+    # pyproject lists the packages one by one (rangekit.sim lives in sim/): a new folder missing from the list
+    # works in this checkout but is left out of a wheel.
+    listed = set(re.findall(r'"(rangekit[\w.]*)"', PYPROJECT.read_text().split("packages = [", 1)[1].split("]", 1)[0]))
+    found = {_module_name(p) for p in _sources().values() if p.name == "__init__.py"}
+    assert found - listed == set(), "packages missing from pyproject.toml: " + ", ".join(sorted(found - listed))
+    assert listed - found == set(), "pyproject.toml lists packages that do not exist: " + ", ".join(sorted(listed - found))

@@ -1,12 +1,12 @@
-"""rangekit.sim.lightstage: images agree with the truth they come with (camera frame, shadows, falloff)."""
+"""rangekit.sim.sensors.lightstage: images agree with the truth they come with (camera frame, shadows, falloff)."""
 
 import numpy as np
 import pytest
 
 from rangekit.errors import InputError
-from rangekit.sim.lightstage import (LIGHT_STAGE_MODEL, light_stage_camera, light_stage_lights, light_stage_scene,
+from rangekit.sim.sensors.lightstage import (LIGHT_STAGE_MODEL, light_stage_camera, light_stage_lights, light_stage_scene,
                                      render_light_stage)
-from rangekit.sim.render import ImagingModel
+from rangekit.sim.imaging.render import ImagingModel
 
 EXACT = ImagingModel(bits=16, ambient=0.0, camera_blur=0.0, full_well=0.0, read_noise=0.0)
 LSB = 1.0 / 65535

@@ -1,4 +1,4 @@
-"""rangekit.memory against glibc's own counters (mallinfo2): inside reuse_freed_memory a large array comes from
+"""rangekit._runtime.memory against glibc's own counters (mallinfo2): inside reuse_freed_memory a large array comes from
 the heap, after it from its own mapping again, and a process started with its malloc settings keeps them.
 Each case runs in a fresh interpreter, so the suite's own allocator is left as it was."""
 
@@ -11,7 +11,7 @@ import pytest
 
 PROBE = textwrap.dedent("""
     import ctypes, numpy as np
-    from rangekit.memory import reuse_freed_memory
+    from rangekit._runtime.memory import reuse_freed_memory
 
     class Info(ctypes.Structure):
         _fields_ = [(n, ctypes.c_size_t) for n in ("arena", "ordblks", "smblks", "hblks", "hblkhd", "usmblks",

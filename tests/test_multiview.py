@@ -12,7 +12,7 @@ from rangekit.geometry import axis_angle_to_R, make_T, rotation_angle
 from rangekit.surface.cloud import PointCloud
 from rangekit.registration.multiview import MultiViewOptions, overlap_rms, refine_jointly, register_views, _prepare
 from rangekit.registration.sync import synchronise
-from rangekit.sim.scans import perturb_poses, turntable_scans
+from rangekit.sim.writers.scans import perturb_poses, turntable_scans
 
 BUNNY = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "stanford-bunny"
 

@@ -1,10 +1,10 @@
-"""rangekit.noalias: the flag reaches LLVM (each array argument's data pointer is ``noalias``), and a
+"""rangekit._runtime.noalias: the flag reaches LLVM (each array argument's data pointer is ``noalias``), and a
 flagged function computes what the same function computes unflagged."""
 
 import numba
 import numpy as np
 
-from rangekit.noalias import njit_noalias
+from rangekit._runtime.noalias import njit_noalias
 
 
 def _shifted_min(src, dst):

@@ -1,4 +1,4 @@
-"""Numeric checks of the procedurally built scene objects (rangekit.sim.objects)."""
+"""Numeric checks of the procedurally built scene objects (rangekit.sim.scene.objects)."""
 
 from __future__ import annotations
 
@@ -10,9 +10,9 @@ from scipy.spatial import cKDTree
 
 from rangekit.errors import FileFormatError, SceneError
 from rangekit.geometry import apply_T, axis_angle_to_R, make_T
-from rangekit.sim.objects import (BUILTIN_OBJECTS, board_corners, box, calibration_board, cylinder, load_mesh,
+from rangekit.sim.scene.objects import (BUILTIN_OBJECTS, board_corners, box, calibration_board, cylinder, load_mesh,
                                   lumpy, make_object, plane, sphere, torus, turntable_disc)
-from rangekit.sim.scene_object import SceneObject
+from rangekit.sim.scene.scene_object import SceneObject
 
 
 def signed_volume(obj: SceneObject) -> float:

@@ -1,4 +1,4 @@
-"""Open3D's plotly viewer deferred in rangekit's processes (rangekit.open3d_viewer): not imported with
+"""Open3D's plotly viewer deferred in rangekit's processes (rangekit._runtime.open3d_viewer): not imported with
 Open3D, and still there, the real thing, when called."""
 
 import os
@@ -7,7 +7,7 @@ import sys
 
 SCRIPT = """
 import sys
-from rangekit.open3d_viewer import defer_plotly_viewer
+from rangekit._runtime.open3d_viewer import defer_plotly_viewer
 defer_plotly_viewer()
 import numpy as np
 import open3d as o3d
@@ -33,7 +33,7 @@ def test_open3d_loads_without_its_viewer_and_the_viewer_works_when_called():
 
 
 def test_nothing_is_deferred_once_open3d_is_imported():
-    lines = run("import sys, open3d\nfrom rangekit.open3d_viewer import defer_plotly_viewer\n"
+    lines = run("import sys, open3d\nfrom rangekit._runtime.open3d_viewer import defer_plotly_viewer\n"
                 "defer_plotly_viewer()\nprint(type(sys.modules['open3d.visualization.draw_plotly'].draw_plotly))")
     assert lines == ["<class 'function'>"]
 

@@ -6,15 +6,15 @@ import json
 import numpy as np
 import pytest
 
-from rangekit.app.acquire import acquire
-from rangekit.app.passes import TurnOverNeeded, turn_over_prompt
+from rangekit.app.acquire.acquire import acquire
+from rangekit.app.scan.passes import TurnOverNeeded, turn_over_prompt
 from rangekit.coded.patterns import make_pattern_spec
 from rangekit.errors import ConfigError, DeviceDisconnected
-from rangekit.formats.session import ScanPlan, Session, SimulatorSettings, load_session
+from rangekit.formats.sessions.session import ScanPlan, Session, SimulatorSettings, load_session
 from rangekit.geometry import apply_T, rotation_angle
-from rangekit.rig import Rig
+from rangekit.rig.rig_file import Rig
 from rangekit.sim import SimRig, default_rig, default_scene
-from rangekit.sim.passes import pass_motions, pass_scene, turn_over_motion
+from rangekit.sim.scene.passes import pass_motions, pass_scene, turn_over_motion
 
 
 def small_rig():

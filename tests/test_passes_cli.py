@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from rangekit.app.report_passes import passes_section
+from rangekit.app.report.passes import passes_section
 from rangekit.cli import main
 from rangekit.surface.cloud import PointCloud, merge_clouds
 
@@ -24,16 +24,16 @@ def test_bad_pass_options_exit_2(tmp_path, capsys, argv, message):
 
 
 def test_resume_keeps_the_sessions_passes(tmp_path):
-    from rangekit.app.scan import prepare_scan
+    from rangekit.app.scan.scan import prepare_scan
 
     setup = prepare_scan(out=str(tmp_path / "s"), n_views=3, passes=2)
     assert setup.n_views == 6 and setup.passes == 2
     assert np.allclose(setup.simulator.pass_motions[0], np.eye(4))
-    from rangekit.formats.session import ScanPlan, Session
+    from rangekit.formats.sessions.session import ScanPlan, Session
 
     Session.new(tmp_path / "s", ScanPlan(n_views=6, passes=2), setup.spec, setup.rig, capture=setup.capture,
                 simulator=setup.simulator).save()
-    from rangekit.rig import save_rig
+    from rangekit.rig.rig_file import save_rig
 
     save_rig(setup.rig, tmp_path / "s" / "rig.json")
     again = prepare_scan(resume=str(tmp_path / "s"))

@@ -7,9 +7,9 @@ import pytest
 from rangekit.errors import RegistrationError
 from rangekit.geometry import invert_T, rotation_angle
 from rangekit.registration.passes import register_passes
-from rangekit.rig import Rig, turntable_prior
+from rangekit.rig.rig_file import Rig, turntable_prior
 from rangekit.sim import SimRig, default_rig, default_scene
-from rangekit.sim.passes import pass_motions, view_motions
+from rangekit.sim.scene.passes import pass_motions, view_motions
 from rangekit.surface.cloud import PointCloud
 
 N_PER_PASS = 6

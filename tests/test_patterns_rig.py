@@ -7,7 +7,7 @@ import pytest
 
 from rangekit.errors import ConfigError, FileFormatError, PatternError
 from rangekit.coded.patterns import PatternSpec, gray_decode, gray_encode, make_pattern_spec
-from rangekit.rig import Rig, load_rig, save_rig
+from rangekit.rig.rig_file import Rig, load_rig, save_rig
 from rangekit.sim import default_rig
 
 

@@ -10,7 +10,7 @@ import pytest
 
 from rangekit.photometric import (angular_error, integrate_normals, photometric_stereo,
                                   uncalibrated_photometric_stereo)
-from rangekit.sim.lightstage import LIGHT_STAGE_MODEL, light_stage_lights, light_stage_scene, render_light_stage
+from rangekit.sim.sensors.lightstage import LIGHT_STAGE_MODEL, light_stage_lights, light_stage_scene, render_light_stage
 
 
 def _inner(mask: np.ndarray, px: float) -> np.ndarray:

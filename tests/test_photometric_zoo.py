@@ -12,7 +12,7 @@ import pytest
 from rangekit.errors import InputError
 from rangekit.photometric import angular_error, photometric_stereo
 from rangekit.photometric.solve import global_light, solve_chunks, to_maps
-from rangekit.sim.lightstage import (LIGHT_STAGE_MODEL, light_stage_camera, light_stage_lights, light_stage_scene,
+from rangekit.sim.sensors.lightstage import (LIGHT_STAGE_MODEL, light_stage_camera, light_stage_lights, light_stage_scene,
                                      render_light_stage)
 
 CLEAN = replace(LIGHT_STAGE_MODEL, full_well=0.0, read_noise=0.0, camera_blur=0.0)

@@ -6,7 +6,7 @@ import pytest
 
 from rangekit.drivers.projector_control import EscVp21Projector, PJLinkProjector, make_projector_control
 from rangekit.errors import CommandError, ConfigError, DeviceDisconnected, DeviceTimeout
-from rangekit.sim.projector_firmware import SimEscVp21, SimPJLink
+from rangekit.sim.devices.projector_firmware import SimEscVp21, SimPJLink
 
 
 @pytest.fixture
@@ -80,9 +80,9 @@ def test_bad_configuration():
 
 def test_rig_file_devices_open_and_fail_clearly():
     from rangekit.drivers import open_rig_devices
-    from rangekit.rig import Rig
+    from rangekit.rig.rig_file import Rig
     from rangekit.sim import default_rig
-    from rangekit.sim.firmware import start_firmware
+    from rangekit.sim.devices.firmware import start_firmware
 
     base = default_rig()
     fw = start_firmware("horus")

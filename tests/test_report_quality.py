@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from rangekit.app.report_quality import QUALITY_VERTICES, mesh_quality, sigma_scale
+from rangekit.app.report.quality import QUALITY_VERTICES, mesh_quality, sigma_scale
 
 
 def _grid(n: int, step: float, z: float) -> np.ndarray:

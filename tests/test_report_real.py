@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 import trimesh
 
-from rangekit.app.report_residuals import residual_histogram_svg
-from rangekit.app.report_viewer import decimate
-from rangekit.app.report_views import saturated_fraction
+from rangekit.app.report.residuals import residual_histogram_svg
+from rangekit.app.report.viewer import decimate
+from rangekit.app.report.views import saturated_fraction
 
 sys.path.insert(0, str(Path(__file__).parent))
 sys.path.insert(0, str(Path(__file__).parent / "faults"))
@@ -25,7 +25,7 @@ sys.path.insert(0, str(Path(__file__).parent / "faults"))
 def report(tmp_path_factory):
     from _sessions import N_VIEWS, make_reference
 
-    from rangekit.app.process import process_session
+    from rangekit.app.process.process import process_session
 
     out = make_reference(tmp_path_factory.mktemp("nogt") / "session")
     data = json.loads((out / "session.json").read_text())

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 import trimesh
 
-from rangekit.app.snapshot import fit_camera, render_cloud
-from rangekit.app.snapshot_hits import HITS_PER_MESH, _cast_mesh, raycast_mesh
+from rangekit.rendering.snapshot import fit_camera, render_cloud
+from rangekit.rendering.hits import HITS_PER_MESH, _cast_mesh, raycast_mesh
 from rangekit.colour import colour_table, colourise
 from rangekit.geometry import apply_T
 from rangekit.surface.mesh import TriangleMesh
@@ -114,7 +114,7 @@ def test_mesh_casts_are_kept_per_mesh_and_camera():
     assert raycast_mesh(mesh, cams[1]) is not first
     for cam in cams:                                # more cameras than kept: the oldest ones go
         raycast_mesh(mesh, cam)
-    from rangekit.app import snapshot_hits
+    from rangekit.rendering import hits as snapshot_hits
 
     assert len(snapshot_hits._HITS[mesh]) == HITS_PER_MESH
     other = TriangleMesh(tm.vertices * 2, tm.faces)  # another mesh, same camera: cast anew
@@ -126,7 +126,7 @@ def test_mesh_casts_are_kept_per_mesh_and_camera():
 
 
 def test_depth_edges_on_the_cast_box_are_the_whole_image_edges():
-    from rangekit.sim.view_errors import _MARGIN, _box, _box_edges, depth_edges
+    from rangekit.sim.truth.view_errors import _MARGIN, _box, _box_edges, depth_edges
 
     class Cam:
         width, height = 90, 70
@@ -149,8 +149,8 @@ def test_depth_edges_on_the_cast_box_are_the_whole_image_edges():
 
 def test_the_truth_cast_through_a_cropped_camera_is_the_whole_casts_box():
     from rangekit.sim import default_rig, default_scene
-    from rangekit.sim.raycast import cast_view
-    from rangekit.sim.view_errors import _truth_in_box
+    from rangekit.sim.scene.raycast import cast_view
+    from rangekit.sim.truth.view_errors import _truth_in_box
 
     rig = default_rig()
     cam = rig.camera.resized(320, 256)

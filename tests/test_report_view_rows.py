@@ -1,13 +1,13 @@
-"""The report's per-view part made ahead of the mesh (rangekit.app.report_view_rows): each view's maps read
+"""The report's per-view part made ahead of the mesh (rangekit.app.report.view_rows): each view's maps read
 once, in order, and not kept; the sigma pictures on one scale over all views, as from maps held in memory."""
 
 import re
 
 import numpy as np
 
-from rangekit.app.report_view_rows import _compact, _expand, view_rows
-from rangekit.app.view_cache import ViewMaps
-from rangekit.sim.devices import default_rig
+from rangekit.app.report.view_rows import _compact, _expand, view_rows
+from rangekit.app.process.view_cache import ViewMaps
+from rangekit.sim.devices.sim_rig import default_rig
 from rangekit.surface.cloud import PointCloud
 
 

@@ -16,8 +16,8 @@ from rangekit.coded.phase import phase_from_steps
 from rangekit.errors import ConfigError, DecodeError, InputError
 from rangekit.coded.patterns import make_pattern_spec
 from rangekit.coded.response import fit_response, phase_correction
-from rangekit.projector_response import ProjectorResponse
-from rangekit.rig import Rig, load_rig, save_rig, template_rig
+from rangekit.rig.projector_response import ProjectorResponse
+from rangekit.rig.rig_file import Rig, load_rig, save_rig, template_rig
 from rangekit.sim import ImagingModel, SimRig, default_rig, default_scene
 
 

@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 
 from rangekit.drivers import open_rig_devices
-from rangekit.rig_checks import (CAPTURE_FIELDS, DEVICE_FIELDS, validate_capture, validate_devices,
+from rangekit.rig.checks import (CAPTURE_FIELDS, DEVICE_FIELDS, validate_capture, validate_devices,
                                  validate_rig_for_hardware)
 from rangekit.errors import ConfigError
-from rangekit.rig import CAMERA_FIELDS, RIG_FIELDS, Rig, load_rig, save_rig, template_rig
+from rangekit.rig.rig_file import CAMERA_FIELDS, RIG_FIELDS, Rig, load_rig, save_rig, template_rig
 from rangekit.sim import default_rig
 
 DOC = Path(__file__).resolve().parents[1] / "docs" / "rig.md"

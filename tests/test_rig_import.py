@@ -9,8 +9,8 @@ import pytest
 
 from rangekit.cli import main
 from rangekit.errors import ConfigError
-from rangekit.formats.rig_import import import_rig
-from rangekit.rig import load_rig
+from rangekit.formats.rig_files.importers import import_rig
+from rangekit.rig.rig_file import load_rig
 
 K1 = np.array([[1234.5678901234567, 0.0, 640.123456789], [0.0, 1233.987654321, 401.5], [0.0, 0.0, 1.0]])
 D1 = np.array([[-0.123456789012345, 0.0987654321, 1.5e-4, -2.5e-4, 0.01234567]])
@@ -161,7 +161,7 @@ def test_a_calibration_written_by_depthai_itself_gives_depthais_own_extrinsics(t
 
 
 def load_rig_dict(data):
-    from rangekit.rig import Rig
+    from rangekit.rig.rig_file import Rig
 
     return Rig.from_dict(data)
 

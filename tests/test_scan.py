@@ -168,7 +168,7 @@ def test_bad_input_fails_before_any_work(tmp_path, capsys):
     assert str(bad) in capsys.readouterr().err
     assert not (tmp_path / "new").exists()
     # An invalid rig file: the message names the field.
-    from rangekit.rig import template_rig
+    from rangekit.rig.rig_file import template_rig
 
     rig = template_rig()
     rig["devices"]["turntable"]["baud"] = "fast"
@@ -201,7 +201,7 @@ def test_render_command_draws_meshes_and_clouds(tmp_path):
 
 
 def test_rig_init_prints_a_loadable_template_and_the_true_sim_rig(capsys):
-    from rangekit.rig import Rig
+    from rangekit.rig.rig_file import Rig
     from rangekit.sim import default_rig
 
     assert main(["rig", "init"]) == 0

@@ -8,7 +8,7 @@ from rangekit.errors import FileFormatError, PatternError, SceneError
 from rangekit.geometry import apply_T, invert_T, look_at
 from rangekit.coded.patterns import make_pattern_spec
 from rangekit.sim import ImagingModel, Scene, SimRig, load_mesh
-from rangekit.sim.objects import sphere
+from rangekit.sim.scene.objects import sphere
 
 
 def _opencv_undistort(cam, uv):
@@ -168,7 +168,7 @@ def test_noise_is_reproducible_per_capture_state(rig, tilted_plane_scene):
 
 
 def test_sim_devices_implement_the_protocols(rig, tilted_plane_scene):
-    from rangekit import devices
+    from rangekit.rig import devices
 
     sim = SimRig(tilted_plane_scene, rig)
     assert isinstance(sim.camera, devices.Camera)
@@ -187,7 +187,7 @@ def test_bad_input_gives_clear_errors(rig, tmp_path, tilted_plane_scene):
     with pytest.raises((FileFormatError, SceneError), match="empty.obj"):
         load_mesh(empty)
     away = rig.camera.with_pose(look_at([0, -0.5, 0.2], [0, -1.5, 0.2]))
-    from rangekit.rig import Rig
+    from rangekit.rig.rig_file import Rig
 
     blind = Rig(cameras=(away,), projector=rig.projector, T_world_table=rig.T_world_table)
     with pytest.raises(SceneError, match="sees nothing"):

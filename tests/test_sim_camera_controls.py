@@ -10,16 +10,16 @@ import pytest
 
 from small_rigs import small_projector_rig
 
-from rangekit.app.acquire import acquire
-from rangekit.app.reconstruct import reconstruct_view
-from rangekit.camera_controls import CameraControls
+from rangekit.app.acquire.acquire import acquire
+from rangekit.coded.reconstruct import reconstruct_view
+from rangekit.rig.camera_controls import CameraControls
 from rangekit.cli import main
 from rangekit.coded.patterns import make_pattern_spec
 from rangekit.errors import ConfigError
-from rangekit.formats.session import CaptureSettings, ScanPlan
+from rangekit.formats.sessions.session import CaptureSettings, ScanPlan
 from rangekit.sim import ImagingModel, SimRig, default_rig, default_scene
-from rangekit.sim import devices as sim_devices
-from rangekit.sim.sensor import AE_TARGET, REF_EXPOSURE_US, Exposure, noise_std
+from rangekit.sim.devices import sim_rig as sim_devices
+from rangekit.sim.imaging.sensor import AE_TARGET, REF_EXPOSURE_US, Exposure, noise_std
 
 AUTO = CameraControls(exposure_us=None, allow_auto_exposure=True)
 
@@ -199,6 +199,6 @@ def test_cli_refuses_auto_exposure_unless_asked(monkeypatch, tmp_path, capsys):
         seen["controls"] = devices.camera.controls
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(sys.modules["rangekit.app.acquire"], "_acquire", stop)
+    monkeypatch.setattr(sys.modules["rangekit.app.acquire.acquire"], "_acquire", stop)
     assert main([*args, "--allow-auto-exposure"]) == 130
     assert seen["controls"].auto_exposure and seen["controls"].allow_auto_exposure

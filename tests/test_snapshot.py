@@ -13,7 +13,7 @@ from rangekit.surface.mesh import TriangleMesh
 from rangekit.surface.cloud import PointCloud
 from rangekit.colour import COLOUR_MAPS, colour_table
 from rangekit.colour import colourise
-from rangekit.app.snapshot import (colour_bar, data_uri, fit_camera, montage, raycast_mesh,
+from rangekit.rendering.snapshot import (colour_bar, data_uri, fit_camera, montage, raycast_mesh,
                                render_cloud, render_mesh, render_values_on_mesh, to_png_bytes)
 
 R = 0.05

@@ -1,4 +1,4 @@
-"""Active stereo (rangekit.stereo + rangekit.sim.stereo) against the simulator's exact truth.
+"""Active stereo (rangekit.stereo + rangekit.sim.sensors.stereo) against the simulator's exact truth.
 
 Scene: the textureless white box, sphere and wall of :func:`stereo_scene` (0.6-1.1 m) seen by the
 OAK-D-Pro-like pair of :func:`stereo_rig` at 320 x 200 (rectified focal 221.6 px, baseline 75 mm).
@@ -16,9 +16,9 @@ import pytest
 
 from rangekit.errors import InputError
 from rangekit.geometry import apply_T
-from rangekit.rig import load_rig
-from rangekit.sim.raycast import cast_view
-from rangekit.sim.stereo import render_stereo, speckle_pattern, stereo_rig, stereo_scene, write_stereo_capture
+from rangekit.rig.rig_file import load_rig
+from rangekit.sim.scene.raycast import cast_view
+from rangekit.sim.sensors.stereo import render_stereo, speckle_pattern, stereo_rig, stereo_scene, write_stereo_capture
 from rangekit.stereo import (census_transform, depth_in_camera, disparity_to_depth, disparity_to_points, rectify,
                              rectify_images, sgbm_disparity, sgm_disparity, stereo_depth)
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from rangekit.errors import InputError
-from rangekit.sim.tof import (KINECT_V2_PLAN, LUXONIS_PLAN, ToFSensor, render_pulsed, render_tof, tof_camera,
+from rangekit.sim.sensors.tof import (KINECT_V2_PLAN, LUXONIS_PLAN, ToFSensor, render_pulsed, render_tof, tof_camera,
                               tof_scene)
 from rangekit.tof import (C_LIGHT, FrequencyPlan, decode_cw, phase_amplitude_offset, phase_to_range, pulsed_range,
                           range_to_depth, range_to_points, unwrap_ranges)

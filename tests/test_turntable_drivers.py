@@ -11,12 +11,12 @@ import time
 
 import pytest
 
-from rangekit.devices import Turntable
+from rangekit.rig.devices import Turntable
 from rangekit.drivers.serial_link import SerialLink
 from rangekit.drivers.turntable import FabScanTurntable, HorusTurntable, make_turntable
 from rangekit.errors import (CommandError, ConfigError, DeviceDisconnected, DeviceError, DeviceTimeout,
                              InputError, ProtocolError)
-from rangekit.sim.firmware import start_firmware
+from rangekit.sim.devices.firmware import start_firmware
 
 TIMEOUT = 0.3  # driver reply timeout in these tests (s)
 SLACK = 0.5  # allowed overshoot of a deadline (s)

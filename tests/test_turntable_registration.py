@@ -6,7 +6,7 @@ import pytest
 from rangekit.geometry import apply_T, axis_angle_to_R, invert_T, make_T, rotation_angle, rotvec_to_R
 from rangekit.registration.multiview import MultiViewOptions, register_views
 from rangekit.registration.turntable import common_axis, onto_turntable, turntable_basis
-from rangekit.sim.scans import perturb_poses, turntable_scans
+from rangekit.sim.writers.scans import perturb_poses, turntable_scans
 
 
 def _about(axis, point, angle):

@@ -10,13 +10,13 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from rangekit.app.vdi2634 import evaluation_masks
+from rangekit.app.scan.vdi2634 import evaluation_masks
 from rangekit.cli.run import main
 from rangekit.metrology import fit_plane_lsq, fit_sphere, flatness, probing, sphere_spacing
-from rangekit.rig import save_rig
+from rangekit.rig.rig_file import save_rig
 from rangekit.sim import cast_view, default_rig
-from rangekit.sim.objects import sphere
-from rangekit.sim.artefacts import (GUIDELINE_POSITIONS, L0, MEASURING_VOLUME, SPHERE_SUBDIVISIONS, artefact_sizes,
+from rangekit.sim.scene.objects import sphere
+from rangekit.sim.scene.artefacts import (GUIDELINE_POSITIONS, L0, MEASURING_VOLUME, SPHERE_SUBDIVISIONS, artefact_sizes,
                                     vdi2634_artefacts)
 
 

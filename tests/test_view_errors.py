@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 
 from rangekit.geometry import axis_angle_to_R, compose, make_T
-from rangekit.rig import Rig, turntable_prior
+from rangekit.rig.rig_file import Rig, turntable_prior
 from rangekit.sim import default_rig, default_scene
-from rangekit.sim.raycast import cast_view
-from rangekit.sim.view_errors import depth_edges, view_errors
+from rangekit.sim.scene.raycast import cast_view
+from rangekit.sim.truth.view_errors import depth_edges, view_errors
 from rangekit.surface.cloud import PointCloud
 
 

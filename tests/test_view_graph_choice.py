@@ -103,7 +103,7 @@ def test_descriptor_is_a_normalised_histogram():
 
 @pytest.fixture(scope="module")
 def scans6():
-    from rangekit.sim.scans import turntable_scans
+    from rangekit.sim.writers.scans import turntable_scans
 
     return turntable_scans(n_views=6, noise=0.0005, resolution=(320, 240), rng=0)
 

@@ -8,14 +8,14 @@ import numpy as np
 import pytest
 import trimesh
 
-from rangekit.app.sim_objects import list_objects
+from rangekit.app.commands.sim_objects import list_objects
 from rangekit.cli import main
 from rangekit.errors import InputError, SceneError
 from rangekit.geometry import R_up_to_z
-from rangekit.rig import Rig, save_rig
+from rangekit.rig.rig_file import Rig, save_rig
 from rangekit.sim import default_rig, default_scene, make_object
-from rangekit.sim import zoo
-from rangekit.sim.objects import BUILTIN_OBJECTS, OBJECT_NOTES, lumpy
+from rangekit.sim.scene import zoo
+from rangekit.sim.scene.objects import BUILTIN_OBJECTS, OBJECT_NOTES, lumpy
 
 MM = 1e-3
 ZOO = ("thin", "bowl", "steps", "shiny", "dark")

@@ -12,7 +12,7 @@ from rangekit.errors import UsageError
 
 def cmd_check(args: argparse.Namespace) -> int:
     """rangekit check [--rig RIG.json] [--out DIR] [--object shiny] [--seed N] [--latency-ms 50]"""
-    from rangekit.app.check_run import (check_hardware, check_simulated, simulated_check_rig, write_check,
+    from rangekit.app.check.run import (check_hardware, check_simulated, simulated_check_rig, write_check,
                                         write_pattern_delay)
 
     t0 = time.perf_counter()

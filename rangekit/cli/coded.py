@@ -15,7 +15,7 @@ def cmd_decode(args: argparse.Namespace) -> int:
     from rangekit.coded.decode import decode
     from rangekit.errors import naming
     from rangekit.formats.capture import list_images, pattern_spec_for, read_stack, save_decoded
-    from rangekit.memory import reuse_freed_memory
+    from rangekit._runtime.memory import reuse_freed_memory
 
     t0 = time.perf_counter()
     from rangekit.formats.capture import DECODED_SUFFIXES
@@ -24,7 +24,7 @@ def cmd_decode(args: argparse.Namespace) -> int:
     paths = list_images(args.images[0] if len(args.images) == 1 else args.images)
     spec = pattern_spec_for(args.pattern, args.projector)
     note(f"reading {len(paths)} images")
-    with reuse_freed_memory():   # the decoder's temporaries reuse pages (rangekit.memory)
+    with reuse_freed_memory():   # the decoder's temporaries reuse pages (rangekit._runtime.memory)
         images = read_stack(paths)
         note(f"decoding {spec.method} ({'subpixel' if not args.integer else 'integer'})")
         with naming(args.images[0] if len(args.images) == 1 else f"{len(paths)} images from {paths[0]}"):
@@ -38,11 +38,11 @@ def cmd_decode(args: argparse.Namespace) -> int:
 
 def cmd_reconstruct(args: argparse.Namespace) -> int:
     """rangekit reconstruct CAPTURE_DIR [--rig RIG.json] --out cloud.ply"""
-    from rangekit.app.reconstruct import reconstruct_view
+    from rangekit.coded.reconstruct import reconstruct_view
     from rangekit.errors import ConfigError, naming
     from rangekit.formats.capture import load_capture
     from rangekit.formats.laser_capture import is_laser_capture
-    from rangekit.rig import load_rig
+    from rangekit.rig.rig_file import load_rig
     from rangekit.formats.clouds import CLOUD_WRITERS, save_cloud
 
     t0 = time.perf_counter()
@@ -69,10 +69,10 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
 
 def _reconstruct_laser(args: argparse.Namespace, t0: float) -> int:
     """``rangekit reconstruct`` of a laser capture folder (off.png, laser0.png, ...): see docs/laser.md."""
-    from rangekit.app.laser_reconstruct import reconstruct_laser_capture
+    from rangekit.app.laser.reconstruct import reconstruct_laser_capture
     from rangekit.formats.clouds import save_cloud
     from rangekit.formats.laser_capture import load_laser_capture
-    from rangekit.rig import load_rig
+    from rangekit.rig.rig_file import load_rig
 
     cap = load_laser_capture(args.capture, rig=load_rig(args.rig) if args.rig else None)
     note(f"laser capture: {len(cap.frames)} laser(s); line peaks ({args.peaks}) and ray-plane triangulation")

@@ -10,7 +10,7 @@ from rangekit.cli._common import check_output, result, say
 
 def cmd_photometric(args: argparse.Namespace) -> int:
     """rangekit photometric DIR [--method ls|robust|uncalibrated] --out OUT: normals, albedo, depth, mesh"""
-    from rangekit.app.photometric_run import photometric_files
+    from rangekit.app.commands.photometric import photometric_files
 
     t0 = time.perf_counter()
     check_output(args.out, folder=True)

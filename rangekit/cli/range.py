@@ -12,7 +12,7 @@ from rangekit.errors import UsageError
 
 def cmd_tof(args: argparse.Namespace) -> int:
     """rangekit tof RAW_DIR --out OUT: range, depth, confidence and a cloud from raw ToF samples."""
-    from rangekit.app.range_runs import tof_depth_files
+    from rangekit.app.commands.ranges import tof_depth_files
 
     t0 = time.perf_counter()
     check_output(args.out, folder=True)
@@ -26,7 +26,7 @@ def cmd_tof(args: argparse.Namespace) -> int:
 def cmd_stereo(args: argparse.Namespace) -> int:
     """rangekit stereo LEFT RIGHT --rig RIG.json --out OUT: depth of the left camera from a stereo pair;
     rangekit stereo --device [--dots 0..1] [--on-device] --out OUT: from a pair captured on an attached OAK-D."""
-    from rangekit.app.range_runs import stereo_depth_files
+    from rangekit.app.commands.ranges import stereo_depth_files
 
     if args.device:
         given = [n for n, v in (("LEFT", args.left), ("RIGHT", args.right), ("--rig", args.rig)) if v is not None]
@@ -50,7 +50,7 @@ def cmd_stereo(args: argparse.Namespace) -> int:
 
 
 def _stereo_device(args: argparse.Namespace) -> int:
-    from rangekit.app.stereo_live import stereo_depth_device
+    from rangekit.app.commands.stereo_live import stereo_depth_device
 
     check_output(args.out, folder=True)
     run = stereo_depth_device(args.out, device_id=args.device_id, size=args.size or (640, 400),

@@ -12,7 +12,7 @@ from rangekit.cli._common import check_output, int_in, note, positive_float, res
 
 def cmd_register(args: argparse.Namespace) -> int:
     """rangekit register SCAN... [--init none|poses.json|turntable:AXIS:STEP] --out DIR"""
-    from rangekit.app.register_files import register_files
+    from rangekit.app.commands.register import register_files
     from rangekit.geometry import rotation_angle
 
     t0 = time.perf_counter()

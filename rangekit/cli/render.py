@@ -11,7 +11,7 @@ from rangekit.cli._common import check_output, finite_float, result, size
 
 def cmd_render(args: argparse.Namespace) -> int:
     """rangekit render MESH_OR_CLOUD --out PNG: a shaded picture of a mesh or a cloud"""
-    from rangekit.app.picture import render_file
+    from rangekit.app.commands.picture import render_file
     from rangekit.io import PNG_SUFFIXES, write_png
 
     check_output(args.out, suffixes=PNG_SUFFIXES, what="PNG image")

@@ -19,7 +19,7 @@ def cmd_rig_init(args: argparse.Namespace) -> int:
 
         data = default_rig().to_dict()
     else:
-        from rangekit.rig import template_rig
+        from rangekit.rig.rig_file import template_rig
 
         data = template_rig()
     _print_rig(data, "rangekit rig init > rig.json")
@@ -27,8 +27,8 @@ def cmd_rig_init(args: argparse.Namespace) -> int:
 
 
 def _print_rig(data: dict, example: str) -> None:
-    """A rig file on standard output, each matrix on one line (:func:`rangekit.formats.rig_json.rig_json_text`)."""
-    from rangekit.formats.rig_json import rig_json_text
+    """A rig file on standard output, each matrix on one line (:func:`rangekit.formats.rig_files.json_text.rig_json_text`)."""
+    from rangekit.formats.rig_files.json_text import rig_json_text
 
     if sys.stdout is None:
         raise OSError(errno.EBADF, f"standard output is closed; redirect it to a file: {example}", "<stdout>")
@@ -38,10 +38,10 @@ def _print_rig(data: dict, example: str) -> None:
 def cmd_rig_import(args: argparse.Namespace) -> int:
     """rangekit rig import FILE [--out RIG.json]: a rig file from an OpenCV stereo calibration (YAML/XML), a
     depthai EEPROM calibration JSON or a Horus calibration.json"""
-    from rangekit.formats.rig_import import import_rig
-    from rangekit.formats.rig_json import rig_json_text
+    from rangekit.formats.rig_files.importers import import_rig
+    from rangekit.formats.rig_files.json_text import rig_json_text
     from rangekit.io import atomic_write_text
-    from rangekit.rig import RIG_SUFFIXES
+    from rangekit.rig.rig_file import RIG_SUFFIXES
 
     if args.out is not None:
         check_output(args.out, force=args.force, suffixes=RIG_SUFFIXES, what="rig")
@@ -61,9 +61,9 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     """rangekit calibrate --rig sim|RIG.json --out RIG.json [--lasers]: camera, projector, turntable and projector
     response (and with --lasers the line lasers' planes: on the simulator after the rest, on hardware alone with
     the rig file's calibrated camera)"""
-    from rangekit.app.calibration import calibrate
+    from rangekit.app.calibrate import calibrate
     from rangekit.boards import Board
-    from rangekit.rig import RIG_SUFFIXES
+    from rangekit.rig.rig_file import RIG_SUFFIXES
 
     t0 = time.perf_counter()
     check_output(args.out, force=args.force, suffixes=RIG_SUFFIXES, what="rig")

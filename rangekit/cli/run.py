@@ -23,8 +23,8 @@ from rangekit.cli.rig import add_calibrate_parser, add_parsers as add_rig
 from rangekit.cli.scan import add_parsers as add_scan
 from rangekit.cli.sim import add_parsers as add_sim
 from rangekit.errors import RangekitError, UsageError
-from rangekit.open3d_viewer import defer_plotly_viewer
-from rangekit.threads import one_blas_thread
+from rangekit._runtime.open3d_viewer import defer_plotly_viewer
+from rangekit._runtime.threads import one_blas_thread
 
 __all__ = ["build_parser", "main", "EXIT_OK", "EXIT_FAILURE", "EXIT_USAGE", "EXIT_INTERRUPTED"]
 
@@ -95,7 +95,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         args = build_parser().parse_args(argv)
         _verbosity(args)
-        with one_blas_thread():     # thin products dominate: see rangekit.threads
+        with one_blas_thread():     # thin products dominate: see rangekit._runtime.threads
             return args.func(args)
     except UsageError as exc:
         return _fail(str(exc), EXIT_USAGE)

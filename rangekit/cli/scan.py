@@ -15,7 +15,7 @@ from rangekit.errors import UsageError
 def cmd_scan(args: argparse.Namespace) -> int:
     """rangekit scan --out DIR | --resume DIR [--method coded|laser] [--rig sim|RIG.json] [--object lumpy]
     [--views 12 | --steps 400] [--passes 2 [--flipped]] [--patterns hybrid] [--up X Y Z] [--allow-auto-exposure]"""
-    from rangekit.formats.session_lock import session_lock as session_lock_of
+    from rangekit.formats.sessions.lock import session_lock as session_lock_of
 
     t0 = time.perf_counter()
     if args.artefact:
@@ -40,8 +40,8 @@ _NOT_WITH_ARTEFACT = {"resume": "--resume", "method": "--method", "steps": "--st
 
 def _scan_artefacts(args: argparse.Namespace, t0: float) -> int:
     """rangekit scan --artefact vdi2634 --out DIR [--rig RIG.json] [--positions S B P] [--seed N]"""
-    from rangekit.app.vdi2634 import figure_lines, run_vdi2634
-    from rangekit.sim.artefacts import GUIDELINE_POSITIONS
+    from rangekit.app.scan.vdi2634 import figure_lines, run_vdi2634
+    from rangekit.sim.scene.artefacts import GUIDELINE_POSITIONS
 
     given = [opt for key, opt in _NOT_WITH_ARTEFACT.items() if getattr(args, key, None) not in (None, False)]
     if given:
@@ -70,9 +70,9 @@ def _scan_artefacts(args: argparse.Namespace, t0: float) -> int:
 
 
 def _scan(args: argparse.Namespace, t0: float) -> int:
-    from rangekit.app.acquire import acquire
-    from rangekit.app.scan import prepare_scan
-    from rangekit.formats.session import ScanPlan
+    from rangekit.app.acquire.acquire import acquire
+    from rangekit.app.scan.scan import prepare_scan
+    from rangekit.formats.sessions.session import ScanPlan
 
     if args.steps is not None and args.views is not None:
         raise UsageError("--steps and --views both give the turntable positions; give one (--steps for a laser scan)")
@@ -93,7 +93,7 @@ def _scan(args: argparse.Namespace, t0: float) -> int:
     try:
         turn_over = None
         if setup.hardware is not None and setup.passes > 1:   # the simulator turns its object over itself
-            from rangekit.app.passes import turn_over_prompt
+            from rangekit.app.scan.passes import turn_over_prompt
 
             turn_over = turn_over_prompt(folder, setup.passes, flipped=args.flipped)
         session = acquire(setup.devices, setup.rig, setup.spec, folder,
@@ -127,8 +127,8 @@ def _with_exposures(setup, given: list):
     or with 'auto' those of rangekit check's statistics on the devices."""
     from dataclasses import replace
 
-    from rangekit.app.check import exposures_from_check
-    from rangekit.camera_controls import controls_from_capture
+    from rangekit.app.check.steps import exposures_from_check
+    from rangekit.rig.camera_controls import controls_from_capture
 
     if setup.resume:
         setup.close()
@@ -157,8 +157,8 @@ def _with_exposures(setup, given: list):
 
 def _process(folder: str, args: argparse.Namespace, *, acquisition_s: float | None = None,
              resume_cmd: str | None = None) -> int:
-    from rangekit.app.fused_outputs import export_meshes
-    from rangekit.app.scan import process_scan
+    from rangekit.app.process.fused_outputs import export_meshes
+    from rangekit.app.scan.scan import process_scan
     from rangekit.progress import format_seconds
 
     t0 = time.perf_counter()
@@ -195,10 +195,10 @@ def cmd_process(args: argparse.Namespace) -> int:
 
 
 def _process_batch(args: argparse.Namespace) -> int:
-    """Several sessions on Dask (rangekit.app.batch): a line per view and session, then each session done or
+    """Several sessions on Dask (rangekit.app.process.batch): a line per view and session, then each session done or
     failed; exit 1 when any failed."""
-    from rangekit.app.batch import process_sessions
-    from rangekit.app.fused_outputs import export_meshes
+    from rangekit.app.process.batch import process_sessions
+    from rangekit.app.process.fused_outputs import export_meshes
     from rangekit.progress import format_seconds
 
     scheduler = args.scheduler or "local"
@@ -232,11 +232,11 @@ def _process_batch(args: argparse.Namespace) -> int:
 
 
 def _processing_options(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--fusion", default="poisson", choices=LazyChoices("rangekit.app.process", "FUSION_METHODS"),
+    p.add_argument("--fusion", default="poisson", choices=LazyChoices("rangekit.app.process.process", "FUSION_METHODS"),
                    metavar="{poisson,tsdf}",
                    help="fusion into one mesh: poisson (default, screened Poisson of the merged cloud) or tsdf")
     p.add_argument("--no-report", action="store_true", help="skip report.html")
-    p.add_argument("--format", default="ply", choices=LazyChoices("rangekit.app.fused_outputs", "MESH_EXPORT_FORMATS"),
+    p.add_argument("--format", default="ply", choices=LazyChoices("rangekit.app.process.fused_outputs", "MESH_EXPORT_FORMATS"),
                    metavar="{ply,obj,stl,glb}",
                    help="mesh files: ply (default; mesh.ply and mesh_watertight.ply, with vertex normals and the "
                         "'observed' flag) or obj, stl, glb written beside them as mesh.FMT and mesh_watertight.FMT")
@@ -253,7 +253,7 @@ def add_parsers(sub) -> None:
     where.add_argument("--out", help="new session folder")
     where.add_argument("--resume", metavar="DIR", help="continue the session in DIR")
     # No argparse defaults: a resumed scan takes the session's settings, and an option given with --resume
-    # must equal them (rangekit.app.scan.SCAN_DEFAULTS fills in a new scan).
+    # must equal them (rangekit.app.scan.scan.SCAN_DEFAULTS fills in a new scan).
     scan.add_argument("--method", choices=("coded", "laser"),
                       help="coded (default: projector patterns, views registered) or laser (the rig's line lasers, "
                            "switched by the turntable board, one profile per turntable step)")

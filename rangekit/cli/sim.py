@@ -15,7 +15,7 @@ from rangekit.errors import UsageError
 
 def cmd_sim_render(args: argparse.Namespace) -> int:
     """rangekit sim render [--sensor projector|laser|tof|tof-pulsed|stereo] [--object NAME_OR_MESH] --out DIR"""
-    from rangekit.app.simulate import (render_laser_capture, render_projector_capture, render_stereo_capture,
+    from rangekit.app.commands.simulate import (render_laser_capture, render_projector_capture, render_stereo_capture,
                                        render_tof_capture)
 
     t0 = time.perf_counter()
@@ -62,7 +62,7 @@ def cmd_sim_render(args: argparse.Namespace) -> int:
 
 def cmd_sim_objects(args: argparse.Namespace) -> int:
     """rangekit sim objects: each built-in object with its size, triangle count and what makes it hard."""
-    from rangekit.app.sim_objects import format_objects, list_objects
+    from rangekit.app.commands.sim_objects import format_objects, list_objects
 
     for line in format_objects(list_objects()):
         result(line)

@@ -51,7 +51,7 @@ from rangekit.coded.phase import decode_phase_maps
 from rangekit.coded.response import phase_correction
 from rangekit.coded.result import DecodeResult
 from rangekit.coded.uncertainty import GRAY_CODE_STD
-from rangekit.projector_response import ProjectorResponse
+from rangekit.rig.projector_response import ProjectorResponse
 
 __all__ = ["decode"]
 
@@ -106,7 +106,7 @@ def decode(stack, spec: PatternSpec, *, order: str = "rangekit", subpixel: bool 
         (an all-black stack), or the captures look like another order or spec (white darker than black).
     """
     if response is not None and not isinstance(response, ProjectorResponse):
-        raise DecodeError(f"response must be a rangekit.projector_response.ProjectorResponse or None, found "
+        raise DecodeError(f"response must be a rangekit.rig.projector_response.ProjectorResponse or None, found "
                           f"{type(response).__name__} {response!r}; e.g. response=ProjectorResponse(gamma=2.2)")
     if spec.method in ("white", "black"):
         raise DecodeError(f"pattern {spec.method!r} carries no code; decode a graycode, xor02, xor04, phase, "

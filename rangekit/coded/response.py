@@ -1,6 +1,6 @@
 """Projector response (gamma): its fit from uniform grey levels, and the phase correction.
 
-The model, :class:`rangekit.projector_response.ProjectorResponse`, is a core type (a field of the rig file).
+The model, :class:`rangekit.rig.projector_response.ProjectorResponse`, is a core type (a field of the rig file).
 
 Model
 -----
@@ -48,7 +48,7 @@ import numpy as np
 
 from rangekit.errors import InputError
 from rangekit.image import to_grey
-from rangekit.projector_response import ProjectorResponse
+from rangekit.rig.projector_response import ProjectorResponse
 
 __all__ = ["ResponseFit", "PhaseCorrection", "fit_response", "phase_correction"]
 

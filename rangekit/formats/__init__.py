@@ -5,7 +5,7 @@ The names below are loaded on first use (PEP 562): importing one module of this 
 ``rangekit.formats.capture`` for ``rangekit decode``, does not import the others (clouds and meshes pull in
 ``rangekit.surface`` and scipy.spatial, about 0.6 s)."""
 
-from rangekit.lazy import lazy_exports
+from rangekit._runtime.lazy import lazy_exports
 
 _EXPORTS = {
     "capture": ("IMAGE_SUFFIXES", "Capture", "list_images", "load_capture", "pattern_spec_for", "read_stack",
@@ -16,11 +16,11 @@ _EXPORTS = {
     "ply_write": ("cloud_ply_bytes", "mesh_ply_bytes", "write_cloud_ply"),
     "poses": ("POSES_SCHEMA", "load_poses", "save_poses"),
     "range_files": ("ToFFolder", "load_ground_truth", "load_tof_folder"),
-    "session": ("SESSION_SCHEMA", "CaptureSettings", "ScanPlan", "Session", "SessionView", "SimulatorSettings",
+    "sessions.session": ("SESSION_SCHEMA", "CaptureSettings", "ScanPlan", "Session", "SessionView", "SimulatorSettings",
                 "load_session", "view_folder"),
-    "session_check": ("verify_views",),
-    "session_lock": ("SessionLocked", "session_lock"),
-    "summary": ("SUMMARY_SCHEMA", "ProcessResult"),
+    "sessions.check": ("verify_views",),
+    "sessions.lock": ("SessionLocked", "session_lock"),
+    "sessions.summary": ("SUMMARY_SCHEMA", "ProcessResult"),
 }
 _MODULE_OF = {name: module for module, names in _EXPORTS.items() for name in names}
 

@@ -18,7 +18,7 @@ from rangekit.coded.patterns import PATTERN_METHODS, PatternSpec, make_pattern_s
 from rangekit.errors import ConfigError, FileFormatError, UsageError
 from rangekit.image_header import check_image_files
 from rangekit.io import atomic_save_npz, read_json, read_png
-from rangekit.rig import Rig, load_rig
+from rangekit.rig.rig_file import Rig, load_rig
 
 __all__ = ["IMAGE_SUFFIXES", "list_images", "read_stack", "Capture", "load_capture", "pattern_spec_for",
            "save_decoded"]

@@ -22,7 +22,7 @@ from rangekit.errors import FileFormatError
 from rangekit.image_header import check_image_files
 from rangekit.formats.capture import capture_full_scale
 from rangekit.io import read_json, read_png
-from rangekit.rig import Rig, load_rig
+from rangekit.rig.rig_file import Rig, load_rig
 
 __all__ = ["LaserCapture", "is_laser_capture", "load_laser_capture"]
 

@@ -11,7 +11,7 @@ the same layout) holds:
 * optionally ``ground_truth.npz`` (range, depth, xyz, hit, valid) from the simulator.
 
 The depth outputs of ``rangekit tof`` and ``rangekit stereo`` are written by
-:func:`rangekit.app.range_runs.write_depth_outputs`.
+:func:`rangekit.app.commands.ranges.write_depth_outputs`.
 """
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ from rangekit.formats.capture import list_images, read_stack
 from rangekit.errors import FileFormatError, InputError
 from rangekit.image_header import check_image_files
 from rangekit.io import read_json
-from rangekit.rig import load_rig
+from rangekit.rig.rig_file import load_rig
 from rangekit.tof import FrequencyPlan, round_trip_problem
 
 __all__ = ["ToFFolder", "load_tof_folder", "load_ground_truth"]

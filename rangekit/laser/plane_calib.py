@@ -36,7 +36,7 @@ from rangekit.errors import CalibrationError, InputError
 from rangekit.geometry import apply_T, compose, invert_T, ray_plane_t
 from rangekit.laser.plane_fit import PlaneFit, fit_plane
 from rangekit.laser.triangulate import MIN_RAY_PLANE_ANGLE
-from rangekit.lasers import LineLaser
+from rangekit.rig.lasers import LineLaser
 
 __all__ = ["TargetView", "board_view", "plate_view", "ViewUse", "LaserPlaneCalibration", "calibrate_laser_plane",
            "PlaneErrors", "plane_errors", "calibrated_laser", "report_lines"]

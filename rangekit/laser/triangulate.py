@@ -16,7 +16,7 @@ Refusals:
   the plane or meets it only at the centre, so no pixel can be triangulated.
 
 Profiles taken at turntable angle theta are brought into the frame of angle 0 by
-:func:`to_turntable_frame` (``rangekit.rig.table_motion(T_world_table, -theta)``).
+:func:`to_turntable_frame` (``rangekit.rig.rig_file.table_motion(T_world_table, -theta)``).
 """
 
 from __future__ import annotations
@@ -29,8 +29,8 @@ import numpy as np
 from rangekit.camera import PinholeCamera
 from rangekit.errors import ConfigError, InputError
 from rangekit.geometry import apply_T, ray_plane_t
-from rangekit.lasers import LineLaser
-from rangekit.rig import table_motion
+from rangekit.rig.lasers import LineLaser
+from rangekit.rig.rig_file import table_motion
 
 __all__ = ["MIN_RAY_PLANE_ANGLE", "MIN_CENTRE_DISTANCE", "LaserPoints", "as_plane", "check_plane_camera",
            "triangulate_peaks", "to_turntable_frame", "plane_region"]
@@ -108,7 +108,7 @@ def triangulate_peaks(points_uv, camera: PinholeCamera, laser, *,
     points_uv : (N, 2) subpixel peak positions ``(u, v)`` = (column, row) in the camera's (distorted) image,
         pixel centres at integers; NaN rows are passed through as NaN.
     camera : the calibrated camera (K, dist, ``T_world_cam``).
-    laser : a :class:`~rangekit.lasers.LineLaser` or its (4,) plane ``[n, d]`` in the world frame.
+    laser : a :class:`~rangekit.rig.lasers.LineLaser` or its (4,) plane ``[n, d]`` in the world frame.
     min_angle : radians; rays meeting the plane at less than this are refused (NaN, counted).
 
     Returns
@@ -158,7 +158,7 @@ def to_turntable_frame(points, angle, T_world_table) -> np.ndarray:
 
     Returns
     -------
-    (N, 3) float64: ``table_motion(T_world_table, -angle) @ X`` (:func:`rangekit.rig.table_motion`).
+    (N, 3) float64: ``table_motion(T_world_table, -angle) @ X`` (:func:`rangekit.rig.rig_file.table_motion`).
     """
     P = np.asarray(points, dtype=np.float64)
     a = np.asarray(angle, dtype=np.float64)
@@ -186,7 +186,7 @@ def plane_region(camera: PinholeCamera, laser, T_world_table, *, z_min: float) -
     Parameters
     ----------
     camera : the calibrated camera (its lens distortion included).
-    laser : a :class:`~rangekit.lasers.LineLaser` or a (4,) plane, world frame.
+    laser : a :class:`~rangekit.rig.lasers.LineLaser` or a (4,) plane, world frame.
     T_world_table : (4, 4) the turntable frame (its z axis up, z = 0 its top).
     z_min : metres above the table top.
     """

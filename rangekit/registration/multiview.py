@@ -35,7 +35,7 @@ from rangekit.registration.pairs import (PairChooser, PairsTried, all_pairs, cho
                                          nearest_in_rotation)
 from rangekit.registration.stability import MIN_CONSTRAINT, HeldMotions
 from rangekit.registration.sync import SyncResult, synchronise
-from rangekit.threads import one_blas_thread
+from rangekit._runtime.threads import one_blas_thread
 
 __all__ = ["MultiViewOptions", "EdgeResult", "MultiViewResult", "register_views", "pairwise_overlap",
            "JointResult", "refine_jointly", "overlap_rms"]
@@ -177,7 +177,7 @@ def register_views(clouds: Sequence[PointCloud], *, init_T_world_view: np.ndarra
     view reached only through them: RegistrationError naming the views and the motion); with a prior, ICP
     solves the constrained motions, keeps the prior along the free ones and the edge's ``reason`` says so.
     """
-    with one_blas_thread():    # thin (n, 6) and (N, 3) products: rangekit.threads
+    with one_blas_thread():    # thin (n, 6) and (N, 3) products: rangekit._runtime.threads
         return _register_views([as_cloud(c, f"register_views clouds[{i}]") for i, c in enumerate(clouds)],
                                init_T_world_view, options, progress, names, map_pairs)
 

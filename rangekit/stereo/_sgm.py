@@ -12,7 +12,7 @@ Why it is laid out this way (issue 20):
   cases), stores their sum and takes each path's minimum in the same loop (a second loop over the stored
   row measured 3x slower); the jump term ``min L + P2`` is computed once per pixel, outside the loop.
 - **Rows compiled ``noalias``, pixels in pairs.** :func:`_row` aggregates one row and is compiled with
-  :func:`rangekit.noalias.njit_noalias`: its arguments are distinct buffers (the previous and the current
+  :func:`rangekit._runtime.noalias.njit_noalias`: its arguments are distinct buffers (the previous and the current
   row's state, the horizontal path's two scratch rows, the cost, the other pass's sum, the output), so
   LLVM packs the disparity loop without checking at every pixel that 13 arrays do not overlap. Those
   checks, and reloading the addresses they compare, took more time than the loop itself: ``sgm_match``
@@ -44,7 +44,7 @@ from __future__ import annotations
 import numpy as np
 from numba import literally, njit, prange
 
-from rangekit.noalias import njit_noalias
+from rangekit._runtime.noalias import njit_noalias
 from rangekit.stereo._kernels import popcount
 
 __all__ = ["sgm_match", "step4"]

@@ -4,7 +4,7 @@ The names below are loaded on first use (PEP 562): importing one module of this 
 ``rangekit.surface.fusion`` in Poisson's child process, does not import the others (the closing's numba
 kernels and scipy's k-d trees: 90 MB resident and 0.2 s that Poisson never uses)."""
 
-from rangekit.lazy import lazy_exports
+from rangekit._runtime.lazy import lazy_exports
 
 _MODULE_OF = {
     **dict.fromkeys(("PointCloud", "affine_dimension", "estimate_normals", "merge_clouds", "orient_normals_to_sensor",

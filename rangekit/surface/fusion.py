@@ -18,7 +18,7 @@ import numpy as np
 from rangekit.camera import PinholeCamera, pixel_rays
 from rangekit.errors import InputError, MeshError
 from rangekit.geometry import transform_vectors
-from rangekit.memory import release_free_memory
+from rangekit._runtime.memory import release_free_memory
 from rangekit.surface.cloud import PointCloud, spread_problem
 from rangekit.surface.cloud import to_open3d as _cloud_to_open3d
 from rangekit.surface.convert import as_cloud
@@ -26,7 +26,7 @@ from rangekit.surface.mesh import TriangleMesh, mesh_from_open3d
 from rangekit.surface.observed import OBSERVED_FACTOR, FusedMeshes, observed_rule
 
 # rangekit.surface.watertight (numba's kernels, 90 MB with scipy) is imported where a surface is closed:
-# Poisson's child process (rangekit.app.process) imports this module and never closes one.
+# Poisson's child process (rangekit.app.process.process) imports this module and never closes one.
 
 __all__ = ["poisson_mesh", "poisson_meshes", "poisson_surfaces", "poisson_input", "poisson_input_problem", "tsdf_fuse"]
 

@@ -11,10 +11,10 @@ import shutil
 from dataclasses import asdict
 from pathlib import Path
 
-from rangekit.app.acquire import acquire
+from rangekit.app.acquire.acquire import acquire
 from rangekit.coded.patterns import make_pattern_spec
-from rangekit.formats.session import ScanPlan, SimulatorSettings
-from rangekit.rig import Rig
+from rangekit.formats.sessions.session import ScanPlan, SimulatorSettings
+from rangekit.rig.rig_file import Rig
 from rangekit.sim import ImagingModel, SimRig, default_rig, default_scene
 
 N_VIEWS = 4

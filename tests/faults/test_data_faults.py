@@ -210,7 +210,7 @@ def capture_src(tmp_path_factory) -> Path:
     """A graycode capture of a 64x40 projector seen by a 64x40 camera pixel for pixel (decodes exactly)."""
     from rangekit.coded.patterns import make_pattern_spec
     from rangekit.io import atomic_write_json, write_png
-    from rangekit.rig import template_rig
+    from rangekit.rig.rig_file import template_rig
 
     folder = tmp_path_factory.mktemp("cap") / "capture"
     rig = template_rig()

@@ -17,8 +17,8 @@ from hypothesis import strategies as st
 from rangekit.coded.patterns import PATTERN_METHODS, PatternSpec, make_pattern_spec
 from rangekit.errors import RangekitError
 from rangekit.formats.capture import pattern_spec_for
-from rangekit.rig import Rig, load_rig, template_rig
-from rangekit.rig_checks import validate_capture, validate_devices, validate_rig_for_hardware
+from rangekit.rig.rig_file import Rig, load_rig, template_rig
+from rangekit.rig.checks import validate_capture, validate_devices, validate_rig_for_hardware
 
 FUZZ = settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow,
                                                                          HealthCheck.function_scoped_fixture])

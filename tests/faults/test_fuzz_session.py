@@ -16,8 +16,8 @@ from hypothesis import HealthCheck, given, settings, strategies as st
 
 from rangekit.coded.patterns import make_pattern_spec
 from rangekit.errors import RangekitError
-from rangekit.formats.session import ScanPlan, Session, SimulatorSettings
-from rangekit.rig import save_rig
+from rangekit.formats.sessions.session import ScanPlan, Session, SimulatorSettings
+from rangekit.rig.rig_file import save_rig
 from rangekit.sim import ImagingModel, default_rig
 
 FUZZ = settings(deadline=None, max_examples=150, suppress_health_check=[HealthCheck.too_slow])

@@ -22,7 +22,7 @@ from rangekit.formats.capture import load_capture, read_stack
 from rangekit.formats.range_files import load_tof_folder
 from rangekit.image_header import check_image_files, read_image_header
 from rangekit.io import read_png
-from rangekit.rig import Rig, save_rig, template_rig
+from rangekit.rig.rig_file import Rig, save_rig, template_rig
 
 BIG = 20000  # pixels per side of the huge images the issue describes (44 of them: 7 GB and more)
 
@@ -170,7 +170,7 @@ def test_the_budget_boundary_is_exact(tmp_path, budget):
 
 
 def _tof_folder(folder, *, pulsed: bool = False):
-    from rangekit.sim.tof import KINECT_V2_PLAN, tof_camera
+    from rangekit.sim.sensors.tof import KINECT_V2_PLAN, tof_camera
 
     folder.mkdir()
     save_rig(Rig(cameras=(tof_camera(320, 240),)), folder / "rig.json")

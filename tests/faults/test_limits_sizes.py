@@ -16,7 +16,7 @@ from rangekit.boards import MAX_SQUARES, Board
 from rangekit.camera import PinholeCamera
 from rangekit.coded.patterns import PatternSpec
 from rangekit.errors import BudgetError, ConfigError, InputError, PatternError, SceneError
-from rangekit.rig import load_rig, template_rig
+from rangekit.rig.rig_file import load_rig, template_rig
 from rangekit.surface.cloud import PointCloud, voxel_downsample
 
 
@@ -81,7 +81,7 @@ def test_the_largest_board_is_accepted_and_its_fine_texture_checked_against_the_
 
 
 def test_a_huge_simulated_board_is_a_scene_error():
-    from rangekit.sim.objects import make_object
+    from rangekit.sim.scene.objects import make_object
 
     with pytest.raises(SceneError, match="board: .*cols .* 2..100, found 1000"):
         make_object("board", cols=1000, rows=1000)
@@ -157,7 +157,7 @@ def test_many_render_sides_count_against_the_budget(cli, tmp_path, budget):
 
 
 def test_ray_casting_checks_the_budget_in_the_library(budget):
-    from rangekit.app.snapshot import raycast_mesh
+    from rangekit.rendering.snapshot import raycast_mesh
     from rangekit.surface.mesh import TriangleMesh
 
     mesh = TriangleMesh(np.array([[0.0, 0, 1], [1, 0, 1], [0, 1, 1]]), np.array([[0, 1, 2]]))

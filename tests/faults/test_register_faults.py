@@ -51,7 +51,7 @@ def _surface(kind: str, n: int, rng):
 def _lumpy(n: int, rng):
     import trimesh
 
-    from rangekit.sim.objects import lumpy
+    from rangekit.sim.scene.objects import lumpy
 
     tm = lumpy().to_trimesh()
     p, f = trimesh.sample.sample_surface(tm, n, seed=int(rng.integers(1 << 30)))

@@ -14,9 +14,9 @@ import pytest
 
 from _faults import assert_error
 from _sessions import copy_session, no_leftovers, small_rig, snapshot
-from rangekit.app.acquire import acquire
-from rangekit.formats.session import ScanPlan, Session
-from rangekit.formats.session_check import verify_views
+from rangekit.app.acquire.acquire import acquire
+from rangekit.formats.sessions.session import ScanPlan, Session
+from rangekit.formats.sessions.check import verify_views
 from rangekit.io import read_png, write_png
 from rangekit.sim import SimRig, default_scene
 
@@ -167,7 +167,7 @@ def test_resume_with_imaging_the_simulator_does_not_know(cli, reference, tmp_pat
 @pytest.fixture(scope="module")
 def small_mesh(tmp_path_factory) -> Path:
     from rangekit.formats.meshes import save_mesh
-    from rangekit.sim.objects import make_object
+    from rangekit.sim.scene.objects import make_object
     from rangekit.surface.mesh import TriangleMesh
 
     ob = make_object("sphere")
@@ -178,7 +178,7 @@ def small_mesh(tmp_path_factory) -> Path:
 
 def test_a_mesh_object_is_copied_into_the_session_and_resumes_from_anywhere(cli, small_mesh, tmp_path,
                                                                             monkeypatch):
-    from rangekit.app.scan import prepare_scan
+    from rangekit.app.scan.scan import prepare_scan
 
     # What `rangekit scan --out DIR --object ball.ply` acquires: the session keeps its own copy.
     setup = prepare_scan(out=str(tmp_path / "new"), obj=str(small_mesh), n_views=2, patterns="white")
@@ -259,7 +259,7 @@ CACHE_DAMAGE = {
 
 @pytest.mark.parametrize("damage", CACHE_DAMAGE)
 def test_a_damaged_view_cache_is_rebuilt(reference, tmp_path, damage):
-    from rangekit.app.view_cache import view_cloud
+    from rangekit.app.process.view_cache import view_cloud
 
     d = copy_session(reference, tmp_path / "s")
     session = Session.load(d)

@@ -18,10 +18,10 @@ import pytest
 
 from _faults import ROOT, assert_error, cli_process
 from _sessions import copy_session, frames, no_leftovers, small_rig, snapshot
-from rangekit.app.acquire import acquire
+from rangekit.app.acquire.acquire import acquire
 from rangekit.coded.patterns import make_pattern_spec
-from rangekit.formats.session import ScanPlan, Session
-from rangekit.formats.session_check import verify_views
+from rangekit.formats.sessions.session import ScanPlan, Session
+from rangekit.formats.sessions.check import verify_views
 from rangekit.sim import SimRig, default_scene
 
 
@@ -96,7 +96,7 @@ def test_a_stale_lock_of_a_dead_process_is_taken_over(cli, reference, tmp_path):
 
 
 def test_the_lock_is_held_for_the_whole_block_and_released(tmp_path):
-    from rangekit.formats.session_lock import SessionLocked, session_lock
+    from rangekit.formats.sessions.lock import SessionLocked, session_lock
 
     with session_lock(tmp_path):
         with session_lock(tmp_path):   # re-entrant in one process

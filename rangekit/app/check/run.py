@@ -1,0 +1,87 @@
+"""``rangekit check`` as a job: open the simulator or the rig file's hardware, run :func:`.check.run_check`,
+write the pattern delay into the rig file and the outputs (``check.json``, ``check.png``).
+
+On hardware (``rig_file``) the rig file is rewritten atomically with ``capture.pattern_delay_s`` set and
+every other field as it was (the JSON is read, that one field changed, written back). On the simulator the
+default rig with the measured delay is written to ``OUT/rig.json`` (with ``out``).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from rangekit.app.check.steps import CheckResult, run_check
+from rangekit.app.check.stats import check_figure
+from rangekit.rig.camera_controls import controls_from_capture
+from rangekit.io import atomic_write_json, read_json, write_png
+from rangekit.rig.rig_file import Rig, load_rig, save_rig
+
+__all__ = ["check_simulated", "check_hardware", "write_check", "write_pattern_delay", "simulated_check_rig"]
+
+
+def _full_scale(rig: Rig, image=None) -> float:
+    bits = rig.capture.get("bits")
+    if bits:
+        return float((1 << int(bits)) - 1)
+    return 255.0 if image is None or np.asarray(image).dtype == np.uint8 else 65535.0
+
+
+def simulated_check_rig(sim, delay_s: float) -> Rig:
+    """The simulator's rig with the measured ``capture.pattern_delay_s``."""
+    from dataclasses import replace
+
+    return replace(sim.rig, capture={**sim.rig.capture, "pattern_delay_s": float(delay_s)})
+
+
+def check_simulated(sim, *, spec=None, progress=None) -> tuple[CheckResult, dict]:
+    """Check a :class:`rangekit.sim.SimRig` (its camera controls from its rig's ``capture.camera``); the
+    object mask is the truth's lit pixels of the objects other than the turntable disc."""
+    truth = sim.ground_truth()
+    names = truth.object_names
+    table = [i for i, n in enumerate(names) if "table" in n or "disc" in n]
+    mask = truth.lit & (truth.object_id >= 0) & ~np.isin(truth.object_id, table)
+    controls = controls_from_capture(sim.rig.capture, where="simulated rig")
+    return run_check(sim, sim.rig, controls, full_scale=float(sim.imaging.max_value), mask=mask, truth=truth,
+                     spec=spec, progress=progress)
+
+
+def check_hardware(rig_file: str, *, progress=None) -> tuple[CheckResult, dict, Rig]:
+    """Check the rig file's devices (opened, checked, closed)."""
+    from rangekit.drivers import open_rig_devices
+
+    rig = load_rig(rig_file)
+    devices = open_rig_devices(rig, where=rig_file, coded_light=False)
+    try:
+        controls = controls_from_capture(rig.capture, where=rig_file)
+        result, images = run_check(devices, rig, controls, full_scale=_full_scale(rig), progress=progress)
+    finally:
+        devices.close()
+    return result, images, rig
+
+
+def write_pattern_delay(rig_file: str | Path, delay_s: float) -> None:
+    """Rewrite ``rig_file`` atomically with ``capture.pattern_delay_s`` = ``delay_s``, nothing else changed."""
+    data = read_json(rig_file, what="rig file")
+    data.setdefault("capture", {})["pattern_delay_s"] = float(delay_s)
+    atomic_write_json(rig_file, data)
+    load_rig(rig_file)     # still a valid rig file
+
+
+def write_check(out: str | Path, result: CheckResult, images: dict, full_scale: float,
+                rig: Rig | None = None) -> list[str]:
+    """Write ``check.json``, ``check.png`` (and ``rig.json`` when ``rig`` is given) into ``out``; returns
+    the names written."""
+    from rangekit.app.check.steps import MIN_CONFIDENCE
+
+    folder = Path(out)
+    folder.mkdir(parents=True, exist_ok=True)
+    atomic_write_json(folder / "check.json", result.to_dict())
+    write_png(folder / "check.png", check_figure(images["white"], images["black"], full_scale, images["mask"],
+                                                 MIN_CONFIDENCE, result.stats))
+    names = ["check.json", "check.png"]
+    if rig is not None:
+        save_rig(rig, folder / "rig.json")
+        names.append("rig.json")
+    return names

@@ -1,0 +1,111 @@
+"""Register scan files into one frame and fuse them: the work behind ``rangekit register``."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable, Sequence
+
+import numpy as np
+
+from rangekit.errors import ConfigError, UsageError, naming
+from rangekit.formats.clouds import load_cloud, save_cloud
+from rangekit.surface.cloud import PointCloud, bbox_diagonal, check_voxel, merge_clouds
+from rangekit.formats.poses import load_poses, save_poses
+from rangekit.registration.multiview import MultiViewOptions, MultiViewResult, register_views
+from rangekit.registration.pairs import all_pairs, nearest_and_long_links
+from rangekit.rig.rig_file import table_frame, turntable_prior
+
+__all__ = ["parse_init", "RegisterReport", "register_files"]
+
+
+def parse_init(init: str | None, n: int, sources: Sequence[str]) -> np.ndarray | None:
+    """Prior poses from ``none``, a poses.json file, or ``turntable:AX,AY,AZ:STEP_DEG[:PX,PY,PZ]``.
+
+    turntable: view i is rotated by i * STEP degrees about the axis (AX, AY, AZ) through (PX, PY, PZ)
+    (default the origin) of the first view's frame.
+    """
+    if init is None or init == "none":
+        return None
+    if init.startswith("turntable:"):
+        parts = init.split(":")
+        try:
+            axis = np.array([float(v) for v in parts[1].split(",")])
+            step = np.radians(float(parts[2]))
+            point = np.array([float(v) for v in parts[3].split(",")]) if len(parts) > 3 else np.zeros(3)
+            if (axis.shape != (3,) or point.shape != (3,) or not np.all(np.isfinite([*axis, *point, step]))
+                    or not np.linalg.norm(axis) > 0):
+                raise ValueError
+        except (ValueError, IndexError) as exc:
+            raise UsageError(f"--init {init!r}: expected turntable:AX,AY,AZ:STEP_DEG[:PX,PY,PZ] with finite numbers "
+                             "and a non-zero axis, e.g. turntable:0,1,0:24") from exc
+        # View i is turned by +i * STEP: the prior of a table turning by -i * STEP between views.
+        return turntable_prior(table_frame(axis, point), -step * np.arange(n))
+    srcs, T = load_poses(init)
+    if len(T) != n:
+        raise ConfigError(f"{init}: has {len(T)} views, but {n} scans were given")
+    names = [Path(s).name for s in sources]
+    if [Path(s).name for s in srcs] != names:
+        order = {Path(s).name: k for k, s in enumerate(srcs)}
+        missing = [s for s in names if s not in order]
+        if missing:
+            raise ConfigError(f"{init}: no pose for {missing}")
+        T = T[[order[s] for s in names]]
+    return T
+
+
+@dataclass(frozen=True, eq=False)
+class RegisterReport:
+    sources: list[str]
+    result: MultiViewResult
+    merged: PointCloud
+    mesh_path: Path | None
+
+
+def register_files(paths: Sequence[str | Path], out_dir: str | Path, *, init: str | None = None,
+                   voxel: float | None = None, mesh: bool = True,
+                   progress: Callable[[str], None] | None = None, neighbours: int | None = None) -> RegisterReport:
+    """Read the scans, register them (world = first scan's frame), write poses.json, merged.ply and mesh.ply.
+
+    ``neighbours``: the view graph's k (each view with its k nearest in rotation plus a few long links,
+    and with no prior coarse alignment of its k most similar); 0 = every pair; None = register_views'
+    defaults (k = 4; with a prior from a file or --init turntable:..., every pair)."""
+    say = progress or (lambda msg: None)
+    paths = [Path(p) for p in paths]
+    clouds = []
+    for p in paths:
+        clouds.append(load_cloud(p))
+        say(f"read {p.name}: {len(clouds[-1])} points")
+    prior = parse_init(init, len(paths), [str(p) for p in paths])
+    if voxel is not None:  # the caller's option, checked against the scans before any work
+        check_voxel(voxel, bbox_diagonal(clouds), what=f"--voxel-mm {voxel * 1e3:g}", error=UsageError)
+    if neighbours is not None and not (isinstance(neighbours, (int, np.integer)) and neighbours >= 0):
+        raise UsageError(f"--neighbours: expected an integer >= 0, found {neighbours!r}")
+    graph = ({} if neighbours is None else dict(pairs=all_pairs, coarse_neighbours=None) if neighbours == 0 else
+             dict(pairs=nearest_and_long_links(int(neighbours)), coarse_neighbours=int(neighbours)))
+    res = register_views(clouds, init_T_world_view=prior, options=MultiViewOptions(voxel=voxel, **graph),
+                         progress=say, names=[p.name for p in paths])
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    edges_of = {k: [e for e in res.edges if e.accepted and k in (e.i, e.j)] for k in range(len(paths))}
+    extra = [{"edges": len(edges_of[k]),
+              "mean_edge_rmse_m": float(np.mean([e.rmse for e in edges_of[k]])) if edges_of[k] else None,
+              # Edges whose overlap left motions free: the prior was kept along them (not measured).
+              "prior_kept": [f"{e.i}-{e.j}: {e.unconstrained}" for e in edges_of[k] if e.unconstrained]}
+             for k in range(len(paths))]
+    save_poses(out / "poses.json", [str(p) for p in paths], res.T_world_view, extra=extra)
+    merged = merge_clouds(clouds, res.T_world_view)
+    save_cloud(out / "merged.ply", merged)
+    mesh_path = None
+    if mesh:
+        from rangekit.formats.meshes import save_mesh
+        from rangekit.surface.cloud import oriented_normals_cloud
+        from rangekit.surface.fusion import poisson_mesh
+
+        say("meshing (screened Poisson)")
+        with naming(out / "merged.ply"):  # the merged scans: too flat or too few to close (use --no-mesh)
+            m = poisson_mesh(merged if merged.normals is not None
+                             else oriented_normals_cloud(merged.points, voxel=voxel))
+        mesh_path = out / "mesh.ply"
+        save_mesh(mesh_path, m)
+    return RegisterReport([str(p) for p in paths], res, merged, mesh_path)

@@ -1,0 +1,150 @@
+"""Simulated captures written as folders a real sensor would give, plus exact ground truth: the work
+behind ``rangekit sim render`` (projector-camera rig, continuous-wave and pulsed ToF, active stereo).
+
+Each function reports what it renders through ``progress(msg)`` and writes into ``out``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+from typing import Callable, Sequence
+
+from rangekit.budget import check_budget
+from rangekit.errors import InputError, UsageError
+from rangekit.progress import call_progress
+
+__all__ = ["render_projector_capture", "render_laser_capture", "render_tof_capture", "render_stereo_capture",
+           "BYTES_PER_PIXEL"]
+
+#: Peak memory of a simulated capture per camera pixel, bytes (measured as the growth of the peak from a
+#: small to a large sensor: ToF 4.6 KB/px, its 3x3 rays per pixel; pulsed ToF 0.54 KB; stereo 1.0 KB per
+#: pixel of one camera; projector-camera rig 0.5 KB), checked against the memory budget before rendering.
+#: Laser (estimated, not measured): the projector rig's ray cast plus the float32 RGB ambient, noise pool and
+#: per-laser xyz truth, 900 bytes.
+BYTES_PER_PIXEL = {"tof": 5000, "tof-pulsed": 640, "stereo": 1100, "projector": 640, "laser": 900}
+
+
+def _check_size(sensor: str, size: tuple[int, int], *, option: str | None = "--size", extra: int = 0,
+                where: str = "") -> None:
+    w, h = (int(v) for v in size)
+    check_budget(w * h * BYTES_PER_PIXEL[sensor] + extra, f"{where}simulating a {w}x{h} {sensor} camera",
+                 option=None if option is None else f"{option} {w}x{h}")
+
+
+def render_projector_capture(out: str | Path, *, obj: str = "lumpy", patterns: str = "graycode",
+                             rig_file: str | Path | None = None, angle: float = 0.0, bits: int = 8, seed: int = 0,
+                             noise: bool = True, global_fraction: float | None = None,
+                             progress: Callable | None = None) -> None:
+    """Render ``patterns`` on ``obj`` (built-in name or mesh file) at turntable ``angle`` (radians) on the
+    rig file's rig (default the simulator's), with a ``bits``-bit camera; write the capture folder."""
+    from rangekit.coded.patterns import make_pattern_spec
+    from rangekit.rig.rig_file import load_rig
+    from rangekit.sim import ImagingModel, SimRig, default_scene
+    from rangekit.sim.writers.capture import write_capture
+
+    imaging = ImagingModel(bits=bits, colour=patterns == "debruijn")
+    if not noise:
+        imaging = imaging.noiseless()
+    if global_fraction is not None:
+        imaging = replace(imaging, global_fraction=global_fraction)
+    rig = load_rig(rig_file) if rig_file else None
+    if rig is not None:
+        cam = rig.camera
+        _check_size("projector", (cam.width, cam.height), option=None, where=f"{rig_file}: ")
+    sim = SimRig(default_scene(obj), rig, imaging=imaging, seed=seed)
+    if sim.turntable is not None:
+        sim.turntable.rotate_to(angle)
+    spec = make_pattern_spec(patterns, sim.projector.resolution)
+    write_capture(sim, spec, out, info={"object": obj}, progress=progress)
+
+
+def render_laser_capture(out: str | Path, *, obj: str = "lumpy", rig_file: str | Path | None = None,
+                         angle: float = 0.0, bits: int = 8, seed: int = 0, noise: bool = True, colour: bool = True,
+                         progress: Callable | None = None) -> None:
+    """The laser-off frame and one frame per line laser of ``obj`` (built-in name or mesh file) at turntable
+    ``angle`` (radians) on the rig file's rig (it must list ``lasers``; default the simulator's rig with
+    two Ciclop-like red lasers, :func:`rangekit.sim.laser.rig.laser_rig`), with a ``bits``-bit RGB (or
+    mono) camera; write the capture folder (:mod:`rangekit.sim.laser.capture`)."""
+    from rangekit.errors import ConfigError
+    from rangekit.rig.rig_file import load_rig
+    from rangekit.sim import ImagingModel, default_scene
+    from rangekit.sim.laser.frames import LaserView
+    from rangekit.sim.laser.capture import write_laser_capture
+    from rangekit.sim.laser.rig import laser_rig
+
+    imaging = ImagingModel(bits=bits, colour=colour)
+    if not noise:
+        imaging = imaging.noiseless()
+    if rig_file:
+        rig = load_rig(rig_file)
+        if not rig.lasers:
+            raise ConfigError(f"{rig_file}: lasers: a laser capture needs at least one line laser, found none "
+                              "(docs/rig.md, 'lasers')")
+        cam = rig.camera
+        _check_size("laser", (cam.width, cam.height), option=None, where=f"{rig_file}: ")
+    else:
+        rig = laser_rig()
+    if rig.capture.get("bits") != bits:
+        rig = replace(rig, capture={**rig.capture, "bits": bits})
+    call_progress(progress, f"ray casting {rig.camera.width}x{rig.camera.height} camera pixels")
+    view = LaserView(default_scene(obj), rig, angle, imaging=imaging, seed=seed)
+    write_laser_capture(view, out, seed=seed, info={"object": obj}, progress=progress)
+
+
+def render_tof_capture(out: str | Path, *, pulsed: bool = False, near: float = 0.5, far: float = 15.0,
+                       size: tuple[int, int] = (320, 240), plan: str = "kinect",
+                       frequencies: Sequence[float] | None = None, steps: int | None = None,
+                       multipath: tuple[float, float] | None = None, jitter: float = 50e-12, noise: bool = True,
+                       seed: int = 0, progress: Callable | None = None) -> None:
+    """The panel scene from ``near`` to ``far`` metres seen by a ToF sensor of ``size`` (W, H) pixels.
+
+    Continuous wave: the ``plan`` ("kinect" or "luxonis") or ``frequencies`` in Hz with ``steps`` phase
+    steps each (default the plan's, or 4); ``multipath`` = (strength, extra round trip in metres).
+    Pulsed: round trips with ``jitter`` seconds RMS of timing jitter.
+    """
+    from rangekit.sim.sensors.tof import (KINECT_V2_PLAN, LUXONIS_PLAN, ToFSensor, render_pulsed, render_tof, tof_camera,
+                                  tof_scene, write_pulsed_capture, write_tof_capture)
+    from rangekit.tof import FrequencyPlan
+
+    if pulsed:
+        _check_size("tof-pulsed", size)
+    else:
+        try:
+            if frequencies:
+                freq_plan = FrequencyPlan.uniform(list(frequencies), steps or 4)
+            else:
+                freq_plan = {"kinect": KINECT_V2_PLAN, "luxonis": LUXONIS_PLAN}[plan]
+                if steps:
+                    freq_plan = FrequencyPlan.uniform(freq_plan.frequencies, steps)
+        except InputError as exc:
+            raise UsageError(f"--frequencies-mhz/--steps: {exc}") from None
+        # Besides the per-pixel peak: the raw samples, as float64 and as 16-bit images.
+        _check_size("tof", size, extra=int(size[0]) * int(size[1]) * 10 * freq_plan.n_samples)
+    scene = tof_scene(near, far)
+    camera = tof_camera(*size)
+    info = {"scene": f"panels {near:g} to {far:g} m"}
+    if pulsed:
+        call_progress(progress, f"rendering pulsed round trips ({camera.width}x{camera.height}, jitter "
+                                f"{jitter * 1e12:g} ps)")
+        write_pulsed_capture(render_pulsed(scene, camera=camera, jitter_s=jitter, seed=seed), out, info=info)
+        return
+    sensor = ToFSensor()
+    if multipath:
+        sensor = replace(sensor, multipath_strength=multipath[0], multipath_extra_m=multipath[1])
+    call_progress(progress, f"rendering {freq_plan.n_samples} raw samples ({freq_plan.describe()}, "
+                            f"{camera.width}x{camera.height}, 3x3 rays per pixel)")
+    cap = render_tof(scene, freq_plan, camera=camera, sensor=sensor, noise=noise, seed=seed)
+    write_tof_capture(cap, out, info=info)
+
+
+def render_stereo_capture(out: str | Path, *, size: tuple[int, int] = (640, 400), dots: bool = True, seed: int = 0,
+                          progress: Callable | None = None) -> None:
+    """The white box and sphere seen by the simulated active-stereo pair of ``size`` (W, H) pixels."""
+    from rangekit.sim.sensors.stereo import render_stereo, stereo_rig, stereo_scene, write_stereo_capture
+
+    _check_size("stereo", size)
+    rig = stereo_rig(*size)
+    call_progress(progress, f"rendering the stereo pair ({rig.cameras[0].width}x{rig.cameras[0].height}, "
+                            f"dots {'off' if not dots else 'on'})")
+    write_stereo_capture(render_stereo(stereo_scene(), rig, dots=dots, seed=seed), rig, out)

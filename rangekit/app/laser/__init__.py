@@ -1,0 +1,2 @@
+"""Laser-line jobs: laser-plane calibration (simulated and on devices), a capture's reconstruction, a
+session processed into a mesh, and its report."""

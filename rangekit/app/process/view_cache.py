@@ -1,0 +1,207 @@
+"""One view of a session decoded, triangulated and filtered, with its cache in the view folder.
+
+Writes into ``view_NNN/`` (atomically): ``cloud.ply`` (the filtered cloud, session-world frame of that
+view, with each point's predicted ``sigma``), ``maps.npz`` (uncompressed: decoded projector column, confidence,
+camera-frame depth, predicted sigma along the camera ray) and ``cloud.json`` (the
+settings they were made with and the SHA-256 of the other two). A view whose ``cloud.json`` holds the
+same settings is read back instead of decoded again, so interrupted processing gives the same mesh as an
+uninterrupted run. A damaged cache (a file missing, truncated, edited or unreadable) is rebuilt.
+"""
+
+from __future__ import annotations
+
+import zipfile
+from collections.abc import Iterator, Sequence
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+
+import numpy as np
+from rangekit._runtime.threads import one_blas_thread
+
+from rangekit import __version__
+from rangekit.coded.reconstruct import EDGE_MARGIN_PX, reconstruct_view
+from rangekit.coded.patterns import PatternSpec
+from rangekit.errors import RangekitError
+from rangekit.formats.capture import list_images, read_stack
+from rangekit.formats.sessions.session import Session, SessionView, exposure_folder
+from rangekit.geometry import apply_T, invert_T
+from rangekit.io import atomic_save_npz, atomic_write_json, read_json, read_png
+from rangekit.rig.rig_file import Rig
+from rangekit.formats.clouds import load_cloud, save_cloud
+from rangekit.formats.sessions.check import file_sha256
+from rangekit.surface.cloud import PointCloud
+
+__all__ = ["ViewMaps", "cache_settings", "reload_maps", "table_transform", "view_cloud", "view_clouds", "white_frame_index"]
+
+
+@dataclass(frozen=True, eq=False)
+class ViewMaps:
+    """What a view's decoding left, per camera pixel (H, W): for the TSDF fusion and the report."""
+
+    proj_col: np.ndarray     # (H, W) float32 projector column, NaN where undecoded
+    confidence: np.ndarray   # (H, W) float32 in [0, 1]
+    depth: np.ndarray        # (H, W) float32 camera-frame z in metres, NaN where no point was kept
+    capture: np.ndarray      # (H, W[, 3]) the capture under the white pattern, as read
+    sigma: np.ndarray | None = None  # (H, W) float32 metres: predicted std along the camera ray, NaN where
+                                     # no point was kept or no prediction (rangekit.coded.uncertainty)
+
+
+def cache_settings(session: Session, method: str, table_margin: float) -> dict:
+    """The settings a coded-light session's views are decoded with, as ``cloud.json`` records them: a view's
+    cache is reused only when they are equal. ``method`` is the triangulation method, ``table_margin`` in
+    metres (see :func:`view_cloud`). The one place they are built, for processing in one process
+    (:mod:`rangekit.app.process.process`) and as Dask tasks (:mod:`rangekit.app.process.batch`)."""
+    rig, spec, full_scale = session.rig, session.pattern, session.capture.full_scale
+    settings = {"rangekit": __version__, "method": method, "table_margin": table_margin,
+                "edge_margin_px": EDGE_MARGIN_PX,
+                "pattern": spec.to_dict()["method"], "full_scale": full_scale,
+                "projector_response": None if rig.projector_response is None else rig.projector_response.to_dict()}
+    if session.capture.exposures_us:      # multi-exposure: each exposure decoded, merged per pixel
+        settings["exposures_us"] = list(session.capture.exposures_us)
+    return settings
+
+
+def table_transform(rig: Rig) -> np.ndarray | None:
+    """``T_table_world`` (4, 4): world points to the turntable frame, z up from the table top; None without
+    a turntable."""
+    return invert_T(rig.T_world_table) if rig.T_world_table is not None else None
+
+
+def white_frame_index(spec: PatternSpec) -> int:
+    """Index of the frame lit by the white pattern (0 if the set has none)."""
+    return next((i for i, name in enumerate(spec.frame_names) if name == "white"), 0)
+
+
+def _read_cache(v: SessionView, settings: dict, shape: tuple[int, int]) -> tuple[PointCloud, dict] | None:
+    """The view's cached cloud and maps when ``cloud.json`` holds these settings and its files are intact
+    (recorded SHA-256s, arrays of the camera's ``shape``); None otherwise (the cache is rebuilt)."""
+    try:
+        meta = read_json(v.folder / "cloud.json", what="view cache")
+        if not isinstance(meta, dict) or meta.get("settings") != settings:
+            return None
+        sha = meta.get("sha256")
+        if not isinstance(sha, dict) or any(file_sha256(v.folder / name) != sha.get(name) for name in _CACHE_FILES):
+            return None
+        cloud = load_cloud(v.folder / "cloud.ply")
+        with np.load(v.folder / "maps.npz") as npz:
+            maps = {k: np.asarray(npz[k], dtype=np.float32) for k in _MAP_NAMES}
+    except (RangekitError, OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):
+        return None
+    if any(m.shape != shape for m in maps.values()):
+        return None
+    return cloud, maps
+
+
+_CACHE_FILES = ("cloud.ply", "maps.npz")
+_MAP_NAMES = ("proj_col", "confidence", "depth", "sigma")  # a cache without one of them is rebuilt
+
+
+def view_cloud(v: SessionView, spec: PatternSpec, rig: Rig, settings: dict, full_scale: float | None,
+               T_table_world: np.ndarray | None, table_margin: float) -> tuple[PointCloud, ViewMaps]:
+    """Decode, triangulate and filter one view, or reuse its cache when made with the same ``settings``.
+
+    ``settings["method"]`` is the triangulation method, ``settings["exposures_us"]`` (when present) the
+    exposures of a multi-exposure session, each decoded from its ``e<us>/`` folder and merged per pixel; ``full_scale`` the camera's largest pixel value
+    (None: the images' dtype). Points less than ``table_margin`` metres above the turntable top
+    (``T_table_world`` maps world points to the table frame; None: no table) are dropped.
+    """
+    return next(view_clouds([v], spec, rig, settings, full_scale, T_table_world, table_margin))
+
+
+def view_clouds(views: Sequence[SessionView], spec: PatternSpec, rig: Rig, settings: dict,
+                full_scale: float | None, T_table_world: np.ndarray | None,
+                table_margin: float) -> Iterator[tuple[PointCloud, ViewMaps]]:
+    """:func:`view_cloud` of each view in turn, yielded in order; the frames of the next view to decode are
+    read (PNG inflate on two threads) on a background thread while this one decodes, which overlaps the
+    stage's I/O with its compute (issue 20). A read error is raised when its view's turn comes."""
+    shape = (rig.camera.height, rig.camera.width)
+    white = white_frame_index(spec)
+    cached = [None] * len(views)
+    with ThreadPoolExecutor(max_workers=1, thread_name_prefix="rangekit-frames") as pool:
+        pending = None
+        for k, v in enumerate(views):
+            folders = _frame_folders(v, settings)
+            if k == 0:
+                cached[0] = _read_cache(v, settings, shape)
+            if cached[k] is not None:
+                cloud, m = cached[k]
+                cached[k] = None
+                yield cloud, _stored_maps(m, folders, white)
+                if k + 1 < len(views):
+                    cached[k + 1] = _read_cache(views[k + 1], settings, shape)
+                continue
+            stacks = pending.result() if pending is not None else _read_stacks(folders)
+            pending = None
+            if k + 1 < len(views):
+                cached[k + 1] = _read_cache(views[k + 1], settings, shape)
+                if cached[k + 1] is None:
+                    pending = pool.submit(_read_stacks, _frame_folders(views[k + 1], settings))
+            images = stacks[0]
+            with one_blas_thread():      # thin products: rangekit._runtime.threads
+                # the white capture copied out: a view of it would keep the view's whole stack alive
+                out = _decode_view(v, stacks if settings.get("exposures_us") else images, images[white].copy(), spec,
+                                   rig, settings, full_scale, T_table_world, table_margin)
+            del stacks, images
+            yield out
+
+
+def reload_maps(v: SessionView, spec: PatternSpec, settings: dict) -> ViewMaps:
+    """A view's :class:`ViewMaps` read back from the cache :func:`view_clouds` just wrote (``maps.npz``,
+    stored uncompressed, and the white capture): processing drops the maps while it fuses and evaluates
+    (about 230 MB for 12 views of 1280x1024) and reads them again for the report. The same numbers as the
+    maps the decoding returned (float32, as stored)."""
+    with np.load(v.folder / "maps.npz") as npz:
+        m = {k: np.asarray(npz[k], dtype=np.float32) for k in _MAP_NAMES}
+    return _stored_maps(m, _frame_folders(v, settings), white_frame_index(spec))
+
+
+def _stored_maps(m: dict, folders: list, white: int) -> ViewMaps:
+    """:class:`ViewMaps` of the cache's arrays ``m`` (:data:`_MAP_NAMES`) and the white capture of the view's
+    first frame folder (the shortest exposure's)."""
+    return ViewMaps(m["proj_col"], m["confidence"], m["depth"], read_png(folders[0] / f"{white:03d}.png"), m["sigma"])
+
+
+def _frame_folders(v: SessionView, settings: dict) -> list:
+    """The folders of a view's stacks: the view's, or (multi-exposure) one ``e<us>/`` per exposure, the
+    shortest first (its white capture is the one shown)."""
+    exposures = settings.get("exposures_us")
+    return [v.folder] if not exposures else [v.folder / exposure_folder(e) for e in exposures]
+
+
+def _read_stacks(folders: list) -> list:
+    return [read_stack(list_images(f)) for f in folders]
+
+
+def _decode_view(v: SessionView, stacks, white_image: np.ndarray, spec: PatternSpec, rig: Rig, settings: dict,
+                 full_scale: float | None, T_table_world: np.ndarray | None,
+                 table_margin: float) -> tuple[PointCloud, ViewMaps]:
+    """:func:`view_cloud` past its cache, on one BLAS thread: its products are thin, (N, 3) @ (3, 3), and two
+    OpenBLAS threads spent 2x the CPU on them for the same bits (issue 20)."""
+    exposures = settings.get("exposures_us")
+    rec = reconstruct_view(stacks, spec, rig.camera, rig.projector, method=settings["method"],
+                           full_scale=full_scale, response=rig.projector_response, exposures_us=exposures)
+    xyz = rec.triangulated.xyz.copy()
+    valid = np.isfinite(xyz[:, :, 0])
+    c = rec.cloud
+    if T_table_world is not None:
+        keep = apply_T(T_table_world, c.points)[:, 2] > table_margin
+        idx = np.flatnonzero(valid.ravel())
+        valid.ravel()[idx[~keep]] = False
+        c = c.take(keep)
+    # Normals as stored (float32), so a run from the cache and a fresh one see the same numbers.
+    c = PointCloud(c.points, c.colours, c.normals.astype(np.float32), c.sigma)
+    depth = np.full(valid.shape, np.nan, dtype=np.float32)
+    depth[valid] = apply_T(invert_T(rig.camera.T_world_cam), xyz[valid])[:, 2]
+    sigma = np.full(valid.shape, np.nan, dtype=np.float32)
+    if rec.sigma is not None:
+        sigma[valid] = rec.sigma[valid]
+    maps = ViewMaps(rec.decoded.proj_col.astype(np.float32), rec.decoded.confidence.astype(np.float32), depth,
+                    white_image, sigma)
+    save_cloud(v.folder / "cloud.ply", c)
+    # uncompressed: deflating the float maps cost 0.18 CPU-s a view (21 MB instead of 4 MB on disk)
+    atomic_save_npz(v.folder / "maps.npz", level=0, proj_col=maps.proj_col, confidence=maps.confidence, depth=depth,
+                    sigma=sigma)
+    # cloud.json last, with the others' checksums: it vouches for a complete cache.
+    atomic_write_json(v.folder / "cloud.json", {"settings": settings, "points": len(c),
+                                                "sha256": {name: file_sha256(v.folder / name) for name in _CACHE_FILES}})
+    return c, maps

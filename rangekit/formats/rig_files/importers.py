@@ -1,0 +1,171 @@
+"""``rangekit rig import``: a rig file from a calibration the user already has.
+
+Three sources, told apart by their content (:func:`import_rig`):
+
+- **OpenCV stereo calibration** (YAML or XML written by ``cv2.FileStorage``, read with it): the camera is
+  the first device, the projector the second (``cv2.stereoCalibrate``'s convention: ``R``, ``T`` map the
+  camera's frame to the projector's, ``X_proj = R X_cam + T``). Keys read, first found wins:
+
+  ==================  ==========================================================================
+  camera matrix       ``K1``, ``M1``, ``cameraMatrix1``, ``camera_matrix``, ``cameraMatrix``, ``cam_K``
+  camera distortion   ``D1``, ``distCoeffs1``, ``dist_coeffs1``, ``distortion_coefficients``,
+                      ``distCoeffs``, ``cam_kc``
+  projector matrix    ``K2``, ``M2``, ``cameraMatrix2``, ``projector_matrix``, ``proj_K``
+  projector dist.     ``D2``, ``distCoeffs2``, ``dist_coeffs2``, ``projector_distortion``, ``proj_kc``
+  rotation            ``R`` (3x3) or a Rodrigues vector (3 numbers); translation ``T`` (3)
+  camera size         ``imageSize``, ``image_size``, ``cam_size`` ([w, h]); or ``image_width`` and
+                      ``image_height``; else ``--size``
+  projector size      ``projectorSize``, ``projector_size``, ``proj_size`` ([w, h]); or
+                      ``projector_width`` and ``projector_height``; else ``--projector-size``
+  ==================  ==========================================================================
+
+  ``T`` is in metres unless ``unit="mm"`` (``--unit mm``). World = the camera's frame; the turntable is
+  unknown (``T_world_table`` null: ``rangekit calibrate`` measures it).
+- **depthai EEPROM calibration** JSON (``CalibrationHandler.eepromToJson()``, :mod:`.rig_import_json`).
+- **Horus** ``calibration.json`` (Ciclop scanner, :mod:`.rig_import_json`).
+
+Every problem raises :class:`ConfigError` naming the file, the key, the expected and the found value.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from rangekit.errors import ConfigError
+from rangekit.formats.rig_files.entries import camera_entry, rig_dict
+from rangekit.geometry import invert_T, make_T
+from rangekit.rig.rig_file import Rig, template_rig
+
+__all__ = ["import_rig", "IMPORT_SUFFIXES", "OPENCV_KEYS"]
+
+#: The extensions ``rig import`` reads: OpenCV's FileStorage (YAML, XML, JSON) and the vendors' JSON.
+IMPORT_SUFFIXES = (".yaml", ".yml", ".xml", ".json")
+
+#: Keys of an OpenCV stereo calibration, each field's names in the order they are looked up.
+OPENCV_KEYS = {
+    "camera_K": ("K1", "M1", "cameraMatrix1", "camera_matrix", "cameraMatrix", "cam_K"),
+    "camera_dist": ("D1", "distCoeffs1", "dist_coeffs1", "distortion_coefficients", "distCoeffs", "cam_kc"),
+    "projector_K": ("K2", "M2", "cameraMatrix2", "projector_matrix", "proj_K"),
+    "projector_dist": ("D2", "distCoeffs2", "dist_coeffs2", "projector_distortion", "proj_kc"),
+    "R": ("R",),
+    "T": ("T",),
+    "camera_size": ("imageSize", "image_size", "cam_size"),
+    "projector_size": ("projectorSize", "projector_size", "proj_size"),
+}
+UNITS = {"m": 1.0, "mm": 1e-3}
+
+
+def import_rig(path: str | Path, *, size: tuple[int, int] | None = None,
+               projector_size: tuple[int, int] | None = None, unit: str = "m") -> dict:
+    """The rig file (plain JSON types, validated by :meth:`Rig.from_dict`) of the calibration in ``path``.
+    ``size`` / ``projector_size``: (width, height) pixels where the file has none (Horus never has one);
+    ``unit``: the OpenCV file's translation unit, "m" or "mm" (depthai's centimetres and Horus's
+    millimetres are known)."""
+    from rangekit.formats.rig_files.import_json import depthai_rig, horus_rig
+
+    path = Path(path)
+    if path.suffix.lower() not in IMPORT_SUFFIXES:
+        raise ConfigError(f"{path}: expected a calibration file ({', '.join(IMPORT_SUFFIXES)}), found "
+                          f"{repr(path.suffix) if path.suffix else 'no extension'}")
+    if not path.is_file():
+        raise ConfigError(f"{path}: expected a calibration file, found {'a folder' if path.is_dir() else 'no file'}")
+    data = None
+    if path.suffix.lower() == ".json":
+        try:
+            data = json.loads(path.read_text(encoding="utf-8"))
+        except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+            raise ConfigError(f"{path}: expected JSON, found a file that does not parse ({exc})") from None
+    if isinstance(data, dict) and "cameraData" in data:
+        rig = depthai_rig(data, str(path))
+    elif isinstance(data, dict) and ("calibration_settings" in data or "camera_matrix" in data):
+        rig = horus_rig(data, str(path), size=size)
+    else:
+        rig = opencv_rig(path, size=size, projector_size=projector_size, unit=unit)
+    Rig.from_dict(rig, where=str(path))        # every field checked as a rig file would be
+    return rig
+
+
+def _node_value(node):
+    """A FileStorage node as a numpy array (a matrix, a sequence of numbers or one number)."""
+    if node.isSeq():
+        return np.array([node.at(i).real() for i in range(node.size())], dtype=np.float64)
+    if node.isReal() or node.isInt():
+        return np.array(node.real(), dtype=np.float64)
+    m = node.mat()
+    return None if m is None else np.asarray(m, dtype=np.float64)
+
+
+def _read_opencv(path: Path) -> dict:
+    import cv2
+
+    try:
+        fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
+    except (cv2.error, SystemError) as exc:     # SystemError: cv2's binding over a parse error
+        cause = exc.__cause__ or exc
+        raise ConfigError(f"{path}: expected an OpenCV FileStorage file (YAML/XML), found one OpenCV cannot "
+                          f"read ({(str(cause).strip().splitlines() or ['?'])[-1]})") from None
+    if not fs.isOpened():
+        raise ConfigError(f"{path}: expected an OpenCV FileStorage file (YAML/XML), found one OpenCV cannot open")
+    try:
+        root = fs.root()
+        return {k: _node_value(root.getNode(k)) for k in root.keys()}
+    finally:
+        fs.release()
+
+
+def _first(values: dict, field: str, path: Path, *, required: bool = True):
+    for key in OPENCV_KEYS[field]:
+        if values.get(key) is not None:
+            return key, values[key]
+    if required:
+        raise ConfigError(f"{path}: expected one of the keys {', '.join(OPENCV_KEYS[field])} ({field}), found "
+                          f"none; the file has {', '.join(values) or 'no keys'}")
+    return None, None
+
+
+def _size(values: dict, field: str, prefix: str, label: str, given, option: str, path: Path) -> tuple[int, int]:
+    key, v = _first(values, field, path, required=False)
+    if v is None and values.get(f"{prefix}_width") is not None and values.get(f"{prefix}_height") is not None:
+        key, v = f"{prefix}_width/{prefix}_height", np.array([values[f"{prefix}_width"], values[f"{prefix}_height"]])
+    if v is None:
+        if given is None:
+            raise ConfigError(f"{path}: expected the {label} size (keys {', '.join(OPENCV_KEYS[field])} or "
+                              f"{prefix}_width and {prefix}_height), found none; give it with {option} WxH")
+        return given
+    v = np.asarray(v, dtype=np.float64).ravel()
+    if v.size != 2 or not np.all(v == np.round(v)) or not np.all(v > 0):
+        raise ConfigError(f"{path}: {key}: expected [width, height] in pixels, found {v.tolist()}")
+    return int(v[0]), int(v[1])
+
+
+def opencv_rig(path: Path, *, size=None, projector_size=None, unit: str = "m") -> dict:
+    """Camera + projector from an OpenCV stereo calibration (module doc: the keys read)."""
+    import cv2
+
+    if unit not in UNITS:
+        raise ConfigError(f"{path}: unit: expected one of {', '.join(UNITS)}, found {unit!r}")
+    values = _read_opencv(path)
+    keys = {f: _first(values, f, path) for f in ("camera_K", "camera_dist", "projector_K", "projector_dist", "R", "T")}
+    rkey, R = keys["R"]
+    R = np.asarray(R, dtype=np.float64)
+    if R.size == 3:
+        R = cv2.Rodrigues(R.reshape(3, 1))[0]
+    if R.shape != (3, 3) or not np.all(np.isfinite(R)) or not np.allclose(R @ R.T, np.eye(3), atol=1e-6):
+        raise ConfigError(f"{path}: {rkey}: expected a 3x3 rotation (orthonormal) or a Rodrigues vector, found "
+                          f"{np.array2string(R, precision=4)}")
+    tkey, t = keys["T"]
+    t = np.asarray(t, dtype=np.float64).ravel()
+    if t.size != 3 or not np.all(np.isfinite(t)):
+        raise ConfigError(f"{path}: {tkey}: expected 3 finite numbers, found {t.tolist()}")
+    T_proj_cam = make_T(R, t * UNITS[unit])
+    cam_size = _size(values, "camera_size", "image", "camera image", size, "--size", path)
+    proj_size = _size(values, "projector_size", "projector", "projector", projector_size, "--projector-size", path)
+    camera = camera_entry("camera", keys["camera_K"][1], keys["camera_dist"][1], cam_size, np.eye(4),
+                          f"{path}: {keys['camera_K'][0]}")
+    projector = camera_entry("projector", keys["projector_K"][1], keys["projector_dist"][1], proj_size,
+                             invert_T(T_proj_cam), f"{path}: {keys['projector_K'][0]}")
+    devices = {k: v for k, v in template_rig()["devices"].items()}
+    return rig_dict([camera], projector, None, devices)

@@ -1,0 +1,93 @@
+"""A session's views checked by content: the SHA-256 of every frame against ``session.json``.
+
+Each finished view records ``{"000.png": sha256, ...}`` (computed by acquisition from the bytes it wrote).
+:func:`verify_views` re-hashes the frame files of the done views and raises naming the view and the
+changed, missing or extra frame, so an edited, deleted or added image never gives a silently wrong mesh
+(``rangekit process`` and ``scan --resume`` call it). Hashing runs at disk speed (0.4-0.5 s for the
+default 12-view session, 720 frames, 208 MB, warm cache, against 233 s of processing), on 2 threads.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+from rangekit.errors import FileFormatError
+from rangekit.formats.capture import IMAGE_SUFFIXES
+from rangekit.formats.sessions.session import Session, SessionView, exposure_folder
+
+__all__ = ["frame_sha256", "file_sha256", "verify_views"]
+
+
+def frame_sha256(data: bytes) -> str:
+    """The SHA-256 (hex) of a frame file's bytes, as recorded in ``session.json``."""
+    return hashlib.sha256(data).hexdigest()
+
+
+def file_sha256(path: Path) -> str | None:
+    """SHA-256 of a file, read in 1 MB blocks; None when it is missing or unreadable."""
+    h = hashlib.sha256()
+    try:
+        with open(path, "rb") as f:
+            while block := f.read(1 << 20):
+                h.update(block)
+    except OSError:
+        return None
+    return h.hexdigest()
+
+
+def _frame_files(v: SessionView, subfolders: tuple[str, ...] = ()) -> set[str]:
+    """Names of the image files in a view folder (those a capture folder reader would take), and in its
+    exposure ``subfolders`` (``e2000/000.png``) for a multi-exposure session."""
+    out = set()
+    for sub in ("", *subfolders):
+        try:
+            out |= {f"{sub}/{p.name}" if sub else p.name for p in (v.folder / sub).iterdir()
+                    if p.suffix.lower() in IMAGE_SUFFIXES and not p.name.startswith(".") and p.stem != "preview"}
+        except OSError:
+            pass
+    return out
+
+
+def _problem(session: Session, v: SessionView, frame: str, what: str) -> FileFormatError:
+    return FileFormatError(f"{v.folder}: frame {frame} {what}; the view's frames no longer match the SHA-256 "
+                           f"recorded in {session.folder / 'session.json'} (views[{v.index}].sha256). Restore "
+                           "the original frame, or scan the view again into a new session")
+
+
+def verify_views(session: Session, *, workers: int = 2, views: list[SessionView] | None = None) -> list[str]:
+    """Check every done view's frames (or those of ``views``, some of the done views: one view's Dask task,
+    :mod:`rangekit.app.process.batch`) against the recorded SHA-256s.
+
+    Returns the names of the done views without recorded checksums (a session written before they were
+    recorded): only their frame count is checked. Raises FileFormatError naming the view folder and the
+    first missing, extra or changed frame.
+    """
+    expected = set(session.frame_files)
+    subfolders = tuple(exposure_folder(e) for e in session.capture.exposures_us or ())
+    unverified, jobs = [], []
+    for v in session.done_views if views is None else views:
+        if not v.folder.is_dir():
+            raise _problem(session, v, "folder", "is missing (the whole view folder)")
+        present = _frame_files(v, subfolders)
+        recorded = set(v.sha256) if v.sha256 else expected
+        for name in sorted(recorded - present):
+            raise _problem(session, v, name, "is missing" + (f" (recorded sha256 {v.sha256[name][:16]}...)"
+                                                             if v.sha256 else ""))
+        for name in sorted(present - recorded):
+            raise _problem(session, v, name, f"is extra: the view has {len(recorded)} frames, "
+                                             f"found {len(present)} image files")
+        if v.sha256 is None:
+            unverified.append(v.folder.name)
+        else:
+            jobs += [(v, name) for name in sorted(recorded)]
+    with ThreadPoolExecutor(max_workers=max(1, workers)) as pool:
+        digests = list(pool.map(lambda job: file_sha256(job[0].folder / job[1]), jobs))
+    for (v, name), digest in zip(jobs, digests):
+        if digest is None:
+            raise _problem(session, v, name, "cannot be read")
+        if digest != v.sha256[name]:
+            raise _problem(session, v, name, f"has changed: sha256 {digest[:16]}..., recorded "
+                                             f"{v.sha256[name][:16]}...")
+    return unverified

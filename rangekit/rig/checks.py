@@ -1,0 +1,250 @@
+"""Checks of a rig file's ``devices`` and ``capture`` sections, without opening anything.
+
+:func:`rangekit.rig.rig_file.load_rig` checks the geometry; :func:`validate_rig_for_hardware` checks what a hardware
+scan reads besides (every field: docs/rig.md), so a typo in the rig file is reported before any device
+moves. The protocol names and camera sockets the checks accept are constants here, and the drivers in
+:mod:`rangekit.drivers` use them. Every error is a :class:`~rangekit.errors.ConfigError` reading
+``{where}: devices.turntable.baud: must be a positive integer ..., found '115k'``.
+"""
+
+from __future__ import annotations
+
+import math
+
+from rangekit.budget import MAX_IMAGE_SIDE_PX
+from rangekit.rig.camera_controls import check_refresh, controls_from_capture
+from rangekit.errors import ConfigError
+
+__all__ = ["validate_devices", "validate_capture", "validate_rig_for_hardware", "DEVICE_FIELDS", "CAPTURE_FIELDS",
+           "CAPTURE_BITS", "TURNTABLE_PROTOCOLS", "PROJECTOR_PROTOCOLS", "DEPTHAI_SOCKETS", "MAX_SEARCH_S",
+           "REFRESH_HZ", "DEFAULT_SEARCH_S"]
+
+#: Serial turntable protocols (rangekit.drivers.turntable): Horus (Ciclop) and FabScan boards.
+TURNTABLE_PROTOCOLS = ("horus", "fabscan")
+#: Projector control protocols (rangekit.drivers.projector_control): Epson serial, PJLink over TCP.
+PROJECTOR_PROTOCOLS = ("escvp21", "pjlink")
+#: depthai camera board sockets (rangekit.drivers.depthai_camera).
+DEPTHAI_SOCKETS = ("CAM_A", "CAM_B", "CAM_C", "CAM_D", "CAM_E", "CAM_F", "CAM_G", "CAM_H")
+#: The longest depthai device search accepted (seconds; depthai takes it as a C int of milliseconds), and
+#: the search a camera opened from a rig file gets without ``devices.camera.search_timeout_s``.
+MAX_SEARCH_S = 600.0
+DEFAULT_SEARCH_S = 3.0
+#: ``devices.projector.refresh_hz``: the projector's refresh rate, Hz (smallest, largest).
+REFRESH_HZ = (1.0, 480.0)
+
+#: Allowed fields of each object in a rig file's ``devices`` section, by dotted path.
+DEVICE_FIELDS = {
+    "devices": ("turntable", "projector", "camera", "depthai"),
+    "devices.turntable": ("type", "protocol", "port", "baud"),
+    "devices.projector": ("type", "display", "control", "refresh_hz"),
+    "devices.projector.control": ("protocol", "port", "baud", "timeout", "password"),
+    "devices.camera": ("type", "id", "socket", "search_timeout_s"),
+    "devices.depthai": ("device_id", "sockets", "size"),  # written by depthai_camera.calibration_to_rig
+}
+#: The ``capture`` settings: name -> (smallest, largest allowed value, unit). ``bits`` is the camera's
+#: ADC bit depth, one of CAPTURE_BITS; a session records it once (rangekit.formats.sessions.session.CaptureSettings)
+#: and decodes with full scale 2**bits - 1. ``capture.camera`` (the camera's controls) is checked by
+#: :func:`rangekit.rig.camera_controls.controls_from_capture`.
+CAPTURE_FIELDS = {
+    "pattern_delay_s": (0.0, 10.0, "seconds"),
+    "turntable_settle_s": (0.0, 60.0, "seconds"),
+    "bits": (8, 16, "bits per pixel"),
+}
+CAPTURE_BITS = (8, 10, 12, 16)
+
+
+def _error(where: str, path: str, problem: str) -> ConfigError:
+    return ConfigError(f"{where}: {path}: {problem}")
+
+
+def _show(value) -> str:
+    text = repr(value)
+    return text if len(text) <= 80 else text[:77] + "..."
+
+
+def _object(value, where: str, path: str) -> dict:
+    """``value`` must be a JSON object whose keys are all in DEVICE_FIELDS[path]."""
+    if not isinstance(value, dict):
+        raise _error(where, path, f"must be an object ({{...}}), found {_show(value)}")
+    allowed = DEVICE_FIELDS[path]
+    unknown = [k for k in value if k not in allowed]
+    if unknown:
+        raise _error(where, f"{path}.{unknown[0]}", f"unknown field; {path} has only {', '.join(allowed)}")
+    return value
+
+
+def _is_int(value) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)
+
+
+def _port(sec: dict, where: str, path: str, what: str) -> None:
+    if "port" not in sec:
+        raise _error(where, f"{path}.port", f"missing: name the {what}")
+    if not isinstance(sec["port"], str) or not sec["port"].strip():
+        raise _error(where, f"{path}.port", f"must be a non-empty string ({what}), found {_show(sec['port'])}")
+
+
+def _baud(sec: dict, where: str, path: str) -> None:
+    baud = sec.get("baud")
+    if baud is not None and not (_is_int(baud) and baud > 0):
+        raise _error(where, f"{path}.baud", f"must be a positive integer (bits per second) or null "
+                     f"for the protocol's default, found {_show(baud)}")
+
+
+def _is_sim(sec: dict, where: str, path: str, real: str) -> bool:
+    """True for ``{"type": "sim"}``; a section of real hardware has no type (turntable, projector)."""
+    kind = sec.get("type")
+    if kind is None:
+        return False
+    if kind != "sim":
+        raise _error(where, f"{path}.type", f"must be 'sim' or absent ({real}), found {_show(kind)}")
+    return True
+
+
+def _check_turntable(sec, where: str) -> None:
+    path = "devices.turntable"
+    sec = _object(sec, where, path)
+    if _is_sim(sec, where, path, "a serial turntable is named by 'protocol' and 'port'"):
+        return
+    known = ", ".join(repr(k) for k in sorted(TURNTABLE_PROTOCOLS))
+    if "protocol" not in sec:
+        raise _error(where, f"{path}.protocol", f"missing: one of {known}")
+    protocol = sec["protocol"]
+    if not isinstance(protocol, str) or protocol.strip().lower() not in TURNTABLE_PROTOCOLS:
+        raise _error(where, f"{path}.protocol", f"unknown turntable protocol {_show(protocol)}; known: {known}")
+    _port(sec, where, path, "serial port or pyserial URL, e.g. '/dev/ttyUSB0' or 'COM3'")
+    _baud(sec, where, path)
+
+
+def _number_in(sec: dict, key: str, lo: float, hi: float, where: str, path: str, unit: str) -> None:
+    """``sec[key]``, when present, must be a finite number in lo..hi (``unit`` says what it is)."""
+    value = sec.get(key)
+    if key in sec and not (isinstance(value, (int, float)) and not isinstance(value, bool)
+                           and math.isfinite(value) and lo <= value <= hi):
+        raise _error(where, f"{path}.{key}", f"must be a number of {unit} from {lo:g} to {hi:g}, found {_show(value)}")
+
+
+def _check_projector(sec, where: str) -> None:
+    path = "devices.projector"
+    sec = _object(sec, where, path)
+    _number_in(sec, "refresh_hz", *REFRESH_HZ, where, path, "hertz (the projector's refresh rate, e.g. 60)")
+    if _is_sim(sec, where, path, "a real projector is named by 'display' and 'control'"):
+        return
+    if "display" in sec and not (_is_int(sec["display"]) and sec["display"] >= 0):
+        raise _error(where, f"{path}.display", "must be a non-negative integer (the SDL display index of the "
+                     f"projector's monitor, 0 = primary), found {_show(sec['display'])}")
+    control = sec.get("control")
+    if control is None:
+        return
+    path = f"{path}.control"
+    control = _object(control, where, path)
+    known = ", ".join(repr(p) for p in PROJECTOR_PROTOCOLS)
+    if "protocol" not in control:
+        raise _error(where, f"{path}.protocol", f"missing: one of {known}")
+    protocol = control["protocol"]
+    if protocol not in PROJECTOR_PROTOCOLS:
+        raise _error(where, f"{path}.protocol", f"unknown projector control protocol {_show(protocol)}; known: {known}")
+    if protocol == "pjlink":
+        _port(control, where, path, "the projector's host name or address, optionally host:port")
+        host, sep, tcp = control["port"].partition(":")
+        if sep and not (tcp.isdigit() and 0 < int(tcp) < 65536):
+            raise _error(where, f"{path}.port", f"must be host or host:port with a TCP port 1..65535, found "
+                         f"{_show(control['port'])}")
+    else:
+        _port(control, where, path, "serial port, e.g. '/dev/ttyUSB1'")
+        if "password" in control:
+            raise _error(where, f"{path}.password", f"only the 'pjlink' protocol takes a password, not {protocol!r}")
+    _baud(control, where, path)
+    if "password" in control and not isinstance(control["password"], str):
+        raise _error(where, f"{path}.password", f"must be a string, found {_show(control['password'])}")
+    timeout = control.get("timeout")
+    if timeout is not None and not (isinstance(timeout, (int, float)) and not isinstance(timeout, bool)
+                                    and math.isfinite(timeout) and timeout > 0):
+        raise _error(where, f"{path}.timeout", f"must be a positive number of seconds, found {_show(timeout)}")
+
+
+def _check_camera(sec, where: str) -> None:
+    path = "devices.camera"
+    sec = _object(sec, where, path)
+    if sec.get("type") not in ("depthai", "sim"):
+        raise _error(where, f"{path}.type", f"must be 'depthai' or 'sim', found {_show(sec.get('type'))}")
+    if sec["type"] == "sim":
+        return
+    if sec.get("id") is not None and not isinstance(sec["id"], str):
+        raise _error(where, f"{path}.id", "must be a string (device id/MXID, name or IP address) or null for the "
+                     f"first device found, found {_show(sec['id'])}")
+    if sec.get("socket", "CAM_A") not in DEPTHAI_SOCKETS:
+        raise _error(where, f"{path}.socket", f"must be one of {', '.join(DEPTHAI_SOCKETS)}, found {_show(sec['socket'])}")
+    _number_in(sec, "search_timeout_s", 0.0, MAX_SEARCH_S, where, path, "seconds (how long to look for the device)")
+
+
+def _check_depthai_record(sec, where: str) -> None:
+    path = "devices.depthai"
+    sec = _object(sec, where, path)
+    if sec.get("device_id") is not None and not isinstance(sec["device_id"], str):
+        raise _error(where, f"{path}.device_id", f"must be a string or null, found {_show(sec['device_id'])}")
+    sockets = sec.get("sockets", [])
+    if not isinstance(sockets, list) or not all(s in DEPTHAI_SOCKETS for s in sockets):
+        raise _error(where, f"{path}.sockets", f"must be a list of {', '.join(DEPTHAI_SOCKETS)}, found {_show(sockets)}")
+    size = sec.get("size")
+    if size is not None and not (isinstance(size, list) and len(size) == 2
+                                 and all(_is_int(v) and 0 < v <= MAX_IMAGE_SIDE_PX for v in size)):
+        raise _error(where, f"{path}.size", f"must be [width, height] in pixels, each 1..{MAX_IMAGE_SIDE_PX}, found "
+                     f"{_show(size)}")
+
+
+def validate_devices(devices: dict, *, where: str) -> None:
+    """Check a rig file's ``devices`` section without opening anything.
+
+    Checks the allowed fields of each object (``DEVICE_FIELDS``), the turntable and projector-control
+    protocols against the drivers' own lists, ports, baud rates, the display index and the depthai
+    socket. Every error is a :class:`~rangekit.errors.ConfigError` reading
+    ``{where}: devices.turntable.baud: must be a positive integer ..., found '115k'``.
+    """
+    devices = _object({} if devices is None else devices, where, "devices")
+    checks = {"turntable": _check_turntable, "projector": _check_projector, "camera": _check_camera,
+              "depthai": _check_depthai_record}
+    for key, value in devices.items():
+        if value is not None:
+            checks[key](value, where)
+
+
+def validate_capture(capture: dict, *, where: str) -> None:
+    """Check a rig file's ``capture`` section: known fields (``CAPTURE_FIELDS`` and ``camera``), numbers in
+    range."""
+    path = "capture"
+    if capture is None:
+        return
+    if not isinstance(capture, dict):
+        raise _error(where, path, f"must be an object ({{...}}), found {_show(capture)}")
+    controls_from_capture(capture, where=where)
+    for key, value in capture.items():
+        if key == "camera":
+            continue
+        if key not in CAPTURE_FIELDS:
+            raise _error(where, f"{path}.{key}", f"unknown field; capture has only camera, {', '.join(CAPTURE_FIELDS)}")
+        if key == "bits":
+            if not (_is_int(value) and value in CAPTURE_BITS):
+                raise _error(where, f"{path}.bits", f"must be {', '.join(map(str, CAPTURE_BITS[:-1]))} or "
+                             f"{CAPTURE_BITS[-1]} (the camera's bit depth), found {_show(value)}")
+            continue
+        lo, hi, unit = CAPTURE_FIELDS[key]
+        number = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+        if not number or not lo <= value <= hi:
+            hint = " (seconds, not milliseconds)" if number and value > hi else ""
+            raise _error(where, f"{path}.{key}", f"must be a number of {unit} from {lo:g} to {hi:g}{hint}, found "
+                         f"{_show(value)}")
+
+
+def validate_rig_for_hardware(rig, *, where: str) -> None:
+    """Everything :func:`open_rig_devices` and a hardware scan read from ``rig``, checked before any device
+    is opened: ``devices``, ``capture``, that a manual exposure is a whole number of the projector's
+    refresh periods (``devices.projector.refresh_hz``, :func:`rangekit.rig.camera_controls.check_refresh`) and
+    that a projector display has a projector calibration."""
+    validate_devices(rig.devices, where=where)
+    validate_capture(rig.capture, where=where)
+    projector = (rig.devices or {}).get("projector") or {}
+    check_refresh(controls_from_capture(rig.capture, where=where), projector.get("refresh_hz"), where=where)
+    if "display" in projector and projector.get("type") != "sim" and rig.projector is None:
+        raise _error(where, "devices.projector.display", "a projector display needs the projector's calibration "
+                     "(field 'projector' is null)")

@@ -1,0 +1,1 @@
+"""Other simulated sensors: time of flight, the active-stereo pair, the photometric light stage."""

@@ -1,0 +1,291 @@
+"""A simulated photometric-stereo light stage: one fixed camera, f lights switched on one at a time.
+
+The camera ray casting (:func:`rangekit.sim.scene.raycast.cast_view` without a projector) is done once; each
+light then costs a vectorised shading pass. For each pixel that sees a surface and each light ``i``::
+
+    E_i = gain * s_i * [albedo * max(n.l_i, 0) + k_s (n.h_i)^shininess] * falloff_i + gain * ambient * albedo
+
+* ``l_i``: unit direction from the surface point towards the light. Directional lights give it directly
+  (``falloff = 1``); point lights give a position ``P_i`` and ``l_i = (P_i - x) / |P_i - x|`` per pixel
+  with ``falloff = (ref_distance / |P_i - x|)^2`` (``ImagingModel.ref_distance``).
+* ``s_i``: the light's intensity (1 unless given). ``h_i``: Blinn-Phong half vector of ``l_i`` and the
+  direction to the camera; ``k_s``, ``shininess`` come from each object's :class:`SceneObject` fields.
+* Attached shadow: ``n.l_i <= 0`` (shading normal). Cast shadow: a ray from ``x + shadow_eps * n``
+  towards the light hits any triangle (before the light, for point lights); the light term is then 0.
+* Interreflection (``bounce_samples > 0``): one diffuse bounce, ``gain * albedo * (1/K) sum_k albedo(y_k)
+  E_i(y_k)`` over K cosine-weighted rays per pixel (:mod:`rangekit.sim.sensors.lightstage_bounce`): a concave
+  object lights itself; on a convex one the rays escape and the term is 0.
+* Then, as in :mod:`rangekit.sim.imaging.render`: camera lens blur (``camera_blur``), shot + read noise
+  (:meth:`ImagingModel.noise_std`), clipping and quantisation to ``bits``. The projector-only fields
+  (gamma, black_level, projector_blur, global_fraction, global_blur) do not apply.
+
+Frames: lights, normals and depth are in the OpenCV camera frame (x right, y down, z forward). A light
+on the camera's side of the object has a negative z component.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from rangekit.camera import PinholeCamera
+from rangekit.errors import InputError
+from rangekit.geometry import make_T
+from rangekit.sim.scene.objects import make_object
+from rangekit.sim.sensors.lightstage_bounce import one_bounce
+from rangekit.sim.scene.raycast import cast_view
+from rangekit.sim.imaging.render import ImagingModel
+from rangekit.sim.scene.scene import Scene
+from rangekit.surface.raycast import raycasting_scene
+
+__all__ = ["LightStageCapture", "LIGHT_STAGE_MODEL", "PLATE_OBJECTS", "light_stage_camera", "light_stage_lights",
+           "light_stage_scene", "render_light_stage"]
+
+#: Default sensor of the light stage: 16-bit like DiLiGenT, no room light, otherwise ImagingModel's defaults.
+LIGHT_STAGE_MODEL = ImagingModel(bits=16, ambient=0.0)
+
+
+@dataclass(frozen=True, eq=False, repr=False)
+class LightStageCapture:
+    """Images of a light stage and the exact truth, all in the camera frame.
+
+    images : (f, H, W) float32 (or (f, H, W, 3) for a colour model) in [0, 1]: quantised digital numbers
+        divided by ``2**bits - 1``; linear in irradiance.
+    lights : (f, 3) float64, camera frame: unit directions towards each light (``kind="directional"``) or
+        light positions in metres (``kind="point"``).
+    intensities : (f,) float64 light intensities ``s_i``.
+    kind : "directional" or "point".
+    normals_true : (H, W, 3) float64 unit shading normals, camera frame, facing the camera (z < 0); NaN
+        outside ``mask``.
+    albedo_true : (H, W) float64 Lambertian albedo (mean of RGB, what a mono sensor sees); NaN outside.
+    depth_true : (H, W) float64 camera z of the surface, metres; NaN outside.
+    mask : (H, W) bool, pixels that see a surface.
+    shadowed : (f, H, W) bool, mask pixels with no direct light from light i (attached or cast shadow).
+    cast_shadow : (f, H, W) bool, the cast part of ``shadowed`` (facing the light but occluded).
+    camera : the camera (its ``T_world_cam`` relates the camera frame to the scene's world frame).
+    """
+
+    images: np.ndarray
+    lights: np.ndarray
+    intensities: np.ndarray
+    kind: str
+    normals_true: np.ndarray
+    albedo_true: np.ndarray
+    depth_true: np.ndarray
+    mask: np.ndarray
+    shadowed: np.ndarray
+    cast_shadow: np.ndarray
+    camera: PinholeCamera
+
+    def __repr__(self) -> str:
+        f, H, W = self.images.shape[:3]
+        return (f"LightStageCapture({f} {self.kind} lights, {W}x{H}, mask_pixels={int(self.mask.sum())}, "
+                f"shadowed_fraction={self.shadowed[:, self.mask].mean():.3f})")
+
+
+def light_stage_camera(width: int = 320, height: int = 256) -> PinholeCamera:
+    """The simulator's camera lens (:func:`rangekit.sim.devices.sim_rig.default_rig`) on a ``width`` x ``height``
+    sensor (same field of view), posed at the world origin (``T_world_cam`` = identity: world = camera)."""
+    from rangekit.sim.devices.sim_rig import default_rig
+
+    return default_rig().cameras[0].resized(width, height).with_pose(np.eye(4))
+
+
+def light_stage_lights(n: int = 96, *, min_angle: float = np.radians(5.0), max_angle: float = np.radians(45.0),
+                       rng: int | np.random.Generator = 0) -> np.ndarray:
+    """(n, 3) float64 unit light directions, camera frame, spread uniformly over a cap facing the object.
+
+    Directions point from the object towards the lights, which stand on the camera's side: each makes
+    an angle in ``[min_angle, max_angle]`` radians with the camera's backward axis (0, 0, -1) (DiLiGenT's
+    ball: 4 to 43 deg), uniform in solid angle, azimuth uniform; drawn from ``rng``.
+    """
+    if int(n) != n or n < 1:
+        raise InputError(f"light_stage_lights: n must be an integer >= 1, found {n!r}")
+    if not (0.0 <= min_angle <= max_angle < np.pi / 2):
+        raise InputError(f"light_stage_lights: need 0 <= min_angle <= max_angle < pi/2 radians, found "
+                         f"min_angle={min_angle!r}, max_angle={max_angle!r}")
+    rng = np.random.default_rng(rng)
+    cos_t = rng.uniform(np.cos(max_angle), np.cos(min_angle), int(n))
+    phi = rng.uniform(0.0, 2 * np.pi, int(n))
+    sin_t = np.sqrt(1.0 - cos_t ** 2)
+    return np.column_stack([sin_t * np.cos(phi), sin_t * np.sin(phi), -cos_t])
+
+
+#: Objects built standing on the turntable plate (lowest point at z = 0, z up): the light stage turns their
+#: up axis towards the camera, so it looks into the bowl and down on the steps, the fins and the bunny.
+PLATE_OBJECTS = ("bowl", "thin", "steps", "bunny")
+
+
+def light_stage_scene(obj: str = "sphere", *, distance: float = 0.5, occluder: bool = False,
+                      face_camera: bool | None = None, **object_options) -> Scene:
+    """A scene for :func:`light_stage_camera`: ``obj`` (builtin name) centred ``distance`` metres in
+    front of the camera (world = camera frame), nothing behind it.
+
+    ``face_camera`` turns the object's up axis (+z) towards the camera (a half turn about x) and puts
+    the centre of its bounding box on the optical axis; default: True for :data:`PLATE_OBJECTS` (the
+    camera then looks into the ``bowl``), False otherwise (the object's origin goes to the axis).
+
+    ``occluder=True`` adds a box (4 x 12 x 20 cm along x, y, z; albedo 0.5) beside it, centred at
+    x = +0.1 m, out of the camera's line of sight to a 5 cm sphere: a light from the +x side (e.g.
+    direction (0.97, 0, -0.24)) casts its shadow on the object's right side.
+    """
+    o = make_object(obj, **object_options)
+    T = make_T(t=[0.0, 0.0, distance])
+    if obj in PLATE_OBJECTS if face_camera is None else face_camera:
+        R = np.diag([1.0, -1.0, -1.0])
+        T = make_T(R, [0.0, 0.0, distance] - R @ (o.vertices.min(axis=0) + o.vertices.max(axis=0)) / 2)
+    objects = [o.with_pose(T)]
+    if occluder:
+        objects.append(make_object("box", extents=(0.04, 0.12, 0.2), albedo=0.5)
+                       .with_pose(make_T(t=[0.1, 0.0, distance])))
+    return Scene(tuple(objects))
+
+
+def render_light_stage(scene: Scene, lights: np.ndarray, *, camera: PinholeCamera | None = None,
+                       kind: str = "directional", intensities: np.ndarray | None = None,
+                       model: ImagingModel = LIGHT_STAGE_MODEL, rng: int | np.random.Generator = 0,
+                       specular: bool = True, shadows: bool = True, shadow_eps: float = 1e-4,
+                       bounce_samples: int = 32) -> LightStageCapture:
+    """Render one image per light, and the truth, for a fixed camera.
+
+    Parameters
+    ----------
+    scene : the objects, in the world frame of ``camera.T_world_cam``.
+    lights : (f, 3) camera frame: unit directions towards the lights, or light positions in metres.
+    camera : the camera; default :func:`light_stage_camera` (320 x 256, world = camera frame).
+    kind : {"directional", "point"}
+    intensities : (f,) light intensities ``s_i`` >= 0; default all 1.
+    model : sensor model (gain, ambient, camera blur, noise, bits, colour; see the module docstring).
+    rng : seed or Generator for the noise; the same seed gives the same images.
+    specular : add each object's Blinn-Phong term (False: purely Lambertian).
+    shadows : cast shadow rays (False: only attached shadows, ``n.l <= 0``).
+    shadow_eps : metres; shadow rays start this far off the surface along the normal.
+    bounce_samples : rays per pixel for the one-bounce interreflection; 0 leaves it out.
+
+    Returns
+    -------
+    LightStageCapture
+
+    Raises
+    ------
+    InputError
+        If ``lights`` is not (f, 3) finite, directional lights are not unit length, ``kind`` is unknown
+        or ``intensities`` does not match. :class:`SceneError` if the camera sees nothing.
+    """
+    if kind not in ("directional", "point"):
+        raise InputError(f"render_light_stage: kind must be 'directional' or 'point', found {kind!r}")
+    L = np.asarray(lights, dtype=np.float64)
+    if L.ndim != 2 or L.shape[1] != 3 or len(L) < 1 or not np.all(np.isfinite(L)):
+        raise InputError(f"render_light_stage: lights must be a finite (f, 3) array, found shape {L.shape}")
+    if kind == "directional" and not np.allclose(np.linalg.norm(L, axis=1), 1.0, atol=1e-6):
+        raise InputError("render_light_stage: directional lights must be unit vectors (camera frame, towards "
+                         f"the light); lengths range {np.linalg.norm(L, axis=1).min():.6g} to "
+                         f"{np.linalg.norm(L, axis=1).max():.6g}")
+    f = len(L)
+    s = np.ones(f) if intensities is None else np.asarray(intensities, dtype=np.float64).reshape(-1)
+    if s.shape != (f,) or not np.all(np.isfinite(s) & (s >= 0)):
+        raise InputError(f"render_light_stage: intensities must be {f} finite values >= 0, found shape {s.shape}")
+    if int(bounce_samples) != bounce_samples or not 0 <= bounce_samples <= 4096:
+        raise InputError(f"render_light_stage: bounce_samples must be an integer in 0..4096, found {bounce_samples!r}")
+    camera = light_stage_camera() if camera is None else camera
+    rng = np.random.default_rng(rng)
+    H, W = camera.height, camera.width
+
+    # Geometry once, moved to the camera frame.
+    mesh = scene.world_mesh()
+    g = cast_view(mesh, camera, None)
+    idx = np.flatnonzero(g.hit.ravel())
+    R_cw, t_cw = camera.T_cam_world[:3, :3], camera.T_cam_world[:3, 3]
+    x = g.xyz.reshape(-1, 3)[idx] @ R_cw.T + t_cw           # (N, 3) camera frame, metres
+    n = g.normal.reshape(-1, 3)[idx] @ R_cw.T               # (N, 3) unit, facing the camera
+    albedo = g.albedo.reshape(-1, 3)[idx]                   # (N, 3)
+    obj = g.object_id.ravel()[idx]
+    ks = np.array([o.specular for o in scene.objects])[obj] if specular else np.zeros(len(idx))
+    shin = np.array([o.shininess for o in scene.objects])[obj]
+
+    # Per light and pixel: direction to the light, falloff, attached shadow.
+    if kind == "directional":
+        l_dir = np.broadcast_to(L[:, None, :], (f, len(idx), 3))
+        dist = np.full((f, len(idx)), np.inf)
+        falloff = np.ones((f, len(idx)))
+    else:
+        to = L[:, None, :] - x[None]                        # (f, N, 3)
+        dist = np.linalg.norm(to, axis=2)
+        l_dir = to / dist[..., None]
+        falloff = (model.ref_distance / dist) ** 2
+    cos_i = np.einsum("fnk,nk->fn", l_dir, n)
+    lit = cos_i > 0
+    cast = np.zeros_like(lit)
+    if shadows:
+        cast = lit & _occluded(mesh.vertices, mesh.triangles, camera.T_world_cam, x, n, l_dir, dist, lit,
+                               shadow_eps)
+        lit &= ~cast
+    # Blinn-Phong half vector between the light and the camera (at the origin of the camera frame).
+    v = -x / np.linalg.norm(x, axis=1, keepdims=True)
+    spec = np.zeros((f, len(idx)))
+    if np.any(ks > 0):
+        h = l_dir + v[None]
+        h /= np.linalg.norm(h, axis=2, keepdims=True)
+        nh = np.clip(np.einsum("fnk,nk->fn", h, n), 0.0, 1.0)
+        spec = ks[None] * nh ** shin[None]
+
+    C = 3 if model.colour else 1
+    alb_c = albedo if model.colour else albedo.mean(axis=1, keepdims=True)  # (N, C)
+    direct = (alb_c[None] * np.where(lit, cos_i, 0.0)[..., None] + np.where(lit, spec, 0.0)[..., None]) \
+        * (model.gain * s[:, None] * falloff)[..., None]    # (f, N, C)
+    if bounce_samples > 0:
+        direct += model.gain * alb_c[None] * one_bounce(
+            mesh, camera.T_cam_world, x, n, L, kind, s, model.ref_distance, samples=int(bounce_samples), rng=rng.spawn(1)[0],
+            eps=shadow_eps, colour=model.colour)
+    img = np.zeros((f, H * W, C), np.float32)
+    img[:, idx] = direct + model.gain * model.ambient * alb_c[None]
+    img = img.reshape(f, H, W, C)
+    if model.camera_blur > 0:
+        for i in range(f):  # one OpenCV call per image, not per pixel
+            img[i] = cv2.GaussianBlur(img[i], (0, 0), model.camera_blur,
+                                      borderType=cv2.BORDER_REPLICATE).reshape(H, W, C)
+    if model.full_well > 0:
+        std = np.sqrt(np.maximum(img, 0) * np.float32(model.full_well) + np.float32(model.read_noise ** 2))
+        img += std * rng.standard_normal(img.shape, dtype=np.float32) / np.float32(model.full_well)
+    img *= np.float32(model.max_value)
+    np.clip(img, 0, model.max_value, out=img)
+    np.rint(img, out=img)
+    img /= np.float32(model.max_value)
+    images = img if model.colour else img[..., 0]
+
+    def field(values: np.ndarray, fill, shape=()) -> np.ndarray:
+        out = np.full((H * W,) + shape, fill, dtype=values.dtype)
+        out[idx] = values
+        return out.reshape((H, W) + shape)
+
+    def stack(per_light: np.ndarray) -> np.ndarray:
+        out = np.zeros((f, H * W), dtype=bool)
+        out[:, idx] = per_light
+        return out.reshape(f, H, W)
+
+    return LightStageCapture(
+        images=images, lights=L.copy(), intensities=s, kind=kind, normals_true=field(n, np.nan, (3,)),
+        albedo_true=field(albedo.mean(axis=1), np.nan), depth_true=field(x[:, 2], np.nan), mask=g.hit.copy(),
+        shadowed=stack(~lit), cast_shadow=stack(cast), camera=camera)
+
+
+def _occluded(vertices: np.ndarray, triangles: np.ndarray, T_world_cam: np.ndarray, x: np.ndarray,
+              n: np.ndarray, l_dir: np.ndarray, dist: np.ndarray, todo: np.ndarray, eps: float) -> np.ndarray:
+    """(f, N) bool: the shadow ray from ``x + eps * n`` along ``l_dir`` hits a triangle before ``dist``.
+
+    Only the (light, pixel) pairs in ``todo`` are cast, all in one Open3D batch (scene built once).
+    """
+    import open3d as o3d  # imported here: it takes ~2 s and most of rangekit never needs it
+
+    scene = raycasting_scene(vertices, triangles)
+    fi, ni = np.nonzero(todo)
+    R, t = T_world_cam[:3, :3], T_world_cam[:3, 3]
+    origins = (x[ni] + eps * n[ni]) @ R.T + t
+    dirs = l_dir[fi, ni] @ R.T
+    rays = np.concatenate([origins, dirs], axis=1).astype(np.float32)
+    t_hit = scene.cast_rays(o3d.core.Tensor(rays))["t_hit"].numpy()
+    out = np.zeros(todo.shape, dtype=bool)
+    out[fi, ni] = t_hit < dist[fi, ni] - eps
+    return out

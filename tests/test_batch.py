@@ -20,6 +20,7 @@ import pytest
 
 from faults._sessions import N_VIEWS, make_reference
 from rangekit.app.process.batch import WORKER_ENV, SchedulerUnreachable, process_sessions
+from rangekit.app.process.options import ProcessOptions
 from rangekit.app.process.process import process_session
 from rangekit.cli import main
 
@@ -33,7 +34,7 @@ def sessions(tmp_path_factory):
     root = tmp_path_factory.mktemp("batch")
     ref = make_reference(root / "reference")
     serial = shutil.copytree(ref, root / "serial")
-    process_session(serial, report=False)
+    process_session(serial, ProcessOptions(report=False))
     return root, ref, {name: (serial / name).read_bytes() for name in OUTPUTS}
 
 

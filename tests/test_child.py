@@ -133,7 +133,7 @@ def loaded(*names):
 def test_poissons_child_loads_open3d_and_the_fusion_without_numba_scipy_or_plotly():
     """Processing's Poisson child holds its octree beside the main process: what it imports counts at the
     peak (numba and scipy came with rangekit.surface's package import: 89 MB; plotly with Open3D: 42 MB)."""
-    from rangekit.app.process.process import CHILD_IMPORTS
+    from rangekit.app.process.fuse import CHILD_IMPORTS
 
     with spawn_child(CHILD_IMPORTS) as child:
         got = call_beside(loaded, "open3d", "rangekit.surface.fusion", "numba", "scipy", "plotly", "dash",

@@ -139,13 +139,14 @@ def finish_session_task(folder: str, views: Sequence[ViewDone], fusion: str = "p
     ``folder`` once its ``views`` are decoded (a Dask task; they come from the cache). Returns the end-of-run
     summary lines."""
     from rangekit.app.process.batch_pairs import dask_pair_mapper
+    from rangekit.app.process.options import ProcessOptions
     from rangekit.app.process.process import process_session
     from rangekit.app.scan.scan import process_scan
 
     pairs = dask_pair_mapper()   # each view pair's registration a task of its own (rangekit.app.process.batch_pairs)
     if evaluate:
         return tuple(process_scan(folder, fusion=fusion, report=report, map_pairs=pairs).summary_lines())
-    return tuple(process_session(folder, fusion=fusion, report=report, map_pairs=pairs).summary_lines())
+    return tuple(process_session(folder, ProcessOptions(fusion=fusion, report=report), map_pairs=pairs).summary_lines())
 
 
 def process_sessions(folders: Sequence[str | Path], *, scheduler: str = "local", workers: int = 2,
@@ -168,7 +169,7 @@ def process_sessions(folders: Sequence[str | Path], *, scheduler: str = "local",
         No scheduler answered at ``scheduler`` within ``timeout`` seconds. A session that fails does not
         raise: its :class:`SessionOutcome` holds the error.
     """
-    from rangekit.app.process.process import FUSION_METHODS
+    from rangekit.app.process.options import FUSION_METHODS
 
     if fusion not in FUSION_METHODS:
         raise ConfigError(f"fusion must be one of {', '.join(FUSION_METHODS)}, found {fusion!r}")

@@ -12,7 +12,9 @@ from pathlib import Path
 from typing import Callable
 
 import numpy as np
-from rangekit.app.process.process import FUSION_METHODS, Evaluator, process_session
+from rangekit.app.process.evaluate import Evaluator
+from rangekit.app.process.options import FUSION_METHODS, ProcessOptions
+from rangekit.app.process.process import process_session
 from rangekit.coded.patterns import PatternSpec, make_pattern_spec
 from rangekit.errors import ConfigError, RangekitError, UsageError
 from rangekit.geometry import R_up_to_z
@@ -23,7 +25,7 @@ from rangekit.laser.triangulate import check_plane_camera
 from rangekit.rig.rig_file import Rig, load_rig
 from rangekit.rig.checks import validate_rig_for_hardware
 
-__all__ = ["ScanSetup", "SCAN_DEFAULTS", "prepare_scan", "check_laser_planes", "session_evaluator", "process_scan"]
+__all__ = ["ScanSetup", "SCAN_DEFAULTS", "prepare_scan", "check_laser_planes", "session_evaluator", "process", "process_scan"]
 
 #: Where a simulated session keeps the mesh file of its object.
 OBJECT_FOLDER = "object"
@@ -297,8 +299,27 @@ def session_evaluator(session: Session) -> Evaluator | None:
                            **({"pass_motions": np.array(motions)} if motions is not None else {}))
 
 
+def process(session: Session | str | Path, options: ProcessOptions | None = None, *,
+            on_event=None, map_pairs=None) -> ProcessResult:
+    """Process a session (loaded, or its folder) as ``rangekit process`` does: :func:`process_session` with the
+    simulator's truth as evaluator when the session is simulated and ``options.truth`` (the session loaded once
+    and handed on). ``on_event``: see :mod:`rangekit.app.events`."""
+    from rangekit.app.events import failures_announced
+
+    options = options or ProcessOptions()
+    with failures_announced(on_event):
+        if not isinstance(session, Session):
+            if not (Path(session) / "session.json").is_file():
+                raise ConfigError(f"{session}: not a session folder (no session.json)")
+            session = Session.load(session)
+        evaluate = session_evaluator(session) if options.truth else None
+    return process_session(session, options, evaluate=evaluate, on_event=on_event, map_pairs=map_pairs)
+
+
 def process_scan(folder: str | Path, *, fusion: str = "poisson", report: bool = True,
                  progress: Callable | None = None, map_pairs=None) -> ProcessResult:
-    """:func:`process_session` with the simulator's truth as evaluator when the session is simulated."""
-    return process_session(folder, fusion=fusion, report=report, evaluate=session_evaluator(Session.load(folder)),
-                           progress=progress, map_pairs=map_pairs)
+    """:func:`process` with the command line's ``progress`` (:class:`rangekit.progress.Console`) as subscriber."""
+    from rangekit.app.events import progress_subscriber
+
+    return process(folder, ProcessOptions(fusion=fusion, report=report), on_event=progress_subscriber(progress),
+                   map_pairs=map_pairs)

@@ -1,0 +1,182 @@
+"""What a running job tells its subscribers: typed events, one frozen dataclass each.
+
+A job (:func:`rangekit.app.process.process.process_session`) takes ``on_event``, a callable given every event in the order things happen, on the job's own thread. The
+command line's progress bar is one subscriber (:func:`progress_subscriber`); a web view or a notebook is
+another. A subscriber that raises stops the job with its exception (nothing is swallowed).
+
+Units as everywhere in rangekit: metres, radians, seconds.
+"""
+
+from __future__ import annotations
+
+import time
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Callable, Iterator, Union
+
+from rangekit.progress import StageTimer
+
+if TYPE_CHECKING:
+    from rangekit.surface.cloud import PointCloud
+    from rangekit.surface.mesh import TriangleMesh
+
+__all__ = ["StageStarted", "StageFinished", "Progress", "ViewAcquired", "ViewDecoded", "PairRegistered", "MeshReady",
+           "JobFailed", "Event", "OnEvent", "emit", "progress_of", "progress_subscriber"]
+
+
+@dataclass(frozen=True)
+class StageStarted:
+    """A stage began: ``"acquire"``, ``"decode"``, ``"register"``, ``"fuse"``, ``"evaluate"`` or ``"report"``."""
+
+    stage: str
+
+
+@dataclass(frozen=True)
+class StageFinished:
+    """A stage ended after ``seconds`` of wall time (a stage run in parts, such as ``"evaluate"`` beside the
+    fusion and after it, finishes once per part)."""
+
+    stage: str
+    seconds: float
+
+
+@dataclass(frozen=True)
+class Progress:
+    """A line for people: ``message``, with ``done`` of ``total`` steps when the work is counted."""
+
+    message: str
+    done: int | None = None
+    total: int | None = None
+
+
+@dataclass(frozen=True)
+class ViewAcquired:
+    """View ``index`` (0-based, of ``total``) is on disk: its folder, frames and turntable angle (radians)."""
+
+    index: int
+    total: int
+    folder: Path
+    angle: float
+    n_frames: int
+
+
+@dataclass(frozen=True, eq=False)
+class ViewDecoded:
+    """View ``index`` (0-based, of ``total``) decoded: its filtered cloud, in the session world at the view's own
+    turntable angle (not yet registered)."""
+
+    index: int
+    total: int
+    name: str
+    cloud: PointCloud
+
+
+@dataclass(frozen=True)
+class PairRegistered:
+    """One view pair's refinement: ``rmse`` (metres), ``overlap`` (fraction), accepted or refused (``reason``)."""
+
+    i: int
+    j: int
+    rmse: float
+    overlap: float
+    accepted: bool
+    reason: str
+
+
+@dataclass(frozen=True, eq=False)
+class MeshReady:
+    """A mesh file was written: ``kind`` ``"observed"`` (mesh.ply) or ``"watertight"`` (mesh_watertight.ply)."""
+
+    kind: str
+    path: Path
+    mesh: TriangleMesh
+
+
+@dataclass(frozen=True, eq=False)
+class JobFailed:
+    """The job stops with ``error`` (raised to the caller right after this event)."""
+
+    error: BaseException
+
+
+Event = Union[StageStarted, StageFinished, Progress, ViewAcquired, ViewDecoded, PairRegistered, MeshReady, JobFailed]
+#: A subscriber: called with each event.
+OnEvent = Callable[[Event], None]
+
+
+def emit(on_event: OnEvent | None, event: Event) -> None:
+    """Hand ``event`` to the subscriber, if there is one."""
+    if on_event is not None:
+        on_event(event)
+
+
+def progress_of(on_event: OnEvent | None) -> Callable | None:
+    """The ``progress(msg, done=None, total=None)`` callable the library's long functions take
+    (:mod:`rangekit.progress`), as :class:`Progress` events to ``on_event``; None without a subscriber."""
+    if on_event is None:
+        return None
+
+    def progress(msg: str, done: int | None = None, total: int | None = None) -> None:
+        on_event(Progress(msg, done, total))
+
+    return progress
+
+
+def progress_subscriber(progress: Callable | None) -> OnEvent | None:
+    """A subscriber that shows the :class:`Progress` events with ``progress(msg, done, total)`` (the command
+    line's :class:`rangekit.progress.Console`) and ignores the others; None for None."""
+    if progress is None:
+        return None
+
+    def on_event(event: Event) -> None:
+        if isinstance(event, Progress):
+            progress(event.message, event.done, event.total)
+
+    return on_event
+
+
+def chain(*subscribers: OnEvent | None) -> OnEvent | None:
+    """One subscriber that hands each event to every one given (None ones left out), in order."""
+    live = [s for s in subscribers if s is not None]
+    if not live:
+        return None
+    if len(live) == 1:
+        return live[0]
+
+    def on_event(event: Event) -> None:
+        for s in live:
+            s(event)
+
+    return on_event
+
+
+
+@contextmanager
+def failures_announced(on_event: OnEvent | None) -> Iterator[None]:
+    """Any exception inside is handed to ``on_event`` as :class:`JobFailed`, then raised on."""
+    try:
+        yield
+    except BaseException as exc:
+        emit(on_event, JobFailed(exc))
+        raise
+
+
+class StageClock(StageTimer):
+    """:class:`rangekit.progress.StageTimer` (wall seconds per named stage) that also announces each part of a
+    stage to ``on_event`` as :class:`StageStarted` and :class:`StageFinished`."""
+
+    def __init__(self, on_event: OnEvent | None = None) -> None:
+        super().__init__()
+        self._on_event = on_event
+
+    @contextmanager
+    def stage(self, name: str) -> Iterator[None]:
+        emit(self._on_event, StageStarted(name))
+        t0 = time.perf_counter()
+        with super().stage(name):
+            yield
+        emit(self._on_event, StageFinished(name, time.perf_counter() - t0))
+
+
+__all__ += ["chain", "StageClock", "failures_announced"]

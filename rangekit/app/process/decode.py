@@ -1,0 +1,59 @@
+"""The decode stage: every completed view of a coded-light session decoded, triangulated and filtered into its
+cloud (or read from its cache, :mod:`rangekit.app.process.view_cache`)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from rangekit._runtime.memory import release_free_memory, reuse_freed_memory
+from rangekit.app.events import OnEvent, ViewDecoded, emit, progress_of, StageClock
+from rangekit.app.process.options import ProcessOptions
+from rangekit.app.process.view_cache import ViewMaps, cache_settings, table_transform, view_clouds
+from rangekit.formats.sessions.session import Session, SessionView
+from rangekit.progress import call_progress
+from rangekit.surface.cloud import PointCloud
+
+__all__ = ["DecodedViews", "decode"]
+
+
+@dataclass(frozen=True, eq=False)
+class DecodedViews:
+    """What the decode stage hands on: each completed view's cloud and what the later stages need of its maps."""
+
+    views: list[SessionView]      # the session's completed views, in order
+    clouds: list[PointCloud]      # each view's filtered cloud, session world at the view's own turntable angle
+    proj_cols: list[np.ndarray]   # (H, W) float32 decoded projector columns, NaN where undecoded: the
+                                  # evaluator's per-view errors; emptied by the fusion stage once used (63 MB)
+    maps: list[ViewMaps] | None   # the TSDF's input (depth maps); None for Poisson, whose report reads them back
+                                  # from the view caches (230 MB for 12 views not kept beside the fusion)
+    settings: dict                # the cache settings the views were decoded with (view_cache.cache_settings)
+
+    @property
+    def names(self) -> list[str]:
+        return [v.folder.name for v in self.views]
+
+
+def decode(session: Session, options: ProcessOptions, clock: StageClock, on_event: OnEvent | None = None) -> DecodedViews:
+    """Decode every completed view of ``session`` in order, each announced as :class:`ViewDecoded` with its
+    cloud; the next view's frames are read while this one decodes."""
+    views = session.done_views
+    rig, spec = session.rig, session.pattern
+    settings = cache_settings(session, options.method, options.table_margin)
+    progress = progress_of(on_event)
+    with clock.stage("decode"), reuse_freed_memory():   # each view's stacks reuse the last one's pages
+        clouds: list[PointCloud] = []
+        maps: list[ViewMaps] = []
+        decoded = view_clouds(views, spec, rig, settings, session.capture.full_scale, table_transform(rig),
+                              options.table_margin)
+        for k, (cloud, view_maps) in enumerate(decoded):
+            clouds.append(cloud)
+            maps.append(view_maps)
+            emit(on_event, ViewDecoded(k, len(views), views[k].folder.name, cloud))
+            call_progress(progress, f"decoded {views[k].folder.name}: {len(cloud):,} points", k + 1, len(views))
+        proj_cols = [m.proj_col for m in maps]
+        kept = maps if options.fusion == "tsdf" else None
+        del maps, decoded
+        release_free_memory()   # the image stacks and decoding temporaries (rangekit._runtime.memory)
+    return DecodedViews(views, clouds, proj_cols, kept, settings)

@@ -1,0 +1,48 @@
+"""How a session is processed: one frozen, validated value (``rangekit process`` and the end of ``rangekit scan``
+map their flags onto it)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from rangekit.errors import ConfigError
+
+__all__ = ["FUSION_METHODS", "TRIANGULATION_METHODS", "ProcessOptions"]
+
+#: ``fusion``: screened Poisson on the merged oriented cloud (the default, the more accurate) or the truncated
+#: signed distance volume of the registered depth maps.
+FUSION_METHODS = ("poisson", "tsdf")
+#: ``method``: how a coded-light pixel is triangulated (:func:`rangekit.coded.triangulate.triangulate`).
+TRIANGULATION_METHODS = ("auto", "ray-plane", "ray-ray")
+
+
+@dataclass(frozen=True)
+class ProcessOptions:
+    """What processing does with a session.
+
+    fusion : one of :data:`FUSION_METHODS`.
+    method : triangulation, one of :data:`TRIANGULATION_METHODS`.
+    table_margin : metres; points within this height of the turntable top (or below it) are dropped, so the
+        table does not become part of the object.
+    report : write ``report.html``.
+    truth : measure against the simulator's truth when the session is simulated (never on hardware).
+    """
+
+    fusion: str = "poisson"
+    method: str = "auto"
+    table_margin: float = 0.002
+    report: bool = True
+    truth: bool = True
+
+    def __post_init__(self) -> None:
+        if self.fusion not in FUSION_METHODS:
+            raise ConfigError(f"fusion must be one of {', '.join(FUSION_METHODS)}, found {self.fusion!r}")
+        if self.method not in TRIANGULATION_METHODS:
+            raise ConfigError(f"method must be one of {', '.join(TRIANGULATION_METHODS)}, found {self.method!r}")
+        if (isinstance(self.table_margin, bool) or not isinstance(self.table_margin, (int, float))
+                or not math.isfinite(self.table_margin) or not 0 <= self.table_margin < 1):
+            raise ConfigError(f"table_margin must be a height in metres in [0, 1), found {self.table_margin!r}")
+        for name in ("report", "truth"):
+            if not isinstance(getattr(self, name), bool):
+                raise ConfigError(f"{name} must be True or False, found {getattr(self, name)!r}")

@@ -53,7 +53,7 @@ scan: $(STAMP) bytecode
 	@if [ -f scan1/session.json ]; then $(BIN)/rangekit scan --resume scan1; else $(BIN)/rangekit scan --out scan1; fi
 
 bench: $(STAMP)
-	$(BIN)/python benchmarks/bench_render.py
+	$(BIN)/python benchmarks/sim/bench_render.py
 
 clean:
 	rm -rf $(VENV) *.egg-info .pytest_cache
@@ -62,4 +62,4 @@ docs-figures: $(STAMP) browser bytecode
 	@# Reruns every figure quoted in README.md and docs/ (the blocks between <!-- figure: COMMAND --> and
 	@# <!-- /figure -->) and writes the fresh output in place: about 19 minutes on an idle 2-core machine (the first run
 	@# also installs OpenCV-contrib into .venv-bench for the decoding benchmark's peer: it needs the package index).
-	$(BIN)/python benchmarks/docs_figures.py
+	$(BIN)/python tools/docs_figures.py

@@ -95,7 +95,7 @@ def transform_vectors(T: np.ndarray, vectors: np.ndarray) -> np.ndarray:
 
 def _rotate(P: np.ndarray, A: np.ndarray) -> np.ndarray:
     """(N, 3) rows of ``P`` times ``A.T``, through BLAS: as ``apply_T`` on 1.3M rows 13.8 CPU-ms on one
-    BLAS thread against 47 for numpy's einsum loop (``benchmarks/bench_process_parts.py``; see
+    BLAS thread against 47 for numpy's einsum loop (``benchmarks/app/bench_process_parts.py``; see
     rangekit._runtime.threads for the thread count)."""
     return P @ A.T
 

@@ -1,4 +1,4 @@
-"""Synthetic laser-line frames with exactly known subpixel centres (tests and benchmarks/bench_laser_peaks.py).
+"""Synthetic laser-line frames with exactly known subpixel centres (tests and benchmarks/laser/bench_laser_peaks.py).
 
 Each frame is a Gaussian profile exp(-2 d^2 / w^2) (w the 1/e^2 full width, d the distance to the true
 line) integrated over every pixel's square, scaled to a peak ``height``, on a background, with Gaussian

@@ -10,8 +10,9 @@ from types import SimpleNamespace
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def _bench(name: str):
-    spec = importlib.util.spec_from_file_location(name, ROOT / "benchmarks" / f"{name}.py")
+def _bench(path: str):
+    """The benchmark script benchmarks/PATH.py (e.g. ``app/bench_process``), loaded as a module."""
+    spec = importlib.util.spec_from_file_location(Path(path).name, ROOT / "benchmarks" / f"{path}.py")
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
@@ -29,7 +30,7 @@ def _table_is_rectangular(text: str) -> list[str]:
 
 
 def test_process_block():
-    bench = _bench("bench_process")
+    bench = _bench("app/bench_process")
     summary = {"seconds": {"decode": 7.0, "register": 3.2, "fuse": 19.4, "evaluate": 8.0, "report": 3.7},
                "accuracy": {"rms": 1.69e-5, "p95": 1.91e-5, "completeness": 0.996, "watertight": {"rms": 1.55e-4}}}
     text = bench.markdown({"wall_s": 37.0, "cpu_s": 39.0, "peak_gb": 1.9}, summary)
@@ -40,7 +41,7 @@ def test_process_block():
 
 
 def test_decode_stage_block():
-    bench = _bench("bench_decode_stage")
+    bench = _bench("coded/bench_decode_stage")
     best = {"png": 4.6, "decode": 2.3, "triangulate": 1.2, "filter+normals": 0.5, "sigma": 0.3, "write": 0.5,
             "other": 0.9, "wall": 10.4}
     text = bench.markdown(best, 10.3, 2021957, SimpleNamespace(serial=True, views=12, repeat=1))

@@ -280,7 +280,7 @@ def bunny():
 
 
 def test_stanford_bun000(bunny):
-    cloud = load_cloud(bunny)  # its load time is measured by benchmarks/bench_cloud_io.py
+    cloud = load_cloud(bunny)  # its load time is measured by benchmarks/formats/bench_cloud_io.py
     assert len(cloud) == 40256 and cloud.normals is None and cloud.colours is None
     assert np.all(np.abs(cloud.points) < 0.2)
     assert np.ptp(cloud.points, axis=0).min() > 0.05  # a bunny-sized object, in metres

@@ -1,17 +1,18 @@
-"""make docs-figures (benchmarks/docs_figures.py): blocks are found, rerun and rewritten in place; a failing
+"""make docs-figures (tools/docs_figures.py): blocks are found, rerun and rewritten in place; a failing
 command leaves its block and is named; unclosed markers are refused by line; every block in the repo's pages
-is well formed."""
+is well formed and runs scripts that exist."""
 
 from __future__ import annotations
 
 import importlib.util
+import re
 import sys
 from pathlib import Path
 
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-spec = importlib.util.spec_from_file_location("docs_figures", ROOT / "benchmarks" / "docs_figures.py")
+spec = importlib.util.spec_from_file_location("docs_figures", ROOT / "tools" / "docs_figures.py")
 docs_figures = importlib.util.module_from_spec(spec)
 sys.modules["docs_figures"] = docs_figures      # its dataclass looks its module up there
 spec.loader.exec_module(docs_figures)
@@ -70,4 +71,8 @@ def test_the_repos_pages_have_well_formed_blocks_that_name_their_command():
     figures = [f for page in docs_figures.pages() for f in docs_figures.find_figures(page)]
     assert len(figures) >= 20
     assert any(f.page.name == "README.md" and "docs_scan.py summary" in f.command for f in figures)
-    assert all(f.command.startswith("python benchmarks/") for f in figures), [f.command for f in figures]
+    commands = [f.command for f in figures]
+    assert all(c.startswith(("python benchmarks/", "python tools/")) for c in commands), commands
+    scripts = {s for c in commands for s in re.findall(r"python ((?:benchmarks|tools)/\S+\.py)", c)}
+    missing = [s for s in sorted(scripts) if not (ROOT / s).is_file()]
+    assert scripts and not missing, f"figure commands run scripts that do not exist: {missing}"

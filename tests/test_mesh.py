@@ -201,7 +201,7 @@ def test_tsdf_fuse_bad_input(scan):
 
 @pytest.mark.slow
 def test_tsdf_fuse_full_resolution():
-    # Its speed (10 s target) is measured by benchmarks/bench_fusion.py, not asserted here.
+    # Its speed (10 s target) is measured by benchmarks/surface/bench_fusion.py, not asserted here.
     views, true_mesh, diag = _turntable_scan(1280, 1024)
     mesh = tsdf_fuse(_depth_views(views))
     d = distance_to_surface(mesh.vertices, true_mesh)

@@ -103,7 +103,7 @@ def test_registered_scan_fuses_into_a_watertight_accurate_mesh(turntable):
           f"{rms * 1e3:.3f} mm = {rms / scans.diag:.3%} of the diagonal ({t_poisson:.1f} s); TSDF watertight "
           f"{fused.is_watertight}, RMS {rms2 * 1e3:.3f} mm = {rms2 / scans.diag:.3%}, 12 views in {t_tsdf:.1f} s")
     assert mesh.is_watertight and rms <= 0.001 * scans.diag
-    assert fused.is_watertight  # its time is measured by benchmarks/bench_fusion.py, not asserted here
+    assert fused.is_watertight  # its time is measured by benchmarks/surface/bench_fusion.py, not asserted here
 
 
 def _bunny():
@@ -137,7 +137,7 @@ def test_stanford_bunny_without_initial_guess():
           f"max {rot.max():.3f} deg / {tr.max() * 1e3:.3f} mm; overlap RMS (1 mm) ours {fit_ours * 1e3:.4f} mm, "
           f"bun.conf {fit_conf * 1e3:.4f} mm; from bun.conf perturbed by 10 deg / 10 mm: max {r2.max():.4f} deg, "
           f"{t2.max() * 1e3:.4f} mm from the --init none answer")
-    assert rot.max() < 1.0 and tr.max() < 0.002  # time printed, not asserted (benchmarks/bench_registration.py)
+    assert rot.max() < 1.0 and tr.max() < 0.002  # timed by benchmarks/registration/bench_registration.py, not asserted
     assert rot.mean() <= 0.3 and tr.mean() <= 0.0005
     assert fit_ours <= fit_conf
     assert r2.max() <= 0.05

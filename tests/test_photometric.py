@@ -127,7 +127,7 @@ def test_lsq_integration_on_l_shaped_mask():
 
 
 def test_lsq_integration_full_size():
-    """The DiLiGenT size; its speed is measured by benchmarks/bench_photometric.py, not here."""
+    """The DiLiGenT size; its speed is measured by benchmarks/photometric/bench_photometric.py, not here."""
     H, W, ps = 512, 612, 1e-4
     Z_true, n = _bump(H, W, ps)
     Z = integrate_normals(n, pixel_size=ps)

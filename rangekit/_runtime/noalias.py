@@ -6,7 +6,7 @@ aliasing facts about its array arguments, so a short loop that reads 8 rows and 
 paths at one pixel, ``rangekit.stereo._sgm``) spent more time in those checks, and in reloading the
 addresses they need, than in its 64 disparities: ``sgm_match`` (cost, aggregation, winner-take-all) took
 41 ms on one thread on the 640x400 benchmark pair before commit 40c1f3c, and 22 ms with its rows passed as
-``noalias`` arguments, with the same disparities (``python benchmarks/bench_stereo.py --parts`` times it).
+``noalias`` arguments, with the same disparities (``python benchmarks/stereo/bench_stereo.py --parts`` times it).
 
 numba already has the switch: the compiler flag ``noalias``, which it sets for its own parallel loop
 bodies (``numba.parfors``). ``njit`` has no option for it, so this module sets the flag in a compiler

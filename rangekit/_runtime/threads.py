@@ -3,7 +3,7 @@
 rangekit's numerical work is dominated by thin products, (N, 3) @ (3, 3) transforms and (n, 6)
 Jacobians, which OpenBLAS splits over every core. On an idle machine a second BLAS thread buys nothing for
 them and costs CPU (`apply_T` on 1.3M points: 13.8 CPU-ms on one thread, 18.9 on two;
-``benchmarks/bench_process_parts.py``); beside other work its spinning threads cost far more (on the
+``benchmarks/app/bench_process_parts.py``); beside other work its spinning threads cost far more (on the
 loaded 2-core machine ``rangekit process`` of the 12-view scan, under cProfile, took 138 CPU-s, and 84 with
 ``OPENBLAS_NUM_THREADS=1``). So the command line and the long pipelines run with one BLAS
 thread (:func:`one_blas_thread`, through threadpoolctl, which finds the BLAS numpy and scipy loaded). The

@@ -23,7 +23,7 @@ __all__ = ["EDGE_MARGIN_PX", "Reconstruction", "reconstruct_view"]
 #: 2 px of a depth edge mix the two surfaces: on the simulated bunny (4 views) they were 6.8% of the
 #: points in the 9th decile of predicted sigma with 3x its error; dropping one more pixel (3.2% of the
 #: points) brings every decile's observed error within 3% of the predicted sigma
-#: (benchmarks/bench_uncertainty.py, docs/metrology.md).
+#: (benchmarks/coded/bench_uncertainty.py, docs/metrology.md).
 EDGE_MARGIN_PX = 1
 
 

@@ -5,7 +5,7 @@ Why it is laid out this way (issue 20):
 
 - **int16 lanes.** Path costs satisfy ``L <= C + P2 <= 64 + 4000``, the sum of 8 paths ``<= 32512``, so every
   value fits int16. Each loop over the disparities stores int16 and only mixes int16 loads, so LLVM narrows
-  numba's int64 arithmetic back to packed 16-bit ``vpminsw`` / ``vpaddw`` (``benchmarks/bench_stereo.py
+  numba's int64 arithmetic back to packed 16-bit ``vpminsw`` / ``vpaddw`` (``benchmarks/stereo/bench_stereo.py
   --asm`` counts them). The results are the exact integers of the float32 kernel they replace.
 - **One loop per pixel.** :func:`step4` runs the 4 paths of a pass in one branch-free loop over the
   disparities (the two ends of the range read pad lanes of value ``_PAD`` instead of being special
@@ -17,7 +17,7 @@ Why it is laid out this way (issue 20):
   LLVM packs the disparity loop without checking at every pixel that 13 arrays do not overlap. Those
   checks, and reloading the addresses they compare, took more time than the loop itself: ``sgm_match``
   on the 640x400 benchmark pair went from 41 to 22 ms on one thread with the same disparities
-  (``benchmarks/bench_stereo.py --parts``). Pixels go in pairs so that the horizontal path reads from one scratch argument and writes
+  (``benchmarks/stereo/bench_stereo.py --parts``). Pixels go in pairs so that the horizontal path reads from one scratch argument and writes
   to the other (h1 -> h0, then h0 -> h1).
 - **Lanes in whole registers.** The disparities are padded to ``lanes``, a multiple of 32 (one 512-bit
   register of int16): LLVM packs the loop by 32 and leaves the rest to scalar code, which made 48

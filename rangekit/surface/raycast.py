@@ -4,7 +4,7 @@ Open3D's scene is float32 (BVH): callers that care about precision pass coordina
 mesh's centre and recompute hits in float64 against the triangle it reports. :func:`mesh_scene` keeps that
 centred scene per mesh object, so ten renders of one mesh (the report) or two distance queries against
 one true surface build its BVH once (on the 910k-triangle mesh of the 12-view scan building it takes 0.41 s,
-one 640x480 cast 12 ms: ``benchmarks/bench_process_parts.py SESSION``).
+one 640x480 cast 12 ms: ``benchmarks/app/bench_process_parts.py SESSION``).
 """
 
 from __future__ import annotations

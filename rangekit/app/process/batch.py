@@ -48,7 +48,7 @@ WORKER_MALLOC = {"MALLOC_ARENA_MAX": "1", "MALLOC_MMAP_THRESHOLD_": str(1 << 30)
 #: Dask settings of the local cluster: its periodic housekeeping slowed down (the event loop's tick, the
 #: system and memory monitors, work stealing) and the workers' statistical profiler off. Together they cost
 #: an idle cluster of 2 workers 6.5-7.1 CPU-s every 100 s, against 1.1 with these
-#: (benchmarks/bench_dask_idle.py): CPU taken from tasks that each run for seconds. Nothing here reads the
+#: (benchmarks/app/bench_dask_idle.py): CPU taken from tasks that each run for seconds. Nothing here reads the
 #: dashboard they feed.
 QUIET_DASK = {"distributed.admin.tick.interval": "1s", "distributed.admin.system-monitor.interval": "5s",
               "distributed.scheduler.work-stealing-interval": "5s", "distributed.worker.memory.monitor-interval": "1s",

@@ -232,7 +232,7 @@ def _process_batch(args: argparse.Namespace) -> int:
 
 
 def _processing_options(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--fusion", default="poisson", choices=LazyChoices("rangekit.app.process.process", "FUSION_METHODS"),
+    p.add_argument("--fusion", default="poisson", choices=LazyChoices("rangekit.app.process.options", "FUSION_METHODS"),
                    metavar="{poisson,tsdf}",
                    help="fusion into one mesh: poisson (default, screened Poisson of the merged cloud) or tsdf")
     p.add_argument("--no-report", action="store_true", help="skip report.html")

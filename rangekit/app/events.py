@@ -136,22 +136,6 @@ def progress_subscriber(progress: Callable | None) -> OnEvent | None:
     return on_event
 
 
-def chain(*subscribers: OnEvent | None) -> OnEvent | None:
-    """One subscriber that hands each event to every one given (None ones left out), in order."""
-    live = [s for s in subscribers if s is not None]
-    if not live:
-        return None
-    if len(live) == 1:
-        return live[0]
-
-    def on_event(event: Event) -> None:
-        for s in live:
-            s(event)
-
-    return on_event
-
-
-
 @contextmanager
 def failures_announced(on_event: OnEvent | None) -> Iterator[None]:
     """Any exception inside is handed to ``on_event`` as :class:`JobFailed`, then raised on."""
@@ -179,4 +163,4 @@ class StageClock(StageTimer):
         emit(self._on_event, StageFinished(name, time.perf_counter() - t0))
 
 
-__all__ += ["chain", "StageClock", "failures_announced"]
+__all__ += ["StageClock", "failures_announced"]

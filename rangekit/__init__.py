@@ -39,6 +39,7 @@ _LAZY = {
     "icp": "rangekit.registration.icp", "IcpOptions": "rangekit.registration.icp",
     "register_views": "rangekit.registration.multiview", "MultiViewOptions": "rangekit.registration.multiview",
     "render": "rangekit.app.commands.picture",
+    "scan": "rangekit.app.scan.scan", "ScanOptions": "rangekit.app.scan.options", "ScanResult": "rangekit.app.scan.scan",
     "process": "rangekit.app.scan.scan", "ProcessOptions": "rangekit.app.process.options",
 }
 __all__ = ["__version__", *_LAZY]

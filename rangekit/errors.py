@@ -16,6 +16,7 @@ __all__ = [
     "RangekitError",
     "InputError",
     "UsageError",
+    "OptionError",
     "BudgetError",
     "BudgetUsageError",
     "FileFormatError",
@@ -48,6 +49,27 @@ class InputError(RangekitError, ValueError):
 class UsageError(InputError):
     """A command-line option has a bad value or names an output that cannot be written (the CLI exits 2;
     every other :class:`RangekitError` is a runtime failure and exits 1)."""
+
+
+class OptionError(UsageError):
+    """A bad value of a job's options (:class:`rangekit.app.scan.options.ScanOptions`). ``template`` names the
+    options as ``{field}`` placeholders: the message shows the Python field names (``views``), and the command
+    line re-raises it with its flags (:meth:`named`: ``--views``)."""
+
+    def __init__(self, template: str) -> None:
+        self.template = template
+        super().__init__(self._render({}))
+
+    def _render(self, names: dict) -> str:
+        import re
+
+        return re.sub(r"\{([a-z_]+)\}", lambda m: names.get(m.group(1), m.group(1)), self.template)
+
+    def named(self, names: dict) -> "OptionError":
+        """The same error, each ``{field}`` shown as ``names[field]`` (a field not in ``names`` as itself)."""
+        error = OptionError(self.template)
+        error.args = (self._render(names),)
+        return error
 
 
 class BudgetError(InputError):

@@ -109,20 +109,24 @@ def _pnm(b: bytes) -> tuple[int, int, int, int] | None:
     return w, h, 3 if b[1:2] in b"36" else 1, 16 if maxval > 255 else 8
 
 
-def read_image_header(path: str | Path) -> ImageHeader | None:
-    """The size of the image in ``path`` from its first bytes, or None for a format not known here.
+def read_image_header(path: str | Path, data: bytes | None = None) -> ImageHeader | None:
+    """The size of the image in ``path`` from its first bytes (``data``: the file's bytes, already read), or
+    None for a format not known here.
 
     Raises FileFormatError when the file cannot be opened, or when it has a known signature but a header
     that is cut short or holds a zero size.
     """
     path = Path(path)
-    try:
-        with open(path, "rb") as f:
-            b = f.read(_HEAD)
-    except FileNotFoundError as exc:
-        raise FileFormatError(f"{path}: not found; expected an image file") from exc
-    except OSError as exc:
-        raise FileFormatError(f"{path}: cannot read the image ({exc.strerror or exc})") from exc
+    if data is not None:
+        b = data
+    else:
+        try:
+            with open(path, "rb") as f:
+                b = f.read(_HEAD)
+        except FileNotFoundError as exc:
+            raise FileFormatError(f"{path}: not found; expected an image file") from exc
+        except OSError as exc:
+            raise FileFormatError(f"{path}: cannot read the image ({exc.strerror or exc})") from exc
     if b[:8] == b"\x89PNG\r\n\x1a\n":
         kind, parse = "png", _png
     elif b[:4] in (b"II*\x00", b"MM\x00*", b"II+\x00", b"MM\x00+"):
@@ -145,14 +149,15 @@ def read_image_header(path: str | Path) -> ImageHeader | None:
 
 def check_image_files(paths: Sequence[str | Path], *, what: str = "image stack", same_size: bool = True,
                       copies: int = 1, bytes_per_pixel: int | None = None,
-                      extra_bytes: int | None = None) -> list[ImageHeader | None]:
+                      extra_bytes: int | None = None, contents: Sequence[bytes] | None = None) -> list[ImageHeader | None]:
     """Read the headers of ``paths`` and refuse, before any pixel is read, images that differ in size or depth
     (FileFormatError naming the first file that differs, when ``same_size``) or a set that would not fit the
     memory budget (BudgetError): ``copies`` of every image (2 when the caller stacks them into one array) at
     ``bytes_per_pixel`` (default: as read, ``ImageHeader.nbytes``; e.g. 4 when the caller keeps float32 grey)
     plus ``extra_bytes`` (default: two of the largest image as read, the reader's working copies). Returns the
-    headers (None for formats without a known header: those are checked after reading only)."""
-    headers = [read_image_header(p) for p in paths]
+    headers (None for formats without a known header: those are checked after reading only). ``contents``: the
+    files' bytes, already read (then no file is opened)."""
+    headers = [read_image_header(p, None if contents is None else contents[k]) for k, p in enumerate(paths)]
     known = [(Path(p), h) for p, h in zip(paths, headers) if h is not None]
     if not known:
         return headers

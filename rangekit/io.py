@@ -15,7 +15,7 @@ from rangekit.errors import FileFormatError
 from rangekit.image_header import check_image_files
 
 __all__ = ["atomic_write_bytes", "atomic_write_with", "fsync_folder", "atomic_write_text", "atomic_write_json", "encode_png", "write_png",
-           "read_png",
+           "read_png", "decode_image",
            "atomic_save_npz", "atomic_save_npy", "read_json"]
 
 # mkstemp creates 0600 files; give written files the usual mode (0666 minus the umask).
@@ -29,17 +29,24 @@ def atomic_write_bytes(path: str | Path, data: bytes) -> None:
     atomic_write_with(path, lambda f: f.write(data))
 
 
-def atomic_write_with(path: str | Path, write: Callable[[BinaryIO], object]) -> None:
+def atomic_write_with(path: str | Path, write: Callable[[BinaryIO], object], *, sha256: bool = False) -> str | None:
     """``write(f)`` into a temporary file in ``path``'s folder (binary, seekable), then fsync and rename it to
     ``path``: never half-written. Writing straight into the file spares the copy through memory that
     building the bytes first costs (the 49 MB of maps ``rangekit decode`` stores: a fresh buffer's pages
-    are faulted in and zeroed, then copied)."""
+    are faulted in and zeroed, then copied). ``sha256``: ``f`` hashes what is written (it is then not
+    seekable: a zip is written as a stream) and the file's SHA-256 (hex) is returned, so a checksum never
+    reads the file back; otherwise None."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    digest = None
     try:
         with os.fdopen(fd, "wb") as f:
-            write(f)
+            if sha256:
+                digest = _Digesting(f)
+                write(digest)
+            else:
+                write(f)
             f.flush()
             os.fsync(f.fileno())
         os.chmod(tmp, _FILE_MODE)
@@ -53,6 +60,36 @@ def atomic_write_with(path: str | Path, write: Callable[[BinaryIO], object]) -> 
         Path(tmp).unlink(missing_ok=True)
         raise
     fsync_folder(path.parent)
+    return None if digest is None else digest.hexdigest()
+
+
+class _Digesting:
+    """A write-only binary stream into ``f`` that takes the SHA-256 of what passes through it. It can tell its
+    position but not seek, so a zip writer streams (data descriptors) instead of going back to the headers."""
+
+    def __init__(self, f: BinaryIO) -> None:
+        import hashlib
+
+        self._f, self._sha256, self._n = f, hashlib.sha256(), 0
+
+    def write(self, data) -> int:
+        view = memoryview(data).cast("B")
+        self._sha256.update(view)
+        self._f.write(view)
+        self._n += view.nbytes
+        return view.nbytes
+
+    def tell(self) -> int:
+        return self._n
+
+    def read(self, *_) -> bytes:   # numpy takes an object with ``read`` for a file; a zip being written never reads
+        raise OSError("write-only stream")
+
+    def flush(self) -> None:
+        self._f.flush()
+
+    def hexdigest(self) -> str:
+        return self._sha256.hexdigest()
 
 
 def fsync_folder(folder: str | Path) -> None:
@@ -90,10 +127,11 @@ def read_json(path: str | Path, *, what: str = "JSON file") -> dict:
         raise FileFormatError(f"{path}: cannot read {what}: {str(exc)[:200]}") from exc
 
 
-def atomic_save_npz(path: str | Path, *, level: int = 6, **arrays: np.ndarray) -> None:
+def atomic_save_npz(path: str | Path, *, level: int = 6, sha256: bool = False, **arrays: np.ndarray) -> str | None:
     """The arrays as an ``.npz`` (``np.load`` reads it) at ``path``, atomically. ``level``: zlib's deflate level,
     6 as ``np.savez_compressed``; 1 takes half its time for files about 5% larger (decoded maps); 0 stores
-    them (``np.savez``: 7-20x faster than 6 for float maps, files 5-7x larger)."""
+    them (``np.savez``: 7-20x faster than 6 for float maps, files 5-7x larger). ``sha256``: return the file's
+    SHA-256 (:func:`atomic_write_with`)."""
     import zipfile
 
     def write(f) -> None:
@@ -107,7 +145,7 @@ def atomic_save_npz(path: str | Path, *, level: int = 6, **arrays: np.ndarray) -
                     with zf.open(name + ".npy", "w", force_zip64=True) as member:
                         np.lib.format.write_array(member, np.asanyarray(arr), allow_pickle=False)
 
-    atomic_write_with(path, write)
+    return atomic_write_with(path, write, sha256=sha256)
 
 
 def atomic_save_npy(path: str | Path, array: np.ndarray) -> None:
@@ -151,6 +189,20 @@ def read_png(path: str | Path) -> np.ndarray:
     img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
     if img is None:
         raise FileFormatError(f"{path}: not found or not a readable image")
+    return _as_rgb(img)
+
+
+def decode_image(data: bytes, where: str | Path) -> np.ndarray:
+    """:func:`read_png` of a file's bytes already read (``where`` names the file in errors); the caller has
+    checked the header (:func:`rangekit.image_header.check_image_files` with ``contents``)."""
+    img = cv2.imdecode(np.frombuffer(data, dtype=np.uint8), cv2.IMREAD_UNCHANGED)
+    if img is None:
+        raise FileFormatError(f"{where}: not a readable image")
+    return _as_rgb(img)
+
+
+def _as_rgb(img: np.ndarray) -> np.ndarray:
+    """An image as OpenCV reads it, colour as RGB (alpha dropped)."""
     if img.ndim == 3 and img.shape[2] == 4:
         img = img[:, :, :3]
     if img.ndim == 3:

@@ -65,6 +65,15 @@ def _return_freed_memory():
         _free_memory()
 
 
+@pytest.fixture(autouse=True)
+def _logger_as_imported():
+    """A command run with -q or -v sets the rangekit logger's level; the next test starts from the default."""
+    yield
+    from rangekit.progress import LOGGER
+
+    LOGGER.setLevel(0)
+
+
 @pytest.fixture(scope="module", autouse=True)
 def _collect_after_module():
     yield

@@ -57,7 +57,7 @@ def local_batch(sessions):
     bad = shutil.copytree(ref, root / "bad_json")
     (bad / "session.json").write_text('{"schema": "rangekit.session/1", "views": 3}')
     lines = []
-    res = process_sessions([good[0], missing, good[1], bad], workers=2, report=False, evaluate=False,
+    res = process_sessions([good[0], missing, good[1], bad], ProcessOptions(report=False, truth=False), workers=2,
                            progress=lambda msg, *counts: lines.append(msg))
     return res, good, missing, bad, lines
 
@@ -172,7 +172,7 @@ def test_a_worker_killed_in_the_middle_loses_nothing_and_decodes_no_view_twice(s
         writes.start()
         out = {}
         batch = threading.Thread(target=lambda: out.update(res=process_sessions(
-            folders, scheduler=address, report=False, evaluate=False)), daemon=True)
+            folders, ProcessOptions(report=False, truth=False), scheduler=address)), daemon=True)
         batch.start()
         deadline = time.monotonic() + 120
         while writes.written() < 1 and time.monotonic() < deadline:   # the first view is cached: kill a worker
@@ -220,7 +220,7 @@ def test_sessions_are_finished_in_groups_one_a_worker(sessions):
     try:
         with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
                           dashboard_address=None, env=dict(WORKER_ENV), silence_logs=logging.ERROR) as cluster:
-            res = process_sessions(folders, scheduler=cluster.scheduler_address, report=False, evaluate=False)
+            res = process_sessions(folders, ProcessOptions(report=False, truth=False), scheduler=cluster.scheduler_address)
             log = list(cluster.scheduler.transition_log)
     finally:
         os.environ.clear()

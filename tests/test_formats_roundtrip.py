@@ -288,16 +288,20 @@ def test_merged_ply_view_field_read_by_plyfile(tmp_path):
 
 
 @pytest.mark.parametrize("fmt", ["obj", "stl", "glb"])
-def test_export_meshes_beside_the_ply_files(tmp_path, fmt):
-    from rangekit.app.process.fused_outputs import MESH_FILE, WATERTIGHT_FILE, export_meshes
+def test_meshes_are_written_beside_the_ply_files_in_another_format(tmp_path, fmt):
+    from rangekit.app.process.fused_outputs import MESH_FILE, WATERTIGHT_FILE, save_one
 
     mesh = _sphere_mesh()
-    rk.save_mesh(tmp_path / MESH_FILE, mesh)
-    rk.save_mesh(tmp_path / WATERTIGHT_FILE, mesh)
-    assert export_meshes(tmp_path, fmt) == [f"mesh.{fmt}", f"mesh_watertight.{fmt}"]
+    save_one(tmp_path, mesh, "poisson", MESH_FILE, fmt)
+    info = save_one(tmp_path, mesh, "poisson", WATERTIGHT_FILE, fmt)
+    assert info["file"] == WATERTIGHT_FILE and (tmp_path / MESH_FILE).is_file()
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted([MESH_FILE, WATERTIGHT_FILE, f"mesh.{fmt}",
+                                                                 f"mesh_watertight.{fmt}"])
     back = trimesh.load(tmp_path / f"mesh_watertight.{fmt}", process=False, force="mesh")
     np.testing.assert_allclose(back.vertices[back.faces], mesh.vertices[mesh.triangles], rtol=0, atol=1e-6)
-    assert export_meshes(tmp_path, "ply") == []
+    (tmp_path / "ply").mkdir()
+    save_one(tmp_path / "ply", mesh, "poisson", MESH_FILE)
+    assert [p.name for p in (tmp_path / "ply").iterdir()] == [MESH_FILE]
 
 
 def test_format_option_refuses_other_formats_before_any_work(tmp_path, capsys):

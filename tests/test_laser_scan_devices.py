@@ -321,7 +321,7 @@ def test_a_laser_plane_through_the_camera_centre_is_refused_before_any_frame(tmp
     assert f"{path}: lasers[1] ('right'): the plane" in err and "0.200 mm of camera 'camera'" in err
     assert "no-such-port" not in err and not (tmp_path / "s").exists()
     # The same check in the library, for a rig with a good plane nothing is raised.
-    from rangekit.app.scan.scan import check_laser_planes
+    from rangekit.app.scan.setup import check_laser_planes
     from rangekit.errors import ConfigError
 
     check_laser_planes(small_rig(), where="sim")

@@ -24,9 +24,10 @@ def test_bad_pass_options_exit_2(tmp_path, capsys, argv, message):
 
 
 def test_resume_keeps_the_sessions_passes(tmp_path):
-    from rangekit.app.scan.scan import prepare_scan
+    from rangekit.app.scan.options import ScanOptions
+    from rangekit.app.scan.setup import prepare_scan
 
-    setup = prepare_scan(out=str(tmp_path / "s"), n_views=3, passes=2)
+    setup = prepare_scan(ScanOptions(out=tmp_path / "s", views=3, passes=2))
     assert setup.n_views == 6 and setup.passes == 2
     assert np.allclose(setup.simulator.pass_motions[0], np.eye(4))
     from rangekit.formats.sessions.session import ScanPlan, Session
@@ -36,13 +37,13 @@ def test_resume_keeps_the_sessions_passes(tmp_path):
     from rangekit.rig.rig_file import save_rig
 
     save_rig(setup.rig, tmp_path / "s" / "rig.json")
-    again = prepare_scan(resume=str(tmp_path / "s"))
+    again = prepare_scan(ScanOptions(resume=tmp_path / "s"))
     assert again.passes == 2 and again.n_views == 6
     assert np.allclose(again.devices.pass_motions, setup.devices.pass_motions)
-    with pytest.raises(Exception, match=r"--passes 1 differs from the session .* which has 2"):
-        prepare_scan(resume=str(tmp_path / "s"), passes=1)
-    with pytest.raises(Exception, match=r"--views 6 differs from the session .* which has 3"):
-        prepare_scan(resume=str(tmp_path / "s"), n_views=6)
+    with pytest.raises(Exception, match=r"^passes 1 differs from the session .* which has 2"):
+        prepare_scan(ScanOptions(resume=tmp_path / "s", passes=1))
+    with pytest.raises(Exception, match=r"^views 6 differs from the session .* which has 3"):
+        prepare_scan(ScanOptions(resume=tmp_path / "s", views=6))
 
 
 def test_the_report_colours_the_cloud_by_pass():

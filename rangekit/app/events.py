@@ -1,6 +1,8 @@
 """What a running job tells its subscribers: typed events, one frozen dataclass each.
 
-A job (:func:`rangekit.app.process.process.process_session`) takes ``on_event``, a callable given every event in the order things happen, on the job's own thread. The
+A job (:func:`rangekit.app.scan.scan.scan`, :func:`rangekit.app.process.process.process_session`) takes
+``on_event``, a callable given every event in the order things happen, one at a time (on the job's thread;
+:class:`ViewAcquired` on the frame writer's). The
 command line's progress bar is one subscriber (:func:`progress_subscriber`); a web view or a notebook is
 another. A subscriber that raises stops the job with its exception (nothing is swallowed).
 
@@ -21,7 +23,7 @@ if TYPE_CHECKING:
     from rangekit.surface.cloud import PointCloud
     from rangekit.surface.mesh import TriangleMesh
 
-__all__ = ["StageStarted", "StageFinished", "Progress", "ViewAcquired", "ViewDecoded", "PairRegistered", "MeshReady",
+__all__ = ["StageStarted", "StageFinished", "Progress", "ScanStarted", "ViewAcquired", "ViewDecoded", "PairRegistered", "MeshReady",
            "JobFailed", "Event", "OnEvent", "emit", "progress_of", "progress_subscriber"]
 
 
@@ -48,6 +50,21 @@ class Progress:
     message: str
     done: int | None = None
     total: int | None = None
+
+
+@dataclass(frozen=True)
+class ScanStarted:
+    """A scan is set up and about to acquire into ``folder``: ``total`` turntable views (a laser scan's steps)
+    of ``n_frames`` frames each (at each exposure of ``exposures_us``, None: the rig's one exposure),
+    ``done`` of them already on disk (``resume``)."""
+
+    folder: Path
+    total: int
+    done: int
+    n_frames: int
+    resume: bool
+    exposures_us: tuple[int, ...] | None
+    laser: bool
 
 
 @dataclass(frozen=True)
@@ -100,7 +117,7 @@ class JobFailed:
     error: BaseException
 
 
-Event = Union[StageStarted, StageFinished, Progress, ViewAcquired, ViewDecoded, PairRegistered, MeshReady, JobFailed]
+Event = Union[StageStarted, StageFinished, Progress, ScanStarted, ViewAcquired, ViewDecoded, PairRegistered, MeshReady, JobFailed]
 #: A subscriber: called with each event.
 OnEvent = Callable[[Event], None]
 

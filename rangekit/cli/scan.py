@@ -14,107 +14,43 @@ from rangekit.errors import UsageError
 
 def cmd_scan(args: argparse.Namespace) -> int:
     """rangekit scan --out DIR | --resume DIR [--method coded|laser] [--rig sim|RIG.json] [--object lumpy]
-    [--views 12 | --steps 400] [--passes 2 [--flipped]] [--patterns hybrid] [--up X Y Z] [--allow-auto-exposure]"""
-    from rangekit.formats.sessions.lock import session_lock as session_lock_of
+    [--views 12 | --steps 400] [--passes 2 [--flipped]] [--patterns hybrid] [--up X Y Z] [--allow-auto-exposure]:
+    :func:`rangekit.app.scan.scan.scan` with these options, its events shown as it runs."""
+    from rangekit.app.scan.options import SCAN_FLAGS
+    from rangekit.app.scan.scan import scan
+    from rangekit.errors import OptionError
 
-    t0 = time.perf_counter()
-    if args.artefact:
-        return _scan_artefacts(args, t0)
-    if args.positions is not None:
-        raise UsageError("--positions: artefact positions of --artefact vdi2634; give --artefact vdi2634 or leave it out")
-    check_output(args.out or args.resume, option="--out" if args.out else "--resume", folder=True,
-                 session=bool(args.resume))
-    if args.resume and Path(args.resume, "session.json").is_file():
-        # Held from the first read of the session to the end of processing (acquire and process take it
-        # again, re-entrantly): a second scan or process of this folder stops at once.
-        with session_lock_of(args.resume):
-            return _scan(args, t0)
-    return _scan(args, t0)
-
-
-#: Options of a turntable scan that --artefact (one view per artefact position, coded light) does not take.
-_NOT_WITH_ARTEFACT = {"resume": "--resume", "method": "--method", "steps": "--steps", "up": "--up", "object": "--object",
-                      "views": "--views", "patterns": "--patterns", "no_process": "--no-process", "passes": "--passes",
-                      "flipped": "--flipped"}
-
-
-def _scan_artefacts(args: argparse.Namespace, t0: float) -> int:
-    """rangekit scan --artefact vdi2634 --out DIR [--rig RIG.json] [--positions S B P] [--seed N]"""
-    from rangekit.app.scan.vdi2634 import figure_lines, run_vdi2634
-    from rangekit.sim.scene.artefacts import GUIDELINE_POSITIONS
-
-    given = [opt for key, opt in _NOT_WITH_ARTEFACT.items() if getattr(args, key, None) not in (None, False)]
-    if given:
-        raise UsageError(f"{', '.join(given)}: not used by --artefact {args.artefact} (one single-view coded-light "
-                         "capture per artefact position on the simulator); leave them out")
-    if not args.out:
-        raise UsageError(f"--artefact {args.artefact}: expected --out DIR, found none")
-    check_output(args.out, option="--out", folder=True)
-    counts = tuple(args.positions) if args.positions is not None else GUIDELINE_POSITIONS
-    for n, most, what in zip(counts, GUIDELINE_POSITIONS, ("sphere", "ball bar", "plane")):
-        if not 0 <= n <= most:
-            raise UsageError(f"--positions: {what} positions must be in 0..{most}, found {n}")
-    if not any(counts):
-        raise UsageError(f"--positions: expected at least one artefact position, found {' '.join(map(str, counts))}")
-    rig = None if args.rig in (None, "sim") else args.rig
-    if rig is not None and not Path(rig).is_file():
-        raise UsageError(f"--rig {rig}: expected a rig file from 'rangekit calibrate', found "
-                         f"{'a folder' if Path(rig).is_dir() else 'no such file'}")
-    res = run_vdi2634(args.out, rig_file=rig, n_spheres=counts[0], n_bars=counts[1], n_planes=counts[2],
-                      seed=0 if args.seed is None else args.seed, progress=console())
-    say("")
-    for line in figure_lines(res):
-        say(line)
-    result(f"wrote {args.out}/vdi2634.json in {time.perf_counter() - t0:.1f} s")
-    return 0
-
-
-def _scan(args: argparse.Namespace, t0: float) -> int:
-    from rangekit.app.acquire.acquire import acquire
-    from rangekit.app.scan.scan import prepare_scan
-    from rangekit.formats.sessions.session import ScanPlan
-
-    if args.steps is not None and args.views is not None:
-        raise UsageError("--steps and --views both give the turntable positions; give one (--steps for a laser scan)")
-    if args.method != "laser" and args.steps is not None and not args.resume:
-        raise UsageError("--steps: turntable steps of a laser scan; with --method coded give --views")
-    if args.flipped and not args.resume:
-        raise UsageError("--flipped confirms, when resuming a multi-pass scan, that the object was turned over; "
-                         "give it with --resume DIR")
-    setup = prepare_scan(out=args.out, resume=args.resume, rig=args.rig, obj=args.object,
-                         n_views=args.views if args.steps is None else args.steps, patterns=args.patterns,
-                         seed=args.seed, fusion=args.fusion, method=args.method, up=args.up, progress=console(),
-                         passes=args.passes)
-    folder = args.resume or args.out
-    if args.exposures is not None:
-        setup = _with_exposures(setup, args.exposures)
-    if setup.resume:
-        note(f"resuming {folder}: {setup.n_done}/{setup.n_views} views already done")
+    if args.out or args.resume:
+        check_output(args.out or args.resume, option="--out" if args.out else "--resume", folder=True,
+                     session=bool(args.resume))
+    shown = _ScanPrinter(args, time.perf_counter())
     try:
-        turn_over = None
-        if setup.hardware is not None and setup.passes > 1:   # the simulator turns its object over itself
-            from rangekit.app.scan.passes import turn_over_prompt
-
-            turn_over = turn_over_prompt(folder, setup.passes, flipped=args.flipped)
-        session = acquire(setup.devices, setup.rig, setup.spec, folder,
-                          plan=ScanPlan(n_views=setup.n_views, passes=setup.passes),
-                          resume=setup.resume, capture=setup.capture, simulator=setup.simulator,
-                          hardware=setup.hardware, files=setup.files, progress=console(),
-                          allow_auto_exposure=args.allow_auto_exposure, turn_over=turn_over)
+        options = scan_options(args)
+        res = scan(options, on_event=shown)
+    except OptionError as exc:
+        raise exc.named(SCAN_FLAGS) from None
     except KeyboardInterrupt:
-        print(f"rangekit: interrupted; completed views are safe. Continue with: rangekit scan --resume {folder}",
-              file=sys.stderr)
+        folder = args.resume or args.out
+        if shown.processing:
+            print(f"rangekit: interrupted; the views decoded so far are cached. Continue with: "
+                  f"rangekit scan --resume {folder}", file=sys.stderr)
+        else:
+            print(f"rangekit: interrupted; completed views are safe. Continue with: rangekit scan --resume {folder}",
+                  file=sys.stderr)
         return 130
-    finally:
-        setup.close()
-    (say if not args.no_process else result)(f"acquired {len(session.done_views)} {'steps' if session.is_laser else 'views'} x {setup.spec.n_frames} "
-        f"frames into {folder} in "
-        f"{time.perf_counter() - t0:.1f} s")
-    if args.no_process:
-        say(f"process it later with: rangekit process {folder}")
+    if res.vdi2634 is not None:
+        from rangekit.app.scan.vdi2634 import figure_lines
+
+        say("")
+        for line in figure_lines(res.vdi2634):
+            say(line)
+        result(f"wrote {args.out}/vdi2634.json in {res.seconds:.1f} s")
         return 0
-    t_acq = time.perf_counter() - t0
-    return _process(folder, args, acquisition_s=t_acq, resume_cmd=f"rangekit scan --resume {folder}")
+    if res.processed is None:
+        say(f"process it later with: rangekit process {res.folder}")
+        return 0
+    _print_processed(res.folder, res.processed, args, res.seconds, acquisition_s=res.acquisition_seconds)
+    return 0
 
 
 def _exposures(text: str):
@@ -122,64 +58,87 @@ def _exposures(text: str):
     return text if text == "auto" else int_in(1, 1_000_000)(text)
 
 
-def _with_exposures(setup, given: list):
-    """The scan set-up with ``--exposures`` (a new coded-light scan only): the exposures given, increasing,
-    or with 'auto' those of rangekit check's statistics on the devices."""
-    from dataclasses import replace
+def scan_options(args: argparse.Namespace):
+    """The :class:`rangekit.app.scan.options.ScanOptions` of ``rangekit scan``'s parsed flags (one field per flag,
+    :data:`rangekit.app.scan.options.SCAN_FLAGS`; ``--no-process`` and ``--no-report`` negated)."""
+    from rangekit.app.scan.options import SCAN_FIELDS, ScanOptions
 
-    from rangekit.app.check.steps import exposures_from_check
-    from rangekit.rig.camera_controls import controls_from_capture
-
-    if setup.resume:
-        setup.close()
-        raise UsageError("--exposures: a resumed scan keeps its session's exposures; leave --exposures out")
-    from rangekit.laser.sequence import LaserSequence
-
-    if isinstance(setup.spec, LaserSequence):
-        setup.close()
-        raise UsageError("--exposures: multi-exposure capture is for coded light; leave it out with --method laser")
-    if "auto" in given:
-        if len(given) != 1:
-            setup.close()
-            raise UsageError(f"--exposures: expected 'auto' alone or 2 to 8 exposures in microseconds, found "
-                             f"{' '.join(map(str, given))}")
-        full_scale = setup.capture.full_scale or 255.0
-        exps = exposures_from_check(setup.devices, setup.rig, controls_from_capture(setup.rig.capture, where="rig file"),
-                                    full_scale)
-        say(f"--exposures auto: {' '.join(map(str, exps))} us (from rangekit check's statistics)")
-    else:
-        exps = tuple(sorted(set(given)))
-    if not 2 <= len(exps) <= 8:
-        setup.close()
-        raise UsageError(f"--exposures: expected 2 to 8 different exposures, found {' '.join(map(str, given))}")
-    return replace(setup, capture=replace(setup.capture, exposures_us=tuple(int(e) for e in exps)))
+    values = {name: getattr(args, name) for name in SCAN_FIELDS if name not in ("process", "report")}
+    values.update(process=not args.no_process, report=not args.no_report)
+    for name in ("up", "positions", "exposures"):
+        if values[name] is not None:
+            values[name] = tuple(values[name])
+    return ScanOptions(**values)
 
 
-def _process(folder: str, args: argparse.Namespace, *, acquisition_s: float | None = None,
-             resume_cmd: str | None = None) -> int:
-    from rangekit.app.process.fused_outputs import export_meshes
-    from rangekit.app.scan.scan import process_scan
-    from rangekit.progress import format_seconds
+class _ScanPrinter:
+    """The command line's subscriber to a scan's events: the resume note and the exposures before acquiring, the
+    progress bar, the acquisition line once every view is on disk."""
+
+    def __init__(self, args: argparse.Namespace, t0: float) -> None:
+        from rangekit.app.events import progress_subscriber
+
+        self._args, self._t0, self._started = args, t0, None
+        self._progress = progress_subscriber(console())
+        self.processing = False
+
+    def __call__(self, event) -> None:
+        from rangekit.app.events import ScanStarted, StageFinished, StageStarted
+
+        if isinstance(event, ScanStarted):
+            self._started = event
+            if event.exposures_us and self._args.exposures == ["auto"]:
+                say(f"--exposures auto: {' '.join(map(str, event.exposures_us))} us (from rangekit check's statistics)")
+            if event.resume:
+                note(f"resuming {event.folder}: {event.done}/{event.total} views already done")
+        elif isinstance(event, StageFinished) and event.stage == "acquire":
+            s = self._started
+            (say if not self._args.no_process else result)(
+                f"acquired {s.total} {'steps' if s.laser else 'views'} x {s.n_frames} frames into {s.folder} in "
+                f"{time.perf_counter() - self._t0:.1f} s")
+        elif isinstance(event, StageStarted) and event.stage != "acquire":
+            self.processing = True
+        if self._progress is not None:
+            self._progress(event)
+
+
+def _process_options(args: argparse.Namespace):
+    """The :class:`rangekit.app.process.options.ProcessOptions` of ``rangekit process``'s flags."""
+    from rangekit.app.process.options import ProcessOptions
+
+    return ProcessOptions(fusion=args.fusion, report=not args.no_report, mesh_format=args.format)
+
+
+def _process(folder: str, args: argparse.Namespace) -> int:
+    from rangekit.app.events import progress_subscriber
+    from rangekit.app.scan.scan import process
 
     t0 = time.perf_counter()
     try:
-        res = process_scan(folder, fusion=args.fusion, report=not args.no_report, progress=console())
+        res = process(folder, _process_options(args), on_event=progress_subscriber(console()))
     except KeyboardInterrupt:
-        print(f"rangekit: interrupted; the views decoded so far are cached. Continue with: "
-              f"{resume_cmd or f'rangekit process {folder}'}", file=sys.stderr)
+        print(f"rangekit: interrupted; the views decoded so far are cached. Continue with: rangekit process {folder}",
+              file=sys.stderr)
         return 130
+    _print_processed(Path(folder), res, args, time.perf_counter() - t0)
+    return 0
+
+
+def _print_processed(folder: Path, res, args: argparse.Namespace, seconds: float, *,
+                     acquisition_s: float | None = None) -> None:
+    """The end-of-run summary and the files written."""
+    from rangekit.progress import format_seconds
+
     say("")
     say(f"== {folder}: summary ==")
     if acquisition_s is not None:
         say(f"acquisition: {format_seconds(acquisition_s)}")
     for line in res.summary_lines():
         say(line)
-    total = time.perf_counter() - t0 + (acquisition_s or 0.0)
-    exported = export_meshes(Path(folder), args.format)
+    exported = [] if args.format == "ply" else [f"mesh.{args.format}", f"mesh_watertight.{args.format}"]
     result(f"wrote {folder}/mesh.ply (observed surface), mesh_watertight.ply (closed), "
-        + "".join(f"{name}, " for name in exported) + "merged.ply, poses.json, summary.json"
-        + ("" if args.no_report else ", report.html") + f" in {format_seconds(total)}")
-    return 0
+           + "".join(f"{name}, " for name in exported) + "merged.ply, poses.json, summary.json"
+           + ("" if args.no_report else ", report.html") + f" in {format_seconds(seconds)}")
 
 
 def cmd_process(args: argparse.Namespace) -> int:
@@ -198,7 +157,6 @@ def _process_batch(args: argparse.Namespace) -> int:
     """Several sessions on Dask (rangekit.app.process.batch): a line per view and session, then each session done or
     failed; exit 1 when any failed."""
     from rangekit.app.process.batch import process_sessions
-    from rangekit.app.process.fused_outputs import export_meshes
     from rangekit.progress import format_seconds
 
     scheduler = args.scheduler or "local"
@@ -212,8 +170,8 @@ def _process_batch(args: argparse.Namespace) -> int:
     where = f"a local cluster of {args.workers or 2} worker processes" if scheduler == "local" else scheduler
     note(f"processing {len(args.session)} session(s) on {where}")
     try:
-        res = process_sessions(args.session, scheduler=scheduler, workers=args.workers or 2, fusion=args.fusion,
-                               report=not args.no_report, progress=console())
+        res = process_sessions(args.session, _process_options(args), scheduler=scheduler, workers=args.workers or 2,
+                               progress=console())
     except KeyboardInterrupt:
         print(f"rangekit: interrupted; the views decoded so far are cached. Continue with: rangekit process "
               f"{' '.join(args.session)}", file=sys.stderr)
@@ -223,7 +181,6 @@ def _process_batch(args: argparse.Namespace) -> int:
         f"{format_seconds(res.seconds)} ==")
     for o in res.sessions:
         if o.ok:
-            export_meshes(Path(o.folder), args.format)
             say(f"{o.folder}: done ({o.views_decoded} views decoded, {o.views_cached} from the cache); "
                 + (o.summary[0] if o.summary else ""))
         else:
@@ -253,7 +210,7 @@ def add_parsers(sub) -> None:
     where.add_argument("--out", help="new session folder")
     where.add_argument("--resume", metavar="DIR", help="continue the session in DIR")
     # No argparse defaults: a resumed scan takes the session's settings, and an option given with --resume
-    # must equal them (rangekit.app.scan.scan.SCAN_DEFAULTS fills in a new scan).
+    # must equal them (rangekit.app.scan.options.SCAN_DEFAULTS fills in a new scan).
     scan.add_argument("--method", choices=("coded", "laser"),
                       help="coded (default: projector patterns, views registered) or laser (the rig's line lasers, "
                            "switched by the turntable board, one profile per turntable step)")

@@ -17,10 +17,10 @@ import numpy as np
 from rangekit.coded.patterns import PATTERN_METHODS, PatternSpec, make_pattern_spec
 from rangekit.errors import ConfigError, FileFormatError, UsageError
 from rangekit.image_header import check_image_files
-from rangekit.io import atomic_save_npz, read_json, read_png
+from rangekit.io import atomic_save_npz, decode_image, read_json, read_png
 from rangekit.rig.rig_file import Rig, load_rig
 
-__all__ = ["IMAGE_SUFFIXES", "list_images", "read_stack", "Capture", "load_capture", "pattern_spec_for",
+__all__ = ["IMAGE_SUFFIXES", "list_images", "read_stack", "stack_from_bytes", "Capture", "load_capture", "pattern_spec_for",
            "save_decoded"]
 
 IMAGE_SUFFIXES = (".png", ".tif", ".tiff", ".bmp", ".pgm", ".ppm")
@@ -71,6 +71,34 @@ def read_stack(paths: Sequence[Path], *, workers: int = 2, what: str = "a captur
                                   f"{stack.dtype} {stack.shape[1:]}; {what} needs one size and depth")
         stack[k] = img
 
+    with ThreadPoolExecutor(max_workers=max(1, workers)) as pool:
+        for _ in pool.map(load, range(1, len(paths))):
+            pass
+    return stack
+
+
+def stack_from_bytes(paths: Sequence[Path], contents: list[bytes], *, workers: int = 2,
+                     what: str = "a capture") -> np.ndarray:
+    """:func:`read_stack` of files already read: ``contents[k]`` the bytes of ``paths[k]`` (which name them in
+    errors; no file is opened). The headers are checked first, then each image decoded into the stack on
+    ``workers`` threads and its bytes dropped from ``contents``."""
+    check_image_files(paths, what=what, contents=contents)
+    if len(paths) == 0:
+        return np.zeros((0, 0, 0), dtype=np.uint8)
+    first = decode_image(contents[0], paths[0])
+    stack = np.empty((len(paths),) + first.shape, dtype=first.dtype)
+    stack[0] = first
+    del first
+
+    def load(k: int) -> None:
+        img = decode_image(contents[k], paths[k])
+        contents[k] = b""
+        if img.shape != stack.shape[1:] or img.dtype != stack.dtype:
+            raise FileFormatError(f"{paths[k]}: image is {img.dtype} {img.shape}, but {Path(paths[0]).name} is "
+                                  f"{stack.dtype} {stack.shape[1:]}; {what} needs one size and depth")
+        stack[k] = img
+
+    contents[0] = b""
     with ThreadPoolExecutor(max_workers=max(1, workers)) as pool:
         for _ in pool.map(load, range(1, len(paths))):
             pass

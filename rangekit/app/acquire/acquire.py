@@ -22,7 +22,7 @@ from __future__ import annotations
 import shutil
 import threading
 import time
-from dataclasses import replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Callable
 
@@ -38,6 +38,7 @@ from rangekit.formats.sessions.session import (CaptureSettings, ScanPlan, Sessio
 from rangekit.formats.sessions.check import verify_views
 from rangekit.formats.sessions.lock import session_lock
 from rangekit.app.acquire.frame_writer import FrameError, FrameWriter
+from rangekit.app.events import OnEvent, ViewAcquired, emit
 from rangekit.app.acquire.lights import light_for
 from rangekit.io import atomic_write_bytes, atomic_write_json, fsync_folder
 from rangekit.progress import LOGGER, call_progress
@@ -50,7 +51,8 @@ def acquire(devices: RigDevices, rig: Rig, spec: PatternSpec, out_dir: str | Pat
             resume: bool = False, capture: CaptureSettings | None = None,
             simulator: SimulatorSettings | None = None, hardware: dict | None = None,
             files: dict[str, bytes] | None = None, progress: Callable[[str], None] | None = None,
-            allow_auto_exposure: bool = False, turn_over: Callable[[int], None] | None = None) -> Session:
+            allow_auto_exposure: bool = False, turn_over: Callable[[int], None] | None = None,
+            on_event: OnEvent | None = None) -> Session:
     """Acquire (or resume) a session.
 
     Parameters
@@ -77,6 +79,8 @@ def acquire(devices: RigDevices, rig: Rig, spec: PatternSpec, out_dir: str | Pat
         hardware it asks the user to turn the object over (:func:`rangekit.app.scan.passes.turn_over_prompt`);
         an error it raises stops the scan there, resumable. Devices with ``start_pass(p)`` (the simulator)
         are told each view's pass before it is taken (they turn the object over themselves).
+    on_event : given :class:`rangekit.app.events.ViewAcquired` as each view is recorded done (from the frame
+        writer's thread, one at a time with ``progress``).
 
     Returns
     -------
@@ -121,7 +125,7 @@ def acquire(devices: RigDevices, rig: Rig, spec: PatternSpec, out_dir: str | Pat
         if set_controls is not None:
             set_controls(controls)
         return _acquire(devices, rig, spec, out, plan, resume, capture, simulator, hardware, files or {}, progress,
-                        controls, turn_over)
+                        controls, turn_over, on_event)
 
 
 def _resume_hint(out: Path, n_done: int) -> str:
@@ -146,7 +150,7 @@ def _new_session(out: Path, plan, spec, rig, capture, simulator, hardware, files
 
 
 def _acquire(devices, rig, spec, out: Path, plan, resume, capture, simulator, hardware, files,
-             progress, controls, turn_over=None) -> Session:
+             progress, controls, turn_over=None, on_event=None) -> Session:
     angles = plan.angles()
     if resume:
         session = Session.load(out)
@@ -163,41 +167,64 @@ def _acquire(devices, rig, spec, out: Path, plan, resume, capture, simulator, ha
                                     "older rangekit); their frames are not verified")
     else:
         session = _new_session(out, plan, spec, rig, capture, simulator, hardware, files)
-    settle_s, pattern_settle_s = session.capture.turntable_settle_s, session.capture.pattern_delay_s
     exposures = session.capture.exposures_us or (None,)
     if exposures[0] is not None and (isinstance(spec, LaserSequence) or
                                      getattr(devices.camera, "set_controls", None) is None):
         raise ConfigError(f"{out}: capture.exposures_us (multi-exposure) needs a coded-light scan and a camera "
                           f"that sets its exposure (set_controls); found {type(devices.camera).__name__}"
                           + (" and a laser scan" if isinstance(spec, LaserSequence) else ""))
-    done = [v.done for v in session.views]
     light = light_for(devices, spec, rig)
-    names, files = spec.frame_names, spec.frame_files
+    run = _Run(devices, light, rig, spec, out, plan, session.capture.turntable_settle_s,
+               session.capture.pattern_delay_s,
+               tuple((e, None if e is None else replace(controls, exposure_us=float(e))) for e in exposures),
+               progress, on_event)
     try:
-        _views(devices, light, rig, spec, out, plan, angles, session, done, names, files, settle_s, pattern_settle_s,
-               progress, [(e, None if e is None else replace(controls, exposure_us=float(e))) for e in exposures],
-               turn_over)
+        return _views(run, session, angles, turn_over)
     finally:
         light.close()
-    return Session.load(out)
 
 
-def _views(devices, light, rig, spec, out, plan, angles, session, done, names, files, settle_s, pattern_settle_s,
-           progress, exposures, turn_over=None) -> None:
-    """Each view not done: turn, then for each exposure (``(us, CameraControls)``; ``(None, None)``: the
-    rig's one exposure) every frame, into the view folder or its exposure sub-folder ``e<us>/``. Frames are
-    taken here in order and written behind by :class:`FrameWriter` (a simulated one rendered there too);
-    a view is recorded done only once all its frames are on disk. Before the first view of a pass none of
-    whose views is done, every earlier view is finished and ``turn_over(pass)`` is called (hardware)."""
-    writer, current, state = FrameWriter(), [-1], {"session": session}
-    # one bar over every frame still to take (with the exposures): per frame, with an ETA on a terminal
-    state["frames"] = [0, int(np.count_nonzero(~np.asarray(done, bool))) * len(exposures) * len(names)]
-    if progress is not None:        # views are reported done from the writer's thread
-        lock, report = threading.Lock(), progress
+@dataclass(frozen=True, eq=False)
+class _Run:
+    """What every view of one acquisition is taken with: the devices and the light that shows the frames, the
+    rig and the frame sequence written with each view, the waits (seconds) and the exposures
+    (``(us, CameraControls)``; ``(None, None)``: the rig's one exposure)."""
 
-        def progress(*args, **kwargs):
-            with lock:
-                report(*args, **kwargs)
+    devices: object
+    light: object
+    rig: Rig
+    spec: PatternSpec | LaserSequence
+    out: Path
+    plan: ScanPlan
+    settle_s: float
+    pattern_settle_s: float
+    exposures: tuple
+    progress: Callable | None
+    on_event: OnEvent | None
+    lock: threading.Lock = field(default_factory=threading.Lock)
+
+    def report(self, *args, **kwargs) -> None:
+        """``progress``: frames are reported from the acquiring thread, views done from the writer's, one at a time."""
+        with self.lock:
+            call_progress(self.progress, *args, **kwargs)
+
+    def announce(self, event) -> None:
+        """``on_event``, one at a time with :meth:`report`."""
+        with self.lock:
+            emit(self.on_event, event)
+
+
+def _views(run: _Run, session: Session, angles: np.ndarray, turn_over=None) -> Session:
+    """Each view not done: turn, then for each exposure every frame, into the view folder or its exposure
+    sub-folder ``e<us>/``. Frames are taken here in order and written behind by :class:`FrameWriter` (a
+    simulated one rendered there too); a view is recorded done only once all its frames are on disk. Before
+    the first view of a pass none of whose views is done, every earlier view is finished and ``turn_over(pass)``
+    is called (hardware). Returns the session as recorded on disk."""
+    done = [v.done for v in session.views]
+    writer, current = FrameWriter(), [-1]
+    state = {"session": session,   # one bar over every frame still to take (with the exposures), with an ETA
+             "frames": [0, int(np.count_nonzero(~np.asarray(done, bool))) * len(run.exposures) * run.spec.n_frames]}
+    plan, devices = run.plan, run.devices
     passes, start_pass, begun = plan.view_passes(), getattr(devices, "start_pass", None), set()
     try:
         for k, angle in enumerate(angles):
@@ -206,15 +233,14 @@ def _views(devices, light, rig, spec, out, plan, angles, session, done, names, f
                 if (p > 0 and turn_over is not None and p not in begun
                         and not any(done[i] for i in np.flatnonzero(passes == p))):
                     writer.close()      # every earlier view on disk before the object is touched
-                    call_progress(progress, f"pass {p} of {plan.passes} done; the object is to be turned over")
+                    run.report(f"pass {p} of {plan.passes} done; the object is to be turned over")
                     turn_over(p)
                     writer = FrameWriter()
                 begun.add(p)
                 if start_pass is not None:
                     start_pass(p)
                 current[0] = k
-                _view(devices, light, rig, spec, out, plan, k, angle, state, done, names, files, settle_s,
-                      pattern_settle_s, progress, exposures, writer)
+                _view(run, k, angle, state, done, writer)
         current[0] = -1
         writer.close()
     except BaseException as exc:
@@ -223,8 +249,9 @@ def _views(devices, light, rig, spec, out, plan, angles, session, done, names, f
         writer.cancel_view()
         writer.close(raise_error=False)
         if isinstance(exc, FrameError):     # the earliest failure, whichever thread failed first
-            _fail(out, current[0], writer.error or exc, done)
+            _fail(run.out, current[0], writer.error or exc, done)
         raise
+    return state["session"]
 
 
 def _fail(out, k, exc: FrameError, done) -> None:
@@ -250,9 +277,9 @@ def _taken(camera):
     return capture
 
 
-def _view(devices, light, rig, spec, out, plan, k, angle, state, done, names, files, settle_s, pattern_settle_s,
-          progress, exposures, writer) -> None:
+def _view(run: _Run, k: int, angle: float, state: dict, done: list, writer: FrameWriter) -> None:
     """Take view ``k``'s frames and hand them to ``writer``, with the view's finishing step."""
+    out, devices, light, names, files = run.out, run.devices, run.light, run.spec.frame_names, run.spec.frame_files
     final = view_folder(out, k)
     partial = out / f"view_{k:03d}.partial"
     t0 = time.time()
@@ -265,11 +292,11 @@ def _view(devices, light, rig, spec, out, plan, k, angle, state, done, names, fi
         shutil.rmtree(final, ignore_errors=True)
         partial.mkdir(parents=True)
         if devices.turntable is not None:
-            LOGGER.debug("view %d/%d: turntable to %.1f deg", k + 1, plan.n_views, np.degrees(angle))
+            LOGGER.debug("view %d/%d: turntable to %.1f deg", k + 1, run.plan.n_views, np.degrees(angle))
             devices.turntable.rotate_to(float(angle))
-            if settle_s > 0:
-                sleep(settle_s)
-        for exposure, controls in exposures:
+            if run.settle_s > 0:
+                sleep(run.settle_s)
+        for exposure, controls in run.exposures:
             sub = "" if exposure is None else f"{exposure_folder(exposure)}/"
             if exposure is not None:
                 step = f"exposure {exposure} us: camera controls"
@@ -278,13 +305,12 @@ def _view(devices, light, rig, spec, out, plan, k, angle, state, done, names, fi
             for i, (name, file) in enumerate(zip(names, files)):
                 step = f"{sub}frame {i} ({name}): {light.device}"
                 light.show(i)
-                if pattern_settle_s > 0:
-                    sleep(pattern_settle_s)
+                if run.pattern_settle_s > 0:
+                    sleep(run.pattern_settle_s)
                 step = f"{sub}frame {i} ({name}): camera"
                 image = capture()
                 state["frames"][0] += 1
-                call_progress(progress, f"view {k + 1}/{plan.n_views}: {sub}frame {i + 1}/{len(names)}",
-                              *state["frames"])
+                run.report(f"view {k + 1}/{run.plan.n_views}: {sub}frame {i + 1}/{len(names)}", *state["frames"])
                 step, target = f"{sub}frame {i} ({name}): writing", partial / sub / file
                 writer.frame(k, angle, sub + file, f"{sub}frame {i} ({name})", target, image)
         step = f"after frame {len(names) - 1} ({names[-1]}): {light.device} off"
@@ -296,8 +322,8 @@ def _view(devices, light, rig, spec, out, plan, k, angle, state, done, names, fi
         step, target = "writing view.json", partial
         try:
             # Each view is a self-contained capture folder (rangekit reconstruct view_NNN works on it).
-            atomic_write_json(partial / "patterns.json", spec.to_dict())
-            save_rig(rig, partial / "rig.json")
+            atomic_write_json(partial / "patterns.json", run.spec.to_dict())
+            save_rig(run.rig, partial / "rig.json")
             atomic_write_json(partial / "view.json", {"index": k, "angle_rad": float(angle), "started": t0,
                                                       "finished": time.time(), "n_frames": len(sha256)})
             partial.rename(final)
@@ -308,7 +334,7 @@ def _view(devices, light, rig, spec, out, plan, k, angle, state, done, names, fi
         except OSError as exc:
             raise FrameError(k, angle, step, target, exc) from exc
         done[k] = True
-        call_progress(progress, f"view {k + 1}/{plan.n_views} done ({len(sha256)} frames, "
-                                f"{time.time() - t0:.1f} s)")
+        run.report(f"view {k + 1}/{run.plan.n_views} done ({len(sha256)} frames, {time.time() - t0:.1f} s)")
+        run.announce(ViewAcquired(k, run.plan.n_views, final, float(angle), len(sha256)))
 
     writer.finish_view(k, angle, partial, finish)

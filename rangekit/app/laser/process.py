@@ -24,12 +24,13 @@ from __future__ import annotations
 
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Callable
 
 import numpy as np
 
+from rangekit.app.events import OnEvent
 from rangekit.app.laser.reconstruct import reconstruct_laser_capture
+from rangekit.app.process.options import ProcessOptions
 from rangekit.errors import ConfigError, DecodeError
 from rangekit.formats.clouds import save_cloud
 from rangekit.formats.poses import save_poses
@@ -39,7 +40,7 @@ from rangekit.formats.sessions.session import Session
 from rangekit.geometry import apply_T, invert_T
 from rangekit.laser.triangulate import plane_region
 from rangekit.io import atomic_write_json
-from rangekit.progress import StageTimer, call_progress
+from rangekit.progress import call_progress
 from rangekit.rig.rig_file import turntable_prior
 from rangekit.surface.cloud import PointCloud
 
@@ -198,16 +199,20 @@ def profile_spacing(profiles: LaserProfiles, T_world_table: np.ndarray | None) -
     return np.maximum(s, np.hypot(local[:, 0], local[:, 1]) * step)
 
 
-def process_laser(out: Path, session: Session, *, fusion: str, table_margin: float, evaluate, report: bool,
-                  progress: Callable | None, method: str = "gaussian") -> ProcessResult:
+def process_laser(session: Session, options: ProcessOptions, evaluate, on_event: OnEvent | None = None,
+                  method: str = "gaussian") -> ProcessResult:
     """The laser branch of :func:`rangekit.app.process.process.process_session` (same outputs, same set rule:
-    ``summary.json`` last). ``evaluate(mesh, angles, cloud=points)`` also measures the merged cloud."""
-    from rangekit.app.process.fused_outputs import evaluate_fused, save_fused
+    ``summary.json`` last; stages "profiles", "fuse", "evaluate", "report" announced to ``on_event``, each mesh
+    as :class:`rangekit.app.events.MeshReady`). ``evaluate(mesh, angles, cloud=points)`` also measures the
+    merged cloud."""
+    from rangekit.app.events import MeshReady, StageClock, emit, progress_of
+    from rangekit.app.process.fused_outputs import MESH_FILE, WATERTIGHT_FILE, evaluate_fused, save_fused
     from rangekit.surface.fusion import poisson_meshes
 
+    out, fusion, table_margin, progress = session.folder, options.fusion, options.table_margin, progress_of(on_event)
     if fusion != "poisson":
         raise ConfigError(f"--fusion {fusion}: a laser scan has profiles, not depth maps; it fuses with poisson")
-    timer = StageTimer()
+    timer = StageClock(on_event)
     with timer.stage("profiles"):
         profiles = laser_profiles(session, method=method, table_margin=table_margin, progress=progress)
         save_poses(out / "poses.json", profiles.names, profiles.T_world_view,
@@ -222,8 +227,10 @@ def process_laser(out: Path, session: Session, *, fusion: str, table_margin: flo
         # One thread: Open3D's multi-threaded Poisson is not deterministic (see process.py).
         fused = poisson_meshes(PointCloud(merged.points[::step], merged.colours[::step], merged.normals[::step]),
                                depth=9, n_threads=1, spacing=profile_spacing(profiles, session.rig.T_world_table)[::step])
-        mesh_info, watertight_info = save_fused(out, fused, fusion)
+        mesh_info, watertight_info = save_fused(out, fused, fusion, options.mesh_format)
         mesh = fused.observed
+        emit(on_event, MeshReady("observed", out / MESH_FILE, mesh))
+        emit(on_event, MeshReady("watertight", out / WATERTIGHT_FILE, fused.watertight))
     angles = [v.angle for v in session.done_views]
     accuracy, truth = None, None
     if evaluate is not None:
@@ -238,7 +245,7 @@ def process_laser(out: Path, session: Session, *, fusion: str, table_margin: flo
                   "peak_method": method}
     result = ProcessResult(out, profiles.names, profiles.T_world_view, [int(n) for n in per_step], [], float("nan"),
                            mesh_info, timer.seconds, accuracy, laser=laser_info, watertight_mesh=watertight_info)
-    if report:
+    if options.report:
         with timer.stage("report"):
             from rangekit.app.laser.report import write_laser_report
 

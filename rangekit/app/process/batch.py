@@ -3,7 +3,7 @@
 Each coded-light view's decoding is one task (:func:`decode_view_task`): it checks the view's frames
 against their SHA-256s, then decodes, triangulates and filters the view into its cache in the view folder
 (:mod:`rangekit.app.process.view_cache`: ``cloud.json`` is written last and vouches for the rest). Then, per
-session, one task (:func:`finish_session_task`) runs :func:`rangekit.app.scan.scan.process_scan` (registration,
+session, one task (:func:`finish_session_task`) runs :func:`rangekit.app.scan.scan.process` (registration,
 fusion, evaluation on the simulator, report), which finds every view in the cache; each view pair's
 registration within it is a task of its own (:mod:`rangekit.app.process.batch_pairs`). Its outputs are the bytes of
 processing the session in one process. A laser session is one task.
@@ -26,6 +26,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Sequence
 
+from rangekit.app.process.options import ProcessOptions
 from rangekit.errors import ConfigError, RangekitError
 from rangekit.progress import call_progress
 
@@ -114,10 +115,10 @@ def decode_view_task(folder: str, index: int, method: str = "auto", table_margin
     if view is None:
         raise ConfigError(f"{Path(folder) / 'session.json'}: expected view {index} done, found it "
                           f"{'pending' if any(v.index == index for v in session.views) else 'missing'}")
-    verify_views(session, views=[view], workers=1)
+    verify_views(session, views=[view], workers=1, contents=False)   # the contents as the frames are read
     stamp = _stamp(view.folder / "cloud.json")
     cloud, _ = view_cloud(view, session.pattern, session.rig, cache_settings(session, method, table_margin),
-                          session.capture.full_scale, table_transform(session.rig), table_margin)
+                          session.capture.full_scale, table_transform(session.rig), table_margin, session)
     done = ViewDone(view.folder.name, len(cloud), _stamp(view.folder / "cloud.json") != stamp)
     del cloud
     release_free_memory()   # the view's stack and maps: a worker holds one view at a time
@@ -133,33 +134,29 @@ def _stamp(path: Path) -> tuple[int, int] | None:
     return st.st_ino, st.st_mtime_ns
 
 
-def finish_session_task(folder: str, views: Sequence[ViewDone], fusion: str = "poisson", report: bool = True,
-                        evaluate: bool = True) -> tuple[str, ...]:
-    """Register, fuse, evaluate (a simulated session, unless ``evaluate`` is False) and report the session in
+def finish_session_task(folder: str, views: Sequence[ViewDone], options: ProcessOptions) -> tuple[str, ...]:
+    """Register, fuse, evaluate (a simulated session, with ``options.truth``) and report the session in
     ``folder`` once its ``views`` are decoded (a Dask task; they come from the cache). Returns the end-of-run
     summary lines."""
     from rangekit.app.process.batch_pairs import dask_pair_mapper
-    from rangekit.app.process.options import ProcessOptions
-    from rangekit.app.process.process import process_session
-    from rangekit.app.scan.scan import process_scan
+    from rangekit.app.scan.scan import process
 
     pairs = dask_pair_mapper()   # each view pair's registration a task of its own (rangekit.app.process.batch_pairs)
-    if evaluate:
-        return tuple(process_scan(folder, fusion=fusion, report=report, map_pairs=pairs).summary_lines())
-    return tuple(process_session(folder, ProcessOptions(fusion=fusion, report=report), map_pairs=pairs).summary_lines())
+    return tuple(process(folder, options, map_pairs=pairs).summary_lines())
 
 
-def process_sessions(folders: Sequence[str | Path], *, scheduler: str = "local", workers: int = 2,
-                     fusion: str = "poisson", report: bool = True, evaluate: bool = True,
-                     progress: Callable | None = None, timeout: float = CONNECT_TIMEOUT_S) -> BatchResult:
+def process_sessions(folders: Sequence[str | Path], options: ProcessOptions | None = None, *,
+                     scheduler: str = "local", workers: int = 2, progress: Callable | None = None,
+                     timeout: float = CONNECT_TIMEOUT_S) -> BatchResult:
     """Process every session folder on Dask; each into its ``mesh.ply`` etc. as
     :func:`rangekit.app.process.process.process_session` does (the same bytes).
 
     Parameters
     ----------
+    options : how (:class:`ProcessOptions`; ``truth``: measure simulated sessions against their truth, as
+        ``rangekit process`` does); the defaults if None.
     scheduler : "local" (a ``LocalCluster`` of ``workers`` processes on 127.0.0.1, one thread each) or the
         address of a running ``dask scheduler`` (``tcp://host:port``; ``workers`` is then unused).
-    evaluate : measure simulated sessions against their truth (as ``rangekit process`` does).
     progress : ``progress(msg, done=None, total=None)``: a line per view and per session done or failed.
     timeout : seconds to wait for the scheduler at an address.
 
@@ -169,10 +166,7 @@ def process_sessions(folders: Sequence[str | Path], *, scheduler: str = "local",
         No scheduler answered at ``scheduler`` within ``timeout`` seconds. A session that fails does not
         raise: its :class:`SessionOutcome` holds the error.
     """
-    from rangekit.app.process.options import FUSION_METHODS
-
-    if fusion not in FUSION_METHODS:
-        raise ConfigError(f"fusion must be one of {', '.join(FUSION_METHODS)}, found {fusion!r}")
+    options = options or ProcessOptions()
     if scheduler == "local" and not (isinstance(workers, int) and workers >= 1):
         raise ConfigError(f"workers: expected a whole number >= 1, found {workers!r}")
     t0 = time.perf_counter()
@@ -187,7 +181,7 @@ def process_sessions(folders: Sequence[str | Path], *, scheduler: str = "local",
             call_progress(progress, f"{f}: failed: {e}")
     if plans:
         with _client(scheduler, workers, timeout) as client:
-            _run(client, plans, folders, outcome, fusion, report, evaluate, progress)
+            _run(client, plans, folders, outcome, options, progress)
     return BatchResult(tuple(SessionOutcome(**o) for o in outcome.values()), time.perf_counter() - t0)
 
 
@@ -201,7 +195,7 @@ def _view_indices(folder: Path) -> list[int] | None:
     return None if session.is_laser else [v.index for v in session.done_views]
 
 
-def _run(client, plans, folders, outcome, fusion, report, evaluate, progress) -> None:
+def _run(client, plans, folders, outcome, options, progress) -> None:
     """Submit every view task, then each group's session tasks once the group's views are done; report them
     as they finish.
 
@@ -221,7 +215,7 @@ def _run(client, plans, folders, outcome, fusion, report, evaluate, progress) ->
         for k, indices in group:
             name = folders[k].name
             group_of[k] = g
-            views_of[k] = [client.submit(decode_view_task, str(folders[k]), i, key=f"decode-{name}-{i:03d}-{k}-{run}",
+            views_of[k] = [client.submit(decode_view_task, str(folders[k]), i, options.method, options.table_margin, key=f"decode-{name}-{i:03d}-{k}-{run}",
                                          pure=False, priority=len(groups) - g) for i in indices or ()]
             owner.update({f.key: (k, "view") for f in views_of[k]})
         left.append(sum(len(views_of[k]) for k, _ in group))
@@ -229,7 +223,7 @@ def _run(client, plans, folders, outcome, fusion, report, evaluate, progress) ->
 
     def finish_group(g: int) -> None:
         for k, _ in groups[g]:
-            session = client.submit(finish_session_task, str(folders[k]), views_of[k], fusion, report, evaluate,
+            session = client.submit(finish_session_task, str(folders[k]), views_of[k], options,
                                     key=f"session-{folders[k].name}-{k}-{run}", pure=False, priority=len(groups) + 1)
             owner[session.key] = (k, "session")
             queue.add(session)

@@ -134,7 +134,7 @@ class Fusion:
             del trimmed
             mesh = rule.observed_part(full)
             del full
-            mesh_info = save_one(out, mesh, fusion, MESH_FILE)
+            mesh_info = save_one(out, mesh, fusion, MESH_FILE, self._options.mesh_format)
             emit(self._on_event, MeshReady("observed", out / MESH_FILE, mesh))
             if evaluate is not None:
                 with clock.stage("evaluate"):
@@ -145,7 +145,7 @@ class Fusion:
             watertight = rule.flagged(closing.result())
         del rule
         release_free_memory()   # the fusion's and the evaluator's temporaries
-        watertight_info = save_one(out, watertight, fusion, WATERTIGHT_FILE)
+        watertight_info = save_one(out, watertight, fusion, WATERTIGHT_FILE, self._options.mesh_format)
         emit(self._on_event, MeshReady("watertight", out / WATERTIGHT_FILE, watertight))
         call_progress(progress_of(self._on_event),
                       f"mesh: {len(mesh.vertices):,} vertices, {len(mesh.triangles):,} triangles observed; "

@@ -7,9 +7,9 @@
 :func:`save_fused` writes both and returns their ``summary.json`` entries (:func:`save_one` one of them);
 :func:`evaluate_fused` measures both against the truth (the summary's accuracy is the observed mesh's, the
 closed one's figures are kept under ``accuracy["watertight"]``); in two halves, :func:`evaluate_observed` then
-:func:`with_closed`, the observed mesh is measured while the closed one is made. :func:`export_meshes` writes
-both again in another format beside them (``--format obj|stl|glb``: what MeshLab, Blender or a slicer opens;
-only PLY keeps ``observed``).
+:func:`with_closed`, the observed mesh is measured while the closed one is made. Given another ``mesh_format``
+(``--format obj|stl|glb``: what MeshLab, Blender or a slicer opens; only PLY keeps ``observed``) each mesh is
+also written in it beside its PLY, from the same mesh in memory.
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ from rangekit.surface.mesh import TriangleMesh
 from rangekit.surface.observed import FusedMeshes
 
 __all__ = ["MESH_FILE", "WATERTIGHT_FILE", "WATERTIGHT_FIGURES", "MESH_EXPORT_FORMATS", "mesh_info", "save_fused",
-           "save_one", "export_meshes", "evaluate_fused", "evaluate_observed", "with_closed"]
+           "save_one", "evaluate_fused", "evaluate_observed", "with_closed"]
 
 MESH_FILE = "mesh.ply"
 WATERTIGHT_FILE = "mesh_watertight.ply"
@@ -43,34 +43,22 @@ def mesh_info(mesh: TriangleMesh, fusion: str, file: str) -> dict:
     return info
 
 
-def save_fused(out: Path, fused: FusedMeshes, fusion: str) -> tuple[dict, dict]:
-    """Write ``out/mesh.ply`` (observed) and ``out/mesh_watertight.ply`` (closed, flagged), atomically;
-    return their summary entries (:func:`mesh_info`)."""
-    return save_one(out, fused.observed, fusion, MESH_FILE), save_one(out, fused.watertight, fusion, WATERTIGHT_FILE)
+def save_fused(out: Path, fused: FusedMeshes, fusion: str, mesh_format: str = "ply") -> tuple[dict, dict]:
+    """Write ``out/mesh.ply`` (observed) and ``out/mesh_watertight.ply`` (closed, flagged), atomically (and each
+    as ``mesh_format`` beside it); return their summary entries (:func:`mesh_info`)."""
+    return (save_one(out, fused.observed, fusion, MESH_FILE, mesh_format),
+            save_one(out, fused.watertight, fusion, WATERTIGHT_FILE, mesh_format))
 
 
-def save_one(out: Path, mesh: TriangleMesh, fusion: str, file: str) -> dict:
-    """Write one of the two (``file``: :data:`MESH_FILE` or :data:`WATERTIGHT_FILE`) atomically; its summary
-    entry (:func:`mesh_info`)."""
+def save_one(out: Path, mesh: TriangleMesh, fusion: str, file: str, mesh_format: str = "ply") -> dict:
+    """Write one of the two (``file``: :data:`MESH_FILE` or :data:`WATERTIGHT_FILE`) atomically, and as
+    ``STEM.mesh_format`` beside it when that is not ``"ply"``; its summary entry (:func:`mesh_info`)."""
     from rangekit.formats.meshes import save_mesh
 
     save_mesh(out / file, mesh)
+    if mesh_format != "ply":
+        save_mesh(out / f"{Path(file).stem}.{mesh_format}", mesh)
     return mesh_info(mesh, fusion, file)
-
-
-def export_meshes(out: Path, fmt: str) -> list[str]:
-    """``out/mesh.FMT`` and ``out/mesh_watertight.FMT`` written from the two PLY files :func:`save_fused`
-    wrote (``fmt`` one of :data:`MESH_EXPORT_FORMATS`; nothing to do for ``ply``); the names written."""
-    from rangekit.formats.meshes import load_mesh_file, save_mesh
-
-    if fmt == "ply":
-        return []
-    names = []
-    for ply in (MESH_FILE, WATERTIGHT_FILE):
-        name = f"{Path(ply).stem}.{fmt}"
-        save_mesh(Path(out) / name, load_mesh_file(Path(out) / ply))
-        names.append(name)
-    return names
 
 
 def evaluate_fused(evaluate: Callable, fused: FusedMeshes, angles, *, views: dict | None = None,

@@ -26,6 +26,9 @@ class ProcessOptions:
     table_margin : metres; points within this height of the turntable top (or below it) are dropped, so the
         table does not become part of the object.
     report : write ``report.html``.
+    mesh_format : the two meshes' files: ``"ply"`` (mesh.ply and mesh_watertight.ply, with vertex normals and
+        the ``observed`` flag) or ``"obj"``, ``"stl"``, ``"glb"`` written beside them from the same meshes
+        (:data:`rangekit.app.process.fused_outputs.MESH_EXPORT_FORMATS`).
     truth : measure against the simulator's truth when the session is simulated (never on hardware).
     """
 
@@ -34,6 +37,7 @@ class ProcessOptions:
     table_margin: float = 0.002
     report: bool = True
     truth: bool = True
+    mesh_format: str = "ply"
 
     def __post_init__(self) -> None:
         if self.fusion not in FUSION_METHODS:
@@ -43,6 +47,10 @@ class ProcessOptions:
         if (isinstance(self.table_margin, bool) or not isinstance(self.table_margin, (int, float))
                 or not math.isfinite(self.table_margin) or not 0 <= self.table_margin < 1):
             raise ConfigError(f"table_margin must be a height in metres in [0, 1), found {self.table_margin!r}")
+        from rangekit.app.process.fused_outputs import MESH_EXPORT_FORMATS
+
+        if self.mesh_format not in MESH_EXPORT_FORMATS:
+            raise ConfigError(f"mesh_format must be one of {', '.join(MESH_EXPORT_FORMATS)}, found {self.mesh_format!r}")
         for name in ("report", "truth"):
             if not isinstance(getattr(self, name), bool):
                 raise ConfigError(f"{name} must be True or False, found {getattr(self, name)!r}")

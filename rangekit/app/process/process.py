@@ -20,8 +20,9 @@ mesh as an uninterrupted run.
 
 The outputs are written as a set: a stale ``summary.json`` is removed first and the new one written
 last, so a folder with ``summary.json`` always has the mesh, poses and merged cloud of the same run.
-Processing holds the session's lock and first checks every view's frames against their recorded
-SHA-256s (:func:`rangekit.formats.sessions.check.verify_views`).
+Processing holds the session's lock and checks every view's frames against their recorded SHA-256s, taken
+from the bytes it reads to decode them (:mod:`rangekit.formats.sessions.check`). Nothing it writes is read
+back in the same run.
 """
 
 from __future__ import annotations
@@ -89,14 +90,13 @@ def process_session(session: Session | str | Path, options: ProcessOptions | Non
 
 def _process(session: Session, options: ProcessOptions, evaluate: Evaluator | None, on_event: OnEvent | None,
              map_pairs: PairMapper | None, children: ExitStack) -> ProcessResult:
-    """The stages in order: check the session, decode, register, fuse (the views measured and the report's
-    per-view part made beside it), measure, report, and summary.json last."""
+    """The stages in order: check the session, decode (with the report's per-view part), register, fuse (the
+    views measured beside it), measure, report, and summary.json last."""
     _start(session, on_event)
     if session.is_laser:
         from rangekit.app.laser.process import process_laser
 
-        return process_laser(session.folder, session, fusion=options.fusion, table_margin=options.table_margin,
-                             evaluate=evaluate, report=options.report, progress=progress_of(on_event))
+        return process_laser(session, options, evaluate, on_event)
     clock = StageClock(on_event)
     decoded = decode(session, options, clock, on_event)
     child = poisson_child(decoded, options, children)      # imports on the other core while the views register
@@ -106,7 +106,6 @@ def _process(session: Session, options: ProcessOptions, evaluate: Evaluator | No
                                      measuring_beside=measuring) as fusion:
         fusion.save_merged()
         measure_views(evaluate, registered, clock)          # beside the fusion
-        rows = _report_rows(registered, session, clock, on_event) if options.report else None
         release_free_memory()
         fused = fusion.meshes(clock, evaluate)
     accuracy, truth, view_errors = (measure_closed(evaluate, fused, registered, clock, on_event)
@@ -117,19 +116,20 @@ def _process(session: Session, options: ProcessOptions, evaluate: Evaluator | No
                            watertight_mesh=fused.watertight_info, view_errors=view_errors,
                            view_passes=registered.view_passes)
     if options.report:
-        _report(result, registered, fused, rows, session, truth, clock, on_event)
+        _report(result, registered, fused, session, truth, clock, on_event)
     atomic_write_json(session.folder / "summary.json", result.to_dict())   # last: the set is complete
     return result
 
 
 def _start(session: Session, on_event: OnEvent | None) -> None:
-    """Check the session before any work: at least two completed views, every view's frames against their
-    recorded SHA-256s; then remove a stale summary.json, so that the outputs are a set (it comes back last)."""
+    """Check the session before any work: at least two completed views, each with its recorded frames and no
+    others (their contents are checked as they are read for decoding); then remove a stale summary.json, so
+    that the outputs are a set (it comes back last)."""
     out = session.folder
     if len(session.done_views) < 2:
         raise ConfigError(f"{out}: {len(session.done_views)} completed view(s); processing needs at least 2 "
                           "(resume the scan)")
-    unverified = verify_views(session)
+    unverified = verify_views(session, contents=False)
     if unverified:
         call_progress(progress_of(on_event), f"{', '.join(unverified)}: no frame checksums in session.json "
                                              "(written by an older rangekit); their frames are not verified")
@@ -139,24 +139,9 @@ def _start(session: Session, on_event: OnEvent | None) -> None:
         fsync_folder(out)
 
 
-def _report_rows(registered, session: Session, clock: StageClock, on_event: OnEvent | None) -> list:
-    """The report's per-view part, made beside the fusion: each view's maps as held (the TSDF's) or read back
-    from its cache (Poisson's; the documented memory trade of :mod:`rangekit.app.process.decode`)."""
-    from rangekit.app.process.view_cache import reload_maps
-    from rangekit.app.report.page import table_up
-    from rangekit.app.report.view_rows import view_rows
-
-    d = registered.decoded
-    with clock.stage("report"):
-        return view_rows(d.names, d.clouds, (lambda k: d.maps[k]) if d.maps is not None else
-                         (lambda k: reload_maps(d.views[k], session.pattern, d.settings)), rig=session.rig,
-                         full_scale=session.capture.full_scale, up=table_up(session.rig),
-                         progress=progress_of(on_event))
-
-
-def _report(result: ProcessResult, registered, fused, rows: list, session: Session, truth, clock: StageClock,
+def _report(result: ProcessResult, registered, fused, session: Session, truth, clock: StageClock,
             on_event: OnEvent | None) -> None:
-    """``report.html``: the summary, the meshes, the per-view ``rows`` made beside the fusion."""
+    """``report.html``: the summary, the meshes, the per-view rows made as the views were decoded."""
     from rangekit.app.report.page import write_report
     from rangekit.surface.cloud import merge_clouds
 
@@ -164,6 +149,6 @@ def _report(result: ProcessResult, registered, fused, rows: list, session: Sessi
     with clock.stage("report"):
         call_progress(progress_of(on_event), "writing report.html")
         release_free_memory()   # the evaluation's temporaries
-        write_report(session.folder, result, clouds=d.clouds, maps=None, rows=rows,
+        write_report(session.folder, result, clouds=d.clouds, maps=None, rows=d.rows,
                      merged=merge_clouds(d.clouds, registered.T_world_view), mesh=fused.observed, session=session,
                      truth=truth, progress=progress_of(on_event), watertight=fused.watertight)

@@ -25,13 +25,14 @@ from rangekit.errors import RangekitError
 from rangekit.formats.capture import list_images, read_stack
 from rangekit.formats.sessions.session import Session, SessionView, exposure_folder
 from rangekit.geometry import apply_T, invert_T
-from rangekit.io import atomic_save_npz, atomic_write_json, read_json, read_png
+from rangekit.io import atomic_save_npz, atomic_write_json, atomic_write_with, read_json, read_png
 from rangekit.rig.rig_file import Rig
-from rangekit.formats.clouds import load_cloud, save_cloud
-from rangekit.formats.sessions.check import file_sha256
+from rangekit.formats.clouds import load_cloud
+from rangekit.formats.ply_write import write_cloud_ply
+from rangekit.formats.sessions.check import file_sha256, read_view_stack, verify_views
 from rangekit.surface.cloud import PointCloud
 
-__all__ = ["ViewMaps", "cache_settings", "reload_maps", "table_transform", "view_cloud", "view_clouds", "white_frame_index"]
+__all__ = ["ViewMaps", "cache_settings", "table_transform", "view_cloud", "view_clouds", "white_frame_index"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -97,23 +98,29 @@ _MAP_NAMES = ("proj_col", "confidence", "depth", "sigma")  # a cache without one
 
 
 def view_cloud(v: SessionView, spec: PatternSpec, rig: Rig, settings: dict, full_scale: float | None,
-               T_table_world: np.ndarray | None, table_margin: float) -> tuple[PointCloud, ViewMaps]:
+               T_table_world: np.ndarray | None, table_margin: float,
+               session: Session | None = None) -> tuple[PointCloud, ViewMaps]:
     """Decode, triangulate and filter one view, or reuse its cache when made with the same ``settings``.
 
     ``settings["method"]`` is the triangulation method, ``settings["exposures_us"]`` (when present) the
     exposures of a multi-exposure session, each decoded from its ``e<us>/`` folder and merged per pixel; ``full_scale`` the camera's largest pixel value
     (None: the images' dtype). Points less than ``table_margin`` metres above the turntable top
-    (``T_table_world`` maps world points to the table frame; None: no table) are dropped.
+    (``T_table_world`` maps world points to the table frame; None: no table) are dropped. ``session``: the
+    frames are checked against its recorded SHA-256s (:func:`view_clouds`).
     """
-    return next(view_clouds([v], spec, rig, settings, full_scale, T_table_world, table_margin))
+    return next(view_clouds([v], spec, rig, settings, full_scale, T_table_world, table_margin, session))
 
 
 def view_clouds(views: Sequence[SessionView], spec: PatternSpec, rig: Rig, settings: dict,
                 full_scale: float | None, T_table_world: np.ndarray | None,
-                table_margin: float) -> Iterator[tuple[PointCloud, ViewMaps]]:
+                table_margin: float, session: Session | None = None) -> Iterator[tuple[PointCloud, ViewMaps]]:
     """:func:`view_cloud` of each view in turn, yielded in order; the frames of the next view to decode are
     read (PNG inflate on two threads) on a background thread while this one decodes, which overlaps the
-    stage's I/O with its compute (issue 20). A read error is raised when its view's turn comes."""
+    stage's I/O with its compute. A read error is raised when its view's turn comes.
+
+    ``session``: each frame is checked against the SHA-256 recorded in its ``session.json``, taken from the bytes
+    read for decoding (:func:`rangekit.formats.sessions.check.read_view_stack`: each frame read once); a view
+    taken from its cache has its frames hashed there instead. None: the frames are read unchecked."""
     shape = (rig.camera.height, rig.camera.width)
     white = white_frame_index(spec)
     cached = [None] * len(views)
@@ -126,16 +133,18 @@ def view_clouds(views: Sequence[SessionView], spec: PatternSpec, rig: Rig, setti
             if cached[k] is not None:
                 cloud, m = cached[k]
                 cached[k] = None
+                if session is not None:
+                    verify_views(session, views=[v])
                 yield cloud, _stored_maps(m, folders, white)
                 if k + 1 < len(views):
                     cached[k + 1] = _read_cache(views[k + 1], settings, shape)
                 continue
-            stacks = pending.result() if pending is not None else _read_stacks(folders)
+            stacks = pending.result() if pending is not None else _read_stacks(v, folders, session)
             pending = None
             if k + 1 < len(views):
                 cached[k + 1] = _read_cache(views[k + 1], settings, shape)
                 if cached[k + 1] is None:
-                    pending = pool.submit(_read_stacks, _frame_folders(views[k + 1], settings))
+                    pending = pool.submit(_read_stacks, views[k + 1], _frame_folders(views[k + 1], settings), session)
             images = stacks[0]
             with one_blas_thread():      # thin products: rangekit._runtime.threads
                 # the white capture copied out: a view of it would keep the view's whole stack alive
@@ -143,16 +152,6 @@ def view_clouds(views: Sequence[SessionView], spec: PatternSpec, rig: Rig, setti
                                    rig, settings, full_scale, T_table_world, table_margin)
             del stacks, images
             yield out
-
-
-def reload_maps(v: SessionView, spec: PatternSpec, settings: dict) -> ViewMaps:
-    """A view's :class:`ViewMaps` read back from the cache :func:`view_clouds` just wrote (``maps.npz``,
-    stored uncompressed, and the white capture): processing drops the maps while it fuses and evaluates
-    (about 230 MB for 12 views of 1280x1024) and reads them again for the report. The same numbers as the
-    maps the decoding returned (float32, as stored)."""
-    with np.load(v.folder / "maps.npz") as npz:
-        m = {k: np.asarray(npz[k], dtype=np.float32) for k in _MAP_NAMES}
-    return _stored_maps(m, _frame_folders(v, settings), white_frame_index(spec))
 
 
 def _stored_maps(m: dict, folders: list, white: int) -> ViewMaps:
@@ -168,15 +167,17 @@ def _frame_folders(v: SessionView, settings: dict) -> list:
     return [v.folder] if not exposures else [v.folder / exposure_folder(e) for e in exposures]
 
 
-def _read_stacks(folders: list) -> list:
-    return [read_stack(list_images(f)) for f in folders]
+def _read_stacks(v: SessionView, folders: list, session: Session | None) -> list:
+    if session is None:
+        return [read_stack(list_images(f)) for f in folders]
+    return [read_view_stack(session, v, f) for f in folders]
 
 
 def _decode_view(v: SessionView, stacks, white_image: np.ndarray, spec: PatternSpec, rig: Rig, settings: dict,
                  full_scale: float | None, T_table_world: np.ndarray | None,
                  table_margin: float) -> tuple[PointCloud, ViewMaps]:
     """:func:`view_cloud` past its cache, on one BLAS thread: its products are thin, (N, 3) @ (3, 3), and two
-    OpenBLAS threads spent 2x the CPU on them for the same bits (issue 20)."""
+    OpenBLAS threads spent 2x the CPU on them for the same bits."""
     exposures = settings.get("exposures_us")
     rec = reconstruct_view(stacks, spec, rig.camera, rig.projector, method=settings["method"],
                            full_scale=full_scale, response=rig.projector_response, exposures_us=exposures)
@@ -197,11 +198,11 @@ def _decode_view(v: SessionView, stacks, white_image: np.ndarray, spec: PatternS
         sigma[valid] = rec.sigma[valid]
     maps = ViewMaps(rec.decoded.proj_col.astype(np.float32), rec.decoded.confidence.astype(np.float32), depth,
                     white_image, sigma)
-    save_cloud(v.folder / "cloud.ply", c)
-    # uncompressed: deflating the float maps cost 0.18 CPU-s a view (21 MB instead of 4 MB on disk)
-    atomic_save_npz(v.folder / "maps.npz", level=0, proj_col=maps.proj_col, confidence=maps.confidence, depth=depth,
-                    sigma=sigma)
+    # Each file's SHA-256 taken from the bytes as they are written: nothing is read back.
+    sha256 = {"cloud.ply": atomic_write_with(v.folder / "cloud.ply", lambda f: write_cloud_ply(f, c), sha256=True),
+              # uncompressed: deflating the float maps cost 0.18 CPU-s a view (21 MB instead of 4 MB on disk)
+              "maps.npz": atomic_save_npz(v.folder / "maps.npz", level=0, sha256=True, proj_col=maps.proj_col,
+                                          confidence=maps.confidence, depth=depth, sigma=sigma)}
     # cloud.json last, with the others' checksums: it vouches for a complete cache.
-    atomic_write_json(v.folder / "cloud.json", {"settings": settings, "points": len(c),
-                                                "sha256": {name: file_sha256(v.folder / name) for name in _CACHE_FILES}})
+    atomic_write_json(v.folder / "cloud.json", {"settings": settings, "points": len(c), "sha256": sha256})
     return c, maps

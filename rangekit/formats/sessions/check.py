@@ -3,8 +3,12 @@
 Each finished view records ``{"000.png": sha256, ...}`` (computed by acquisition from the bytes it wrote).
 :func:`verify_views` re-hashes the frame files of the done views and raises naming the view and the
 changed, missing or extra frame, so an edited, deleted or added image never gives a silently wrong mesh
-(``rangekit process`` and ``scan --resume`` call it). Hashing runs at disk speed (0.4-0.5 s for the
-default 12-view session, 720 frames, 208 MB, warm cache, against 233 s of processing), on 2 threads.
+(``scan --resume`` calls it). Hashing runs at disk speed (0.4-0.5 s for the default 12-view session, 720
+frames, 208 MB, warm cache, against 233 s of processing), on 2 threads.
+
+Processing reads each frame once: :func:`verify_views` with ``contents=False`` checks up front that every
+view has its recorded frames and no others, and :func:`read_view_stack` takes each frame's SHA-256 from the
+bytes it reads for decoding, before the pixels are decoded.
 """
 
 from __future__ import annotations
@@ -13,11 +17,13 @@ import hashlib
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
+import numpy as np
+
 from rangekit.errors import FileFormatError
 from rangekit.formats.capture import IMAGE_SUFFIXES
 from rangekit.formats.sessions.session import Session, SessionView, exposure_folder
 
-__all__ = ["frame_sha256", "file_sha256", "verify_views"]
+__all__ = ["frame_sha256", "file_sha256", "verify_views", "read_view_stack"]
 
 
 def frame_sha256(data: bytes) -> str:
@@ -56,9 +62,11 @@ def _problem(session: Session, v: SessionView, frame: str, what: str) -> FileFor
                            "the original frame, or scan the view again into a new session")
 
 
-def verify_views(session: Session, *, workers: int = 2, views: list[SessionView] | None = None) -> list[str]:
+def verify_views(session: Session, *, workers: int = 2, views: list[SessionView] | None = None,
+                 contents: bool = True) -> list[str]:
     """Check every done view's frames (or those of ``views``, some of the done views: one view's Dask task,
-    :mod:`rangekit.app.process.batch`) against the recorded SHA-256s.
+    :mod:`rangekit.app.process.batch`) against the recorded SHA-256s; ``contents=False``: only that each
+    view has its recorded frames and no others (no frame read: :func:`read_view_stack` checks the contents).
 
     Returns the names of the done views without recorded checksums (a session written before they were
     recorded): only their frame count is checked. Raises FileFormatError naming the view folder and the
@@ -80,7 +88,7 @@ def verify_views(session: Session, *, workers: int = 2, views: list[SessionView]
                                              f"found {len(present)} image files")
         if v.sha256 is None:
             unverified.append(v.folder.name)
-        else:
+        elif contents:
             jobs += [(v, name) for name in sorted(recorded)]
     with ThreadPoolExecutor(max_workers=max(1, workers)) as pool:
         digests = list(pool.map(lambda job: file_sha256(job[0].folder / job[1]), jobs))
@@ -91,3 +99,35 @@ def verify_views(session: Session, *, workers: int = 2, views: list[SessionView]
             raise _problem(session, v, name, f"has changed: sha256 {digest[:16]}..., recorded "
                                              f"{v.sha256[name][:16]}...")
     return unverified
+
+
+def read_view_stack(session: Session, v: SessionView, folder: Path, *, workers: int = 2) -> np.ndarray:
+    """The frames of ``folder`` (view ``v``'s folder or one of its exposure sub-folders) as one stack
+    (:func:`rangekit.formats.capture.read_stack`), each file read once: its SHA-256 taken from the bytes read
+    and checked against ``session.json`` before any pixel is decoded (FileFormatError naming the view and the
+    frame, as :func:`verify_views`). A view without recorded checksums is read unchecked."""
+    from rangekit.formats.capture import list_images, stack_from_bytes
+
+    paths = list_images(folder)
+
+    def read(path: Path) -> tuple[bytes, str | None]:   # hashed on the reading thread (hashlib frees the GIL)
+        try:
+            data = path.read_bytes()
+        except OSError as exc:
+            raise _problem(session, v, path.relative_to(v.folder).as_posix(),
+                           f"cannot be read ({exc.strerror or exc})") from None
+        return data, None if v.sha256 is None else frame_sha256(data)
+
+    with ThreadPoolExecutor(max_workers=max(1, workers)) as pool:
+        read_files = list(pool.map(read, paths))
+    contents = [data for data, _ in read_files]
+    if v.sha256 is not None:
+        for path, (_, digest) in zip(paths, read_files):
+            name = path.relative_to(v.folder).as_posix()
+            recorded = v.sha256.get(name)
+            if recorded is None:
+                raise _problem(session, v, name, f"is extra: the view has {len(v.sha256)} frames")
+            if digest != recorded:
+                raise _problem(session, v, name, f"has changed: sha256 {digest[:16]}..., recorded {recorded[:16]}...")
+    del read_files
+    return stack_from_bytes(paths, contents, workers=workers)

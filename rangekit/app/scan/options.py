@@ -1,0 +1,184 @@
+"""What a scan does: one frozen value, checked in one place (``rangekit scan`` maps its flags onto it, and
+maps its errors back to flag names with :data:`SCAN_FLAGS`).
+
+Options left None take the defaults of a new scan (:data:`SCAN_DEFAULTS`) or, with ``resume``, the
+session's own settings; an option given with ``resume`` must equal the session's
+(:func:`rangekit.app.scan.setup.prepare_scan` checks that, with the folder, the rig and the object).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+from pathlib import Path
+
+from rangekit.errors import OptionError
+
+__all__ = ["ScanOptions", "SCAN_FLAGS", "SCAN_METHODS", "SCAN_DEFAULTS", "LASER_STEPS", "ARTEFACTS"]
+
+#: Scan methods: coded light (projector patterns, views registered) and laser lines (profiles at small
+#: turntable steps, placed by the turntable angle).
+SCAN_METHODS = ("coded", "laser")
+#: The options of a new scan left None.
+SCAN_DEFAULTS = {"method": "coded", "rig": "sim", "object": "lumpy", "views": 12, "patterns": "hybrid", "seed": 0,
+                 "passes": 1}
+#: Turntable steps of a laser scan over a full turn (0.9 degrees each).
+LASER_STEPS = 400
+#: ``artefact``: the simulated acceptance test of VDI/VDE 2634 part 2 (:mod:`rangekit.app.scan.vdi2634`).
+ARTEFACTS = ("vdi2634",)
+#: Each field's ``rangekit scan`` flag (``process`` and ``report`` are the flags' negations).
+SCAN_FLAGS = {"out": "--out", "resume": "--resume", "method": "--method", "rig": "--rig", "object": "--object",
+              "views": "--views", "steps": "--steps", "passes": "--passes", "flipped": "--flipped",
+              "patterns": "--patterns", "seed": "--seed", "up": "--up", "artefact": "--artefact",
+              "positions": "--positions", "allow_auto_exposure": "--allow-auto-exposure",
+              "exposures": "--exposures", "process": "--no-process", "fusion": "--fusion", "report": "--no-report",
+              "format": "--format"}
+#: Options of a turntable scan that ``artefact`` (one view per artefact position, coded light) does not take.
+_NOT_WITH_ARTEFACT = ("resume", "method", "steps", "up", "object", "views", "patterns", "passes", "flipped")
+
+
+@dataclass(frozen=True)
+class ScanOptions:
+    """A scan (``rangekit scan``): where, with what, and what is done with it after acquisition.
+
+    out : a new (or empty) session folder; or
+    resume : the folder of a session to continue (its own settings; the given ones must equal them).
+    method : ``"coded"`` (projector patterns, views registered) or ``"laser"`` (the rig's line lasers, one
+        profile per turntable step).
+    rig : ``"sim"`` (the simulator) or a rig file whose ``devices`` name the hardware.
+    object : the simulated object: a built-in name (:data:`rangekit.sim.scene.zoo`) or a mesh file.
+    views : turntable views over a full turn (coded light, 2..720); steps : a laser scan's steps (2..3600).
+    passes : coded-light passes (1..8), the object turned over between them; flipped : with ``resume``, the
+        user confirms the object is already turned over for the next pass.
+    patterns : the pattern set (:data:`rangekit.coded.patterns.PATTERN_METHODS`).
+    seed : the simulator's noise seed (0 <= seed < 2**32).
+    up : (x, y, z) of a mesh file object that points up on the turntable (Stanford meshes: (0, 1, 0)).
+    artefact : ``"vdi2634"``: scan the guideline's artefacts instead (with ``out``, ``rig``, ``positions``,
+        ``seed``); positions : (spheres, ball bars, planes) of it.
+    allow_auto_exposure : scan although the rig file's exposure is ``"auto"``.
+    exposures : multi-exposure capture, 2 to 8 exposures in microseconds, or ``("auto",)``.
+    process : decode, register and fuse after acquisition; fusion, report, format : how
+        (:class:`rangekit.app.process.options.ProcessOptions`).
+    """
+
+    out: str | Path | None = None
+    resume: str | Path | None = None
+    method: str | None = None
+    rig: str | Path | None = None
+    object: str | Path | None = None
+    views: int | None = None
+    steps: int | None = None
+    passes: int | None = None
+    flipped: bool = False
+    patterns: str | None = None
+    seed: int | None = None
+    up: tuple[float, float, float] | None = None
+    artefact: str | None = None
+    positions: tuple[int, int, int] | None = None
+    allow_auto_exposure: bool = False
+    exposures: tuple | None = None
+    process: bool = True
+    fusion: str = "poisson"
+    report: bool = True
+    format: str = "ply"
+
+    def __post_init__(self) -> None:
+        _check_values(self)
+        _check_combination(self)
+
+    @property
+    def folder(self) -> Path:
+        """The session folder: ``resume`` or ``out``."""
+        return Path(self.resume if self.resume is not None else self.out)
+
+    @property
+    def turntable_positions(self) -> int | None:
+        """``steps`` or ``views``, whichever is given (None: the default of the method)."""
+        return self.steps if self.steps is not None else self.views
+
+
+def _check_values(o: ScanOptions) -> None:
+    """Each field on its own: type and range."""
+    from rangekit.app.process.fused_outputs import MESH_EXPORT_FORMATS
+    from rangekit.app.process.options import FUSION_METHODS
+    from rangekit.coded.patterns import PATTERN_METHODS
+
+    for name, lo, hi in (("views", 2, 720), ("steps", 2, 3600), ("passes", 1, 8), ("seed", 0, 2**32 - 1)):
+        value = getattr(o, name)
+        if value is not None and (not _is_int(value) or not lo <= value <= hi):
+            raise OptionError(f"{{{name}}}: expected an integer in {lo}..{hi}, found {value!r}")
+    for name, choices in (("method", SCAN_METHODS), ("patterns", PATTERN_METHODS), ("artefact", ARTEFACTS)):
+        value = getattr(o, name)
+        if value is not None and value not in choices:
+            raise OptionError(f"{{{name}}} must be one of {', '.join(choices)}, found {value!r}")
+    for name, choices in (("fusion", FUSION_METHODS), ("format", MESH_EXPORT_FORMATS)):
+        if getattr(o, name) not in choices:
+            raise OptionError(f"{{{name}}} must be one of {', '.join(choices)}, found {getattr(o, name)!r}")
+    for name in ("flipped", "allow_auto_exposure", "process", "report"):
+        if not isinstance(getattr(o, name), bool):
+            raise OptionError(f"{{{name}}}: expected True or False, found {getattr(o, name)!r}")
+    if o.up is not None and (len(tuple(o.up)) != 3 or not all(_is_number(v) and math.isfinite(v) for v in o.up)):
+        raise OptionError(f"{{up}}: expected three finite numbers X Y Z, found {o.up!r}")
+    if o.positions is not None and (len(tuple(o.positions)) != 3 or not all(_is_int(n) for n in o.positions)):
+        raise OptionError(f"{{positions}}: expected three integers SPHERES BARS PLANES, found {o.positions!r}")
+    if o.exposures is not None:
+        given = tuple(o.exposures)
+        if given != ("auto",) and not all(_is_int(e) and 1 <= e <= 1_000_000 for e in given):
+            raise OptionError("{exposures}: expected 'auto' alone or 2 to 8 exposures in microseconds (1..1000000), "
+                              f"found {' '.join(map(str, given))}")
+        if given != ("auto",) and not 2 <= len(set(given)) <= 8:
+            raise OptionError(f"{{exposures}}: expected 2 to 8 different exposures, found {' '.join(map(str, given))}")
+
+
+def _check_combination(o: ScanOptions) -> None:
+    """The fields together: one folder, options that go with the method, ``artefact``'s own set."""
+    if o.artefact is not None:
+        given = [f"{{{name}}}" for name in _NOT_WITH_ARTEFACT if getattr(o, name) not in (None, False)]
+        if given:
+            raise OptionError(f"{', '.join(given)}: not used by {{artefact}} {o.artefact} (one single-view "
+                              "coded-light capture per artefact position on the simulator); leave them out")
+        if o.out is None:
+            raise OptionError(f"{{artefact}} {o.artefact}: expected {{out}} DIR, found none")
+        return
+    if o.positions is not None:
+        raise OptionError("{positions}: artefact positions of {artefact} vdi2634; give {artefact} vdi2634 or "
+                          "leave it out")
+    if (o.out is None) == (o.resume is None):
+        raise OptionError("{out} and {resume}: expected one of them (a new session folder, or the session to "
+                          f"continue), found {'both' if o.out is not None else 'neither'}")
+    if o.steps is not None and o.views is not None:
+        raise OptionError("{steps} and {views} both give the turntable positions; give one ({steps} for a laser "
+                          "scan)")
+    if o.method != "laser" and o.steps is not None and o.resume is None:
+        raise OptionError("{steps}: turntable steps of a laser scan; with {method} coded give {views}")
+    if o.flipped and o.resume is None:
+        raise OptionError("{flipped} confirms, when resuming a multi-pass scan, that the object was turned over; "
+                          "give it with {resume} DIR")
+    if o.method == "laser" and o.patterns is not None:
+        raise OptionError("{patterns}: a laser scan projects no patterns; leave {patterns} out with {method} laser")
+    if o.method == "laser" and o.passes not in (None, 1):
+        raise OptionError(f"{{passes}}: a laser scan takes one pass, found {o.passes}; leave {{passes}} out with "
+                          "{method} laser")
+    if o.resume is not None and o.up is not None:
+        raise OptionError("{up}: a resumed scan keeps its session's object as it stands; leave {up} out")
+    if o.resume is not None and o.exposures is not None:
+        raise OptionError("{exposures}: a resumed scan keeps its session's exposures; leave {exposures} out")
+    if o.method == "laser" and o.exposures is not None:
+        raise OptionError("{exposures}: multi-exposure capture is for coded light; leave it out with {method} laser")
+
+
+def _is_int(value) -> bool:
+    import numbers
+
+    return isinstance(value, numbers.Integral) and not isinstance(value, bool)
+
+
+def _is_number(value) -> bool:
+    import numbers
+
+    return isinstance(value, numbers.Real) and not isinstance(value, bool)
+
+
+#: Every field, in order (the command line's test checks each has its flag and the reverse).
+SCAN_FIELDS = tuple(f.name for f in fields(ScanOptions))
+__all__ += ["SCAN_FIELDS"]

@@ -31,7 +31,7 @@ __all__ = ["HardwareRig", "open_rig_devices"]
 
 @dataclass
 class HardwareRig:
-    """The opened devices of a rig (the :class:`rangekit.rig.devices.Rig` protocol), plus projector control."""
+    """The opened devices of a rig (the :class:`rangekit.rig.devices.RigDevices` protocol), plus projector control."""
 
     camera: object
     projector: object

@@ -10,7 +10,9 @@ The functions a notebook reaches for first are here (README "In Python")::
     picture = rk.render(mesh).image                    # (H, W, 3) uint8
 
 They are imported on first use (module ``__getattr__``), so ``import rangekit`` stays fast and loads no
-heavy dependency; everything else is in its module (``rangekit.camera``, ``rangekit.sim``...).
+heavy dependency; everything else is in its module (``rangekit.camera``, ``rangekit.sim``...). The main job:
+``rk.scan(rk.ScanOptions(out="scan1"))``, ``rk.process("scan1")``; one capture to a cloud:
+``rk.reconstruct("capture_dir")``. A subpackage is reached the same way (``rk.photometric``, ``rk.sim``).
 """
 
 import os as _os
@@ -24,38 +26,28 @@ __version__ = "0.1.0"
 # any OpenMP runtime starts; a user's own setting wins. See rangekit._runtime.threads.
 _os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
-# name -> module that defines it; imported on first access (PEP 562), so ``import rangekit`` stays light.
-_LAZY = {
-    "load_cloud": "rangekit.formats.clouds", "save_cloud": "rangekit.formats.clouds",
-    "load_range_grid": "rangekit.formats.clouds",
-    "load_mesh": "rangekit.formats.meshes", "save_mesh": "rangekit.formats.meshes",
-    "PointCloud": "rangekit.surface.cloud", "TriangleMesh": "rangekit.surface.mesh",
-    "as_cloud": "rangekit.surface.convert", "as_mesh": "rangekit.surface.convert",
-    "from_open3d": "rangekit.surface.convert", "from_trimesh": "rangekit.surface.convert",
-    "to_trimesh": "rangekit.surface.convert", "to_open3d": "rangekit.surface.convert",
-    "estimate_normals": "rangekit.surface.cloud", "voxel_downsample": "rangekit.surface.cloud",
-    "merge_clouds": "rangekit.surface.cloud", "transform_cloud": "rangekit.surface.cloud",
-    "poisson_mesh": "rangekit.surface.fusion", "make_watertight": "rangekit.surface.watertight",
-    "icp": "rangekit.registration.icp", "IcpOptions": "rangekit.registration.icp",
-    "register_views": "rangekit.registration.multiview", "MultiViewOptions": "rangekit.registration.multiview",
-    "render": "rangekit.app.commands.picture",
-    "scan": "rangekit.app.scan.scan", "ScanOptions": "rangekit.app.scan.options", "ScanResult": "rangekit.app.scan.scan",
-    "process": "rangekit.app.scan.scan", "ProcessOptions": "rangekit.app.process.options",
+from rangekit._runtime.lazy import lazy_exports
+
+# name -> the module that defines it (relative to rangekit), imported on first access (PEP 562): the one
+# re-export mechanism of rangekit's packages (rangekit._runtime.lazy), so ``import rangekit`` stays light.
+_MODULE_OF = {
+    "load_cloud": "formats.clouds", "save_cloud": "formats.clouds", "load_range_grid": "formats.clouds",
+    "load_mesh": "formats.meshes", "save_mesh": "formats.meshes",
+    "load_rig": "rig.rig_file", "save_rig": "rig.rig_file", "Rig": "rig.rig_file",
+    "PointCloud": "surface.cloud", "TriangleMesh": "surface.mesh",
+    "as_cloud": "surface.convert", "as_mesh": "surface.convert", "from_open3d": "surface.convert",
+    "from_trimesh": "surface.convert", "to_trimesh": "surface.convert", "to_open3d": "surface.convert",
+    "estimate_normals": "surface.cloud", "voxel_downsample": "surface.cloud", "merge_clouds": "surface.cloud",
+    "transform_cloud": "surface.cloud",
+    "poisson_mesh": "surface.fusion", "make_watertight": "surface.watertight",
+    "icp": "registration.icp", "IcpOptions": "registration.icp",
+    "register_views": "registration.multiview", "MultiViewOptions": "registration.multiview",
+    "render": "app.commands.picture",
+    "reconstruct": "app.commands.reconstruct",
+    "register": "app.commands.register", "photometric_folder": "app.commands.photometric",
+    "photometric_stereo": "photometric.calibrated",
+    "scan": "app.scan.scan", "ScanOptions": "app.scan.options", "ScanResult": "app.scan.scan",
+    "process": "app.scan.scan", "ProcessOptions": "app.process.options",
 }
-__all__ = ["__version__", *_LAZY]
-
-
-def __getattr__(name: str):
-    module = _LAZY.get(name)
-    if module is None:
-        raise AttributeError(f"module 'rangekit' has no attribute {name!r}")
-    import importlib
-
-    attr = "load_mesh_file" if name == "load_mesh" else name
-    value = getattr(importlib.import_module(module), attr)
-    globals()[name] = value   # the next access is a plain attribute
-    return value
-
-
-def __dir__():
-    return sorted([*globals(), *_LAZY])
+__all__ = ["__version__", *_MODULE_OF]
+__getattr__, __dir__ = lazy_exports(__name__, _MODULE_OF, __all__)

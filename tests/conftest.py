@@ -1,7 +1,13 @@
+"""The suite's shared fixtures: ``rig`` (the default simulated rig), ``small_rig`` (it with a 320x256 camera),
+``cli(*args)`` (``rangekit ARGS`` in this process: a :class:`cli_runs.Run` with the exit code, stdout and
+stderr; argparse's own exits caught), ``reference_session`` (a small finished simulated session, made once per
+run: tests/sessions.py) and ``tmp_session`` (a fresh copy of it for one test to change); scenes and imaging."""
+
 import ctypes
 import ctypes.util
 import gc
 import os
+import shutil
 
 import numpy as np
 import pytest
@@ -14,6 +20,45 @@ from rangekit.sim.scene.objects import box, plane
 @pytest.fixture(scope="session")
 def rig():
     return default_rig()
+
+
+@pytest.fixture(scope="session")
+def small_rig():
+    from small_rigs import small_rig as make
+
+    return make()
+
+
+@pytest.fixture
+def cli(capsys):
+    from cli_runs import Run
+    from rangekit.cli import main
+
+    def run(*args) -> Run:
+        capsys.readouterr()
+        try:
+            code = main([str(a) for a in args])
+        except SystemExit as stop:  # argparse: --help, or a usage error
+            code = stop.code if isinstance(stop.code, int) else 1
+        captured = capsys.readouterr()
+        return Run(code, captured.out, captured.err)
+
+    return run
+
+
+@pytest.fixture(scope="session")
+def reference_session(tmp_path_factory):
+    """A finished simulated session as ``rangekit scan`` makes it (tests/sessions.py: 4 views of the lumpy object,
+    seed 1, Gray code, the small rig). Read it; copy it (``tmp_session``) to change it."""
+    from sessions import make_reference
+
+    return make_reference(tmp_path_factory.mktemp("reference") / "s")
+
+
+@pytest.fixture
+def tmp_session(reference_session, tmp_path):
+    """A copy of ``reference_session`` of this test's own."""
+    return shutil.copytree(reference_session, tmp_path / "session")
 
 
 @pytest.fixture(scope="session")

@@ -2,7 +2,15 @@
 
 from dataclasses import replace
 
+from rangekit.rig.rig_file import Rig
 from rangekit.sim import default_rig
+
+
+def small_rig() -> Rig:
+    """The default simulated rig's camera at 320x256 (same pose and lens), its projector and turntable: the
+    suite's session rig (the ``small_rig`` fixture)."""
+    r = default_rig()
+    return Rig(cameras=(r.camera.resized(320, 256),), projector=r.projector, T_world_table=r.T_world_table)
 
 
 def small_projector_rig():

@@ -1,4 +1,4 @@
-"""Crash-safe acquisition on the simulated rig (issue 5)."""
+"""Crash-safe acquisition on the simulated rig."""
 
 import time
 
@@ -9,13 +9,9 @@ from rangekit.app.acquire.acquire import acquire
 from rangekit.formats.sessions.session import ScanPlan, Session, SimulatorSettings, load_session
 from rangekit.errors import ConfigError, DecodeError, DeviceDisconnected
 from rangekit.coded.patterns import make_pattern_spec
-from rangekit.rig.rig_file import Rig
-from rangekit.sim import SimRig, default_rig, default_scene
+from rangekit.sim import SimRig, default_scene
+from small_rigs import small_rig
 
-
-def small_rig():
-    r = default_rig()
-    return Rig(cameras=(r.camera.resized(320, 256),), projector=r.projector, T_world_table=r.T_world_table)
 
 
 def sim(seed=3):

@@ -1,4 +1,4 @@
-"""Many sessions on Dask (issue 21, rangekit.app.process.batch): real worker processes, no mocks. The outputs are the
+"""Many sessions on Dask (rangekit.app.process.batch): real worker processes, no mocks. The outputs are the
 bytes of serial processing; a failing session is reported by name while the others finish; a worker
 killed in the middle loses nothing and no view is decoded twice; an unreachable scheduler is a clear
 error within 10 s."""
@@ -18,7 +18,7 @@ from pathlib import Path
 
 import pytest
 
-from faults._sessions import N_VIEWS, make_reference
+from sessions import N_VIEWS
 from rangekit.app.process.batch import WORKER_ENV, SchedulerUnreachable, process_sessions
 from rangekit.app.process.options import ProcessOptions
 from rangekit.app.process.process import process_session
@@ -29,20 +29,20 @@ OUTPUTS = ("mesh.ply", "mesh_watertight.ply", "poses.json", "merged.ply")
 
 
 @pytest.fixture(scope="module")
-def sessions(tmp_path_factory):
+def sessions(tmp_path_factory, reference_session):
     """The small reference session (4 views, 320x256) and its outputs processed serially, in one process."""
     root = tmp_path_factory.mktemp("batch")
-    ref = make_reference(root / "reference")
+    ref = shutil.copytree(reference_session, root / "reference")
     serial = shutil.copytree(ref, root / "serial")
     process_session(serial, ProcessOptions(report=False))
     return root, ref, {name: (serial / name).read_bytes() for name in OUTPUTS}
 
 
 @pytest.fixture(scope="module")
-def two_unprocessed(tmp_path_factory):
+def two_unprocessed(tmp_path_factory, reference_session):
     """The small reference session and a copy, neither processed (for the tests that stop before any work)."""
     root = tmp_path_factory.mktemp("batch_options")
-    ref = make_reference(root / "reference")
+    ref = shutil.copytree(reference_session, root / "reference")
     return ref, shutil.copytree(ref, root / "copy")
 
 

@@ -1,4 +1,4 @@
-"""Calibration against the simulator's exact rig (issue 7).
+"""Calibration against the simulator's exact rig.
 
 One module fixture runs the whole simulated calibration (8-bit captures, ~1% noise, lens and projector
 blur, projector gamma 2.2): 20 hand-held board poses plus one pose where the board is out of view, then

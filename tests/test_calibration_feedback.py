@@ -1,4 +1,4 @@
-"""Calibration with feedback (issue 19, point 5): each board pose is judged as it is captured, against the
+"""Calibration with feedback: each board pose is judged as it is captured, against the
 simulator's truth: good poses reproject well under 0.5 px, bad poses (out of view, too oblique, too small)
 are rejected with the reason named, and the summary counts the kept poses."""
 

@@ -1,4 +1,4 @@
-"""rangekit check (issue 19): the measured projector latency (within one frame period of the simulator's,
+"""rangekit check: the measured projector latency (within one frame period of the simulator's,
 and a scan that uses the written pattern delay records the frames of a latency-free rig), the saturated
 fraction against the simulator's noise-free truth on the shiny zoo object, the outputs and the CLI."""
 

@@ -118,14 +118,14 @@ def test_register_and_mesh_commands(tmp_path, capsys):
     assert main(["register", *scans, "--init", "none", "--out", str(out)]) == 0
     text = capsys.readouterr().out
     assert "synchronisation over" in text and "rmse" in text
-    from rangekit.formats.meshes import load_mesh_file
+    from rangekit.formats.meshes import load_mesh
     from rangekit.formats.poses import load_poses
 
     sources, T = load_poses(out / "poses.json")
     assert [s.split("/")[-1] for s in sources] == ["bun000.ply", "bun045.ply", "bun315.ply", "chin.ply"]
     assert np.allclose(T[0], np.eye(4))
     assert 20 < np.degrees(np.arccos((np.trace(T[1][:3, :3]) - 1) / 2)) < 50  # bun045 is ~34 deg from bun000
-    mesh = load_mesh_file(out / "mesh.ply")
+    mesh = load_mesh(out / "mesh.ply")
     assert mesh.is_watertight and len(mesh.triangles) > 1000
     # The poses file seeds a second run; a turntable prior parses.
     assert main(["register", *scans, "--init", str(out / "poses.json"), "--no-mesh", "--out", str(tmp_path / "r2")]) == 0

@@ -1,4 +1,4 @@
-"""What the command line prints (issue 22): progress on stderr (a tqdm bar with an ETA on a terminal, plain
+"""What the command line prints: progress on stderr (a tqdm bar with an ETA on a terminal, plain
 lines elsewhere), results on stdout, -q/-v on every command, and output extensions refused before any work."""
 
 import os

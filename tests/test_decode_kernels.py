@@ -21,6 +21,7 @@ from rangekit.coded.response import phase_correction
 from rangekit.coded.triangulate import triangulate_ray_ray
 from rangekit.coded.uncertainty import along_ray_jacobian, point_sigma
 from rangekit.geometry import look_at
+from small_rigs import small_rig
 
 DISTORTIONS = [
     [-0.02, 0.01, 0.0, 0.0, 0.0],
@@ -30,7 +31,7 @@ DISTORTIONS = [
 
 
 def _numpy_undistort(xy_distorted, dist, tol=1e-14, max_iterations=30):
-    """The vectorised numpy Newton of rangekit.camera.undistort before issue 20's kernels (the reference)."""
+    """The vectorised numpy Newton of rangekit.camera.undistort before the compiled kernels (the reference)."""
     d = _full_coeffs(np.asarray(dist, dtype=np.float64))
     target = np.asarray(xy_distorted, dtype=np.float64)
     xy = target.copy()
@@ -172,11 +173,9 @@ def test_view_clouds_reads_ahead_and_gives_view_clouds_results_in_order(tmp_path
     from rangekit.errors import RangekitError
     from rangekit.formats.sessions.session import ScanPlan, Session
     from rangekit.geometry import invert_T
-    from rangekit.rig.rig_file import Rig
-    from rangekit.sim import SimRig, default_rig, default_scene
+    from rangekit.sim import SimRig, default_scene
 
-    r = default_rig()
-    rig = Rig(cameras=(r.camera.resized(320, 256),), projector=r.projector, T_world_table=r.T_world_table)
+    rig = small_rig()
     s = SimRig(default_scene("lumpy"), rig, seed=2)
     spec = make_pattern_spec("hybrid", s.projector.resolution, steps=4, period=16)
     acquire(s, rig, spec, tmp_path / "a", plan=ScanPlan(n_views=3))

@@ -1,4 +1,4 @@
-"""``rangekit stereo --device`` (issue 19, point 6) against a fake ``depthai`` module at the API boundary.
+"""``rangekit stereo --device`` against a fake ``depthai`` module at the API boundary.
 
 The fake records every node, link and emitter call and streams a simulated OAK-D-Pro-like pair
 (:func:`rangekit.sim.sensors.stereo.render_stereo`, 320 x 200) through a Sync node's message groups, with the

@@ -1,4 +1,4 @@
-"""Frames written behind the capture (issue 20): the same bytes, the same errors, the same crash safety."""
+"""Frames written behind the capture: the same bytes, the same errors, the same crash safety."""
 
 import errno
 from types import SimpleNamespace

@@ -1,4 +1,4 @@
-"""Fusion that invents nothing (issue 18 point 3): the observed mesh keeps only surface the input points
+"""Fusion that invents nothing: the observed mesh keeps only surface the input points
 support, the watertight mesh closes it and flags what no view observed. Against analytic truth: a sphere
 with its bottom cut off, and two parallel "ears" with a gap Poisson webs over."""
 
@@ -9,7 +9,7 @@ import pytest
 from scipy.spatial import cKDTree
 
 from rangekit.errors import InputError, MeshError
-from rangekit.formats.meshes import load_mesh_file, save_mesh
+from rangekit.formats.meshes import load_mesh, save_mesh
 from rangekit.formats.sessions.summary import ProcessResult
 from rangekit.surface.cloud import PointCloud
 from rangekit.surface.fusion import poisson_meshes
@@ -187,10 +187,10 @@ def test_observed_flag_round_trips_through_ply(tmp_path):
     save_mesh(tmp_path / "m.ply", TriangleMesh(V, np.array([[0, 1, 2], [1, 3, 2]]), observed=flag))
     data = (tmp_path / "m.ply").read_bytes()
     assert b"property uchar observed" in data
-    back = load_mesh_file(tmp_path / "m.ply")
+    back = load_mesh(tmp_path / "m.ply")
     assert np.array_equal(back.observed, flag) and np.array_equal(back.vertices, V)
     save_mesh(tmp_path / "n.ply", TriangleMesh(V, np.array([[0, 1, 2]])))
-    assert load_mesh_file(tmp_path / "n.ply").observed is None
+    assert load_mesh(tmp_path / "n.ply").observed is None
     with pytest.raises(InputError, match=r"observed must be \(4,\) bool, found shape \(2,\)"):
         TriangleMesh(V, np.array([[0, 1, 2]]), observed=np.ones(2, bool))
 

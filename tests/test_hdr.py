@@ -1,4 +1,4 @@
-"""Multi-exposure (HDR) coded light (issue 19): capture per exposure (e<us>/ folders, session.json, resume),
+"""Multi-exposure (HDR) coded light: capture per exposure (e<us>/ folders, session.json, resume),
 the per-pixel merge rule, and the shiny simulated object decoded over >= 95% of its lit pixels."""
 
 import json

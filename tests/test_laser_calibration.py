@@ -1,4 +1,4 @@
-"""Laser-plane calibration on rendered simulator frames (issue 17, point 3): board poses crossed by the
+"""Laser-plane calibration on rendered simulator frames: board poses crossed by the
 lasers, rendered off and on, the board pose from the detected corners (never the simulator's), the line
 peaks triangulated on the board and fitted per laser; the errors against the true planes; bad input."""
 

@@ -1,4 +1,4 @@
-"""Laser-plane calibration on hardware (issue 17, point 3: ``rangekit calibrate --lasers --rig RIG.json``),
+"""Laser-plane calibration on hardware (``rangekit calibrate --lasers --rig RIG.json``),
 driven here with simulated devices: a SimRig (light="laser") whose scene is the board the test's ``ask``
 places at known poses, a rig file whose laser planes are rough guesses; the fitted planes against the
 simulator's true ones, the laser commands, a pose missing a line, an interrupted run, refusals."""

@@ -1,4 +1,4 @@
-"""The simulated rig's line lasers as devices (issue 17): the turntable board switches them, the camera
+"""The simulated rig's line lasers as devices: the turntable board switches them, the camera
 sees the one that is on, the same state gives the same bytes, ground truth is the LaserView's."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Laser triangulation and laser-plane calibration against exact synthetic geometry (issue 17).
+"""Laser triangulation and laser-plane calibration against exact synthetic geometry.
 
 The camera is the simulator's default (1800 px focal length, k1 = -0.08, k2 = 0.12), the laser plane a
 Ciclop-like sheet through the turntable axis at 30 degrees to the camera; board poses are tilted up to

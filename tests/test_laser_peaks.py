@@ -1,4 +1,4 @@
-"""Laser-line peak detection (issue 17, point 2) against synthetic lines with exactly known centres.
+"""Laser-line peak detection against synthetic lines with exactly known centres.
 
 Frames from tests/laser_lines.py: pixel-integrated Gaussian profiles (1/e^2 widths 3-8 px) at a known
 subpixel column per row (or a known slanted or curved line for the ridge detector), Gaussian noise,

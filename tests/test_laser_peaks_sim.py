@@ -1,4 +1,4 @@
-"""Peak detection on the simulator's own laser frames (issue 17, point 2's acceptance): the default laser
+"""Peak detection on the simulator's own laser frames: the default laser
 rig, RGB 8-bit camera, line width 0.8 mm, default noise and speckle, against the exact image projection of
 the lit curve (:func:`rangekit.sim.laser.truth.column_errors`). benchmarks/laser/bench_laser_peaks_sim.py
 measures the same over more objects and angles (docs/laser.md)."""

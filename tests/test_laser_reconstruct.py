@@ -1,4 +1,4 @@
-"""``rangekit reconstruct`` of a simulated laser capture (issue 17): each laser's line peaks triangulated
+"""``rangekit reconstruct`` of a simulated laser capture: each laser's line peaks triangulated
 against its plane, measured against the simulator's lit curve; a laser that lights nothing is an error
 naming its frame, never an empty cloud."""
 

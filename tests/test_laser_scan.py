@@ -1,4 +1,4 @@
-"""``rangekit scan --method laser`` (issue 17): a turntable laser-line session, acquired crash-safe and
+"""``rangekit scan --method laser``: a turntable laser-line session, acquired crash-safe and
 resumable like coded light, processed into a cloud and a mesh measured against the simulator's truth.
 
 The full 400-step scans of lumpy and of the upright bunny run in ``make test-slow``, and so does a 12-step

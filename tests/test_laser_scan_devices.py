@@ -1,5 +1,5 @@
 """The laser scan's acquisition through the real turntable drivers on the simulated Horus and FabScan
-firmware over a pty, its resume after an unplug, and its bad input (issue 17).
+firmware over a pty, its resume after an unplug, and its bad input.
 
 The simulated camera renders the lasers the *firmware* has on: a small wrapper (:class:`_DrivenBoard`)
 sends every move and laser command through the driver, then mirrors the firmware's laser state

@@ -1,4 +1,4 @@
-"""Simulated line lasers (issue 17, point 1): the lit curve's ground truth is exact (on the laser plane,
+"""Simulated line lasers: the lit curve's ground truth is exact (on the laser plane,
 on the mesh, at the pixel it is stored at), shadowed and hidden points are absent, the rendered line
 peaks on the true curve, and ``rangekit sim render --sensor laser`` writes the capture folder."""
 

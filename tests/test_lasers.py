@@ -1,4 +1,4 @@
-"""Line lasers in the rig file (issue 17): round trip, the plane's normalisation, errors naming the field."""
+"""Line lasers in the rig file: round trip, the plane's normalisation, errors naming the field."""
 
 from __future__ import annotations
 

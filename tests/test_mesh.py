@@ -17,7 +17,7 @@ from scipy.spatial import cKDTree
 
 from rangekit.errors import FileFormatError, InputError, MeshError
 from rangekit.geometry import apply_T, compose, invert_T
-from rangekit.formats.meshes import load_mesh_file, save_mesh
+from rangekit.formats.meshes import load_mesh, save_mesh
 from rangekit.surface.cloud import PointCloud, orient_normals_to_sensor
 from rangekit.surface.fusion import poisson_mesh, tsdf_fuse
 from rangekit.surface.mesh import TriangleMesh, distance_to_surface
@@ -277,7 +277,7 @@ def test_save_and_load_mesh(tmp_path, suffix):
     mesh = TriangleMesh(sphere.vertices + [0.1, -0.2, 0.3], sphere.triangles, colours)
     path = tmp_path / f"mesh{suffix}"
     save_mesh(path, mesh)
-    back = load_mesh_file(path)
+    back = load_mesh(path)
     assert back.is_watertight
     assert distance_to_surface(back.vertices, mesh).max() < 1e-7
     if suffix == ".ply":  # exact: float64 coordinates, 8-bit colours
@@ -292,10 +292,10 @@ def test_mesh_file_errors(tmp_path):
     with pytest.raises(FileFormatError, match="unknown mesh format '.off'.*known: .ply, .obj, .stl"):
         save_mesh(tmp_path / "m.off", mesh)
     with pytest.raises(FileFormatError, match="not found"):
-        load_mesh_file(tmp_path / "missing.ply")
+        load_mesh(tmp_path / "missing.ply")
     (tmp_path / "bad.ply").write_bytes(b"ply\nformat nonsense\n")
     with pytest.raises(FileFormatError, match="bad.ply"):
-        load_mesh_file(tmp_path / "bad.ply")
+        load_mesh(tmp_path / "bad.ply")
 
 
 def test_orient_normals_to_sensor():

@@ -169,7 +169,7 @@ def test_prior_chosen_pairs_register_to_ground_truth():
     prior = perturb_poses(scans.T_world_view, max_angle=np.radians(1), max_translation=0.005 * scans.diag, rng=2)
     chosen = default_pairs(prior, True)
     # 12 views 30 deg apart: each with its neighbours at 30 and 60 deg, 24 of the 66 pairs; without a prior
-    # also 4 long links 90 deg apart (issue 21)
+    # also 4 long links 90 deg apart
     assert len(chosen) == 24 and all(min(j - i, 12 - (j - i)) <= 2 for i, j in chosen)
     unprimed = default_pairs(prior, False)
     assert len(unprimed) == 28 and set(chosen) <= set(unprimed) and len(all_pairs(prior)) == 66

@@ -10,7 +10,7 @@ from scipy.spatial import cKDTree
 
 from rangekit.errors import FileFormatError, SceneError
 from rangekit.geometry import apply_T, axis_angle_to_R, make_T
-from rangekit.sim.scene.objects import (BUILTIN_OBJECTS, board_corners, box, calibration_board, cylinder, load_mesh,
+from rangekit.sim.scene.objects import (BUILTIN_OBJECTS, board_corners, box, calibration_board, cylinder, load_scene_object,
                                   lumpy, make_object, plane, sphere, torus, turntable_disc)
 from rangekit.sim.scene.scene_object import SceneObject
 
@@ -266,7 +266,7 @@ def test_load_mesh_round_trip_with_colours(tmp_path):
                           process=False)
     path = tmp_path / "blob.ply"
     src.export(path)
-    back = load_mesh(path, scale=2.0)
+    back = load_scene_object(path, scale=2.0)
     assert back.name == "blob" and back.triangles.shape == obj.triangles.shape
     dist, idx = cKDTree(obj.vertices * 2.0).query(back.vertices)
     assert dist.max() < 1e-7                                              # float32 in the file
@@ -277,26 +277,26 @@ def test_load_mesh_round_trip_with_colours(tmp_path):
     assert np.all(make_object(str(plain), albedo=0.3).vertex_albedo == 0.3)
     quad = tmp_path / "quad.obj"                                          # polygons are triangulated
     quad.write_text("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\n")
-    q = load_mesh(quad, scale=0.1)
+    q = load_scene_object(quad, scale=0.1)
     assert q.triangles.shape == (2, 3) and np.allclose(q.face_normals(), [0, 0, 1])
     assert q.to_trimesh().area == pytest.approx(0.01)
 
 
 def test_load_mesh_bad_files(tmp_path):
     with pytest.raises(FileFormatError, match="missing.ply: no such file"):
-        load_mesh(tmp_path / "missing.ply")
+        load_scene_object(tmp_path / "missing.ply")
     garbage = tmp_path / "garbage.ply"
     garbage.write_bytes(np.random.default_rng(0).bytes(300))
     with pytest.raises(FileFormatError, match="garbage.ply: trimesh cannot read"):
-        load_mesh(garbage)
+        load_scene_object(garbage)
     empty = tmp_path / "empty.ply"
     trimesh.Trimesh(np.zeros((0, 3)), np.zeros((0, 3), int)).export(empty)
     with pytest.raises(FileFormatError, match="empty.ply: the mesh has 0 triangles"):
-        load_mesh(empty)
+        load_scene_object(empty)
     points = tmp_path / "points.ply"
     trimesh.PointCloud(np.random.default_rng(0).random((10, 3))).export(points)
     with pytest.raises(FileFormatError, match="points.ply: the mesh has 0 triangles"):
-        load_mesh(points)
+        load_scene_object(points)
 
 
 def test_make_object_builtins_and_unknown():

@@ -1,4 +1,4 @@
-"""Multi-pass scans (issue 21): the session's passes, the simulated turn-over, resume in pass 2, the prompt."""
+"""Multi-pass scans: the session's passes, the simulated turn-over, resume in pass 2, the prompt."""
 
 import io
 import json

@@ -1,4 +1,4 @@
-"""Registration of a two-pass scan (issue 21): each pass from its turntable prior, the passes to each
+"""Registration of a two-pass scan: each pass from its turntable prior, the passes to each
 other with no prior, against the simulator's known turn-over (exact clouds from the ray caster)."""
 
 import numpy as np
@@ -7,17 +7,17 @@ import pytest
 from rangekit.errors import RegistrationError
 from rangekit.geometry import invert_T, rotation_angle
 from rangekit.registration.passes import register_passes
-from rangekit.rig.rig_file import Rig, turntable_prior
-from rangekit.sim import SimRig, default_rig, default_scene
+from rangekit.rig.rig_file import turntable_prior
+from rangekit.sim import SimRig, default_scene
 from rangekit.sim.scene.passes import pass_motions, view_motions
 from rangekit.surface.cloud import PointCloud
+from small_rigs import small_rig
 
 N_PER_PASS = 6
 
 
 def _rig():
-    r = default_rig()
-    return Rig(cameras=(r.camera.resized(320, 256),), projector=r.projector, T_world_table=r.T_world_table)
+    return small_rig()
 
 
 @pytest.fixture(scope="module")

@@ -1,4 +1,4 @@
-"""Photometric stereo on the simulated light stage, against its exact normals and depth (issue 8)."""
+"""Photometric stereo on the simulated light stage, against its exact normals and depth."""
 
 from __future__ import annotations
 

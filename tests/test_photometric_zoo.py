@@ -1,4 +1,4 @@
-"""Photometric stereo on the zoo's hard objects (issue 18, point 6): the light stage's interreflection
+"""Photometric stereo on the zoo's hard objects: the light stage's interreflection
 against the analytic spherical cavity, and the robust method against least squares on ``bowl`` and
 ``shiny`` (cast shadows, one bounce of interreflection, saturated highlights), small images."""
 

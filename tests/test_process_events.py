@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import rangekit as rk
-from faults._sessions import N_VIEWS, make_reference
+from sessions import N_VIEWS
 from rangekit.app import events as ev
 from rangekit.app.process.options import ProcessOptions
 from rangekit.cli import main
@@ -19,10 +19,10 @@ from rangekit.errors import ConfigError, RangekitError
 
 
 @pytest.fixture(scope="module")
-def processed(tmp_path_factory):
+def processed(tmp_path_factory, reference_session):
     """The small reference session processed twice: by the command line, and by rk.process with a subscriber."""
     root = tmp_path_factory.mktemp("process_events")
-    ref = make_reference(root / "reference")
+    ref = reference_session
     by_cli, by_call = shutil.copytree(ref, root / "cli"), shutil.copytree(ref, root / "call")
     assert main(["-q", "process", str(by_cli), "--no-report"]) == 0
     seen: list = []

@@ -5,8 +5,7 @@ the 3D view turns when dragged in headless Chromium, and the page makes no netwo
 import base64
 import json
 import re
-import sys
-from pathlib import Path
+import shutil
 
 import cv2
 import numpy as np
@@ -17,17 +16,15 @@ from rangekit.app.report.residuals import residual_histogram_svg
 from rangekit.app.report.viewer import decimate
 from rangekit.app.report.views import saturated_fraction
 
-sys.path.insert(0, str(Path(__file__).parent))
-sys.path.insert(0, str(Path(__file__).parent / "faults"))
 
 
 @pytest.fixture(scope="module")
-def report(tmp_path_factory):
-    from _sessions import N_VIEWS, make_reference
+def report(tmp_path_factory, reference_session):
+    from sessions import N_VIEWS
 
     from rangekit.app.process.process import process_session
 
-    out = make_reference(tmp_path_factory.mktemp("nogt") / "session")
+    out = shutil.copytree(reference_session, tmp_path_factory.mktemp("nogt") / "session")
     data = json.loads((out / "session.json").read_text())
     data.pop("simulator")                      # as a hardware session: nothing to evaluate against
     (out / "session.json").write_text(json.dumps(data, indent=2))

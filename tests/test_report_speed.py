@@ -1,4 +1,4 @@
-"""The report's and the evaluation's fast paths (issue 20) against the straightforward code they replace:
+"""The report's and the evaluation's fast paths against the straightforward code they replace:
 every one must give the same bits (colours, z-buffer winners, normal sums, k-d tree neighbours, depth edges),
 and the kept mesh casts must be the casts."""
 

@@ -1,4 +1,4 @@
-"""Projector response (gamma): fit from grey levels, phase correction, rig file (issue 7).
+"""Projector response (gamma): fit from grey levels, phase correction, rig file.
 
 Against the simulator's truth: ImagingModel's projector response ``black + (1 - black) p ** gamma``,
 default noise, 8 bits. Run with ``pytest -s`` to see the measured figures quoted in docs/coded-light.md.

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from rangekit.cli import main
-from rangekit.formats.meshes import load_mesh_file
+from rangekit.formats.meshes import load_mesh
 from rangekit.surface.mesh import TriangleMesh, distance_to_surface
 from rangekit.sim import default_scene
 
@@ -32,8 +32,8 @@ def scanned(tmp_path_factory):
 
 @pytest.mark.slow
 def test_scan_gives_a_watertight_mesh_close_to_the_true_surface(scanned):
-    mesh = load_mesh_file(scanned.parent / "poisson_mesh.ply")   # the observed surface
-    closed = load_mesh_file(scanned.parent / "poisson_mesh_watertight.ply")
+    mesh = load_mesh(scanned.parent / "poisson_mesh.ply")   # the observed surface
+    closed = load_mesh(scanned.parent / "poisson_mesh_watertight.ply")
     summary = json.loads((scanned.parent / "poisson_summary.json").read_text())
     acc = summary["accuracy"]
     print(f"\n6-view scan: observed mesh RMS {acc['rms'] * 1e3:.4f} mm = "

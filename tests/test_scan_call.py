@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 import rangekit as rk
-from faults._sessions import N_VIEWS, make_reference
+from sessions import N_VIEWS
 from file_reads import FileReads
 from rangekit.app import events as ev
 from rangekit.app.scan.options import SCAN_FIELDS, SCAN_FLAGS, ScanOptions
@@ -107,10 +107,10 @@ def _check_reads(folder: Path, reads: FileReads, session_reads: int) -> None:
     assert written and {name: reads.count(name) for name in written} == {name: 0 for name in written}
 
 
-def test_processing_reads_each_frame_once_and_nothing_it_wrote(tmp_path):
+def test_processing_reads_each_frame_once_and_nothing_it_wrote(tmp_session):
     """The small reference session processed from its folder (report included): session.json read once, each
     frame once (its SHA-256 taken from those bytes), no cache or output read back."""
-    folder = make_reference(tmp_path / "s")
+    folder = tmp_session
     with FileReads(_watched(folder)) as reads:
         rk.process(folder)
     assert (folder / "report.html").is_file() and (folder / "view_000" / "maps.npz").is_file()
@@ -118,10 +118,10 @@ def test_processing_reads_each_frame_once_and_nothing_it_wrote(tmp_path):
     assert sum(n for name, n in reads.reads.items() if name.endswith(".png")) == N_VIEWS * FRAMES_GRAYCODE
 
 
-def test_a_changed_frame_is_refused_from_the_bytes_read_for_decoding(tmp_path):
+def test_a_changed_frame_is_refused_from_the_bytes_read_for_decoding(tmp_session):
     from rangekit.errors import FileFormatError
 
-    folder = make_reference(tmp_path / "s")
+    folder = tmp_session
     frame = folder / "view_002" / "005.png"
     data = bytearray(frame.read_bytes())
     data[-20] ^= 0xFF

@@ -7,7 +7,7 @@ import pytest
 from rangekit.errors import FileFormatError, PatternError, SceneError
 from rangekit.geometry import apply_T, invert_T, look_at
 from rangekit.coded.patterns import make_pattern_spec
-from rangekit.sim import ImagingModel, Scene, SimRig, load_mesh
+from rangekit.sim import ImagingModel, Scene, SimRig, load_scene_object
 from rangekit.sim.scene.objects import sphere
 
 
@@ -174,18 +174,18 @@ def test_sim_devices_implement_the_protocols(rig, tilted_plane_scene):
     assert isinstance(sim.camera, devices.Camera)
     assert isinstance(sim.projector, devices.Projector)
     assert isinstance(sim.turntable, devices.Turntable)
-    assert isinstance(sim, devices.Rig)
+    assert isinstance(sim, devices.RigDevices)
 
 
 def test_bad_input_gives_clear_errors(rig, tmp_path, tilted_plane_scene):
     garbage = tmp_path / "broken.ply"
     garbage.write_bytes(b"\x00\x01not a mesh at all\xff" * 10)
     with pytest.raises((FileFormatError, SceneError), match="broken.ply"):
-        load_mesh(garbage)
+        load_scene_object(garbage)
     empty = tmp_path / "empty.obj"
     empty.write_text("# no vertices\n")
     with pytest.raises((FileFormatError, SceneError), match="empty.obj"):
-        load_mesh(empty)
+        load_scene_object(empty)
     away = rig.camera.with_pose(look_at([0, -0.5, 0.2], [0, -1.5, 0.2]))
     from rangekit.rig.rig_file import Rig
 

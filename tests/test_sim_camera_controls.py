@@ -1,4 +1,4 @@
-"""The simulated camera's controls (issue 19): exposure and ISO as a real sensor, auto-exposure with a lag,
+"""The simulated camera's controls: exposure and ISO as a real sensor, auto-exposure with a lag,
 the projector's latency on the devices' shared virtual clock, and the refusal of auto-exposure for coded light."""
 
 import sys
@@ -120,7 +120,7 @@ def test_auto_exposure_follows_the_mean_with_a_lag_and_is_deterministic(scene):
 
 
 def test_auto_exposure_ruins_a_graycode_decode(scene):
-    """Acceptance (issue 19): with auto-exposure on, a Gray-code view decodes less than 80% of the pixels
+    """Acceptance: with auto-exposure on, a Gray-code view decodes less than 80% of the pixels
     it decodes with the exposure locked (full rig: 260311 of 401484, 65%; this 320x256 rig: about 30%)."""
     spec = make_pattern_spec("graycode", (320, 200))
 

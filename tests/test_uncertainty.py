@@ -1,4 +1,4 @@
-"""Per-point uncertainty of coded light (issue 18, point 4): the along-ray Jacobian of ray-plane and ray-ray
+"""Per-point uncertainty of coded light: the along-ray Jacobian of ray-plane and ray-ray
 triangulation against finite differences, the predicted sigma on a plane against a Monte-Carlo of the
 decoder's noise, and the sigma field through PointCloud, merge and the PLY round trip."""
 

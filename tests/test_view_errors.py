@@ -1,4 +1,4 @@
-"""Per-view error breakdown against the simulator's truth (issue 18, point 2): exact clouds and poses score
+"""Per-view error breakdown against the simulator's truth: exact clouds and poses score
 zero; a known pose error, a known offset of the depth-edge points and a known decoding bias each come out
 where they belong."""
 
@@ -8,17 +8,17 @@ import numpy as np
 import pytest
 
 from rangekit.geometry import axis_angle_to_R, compose, make_T
-from rangekit.rig.rig_file import Rig, turntable_prior
-from rangekit.sim import default_rig, default_scene
+from rangekit.rig.rig_file import turntable_prior
+from rangekit.sim import default_scene
 from rangekit.sim.scene.raycast import cast_view
 from rangekit.sim.truth.view_errors import depth_edges, view_errors
 from rangekit.surface.cloud import PointCloud
+from small_rigs import small_rig
 
 
 @pytest.fixture(scope="module")
 def exact():
-    r = default_rig()
-    rig = Rig(cameras=(r.camera.resized(320, 256),), projector=r.projector, T_world_table=r.T_world_table)
+    rig = small_rig()
     scene = default_scene("lumpy")
     angles = [0.0, np.pi / 2]
     clouds, cols, edges = [], [], []

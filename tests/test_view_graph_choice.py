@@ -1,4 +1,4 @@
-"""The view graph's candidate pairs (issue 21): O(n k) with a prior (nearest in rotation + long links) and
+"""The view graph's candidate pairs: O(n k) with a prior (nearest in rotation + long links) and
 without (a global descriptor, widened until the accepted edges connect the views)."""
 
 import numpy as np

@@ -1,4 +1,4 @@
-"""The simulator's object zoo (issue 18) against its analytic truth: fin, pin, slot and step sizes by exact
+"""The simulator's object zoo against its analytic truth: fin, pin, slot and step sizes by exact
 ray casts, the bowl's spheres, watertight outward meshes standing on the plate, the bunny upright, and
 ``rangekit sim objects`` / ``rangekit sim render --object thin``."""
 
@@ -12,10 +12,11 @@ from rangekit.app.commands.sim_objects import list_objects
 from rangekit.cli import main
 from rangekit.errors import InputError, SceneError
 from rangekit.geometry import R_up_to_z
-from rangekit.rig.rig_file import Rig, save_rig
-from rangekit.sim import default_rig, default_scene, make_object
+from rangekit.rig.rig_file import save_rig
+from rangekit.sim import default_scene, make_object
 from rangekit.sim.scene import zoo
 from rangekit.sim.scene.objects import BUILTIN_OBJECTS, OBJECT_NOTES, lumpy
+from small_rigs import small_rig
 
 MM = 1e-3
 ZOO = ("thin", "bowl", "steps", "shiny", "dark")
@@ -145,10 +146,8 @@ def test_sim_objects_command_prints_each_object(capsys):
 
 
 def test_sim_render_object_thin(tmp_path):
-    r = default_rig()
     rig_file = tmp_path / "rig.json"
-    save_rig(Rig(cameras=(r.camera.resized(320, 256),), projector=r.projector, T_world_table=r.T_world_table),
-             rig_file)
+    save_rig(small_rig(), rig_file)
     out = tmp_path / "cap"
     assert main(["sim", "render", "--object", "thin", "--rig", str(rig_file), "--patterns", "white",
                  "--out", str(out)]) == 0
@@ -183,9 +182,9 @@ def test_bunny_stands_upright_on_the_plate():
     path = zoo.bunny_path()
     if not path.is_file():
         pytest.skip(f"{path} not found (the shared data folder)")
-    from rangekit.formats.meshes import load_mesh_file
+    from rangekit.formats.meshes import load_mesh
 
-    raw = load_mesh_file(path)
+    raw = load_mesh(path)
     obj = make_object("bunny")
     assert len(obj.triangles) == len(raw.triangles) == 69451
     # +y became +z: the upright z extent is the file's y extent, the file's z runs along -y.

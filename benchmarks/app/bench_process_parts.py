@@ -49,10 +49,10 @@ def main() -> int:
 
         from rangekit.rendering.snapshot import fit_camera
         from rangekit.camera import world_pixel_rays
-        from rangekit.formats.meshes import load_mesh_file
+        from rangekit.formats.meshes import load_mesh
         from rangekit.surface.raycast import raycasting_scene
 
-        mesh = load_mesh_file(f"{sys.argv[1]}/mesh.ply")
+        mesh = load_mesh(f"{sys.argv[1]}/mesh.ply")
         c = (mesh.vertices.min(axis=0) + mesh.vertices.max(axis=0)) / 2
         o, d = world_pixel_rays(fit_camera(mesh.vertices, azimuth=0.5, elevation=0.3, size=(640, 480)))
         rays = o3d.core.Tensor(np.concatenate([o - c, d], axis=1).astype(np.float32))

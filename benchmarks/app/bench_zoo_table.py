@@ -16,7 +16,7 @@ import argparse
 import json
 from pathlib import Path
 
-from rangekit.formats.meshes import load_mesh_file
+from rangekit.formats.meshes import load_mesh
 from rangekit.formats.sessions.session import Session
 from rangekit.sim import default_scene
 from rangekit.surface.mesh import TriangleMesh, distance_to_surface
@@ -27,7 +27,7 @@ def row(folder: Path) -> str:
     summary = json.loads((folder / "summary.json").read_text())
     a, views = summary["accuracy"], summary["view_errors"]
     obj = default_scene(name).objects[0]
-    d = distance_to_surface(load_mesh_file(folder / "mesh.ply").vertices, TriangleMesh(obj.world_vertices(), obj.triangles))
+    d = distance_to_surface(load_mesh(folder / "mesh.ply").vertices, TriangleMesh(obj.world_vertices(), obj.triangles))
     cloud = [v["cloud"]["rms_mm"] for v in views]
     rot = max(v["registration"]["rotation_deg"] for v in views)
     move = max(v["registration"]["translation_mm"] for v in views)

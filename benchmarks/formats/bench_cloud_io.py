@@ -45,7 +45,7 @@ def main() -> int:
     import plyfile
 
     from rangekit.formats.clouds import load_cloud
-    from rangekit.formats.meshes import load_mesh_file, save_mesh
+    from rangekit.formats.meshes import load_mesh, save_mesh
     from rangekit.surface.mesh import TriangleMesh
 
     rows, ok = [], True
@@ -73,9 +73,9 @@ def main() -> int:
             d = plyfile.PlyData.read(str(path), known_list_len={"face": {"vertex_indices": 3}})
             return np.asarray(d["face"]["vertex_indices"]).astype(np.int64)
 
-        t_ours, _ = timed(lambda: load_mesh_file(path), args.repeat, warmup=1)
+        t_ours, _ = timed(lambda: load_mesh(path), args.repeat, warmup=1)
         t_peer, _ = timed(peer_mesh, args.repeat, warmup=1)
-        rows.append((f"{n:,}-triangle binary mesh, `load_mesh_file` (with TriangleMesh checks) vs plyfile with "
+        rows.append((f"{n:,}-triangle binary mesh, `load_mesh` (with TriangleMesh checks) vs plyfile with "
                      "`known_list_len` (memory-mapped)" if args.markdown else f"{n:,}-triangle mesh (binary)",
                      t_ours, t_peer))
 

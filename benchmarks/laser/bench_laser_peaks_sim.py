@@ -31,7 +31,7 @@ from rangekit.sim import default_scene
 from rangekit.sim.laser.frames import LaserLook, LaserView
 from rangekit.sim.laser.rig import laser_rig
 from rangekit.sim.laser.truth import column_errors, curve_distance
-from rangekit.sim.scene.objects import load_mesh
+from rangekit.sim.scene.objects import load_scene_object
 from rangekit.sim.imaging.render import ImagingModel
 
 #: label -> (method, options)
@@ -47,7 +47,7 @@ BUNNY = next((p for p in (_ROOT.parent / "shared", _ROOT.parent.parent / "shared
 def objects(quick: bool) -> dict:
     out = {"lumpy": default_scene("lumpy"), "sphere": default_scene("sphere")}
     if not quick and BUNNY.is_file():
-        bunny = load_mesh(BUNNY, name="bunny")
+        bunny = load_scene_object(BUNNY, name="bunny")
         v = bunny.vertices @ np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])   # y up -> z up
         out["bunny"] = default_scene(replace(bunny, vertices=v))
     return out

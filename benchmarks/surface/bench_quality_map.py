@@ -21,7 +21,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from rangekit.formats.clouds import load_cloud
-from rangekit.formats.meshes import load_mesh_file
+from rangekit.formats.meshes import load_mesh
 from rangekit.geometry import apply_T, make_T
 from rangekit.registration.multiview import register_views
 from rangekit.surface.quality import vertex_normals, view_disagreement
@@ -47,7 +47,7 @@ def main() -> int:
     t0 = time.perf_counter()
     if args.poses == "rangekit":
         T = register_views(clouds, init_T_world_view=T).T_world_view
-    mesh = load_mesh_file(folder / "bun_zipper.ply")
+    mesh = load_mesh(folder / "bun_zipper.ply")
     n = vertex_normals(mesh.vertices, mesh.triangles)
     q = view_disagreement(mesh.vertices, n, [apply_T(Tk, c.points) for c, Tk in zip(clouds, T)],
                           radius=args.radius_mm * 1e-3)

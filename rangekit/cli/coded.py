@@ -38,8 +38,8 @@ def cmd_decode(args: argparse.Namespace) -> int:
 
 def cmd_reconstruct(args: argparse.Namespace) -> int:
     """rangekit reconstruct CAPTURE_DIR [--rig RIG.json] --out cloud.ply"""
-    from rangekit.coded.reconstruct import reconstruct_view
-    from rangekit.errors import ConfigError, naming
+    from rangekit.app.commands.reconstruct import reconstruct_capture
+    from rangekit.errors import ConfigError
     from rangekit.formats.capture import load_capture
     from rangekit.formats.laser_capture import is_laser_capture
     from rangekit.rig.rig_file import load_rig
@@ -57,9 +57,7 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
     if rig is None or rig.projector is None:
         raise ConfigError(f"{args.capture}: no rig.json with a projector; pass --rig RIG.json")
     note(f"decoding {len(cap.images)} images ({cap.spec.method})")
-    with naming(args.capture):
-        rec = reconstruct_view(cap.images, cap.spec, rig.camera, rig.projector, subpixel=not args.integer,
-                               method=args.method, full_scale=cap.full_scale, response=rig.projector_response)
+    rec = reconstruct_capture(cap, rig, subpixel=not args.integer, method=args.method)
     save_cloud(args.out, rec.cloud)
     say(f"{rec.decoded!r}")
     say(f"{rec.triangulated!r}")

@@ -10,11 +10,11 @@ from rangekit.cli._common import check_output, result, say
 
 def cmd_photometric(args: argparse.Namespace) -> int:
     """rangekit photometric DIR [--method ls|robust|uncalibrated] --out OUT: normals, albedo, depth, mesh"""
-    from rangekit.app.commands.photometric import photometric_files
+    from rangekit.app.commands.photometric import photometric_folder
 
     t0 = time.perf_counter()
     check_output(args.out, folder=True)
-    out = photometric_files(args.folder, args.out, method=args.method, progress=say)
+    out = photometric_folder(args.folder, args.out, method=args.method, progress=say)
     result(f"wrote {out}/normals.npy, normals.png, albedo.png, depth.npy, mesh.ply (pixel units, orthographic) in "
         f"{time.perf_counter() - t0:.1f} s")
     return 0

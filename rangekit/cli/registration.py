@@ -12,13 +12,13 @@ from rangekit.cli._common import check_output, int_in, note, positive_float, res
 
 def cmd_register(args: argparse.Namespace) -> int:
     """rangekit register SCAN... [--init none|poses.json|turntable:AXIS:STEP] --out DIR"""
-    from rangekit.app.commands.register import register_files
+    from rangekit.app.commands.register import register
     from rangekit.geometry import rotation_angle
 
     t0 = time.perf_counter()
     check_output(args.out, folder=True)
     voxel = args.voxel_mm * 1e-3 if args.voxel_mm else None
-    rep = register_files(args.scans, args.out, init=args.init, voxel=voxel, mesh=not args.no_mesh, progress=say,
+    rep = register(args.scans, args.out, init=args.init, voxel=voxel, mesh=not args.no_mesh, progress=say,
                          neighbours=args.neighbours)
     res = rep.result
     say("edges (view i - view j): ICP inlier RMSE, overlap, accepted, synchronisation residual")

@@ -11,7 +11,7 @@ _EXPORTS = {
     "capture": ("IMAGE_SUFFIXES", "Capture", "list_images", "load_capture", "pattern_spec_for", "read_stack",
                 "save_decoded"),
     "clouds": ("CLOUD_READERS", "CLOUD_WRITERS", "RangeGrid", "load_cloud", "load_range_grid", "save_cloud"),
-    "meshes": ("MESH_FORMATS", "load_mesh_file", "save_mesh"),
+    "meshes": ("MESH_FORMATS", "load_mesh", "save_mesh"),
     "ply": ("read_ply",),
     "ply_write": ("cloud_ply_bytes", "mesh_ply_bytes", "write_cloud_ply"),
     "poses": ("POSES_SCHEMA", "load_poses", "save_poses"),
@@ -25,7 +25,7 @@ _EXPORTS = {
 _MODULE_OF = {name: module for module, names in _EXPORTS.items() for name in names}
 
 __all__ = ["load_cloud", "save_cloud", "CLOUD_READERS", "CLOUD_WRITERS", "RangeGrid", "load_range_grid",
-           "load_mesh_file", "save_mesh", "MESH_FORMATS", "read_ply", "cloud_ply_bytes", "mesh_ply_bytes",
+           "load_mesh", "save_mesh", "MESH_FORMATS", "read_ply", "cloud_ply_bytes", "mesh_ply_bytes",
            "write_cloud_ply",
            "IMAGE_SUFFIXES", "Capture", "list_images", "load_capture", "pattern_spec_for", "read_stack",
            "save_decoded", "POSES_SCHEMA", "load_poses", "save_poses", "ToFFolder", "load_ground_truth",

@@ -15,7 +15,7 @@ from rangekit.io import atomic_write_bytes
 from rangekit.surface.convert import as_mesh
 from rangekit.surface.mesh import TriangleMesh
 
-__all__ = ["save_mesh", "load_mesh_file", "MESH_FORMATS"]
+__all__ = ["save_mesh", "load_mesh", "MESH_FORMATS"]
 
 
 def _write_via_trimesh(file_type: str, **options):
@@ -86,7 +86,7 @@ def _read_ply_mesh(path: Path) -> TriangleMesh:
                         ply_observed(header, elements["vertex"]))
 
 
-def load_mesh_file(path: str | Path) -> TriangleMesh:
+def load_mesh(path: str | Path) -> TriangleMesh:
     """Read a ``.ply`` (:mod:`rangekit.formats.ply`), ``.obj``, ``.stl``, ``.off`` or ``.glb`` (trimesh; a glTF
     scene's meshes concatenated in the scene frame) mesh; vertex order kept, nothing merged.
 

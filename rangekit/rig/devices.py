@@ -12,7 +12,7 @@ import numpy as np
 
 from rangekit.camera import PinholeCamera
 
-__all__ = ["Camera", "Projector", "Turntable", "Rig", "check_pattern"]
+__all__ = ["Camera", "Projector", "Turntable", "RigDevices", "check_pattern"]
 
 
 def check_pattern(image: np.ndarray, resolution: tuple[int, int], name: str = "projector") -> np.ndarray:
@@ -81,8 +81,8 @@ class Turntable(Protocol):
 
 
 @runtime_checkable
-class Rig(Protocol):
-    """The devices of one scanner, grouped."""
+class RigDevices(Protocol):
+    """The devices of one scanner, grouped (the rig file's calibration is :class:`rangekit.rig.rig_file.Rig`)."""
 
     camera: Camera
     projector: Projector

@@ -8,8 +8,8 @@ from rangekit._runtime.lazy import lazy_exports
 
 _MODULE_OF = {
     **dict.fromkeys(("PointCloud", "affine_dimension", "estimate_normals", "merge_clouds", "orient_normals_to_sensor",
-                     "oriented_normals_cloud", "spread_problem", "to_open3d", "transform_cloud", "voxel_downsample"),
-                    "cloud"),
+                     "oriented_normals_cloud", "spread_problem", "transform_cloud", "voxel_downsample"), "cloud"),
+    "to_open3d": "convert",
     **dict.fromkeys(("poisson_input_problem", "poisson_mesh", "tsdf_fuse"), "fusion"),
     **dict.fromkeys(("TriangleMesh", "distance_to_surface", "mesh_from_open3d", "signed_volume"), "mesh"),
     "raycasting_scene": "raycast",

@@ -1,7 +1,7 @@
 """Point clouds with colours and normals: the type, voxel downsampling, normals, transforms and merging.
 
 Files of clouds are read and written by :mod:`rangekit.formats.clouds`. Conversion to open3d happens in
-:func:`to_open3d` only (open3d is imported inside the functions that need it).
+:func:`cloud_to_open3d` only (open3d is imported inside the functions that need it).
 """
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ import numpy as np
 
 from rangekit.errors import InputError, MeshError
 
-__all__ = ["PointCloud", "to_open3d", "voxel_downsample", "MAX_VOXELS_PER_DIAGONAL", "bbox_diagonal",
+__all__ = ["PointCloud", "cloud_to_open3d", "voxel_downsample", "MAX_VOXELS_PER_DIAGONAL", "bbox_diagonal",
            "check_voxel", "estimate_normals", "downsample_with_normals", "orient_normals_to_sensor", "oriented_normals_cloud", "transform_cloud",
            "merge_clouds", "view_index", "affine_dimension", "spread_problem"]
 
@@ -59,7 +59,7 @@ class PointCloud:
         return f"PointCloud({len(self)} points{', ' + ', '.join(extra) if extra else ''})"
 
 
-def to_open3d(cloud: PointCloud):
+def cloud_to_open3d(cloud: PointCloud):
     """The cloud as an ``open3d.geometry.PointCloud`` (imports open3d)."""
     import open3d as o3d
 

@@ -15,7 +15,7 @@ import numpy as np
 
 from rangekit.errors import InputError
 from rangekit.surface.cloud import PointCloud
-from rangekit.surface.cloud import to_open3d as _cloud_to_open3d
+from rangekit.surface.cloud import cloud_to_open3d as _cloud_to_open3d
 from rangekit.surface.mesh import TriangleMesh, mesh_from_open3d
 from rangekit.surface.quality import vertex_normals
 
@@ -92,7 +92,7 @@ def to_trimesh(x):
 
 def to_open3d(x):
     """An ``open3d.geometry.TriangleMesh`` of a mesh (:meth:`TriangleMesh.to_open3d`) or an
-    ``open3d.geometry.PointCloud`` of a cloud (:func:`rangekit.surface.cloud.to_open3d`); anything
+    ``open3d.geometry.PointCloud`` of a cloud (:func:`rangekit.surface.cloud.cloud_to_open3d`); anything
     :func:`as_mesh` / :func:`as_cloud` accepts."""
     if isinstance(x, TriangleMesh) or (_library(x) and type(x).__name__ in ("TriangleMesh", "Trimesh", "Scene")):
         return as_mesh(x).to_open3d()

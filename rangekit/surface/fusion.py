@@ -20,7 +20,7 @@ from rangekit.errors import InputError, MeshError
 from rangekit.geometry import transform_vectors
 from rangekit._runtime.memory import release_free_memory
 from rangekit.surface.cloud import PointCloud, spread_problem
-from rangekit.surface.cloud import to_open3d as _cloud_to_open3d
+from rangekit.surface.cloud import cloud_to_open3d as _cloud_to_open3d
 from rangekit.surface.convert import as_cloud
 from rangekit.surface.mesh import TriangleMesh, mesh_from_open3d
 from rangekit.surface.observed import OBSERVED_FACTOR, FusedMeshes, observed_rule

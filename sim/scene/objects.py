@@ -21,7 +21,7 @@ from rangekit.sim.scene.scene_object import PlanarTexture, SceneObject
 from rangekit.sim.scene.zoo import bowl, bunny, steps, thin
 
 __all__ = ["plane", "sphere", "box", "cylinder", "torus", "board_object",
-           "calibration_board", "board_corners", "lumpy", "shiny", "dark", "turntable_disc", "load_mesh",
+           "calibration_board", "board_corners", "lumpy", "shiny", "dark", "turntable_disc", "load_scene_object",
            "BUILTIN_OBJECTS", "OBJECT_NOTES", "make_object"]
 
 
@@ -257,7 +257,7 @@ def turntable_disc(radius: float = 0.15, thickness: float = 0.02, *, albedo=0.3,
     return dataclasses.replace(cyl, vertices=cyl.vertices - [0.0, 0.0, thickness / 2])
 
 
-def load_mesh(path, *, albedo=0.8, scale: float = 1.0, name: str | None = None) -> SceneObject:
+def load_scene_object(path, *, albedo=0.8, scale: float = 1.0, name: str | None = None) -> SceneObject:
     """Load any mesh file trimesh reads (PLY, OBJ, STL, OFF, GLB, ...) as a :class:`SceneObject`.
 
     Vertex colours in the file become the albedo (8-bit values / 255, no sRGB decoding); otherwise the
@@ -270,7 +270,7 @@ def load_mesh(path, *, albedo=0.8, scale: float = 1.0, name: str | None = None) 
         If the file is missing, cannot be parsed, has no triangles, or has invalid geometry.
     """
     p = Path(path)
-    _check(f"load_mesh({p.name})", scale=scale)
+    _check(f"load_scene_object({p.name})", scale=scale)
     if not p.is_file():
         raise FileFormatError(f"{p}: no such file; expected a mesh file (.ply, .obj, .stl, .off, .glb)")
     try:
@@ -316,10 +316,10 @@ OBJECT_NOTES: dict[str, str] = {
 
 def make_object(name_or_path: str, **kwargs) -> SceneObject:
     """A builtin object by name (``BUILTIN_OBJECTS`` key, ``kwargs`` go to its builder) or else a mesh
-    file path (``kwargs`` go to :func:`load_mesh`)."""
+    file path (``kwargs`` go to :func:`load_scene_object`)."""
     if name_or_path in BUILTIN_OBJECTS:
         return BUILTIN_OBJECTS[name_or_path](**kwargs)
     if Path(name_or_path).is_file():
-        return load_mesh(name_or_path, **kwargs)
+        return load_scene_object(name_or_path, **kwargs)
     raise SceneError(f"{name_or_path!r}: neither a builtin object ({', '.join(BUILTIN_OBJECTS)}) "
                      f"nor an existing mesh file")

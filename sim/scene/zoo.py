@@ -198,9 +198,9 @@ def bunny(path: str | os.PathLike | None = None, *, albedo=0.8, name: str = "bun
 @lru_cache(maxsize=2)
 def _upright(path: str) -> tuple[np.ndarray, np.ndarray]:
     """(V, 3) upright vertices (lowest at z = 0) and (F, 3) triangles of a y-up mesh file, read once."""
-    from rangekit.formats.meshes import load_mesh_file
+    from rangekit.formats.meshes import load_mesh
 
-    mesh = load_mesh_file(path)
+    mesh = load_mesh(path)
     v = mesh.vertices @ R_up_to_z([0.0, 1.0, 0.0]).T
     v[:, 2] -= v[:, 2].min()
     v.flags.writeable = False

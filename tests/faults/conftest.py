@@ -1,10 +1,7 @@
-"""Fixtures of the fault-injection tests (issue 16).
+"""Fixtures of the fault-injection tests (``cli`` and ``reference_session`` are the suite's, tests/conftest.py).
 
-``cli(*args)`` runs ``rangekit ARGS`` in this process (fast: no interpreter start, no open3d import) and
-returns a :class:`_faults.Run` (exit code, stdout, stderr); argparse's own exits are caught.
 ``mount_tmpfs(size, read_only=False)`` mounts a real small tmpfs (a full or read-only disk; skips where
-mounting is not permitted). ``reference`` is the small finished session of tests/faults/_sessions.py,
-made once per run; tests copy it. ``budget(text)`` sets RANGEKIT_MEMORY_BUDGET for one test (4G unless
+mounting is not permitted). ``budget(text)`` sets RANGEKIT_MEMORY_BUDGET for one test (4G unless
 set); ``no_pixels`` fails a test that decodes any image (refusals must come from the headers).
 """
 
@@ -17,24 +14,9 @@ from pathlib import Path
 import cv2
 import pytest
 
-from _faults import Run
 from rangekit.budget import ENV_VAR
 
 
-@pytest.fixture
-def cli(capsys):
-    from rangekit.cli import main
-
-    def run(*args) -> Run:
-        capsys.readouterr()
-        try:
-            code = main([str(a) for a in args])
-        except SystemExit as stop:  # argparse: --help, or a usage error
-            code = stop.code if isinstance(stop.code, int) else 1
-        captured = capsys.readouterr()
-        return Run(code, captured.out, captured.err)
-
-    return run
 
 
 @pytest.fixture
@@ -58,12 +40,6 @@ def mount_tmpfs():
         where.rmdir()
 
 
-@pytest.fixture(scope="session")
-def reference(tmp_path_factory) -> Path:
-    """A finished simulated session as ``rangekit scan`` makes it (object lumpy, seed 1, graycode)."""
-    from _sessions import make_reference
-
-    return make_reference(tmp_path_factory.mktemp("reference") / "s")
 
 
 @pytest.fixture
@@ -80,4 +56,8 @@ def no_pixels(monkeypatch):
     """Fail the test if any image is decoded (the refusals must come from the headers)."""
     def imread(*args, **kwargs):
         raise AssertionError(f"pixels were read: cv2.imread{args}")
+
+    def imdecode(*args, **kwargs):
+        raise AssertionError("pixels were decoded: cv2.imdecode")
     monkeypatch.setattr(cv2, "imread", imread)
+    monkeypatch.setattr(cv2, "imdecode", imdecode)

@@ -1,5 +1,5 @@
 """Every command given a missing file, an empty file, random bytes or a folder where a file goes (or the
-reverse) ends with exit 1 and one ``rangekit: error:`` line naming that input; nothing is written (issue 16)."""
+reverse) ends with exit 1 and one ``rangekit: error:`` line naming that input; nothing is written."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import os
 
 import pytest
 
-from _faults import assert_error
+from cli_runs import assert_error
 
 KINDS = ("missing", "empty", "junk", "folder")
 # Each command, with {} where the bad input goes; {json} and {png} are the same input with that suffix.

@@ -1,5 +1,5 @@
 """Output paths are checked before any work; write failures, closed streams and full disks end in one
-``rangekit: error:`` line and leave no half-written file (issue 16)."""
+``rangekit: error:`` line and leave no half-written file."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from _faults import Run, assert_error, cli_process
+from cli_runs import Run, assert_error, cli_process
 
 # Commands whose --out is a file, and whose --out is a folder (each with the other arguments it needs; the
 # inputs need not exist: the output is checked first).

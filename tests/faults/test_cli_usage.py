@@ -1,11 +1,11 @@
 """Bad options end with exit 2 and one ``rangekit: error:`` line naming the option and the found value,
-before any work or any file is written (issue 16)."""
+before any work or any file is written."""
 
 from __future__ import annotations
 
 import pytest
 
-from _faults import assert_error
+from cli_runs import assert_error
 
 
 @pytest.mark.parametrize("args, mentions", [

@@ -1,7 +1,7 @@
 """Data faults of the range commands (``tof``, ``stereo``, ``decode``, ``reconstruct``): each ends in one
 ``rangekit: error:`` line naming the file or folder with the expected and the found value, and writes
 nothing; never a traceback, and never a result built from impossible data (a pulsed capture with negative
-round trips gave 76,800 points at -1.5e8 m) (issue 16)."""
+round trips gave 76,800 points at -1.5e8 m)."""
 
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ import cv2
 import numpy as np
 import pytest
 
-from _faults import assert_error
+from cli_runs import assert_error
 
 
 def _sim(tmp_path_factory, name: str, *args) -> Path:

@@ -1,4 +1,4 @@
-"""Device faults (issue 16, points 5 and 6): ``rangekit devices`` never aborts whatever the search timeout,
+"""Device faults: ``rangekit devices`` never aborts whatever the search timeout,
 and an error message quotes at most 200 bytes of what a device sent, escaped.
 
 The depthai cases run real child processes: the abort they guard against (``terminate called without an
@@ -21,7 +21,7 @@ from contextlib import contextmanager
 
 import pytest
 
-from _faults import ROOT, Run, assert_error, cli_process
+from cli_runs import ROOT, Run, assert_error, cli_process
 
 from rangekit.errors import QUOTE_LIMIT, ConfigError, DeviceError, DeviceTimeout, ProtocolError
 

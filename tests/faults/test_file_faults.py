@@ -1,6 +1,6 @@
 """Bad cloud and mesh files (truncated, lying headers, unknown types, text where numbers go, wrong shapes,
 empty files, folders) end in one ``rangekit: error:`` line naming the file, the expected and the found
-value, and nothing is written (issue 16)."""
+value, and nothing is written."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import struct
 import numpy as np
 import pytest
 
-from _faults import assert_error
+from cli_runs import assert_error
 
 _XYZ = np.arange(12, dtype="<f4").reshape(4, 3)
 _TRI = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], "<f4").tobytes()

@@ -1,5 +1,5 @@
 """Property: the poses-file reader returns valid rigid transforms or raises a RangekitError, never anything
-else, for any JSON a user or a crash can leave in poses.json (issue 16)."""
+else, for any JSON a user or a crash can leave in poses.json."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Property-based tests of the rig file and pattern spec readers (issue 16): for any JSON, and for any
+"""Property-based tests of the rig file and pattern spec readers: for any JSON, and for any
 mutation of a valid file (a key dropped, a value of the wrong type, nan, inf, a huge or negative number,
 nested junk), the reader returns a valid object or raises a RangekitError, never anything else and never
 slowly (each call runs under an alarm)."""

@@ -1,4 +1,4 @@
-"""Property-based tests of the session manifest reader (issue 16): whatever ``session.json`` holds (any
+"""Property-based tests of the session manifest reader: whatever ``session.json`` holds (any
 JSON value, a valid manifest with a key dropped, a value replaced by junk, nan, huge integers, nested
 junk, bytes that are not JSON), ``Session.load`` gives a valid Session or a RangekitError, never
 anything else."""

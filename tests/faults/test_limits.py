@@ -1,4 +1,4 @@
-"""Nothing hangs or eats the machine (issue 16): the memory budget, image headers read before any pixel, and
+"""Nothing hangs or eats the machine: the memory budget, image headers read before any pixel, and
 image stacks of every kind refused from their headers. (Sizes of patterns, boards, rig cameras, voxels,
 renders, simulated sensors and ToF plans: test_limits_sizes.py.) Each refusal names the input, what was expected and what was found; options exit 2,
 file contents exit 1, and no output is written."""
@@ -14,7 +14,7 @@ import cv2
 import numpy as np
 import pytest
 
-from _faults import assert_error
+from cli_runs import assert_error
 from rangekit.budget import (ENV_VAR, array_bytes, cgroup_memory_limit, check_budget, format_bytes, memory_budget,
                              parse_bytes, physical_memory)
 from rangekit.errors import BudgetError, BudgetUsageError, FileFormatError, UsageError

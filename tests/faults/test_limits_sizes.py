@@ -1,4 +1,4 @@
-"""Nothing hangs or eats the machine (issue 16): sizes checked before anything is allocated (pattern specs,
+"""Nothing hangs or eats the machine: sizes checked before anything is allocated (pattern specs,
 boards, rig cameras, voxels, render and simulator sizes, ToF plans). Each refusal names the input, what was
 expected and what was found; options exit 2, file contents exit 1, and no output is written. (The memory
 budget and image headers: test_limits.py.)"""
@@ -11,7 +11,7 @@ import cv2
 import numpy as np
 import pytest
 
-from _faults import assert_error
+from cli_runs import assert_error
 from rangekit.boards import MAX_SQUARES, Board
 from rangekit.camera import PinholeCamera
 from rangekit.coded.patterns import PatternSpec

@@ -1,13 +1,13 @@
 """Meshing and rendering degenerate clouds and meshes ends in one ``rangekit: error:`` line naming the file,
 how many points it has and what is needed, never a Qhull/Open3D traceback or crash; a one-point cloud still
-renders (issue 16)."""
+renders."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from _faults import assert_error
+from cli_runs import assert_error
 
 _RNG = np.random.default_rng(16)
 _SPHERE = _RNG.normal(size=(200, 3))

@@ -1,7 +1,7 @@
 """``rangekit photometric`` on bad DiLiGenT-style folders: corrupt Normal_gt.mat, black images, bad light
 files, image names that leave the folder, bad masks, degenerate uncalibrated input. Each ends in one
 ``rangekit: error:`` line naming the file (or folder) with the expected and found value, and no output
-folder is created; the outputs and ``PinholeCamera.save`` are written atomically (issue 16)."""
+folder is created; the outputs and ``PinholeCamera.save`` are written atomically."""
 
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 import scipy.io
 
-from _faults import assert_error
+from cli_runs import assert_error
 
 H = W = 24
 N_LIGHTS = 8

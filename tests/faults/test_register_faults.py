@@ -1,4 +1,4 @@
-"""``register`` refuses or flags pairs whose overlap does not fix the pose (issue 16): two caps of one
+"""``register`` refuses or flags pairs whose overlap does not fix the pose: two caps of one
 sphere, two patches of a plane, of a cylinder or of a surface of revolution slide on each other, so any
 pose along the free motions fits; with ``--init none`` that is an error naming the views and the free
 motion (no poses written), with a prior the prior is kept along the free motions and the edge is flagged.
@@ -14,7 +14,7 @@ import json
 import numpy as np
 import pytest
 
-from _faults import assert_error
+from cli_runs import assert_error
 from rangekit.errors import RegistrationError
 from rangekit.formats.clouds import save_cloud
 from rangekit.formats.poses import load_poses, save_poses

@@ -1,6 +1,6 @@
-"""Sessions nobody can corrupt (issue 16), what a session holds: frames checked by SHA-256, a malformed
+"""Sessions nobody can corrupt, what a session holds: frames checked by SHA-256, a malformed
 session.json, the simulated object's path, a damaged view cache. (What a run does to it: test_session_runs.py.)
-Each test works on a copy of the small reference session (tests/faults/_sessions.py).
+Each test works on a copy of the small reference session (tests/sessions.py).
 """
 
 from __future__ import annotations
@@ -12,8 +12,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from _faults import assert_error
-from _sessions import copy_session, no_leftovers, small_rig, snapshot
+from cli_runs import assert_error
+from sessions import copy_session, no_leftovers, snapshot
+from small_rigs import small_rig
 from rangekit.app.acquire.acquire import acquire
 from rangekit.formats.sessions.session import ScanPlan, Session
 from rangekit.formats.sessions.check import verify_views
@@ -44,8 +45,8 @@ DAMAGE = {
 
 @pytest.mark.parametrize("command", ["process", "resume"])
 @pytest.mark.parametrize("damage", DAMAGE)
-def test_a_changed_missing_or_extra_frame_is_named(cli, reference, tmp_path, damage, command):
-    d = copy_session(reference, tmp_path / "s")
+def test_a_changed_missing_or_extra_frame_is_named(cli, reference_session, tmp_path, damage, command):
+    d = copy_session(reference_session, tmp_path / "s")
     do, mentions = DAMAGE[damage]
     do(d)
     before = snapshot(d)
@@ -61,24 +62,24 @@ def test_a_changed_missing_or_extra_frame_is_named(cli, reference, tmp_path, dam
     no_leftovers(d)
 
 
-def test_a_session_without_checksums_loads_unverified_and_resume_records_them(cli, reference, tmp_path):
-    d = copy_session(reference, tmp_path / "s", pending=(3,), checksums=False)
+def test_a_session_without_checksums_loads_unverified_and_resume_records_them(cli, reference_session, tmp_path):
+    d = copy_session(reference_session, tmp_path / "s", pending=(3,), checksums=False)
     run = cli("scan", "--resume", d, "--no-process")
     assert run.code == 0, run.err
     assert "view_000, view_001, view_002: no frame checksums" in run.err and "not verified" in run.err  # progress
     session = Session.load(d)
     assert [v.sha256 is None for v in session.views] == [True, True, True, False]
     assert verify_views(session) == ["view_000", "view_001", "view_002"]
-    assert snapshot(d)["view_003/000.png"] == (reference / "view_003" / "000.png").read_bytes()
+    assert snapshot(d)["view_003/000.png"] == (reference_session / "view_003" / "000.png").read_bytes()
     # Even without checksums, a missing frame is named, never a view silently dropped.
     (d / "view_002" / "010.png").unlink()
     assert_error(cli("process", d), 1, "view_002", "010.png", "is missing")
 
 
-def test_checksums_are_those_of_the_written_bytes(reference):
+def test_checksums_are_those_of_the_written_bytes(reference_session):
     import hashlib
 
-    session = Session.load(reference)
+    session = Session.load(reference_session)
     assert all(v.done and len(v.sha256) == session.pattern.n_frames for v in session.views)
     for v in session.views:
         for name, digest in v.sha256.items():
@@ -137,8 +138,8 @@ MALFORMED = {
 
 @pytest.mark.parametrize("command", ["process", "resume"])
 @pytest.mark.parametrize("case", MALFORMED)
-def test_a_malformed_session_json_names_the_field(cli, reference, tmp_path, case, command):
-    d = copy_session(reference, tmp_path / "s")
+def test_a_malformed_session_json_names_the_field(cli, reference_session, tmp_path, case, command):
+    d = copy_session(reference_session, tmp_path / "s")
     mutate, mentions = MALFORMED[case]
     (d / "session.json").write_text(json.dumps(mutate(json.loads((d / "session.json").read_text()))))
     before = snapshot(d)
@@ -152,15 +153,15 @@ def test_a_malformed_session_json_names_the_field(cli, reference, tmp_path, case
                                            ("1" * 5000, "cannot read session manifest"),
                                            ("[" * 100_000, "cannot read session manifest"),
                                            ("", "cannot read session manifest")])
-def test_a_session_json_that_is_not_json(cli, reference, tmp_path, text, mention):
-    d = copy_session(reference, tmp_path / "s")
+def test_a_session_json_that_is_not_json(cli, reference_session, tmp_path, text, mention):
+    d = copy_session(reference_session, tmp_path / "s")
     (d / "session.json").write_text(text)
     assert_error(cli("scan", "--resume", d, "--no-process"), 1, "session.json", mention)
     assert_error(cli("process", d), 1, "session.json", mention)
 
 
-def test_resume_with_imaging_the_simulator_does_not_know(cli, reference, tmp_path):
-    d = copy_session(reference, tmp_path / "s", pending=(3,))
+def test_resume_with_imaging_the_simulator_does_not_know(cli, reference_session, tmp_path):
+    d = copy_session(reference_session, tmp_path / "s", pending=(3,))
     data = json.loads((d / "session.json").read_text())
     data["simulator"]["imaging"]["bogus"] = 1
     (d / "session.json").write_text(json.dumps(data))
@@ -227,8 +228,8 @@ def test_scan_out_with_a_mesh_object_records_its_copy(cli, small_mesh, tmp_path)
     assert (d / "object" / "ball.ply").read_bytes() == small_mesh.read_bytes()
 
 
-def test_an_object_linked_out_of_the_session_is_refused(cli, reference, tmp_path):
-    d = copy_session(reference, tmp_path / "s")
+def test_an_object_linked_out_of_the_session_is_refused(cli, reference_session, tmp_path):
+    d = copy_session(reference_session, tmp_path / "s")
     (d / "object").mkdir()
     (d / "object" / "evil.ply").symlink_to("/etc/passwd")
     data = json.loads((d / "session.json").read_text())
@@ -265,10 +266,10 @@ CACHE_DAMAGE = {
 
 
 @pytest.mark.parametrize("damage", CACHE_DAMAGE)
-def test_a_damaged_view_cache_is_rebuilt(reference, tmp_path, damage):
+def test_a_damaged_view_cache_is_rebuilt(reference_session, tmp_path, damage):
     from rangekit.app.process.view_cache import view_cloud
 
-    d = copy_session(reference, tmp_path / "s")
+    d = copy_session(reference_session, tmp_path / "s")
     session = Session.load(d)
     first = [view_cloud(v, *_cache_args(session)) for v in session.views[:2]]
     v = session.views[1].folder

@@ -1,6 +1,6 @@
-"""Sessions nobody can corrupt (issue 16), what a run does to one: resume options that differ from the
+"""Sessions nobody can corrupt, what a run does to one: resume options that differ from the
 session, the lock (one process per session), process outputs written as a set, a full disk mid-scan.
-Each test works on a copy of the small reference session (tests/faults/_sessions.py).
+Each test works on a copy of the small reference session (tests/sessions.py).
 """
 
 from __future__ import annotations
@@ -16,8 +16,9 @@ from pathlib import Path
 
 import pytest
 
-from _faults import ROOT, assert_error, cli_process
-from _sessions import copy_session, frames, no_leftovers, small_rig, snapshot
+from cli_runs import ROOT, assert_error, cli_process
+from sessions import copy_session, frames, no_leftovers, snapshot
+from small_rigs import small_rig
 from rangekit.app.acquire.acquire import acquire
 from rangekit.coded.patterns import make_pattern_spec
 from rangekit.formats.sessions.session import ScanPlan, Session
@@ -31,20 +32,20 @@ from rangekit.sim import SimRig, default_scene
     ("--views", "5", "4"), ("--object", "sphere", "'lumpy'"), ("--seed", "2", "1"),
     ("--patterns", "hybrid", "'graycode'"), ("--rig", "my_rig.json", "'sim'"),
 ])
-def test_resume_with_an_option_that_differs_from_the_session_stops(cli, reference, tmp_path, option, value,
+def test_resume_with_an_option_that_differs_from_the_session_stops(cli, reference_session, tmp_path, option, value,
                                                                    recorded):
-    d = copy_session(reference, tmp_path / "s", pending=(3,))
+    d = copy_session(reference_session, tmp_path / "s", pending=(3,))
     before = snapshot(d)
     assert_error(cli("scan", "--resume", d, "--no-process", option, value), 2, option, value, recorded, str(d))
     assert snapshot(d) == before and not (d / "view_003").exists()
 
 
-def test_resume_with_the_sessions_own_options_goes_on(cli, reference, tmp_path):
-    d = copy_session(reference, tmp_path / "s", pending=(3,))
+def test_resume_with_the_sessions_own_options_goes_on(cli, reference_session, tmp_path):
+    d = copy_session(reference_session, tmp_path / "s", pending=(3,))
     run = cli("scan", "--resume", d, "--no-process", "--views", "4", "--object", "lumpy", "--seed", "1",
               "--patterns", "graycode", "--rig", "sim")
     assert run.code == 0, run.err
-    assert frames(d) == frames(reference)
+    assert frames(d) == frames(reference_session)
     no_leftovers(d)
 
 
@@ -60,8 +61,8 @@ def _wait_for_lock(folder: Path, pid: int, proc: subprocess.Popen, timeout: floa
     raise AssertionError("the child never took the lock")
 
 
-def test_a_second_process_of_a_session_in_use_stops_at_once(cli, reference, tmp_path):
-    d = copy_session(reference, tmp_path / "s", pending=(2, 3))
+def test_a_second_process_of_a_session_in_use_stops_at_once(cli, reference_session, tmp_path):
+    d = copy_session(reference_session, tmp_path / "s", pending=(2, 3))
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     child = subprocess.Popen([sys.executable, "-m", "rangekit", "scan", "--resume", str(d), "--no-process"],
                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
@@ -79,20 +80,20 @@ def test_a_second_process_of_a_session_in_use_stops_at_once(cli, reference, tmp_
     for run in (second, third):
         assert_error(run, 1, str(d), f"pid {child.pid}", "in use by another rangekit process")
     assert child.returncode == 0, err
-    # The first one finished undisturbed: the same frames as the uninterrupted reference.
-    assert frames(d) == frames(reference)
+    # The first one finished undisturbed: the same frames as the uninterrupted reference_session.
+    assert frames(d) == frames(reference_session)
     no_leftovers(d)
 
 
-def test_a_stale_lock_of_a_dead_process_is_taken_over(cli, reference, tmp_path):
-    d = copy_session(reference, tmp_path / "s", pending=(3,))
+def test_a_stale_lock_of_a_dead_process_is_taken_over(cli, reference_session, tmp_path):
+    d = copy_session(reference_session, tmp_path / "s", pending=(3,))
     dead = subprocess.Popen(["true"])
     dead.wait()
     (d / ".lock").write_text(f"{dead.pid}\n")
     run = cli("scan", "--resume", d, "--no-process")
     assert run.code == 0, run.err
     assert (d / ".lock").read_text().strip() == str(os.getpid())
-    assert frames(d) == frames(reference)
+    assert frames(d) == frames(reference_session)
 
 
 def test_the_lock_is_held_for_the_whole_block_and_released(tmp_path):
@@ -116,8 +117,8 @@ def test_the_lock_is_held_for_the_whole_block_and_released(tmp_path):
 # -- 7. process writes its outputs as a set ------------------------------------------------------------
 
 @pytest.mark.slow     # 14 s (two processings); make test-slow (CI) runs it
-def test_a_process_that_fails_between_outputs_leaves_no_summary(cli, reference, tmp_path):
-    d = copy_session(reference, tmp_path / "s")
+def test_a_process_that_fails_between_outputs_leaves_no_summary(cli, reference_session, tmp_path):
+    d = copy_session(reference_session, tmp_path / "s")
     assert cli("process", d, "--no-report").code == 0   # the view caches, then every output
     sizes = {name: (d / name).stat().st_size for name in ("poses.json", "merged.ply", "mesh.ply")}
     for name in sizes:
@@ -153,8 +154,8 @@ def test_every_rename_of_acquisition_is_followed_by_a_folder_fsync(tmp_path, mon
 
 # -- 8. a full disk mid-scan -----------------------------------------------------------------------------
 
-def test_a_full_disk_mid_scan_says_how_to_resume_and_the_resume_completes(cli, reference, tmp_path):
-    d = copy_session(reference, tmp_path / "s", pending=(3,))
+def test_a_full_disk_mid_scan_says_how_to_resume_and_the_resume_completes(cli, reference_session, tmp_path):
+    d = copy_session(reference_session, tmp_path / "s", pending=(3,))
     before = snapshot(d)
     limit = min(p.stat().st_size for p in (d / "view_000").glob("*.png")) // 2
     assert limit > 1000   # the lock file and the first bytes fit, a frame does not
@@ -168,7 +169,7 @@ def test_a_full_disk_mid_scan_says_how_to_resume_and_the_resume_completes(cli, r
     assert snapshot(d) == before   # finished views intact, nothing half-written
     no_leftovers(d)
     assert cli("scan", "--resume", d, "--no-process").code == 0
-    assert frames(d) == frames(reference)
+    assert frames(d) == frames(reference_session)
 
 
 @pytest.fixture
@@ -176,12 +177,12 @@ def small_disk(mount_tmpfs):
     return mount_tmpfs("16m")
 
 
-def test_a_disk_that_fills_up_mid_scan_keeps_every_finished_view(cli, reference, small_disk, monkeypatch):
+def test_a_disk_that_fills_up_mid_scan_keeps_every_finished_view(cli, reference_session, small_disk, monkeypatch):
     import rangekit.cli._common as common
 
     monkeypatch.setattr(common, "MIN_FREE_BYTES", 0)   # the disk is small from the start
-    d = copy_session(reference, small_disk / "s", pending=(1, 2, 3))
-    view_bytes = sum(p.stat().st_size for p in (reference / "view_001").iterdir())
+    d = copy_session(reference_session, small_disk / "s", pending=(1, 2, 3))
+    view_bytes = sum(p.stat().st_size for p in (reference_session / "view_001").iterdir())
     free = shutil.disk_usage(small_disk).free
     (small_disk / "filler").write_bytes(b"\0" * (free - int(1.5 * view_bytes)))
     run = cli("scan", "--resume", d, "--no-process")
@@ -193,4 +194,4 @@ def test_a_disk_that_fills_up_mid_scan_keeps_every_finished_view(cli, reference,
     no_leftovers(d)
     (small_disk / "filler").unlink()
     assert cli("scan", "--resume", d, "--no-process").code == 0
-    assert frames(d) == frames(reference)
+    assert frames(d) == frames(reference_session)

@@ -31,7 +31,7 @@ import numpy as np
 from rangekit.rig.camera_controls import controls_from_capture, require_locked
 from rangekit.coded.patterns import PatternSpec
 from rangekit.laser.sequence import LaserSequence
-from rangekit.rig.devices import Rig as RigDevices
+from rangekit.rig.devices import RigDevices
 from rangekit.errors import ConfigError, DeviceError, StorageError
 from rangekit.formats.sessions.session import (CaptureSettings, ScanPlan, Session, SimulatorSettings, exposure_folder,
                                       view_folder)

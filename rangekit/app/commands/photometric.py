@@ -19,10 +19,10 @@ from rangekit.errors import naming
 from rangekit.io import atomic_save_npy, write_png
 from rangekit.progress import call_progress
 
-__all__ = ["photometric_files"]
+__all__ = ["photometric_folder"]
 
 
-def photometric_files(folder: str | Path, out: str | Path, *, method: str = "robust",
+def photometric_folder(folder: str | Path, out: str | Path, *, method: str = "robust",
                       progress: Callable | None = None) -> Path:
     """Normals (``method`` "ls", "robust" or "uncalibrated"), albedo, depth and a mesh from ``folder``,
     written into ``out``; reports each step (and the angular error against Normal_gt.mat when the folder

@@ -91,9 +91,9 @@ def render(x, *, azimuths: Sequence[float] = (np.radians(30.0),),
     check_budget(w * h * (per_px + 6 * len(azimuths)),  # one render at a time; the images and their montage
                  f"rendering a {kind} from {len(azimuths)} side(s)", option=f"--size {w}x{h}")
     if is_mesh and mesh is None:
-        from rangekit.formats.meshes import load_mesh_file
+        from rangekit.formats.meshes import load_mesh
 
-        mesh = load_mesh_file(src)
+        mesh = load_mesh(src)
     elif cloud is None and mesh is None:
         from rangekit.formats.clouds import load_cloud
 

@@ -16,7 +16,7 @@ from rangekit.registration.multiview import MultiViewOptions, MultiViewResult, r
 from rangekit.registration.pairs import all_pairs, nearest_and_long_links
 from rangekit.rig.rig_file import table_frame, turntable_prior
 
-__all__ = ["parse_init", "RegisterReport", "register_files"]
+__all__ = ["parse_init", "RegisterReport", "register"]
 
 
 def parse_init(init: str | None, n: int, sources: Sequence[str]) -> np.ndarray | None:
@@ -62,7 +62,7 @@ class RegisterReport:
     mesh_path: Path | None
 
 
-def register_files(paths: Sequence[str | Path], out_dir: str | Path, *, init: str | None = None,
+def register(paths: Sequence[str | Path], out_dir: str | Path, *, init: str | None = None,
                    voxel: float | None = None, mesh: bool = True,
                    progress: Callable[[str], None] | None = None, neighbours: int | None = None) -> RegisterReport:
     """Read the scans, register them (world = first scan's frame), write poses.json, merged.ply and mesh.ply.

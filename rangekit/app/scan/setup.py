@@ -30,7 +30,7 @@ class ScanSetup:
     """What :func:`rangekit.app.acquire.acquire.acquire` needs for a new or resumed scan, devices opened."""
 
     folder: Path
-    devices: object                     # the rangekit.rig.devices.Rig protocol: camera, projector, turntable
+    devices: object                     # the rangekit.rig.devices.RigDevices protocol: camera, projector, turntable
     rig: Rig
     spec: PatternSpec | LaserSequence   # coded light: the patterns; laser: off + one frame per laser
     n_views: int                        # turntable positions in all (over a full turn in each pass)
@@ -212,12 +212,12 @@ def _object_bytes(obj: str, up) -> tuple[str, bytes]:
         raise OptionError(f"{{up}}: expected a non-zero direction X Y Z, found {up!r}")
     if u is None or np.allclose(u / np.linalg.norm(u), [0.0, 0.0, 1.0]):
         return path.name, path.read_bytes()
-    from rangekit.formats.meshes import load_mesh_file
+    from rangekit.formats.meshes import load_mesh
     from rangekit.formats.ply_write import mesh_ply_bytes
     from rangekit.surface.mesh import TriangleMesh
 
     R = R_up_to_z(u)
-    mesh = load_mesh_file(path)
+    mesh = load_mesh(path)
     return f"{path.stem}_upright.ply", mesh_ply_bytes(TriangleMesh(mesh.vertices @ R.T, mesh.triangles,
                                                                    mesh.vertex_colours))
 

@@ -1,9 +1,9 @@
-"""Helpers of the fault-injection tests (issue 16); the ``cli`` fixture is in conftest.py.
+"""Running the command line in tests; the in-process ``cli`` fixture is in tests/conftest.py.
 
 ``cli_process(*args)`` runs ``rangekit ARGS`` as a real child process for what needs one (signals, closed
 streams, another user, resource limits). ``assert_error(run, code, *mentions)``: the exit code, no
 traceback, the last line ``rangekit: error: ...`` mentioning each of ``mentions`` (the file or option, the
-expected and the found value). Import them with ``from _faults import assert_error, cli_process``.
+expected and the found value). Import them with ``from cli_runs import assert_error, cli_process``.
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[1]
 
 
 @dataclass(frozen=True)

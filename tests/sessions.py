@@ -1,5 +1,5 @@
-"""Small simulated sessions for the session fault tests (issue 16): the reference session and what the
-tests do with copies of it. The ``reference`` fixture (tests/faults/conftest.py) makes it once per run.
+"""Small simulated sessions: the reference session and what the tests do with copies of it. The
+``reference_session`` fixture (tests/conftest.py) makes it once per run.
 
 Sessions are small: 4 views of the lumpy object, Gray code, a 320x256 camera (about 3 s to acquire).
 """
@@ -14,15 +14,10 @@ from pathlib import Path
 from rangekit.app.acquire.acquire import acquire
 from rangekit.coded.patterns import make_pattern_spec
 from rangekit.formats.sessions.session import ScanPlan, SimulatorSettings
-from rangekit.rig.rig_file import Rig
-from rangekit.sim import ImagingModel, SimRig, default_rig, default_scene
+from rangekit.sim import ImagingModel, SimRig, default_scene
+from small_rigs import small_rig
 
 N_VIEWS = 4
-
-
-def small_rig() -> Rig:
-    r = default_rig()
-    return Rig(cameras=(r.camera.resized(320, 256),), projector=r.projector, T_world_table=r.T_world_table)
 
 
 def make_reference(out: Path) -> Path:

@@ -294,7 +294,7 @@ def test_meshes_are_written_beside_the_ply_files_in_another_format(tmp_path, fmt
     mesh = _sphere_mesh()
     save_one(tmp_path, mesh, "poisson", MESH_FILE, fmt)
     info = save_one(tmp_path, mesh, "poisson", WATERTIGHT_FILE, fmt)
-    assert info["file"] == WATERTIGHT_FILE and (tmp_path / MESH_FILE).is_file()
+    assert info.file == WATERTIGHT_FILE and (tmp_path / MESH_FILE).is_file()
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted([MESH_FILE, WATERTIGHT_FILE, f"mesh.{fmt}",
                                                                  f"mesh_watertight.{fmt}"])
     back = trimesh.load(tmp_path / f"mesh_watertight.{fmt}", process=False, force="mesh")

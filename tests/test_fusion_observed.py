@@ -10,7 +10,7 @@ from scipy.spatial import cKDTree
 
 from rangekit.errors import InputError, MeshError
 from rangekit.formats.meshes import load_mesh, save_mesh
-from rangekit.formats.sessions.summary import ProcessResult
+from rangekit.formats.sessions.summary import Accuracy, Edge, MeshFigures, ProcessResult
 from rangekit.surface.cloud import PointCloud
 from rangekit.surface.fusion import poisson_meshes
 from rangekit.surface.mesh import TriangleMesh
@@ -200,15 +200,22 @@ def test_summary_reports_both_meshes(tmp_path):
             "volume_m3": None, "fusion": "poisson"}
     closed = {**mesh, "file": "mesh_watertight.ply", "watertight": True, "volume_m3": 2e-6,
               "unobserved_vertices": 3, "unobserved_area_m2": 1e-4}
-    acc = {"rms": 1e-5, "p95": 2e-5, "completeness": 0.99, "tolerance": 1e-3, "diagonal": 0.1,
-           "visible_fraction": 0.9, "max_incidence_deg": 80.0, "unobserved_area": 0.0, "unobserved_rms": 0.0,
-           "watertight": {"rms": 1e-4, "p95": 3e-4, "completeness": 0.995, "unobserved_area": 0.1,
-                          "unobserved_rms": 5e-4}}
+    acc = {"rms": 1e-5, "p95": 2e-5, "max": 5e-5, "completeness": 0.99, "tolerance": 1e-3, "diagonal": 0.1,
+           "visible_fraction": 0.9, "unobserved_area": 0.0, "unobserved_rms": 0.0, "rms_all": 1e-5,
+           "max_incidence_deg": 80.0, "n_mesh_samples": 100, "n_truth_samples": 100, "cloud_rms": None,
+           "cloud_p95": None, "n_cloud": None, "completeness_whole": None,
+           "watertight": {"rms": 1e-4, "p95": 3e-4, "max": 1e-3, "completeness": 0.995, "unobserved_area": 0.1,
+                          "unobserved_rms": 5e-4, "rms_all": 2e-4}}
     edge = {"i": 0, "j": 1, "rmse_mm": 0.01, "overlap": 0.5, "accepted": True, "reason": "",
             "rotation_residual_deg": None, "translation_residual_mm": None}
-    r = ProcessResult(tmp_path, ["view_000", "view_001"], np.repeat(np.eye(4)[None], 2, axis=0), [5, 5], [edge],
-                      1e-5, mesh, {"fuse": 1.0}, acc, watertight_mesh=closed)
+    r = ProcessResult(tmp_path, ["view_000", "view_001"], np.repeat(np.eye(4)[None], 2, axis=0), [5, 5],
+                      [Edge.from_dict(edge)], 1e-5, MeshFigures.from_dict(mesh), {"fuse": 1.0},
+                      Accuracy.from_dict(acc), watertight_mesh=MeshFigures.from_dict(closed))
     d = json.loads(json.dumps(r.to_dict()))
+    # summary.json keeps its schema: what was read is written back, key for key, in the file's units.
+    assert d["mesh"] == mesh and d["mesh_watertight"] == closed and d["accuracy"] == acc and d["edges"] == [edge]
+    assert r.accuracy.max_incidence == pytest.approx(np.radians(80.0)) and r.edges[0].rmse == pytest.approx(1e-5)
+    assert ProcessResult.from_dict(d, tmp_path).to_dict() == d
     assert d["mesh"]["file"] == "mesh.ply" and d["mesh_watertight"]["unobserved_vertices"] == 3
     assert r.mesh_watertight
     text = "\n".join(r.summary_lines())

@@ -35,7 +35,7 @@ def test_the_call_writes_what_the_command_writes(processed):
     for name in ("mesh.ply", "mesh_watertight.ply", "merged.ply", "poses.json"):
         assert (by_cli / name).read_bytes() == (by_call / name).read_bytes(), name
     summary = json.loads((by_cli / "summary.json").read_text())
-    assert result.accuracy is not None and result.accuracy == summary["accuracy"]   # the simulator's truth, the same
+    assert result.accuracy is not None and result.accuracy.to_dict() == summary["accuracy"]   # the simulator's truth, the same
     assert np.array_equal(result.T_world_view, np.array(summary["T_world_view"]))
     assert json.loads((by_call / "summary.json").read_text())["accuracy"] == summary["accuracy"]
 
@@ -60,7 +60,7 @@ def test_stages_pairs_and_meshes_are_announced(processed):
     meshes = {e.kind: e for e in seen if isinstance(e, ev.MeshReady)}
     assert set(meshes) == {"observed", "watertight"}
     assert meshes["observed"].path == by_call / "mesh.ply"
-    assert len(meshes["watertight"].mesh.vertices) == result.watertight_mesh["vertices"]
+    assert len(meshes["watertight"].mesh.vertices) == result.watertight_mesh.vertices
     assert any(isinstance(e, ev.Progress) for e in seen)
     assert not any(isinstance(e, ev.JobFailed) for e in seen)
 

@@ -157,5 +157,5 @@ def test_the_call_makes_the_files_of_the_command_and_reads_each_frame_once(tmp_p
     call, cli = (json.loads((d / "summary.json").read_text()) for d in (by_call, by_cli))
     call.pop("seconds"), cli.pop("seconds")
     assert json.loads(json.dumps(call).replace(str(by_call), "F")) == json.loads(json.dumps(cli).replace(str(by_cli), "F"))
-    assert res.processed.accuracy == json.loads((by_call / "summary.json").read_text())["accuracy"]
+    assert res.processed.accuracy.to_dict() == json.loads((by_call / "summary.json").read_text())["accuracy"]
     shutil.rmtree(by_cli)

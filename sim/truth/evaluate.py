@@ -26,6 +26,7 @@ from typing import Callable, Sequence
 import numpy as np
 
 from rangekit.errors import InputError
+from rangekit.formats.sessions.summary import Accuracy
 from rangekit.geometry import apply_T, invert_T
 from rangekit.surface.mesh import TriangleMesh
 from rangekit.surface.raycast import mesh_scene, raycasting_scene
@@ -37,42 +38,6 @@ from rangekit.sim.scene.scene import Scene, default_scene
 
 __all__ = ["Accuracy", "TruthEvaluation", "TruthSamples", "sample_surface", "visible_samples", "truth_samples",
            "mesh_accuracy", "truth_evaluator", "TruthEvaluator"]
-
-
-@dataclass(frozen=True)
-class Accuracy:
-    """Mesh against the true surface. Distances in metres."""
-
-    rms: float               # mesh -> true surface
-    p95: float
-    max: float
-    completeness: float      # fraction of the visible true surface within ``tolerance`` of the mesh
-    tolerance: float
-    diagonal: float          # the true object's bounding-box diagonal
-    visible_fraction: float  # share of the object's whole surface the views can see
-    unobserved_area: float   # share of the mesh's area filled in where no view saw the truth
-    unobserved_rms: float    # mesh -> true surface over that filled-in part
-    rms_all: float           # mesh -> true surface over the whole mesh, filled-in parts included
-    max_incidence_deg: float # "can see" = facing camera and projector within this angle
-    n_mesh_samples: int
-    n_truth_samples: int
-    cloud_rms: float | None = None   # the scan's merged cloud -> true surface, when given
-    cloud_p95: float | None = None
-    n_cloud: int | None = None
-    completeness_whole: float | None = None   # fraction of the object's WHOLE surface within ``tolerance``
-
-    def to_dict(self) -> dict:
-        return {k: (float(v) if isinstance(v, (float, np.floating)) else v) for k, v in self.__dict__.items()}
-
-    def __str__(self) -> str:
-        return (f"RMS {self.rms * 1e3:.3f} mm ({self.rms / self.diagonal:.3%} of the {self.diagonal * 1e3:.0f} mm "
-                f"diagonal), 95th percentile {self.p95 * 1e3:.3f} mm, max {self.max * 1e3:.3f} mm; completeness "
-                f"{self.completeness:.1%} of the visible surface within {self.tolerance * 1e3:g} mm"
-                + (f", {self.completeness_whole:.1%} of the whole surface " if self.completeness_whole is not None
-                   else " ") +
-                f"({self.visible_fraction:.0%} of the object is visible); {self.unobserved_area:.0%} of the mesh "
-                f"fills unseen parts (RMS {self.unobserved_rms * 1e3:.2f} mm there; whole mesh "
-                f"{self.rms_all * 1e3:.3f} mm)")
 
 
 def sample_surface(V: np.ndarray, F: np.ndarray, n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
@@ -255,7 +220,7 @@ def mesh_accuracy(mesh: TriangleMesh, scene: Scene, rig: Rig, angles, *, toleran
                     completeness=float(np.mean(d_truth[seen] <= tolerance)), tolerance=tolerance, diagonal=diag,
                     visible_fraction=float(seen.mean()), unobserved_area=float(np.mean(~on_seen)),
                     unobserved_rms=float(np.sqrt(np.mean(d_fill ** 2))) if d_fill.size else 0.0,
-                    rms_all=float(np.sqrt(np.mean(d_mesh ** 2))), max_incidence_deg=float(max_incidence_deg),
+                    rms_all=float(np.sqrt(np.mean(d_mesh ** 2))), max_incidence=float(np.radians(max_incidence_deg)),
                     n_mesh_samples=int(on_seen.sum()), n_truth_samples=int(seen.sum()),
                     completeness_whole=float(np.mean(d_truth <= tolerance)), **cloud_figures)
 
@@ -286,15 +251,16 @@ class TruthEvaluator:
     the mesh ahead: the truth's samples and their visibility, and the per-view errors. Processing runs it
     beside the fusion; a later call with the same angles (and the same ``views`` object) reuses it.
 
-    ``views``: the views' ``clouds``, registered ``T_world_view``, decoded ``proj_cols`` and ``names``
-    (:func:`rangekit.sim.truth.view_errors.view_errors`), for the per-view error breakdown.
+    ``views``: the registered views' ``clouds``, ``T_world_view``, decoded ``proj_cols`` and ``names``
+    (:class:`rangekit.app.process.evaluate.RegisteredViewsLike`; :func:`rangekit.sim.truth.view_errors.view_errors`),
+    for the per-view error breakdown.
     """
 
     def __init__(self, scene: Scene, rig: Rig, options: dict) -> None:
         self.scene, self.rig, self.options = scene, rig, dict(options)
         self._key, self._truth, self._views, self._view_errors = None, None, None, None
 
-    def prepare(self, angles: Sequence[float], views: dict | None = None) -> None:
+    def prepare(self, angles: Sequence[float], views=None) -> None:
         key = tuple(np.asarray(angles, dtype=np.float64).reshape(-1).tolist())
         if self._key != key:
             self._truth = truth_samples(self.scene, self.rig, angles,
@@ -303,11 +269,12 @@ class TruthEvaluator:
         if views is not None and views is not self._views:
             from rangekit.sim.truth.view_errors import view_errors
 
-            self._views, self._view_errors = views, view_errors(self.scene, self.rig, angles, **views,
-                                                                pass_motions=self.options.get("pass_motions"))
+            errors = view_errors(self.scene, self.rig, angles, views.clouds, views.T_world_view, views.proj_cols,
+                                 views.names, pass_motions=self.options.get("pass_motions"))
+            self._views, self._view_errors = views, errors
 
     def __call__(self, mesh: TriangleMesh, angles: Sequence[float], cloud: np.ndarray | None = None,
-                 views: dict | None = None) -> TruthEvaluation:
+                 views=None) -> TruthEvaluation:
         self.prepare(angles, views)
         options = {k: v for k, v in self.options.items() if k != "pass_motions"}
         accuracy = mesh_accuracy(mesh, self.scene, self.rig, angles, cloud=cloud, truth=self._truth, **options)

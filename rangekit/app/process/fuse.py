@@ -27,6 +27,7 @@ from rangekit.app.process.options import ProcessOptions
 from rangekit.app.process.register import RegisteredViews
 from rangekit.formats.clouds import save_cloud
 from rangekit.formats.sessions.session import Session
+from rangekit.formats.sessions.summary import MeshFigures
 from rangekit.geometry import compose
 from rangekit.progress import call_progress
 from rangekit.rig.rig_file import Rig
@@ -51,8 +52,8 @@ class FusedViews:
 
     observed: TriangleMesh       # mesh.ply
     watertight: TriangleMesh     # mesh_watertight.ply, with the per-vertex ``observed`` flag
-    observed_info: dict
-    watertight_info: dict
+    observed_info: MeshFigures
+    watertight_info: MeshFigures
     evaluation: object | None
 
 
@@ -141,7 +142,7 @@ class Fusion:
                     call_progress(progress_of(self._on_event),
                                   "measuring the observed mesh and each view against the true surface")
                     evaluation = evaluate_observed(evaluate, mesh, self._registered.angles,
-                                                   views=self._registered.evaluator_views)
+                                                   views=self._registered)
             watertight = rule.flagged(closing.result())
         del rule
         release_free_memory()   # the fusion's and the evaluator's temporaries
@@ -149,7 +150,7 @@ class Fusion:
         emit(self._on_event, MeshReady("watertight", out / WATERTIGHT_FILE, watertight))
         call_progress(progress_of(self._on_event),
                       f"mesh: {len(mesh.vertices):,} vertices, {len(mesh.triangles):,} triangles observed; "
-                      f"closed: {watertight_info['unobserved_vertices']:,} of {watertight_info['vertices']:,} "
+                      f"closed: {watertight_info.unobserved_vertices:,} of {watertight_info.vertices:,} "
                       "vertices unobserved")
         return FusedViews(mesh, watertight, mesh_info, watertight_info, evaluation)
 

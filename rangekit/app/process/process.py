@@ -101,7 +101,7 @@ def _process(session: Session, options: ProcessOptions, evaluate: Evaluator | No
     decoded = decode(session, options, clock, on_event)
     child = poisson_child(decoded, options, children)      # imports on the other core while the views register
     registered = register(decoded, session, clock, on_event, map_pairs=map_pairs)
-    measuring = getattr(evaluate, "prepare", None) is not None
+    measuring = evaluate is not None
     with clock.stage("fuse"), Fusion(registered, session, options, child, on_event,
                                      measuring_beside=measuring) as fusion:
         fusion.save_merged()

@@ -4,7 +4,6 @@ scan from its prior and the passes to each other without one; the poses written 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import cached_property
 
 import numpy as np
 
@@ -13,6 +12,7 @@ from rangekit.app.events import OnEvent, PairRegistered, StageClock, emit, progr
 from rangekit.app.process.decode import DecodedViews
 from rangekit.formats.poses import save_poses
 from rangekit.formats.sessions.session import Session
+from rangekit.formats.sessions.summary import Edge
 from rangekit.rig.rig_file import turntable_prior
 
 __all__ = ["RegisteredViews", "register"]
@@ -24,7 +24,7 @@ class RegisteredViews:
 
     decoded: DecodedViews
     T_world_view: np.ndarray      # (n, 4, 4) registered poses, world = the first view's frame
-    edges: list[dict]             # the view graph as summary.json keeps it (rangekit.formats.sessions.summary)
+    edges: list[Edge]             # the registration's view pairs (rangekit.formats.sessions.summary)
     rmse: float                   # metres: the joint point-to-plane RMS of the final poses
     view_passes: list[int] | None  # a multi-pass scan: each view's turntable pass; None for one pass
 
@@ -34,13 +34,20 @@ class RegisteredViews:
         views = self.decoded.views
         return [v.angle for v in views] if self.view_passes is None else [(v.angle, v.scan_pass) for v in views]
 
-    @cached_property
-    def evaluator_views(self) -> dict:
-        """The evaluator's view of the registered views, one dict (an evaluator knows it by identity): their
-        ``clouds``, registered ``T_world_view``, decoded ``proj_cols`` and ``names``
-        (:data:`rangekit.app.process.evaluate.Evaluator`)."""
-        d = self.decoded
-        return {"clouds": d.clouds, "T_world_view": self.T_world_view, "proj_cols": d.proj_cols, "names": d.names}
+    # What an evaluator reads of the views (rangekit.app.process.evaluate.RegisteredViewsLike), with T_world_view:
+    @property
+    def clouds(self) -> list:
+        """Each view's cloud in its own frame."""
+        return self.decoded.clouds
+
+    @property
+    def proj_cols(self) -> list:
+        """Each view's decoded (H, W) projector columns, NaN where undecoded (emptied once measured)."""
+        return self.decoded.proj_cols
+
+    @property
+    def names(self) -> list[str]:
+        return self.decoded.names
 
 
 def register(decoded: DecodedViews, session: Session, clock: StageClock, on_event: OnEvent | None = None, *,
@@ -73,15 +80,15 @@ def register(decoded: DecodedViews, session: Session, clock: StageClock, on_even
     return RegisteredViews(decoded, res.T_world_view, edges, float(res.rmse), view_passes)
 
 
-def _edge_rows(res) -> list[dict]:
-    """The registration's edges as summary.json rows, each accepted one with its synchronisation residuals."""
+def _edge_rows(res) -> list[Edge]:
+    """The registration's view pairs, each accepted one with its synchronisation residuals (radians, metres)."""
     edges, k_acc = [], 0
     for e in res.edges:
-        row = {"i": e.i, "j": e.j, "rmse_mm": e.rmse * 1e3, "overlap": e.overlap, "accepted": e.accepted,
-               "reason": e.reason, "rotation_residual_deg": None, "translation_residual_mm": None}
+        rotation = translation = None
         if e.accepted and k_acc < len(res.sync.edge_rotation_error):
-            row["rotation_residual_deg"] = float(np.degrees(res.sync.edge_rotation_error[k_acc]))
-            row["translation_residual_mm"] = float(res.sync.edge_translation_error[k_acc] * 1e3)
+            rotation = float(res.sync.edge_rotation_error[k_acc])
+            translation = float(res.sync.edge_translation_error[k_acc])
             k_acc += 1
-        edges.append(row)
+        edges.append(Edge(int(e.i), int(e.j), float(e.rmse), float(e.overlap), bool(e.accepted), e.reason, rotation,
+                          translation))
     return edges

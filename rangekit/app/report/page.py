@@ -33,7 +33,7 @@ if TYPE_CHECKING:
     from rangekit.app.report.view_rows import ViewRows
     from rangekit.app.process.view_cache import ViewMaps
     from rangekit.formats.sessions.session import Session
-    from rangekit.formats.sessions.summary import ProcessResult
+    from rangekit.formats.sessions.summary import Edge, ProcessResult
     from rangekit.surface.cloud import PointCloud
     from rangekit.surface.mesh import TriangleMesh
 
@@ -56,7 +56,7 @@ margin-right:4px;vertical-align:-1px;border:1px solid #999}
 CSP = "default-src 'none'; img-src data:; style-src 'unsafe-inline'; script-src 'unsafe-inline'"
 
 
-def view_graph_svg(n: int, edges: Sequence[dict], *, size: int = 460) -> str:
+def view_graph_svg(n: int, edges: Sequence[Edge], *, size: int = 460) -> str:
     """The view graph as SVG: views on a circle (in turntable order), accepted pairs as lines coloured by
     their ICP RMSE (green low, red high; the label in micrometres), rejected pairs dashed grey."""
     from rangekit.colour import colourise
@@ -64,21 +64,21 @@ def view_graph_svg(n: int, edges: Sequence[dict], *, size: int = 460) -> str:
     c, r = size / 2, size / 2 - 40
     ang = np.pi / 2 - 2 * np.pi * np.arange(n) / n
     xy = np.column_stack([c + r * np.cos(ang), c - r * np.sin(ang)])
-    acc = [e for e in edges if e["accepted"]]
-    hi = max([e["rmse_mm"] for e in acc], default=1.0) or 1.0
+    acc = [e for e in edges if e.accepted]
+    hi = max([e.rmse * 1e3 for e in acc], default=1.0) or 1.0
     parts = [f'<svg xmlns="http://www.w3.org/2000/svg" width="{size}" height="{size}" '
              f'viewBox="0 0 {size} {size}" font-family="sans-serif" font-size="11">',
              f'<rect width="{size}" height="{size}" fill="white"/>']
-    for e in sorted(edges, key=lambda e: e["accepted"]):
-        (x1, y1), (x2, y2) = xy[e["i"]], xy[e["j"]]
-        if e["accepted"]:
-            rgb = colourise(np.array([e["rmse_mm"]]), 0.0, hi, cmap="turbo")[0]
+    for e in sorted(edges, key=lambda e: e.accepted):
+        (x1, y1), (x2, y2) = xy[e.i], xy[e.j]
+        if e.accepted:
+            rgb = colourise(np.array([e.rmse * 1e3]), 0.0, hi, cmap="turbo")[0]
             parts.append(f'<line x1="{x1:.1f}" y1="{y1:.1f}" x2="{x2:.1f}" y2="{y2:.1f}" '
                          f'stroke="rgb({rgb[0]},{rgb[1]},{rgb[2]})" stroke-width="2.5"/>')
-            if abs(e["i"] - e["j"]) in (1, n - 1):
+            if abs(e.i - e.j) in (1, n - 1):
                 mx, my = (x1 + x2) / 2, (y1 + y2) / 2
                 parts.append(f'<text x="{mx:.1f}" y="{my:.1f}" text-anchor="middle" fill="#333">'
-                             f'{e["rmse_mm"] * 1e3:.0f}</text>')
+                             f'{e.rmse * 1e6:.0f}</text>')
         else:
             parts.append(f'<line x1="{x1:.1f}" y1="{y1:.1f}" x2="{x2:.1f}" y2="{y2:.1f}" stroke="#bbb" '
                          'stroke-width="1" stroke-dasharray="4 3"/>')
@@ -243,7 +243,7 @@ def head_sections(out: Path, result: "ProcessResult", *, mesh: "TriangleMesh", s
     frame_pts, up, sides, side_names = mesh.vertices, table_up(session.rig), SIDES, SIDE_NAMES
     if truth is not None and result.accuracy:
         call_progress(progress, "report: error heat map")
-        vmax = 1e-3 * max(0.2, round(result.accuracy["p95"] * 1e3 * 2, 1))
+        vmax = 1e-3 * max(0.2, round(result.accuracy.p95 * 1e3 * 2, 1))
         figs = []
         for (az, el), name in zip(sides, side_names):
             cam = fit_camera(frame_pts, azimuth=az, elevation=el, size=size, up=up, tight=True)
@@ -253,13 +253,13 @@ def head_sections(out: Path, result: "ProcessResult", *, mesh: "TriangleMesh", s
         bar = colour_bar(0.0, vmax * 1e3, label="distance to the true surface, mm", cmap="turbo")
         a = result.accuracy
         sections += ["<h2>Accuracy against the true surface (simulator)</h2>",
-                     f"<p>RMS {a['rms'] * 1e3:.3f} mm, 95th percentile {a['p95'] * 1e3:.3f} mm, completeness "
-                     f"{a['completeness']:.1%} within {a['tolerance'] * 1e3:g} mm, on the observed mesh (mesh.ply: "
+                     f"<p>RMS {a.rms * 1e3:.3f} mm, 95th percentile {a.p95 * 1e3:.3f} mm, completeness "
+                     f"{a.completeness:.1%} within {a.tolerance * 1e3:g} mm, on the observed mesh (mesh.ply: "
                      "only surface some view's points support)"
-                     + (f"; the closed mesh (mesh_watertight.ply): RMS {a['watertight']['rms'] * 1e3:.3f} mm, 95th "
-                        f"percentile {a['watertight']['p95'] * 1e3:.3f} mm, "
-                        f"{a['watertight']['unobserved_area']:.0%} of its area where no view can see"
-                        if a.get("watertight") else "") + ".</p>",
+                     + (f"; the closed mesh (mesh_watertight.ply): RMS {a.watertight.rms * 1e3:.3f} mm, 95th "
+                        f"percentile {a.watertight.p95 * 1e3:.3f} mm, "
+                        f"{a.watertight.unobserved_area:.0%} of its area where no view can see"
+                        if a.watertight is not None else "") + ".</p>",
                      f"<div class='row'>{''.join(figs)}</div>", _img(bar, "colour scale")]
 
     call_progress(progress, "report: mesh renders")

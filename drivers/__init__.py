@@ -26,7 +26,21 @@ from rangekit.rig.camera_controls import controls_from_capture
 from rangekit.errors import ConfigError
 from rangekit.rig.checks import DEFAULT_SEARCH_S, validate_rig_for_hardware
 
-__all__ = ["HardwareRig", "open_rig_devices"]
+__all__ = ["HardwareRig", "open_rig_devices", "CAMERA_DRIVERS"]
+
+
+def _open_depthai(sec: dict, rig, *, coded_light: bool, where: str):
+    """An OAK camera (:class:`rangekit.drivers.depthai_camera.DepthaiCamera`) of a ``devices.camera`` entry."""
+    from rangekit.drivers.depthai_camera import DepthaiCamera
+
+    return DepthaiCamera(sec.get("id"), socket=sec.get("socket", "CAM_A"), size=(rig.camera.width, rig.camera.height),
+                         controls=controls_from_capture(rig.capture, where=where), coded_light=coded_light,
+                         search_timeout_s=sec.get("search_timeout_s", DEFAULT_SEARCH_S), where=where)
+
+
+#: The camera drivers, by the rig file's ``devices.camera.type`` (each entry in this one place; the names the rig
+#: file may hold are rangekit.rig.checks.CAMERA_TYPES): ``open(section, rig, coded_light=, where=)`` -> a camera.
+CAMERA_DRIVERS = {"depthai": _open_depthai}
 
 
 @dataclass
@@ -97,13 +111,8 @@ def open_rig_devices(rig, *, where: str = "rig file", open_camera: bool = True, 
         camera = None
         sec = _section(devices, "camera")
         if open_camera and sec is not None:
-            from rangekit.drivers.depthai_camera import DepthaiCamera
-
-            camera = DepthaiCamera(sec.get("id"), socket=sec.get("socket", "CAM_A"),
-                                   size=(rig.camera.width, rig.camera.height),
-                                   controls=controls_from_capture(rig.capture, where=where),
-                                   coded_light=projector is not None if coded_light is None else coded_light,
-                                   search_timeout_s=sec.get("search_timeout_s", DEFAULT_SEARCH_S), where=where)
+            camera = CAMERA_DRIVERS[sec["type"]](sec, rig, where=where,
+                                                 coded_light=projector is not None if coded_light is None else coded_light)
             opened.append(camera)
         return HardwareRig(camera, projector, turntable, control)
     except BaseException:

@@ -273,3 +273,20 @@ def test_docs_describe_every_field():
     # The template printed in the docs is the one the code makes.
     block = re.search(r"```json\n(.*?)```", doc, re.S).group(1)
     assert json.loads(block) == template_rig()
+
+
+def test_every_camera_type_a_rig_file_may_name_has_its_driver():
+    """The camera drivers are a registry (rangekit.drivers.CAMERA_DRIVERS); the rig file's check accepts its
+    names and the simulator's, nothing else."""
+    from rangekit.drivers import CAMERA_DRIVERS
+    from rangekit.rig.checks import CAMERA_TYPES
+
+    assert set(CAMERA_TYPES) == {"sim", *CAMERA_DRIVERS}
+
+
+def test_the_mesh_formats_are_listed_once():
+    """--format's choices are the mesh writers of rangekit.formats.meshes, the one list of them."""
+    from rangekit.app.process.fused_outputs import MESH_EXPORT_FORMATS
+    from rangekit.formats.meshes import MESH_FORMATS
+
+    assert [f".{fmt}" for fmt in MESH_EXPORT_FORMATS] == list(MESH_FORMATS)

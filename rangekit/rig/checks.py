@@ -163,11 +163,17 @@ def _check_projector(sec, where: str) -> None:
         raise _error(where, f"{path}.timeout", f"must be a positive number of seconds, found {_show(timeout)}")
 
 
+#: ``devices.camera.type``: the simulator's camera, or one of the camera drivers (rangekit.drivers.CAMERA_DRIVERS,
+#: one entry per type; tests/test_rig_file.py checks the two agree).
+CAMERA_TYPES = ("sim", "depthai")
+
+
 def _check_camera(sec, where: str) -> None:
     path = "devices.camera"
     sec = _object(sec, where, path)
-    if sec.get("type") not in ("depthai", "sim"):
-        raise _error(where, f"{path}.type", f"must be 'depthai' or 'sim', found {_show(sec.get('type'))}")
+    if sec.get("type") not in CAMERA_TYPES:
+        raise _error(where, f"{path}.type", f"must be {' or '.join(repr(t) for t in reversed(CAMERA_TYPES))}, "
+                                            f"found {_show(sec.get('type'))}")
     if sec["type"] == "sim":
         return
     if sec.get("id") is not None and not isinstance(sec["id"], str):

@@ -17,6 +17,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Callable
 
+from rangekit.formats.meshes import MESH_FORMATS
 from rangekit.formats.sessions.summary import Accuracy, ClosedAccuracy, MeshFigures
 from rangekit.surface.mesh import TriangleMesh
 from rangekit.surface.observed import FusedMeshes
@@ -26,8 +27,9 @@ __all__ = ["MESH_FILE", "WATERTIGHT_FILE", "MESH_EXPORT_FORMATS", "mesh_info", "
 
 MESH_FILE = "mesh.ply"
 WATERTIGHT_FILE = "mesh_watertight.ply"
-#: ``--format`` of scan and process: the mesh files' format (PLY always written; the others beside it).
-MESH_EXPORT_FORMATS = ("ply", "obj", "stl", "glb")
+#: ``--format`` of scan and process: the mesh files' format (PLY always written; the others beside it): the
+#: mesh writers of rangekit.formats.meshes.MESH_FORMATS, the one list.
+MESH_EXPORT_FORMATS = tuple(suffix[1:] for suffix in MESH_FORMATS)
 
 
 def mesh_info(mesh: TriangleMesh, fusion: str, file: str) -> MeshFigures:

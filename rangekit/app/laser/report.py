@@ -1,5 +1,5 @@
-"""``report.html`` of a laser-line scan: the summary, heat map and mesh of every report
-(:func:`rangekit.app.report.page.head_sections`), then the profiles: the merged cloud coloured by turntable
+"""``report.html`` of a laser-line scan (:data:`LASER_PANELS`): the summary, heat map and mesh of every report
+(:data:`rangekit.app.report.panels.HEAD_PANELS`), then the profiles: the merged cloud coloured by turntable
 step, the points each laser gave per step (a chart: a dip is a step where the line missed or was
 rejected), and a few steps' laser frames with their detected peaks drawn on them.
 """
@@ -13,11 +13,13 @@ from typing import Callable
 
 import numpy as np
 
-from rangekit.app.report.page import SIDE_NAMES, SIDES, head_sections, table_up, write_page
+from rangekit.app.report.context import SIDE_NAMES, SIDES, ReportContext
+from rangekit.app.report.page import write_page
+from rangekit.app.report.panels import HEAD_PANELS
 from rangekit.app.report.figures import THUMB_W, crop as _crop, figure as _img
 from rangekit.progress import call_progress
 
-__all__ = ["write_laser_report", "points_chart_svg"]
+__all__ = ["write_laser_report", "points_chart_svg", "LASER_PANELS"]
 
 #: Laser colours in the chart and on the frames (RGB).
 _COLOURS = ((214, 39, 40), (31, 119, 180), (44, 160, 44), (255, 127, 14))
@@ -73,36 +75,54 @@ def _frame_with_peaks(folder: Path, session, k: int, full_scale: float | None) -
 
 
 def write_laser_report(folder: str | Path, result, *, profiles, merged, mesh, session, truth=None,
-                       progress: Callable | None = None, size: tuple[int, int] = (230, 230), n_frames: int = 4,
+                       progress: Callable | None = None, size: tuple[int, int] = (230, 230),
                        watertight=None) -> Path:
     """Write ``folder/report.html`` of a laser scan (see the module docstring); returns its path.
     ``profiles``: :class:`rangekit.app.laser.process.LaserProfiles`; ``merged`` and ``mesh`` in the session
     world (``mesh`` the observed surface, ``watertight`` the closed one with its ``observed`` flag); ``truth``
-    the true surface there (simulator) for the heat map; ``n_frames`` steps shown."""
+    the true surface there (simulator) for the heat map."""
+    ctx = ReportContext(Path(folder), result, session, mesh, watertight=watertight, truth=truth, merged=merged,
+                        profiles=profiles, size=size, progress=progress)
+    return write_page(ctx.out, [panel(ctx) for panel in LASER_PANELS])
+
+
+def profiles_panel(ctx: ReportContext) -> str:
+    """The profiles placed by the turntable, coloured by step, and the points each laser gave per step."""
     from rangekit.rendering.snapshot import fit_camera, render_cloud
 
-    out = Path(folder)
-    sections = head_sections(out, result, mesh=mesh, session=session, truth=truth, progress=progress, size=size,
-                             watertight=watertight)
-    call_progress(progress, "report: laser profiles")
-    up = table_up(session.rig)
+    call_progress(ctx.progress, "report: laser profiles")
+    profiles = ctx.profiles
     P, step_of = profiles.cloud.points, profiles.step.astype(np.float64)
     every = max(1, len(P) // 600_000)
     n = len(profiles.names)
-    figs = [_img(_crop(render_cloud(P[::every], fit_camera(mesh.vertices, azimuth=az, elevation=el, size=size, up=up,
-                                                           tight=True),
+    figs = [_img(_crop(render_cloud(P[::every], fit_camera(ctx.mesh.vertices, azimuth=az, elevation=el, size=ctx.size,
+                                                           up=ctx.up, tight=True),
                                     values=step_of[::every], vmin=0, vmax=max(1, n - 1))), f"{name}: colour = step")
             for (az, el), name in list(zip(SIDES, SIDE_NAMES))[:2]]
-    names = [laser.name for laser in session.rig.lasers]
+    names = [laser.name for laser in ctx.session.rig.lasers]
     figs.append(_img(points_chart_svg(profiles.n_points, names), "points per step and laser"))
-    sections += ["<h2>Laser profiles</h2>", f"<div class='row'>{''.join(figs)}</div>"]
-    picks = sorted(set(np.linspace(0, n - 1, min(n_frames, n)).round().astype(int).tolist()))
+    return f"<h2>Laser profiles</h2><div class='row'>{''.join(figs)}</div>"
+
+
+#: Steps whose laser frames the report shows.
+FRAMES_SHOWN = 4
+
+
+def frames_panel(ctx: ReportContext) -> str:
+    """:data:`FRAMES_SHOWN` steps' laser frames with their detected peaks drawn on them."""
+    profiles, session = ctx.profiles, ctx.session
+    n = len(profiles.names)
+    names = [laser.name for laser in session.rig.lasers]
+    picks = sorted(set(np.linspace(0, n - 1, min(FRAMES_SHOWN, n)).round().astype(int).tolist()))
     rows = []
     for j in picks:
-        view = out / profiles.names[j]
+        view = ctx.out / profiles.names[j]
         figs = [_img(_frame_with_peaks(view, session, k, session.capture.full_scale),
                      f"{profiles.names[j]}: {names[k]}, {int(profiles.n_points[j, k]):,} points")
                 for k in range(len(names))]
         rows.append(f"<div class='row'>{''.join(figs)}</div>")
-    sections += ["<h2>Laser frames (green: detected peaks)</h2>", "".join(rows)]
-    return write_page(out, sections)
+    return "<h2>Laser frames (green: detected peaks)</h2>" + "".join(rows)
+
+
+#: A laser scan's report, in order: the one list of its panels.
+LASER_PANELS = (*HEAD_PANELS, profiles_panel, frames_panel)

@@ -67,7 +67,7 @@ def decode(session: Session, options: ProcessOptions, clock: StageClock, on_even
 
 
 def _rows_maker(session: Session):
-    from rangekit.app.report.page import table_up
+    from rangekit.app.report.context import table_up
     from rangekit.app.report.view_rows import ViewRowsMaker
 
     return ViewRowsMaker(rig=session.rig, full_scale=session.capture.full_scale, up=table_up(session.rig))

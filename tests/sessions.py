@@ -28,6 +28,17 @@ def make_reference(out: Path) -> Path:
     return out
 
 
+def sim(seed: int = 3) -> SimRig:
+    """The simulated rig of the small sessions: the lumpy object on the small rig."""
+    return SimRig(default_scene("lumpy"), small_rig(), seed=seed)
+
+
+def pngs(folder: Path) -> dict:
+    """Every finished view's frames (bytes), by path relative to the session folder."""
+    return {p.relative_to(folder).as_posix(): p.read_bytes() for p in sorted(folder.glob("view_*/*.png"))
+            if not p.parent.name.endswith(".partial")}
+
+
 def copy_session(reference: Path, dest: Path, pending=(), checksums: bool = True) -> Path:
     """A copy of the reference session; views in ``pending`` not yet taken; without their checksums
     (as written before rangekit recorded them) when ``checksums`` is False."""

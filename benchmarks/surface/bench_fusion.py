@@ -1,6 +1,6 @@
 """TSDF fusion speed at full resolution: 12 simulated 1280x1024 views of the ``lumpy`` object.
 
-Target (formerly an assert in tests/test_mesh.py): ``tsdf_fuse`` of the 12 views in under 10 s on a
+Target (formerly an assert in tests/surface/test_mesh.py): ``tsdf_fuse`` of the 12 views in under 10 s on a
 2-core machine. ``tsdf_fuse`` wraps Open3D's ``UniformTSDFVolume``, so the comparison printed is with
 and without the watertight closing (what :func:`make_watertight` adds to Open3D's own work).
 

@@ -13,7 +13,7 @@ bodies (``numba.parfors``). ``njit`` has no option for it, so this module sets t
 pipeline (``pipeline_class``, numba's documented hook for custom pipelines). The promise is the
 caller's: no two arguments of such a function may share memory that the function writes. Views of one
 array passed as two arguments break it, silently. So keep such a function small, call it with buffers
-it owns, and check it against an unflagged reference (tests/test_stereo_sgm.py does).
+it owns, and check it against an unflagged reference (tests/stereo/test_stereo_sgm.py does).
 """
 
 from __future__ import annotations

@@ -122,7 +122,7 @@ def nearest_and_long_links(k: int = PRIOR_NEIGHBOURS, links: int = LONG_LINKS,
 def default_pairs(T_world_view: np.ndarray, prior: bool = False) -> list[tuple[int, int]]:
     """The :data:`PRIOR_NEIGHBOURS` nearest views in rotation, plus :data:`LONG_LINKS` long links without
     a prior. With a turntable prior the joint refinement keeps the views on one axis, so drift cannot
-    accumulate, and long links only add risk: on the step gauge (tests/test_turntable_registration.py)
+    accumulate, and long links only add risk: on the step gauge (tests/registration/test_turntable_registration.py)
     its 90 deg pairs slide and the robust synchronisation then refused 9 of 28 edges."""
     return (nearest_in_rotation() if prior else nearest_and_long_links())(T_world_view, prior)
 

@@ -164,7 +164,7 @@ def _check_projector(sec, where: str) -> None:
 
 
 #: ``devices.camera.type``: the simulator's camera, or one of the camera drivers (rangekit.drivers.CAMERA_DRIVERS,
-#: one entry per type; tests/test_rig_file.py checks the two agree).
+#: one entry per type; tests/rig/test_rig_file.py checks the two agree).
 CAMERA_TYPES = ("sim", "depthai")
 
 

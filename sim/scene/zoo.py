@@ -6,7 +6,7 @@ scanned mesh as it is: open underneath). The mesh is the truth the simulator's e
 against (:mod:`rangekit.sim.truth.evaluate`). The shiny and dark members are materials on the ``lumpy`` blob
 (:mod:`rangekit.sim.scene.objects`, which registers all of them in ``BUILTIN_OBJECTS``).
 
-Sizes in the docstrings are the analytic truth the tests check (tests/test_zoo.py).
+Sizes in the docstrings are the analytic truth the tests check (tests/sim/test_zoo.py).
 """
 
 from __future__ import annotations

@@ -140,7 +140,7 @@ def turntable_board_scene(rig: Rig, board: Board, *, tilt_deg: float = 20.0, off
     turntable angles turn it about the axis, its centre about 7 cm off the axis (defaults, 10 x 7 board
     of 2 cm squares). On the default rig, with the defaults, the whole board (margin and corners) stays
     at least 20 px inside the camera and projector images, facing both within 60 deg, for turntable
-    angles from -45 to +60 degrees (checked in tests/test_boards.py for -40..+40). The scene also holds
+    angles from -45 to +60 degrees (checked in tests/sim/test_boards.py for -40..+40). The scene also holds
     the turntable disc (radius 0.15 m), which the board's footprint fits on.
 
     Raises

@@ -57,7 +57,7 @@ def test_scan_gives_a_watertight_mesh_close_to_the_true_surface(scanned):
 
 @pytest.mark.slow
 def test_report_opens_in_headless_chromium_with_every_image_loaded(scanned, tmp_path):
-    sys.path.insert(0, str(Path(__file__).parent))
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
     from chromium import chromium_paths, open_page
 
     html = (scanned / "report.html").read_text()

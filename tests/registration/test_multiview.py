@@ -14,7 +14,7 @@ from rangekit.registration.multiview import MultiViewOptions, overlap_rms, refin
 from rangekit.registration.sync import synchronise
 from rangekit.sim.writers.scans import perturb_poses, turntable_scans
 
-BUNNY = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "stanford-bunny"
+BUNNY = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "stanford-bunny"
 
 
 def pose_errors(T_est, T_true):

@@ -10,17 +10,9 @@ from rangekit.formats.sessions.session import ScanPlan, Session, SimulatorSettin
 from rangekit.errors import ConfigError, DecodeError, DeviceDisconnected
 from rangekit.coded.patterns import make_pattern_spec
 from rangekit.sim import SimRig, default_scene
+from sessions import pngs, sim
 from small_rigs import small_rig
 
-
-
-def sim(seed=3):
-    return SimRig(default_scene("lumpy"), small_rig(), seed=seed)
-
-
-def pngs(folder):
-    return {p.relative_to(folder).as_posix(): p.read_bytes() for p in sorted(folder.glob("view_*/*.png"))
-            if not p.parent.name.endswith(".partial")}
 
 
 def test_unplug_then_resume_gives_identical_bytes(tmp_path):

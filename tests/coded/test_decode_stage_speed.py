@@ -24,7 +24,7 @@ from rangekit.coded.uncertainty import point_sigma
 from rangekit.geometry import look_at, transform_vectors
 from rangekit.io import atomic_save_npz, write_png
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def _rig(size=(96, 72)):

@@ -9,7 +9,7 @@ import pytest
 from rangekit.photometric.diligent import load_diligent
 from rangekit.errors import FileFormatError
 
-BALL = (Path(__file__).parents[1] / ".." / "shared" / "data" / "diligent-ball").resolve()
+BALL = (Path(__file__).parents[2] / ".." / "shared" / "data" / "diligent-ball").resolve()
 
 
 @pytest.fixture(scope="module")

@@ -12,7 +12,8 @@ from rangekit.coded.patterns import make_pattern_spec
 from rangekit.errors import DeviceDisconnected, StorageError
 from rangekit.formats.sessions.session import ScanPlan, load_session
 from rangekit.io import write_png
-from tests.test_acquire import pngs, sim, small_rig
+from sessions import pngs, sim
+from small_rigs import small_rig
 
 SPEC = make_pattern_spec("graycode", (1280, 800))
 PLAN = ScanPlan(n_views=3)

@@ -10,7 +10,7 @@ from rangekit.errors import FileFormatError
 from rangekit.formats.clouds import CLOUD_READERS, CLOUD_WRITERS, load_cloud, load_range_grid, save_cloud
 from rangekit.surface.cloud import PointCloud
 
-DATA = Path(__file__).parents[1] / ".." / "shared" / "data"
+DATA = Path(__file__).parents[2] / ".." / "shared" / "data"
 BUNNY = DATA / "stanford-bunny" / "bun000.ply"
 
 

@@ -106,7 +106,7 @@ def test_decode_command_errors(tmp_path, capsys):
         main(["decode", str(cap), "--pattern", "graycode", "--projector", "1280by800", "--out", "x.npz"])
 
 
-BUNNY = __import__("pathlib").Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "stanford-bunny"
+BUNNY = __import__("pathlib").Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "stanford-bunny"
 
 
 @pytest.mark.slow
@@ -180,7 +180,7 @@ def test_processing_and_the_cli_leave_the_work_to_the_library():
     import ast
     from pathlib import Path
 
-    root = Path(__file__).resolve().parents[1] / "rangekit"
+    root = Path(__file__).resolve().parents[2] / "rangekit"
 
     def imported(path):
         names = set()

@@ -3,7 +3,7 @@
 A fake ``depthai`` module (tests only) stands at the API boundary: it is put in ``sys.modules`` before the
 driver imports depthai and records every call the driver makes on it, so the tests read exactly which
 commands a real OAK camera would receive. The names the fake offers are checked against the installed
-depthai by tests/test_depthai_driver.py (``DEPTHAI_NAMES``), and :func:`test_mapping_on_real_depthai`
+depthai by tests/drivers/test_depthai_driver.py (``DEPTHAI_NAMES``), and :func:`test_mapping_on_real_depthai`
 applies the same mapping to a real ``depthai.CameraControl`` message.
 """
 

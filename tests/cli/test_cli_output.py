@@ -10,7 +10,7 @@ import pytest
 
 from rangekit.cli import build_parser, main
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 ENV = {**os.environ, "PYTHONPATH": str(ROOT), "PYTHONUNBUFFERED": "1"}
 # The quickest real acquisition: 2 views of one De Bruijn frame each (a per-frame bar of 2 steps).
 SCAN = ["scan", "--views", "2", "--patterns", "debruijn", "--object", "plane", "--no-process"]

@@ -108,7 +108,7 @@ def test_laser_session_refuses_tsdf(laser_scan, capsys):
     assert "fuses with poisson" in capsys.readouterr().err
 
 
-_BUNNY = __import__("pathlib").Path(__file__).resolve().parents[1].parent / "shared/data/stanford-bunny/bun_zipper.ply"
+_BUNNY = __import__("pathlib").Path(__file__).resolve().parents[2].parent / "shared/data/stanford-bunny/bun_zipper.ply"
 
 
 @pytest.mark.slow

@@ -15,7 +15,7 @@ from rangekit.errors import ConfigError
 from rangekit.rig.rig_file import CAMERA_FIELDS, RIG_FIELDS, Rig, load_rig, save_rig, template_rig
 from rangekit.sim import default_rig
 
-DOC = Path(__file__).resolve().parents[1] / "docs" / "rig.md"
+DOC = Path(__file__).resolve().parents[2] / "docs" / "rig.md"
 
 
 def test_template_is_plain_json_and_round_trips(tmp_path):

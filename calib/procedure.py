@@ -198,7 +198,7 @@ def calibrate_rig(devices, *, settings: CalibrationSettings = CalibrationSetting
         if check.accepted:
             kept.append((det.ids, det.uv))
             cam_views.append(Correspondences(det.ids, det.uv))
-            dec = decode(images, spec, response=response)
+            dec = decode(images, spec, subpixel=False, response=response)
             decoded.append((dec.proj_col, dec.proj_row, dec.confidence))
         else:
             cam_views.append(Correspondences(np.zeros(0, np.int64), np.zeros((0, 2)), check.reason))
@@ -259,7 +259,7 @@ def calibrate_rig(devices, *, settings: CalibrationSettings = CalibrationSetting
             obs.append((det.ids, det.uv))
             poses.append(_pose_from_corners(camera, obj, det.ids, det.uv))
             if k == mid:
-                dec = decode(images, spec, response=response)
+                dec = decode(images, spec, subpixel=False, response=response)
                 tri = triangulate(camera, projector, dec.proj_col, dec.proj_row)
                 table_points = tri.xyz.reshape(-1, 3)
         turntable.rotate_to(0.0)

@@ -344,7 +344,7 @@ def main() -> int:
     t_int = t_sub = None
     if have_decode:
         spec = make_pattern_spec("graycode", (PROJ_W, PROJ_H))
-        t_int, first, res = median_time(lambda: decode(stack, spec, order="opencv"), repeat)
+        t_int, first, res = median_time(lambda: decode(stack, spec, order="opencv", subpixel=False), repeat)
         firsts["int"] = first
         rows.append(("rangekit integer col+row+conf", t_int, f"first call {first:.3f} s",
                      accuracy(res.proj_col, res.proj_row, truth, integer=True)))

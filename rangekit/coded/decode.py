@@ -56,7 +56,7 @@ from rangekit.rig.projector_response import ProjectorResponse
 __all__ = ["decode"]
 
 
-def decode(stack, spec: PatternSpec, *, order: str = "rangekit", subpixel: bool = False,
+def decode(stack, spec: PatternSpec, *, order: str = "rangekit", subpixel: bool = True,
            min_contrast: float = 0.015, shadow_threshold: float = 0.01, max_global_ratio: float | None = None,
            max_gap: float = 6.0, max_disagreement: float = 1.5, full_scale: float | None = None,
            response: ProjectorResponse | None = None, workers: int = 2, chunk_rows: int = 96) -> DecodeResult:
@@ -72,8 +72,9 @@ def decode(stack, spec: PatternSpec, *, order: str = "rangekit", subpixel: bool 
     order : {"rangekit", "opencv"}
         Capture order; "opencv" is GrayCodePattern's (column pairs, row pairs, white, black).
     subpixel : bool
-        Binary codes: refine to subpixel by stripe-edge crossings (module doc). Phase methods are always
-        subpixel.
+        Binary codes: refine to subpixel by stripe-edge crossings (module doc; the default, as
+        :func:`rangekit.coded.reconstruct.reconstruct_view` and ``rangekit decode`` without ``--integer``);
+        False keeps the integer Gray code (calibration's correspondences). Phase methods are always subpixel.
     min_contrast : float
         Reject pixels whose code contrast (white - black for binary codes; 2x modulation for phase) is
         below this fraction of full scale.

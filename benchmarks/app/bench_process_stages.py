@@ -2,7 +2,7 @@
 
     PYTHONPATH=. .venv/bin/python benchmarks/app/bench_process_stages.py SESSION [--no-report] [--serial-evaluation]
 
-Runs :func:`rangekit.app.scan.scan.process_scan` (the work of ``rangekit process``, one BLAS thread as the CLI)
+Runs :func:`rangekit.app.scan.scan.process` (the work of ``rangekit process``, one BLAS thread as the CLI)
 on SESSION, which it changes (caches, outputs): give it a fresh copy of a session made by ``rangekit scan
 --out S --no-process`` for a run without the view cache. Prints, per stage, the resident and the peak
 memory at its start and end; the stage times the summary records (wall) and the CPU seconds (user + sys
@@ -60,6 +60,7 @@ def main() -> int:
 
     progress_module.StageTimer.stage = stage
     import rangekit.app.scan.scan as scan_module
+    from rangekit.app.process.options import ProcessOptions
     import rangekit.sim.truth.evaluate as evaluate_module
     import rangekit.sim.truth.view_errors as view_errors_module
     from rangekit._runtime.threads import one_blas_thread
@@ -70,14 +71,26 @@ def main() -> int:
     if "--serial-evaluation" in sys.argv:
         with_prepare = scan_module.session_evaluator
 
+        class Serial:
+            """The evaluator with nothing done beside the fusion: its preparation runs inside the first call."""
+
+            def __init__(self, ev) -> None:
+                self._ev = ev
+
+            def prepare(self, angles, views=None) -> None:
+                pass
+
+            def __call__(self, mesh, angles, **kw):
+                return self._ev(mesh, angles, **kw)
+
         def without_prepare(session):
             ev = with_prepare(session)
-            return None if ev is None else (lambda mesh, angles, **kw: ev(mesh, angles, **kw))
+            return None if ev is None else Serial(ev)
 
         scan_module.session_evaluator = without_prepare
     c0, w0 = time.process_time(), time.perf_counter()
     with one_blas_thread():
-        result = scan_module.process_scan(args[0], report="--no-report" not in sys.argv)
+        result = scan_module.process(args[0], ProcessOptions(report="--no-report" not in sys.argv))
     print("stage wall s:", {k: round(v, 1) for k, v in result.seconds.items()})
     print("stage CPU s: ", {k: round(v, 1) for k, v in cpu.items()})
     print("evaluator parts, wall s:", {k: round(v, 1) for k, v in parts.items()})

@@ -47,7 +47,7 @@ REPORT, EVAL = STORE / "bench_report_inputs.pkl", STORE / "bench_report_eval.pkl
 def capture(session: str) -> None:
     import rangekit.app.report.page as report
     import rangekit.sim.truth.evaluate as evaluate
-    from rangekit.app.scan.scan import process_scan
+    from rangekit.app.scan.scan import process
     from rangekit._runtime.threads import one_blas_thread
 
     write, prepare = report.write_report, evaluate.TruthEvaluator.prepare
@@ -65,7 +65,7 @@ def capture(session: str) -> None:
 
     report.write_report, evaluate.TruthEvaluator.prepare = keep_report, keep_eval
     with one_blas_thread():
-        process_scan(session)
+        process(session)
     print(f"kept {REPORT} and {EVAL}")
 
 

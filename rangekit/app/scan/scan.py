@@ -11,7 +11,7 @@ import time
 from contextlib import ExitStack
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Callable
+from typing import TYPE_CHECKING
 
 import numpy as np
 from rangekit.app.events import OnEvent, ScanStarted, StageClock, emit, failures_announced, progress_of
@@ -27,7 +27,7 @@ from rangekit.laser.sequence import LaserSequence
 if TYPE_CHECKING:
     from rangekit.app.scan.vdi2634 import Vdi2634Result
 
-__all__ = ["ScanResult", "scan", "session_evaluator", "process", "process_scan"]
+__all__ = ["ScanResult", "scan", "session_evaluator", "process"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -162,12 +162,3 @@ def process(session: Session | str | Path, options: ProcessOptions | None = None
             session = Session.load(session)
         evaluate = session_evaluator(session) if options.truth else None
     return process_session(session, options, evaluate=evaluate, on_event=on_event, map_pairs=map_pairs)
-
-
-def process_scan(folder: str | Path, *, fusion: str = "poisson", report: bool = True, mesh_format: str = "ply",
-                 progress: Callable | None = None, map_pairs=None) -> ProcessResult:
-    """:func:`process` with the command line's ``progress`` (:class:`rangekit.progress.Console`) as subscriber."""
-    from rangekit.app.events import progress_subscriber
-
-    return process(folder, ProcessOptions(fusion=fusion, report=report, mesh_format=mesh_format),
-                   on_event=progress_subscriber(progress), map_pairs=map_pairs)

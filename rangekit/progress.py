@@ -8,7 +8,8 @@ standard error (results stay on standard output):
   time: a new total, or a count going back, starts a new bar), and a message without counts is printed on
   its own line above the bar;
 - otherwise (CI, a pipe, a file) every message without counts is one plain line, and a counted step is a
-  line when its bar starts, ends or crosses a tenth of its total (every step with ``verbose``): no carriage
+  line at every step when it has at most :data:`EVERY_STEP_UP_TO` steps (a scan's views: one line each),
+  else when its bar starts, ends or crosses a tenth of its total (every step with ``verbose``): no carriage
   returns, no escape codes, so logs read as they were written and a 480-frame scan writes about 11 lines.
 
 The level comes from the ``rangekit`` logger (:data:`LOGGER`; the command line's ``-q`` sets it to
@@ -99,7 +100,8 @@ class Console:
         if self._new_step(done, total):
             self._tenth = -1
         tenth = 10 * min(done, total) // total
-        if self._tenth < 0 or tenth > self._tenth or done >= total or self.level <= logging.DEBUG:
+        if (total <= EVERY_STEP_UP_TO or self._tenth < 0 or tenth > self._tenth or done >= total
+                or self.level <= logging.DEBUG):
             self._tenth = tenth
             self.stream.write(f"{msg}\n")
             self.stream.flush()
@@ -125,6 +127,12 @@ class Console:
             self._bar.refresh()
             self._bar.close()
             self._bar = None
+
+
+#: Off a terminal, a counted step of at most this many steps (the views of a scan, its pairs) prints every step:
+#: a per-tenth throttle over 12 views printed 11 "decoded view_NNN" lines, which reads as a lost view. Longer
+#: ones (a scan's 720 frames, a laser scan's 400 steps) print a line per tenth.
+EVERY_STEP_UP_TO = 100
 
 
 class StageTimer:

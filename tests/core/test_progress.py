@@ -28,6 +28,24 @@ def test_bar_on_a_terminal_has_an_eta_and_messages_go_above_it():
     assert out.rstrip().endswith("ETA 00:00]")
 
 
+def test_off_a_terminal_every_view_of_a_scan_has_its_line():
+    """12 views decoded: 12 lines (a per-tenth throttle hid the 7th, which read as a lost view); up to
+    EVERY_STEP_UP_TO steps each is a line, a longer count one a tenth."""
+    from rangekit.progress import EVERY_STEP_UP_TO
+
+    for n in (12, 13, 99, EVERY_STEP_UP_TO):
+        buf = io.StringIO()
+        con = Console(buf, tty=False)
+        for k in range(1, n + 1):
+            con(f"decoded view_{k - 1:03d}", k, n)
+        assert buf.getvalue().splitlines() == [f"decoded view_{k:03d}" for k in range(n)]
+    buf = io.StringIO()
+    con = Console(buf, tty=False)
+    for k in range(1, EVERY_STEP_UP_TO + 2):
+        con(f"step {k}", k, EVERY_STEP_UP_TO + 1)
+    assert len(buf.getvalue().splitlines()) == 11
+
+
 def test_plain_lines_at_each_tenth_and_nothing_when_quiet():
     buf = io.StringIO()
     con = Console(buf, tty=False)

@@ -120,13 +120,9 @@ def read_image_header(path: str | Path, data: bytes | None = None) -> ImageHeade
     if data is not None:
         b = data
     else:
-        try:
-            with open(path, "rb") as f:
-                b = f.read(_HEAD)
-        except FileNotFoundError as exc:
-            raise FileFormatError(f"{path}: not found; expected an image file") from exc
-        except OSError as exc:
-            raise FileFormatError(f"{path}: cannot read the image ({exc.strerror or exc})") from exc
+        from rangekit.io import read_regular_file   # (io imports this module: its reader, on first use)
+
+        b = read_regular_file(path, what="an image file", limit=_HEAD)
     if b[:8] == b"\x89PNG\r\n\x1a\n":
         kind, parse = "png", _png
     elif b[:4] in (b"II*\x00", b"MM\x00*", b"II+\x00", b"MM\x00+"):

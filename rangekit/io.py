@@ -15,7 +15,7 @@ from rangekit.errors import FileFormatError
 from rangekit.image_header import check_image_files
 
 __all__ = ["atomic_write_bytes", "atomic_write_with", "fsync_folder", "atomic_write_text", "atomic_write_json", "encode_png", "write_png",
-           "read_png", "decode_image",
+           "read_png", "decode_image", "read_regular_file",
            "atomic_save_npz", "atomic_save_npy", "read_json"]
 
 # mkstemp creates 0600 files; give written files the usual mode (0666 minus the umask).
@@ -180,22 +180,54 @@ def encode_png(image: np.ndarray, *, where: str | Path = "image") -> bytes:
     return buf.tobytes()
 
 
+def read_regular_file(path: str | Path, *, what: str = "a file", limit: int | None = None) -> bytes:
+    """The bytes of ``path``, which must be a regular file (a FIFO, a device such as ``/dev/urandom`` or a
+    folder is refused by name: reading one could block or never end); at most ``limit`` bytes when given.
+    The path is handed to the system as it is (``os.fsencode``: any bytes, valid UTF-8 or not), never to a
+    library that converts it. FileFormatError names the file and what was expected."""
+    import stat
+
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_CLOEXEC)
+    except FileNotFoundError:
+        raise FileFormatError(f"{path}: not found; expected {what}") from None
+    except OSError as exc:
+        raise FileFormatError(f"{path}: cannot be opened ({exc.strerror or exc}); expected {what}") from None
+    try:
+        mode = os.fstat(fd).st_mode
+        if not stat.S_ISREG(mode):
+            kind = ("a folder" if stat.S_ISDIR(mode) else "a FIFO (named pipe)" if stat.S_ISFIFO(mode) else
+                    "a device" if stat.S_ISCHR(mode) or stat.S_ISBLK(mode) else "a socket" if stat.S_ISSOCK(mode)
+                    else "not a regular file")
+            raise FileFormatError(f"{path}: is {kind}; expected {what} (a regular file)")
+        with os.fdopen(fd, "rb", closefd=False) as f:
+            return f.read() if limit is None else f.read(limit)
+    except OSError as exc:
+        raise FileFormatError(f"{path}: cannot be read ({exc.strerror or exc}); expected {what}") from None
+    finally:
+        os.close(fd)
+
+
 def read_png(path: str | Path) -> np.ndarray:
     """Read a PNG (or any lossless image OpenCV reads) unchanged in bit depth, colour as RGB.
 
-    The header is read first (:func:`rangekit.image_header.read_image_header`): an image that would not fit
-    the memory budget raises BudgetError before its pixels are decoded."""
-    check_image_files([path], what="image", extra_bytes=0)
-    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-    if img is None:
-        raise FileFormatError(f"{path}: not found or not a readable image")
-    return _as_rgb(img)
+    The file is read once (:func:`read_regular_file`: a regular file only, its path never handed to OpenCV)
+    and its header checked (:func:`rangekit.image_header.check_image_files`) before the pixels are decoded:
+    an image that would not fit the memory budget raises BudgetError first."""
+    data = read_regular_file(path, what="an image")
+    check_image_files([path], what="image", extra_bytes=0, contents=[data])
+    return decode_image(data, path)
 
 
 def decode_image(data: bytes, where: str | Path) -> np.ndarray:
     """:func:`read_png` of a file's bytes already read (``where`` names the file in errors); the caller has
     checked the header (:func:`rangekit.image_header.check_image_files` with ``contents``)."""
-    img = cv2.imdecode(np.frombuffer(data, dtype=np.uint8), cv2.IMREAD_UNCHANGED)
+    if not data:
+        raise FileFormatError(f"{where}: is empty (0 bytes); expected an image")
+    try:
+        img = cv2.imdecode(np.frombuffer(data, dtype=np.uint8), cv2.IMREAD_UNCHANGED)
+    except cv2.error:
+        img = None
     if img is None:
         raise FileFormatError(f"{where}: not a readable image")
     return _as_rgb(img)

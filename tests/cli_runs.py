@@ -32,7 +32,7 @@ def cli_process(*args, timeout: float = 300, **kwargs) -> Run:
     kwargs.setdefault("stdin", subprocess.DEVNULL)
     kwargs.setdefault("stdout", subprocess.PIPE)
     proc = subprocess.run([sys.executable, "-m", "rangekit", *[str(a) for a in args]], stderr=subprocess.PIPE,
-                          text=True, timeout=timeout, env=kwargs.pop("env", env), **kwargs)
+                          text=True, errors="backslashreplace", timeout=timeout, env=kwargs.pop("env", env), **kwargs)
     return Run(proc.returncode, proc.stdout or "", proc.stderr)
 
 

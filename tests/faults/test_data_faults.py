@@ -172,7 +172,7 @@ STEREO = {
                         ["not a readable image"]),
     "right_missing": (lambda f: (f / "right.png").unlink(), "right.png", ["not found; expected an image file"]),
     "left_is_a_folder": (lambda f: ((f / "left.png").unlink(), (f / "left.png").mkdir()), "left.png",
-                         ["cannot read the image (Is a directory)"]),
+                         ["is a folder; expected an image file"]),
     "sizes_differ": (lambda f: cv2.imwrite(str(f / "right.png"), np.zeros((40, 64), np.uint8)), "right.png",
                      ["is 64x40", "a stereo pair needs two images of one size"]),
     "camera_size": (lambda f: [cv2.imwrite(str(f / n), np.zeros((40, 60), np.uint8)) for n in ("left.png", "right.png")],

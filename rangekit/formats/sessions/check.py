@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from rangekit.errors import FileFormatError
+from rangekit.io import read_regular_file
 from rangekit.formats.capture import IMAGE_SUFFIXES
 from rangekit.formats.sessions.session import Session, SessionView, exposure_folder
 
@@ -112,10 +113,10 @@ def read_view_stack(session: Session, v: SessionView, folder: Path, *, workers: 
 
     def read(path: Path) -> tuple[bytes, str | None]:   # hashed on the reading thread (hashlib frees the GIL)
         try:
-            data = path.read_bytes()
-        except OSError as exc:
+            data = read_regular_file(path, what="a frame")
+        except FileFormatError as exc:
             raise _problem(session, v, path.relative_to(v.folder).as_posix(),
-                           f"cannot be read ({exc.strerror or exc})") from None
+                           f"cannot be read ({str(exc).split(': ', 1)[-1]})") from None
         return data, None if v.sha256 is None else frame_sha256(data)
 
     with ThreadPoolExecutor(max_workers=max(1, workers)) as pool:

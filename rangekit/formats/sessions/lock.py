@@ -16,7 +16,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Iterator
 
-from rangekit.errors import RangekitError
+from rangekit.errors import FileFormatError, RangekitError
 from rangekit.io import fsync_folder
 
 __all__ = ["LOCK_NAME", "SessionLocked", "session_lock"]
@@ -35,6 +35,27 @@ def _holder(path: Path) -> str:
     except (OSError, UnicodeDecodeError):
         return "unknown"
     return text if text.isdigit() else "unknown"
+
+
+def _open_lock(path: Path) -> int:
+    """The lock file opened for writing: never through a symbolic link (it would truncate the file it points
+    to) and only a regular file (a FIFO or a device could block or be written into). FileFormatError naming the
+    lock file and what to do otherwise."""
+    import stat
+
+    try:
+        fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_CLOEXEC, 0o644)
+    except OSError as exc:
+        if os.path.islink(path):
+            raise FileFormatError(f"{path}: the session's lock file is a symbolic link (to {os.readlink(path)}); "
+                                  "rangekit does not follow it, so as not to write into another file: remove "
+                                  f"{path} and try again") from None
+        raise FileFormatError(f"{path}: cannot open the session's lock file ({exc.strerror or exc})") from None
+    if not stat.S_ISREG(os.fstat(fd).st_mode):
+        os.close(fd)
+        raise FileFormatError(f"{path}: the session's lock file is not a regular file (a FIFO, a device or a "
+                              f"folder); remove {path} and try again")
+    return fd
 
 
 @contextmanager
@@ -56,7 +77,7 @@ def session_lock(folder: str | Path) -> Iterator[None]:
             _held[key][1] -= 1
         return
     path = folder / LOCK_NAME
-    fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+    fd = _open_lock(path)
     try:
         fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
     except BlockingIOError:

@@ -20,6 +20,7 @@ from typing import Sequence
 
 from rangekit.budget import check_budget, format_bytes
 from rangekit.errors import FileFormatError
+from rangekit.regular_files import read_regular_file
 
 __all__ = ["ImageHeader", "read_image_header", "check_image_files"]
 
@@ -120,8 +121,6 @@ def read_image_header(path: str | Path, data: bytes | None = None) -> ImageHeade
     if data is not None:
         b = data
     else:
-        from rangekit.io import read_regular_file   # (io imports this module: its reader, on first use)
-
         b = read_regular_file(path, what="an image file", limit=_HEAD)
     if b[:8] == b"\x89PNG\r\n\x1a\n":
         kind, parse = "png", _png

@@ -13,9 +13,10 @@ import numpy as np
 
 from rangekit.errors import FileFormatError
 from rangekit.image_header import check_image_files
+from rangekit.regular_files import read_regular_file
 
 __all__ = ["atomic_write_bytes", "atomic_write_with", "fsync_folder", "atomic_write_text", "atomic_write_json", "encode_png", "write_png",
-           "read_png", "decode_image", "read_regular_file",
+           "read_png", "decode_image",
            "atomic_save_npz", "atomic_save_npy", "read_json"]
 
 # mkstemp creates 0600 files; give written files the usual mode (0666 minus the umask).
@@ -178,34 +179,6 @@ def encode_png(image: np.ndarray, *, where: str | Path = "image") -> bytes:
     if not ok:
         raise FileFormatError(f"{path}: OpenCV could not encode the image as PNG")
     return buf.tobytes()
-
-
-def read_regular_file(path: str | Path, *, what: str = "a file", limit: int | None = None) -> bytes:
-    """The bytes of ``path``, which must be a regular file (a FIFO, a device such as ``/dev/urandom`` or a
-    folder is refused by name: reading one could block or never end); at most ``limit`` bytes when given.
-    The path is handed to the system as it is (``os.fsencode``: any bytes, valid UTF-8 or not), never to a
-    library that converts it. FileFormatError names the file and what was expected."""
-    import stat
-
-    try:
-        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_CLOEXEC)
-    except FileNotFoundError:
-        raise FileFormatError(f"{path}: not found; expected {what}") from None
-    except OSError as exc:
-        raise FileFormatError(f"{path}: cannot be opened ({exc.strerror or exc}); expected {what}") from None
-    try:
-        mode = os.fstat(fd).st_mode
-        if not stat.S_ISREG(mode):
-            kind = ("a folder" if stat.S_ISDIR(mode) else "a FIFO (named pipe)" if stat.S_ISFIFO(mode) else
-                    "a device" if stat.S_ISCHR(mode) or stat.S_ISBLK(mode) else "a socket" if stat.S_ISSOCK(mode)
-                    else "not a regular file")
-            raise FileFormatError(f"{path}: is {kind}; expected {what} (a regular file)")
-        with os.fdopen(fd, "rb", closefd=False) as f:
-            return f.read() if limit is None else f.read(limit)
-    except OSError as exc:
-        raise FileFormatError(f"{path}: cannot be read ({exc.strerror or exc}); expected {what}") from None
-    finally:
-        os.close(fd)
 
 
 def read_png(path: str | Path) -> np.ndarray:

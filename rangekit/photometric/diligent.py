@@ -201,7 +201,7 @@ def _imread(path: Path, what: str) -> np.ndarray:
         raise FileFormatError(f"{path}: is a folder; expected {what}")
     if not path.is_file():
         raise FileFormatError(f"{path}: missing; expected {what}")
-    from rangekit.io import read_regular_file
+    from rangekit.regular_files import read_regular_file
 
     data = read_regular_file(path, what=what)
     img = cv2.imdecode(np.frombuffer(data, dtype=np.uint8), cv2.IMREAD_UNCHANGED) if data else None

@@ -46,6 +46,7 @@ def test_a_missing_image_under_a_non_utf8_name_is_one_line(capture, tmp_path):
     assert_error(run, 1, "003.png")
 
 
+@pytest.mark.slow   # a whole session processed in a child process; make test-slow (CI) runs it
 def test_a_session_in_a_non_utf8_folder_is_processed(reference_session, tmp_path):
     folder = copy_session(reference_session, _non_utf8(tmp_path, b"sess\xff"))
     run = cli_process("-q", "process", folder, "--no-report", timeout=300)

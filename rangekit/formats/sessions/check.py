@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from rangekit.errors import FileFormatError
-from rangekit.io import read_regular_file
+from rangekit.regular_files import read_regular_file
 from rangekit.formats.capture import IMAGE_SUFFIXES
 from rangekit.formats.sessions.session import Session, SessionView, exposure_folder
 

@@ -159,3 +159,17 @@ def test_the_call_makes_the_files_of_the_command_and_reads_each_frame_once(tmp_p
     assert json.loads(json.dumps(call).replace(str(by_call), "F")) == json.loads(json.dumps(cli).replace(str(by_cli), "F"))
     assert res.processed.accuracy.to_dict() == json.loads((by_call / "summary.json").read_text())["accuracy"]
     shutil.rmtree(by_cli)
+
+
+def test_a_resumed_scan_announces_its_sessions_exposures(tmp_path):
+    """ScanStarted says what every frame is taken at: a new multi-exposure scan its exposures, and resumed, the
+    session's own (the options of a resumed scan leave them out)."""
+    options = dict(object="sphere", views=2, patterns="white", process=False)
+    first: list = []
+    rk.scan(ScanOptions(out=tmp_path / "s", exposures=(8000, 2000), **options), on_event=first.append)
+    again: list = []
+    rk.scan(ScanOptions(resume=tmp_path / "s", process=False), on_event=again.append)
+    (new,), (resumed,) = ([e for e in seen if isinstance(e, ev.ScanStarted)] for seen in (first, again))
+    assert new.exposures_us == resumed.exposures_us == (2000, 8000)
+    assert (resumed.resume, resumed.done, resumed.total) == (True, 2, 2)
+    assert not [e for e in again if isinstance(e, ev.ViewAcquired)]

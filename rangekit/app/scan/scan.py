@@ -95,7 +95,7 @@ def _acquire(options: ScanOptions, on_event: OnEvent | None) -> Session:
     try:
         spec = setup.spec
         emit(on_event, ScanStarted(setup.folder, setup.n_views, setup.n_done, spec.n_frames, setup.resume,
-                                   (setup.capture.exposures_us if setup.capture is not None else None) or None,
+                                   setup.exposures_us,
                                    isinstance(spec, LaserSequence)))
         turn_over = None
         if setup.hardware is not None and setup.passes > 1:   # the simulator turns its object over itself

@@ -41,6 +41,12 @@ class ScanSetup:
     hardware: dict | None
     files: dict = field(default_factory=dict)   # files a new session keeps: relative name -> bytes
     passes: int = 1                     # turntable passes, the object turned over between them
+    resumed_exposures_us: tuple | None = None   # on resume: the session's own exposures (None: one exposure)
+
+    @property
+    def exposures_us(self) -> tuple | None:
+        """The exposures every frame is taken at (microseconds; None: the rig's one exposure)."""
+        return (self.capture.exposures_us if self.capture is not None else self.resumed_exposures_us) or None
 
     def close(self) -> None:
         """Close the hardware devices (the simulator has nothing to close)."""
@@ -124,7 +130,7 @@ def prepare_scan(options: ScanOptions, progress: Callable | None = None) -> Scan
     capture = None if session else CaptureSettings.from_rig(the_rig, hardware=hardware)
     n_done = len(session.done_views) if session else 0
     setup = ScanSetup(options.folder, devices, the_rig, spec, n_views, resume is not None, n_done, capture,
-                      simulator, hw, files, passes)
+                      simulator, hw, files, passes, session.capture.exposures_us if session else None)
     if options.exposures is not None:
         try:
             setup = _with_exposures(setup, tuple(options.exposures), progress)

@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from rangekit.geometry import apply_T, axis_angle_to_R, invert_T, make_T, rotation_angle
+from rangekit.metrology.pose_errors import pose_errors
 from rangekit.surface.cloud import PointCloud
 from rangekit.registration.icp import IcpOptions, OrganisedScan, icp
 
@@ -40,13 +41,6 @@ def bunny_folder() -> Path:
 
     folders = [f / "stanford-bunny" for f in data_folders()]
     return next((f for f in folders if (f / "bun.conf").is_file()), folders[0])
-
-
-def pose_errors(T_est: np.ndarray, T_true: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Per-view rotation (deg) and translation (m) errors, both in the first view's frame."""
-    rot = np.array([np.degrees(rotation_angle(a[:3, :3] @ b[:3, :3].T)) for a, b in zip(T_est, T_true)])
-    tr = np.array([np.linalg.norm(a[:3, 3] - b[:3, 3]) for a, b in zip(T_est, T_true)])
-    return rot, tr
 
 
 def o3d_cloud(c: PointCloud):
@@ -175,21 +169,16 @@ BUNNY_TARGET_S = 90.0
 
 def bench_bunny(verdict: bool = False) -> list[str]:
     from rangekit.formats.clouds import load_cloud
+    from rangekit.formats.stanford_conf import load_stanford_conf
     from rangekit.registration.multiview import register_views
-    from scipy.spatial.transform import Rotation
 
     DATA = bunny_folder()
     if not DATA.is_dir():
         return [f"| Stanford bunny | skipped: {DATA} absent (set RANGEKIT_DATA) | | |"]
-    names, poses = [], []
-    for line in (DATA / "bun.conf").read_text().splitlines():
-        p = line.split()
-        if p and p[0] == "bmesh":
-            names.append(p[1])
-            poses.append(make_T(Rotation.from_quat(np.array(p[5:9], float)).inv().as_matrix(), np.array(p[2:5], float)))
+    names, poses = load_stanford_conf(DATA / "bun.conf")
     clouds = [load_cloud(DATA / n) for n in names]
     t, res = timed(lambda: register_views(clouds), repeat=1)
-    rot, tr = pose_errors(res.T_world_view, np.stack(poses))
+    rot, tr = pose_errors(res.T_world_view, poses)
     target = f"target <= {BUNNY_TARGET_S:.0f} s: {'met' if t <= BUNNY_TARGET_S else 'not met'}" if verdict else ""
     return [f"| Stanford bunny, 10 scans, --init none | {t:.1f} s; vs bun.conf mean {rot.mean():.3f} deg / "
             f"{tr.mean() * 1e3:.3f} mm, max {rot.max():.3f} deg / {tr.max() * 1e3:.3f} mm | | {target} |"]

@@ -18,11 +18,11 @@ import time
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from rangekit.formats.clouds import load_cloud
 from rangekit.formats.meshes import load_mesh
-from rangekit.geometry import apply_T, make_T
+from rangekit.formats.stanford_conf import load_stanford_conf
+from rangekit.geometry import apply_T
 from rangekit.registration.multiview import register_views
 from rangekit.surface.quality import vertex_normals, view_disagreement
 
@@ -36,14 +36,8 @@ def main() -> int:
     ap.add_argument("--radius-mm", type=float, default=1.0)
     args = ap.parse_args()
     folder = args.data / "stanford-bunny"
-    names, poses = [], []
-    for line in (folder / "bun.conf").read_text().splitlines():
-        p = line.split()
-        if p and p[0] == "bmesh":
-            names.append(p[1])
-            poses.append(make_T(Rotation.from_quat(np.array(p[5:9], float)).inv().as_matrix(), np.array(p[2:5], float)))
+    names, T = load_stanford_conf(folder / "bun.conf")
     clouds = [load_cloud(folder / n) for n in names]
-    T = np.stack(poses)
     t0 = time.perf_counter()
     if args.poses == "rangekit":
         T = register_views(clouds, init_T_world_view=T).T_world_view

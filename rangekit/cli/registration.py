@@ -11,7 +11,7 @@ from rangekit.cli._common import check_output, int_in, note, positive_float, res
 
 
 def cmd_register(args: argparse.Namespace) -> int:
-    """rangekit register SCAN... [--init none|poses.json|turntable:AXIS:STEP] --out DIR"""
+    """rangekit register SCAN... [--init none|poses.json|FILE.conf|turntable:AXIS:STEP] --out DIR"""
     from rangekit.app.commands.register import register
     from rangekit.geometry import rotation_angle
 
@@ -74,7 +74,7 @@ def add_parsers(sub) -> None:
                                      "the first scan's frame; writes DIR/poses.json, DIR/merged.ply, DIR/mesh.ply.")
     reg.add_argument("scans", nargs="+", metavar="SCAN", help="scan files")
     reg.add_argument("--init", default="none",
-                     help="prior poses: none (coarse alignment, see --neighbours), a poses.json, or "
+                     help="prior poses: none (coarse alignment, see --neighbours), a poses.json, a Stanford .conf, or "
                           "turntable:AX,AY,AZ:STEP_DEG[:PX,PY,PZ] (view i turned i*STEP degrees about the axis)")
     reg.add_argument("--voxel-mm", type=positive_float, default=None,
                      help="voxel for features and the first ICP round, mm (default: scene diagonal / 80)")

@@ -27,8 +27,9 @@ def photometric_stereo(images, lights, mask=None, *, method: str = "ls",
         ``"ls"``: plain least squares, exact for Lambertian pixels lit by every light.
         ``"robust"``: trimmed start then shadow-aware IRLS with Tukey weights (see :func:`_robust_solve`),
         then the light a concave object reflects onto itself, measured in its cast shadows, removed and
-        the fit repeated (:func:`~rangekit.photometric.solve.global_light`); use it when shadows, specular
-        highlights or interreflections are present.
+        the fit repeated, where the shadows show its model holds (:mod:`rangekit.photometric.cavity_light`;
+        ``interreflection`` in the result says which); use it when shadows, specular highlights or
+        interreflections are present.
     channels : {"grey", "per-channel"}
         For RGB input: solve the grey image (:func:`rangekit.image.to_grey`), or each channel (normals from the summed
         albedo-scaled normals, albedo (H, W, 3) per channel).
@@ -53,11 +54,14 @@ def photometric_stereo(images, lights, mask=None, *, method: str = "ls",
     S = L.T
     if images.ndim == 4 and channels == "per-channel":
         B = stack_pixels(images, mask)                         # (p, f, 3)
-        Gc = np.stack([solve_chunks(B[:, :, c], S, method) for c in range(3)], axis=2)  # (p, 3, 3)
+        solved = [solve_chunks(B[:, :, c], S, method) for c in range(3)]
+        Gc = np.stack([G for G, _ in solved], axis=2)  # (p, 3, 3)
+        notes = [f"{name}: {found.describe()}" for name, (_, found) in zip("RGB", solved) if found is not None]
         normals, _ = to_maps(np.nansum(Gc, axis=2), mask)
         albedo = np.full(mask.shape + (3,), np.nan)
         albedo[mask] = np.einsum("pic,pi->pc", Gc, normals[mask])
     else:
-        B = stack_pixels(grey_images(images), mask)
-        normals, albedo = to_maps(solve_chunks(B, S, method), mask)
-    return PhotometricResult(normals, albedo, mask, method, L.copy())
+        G, found = solve_chunks(stack_pixels(grey_images(images), mask), S, method)
+        notes = [found.describe()] if found is not None else []
+        normals, albedo = to_maps(G, mask)
+    return PhotometricResult(normals, albedo, mask, method, L.copy(), "; ".join(notes))

@@ -9,6 +9,7 @@ import numpy as np
 
 from rangekit.errors import InputError
 from rangekit.image import to_grey
+from rangekit.photometric.cavity_light import CavityLight, cavity_light
 
 __all__ = ["PhotometricResult"]
 
@@ -33,6 +34,9 @@ class PhotometricResult:
         ``"ls"``, ``"robust"`` or ``"uncalibrated"``.
     lights : (f, 3) float64
         The lights used (calibrated) or estimated (uncalibrated; direction times relative intensity).
+    interreflection : str
+        ``"robust"``: whether a concave object's interreflection was removed, and the figures that decided
+        it (:mod:`rangekit.photometric.cavity_light`); "" for the other methods.
     """
 
     normals: np.ndarray
@@ -40,6 +44,7 @@ class PhotometricResult:
     mask: np.ndarray
     method: str
     lights: np.ndarray
+    interreflection: str = ""
 
     def __repr__(self) -> str:
         H, W = self.mask.shape
@@ -178,37 +183,15 @@ def _robust_solve(B: np.ndarray, S: np.ndarray, *, dark_fraction: float = 0.4,
     return G, shadow
 
 
-def global_light(B: np.ndarray, rho: np.ndarray, shadow: np.ndarray, S: np.ndarray, *, min_pixels: int = 20,
-                 min_fraction: float = 0.02) -> np.ndarray:
-    """(f,) light each image adds everywhere in proportion to the albedo: interreflection in a cavity.
+def solve_chunks(B: np.ndarray, S: np.ndarray, method: str, *, global_rounds: int = 3,
+                 force_cavity: bool = False) -> tuple[np.ndarray, CavityLight | None]:
+    """(p, 3) albedo-scaled normals of (p, f) intensities B under lights S (3, f), and for ``"robust"`` what
+    was found of a concave object's interreflection (None for ``"ls"``).
 
-    A pixel in cast shadow from light i still receives what the object's walls reflect; inside a
-    spherical cavity that light is exactly ``albedo(x) * beta_i`` for every pixel, and ``beta_i`` is
-    proportional to the light entering the opening, linear in the light direction: ``beta_i = k . s_i``.
-    ``beta_i`` is measured as the median of ``B / rho`` over the pixels in cast shadow from light i
-    (``shadow`` (p, f), ``rho`` (p,) albedo) on lights that shadow at least ``min_pixels`` pixels and
-    ``min_fraction`` of them; ``k`` (3,) is fitted to them by least squares (``S`` (3, f) the lights).
-    Returns zeros when fewer than 6 lights cast enough shadow (a convex object: nothing to measure
-    it on, and nothing to correct).
-    """
-    n = shadow.sum(axis=0)
-    measured = np.flatnonzero(n >= max(min_pixels, min_fraction * len(B)))
-    if measured.size < 6:
-        return np.zeros(B.shape[1])
-    sub = shadow[:, measured] & (rho[:, None] > 0)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        ratio = np.where(sub, B[:, measured] / rho[:, None], np.nan)
-    beta = np.nanmedian(ratio, axis=0)
-    k = np.linalg.lstsq(S[:, measured].T, beta, rcond=None)[0]
-    return np.maximum(k @ S, 0.0)
-
-
-def solve_chunks(B: np.ndarray, S: np.ndarray, method: str, *, global_rounds: int = 3) -> np.ndarray:
-    """(p, 3) albedo-scaled normals of (p, f) intensities B under lights S (3, f).
-
-    ``"robust"`` then removes the light each image adds in proportion to the albedo (interreflection,
-    :func:`global_light`, measured in the cast shadows of all pixels together) and fits again,
-    ``global_rounds`` times; an image with no cast shadow to measure it keeps its intensities.
+    ``"robust"`` then measures the light each image adds in proportion to the albedo in the cast shadows
+    (:func:`rangekit.photometric.cavity_light.cavity_light`) and, only if its spherical-cavity model is
+    seen to hold (``force_cavity``: whenever it can be measured, for comparisons), removes it and fits
+    again, ``global_rounds`` times.
     """
     def robust(B_: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         G_, sh = np.empty((len(B_), 3)), np.zeros(B_.shape, dtype=bool)
@@ -220,15 +203,19 @@ def solve_chunks(B: np.ndarray, S: np.ndarray, method: str, *, global_rounds: in
         out = np.empty((len(B), 3))
         for i in range(0, len(B), CHUNK):
             out[i:i + CHUNK] = weighted_solve(np.asarray(B[i:i + CHUNK], dtype=np.float64), None, S)
-        return out
+        return out, None
     G, shadow = robust(B)
-    beta = np.zeros(B.shape[1])
+    found = None
     for _ in range(global_rounds):
-        beta = global_light(B, np.nan_to_num(np.linalg.norm(G, axis=1)), shadow, S)
-        if not np.any(beta > 0):
+        again = cavity_light(B, np.nan_to_num(np.linalg.norm(G, axis=1)), shadow, S,
+                             force=force_cavity)
+        if not again.applied:   # the first round decides; a later one that no longer sees it keeps the last
+            found = found or again
             break
-        G, shadow = robust(np.asarray(B, dtype=np.float64) - np.linalg.norm(np.nan_to_num(G), axis=1)[:, None] * beta[None])
-    return G
+        found = again
+        G, shadow = robust(np.asarray(B, dtype=np.float64)
+                           - np.linalg.norm(np.nan_to_num(G), axis=1)[:, None] * found.beta[None])
+    return G, found
 
 
 def to_maps(G: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -16,7 +16,21 @@ from scipy.sparse.csgraph import connected_components
 from rangekit.errors import InputError, RegistrationError
 from rangekit.geometry import nearest_rotation
 
-__all__ = ["ViewGraph", "parse_view_graph", "check_connected", "check_rejection", "triangles"]
+__all__ = ["ViewGraph", "ViewsCutOff", "EdgesDisagree", "parse_view_graph", "check_connected", "check_rejection",
+           "triangles"]
+
+
+class ViewsCutOff(RegistrationError):
+    """The robust scheme rejected edges until ``views`` (sorted view indices) lost every confirmed link to
+    view 0. Callers that can measure more edges (more pairs, a finer level) catch it and try again."""
+
+    def __init__(self, message: str, views: list[int]):
+        super().__init__(message)
+        self.views = list(views)
+
+
+class EdgesDisagree(ViewsCutOff):
+    """The views were connected, but the robust scheme found their edges inconsistent and rejected them."""
 
 
 class ViewGraph(NamedTuple):
@@ -145,10 +159,10 @@ def check_rejection(g: ViewGraph, active: np.ndarray, inlier: np.ndarray) -> Non
     unconfirmed = _bridges(g.n, g.I, g.J, inlier) & ~_bridges(g.n, g.I, g.J, active)
     cut = _unreached(g.n, g.I, g.J, inlier & ~unconfirmed)
     if cut:
-        raise RegistrationError(
+        raise EdgesDisagree(
             f"sync: after rejecting {int((active & ~inlier).sum())} outlier edges, views {cut} are no longer "
             f"connected to view 0 by edges that a cycle confirms; their measurements disagree with each "
-            f"other and with the rest. Add edges to them, or use robust=False")
+            f"other and with the rest. Add edges to them, or use robust=False", cut)
 
 
 def triangles(g: ViewGraph) -> np.ndarray:

@@ -138,6 +138,27 @@ def test_scans_that_do_not_overlap_are_an_error(cli, tmp_path):
     assert not (tmp_path / "reg").exists()
 
 
+def test_a_view_that_cannot_be_registered_is_named_and_the_others_are_written(cli, tmp_path):
+    """Giving up on one view keeps the rest: 3 overlapping scans and a sphere cap that matches none of them."""
+    a, b = _pair("lumpy")
+    rng = np.random.default_rng(5)
+    p, nn = _lumpy(6000, rng)
+    T_c = make_T(axis_angle_to_R([1.0, 0.2, 0.0], np.radians(15)), [0.0, 0.01, -0.01])   # p_a = T_c @ p_c
+    inv = invert_T(T_c)
+    c = PointCloud(apply_T(inv, p), normals=nn @ inv[:3, :3].T)
+    sp, sn = _surface("sphere", 4000, rng)
+    paths = _write(tmp_path, [a, b, c, PointCloud(sp + [0.3, 0.0, 0.0], normals=sn)])
+    out = tmp_path / "reg"
+    run = cli("register", *paths, "--init", "none", "--no-mesh", "--out", out)
+    assert_error(run, 1, "views [[3]]", "scan3.ply", "Wrote the other 3 views", f"--neighbours 0 --out {out}-all")
+    sources, T = load_poses(out / "poses.json")
+    assert [s.rsplit("/", 1)[-1] for s in sources] == ["scan0.ply", "scan1.ply", "scan2.ply"]
+    for k, truth in ((1, T_TRUE), (2, T_c)):
+        rot, tr = _errors(T[k], truth)
+        assert rot < 0.05 and tr < 1e-4, (k, rot, tr)
+    assert (out / "merged.ply").is_file() and not (out / "mesh.ply").exists()
+
+
 def test_too_few_points_after_downsampling_is_an_error(cli, tmp_path):
     paths = _write(tmp_path, _pair("lumpy", n=3000))
     run = cli("register", *paths, "--no-mesh", "--voxel-mm", "60", "--out", tmp_path / "reg")

@@ -49,8 +49,10 @@ def test_robust_beats_least_squares_with_highlights_and_cast_shadows(lights):
                        cap.normals_true, inner).mean_deg
     rob = angular_error(photometric_stereo(cap.images, cap.lights, cap.mask, method="robust").normals,
                         cap.normals_true, inner).mean_deg
-    assert ls > 3.0, ls                                            # measured 5.74 deg: the effect is there
-    assert rob <= ls / 3, (rob, ls)                                # measured 1.10 deg
+    assert ls > 3.0, ls                                            # measured 6.93 deg: the effect is there
+    # measured 2.32 deg: the box's reflected light is not a cavity's, so it is no longer subtracted (issue 34;
+    # subtracting it anyway gave 2.24, by chance: on the real objects it costs up to 2 deg)
+    assert rob <= 0.35 * ls, (rob, ls)
 
 
 def test_uncalibrated_sphere_after_the_bas_relief_ambiguity(lights):

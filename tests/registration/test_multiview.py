@@ -8,19 +8,14 @@ import numpy as np
 import pytest
 
 from rangekit.errors import RegistrationError
-from rangekit.geometry import axis_angle_to_R, make_T, rotation_angle
+from rangekit.metrology.pose_errors import pose_errors
+from rangekit.geometry import axis_angle_to_R, make_T
 from rangekit.surface.cloud import PointCloud
 from rangekit.registration.multiview import MultiViewOptions, overlap_rms, refine_jointly, register_views, _prepare
 from rangekit.registration.sync import synchronise
 from rangekit.sim.writers.scans import perturb_poses, turntable_scans
 
 BUNNY = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "stanford-bunny"
-
-
-def pose_errors(T_est, T_true):
-    rot = np.array([np.degrees(rotation_angle(a[:3, :3] @ b[:3, :3].T)) for a, b in zip(T_est, T_true)])
-    tr = np.array([np.linalg.norm(a[:3, 3] - b[:3, 3]) for a, b in zip(T_est, T_true)])
-    return rot, tr
 
 
 @pytest.fixture(scope="module")
@@ -107,19 +102,13 @@ def test_registered_scan_fuses_into_a_watertight_accurate_mesh(turntable):
 
 
 def _bunny():
-    from scipy.spatial.transform import Rotation
-
     from rangekit.formats.clouds import load_cloud
+    from rangekit.formats.stanford_conf import load_stanford_conf
 
     if not BUNNY.is_dir():
         pytest.skip("../shared/data/stanford-bunny is absent")
-    names, poses = [], []
-    for line in (BUNNY / "bun.conf").read_text().splitlines():
-        p = line.split()
-        if p and p[0] == "bmesh":
-            names.append(p[1])
-            poses.append(make_T(Rotation.from_quat(np.array(p[5:9], float)).inv().as_matrix(), np.array(p[2:5], float)))
-    return names, [load_cloud(BUNNY / n) for n in names], np.stack(poses)
+    names, poses = load_stanford_conf(BUNNY / "bun.conf")
+    return names, [load_cloud(BUNNY / n) for n in names], poses
 
 
 @pytest.mark.slow

@@ -5,6 +5,7 @@ import pytest
 
 from rangekit.errors import InputError, RegistrationError
 from rangekit.geometry import apply_T, axis_angle_to_R, invert_T, make_T, rotation_angle, rotvec_to_R
+from rangekit.registration.view_graph import EdgesDisagree
 from rangekit.registration.sync import synchronise, synchronise_rotations, synchronise_translations
 
 SCENE = 1.0  # metres: the ring's diameter
@@ -197,6 +198,7 @@ def test_rejection_that_disconnects_a_view_is_an_error():
     edges, _ = measure(T, pairs, rng, rot_noise=np.radians(0.01))
     i, j, T_ij = edges[-1]
     edges[-1] = (i, j, T_ij @ make_T(axis_angle_to_R([1, 0, 0], np.radians(60))))
-    with pytest.raises(RegistrationError, match=r"views \[8\] are no longer connected to view 0 by edges that a cycle confirms"):
+    with pytest.raises(EdgesDisagree, match=r"views \[8\] are no longer connected to view 0 by edges that a cycle confirms") as info:
         synchronise(9, edges)
+    assert info.value.views == [8] and isinstance(info.value, RegistrationError)
     assert synchronise(9, edges, robust=False).inlier.all()

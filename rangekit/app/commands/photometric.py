@@ -43,7 +43,8 @@ def photometric_folder(folder: str | Path, out: str | Path, *, method: str = "ro
             res = uncalibrated_photometric_stereo(data.images, data.mask)
         else:
             res = photometric_stereo(data.images, data.lights, data.mask, method=method)
-    call_progress(progress, f"normals ({method}) in {time.perf_counter() - t1:.1f} s")
+    call_progress(progress, f"normals ({method}) in {time.perf_counter() - t1:.1f} s"
+                            + (f"; {res.interreflection}" if res.interreflection else ""))
     if data.normals_gt is not None:
         err = angular_error(res.normals, data.normals_gt, data.mask)
         call_progress(progress, f"angular error against Normal_gt.mat: mean {err.mean_deg:.3f} deg, median "

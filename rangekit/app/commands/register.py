@@ -2,17 +2,20 @@
 
 from __future__ import annotations
 
+import shlex
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Sequence
 
 import numpy as np
 
-from rangekit.errors import ConfigError, UsageError, naming
+from rangekit.errors import ConfigError, RegistrationError, UsageError, naming
 from rangekit.formats.clouds import load_cloud, save_cloud
 from rangekit.surface.cloud import PointCloud, bbox_diagonal, check_voxel, merge_clouds
 from rangekit.formats.poses import load_poses, save_poses
+from rangekit.formats.stanford_conf import load_stanford_conf
 from rangekit.registration.multiview import MultiViewOptions, MultiViewResult, register_views
+from rangekit.registration.view_graph import ViewsCutOff
 from rangekit.registration.pairs import all_pairs, nearest_and_long_links
 from rangekit.rig.rig_file import table_frame, turntable_prior
 
@@ -20,7 +23,7 @@ __all__ = ["parse_init", "RegisterReport", "register"]
 
 
 def parse_init(init: str | None, n: int, sources: Sequence[str]) -> np.ndarray | None:
-    """Prior poses from ``none``, a poses.json file, or ``turntable:AX,AY,AZ:STEP_DEG[:PX,PY,PZ]``.
+    """Prior poses from ``none``, a poses.json file, a Stanford ``.conf`` file, or ``turntable:AX,AY,AZ:STEP_DEG[:PX,PY,PZ]``.
 
     turntable: view i is rotated by i * STEP degrees about the axis (AX, AY, AZ) through (PX, PY, PZ)
     (default the origin) of the first view's frame.
@@ -41,7 +44,7 @@ def parse_init(init: str | None, n: int, sources: Sequence[str]) -> np.ndarray |
                              "and a non-zero axis, e.g. turntable:0,1,0:24") from exc
         # View i is turned by +i * STEP: the prior of a table turning by -i * STEP between views.
         return turntable_prior(table_frame(axis, point), -step * np.arange(n))
-    srcs, T = load_poses(init)
+    srcs, T = load_stanford_conf(init) if init.endswith(".conf") else load_poses(init)
     if len(T) != n:
         raise ConfigError(f"{init}: has {len(T)} views, but {n} scans were given")
     names = [Path(s).name for s in sources]
@@ -83,9 +86,35 @@ def register(paths: Sequence[str | Path], out_dir: str | Path, *, init: str | No
         raise UsageError(f"--neighbours: expected an integer >= 0, found {neighbours!r}")
     graph = ({} if neighbours is None else dict(pairs=all_pairs, coarse_neighbours=None) if neighbours == 0 else
              dict(pairs=nearest_and_long_links(int(neighbours)), coarse_neighbours=int(neighbours)))
-    res = register_views(clouds, init_T_world_view=prior, options=MultiViewOptions(voxel=voxel, **graph),
-                         progress=say, names=[p.name for p in paths])
+    options = MultiViewOptions(voxel=voxel, **graph)
     out = Path(out_dir)
+    try:
+        res = register_views(clouds, init_T_world_view=prior, options=options, progress=say,
+                             names=[p.name for p in paths])
+    except ViewsCutOff as cut:
+        # Keep what can be registered: the other views, written as usual, then the error names the rest.
+        keep = [k for k in range(len(paths)) if k not in cut.views]
+        if len(keep) < 2:
+            raise
+        say(f"registering the other {len(keep)} views without {', '.join(paths[k].name for k in cut.views)}")
+        report = _write(out, [paths[k] for k in keep], [clouds[k] for k in keep],
+                        register_views([clouds[k] for k in keep],
+                                       init_T_world_view=None if prior is None else prior[keep], options=options,
+                                       progress=say, names=[paths[k].name for k in keep]), mesh, voxel, say)
+        quoted = lambda ps: " ".join(shlex.quote(str(p)) for p in ps)  # noqa: E731
+        alone = [paths[k] for k in cut.views]
+        raise RegistrationError(
+            f"{cut}. Wrote the other {len(keep)} views to {out} (poses.json, merged.ply"
+            f"{', mesh.ply' if report.mesh_path else ''}). To retry with every pair: rangekit register "
+            f"{quoted(paths)} --neighbours 0 --out {shlex.quote(str(out) + '-all')}"
+            + (f"; to register those on their own: rangekit register {quoted(alone)} --out "
+               f"{shlex.quote(str(out) + '-rest')}" if len(alone) > 1 else "")) from None
+    return _write(out, paths, clouds, res, mesh, voxel, say)
+
+
+def _write(out: Path, paths: list[Path], clouds: list[PointCloud], res: MultiViewResult, mesh: bool,
+           voxel: float | None, say: Callable[[str], None]) -> RegisterReport:
+    """poses.json, merged.ply and (``mesh``) mesh.ply of the registered ``clouds`` into ``out``."""
     out.mkdir(parents=True, exist_ok=True)
     edges_of = {k: [e for e in res.edges if e.accepted and k in (e.i, e.j)] for k in range(len(paths))}
     extra = [{"edges": len(edges_of[k]),

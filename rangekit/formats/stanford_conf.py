@@ -1,0 +1,42 @@
+"""The Stanford 3D Scanning Repository's ``.conf`` file: the pose of every range scan of a set.
+
+Lines ``bmesh NAME TX TY TZ QX QY QZ QW`` give a scan's translation (metres) and the quaternion of the
+inverse of its rotation (the convention of Stanford's ``scanalyze``; the bunny's and dragon's sets use
+it). ``camera`` and ``mesh`` lines are skipped. :func:`load_stanford_conf` returns ``T_world_view`` in the
+file's world frame, so ``register --init bun.conf`` and the tests compare with the authors' alignment.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from rangekit.errors import ConfigError
+from rangekit.geometry import make_T
+from rangekit.regular_files import read_regular_file
+
+__all__ = ["load_stanford_conf"]
+
+def load_stanford_conf(path: str | Path) -> tuple[list[str], np.ndarray]:
+    """(scan file names, (n, 4, 4) T_world_view) from a ``.conf`` file; errors name the file and line."""
+    from scipy.spatial.transform import Rotation
+
+    text = read_regular_file(path, what="a Stanford .conf file").decode("utf-8", "replace")
+    names, Ts = [], []
+    for number, line in enumerate(text.splitlines(), 1):
+        p = line.split()
+        if not p or p[0] != "bmesh":
+            continue
+        try:
+            values = np.array(p[2:9], dtype=np.float64)
+            if len(p) != 9 or not np.all(np.isfinite(values)) or not np.linalg.norm(values[3:]) > 0.5:
+                raise ValueError
+        except ValueError:
+            raise ConfigError(f"{path}: line {number}: expected 'bmesh NAME TX TY TZ QX QY QZ QW' with 7 finite "
+                              f"numbers and a unit quaternion, found {line.strip()!r:.120}") from None
+        names.append(p[1])
+        Ts.append(make_T(Rotation.from_quat(values[3:]).inv().as_matrix(), values[:3]))
+    if not names:
+        raise ConfigError(f"{path}: no 'bmesh NAME TX TY TZ QX QY QZ QW' line; not a Stanford .conf file")
+    return names, np.stack(Ts)

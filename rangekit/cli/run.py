@@ -23,6 +23,7 @@ from rangekit.cli.rig import add_calibrate_parser, add_parsers as add_rig
 from rangekit.cli.scan import add_parsers as add_scan
 from rangekit.cli.sim import add_parsers as add_sim
 from rangekit.errors import RangekitError, UsageError
+from rangekit._runtime.environment import interrupted, memory_shortage
 from rangekit._runtime.open3d_viewer import defer_plotly_viewer
 from rangekit._runtime.threads import one_blas_thread
 
@@ -107,12 +108,17 @@ def main(argv: list[str] | None = None) -> int:
     except BrokenPipeError:
         _detach_stdout()
         return _fail("standard output was closed before the output was written", EXIT_FAILURE)
-    except OSError as exc:
-        return _fail(_os_message(exc), EXIT_FAILURE)
-    except MemoryError:
-        return _fail("out of memory; use smaller images, fewer views or a larger --voxel-mm", EXIT_FAILURE)
-    except Exception as exc:  # the last net: a bug, reported in one line, never a traceback
-        if os.environ.get("RANGEKIT_DEBUG") == "1":
+    except (OSError, MemoryError, Exception) as exc:
+        if interrupted():   # Ctrl-C inside a lazy import shows as "ImportError: initialization failed"
+            print("rangekit: interrupted", file=sys.stderr)
+            return EXIT_INTERRUPTED
+        if memory_shortage(exc):   # under a low ulimit -v: a library that cannot map, an image not allocated
+            return _fail(memory_shortage(exc), EXIT_FAILURE)
+        if isinstance(exc, OSError):
+            return _fail(_os_message(exc), EXIT_FAILURE)
+        if isinstance(exc, MemoryError):
+            return _fail("out of memory; use smaller images, fewer views or a larger --voxel-mm", EXIT_FAILURE)
+        if os.environ.get("RANGEKIT_DEBUG") == "1":   # the last net: a bug, in one line, never a traceback
             raise
         return _fail(f"internal error ({type(exc).__name__}: {str(exc)[:200]}); please report it with the "
                      "command line (RANGEKIT_DEBUG=1 shows the traceback)", EXIT_FAILURE)

@@ -1,0 +1,83 @@
+"""The surroundings a command runs in (issue 34, internal errors from the environment): a deleted working
+folder, numba's thread variable, an ASCII-only output encoding, a low address-space limit, and Ctrl-C
+while the libraries load. Each ends with one line and exit 1, 2 or 130: no traceback, no crash by signal,
+no "internal error". Real child processes (rangekit._runtime.environment acts before anything loads).
+"""
+
+from __future__ import annotations
+
+import os
+import resource
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from cli_runs import ROOT, assert_error, cli_process
+
+
+def _env(**extra) -> dict:
+    env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""), **extra)
+    env.pop("RANGEKIT_DEBUG", None)
+    return env
+
+
+@pytest.mark.parametrize("value", ["0", "abc", "-3", ""])
+def test_a_bad_numba_thread_count_is_named(tmp_path, value):
+    run = cli_process("reconstruct", tmp_path, "--out", tmp_path / "c.ply", env=_env(NUMBA_NUM_THREADS=value))
+    assert_error(run, 2, f"NUMBA_NUM_THREADS={value!r}", "whole number of threads >= 1")
+
+
+def test_a_deleted_working_folder_is_named(tmp_path):
+    gone = tmp_path / "gone"
+    gone.mkdir()
+    # The child starts in the folder, which is removed before it runs (as a shell whose folder was deleted).
+    code = ("import os, sys, runpy; os.rmdir(os.getcwd()); sys.argv = ['rangekit', 'reconstruct', 'cap', '--out', "
+            "'c.ply']; runpy.run_module('rangekit', run_name='__main__')")
+    proc = subprocess.run([sys.executable, "-c", code], cwd=gone, env=_env(), capture_output=True, text=True,
+                          stdin=subprocess.DEVNULL, timeout=120)
+    assert proc.returncode == 2, proc.stderr
+    assert proc.stderr.strip().splitlines()[-1].startswith("rangekit: error: the working folder no longer exists")
+    assert "Traceback" not in proc.stderr
+
+
+def test_an_ascii_output_encoding_escapes_a_non_ascii_path(tmp_path):
+    np.savetxt(tmp_path / "pts\u00e9.xyz", np.random.default_rng(0).normal(size=(300, 3)) * 0.05)
+    run = cli_process("mesh", tmp_path / "pts\u00e9.xyz", "--out", tmp_path / "m\u00e9.ply",
+                      env=_env(PYTHONIOENCODING="ascii"))
+    assert run.code == 0, run.err
+    assert "m\\xe9.ply" in run.out and "Traceback" not in run.err
+    assert (tmp_path / "m\u00e9.ply").is_file()
+
+
+@pytest.mark.parametrize("megabytes", [400, 600, 1200])
+def test_a_low_address_space_limit_is_one_line(tmp_path, megabytes):
+    """600 MB crashed with SIGSEGV, 400 and 1200 MB failed to map a library: each is now named."""
+    limit = megabytes << 20
+
+    def low_limit():
+        resource.setrlimit(resource.RLIMIT_AS, (limit, resource.getrlimit(resource.RLIMIT_AS)[1]))
+
+    run = cli_process("sim", "render", "--object", "sphere", "--out", tmp_path / "cap", preexec_fn=low_limit)
+    line = assert_error(run, 1, "ulimit -v", f"{megabytes} MB")
+    assert "internal error" not in line
+
+
+@pytest.mark.parametrize("delay", [0.05, 0.2, 0.5, 1.0])
+def test_ctrl_c_while_the_libraries_load_exits_130(tmp_path, delay):
+    """SIGINT at several moments of start-up (numpy, OpenCV, Open3D, numba load one after another)."""
+    proc = subprocess.Popen([sys.executable, "-m", "rangekit", "sim", "render", "--object", "sphere", "--out",
+                             str(tmp_path / "cap")], env=_env(), stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))  # as from a terminal
+    time.sleep(delay)
+    proc.send_signal(signal.SIGINT)
+    out, err = proc.communicate(timeout=120)
+    if proc.returncode == 0:
+        pytest.skip(f"the command finished within {delay} s")  # never on this machine: start-up alone takes longer
+    assert proc.returncode == 130, err
+    assert err.strip().splitlines()[-1] == "rangekit: interrupted", err
+    assert "Traceback" not in err and "initialization failed" not in err

@@ -8,6 +8,7 @@ import time
 
 from rangekit.cli._common import check_output, console, float_in, result as final, say, seed
 from rangekit.errors import UsageError
+from rangekit.formats.output_sets import claim_folder
 
 
 def cmd_check(args: argparse.Namespace) -> int:
@@ -16,8 +17,10 @@ def cmd_check(args: argparse.Namespace) -> int:
                                         write_pattern_delay)
 
     t0 = time.perf_counter()
+    replace = lambda: []  # noqa: E731
     if args.out is not None:
         check_output(args.out, option="--out", folder=True)
+        replace = claim_folder(args.out, "check", force=args.force)
     hardware = args.rig not in (None, "sim")
     if hardware:
         given = [opt for opt, v in (("--object", args.object), ("--seed", args.seed),
@@ -59,6 +62,7 @@ def cmd_check(args: argparse.Namespace) -> int:
         say(line)
     if args.out:
         names = write_check(args.out, result, images, full_scale, out_rig)
+        replace()
         say(f"wrote {', '.join(f'{args.out}/{n}' for n in names)}")
     say(rig_note)
     final(f"check took {time.perf_counter() - t0:.1f} s")
@@ -75,6 +79,7 @@ def add_parsers(sub) -> None:
     p.add_argument("--rig", help="'sim' (default) or a rig file whose 'devices' name the projector and camera; its "
                                  "capture.pattern_delay_s is rewritten with the measured delay")
     p.add_argument("--out", help="folder for check.png, check.json (and, on the simulator, rig.json)")
+    p.add_argument("--force", action="store_true", help="replace a set of files another command left in --out (a session, a capture, results)")
     p.add_argument("--object", help="simulated object (default lumpy; 'shiny' saturates)")
     p.add_argument("--seed", type=seed, help="simulator noise seed (default 0)")
     p.add_argument("--latency-ms", type=float_in(0.0, 1000.0), help="the simulated projector's latency, ms "

@@ -7,6 +7,7 @@ import time
 
 import numpy as np
 
+from rangekit.formats.output_sets import claim_folder
 from rangekit.cli._common import check_output, int_in, note, positive_float, result, say
 
 
@@ -17,6 +18,7 @@ def cmd_register(args: argparse.Namespace) -> int:
 
     t0 = time.perf_counter()
     check_output(args.out, folder=True)
+    replace = claim_folder(args.out, "registration", force=args.force)
     voxel = args.voxel_mm * 1e-3 if args.voxel_mm else None
     rep = register(args.scans, args.out, init=args.init, voxel=voxel, mesh=not args.no_mesh, progress=say,
                          neighbours=args.neighbours)
@@ -37,8 +39,9 @@ def cmd_register(args: argparse.Namespace) -> int:
     for k, T in enumerate(res.T_world_view):
         say(f"  view {k}: {rep.sources[k]}: rotation {np.degrees(rotation_angle(T[:3, :3])):8.3f} deg, "
             f"translation {np.linalg.norm(T[:3, 3]) * 1e3:8.2f} mm")
+    removed = replace()
     result(f"wrote {args.out}/poses.json, merged.ply{', mesh.ply' if rep.mesh_path else ''} in "
-        f"{time.perf_counter() - t0:.1f} s")
+        f"{time.perf_counter() - t0:.1f} s" + (f"; removed the earlier {', '.join(removed)}" if removed else ""))
     return 0
 
 
@@ -84,6 +87,7 @@ def add_parsers(sub) -> None:
                           "0 tries every pair (default: 4 with --init none, every pair with a prior)")
     reg.add_argument("--no-mesh", action="store_true", help="skip meshing")
     reg.add_argument("--out", required=True, help="output folder")
+    reg.add_argument("--force", action="store_true", help="replace a set of files another command left in --out (a session, a capture, results)")
     reg.set_defaults(func=cmd_register)
 
     mesh = sub.add_parser("mesh", help="fuse one cloud into a watertight mesh (screened Poisson)",

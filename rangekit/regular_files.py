@@ -11,7 +11,7 @@ from pathlib import Path
 
 from rangekit.errors import FileFormatError
 
-__all__ = ["read_regular_file"]
+__all__ = ["read_regular_file", "check_regular_file"]
 
 
 def read_regular_file(path: str | Path, *, what: str = "a file", limit: int | None = None) -> bytes:
@@ -30,13 +30,34 @@ def read_regular_file(path: str | Path, *, what: str = "a file", limit: int | No
     try:
         mode = os.fstat(fd).st_mode
         if not stat.S_ISREG(mode):
-            kind = ("a folder" if stat.S_ISDIR(mode) else "a FIFO (named pipe)" if stat.S_ISFIFO(mode) else
-                    "a device" if stat.S_ISCHR(mode) or stat.S_ISBLK(mode) else "a socket" if stat.S_ISSOCK(mode)
-                    else "not a regular file")
-            raise FileFormatError(f"{path}: is {kind}; expected {what} (a regular file)")
+            raise FileFormatError(f"{path}: is {_kind(mode)}; expected {what} (a regular file)")
         with os.fdopen(fd, "rb", closefd=False) as f:
             return f.read() if limit is None else f.read(limit)
     except OSError as exc:
         raise FileFormatError(f"{path}: cannot be read ({exc.strerror or exc}); expected {what}") from None
     finally:
         os.close(fd)
+
+
+def _kind(mode: int) -> str:
+    import stat
+
+    return ("a folder" if stat.S_ISDIR(mode) else "a FIFO (named pipe)" if stat.S_ISFIFO(mode) else
+            "a device" if stat.S_ISCHR(mode) or stat.S_ISBLK(mode) else "a socket" if stat.S_ISSOCK(mode)
+            else "not a regular file")
+
+
+def check_regular_file(path: str | Path, *, what: str = "a file") -> None:
+    """FileFormatError unless ``path`` (links followed) is a regular file: a missing path, a folder, a FIFO
+    (reading it blocks) or a device such as ``/dev/urandom`` (reading it never ends) are named. For readers
+    that open the file through a library (plyfile, trimesh, pye57) after this check."""
+    import stat
+
+    try:
+        mode = os.stat(path).st_mode
+    except FileNotFoundError:
+        raise FileFormatError(f"{path}: not found; expected {what}") from None
+    except OSError as exc:
+        raise FileFormatError(f"{path}: cannot be read ({exc.strerror or exc}); expected {what}") from None
+    if not stat.S_ISREG(mode):
+        raise FileFormatError(f"{path}: is {_kind(mode)}; expected {what} (a regular file)")

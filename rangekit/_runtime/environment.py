@@ -81,7 +81,9 @@ def watching_interrupts():
         yield
     finally:
         if ours:
-            signal.signal(signal.SIGINT, previous)
+            # Interrupted, the process is about to exit 130: a SIGINT re-delivered late (Open3D's extension
+            # hands one back after its initialisation) or a second Ctrl-C must not kill it by signal then.
+            signal.signal(signal.SIGINT, signal.SIG_IGN if _sigint_seen else previous)
             sys.meta_path.remove(_InterruptAtNextImport)
         _sigint_pending = False
 

@@ -60,12 +60,22 @@ def _informative() -> bool:
 def say(msg: str) -> None:
     """A report line on standard output (a table row, a figure); none with ``-q``."""
     if _informative():
-        print(msg, flush=True)
+        _print_out(msg)
 
 
 def result(msg: str) -> None:
     """A command's final result line on standard output, printed even with ``-q``."""
-    print(msg, flush=True)
+    _print_out(msg)
+
+
+def _print_out(msg: str) -> None:
+    """One line on standard output; a failed write (``> /dev/full``) is an OSError naming standard output."""
+    try:
+        print(msg, flush=True)
+    except BrokenPipeError:
+        raise
+    except OSError as exc:
+        raise OSError(exc.errno, exc.strerror, "standard output") from None
 
 
 def note(msg: str) -> None:
@@ -160,6 +170,15 @@ def check_output(path: str | os.PathLike, *, option: str = "--out", folder: bool
     ``session=True`` the folder is also read (a session to resume or process), so a file there is bad data
     (:class:`FileFormatError`, exit 1). ``suffixes``: the extensions a file output may have (the formats
     module's own list, e.g. ``MESH_FORMATS``), ``what`` names them in the error."""
+    raw = os.fsdecode(path)
+    if not raw:
+        raise UsageError(f"{option}: an empty path; expected a {'folder' if folder else 'file name'}")
+    if not folder and raw.endswith(("/", os.sep)):
+        raise UsageError(f"{option} {raw}: ends with '/', which names a folder; expected a file name")
+    too_long = next((part for part in raw.split(os.sep) if len(os.fsencode(part)) > 255), None)
+    if too_long is not None or len(os.fsencode(raw)) > 4095:
+        raise UsageError(f"{option} {raw[:60]}...: a name longer than the system allows (255 bytes a name, 4095 a "
+                         f"path); choose a shorter one")
     out = Path(path)
     if folder and out.exists() and not out.is_dir():
         if session:

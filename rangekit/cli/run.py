@@ -135,6 +135,9 @@ def _fail(message: str, code: int) -> int:
 def _os_message(exc: OSError) -> str:
     """An OSError in one line naming the file; a full disk says so."""
     where = exc.filename if exc.filename is not None else "a file"
+    if where == "standard output":   # rangekit.cli._common: a result line that could not be written
+        _detach_stdout()
+        return f"standard output: cannot be written ({exc.strerror}); send it to a file or a pipe that takes it"
     if exc.errno in (errno.ENOSPC, errno.EFBIG, errno.EDQUOT):
         return (f"{where}: no space left to write ({exc.strerror}); free some space, then run the command again "
                 "(a scan continues with: rangekit scan --resume DIR)")

@@ -20,9 +20,9 @@ def cmd_scan(args: argparse.Namespace) -> int:
     from rangekit.app.scan.scan import scan
     from rangekit.errors import OptionError
 
-    if args.out or args.resume:
-        check_output(args.out or args.resume, option="--out" if args.out else "--resume", folder=True,
-                     session=bool(args.resume))
+    if args.out is not None or args.resume is not None:
+        check_output(args.resume if args.out is None else args.out, option="--out" if args.resume is None else
+                     "--resume", folder=True, session=args.resume is not None)
     shown = _ScanPrinter(args, time.perf_counter())
     try:
         options = scan_options(args)

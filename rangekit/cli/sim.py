@@ -8,12 +8,22 @@ import time
 
 import numpy as np
 
+from rangekit.formats.output_sets import claim_folder
 from rangekit.cli._common import (check_output, console, finite_float, int_in, non_negative_float, positive_float,
                                   result, seed, size)
 from rangekit.errors import UsageError
 
 
 def cmd_sim_render(args: argparse.Namespace) -> int:
+    """rangekit sim render: the capture, written where no other command's set of files is (--force replaces one)."""
+    check_output(args.out, folder=True)
+    replace = claim_folder(args.out, "capture", force=args.force)
+    code = _sim_render(args)
+    replace()
+    return code
+
+
+def _sim_render(args: argparse.Namespace) -> int:
     """rangekit sim render [--sensor projector|laser|tof|tof-pulsed|stereo] [--object NAME_OR_MESH] --out DIR"""
     from rangekit.app.commands.simulate import (render_laser_capture, render_projector_capture, render_stereo_capture,
                                        render_tof_capture)
@@ -29,15 +39,16 @@ def cmd_sim_render(args: argparse.Namespace) -> int:
     elif args.mono:
         raise UsageError(f"--mono: only for --sensor laser, found --sensor {args.sensor}")
     if args.sensor not in ("projector", "laser"):
-        given = [f for f, v in (("--object", args.object), ("--patterns", args.patterns), ("--rig", args.rig))
-                 if v is not None]
+        given = [f for f, v in (("--object", args.object), ("--object-unit", args.object_unit),
+                                ("--patterns", args.patterns), ("--rig", args.rig)) if v is not None]
         if given:
             raise UsageError(f"{', '.join(given)}: only for --sensor projector or laser; the {args.sensor} sensor "
                              "renders its own scene (docs/simulator.md)")
     if args.sensor == "laser":
         render_laser_capture(args.out, obj=args.object or "lumpy", rig_file=args.rig,
                              angle=np.radians(args.angle_deg), bits=args.bits, seed=args.seed,
-                             noise=not args.no_noise, colour=not args.mono, progress=console())
+                             noise=not args.no_noise, colour=not args.mono, object_unit=args.object_unit or "m",
+                             progress=console())
         result(f"wrote {args.out} (off.png, laser<k>.png, rig.json, ground_truth.npz) in {time.perf_counter() - t0:.1f} s")
         return 0
     if args.sensor == "stereo":
@@ -55,7 +66,8 @@ def cmd_sim_render(args: argparse.Namespace) -> int:
         return 0
     render_projector_capture(args.out, obj=args.object or "lumpy", patterns=args.patterns or "graycode",
                              rig_file=args.rig, angle=np.radians(args.angle_deg), bits=args.bits, seed=args.seed,
-                             noise=not args.no_noise, global_fraction=args.global_fraction, progress=console())
+                             noise=not args.no_noise, global_fraction=args.global_fraction,
+                             object_unit=args.object_unit or "m", progress=console())
     result(f"done in {time.perf_counter() - t0:.1f} s")
     return 0
 
@@ -71,6 +83,7 @@ def cmd_sim_objects(args: argparse.Namespace) -> int:
 
 def add_parsers(sub) -> None:
     from rangekit.coded.patterns import PATTERN_METHODS
+    from rangekit.app.commands.simulate import OBJECT_UNITS
 
     sim = sub.add_parser("sim", help="simulated rig: render captures with exact ground truth",
                          description="Simulated projector-camera-turntable rig.")
@@ -87,10 +100,14 @@ def add_parsers(sub) -> None:
     render.add_argument("--object", default=None,
                         help="built-in object (plane, sphere, box, cylinder, torus, board, lumpy, and the zoo: "
                              "bunny, thin, bowl, shiny, dark, steps; 'rangekit sim objects' lists them) or a "
-                             "mesh file trimesh can read (metres); default: lumpy")
+                             "mesh file trimesh can read (metres, or see --object-unit); default: lumpy")
+    render.add_argument("--object-unit", default=None, choices=OBJECT_UNITS,
+                        help="unit of the --object mesh file's coordinates (default m); a mesh whose size is "
+                             "implausible in it (bounding-box diagonal above 5 m or below 1 mm) is refused")
     render.add_argument("--patterns", default=None, choices=PATTERN_METHODS,
                         help="pattern set to project; default: graycode (44 frames on the default rig)")
     render.add_argument("--out", required=True, help="output folder (created if missing)")
+    render.add_argument("--force", action="store_true", help="replace a set of files another command left in --out (a session, a capture, results)")
     render.add_argument("--rig", help="rig file to simulate (default: the built-in simulated rig; --sensor laser: "
                                       "it plus two red line lasers; a laser rig file must list 'lasers')")
     render.add_argument("--angle-deg", type=finite_float, default=0.0, help="turntable angle in degrees (default 0)")

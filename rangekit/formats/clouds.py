@@ -16,12 +16,14 @@ organised scan.
 from __future__ import annotations
 
 import io
+import os
 import warnings
 from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
 
+from rangekit.regular_files import check_regular_file
 from rangekit.errors import FileFormatError
 from rangekit.formats.parsing import cloud_of_finite_rows, read_bytes
 from rangekit.formats.e57 import e57_bytes, read_e57
@@ -116,6 +118,9 @@ def load_cloud(path: str | Path) -> PointCloud:
     if reader is None:
         raise FileFormatError(f"{path}: unknown point cloud format {path.suffix!r}; known: "
                               f"{', '.join(CLOUD_READERS)}")
+    if not os.path.lexists(path):
+        raise FileFormatError(f"{path}: point cloud file not found")
+    check_regular_file(path, what=f"a point cloud file ({path.suffix.lower()})")   # /dev/urandom as u.xyz
     return reader(path)
 
 

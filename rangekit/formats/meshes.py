@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
+from rangekit.regular_files import check_regular_file, read_regular_file
 from rangekit.errors import FileFormatError
 from rangekit.formats.ply import ply_observed, ply_vertex_attributes, read_ply
 from rangekit.formats.ply_write import mesh_ply_bytes
@@ -86,6 +87,24 @@ def _read_ply_mesh(path: Path) -> TriangleMesh:
                         ply_observed(header, elements["vertex"]))
 
 
+def _obj_geometry(path: Path):
+    """An OBJ's text without its texture coordinates and materials (``vt``, ``mtllib``, ``usemtl`` lines; face
+    corners ``v/vt/vn`` become ``v//vn``), as a file object for trimesh."""
+    import io
+    import re
+
+    keep = []
+    for line in read_regular_file(path, what="an OBJ mesh").splitlines():
+        word = line.split(maxsplit=1)[0] if line.strip() else b""
+        if word in (b"vt", b"mtllib", b"usemtl"):
+            continue
+        if word == b"f":
+            line = re.sub(rb"(-?\d+)/-?\d*(/-?\d*)?", lambda m: m.group(1) + (b"/" + m.group(2) if m.group(2) and
+                                                                              len(m.group(2)) > 1 else b""), line)
+        keep.append(line)
+    return io.BytesIO(b"\n".join(keep))
+
+
 def load_mesh(path: str | Path) -> TriangleMesh:
     """Read a ``.ply`` (:mod:`rangekit.formats.ply`), ``.obj``, ``.stl``, ``.off`` or ``.glb`` (trimesh; a glTF
     scene's meshes concatenated in the scene frame) mesh; vertex order kept, nothing merged.
@@ -100,14 +119,20 @@ def load_mesh(path: str | Path) -> TriangleMesh:
     suffix = _check_suffix(path, (*MESH_FORMATS, *_READ_ONLY))
     if path.is_dir():
         raise FileFormatError(f"{path}: is a folder, expected a mesh file")
-    if not path.is_file():
-        raise FileFormatError(f"{path}: mesh file not found")
+    check_regular_file(path, what="a mesh file")
     if suffix == ".ply":
         return _read_ply_mesh(path)
     import trimesh
 
     try:
-        loaded = trimesh.load_mesh(path, file_type=suffix[1:], process=False)
+        try:
+            loaded = trimesh.load_mesh(path, file_type=suffix[1:], process=False)
+        except ModuleNotFoundError as exc:
+            # Texture coordinates make trimesh build a texture, which needs Pillow (not a dependency): the
+            # geometry is read without them.
+            if suffix != ".obj" or "PIL" not in str(exc):
+                raise
+            loaded = trimesh.load_mesh(_obj_geometry(path), file_type="obj", process=False)
     except Exception as exc:  # trimesh raises many types for a corrupt file
         raise FileFormatError(f"{path}: cannot read {suffix[1:].upper()} mesh: {exc}") from exc
     if isinstance(loaded, trimesh.Scene):

@@ -224,12 +224,33 @@ def _first_row_list_lengths(path: Path, header: PlyHeader) -> dict[str, dict[str
     return known
 
 
+def _check_body_size(path: Path, header: PlyHeader) -> None:
+    """The body must hold at least the bytes the header's counts need (rows of fixed properties, each list
+    its length prefix at least): a header declaring 3e8 faces over a few bytes is refused here, before
+    plyfile allocates gigabytes for it."""
+    import os
+
+    have = os.path.getsize(path) - header.data_start
+    used = 0
+    for e in header.elements:
+        row = 0
+        for p in e.properties:
+            if p.count_dtype is None:
+                row += np.dtype(p.dtype).itemsize
+            else:   # a list's length prefix: its items may be 0 in rows after the first (a range grid's 0 or 1)
+                row += np.dtype(p.count_dtype).itemsize
+        if row and used + e.count * row > have:
+            raise truncated_error(path, e.name, e.count, max(have - used, 0) // row)
+        used += e.count * row
+
+
 def _read_binary(path: Path, header: PlyHeader, wanted: tuple[str, ...]) -> dict[str, dict]:
     """The ``wanted`` elements of a binary PLY, read by plyfile (memory-mapped when every list of an element
     is as long as in its first row)."""
     import plyfile
 
     known = _first_row_list_lengths(path, header)
+    _check_body_size(path, header)
     try:
         try:
             ply = plyfile.PlyData.read(str(path), mmap="c", known_list_len=known)

@@ -181,9 +181,9 @@ STEREO = {
     "focal_zero": (_set_K(1, 0, 0, 0.0), "rig.json", ["cameras[1].K", "fx, fy > 0"]),
     "focal_negative": (_set_K(1, 1, 1, -44.0), "rig.json", ["cameras[1].K", "fx, fy > 0"]),
     "identical_cameras": (lambda f: _edit_json(f / "rig.json", lambda r: r["cameras"].__setitem__(
-        1, dict(r["cameras"][0], name="right"))), "rig.json", ["share their optical centre", "baseline 0 m"]),
+        1, dict(r["cameras"][0], name="right"))), "rig.json", ["is (0, 0, 0) m from", "a zero stereo baseline"]),
     "tiny_baseline": (lambda f: _edit_json(f / "rig.json", _tiny_baseline), "rig.json",
-                      ["share their optical centre", "baseline 1e-12 m"]),
+                      ["is (1e-12, 0, 0) m from", "a 1e-09 mm stereo baseline"]),
     "one_camera": (lambda f: _edit_json(f / "rig.json", lambda r: r["cameras"].pop()), "rig.json",
                    ["needs two cameras", "found 1"]),
 }

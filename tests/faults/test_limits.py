@@ -209,7 +209,8 @@ def test_a_pulsed_round_trip_file_with_a_huge_header_is_refused_before_allocatin
 
 def test_a_huge_stereo_pair_is_refused_from_the_headers(cli, tmp_path, budget, no_pixels):
     cam = template_rig()["cameras"][0]
-    (tmp_path / "rig.json").write_text(json.dumps({**template_rig(), "cameras": [cam, dict(cam, name="right")]}))
+    right = dict(cam, name="right", T_world_cam=[[1, 0, 0, 0.075], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]])  # 75 mm
+    (tmp_path / "rig.json").write_text(json.dumps({**template_rig(), "cameras": [cam, right]}))
     for name in ("l.png", "r.png"):
         png_header(tmp_path / name, BIG, BIG, colour=2)
     run = cli("stereo", tmp_path / "l.png", tmp_path / "r.png", "--rig", tmp_path / "rig.json", "--out", tmp_path / "o")

@@ -103,3 +103,28 @@ def test_a_lock_file_that_is_a_fifo_is_named(reference_session, tmp_path):
     os.mkfifo(d / ".lock")
     run = cli_process("process", d, "--no-report", timeout=60)
     assert_error(run, 1, ".lock", "not a regular file")
+
+
+# --------------------------------------------------------------------------- endless and special inputs
+@pytest.mark.skipif(not os.path.exists("/dev/urandom"), reason="no /dev/urandom")
+@pytest.mark.parametrize("name, command", [
+    ("u.xyz", ["mesh", "{src}", "--out", "{tmp}/m.ply"]),
+    ("u.ply", ["register", "{src}", "{src}", "--no-mesh", "--out", "{tmp}/r"]),
+    ("u.obj", ["render", "{src}", "--out", "{tmp}/r.png"]),
+    ("u.pcd", ["mesh", "{src}", "--out", "{tmp}/m.ply"]),
+])
+def test_an_endless_device_as_a_scan_or_mesh_is_refused_by_name(cli, tmp_path, name, command):
+    """/dev/urandom linked as a cloud or mesh was read until killed."""
+    src = tmp_path / name
+    src.symlink_to("/dev/urandom")
+    run = cli(*[a.format(src=src, tmp=tmp_path) for a in command])
+    assert_error(run, 1, str(src), "is a device", "regular file")
+
+
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="no FIFOs here")
+@pytest.mark.parametrize("name", ["f.xyz", "f.ply", "f.stl"])
+def test_a_fifo_as_a_scan_or_mesh_is_refused_by_name(cli, tmp_path, name):
+    src = tmp_path / name
+    os.mkfifo(src)
+    run = cli("render", src, "--out", tmp_path / "r.png")
+    assert_error(run, 1, str(src), "FIFO")

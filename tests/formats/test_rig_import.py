@@ -22,7 +22,7 @@ T = np.array([[-0.201234567891], [0.00312345678], [0.0412345678]])
 
 def _write_opencv(path, **extra):
     fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_WRITE)
-    for k, v in dict(K1=K1, D1=D1, K2=K2, D2=D2, R=R, T=T, **extra).items():
+    for k, v in {**dict(K1=K1, D1=D1, K2=K2, D2=D2, R=R, T=T), **extra}.items():
         fs.write(k, v)
     fs.release()
 
@@ -47,8 +47,8 @@ def test_opencv_filestorage_values_come_back_to_1e_12(tmp_path, suffix):
 
 def test_opencv_sizes_units_and_printing(tmp_path, capsys):
     src = tmp_path / "calib.yml"
-    _write_opencv(src)
-    assert main(["rig", "import", str(src)]) == 1          # no size in the file, none given
+    _write_opencv(src, T=T * 1000)                          # millimetres
+    assert main(["rig", "import", str(src), "--unit", "mm"]) == 1          # no size in the file, none given
     assert ("calib.yml: expected the camera image size (keys imageSize, image_size, cam_size or image_width and "
             "image_height), found none; give it with --size WxH") in capsys.readouterr().err
     assert main(["rig", "import", str(src), "--size", "640x480", "--projector-size", "800x600", "--unit", "mm"]) == 0
@@ -57,7 +57,7 @@ def test_opencv_sizes_units_and_printing(tmp_path, capsys):
     assert '"K": [[1234.5678901234567, 0.0, 640.123456789], [0.0, 1233.987654321, 401.5], [0.0, 0.0, 1.0]]' in text
     assert (data["cameras"][0]["width"], data["projector"]["height"]) == (640, 600)
     T_world_proj = np.array(data["projector"]["T_world_cam"])
-    np.testing.assert_allclose(-R.T @ T.ravel() * 1e-3, T_world_proj[:3, 3], atol=1e-15)
+    np.testing.assert_allclose(-R.T @ T.ravel(), T_world_proj[:3, 3], atol=1e-15)
 
 
 def test_opencv_errors_name_the_file_the_key_and_what_was_found(tmp_path):

@@ -68,6 +68,7 @@ def render(x, *, azimuths: Sequence[float] = (np.radians(30.0),),
     """
     from rangekit.rendering.snapshot import (CLOUD_RENDER_BYTES_PER_PIXEL, MESH_RENDER_BYTES_PER_PIXEL, fit_camera, montage,
                                        render_cloud, render_mesh)
+    from rangekit.regular_files import check_regular_file
     from rangekit.surface.convert import as_cloud, as_mesh
 
     mesh = cloud = None
@@ -75,8 +76,7 @@ def render(x, *, azimuths: Sequence[float] = (np.radians(30.0),),
         src = Path(x)
         if src.is_dir():
             raise FileFormatError(f"{src}: is a folder, expected a mesh or a point cloud file")
-        if not src.is_file():
-            raise FileFormatError(f"{src}: no such file (expected a mesh or a point cloud)")
+        check_regular_file(src, what="a mesh or a point cloud file")
         is_mesh = src.suffix.lower() in MESH_SUFFIXES or _ply_has_faces(src)
     else:
         src = "render"

@@ -23,6 +23,7 @@ from rangekit.formats.range_files import load_ground_truth, load_tof_folder
 from rangekit.image_header import check_image_files
 from rangekit.io import atomic_save_npy, read_png, write_png
 from rangekit.progress import call_progress
+from rangekit.rig.plausibility import check_stereo_baseline
 from rangekit.rig.rig_file import load_rig
 
 __all__ = ["DepthRun", "tof_depth_files", "stereo_depth_files", "write_depth_outputs"]
@@ -97,6 +98,7 @@ def stereo_depth_files(left: str | Path, right: str | Path, rig_file: str | Path
     if len(rig.cameras) < 2:
         raise ConfigError(f"{rig_file}: the stereo command needs two cameras in 'cameras' (left = cameras[0], "
                           f"right = cameras[1]), found {len(rig.cameras)}")
+    check_stereo_baseline(rig, str(rig_file))  # a rig file in millimetres: depths 1000 times off
     check_image_files([left, right], what="stereo pair", same_size=False)  # the budget, before any pixel
     left_img, right_img = read_png(left), read_png(right)
     if left_img.shape[:2] != right_img.shape[:2]:

@@ -9,6 +9,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
+from rangekit.app.commands.handedness import check_handedness
 from rangekit.errors import ConfigError, RegistrationError, UsageError, naming
 from rangekit.formats.clouds import load_cloud, save_cloud
 from rangekit.surface.cloud import PointCloud, bbox_diagonal, check_voxel, merge_clouds
@@ -37,11 +38,11 @@ def parse_init(init: str | None, n: int, sources: Sequence[str]) -> np.ndarray |
             step = np.radians(float(parts[2]))
             point = np.array([float(v) for v in parts[3].split(",")]) if len(parts) > 3 else np.zeros(3)
             if (axis.shape != (3,) or point.shape != (3,) or not np.all(np.isfinite([*axis, *point, step]))
-                    or not np.linalg.norm(axis) > 0):
+                    or not np.linalg.norm(axis) > 0 or not abs(step) <= 2 * np.pi or len(parts) > 4):
                 raise ValueError
-        except (ValueError, IndexError) as exc:
-            raise UsageError(f"--init {init!r}: expected turntable:AX,AY,AZ:STEP_DEG[:PX,PY,PZ] with finite numbers "
-                             "and a non-zero axis, e.g. turntable:0,1,0:24") from exc
+        except (ValueError, IndexError, OverflowError) as exc:
+            raise UsageError(f"--init {init!r}: expected turntable:AX,AY,AZ:STEP_DEG[:PX,PY,PZ] with finite numbers, "
+                             "a non-zero axis and a step of at most 360 degrees, e.g. turntable:0,1,0:24") from exc
         # View i is turned by +i * STEP: the prior of a table turning by -i * STEP between views.
         return turntable_prior(table_frame(axis, point), -step * np.arange(n))
     srcs, T = load_stanford_conf(init) if init.endswith(".conf") else load_poses(init)
@@ -109,6 +110,7 @@ def register(paths: Sequence[str | Path], out_dir: str | Path, *, init: str | No
             f"{quoted(paths)} --neighbours 0 --out {shlex.quote(str(out) + '-all')}"
             + (f"; to register those on their own: rangekit register {quoted(alone)} --out "
                f"{shlex.quote(str(out) + '-rest')}" if len(alone) > 1 else "")) from None
+    check_handedness(clouds, res, [p.name for p in paths], voxel=voxel, options=options)  # a mirrored scan
     return _write(out, paths, clouds, res, mesh, voxel, say)
 
 

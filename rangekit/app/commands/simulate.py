@@ -15,7 +15,7 @@ from rangekit.errors import InputError, UsageError
 from rangekit.progress import call_progress
 
 __all__ = ["render_projector_capture", "render_laser_capture", "render_tof_capture", "render_stereo_capture",
-           "BYTES_PER_PIXEL"]
+           "BYTES_PER_PIXEL", "OBJECT_UNITS"]
 
 #: Peak memory of a simulated capture per camera pixel, bytes (measured as the growth of the peak from a
 #: small to a large sensor: ToF 4.6 KB/px, its 3x3 rays per pixel; pulsed ToF 0.54 KB; stereo 1.0 KB per
@@ -23,6 +23,8 @@ __all__ = ["render_projector_capture", "render_laser_capture", "render_tof_captu
 #: Laser (estimated, not measured): the projector rig's ray cast plus the float32 RGB ambient, noise pool and
 #: per-laser xyz truth, 900 bytes.
 BYTES_PER_PIXEL = {"tof": 5000, "tof-pulsed": 640, "stereo": 1100, "projector": 640, "laser": 900}
+#: The units ``--object-unit`` reads a mesh file in.
+OBJECT_UNITS = ("m", "mm")
 
 
 def _check_size(sensor: str, size: tuple[int, int], *, option: str | None = "--size", extra: int = 0,
@@ -32,15 +34,49 @@ def _check_size(sensor: str, size: tuple[int, int], *, option: str | None = "--s
                  option=None if option is None else f"{option} {w}x{h}")
 
 
+def _object_scene(obj: str, object_unit: str = "m"):
+    """The scene of ``obj``: a built-in name, or a mesh file whose lengths are in ``object_unit`` ("m" or "mm"),
+    its size checked by :data:`rangekit.rig.plausibility.OBJECT_SIZE` (a mesh in millimetres read as metres
+    is an object 100 m across around the rig: refused, naming its size and the unit it looks like)."""
+    import numpy as np
+
+    from rangekit.errors import SceneError
+    from rangekit.rig.plausibility import OBJECT_SIZE, UNIT_SCALES, check_length, format_vector
+    from rangekit.sim import default_scene
+    from rangekit.sim.scene.objects import BUILTIN_OBJECTS, make_object
+
+    if object_unit not in OBJECT_UNITS:
+        raise UsageError(f"--object-unit: expected one of {', '.join(OBJECT_UNITS)}, found {object_unit!r}")
+    if obj in BUILTIN_OBJECTS:
+        if object_unit != "m":
+            raise UsageError(f"--object-unit {object_unit}: only for a mesh file; the built-in object {obj!r} is "
+                             "in metres")
+        return default_scene(obj)
+    scale = UNIT_SCALES[object_unit]
+    loaded = make_object(obj, scale=scale)
+    extent = np.ptp(loaded.vertices, axis=0)
+    check_length(float(np.linalg.norm(extent)), OBJECT_SIZE, where=obj, read_as=object_unit, units=OBJECT_UNITS,
+                 shown=f"bounding box {format_vector(extent / scale)} {object_unit}",
+                 what="object (its bounding-box diagonal)", error=SceneError,
+                 fixes={"mm": "use --object-unit mm", "m": "use --object-unit m (the default)"})
+    return default_scene(loaded)
+
+
+def _object_info(obj: str, object_unit: str) -> dict:
+    """What capture.json records of the object: its name or file, and its unit when not metres."""
+    return {"object": obj, **({"object_unit": object_unit} if object_unit != "m" else {})}
+
+
 def render_projector_capture(out: str | Path, *, obj: str = "lumpy", patterns: str = "graycode",
                              rig_file: str | Path | None = None, angle: float = 0.0, bits: int = 8, seed: int = 0,
-                             noise: bool = True, global_fraction: float | None = None,
+                             noise: bool = True, global_fraction: float | None = None, object_unit: str = "m",
                              progress: Callable | None = None) -> None:
-    """Render ``patterns`` on ``obj`` (built-in name or mesh file) at turntable ``angle`` (radians) on the
-    rig file's rig (default the simulator's), with a ``bits``-bit camera; write the capture folder."""
+    """Render ``patterns`` on ``obj`` (built-in name or mesh file, in ``object_unit``) at turntable ``angle``
+    (radians) on the rig file's rig (default the simulator's), with a ``bits``-bit camera; write the capture
+    folder."""
     from rangekit.coded.patterns import make_pattern_spec
     from rangekit.rig.rig_file import load_rig
-    from rangekit.sim import ImagingModel, SimRig, default_scene
+    from rangekit.sim import ImagingModel, SimRig
     from rangekit.sim.writers.capture import write_capture
 
     imaging = ImagingModel(bits=bits, colour=patterns == "debruijn")
@@ -52,23 +88,23 @@ def render_projector_capture(out: str | Path, *, obj: str = "lumpy", patterns: s
     if rig is not None:
         cam = rig.camera
         _check_size("projector", (cam.width, cam.height), option=None, where=f"{rig_file}: ")
-    sim = SimRig(default_scene(obj), rig, imaging=imaging, seed=seed)
+    sim = SimRig(_object_scene(obj, object_unit), rig, imaging=imaging, seed=seed)
     if sim.turntable is not None:
         sim.turntable.rotate_to(angle)
     spec = make_pattern_spec(patterns, sim.projector.resolution)
-    write_capture(sim, spec, out, info={"object": obj}, progress=progress)
+    write_capture(sim, spec, out, info=_object_info(obj, object_unit), progress=progress)
 
 
 def render_laser_capture(out: str | Path, *, obj: str = "lumpy", rig_file: str | Path | None = None,
                          angle: float = 0.0, bits: int = 8, seed: int = 0, noise: bool = True, colour: bool = True,
-                         progress: Callable | None = None) -> None:
-    """The laser-off frame and one frame per line laser of ``obj`` (built-in name or mesh file) at turntable
-    ``angle`` (radians) on the rig file's rig (it must list ``lasers``; default the simulator's rig with
+                         object_unit: str = "m", progress: Callable | None = None) -> None:
+    """The laser-off frame and one frame per line laser of ``obj`` (built-in name or mesh file in
+    ``object_unit``) at turntable ``angle`` (radians) on the rig file's rig (it must list ``lasers``; default the simulator's rig with
     two Ciclop-like red lasers, :func:`rangekit.sim.laser.rig.laser_rig`), with a ``bits``-bit RGB (or
     mono) camera; write the capture folder (:mod:`rangekit.sim.laser.capture`)."""
     from rangekit.errors import ConfigError
     from rangekit.rig.rig_file import load_rig
-    from rangekit.sim import ImagingModel, default_scene
+    from rangekit.sim import ImagingModel
     from rangekit.sim.laser.frames import LaserView
     from rangekit.sim.laser.capture import write_laser_capture
     from rangekit.sim.laser.rig import laser_rig
@@ -87,9 +123,10 @@ def render_laser_capture(out: str | Path, *, obj: str = "lumpy", rig_file: str |
         rig = laser_rig()
     if rig.capture.get("bits") != bits:
         rig = replace(rig, capture={**rig.capture, "bits": bits})
+    scene = _object_scene(obj, object_unit)
     call_progress(progress, f"ray casting {rig.camera.width}x{rig.camera.height} camera pixels")
-    view = LaserView(default_scene(obj), rig, angle, imaging=imaging, seed=seed)
-    write_laser_capture(view, out, seed=seed, info={"object": obj}, progress=progress)
+    view = LaserView(scene, rig, angle, imaging=imaging, seed=seed)
+    write_laser_capture(view, out, seed=seed, info=_object_info(obj, object_unit), progress=progress)
 
 
 def render_tof_capture(out: str | Path, *, pulsed: bool = False, near: float = 0.5, far: float = 15.0,

@@ -4,7 +4,8 @@
 ``[socket, camera]`` pairs (socket 0 = CAM_A, 1 = CAM_B, 2 = CAM_C, ...); each camera has ``width``,
 ``height``, ``intrinsicMatrix`` (3x3 pixels), ``distortionCoeff`` (14, OpenCV order) and ``extrinsics``
 with ``rotationMatrix`` (float32 on the device: projected onto the nearest rotation), ``translation`` {x, y, z} in **centimetres** and ``toCameraSocket`` (-1: none):
-``X_to = R X_this + t``. World = CAM_A's frame (else the lowest socket); every camera linked to it through
+``X_to = R X_this + t``; a baseline ``|t|`` outside :data:`rangekit.rig.plausibility.BASELINE` is refused or
+warned of. World = CAM_A's frame (else the lowest socket); every camera linked to it through
 the extrinsics is listed, the world camera first. No projector, no turntable.
 
 **Horus** ``calibration.json`` (Ciclop scanner; its profile file, the settings either at the top or under
@@ -25,6 +26,7 @@ from rangekit.errors import ConfigError
 from rangekit.formats.rig_files.entries import camera_entry, rig_dict
 from rangekit.geometry import invert_T, make_T, nearest_rotation
 from rangekit.rig.lasers import LineLaser, laser_plane
+from rangekit.rig.plausibility import BASELINE, check_length, format_vector
 
 __all__ = ["depthai_rig", "horus_rig", "DEPTHAI_SOCKETS"]
 
@@ -79,6 +81,9 @@ def depthai_rig(data: dict, where: str) -> dict:
         if isinstance(to, int) and to >= 0:
             R = _rotation(ext.get("rotationMatrix"), where, f"{key}.extrinsics.rotationMatrix")
             t = _xyz(ext.get("translation"), where, f"{key}.extrinsics.translation") * 0.01   # cm -> m
+            check_length(float(np.linalg.norm(t)), BASELINE, where=where, read_as="cm",
+                         shown=f"{key}.extrinsics.translation = {format_vector(t * 100)} cm",
+                         what=f"baseline from socket {socket} to socket {to}")
             links[(to, socket)] = make_T(R, t)                 # T_to_this
             links[(socket, to)] = invert_T(links[(to, socket)])
     world = 0 if 0 in cams else min(cams)

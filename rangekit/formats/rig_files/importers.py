@@ -19,7 +19,9 @@ Three sources, told apart by their content (:func:`import_rig`):
                       ``projector_width`` and ``projector_height``; else ``--projector-size``
   ==================  ==========================================================================
 
-  ``T`` is in metres unless ``unit="mm"`` (``--unit mm``). World = the camera's frame; the turntable is
+  ``T`` is in metres unless ``unit="mm"`` (``--unit mm``); a baseline ``|T|`` outside
+  :data:`rangekit.rig.plausibility.BASELINE` is refused (zero, below 1 mm or above 10 m: a file in millimetres
+  read as metres, or the other way round) or warned of. World = the camera's frame; the turntable is
   unknown (``T_world_table`` null: ``rangekit calibrate`` measures it).
 - **depthai EEPROM calibration** JSON (``CalibrationHandler.eepromToJson()``, :mod:`.rig_import_json`).
 - **Horus** ``calibration.json`` (Ciclop scanner, :mod:`.rig_import_json`).
@@ -34,9 +36,11 @@ from pathlib import Path
 
 import numpy as np
 
+from rangekit.regular_files import read_regular_file
 from rangekit.errors import ConfigError
 from rangekit.formats.rig_files.entries import camera_entry, rig_dict
 from rangekit.geometry import invert_T, make_T
+from rangekit.rig.plausibility import BASELINE, UNIT_SCALES, check_length, format_vector
 from rangekit.rig.rig_file import Rig, template_rig
 
 __all__ = ["import_rig", "IMPORT_SUFFIXES", "OPENCV_KEYS"]
@@ -55,7 +59,9 @@ OPENCV_KEYS = {
     "camera_size": ("imageSize", "image_size", "cam_size"),
     "projector_size": ("projectorSize", "projector_size", "proj_size"),
 }
-UNITS = {"m": 1.0, "mm": 1e-3}
+#: The units ``--unit`` reads an OpenCV file's ``T`` in, metres per unit, and how to ask for each.
+UNITS = {u: UNIT_SCALES[u] for u in ("m", "mm")}
+_UNIT_FIXES = {"mm": "use --unit mm", "m": "use --unit m (the default)"}
 
 
 def import_rig(path: str | Path, *, size: tuple[int, int] | None = None,
@@ -75,9 +81,12 @@ def import_rig(path: str | Path, *, size: tuple[int, int] | None = None,
     data = None
     if path.suffix.lower() == ".json":
         try:
-            data = json.loads(path.read_text(encoding="utf-8"))
+            data = json.loads(read_regular_file(path, what="a calibration file").decode("utf-8"))
         except (UnicodeDecodeError, json.JSONDecodeError) as exc:
             raise ConfigError(f"{path}: expected JSON, found a file that does not parse ({exc})") from None
+        except RecursionError:
+            raise ConfigError(f"{path}: expected a calibration JSON, found arrays or objects nested too deeply to "
+                              f"read") from None
     if isinstance(data, dict) and "cameraData" in data:
         rig = depthai_rig(data, str(path))
     elif isinstance(data, dict) and ("calibration_settings" in data or "camera_matrix" in data):
@@ -88,13 +97,25 @@ def import_rig(path: str | Path, *, size: tuple[int, int] | None = None,
     return rig
 
 
-def _node_value(node):
-    """A FileStorage node as a numpy array (a matrix, a sequence of numbers or one number)."""
+def _node_value(node, path: Path, key: str):
+    """A FileStorage node as a numpy array (a matrix, a sequence of numbers or one number); ConfigError naming
+    ``key`` for text or anything else that is not numbers."""
+    import cv2
+
+    if node.isString():
+        raise ConfigError(f"{path}: {key}: expected a matrix or numbers, found the text {node.string()[:40]!r}")
     if node.isSeq():
-        return np.array([node.at(i).real() for i in range(node.size())], dtype=np.float64)
+        items = [node.at(i) for i in range(node.size())]
+        if not all(item.isReal() or item.isInt() for item in items):
+            raise ConfigError(f"{path}: {key}: expected a sequence of numbers, found other items in it")
+        return np.array([item.real() for item in items], dtype=np.float64)
     if node.isReal() or node.isInt():
         return np.array(node.real(), dtype=np.float64)
-    m = node.mat()
+    try:
+        m = node.mat()
+    except cv2.error:
+        raise ConfigError(f"{path}: {key}: expected a matrix (!!opencv-matrix) or numbers, found something "
+                          f"else") from None
     return None if m is None else np.asarray(m, dtype=np.float64)
 
 
@@ -111,7 +132,7 @@ def _read_opencv(path: Path) -> dict:
         raise ConfigError(f"{path}: expected an OpenCV FileStorage file (YAML/XML), found one OpenCV cannot open")
     try:
         root = fs.root()
-        return {k: _node_value(root.getNode(k)) for k in root.keys()}
+        return {k: _node_value(root.getNode(k), path, k) for k in root.keys()}
     finally:
         fs.release()
 
@@ -160,6 +181,8 @@ def opencv_rig(path: Path, *, size=None, projector_size=None, unit: str = "m") -
     t = np.asarray(t, dtype=np.float64).ravel()
     if t.size != 3 or not np.all(np.isfinite(t)):
         raise ConfigError(f"{path}: {tkey}: expected 3 finite numbers, found {t.tolist()}")
+    check_length(float(np.linalg.norm(t)) * UNITS[unit], BASELINE, where=str(path), read_as=unit, units=UNITS,
+                 shown=f"{tkey} = {format_vector(t)} {unit}", what="camera-projector baseline", fixes=_UNIT_FIXES)
     T_proj_cam = make_T(R, t * UNITS[unit])
     cam_size = _size(values, "camera_size", "image", "camera image", size, "--size", path)
     proj_size = _size(values, "projector_size", "projector", "projector", projector_size, "--projector-size", path)

@@ -37,6 +37,7 @@ class ImageHeader:
     channels: int
     bits: int
     format: str
+    file_bits: int = 0   # bits per sample in the file when fewer than ``bits`` (a 1-bit PNG read as 8-bit); 0: ``bits``
 
     @property
     def nbytes(self) -> int:
@@ -44,7 +45,8 @@ class ImageHeader:
         return self.width * self.height * self.channels * (self.bits // 8)
 
     def describe(self) -> str:
-        return f"{self.width}x{self.height} {self.channels}-channel {self.bits}-bit"
+        stored = f" ({self.file_bits}-bit in the file)" if self.file_bits else ""
+        return f"{self.width}x{self.height} {self.channels}-channel {self.bits}-bit{stored}"
 
 
 def _depth(bits: int) -> int:
@@ -52,12 +54,12 @@ def _depth(bits: int) -> int:
     return 8 if bits <= 8 else 16 if bits <= 16 else 32
 
 
-def _png(b: bytes) -> tuple[int, int, int, int] | None:
+def _png(b: bytes) -> tuple[int, int, int, int, int] | None:
     if len(b) < 8 + 8 + 13 or b[12:16] != b"IHDR":
         return None
     w, h, bits, colour = struct.unpack(">IIBB", b[16:26])
     channels = {0: 1, 2: 3, 3: 3, 4: 3, 6: 3}.get(colour)  # grey, RGB, palette, grey+alpha -> BGRA, RGBA
-    return None if channels is None else (w, h, channels, _depth(bits))
+    return None if channels is None else (w, h, channels, _depth(bits), bits if bits < _depth(bits) else 0)
 
 
 def _tiff(b: bytes, path: Path) -> tuple[int, int, int, int] | None:
@@ -139,7 +141,7 @@ def read_image_header(path: str | Path, data: bytes | None = None) -> ImageHeade
     if found is None or found[0] < 1 or found[1] < 1:
         raise FileFormatError(f"{path}: not a readable {kind.upper()} image: its header is cut short, damaged or "
                               f"gives a zero size ({'x'.join(map(str, found[:2])) if found else 'no size'})")
-    return ImageHeader(*found, kind)
+    return ImageHeader(*found[:4], kind, file_bits=found[4] if len(found) > 4 else 0)
 
 
 def check_image_files(paths: Sequence[str | Path], *, what: str = "image stack", same_size: bool = True,
@@ -159,7 +161,7 @@ def check_image_files(paths: Sequence[str | Path], *, what: str = "image stack",
     p0, h0 = known[0]
     if same_size:
         for p, h in known[1:]:
-            if (h.width, h.height, h.bits) != (h0.width, h0.height, h0.bits):
+            if (h.width, h.height, h.bits, h.file_bits) != (h0.width, h0.height, h0.bits, h0.file_bits):
                 raise FileFormatError(f"{p}: image is {h.describe()}, but {p0.name} is {h0.describe()}; "
                                       f"{what} needs one size and depth (from the image headers)")
     largest = max(h.nbytes for _, h in known)

@@ -86,6 +86,7 @@ class MultiViewResult:
     sync: SyncResult                  # last synchronisation (edge residuals, inliers)
     rmse: float                       # RMS point-to-plane residual of the final poses, metres; lower is better
     pairs: PairsTried | None = None   # how many pairs each stage tried
+    converged: bool = True            # the joint refinement stopped by its tolerance, not its iteration limit
 
     def __repr__(self) -> str:
         acc = sum(e.accepted for e in self.edges)
@@ -324,7 +325,7 @@ def _register_views(clouds, init_T_world_view, options, progress, names, map_pai
         say(f"round {rnd + 1}: {len(acc)}/{len(edges)} overlapping pairs accepted, mean rmse "
             f"{np.mean([e.rmse for e in acc]) * 1e3:.3f} mm")
     acc = [e for e in edges if e.accepted]
-    rmse, n_joint = float(np.mean([e.rmse for e in acc])), 0
+    rmse, n_joint, converged = float(np.mean([e.rmse for e in acc])), 0, True
     if options.joint_iterations > 0:
         basis = None
         if options.turntable and prior:
@@ -346,13 +347,13 @@ def _register_views(clouds, init_T_world_view, options, progress, names, map_pai
                                samples=options.joint_samples, tolerance=options.joint_tolerance, rng=options.rng,
                                hold=_joint_holds(n, pairs, edges, holds, T), basis=basis)
         T = joint.T_world_view
-        rmse, n_joint = joint.rmse, len(pairs)
+        rmse, n_joint, converged = joint.rmse, len(pairs), bool(joint.converged)
         say(f"joint refinement of {n} views over {len(pairs)} pairs: rmse {joint.rmse * 1e3:.4f} mm, "
             f"{joint.n_iterations} iterations{'' if joint.converged else ' (not converged)'}")
     label = chooser_label(choose) + (f" + {OVERLAP_NEIGHBOURS} most overlapping (estimated)" if estimate else "")
     tried = PairsTried(n, len(seen), n_coarse, n_candidates, n_refined, n_joint, label, coarse_label)
     say(tried.summary())
-    return MultiViewResult(T, tuple(edges), sync, rmse, tried)
+    return MultiViewResult(T, tuple(edges), sync, rmse, tried, converged)
 
 
 def overlap_rms(clouds: Sequence[PointCloud], T_world_view: np.ndarray, *, radius: float = 0.001) -> float:

@@ -110,3 +110,21 @@ def test_a_calibration_json_nested_without_end_is_named(cli, tmp_path):
     src.write_text("[" * 100_000 + "]" * 100_000)
     run = cli("rig", "import", src, "--out", tmp_path / "rig.json")
     assert_error(run, 1, str(src), "nested too deeply")
+
+
+def test_a_1_bit_frame_among_8_bit_frames_is_refused_from_the_headers(cli, tmp_path):
+    """A 1-bit PNG decodes to 0/255, a binarised frame: it used to decode to fewer points without a word."""
+    import cv2
+
+    rng = np.random.default_rng(0)
+    for k in range(4):
+        cv2.imwrite(str(tmp_path / f"{k:03d}.png"), rng.integers(0, 256, (32, 64), dtype=np.uint8))
+    cv2.imwrite(str(tmp_path / "002.png"), (rng.random((32, 64)) > 0.5).astype(np.uint8) * 255,
+                [cv2.IMWRITE_PNG_BILEVEL, 1])
+    run = cli("decode", tmp_path, "--pattern", "graycode", "--projector", "64x32", "--out", tmp_path / "m.npz")
+    assert_error(run, 1, "002.png", "1-bit in the file", "000.png is 64x32 1-channel 8-bit", "one size and depth")
+
+
+def test_resume_flipped_on_a_one_pass_session_is_a_usage_error(cli, tmp_session):
+    run = cli("scan", "--resume", tmp_session, "--flipped", "--no-process")
+    assert_error(run, 2, "--flipped", "has one pass", "leave --flipped out")

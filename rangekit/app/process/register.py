@@ -15,7 +15,12 @@ from rangekit.formats.sessions.session import Session
 from rangekit.formats.sessions.summary import Edge
 from rangekit.rig.rig_file import turntable_prior
 
-__all__ = ["RegisteredViews", "register"]
+__all__ = ["RegisteredViews", "register", "held_to_prior", "PRIOR_TRUST_DEG"]
+
+#: Degrees a registration may move a view from the turntable's pose. A turntable's steps and calibrated axis
+#: are good to a fraction of a degree (the simulated 12-view scan: 0.001 deg); a view moved further was slid by
+#: ICP on too little shape (a 4-view scan with a 320x256 camera ended 46 deg off with exit 0).
+PRIOR_TRUST_DEG = 5.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -27,6 +32,7 @@ class RegisteredViews:
     edges: list[Edge]             # the registration's view pairs (rangekit.formats.sessions.summary)
     rmse: float                   # metres: the joint point-to-plane RMS of the final poses
     view_passes: list[int] | None  # a multi-pass scan: each view's turntable pass; None for one pass
+    note: str = ""                # what went wrong and what was done (the turntable's poses kept), else ""
 
     @property
     def angles(self) -> list:
@@ -70,14 +76,42 @@ def register(decoded: DecodedViews, session: Session, clock: StageClock, on_even
             # On the rig's turntable the views are rotations about one axis: the joint refinement keeps them so.
             res = register_views(clouds, init_T_world_view=prior, progress=progress,
                                  options=MultiViewOptions(turntable=prior is not None), map_pairs=map_pairs)
-        save_poses(session.folder / "poses.json", decoded.names, res.T_world_view,
+        T, note = res.T_world_view, ""
+        if view_passes is None and prior is not None:
+            T, note = held_to_prior(res.T_world_view, prior, decoded.names, converged=res.converged)
+            if note:
+                from rangekit.progress import LOGGER
+
+                LOGGER.warning(note)
+        save_poses(session.folder / "poses.json", decoded.names, T,
                    world=f"frame of {views[0].folder.name} (the rig's world at its turntable angle)",
                    extra=None if view_passes is None else [{"pass": p} for p in view_passes])
         edges = _edge_rows(res)
         for e in res.edges:
             emit(on_event, PairRegistered(e.i, e.j, float(e.rmse), float(e.overlap), bool(e.accepted), e.reason))
         release_free_memory()   # the registration's k-d trees and samples
-    return RegisteredViews(decoded, res.T_world_view, edges, float(res.rmse), view_passes)
+    return RegisteredViews(decoded, T, edges, float(res.rmse), view_passes, note)
+
+
+def held_to_prior(T_world_view: np.ndarray, prior: np.ndarray, names: list[str], *,
+                  converged: bool = True) -> tuple[np.ndarray, str]:
+    """The registered poses, or the turntable's (``prior``, (n, 4, 4), expressed in the first view's frame) when
+    the registration moved a view more than :data:`PRIOR_TRUST_DEG` from it; with a note saying which view
+    and how far (and, ``converged`` False, that the joint refinement did not converge), else ""."""
+    from rangekit.metrology.pose_errors import pose_errors
+
+    P = np.einsum("ij,njk->nik", np.linalg.inv(prior[0]), prior)
+    moved = pose_errors(T_world_view, P).rotation_deg
+    worst = int(np.argmax(moved))
+    unconverged = "" if converged else "; the joint refinement did not converge"
+    if moved[worst] > PRIOR_TRUST_DEG:
+        return P, (f"registration moved {names[worst]} {moved[worst]:.1f} deg from its turntable pose (more than "
+                   f"{PRIOR_TRUST_DEG:g} deg){unconverged}: the turntable's poses are kept; too little shape overlaps "
+                   f"between views (more views, or a larger camera image, give ICP more to hold on to)")
+    if not converged:
+        return T_world_view, (f"registration: the joint refinement did not converge (views within "
+                              f"{moved.max():.2f} deg of the turntable's poses); the poses may be slightly off")
+    return T_world_view, ""
 
 
 def _edge_rows(res) -> list[Edge]:

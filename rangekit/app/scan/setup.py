@@ -85,6 +85,9 @@ def prepare_scan(options: ScanOptions, progress: Callable | None = None) -> Scan
         resume = str(resume)
         session = Session.load(resume)
         _check_resume_options(session, given)
+        if options.flipped and session.plan.passes < 2:
+            raise OptionError(f"{{flipped}} confirms that the object was turned over between passes, but the session "
+                              f"in {resume} has one pass: nothing is turned over; leave {{flipped}} out")
         rig_file, the_rig, spec = f"{resume}/rig.json", session.rig, session.pattern
         n_views, hardware, passes = len(session.views), session.hardware is not None, session.plan.passes
         method = "laser" if session.is_laser else "coded"

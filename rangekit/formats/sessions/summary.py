@@ -168,6 +168,7 @@ class ProcessResult:
     watertight_mesh: MeshFigures | None = None   # the closed mesh (mesh_watertight.ply)
     view_errors: list | None = None  # simulator: per view, decoding / cloud (inside, edge) / registration errors
     view_passes: list | None = None  # a multi-pass scan: each view's turntable pass (0, 1, ...)
+    registration_note: str = ""     # a registration that failed and what was kept instead (the turntable's poses)
 
     @property
     def mesh_path(self) -> Path:
@@ -188,7 +189,8 @@ class ProcessResult:
                 **({"laser": self.laser} if self.laser is not None else {}),
                 **({"mesh_watertight": self.watertight_mesh.to_dict()} if self.watertight_mesh is not None else {}),
                 **({"view_errors": self.view_errors} if self.view_errors is not None else {}),
-                **({"view_passes": self.view_passes} if self.view_passes is not None else {})}
+                **({"view_passes": self.view_passes} if self.view_passes is not None else {}),
+                **({"registration_note": self.registration_note} if self.registration_note else {})}
 
     @classmethod
     def from_dict(cls, d: dict, folder: str | Path) -> "ProcessResult":
@@ -205,7 +207,8 @@ class ProcessResult:
                    [Edge.from_dict(e) for e in d["edges"]], float("nan") if rmse is None else rmse,
                    MeshFigures.from_dict(d["mesh"]), dict(d.get("seconds", {})),
                    None if acc is None else Accuracy.from_dict(acc), d.get("laser"),
-                   None if closed is None else MeshFigures.from_dict(closed), d.get("view_errors"), d.get("view_passes"))
+                   None if closed is None else MeshFigures.from_dict(closed), d.get("view_errors"), d.get("view_passes"),
+                   str(d.get("registration_note", "")))
 
     def summary_lines(self) -> list[str]:
         """The end-of-run summary, one line per fact, for people (mm and degrees here only)."""
@@ -227,6 +230,8 @@ class ProcessResult:
                          f"{np.median([e.rmse * 1e3 for e in acc]):.4f} mm, joint RMS {self.registration_rmse * 1e3:.4f} "
                          "mm" + (f"; synchronisation residual max {max(rot):.4f} deg, {max(tr):.4f} mm" if rot and tr
                                  else ""))
+        if self.registration_note:
+            lines.append(f"warning: {self.registration_note}")
         lines += [
                  f"mesh ({m.fusion}{', observed surface' if self.watertight_mesh else ''}): {m.vertices:,} "
                  f"vertices, {m.triangles:,} triangles, watertight {m.watertight}, area {m.area * 1e4:.1f} cm^2"

@@ -63,6 +63,52 @@ class SchedulerUnreachable(RangekitError):
     """No Dask scheduler answered at the address given (exit 1)."""
 
 
+#: A Dask scheduler's first message (its handshake) is a few hundred bytes; a length beyond this is not Dask's.
+MAX_HANDSHAKE_BYTES = 1 << 20
+
+
+def probe_scheduler(address: str, timeout: float) -> None:
+    """SchedulerUnreachable unless a Dask scheduler's handshake arrives from ``address`` (``tcp://HOST:PORT``)
+    within ``timeout`` seconds. A Dask scheduler writes its handshake as soon as a connection opens: its first
+    8 bytes are the message's length (little-endian), then the message. ``distributed.Client`` writes first and
+    trusts that length: an HTTP server there (the dashboard's port) answered with 'HTTP/1.1 400', read as a
+    length of 10^18 bytes, and the client never returned; a server sending garbage ended in 'out of memory'."""
+    import socket
+    import struct
+    from urllib.parse import urlsplit
+
+    expected = f"--scheduler {address}: expected a Dask scheduler (dask scheduler) answering there, found "
+    try:
+        parts = urlsplit(address)
+        host, port = parts.hostname, parts.port
+    except ValueError:
+        host = port = None
+    if parts.scheme != "tcp" or not host or port is None:
+        raise SchedulerUnreachable(expected + "an address that is not tcp://HOST:PORT")
+    deadline = time.monotonic() + timeout
+    head, connected = b"", False
+    try:
+        with socket.create_connection((host, port), timeout=timeout) as sock:
+            connected = True
+            while len(head) < 8:
+                sock.settimeout(max(deadline - time.monotonic(), 1e-3))
+                chunk = sock.recv(8 - len(head))
+                if not chunk:
+                    raise SchedulerUnreachable(expected + f"a server that closed the connection after {len(head)} "
+                                               "bytes, without Dask's handshake")
+                head += chunk
+    except (socket.timeout, TimeoutError):
+        raise SchedulerUnreachable(expected + (f"a server that sent no Dask handshake within {timeout:g} s (another "
+                                               "protocol there, such as the dashboard's HTTP port?)" if connected
+                                               else f"none within {timeout:g} s")) from None
+    except OSError as e:
+        raise SchedulerUnreachable(expected + f"none within {timeout:g} s ({type(e).__name__}: "
+                                   f"{e.strerror or e})") from None
+    length = struct.unpack("<Q", head)[0]
+    if not 0 < length <= MAX_HANDSHAKE_BYTES:
+        raise SchedulerUnreachable(expected + f"a server that speaks another protocol (its first bytes {head!r})")
+
+
 @dataclass(frozen=True)
 class ViewDone:
     """A view task's result: the view folder's name, its points, and whether this task decoded it (False:
@@ -302,6 +348,7 @@ class _client:
                         os.environ[k] = v
             self.client = Client(self.cluster)
             return self.client
+        probe_scheduler(self.scheduler, self.timeout)
         try:
             self.client = Client(self.scheduler, timeout=f"{self.timeout}s")
         except (OSError, TimeoutError, ValueError) as e:

@@ -128,3 +128,19 @@ def test_a_fifo_as_a_scan_or_mesh_is_refused_by_name(cli, tmp_path, name):
     os.mkfifo(src)
     run = cli("render", src, "--out", tmp_path / "r.png")
     assert_error(run, 1, str(src), "FIFO")
+
+
+@pytest.mark.parametrize("sensor, size, command", [
+    ("stereo", "160x100", ["stereo", "{src}/left.png", "{src}/right.png", "--rig", "{src}/rig.json", "--out", "{out}"]),
+    ("tof", "64x48", ["tof", "{src}", "--out", "{out}"]),
+])
+def test_stereo_and_tof_read_folders_named_with_non_utf8_bytes(tmp_path, sensor, size, command):
+    """stereo and tof were killed by SIGSEGV in the image read on such a path."""
+    src = _non_utf8(tmp_path, b"cap\xe9")
+    run = cli_process("-q", "sim", "render", "--sensor", sensor, "--size", size, "--out", tmp_path / "plain")
+    assert run.code == 0, run.err
+    shutil.copytree(tmp_path / "plain", src)
+    out = _non_utf8(tmp_path, b"out\xff")
+    run = cli_process(*[os.fsdecode(a).format(src=os.fsdecode(src), out=os.fsdecode(out)) for a in command], timeout=120)
+    assert run.code == 0, run.err
+    assert (out / "cloud.ply").is_file()

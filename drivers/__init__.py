@@ -4,10 +4,13 @@ a full-screen projector display (pygame, optional) and Luxonis depthai cameras.
 ``open_rig_devices(rig)`` opens what a rig file's ``devices`` section names (every field: docs/rig.md)::
 
     "devices": {
-      "turntable": {"protocol": "horus" | "fabscan", "port": "/dev/ttyUSB0", "baud": 115200},
+      "turntable": {"protocol": "horus" | "fabscan", "port": "/dev/ttyUSB0", "baud": 115200, "timeout_s": 2},
       "projector": {"display": 1, "control": {"protocol": "escvp21" | "pjlink", "port": "/dev/ttyUSB1"}},
       "camera": {"type": "depthai", "id": null, "socket": "CAM_A", "search_timeout_s": 3}
     }
+
+Each opened device that can come back after it went away mid-scan has ``reconnect(timeout_s)``;
+acquisition calls it with the entry's ``reconnect_timeout_s`` (:func:`rangekit.rig.checks.reconnect_timeout_s`).
 
 The camera is opened with the rig's ``capture.camera`` controls (:func:`rangekit.rig.camera_controls.
 controls_from_capture`), and for coded light (a projector display is opened) auto-exposure is refused
@@ -24,7 +27,7 @@ from dataclasses import dataclass
 
 from rangekit.rig.camera_controls import controls_from_capture
 from rangekit.errors import ConfigError
-from rangekit.rig.checks import DEFAULT_SEARCH_S, validate_rig_for_hardware
+from rangekit.rig.checks import DEFAULT_REPLY_S, DEFAULT_SEARCH_S, validate_rig_for_hardware
 
 __all__ = ["HardwareRig", "open_rig_devices", "CAMERA_DRIVERS"]
 
@@ -86,7 +89,8 @@ def open_rig_devices(rig, *, where: str = "rig file", open_camera: bool = True, 
             from rangekit.drivers.turntable import make_turntable
 
             try:
-                turntable = make_turntable(sec["protocol"], sec["port"], sec.get("baud"))
+                turntable = make_turntable(sec["protocol"], sec["port"], sec.get("baud"),
+                                           timeout=sec.get("timeout_s", DEFAULT_REPLY_S))
             except ConfigError as exc:
                 raise ConfigError(f"{where}: devices.turntable.protocol: {exc}") from exc
             opened.append(turntable)

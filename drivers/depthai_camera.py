@@ -22,7 +22,6 @@ Conventions at this boundary (see ARCHITECTURE.md):
 from __future__ import annotations
 
 import datetime
-import os
 import time
 
 import numpy as np
@@ -30,8 +29,8 @@ import numpy as np
 from rangekit.camera import PinholeCamera
 from rangekit.rig.camera_controls import CameraControls, require_locked
 from rangekit.drivers.depthai_controls import AUTO_CONTROLS, CONTROL_NAMES, apply_controls, check_frame_period
-from rangekit.drivers.discovery import check_search_timeout, search_depthai
-from rangekit.errors import ConfigError, DeviceDisconnected, DeviceError, DeviceTimeout
+from rangekit.drivers.discovery import open_depthai_device
+from rangekit.errors import ConfigError, DeviceDisconnected, DeviceError, DeviceTimeout, one_line
 from rangekit.rig.rig_file import Rig
 from rangekit.rig.checks import DEFAULT_SEARCH_S, DEPTHAI_SOCKETS
 
@@ -39,6 +38,8 @@ __all__ = ["DepthaiCamera", "DEPTHAI_NAMES", "calibration_to_rig", "pinhole_from
            "scale_intrinsics", "SOCKETS"]
 
 SOCKETS = DEPTHAI_SOCKETS
+#: What a lost or silent camera's message says to check.
+_CHECK = "check its USB/PoE cable and power (was it unplugged or reset?)"
 
 #: Every depthai attribute path this module uses; tests check each against the installed depthai.
 DEPTHAI_NAMES = [
@@ -159,46 +160,6 @@ def calibration_to_rig(handler, *, size: tuple[int, int], sockets: tuple[str, ..
 
 
 # ----------------------------------------------------------------------------- the device
-def _open_device(dai, device_id: str | None, search_timeout_s: float):
-    """Find the device (polling, so the timeout holds on every call) and open it.
-
-    depthai reads DEPTHAI_SEARCH_TIMEOUT once per process, at its first search, so the deadline here is
-    enforced by polling :func:`rangekit.drivers.discovery.search_depthai`, each search bounded by the time
-    left (at most 0.5 s), until the device is listed and free; a device that is rebooting after a previous
-    ``close()`` shows up again within that time. Runs on the calling thread: nothing is left inside
-    depthai when this returns or raises.
-    """
-    check_search_timeout(search_timeout_s)
-    os.environ.setdefault("DEPTHAI_SEARCH_TIMEOUT", str(max(1, int(round(search_timeout_s * 1000)))))
-    who = f"depthai device {device_id!r}" if device_id else "a depthai device"
-    t0 = time.monotonic()
-    deadline = t0 + search_timeout_s
-    while True:
-        try:
-            infos = search_depthai(dai, min(0.5, max(0.0, deadline - time.monotonic())))
-        except RuntimeError as exc:
-            raise DeviceError(f"{who}: the device search failed: {exc}") from exc
-        match = [i for i in infos if device_id is None or device_id in (i.getDeviceId(), i.name)]
-        free = [i for i in match if i.state != dai.XLinkDeviceState.X_LINK_BOOTED]
-        if free:
-            break
-        if time.monotonic() >= deadline:
-            if match:
-                found = f"; {match[0].getDeviceId()} is held by another program (state X_LINK_BOOTED)"
-            else:
-                found = f"; found only {[i.getDeviceId() for i in infos]}" if infos else ""
-            raise DeviceDisconnected(f"{who}: none answered within search_timeout_s={search_timeout_s:g} s "
-                                     f"(searched {time.monotonic() - t0:.2f} s){found}; check the USB/PoE cable "
-                                     "and power and that no other program holds it, list devices with "
-                                     "'rangekit devices', or raise the rig file's devices.camera.search_timeout_s")
-        time.sleep(min(0.05, max(0.0, deadline - time.monotonic())))
-    try:
-        return dai.Device(free[0])
-    except RuntimeError as exc:
-        raise DeviceError(f"{who}: found {free[0].getDeviceId()} but could not open it: {exc}; close other "
-                          "programs using it and replug it") from exc
-
-
 class DepthaiCamera:
     """An OAK camera implementing :class:`rangekit.rig.devices.Camera`, plus IR emitters and stereo depth.
 
@@ -237,7 +198,7 @@ class DepthaiCamera:
 
         self._dai = dai
         self._socket_name = socket
-        sock = _socket(dai, socket)
+        _socket(dai, socket)  # an unknown socket is refused before the search
         self.size = (int(size[0]), int(size[1]))
         self.controls = AUTO_CONTROLS if controls is None else controls
         self.mono = self.controls.mono
@@ -246,9 +207,16 @@ class DepthaiCamera:
         if coded_light:
             require_locked(self.controls, where=where)
         check_frame_period(self.controls, name=where)
-        self._device = _open_device(dai, device_id, search_timeout_s)
+        self._want_depth = depth
+        self._device = open_depthai_device(dai, device_id, search_timeout_s)
         self.device_id = self._device.getDeviceId()
         self._name = f"depthai {self.device_id} {socket}"
+        self._start()
+
+    def _start(self) -> None:
+        """Build and start the pipeline on the opened device, with the controls in force (closes the device on
+        failure)."""
+        dai, sock, socket = self._dai, _socket(self._dai, self._socket_name), self._socket_name
         try:
             connected = set(self._device.getConnectedCameras())
             if sock not in connected:
@@ -265,7 +233,7 @@ class DepthaiCamera:
             self._frames = out.createOutputQueue(maxSize=4, blocking=False)
             self._depth = None
             stereo_socks = (dai.CameraBoardSocket.CAM_B, dai.CameraBoardSocket.CAM_C)
-            if depth and all(s in connected for s in stereo_socks):
+            if self._want_depth and all(s in connected for s in stereo_socks):
                 left, right = (cam if s == sock else self._pipeline.create(dai.node.Camera).build(s, sensorFps=fps)
                                for s in stereo_socks)
                 stereo = self._pipeline.create(dai.node.StereoDepth).build(
@@ -277,10 +245,22 @@ class DepthaiCamera:
             self._pipeline.start()
         except RuntimeError as exc:
             self._device.close()
-            raise DeviceError(f"{self._name}: could not start the pipeline: {exc}") from exc
+            raise DeviceError(f"{self._name}: could not start the pipeline: {one_line(exc)}") from exc
         except (DeviceError, ConfigError):
             self._device.close()
             raise
+
+    def reconnect(self, timeout_s: float) -> None:
+        """Release the device and open it again (the same id), waiting up to ``timeout_s`` seconds for it to answer:
+        after it was unplugged or reset mid-scan. The controls in force are applied again before the first frame.
+
+        Raises DeviceDisconnected if it does not answer in time; DeviceError if it cannot be opened again."""
+        try:
+            self.close()
+        except RuntimeError:    # the old connection is gone already
+            pass
+        self._device = open_depthai_device(self._dai, self.device_id, timeout_s)
+        self._start()
 
     # ------------------------------------------------------------------ Camera protocol
     @property
@@ -318,8 +298,8 @@ class DepthaiCamera:
         try:
             self._control.send(ctrl)
         except RuntimeError as exc:
-            raise DeviceDisconnected(f"{self._name}: could not send the camera controls: {exc}; replug the "
-                                     "device and reopen it") from exc
+            raise DeviceDisconnected(f"{self._name}: could not send the camera controls ({one_line(exc)}); "
+                                     f"{_CHECK}") from exc
         self.controls = controls
 
     def depth(self) -> np.ndarray:
@@ -349,11 +329,11 @@ class DepthaiCamera:
     def close(self) -> None:
         """Stop the pipeline and release the device (idempotent)."""
         pipeline, self._pipeline = getattr(self, "_pipeline", None), None
+        device, self._device = getattr(self, "_device", None), None
         try:
             if pipeline is not None and pipeline.isRunning():
                 pipeline.stop()
         finally:
-            device = getattr(self, "_device", None)
             if device is not None:
                 device.close()
 
@@ -376,12 +356,12 @@ class DepthaiCamera:
             left = deadline - time.monotonic()
             if left <= 0:
                 raise DeviceTimeout(f"{self._name}: no {what} exposed after the request within "
-                                    f"{self.frame_timeout_s:.1f} s; check the cable and frame rate")
+                                    f"{self.frame_timeout_s:.1f} s; {_CHECK}, and the frame rate")
             try:
                 msg = queue.get(datetime.timedelta(seconds=left))
             except (RuntimeError, dai.MessageQueue.QueueException) as exc:
-                raise DeviceDisconnected(f"{self._name}: stream closed while waiting for a {what}: {exc}; "
-                                         "replug the device and reopen it") from exc
+                raise DeviceDisconnected(f"{self._name}: lost while waiting for a {what} ({one_line(exc)}); "
+                                         f"{_CHECK}") from exc
             if msg is None:
                 continue
             try:

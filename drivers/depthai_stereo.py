@@ -20,7 +20,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from rangekit.camera import PinholeCamera
-from rangekit.drivers.depthai_camera import _open_device, _socket, pinhole_from_calibration
+from rangekit.drivers.depthai_camera import _socket, pinhole_from_calibration
+from rangekit.drivers.discovery import open_depthai_device
 from rangekit.errors import ConfigError, DeviceDisconnected, DeviceError, DeviceTimeout
 
 __all__ = ["LiveStereoPair", "capture_stereo_pair", "DEPTHAI_STEREO_NAMES", "LEFT", "RIGHT"]
@@ -85,7 +86,7 @@ def capture_stereo_pair(device_id: str | None = None, *, size: tuple[int, int] =
     import depthai as dai
 
     size = (int(size[0]), int(size[1]))
-    device = _open_device(dai, device_id, search_timeout_s)
+    device = open_depthai_device(dai, device_id, search_timeout_s)
     name = f"depthai {device.getDeviceId()}"
     pipeline = None
     try:

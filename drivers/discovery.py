@@ -6,19 +6,21 @@ searching at the deadline itself. (An earlier version ran ``Device.getAllAvailab
 always searches for 500 ms, in a daemon thread abandoned at the deadline; when the interpreter exited
 while that thread was still inside depthai's C++ code, the thread was torn down through a C++ frame
 and the process died with ``terminate called without an active exception``, SIGABRT, exit 134.)
-depthai is imported inside :func:`list_depthai_devices` only.
+depthai is imported inside :func:`list_depthai_devices` only; :func:`open_depthai_device` (the search, then
+``dai.Device``) takes the module from its caller.
 """
 
 from __future__ import annotations
 
 import math
+import os
 import time
 
-from rangekit.errors import ConfigError
+from rangekit.errors import ConfigError, DeviceDisconnected, DeviceError
 from rangekit.rig.checks import MAX_SEARCH_S
 
-__all__ = ["list_serial_ports", "list_depthai_devices", "search_depthai", "check_search_timeout",
-           "MAX_SEARCH_S"]
+__all__ = ["list_serial_ports", "list_depthai_devices", "search_depthai", "open_depthai_device",
+           "check_search_timeout", "MAX_SEARCH_S"]
 
 #: MAX_SEARCH_S (rangekit.rig.checks): the longest depthai search accepted, seconds.
 #: The longest single depthai search call (seconds): a longer search is several calls.
@@ -92,3 +94,45 @@ def list_depthai_devices(timeout_s: float = 1.0) -> list[dict]:
     return [{"device_id": info.getDeviceId(), "name": info.name, "state": info.state.name,
              "protocol": info.protocol.name, "platform": info.platform.name} for info in infos]
 
+
+def open_depthai_device(dai, device_id: str | None, search_timeout_s: float):
+    """Find the depthai device ``device_id`` (id, name or IP; None: the first free one) and open it:
+    ``dai.Device``, for :class:`rangekit.drivers.depthai_camera.DepthaiCamera` and the stereo pair.
+
+    The search polls, so the timeout holds on every call.
+
+    depthai reads DEPTHAI_SEARCH_TIMEOUT once per process, at its first search, so the deadline here is
+    enforced by polling :func:`rangekit.drivers.discovery.search_depthai`, each search bounded by the time
+    left (at most 0.5 s), until the device is listed and free; a device that is rebooting after a previous
+    ``close()`` shows up again within that time. Runs on the calling thread: nothing is left inside
+    depthai when this returns or raises.
+    """
+    check_search_timeout(search_timeout_s)
+    os.environ.setdefault("DEPTHAI_SEARCH_TIMEOUT", str(max(1, int(round(search_timeout_s * 1000)))))
+    who = f"depthai device {device_id!r}" if device_id else "a depthai device"
+    t0 = time.monotonic()
+    deadline = t0 + search_timeout_s
+    while True:
+        try:
+            infos = search_depthai(dai, min(0.5, max(0.0, deadline - time.monotonic())))
+        except RuntimeError as exc:
+            raise DeviceError(f"{who}: the device search failed: {exc}") from exc
+        match = [i for i in infos if device_id is None or device_id in (i.getDeviceId(), i.name)]
+        free = [i for i in match if i.state != dai.XLinkDeviceState.X_LINK_BOOTED]
+        if free:
+            break
+        if time.monotonic() >= deadline:
+            if match:
+                found = f"; {match[0].getDeviceId()} is held by another program (state X_LINK_BOOTED)"
+            else:
+                found = f"; found only {[i.getDeviceId() for i in infos]}" if infos else ""
+            raise DeviceDisconnected(f"{who}: none answered within search_timeout_s={search_timeout_s:g} s "
+                                     f"(searched {time.monotonic() - t0:.2f} s){found}; check the USB/PoE cable "
+                                     "and power and that no other program holds it, list devices with "
+                                     "'rangekit devices', or raise the rig file's devices.camera.search_timeout_s")
+        time.sleep(min(0.05, max(0.0, deadline - time.monotonic())))
+    try:
+        return dai.Device(free[0])
+    except RuntimeError as exc:
+        raise DeviceError(f"{who}: found {free[0].getDeviceId()} but could not open it: {exc}; close other "
+                          "programs using it and replug it") from exc

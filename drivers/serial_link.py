@@ -23,7 +23,7 @@ import time
 
 import serial
 
-from rangekit.errors import CommandError, DeviceDisconnected, DeviceTimeout, ProtocolError, quote
+from rangekit.errors import CommandError, DeviceDisconnected, DeviceTimeout, ProtocolError, one_line, quote
 
 __all__ = ["SerialLink", "MAX_REPLY_BYTES"]
 
@@ -32,6 +32,7 @@ _ALLOWED = bytes(range(0x20, 0x7F)) + b"\t\n\r"  # printable ASCII, tab, CR, LF
 #: The longest reply (bytes up to and including its terminator) a read accepts: longer is a ProtocolError.
 MAX_REPLY_BYTES = 4096
 _GARBAGE_SETTLE = 0.05  # seconds to keep reading after a bad byte, so the message shows the whole burst
+_CHECK = "was the device unplugged? check its USB cable and power"
 
 
 class SerialLink:
@@ -89,8 +90,8 @@ class SerialLink:
             self._port.write(data)
             self._port.flush()
         except (serial.SerialException, OSError) as exc:
-            raise DeviceDisconnected(f"{self.label}: writing {quote(data)} failed ({exc}); "
-                                     f"was the device unplugged?") from exc
+            raise DeviceDisconnected(f"{self.label}: writing {quote(data)} failed ({one_line(exc)}); "
+                                     f"{_CHECK}") from exc
         self._last_sent = what if what is not None else repr(data)
         self._last_write_t = time.monotonic()
 
@@ -138,7 +139,8 @@ class SerialLink:
             if time.monotonic() >= deadline:
                 waited = max(0.0, deadline - self._last_write_t)
                 raise DeviceTimeout(f"{self.label}: no {waiting_for} within {waited:.1f} s after "
-                                    f"{self._sent}; received {quote(self._buf)}")
+                                    f"{self._sent}; received {quote(self._buf)}; check that the board is powered "
+                                    "and its USB cable")
             self._read_chunk(deadline)
 
     def read_line(self, deadline: float | None = None, *, waiting_for: str = "line") -> str:
@@ -158,7 +160,7 @@ class SerialLink:
                 chunk = self._port.read(max(1, self._port.in_waiting))
             except (serial.SerialException, OSError) as exc:
                 raise DeviceDisconnected(f"{self.label}: reading failed while waiting after "
-                                         f"{self._sent} ({exc}); was the device unplugged?") from exc
+                                         f"{self._sent} ({one_line(exc)}); {_CHECK}") from exc
             self._buf += chunk
             if not drain or time.monotonic() >= deadline or len(self._buf) > MAX_REPLY_BYTES:
                 return
@@ -210,8 +212,8 @@ class SerialLink:
                     dropped += chunk
                     last = time.monotonic()
         except (serial.SerialException, OSError) as exc:
-            raise DeviceDisconnected(f"{self.label}: flushing input failed ({exc}); "
-                                     f"was the device unplugged?") from exc
+            raise DeviceDisconnected(f"{self.label}: flushing input failed ({one_line(exc)}); "
+                                     f"{_CHECK}") from exc
         return dropped
 
     def close(self) -> None:

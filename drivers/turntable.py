@@ -10,7 +10,8 @@ microsteps exist only in the bytes sent to the firmware. ``rotate_to`` returns o
   keeps the step counter and sends the difference.
 
 Faults are raised from :mod:`rangekit.errors` (see :mod:`rangekit.drivers.serial_link`); after any fault
-but ``DeviceDisconnected`` the input is flushed, so the next command starts clean.
+but ``DeviceDisconnected`` the input is flushed, so the next command starts clean. ``reconnect(timeout_s)``
+opens the port again and greets the board, until it is back or the time is up.
 
 >>> tt = make_turntable("horus", "/dev/ttyUSB0")        # doctest: +SKIP
 >>> tt.rotate_to(math.radians(30)); tt.angle            # doctest: +SKIP
@@ -25,6 +26,7 @@ import time
 from contextlib import contextmanager
 from typing import Iterator
 
+from rangekit.drivers.retry import retry
 from rangekit.drivers.serial_link import SerialLink
 from rangekit.errors import (ConfigError, DeviceError, DeviceDisconnected, DeviceTimeout, InputError, ProtocolError,
                              quote)
@@ -57,11 +59,24 @@ class _SerialTurntable:
         if steps_per_turn <= 0:
             raise InputError(f"steps_per_turn must be positive, got {steps_per_turn!r}")
         self.steps_per_turn = int(steps_per_turn)
+        self._baud, self._timeout = int(baud), float(timeout)
         self._link = SerialLink(url, baud, timeout=timeout, name="turntable")
 
     @property
     def url(self) -> str:
         return self._link.url
+
+    def reconnect(self, timeout_s: float) -> None:
+        """Open the port again and greet the board (``_greet``), retried until ``timeout_s`` seconds have passed:
+        after the port went away or the board stopped answering. Raises the last DeviceDisconnected,
+        DeviceTimeout or ProtocolError if it is not back; DeviceError if it is back but cannot go on."""
+        def attempt(left_s: float) -> None:
+            self._link.close()
+            self._link = SerialLink(self._link.url, self._baud, timeout=min(self._timeout, left_s), name="turntable")
+            self._greet()
+            self._link.timeout = self._timeout
+
+        retry(attempt, timeout_s)
 
     @contextmanager
     def _guard(self) -> Iterator[None]:
@@ -125,12 +140,27 @@ class HorusTurntable(_SerialTurntable):
                  steps_per_turn: int = 3200, speed: float = math.radians(30)):
         super().__init__(url, baud, timeout=timeout, steps_per_turn=steps_per_turn)
         self.poll_interval = float(poll_interval)
+        self._span: tuple[float, float] | None = None  # degrees: where the table is, between these two
         try:
-            self.banner = self._handshake()
-            self.set_speed(speed)
+            self._speed = _check_speed(speed)
+            self._greet()
         except BaseException:
             self._link.close()
             raise
+
+    def _greet(self) -> None:
+        """Ctrl-X, the banner, the speed; after a reconnection the board must still hold its origin."""
+        self.banner = self._handshake()
+        self.set_speed(self._speed)
+        if self._span is not None:
+            _, x_deg, _ = self._status(time.monotonic() + self._link.timeout)
+            lo, hi = sorted(self._span)
+            tol_deg = 0.5 * 360.0 / self.steps_per_turn
+            if not lo - tol_deg <= x_deg <= hi + tol_deg:
+                was = f"{lo:.3f} deg" if hi - lo <= tol_deg else f"between {lo:.3f} and {hi:.3f} deg"
+                raise DeviceError(f"{self._link.label}: back, but at X={x_deg:.3f} deg where the table was at {was}: "
+                                  "the board restarted and lost its origin; turn the table back to where the scan "
+                                  "started (angle 0) before continuing")
 
     # -- protocol --------------------------------------------------------------------------------
 
@@ -205,6 +235,7 @@ class HorusTurntable(_SerialTurntable):
             _, start_deg, _ = self._status(time.monotonic() + link.timeout)
             expected_s = abs(target_deg - start_deg) / math.degrees(self._speed)
             command = f"G1 X{target_deg:.4f}"
+            self._span = (start_deg, target_deg)
             link.command(command, "ok", reset_prefixes=_BANNER_PREFIXES)
             limit_s = link.timeout + _MOVE_MARGIN * expected_s
             deadline = time.monotonic() + limit_s
@@ -213,6 +244,7 @@ class HorusTurntable(_SerialTurntable):
                 # is possible on real Grbl, so the position must match too).
                 state, x_deg, report = self._status(time.monotonic() + link.timeout)
                 if state.lower() == "idle" and abs(x_deg - target_deg) <= tol_deg:
+                    self._span = (x_deg, x_deg)
                     return
                 if state.lower() == "alarm":
                     raise DeviceError(f"{link.label}: alarm during {command!r}: {quote(report)}; "
@@ -274,14 +306,20 @@ class FabScanTurntable(_SerialTurntable):
         super().__init__(url, baud, timeout=timeout, steps_per_turn=steps_per_turn)
         self._speed = _check_speed(speed)
         self._steps: int | None = 0
+        self._reset_delay = float(reset_delay)
         try:
-            time.sleep(reset_delay)
-            self._link.flush(quiet=0.01, max_time=0.2)
-            info = self._command("M200")
-            self.version = info[0] if info else ""
+            self._greet()
         except BaseException:
             self._link.close()
             raise
+
+    def _greet(self) -> None:
+        """Wait out the reset that opening the port causes, then ask the version (``M200``). The step counter
+        is kept: the board does not know its position (after a failed move it is unknown anyway)."""
+        time.sleep(self._reset_delay)
+        self._link.flush(quiet=0.01, max_time=0.2)
+        info = self._command("M200")
+        self.version = info[0] if info else ""
 
     def _command(self, text: str, *, timeout: float | None = None) -> list[str]:
         """Send a line; check its echo; return the lines between the echo and the ``>`` prompt."""

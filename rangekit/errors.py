@@ -35,6 +35,7 @@ __all__ = [
     "StorageError",
     "QUOTE_LIMIT",
     "quote",
+    "one_line",
 ]
 
 
@@ -170,3 +171,10 @@ def quote(data: bytes | bytearray | str, limit: int = QUOTE_LIMIT) -> str:
         return repr(data)
     unit = "characters" if isinstance(data, str) else "bytes"
     return f"{data[:limit]!r}... ({len(data)} {unit})"
+
+
+def one_line(exc: BaseException | str, limit: int = QUOTE_LIMIT) -> str:
+    """A library's error text (depthai's, pygame's, pyserial's) for a rangekit message: its whitespace and line
+    breaks collapsed to single spaces, at most ``limit`` characters (then ``...``)."""
+    text = " ".join(str(exc).split())
+    return text if len(text) <= limit else text[:limit] + "..."

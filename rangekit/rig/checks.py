@@ -17,7 +17,7 @@ from rangekit.errors import ConfigError
 
 __all__ = ["validate_devices", "validate_capture", "validate_rig_for_hardware", "DEVICE_FIELDS", "CAPTURE_FIELDS",
            "CAPTURE_BITS", "TURNTABLE_PROTOCOLS", "PROJECTOR_PROTOCOLS", "DEPTHAI_SOCKETS", "MAX_SEARCH_S",
-           "REFRESH_HZ", "DEFAULT_SEARCH_S"]
+           "REFRESH_HZ", "DEFAULT_SEARCH_S", "DEFAULT_RECONNECT_S", "DEFAULT_REPLY_S", "reconnect_timeout_s"]
 
 #: Serial turntable protocols (rangekit.drivers.turntable): Horus (Ciclop) and FabScan boards.
 TURNTABLE_PROTOCOLS = ("horus", "fabscan")
@@ -29,16 +29,22 @@ DEPTHAI_SOCKETS = ("CAM_A", "CAM_B", "CAM_C", "CAM_D", "CAM_E", "CAM_F", "CAM_G"
 #: the search a camera opened from a rig file gets without ``devices.camera.search_timeout_s``.
 MAX_SEARCH_S = 600.0
 DEFAULT_SEARCH_S = 3.0
+#: ``devices.<device>.reconnect_timeout_s`` when absent: seconds a scan waits for a device that went away
+#: mid-scan (unplugged, reset, stopped answering) to come back before it ends; long enough for a USB device
+#: to enumerate again and an OAK camera to boot. 0: never wait.
+DEFAULT_RECONNECT_S = 10.0
+#: ``devices.turntable.timeout_s`` when absent: seconds a turntable board may take to answer a command.
+DEFAULT_REPLY_S = 2.0
 #: ``devices.projector.refresh_hz``: the projector's refresh rate, Hz (smallest, largest).
 REFRESH_HZ = (1.0, 480.0)
 
 #: Allowed fields of each object in a rig file's ``devices`` section, by dotted path.
 DEVICE_FIELDS = {
     "devices": ("turntable", "projector", "camera", "depthai"),
-    "devices.turntable": ("type", "protocol", "port", "baud"),
-    "devices.projector": ("type", "display", "control", "refresh_hz"),
+    "devices.turntable": ("type", "protocol", "port", "baud", "timeout_s", "reconnect_timeout_s"),
+    "devices.projector": ("type", "display", "control", "refresh_hz", "reconnect_timeout_s"),
     "devices.projector.control": ("protocol", "port", "baud", "timeout", "password"),
-    "devices.camera": ("type", "id", "socket", "search_timeout_s"),
+    "devices.camera": ("type", "id", "socket", "search_timeout_s", "reconnect_timeout_s"),
     "devices.depthai": ("device_id", "sockets", "size"),  # written by depthai_camera.calibration_to_rig
 }
 #: The ``capture`` settings: name -> (smallest, largest allowed value, unit). ``bits`` is the camera's
@@ -101,9 +107,20 @@ def _is_sim(sec: dict, where: str, path: str, real: str) -> bool:
     return True
 
 
+_RECONNECT = "seconds (how long a scan waits for the device to come back)"
+
+
+def reconnect_timeout_s(devices: dict | None, name: str) -> float:
+    """Seconds a scan waits for device ``name`` ("turntable", "projector", "camera") to come back after it went
+    away mid-scan: the rig file's ``devices.<name>.reconnect_timeout_s``, else :data:`DEFAULT_RECONNECT_S`."""
+    sec = (devices or {}).get(name) or {}
+    return float(sec.get("reconnect_timeout_s", DEFAULT_RECONNECT_S)) if isinstance(sec, dict) else DEFAULT_RECONNECT_S
+
+
 def _check_turntable(sec, where: str) -> None:
     path = "devices.turntable"
     sec = _object(sec, where, path)
+    _number_in(sec, "reconnect_timeout_s", 0.0, MAX_SEARCH_S, where, path, _RECONNECT)
     if _is_sim(sec, where, path, "a serial turntable is named by 'protocol' and 'port'"):
         return
     known = ", ".join(repr(k) for k in sorted(TURNTABLE_PROTOCOLS))
@@ -114,6 +131,7 @@ def _check_turntable(sec, where: str) -> None:
         raise _error(where, f"{path}.protocol", f"unknown turntable protocol {_show(protocol)}; known: {known}")
     _port(sec, where, path, "serial port or pyserial URL, e.g. '/dev/ttyUSB0' or 'COM3'")
     _baud(sec, where, path)
+    _number_in(sec, "timeout_s", 0.01, MAX_SEARCH_S, where, path, "seconds (how long the board may take to answer)")
 
 
 def _number_in(sec: dict, key: str, lo: float, hi: float, where: str, path: str, unit: str) -> None:
@@ -127,6 +145,7 @@ def _number_in(sec: dict, key: str, lo: float, hi: float, where: str, path: str,
 def _check_projector(sec, where: str) -> None:
     path = "devices.projector"
     sec = _object(sec, where, path)
+    _number_in(sec, "reconnect_timeout_s", 0.0, MAX_SEARCH_S, where, path, _RECONNECT)
     _number_in(sec, "refresh_hz", *REFRESH_HZ, where, path, "hertz (the projector's refresh rate, e.g. 60)")
     if _is_sim(sec, where, path, "a real projector is named by 'display' and 'control'"):
         return
@@ -182,6 +201,7 @@ def _check_camera(sec, where: str) -> None:
     if sec.get("socket", "CAM_A") not in DEPTHAI_SOCKETS:
         raise _error(where, f"{path}.socket", f"must be one of {', '.join(DEPTHAI_SOCKETS)}, found {_show(sec['socket'])}")
     _number_in(sec, "search_timeout_s", 0.0, MAX_SEARCH_S, where, path, "seconds (how long to look for the device)")
+    _number_in(sec, "reconnect_timeout_s", 0.0, MAX_SEARCH_S, where, path, _RECONNECT)
 
 
 def _check_depthai_record(sec, where: str) -> None:

@@ -23,7 +23,10 @@ Faults (``inject`` or ``faults=``), each applied to the next command line (or Ct
 ``"garbage"`` (the reply becomes random non-ASCII bytes), ``"silence"`` (the line is swallowed),
 ``"partial"`` (only the reply's first byte is sent), ``"reboot"`` (the board resets mid-command: banner
 for Horus, silence for FabScan, position back to 0), ``"error"`` (Horus: ``error:`` instead of ``ok``).
-``"unplug"`` acts at once: the master side is closed.
+``"unplug"`` and ``"stall"`` act at once. ``"unplug"``: the pty is unplugged (:class:`rangekit.sim.devices.
+pty_port.PtyPort`: EIO on the driver's side, the path and ``link`` gone) until :meth:`SimFirmware.replug`.
+``"stall"``: the board stops answering (it reads and drops every byte, the table stops where it is) until
+:meth:`SimFirmware.recover`. ``link``: a path kept as a symbolic link to the board's current pty.
 """
 
 from __future__ import annotations
@@ -34,21 +37,22 @@ import re
 import select
 import threading
 import time
-import tty
 from typing import Iterable
 
 import numpy as np
 
+from rangekit.sim.devices.fabscan_firmware import WORD as _WORD, FabScanProtocol
+from rangekit.sim.devices.pty_port import PtyPort
+
 __all__ = ["SimFirmware", "start_firmware", "FAULTS", "HORUS_BANNER"]
 
-FAULTS = ("garbage", "silence", "partial", "reboot", "error", "unplug")
+FAULTS = ("garbage", "silence", "partial", "reboot", "error", "unplug", "stall")
 HORUS_BANNER = b"\r\nHorus 0.2 ['$' for help]\r\n"
-FABSCAN_VERSION = "FabScan v0.1 (rangekit sim)"
-_WORD = re.compile(r"([A-Z])\s*([-+]?(?:\d+\.?\d*|\.\d+))")
 
 
-class SimFirmware:
-    """One simulated board on a pty. Use :func:`start_firmware`; stop it with :meth:`stop`.
+class SimFirmware(FabScanProtocol):
+    """One simulated board on a pty. Use :func:`start_firmware`; stop it with :meth:`stop`. The FabScan protocol
+    is :class:`rangekit.sim.devices.fabscan_firmware.FabScanProtocol`.
 
     Attributes
     ----------
@@ -56,15 +60,19 @@ class SimFirmware:
         Slave pty path to open with a driver (``/dev/pts/N``).
     kind : str
         ``"horus"`` or ``"fabscan"``.
+    link : str or None
+        The symbolic link kept to ``port`` while the board is plugged in (None: no link).
     status_queries : int
         How many ``?`` status reports the Horus board has sent (to check that drivers poll).
     lasers : dict[int, bool]; motors_on : bool; acceleration : float | None
         Last state set by commands.
+    ignored : bytearray
+        Every byte received (and dropped) while the board was stalled.
     """
 
     def __init__(self, kind: str, *, time_scale: float = 0.01, faults: Iterable[str] | None = None,
                  steps_per_turn: int = 3200, feed_deg_per_min: float = 1800.0, boot_time: float = 0.0,
-                 seed: int = 0):
+                 seed: int = 0, link: str | os.PathLike | None = None):
         if kind not in ("horus", "fabscan"):
             raise ValueError(f"firmware kind must be 'horus' or 'fabscan', got {kind!r}")
         self.kind = kind
@@ -77,11 +85,13 @@ class SimFirmware:
         self.motors_on = False
         self.acceleration: float | None = None
         self.lines: list[str] = []  # every command line received, for tests
+        self.ignored = bytearray()
         self._rng = np.random.default_rng(seed)
         self._lock = threading.RLock()
         self._faults: collections.deque[str] = collections.deque()
         self._stop = threading.Event()
         self._unplug = threading.Event()
+        self._stalled = threading.Event()
         # motion state (degrees): position at _seg_t0, then the queued moves (target, duration in s)
         self._pos = 0.0
         self._seg_t0 = time.monotonic()
@@ -91,27 +101,59 @@ class SimFirmware:
         self._line_started = False
         self._booting_until = time.monotonic() + self.boot_time
 
-        self._master, self._slave = os.openpty()
-        tty.setraw(self._slave)
-        self.port = os.ttyname(self._slave)
+        self._pty = PtyPort(link)
+        self.link = self._pty.link
+        self._serve()
         for f in faults or ():
             self.inject(f)
-        self._thread = threading.Thread(target=self._run, name=f"sim-{kind}-firmware", daemon=True)
+
+    @property
+    def port(self) -> str:
+        return self._pty.port
+
+    def _serve(self) -> None:
+        self._unplug.clear()
+        self._thread = threading.Thread(target=self._run, name=f"sim-{self.kind}-firmware", daemon=True)
         self._thread.start()
 
     # -- public --------------------------------------------------------------------------------
 
     def inject(self, fault: str) -> None:
-        """Queue a fault for the next command (``"unplug"`` happens at once). See the module doc."""
+        """Queue a fault for the next command (``"unplug"`` and ``"stall"`` happen at once). See the module doc."""
         if fault not in FAULTS:
             raise ValueError(f"unknown fault {fault!r}; known: {', '.join(FAULTS)}")
         if fault == "unplug":
+            self._pty.remove_link()
             self._unplug.set()
             if threading.current_thread() is not self._thread:
                 self._thread.join(timeout=1.0)
             return
+        if fault == "stall":
+            with self._lock:      # the table stops where it is
+                pos = self.position_deg
+                self._moves.clear()
+                self._pos, self._seg_t0 = pos, time.monotonic()
+            self._stalled.set()
+            return
         with self._lock:
             self._faults.append(fault)
+
+    def replug(self, *, restarted: bool = False) -> None:
+        """Plug an unplugged board in again: a new pty (``port`` changes, ``link`` follows). The board's state
+        (position, lasers) is kept, or with ``restarted`` lost as a board powered from USB loses it (position
+        0 wherever the table stands, lasers off). Raises RuntimeError if the board is not unplugged."""
+        if not self._unplug.is_set() or self._stop.is_set():
+            raise RuntimeError(f"sim {self.kind} firmware: replug() needs an unplugged board")
+        self._thread.join(timeout=2.0)
+        if restarted:
+            self._reset()
+            self.lasers = {n: False for n in self.lasers}
+        self._pty.plug_in()
+        self._serve()
+
+    def recover(self) -> None:
+        """End a ``"stall"``: the board answers again (what it received meanwhile is lost)."""
+        self._stalled.clear()
 
     @property
     def position_deg(self) -> float:
@@ -135,12 +177,7 @@ class SimFirmware:
         self._stop.set()
         if self._thread.is_alive() and threading.current_thread() is not self._thread:
             self._thread.join(timeout=2.0)
-        for fd in (self._master, self._slave):
-            try:
-                os.close(fd)
-            except OSError:
-                pass
-        self._master = self._slave = -1
+        self._pty.close()
 
     def __enter__(self) -> "SimFirmware":
         return self
@@ -153,25 +190,28 @@ class SimFirmware:
     def _run(self) -> None:
         while not self._stop.is_set():
             if self._unplug.is_set():
-                os.close(self._master)
-                self._master = -1
+                self._pty.unplug()
                 return
             try:
-                ready, _, _ = select.select([self._master], [], [], 0.005)
-                data = os.read(self._master, 4096) if ready else b""
+                master = self._pty.master
+                ready, _, _ = select.select([master], [], [], 0.005)
+                data = os.read(master, 4096) if ready else b""
             except OSError:
                 return
+            if self._stalled.is_set():
+                self.ignored += data    # a hung board: what it is sent is lost
+                continue
             for b in data:
-                if self._unplug.is_set() or self._stop.is_set():
+                if self._unplug.is_set() or self._stop.is_set() or self._stalled.is_set():
                     break
                 if time.monotonic() < self._booting_until:
                     continue  # the bootloader ignores input
                 self._on_byte(b)
 
     def _send(self, data: bytes) -> None:
-        if data and self._master >= 0:
+        if data and self._pty.master >= 0 and not self._stalled.is_set():
             try:
-                os.write(self._master, data)
+                os.write(self._pty.master, data)
             except OSError:
                 pass
 
@@ -307,67 +347,6 @@ class SimFirmware:
             self.lasers[int(float(words["T"]))] = num == 71
             return ok
         return bad
-
-    # -- FabScan ---------------------------------------------------------------------------------
-
-    def _fabscan_byte(self, b: int) -> None:
-        if not self._line_started:
-            self._line_started = True
-            self._line_fault = self._pop_fault()
-        fault = self._line_fault
-        is_end = b in (0x0A, 0x0D)
-        if fault == "reboot" and self._line:
-            # the board resets after echoing one byte: position back to 0, and the rest of the line
-            # (sent in the same burst) is lost while it boots
-            self._reset()
-            self._line_started, self._line_fault = False, None
-            self._booting_until = time.monotonic() + max(self.boot_time, 0.02)
-            return
-        if fault in (None, "error"):
-            self._send(bytes([b]))
-        elif fault == "garbage":
-            self._send(self._garbage(1))
-        elif fault in ("partial", "reboot") and not self._line and not is_end:
-            self._send(bytes([b]))
-        if not is_end:
-            self._line.append(b)
-            return
-        line = self._line.decode("ascii", "replace").strip().upper()
-        self._line.clear()
-        self._line_started, self._line_fault = False, None
-        if fault == "silence":
-            return
-        self.lines.append(line)
-        reply = self._fabscan_execute(line) + b">"
-        if fault == "garbage":
-            reply = self._garbage()
-        elif fault == "partial":
-            reply = b""
-        self._send(reply)
-
-    def _fabscan_execute(self, line: str) -> bytes:
-        words = dict(_WORD.findall(line.replace(" ", "")))
-        code = re.match(r"^([GM])(\d+)", line)
-        if code is None:
-            return b""
-        letter, num = code[1], int(code[2])
-        if letter == "G" and num in (1, 2) and "T" in words:
-            if "F" in words and float(words["F"]) > 0:
-                self.feed = float(words["F"])
-            delta = int(float(words["T"])) * 360.0 / self.steps_per_turn
-            duration = self._duration(delta, self.feed)
-            with self._lock:
-                self._advance()
-                self._seg_t0 = time.monotonic()
-                self._moves.append((self._pos + delta, duration))
-            self._wait_idle()  # FabScan blocks until the move is done
-        elif letter == "M" and num == 200:
-            return FABSCAN_VERSION.encode() + b"\r\n"
-        elif letter == "M" and num in (17, 18):
-            self.motors_on = num == 17
-        elif letter == "M" and 19 <= num <= 22:
-            self.lasers[1 + (num - 19) // 2] = (num - 19) % 2 == 0
-        return b""
 
 
 def start_firmware(kind: str, *, time_scale: float = 0.01, faults: Iterable[str] | None = None,

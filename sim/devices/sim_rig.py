@@ -319,6 +319,13 @@ class SimRig:
         scene_key = (self._scene_index,) if self._scene_index else ()
         return np.random.default_rng(np.random.SeedSequence(self.seed, spawn_key=(*key, count, *scene_key)))
 
+    def restart_noise(self) -> None:
+        """Forget how often each state was captured: the next capture of a state draws the noise of its
+        first capture. A view taken again (after a device came back mid-view) then records the bytes an
+        uninterrupted scan records; call it when the turntable arrives for a view (tests' hardware fakes
+        do, on each move command the simulated board receives)."""
+        self._counts.clear()
+
     def capture_sequence(self, patterns, delay_s: float = 0.0) -> list[np.ndarray]:
         """Show each pattern, wait ``delay_s`` on the clock and capture it: the same bytes as show(),
         sleep() and capture() in turn. Renders on two threads when no frame depends on the one before

@@ -10,6 +10,11 @@ Every file is written atomically. A view is captured into ``view_NNN.partial/`` 
 at any moment leaves every completed view intact, and ``acquire(..., resume=True)`` redoes only the
 view that was interrupted and the ones after it.
 
+A device that goes away mid-view is waited for up to the rig file's ``devices.<device>.reconnect_timeout_s``
+(:mod:`rangekit.app.acquire.reconnect`); once it is back, the view in progress is taken again from its turntable
+move, its frames taken so far dropped, so the session is the one an uninterrupted scan records. A device not
+back in time ends the scan as any device fault does.
+
 Each frame's SHA-256 is taken from the bytes written and recorded with its view in ``session.json``; a
 resume first checks the finished views against them (:mod:`rangekit.formats.sessions.check`). The
 session folder is locked (:mod:`rangekit.formats.sessions.lock`) while acquisition runs. A file that
@@ -40,6 +45,7 @@ from rangekit.formats.sessions.lock import session_lock
 from rangekit.app.acquire.frame_writer import FrameError, FrameWriter
 from rangekit.app.events import OnEvent, ViewAcquired, emit
 from rangekit.app.acquire.lights import light_for
+from rangekit.app.acquire.reconnect import MAX_RETAKES, reconnected
 from rangekit.io import atomic_write_bytes, atomic_write_json, fsync_folder
 from rangekit.progress import LOGGER, call_progress
 from rangekit.rig.rig_file import Rig, save_rig
@@ -99,8 +105,9 @@ def acquire(devices: RigDevices, rig: Rig, spec: PatternSpec, out_dir: str | Pat
     StorageError
         A file cannot be written (full disk); the message says how to resume.
     DeviceError
-        A device failed; the message names the device, the view and the frame. Completed views stay on
-        disk and ``resume=True`` continues.
+        A device failed (and, if it went away, did not come back within its ``reconnect_timeout_s``); the
+        message names the device, the view and the frame. Completed views stay on disk and ``resume=True``
+        continues.
     """
     out = Path(out_dir)
     controls = controls_from_capture(rig.capture, where="rig file")
@@ -240,7 +247,7 @@ def _views(run: _Run, session: Session, angles: np.ndarray, turn_over=None) -> S
                 if start_pass is not None:
                     start_pass(p)
                 current[0] = k
-                _view(run, k, angle, state, done, writer)
+                _take_view(run, k, angle, state, done, writer)
         current[0] = -1
         writer.close()
     except BaseException as exc:
@@ -252,6 +259,20 @@ def _views(run: _Run, session: Session, angles: np.ndarray, turn_over=None) -> S
             _fail(run.out, current[0], writer.error or exc, done)
         raise
     return state["session"]
+
+
+def _take_view(run: _Run, k: int, angle: float, state: dict, done: list, writer: FrameWriter) -> None:
+    """:func:`_view`, taken again from its turntable move (its frames so far dropped) each time its device went away
+    and came back (:func:`rangekit.app.acquire.reconnect.reconnected`), at most :data:`MAX_RETAKES` times."""
+    for retake in range(MAX_RETAKES + 1):
+        taken = state["frames"][0]
+        try:
+            return _view(run, k, angle, state, done, writer, retake=retake > 0)
+        except FrameError as exc:
+            if retake == MAX_RETAKES or not reconnected(run.devices, run.rig, exc, run.report, run.plan.n_views):
+                raise
+            writer.drop_view()
+            state["frames"][0] = taken
 
 
 def _fail(out, k, exc: FrameError, done) -> None:
@@ -277,8 +298,10 @@ def _taken(camera):
     return capture
 
 
-def _view(run: _Run, k: int, angle: float, state: dict, done: list, writer: FrameWriter) -> None:
-    """Take view ``k``'s frames and hand them to ``writer``, with the view's finishing step."""
+def _view(run: _Run, k: int, angle: float, state: dict, done: list, writer: FrameWriter, *,
+          retake: bool = False) -> None:
+    """Take view ``k``'s frames and hand them to ``writer``, with the view's finishing step; ``retake``: the view
+    is taken again after a device came back, its light first put in a known state (``light.reset()``)."""
     out, devices, light, names, files = run.out, run.devices, run.light, run.spec.frame_names, run.spec.frame_files
     final = view_folder(out, k)
     partial = out / f"view_{k:03d}.partial"
@@ -286,11 +309,15 @@ def _view(run: _Run, k: int, angle: float, state: dict, done: list, writer: Fram
     sleep = getattr(devices, "sleep", time.sleep)    # the simulator's virtual clock, else the real one
     deferred = getattr(devices.camera, "capture_deferred", None)
     capture = deferred if deferred is not None else _taken(devices.camera)
-    step, target = "turntable move", partial
+    step, target, device = "turntable move", partial, None
     try:
         shutil.rmtree(partial, ignore_errors=True)
         shutil.rmtree(final, ignore_errors=True)
         partial.mkdir(parents=True)
+        if retake:
+            step, device = f"{light.device} reset before the view is taken again", light.device
+            light.reset()
+        step, device = "turntable move", "turntable"
         if devices.turntable is not None:
             LOGGER.debug("view %d/%d: turntable to %.1f deg", k + 1, run.plan.n_views, np.degrees(angle))
             devices.turntable.rotate_to(float(angle))
@@ -299,24 +326,25 @@ def _view(run: _Run, k: int, angle: float, state: dict, done: list, writer: Fram
         for exposure, controls in run.exposures:
             sub = "" if exposure is None else f"{exposure_folder(exposure)}/"
             if exposure is not None:
-                step = f"exposure {exposure} us: camera controls"
+                step, device = f"exposure {exposure} us: camera controls", None
                 (partial / sub).mkdir()
+                device = "camera"
                 devices.camera.set_controls(controls)
             for i, (name, file) in enumerate(zip(names, files)):
-                step = f"{sub}frame {i} ({name}): {light.device}"
+                step, device = f"{sub}frame {i} ({name}): {light.device}", light.device
                 light.show(i)
                 if run.pattern_settle_s > 0:
                     sleep(run.pattern_settle_s)
-                step = f"{sub}frame {i} ({name}): camera"
+                step, device = f"{sub}frame {i} ({name}): camera", "camera"
                 image = capture()
                 state["frames"][0] += 1
                 run.report(f"view {k + 1}/{run.plan.n_views}: {sub}frame {i + 1}/{len(names)}", *state["frames"])
-                step, target = f"{sub}frame {i} ({name}): writing", partial / sub / file
+                step, target, device = f"{sub}frame {i} ({name}): writing", partial / sub / file, None
                 writer.frame(k, angle, sub + file, f"{sub}frame {i} ({name})", target, image)
-        step = f"after frame {len(names) - 1} ({names[-1]}): {light.device} off"
+        step, device = f"after frame {len(names) - 1} ({names[-1]}): {light.device} off", light.device
         light.show(None)
     except (DeviceError, OSError) as exc:
-        raise FrameError(k, angle, step, target, exc) from exc
+        raise FrameError(k, angle, step, target, exc, device=device) from exc
 
     def finish(sha256: dict) -> None:
         step, target = "writing view.json", partial

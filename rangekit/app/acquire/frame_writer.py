@@ -21,7 +21,7 @@ finished, also after an error elsewhere or Ctrl-C) and raises it.
 from __future__ import annotations
 
 import threading
-from concurrent.futures import Future, ThreadPoolExecutor
+from concurrent.futures import Future, ThreadPoolExecutor, wait
 from pathlib import Path
 from typing import Callable
 
@@ -35,13 +35,14 @@ class FrameError(Exception):
     """A frame or view that failed behind the capture: ``view`` (index), ``angle`` (radians), ``step`` (the
     same words acquisition uses: ``frame 3 (x_bit03): writing``), ``target`` (the file or folder) and the
     original exception ``error``; ``order`` its place in capture order (frames numbered from 0, a view's
-    finishing after its frames)."""
+    finishing after its frames); ``device`` the device acquisition was calling ("turntable", "projector",
+    "lasers", "camera"), None for a failure behind the capture."""
 
     def __init__(self, view: int, angle: float, step: str, target: Path, error: BaseException,
-                 order: float = float("inf")) -> None:
+                 order: float = float("inf"), device: str | None = None) -> None:
         super().__init__(f"view {view}, {step}: {error}")
         self.view, self.angle, self.step, self.target, self.error = view, angle, step, target, error
-        self.order = order
+        self.order, self.device = order, device
 
 
 class FrameWriter:
@@ -130,6 +131,15 @@ class FrameWriter:
         except Exception as exc:
             self._broken = True
             self._fail(FrameError(view, angle, "finishing the view", target, exc, order))
+
+    def drop_view(self) -> None:
+        """Forget the view being taken (it is to be taken again): its frames not started are cancelled, those
+        being written are waited for, so nothing of it is written afterwards."""
+        frames, self._frames = self._frames, []
+        for _, future in frames:
+            if future.cancel():
+                self._slots.release()     # the slot its _write would have released
+        wait([future for _, future in frames])
 
     def cancel_view(self) -> None:
         """Drop the frames of the view being taken that have not started (its view is not finished)."""

@@ -1,8 +1,9 @@
 """What lights the object for each frame of a view: the projector showing a pattern, or one line laser.
 
 :func:`rangekit.app.acquire.acquire.acquire` calls ``light.show(i)`` before capturing frame ``i`` of a view,
-``light.show(None)`` after the view's last frame, and ``light.close()`` when acquisition ends (also on a
-fault or an interrupt): the lasers are then switched off, so a stopped scan never leaves a laser on.
+``light.show(None)`` after the view's last frame, ``light.reset()`` before a view is taken again (after a device
+came back), and ``light.close()`` when acquisition ends (also on a fault or an interrupt): the lasers are then
+switched off, so a stopped scan never leaves a laser on.
 
 Laser order at each turntable step (one frame per laser, the others off): the laser-off frame with every
 laser off, then for laser k: on (``turntable.laser(switch_k, True)``: ``M71T<n>`` on Horus firmware), the
@@ -31,6 +32,9 @@ class ProjectorLight:
         if frame is not None:
             self._projector.show(self._frames[frame])
 
+    def reset(self) -> None:
+        """Nothing to do: every frame shows its pattern."""
+
     def close(self) -> None:
         pass
 
@@ -44,8 +48,13 @@ class LaserLight:
         self._board, self._spec = board, spec
         self._switch = [laser.switch if laser.switch is not None else k + 1 for k, laser in enumerate(rig.lasers)]
         self._on: int | None = None
-        for n in self._switch:       # a known state: a board may start with a laser on
-            board.laser(n, False)
+        self.reset()
+
+    def reset(self) -> None:
+        """Every laser off: a known state (a board may start with a laser on, or have lost a command)."""
+        self._on = None
+        for n in self._switch:
+            self._board.laser(n, False)
 
     def show(self, frame: int | None) -> None:
         want = None if frame is None else self._spec.lit(frame)

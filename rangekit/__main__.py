@@ -1,3 +1,9 @@
-from rangekit.cli import main
 import sys
-sys.exit(main())
+
+from rangekit.cli import main
+
+try:
+    code = main()
+except KeyboardInterrupt:   # after the command's own handling: still exit 130, never a death by signal
+    code = 130
+sys.exit(code)

@@ -20,8 +20,15 @@ def main(argv: list[str] | None = None) -> int:
     if message:
         print(f"rangekit: error: {message}", file=sys.stderr)
         return 2 if kind == "usage" else 1
-    with watching_interrupts():
-        return _run(argv)
+    try:
+        with watching_interrupts():
+            return _run(argv)
+    except KeyboardInterrupt:   # a SIGINT delivered while the handlers were being put back
+        from rangekit._runtime.environment import interrupted
+
+        if not interrupted():
+            print("rangekit: interrupted", file=sys.stderr)
+        return 130
 
 
 def _run(argv: list[str] | None) -> int:

@@ -83,7 +83,7 @@ def cmd_sim_objects(args: argparse.Namespace) -> int:
 
 def add_parsers(sub) -> None:
     from rangekit.coded.patterns import PATTERN_METHODS
-    from rangekit.app.commands.simulate import OBJECT_UNITS
+    from rangekit.rig.plausibility import OBJECT_UNITS
 
     sim = sub.add_parser("sim", help="simulated rig: render captures with exact ground truth",
                          description="Simulated projector-camera-turntable rig.")

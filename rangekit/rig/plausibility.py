@@ -25,12 +25,14 @@ import numpy as np
 
 from rangekit.errors import ConfigError, InputError
 
-__all__ = ["LengthRule", "BASELINE", "OBJECT_SIZE", "UNIT_SCALES", "UNIT_NAMES", "check_length", "likely_unit",
-           "format_length", "format_vector", "check_stereo_baseline"]
+__all__ = ["LengthRule", "BASELINE", "OBJECT_SIZE", "OBJECT_UNITS", "UNIT_SCALES", "UNIT_NAMES", "check_length",
+           "likely_unit", "format_length", "format_vector", "check_stereo_baseline"]
 
 #: Metres per unit of the lengths a file may hold; the order is the order units are guessed in.
 UNIT_SCALES = {"mm": 1e-3, "m": 1.0, "cm": 1e-2}
 UNIT_NAMES = {"mm": "millimetres", "m": "metres", "cm": "centimetres"}
+#: The units an object mesh file may be given in (``sim render --object-unit``).
+OBJECT_UNITS = ("m", "mm")
 
 
 @dataclass(frozen=True)

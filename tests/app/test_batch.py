@@ -280,6 +280,7 @@ def test_the_cluster_recipe_in_docs_matches_the_local_workers():
     assert {k: dask.config.get(k, config=config) for k in QUIET_DASK} == QUIET_DASK
 
 
+@pytest.mark.slow
 def test_pairs_shipped_away_and_back_give_the_bits_of_serial_registration():
     """A round's pairs pickled as a cluster would ship them, refined with k-d trees built anew: the poses of
     serial registration, bit for bit; the Dask mapper outside any cluster redoes the round here, the same."""

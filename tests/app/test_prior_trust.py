@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import pytest
 
 from rangekit.app.process.register import PRIOR_TRUST_DEG, held_to_prior
 from rangekit.formats.poses import load_poses
@@ -37,6 +38,7 @@ def test_a_view_moved_beyond_the_trust_keeps_the_turntable_poses():
     assert np.array_equal(T, small) and note.startswith("registration: the joint refinement did not converge")
 
 
+@pytest.mark.slow
 def test_the_reference_session_keeps_its_turntable_poses_and_says_so(cli, tmp_session):
     run = cli("process", tmp_session, "--no-report")
     assert run.code == 0, run.err

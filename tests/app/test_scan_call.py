@@ -107,6 +107,7 @@ def _check_reads(folder: Path, reads: FileReads, session_reads: int) -> None:
     assert written and {name: reads.count(name) for name in written} == {name: 0 for name in written}
 
 
+@pytest.mark.slow
 def test_processing_reads_each_frame_once_and_nothing_it_wrote(tmp_session):
     """The small reference session processed from its folder (report included): session.json read once, each
     frame once (its SHA-256 taken from those bytes), no cache or output read back."""

@@ -299,6 +299,7 @@ def test_camera_reset_and_back_within_the_timeout_is_reconnected(cli, rig_world,
     assert pngs(tmp_path / "s") == reference
 
 
+@pytest.mark.slow
 def test_camera_that_keeps_resetting_ends_the_scan_after_three_retakes(cli, rig_world, reference, tmp_path):
     """A view is taken again at most 3 times (MAX_RETAKES): a camera that resets in each attempt ends the scan,
     with the loss itself; the finished view stays."""
@@ -313,6 +314,7 @@ def test_camera_that_keeps_resetting_ends_the_scan_after_three_retakes(cli, rig_
 
 
 # ----------------------------------------------------------------------------- the serial port
+@pytest.mark.slow
 def test_turntable_port_gone_ends_the_scan_then_resume_gives_identical_bytes(cli, rig_world, reference, tmp_path):
     """The board's USB link goes away (the pty closes: EIO; its path and link vanish) while view 1 is taken;
     the next move fails, and the port is not back within 0.3 s."""
@@ -335,6 +337,7 @@ def test_turntable_port_back_within_the_timeout_is_reconnected(cli, rig_world, r
     assert pngs(tmp_path / "s") == reference
 
 
+@pytest.mark.slow
 def test_turntable_back_without_its_origin_ends_the_scan(cli, rig_world, reference, tmp_path):
     """A board powered from USB restarts when plugged in again: at X=0 wherever the table stands. The scan must
     not go on at wrong angles: exit 1 saying so. The simulated table stands where its board says, so it is at
@@ -347,6 +350,7 @@ def test_turntable_back_without_its_origin_ends_the_scan(cli, rig_world, referen
     print(f"\n{line}")
 
 
+@pytest.mark.slow
 def test_fabscan_board_replugged_is_reconnected_but_a_move_cut_short_is_refused(tmp_path):
     """The FabScan driver greets the board again on its link; it keeps its step counter, which a move cut short by
     the unplug leaves unknown: the next move says so instead of turning to a wrong angle."""
@@ -373,6 +377,7 @@ def test_fabscan_board_replugged_is_reconnected_but_a_move_cut_short_is_refused(
 
 
 # ----------------------------------------------------------------------------- a turntable that stalls
+@pytest.mark.slow
 def test_turntable_stall_times_out_and_ends_the_scan_then_resume_gives_identical_bytes(cli, rig_world, reference,
                                                                                       tmp_path):
     """The firmware stops answering (it reads and drops everything): the driver times out (0.5 s per reply),
@@ -412,6 +417,7 @@ def _when(condition, action, limit_s: float = 30.0) -> None:
 
 
 # ----------------------------------------------------------------------------- the projector's display
+@pytest.mark.slow
 def test_projector_display_gone_ends_the_scan_then_resume_gives_identical_bytes(cli, rig_world, reference,
                                                                                tmp_path, monkeypatch):
     """The display goes away mid-view (SDL's video is shut down) and cannot be brought up within 0.3 s (SDL has

@@ -96,6 +96,7 @@ def _scan_pair(tmp_path):
     return paths
 
 
+@pytest.mark.slow
 def test_register_into_a_processed_session_is_refused_then_force_replaces_the_session(cli, tmp_session, tmp_path):
     session = _processed(tmp_session)
     before = _tree(session)

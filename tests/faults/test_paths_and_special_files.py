@@ -130,6 +130,7 @@ def test_a_fifo_as_a_scan_or_mesh_is_refused_by_name(cli, tmp_path, name):
     assert_error(run, 1, str(src), "FIFO")
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("sensor, size, command", [
     ("stereo", "160x100", ["stereo", "{src}/left.png", "{src}/right.png", "--rig", "{src}/rig.json", "--out", "{out}"]),
     ("tof", "64x48", ["tof", "{src}", "--out", "{out}"]),

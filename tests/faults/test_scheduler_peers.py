@@ -78,6 +78,7 @@ def test_a_peer_sending_garbage_is_another_protocol(listener):
     assert address in str(info.value)
 
 
+@pytest.mark.slow
 def test_an_http_server_is_refused_from_the_command_line(cli, tmp_session, tmp_path):
     """Dask's dashboard port: an HTTP server waits for a request, so no handshake ever comes."""
     server = http.server.HTTPServer(("127.0.0.1", 0), http.server.SimpleHTTPRequestHandler)

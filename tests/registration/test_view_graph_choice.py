@@ -137,6 +137,7 @@ def test_descriptor_chooser_registers_views_cut_from_one_object(scans6):
     assert len(res.edges) == tried.refined <= tried.candidates and tried.joint <= tried.candidates
 
 
+@pytest.mark.slow
 def test_register_cli_prints_the_pairs_tried(scans6, tmp_path, capsys):
     from rangekit.cli.run import main
     from rangekit.formats.clouds import save_cloud

@@ -141,6 +141,7 @@ def test_set_scene_reproducible_and_new_noise_per_scene(small_rig):
 
 # --- detection ---------------------------------------------------------------------------------------
 
+@pytest.mark.slow
 def test_checkerboard_detection_accuracy(sim):
     board = Board()
     err, counts = _errors(sim, board, board_poses(sim.rig, board, 8, seed=0))
@@ -150,6 +151,7 @@ def test_checkerboard_detection_accuracy(sim):
     assert rms <= 0.032 and err.max() <= 0.07  # measured: RMS 0.0245 px, max 0.0505 px (8 poses)
 
 
+@pytest.mark.slow
 def test_charuco_detection_accuracy(sim):
     board = Board("charuco")
     err, counts = _errors(sim, board, board_poses(sim.rig, board, 10, seed=1))

@@ -15,7 +15,7 @@ from rangekit.errors import InputError, UsageError
 from rangekit.progress import call_progress
 
 __all__ = ["render_projector_capture", "render_laser_capture", "render_tof_capture", "render_stereo_capture",
-           "BYTES_PER_PIXEL", "OBJECT_UNITS"]
+           "BYTES_PER_PIXEL"]
 
 #: Peak memory of a simulated capture per camera pixel, bytes (measured as the growth of the peak from a
 #: small to a large sensor: ToF 4.6 KB/px, its 3x3 rays per pixel; pulsed ToF 0.54 KB; stereo 1.0 KB per
@@ -24,7 +24,6 @@ __all__ = ["render_projector_capture", "render_laser_capture", "render_tof_captu
 #: per-laser xyz truth, 900 bytes.
 BYTES_PER_PIXEL = {"tof": 5000, "tof-pulsed": 640, "stereo": 1100, "projector": 640, "laser": 900}
 #: The units ``--object-unit`` reads a mesh file in.
-OBJECT_UNITS = ("m", "mm")
 
 
 def _check_size(sensor: str, size: tuple[int, int], *, option: str | None = "--size", extra: int = 0,
@@ -41,7 +40,7 @@ def _object_scene(obj: str, object_unit: str = "m"):
     import numpy as np
 
     from rangekit.errors import SceneError
-    from rangekit.rig.plausibility import OBJECT_SIZE, UNIT_SCALES, check_length, format_vector
+    from rangekit.rig.plausibility import OBJECT_SIZE, OBJECT_UNITS, UNIT_SCALES, check_length, format_vector
     from rangekit.sim import default_scene
     from rangekit.sim.scene.objects import BUILTIN_OBJECTS, make_object
 

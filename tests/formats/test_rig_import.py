@@ -2,11 +2,13 @@
 Horus calibration.json become rig files with the same numbers; ``rig init`` prints matrices on one line."""
 
 import json
+from pathlib import Path
 
 import cv2
 import numpy as np
 import pytest
 
+from cli_runs import assert_error
 from rangekit.cli import main
 from rangekit.errors import ConfigError
 from rangekit.formats.rig_files.importers import import_rig
@@ -211,3 +213,61 @@ def test_rig_init_prints_each_matrix_on_one_line(capsys):
     text = capsys.readouterr().out
     assert '      "K": [[1000.0, 0.0, 639.5], [0.0, 1000.0, 399.5], [0.0, 0.0, 1.0]],\n' in text
     assert json.loads(text)["cameras"][0]["K"][2] == [0.0, 0.0, 1.0]
+
+
+# --------------------------------------------------------------------------- structured-light tools' files
+SLSTUDIO = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "slstudio-skull" / "calibration"
+
+
+def _slstudio_xml(path, *, Rp=None, drop=()):
+    """A calibration.xml with SLStudio's keys (float32 matrices, millimetres), as its calibrator writes it."""
+    import cv2
+
+    R = cv2.Rodrigues(np.array([[0.15], [-0.23], [0.14]]))[0] if Rp is None else np.asarray(Rp)
+    values = {"Kc": np.array([[2195.1, 0, 843.5], [0, 2195.1, 675.5], [0, 0, 1]], np.float32),
+              "kc": np.array([[-0.058], [0], [0], [0], [0]], np.float32),
+              "Kp": np.array([[2601.5, 0, 866.5], [0, 2601.5, 1109.1], [0, 0, 1]], np.float32),
+              "kp": np.array([[-0.031], [0], [0], [0], [0]], np.float32),
+              "Rp": R.astype(np.float32), "Tp": np.array([[-145.28], [-36.50], [67.92]], np.float32)}
+    fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_WRITE)
+    for k, v in values.items():
+        if k not in drop:
+            fs.write(k, v)
+    for k, v in (("frameWidth", 1688), ("frameHeight", 1352), ("screenResX", 1824), ("screenResY", 1140)):
+        if k not in drop:
+            fs.write(k, v)
+    fs.release()
+    return values
+
+
+def test_slstudio_calibration_reads_its_keys_units_and_convention(cli, tmp_path):
+    values = _slstudio_xml(tmp_path / "calibration.xml")
+    run = cli("rig", "import", tmp_path / "calibration.xml", "--out", tmp_path / "rig.json")
+    assert run.code == 0, run.err
+    rig = load_rig(tmp_path / "rig.json")
+    cam, proj = rig.cameras[0], rig.projector
+    assert (cam.width, cam.height, proj.width, proj.height) == (1688, 1352, 1824, 1140)
+    np.testing.assert_allclose(cam.K, values["Kc"], rtol=1e-6)
+    np.testing.assert_allclose(proj.K, values["Kp"], rtol=1e-6)
+    # X_proj = Rp X_cam + Tp (mm): the projector's centre in the camera frame is -Rp^T Tp, in metres.
+    centre = -values["Rp"].astype(float).T @ values["Tp"].astype(float).ravel() / 1000
+    np.testing.assert_allclose(proj.T_world_cam[:3, 3], centre, atol=1e-6)
+    assert np.allclose(cam.T_world_cam, np.eye(4))
+
+
+def test_slstudio_calibration_with_a_bad_rotation_or_a_missing_size_is_named(cli, tmp_path):
+    _slstudio_xml(tmp_path / "a.xml", Rp=np.diag([1.0, 1.0, 2.0]))
+    run = cli("rig", "import", tmp_path / "a.xml", "--out", tmp_path / "a.json")
+    assert_error(run, 1, "a.xml", "Rp: expected a 3x3 rotation")
+    _slstudio_xml(tmp_path / "b.xml", drop=("screenResX",))
+    run = cli("rig", "import", tmp_path / "b.xml", "--out", tmp_path / "b.json")
+    assert_error(run, 1, "b.xml", "screenResX/screenResY", "width and a height")
+
+
+@pytest.mark.skipif(not (SLSTUDIO / "calibration.xml").is_file(), reason="../shared/data/slstudio-skull is absent")
+def test_slstudios_own_calibration_file_imports(cli, tmp_path):
+    run = cli("rig", "import", SLSTUDIO / "calibration.xml", "--out", tmp_path / "rig.json")
+    assert run.code == 0, run.err
+    rig = load_rig(tmp_path / "rig.json")
+    assert rig.cameras[0].K[0, 0] == pytest.approx(2195.12036, rel=1e-6)
+    assert np.linalg.norm(rig.projector.T_world_cam[:3, 3]) == pytest.approx(0.164477, abs=1e-5)   # |Tp| = 164.5 mm

@@ -1,6 +1,6 @@
 """``rangekit rig import``: a rig file from a calibration the user already has.
 
-Three sources, told apart by their content (:func:`import_rig`):
+Four kinds of source, told apart by their content (:func:`import_rig`):
 
 - **OpenCV stereo calibration** (YAML or XML written by ``cv2.FileStorage``, read with it): the camera is
   the first device, the projector the second (``cv2.stereoCalibrate``'s convention: ``R``, ``T`` map the
@@ -23,6 +23,8 @@ Three sources, told apart by their content (:func:`import_rig`):
   :data:`rangekit.rig.plausibility.BASELINE` is refused (zero, below 1 mm or above 10 m: a file in millimetres
   read as metres, or the other way round) or warned of. World = the camera's frame; the turntable is
   unknown (``T_world_table`` null: ``rangekit calibrate`` measures it).
+- **Structured-light tools' calibration files** (SLStudio's ``calibration.xml``, ...), recognised by their keys
+  (:mod:`.import_tools`: each tool's keys, units and extrinsic convention).
 - **depthai EEPROM calibration** JSON (``CalibrationHandler.eepromToJson()``, :mod:`.rig_import_json`).
 - **Horus** ``calibration.json`` (Ciclop scanner, :mod:`.rig_import_json`).
 
@@ -39,11 +41,11 @@ import numpy as np
 from rangekit.regular_files import read_regular_file
 from rangekit.errors import ConfigError
 from rangekit.formats.rig_files.entries import camera_entry, rig_dict
-from rangekit.geometry import invert_T, make_T
+from rangekit.geometry import invert_T, make_T, nearest_rotation
 from rangekit.rig.plausibility import BASELINE, UNIT_SCALES, check_length, format_vector
 from rangekit.rig.rig_file import Rig, template_rig
 
-__all__ = ["import_rig", "IMPORT_SUFFIXES", "OPENCV_KEYS"]
+__all__ = ["import_rig", "IMPORT_SUFFIXES", "OPENCV_KEYS", "procam_rig", "read_opencv"]
 
 #: The extensions ``rig import`` reads: OpenCV's FileStorage (YAML, XML, JSON) and the vendors' JSON.
 IMPORT_SUFFIXES = (".yaml", ".yml", ".xml", ".json")
@@ -92,7 +94,12 @@ def import_rig(path: str | Path, *, size: tuple[int, int] | None = None,
     elif isinstance(data, dict) and ("calibration_settings" in data or "camera_matrix" in data):
         rig = horus_rig(data, str(path), size=size)
     else:
-        rig = opencv_rig(path, size=size, projector_size=projector_size, unit=unit)
+        from rangekit.formats.rig_files.import_tools import tool_of, tool_rig
+
+        values = read_opencv(path)
+        tool = tool_of(values)
+        rig = (opencv_rig(path, size=size, projector_size=projector_size, unit=unit, values=values) if tool is None
+               else tool_rig(tool, values, path))
     Rig.from_dict(rig, where=str(path))        # every field checked as a rig file would be
     return rig
 
@@ -119,7 +126,7 @@ def _node_value(node, path: Path, key: str):
     return None if m is None else np.asarray(m, dtype=np.float64)
 
 
-def _read_opencv(path: Path) -> dict:
+def read_opencv(path: Path) -> dict:
     import cv2
 
     try:
@@ -162,30 +169,40 @@ def _size(values: dict, field: str, prefix: str, label: str, given, option: str,
     return int(v[0]), int(v[1])
 
 
-def opencv_rig(path: Path, *, size=None, projector_size=None, unit: str = "m") -> dict:
-    """Camera + projector from an OpenCV stereo calibration (module doc: the keys read)."""
-    import cv2
-
+def opencv_rig(path: Path, *, size=None, projector_size=None, unit: str = "m", values: dict | None = None) -> dict:
+    """Camera + projector from an OpenCV stereo calibration (module doc: the keys read); ``values``: the file's
+    keys, already read."""
     if unit not in UNITS:
         raise ConfigError(f"{path}: unit: expected one of {', '.join(UNITS)}, found {unit!r}")
-    values = _read_opencv(path)
+    values = read_opencv(path) if values is None else values
     keys = {f: _first(values, f, path) for f in ("camera_K", "camera_dist", "projector_K", "projector_dist", "R", "T")}
+    cam_size = _size(values, "camera_size", "image", "camera image", size, "--size", path)
+    proj_size = _size(values, "projector_size", "projector", "projector", projector_size, "--projector-size", path)
+    return procam_rig(path, keys, unit, cam_size, proj_size, UNITS, _UNIT_FIXES)
+
+
+def procam_rig(path: Path, keys: dict, unit: str, cam_size, proj_size, units: dict, fixes: dict) -> dict:
+    """The rig file of a camera and a projector: ``keys`` maps camera_K, camera_dist, projector_K, projector_dist,
+    R and T to (key in the file, value), with ``X_proj = R X_cam + T`` (``T`` in ``unit``, one of ``units``:
+    metres per unit); the baseline is checked (``fixes``: the advice for each likely unit)."""
+    import cv2
+
     rkey, R = keys["R"]
     R = np.asarray(R, dtype=np.float64)
     if R.size == 3:
         R = cv2.Rodrigues(R.reshape(3, 1))[0]
-    if R.shape != (3, 3) or not np.all(np.isfinite(R)) or not np.allclose(R @ R.T, np.eye(3), atol=1e-6):
-        raise ConfigError(f"{path}: {rkey}: expected a 3x3 rotation (orthonormal) or a Rodrigues vector, found "
-                          f"{np.array2string(R, precision=4)}")
+    if R.shape != (3, 3) or not np.all(np.isfinite(R)) or not np.allclose(R @ R.T, np.eye(3), atol=1e-6) \
+            or np.linalg.det(R) <= 0:
+        raise ConfigError(f"{path}: {rkey}: expected a 3x3 rotation (orthonormal, determinant +1) or a Rodrigues "
+                          f"vector, found {np.round(R, 4).tolist()}")
+    R = nearest_rotation(R)   # a file written in float32 (SLStudio's) is orthonormal to 1e-7 only
     tkey, t = keys["T"]
     t = np.asarray(t, dtype=np.float64).ravel()
     if t.size != 3 or not np.all(np.isfinite(t)):
         raise ConfigError(f"{path}: {tkey}: expected 3 finite numbers, found {t.tolist()}")
-    check_length(float(np.linalg.norm(t)) * UNITS[unit], BASELINE, where=str(path), read_as=unit, units=UNITS,
-                 shown=f"{tkey} = {format_vector(t)} {unit}", what="camera-projector baseline", fixes=_UNIT_FIXES)
-    T_proj_cam = make_T(R, t * UNITS[unit])
-    cam_size = _size(values, "camera_size", "image", "camera image", size, "--size", path)
-    proj_size = _size(values, "projector_size", "projector", "projector", projector_size, "--projector-size", path)
+    check_length(float(np.linalg.norm(t)) * units[unit], BASELINE, where=str(path), read_as=unit, units=units,
+                 shown=f"{tkey} = {format_vector(t)} {unit}", what="camera-projector baseline", fixes=fixes)
+    T_proj_cam = make_T(R, t * units[unit])
     camera = camera_entry("camera", keys["camera_K"][1], keys["camera_dist"][1], cam_size, np.eye(4),
                           f"{path}: {keys['camera_K'][0]}")
     projector = camera_entry("projector", keys["projector_K"][1], keys["projector_dist"][1], proj_size,

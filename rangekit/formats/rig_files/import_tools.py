@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from rangekit.errors import ConfigError
+from rangekit.formats.rig_files.procam import procam_rig
 from rangekit.rig.plausibility import UNIT_SCALES
 
 __all__ = ["ToolCalibration", "TOOL_CALIBRATIONS", "tool_of", "tool_rig"]
@@ -62,8 +63,6 @@ def _size(values: dict, keys: tuple[str, str], path: Path) -> tuple[int, int]:
 
 def tool_rig(tool: ToolCalibration, values: dict, path: Path) -> dict:
     """The rig file of a tool's calibration (checked as an OpenCV stereo calibration is)."""
-    from rangekit.formats.rig_files.importers import procam_rig
-
     keys = {field: (key, values[key]) for field, key in tool.keys.items()}
     for field, (key, value) in keys.items():
         if value is None:

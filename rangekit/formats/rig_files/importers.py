@@ -40,12 +40,11 @@ import numpy as np
 
 from rangekit.regular_files import read_regular_file
 from rangekit.errors import ConfigError
-from rangekit.formats.rig_files.entries import camera_entry, rig_dict
-from rangekit.geometry import invert_T, make_T, nearest_rotation
-from rangekit.rig.plausibility import BASELINE, UNIT_SCALES, check_length, format_vector
-from rangekit.rig.rig_file import Rig, template_rig
+from rangekit.formats.rig_files.procam import procam_rig
+from rangekit.rig.plausibility import UNIT_SCALES
+from rangekit.rig.rig_file import Rig
 
-__all__ = ["import_rig", "IMPORT_SUFFIXES", "OPENCV_KEYS", "procam_rig", "read_opencv"]
+__all__ = ["import_rig", "IMPORT_SUFFIXES", "OPENCV_KEYS", "read_opencv"]
 
 #: The extensions ``rig import`` reads: OpenCV's FileStorage (YAML, XML, JSON) and the vendors' JSON.
 IMPORT_SUFFIXES = (".yaml", ".yml", ".xml", ".json")
@@ -179,33 +178,3 @@ def opencv_rig(path: Path, *, size=None, projector_size=None, unit: str = "m", v
     cam_size = _size(values, "camera_size", "image", "camera image", size, "--size", path)
     proj_size = _size(values, "projector_size", "projector", "projector", projector_size, "--projector-size", path)
     return procam_rig(path, keys, unit, cam_size, proj_size, UNITS, _UNIT_FIXES)
-
-
-def procam_rig(path: Path, keys: dict, unit: str, cam_size, proj_size, units: dict, fixes: dict) -> dict:
-    """The rig file of a camera and a projector: ``keys`` maps camera_K, camera_dist, projector_K, projector_dist,
-    R and T to (key in the file, value), with ``X_proj = R X_cam + T`` (``T`` in ``unit``, one of ``units``:
-    metres per unit); the baseline is checked (``fixes``: the advice for each likely unit)."""
-    import cv2
-
-    rkey, R = keys["R"]
-    R = np.asarray(R, dtype=np.float64)
-    if R.size == 3:
-        R = cv2.Rodrigues(R.reshape(3, 1))[0]
-    if R.shape != (3, 3) or not np.all(np.isfinite(R)) or not np.allclose(R @ R.T, np.eye(3), atol=1e-6) \
-            or np.linalg.det(R) <= 0:
-        raise ConfigError(f"{path}: {rkey}: expected a 3x3 rotation (orthonormal, determinant +1) or a Rodrigues "
-                          f"vector, found {np.round(R, 4).tolist()}")
-    R = nearest_rotation(R)   # a file written in float32 (SLStudio's) is orthonormal to 1e-7 only
-    tkey, t = keys["T"]
-    t = np.asarray(t, dtype=np.float64).ravel()
-    if t.size != 3 or not np.all(np.isfinite(t)):
-        raise ConfigError(f"{path}: {tkey}: expected 3 finite numbers, found {t.tolist()}")
-    check_length(float(np.linalg.norm(t)) * units[unit], BASELINE, where=str(path), read_as=unit, units=units,
-                 shown=f"{tkey} = {format_vector(t)} {unit}", what="camera-projector baseline", fixes=fixes)
-    T_proj_cam = make_T(R, t * units[unit])
-    camera = camera_entry("camera", keys["camera_K"][1], keys["camera_dist"][1], cam_size, np.eye(4),
-                          f"{path}: {keys['camera_K'][0]}")
-    projector = camera_entry("projector", keys["projector_K"][1], keys["projector_dist"][1], proj_size,
-                             invert_T(T_proj_cam), f"{path}: {keys['projector_K'][0]}")
-    devices = {k: v for k, v in template_rig()["devices"].items()}
-    return rig_dict([camera], projector, None, devices)

@@ -30,6 +30,7 @@ def processed(tmp_path_factory, reference_session):
     return by_cli, by_call, result, seen
 
 
+@pytest.mark.slow
 def test_the_call_writes_what_the_command_writes(processed):
     by_cli, by_call, result, _ = processed
     for name in ("mesh.ply", "mesh_watertight.ply", "merged.ply", "poses.json"):
@@ -40,6 +41,7 @@ def test_the_call_writes_what_the_command_writes(processed):
     assert json.loads((by_call / "summary.json").read_text())["accuracy"] == summary["accuracy"]
 
 
+@pytest.mark.slow
 def test_every_view_cloud_arrives_before_the_fusion(processed):
     _, _, result, seen = processed
     decoded = [e for e in seen if isinstance(e, ev.ViewDecoded)]
@@ -49,6 +51,7 @@ def test_every_view_cloud_arrives_before_the_fusion(processed):
     assert all(seen.index(e) < fuse_start for e in decoded)
 
 
+@pytest.mark.slow
 def test_stages_pairs_and_meshes_are_announced(processed):
     by_cli, by_call, result, seen = processed
     started = [e.stage for e in seen if isinstance(e, ev.StageStarted)]

@@ -167,6 +167,7 @@ def test_xor_codes_keep_columns_under_global_light(scenes):
     assert rates["graycode (no global rejection)"][1] > 2 * rates["xor04"][1]  # ... or decodes wrongly
 
 
+@pytest.mark.slow
 def test_no_point_far_from_the_surface_in_a_box_shadow_scene(box_on_plane_scene):
     import open3d as o3d
 

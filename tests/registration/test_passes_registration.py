@@ -45,6 +45,7 @@ def _errors(T, T_true):
     return max(rot), max(np.linalg.norm(a[:3, 3] - b[:3, 3]) for a, b in zip(T, T_true))
 
 
+@pytest.mark.slow
 def test_the_second_pass_is_found_without_a_prior(two_passes):
     clouds, rig, angles, T_true = two_passes
     prior = turntable_prior(rig.T_world_table, angles)

@@ -108,6 +108,7 @@ def scans6():
     return turntable_scans(n_views=6, noise=0.0005, resolution=(320, 240), rng=0)
 
 
+@pytest.mark.slow
 def test_descriptor_chooser_registers_views_cut_from_one_object(scans6):
     """No prior: coarse alignment of each view with its 4 most similar only, the poses within 0.2 deg and
     0.1% of the diagonal of the simulator's (a wrong pair, a flip or a neighbour's pose, is degrees off)."""

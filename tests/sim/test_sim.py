@@ -109,6 +109,7 @@ def test_image_formation_matches_the_model(rig, tilted_plane_scene):
     assert np.abs(cos - truth.cos_proj[v, u]).max() < 1e-12
 
 
+@pytest.mark.slow
 def test_noise_mean_and_variance_follow_the_model(rig, tilted_plane_scene):
     model = ImagingModel(bits=16, full_well=5000.0, read_noise=20.0)
     sim = SimRig(tilted_plane_scene, rig, imaging=model, seed=3)
@@ -150,6 +151,7 @@ def test_turntable_rotates_the_objects(rig):
         assert 0.04 - 2e-5 < r.min() and r.max() <= 0.04 + 1e-12
 
 
+@pytest.mark.slow
 def test_noise_is_reproducible_per_capture_state(rig, tilted_plane_scene):
     spec = make_pattern_spec("graycode", (1280, 800))
     frames = [spec.frame(i) for i in (0, 5, 9)]

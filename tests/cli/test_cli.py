@@ -65,6 +65,7 @@ def test_cli_errors_are_one_line_without_traceback(tmp_path):
     assert "bad.ply" in proc.stderr and "Traceback" not in proc.stderr
 
 
+@pytest.mark.slow
 def test_decode_and_reconstruct_commands(tmp_path):
     cap = tmp_path / "cap"
     assert main(["sim", "render", "--object", "sphere", "--patterns", "hybrid", "--out", str(cap)]) == 0

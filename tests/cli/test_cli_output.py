@@ -57,6 +57,7 @@ def test_a_terminal_gets_a_bar_with_an_eta(tmp_path):
     assert out.startswith("acquired 2 views") and not any(c in out for c in CONTROL)
 
 
+@pytest.mark.slow
 def test_quiet_prints_only_the_final_result_line(tmp_path):
     run = subprocess.run(_rangekit("-q", *SCAN, "--out", str(tmp_path / "s")), capture_output=True, text=True,
                          env=ENV, cwd=tmp_path, timeout=300)

@@ -118,6 +118,7 @@ def test_rig_init_into_a_pipe_closed_by_the_reader(tmp_path):
     assert "Exception ignored" not in run.err
 
 
+@pytest.mark.slow
 def test_sigint_during_a_render_exits_130_and_leaves_no_partial_file(tmp_path):
     import time
 

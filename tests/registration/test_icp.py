@@ -97,6 +97,7 @@ def test_projective_association_on_organised_scans():
     assert rot < 0.02 and tr < 2e-5
 
 
+@pytest.mark.slow
 def test_coarse_alignment_without_a_guess(surface):
     a, na, b, nb = surface
     T = make_T(axis_angle_to_R([0.2, -1, 0.5], np.radians(120)), [0.05, -0.02, 0.03])

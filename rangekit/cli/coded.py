@@ -47,6 +47,8 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
 
     t0 = time.perf_counter()
     check_output(args.out, suffixes=CLOUD_WRITERS, what="point cloud")
+    if args.pattern is not None:
+        return _reconstruct_layout(args, t0)
     if is_laser_capture(args.capture):
         return _reconstruct_laser(args, t0)
     cap = load_capture(args.capture)
@@ -61,6 +63,33 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
     save_cloud(args.out, rec.cloud)
     say(f"{rec.decoded!r}")
     say(f"{rec.triangulated!r}")
+    result(f"wrote {len(rec.cloud)} points to {args.out} in {time.perf_counter() - t0:.1f} s")
+    return 0
+
+
+def _reconstruct_layout(args: argparse.Namespace, t0: float) -> int:
+    """``rangekit reconstruct DIR --pattern PRESET --rig RIG.json``: another tool's capture folder as it lies on
+    disk (:mod:`rangekit.formats.capture_layouts`)."""
+    from rangekit.app.commands.reconstruct import reconstruct_capture
+    from rangekit.errors import UsageError
+    from rangekit.formats.capture import read_stack
+    from rangekit.formats.capture_layouts import LAYOUTS, arrange, layout_files
+    from rangekit.formats.clouds import save_cloud
+    from rangekit.rig.rig_file import load_rig
+
+    if not args.rig:
+        raise UsageError(f"--pattern {args.pattern}: give the rig with --rig RIG.json (e.g. from 'rangekit rig "
+                         "import' of the tool's calibration)")
+    rig = load_rig(args.rig)
+    if rig.projector is None:
+        raise UsageError(f"--rig {args.rig}: has no projector; {args.pattern} needs one")
+    layout = LAYOUTS[args.pattern]
+    frames = read_stack(layout_files(args.capture, layout), what=f"a {layout.name} capture")
+    stack, spec = arrange(list(frames), layout, rig.projector.width, rig.projector.height)
+    note(f"decoding {len(frames)} images ({layout.name}: {layout.source})")
+    rec = reconstruct_capture(stack, rig, spec, subpixel=not args.integer, method=args.method)
+    save_cloud(args.out, rec.cloud)
+    say(f"{rec.decoded!r}")
     result(f"wrote {len(rec.cloud)} points to {args.out} in {time.perf_counter() - t0:.1f} s")
     return 0
 
@@ -83,6 +112,7 @@ def _reconstruct_laser(args: argparse.Namespace, t0: float) -> int:
 
 def add_parsers(sub) -> None:
     from rangekit.coded.patterns import PATTERN_METHODS
+    from rangekit.formats.capture_layouts import LAYOUTS as CAPTURE_LAYOUTS
 
     dec = sub.add_parser("decode", help="decode coded-light images into projector coordinates (maps.npz)",
                          description="Decode a capture into per-pixel projector column/row maps with confidence.")
@@ -106,6 +136,9 @@ def add_parsers(sub) -> None:
                                      "rig file's laser planes.")
     rec.add_argument("capture", metavar="CAPTURE_DIR", help="capture folder (images + patterns.json)")
     rec.add_argument("--rig", help="rig file (default: the folder's rig.json)")
+    rec.add_argument("--pattern", choices=sorted(CAPTURE_LAYOUTS), default=None,
+                     help="another tool's capture layout, read as it lies on disk (docs/real-captures.md); needs "
+                          "--rig")
     rec.add_argument("--method", default="auto", choices=("auto", "ray-plane", "ray-ray"),
                      help="triangulation; auto = ray-ray where rows are coded, else ray-plane")
     rec.add_argument("--integer", action="store_true", help="integer codes only (no subpixel refinement)")

@@ -8,8 +8,9 @@ cast shadow from light i sees only that term, so ``B / albedo`` there measures `
 Where it does not hold. Real objects have cast shadows too (under an ear, in a fold, at the foot of a
 step), but the light in them comes from the nearest walls and differs from place to place, or only a
 corner receives it. Subtracting one ``beta_i`` from every pixel then bends the normals of pixels that
-received nothing: on three real DiLiGenT objects the mean error rose from 13.1 to 14.0 deg, and on the
-simulator's bunny, steps and thin objects from 4.4 to 4.9, 8.5 to 14.7 and 23.8 to 25.9 deg.
+received nothing: on three real DiLiGenT objects (issue 34's measurement; they are not in ../shared/data)
+the mean error rose from 13.1 to 14.0 deg, and on the simulator's bunny, steps and thin objects from 4.4 to
+4.9, 8.5 to 14.7 and 23.8 to 25.9 deg.
 
 So :func:`cavity_light` measures ``beta`` and applies it only if the shadows show the model:
 

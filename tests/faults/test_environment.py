@@ -77,7 +77,9 @@ def test_ctrl_c_while_the_libraries_load_exits_130(tmp_path, delay):
     proc.send_signal(signal.SIGINT)
     out, err = proc.communicate(timeout=120)
     if proc.returncode == 0:
-        pytest.skip(f"the command finished within {delay} s")  # never on this machine: start-up alone takes longer
+        # Seen once in a dozen runs at 0.05 s: the SIGINT was lost before any rangekit code ran (the
+        # interpreter's own start-up) and the command ran to its end. Reported, not passed.
+        pytest.skip(f"the SIGINT at {delay} s was lost before rangekit started; the command finished")
     # 130, or a death by SIGINT (-2) after the line: a shell shows both as $? = 130. A SIGINT landing while
     # Open3D's extension loads is handed back by it after rangekit has handled it (about 1 run in 8 at 0.4 s).
     assert proc.returncode in (130, -signal.SIGINT), (proc.returncode, err)

@@ -8,7 +8,8 @@ import sys
 import time
 from pathlib import Path
 
-from rangekit.cli._common import check_output, console, float_in, int_in, positive_float, result, say, seed, size
+from rangekit.cli._common import (check_output, console, float_in, int_in, note, positive_float, result, say, seed,
+                                  size)
 from rangekit.drivers.discovery import MAX_SEARCH_S
 
 
@@ -37,7 +38,7 @@ def _print_rig(data: dict, example: str) -> None:
 
 def cmd_rig_import(args: argparse.Namespace) -> int:
     """rangekit rig import FILE [--out RIG.json]: a rig file from an OpenCV stereo calibration (YAML/XML), a
-    depthai EEPROM calibration JSON or a Horus calibration.json"""
+    structured-light tool's calibration, a depthai EEPROM calibration JSON or a Horus calibration.json"""
     from rangekit.formats.rig_files.importers import import_rig
     from rangekit.formats.rig_files.json_text import rig_json_text
     from rangekit.io import atomic_write_text
@@ -45,7 +46,7 @@ def cmd_rig_import(args: argparse.Namespace) -> int:
 
     if args.out is not None:
         check_output(args.out, force=args.force, suffixes=RIG_SUFFIXES, what="rig")
-    data = import_rig(args.file, size=args.size, projector_size=args.projector_size, unit=args.unit)
+    data = import_rig(args.file, size=args.size, projector_size=args.projector_size, unit=args.unit, report=note)
     if args.out is None:
         _print_rig(data, f"rangekit rig import {args.file} > rig.json")
         return 0
@@ -147,22 +148,29 @@ def add_parsers(sub) -> None:
                                           "parameters).")
     init.add_argument("--sim", action="store_true", help="print the simulator's default rig instead")
     init.set_defaults(func=cmd_rig_init)
-    imp = rig_sub.add_parser("import", help="a rig file from an OpenCV stereo calibration, a depthai EEPROM JSON or "
-                                            "a Horus calibration.json",
+    imp = rig_sub.add_parser("import", help="a rig file from an OpenCV stereo calibration, a structured-light "
+                                            "tool's calibration, a depthai EEPROM JSON or a Horus calibration.json",
                              description="Convert a calibration you already have into a rig file: an OpenCV "
                                          "stereo calibration written by cv2.FileStorage (YAML/XML; the camera, "
                                          "then the projector as the second device: K1/D1/K2/D2/R/T or "
-                                         "cameraMatrix1/distCoeffs1/..., docs/rig.md lists the keys), a depthai "
-                                         "EEPROM calibration (CalibrationHandler.eepromToJson()) or a Horus "
-                                         "calibration.json (Ciclop: camera, laser planes, platform). Printed, "
-                                         "or written to --out.")
+                                         "cameraMatrix1/distCoeffs1/..., docs/rig.md lists the keys), a "
+                                         "structured-light tool's file recognised by its keys (SLStudio's "
+                                         "calibration.xml, kamino410 procam-calibration's calibration_result.xml, "
+                                         "Moreno-Taubin scan3d-capture's calibration.yml, OpenCV's "
+                                         "structured_light sample's two-camera calibration; "
+                                         "docs/real-captures.md), a depthai EEPROM calibration "
+                                         "(CalibrationHandler.eepromToJson()) or a Horus calibration.json "
+                                         "(Ciclop: camera, laser planes, platform). Printed, or written to --out.")
     imp.add_argument("file", metavar="FILE", help="the calibration file (.yaml, .yml, .xml or .json)")
     imp.add_argument("--out", help="rig file to write (default: print it)")
     imp.add_argument("--force", action="store_true", help="overwrite --out if it exists")
     imp.add_argument("--size", type=size, help="camera image size WxH where the file has none (Horus: read from camera_width, camera_height)")
-    imp.add_argument("--projector-size", type=size, help="projector size WxH where the OpenCV file has none")
-    imp.add_argument("--unit", choices=("m", "mm"), default="m",
-                     help="unit of the OpenCV file's T (default m; depthai's cm and Horus's mm are known)")
+    imp.add_argument("--projector-size", type=size, help="projector size WxH where the file has none (kamino410 "
+                                                           "procam-calibration, Moreno-Taubin: always)")
+    imp.add_argument("--unit", choices=("m", "cm", "mm"), default=None,
+                     help="unit of the file's translation: an OpenCV file's T (default m) or a structured-light "
+                          "tool's (default the tool's, mm; it prints the unit it read); depthai's cm and Horus's "
+                          "mm are known")
     imp.set_defaults(func=cmd_rig_import)
 
     dev = sub.add_parser("devices", help="list serial ports and depthai cameras",

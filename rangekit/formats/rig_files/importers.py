@@ -19,12 +19,14 @@ Four kinds of source, told apart by their content (:func:`import_rig`):
                       ``projector_width`` and ``projector_height``; else ``--projector-size``
   ==================  ==========================================================================
 
-  ``T`` is in metres unless ``unit="mm"`` (``--unit mm``); a baseline ``|T|`` outside
+  ``T`` is in metres unless ``unit`` says otherwise (``--unit mm`` or ``cm``); a baseline ``|T|`` outside
   :data:`rangekit.rig.plausibility.BASELINE` is refused (zero, below 1 mm or above 10 m: a file in millimetres
   read as metres, or the other way round) or warned of. World = the camera's frame; the turntable is
   unknown (``T_world_table`` null: ``rangekit calibrate`` measures it).
-- **Structured-light tools' calibration files** (SLStudio's ``calibration.xml``, ...), recognised by their keys
-  (:mod:`.import_tools`: each tool's keys, units and extrinsic convention).
+- **Structured-light tools' calibration files** (SLStudio's ``calibration.xml``, kamino410 procam-calibration's
+  ``calibration_result.xml``, Moreno-Taubin scan3d-capture's ``calibration.yml``, OpenCV's structured-light
+  sample's two-camera calibration), recognised by their keys (:mod:`.import_tools`: each tool's keys, units
+  and extrinsic convention); ``unit`` overrides the tool's unit.
 - **depthai EEPROM calibration** JSON (``CalibrationHandler.eepromToJson()``, :mod:`.rig_import_json`).
 - **Horus** ``calibration.json`` (Ciclop scanner, :mod:`.rig_import_json`).
 
@@ -35,6 +37,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
@@ -60,17 +63,20 @@ OPENCV_KEYS = {
     "camera_size": ("imageSize", "image_size", "cam_size"),
     "projector_size": ("projectorSize", "projector_size", "proj_size"),
 }
-#: The units ``--unit`` reads an OpenCV file's ``T`` in, metres per unit, and how to ask for each.
+#: The units an OpenCV file's ``T`` is guessed in when its baseline is out of range, metres per unit, and how
+#: to ask for each (``--unit`` reads any of :data:`UNIT_SCALES`).
 UNITS = {u: UNIT_SCALES[u] for u in ("m", "mm")}
 _UNIT_FIXES = {"mm": "use --unit mm", "m": "use --unit m (the default)"}
 
 
 def import_rig(path: str | Path, *, size: tuple[int, int] | None = None,
-               projector_size: tuple[int, int] | None = None, unit: str = "m") -> dict:
+               projector_size: tuple[int, int] | None = None, unit: str | None = None,
+               report: Callable[[str], None] | None = None) -> dict:
     """The rig file (plain JSON types, validated by :meth:`Rig.from_dict`) of the calibration in ``path``.
     ``size`` / ``projector_size``: (width, height) pixels where the file has none (Horus never has one);
-    ``unit``: the OpenCV file's translation unit, "m" or "mm" (depthai's centimetres and Horus's
-    millimetres are known)."""
+    ``unit``: the translation's unit, "m", "cm" or "mm" (default: metres for an OpenCV file, the tool's unit
+    for a tool's file; depthai's centimetres and Horus's millimetres are known); ``report``: told which
+    tool's file was read and the unit of its translation."""
     from rangekit.formats.rig_files.import_json import depthai_rig, horus_rig
 
     path = Path(path)
@@ -97,8 +103,9 @@ def import_rig(path: str | Path, *, size: tuple[int, int] | None = None,
 
         values = read_opencv(path)
         tool = tool_of(values)
-        rig = (opencv_rig(path, size=size, projector_size=projector_size, unit=unit, values=values) if tool is None
-               else tool_rig(tool, values, path))
+        rig = (opencv_rig(path, size=size, projector_size=projector_size, unit=unit or "m", values=values)
+               if tool is None else tool_rig(tool, values, path, size=size, projector_size=projector_size,
+                                             unit=unit, report=report))
     Rig.from_dict(rig, where=str(path))        # every field checked as a rig file would be
     return rig
 
@@ -171,8 +178,8 @@ def _size(values: dict, field: str, prefix: str, label: str, given, option: str,
 def opencv_rig(path: Path, *, size=None, projector_size=None, unit: str = "m", values: dict | None = None) -> dict:
     """Camera + projector from an OpenCV stereo calibration (module doc: the keys read); ``values``: the file's
     keys, already read."""
-    if unit not in UNITS:
-        raise ConfigError(f"{path}: unit: expected one of {', '.join(UNITS)}, found {unit!r}")
+    if unit not in UNIT_SCALES:
+        raise ConfigError(f"{path}: unit: expected one of {', '.join(UNIT_SCALES)}, found {unit!r}")
     values = read_opencv(path) if values is None else values
     keys = {f: _first(values, f, path) for f in ("camera_K", "camera_dist", "projector_K", "projector_dist", "R", "T")}
     cam_size = _size(values, "camera_size", "image", "camera image", size, "--size", path)

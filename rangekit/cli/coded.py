@@ -69,11 +69,13 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
 
 def _reconstruct_layout(args: argparse.Namespace, t0: float) -> int:
     """``rangekit reconstruct DIR --pattern PRESET --rig RIG.json``: another tool's capture folder as it lies on
-    disk (:mod:`rangekit.formats.capture_layouts`)."""
+    disk (:mod:`rangekit.formats.layouts`)."""
+    from dataclasses import replace
+
     from rangekit.app.commands.reconstruct import reconstruct_capture
     from rangekit.errors import UsageError
     from rangekit.formats.capture import read_stack
-    from rangekit.formats.capture_layouts import LAYOUTS, arrange, layout_files
+    from rangekit.formats.layouts import LAYOUTS, arrange, decoding_projector, layout_files
     from rangekit.formats.clouds import save_cloud
     from rangekit.rig.rig_file import load_rig
 
@@ -84,10 +86,13 @@ def _reconstruct_layout(args: argparse.Namespace, t0: float) -> int:
     if rig.projector is None:
         raise UsageError(f"--rig {args.rig}: has no projector; {args.pattern} needs one")
     layout = LAYOUTS[args.pattern]
-    frames = read_stack(layout_files(args.capture, layout), what=f"a {layout.name} capture")
-    stack, spec = arrange(list(frames), layout, rig.projector.width, rig.projector.height)
+    width, height = rig.projector.width, rig.projector.height
+    frames = read_stack(layout_files(args.capture, layout, width, height), what=f"a {layout.name} capture")
+    stack, spec = arrange(list(frames), layout, width, height)
     note(f"decoding {len(frames)} images ({layout.name}: {layout.source})")
-    rec = reconstruct_capture(stack, rig, spec, subpixel=not args.integer, method=args.method)
+    rig = replace(rig, projector=decoding_projector(rig.projector, layout))
+    rec = reconstruct_capture(stack, rig, spec, subpixel=not args.integer, method=args.method,
+                              view_options=layout.view_options)
     save_cloud(args.out, rec.cloud)
     say(f"{rec.decoded!r}")
     result(f"wrote {len(rec.cloud)} points to {args.out} in {time.perf_counter() - t0:.1f} s")
@@ -112,7 +117,7 @@ def _reconstruct_laser(args: argparse.Namespace, t0: float) -> int:
 
 def add_parsers(sub) -> None:
     from rangekit.coded.patterns import PATTERN_METHODS
-    from rangekit.formats.capture_layouts import LAYOUTS as CAPTURE_LAYOUTS
+    from rangekit.formats.layouts import LAYOUTS as CAPTURE_LAYOUTS
 
     dec = sub.add_parser("decode", help="decode coded-light images into projector coordinates (maps.npz)",
                          description="Decode a capture into per-pixel projector column/row maps with confidence.")

@@ -6,12 +6,14 @@ method; the per-pixel work is in the compiled :mod:`rangekit.coded._kernels`.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from rangekit.coded.frames import CaptureStack, row_chunks, run_parallel
 from rangekit.coded.patterns import PatternSpec, gray_decode, gray_encode
 
-__all__ = ["axis_code", "axis_subpixel", "gray_lut"]
+__all__ = ["axis_code", "axis_subpixel", "gray_lut", "smooth_along_stripes"]
 
 
 def _decode_bits(fr: CaptureStack, spec: PatternSpec, axis: str, region, need_diffs: bool):
@@ -137,3 +139,22 @@ def axis_subpixel(fr: CaptureStack, spec: PatternSpec, axis: str, code: np.ndarr
         K.interp_along_cols(code, t, np.float32(max_gap), out)
     return out
 
+
+def smooth_along_stripes(coord: np.ndarray, axis: str, half: int) -> np.ndarray:
+    """A decoded coordinate map (H, W) float32 averaged along its stripes: camera columns for projector
+    columns (stripes of a column code stand about upright in the camera), camera rows for projector rows.
+
+    Binomial weights over ``2 half + 1`` pixels (``half`` 1: 1 2 1; 2: 1 4 6 4 1, a Gaussian of 1 px);
+    pixels with a NaN among their taps keep their value. Used where a real projector's stripe edges wander
+    from one camera row to the next more than the camera's noise explains (docs/real-captures.md).
+    """
+    if half <= 0:
+        return coord
+    taps = np.array([math.comb(2 * half, k) for k in range(2 * half + 1)], np.float64)
+    taps /= taps.sum()
+    along = 0 if axis == "columns" else 1
+    pad = [(half, half) if a == along else (0, 0) for a in range(2)]
+    padded = np.pad(coord.astype(np.float64), pad, constant_values=np.nan)
+    n = coord.shape[along]
+    acc = sum(w * np.take(padded, np.arange(k, k + n), axis=along) for k, w in enumerate(taps))
+    return np.where(np.isfinite(acc), acc, coord).astype(np.float32)

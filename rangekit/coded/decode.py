@@ -43,7 +43,7 @@ from __future__ import annotations
 import numpy as np
 
 from rangekit.errors import DecodeError
-from rangekit.coded.binary import axis_code, axis_subpixel
+from rangekit.coded.binary import axis_code, axis_subpixel, smooth_along_stripes
 from rangekit.coded.debruijn import decode_debruijn
 from rangekit.coded.frames import CaptureStack
 from rangekit.coded.patterns import PatternSpec
@@ -59,7 +59,8 @@ __all__ = ["decode"]
 def decode(stack, spec: PatternSpec, *, order: str = "rangekit", subpixel: bool = True,
            min_contrast: float = 0.015, shadow_threshold: float = 0.01, max_global_ratio: float | None = None,
            max_gap: float = 6.0, max_disagreement: float = 1.5, full_scale: float | None = None,
-           response: ProjectorResponse | None = None, workers: int = 2, chunk_rows: int = 96) -> DecodeResult:
+           response: ProjectorResponse | None = None, stripe_smoothing: int = 0,
+           workers: int = 2, chunk_rows: int = 96) -> DecodeResult:
     """Decode a capture stack into projector coordinates.
 
     Parameters
@@ -94,6 +95,10 @@ def decode(stack, spec: PatternSpec, *, order: str = "rangekit", subpixel: bool 
         The projector's response (the rig file's ``projector_response``). Phase methods correct each
         wrapped phase for it (:func:`rangekit.coded.response.phase_correction`); None or gamma 1 changes
         nothing. Binary codes do not depend on it.
+    stripe_smoothing : int
+        Subpixel edges: average each decoded coordinate along its stripes over ``2 n + 1`` pixels (binomial
+        weights; :func:`rangekit.coded.binary.smooth_along_stripes`); 0, the default, leaves it per pixel. For
+        captures whose stripe edges wander from row to row (a real projector's, docs/real-captures.md).
     workers, chunk_rows : threads and rows per chunk.
 
     Returns
@@ -152,6 +157,9 @@ def decode(stack, spec: PatternSpec, *, order: str = "rangekit", subpixel: bool 
         K.finalise_binary(codes.get("columns", empty_i), subs.get("columns", empty_f), codes.get("rows", empty_i),
                           subs.get("rows", empty_f), "columns" in codes, "rows" in codes, edges, shadow, low,
                           glob_mask, conf, proj_col, proj_row, incons)
+        if edges and stripe_smoothing > 0:
+            proj_col = smooth_along_stripes(proj_col, "columns", stripe_smoothing)
+            proj_row = smooth_along_stripes(proj_row, "rows", stripe_smoothing)
         # Integer codes are uniform within their stripe; subpixel edges have no noise model yet (NaN).
         std = np.float32(GRAY_CODE_STD if not edges else np.nan)
         col_std = np.where(np.isfinite(proj_col), std, np.float32(np.nan))

@@ -47,7 +47,7 @@ def reconstruct_view(images, spec: PatternSpec, camera: PinholeCamera, projector
                      max_jump: float = 0.004, max_residual: float = 0.002, min_confidence: float = 0.03,
                      edge_margin: int = EDGE_MARGIN_PX,
                      full_scale: float | None = None, response: ProjectorResponse | None = None,
-                     exposures_us=None) -> Reconstruction:
+                     exposures_us=None, decode_options: dict | None = None) -> Reconstruction:
     """Decode ``images`` and triangulate against ``projector``.
 
     ``max_jump`` (relative range step, see :func:`rangekit.coded.triangulate.discontinuity_mask`, applied with
@@ -59,7 +59,8 @@ def reconstruct_view(images, spec: PatternSpec, camera: PinholeCamera, projector
     column, which at grazing angles is millimetres. ``response`` is the projector's response (the rig's
     ``projector_response``), which phase methods correct for (see :func:`rangekit.coded.decode.decode`).
     ``exposures_us`` (increasing): ``images`` is then one stack per exposure (multi-exposure capture), each
-    decoded and merged per pixel (:func:`rangekit.coded.hdr.merge_decodes`).
+    decoded and merged per pixel (:func:`rangekit.coded.hdr.merge_decodes`). ``decode_options``: more keyword
+    arguments of :func:`rangekit.coded.decode.decode` (a capture layout's, e.g. ``max_global_ratio``).
     """
     probe = np.asarray(images[0][0] if exposures_us is not None else images[0])
     if camera.size != (probe.shape[1], probe.shape[0]):
@@ -70,12 +71,13 @@ def reconstruct_view(images, spec: PatternSpec, camera: PinholeCamera, projector
                           f"projector is {projector.width}x{projector.height}")
     if exposures_us is not None:
         stacks = list(images)
-        decs = [decode(st, spec, order=order, subpixel=subpixel, full_scale=full_scale, response=response)
-                for st in stacks]
+        decs = [decode(st, spec, order=order, subpixel=subpixel, full_scale=full_scale, response=response,
+                       **(decode_options or {})) for st in stacks]
         top = full_scale or (255.0 if np.asarray(stacks[0][0]).dtype == np.uint8 else 65535.0)
         dec = merge_decodes(decs, exposures_us, top)[0]
     else:
-        dec = decode(images, spec, order=order, subpixel=subpixel, full_scale=full_scale, response=response)
+        dec = decode(images, spec, order=order, subpixel=subpixel, full_scale=full_scale, response=response,
+                     **(decode_options or {}))
     weak = dec.confidence < min_confidence
     cols = np.where(weak, np.nan, dec.proj_col)
     rows = np.where(weak, np.nan, dec.proj_row) if np.any(np.isfinite(dec.proj_row)) else None

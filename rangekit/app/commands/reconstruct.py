@@ -37,8 +37,10 @@ def reconstruct(images_or_folder, rig: Rig | str | Path | None = None, pattern: 
 
 def reconstruct_capture(images_or_folder, rig: Rig | str | Path | None = None,
                         pattern: PatternSpec | str | None = None, *, method: str = "auto",
-                        subpixel: bool = True) -> Reconstruction:
-    """:func:`reconstruct` with what the decoding and the triangulation found (``Reconstruction``)."""
+                        subpixel: bool = True, view_options: dict | None = None) -> Reconstruction:
+    """:func:`reconstruct` with what the decoding and the triangulation found (``Reconstruction``);
+    ``view_options``: more keyword arguments of :func:`rangekit.coded.reconstruct.reconstruct_view` (a
+    capture layout's, :attr:`rangekit.formats.layouts.CaptureLayout.view_options`)."""
     images, folder_rig, folder_spec, full_scale, where = _images(images_or_folder)
     if isinstance(rig, (str, Path)):
         rig = load_rig(rig)
@@ -54,7 +56,7 @@ def reconstruct_capture(images_or_folder, rig: Rig | str | Path | None = None,
                           "patterns.json in the folder")
     with naming(where):
         return reconstruct_view(images, spec, rig.camera, rig.projector, subpixel=subpixel, method=method,
-                                full_scale=full_scale, response=rig.projector_response)
+                                full_scale=full_scale, response=rig.projector_response, **(view_options or {}))
 
 
 def _images(source) -> tuple[np.ndarray, Rig | None, PatternSpec | None, float | None, str]:

@@ -1,0 +1,12 @@
+"""Other tools' capture folders as data (issue 35): :data:`LAYOUTS`, every preset by name, and the machinery of
+:mod:`rangekit.formats.layouts.layout`. One module per tool holds that tool's presets."""
+
+from rangekit.formats.layouts.layout import (BLACK_FROM_STEPS, WHITE_FROM_STEPS, CaptureLayout, Inverse, arrange,
+                                             decoding_projector, layout_files)
+from rangekit.formats.layouts.slstudio import SLSTUDIO_LAYOUTS
+
+__all__ = ["LAYOUTS", "CaptureLayout", "Inverse", "WHITE_FROM_STEPS", "BLACK_FROM_STEPS", "arrange",
+           "decoding_projector", "layout_files"]
+
+#: Every preset by its name ("tool:codec").
+LAYOUTS = {**SLSTUDIO_LAYOUTS}

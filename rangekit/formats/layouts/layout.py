@@ -1,0 +1,135 @@
+"""A capture layout: what each frame of another tool's capture folder is, so the folder decodes as it lies on
+disk (issue 35; docs/real-captures.md gives each preset's frame table and the source it was read from).
+
+A :class:`CaptureLayout` names the tool's frame files, the rangekit :class:`~rangekit.coded.patterns.PatternSpec`
+of the same patterns, and for each frame of that spec where it comes from:
+
+- a file index (an ``int``): the tool recorded that frame;
+- :data:`WHITE_FROM_STEPS` / :data:`BLACK_FROM_STEPS`: the references of a phase-only codec, which records
+  none, made as ``A + B`` and ``A - B`` of its coarsest phase steps (exact for sinusoidal frames);
+- :class:`Inverse` ``(k)``: the inverse of a binary frame the tool projected without one, made as
+  ``white + black - frame k``. rangekit's bit rule, ``frame - inverse > 0``, then reads
+  ``2 frame > white + black``: the frame is nearer white than black, the rule of tools without inverses.
+
+``binning``: the tool's code addresses the projector in blocks of ``binning`` columns (a Gray code whose
+least significant bits are left out: its top bits are the Gray code of ``column // binning``, since
+``gray(u) >> k == gray(u >> k)``). The spec is then for a projector ``ceil(width / binning)`` blocks wide, and
+:func:`decoding_projector` the projector model whose columns are those blocks: exact, not a resampling.
+
+:func:`arrange` puts the tool's frames into the spec's order; everything after it (decoding, triangulation,
+filtering) is rangekit's own, with the layout's ``view_options`` (keywords of
+:func:`rangekit.coded.reconstruct.reconstruct_view`) where a tool's captures need other settings than
+rangekit's own, each with the measurement that chose it in the tool's module.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, Sequence
+
+import numpy as np
+
+from rangekit.camera import PinholeCamera
+from rangekit.coded.patterns import PatternSpec
+from rangekit.errors import FileFormatError
+
+__all__ = ["CaptureLayout", "Inverse", "WHITE_FROM_STEPS", "BLACK_FROM_STEPS", "layout_files", "arrange",
+           "decoding_projector"]
+
+WHITE_FROM_STEPS, BLACK_FROM_STEPS = "A+B", "A-B"
+
+
+@dataclass(frozen=True)
+class Inverse:
+    """The inverse of file ``file``'s binary frame, made as ``white + black - frame``."""
+
+    file: int
+
+
+@dataclass(frozen=True)
+class CaptureLayout:
+    """One tool's capture folder: its files, the same patterns as a rangekit spec, and each spec frame's source.
+
+    ``spec`` and ``frames`` are functions of the projector's (width, height) in the tool's own pixels, since
+    how many bits a Gray code has depends on it; ``n_files`` likewise.
+    """
+
+    name: str                                          # "slstudio:2x3"
+    source: str                                        # the tool's source files the layout was read from
+    file_name: str                                     # a frame's file from its index, e.g. "frameSeq_{:02d}.bmp"
+    n_files: Callable[[int, int], int]                 # how many files, from the projector size
+    spec: Callable[[int, int], PatternSpec]            # the spec, for the (binned) projector size
+    frames: Callable[[int, int], tuple]                # per spec frame: file index, Inverse, or WHITE_/BLACK_...
+    steps_for_references: tuple[int, ...] = ()         # the files whose phase steps make the synthesized references
+    binning: Callable[[int, int], int] = lambda w, h: 1  # projector columns per coded column
+    view_options: dict = field(default_factory=dict)   # reconstruct_view's keywords for the tool's captures
+
+    def decoded_size(self, width: int, height: int) -> tuple[int, int]:
+        """The size of the projector the spec codes: ``width`` in blocks of ``binning`` columns."""
+        return math.ceil(width / self.binning(width, height)), height
+
+
+def layout_files(folder: str | Path, layout: CaptureLayout, width: int, height: int) -> list[Path]:
+    """The layout's frame files in ``folder`` for a ``width`` x ``height`` projector, in the tool's order;
+    FileFormatError naming the first missing."""
+    n = layout.n_files(width, height)
+    paths = [Path(folder) / layout.file_name.format(k) for k in range(n)]
+    missing = [p.name for p in paths if not p.is_file()]
+    if missing:
+        raise FileFormatError(f"{folder}: expected the {n} frames of {layout.name} for a {width}x{height} "
+                              f"projector ({paths[0].name} ... {paths[-1].name}), found {missing[0]} missing"
+                              f"{f' and {len(missing) - 1} more' if len(missing) > 1 else ''}")
+    return paths
+
+
+def arrange(images: Sequence[np.ndarray], layout: CaptureLayout, width: int, height: int
+            ) -> tuple[np.ndarray, PatternSpec]:
+    """The tool's frames (``images``, its order) as a stack in the order of the spec for a ``width`` x ``height``
+    projector (the tool's pixels), and that spec (for :meth:`CaptureLayout.decoded_size`). Made frames keep
+    the frames' dtype, clipped to its range."""
+    from rangekit.coded.phase import phase_from_steps
+
+    n = layout.n_files(width, height)
+    if len(images) != n:
+        raise FileFormatError(f"{layout.name}: expected {n} frames for a {width}x{height} projector, found "
+                              f"{len(images)}")
+    spec = layout.spec(*layout.decoded_size(width, height))
+    frames = layout.frames(width, height)
+    first = np.asarray(images[0])
+    top = np.iinfo(first.dtype).max if first.dtype.kind in "ui" else np.inf
+    made = {}
+    if layout.steps_for_references:
+        _, B, A = phase_from_steps([images[k] for k in layout.steps_for_references])
+        made = {WHITE_FROM_STEPS: np.clip(A + B, 0, top).astype(first.dtype),
+                BLACK_FROM_STEPS: np.clip(A - B, 0, top).astype(first.dtype)}
+
+    def frame(source) -> np.ndarray:
+        if isinstance(source, Inverse):
+            white, black = (frame(frames[spec.frame_names.index(name)]) for name in ("white", "black"))
+            inverse = white.astype(np.int32) + black - np.asarray(images[source.file])
+            return np.clip(inverse, 0, top).astype(first.dtype)
+        return made[source] if isinstance(source, str) else np.asarray(images[source])
+
+    stack = np.stack([frame(f) for f in frames])
+    if len(stack) != len(spec.frame_names):
+        raise FileFormatError(f"{layout.name}: the layout gives {len(stack)} frames, its spec has "
+                              f"{len(spec.frame_names)}")
+    return stack, spec
+
+
+def decoding_projector(projector: PinholeCamera, layout: CaptureLayout) -> PinholeCamera:
+    """The projector as the layout's code sees it: each column a block of ``binning`` columns of ``projector``.
+
+    Block ``c`` spans columns ``s c .. s c + s - 1``, centre ``u = s c + (s - 1) / 2``, so ``fx' = fx / s`` and
+    ``cx' = (cx - (s - 1) / 2) / s``: the same rays, exactly. ``projector`` itself for ``binning`` 1.
+    """
+    s = layout.binning(projector.width, projector.height)
+    if s == 1:
+        return projector
+    K = projector.K.copy()
+    K[0, 0] /= s
+    K[0, 2] = (K[0, 2] - (s - 1) / 2) / s
+    width, height = layout.decoded_size(projector.width, projector.height)
+    return PinholeCamera(K, width, height, projector.dist, projector.T_world_cam, projector.name)

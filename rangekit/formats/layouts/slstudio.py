@@ -1,0 +1,72 @@
+"""SLStudio's capture folders (github jakobwilm/slstudio): ``frameSeq_NN.bmp``, one folder per scan, the frame
+order of each codec's encoder (``src/codec/Codec*.cpp``; docs/real-captures.md has the frame tables).
+
+- ``slstudio:graycode`` (``CodecGrayCode``, columns): 00 white, 01 black, then 10 frames: the 10 most significant
+  bits of the ``ceil(log2(columns))``-bit reflected Gray code of the screen column, most significant first.
+  No inverses: a bit is 1 where the frame is nearer white than black (:class:`~.layout.Inverse`). Those 10
+  bits are the Gray code of ``column // 2**k``, ``k = ceil(log2(columns)) - 10``: a 1824-column screen is
+  coded in blocks of 2 columns (``binning``).
+- ``slstudio:2x3`` (``CodecPhaseShift2x3``, columns): 00-02 three steps of 16 periods across the screen,
+  03-05 three steps of one period (the cue), each ``(1 + cos(2 pi x / pitch - 2 pi k / 3)) / 2``:
+  rangekit's ``phase`` method with periods (width, width / 16) and 3 steps each; no white or black frame.
+"""
+
+from __future__ import annotations
+
+import math
+
+from rangekit.coded.patterns import PatternSpec
+from rangekit.errors import ConfigError
+from rangekit.formats.layouts.layout import BLACK_FROM_STEPS, WHITE_FROM_STEPS, CaptureLayout, Inverse
+
+__all__ = ["SLSTUDIO_LAYOUTS"]
+
+FRAME_FILE = "frameSeq_{:02d}.bmp"
+GRAY_BITS = 10          # CodecGrayCode.cpp: Nhorz, the column bits projected whatever the screen's width
+
+#: How rangekit reconstructs SLStudio's Gray code, each setting measured on its skull capture against the
+#: authors' cloud (tests/formats/test_capture_layouts.py, docs/real-captures.md):
+#: - no direct/global separation (``max_global_ratio`` inf): it needs true inverses; with made ones a blurred
+#:   stripe reads as global light, and rejected 53% of the pixels the authors kept (eye sockets, rims);
+#: - ``stripe_smoothing`` 2 (1 4 6 4 1 along the stripes, a Gaussian of 1 camera pixel): the stripe edges of
+#:   its projector wander from row to row by 0.34 projector columns RMS, white in both directions, five
+#:   times what the camera's noise moves a crossing (its 2x3 phase noise gives 1.5 DN); per pixel the
+#:   cloud is 12% rougher than the authors' (who keep one point per stripe edge), with it 1.9% smoother;
+#: - ``min_confidence`` 0.015 (the decoder's own ``min_contrast``; 3.8 DN of white - black, 2.5 times the
+#:   camera's noise): 0.03, tuned on the simulator's camera, drops 2% of the skull the authors kept.
+GRAY_VIEW_OPTIONS = {"decode_options": {"max_global_ratio": float("inf"), "stripe_smoothing": 2},
+                     "min_confidence": 0.015}
+
+#: And its 2x3 phase shifting (the same measurement): ``min_confidence`` 0.015 as above, and ``edge_margin`` 0:
+#: three steps leave 0.6 projector columns of noise (as its 1.5 DN camera noise predicts), at low modulation
+#: a single pixel then jumps in range, and the margin grows each such pixel into a 5 x 5 hole: 91.8% of the
+#: authors' points are within 0.5 mm of the cloud with the margin, 95.7% without.
+PHASE_2X3_VIEW_OPTIONS = {"min_confidence": 0.015, "edge_margin": 0}
+
+
+def _gray_binning(width: int, height: int) -> int:
+    if width <= 2 ** (GRAY_BITS - 1):
+        raise ConfigError(f"slstudio:graycode codes {GRAY_BITS} column bits: the projector needs more than "
+                          f"{2 ** (GRAY_BITS - 1)} columns, found {width}")
+    return 2 ** max(0, math.ceil(math.log2(width)) - GRAY_BITS)
+
+
+def _gray_frames(width: int, height: int) -> tuple:
+    pairs = []
+    for k in range(GRAY_BITS):                     # file 2 + k holds bit GRAY_BITS - 1 - k of the coded column
+        pairs += [2 + k, Inverse(2 + k)]
+    return (0, 1, *pairs)
+
+
+SLSTUDIO_LAYOUTS = {
+    "slstudio:graycode": CaptureLayout(
+        "slstudio:graycode", "slstudio src/codec/CodecGrayCode.cpp", FRAME_FILE, lambda w, h: 2 + GRAY_BITS,
+        lambda w, h: PatternSpec("graycode", w, h, ("columns",)), _gray_frames, binning=_gray_binning,
+        view_options=GRAY_VIEW_OPTIONS),
+    "slstudio:2x3": CaptureLayout(
+        "slstudio:2x3", "slstudio src/codec/CodecPhaseShift2x3.cpp, pstools.cpp", FRAME_FILE, lambda w, h: 6,
+        lambda w, h: PatternSpec("phase", w, h, ("columns",),
+                                 {"steps": 3, "fine_steps": 3, "periods": [w, w / 16]}),
+        lambda w, h: (WHITE_FROM_STEPS, BLACK_FROM_STEPS, 3, 4, 5, 0, 1, 2), (3, 4, 5),
+        view_options=PHASE_2X3_VIEW_OPTIONS),
+}

@@ -29,6 +29,9 @@ Predicted std of each decoded coordinate (``col_std``, ``row_std``; :mod:`rangek
 phase methods from the camera noise (measured on the Gray-code pairs for hybrid, on the sinusoid fit's
 alternating sum for phase) and the fringe modulation; integer Gray codes 1/sqrt(12) px; subpixel edges NaN.
 
+Other tools' fringe codecs (micro, modulated, ftp, psp, faps) are decoded by
+:func:`rangekit.coded.codecs.decoders.decode_fringes`; their module docs give each formula and its source.
+
 Direct/global separation (Nayar et al. 2006): in the finest binary stripes half the projector is lit,
 so ``direct = max - min`` and ``global = 2 (min - black)`` over the finest pattern/inverse pairs. Pixels
 whose global light exceeds ``max_global_ratio`` times the direct light are rejected as
@@ -44,6 +47,8 @@ import numpy as np
 
 from rangekit.errors import DecodeError
 from rangekit.coded.binary import axis_code, axis_subpixel, smooth_along_stripes
+from rangekit.coded.codecs.decoders import decode_fringes
+from rangekit.coded.codecs.fringes import FRINGE_METHODS
 from rangekit.coded.debruijn import decode_debruijn
 from rangekit.coded.frames import CaptureStack
 from rangekit.coded.patterns import PatternSpec
@@ -116,10 +121,14 @@ def decode(stack, spec: PatternSpec, *, order: str = "rangekit", subpixel: bool 
                           f"{type(response).__name__} {response!r}; e.g. response=ProjectorResponse(gamma=2.2)")
     if spec.method in ("white", "black"):
         raise DecodeError(f"pattern {spec.method!r} carries no code; decode a graycode, xor02, xor04, phase, "
-                          "hybrid or debruijn capture")
+                          "hybrid, debruijn, micro, modulated, ftp, psp or faps capture")
     if spec.method == "debruijn":
         return decode_debruijn(stack, spec, min_contrast=min_contrast, shadow_threshold=shadow_threshold,
                                full_scale=full_scale)
+    if spec.method in FRINGE_METHODS:
+        return decode_fringes(stack, spec, order=order, min_contrast=min_contrast,
+                              shadow_threshold=shadow_threshold, full_scale=full_scale, response=response,
+                              workers=workers)
     from rangekit.coded import _kernels as K
 
     fr = CaptureStack(stack, spec, order)

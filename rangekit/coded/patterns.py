@@ -20,10 +20,16 @@ Methods and frame lists (Fusiello ch. 13.2; pixel centres at integers, column u 
 ``phase``
     white, black, then for each axis and each period T in ``periods`` (coarse to fine), ``steps``
     frames ``0.5 + 0.5 cos(2 pi u / T - 2 pi s / steps)``. The coarsest period is at least the axis
-    size, so its phase is absolute; each finer phase is unwrapped with the coarser one.
+    size, so its phase is absolute; each finer phase is unwrapped with the coarser one. One period gives
+    single-period phase shifting (its steps are ``fine_steps``). Values are rounded to nearest; option
+    ``rounding: "down"`` makes them as SLStudio's ``computePhaseVector`` does (float32, truncated), so
+    SLStudio's 2x3, N-step and single-period codecs are this method frame for frame.
 ``hybrid``
     The graycode frames, then ``steps`` phase frames of one ``period`` per axis: the Gray code gives the
     period, the phase the position inside it.
+``micro``, ``modulated``, ``ftp``, ``psp``, ``faps``
+    Other tools' fringe codecs (SLStudio's micro and modulated phase shifting, OpenCV's sinusoidal
+    patterns), their frames value for value as the tool makes them: :mod:`rangekit.coded.codecs.fringes`.
 ``debruijn`` (single shot, Fusiello 13.2.5)
     One RGB frame of vertical stripes ``stripe_width`` px wide. Stripe colours follow a de Bruijn
     sequence B(k, n) of transitions: colour_i = (colour_{i-1} + 1 + s_i) mod (k + 1), from a palette of
@@ -43,16 +49,19 @@ from typing import Iterator
 import numpy as np
 
 from rangekit.budget import MAX_IMAGE_SIDE_PX, check_budget
+from rangekit.coded.codecs.fringes import (FRINGE_METHODS, check_fringe_options, fringe_frame, fringe_frame_names,
+                                           slstudio_phase_line, slstudio_shift)
 from rangekit.errors import PatternError
 
 __all__ = ["PatternSpec", "PATTERN_METHODS", "MAX_PHASE_STEPS", "MAX_PHASE_LEVELS", "MAX_DEBRUIJN_LENGTH",
            "make_pattern_spec", "gray_encode", "gray_decode", "n_bits_for",
            "de_bruijn", "DEBRUIJN_PALETTE", "debruijn_stripe_colours"]
 
-PATTERN_METHODS = ("white", "black", "graycode", "xor02", "xor04", "phase", "hybrid", "debruijn")
+PATTERN_METHODS = ("white", "black", "graycode", "xor02", "xor04", "phase", "hybrid", "debruijn") + FRINGE_METHODS
 _BINARY = ("graycode", "xor02", "xor04", "hybrid")
 _AXES = ("columns", "rows")
 _ORDERS = ("rangekit", "opencv")
+_ROUNDINGS = ("nearest", "down")
 
 # Linear RGB stripe colours (0/1 per channel), as distinct as a colour camera sees them.
 DEBRUIJN_PALETTE = np.array([[1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 0], [1, 0, 1], [0, 1, 1], [1, 1, 1]],
@@ -175,6 +184,11 @@ class PatternSpec:
         object.__setattr__(self, "axes", axes)
         if self.method == "phase":
             opts["periods"] = {a: self._periods(opts.get("periods"), a) for a in axes}
+            if "rounding" in opts and opts["rounding"] not in _ROUNDINGS:
+                raise PatternError(f"phase rounding must be one of {', '.join(_ROUNDINGS)} (\"down\": SLStudio's "
+                                   f"truncated frames), found {_show(opts['rounding'])}")
+        if self.method in FRINGE_METHODS:
+            opts = check_fringe_options(self.method, opts, self.width, self.height, axes)
         if self.method == "hybrid":
             period = opts["period"]
             if not (_is_number(period) and 0 < period <= MAX_IMAGE_SIDE_PX):
@@ -242,6 +256,8 @@ class PatternSpec:
             return [m]
         if m == "debruijn":
             return ["debruijn"]
+        if m in FRINGE_METHODS:
+            return fringe_frame_names(m, self.axes, self.options)
         names = ["white", "black"]
         for axis in self.axes:
             prefix = "col" if axis == "columns" else "row"
@@ -287,6 +303,8 @@ class PatternSpec:
 
     def frame_by_name(self, name: str) -> np.ndarray:
         H, W = self.height, self.width
+        if self.method in FRINGE_METHODS:
+            return fringe_frame(self.method, name, W, H, self.options)
         if name == "white":
             return np.full((H, W), 255, np.uint8)
         if name == "black":
@@ -315,8 +333,13 @@ class PatternSpec:
             s = int(parts[2][1:])
             steps = dict((f"{p:g}", st) for p, st in self.phase_plan("columns" if prefix == "col" else "rows"))
             n_steps = steps[f"{period:g}"]
-            value = 0.5 + 0.5 * np.cos(2 * np.pi * u / period - 2 * np.pi * s / n_steps)
-            line = np.rint(value * 255).astype(np.uint8)
+            if self.options.get("rounding") == "down":  # the exact period, not its name's 6 digits
+                exact = next(p for p, _ in self.phase_plan("columns" if prefix == "col" else "rows")
+                             if f"{p:g}" == f"{period:g}")
+                line = slstudio_phase_line(n, exact, slstudio_shift(s, n_steps))
+            else:
+                value = 0.5 + 0.5 * np.cos(2 * np.pi * u / period - 2 * np.pi * s / n_steps)
+                line = np.rint(value * 255).astype(np.uint8)
         return np.broadcast_to(line[None, :] if prefix == "col" else line[:, None], (H, W)).copy()
 
     def frames(self, *, order: str = "rangekit") -> Iterator[np.ndarray]:

@@ -16,8 +16,9 @@ light of fringe step i alone (Nayar et al.'s separation, done by the carrier).
    nearest to it is taken (SLStudio: ``pstools::unwrapWithCue(up, upCue, nPhases)``, ``up *= screenCols / 2 pi``).
 
 Masks: shadow where the cue's signal ``2 B_cue`` is below ``shadow_threshold``; low contrast where the
-direct light ``b = 4 B_D`` (``B_D`` the modulation of ``D_i`` over i) is below ``min_contrast`` (SLStudio
-thresholds the cue's DFT magnitude at 10); inconsistent where cue and fringe disagree by more than a quarter
+direct light ``b = 4 B_D`` (``B_D`` the modulation of ``D_i`` over i; under a response, ``B_D`` divided by
+the modulation both fits give at their phases, :func:`rangekit.coded.codecs.known_shifts.white_minus_black`)
+is below ``min_contrast`` (SLStudio thresholds the cue's DFT magnitude at 10); inconsistent where cue and fringe disagree by more than a quarter
 period (:data:`rangekit.coded.codecs.fringe_result.CUE_TOLERANCE`). ``direct`` is ``b``.
 """
 
@@ -27,7 +28,7 @@ import numpy as np
 
 from rangekit.coded.codecs.fringe_result import AxisMaps, unwrap_with_cue
 from rangekit.coded.codecs.fringes import PI_F32, modulated_pitches, slstudio_shift
-from rangekit.coded.codecs.known_shifts import corrected_phase, phase_known_shifts
+from rangekit.coded.codecs.known_shifts import corrected_phase, phase_known_shifts, white_minus_black
 from rangekit.coded.frames import CaptureStack
 from rangekit.coded.patterns import PatternSpec
 from rangekit.rig.projector_response import ProjectorResponse
@@ -48,17 +49,21 @@ def decode_modulated_axis(fr: CaptureStack, spec: PatternSpec, axis: str, respon
     P, _ = modulated_pitches(spec.options, n, m)
     whole = (slice(None), slice(None))
     steps = _steps()
-    direct = []
+    direct, carrier = [], []
     for i in range(3):
-        _, D, _ = phase_known_shifts([fr.get(f"{prefix}_fringe{i}_carrier{k}", whole) for k in range(3)], steps)
+        psi, D, _ = phase_known_shifts([fr.get(f"{prefix}_fringe{i}_carrier{k}", whole) for k in range(3)], steps)
         direct.append(D)
+        carrier.append(psi)
     phi, B_D, _ = phase_known_shifts(direct, steps)
     phi = corrected_phase(phi, response)
+    # The carrier's phase from the step with the most light (the others' may be noise alone).
+    brightest = np.argmax(np.stack(direct), axis=0)
+    psi = corrected_phase(np.choose(brightest, carrier), response)
     cue_steps = np.array([slstudio_shift(s, 3) for s in range(3)], np.float64)
     phi_cue, B_cue, A_cue = phase_known_shifts([fr.get(f"{prefix}_cue_s{s}", whole) for s in range(3)], cue_steps)
     phi_cue = corrected_phase(phi_cue, response)
     wrapped = phi * np.float32(P / (2 * np.pi))
     value, disagree = unwrap_with_cue(wrapped, float(P), phi_cue * np.float32(n / (2 * np.pi)))
-    b = np.float32(4) * B_D
+    b = white_minus_black(white_minus_black(B_D, phi, steps, response), psi, steps, response)
     return AxisMaps(value=value, signal=b, reference=np.float32(2) * B_cue, inconsistent=disagree,
                     white=A_cue + B_cue, direct=b)

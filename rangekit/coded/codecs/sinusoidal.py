@@ -29,7 +29,8 @@ modulo P.
 The cue (three frames of one period, steps ``-i d``) gives ``x_cue``; the period of the fringe nearest to it
 is taken and pixels where the two disagree by more than a quarter period are ``inconsistent``
 (:func:`rangekit.coded.codecs.fringe_result.unwrap_with_cue`). Shadow from the cue's ``2 B``, low contrast from
-the fringe's ``2 B`` (OpenCV: ``computeShadowMask``, the mean of the three frames above 10).
+the fringe's ``2 B`` (FTP: the smaller of its ``2 |2 z|`` and the cue's ``2 B``, as the transform spreads the
+amplitude over its window, into shadows; OpenCV: ``computeShadowMask``, the mean of the three frames above 10).
 """
 
 from __future__ import annotations
@@ -145,5 +146,8 @@ def decode_sinusoidal_axis(fr: CaptureStack, spec: PatternSpec, axis: str, respo
             phi = corrected_phase(phi, response)
         wrapped = _column(phi, period)
     value, disagree = unwrap_with_cue(wrapped, period, cue)
-    return AxisMaps(value=value, signal=np.float32(2) * B, reference=np.float32(2) * B_cue, inconsistent=disagree,
+    signal = np.float32(2) * B
+    if method == "ftp":  # the transform spreads the fringe's amplitude over a window: the cue's is per pixel
+        signal = np.minimum(signal, np.float32(2) * B_cue)
+    return AxisMaps(value=value, signal=signal, reference=np.float32(2) * B_cue, inconsistent=disagree,
                     white=A_cue + B_cue)

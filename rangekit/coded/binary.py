@@ -140,13 +140,14 @@ def axis_subpixel(fr: CaptureStack, spec: PatternSpec, axis: str, code: np.ndarr
     return out
 
 
-def smooth_along_stripes(coord: np.ndarray, axis: str, half: int) -> np.ndarray:
+def smooth_along_stripes(coord: np.ndarray, axis: str, half: int, max_step: float = 2.0) -> np.ndarray:
     """A decoded coordinate map (H, W) float32 averaged along its stripes: camera columns for projector
     columns (stripes of a column code stand about upright in the camera), camera rows for projector rows.
 
-    Binomial weights over ``2 half + 1`` pixels (``half`` 1: 1 2 1; 2: 1 4 6 4 1, a Gaussian of 1 px);
-    pixels with a NaN among their taps keep their value. Used where a real projector's stripe edges wander
-    from one camera row to the next more than the camera's noise explains (docs/real-captures.md).
+    Binomial weights over ``2 half + 1`` pixels (``half`` 1: 1 2 1; 2: 1 4 6 4 1, a Gaussian of 1 px). A pixel
+    keeps its value where a tap is NaN or differs from it by more than ``max_step`` codes per pixel between
+    them (a depth edge: the stripes there belong to two surfaces). Used where a real projector's stripe edges
+    wander from one camera row to the next more than the camera's noise explains (docs/real-captures.md).
     """
     if half <= 0:
         return coord
@@ -156,5 +157,11 @@ def smooth_along_stripes(coord: np.ndarray, axis: str, half: int) -> np.ndarray:
     pad = [(half, half) if a == along else (0, 0) for a in range(2)]
     padded = np.pad(coord.astype(np.float64), pad, constant_values=np.nan)
     n = coord.shape[along]
-    acc = sum(w * np.take(padded, np.arange(k, k + n), axis=along) for k, w in enumerate(taps))
+    centre = coord.astype(np.float64)
+    acc = np.zeros_like(centre)
+    with np.errstate(invalid="ignore"):
+        for k, w in enumerate(taps):
+            tap = np.take(padded, np.arange(k, k + n), axis=along)
+            far = np.abs(tap - centre) > max_step * abs(k - half)
+            acc += w * np.where(far, np.nan, tap)
     return np.where(np.isfinite(acc), acc, coord).astype(np.float32)

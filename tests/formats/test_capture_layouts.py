@@ -87,13 +87,18 @@ def test_smoothing_along_stripes_keeps_a_slope_and_quiets_noise():
     smooth = smooth_along_stripes(slope, "columns", 2)
     np.testing.assert_allclose(smooth[2:-2], slope[2:-2], atol=1e-4)           # binomial taps keep a line
     assert (smooth[:2] == slope[:2]).all() and (smooth[-2:] == slope[-2:]).all()  # taps outside: unchanged
-    noise = rng.normal(0, 1, (400, 400)).astype(np.float32)
+    noise = rng.normal(0, 0.2, (400, 400)).astype(np.float32)           # 0.2 codes, as on SLStudio's skull
     ratio = smooth_along_stripes(noise, "columns", 2)[2:-2].var() / noise[2:-2].var()
     assert abs(ratio - 70 / 256) < 0.02                          # sum of the squared taps 1 4 6 4 1 / 16
     holed = noise.copy()
     holed[100, 50] = np.nan
     out = smooth_along_stripes(holed, "rows", 1)
     assert np.isnan(out[100, 50]) and out[100, 49] == holed[100, 49] and out[100, 48] != holed[100, 48]
+    edge = slope.copy()
+    edge[100:] += 40                                             # a depth edge: two surfaces' stripes
+    out = smooth_along_stripes(edge, "columns", 2)
+    assert (out[98:102] == edge[98:102]).all()                   # taps across the edge: kept as they are
+    np.testing.assert_allclose(out[90:97], edge[90:97], atol=1e-4)  # beside it, smoothed (a line stays a line)
 
 
 def test_slstudio_2x3_as_projected_decodes_to_its_columns():

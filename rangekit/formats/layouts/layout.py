@@ -11,10 +11,11 @@ of the same patterns, and for each frame of that spec where it comes from:
   ``white + black - frame k``. rangekit's bit rule, ``frame - inverse > 0``, then reads
   ``2 frame > white + black``: the frame is nearer white than black, the rule of tools without inverses.
 
-``binning``: the tool's code addresses the projector in blocks of ``binning`` columns (a Gray code whose
-least significant bits are left out: its top bits are the Gray code of ``column // binning``, since
-``gray(u) >> k == gray(u >> k)``). The spec is then for a projector ``ceil(width / binning)`` blocks wide, and
-:func:`decoding_projector` the projector model whose columns are those blocks: exact, not a resampling.
+``blocks``: per axis, how the tool's code counts projector pixels (:class:`AxisBlocks`): in blocks of ``size``
+pixels (a Gray code whose least significant bits are left out: its top bits are the Gray code of
+``column >> k``, since ``gray(u) >> k == gray(u >> k)``), from ``offset`` pixels before the first (a Gray code
+centred on the screen, as Moreno and Taubin's). The spec is for the projector of those codes, and
+:func:`decoding_projector` the projector model whose pixels they are: exact, not a resampling.
 
 :func:`arrange` puts the tool's frames into the spec's order; everything after it (decoding, triangulation,
 filtering) is rangekit's own, with the layout's ``view_options`` (keywords of
@@ -35,8 +36,8 @@ from rangekit.camera import PinholeCamera
 from rangekit.coded.patterns import PatternSpec
 from rangekit.errors import FileFormatError
 
-__all__ = ["CaptureLayout", "Inverse", "WHITE_FROM_STEPS", "BLACK_FROM_STEPS", "layout_files", "arrange",
-           "decoding_projector"]
+__all__ = ["AxisBlocks", "CaptureLayout", "Inverse", "WHITE_FROM_STEPS", "BLACK_FROM_STEPS", "layout_files",
+           "arrange", "decoding_projector", "tool_frames"]
 
 WHITE_FROM_STEPS, BLACK_FROM_STEPS = "A+B", "A-B"
 
@@ -49,6 +50,22 @@ class Inverse:
 
 
 @dataclass(frozen=True)
+class AxisBlocks:
+    """How a code counts the pixels of one projector axis: ``code = (pixel + offset) // size``; code ``c`` is lit
+    on pixels ``size c - offset ... size c - offset + size - 1``, centre ``size c - offset + (size - 1) / 2``."""
+
+    size: int = 1
+    offset: int = 0
+
+    def codes(self, n: int) -> int:
+        """How many codes an axis of ``n`` pixels needs (the spec's size on that axis)."""
+        return (n - 1 + self.offset) // self.size + 1
+
+
+PLAIN = (AxisBlocks(), AxisBlocks())
+
+
+@dataclass(frozen=True)
 class CaptureLayout:
     """One tool's capture folder: its files, the same patterns as a rangekit spec, and each spec frame's source.
 
@@ -58,29 +75,46 @@ class CaptureLayout:
 
     name: str                                          # "slstudio:2x3"
     source: str                                        # the tool's source files the layout was read from
-    file_name: str                                     # a frame's file from its index, e.g. "frameSeq_{:02d}.bmp"
+    file_name: str                                     # a frame's file from its index, e.g. "frameSeq_{:02d}.bmp";
+                                                       # may name {index} and {camera} (1, 2: a stereo capture)
     n_files: Callable[[int, int], int]                 # how many files, from the projector size
     spec: Callable[[int, int], PatternSpec]            # the spec, for the (binned) projector size
     frames: Callable[[int, int], tuple]                # per spec frame: file index, Inverse, or WHITE_/BLACK_...
     steps_for_references: tuple[int, ...] = ()         # the files whose phase steps make the synthesized references
-    binning: Callable[[int, int], int] = lambda w, h: 1  # projector columns per coded column
+    blocks: Callable[[int, int], tuple] = lambda w, h: PLAIN   # (columns, rows) AxisBlocks of the code
     view_options: dict = field(default_factory=dict)   # reconstruct_view's keywords for the tool's captures
+    first_index: int = 0                               # the first file's index (OpenCV's and Moreno-Taubin's: 1)
+    other_names: tuple[str, ...] = ()                  # file names tried when file_name's first file is missing
 
     def decoded_size(self, width: int, height: int) -> tuple[int, int]:
-        """The size of the projector the spec codes: ``width`` in blocks of ``binning`` columns."""
-        return math.ceil(width / self.binning(width, height)), height
+        """The size of the projector the spec codes: the codes of each axis (:class:`AxisBlocks`)."""
+        cols, rows = self.blocks(width, height)
+        return cols.codes(width), rows.codes(height)
 
 
-def layout_files(folder: str | Path, layout: CaptureLayout, width: int, height: int) -> list[Path]:
-    """The layout's frame files in ``folder`` for a ``width`` x ``height`` projector, in the tool's order;
-    FileFormatError naming the first missing."""
+def layout_files(folder: str | Path, layout: CaptureLayout, width: int, height: int, *, camera: int = 1
+                 ) -> list[Path]:
+    """The layout's frame files in ``folder`` for a ``width`` x ``height`` projector, in the tool's order (of
+    camera ``camera`` where the names carry one); FileFormatError naming the first missing."""
     n = layout.n_files(width, height)
-    paths = [Path(folder) / layout.file_name.format(k) for k in range(n)]
+    names = (layout.file_name, *layout.other_names)
+    for name in names:
+        paths = [Path(folder) / name.format(k, index=k, camera=camera)
+                 for k in range(layout.first_index, layout.first_index + n)]
+        if paths[0].is_file():
+            break
+    else:
+        paths = [Path(folder) / layout.file_name.format(k, index=k, camera=camera)
+                 for k in range(layout.first_index, layout.first_index + n)]
     missing = [p.name for p in paths if not p.is_file()]
     if missing:
         raise FileFormatError(f"{folder}: expected the {n} frames of {layout.name} for a {width}x{height} "
                               f"projector ({paths[0].name} ... {paths[-1].name}), found {missing[0]} missing"
                               f"{f' and {len(missing) - 1} more' if len(missing) > 1 else ''}")
+    extra = Path(folder) / names[0].format(layout.first_index + n, index=layout.first_index + n, camera=camera)
+    if extra.is_file():
+        raise FileFormatError(f"{folder}: expected the {n} frames of {layout.name} for a {width}x{height} "
+                              f"projector, found more ({extra.name}): is the projector size right?")
     return paths
 
 
@@ -120,16 +154,36 @@ def arrange(images: Sequence[np.ndarray], layout: CaptureLayout, width: int, hei
 
 
 def decoding_projector(projector: PinholeCamera, layout: CaptureLayout) -> PinholeCamera:
-    """The projector as the layout's code sees it: each column a block of ``binning`` columns of ``projector``.
+    """The projector as the layout's code sees it: its pixels are the code's blocks (:class:`AxisBlocks`).
 
-    Block ``c`` spans columns ``s c .. s c + s - 1``, centre ``u = s c + (s - 1) / 2``, so ``fx' = fx / s`` and
-    ``cx' = (cx - (s - 1) / 2) / s``: the same rays, exactly. ``projector`` itself for ``binning`` 1.
+    Code ``c`` is centred on pixel ``u = s c - o + (s - 1) / 2``, so ``fx' = fx / s`` and
+    ``cx' = (cx + o - (s - 1) / 2) / s`` (rows alike): the same rays, exactly. ``projector`` itself where the
+    code counts single pixels from 0.
     """
-    s = layout.binning(projector.width, projector.height)
-    if s == 1:
+    cols, rows = layout.blocks(projector.width, projector.height)
+    if (cols, rows) == PLAIN:
         return projector
     K = projector.K.copy()
-    K[0, 0] /= s
-    K[0, 2] = (K[0, 2] - (s - 1) / 2) / s
+    for axis, blocks in ((0, cols), (1, rows)):
+        K[axis, axis] /= blocks.size
+        K[axis, 2] = (K[axis, 2] + blocks.offset - (blocks.size - 1) / 2) / blocks.size
     width, height = layout.decoded_size(projector.width, projector.height)
     return PinholeCamera(K, width, height, projector.dist, projector.T_world_cam, projector.name)
+
+
+def tool_frames(layout: CaptureLayout, width: int, height: int) -> list[np.ndarray]:
+    """The frames the tool projects, in its file order, as (height, width) uint8 images of a ``width`` x
+    ``height`` projector: what the simulator renders to make a capture in the tool's layout (a file made by
+    rangekit, as a phase codec's references, is none of them). Each comes from the spec's frame of that file,
+    its codes spread over their blocks."""
+    spec = layout.spec(*layout.decoded_size(width, height))
+    cols, rows = layout.blocks(width, height)
+    col_code = (np.arange(width) + cols.offset) // cols.size
+    row_code = (np.arange(height) + rows.offset) // rows.size
+    files = {f: name for f, name in zip(layout.frames(width, height), spec.frame_names) if isinstance(f, int)}
+    frames = []
+    for k in range(layout.n_files(width, height)):
+        if k not in files:
+            raise FileFormatError(f"{layout.name}: file {k} holds none of the spec's frames")
+        frames.append(spec.frame_by_name(files[k])[np.ix_(row_code, col_code)])
+    return frames

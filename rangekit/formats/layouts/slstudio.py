@@ -5,7 +5,7 @@ order of each codec's encoder (``src/codec/Codec*.cpp``; docs/real-captures.md h
   bits of the ``ceil(log2(columns))``-bit reflected Gray code of the screen column, most significant first.
   No inverses: a bit is 1 where the frame is nearer white than black (:class:`~.layout.Inverse`). Those 10
   bits are the Gray code of ``column // 2**k``, ``k = ceil(log2(columns)) - 10``: a 1824-column screen is
-  coded in blocks of 2 columns (``binning``).
+  coded in blocks of 2 columns (``blocks``).
 - ``slstudio:2x3`` (``CodecPhaseShift2x3``, columns): 00-02 three steps of 16 periods across the screen,
   03-05 three steps of one period (the cue), each ``(1 + cos(2 pi x / pitch - 2 pi k / 3)) / 2``:
   rangekit's ``phase`` method with periods (width, width / 16) and 3 steps each; no white or black frame.
@@ -17,7 +17,7 @@ import math
 
 from rangekit.coded.patterns import PatternSpec
 from rangekit.errors import ConfigError
-from rangekit.formats.layouts.layout import BLACK_FROM_STEPS, WHITE_FROM_STEPS, CaptureLayout, Inverse
+from rangekit.formats.layouts.layout import BLACK_FROM_STEPS, WHITE_FROM_STEPS, AxisBlocks, CaptureLayout, Inverse
 
 __all__ = ["SLSTUDIO_LAYOUTS"]
 
@@ -44,11 +44,11 @@ GRAY_VIEW_OPTIONS = {"decode_options": {"max_global_ratio": float("inf"), "strip
 PHASE_2X3_VIEW_OPTIONS = {"min_confidence": 0.015, "edge_margin": 0}
 
 
-def _gray_binning(width: int, height: int) -> int:
+def _gray_blocks(width: int, height: int) -> tuple[AxisBlocks, AxisBlocks]:
     if width <= 2 ** (GRAY_BITS - 1):
         raise ConfigError(f"slstudio:graycode codes {GRAY_BITS} column bits: the projector needs more than "
                           f"{2 ** (GRAY_BITS - 1)} columns, found {width}")
-    return 2 ** max(0, math.ceil(math.log2(width)) - GRAY_BITS)
+    return AxisBlocks(2 ** max(0, math.ceil(math.log2(width)) - GRAY_BITS)), AxisBlocks()
 
 
 def _gray_frames(width: int, height: int) -> tuple:
@@ -61,12 +61,13 @@ def _gray_frames(width: int, height: int) -> tuple:
 SLSTUDIO_LAYOUTS = {
     "slstudio:graycode": CaptureLayout(
         "slstudio:graycode", "slstudio src/codec/CodecGrayCode.cpp", FRAME_FILE, lambda w, h: 2 + GRAY_BITS,
-        lambda w, h: PatternSpec("graycode", w, h, ("columns",)), _gray_frames, binning=_gray_binning,
+        lambda w, h: PatternSpec("graycode", w, h, ("columns",)), _gray_frames, blocks=_gray_blocks,
         view_options=GRAY_VIEW_OPTIONS),
     "slstudio:2x3": CaptureLayout(
         "slstudio:2x3", "slstudio src/codec/CodecPhaseShift2x3.cpp, pstools.cpp", FRAME_FILE, lambda w, h: 6,
         lambda w, h: PatternSpec("phase", w, h, ("columns",),
-                                 {"steps": 3, "fine_steps": 3, "periods": [w, w / 16]}),
+                                 {"steps": 3, "fine_steps": 3, "periods": [w, w / 16], "rounding": "down"}),
         lambda w, h: (WHITE_FROM_STEPS, BLACK_FROM_STEPS, 3, 4, 5, 0, 1, 2), (3, 4, 5),
         view_options=PHASE_2X3_VIEW_OPTIONS),
 }
+

@@ -4,7 +4,8 @@ Modules: ``patterns`` (what is projected), ``decode`` (capture stack -> projecto
 ``binary`` and ``phase`` for the code families, ``debruijn`` for single-shot colour stripes, ``result``
 for :class:`DecodeResult`), ``response`` (gamma fit and phase correction), ``triangulate`` (camera pixel +
 projector coordinate -> 3D point), ``uncertainty`` (camera noise model, decoded-coordinate std, and its
-propagation to a per-point sigma along the camera ray).
+propagation to a per-point sigma along the camera ray); ``codecs/`` holds other tools' fringe codecs (SLStudio's
+micro and modulated phase shifting, OpenCV's FTP, PSP and FAPS).
 """
 
 from rangekit.coded.debruijn import decode_debruijn

@@ -106,6 +106,9 @@ def decode(stack, spec: PatternSpec, *, order: str = "rangekit", subpixel: bool 
         captures whose stripe edges wander from row to row (a real projector's, docs/real-captures.md).
     workers, chunk_rows : threads and rows per chunk.
 
+    The fringe codecs (micro, modulated, ftp, psp, faps) read ``min_contrast``, ``shadow_threshold``,
+    ``full_scale``, ``response`` and ``workers``; the other options are the binary and phase codes'.
+
     Returns
     -------
     DecodeResult

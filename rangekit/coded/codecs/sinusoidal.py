@@ -97,7 +97,8 @@ def _measured_steps(z0: np.ndarray, z1: np.ndarray, z2: np.ndarray, peak: tuple[
     """FAPS's steps ``t_1 = arg(z_1 conj z_0)``, ``t_2 = arg(z_2 conj z_1)``, each product first averaged over
     a Gaussian of sigma one camera fringe period (FTP's phase errors follow the fringe, so they swing about zero over
     a period while the step changes slowly)."""
-    sigma = max(z0.shape) / max(float(np.hypot(*peak)), 1.0)
+    cycles_per_px = float(np.hypot(peak[0] / z0.shape[0], peak[1] / z0.shape[1]))
+    sigma = 1.0 / max(cycles_per_px, 1.0 / max(z0.shape))
     out = []
     for u, v in ((z1, z0), (z2, z1)):
         w = u * np.conj(v)

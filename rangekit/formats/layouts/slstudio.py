@@ -71,3 +71,21 @@ SLSTUDIO_LAYOUTS = {
         view_options=PHASE_2X3_VIEW_OPTIONS),
 }
 
+
+# ------------------------------------------------------------------ slstudio:calibration
+#: ``CodecCalibration.cpp``'s ``nPhases``: fringes across the screen in the fine steps of each axis.
+CALIBRATION_PHASES = 16
+
+
+def _calibration_spec(width: int, height: int) -> PatternSpec:
+    """Both axes as SLStudio's calibration codec codes them: a cue of one period and 16 periods, 3 steps each,
+    the frames truncated as ``pstools::computePhaseVector`` makes them (``rounding`` "down")."""
+    periods = {"columns": [width, width / CALIBRATION_PHASES], "rows": [height, height / CALIBRATION_PHASES]}
+    return PatternSpec("phase", width, height, ("columns", "rows"),
+                       {"steps": 3, "fine_steps": 3, "periods": periods, "rounding": "down"})
+
+
+SLSTUDIO_LAYOUTS["slstudio:calibration"] = CaptureLayout(
+    "slstudio:calibration", "slstudio src/codec/CodecCalibration.cpp, pstools.cpp; src/calibrator/CalibratorLocHom.cpp",
+    FRAME_FILE, lambda w, h: 12, _calibration_spec,
+    lambda w, h: (WHITE_FROM_STEPS, BLACK_FROM_STEPS, 3, 4, 5, 0, 1, 2, 9, 10, 11, 6, 7, 8), (3, 4, 5))

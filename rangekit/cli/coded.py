@@ -39,7 +39,7 @@ def cmd_decode(args: argparse.Namespace) -> int:
 def cmd_reconstruct(args: argparse.Namespace) -> int:
     """rangekit reconstruct CAPTURE_DIR [--rig RIG.json] --out cloud.ply"""
     from rangekit.app.commands.reconstruct import reconstruct_capture
-    from rangekit.errors import ConfigError
+    from rangekit.errors import ConfigError, UsageError
     from rangekit.formats.capture import load_capture
     from rangekit.formats.laser_capture import is_laser_capture
     from rangekit.rig.rig_file import load_rig
@@ -49,6 +49,13 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
     check_output(args.out, suffixes=CLOUD_WRITERS, what="point cloud")
     if args.pattern is not None:
         return _reconstruct_layout(args, t0)
+    if len(args.capture) != 1:
+        raise UsageError(f"two captures ({' '.join(map(str, args.capture))}) are read only with --pattern PRESET "
+                         "(two cameras under another tool's layout, docs/real-captures.md)")
+    if args.projector is not None:
+        raise UsageError("--projector WxH is for --pattern PRESET with a rig of two cameras; a capture folder's "
+                         "pattern set gives the projector's size")
+    args.capture = args.capture[0]
     if is_laser_capture(args.capture):
         return _reconstruct_laser(args, t0)
     cap = load_capture(args.capture)
@@ -68,31 +75,22 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
 
 
 def _reconstruct_layout(args: argparse.Namespace, t0: float) -> int:
-    """``rangekit reconstruct DIR --pattern PRESET --rig RIG.json``: another tool's capture folder as it lies on
-    disk (:mod:`rangekit.formats.layouts`)."""
-    from dataclasses import replace
-
-    from rangekit.app.commands.reconstruct import reconstruct_capture
+    """``rangekit reconstruct DIR [DIR2] --pattern PRESET --rig RIG.json [--projector WxH]``: another tool's capture
+    as it lies on disk (:mod:`rangekit.formats.layouts`), one camera with a projector or two cameras."""
+    from rangekit.app.commands.reconstruct import reconstruct_tool_capture
     from rangekit.errors import UsageError
-    from rangekit.formats.capture import read_stack
-    from rangekit.formats.layouts import LAYOUTS, arrange, decoding_projector, layout_files
     from rangekit.formats.clouds import save_cloud
+    from rangekit.formats.layouts import LAYOUTS
     from rangekit.rig.rig_file import load_rig
 
     if not args.rig:
         raise UsageError(f"--pattern {args.pattern}: give the rig with --rig RIG.json (e.g. from 'rangekit rig "
                          "import' of the tool's calibration)")
     rig = load_rig(args.rig)
-    if rig.projector is None:
-        raise UsageError(f"--rig {args.rig}: has no projector; {args.pattern} needs one")
     layout = LAYOUTS[args.pattern]
-    width, height = rig.projector.width, rig.projector.height
-    frames = read_stack(layout_files(args.capture, layout, width, height), what=f"a {layout.name} capture")
-    stack, spec = arrange(list(frames), layout, width, height)
-    note(f"decoding {len(frames)} images ({layout.name}: {layout.source})")
-    rig = replace(rig, projector=decoding_projector(rig.projector, layout))
-    rec = reconstruct_capture(stack, rig, spec, subpixel=not args.integer, method=args.method,
-                              view_options=layout.view_options)
+    note(f"reading {' and '.join(map(str, args.capture))} ({layout.name}: {layout.source})")
+    rec = reconstruct_tool_capture(args.capture, args.pattern, rig, projector_size=args.projector,
+                                   subpixel=not args.integer, method=args.method)
     save_cloud(args.out, rec.cloud)
     say(f"{rec.decoded!r}")
     result(f"wrote {len(rec.cloud)} points to {args.out} in {time.perf_counter() - t0:.1f} s")
@@ -139,11 +137,15 @@ def add_parsers(sub) -> None:
                                      "triangulate it against the projector into a coloured cloud with normals; "
                                      "a laser capture (off.png, laser0.png, ...) is triangulated against the "
                                      "rig file's laser planes.")
-    rec.add_argument("capture", metavar="CAPTURE_DIR", help="capture folder (images + patterns.json)")
+    rec.add_argument("capture", metavar="CAPTURE_DIR", nargs="+",
+                     help="capture folder (images + patterns.json); with --pattern, another tool's folder, two "
+                          "folders (camera 1, camera 2) or OpenCV's image list")
     rec.add_argument("--rig", help="rig file (default: the folder's rig.json)")
     rec.add_argument("--pattern", choices=sorted(CAPTURE_LAYOUTS), default=None,
                      help="another tool's capture layout, read as it lies on disk (docs/real-captures.md); needs "
                           "--rig")
+    rec.add_argument("--projector", type=size, default=None,
+                     help="with --pattern and a rig of two cameras: the projector's size WxH the tool projected at")
     rec.add_argument("--method", default="auto", choices=("auto", "ray-plane", "ray-ray"),
                      help="triangulation; auto = ray-ray where rows are coded, else ray-plane")
     rec.add_argument("--integer", action="store_true", help="integer codes only (no subpixel refinement)")

@@ -1,6 +1,8 @@
 """One coded-light capture to a cloud (``rangekit reconstruct`` and ``rk.reconstruct``): the images, the rig and
 the pattern set from a capture folder, or given, decoded and triangulated by
-:func:`rangekit.coded.reconstruct.reconstruct_view`."""
+:func:`rangekit.coded.reconstruct.reconstruct_view`; another tool's capture folder in its own layout
+(:func:`reconstruct_tool_capture`), with a camera and a projector or with two cameras
+(:func:`rangekit.stereo.coded_pair.reconstruct_pair`)."""
 
 from __future__ import annotations
 
@@ -15,7 +17,7 @@ from rangekit.errors import ConfigError, InputError, naming
 from rangekit.rig.rig_file import Rig, load_rig
 from rangekit.surface.cloud import PointCloud
 
-__all__ = ["reconstruct", "reconstruct_capture"]
+__all__ = ["reconstruct", "reconstruct_capture", "reconstruct_tool_capture"]
 
 
 def reconstruct(images_or_folder, rig: Rig | str | Path | None = None, pattern: PatternSpec | str | None = None, *,
@@ -75,3 +77,65 @@ def _images(source) -> tuple[np.ndarray, Rig | None, PatternSpec | None, float |
         return np.stack(source), None, None, None, "images"
     raise InputError(f"images_or_folder: expected a capture folder, image files or image arrays, found "
                      f"{type(source).__name__}" + (f" {source!r}" if isinstance(source, (str, Path)) else ""))
+
+
+def reconstruct_tool_capture(captures: Sequence[str | Path], preset: str, rig: Rig, *,
+                             projector_size: tuple[int, int] | None = None, subpixel: bool = True,
+                             method: str = "auto"):
+    """Another tool's capture as it lies on disk (:data:`rangekit.formats.layouts.LAYOUTS` ``preset``) to a cloud.
+
+    ``captures``: one folder (a camera with the rig's projector; or, for a rig of two cameras and no projector,
+    both cameras' files where the layout's names carry the camera, as OpenCV's do), two folders (camera 1's,
+    camera 2's), or an image list file (OpenCV's ``pointcloud.cpp`` list). ``projector_size``: (width, height)
+    of the tool's projector, needed when the rig has none. Returns a
+    :class:`~rangekit.coded.reconstruct.Reconstruction` (camera and projector) or a
+    :class:`~rangekit.stereo.coded_pair.PairReconstruction` (two cameras).
+    """
+    from rangekit.formats.capture import read_stack
+    from rangekit.formats.layouts import LAYOUTS, arrange, decoding_projector, layout_files, read_image_list
+    from rangekit.stereo.coded_pair import reconstruct_pair
+
+    layout = LAYOUTS[preset]
+    width, height = _projector_size(rig, projector_size, preset)
+    paths = [Path(c) for c in captures]
+    pair = rig.projector is None
+    if pair and len(rig.cameras) < 2:
+        raise ConfigError(f"{preset}: the rig has neither a projector nor a second camera; give a rig with a "
+                          "projector (camera + projector) or with two cameras (matched through the projector's codes)")
+    if len(paths) == 1 and paths[0].is_file():
+        lists = read_image_list(paths[0])
+    elif len(paths) == 1:
+        lists = [layout_files(paths[0], layout, width, height, camera=k + 1) for k in range(2 if pair else 1)]
+    else:
+        lists = [layout_files(p, layout, width, height, camera=k + 1) for k, p in enumerate(paths)]
+    n = layout.n_files(width, height)
+    where = str(paths[0])
+    for k, files in enumerate(lists):
+        if len(files) != n:
+            raise ConfigError(f"{where}: camera {k + 1} lists {len(files)} files; {preset} for a {width}x{height} "
+                              f"projector has {n}")
+    if len(lists) != (2 if pair else 1):
+        raise ConfigError(f"{where}: {len(lists)} camera(s) of captures for a rig with "
+                          f"{'two cameras and no projector' if pair else 'a camera and a projector'}")
+    stacks, spec = [], None
+    for files in lists:
+        stack, spec = arrange(list(read_stack(files, what=f"a {preset} capture")), layout, width, height)
+        stacks.append(stack)
+    with naming(where):
+        if pair:
+            return reconstruct_pair(stacks, spec, rig.cameras[:2], subpixel=subpixel, **layout.view_options)
+        projector = decoding_projector(rig.projector, layout)
+        return reconstruct_view(stacks[0], spec, rig.camera, projector, subpixel=subpixel, method=method,
+                                response=rig.projector_response, **layout.view_options)
+
+
+def _projector_size(rig: Rig, given: tuple[int, int] | None, preset: str) -> tuple[int, int]:
+    if rig.projector is None:
+        if given is None:
+            raise ConfigError(f"{preset}: the rig has no projector; give its size with --projector WxH (the size the "
+                              "tool projected its patterns at)")
+        return int(given[0]), int(given[1])
+    size = rig.projector.width, rig.projector.height
+    if given is not None and tuple(given) != size:
+        raise ConfigError(f"--projector {given[0]}x{given[1]}: the rig's projector is {size[0]}x{size[1]}")
+    return size

@@ -25,7 +25,6 @@ rangekit's own, each with the measurement that chose it in the tool's module.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Sequence

@@ -6,14 +6,20 @@
   (``ceil(log2(size))`` bits per axis), then white, then black: 2 (11 + 10) + 2 = 44 frames for 1280x800.
   A bit is 1 where the frame is brighter than its inverse (rangekit's rule). ``.jpg`` files (the samples'
   test data) are read as well; a stereo capture's second camera is ``pattern_cam2_im...``.
+- The image list ``pointcloud.cpp`` reads (:func:`read_image_list`): an OpenCV FileStorage (YAML or XML) whose
+  first node is the sequence of camera 1's files and whose ``cam2`` node is camera 2's, each in the order
+  above.
 """
 
 from __future__ import annotations
 
+from pathlib import Path
+
 from rangekit.coded.patterns import PatternSpec
+from rangekit.errors import FileFormatError
 from rangekit.formats.layouts.layout import CaptureLayout
 
-__all__ = ["OPENCV_LAYOUTS", "opencv_graycode_frames"]
+__all__ = ["OPENCV_LAYOUTS", "opencv_graycode_frames", "read_image_list"]
 
 
 def _spec(width: int, height: int) -> PatternSpec:
@@ -34,3 +40,30 @@ OPENCV_LAYOUTS = {
         lambda w, h: _spec(w, h).n_frames, _spec, opencv_graycode_frames, first_index=1,
         other_names=("pattern_cam{camera}_im{index}.jpg",)),
 }
+
+
+def read_image_list(path: str | Path) -> list[list[Path]]:
+    """The files of each camera (one or two lists) in an image list as OpenCV's ``pointcloud.cpp`` reads it:
+    the first node a sequence (camera 1), then ``cam2`` (camera 2) if there. A relative name is relative to the
+    list's folder. FileFormatError naming the file and what is missing."""
+    import cv2
+
+    path = Path(path)
+    fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
+    try:
+        if not fs.isOpened():
+            raise FileFormatError(f"{path}: expected an OpenCV image list (YAML or XML), found a file OpenCV cannot "
+                                  "read")
+        first = fs.getFirstTopLevelNode()
+        nodes = [first] + ([fs.getNode("cam2")] if first.name() != "cam2" and not fs.getNode("cam2").empty()
+                           else [])
+        lists = []
+        for node in nodes:
+            if not node.isSeq() or node.size() == 0:
+                raise FileFormatError(f"{path}: expected {node.name() or 'the first node'} to be a sequence of image "
+                                      "file names, found none")
+            names = [node.at(k).string() for k in range(node.size())]
+            lists.append([p if p.is_absolute() else path.parent / p for p in map(Path, names)])
+    finally:
+        fs.release()
+    return lists

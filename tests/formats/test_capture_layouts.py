@@ -4,6 +4,7 @@ skull capture the cloud agrees with the authors' own (issue 35)."""
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 import pytest
 
@@ -116,6 +117,49 @@ def test_a_missing_or_extra_frame_is_named(tmp_path):
         layout_files(tmp_path, LAYOUTS["slstudio:2x3"], 64, 8)
     with pytest.raises(FileFormatError, match="expected 6 frames for a 64x8 projector, found 5"):
         arrange(_slstudio_2x3_frames(64, 8)[:5], LAYOUTS["slstudio:2x3"], 64, 8)
+
+
+@pytest.mark.parametrize("suffix, depth, colour", [(".bmp", 8, False), (".tif", 16, False), (".png", 8, True),
+                                                     (".png", 16, True), (".jpg", 8, False)])
+def test_frames_in_any_format_decode(tmp_path, suffix, depth, colour):
+    """SLStudio's 2x3 frames saved as BMP, 16-bit TIFF, colour PNG (8 and 16 bit) or JPEG decode to the
+    same columns: a folder converted to another format keeps its names' stems."""
+    from rangekit.formats.capture import read_stack
+
+    layout = LAYOUTS["slstudio:2x3"]
+    for k, frame in enumerate(_slstudio_2x3_frames(256, 32)):
+        image = frame.astype(np.uint16) * 257 if depth == 16 else frame
+        image = np.repeat(image[..., None], 3, axis=2) if colour else image
+        params = [cv2.IMWRITE_JPEG_QUALITY, 100] if suffix == ".jpg" else []
+        assert cv2.imwrite(str(tmp_path / f"frameSeq_{k:02d}{suffix}"), image, params)
+    images = read_stack(layout_files(tmp_path, layout, 256, 32))
+    assert images.dtype == (np.uint16 if depth == 16 else np.uint8) and images.ndim == (4 if colour else 3)
+    stack, spec = arrange(list(images), layout, 256, 32)
+    cols = decode(stack, spec).proj_col[:, 8:-8]
+    assert np.isfinite(cols).all() and np.abs(cols - np.arange(256)[8:-8]).max() < (0.6 if suffix == ".jpg" else 0.05)
+
+
+def test_a_folder_with_other_frames_than_the_layout_is_one_line(cli, tmp_path):
+    """More frames than the layout has for the rig's projector, frames of two sizes, frames of two depths:
+    each named in one line, and no cloud."""
+    from rangekit.rig.rig_file import Rig, save_rig
+    from rangekit.sim import default_rig
+
+    r = default_rig()
+    save_rig(Rig(cameras=(r.camera.resized(64, 8),), projector=r.projector.resized(256, 32)), tmp_path / "rig.json")
+    capture = tmp_path / "capture"
+    capture.mkdir()
+    for k, frame in enumerate(_slstudio_2x3_frames(64, 8) + _slstudio_2x3_frames(64, 8)[:1]):
+        cv2.imwrite(str(capture / f"frameSeq_{k:02d}.png"), frame)
+    args = ("reconstruct", capture, "--pattern", "slstudio:2x3", "--rig", tmp_path / "rig.json", "--out",
+            tmp_path / "c.ply")
+    assert_error(cli(*args), 1, "found more (frameSeq_06.png): is the projector size right?")
+    (capture / "frameSeq_06.png").unlink()
+    cv2.imwrite(str(capture / "frameSeq_03.png"), np.zeros((9, 64), np.uint8))
+    assert_error(cli(*args), 1, "frameSeq_03.png", "64x9")
+    cv2.imwrite(str(capture / "frameSeq_03.png"), np.zeros((8, 64), np.uint16))
+    assert_error(cli(*args), 1, "frameSeq_03.png", "16-bit")
+    assert not (tmp_path / "c.ply").exists()
 
 
 def test_a_layout_without_its_rig_or_its_frames_is_one_line(cli, tmp_path):

@@ -35,10 +35,13 @@ from rangekit.camera import PinholeCamera
 from rangekit.coded.patterns import PatternSpec
 from rangekit.errors import FileFormatError
 
-__all__ = ["AxisBlocks", "CaptureLayout", "Inverse", "WHITE_FROM_STEPS", "BLACK_FROM_STEPS", "layout_files",
-           "arrange", "decoding_projector", "tool_frames"]
+__all__ = ["AxisBlocks", "CaptureLayout", "Inverse", "WHITE_FROM_STEPS", "BLACK_FROM_STEPS", "FRAME_SUFFIXES",
+           "layout_files", "arrange", "decoding_projector", "tool_frames"]
 
 WHITE_FROM_STEPS, BLACK_FROM_STEPS = "A+B", "A-B"
+
+#: The image formats a tool's frames may come in (8 or 16 bit, grey or colour; JPEG as OpenCV's sample data).
+FRAME_SUFFIXES = (".bmp", ".png", ".tif", ".tiff", ".jpg", ".jpeg", ".pgm", ".ppm")
 
 
 @dataclass(frozen=True)
@@ -94,23 +97,22 @@ class CaptureLayout:
 def layout_files(folder: str | Path, layout: CaptureLayout, width: int, height: int, *, camera: int = 1
                  ) -> list[Path]:
     """The layout's frame files in ``folder`` for a ``width`` x ``height`` projector, in the tool's order (of
-    camera ``camera`` where the names carry one); FileFormatError naming the first missing."""
+    camera ``camera`` where the names carry one); the tool's names first, then the same names as any of
+    :data:`FRAME_SUFFIXES` (a folder converted to another format). FileFormatError naming the first missing."""
     n = layout.n_files(width, height)
-    names = (layout.file_name, *layout.other_names)
-    for name in names:
-        paths = [Path(folder) / name.format(k, index=k, camera=camera)
-                 for k in range(layout.first_index, layout.first_index + n)]
-        if paths[0].is_file():
-            break
-    else:
-        paths = [Path(folder) / layout.file_name.format(k, index=k, camera=camera)
-                 for k in range(layout.first_index, layout.first_index + n)]
+    given = (layout.file_name, *layout.other_names)
+    names = given + tuple(name.rsplit(".", 1)[0] + suffix for name in given for suffix in FRAME_SUFFIXES
+                          if not name.endswith(suffix))
+    found = next((name for name in names if (Path(folder) / name.format(layout.first_index, index=layout.first_index,
+                                                                          camera=camera)).is_file()), names[0])
+    indices = range(layout.first_index, layout.first_index + n)
+    paths = [Path(folder) / found.format(k, index=k, camera=camera) for k in indices]
     missing = [p.name for p in paths if not p.is_file()]
     if missing:
         raise FileFormatError(f"{folder}: expected the {n} frames of {layout.name} for a {width}x{height} "
                               f"projector ({paths[0].name} ... {paths[-1].name}), found {missing[0]} missing"
                               f"{f' and {len(missing) - 1} more' if len(missing) > 1 else ''}")
-    extra = Path(folder) / names[0].format(layout.first_index + n, index=layout.first_index + n, camera=camera)
+    extra = Path(folder) / found.format(indices.stop, index=indices.stop, camera=camera)
     if extra.is_file():
         raise FileFormatError(f"{folder}: expected the {n} frames of {layout.name} for a {width}x{height} "
                               f"projector, found more ({extra.name}): is the projector size right?")

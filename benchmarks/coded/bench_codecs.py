@@ -76,7 +76,8 @@ def measure(sim: SimRig, spec: PatternSpec, repeat: int) -> dict:
     err = np.linalg.norm(rec.triangulated.xyz[point] - truth.xyz[point], axis=1)
     mp = stack.shape[1] * stack.shape[2] / 1e6
     rms = lambda e: float(np.sqrt(np.mean(e ** 2)) * 1e3) if e.size else float("nan")  # noqa: E731
-    return {"frames": spec.n_frames, "decoded": decoded.sum() / visible.sum(), "median_decoded_mm": float(np.median(err_raw) * 1e3),
+    return {"frames": spec.n_frames, "decoded": decoded.sum() / visible.sum(),
+            "median_decoded_mm": float(np.median(err_raw) * 1e3),
             "coverage": point.sum() / visible.sum(), "rms_mm": rms(err),
             "over_1mm": float(np.mean(err > 1e-3)) if err.size else float("nan"),
             "cpu_per_mp": float(np.median(cpu)) / mp}

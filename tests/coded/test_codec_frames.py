@@ -110,8 +110,8 @@ def test_slstudio_phase_shift3_is_single_period_phase():
     diffs = 0
     for k in range(3):
         i = np.arange(W).astype(np.float32)
-        amp = (0.5 * (np.float32(1) + _cosf(np.float32(2) * PI * i / np.float32(W)
-                                             - np.float32(2.0 * float(PI) / 3 * k))).astype(np.float64)).astype(np.float32)
+        arg = np.float32(2) * PI * i / np.float32(W) - np.float32(2.0 * float(PI) / 3 * k)
+        amp = (0.5 * (np.float32(1) + _cosf(arg)).astype(np.float64)).astype(np.float32)
         tool = np.rint(amp * np.float32(255)).astype(np.uint8)
         d = spec.frame(2 + k)[0].astype(int) - tool
         assert np.abs(d).max() <= 1

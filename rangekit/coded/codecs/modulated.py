@@ -18,8 +18,9 @@ light of fringe step i alone (Nayar et al.'s separation, done by the carrier).
 Masks: shadow where the cue's signal ``2 B_cue`` is below ``shadow_threshold``; low contrast where the
 direct light ``b = 4 B_D`` (``B_D`` the modulation of ``D_i`` over i; under a response, ``B_D`` divided by
 the modulation both fits give at their phases, :func:`rangekit.coded.codecs.known_shifts.white_minus_black`)
-is below ``min_contrast`` (SLStudio thresholds the cue's DFT magnitude at 10); inconsistent where cue and fringe disagree by more than a quarter
-period (:data:`rangekit.coded.codecs.fringe_result.CUE_TOLERANCE`). ``direct`` is ``b``.
+is below ``min_contrast`` (SLStudio thresholds the cue's DFT magnitude at 10); inconsistent where cue and
+fringe disagree by more than a quarter period (:data:`rangekit.coded.codecs.fringe_result.CUE_TOLERANCE`).
+``direct`` is ``b``.
 """
 
 from __future__ import annotations

@@ -8,6 +8,10 @@ history in docs/benchmarks.md ("Real-data figures"). Every test skips cleanly wi
 - Stanford bunny (10 scans) and dragon (15 scans on a turntable), registered with no initial guess,
   against the authors' ``.conf`` alignment (poses in the first scan's frame).
 - DiLiGenT ball: robust photometric stereo's mean angular error against the true normals.
+- SLStudio's skull (issue 35): ``rangekit rig import`` of its calibration.xml, ``rangekit reconstruct`` of its
+  Gray-code and 2x3 folders, against the authors' own cloud (pointCloud.mat): the share of their points
+  farther than 0.5 mm from rangekit's cloud, the median distance, the roughness, and the Gray-code cloud's
+  distance to the 2x3's.
 """
 
 from __future__ import annotations
@@ -32,6 +36,9 @@ PINNED = {
     "bunny": {"worst_deg": 0.341, "mean_deg": 0.172, "worst_mm": 0.798},
     "dragon": {"worst_deg": 0.637, "mean_deg": 0.329, "worst_mm": 2.702},
     "diligent_ball": {"robust_mean_deg": 1.969},
+    "skull_graycode": {"missed_share": 0.0370, "median_mm": 0.0687, "roughness_mm": 0.0607},
+    "skull_2x3": {"missed_share": 0.0429, "median_mm": 0.1133},
+    "skull_agreement": {"graycode_to_2x3_mm": 0.0850},
 }
 
 
@@ -86,3 +93,44 @@ def test_diligent_ball_robust_error_as_pinned():
     error = angular_error(rob.normals, ball.normals_gt, ball.mask).mean_deg
     assert error <= 2.0, error   # issue 34's acceptance
     check_pinned("diligent_ball", {"robust_mean_deg": float(error)})
+
+
+def test_slstudio_skull_agrees_with_the_authors_cloud(cli, tmp_path):
+    """Issue 35's acceptance on SLStudio's own data, and its figures pinned: Gray code at least 3x the authors'
+    points, 95% of theirs within 0.5 mm, median <= 0.15 mm, no rougher than theirs (median over 4000 of their
+    points of the RMS residual of a plane through a cloud's points within 2 mm); 2x3 95% and 0.15 mm; the two
+    clouds within 0.10 mm of each other (median, the Gray code's points to the 2x3's local planes)."""
+    import scipy.io
+
+    from rangekit.formats.clouds import load_cloud
+    from rangekit.metrology.cloud_compare import distances_to_local_planes, roughness
+
+    skull = _folder("slstudio-skull", "calibration/calibration.xml")
+    run = cli("rig", "import", skull / "calibration" / "calibration.xml", "--out", tmp_path / "rig.json")
+    assert run.code == 0, run.err
+    clouds = {}
+    for folder, preset in (("skull_gray", "slstudio:graycode"), ("skull_2x3", "slstudio:2x3")):
+        run = cli("reconstruct", skull / folder, "--pattern", preset, "--rig", tmp_path / "rig.json",
+                  "--out", tmp_path / f"{folder}.ply")
+        assert run.code == 0, run.err
+        clouds[folder] = np.asarray(load_cloud(tmp_path / f"{folder}.ply").points) * 1000     # millimetres
+    ref = scipy.io.loadmat(skull / "skull_gray" / "pointCloud.mat")["xyz"].reshape(-1, 3)
+    ref = ref[np.isfinite(ref).all(axis=1)]
+    at = ref[np.random.default_rng(0).choice(len(ref), 4000, replace=False)]
+    theirs = float(np.nanmedian(roughness(ref, at, 2.0)))
+    figures = {}
+    for folder, ours in clouds.items():
+        d = distances_to_local_planes(ref, ours, 1.0)
+        figures[folder] = {"missed_share": float(np.mean(~(d < 0.5))), "median_mm": float(np.nanmedian(d)),
+                           "roughness_mm": float(np.nanmedian(roughness(ours, at, 2.0))),
+                           "density": len(ours) / len(ref)}
+    gray, phase = clouds["skull_gray"], clouds["skull_2x3"]
+    sample = gray[np.random.default_rng(1).choice(len(gray), 50000, replace=False)]
+    agree = float(np.nanmedian(distances_to_local_planes(sample, phase, 1.0)))
+    print(f"\nskull: {figures}; the authors' roughness {theirs:.4f} mm")
+    g, p = figures["skull_gray"], figures["skull_2x3"]
+    assert g["density"] >= 3 and g["missed_share"] <= 0.05 and g["median_mm"] <= 0.15 and g["roughness_mm"] <= theirs
+    assert p["missed_share"] <= 0.05 and p["median_mm"] <= 0.15 and agree <= 0.10
+    check_pinned("skull_graycode", {k: g[k] for k in PINNED["skull_graycode"]})
+    check_pinned("skull_2x3", {k: p[k] for k in PINNED["skull_2x3"]})
+    check_pinned("skull_agreement", {"graycode_to_2x3_mm": agree})

@@ -103,6 +103,7 @@ def layout_files(folder: str | Path, layout: CaptureLayout, width: int, height: 
     given = (layout.file_name, *layout.other_names)
     names = given + tuple(name.rsplit(".", 1)[0] + suffix for name in given for suffix in FRAME_SUFFIXES
                           if not name.endswith(suffix))
+    names = tuple(_with_prefix(folder, name, layout.first_index, camera) for name in names)
     found = next((name for name in names if (Path(folder) / name.format(layout.first_index, index=layout.first_index,
                                                                           camera=camera)).is_file()), names[0])
     indices = range(layout.first_index, layout.first_index + n)
@@ -117,6 +118,21 @@ def layout_files(folder: str | Path, layout: CaptureLayout, width: int, height: 
         raise FileFormatError(f"{folder}: expected the {n} frames of {layout.name} for a {width}x{height} "
                               f"projector, found more ({extra.name}): is the projector size right?")
     return paths
+
+
+def _with_prefix(folder: str | Path, name: str, first: int, camera: int) -> str:
+    """``name`` with its ``*`` (a prefix the user chose, as OpenCV's samples take) replaced by the one prefix
+    of the folder's first frame; FileFormatError if two prefixes have one."""
+    if "*" not in name:
+        return name
+    head, tail = name.split("*", 1)
+    first_name = tail.format(first, index=first, camera=camera)
+    matches = sorted(p.name[len(head): len(p.name) - len(first_name)]
+                     for p in Path(folder).glob(head + "*" + first_name) if p.is_file())
+    if len(matches) > 1:
+        raise FileFormatError(f"{folder}: expected one capture ({head}*{first_name}), found {len(matches)}: "
+                              f"{', '.join(head + m + first_name for m in matches[:3])}; give each its own folder")
+    return head + (matches[0] if matches else "*").replace("{", "{{").replace("}", "}}") + tail
 
 
 def arrange(images: Sequence[np.ndarray], layout: CaptureLayout, width: int, height: int

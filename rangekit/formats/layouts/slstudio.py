@@ -9,6 +9,11 @@ order of each codec's encoder (``src/codec/Codec*.cpp``; docs/real-captures.md h
 - ``slstudio:2x3`` (``CodecPhaseShift2x3``, columns): 00-02 three steps of 16 periods across the screen,
   03-05 three steps of one period (the cue), each ``(1 + cos(2 pi x / pitch - 2 pi k / 3)) / 2``:
   rangekit's ``phase`` method with periods (width, width / 16) and 3 steps each; no white or black frame.
+- ``slstudio:3ps`` (``CodecPhaseShift3``, columns): 00-02 three steps of one period across the screen (the
+  encoder adds noise of 5% to each frame): ``phase`` with the one period; no white or black frame.
+- ``slstudio:micro`` (``CodecPhaseShiftMicro``) and ``slstudio:modulated`` (``CodecPhaseShiftModulated``),
+  00-11: rangekit's ``micro`` and ``modulated`` methods, whose frames are SLStudio's in its order
+  (:mod:`rangekit.coded.codecs.fringes`).
 """
 
 from __future__ import annotations
@@ -58,6 +63,19 @@ def _gray_frames(width: int, height: int) -> tuple:
     return (0, 1, *pairs)
 
 
+def _same_order(spec):
+    """A spec whose frames are the tool's files in order."""
+    return lambda w, h: tuple(range(spec(w, h).n_frames))
+
+
+def _micro(w: int, h: int) -> PatternSpec:
+    return PatternSpec("micro", w, h, ("columns",))
+
+
+def _modulated(w: int, h: int) -> PatternSpec:
+    return PatternSpec("modulated", w, h, ("columns",))
+
+
 SLSTUDIO_LAYOUTS = {
     "slstudio:graycode": CaptureLayout(
         "slstudio:graycode", "slstudio src/codec/CodecGrayCode.cpp", FRAME_FILE, lambda w, h: 2 + GRAY_BITS,
@@ -69,6 +87,16 @@ SLSTUDIO_LAYOUTS = {
                                  {"steps": 3, "fine_steps": 3, "periods": [w, w / 16], "rounding": "down"}),
         lambda w, h: (WHITE_FROM_STEPS, BLACK_FROM_STEPS, 3, 4, 5, 0, 1, 2), (3, 4, 5),
         view_options=PHASE_2X3_VIEW_OPTIONS),
+    "slstudio:3ps": CaptureLayout(
+        "slstudio:3ps", "slstudio src/codec/CodecPhaseShift3.cpp", FRAME_FILE, lambda w, h: 3,
+        lambda w, h: PatternSpec("phase", w, h, ("columns",), {"periods": [w], "fine_steps": 3, "rounding": "down"}),
+        lambda w, h: (WHITE_FROM_STEPS, BLACK_FROM_STEPS, 0, 1, 2), (0, 1, 2)),
+    "slstudio:micro": CaptureLayout(
+        "slstudio:micro", "slstudio src/codec/CodecPhaseShiftMicro.cpp", FRAME_FILE,
+        lambda w, h: _micro(w, h).n_frames, _micro, _same_order(_micro)),
+    "slstudio:modulated": CaptureLayout(
+        "slstudio:modulated", "slstudio src/codec/CodecPhaseShiftModulated.cpp", FRAME_FILE,
+        lambda w, h: _modulated(w, h).n_frames, _modulated, _same_order(_modulated)),
 }
 
 

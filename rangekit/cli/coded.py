@@ -21,6 +21,8 @@ def cmd_decode(args: argparse.Namespace) -> int:
     from rangekit.formats.capture import DECODED_SUFFIXES
 
     check_output(args.out, suffixes=DECODED_SUFFIXES, what="decoded maps")
+    if ":" in args.pattern:
+        return _decode_layout(args, t0)
     paths = list_images(args.images[0] if len(args.images) == 1 else args.images)
     spec = pattern_spec_for(args.pattern, args.projector)
     note(f"reading {len(paths)} images")
@@ -30,6 +32,36 @@ def cmd_decode(args: argparse.Namespace) -> int:
         with naming(args.images[0] if len(args.images) == 1 else f"{len(paths)} images from {paths[0]}"):
             res = decode(images, spec, order=args.order, subpixel=not args.integer)
         del images
+    save_decoded(args.out, res, compress=args.compress)
+    say(f"{res!r}")
+    result(f"wrote {Path(args.out)} in {time.perf_counter() - t0:.1f} s")
+    return 0
+
+
+def _decode_layout(args: argparse.Namespace, t0: float) -> int:
+    """``rangekit decode DIR --pattern PRESET --projector WxH``: another tool's folder as it lies on disk, the maps
+    in its projector's pixels (:func:`rangekit.formats.layouts.in_projector_pixels`)."""
+    from pathlib import Path
+
+    from rangekit.coded.decode import decode
+    from rangekit.errors import UsageError, naming
+    from rangekit.formats.capture import read_stack, save_decoded
+    from rangekit.formats.layouts import LAYOUTS, arrange, in_projector_pixels, layout_files
+
+    if args.pattern not in LAYOUTS:
+        raise UsageError(f"--pattern {args.pattern}: not a capture layout; known: {', '.join(sorted(LAYOUTS))}")
+    if args.projector is None or len(args.images) != 1:
+        raise UsageError(f"--pattern {args.pattern} reads one folder and needs --projector WxH (the size the tool "
+                         "projected at)")
+    layout, (width, height) = LAYOUTS[args.pattern], args.projector
+    frames = read_stack(layout_files(args.images[0], layout, width, height), what=f"a {layout.name} capture")
+    stack, spec = arrange(list(frames), layout, width, height)
+    del frames
+    note(f"decoding {layout.name} ({layout.source})")
+    with naming(args.images[0]):
+        res = decode(stack, spec, subpixel=not args.integer,
+                     **layout.view_options.get("decode_options", {}))
+    res = in_projector_pixels(res, layout, width, height)
     save_decoded(args.out, res, compress=args.compress)
     say(f"{res!r}")
     result(f"wrote {Path(args.out)} in {time.perf_counter() - t0:.1f} s")
@@ -122,7 +154,8 @@ def add_parsers(sub) -> None:
     dec.add_argument("images", nargs="+", metavar="IMAGES",
                      help="a folder (images taken in natural numeric order) or a list of image files")
     dec.add_argument("--pattern", required=True,
-                     help=f"pattern method ({', '.join(PATTERN_METHODS)}) or a patterns.json spec file")
+                     help=f"pattern method ({', '.join(PATTERN_METHODS)}), a patterns.json spec file, or another "
+                          f"tool's capture layout ({', '.join(sorted(CAPTURE_LAYOUTS))}; docs/real-captures.md)")
     dec.add_argument("--projector", type=size, help="projector resolution WxH, e.g. 1280x800")
     dec.add_argument("--order", default="rangekit", choices=("rangekit", "opencv"),
                      help="capture order; 'opencv' = GrayCodePattern (pairs, then white, black)")

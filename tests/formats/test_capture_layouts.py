@@ -169,3 +169,17 @@ def test_a_layout_without_its_rig_or_its_frames_is_one_line(cli, tmp_path):
     run = cli("reconstruct", tmp_path, "--pattern", "slstudio:2x3", "--rig", tmp_path / "rig.json",
               "--out", tmp_path / "c.ply")
     assert run.code in (1, 2) and "Traceback" not in run.err and not (tmp_path / "c.ply").exists()
+
+
+def test_decode_reads_a_tool_folder_into_its_projector_pixels(cli, tmp_path):
+    """``rangekit decode DIR --pattern slstudio:graycode --projector WxH``: the maps are in the tool's projector
+    pixels (SLStudio's blocks of two columns at their centres), not in the code's blocks."""
+    for k, frame in enumerate(_slstudio_gray_frames(1100, 16)):
+        cv2.imwrite(str(tmp_path / f"frameSeq_{k:02d}.bmp"), frame)
+    run = cli("decode", tmp_path, "--pattern", "slstudio:graycode", "--projector", "1100x16", "--out",
+              tmp_path / "maps.npz")
+    assert run.code == 0, run.err
+    cols = np.load(tmp_path / "maps.npz")["proj_col"][:, 4:-4]
+    assert np.isfinite(cols).all() and np.abs(cols - np.arange(1100)[4:-4]).max() < 1e-4
+    run = cli("decode", tmp_path, "--pattern", "slstudio:graycode", "--out", tmp_path / "m.npz")
+    assert_error(run, 2, "--projector WxH")

@@ -36,7 +36,7 @@ from rangekit.coded.patterns import PatternSpec
 from rangekit.errors import FileFormatError
 
 __all__ = ["AxisBlocks", "CaptureLayout", "Inverse", "WHITE_FROM_STEPS", "BLACK_FROM_STEPS", "FRAME_SUFFIXES",
-           "layout_files", "arrange", "decoding_projector", "tool_frames"]
+           "layout_files", "arrange", "decoding_projector", "in_projector_pixels", "tool_frames"]
 
 WHITE_FROM_STEPS, BLACK_FROM_STEPS = "A+B", "A-B"
 
@@ -186,6 +186,23 @@ def decoding_projector(projector: PinholeCamera, layout: CaptureLayout) -> Pinho
         K[axis, 2] = (K[axis, 2] + blocks.offset - (blocks.size - 1) / 2) / blocks.size
     width, height = layout.decoded_size(projector.width, projector.height)
     return PinholeCamera(K, width, height, projector.dist, projector.T_world_cam, projector.name)
+
+
+def in_projector_pixels(decoded, layout: CaptureLayout, width: int, height: int):
+    """A :class:`~rangekit.coded.result.DecodeResult` of the layout's spec with its coordinates (and their stds)
+    in the ``width`` x ``height`` projector's pixels: each code at its block's centre (:class:`AxisBlocks`)."""
+    from dataclasses import replace
+
+    cols, rows = layout.blocks(width, height)
+    if (cols, rows) == PLAIN:
+        return decoded
+
+    def pixels(coord, blocks):
+        return (blocks.size * coord.astype(np.float64) - blocks.offset + (blocks.size - 1) / 2).astype(np.float32)
+
+    return replace(decoded, proj_col=pixels(decoded.proj_col, cols), proj_row=pixels(decoded.proj_row, rows),
+                   col_std=None if decoded.col_std is None else decoded.col_std * np.float32(cols.size),
+                   row_std=None if decoded.row_std is None else decoded.row_std * np.float32(rows.size))
 
 
 def tool_frames(layout: CaptureLayout, width: int, height: int) -> list[np.ndarray]:

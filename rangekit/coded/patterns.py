@@ -41,7 +41,6 @@ GrayCodePattern order for graycode (column pairs MSB first, row pairs, then whit
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from functools import lru_cache
 from typing import Iterator
@@ -51,6 +50,7 @@ import numpy as np
 from rangekit.budget import MAX_IMAGE_SIDE_PX, check_budget
 from rangekit.coded.codecs.fringes import (FRINGE_METHODS, check_fringe_options, fringe_frame, fringe_frame_names,
                                            slstudio_phase_line, slstudio_shift)
+from rangekit.coded.codecs.option_checks import is_number, show, whole_number
 from rangekit.errors import PatternError
 
 __all__ = ["PatternSpec", "PATTERN_METHODS", "MAX_PHASE_STEPS", "MAX_PHASE_LEVELS", "MAX_DEBRUIJN_LENGTH",
@@ -78,24 +78,6 @@ _DEFAULT_OPTIONS = {
     "hybrid": {"steps": 8, "period": 16},
     "debruijn": {"k": 6, "n": 3, "stripe_width": 8},
 }
-
-
-def _show(value) -> str:
-    text = repr(value)
-    return text if len(text) <= 80 else text[:77] + "..."
-
-
-def _is_number(value) -> bool:
-    """A finite real number (not a bool)."""
-    return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, (bool, np.bool_)) \
-        and math.isfinite(value)
-
-
-def _count(value, what: str, lo: int, hi: int) -> int:
-    """``value`` as an int in [lo, hi] (a whole number, int or float); PatternError naming ``what`` otherwise."""
-    if not (_is_number(value) and float(value).is_integer() and lo <= value <= hi):
-        raise PatternError(f"{what} must be a whole number in {lo}..{hi}, found {_show(value)}")
-    return int(value)
 
 
 def gray_encode(x: np.ndarray) -> np.ndarray:
@@ -166,12 +148,12 @@ class PatternSpec:
 
     def __post_init__(self) -> None:
         if not isinstance(self.method, str) or self.method not in PATTERN_METHODS:
-            raise PatternError(f"unknown pattern method {_show(self.method)}; known: {', '.join(PATTERN_METHODS)}")
+            raise PatternError(f"unknown pattern method {show(self.method)}; known: {', '.join(PATTERN_METHODS)}")
         for name in ("width", "height"):
-            object.__setattr__(self, name, _count(getattr(self, name), f"pattern {name} (projector pixels)",
+            object.__setattr__(self, name, whole_number(getattr(self, name), f"pattern {name} (projector pixels)",
                                                   1, MAX_IMAGE_SIDE_PX))
         if not isinstance(self.axes, (tuple, list)) or not all(isinstance(a, str) for a in self.axes):
-            raise PatternError(f"pattern axes must be a non-empty subset of {_AXES}, found {_show(self.axes)}")
+            raise PatternError(f"pattern axes must be a non-empty subset of {_AXES}, found {show(self.axes)}")
         bad = [a for a in self.axes if a not in _AXES]
         if bad or not self.axes or len(set(self.axes)) != len(self.axes):
             raise PatternError(f"pattern axes must be a non-empty subset of {_AXES}, found {self.axes}")
@@ -179,31 +161,31 @@ class PatternSpec:
         if self.method == "debruijn":
             axes = ("columns",)
         if not isinstance(self.options, dict):
-            raise PatternError(f"pattern options must be an object, found {_show(self.options)}")
+            raise PatternError(f"pattern options must be an object, found {show(self.options)}")
         opts = {**_DEFAULT_OPTIONS.get(self.method, {}), **dict(self.options)}
         object.__setattr__(self, "axes", axes)
         if self.method == "phase":
             opts["periods"] = {a: self._periods(opts.get("periods"), a) for a in axes}
             if "rounding" in opts and opts["rounding"] not in _ROUNDINGS:
                 raise PatternError(f"phase rounding must be one of {', '.join(_ROUNDINGS)} (\"down\": SLStudio's "
-                                   f"truncated frames), found {_show(opts['rounding'])}")
+                                   f"truncated frames), found {show(opts['rounding'])}")
         if self.method in FRINGE_METHODS:
             opts = check_fringe_options(self.method, opts, self.width, self.height, axes)
         if self.method == "hybrid":
             period = opts["period"]
-            if not (_is_number(period) and 0 < period <= MAX_IMAGE_SIDE_PX):
+            if not (is_number(period) and 0 < period <= MAX_IMAGE_SIDE_PX):
                 raise PatternError(f"hybrid period must be a number in (0, {MAX_IMAGE_SIDE_PX}] projector px, "
-                                   f"found {_show(period)}")
+                                   f"found {show(period)}")
         for key in ("steps", "fine_steps"):
             if key in opts and self.method in ("phase", "hybrid"):
-                opts[key] = _count(opts[key], f"phase shifting {key}", 3, MAX_PHASE_STEPS)
+                opts[key] = whole_number(opts[key], f"phase shifting {key}", 3, MAX_PHASE_STEPS)
         if self.method == "debruijn":
-            k = _count(opts["k"], "de Bruijn k (stripe colours - 1)", 2, len(DEBRUIJN_PALETTE) - 1)
-            n = _count(opts["n"], "de Bruijn n (window length)", 1, 64)
+            k = whole_number(opts["k"], "de Bruijn k (stripe colours - 1)", 2, len(DEBRUIJN_PALETTE) - 1)
+            n = whole_number(opts["n"], "de Bruijn n (window length)", 1, 64)
             if k ** n > MAX_DEBRUIJN_LENGTH:
                 raise PatternError(f"de Bruijn B(k={k}, n={n}) has k**n = {k ** n} entries, expected at most "
                                    f"{MAX_DEBRUIJN_LENGTH}; lower n")
-            w = _count(opts["stripe_width"], "de Bruijn stripe_width (projector px)", 1, self.width)
+            w = whole_number(opts["stripe_width"], "de Bruijn stripe_width (projector px)", 1, self.width)
             opts.update(k=k, n=n, stripe_width=w)
             debruijn_stripe_colours(k, n, -(-self.width // w))  # raises if too short
         object.__setattr__(self, "options", opts)
@@ -215,10 +197,10 @@ class PatternSpec:
         ps = list(self._default_periods(axis)) if given is None else given.get(axis) if isinstance(given, dict) \
             else given
         size = self._size(axis)
-        if not (isinstance(ps, (list, tuple)) and 1 <= len(ps) <= MAX_PHASE_LEVELS and all(map(_is_number, ps))
+        if not (isinstance(ps, (list, tuple)) and 1 <= len(ps) <= MAX_PHASE_LEVELS and all(map(is_number, ps))
                 and ps[0] >= size and all(p > 0 for p in ps)):
             raise PatternError(f"phase periods for {axis} must be 1 to {MAX_PHASE_LEVELS} finite numbers > 0, the "
-                               f"first >= {size} px (absolute phase), found {_show(ps)}")
+                               f"first >= {size} px (absolute phase), found {show(ps)}")
         return list(ps)
 
     def _size(self, axis: str) -> int:
@@ -356,7 +338,7 @@ class PatternSpec:
         """Inverse of :meth:`to_dict`; every problem is a PatternError starting with ``where``."""
         if not isinstance(data, dict):
             raise PatternError(f"{where}: expected a JSON object with method, width, height (and axes, options), "
-                               f"found {_show(data)}")
+                               f"found {show(data)}")
         missing = [k for k in ("method", "width", "height") if k not in data]
         if missing:
             raise PatternError(f"{where}: expected method, width, height (and axes, options); missing "
@@ -369,7 +351,7 @@ class PatternSpec:
             raise PatternError(f"{where}: {exc}") from None
         frames = data.get("frames", spec.frame_names)
         if not isinstance(frames, list) or frames != spec.frame_names:
-            n = len(frames) if isinstance(frames, list) else _show(frames)
+            n = len(frames) if isinstance(frames, list) else show(frames)
             raise PatternError(f"{where}: its frame list ({n} frames) does not match what "
                                f"method {spec.method!r} generates ({spec.n_frames} frames)")
         return spec

@@ -45,6 +45,7 @@ import math
 import numpy as np
 
 from rangekit.budget import MAX_IMAGE_SIDE_PX
+from rangekit.coded.codecs.option_checks import is_number, show, whole_number
 from rangekit.errors import PatternError
 
 __all__ = ["FRINGE_METHODS", "SINUS_METHODS", "SLSTUDIO_MICRO_PERIODS", "OPENCV_SHIFT", "PI_F32",
@@ -71,22 +72,6 @@ _DEFAULTS = {
 }
 
 
-def _show(value) -> str:
-    text = repr(value)
-    return text if len(text) <= 80 else text[:77] + "..."
-
-
-def _number(value) -> bool:
-    return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, (bool, np.bool_)) \
-        and math.isfinite(value)
-
-
-def _whole(value, what: str, lo: int, hi: int) -> int:
-    if not (_number(value) and float(value).is_integer() and lo <= value <= hi):
-        raise PatternError(f"{what} must be a whole number in {lo}..{hi}, found {_show(value)}")
-    return int(value)
-
-
 def check_fringe_options(method: str, options: dict, width: int, height: int, axes: tuple[str, ...]) -> dict:
     """``options`` over the method's defaults, checked against every coded axis; PatternError naming the
     option, what was expected and what was found."""
@@ -95,33 +80,33 @@ def check_fringe_options(method: str, options: dict, width: int, height: int, ax
     if method == "micro":
         ps = opts["periods"]
         if not (isinstance(ps, (list, tuple)) and 2 <= len(ps) <= MAX_MICRO_PERIODS
-                and all(_number(p) and 2 <= p <= MAX_IMAGE_SIDE_PX for p in ps)):
+                and all(is_number(p) and 2 <= p <= MAX_IMAGE_SIDE_PX for p in ps)):
             raise PatternError(f"micro periods must be 2 to {MAX_MICRO_PERIODS} numbers in 2..{MAX_IMAGE_SIDE_PX} "
-                               f"projector px (the first projected in 3 steps), found {_show(ps)}")
+                               f"projector px (the first projected in 3 steps), found {show(ps)}")
         opts["periods"] = [float(p) for p in ps]
     elif method == "modulated":
         for axis in axes:
             other = "rows" if axis == "columns" else "columns"
-            opts["n_periods"] = _whole(opts["n_periods"], f"modulated n_periods (fringe periods across the "
+            opts["n_periods"] = whole_number(opts["n_periods"], f"modulated n_periods (fringe periods across the "
                                        f"{sizes[axis]} projector {axis})", 1, sizes[axis] // 2)
-            opts["carrier_n_periods"] = _whole(opts["carrier_n_periods"], f"modulated carrier_n_periods (carrier "
+            opts["carrier_n_periods"] = whole_number(opts["carrier_n_periods"], f"modulated carrier_n_periods (carrier "
                                                f"periods across the {sizes[other]} projector {other})", 1,
                                                max(1, sizes[other] // 2))
     else:
         for axis in axes:
-            opts["n_periods"] = _whole(opts["n_periods"], f"{method} n_periods (fringe periods across the "
+            opts["n_periods"] = whole_number(opts["n_periods"], f"{method} n_periods (fringe periods across the "
                                        f"{sizes[axis]} projector {axis}, each at least 2 px)", 1,
                                        max(1, sizes[axis] // 2))
         if opts["n_periods"] > 1 and min(sizes[a] for a in axes) // opts["n_periods"] < 2:
             raise PatternError(f"{method} n_periods {opts['n_periods']} leaves periods under 2 projector px")
         shift = opts["shift"]
-        if not (_number(shift) and 0.05 <= shift <= math.pi - 0.05):
+        if not (is_number(shift) and 0.05 <= shift <= math.pi - 0.05):
             raise PatternError(f"{method} shift must be a phase step in radians within 0.05..{math.pi - 0.05:.2f} "
-                               f"(OpenCV's default 2 pi / 3), found {_show(shift)}")
+                               f"(OpenCV's default 2 pi / 3), found {show(shift)}")
         opts["shift"] = float(np.float32(shift))
         if not isinstance(opts["cue"], bool):
             raise PatternError(f"{method} cue must be true or false (three one-period frames that make the "
-                               f"column absolute), found {_show(opts['cue'])}")
+                               f"column absolute), found {show(opts['cue'])}")
     return opts
 
 

@@ -22,11 +22,41 @@ from rangekit.errors import CalibrationError
 from rangekit.geometry import make_T, rotvec_to_R
 
 __all__ = ["ViewReport", "DeviceCalibration", "Correspondences", "calibrate_device", "board_normal_spread",
-           "DEFAULT_FLAGS", "CalibrationWarning"]
+           "DEFAULT_FLAGS", "CalibrationWarning", "LensModel", "LENS_MODELS"]
 
 #: Five coefficients (k1, k2, p1, p2, k3) with k3 fixed at 0: a board seldom covers the corners of the image
 #: well enough to separate k3 from k1, k2 (it then absorbs noise and extrapolates badly).
 DEFAULT_FLAGS = cv2.CALIB_FIX_K3
+
+
+@dataclass(frozen=True)
+class LensModel:
+    """What a calibration fits of the camera and of the projector: OpenCV flags for :func:`calibrate_device`
+    and the same as the intrinsics :func:`rangekit.calib.projector.bundle_adjust` holds (its ``fixed_*``)."""
+
+    name: str
+    description: str
+    camera_flags: int
+    projector_flags: int
+    camera_fixed: tuple[str, ...] = ()
+    projector_fixed: tuple[str, ...] = ()
+
+
+_RADIAL = cv2.CALIB_FIX_K3 | cv2.CALIB_ZERO_TANGENT_DIST
+_K1 = _RADIAL | cv2.CALIB_FIX_K2
+_SQUARE = cv2.CALIB_FIX_ASPECT_RATIO
+
+#: The lens models ``rangekit calibrate --lens`` offers, by name; "k1k2p" is rangekit's default. "slstudio"
+#: is SLStudio's calibrator's (``CalibratorLocHom.cpp``): k1 alone and square pixels for both devices, the
+#: camera's principal point held at the image centre.
+LENS_MODELS = {
+    "k1k2p": LensModel("k1k2p", "k1, k2, p1, p2 (k3 0)", DEFAULT_FLAGS, DEFAULT_FLAGS),
+    "k1k2": LensModel("k1k2", "k1, k2 (no tangential terms)", _RADIAL, _RADIAL, ("p1", "p2"), ("p1", "p2")),
+    "k1": LensModel("k1", "k1 alone", _K1, _K1, ("k2", "p1", "p2"), ("k2", "p1", "p2")),
+    "slstudio": LensModel("slstudio", "SLStudio's: k1 alone, square pixels, the camera's principal point at the "
+                          "image centre", _K1 | _SQUARE | cv2.CALIB_FIX_PRINCIPAL_POINT, _K1 | _SQUARE,
+                          ("k2", "p1", "p2", "aspect", "cx", "cy"), ("k2", "p1", "p2", "aspect")),
+}
 
 
 class CalibrationWarning(UserWarning):

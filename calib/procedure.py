@@ -6,8 +6,10 @@
 2. for each board pose (``place_board(i, n)`` puts it there: the simulator moves it, on hardware the user
    does and confirms): a coded-light sequence (default ``hybrid``; its white frame finds the corners);
 3. camera calibration from the corners (:func:`rangekit.calib.camera.calibrate_device`);
-4. projector coordinates of each corner from the decoded maps (:func:`rangekit.calib.projector.corner_projector_coords`),
-   projector calibration as an inverse camera, then a bundle adjustment of both devices and every board pose;
+4. projector coordinates of each corner from the decoded maps
+   (:func:`rangekit.calib.projector.corner_projector_coords`), projector calibration as an inverse camera, then
+   a bundle adjustment of both devices and every board pose (:func:`rangekit.calib.pair.calibrate_pair`, shared
+   with calibration from recorded sequences);
 5. turntable (when there is one): the board fixed on the table (``place_on_turntable()``), a sequence at
    each angle; board poses by PnP, the axis fit (:mod:`rangekit.calib.turntable`), the table top from the
    triangulated scene at the middle angle.
@@ -28,9 +30,10 @@ import cv2
 import numpy as np
 
 from rangekit.boards import Board, detect_board
-from rangekit.calib.camera import Correspondences, DeviceCalibration, calibrate_device
+from rangekit.calib.camera import LENS_MODELS, Correspondences, DeviceCalibration
+from rangekit.calib.pair import calibrate_pair
 from rangekit.calib.pose_feedback import FeedbackLimits, PoseCheck, check_pose, coverage_image
-from rangekit.calib.projector import BundleResult, bundle_adjust, corner_projector_coords, initial_T_proj_cam
+from rangekit.calib.projector import BundleResult, corner_projector_coords
 from rangekit.calib.response import measure_response
 from rangekit.calib.turntable import AxisFit, fit_turntable_axis, turntable_frame
 from rangekit.camera import PinholeCamera
@@ -59,6 +62,12 @@ class CalibrationSettings:
     measure_response: bool = True
     feedback: FeedbackLimits = field(default_factory=FeedbackLimits)   # when a board pose is rejected
     max_attempts: int = 10                 # captures of one pose at most (retakes asked for by ``on_pose``)
+    lens: str = "k1k2p"                    # what each device fits: a name of rangekit.calib.camera.LENS_MODELS
+
+    def __post_init__(self) -> None:
+        if self.lens not in LENS_MODELS:
+            raise CalibrationError(f"CalibrationSettings: lens must be one of {', '.join(LENS_MODELS)}, found "
+                                   f"{self.lens!r}")
 
 
 @dataclass(frozen=True, eq=False)
@@ -75,23 +84,46 @@ class RigCalibration:
     seconds: dict
     pose_checks: tuple[PoseCheck, ...] = ()    # the verdict on each board pose (the last capture of it)
     retaken: int = 0                           # captures retaken after a rejection
+    lens: str = "k1k2p"                        # the lens model fitted (rangekit.calib.camera.LENS_MODELS)
+    pose_names: tuple[str, ...] = ()           # each pose's name in the lines ("pose 1", ... when empty)
+
+    def pose_check_line(self, check: PoseCheck) -> str:
+        """``check.line()`` with the pose's name (:attr:`pose_names`) for "pose N"."""
+        line = check.line()
+        return f"{self.pose_names[check.index]}: {line.split(': ', 1)[1]}" if self.pose_names else line
+
+    def pose_table(self) -> list[str]:
+        """One line per board pose: its name, corners used by each device and the reprojection RMS of each
+        at the bundle adjustment (px), or why it was not used."""
+        lines = [f"  {'pose':<14} {'corners':>7} {'camera px':>10} {'projector px':>13}"]
+        for cam, proj in zip(self.camera.views, self.projector.views):
+            rms = self.bundle.view_rms.get(cam.index)
+            if rms is None:
+                lines.append(f"  {cam.name:<14} not used: {cam.reason or proj.reason or 'not in the bundle'}")
+            else:
+                lines.append(f"  {cam.name:<14} {cam.n_corners:>3}/{proj.n_corners:<3} {rms[0]:>10.4f} {rms[1]:>13.4f}")
+        return lines
 
     def summary_lines(self) -> list[str]:
         b = self.bundle
         base = np.linalg.norm(b.T_cam_proj[:3, 3])
+        T_proj_cam = invert_T(b.T_cam_proj)
         checks = self.pose_checks
         kept = sum(c.accepted for c in checks)
         lines = [f"board poses: {kept} of {len(checks)} kept ({len(checks) - kept} skipped, {self.retaken} retaken)"]
-        lines += [f"  {c.line()}" for c in checks if not c.accepted]
+        lines += [f"  {self.pose_check_line(c)}" for c in checks if not c.accepted]
         lines += [f"camera: {len(self.camera.used)}/{len(self.camera.views)} board poses used; "
                  f"reprojection RMS {b.rms_camera:.4f} px (bundle adjusted; {self.camera.rms:.4f} px alone)",
                  f"projector: reprojection RMS {b.rms_projector:.4f} px (bundle adjusted; {self.projector.rms:.4f} "
                  f"px alone); corner coordinates +- {self.corner_std_projector:.4f} px (median standard error)",
-                 f"camera-projector baseline {base * 1e3:.3f} mm"]
+                 f"camera-projector baseline {base * 1e3:.3f} mm; the camera's points in the projector's frame "
+                 f"X_proj = R X_cam + T, T = ({', '.join(f'{x * 1e3:.2f}' for x in T_proj_cam[:3, 3])}) mm",
+                 f"lens model: {self.lens} ({LENS_MODELS[self.lens].description})"]
         for dev in (b.camera, b.projector):
             K = dev.K
             lines.append(f"  {dev.name}: fx {K[0, 0]:.2f} fy {K[1, 1]:.2f} cx {K[0, 2]:.2f} cy {K[1, 2]:.2f} "
                          f"dist {' '.join(f'{x:.5f}' for x in dev.dist)}")
+        lines += ["per board pose, bundle adjusted (corners: camera/projector):"] + self.pose_table()
         if self.response is not None:
             lines.append(f"projector response: gamma {self.response.response.gamma:.4f}")
         if self.axis is not None:
@@ -176,7 +208,7 @@ def calibrate_rig(devices, *, settings: CalibrationSettings = CalibrationSetting
         seconds["response"] = time.time() - t0
 
     t1 = time.time()
-    cam_views, decoded, checks, kept, retaken = [], [], [], [], 0
+    cam_views, proj_fits, checks, kept, retaken = [], [], [], [], 0
     size = devices.camera.calibration.size
     for i in range(n):
         if i > 0:
@@ -199,38 +231,18 @@ def calibrate_rig(devices, *, settings: CalibrationSettings = CalibrationSetting
             kept.append((det.ids, det.uv))
             cam_views.append(Correspondences(det.ids, det.uv))
             dec = decode(images, spec, subpixel=False, response=response)
-            decoded.append((dec.proj_col, dec.proj_row, dec.confidence))
+            proj_fits.append(corner_projector_coords(dec.proj_col, dec.proj_row, dec.confidence, det.uv,
+                                                     radius=settings.corner_radius))
         else:
             cam_views.append(Correspondences(np.zeros(0, np.int64), np.zeros((0, 2)), check.reason))
-            decoded.append(None)
+            proj_fits.append(None)
     call_progress(progress, f"captured {n} board poses", n, n)
     seconds["capture"] = time.time() - t1
 
     t2 = time.time()
     names = [f"pose {i + 1}" for i in range(n)]
-    cam_cal = calibrate_device(cam_views, obj, devices.camera.calibration.size, name="camera", names=names)
-    proj_views: list[Correspondences | None] = []
-    stds = []
-    for i, (view, maps) in enumerate(zip(cam_views, decoded)):
-        if maps is None or i not in cam_cal.T_dev_board:
-            proj_views.append(Correspondences(np.zeros(0, np.int64), np.zeros((0, 2)),
-                                              view.reason or "not used for the camera"))
-            continue
-        fit = corner_projector_coords(*maps, view.uv, radius=settings.corner_radius)
-        ok = fit.ok
-        stds.append(fit.std[ok].ravel())
-        proj_views.append(Correspondences(view.ids[ok], fit.proj_uv[ok],
-                                          "" if ok.any() else "no corner lit by the projector"))
-    proj_cal = calibrate_device(proj_views, obj, (W, H), name="projector", names=names)
-    T_proj_cam = initial_T_proj_cam(cam_cal.T_dev_board, proj_cal.T_dev_board)
-    common = sorted(set(cam_cal.T_dev_board) & set(proj_cal.T_dev_board))
-    corner_std = float(np.median(np.concatenate(stds))) if stds else float("nan")
-    bundle = bundle_adjust(cam_cal.device, proj_cal.device, T_proj_cam,
-                           {i: cam_cal.T_dev_board[i] for i in common}, obj,
-                           {i: (cam_views[i].ids, cam_views[i].uv) for i in common},
-                           {i: (proj_views[i].ids, proj_views[i].uv) for i in common},
-                           sigma_camera=max(cam_cal.rms / np.sqrt(2), 1e-3),
-                           sigma_projector=max(proj_cal.rms / np.sqrt(2), 1e-3))
+    pair = calibrate_pair(cam_views, proj_fits, obj, size, (W, H), names=names, lens=LENS_MODELS[settings.lens])
+    bundle = pair.bundle
     seconds["solve"] = time.time() - t2
 
     camera, projector = bundle.camera, bundle.projector         # world = camera frame
@@ -276,9 +288,9 @@ def calibrate_rig(devices, *, settings: CalibrationSettings = CalibrationSetting
               capture=dict(template.capture) if template is not None else {},
               projector_response=response)
     seconds["total"] = time.time() - t0
-    return RigCalibration(rig=rig, camera=cam_cal, projector=proj_cal, bundle=bundle, axis=axis,
-                          response=response_fit, corner_std_projector=corner_std, seconds=seconds,
-                          pose_checks=tuple(checks), retaken=retaken)
+    return RigCalibration(rig=rig, camera=pair.camera, projector=pair.projector, bundle=bundle, axis=axis,
+                          response=response_fit, corner_std_projector=pair.corner_std_projector, seconds=seconds,
+                          pose_checks=tuple(checks), retaken=retaken, lens=pair.lens.name)
 
 
 def _axis_in_camera(rig: Rig) -> tuple[np.ndarray, np.ndarray]:

@@ -25,7 +25,9 @@ Bundle adjustment
 :func:`bundle_adjust` refines the camera's and the projector's intrinsics and distortion, the projector's
 pose relative to the camera and every board pose together, minimising the reprojection error of the board
 corners in both devices (each scaled by its own noise level) with ``scipy.optimize.least_squares`` and a
-sparse Jacobian (a board pose touches only its own view's residuals).
+sparse Jacobian (a board pose touches only its own view's residuals). A lens model with fewer parameters
+(k1 alone, a fixed aspect ratio or principal point: :data:`rangekit.calib.camera.LENS_MODELS`) holds the
+others at their initial values (``fixed_camera``, ``fixed_projector``).
 
 Frames: world = the camera's frame; the projector's pose is ``T_cam_proj``; board poses ``T_cam_board``.
 """
@@ -144,6 +146,18 @@ def _weighted_median(values: np.ndarray, weights: np.ndarray) -> np.ndarray:
 
 # --------------------------------------------------------------------------- bundle adjustment
 _N_INTR = 8   # fx, fy, cx, cy, k1, k2, p1, p2 (k3 kept at its initial value)
+#: The intrinsics :func:`bundle_adjust` refines, in its parameter order; ``fixed_*`` may name any of them, and
+#: "aspect" (fy kept at fx times its initial ratio).
+INTRINSICS = ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2")
+
+
+def _free_intrinsics(fixed, device: str) -> np.ndarray:
+    """(8,) bool: which of :data:`INTRINSICS` vary; CalibrationError naming an unknown name."""
+    unknown = sorted(set(fixed) - set(INTRINSICS) - {"aspect"})
+    if unknown:
+        raise CalibrationError(f"bundle_adjust: fixed_{device}: expected names among {', '.join(INTRINSICS)}, "
+                               f"aspect; found {', '.join(map(repr, unknown))}")
+    return np.array([n not in fixed and not (n == "fy" and "aspect" in fixed) for n in INTRINSICS])
 
 
 def _intr_vector(dev: PinholeCamera) -> np.ndarray:
@@ -197,7 +211,8 @@ class BundleResult:
 
 def bundle_adjust(camera: PinholeCamera, projector: PinholeCamera, T_proj_cam: np.ndarray,
                   T_cam_board: dict, object_points: np.ndarray, cam_obs: dict, proj_obs: dict, *,
-                  sigma_camera: float = 0.05, sigma_projector: float = 0.1, max_nfev: int = 200) -> BundleResult:
+                  sigma_camera: float = 0.05, sigma_projector: float = 0.1, max_nfev: int = 200,
+                  fixed_camera: tuple[str, ...] = (), fixed_projector: tuple[str, ...] = ()) -> BundleResult:
     """Joint refinement of both devices' intrinsics, their relative pose and the board poses.
 
     Parameters
@@ -210,6 +225,8 @@ def bundle_adjust(camera: PinholeCamera, projector: PinholeCamera, T_proj_cam: n
     sigma_camera, sigma_projector : expected noise of each device's corners (px); residuals are divided by
         them, so the two devices are weighted by their precision.
     max_nfev : iteration limit of ``least_squares``.
+    fixed_camera, fixed_projector : intrinsics held at their initial values (names of :data:`INTRINSICS`;
+        "aspect" keeps fy / fx), e.g. ``("k2", "p1", "p2")`` for a lens model of k1 alone.
 
     Outliers are the caller's business (the corner fit drops corners it cannot estimate, and
     :func:`rangekit.calib.calibrate_device` rejects bad views); the problem is small and well posed, so it is
@@ -225,6 +242,13 @@ def bundle_adjust(camera: PinholeCamera, projector: PinholeCamera, T_proj_cam: n
         x0 += [R_to_rotvec(T[:3, :3]), T[:3, 3]]
     x0 = np.concatenate(x0)
     base = 2 * _N_INTR + 6
+    free = np.ones(len(x0), bool)
+    free[:2 * _N_INTR] = np.concatenate([_free_intrinsics(fixed_camera, "camera"),
+                                         _free_intrinsics(fixed_projector, "projector")])
+    # "aspect": fy follows fx at its initial ratio (fy is then not free).
+    ties = [(k + 1, k, x0[k + 1] / x0[k]) for k, fixed in ((0, fixed_camera), (_N_INTR, fixed_projector))
+            if "aspect" in fixed]
+    free_index = np.flatnonzero(free)
 
     blocks = []   # (view k, device, ids, uv, row offset)
     rows = 0
@@ -243,6 +267,13 @@ def bundle_adjust(camera: PinholeCamera, projector: PinholeCamera, T_proj_cam: n
         else:
             S[r0:r1, _N_INTR:2 * _N_INTR + 6] = 1
 
+    def full(x_free):
+        x = x0.copy()
+        x[free_index] = x_free
+        for dst, src, ratio in ties:
+            x[dst] = x[src] * ratio
+        return x
+
     def unpack(x):
         ic, ip = x[:_N_INTR], x[_N_INTR:2 * _N_INTR]
         R_pc = rotvec_to_R(x[2 * _N_INTR:2 * _N_INTR + 3])
@@ -256,7 +287,8 @@ def bundle_adjust(camera: PinholeCamera, projector: PinholeCamera, T_proj_cam: n
     obs_uv = np.concatenate([uvs for _, _, _, uvs, _ in blocks])
     obs_sigma = np.where(obs_cam, sigma_camera, sigma_projector)[:, None]
 
-    def residuals(x, scaled=True):
+    def residuals(x_free, scaled=True):
+        x = full(x_free)
         ic, ip, R_pc, t_pc = unpack(x)
         p = x[base:].reshape(-1, 6)
         R = rotvec_to_R(p[:, :3])                                          # (V, 3, 3)
@@ -270,9 +302,12 @@ def bundle_adjust(camera: PinholeCamera, projector: PinholeCamera, T_proj_cam: n
     # Finite differences by column groups that share no residual row: parameter j of every board pose
     # (each pose touches only its own view's rows) moves in one evaluation, so a Jacobian costs
     # 2 * 8 + 6 + 6 evaluations whatever the number of views. The result is small and solved densely.
-    groups = [[c] for c in range(base)] + [list(range(base + j, len(x0), 6)) for j in range(6)]
+    # Columns are positions in the free parameters (a fixed intrinsic has none).
+    position = np.cumsum(free) - 1
+    groups = [[position[c]] for c in range(base) if free[c]] + \
+        [list(position[base + j::6]) for j in range(6)]
 
-    touches = S.toarray().astype(bool)
+    touches = S.toarray().astype(bool)[:, free]    # a tied fy's rows are its fx's: the device's own rows
 
     def jacobian(x):
         f0 = residuals(x)
@@ -286,11 +321,11 @@ def bundle_adjust(camera: PinholeCamera, projector: PinholeCamera, T_proj_cam: n
                 J[touches[:, c], c] = df[touches[:, c]] / hc
         return J
 
-    sol = least_squares(residuals, x0, jac=jacobian, method="lm", x_scale="jac", max_nfev=max_nfev,
+    sol = least_squares(residuals, x0[free], jac=jacobian, method="lm", x_scale="jac", max_nfev=max_nfev,
                         xtol=1e-12, ftol=1e-12, gtol=1e-12)
-    x = sol.x
+    x = full(sol.x)
     ic, ip, R_pc, t_pc = unpack(x)
-    raw = residuals(x, scaled=False)
+    raw = residuals(sol.x, scaled=False)
     sq = {"camera": [], "projector": []}
     view_rms = {}
     for k, device, ids, _, r0 in blocks:

@@ -228,7 +228,8 @@ def _as_gray(image: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return gray, np.rint(gray * (255.0 / top)).astype(np.uint8)
 
 
-def detect_board(image: np.ndarray, board: Board, *, min_corners: int = 6) -> BoardDetection:
+def detect_board(image: np.ndarray, board: Board, *, min_corners: int = 6,
+                 symmetric_ok: bool = False) -> BoardDetection:
     """Find a board's inner corners in an image, with ids matching :meth:`Board.object_points`.
 
     Checkerboards: ``cv2.findChessboardCorners`` (adaptive threshold, normalised image; falling back to
@@ -267,6 +268,9 @@ def detect_board(image: np.ndarray, board: Board, *, min_corners: int = 6) -> Bo
     min_corners : int
         Fewest corners to report the board found (ChArUco boards may be partly visible; a checkerboard
         is found whole or not at all).
+    symmetric_ok : bool
+        Accept a checkerboard with ``rows + cols`` even: ids known up to a half turn (corner 0 the one nearer
+        the image's top-left), which poses each solved alone do not mind (a turntable's axis would).
 
     Returns
     -------
@@ -286,7 +290,7 @@ def detect_board(image: np.ndarray, board: Board, *, min_corners: int = 6) -> Bo
     gray, gray8 = _as_gray(image)
     size = (gray.shape[1], gray.shape[0])
     if board.kind == "checkerboard":
-        if (board.rows + board.cols) % 2 == 0:
+        if (board.rows + board.cols) % 2 == 0 and not symmetric_ok:
             raise InputError(f"detect_board: a {board.cols}x{board.rows} checkerboard looks the same after a "
                              "180 degree turn, so its corner ids are ambiguous; use rows + cols odd (e.g. 10x7) "
                              "or a ChArUco board")
@@ -331,6 +335,8 @@ def _detect_checkerboard(gray: np.ndarray, gray8: np.ndarray, board: Board, size
     if uv is None:
         return _failed(size, "board found but its orientation could not be resolved (seen from behind, or "
                              "too little contrast between dark and light squares)")
+    if (board.rows + board.cols) % 2 == 0 and uv[-1].sum() < uv[0].sum():   # a half turn: corner 0 top-left
+        uv = uv[::-1].copy()
     ids = np.arange(board.n_corners, dtype=np.int64)
     half = int(np.clip(round(0.22 * _min_spacing(uv, ids, board)), 3, 15))
     return BoardDetection(ids, _refine(gray, uv, half), size)

@@ -38,7 +38,7 @@ class Calibration:
 def calibrate(out: str | Path, *, rig: str = "sim", board: Board, n_poses: int = 20, seed: int = 0,
               force: bool = False, interactive: bool = False, ask: Callable[[str], object] = input,
               progress: Callable | None = None, lasers: bool = False, laser_poses: int = 10,
-              report: Callable[[str], object] | None = None) -> Calibration:
+              report: Callable[[str], object] | None = None, lens: str = "k1k2p") -> Calibration:
     """Calibrate the camera, projector, turntable axis and projector response; write the rig file ``out``.
 
     ``rig`` is "sim" or a rig file naming the devices (its geometry is replaced). On hardware,
@@ -49,7 +49,8 @@ def calibrate(out: str | Path, *, rig: str = "sim", board: Board, n_poses: int =
     file's calibrated camera (the person places the board, :mod:`rangekit.app.laser.calibration_hw`), and
     writes the rig file with the fitted planes, everything else unchanged.
 
-    Each board pose is checked as it is captured (:mod:`rangekit.calib.pose_feedback`): ``report`` gets
+    ``lens`` names what each device's lens model fits (:data:`rangekit.calib.camera.LENS_MODELS`). Each board
+    pose is checked as it is captured (:mod:`rangekit.calib.pose_feedback`): ``report`` gets
     one line per capture (kept, or rejected and why), and ``coverage.png`` beside ``out`` shows which parts
     of the camera image the kept poses' corners have covered (rewritten atomically after each pose). A
     rejected pose is skipped and counted, or on hardware with ``interactive`` the person is asked whether
@@ -72,7 +73,7 @@ def calibrate(out: str | Path, *, rig: str = "sim", board: Board, n_poses: int =
         raise UsageError(f"--out {out}: exists; choose another file or pass --force to overwrite it")
     if n_poses < 3:
         raise UsageError(f"--poses must be at least 3 (Zhang's method), found {n_poses}; 15-25 is typical")
-    settings = CalibrationSettings(board=board, n_poses=n_poses)
+    settings = CalibrationSettings(board=board, n_poses=n_poses, lens=lens)
     hardware = rig != "sim"
     if lasers and laser_poses < 2:
         raise UsageError(f"--laser-poses must be at least 2 (two board lines fix a plane), found {laser_poses}; "

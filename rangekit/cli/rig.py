@@ -61,17 +61,25 @@ def cmd_rig_import(args: argparse.Namespace) -> int:
 def cmd_calibrate(args: argparse.Namespace) -> int:
     """rangekit calibrate --rig sim|RIG.json --out RIG.json [--lasers]: camera, projector, turntable and projector
     response (and with --lasers the line lasers' planes: on the simulator after the rest, on hardware alone with
-    the rig file's calibrated camera)"""
+    the rig file's calibrated camera); rangekit calibrate --captures DIR [DIR ...] --pattern PRESET --projector
+    WxH --out RIG.json: camera and projector from board poses another tool recorded"""
     from rangekit.app.calibrate import calibrate
     from rangekit.boards import Board
     from rangekit.rig.rig_file import RIG_SUFFIXES
 
     t0 = time.perf_counter()
+    _check_captures_options(args)
     check_output(args.out, force=args.force, suffixes=RIG_SUFFIXES, what="rig")
     board = Board(kind=args.board, cols=args.cols, rows=args.rows, square=args.square_mm / 1000.0)
-    cal = calibrate(args.out, rig=args.rig, board=board, n_poses=args.poses, seed=args.seed, force=args.force,
-                    interactive=sys.stdin.isatty(), ask=input, progress=console(), lasers=args.lasers,
-                    laser_poses=args.laser_poses, report=say)
+    if args.captures:
+        from rangekit.app.calibrate_recorded import calibrate_recordings
+
+        cal = calibrate_recordings(args.out, args.captures, pattern=args.pattern, projector_size=args.projector,
+                                   board=board, lens=args.lens, force=args.force, progress=console(), report=say)
+    else:
+        cal = calibrate(args.out, rig=args.rig, board=board, n_poses=args.poses, seed=args.seed, force=args.force,
+                        interactive=sys.stdin.isatty(), ask=input, progress=console(), lasers=args.lasers,
+                        laser_poses=args.laser_poses, report=say, lens=args.lens)
     say("")
     if cal.result is not None:
         say("== calibration ==")
@@ -88,6 +96,30 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
             say(line)
     result(f"wrote {args.out} in {time.perf_counter() - t0:.1f} s")
     return 0
+
+
+def _check_captures_options(args: argparse.Namespace) -> None:
+    """--captures needs --pattern and --projector, and takes none of the options of a calibration that captures
+    its own poses; those two are refused without it. UsageError naming the option."""
+    from rangekit.errors import UsageError
+
+    if not args.captures:
+        given = [name for name, value in (("--pattern", args.pattern), ("--projector", args.projector)) if value]
+        if given:
+            raise UsageError(f"{given[0]}: only with --captures DIR [DIR ...] (board poses another tool recorded)")
+        return
+    needed = (("--pattern", args.pattern, "the folders' capture layout, e.g. slstudio:calibration"),
+              ("--projector", args.projector, "the projector screen the tool drew its patterns on, WxH, e.g. "
+                                              "1824x1140"))
+    for name, value, what in needed:
+        if value is None:
+            raise UsageError(f"--captures: give {name} ({what})")
+    defaults = (("--rig", args.rig, "sim"), ("--poses", args.poses, 20), ("--seed", args.seed, 0),
+                ("--lasers", args.lasers, False), ("--laser-poses", args.laser_poses, 10))
+    for name, value, default in defaults:
+        if value != default:
+            raise UsageError(f"{name}: not with --captures (the recorded folders are the board poses; the rig "
+                             "file is written from them alone)")
 
 
 def cmd_devices(args: argparse.Namespace) -> int:
@@ -108,6 +140,9 @@ def cmd_devices(args: argparse.Namespace) -> int:
 
 
 def add_calibrate_parser(sub) -> None:
+    from rangekit.calib.camera import LENS_MODELS
+    from rangekit.formats.layouts import LAYOUTS as CAPTURE_LAYOUTS
+
     cal = sub.add_parser("calibrate", help="calibrate camera, projector, turntable axis and projector response",
                          description="Capture a board at several poses under coded light (the simulator moves it; "
                                      "on hardware you do, pose by pose), calibrate the camera and the projector "
@@ -116,7 +151,11 @@ def add_calibrate_parser(sub) -> None:
                                      "size in the image, tilt, reprojection error): a rejected pose says why and is "
                                      "skipped, or on hardware in a terminal you may retake it; coverage.png beside --out "
                                      "shows the parts of the image covered so far. On the simulator it also prints "
-                                     "each parameter's deviation from the true rig.")
+                                     "each parameter's deviation from the true rig. With --captures the board "
+                                     "poses are folders another tool recorded under its coded light (a capture "
+                                     "layout, --pattern): the camera and the projector are calibrated from them "
+                                     "(Moreno and Taubin's local homographies, then the same bundle adjustment "
+                                     "and checks; docs/real-captures.md).")
     cal.add_argument("--rig", default="sim", help="'sim' (default) or a rig file naming the devices (its geometry "
                                                    "is replaced)")
     cal.add_argument("--out", required=True, help="rig file to write")
@@ -134,6 +173,17 @@ def add_calibrate_parser(sub) -> None:
                           "calibrated camera (you place the board; docs/laser.md); prints every rejected pose")
     cal.add_argument("--laser-poses", type=int_in(2, 200), default=10,
                      help="with --lasers: board poses for the laser planes (default 10)")
+    cal.add_argument("--captures", nargs="+", metavar="DIR",
+                     help="calibrate from board poses another tool recorded, one folder per pose in the capture "
+                          "layout --pattern (docs/real-captures.md); needs --projector")
+    cal.add_argument("--pattern", choices=sorted(CAPTURE_LAYOUTS), default=None,
+                     help="with --captures: the folders' capture layout; it must code columns and rows (e.g. "
+                          "slstudio:calibration)")
+    cal.add_argument("--projector", type=size, default=None,
+                     help="with --captures: the projector screen the patterns were drawn on, WxH (e.g. 1824x1140)")
+    cal.add_argument("--lens", choices=tuple(LENS_MODELS), default="k1k2p",
+                     help="what each device's lens model fits: " + "; ".join(
+                         f"{m.name}: {m.description}" for m in LENS_MODELS.values()) + " (default k1k2p)")
     cal.set_defaults(func=cmd_calibrate)
 
 

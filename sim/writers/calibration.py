@@ -1,4 +1,5 @@
-"""Simulated calibration sessions: hand-held board poses and boards standing on the turntable.
+"""Simulated calibration sessions: hand-held board poses and boards standing on the turntable, and board poses
+recorded as another tool records them (:func:`write_layout_poses`: its frames, under its file names).
 
 Poses are ``T_world_board`` (4, 4): board frame as in :mod:`rangekit.boards` (corners in z = 0, printed
 side towards -z), world frame the rig's. ``board_scene`` and ``turntable_board_scene`` build the
@@ -9,18 +10,23 @@ from __future__ import annotations
 
 import dataclasses
 from collections import Counter
+from pathlib import Path
+from typing import Sequence
 
+import cv2
 import numpy as np
 
 from rangekit.boards import Board
 from rangekit.camera import PinholeCamera
 from rangekit.errors import SceneError
+from rangekit.io import atomic_write_bytes
 from rangekit.geometry import apply_T, axis_angle_to_R, compose, invert_T, make_T
 from rangekit.rig.rig_file import Rig
 from rangekit.sim.scene.objects import board_object, turntable_disc
 from rangekit.sim.scene.scene import Scene
 
-__all__ = ["board_poses", "board_scene", "turntable_board_scene", "board_outline", "pose_problem"]
+__all__ = ["board_poses", "board_scene", "turntable_board_scene", "board_outline", "pose_problem",
+           "write_layout_poses"]
 
 
 def board_outline(board: Board, *, per_edge: int = 16) -> np.ndarray:
@@ -166,3 +172,35 @@ def turntable_board_scene(rig: Rig, board: Board, *, tilt_deg: float = 20.0, off
     obj = board_object(board).with_pose(compose(rig.T_world_table, T_table_board))
     disc = turntable_disc().with_pose(rig.T_world_table)
     return Scene((obj, disc))
+
+
+def write_layout_poses(folder: str | Path, rig: Rig, board: Board, poses: Sequence[np.ndarray], layout, *,
+                       seed: int = 0, imaging=None) -> list[Path]:
+    """Board poses recorded as another tool records them: per pose a folder ``pose_01``, ``pose_02``, ... in
+    ``folder`` holding the frames that tool projects (:func:`rangekit.formats.layouts.tool_frames` of
+    ``layout``, a :class:`~rangekit.formats.layouts.CaptureLayout`, for ``rig``'s projector) under its own file
+    names, as the simulated rig captures them (:class:`rangekit.sim.devices.sim_rig.SimRig`, ``seed``, ``imaging``
+    an :class:`~rangekit.sim.imaging.render.ImagingModel` or the default). ``poses``: ``T_world_board`` (4, 4)
+    each (:func:`board_poses`). Returns the pose folders, in order; each file is written atomically.
+    """
+    from rangekit.formats.layouts import tool_frames
+    from rangekit.sim.devices.sim_rig import SimRig
+
+    if rig.projector is None:
+        raise SceneError("write_layout_poses: the rig has no projector to project the layout's frames")
+    frames = tool_frames(layout, rig.projector.width, rig.projector.height)
+    first = layout.first_index
+    sim = SimRig(board_scene(board, poses[0]), rig, seed=seed, **({"imaging": imaging} if imaging else {}))
+    folders = []
+    for i, T in enumerate(poses):
+        sim.set_scene(board_scene(board, T))
+        pose_folder = Path(folder) / f"pose_{i + 1:02d}"
+        pose_folder.mkdir(parents=True, exist_ok=True)
+        for k, image in enumerate(sim.capture_sequence(frames)):
+            name = layout.file_name.format(first + k, index=first + k, camera=1)
+            ok, data = cv2.imencode(Path(name).suffix, image)
+            if not ok:
+                raise SceneError(f"write_layout_poses: OpenCV cannot encode {name}")
+            atomic_write_bytes(pose_folder / name, data.tobytes())
+        folders.append(pose_folder)
+    return folders

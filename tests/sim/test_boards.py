@@ -210,6 +210,25 @@ def test_not_found_gives_a_reason():
         detect_board(blank.astype(np.float32), Board())
 
 
+def test_a_symmetric_checkerboard_is_found_up_to_a_half_turn():
+    """rows + cols even (SLStudio's 9 x 13 corners): refused unless asked for; then found in any quarter turn,
+    corner 0 the top-left one of the two a half turn swaps, and a print read with cols and rows the wrong way
+    round says to swap them."""
+    board = Board(cols=8, rows=6, square=0.01)
+    img, _ = board.texture(2e-4)                                      # 50 px squares, seen square on
+    image = np.pad((np.asarray(img) * 255).astype(np.uint8), 40, constant_values=230)
+    with pytest.raises(InputError, match="180 degree turn"):
+        detect_board(image, board)
+    for turns in range(4):
+        det = detect_board(np.ascontiguousarray(np.rot90(image, turns)), board, symmetric_ok=True)
+        assert det.found and len(det.ids) == 35
+        assert det.uv[0].sum() < det.uv[-1].sum()
+        step = np.linalg.norm(det.uv[1] - det.uv[0])
+        assert abs(step - 50) < 0.5                                    # neighbours along board x
+    det = detect_board(image, Board(cols=6, rows=8, square=0.01), symmetric_ok=True)
+    assert not det.found and "cols and rows swapped (8x6" in det.reason
+
+
 # --- poses -------------------------------------------------------------------------------------------
 
 def _twist_about_z(R: np.ndarray) -> float:

@@ -1,0 +1,158 @@
+"""``rangekit calibrate --captures DIR [DIR ...] --pattern PRESET --projector WxH``: a rig from board poses another
+tool recorded under its coded light, one folder per pose in a capture layout (:mod:`rangekit.formats.layouts`).
+
+Each folder is read (:func:`rangekit.formats.layouts.layout_files`: the layout's frames, no more, no fewer),
+put in the layout's spec order (:func:`~rangekit.formats.layouts.arrange`), decoded
+(:func:`rangekit.coded.decode.decode`) and measured (:func:`rangekit.calib.recorded.measure_pose`: the board's
+corners in the spec's white frame, the pose's checks, each corner's projector coordinates from a local
+homography); only the corners are kept, so any number of poses fits in memory. Then the camera and the
+projector are calibrated and bundle-adjusted together (:func:`rangekit.calib.recorded.calibrate_recorded`) and
+the rig file written, world = the camera's frame. ``coverage.png`` beside it shows the camera image the kept
+poses' corners cover, as the hardware calibration's does.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Callable, Sequence
+
+import numpy as np
+
+from rangekit.app.calibrate import Calibration
+from rangekit.boards import Board
+from rangekit.errors import DecodeError, FileFormatError, UsageError
+from rangekit.io import write_png
+from rangekit.progress import call_progress
+from rangekit.rig.rig_file import save_rig
+
+__all__ = ["calibrate_recordings", "board_image_source"]
+
+
+def board_image_source(layout, width: int, height: int) -> str:
+    """Where a layout's white frame, the one the board's corners are found in, comes from: a file of the
+    tool's, or made from its phase steps ("white made as A + B of the phase steps in frameSeq_03.bmp, ...")."""
+    from rangekit.formats.layouts import WHITE_FROM_STEPS
+
+    spec = layout.spec(*layout.decoded_size(width, height))
+    source = layout.frames(width, height)[spec.frame_names.index("white")]
+
+    def files(ks) -> str:
+        return ", ".join(layout.file_name.format(k, index=k, camera=1) for k in ks)
+
+    if source == WHITE_FROM_STEPS:
+        return f"white made as A + B of the phase steps in {files(layout.steps_for_references)}"
+    if isinstance(source, int):
+        return f"white, {files([source])}"
+    return f"white ({source})"
+
+
+def _codes_to_pixels(code: np.ndarray, blocks) -> np.ndarray:
+    """Decoded codes of an axis counted in :class:`~rangekit.formats.layouts.AxisBlocks` to projector pixels:
+    code ``c`` is centred on pixel ``size c - offset + (size - 1) / 2``."""
+    if blocks.size == 1 and blocks.offset == 0:
+        return code
+    return code * np.float32(blocks.size) + np.float32((blocks.size - 1) / 2 - blocks.offset)
+
+
+def _names(captures: Sequence[Path]) -> list[str]:
+    """Each pose's name: its folder's name, or the path as given where two folders share a name."""
+    short = [p.name or str(p) for p in captures]
+    return short if len(set(short)) == len(short) else [str(p) for p in captures]
+
+
+def calibrate_recordings(out: str | Path, captures: Sequence[str | Path], *, pattern: str,
+                         projector_size: tuple[int, int], board: Board, lens: str = "k1k2p", force: bool = False,
+                         progress: Callable | None = None, report: Callable[[str], object] | None = None
+                         ) -> Calibration:
+    """Calibrate the camera and the projector from recorded board poses; write the rig file ``out``.
+
+    Parameters
+    ----------
+    out : the rig file to write (JSON).
+    captures : one folder per board pose, each holding the layout's frames.
+    pattern : the layout's name (:data:`rangekit.formats.layouts.LAYOUTS`); it must code columns and rows.
+    projector_size : (width, height) of the projector's screen in the pixels the tool drew its patterns in.
+    board : the printed board (a checkerboard may have ``rows + cols`` even).
+    lens : a name of :data:`rangekit.calib.camera.LENS_MODELS`.
+    report : gets one line per pose (kept, or rejected and why) and where the corners are found.
+
+    Raises
+    ------
+    UsageError
+        ``out`` exists (without ``force``), an unknown layout, one that does not code both axes, a capture
+        that is not a folder, fewer than 3 folders.
+    FileFormatError
+        A folder without the layout's frames (one missing, more than it has), images of another size than
+        the other poses'.
+    CalibrationError
+        Fewer than 3 poses usable (each rejected pose named with its reason), degenerate poses.
+    """
+    from rangekit.calib.pose_feedback import FeedbackLimits, coverage_image
+    from rangekit.calib.recorded import MIN_POSES, calibrate_recorded, measure_pose, refused_pose
+    from rangekit.coded.decode import decode
+    from rangekit.formats.capture import read_stack
+    from rangekit.formats.layouts import LAYOUTS, arrange, layout_files
+
+    out = Path(out)
+    if out.exists() and not force:
+        raise UsageError(f"--out {out}: exists; choose another file or pass --force to overwrite it")
+    if pattern not in LAYOUTS:
+        raise UsageError(f"--pattern {pattern}: unknown capture layout; known: {', '.join(sorted(LAYOUTS))}")
+    layout = LAYOUTS[pattern]
+    width, height = (int(v) for v in projector_size)
+    spec = layout.spec(*layout.decoded_size(width, height))
+    if set(spec.axes) != {"columns", "rows"} or "white" not in spec.frame_names:
+        raise UsageError(f"--pattern {pattern}: codes only the projector's {' and '.join(spec.axes)}; calibrating "
+                         "the projector needs its columns and rows at every board corner (e.g. "
+                         "slstudio:calibration)")
+    folders = [Path(c) for c in captures]
+    if len(folders) < MIN_POSES:
+        raise UsageError(f"--captures: {len(folders)} folder(s); at least {MIN_POSES} board poses are needed "
+                         "(Zhang's method), 5-20 is typical")
+    for folder in folders:
+        if not folder.is_dir():
+            raise UsageError(f"--captures {folder}: expected a folder of {pattern} frames, found "
+                             f"{'a file' if folder.exists() else 'nothing'}")
+    names = _names(folders)
+    blocks = layout.blocks(width, height)
+    if report is not None:
+        report(f"{len(folders)} board poses, {pattern} ({layout.source}); corners found in each pose's "
+               f"{board_image_source(layout, width, height)}")
+    limits = FeedbackLimits()
+    coverage_png = out.parent / "coverage.png"
+    poses, kept, camera_size = [], [], None
+    t0 = time.time()
+    for i, (folder, name) in enumerate(zip(folders, names)):
+        call_progress(progress, f"pose {i + 1}/{len(folders)}: {name}", i, len(folders))
+        files = layout_files(folder, layout, width, height)
+        frames = read_stack(files, what=f"a {pattern} capture")
+        size = (frames.shape[2], frames.shape[1])
+        if camera_size is None:
+            camera_size = size
+        elif size != camera_size:
+            raise FileFormatError(f"{folder}: images are {size[0]}x{size[1]}, those of {folders[0]} "
+                                  f"{camera_size[0]}x{camera_size[1]}; every pose must come from the same camera")
+        stack, spec = arrange(list(frames), layout, width, height)
+        del frames
+        try:
+            dec = decode(stack, spec)
+        except DecodeError as exc:                  # an unlit or wrong folder: this pose refused, not the run
+            pose = refused_pose(i, name, f"not decoded: {exc}")
+        else:
+            lit = stack[spec.frame_names.index("white")]
+            pose = measure_pose(i, name, lit, _codes_to_pixels(dec.proj_col, blocks[0]),
+                                _codes_to_pixels(dec.proj_row, blocks[1]), board, kept=kept, limits=limits)
+        del stack
+        poses.append(pose)
+        if pose.check.accepted:
+            kept.append((pose.corners.ids, pose.corners.uv))
+        write_png(coverage_png, coverage_image(kept, camera_size, pose.corners.uv if pose.check.accepted else None,
+                                               pose.check.accepted))
+        if report is not None:
+            report(pose.line())
+    call_progress(progress, f"decoded {len(folders)} board poses", len(folders), len(folders))
+    result = calibrate_recorded(poses, board, camera_size, (width, height), lens=lens,
+                                seconds={"decode": time.time() - t0})
+    save_rig(result.rig, out)
+    return Calibration(result, None, [])

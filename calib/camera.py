@@ -22,7 +22,7 @@ from rangekit.errors import CalibrationError
 from rangekit.geometry import make_T, rotvec_to_R
 
 __all__ = ["ViewReport", "DeviceCalibration", "Correspondences", "calibrate_device", "board_normal_spread",
-           "DEFAULT_FLAGS", "CalibrationWarning", "LensModel", "LENS_MODELS"]
+           "DEFAULT_FLAGS", "CalibrationWarning", "LensModel", "LENS_MODELS", "CORNER_FITS"]
 
 #: Five coefficients (k1, k2, p1, p2, k3) with k3 fixed at 0: a board seldom covers the corners of the image
 #: well enough to separate k3 from k1, k2 (it then absorbs noise and extrapolates badly).
@@ -41,6 +41,12 @@ class LensModel:
     camera_fixed: tuple[str, ...] = ()
     projector_fixed: tuple[str, ...] = ()
 
+
+#: How a board corner's projector coordinates are fitted from the decoded maps around it, the default first:
+#: rangekit's robust local quadratic (:func:`rangekit.calib.projector.corner_projector_coords`) or Moreno and
+#: Taubin's local homography (:func:`rangekit.calib.local_homography.local_homography_coords`). Here, beside the
+#: lens models, so the command line lists both without loading the solvers.
+CORNER_FITS = ("quadratic", "homography")
 
 _RADIAL = cv2.CALIB_FIX_K3 | cv2.CALIB_ZERO_TANGENT_DIST
 _K1 = _RADIAL | cv2.CALIB_FIX_K2

@@ -8,8 +8,13 @@ rangekit's pose checks and bundle adjustment. Per board pose (:func:`measure_pos
    mind);
 2. the pose's checks (:func:`rangekit.calib.pose_feedback.check_pose`: corners, size, tilt, reprojection), and
    one more: enough corners lit by the projector;
-3. each corner's projector coordinates from a local homography over the decoded maps
-   (:func:`rangekit.calib.local_homography.local_homography_coords`).
+3. each corner's projector coordinates from the decoded maps around it, by one of
+   :data:`rangekit.calib.camera.CORNER_FITS`:
+   "quadratic", rangekit's own robust local quadratic regression
+   (:func:`rangekit.calib.projector.corner_projector_coords`, the hardware calibration's), or "homography",
+   Moreno and Taubin's local homography (:func:`rangekit.calib.local_homography.local_homography_coords`;
+   docs/calibration.md notes it is patented, US 10008007). On SLStudio's five recorded poses both give the
+   same rig (projector RMS 0.304 and 0.307 px alone, docs/real-captures.md).
 
 Then (:func:`calibrate_recorded`) the camera alone, the projector alone and both bundle-adjusted together
 (:func:`rangekit.calib.pair.calibrate_pair`). The rig's world is the camera's frame; there is no turntable
@@ -26,12 +31,12 @@ from typing import Sequence
 import numpy as np
 
 from rangekit.boards import Board, detect_board
-from rangekit.calib.camera import LENS_MODELS, Correspondences
+from rangekit.calib.camera import CORNER_FITS, LENS_MODELS, Correspondences
 from rangekit.calib.local_homography import local_homography_coords
 from rangekit.calib.pair import calibrate_pair
 from rangekit.calib.pose_feedback import FeedbackLimits, PoseCheck, check_pose
 from rangekit.calib.procedure import RigCalibration
-from rangekit.calib.projector import CornerFit
+from rangekit.calib.projector import CornerFit, corner_projector_coords
 from rangekit.camera import PinholeCamera
 from rangekit.errors import CalibrationError
 from rangekit.rig.rig_file import Rig
@@ -71,8 +76,9 @@ def _none(reason: str) -> Correspondences:
 
 
 def measure_pose(index: int, name: str, lit: np.ndarray, proj_col: np.ndarray, proj_row: np.ndarray,
-                 board: Board, *, kept: Sequence[tuple[np.ndarray, np.ndarray]] = (),
-                 limits: FeedbackLimits = FeedbackLimits(), radius: int = 10) -> RecordedPose:
+                 board: Board, *, confidence: np.ndarray | None = None,
+                 kept: Sequence[tuple[np.ndarray, np.ndarray]] = (), limits: FeedbackLimits = FeedbackLimits(),
+                 corners: str = CORNER_FITS[0], radius: int = 10) -> RecordedPose:
     """Steps 1-3 of the module doc for one board pose.
 
     Parameters
@@ -82,11 +88,15 @@ def measure_pose(index: int, name: str, lit: np.ndarray, proj_col: np.ndarray, p
     lit : (H, W) uint8/uint16 image the board's corners are found in (a layout's white frame, recorded or
         made from phase steps).
     proj_col, proj_row : (H, W) float decoded projector column and row, NaN where the decoder masked the pixel.
+    confidence : (H, W) float in [0, 1], the decoder's (the quadratic fit weights by it); None: 1 where decoded.
     board : the printed board.
     kept : (ids, uv) of the poses kept before this one (the reprojection check fits a camera to them).
     limits : when a pose is rejected; ``min_corners`` also counts the corners the projector lights.
-    radius : half-window of the local homographies, camera pixels.
+    corners : one of :data:`rangekit.calib.camera.CORNER_FITS`.
+    radius : half-window of the corner fits, camera pixels (10: SLStudio's; 21 x 21 pixels).
     """
+    if corners not in CORNER_FITS:
+        raise CalibrationError(f"corners must be one of {', '.join(CORNER_FITS)}, found {corners!r}")
     height, width = proj_col.shape
     det = detect_board(lit, board, symmetric_ok=True)
     if not det.found and board.kind == "checkerboard" and det.reason == "board not found":
@@ -99,7 +109,11 @@ def measure_pose(index: int, name: str, lit: np.ndarray, proj_col: np.ndarray, p
     check = check_pose(index, det, board, (width, height), kept=kept, limits=limits)
     if not check.accepted:
         return RecordedPose(name, check, _none(check.reason), None)
-    fit = local_homography_coords(proj_col, proj_row, det.uv, radius=radius)
+    if corners == "homography":
+        fit = local_homography_coords(proj_col, proj_row, det.uv, radius=radius)
+    else:
+        conf = np.isfinite(proj_col) & np.isfinite(proj_row) if confidence is None else confidence
+        fit = corner_projector_coords(proj_col, proj_row, conf.astype(np.float32), det.uv, radius=radius)
     lit_corners = int(fit.ok.sum())
     if lit_corners < limits.min_corners:
         reason = (f"only {lit_corners} of its {len(det.ids)} corners in the projector's light, at least "

@@ -4,8 +4,8 @@ tool recorded under its coded light, one folder per pose in a capture layout (:m
 Each folder is read (:func:`rangekit.formats.layouts.layout_files`: the layout's frames, no more, no fewer),
 put in the layout's spec order (:func:`~rangekit.formats.layouts.arrange`), decoded
 (:func:`rangekit.coded.decode.decode`) and measured (:func:`rangekit.calib.recorded.measure_pose`: the board's
-corners in the spec's white frame, the pose's checks, each corner's projector coordinates from a local
-homography); only the corners are kept, so any number of poses fits in memory. Then the camera and the
+corners in the spec's white frame, the pose's checks, each corner's projector coordinates from a local fit
+over the decoded maps); only the corners are kept, so any number of poses fits in memory. Then the camera and the
 projector are calibrated and bundle-adjusted together (:func:`rangekit.calib.recorded.calibrate_recorded`) and
 the rig file written, world = the camera's frame. ``coverage.png`` beside it shows the camera image the kept
 poses' corners cover, as the hardware calibration's does.
@@ -62,9 +62,9 @@ def _names(captures: Sequence[Path]) -> list[str]:
 
 
 def calibrate_recordings(out: str | Path, captures: Sequence[str | Path], *, pattern: str,
-                         projector_size: tuple[int, int], board: Board, lens: str = "k1k2p", force: bool = False,
-                         progress: Callable | None = None, report: Callable[[str], object] | None = None
-                         ) -> Calibration:
+                         projector_size: tuple[int, int], board: Board, lens: str = "k1k2p",
+                         corners: str = "quadratic", force: bool = False, progress: Callable | None = None,
+                         report: Callable[[str], object] | None = None) -> Calibration:
     """Calibrate the camera and the projector from recorded board poses; write the rig file ``out``.
 
     Parameters
@@ -75,6 +75,9 @@ def calibrate_recordings(out: str | Path, captures: Sequence[str | Path], *, pat
     projector_size : (width, height) of the projector's screen in the pixels the tool drew its patterns in.
     board : the printed board (a checkerboard may have ``rows + cols`` even).
     lens : a name of :data:`rangekit.calib.camera.LENS_MODELS`.
+    corners : how each corner's projector coordinates are fitted, one of
+        :data:`rangekit.calib.camera.CORNER_FITS` ("quadratic", rangekit's own; "homography", Moreno and
+        Taubin's).
     report : gets one line per pose (kept, or rejected and why) and where the corners are found.
 
     Raises
@@ -89,6 +92,7 @@ def calibrate_recordings(out: str | Path, captures: Sequence[str | Path], *, pat
         Fewer than 3 poses usable (each rejected pose named with its reason), degenerate poses.
     """
     from rangekit.calib.pose_feedback import FeedbackLimits, coverage_image
+    from rangekit.calib.camera import CORNER_FITS
     from rangekit.calib.recorded import MIN_POSES, calibrate_recorded, measure_pose, refused_pose
     from rangekit.coded.decode import decode
     from rangekit.formats.capture import read_stack
@@ -99,6 +103,8 @@ def calibrate_recordings(out: str | Path, captures: Sequence[str | Path], *, pat
         raise UsageError(f"--out {out}: exists; choose another file or pass --force to overwrite it")
     if pattern not in LAYOUTS:
         raise UsageError(f"--pattern {pattern}: unknown capture layout; known: {', '.join(sorted(LAYOUTS))}")
+    if corners not in CORNER_FITS:
+        raise UsageError(f"--corners {corners}: expected one of {', '.join(CORNER_FITS)}")
     layout = LAYOUTS[pattern]
     width, height = (int(v) for v in projector_size)
     spec = layout.spec(*layout.decoded_size(width, height))
@@ -118,7 +124,8 @@ def calibrate_recordings(out: str | Path, captures: Sequence[str | Path], *, pat
     blocks = layout.blocks(width, height)
     if report is not None:
         report(f"{len(folders)} board poses, {pattern} ({layout.source}); corners found in each pose's "
-               f"{board_image_source(layout, width, height)}")
+               f"{board_image_source(layout, width, height)}; their projector coordinates by a local {corners} "
+               "fit")
     limits = FeedbackLimits()
     coverage_png = out.parent / "coverage.png"
     poses, kept, camera_size = [], [], None
@@ -142,7 +149,8 @@ def calibrate_recordings(out: str | Path, captures: Sequence[str | Path], *, pat
         else:
             lit = stack[spec.frame_names.index("white")]
             pose = measure_pose(i, name, lit, _codes_to_pixels(dec.proj_col, blocks[0]),
-                                _codes_to_pixels(dec.proj_row, blocks[1]), board, kept=kept, limits=limits)
+                                _codes_to_pixels(dec.proj_row, blocks[1]), board, confidence=dec.confidence,
+                                kept=kept, limits=limits, corners=corners)
         del stack
         poses.append(pose)
         if pose.check.accepted:

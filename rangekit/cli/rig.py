@@ -75,7 +75,8 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         from rangekit.app.calibrate_recorded import calibrate_recordings
 
         cal = calibrate_recordings(args.out, args.captures, pattern=args.pattern, projector_size=args.projector,
-                                   board=board, lens=args.lens, force=args.force, progress=console(), report=say)
+                                   board=board, lens=args.lens, corners=args.corners, force=args.force,
+                                   progress=console(), report=say)
     else:
         cal = calibrate(args.out, rig=args.rig, board=board, n_poses=args.poses, seed=args.seed, force=args.force,
                         interactive=sys.stdin.isatty(), ask=input, progress=console(), lasers=args.lasers,
@@ -104,7 +105,8 @@ def _check_captures_options(args: argparse.Namespace) -> None:
     from rangekit.errors import UsageError
 
     if not args.captures:
-        given = [name for name, value in (("--pattern", args.pattern), ("--projector", args.projector)) if value]
+        given = [name for name, value in (("--pattern", args.pattern), ("--projector", args.projector),
+                                          ("--corners", args.corners != "quadratic")) if value]
         if given:
             raise UsageError(f"{given[0]}: only with --captures DIR [DIR ...] (board poses another tool recorded)")
         return
@@ -140,7 +142,7 @@ def cmd_devices(args: argparse.Namespace) -> int:
 
 
 def add_calibrate_parser(sub) -> None:
-    from rangekit.calib.camera import LENS_MODELS
+    from rangekit.calib.camera import CORNER_FITS, LENS_MODELS
     from rangekit.formats.layouts import LAYOUTS as CAPTURE_LAYOUTS
 
     cal = sub.add_parser("calibrate", help="calibrate camera, projector, turntable axis and projector response",
@@ -181,6 +183,10 @@ def add_calibrate_parser(sub) -> None:
                           "slstudio:calibration)")
     cal.add_argument("--projector", type=size, default=None,
                      help="with --captures: the projector screen the patterns were drawn on, WxH (e.g. 1824x1140)")
+    cal.add_argument("--corners", choices=CORNER_FITS, default=CORNER_FITS[0],
+                     help="with --captures: each corner's projector coordinates from the decoded maps around it: "
+                          "quadratic (rangekit's robust local regression, as calibrate on devices; default) or "
+                          "homography (Moreno and Taubin's local homography, patented: US 10008007)")
     cal.add_argument("--lens", choices=tuple(LENS_MODELS), default="k1k2p",
                      help="what each device's lens model fits: " + "; ".join(
                          f"{m.name}: {m.description}" for m in LENS_MODELS.values()) + " (default k1k2p)")

@@ -212,8 +212,8 @@ def test_not_found_gives_a_reason():
 
 def test_a_symmetric_checkerboard_is_found_up_to_a_half_turn():
     """rows + cols even (SLStudio's 9 x 13 corners): refused unless asked for; then found in any quarter turn,
-    corner 0 the top-left one of the two a half turn swaps, and a print read with cols and rows the wrong way
-    round says to swap them."""
+    corner 0 the top-left one of the two a half turn swaps; read with cols and rows the wrong way round, its
+    dark squares are where the board's light ones are and no orientation fits."""
     board = Board(cols=8, rows=6, square=0.01)
     img, _ = board.texture(2e-4)                                      # 50 px squares, seen square on
     image = np.pad((np.asarray(img) * 255).astype(np.uint8), 40, constant_values=230)
@@ -226,7 +226,7 @@ def test_a_symmetric_checkerboard_is_found_up_to_a_half_turn():
         step = np.linalg.norm(det.uv[1] - det.uv[0])
         assert abs(step - 50) < 0.5                                    # neighbours along board x
     det = detect_board(image, Board(cols=6, rows=8, square=0.01), symmetric_ok=True)
-    assert not det.found and "cols and rows swapped (8x6" in det.reason
+    assert not det.found and "orientation could not be resolved" in det.reason
 
 
 # --- poses -------------------------------------------------------------------------------------------

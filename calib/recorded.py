@@ -85,8 +85,8 @@ def measure_pose(index: int, name: str, lit: np.ndarray, proj_col: np.ndarray, p
     ----------
     index : the pose's place in the calibration, from 0.
     name : its name in messages.
-    lit : (H, W) uint8/uint16 image the board's corners are found in (a layout's white frame, recorded or
-        made from phase steps).
+    lit : (H, W) uint8/uint16 image the board's corners are found in (the mean of a pose's frames:
+        :func:`rangekit.app.calibrate_recorded.board_image`).
     proj_col, proj_row : (H, W) float decoded projector column and row, NaN where the decoder masked the pixel.
     confidence : (H, W) float in [0, 1], the decoder's (the quadratic fit weights by it); None: 1 where decoded.
     board : the printed board.

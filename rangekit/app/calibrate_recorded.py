@@ -4,8 +4,8 @@ tool recorded under its coded light, one folder per pose in a capture layout (:m
 Each folder is read (:func:`rangekit.formats.layouts.layout_files`: the layout's frames, no more, no fewer),
 put in the layout's spec order (:func:`~rangekit.formats.layouts.arrange`), decoded
 (:func:`rangekit.coded.decode.decode`) and measured (:func:`rangekit.calib.recorded.measure_pose`: the board's
-corners in the spec's white frame, the pose's checks, each corner's projector coordinates from a local fit
-over the decoded maps); only the corners are kept, so any number of poses fits in memory. Then the camera and the
+corners in the mean of its frames (:func:`board_image`), the pose's checks, each corner's projector coordinates
+from a local fit over the decoded maps); only the corners are kept, so any number of poses fits in memory. Then the camera and the
 projector are calibrated and bundle-adjusted together (:func:`rangekit.calib.recorded.calibrate_recorded`) and
 the rig file written, world = the camera's frame. ``coverage.png`` beside it shows the camera image the kept
 poses' corners cover, as the hardware calibration's does.
@@ -26,33 +26,29 @@ from rangekit.io import write_png
 from rangekit.progress import call_progress
 from rangekit.rig.rig_file import save_rig
 
-__all__ = ["calibrate_recordings", "board_image_source"]
+__all__ = ["calibrate_recordings", "board_image", "board_image_source"]
 
 
 def board_image_source(layout, width: int, height: int) -> str:
-    """Where a layout's white frame, the one the board's corners are found in, comes from: a file of the
-    tool's, or made from its phase steps ("white made as A + B of the phase steps in frameSeq_03.bmp, ...")."""
-    from rangekit.formats.layouts import WHITE_FROM_STEPS
-
-    spec = layout.spec(*layout.decoded_size(width, height))
-    source = layout.frames(width, height)[spec.frame_names.index("white")]
-
-    def files(ks) -> str:
-        return ", ".join(layout.file_name.format(k, index=k, camera=1) for k in ks)
-
-    if source == WHITE_FROM_STEPS:
-        return f"white made as A + B of the phase steps in {files(layout.steps_for_references)}"
-    if isinstance(source, int):
-        return f"white, {files([source])}"
-    return f"white ({source})"
+    """What the board's corners are found in: the mean of the pose's frames, as the tool recorded them."""
+    n = layout.n_files(width, height)
+    first, last = (layout.file_name.format(k, index=k, camera=1) for k in (layout.first_index,
+                                                                             layout.first_index + n - 1))
+    return f"mean of its {n} frames ({first} ... {last})"
 
 
-def _codes_to_pixels(code: np.ndarray, blocks) -> np.ndarray:
-    """Decoded codes of an axis counted in :class:`~rangekit.formats.layouts.AxisBlocks` to projector pixels:
-    code ``c`` is centred on pixel ``size c - offset + (size - 1) / 2``."""
-    if blocks.size == 1 and blocks.offset == 0:
-        return code
-    return code * np.float32(blocks.size) + np.float32((blocks.size - 1) / 2 - blocks.offset)
+def board_image(frames: np.ndarray) -> np.ndarray:
+    """(H, W) uint16: the mean of a pose's frames ((K, H, W[, 3]) as recorded), scaled to 16 bits.
+
+    Every frame of a coded sequence lights the board on average half the time, so the mean is a lit board with
+    the camera's noise averaged over all of them: on SLStudio's five poses the camera's reprojection RMS is
+    0.280 px from the mean of the 12 frames, 0.284 from the cue's A + B, 0.286 from the fine steps' modulation
+    (the image SLStudio itself detects corners in).
+    """
+    grey = frames.astype(np.float32).mean(axis=-1) if frames.ndim == 4 else frames.astype(np.float32)
+    mean = grey.mean(axis=0)
+    top = float(mean.max()) or 1.0
+    return np.clip(np.rint(mean * (65535.0 / top)), 0, 65535).astype(np.uint16)
 
 
 def _names(captures: Sequence[Path]) -> list[str]:
@@ -96,7 +92,7 @@ def calibrate_recordings(out: str | Path, captures: Sequence[str | Path], *, pat
     from rangekit.calib.recorded import MIN_POSES, calibrate_recorded, measure_pose, refused_pose
     from rangekit.coded.decode import decode
     from rangekit.formats.capture import read_stack
-    from rangekit.formats.layouts import LAYOUTS, arrange, layout_files
+    from rangekit.formats.layouts import LAYOUTS, arrange, in_projector_pixels, layout_files
 
     out = Path(out)
     if out.exists() and not force:
@@ -121,7 +117,6 @@ def calibrate_recordings(out: str | Path, captures: Sequence[str | Path], *, pat
             raise UsageError(f"--captures {folder}: expected a folder of {pattern} frames, found "
                              f"{'a file' if folder.exists() else 'nothing'}")
     names = _names(folders)
-    blocks = layout.blocks(width, height)
     if report is not None:
         report(f"{len(folders)} board poses, {pattern} ({layout.source}); corners found in each pose's "
                f"{board_image_source(layout, width, height)}; their projector coordinates by a local {corners} "
@@ -140,6 +135,7 @@ def calibrate_recordings(out: str | Path, captures: Sequence[str | Path], *, pat
         elif size != camera_size:
             raise FileFormatError(f"{folder}: images are {size[0]}x{size[1]}, those of {folders[0]} "
                                   f"{camera_size[0]}x{camera_size[1]}; every pose must come from the same camera")
+        lit = board_image(frames)
         stack, spec = arrange(list(frames), layout, width, height)
         del frames
         try:
@@ -147,9 +143,8 @@ def calibrate_recordings(out: str | Path, captures: Sequence[str | Path], *, pat
         except DecodeError as exc:                  # an unlit or wrong folder: this pose refused, not the run
             pose = refused_pose(i, name, f"not decoded: {exc}")
         else:
-            lit = stack[spec.frame_names.index("white")]
-            pose = measure_pose(i, name, lit, _codes_to_pixels(dec.proj_col, blocks[0]),
-                                _codes_to_pixels(dec.proj_row, blocks[1]), board, confidence=dec.confidence,
+            dec = in_projector_pixels(dec, layout, width, height)
+            pose = measure_pose(i, name, lit, dec.proj_col, dec.proj_row, board, confidence=dec.confidence,
                                 kept=kept, limits=limits, corners=corners)
         del stack
         poses.append(pose)

@@ -24,6 +24,7 @@ from rangekit.surface.cloud import cloud_to_open3d as _cloud_to_open3d
 from rangekit.surface.convert import as_cloud
 from rangekit.surface.mesh import TriangleMesh, mesh_from_open3d
 from rangekit.surface.observed import OBSERVED_FACTOR, FusedMeshes, observed_rule
+from rangekit.surface.tsdf_volume import integrate_view, tsdf_volume
 
 # rangekit.surface.watertight (numba's kernels, 90 MB with scipy) is imported where a surface is closed:
 # Poisson's child process (rangekit.app.process.process) imports this module and never closes one.
@@ -165,32 +166,6 @@ def poisson_surfaces(cloud: PointCloud, *, depth: int = 9, density_quantile: flo
     return full, surface
 
 
-def _depth_image(depth: np.ndarray, colour: np.ndarray | None, camera: PinholeCamera):
-    """Resample a view's z-depth (metres, 0 = none) on the undistorted pinhole grid of ``camera``.
-
-    Each pixel of the undistorted grid (same K, no distortion) takes the depth of the image pixel its
-    ray crosses in the distorted image (nearest pixel). Unlike forward-projecting points into a
-    z-buffer, this loses no pixel to rounding collisions when the points carry sub-pixel noise.
-    """
-    H, W = camera.height, camera.width
-    K = camera.K
-    grid = camera.pixel_grid()
-    xy = np.column_stack([(grid[:, 0] - K[0, 2]) / K[0, 0], (grid[:, 1] - K[1, 2]) / K[1, 1]])
-    src = np.rint(camera.normalized_to_pixels(xy))  # where each undistorted ray lands in the image
-    inside = (src[:, 0] >= 0) & (src[:, 0] < W) & (src[:, 1] >= 0) & (src[:, 1] < H)
-    src_idx = (src[inside, 1] * W + src[inside, 0]).astype(np.int64)
-    z = depth.reshape(-1)[src_idx]
-    out = np.zeros(H * W, np.float32)
-    out[inside] = np.where(np.isfinite(z) & (z > 0), z, 0.0)
-    rgb = None
-    if colour is not None:
-        c = np.asarray(colour, dtype=np.float32).reshape(-1, 3)
-        rgb = np.zeros((H * W, 3), np.uint8)
-        rgb[inside] = np.clip(np.rint(np.nan_to_num(c[src_idx]) * 255), 0, 255).astype(np.uint8)
-        rgb = rgb.reshape(H, W, 3)
-    return out.reshape(H, W), rgb
-
-
 def _world_points(depth: np.ndarray, camera: PinholeCamera) -> np.ndarray:
     """(K, 3) points, in the frame of ``camera.T_world_cam``, of the pixels with a depth > 0."""
     ok = np.isfinite(depth) & (depth > 0)
@@ -231,7 +206,6 @@ def tsdf_fuse(views: Sequence[tuple[np.ndarray, np.ndarray | None, PinholeCamera
         If there are no views, a depth map or colour image does not match its camera, there are no
         valid depths, or the grid would be too fine.
     """
-    import open3d as o3d
 
     views = list(views)
     if not views:
@@ -268,30 +242,9 @@ def tsdf_fuse(views: Sequence[tuple[np.ndarray, np.ndarray | None, PinholeCamera
     trunc = 4 * voxel if sdf_trunc is None else float(sdf_trunc)
     if not (trunc > 0 and np.isfinite(trunc)):
         raise InputError(f"tsdf_fuse: sdf_trunc must be > 0, found {sdf_trunc!r}")
-    margin = trunc + 2 * voxel
-    resolution = int(np.ceil((np.max(hi - lo) + 2 * margin) / voxel))
-    if resolution > max_resolution:
-        raise InputError(f"tsdf_fuse: voxel_size {voxel:.4g} m needs a {resolution}^3 grid for a "
-                         f"{np.max(hi - lo):.4g} m object; the limit is max_resolution={max_resolution}. Use a "
-                         "larger voxel_size or raise max_resolution")
-    length = resolution * voxel
-    origin = (lo + hi) / 2 - length / 2
-    colour_type = o3d.pipelines.integration.TSDFVolumeColorType
-    # UniformTSDFVolume: ScalableTSDFVolume integrates nothing in Open3D 0.20.
-    volume = o3d.pipelines.integration.UniformTSDFVolume(
-        length=length, resolution=resolution, sdf_trunc=trunc,
-        color_type=colour_type.RGB8 if with_colour else colour_type.NoColor, origin=origin)
-
+    volume = tsdf_volume(lo, hi, voxel, trunc, colour=with_colour, max_resolution=max_resolution)
     for Z, colour, camera in checked:
-        depth, rgb = _depth_image(Z, colour if with_colour else None, camera)
-        if rgb is None:
-            rgb = np.zeros(depth.shape + (3,), np.uint8)
-        rgbd = o3d.geometry.RGBDImage.create_from_color_and_depth(
-            o3d.geometry.Image(rgb), o3d.geometry.Image(depth), depth_scale=1.0, depth_trunc=1e9,
-            convert_rgb_to_intensity=False)
-        K = camera.K
-        intrinsic = o3d.camera.PinholeCameraIntrinsic(camera.width, camera.height, K[0, 0], K[1, 1], K[0, 2], K[1, 2])
-        volume.integrate(rgbd, intrinsic, camera.T_cam_world)
+        integrate_view(volume, Z, colour if with_colour else None, camera)
 
     mesh = mesh_from_open3d(volume.extract_triangle_mesh())
     if not with_colour:

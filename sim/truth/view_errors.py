@@ -25,7 +25,6 @@ from scipy.ndimage import binary_dilation, maximum_filter, minimum_filter
 
 from rangekit.camera import PinholeCamera, world_pixel_rays
 from rangekit.geometry import apply_T, invert_T, rotation_angle
-from rangekit._runtime.memory import release_free_memory
 from rangekit.rig.rig_file import Rig
 from rangekit.surface.mesh import TriangleMesh, distance_to_surface
 from rangekit.sim.scene.raycast import cast_view
@@ -160,6 +159,5 @@ def view_errors(scene: Scene, rig: Rig, angles: Sequence[float], clouds: Sequenc
                         "p95_px": float(np.percentile(np.abs(e), 95)) if e.size else None, "n": int(e.size)}
         out.append({"view": names[k] if names is not None else k, "decoding": decoding, "cloud": cloud_stats,
                     "registration": registration})
-        del geometry, edges
-        release_free_memory()   # this view's cast, before the next (it runs beside Poisson: rangekit._runtime.memory)
+        del geometry, edges     # its pages serve the next view's cast (processing: reuse_freed_memory)
     return out

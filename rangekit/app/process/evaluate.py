@@ -13,6 +13,7 @@ from typing import Protocol, Sequence
 
 import numpy as np
 
+from rangekit._runtime.memory import reuse_freed_memory
 from rangekit.app.events import OnEvent, StageClock, progress_of
 from rangekit.app.process.fuse import FusedViews
 from rangekit.app.process.fused_outputs import with_closed
@@ -65,9 +66,11 @@ class Evaluator(Protocol):
 def measure_views(evaluate: Evaluator | None, registered: RegisteredViews, clock: StageClock) -> None:
     """Beside the fusion: the evaluator's ``prepare`` (each view against the truth), after which the decoded
     projector columns (12 maps, 63 MB) are let go; then the camera's cached rays (63 MB, used by the decoding
-    and the per-view errors) are let go, with or without an evaluator."""
+    and the per-view errors) are let go, with or without an evaluator. The views' casts and distances reuse freed
+    pages (:func:`rangekit._runtime.memory.reuse_freed_memory`): 0.8 GB of fresh pages faulted in and zeroed on the
+    12-view scan became 0.12 GB, with the same peak (issue 36)."""
     if evaluate is not None:
-        with clock.stage("evaluate"):
+        with clock.stage("evaluate"), reuse_freed_memory():   # each view's casts reuse the last view's pages
             evaluate.prepare(registered.angles, registered)
         registered.decoded.proj_cols.clear()   # made into the per-view errors: not kept beside Poisson
     forget_pixel_rays()

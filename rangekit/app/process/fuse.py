@@ -39,8 +39,12 @@ __all__ = ["CHILD_MIN_POINTS", "POISSON_POINTS", "CHILD_IMPORTS", "FusedViews", 
 #: Fewest sampled points whose Poisson runs in a child process: below, it takes less than the child's start
 #: (about 1 s of imports, on the other core).
 CHILD_MIN_POINTS = 100_000
-#: Poisson's input: every k-th merged point, k the smallest that leaves at most this many.
-POISSON_POINTS = 400_000
+#: Poisson's input: every k-th merged point, k the smallest that leaves at most this many. With the octree at
+#: depth 8 (:class:`ProcessOptions`' ``poisson_depth``) more points per cell average more noise out: on the default
+#: 12-view scan (2.02M points) 674k points measure 0.012 mm RMS against the truth where 404k measured 0.017 mm;
+#: every point (2.02M) measured 0.008 mm but the observed cut, spaced by these points, then kept less (completeness
+#: 99.4% against 99.6%). docs/benchmarks.md, issue 36.
+POISSON_POINTS = 700_000
 #: What the Poisson child imports while the views are registered (Open3D alone: 0.6 s).
 CHILD_IMPORTS = ("open3d", "rangekit.surface.fusion")
 
@@ -59,7 +63,7 @@ class FusedViews:
 
 def _sample_step(decoded: DecodedViews) -> int:
     """Poisson's sample: every step-th merged point, at most :data:`POISSON_POINTS`."""
-    return max(1, sum(len(c) for c in decoded.clouds) // POISSON_POINTS)
+    return max(1, -(-sum(len(c) for c in decoded.clouds) // POISSON_POINTS))
 
 
 def poisson_child(decoded: DecodedViews, options: ProcessOptions, children: ExitStack):
@@ -95,7 +99,7 @@ class Fusion:
                       + ("; measuring the views against the true surface alongside" if measuring_beside else ""))
         if options.fusion == "poisson":
             in_child = -(-self.n_merged // step) >= CHILD_MIN_POINTS
-            self._call = call_beside(poisson_surfaces, self._sample, depth=9, n_threads=1, in_child=in_child,
+            self._call = call_beside(poisson_surfaces, self._sample, depth=options.poisson_depth, n_threads=1, in_child=in_child,
                                      child=child)
         else:
             self._call = call_beside(_tsdf_surface, registered.decoded.maps, T, session.rig, in_child=False)

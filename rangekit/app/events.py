@@ -23,8 +23,8 @@ if TYPE_CHECKING:
     from rangekit.surface.cloud import PointCloud
     from rangekit.surface.mesh import TriangleMesh
 
-__all__ = ["StageStarted", "StageFinished", "Progress", "ScanStarted", "ViewAcquired", "ViewDecoded", "PairRegistered", "MeshReady",
-           "JobFailed", "Event", "OnEvent", "emit", "progress_of", "progress_subscriber"]
+__all__ = ["StageStarted", "StageFinished", "Progress", "ScanStarted", "ViewAcquired", "ViewDecoded", "ViewPlaced",
+           "PairRegistered", "MeshReady", "JobFailed", "Event", "OnEvent", "emit", "progress_of", "progress_subscriber"]
 
 
 @dataclass(frozen=True)
@@ -89,6 +89,20 @@ class ViewDecoded:
     cloud: PointCloud
 
 
+@dataclass(frozen=True, eq=False)
+class ViewPlaced:
+    """During a scan (:mod:`rangekit.app.scan.streaming`), view ``index`` placed beside the views already in:
+    ``cloud`` (session world at the view's turntable angle, as in :class:`ViewDecoded`) and ``T_world_view``
+    (4, 4), its pose in the first view's frame (the turntable prior refined against its neighbour): the
+    growing model, before the processing's closing registration."""
+
+    index: int
+    total: int
+    name: str
+    cloud: PointCloud
+    T_world_view: object
+
+
 @dataclass(frozen=True)
 class PairRegistered:
     """One view pair's refinement: ``rmse`` (metres), ``overlap`` (fraction), accepted or refused (``reason``)."""
@@ -103,7 +117,8 @@ class PairRegistered:
 
 @dataclass(frozen=True, eq=False)
 class MeshReady:
-    """A mesh file was written: ``kind`` ``"observed"`` (mesh.ply) or ``"watertight"`` (mesh_watertight.ply)."""
+    """A mesh file was written: ``kind`` ``"observed"`` (mesh.ply), ``"watertight"`` (mesh_watertight.ply) or
+    ``"preview"`` (preview.ply: a scan's views fused as they were decoded, :mod:`rangekit.app.scan.streaming`)."""
 
     kind: str
     path: Path
@@ -117,7 +132,8 @@ class JobFailed:
     error: BaseException
 
 
-Event = Union[StageStarted, StageFinished, Progress, ScanStarted, ViewAcquired, ViewDecoded, PairRegistered, MeshReady, JobFailed]
+Event = Union[StageStarted, StageFinished, Progress, ScanStarted, ViewAcquired, ViewDecoded, ViewPlaced, PairRegistered,
+              MeshReady, JobFailed]
 #: A subscriber: called with each event.
 OnEvent = Callable[[Event], None]
 

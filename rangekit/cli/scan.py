@@ -245,6 +245,9 @@ def add_parsers(sub) -> None:
                            "8000 32000) and decode each pixel from its longest unsaturated one; 'auto' picks three "
                            "4x apart from rangekit check's statistics")
     scan.add_argument("--no-process", action="store_true", help="acquire only (process later with 'rangekit process')")
+    scan.add_argument("--realtime", action="store_true",
+                      help="the simulator keeps real time: the rig file's pattern delay (0.1 s) and frame rate, the "
+                           "projector's latency, the turntable's speed and settling (as long as a real rig takes)")
     _processing_options(scan)
     scan.set_defaults(func=cmd_scan)
 

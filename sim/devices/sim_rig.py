@@ -73,13 +73,19 @@ class _Faults:
 
 
 class SimTurntable:
-    """A turntable that moves instantly; ``angle`` in radians. Like the Horus and FabScan boards it also
-    switches the rig's line lasers (``laser(n, on)``, n = the laser's ``switch`` number)."""
+    """A turntable; ``angle`` in radians. It moves instantly, or at ``speed_rad_s`` on the shared ``clock``
+    (:meth:`rotate_to` then takes ``|angle - before| / speed``, as a stepper board does). Like the Horus and
+    FabScan boards it also switches the rig's line lasers (``laser(n, on)``, n = the laser's ``switch``
+    number)."""
 
-    def __init__(self, faults: _Faults | None = None) -> None:
+    def __init__(self, faults: _Faults | None = None, *, speed_rad_s: float | None = None, clock=None) -> None:
         self._angle = 0.0
         self._faults = faults or _Faults()
         self.lasers_on: set[int] = set()
+        if speed_rad_s is not None and not (np.isfinite(speed_rad_s) and speed_rad_s > 0):
+            raise SceneError(f"SimTurntable: speed_rad_s must be a finite number > 0 or None, found {speed_rad_s!r}")
+        self.speed_rad_s = speed_rad_s
+        self.clock = clock if clock is not None else SimClock()
 
     def laser(self, n: int, on: bool) -> None:
         self._faults.tick("turntable")
@@ -94,6 +100,8 @@ class SimTurntable:
 
     def rotate_to(self, angle: float) -> None:
         self._faults.tick("turntable")
+        if self.speed_rad_s is not None:
+            self.clock.sleep(abs(float(angle) - self._angle) / self.speed_rad_s)
         self._angle = float(angle)
 
 
@@ -160,13 +168,14 @@ class SimRig:
         a rig file field (a real rig's is measured, and written as ``capture.pattern_delay_s``).
     clock : the clock the devices share (:mod:`rangekit.sim.devices.clock`); default a virtual :class:`SimClock`.
         ``sim.sleep`` waits on it (acquisition and calibration wait through ``devices.sleep``).
+    turntable_speed_deg_s : the turntable's speed on ``clock`` (None: it moves instantly).
     pass_motions : (passes, 4, 4) a multi-pass scan's motion of the object in each pass
         (:func:`rangekit.sim.scene.passes.pass_motions`); :meth:`start_pass` turns it over between passes.
     """
 
     def __init__(self, scene: Scene, rig: Rig | None = None, *, imaging: ImagingModel | None = None,
                  seed: int = 0, light: str = "projector", laser_ambient_scale: int = 4, latency_s: float = 0.0,
-                 clock=None, pass_motions=None) -> None:
+                 clock=None, pass_motions=None, turntable_speed_deg_s: float | None = None) -> None:
         if not isinstance(scene, Scene):
             raise SceneError(f"SimRig: scene must be a rangekit.sim.Scene, found {type(scene).__name__}")
         self._scene = scene
@@ -191,7 +200,9 @@ class SimRig:
         self.camera = SimCamera(self)
         self.projector = None if self.rig.projector is None else SimProjector(
             self.rig.projector, self._faults, latency_s=latency_s, clock=self.clock)
-        self.turntable = SimTurntable(self._faults) if self.rig.T_world_table is not None else None
+        speed = None if turntable_speed_deg_s is None else np.radians(float(turntable_speed_deg_s))
+        self.turntable = SimTurntable(self._faults, speed_rad_s=speed, clock=self.clock) \
+            if self.rig.T_world_table is not None else None
         self._cam_rays = None
         self._corner_rays = None
         self._cache_key = None

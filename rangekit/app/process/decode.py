@@ -37,11 +37,14 @@ class DecodedViews:
         return [v.folder.name for v in self.views]
 
 
-def decode(session: Session, options: ProcessOptions, clock: StageClock, on_event: OnEvent | None = None) -> DecodedViews:
+def decode(session: Session, options: ProcessOptions, clock: StageClock, on_event: OnEvent | None = None, *,
+           given: dict | None = None) -> DecodedViews:
     """Decode every completed view of ``session`` in order, each announced as :class:`ViewDecoded` with its
     cloud; the next view's frames are read while this one decodes, each frame once (its SHA-256 checked against
     ``session.json`` from the bytes read). With ``options.report`` each view's report row is made from its maps
-    (:class:`rangekit.app.report.view_rows.ViewRowsMaker`), so no map is read back from the cache."""
+    (:class:`rangekit.app.report.view_rows.ViewRowsMaker`), so no map is read back from the cache. ``given``:
+    views decoded earlier in this run (index -> (cloud, ViewMaps), frames checked then), taken as they are and
+    removed from it as they are used."""
     views = session.done_views
     rig, spec = session.rig, session.pattern
     settings = cache_settings(session, options.method, options.table_margin)
@@ -49,15 +52,20 @@ def decode(session: Session, options: ProcessOptions, clock: StageClock, on_even
     with clock.stage("decode"), reuse_freed_memory():   # each view's stacks reuse the last one's pages
         clouds: list[PointCloud] = []
         maps: list[ViewMaps] = []
-        decoded = view_clouds(views, spec, rig, settings, session.capture.full_scale, table_transform(rig),
-                              options.table_margin, session)
+        given = given if given is not None else {}
+        handed = {v.index for v in views if v.index in given}
+        rest = view_clouds([v for v in views if v.index not in handed], spec, rig, settings,
+                           session.capture.full_scale, table_transform(rig), options.table_margin, session)
+        # a view handed on is taken out of ``given`` as it is used: its maps are freed with the others'
+        decoded = (given.pop(v.index) if v.index in handed else next(rest) for v in views)
         rows, view_maps = (_rows_maker(session) if options.report else None), None
         for k, (cloud, view_maps) in enumerate(decoded):
             clouds.append(cloud)
             if rows is not None:
                 rows.add(views[k].folder.name, cloud, view_maps)
             maps.append(view_maps if options.fusion == "tsdf" else _column_only(view_maps))
-            emit(on_event, ViewDecoded(k, len(views), views[k].folder.name, cloud))
+            if views[k].index not in handed:    # a view handed on was announced when it was decoded
+                emit(on_event, ViewDecoded(k, len(views), views[k].folder.name, cloud))
             call_progress(progress, f"decoded {views[k].folder.name}: {len(cloud):,} points", k + 1, len(views))
         proj_cols = [m.proj_col for m in maps]
         kept = maps if options.fusion == "tsdf" else None

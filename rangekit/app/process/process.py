@@ -55,7 +55,7 @@ __all__ = ["process_session"]
 
 def process_session(session: Session | str | Path, options: ProcessOptions | None = None, *,
                     evaluate: Evaluator | None = None, on_event: OnEvent | None = None,
-                    map_pairs: PairMapper | None = None) -> ProcessResult:
+                    map_pairs: PairMapper | None = None, decoded_views: dict | None = None) -> ProcessResult:
     """Process the completed views of a session (a loaded :class:`Session` or its folder) into ``mesh.ply``
     (the observed surface) and ``mesh_watertight.ply`` (closed, flagged; and ``summary.json``, ``report.html``).
 
@@ -69,6 +69,10 @@ def process_session(session: Session | str | Path, options: ProcessOptions | Non
         :class:`JobFailed` before it is raised.
     map_pairs : runs the registration's pair refinements (:func:`rangekit.registration.multiview.register_views`;
         the Dask batch maps them onto its workers); None: here, one after another.
+    decoded_views : views already decoded in this run, by index: ``(cloud, ViewMaps)`` as
+        :func:`rangekit.app.process.view_cache.view_cloud` gives them, their frames checked when they were read
+        (the scan's streaming processor, :mod:`rangekit.app.scan.streaming`); the others are decoded or read
+        from their cache.
 
     Raises
     ------
@@ -85,11 +89,11 @@ def process_session(session: Session | str | Path, options: ProcessOptions | Non
     with failures_announced(on_event), session_lock(folder), one_blas_thread(), ExitStack() as children:
         if not isinstance(session, Session):    # (one BLAS thread: thin products, rangekit._runtime.threads)
             session = Session.load(folder)
-        return _process(session, options, evaluate, on_event, map_pairs, children)
+        return _process(session, options, evaluate, on_event, map_pairs, children, decoded_views or {})
 
 
 def _process(session: Session, options: ProcessOptions, evaluate: Evaluator | None, on_event: OnEvent | None,
-             map_pairs: PairMapper | None, children: ExitStack) -> ProcessResult:
+             map_pairs: PairMapper | None, children: ExitStack, decoded_views: dict) -> ProcessResult:
     """The stages in order: check the session, decode (with the report's per-view part), register, fuse (the
     views measured beside it), measure, report, and summary.json last."""
     _start(session, on_event)
@@ -98,7 +102,7 @@ def _process(session: Session, options: ProcessOptions, evaluate: Evaluator | No
 
         return process_laser(session, options, evaluate, on_event)
     clock = StageClock(on_event)
-    decoded = decode(session, options, clock, on_event)
+    decoded = decode(session, options, clock, on_event, given=decoded_views)
     child = poisson_child(decoded, options, children)      # imports on the other core while the views register
     registered = register(decoded, session, clock, on_event, map_pairs=map_pairs)
     measuring = evaluate is not None

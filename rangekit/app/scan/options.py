@@ -32,7 +32,7 @@ SCAN_FLAGS = {"out": "--out", "resume": "--resume", "method": "--method", "rig":
               "patterns": "--patterns", "seed": "--seed", "up": "--up", "artefact": "--artefact",
               "positions": "--positions", "allow_auto_exposure": "--allow-auto-exposure",
               "exposures": "--exposures", "process": "--no-process", "fusion": "--fusion", "report": "--no-report",
-              "format": "--format"}
+              "format": "--format", "realtime": "--realtime"}
 #: Options of a turntable scan that ``artefact`` (one view per artefact position, coded light) does not take.
 _NOT_WITH_ARTEFACT = ("resume", "method", "steps", "up", "object", "views", "patterns", "passes", "flipped")
 
@@ -59,6 +59,8 @@ class ScanOptions:
     exposures : multi-exposure capture, 2 to 8 exposures in microseconds, or ``("auto",)``.
     process : decode, register and fuse after acquisition; fusion, report, format : how
         (:class:`rangekit.app.process.options.ProcessOptions`).
+    realtime : the simulator keeps real time: the rig file's waits and frame rate, the projector's latency,
+        the turntable's speed (:mod:`rangekit.sim.devices.realtime`); the frames are the same bytes.
     """
 
     out: str | Path | None = None
@@ -81,6 +83,7 @@ class ScanOptions:
     fusion: str = "poisson"
     report: bool = True
     format: str = "ply"
+    realtime: bool = False
 
     def __post_init__(self) -> None:
         _check_values(self)
@@ -114,7 +117,7 @@ def _check_values(o: ScanOptions) -> None:
     for name, choices in (("fusion", FUSION_METHODS), ("format", MESH_EXPORT_FORMATS)):
         if getattr(o, name) not in choices:
             raise OptionError(f"{{{name}}} must be one of {', '.join(choices)}, found {getattr(o, name)!r}")
-    for name in ("flipped", "allow_auto_exposure", "process", "report"):
+    for name in ("flipped", "allow_auto_exposure", "process", "report", "realtime"):
         if not isinstance(getattr(o, name), bool):
             raise OptionError(f"{{{name}}}: expected True or False, found {getattr(o, name)!r}")
     if o.up is not None and (len(tuple(o.up)) != 3 or not all(_is_number(v) and math.isfinite(v) for v in o.up)):
@@ -163,6 +166,9 @@ def _check_combination(o: ScanOptions) -> None:
         raise OptionError("{up}: a resumed scan keeps its session's object as it stands; leave {up} out")
     if o.resume is not None and o.exposures is not None:
         raise OptionError("{exposures}: a resumed scan keeps its session's exposures; leave {exposures} out")
+    if o.realtime and o.rig not in (None, "sim"):
+        raise OptionError(f"{{realtime}} makes the simulator keep real time; {{rig}} {o.rig} is hardware, which "
+                          "keeps it anyway: leave {realtime} out")
     if o.method == "laser" and o.exposures is not None:
         raise OptionError("{exposures}: multi-exposure capture is for coded light; leave it out with {method} laser")
 

@@ -76,13 +76,40 @@ def scan(options: ScanOptions, on_event: OnEvent | None = None) -> ScanResult:
         with ExitStack() as held:
             if options.resume is not None and (options.folder / "session.json").is_file():
                 held.enter_context(session_lock(options.folder))
-            session = _acquire(options, on_event)
+            process_options = ProcessOptions(fusion=options.fusion, report=options.report, mesh_format=options.format)
+            one_at_a_time, streaming = _serialised(on_event), None
+            if options.process:
+                from rangekit.app.scan.streaming import StreamingProcessor
+
+                streaming = StreamingProcessor(options.folder, process_options, on_event, lock=one_at_a_time.lock)
+                held.callback(streaming.stop)     # an error or Ctrl-C: the view being decoded finishes, no more
+            session = _acquire(options, one_at_a_time.chained(streaming))
             acquisition_s = time.perf_counter() - t0
             if not options.process:
                 return ScanResult(options.folder, session, acquisition_s, None, time.perf_counter() - t0)
-            processed = process(session, ProcessOptions(fusion=options.fusion, report=options.report,
-                                                        mesh_format=options.format), on_event=on_event)
+            streaming.finish()
+            processed = process(session, process_options, on_event=on_event, decoded_views=streaming.results)
     return ScanResult(options.folder, session, acquisition_s, processed, time.perf_counter() - t0)
+
+
+class _serialised:
+    """The scan's subscriber given one event at a time from any thread (the capture's, the frame writer's, the
+    streaming processor's): each call holds ``lock``."""
+
+    def __init__(self, on_event: OnEvent | None) -> None:
+        import threading
+
+        self.on_event, self.lock = on_event, threading.Lock()
+
+    def chained(self, streaming) -> OnEvent:
+        """The subscriber acquisition is given: the streaming processor's first (it queues views), then the
+        scan's."""
+        def on_event(event) -> None:
+            with self.lock:
+                if streaming is not None:
+                    streaming.on_event(event)
+                emit(self.on_event, event)
+        return on_event
 
 
 def _acquire(options: ScanOptions, on_event: OnEvent | None) -> Session:
@@ -148,10 +175,11 @@ def session_evaluator(session: Session) -> Evaluator | None:
 
 
 def process(session: Session | str | Path, options: ProcessOptions | None = None, *,
-            on_event=None, map_pairs=None) -> ProcessResult:
+            on_event=None, map_pairs=None, decoded_views: dict | None = None) -> ProcessResult:
     """Process a session (loaded, or its folder) as ``rangekit process`` does: :func:`process_session` with the
     simulator's truth as evaluator when the session is simulated and ``options.truth`` (the session loaded once
-    and handed on). ``on_event``: see :mod:`rangekit.app.events`."""
+    and handed on). ``on_event``: see :mod:`rangekit.app.events`; ``decoded_views``: views the scan decoded
+    already (:attr:`rangekit.app.scan.streaming.StreamingProcessor.results`)."""
     from rangekit.app.events import failures_announced
 
     options = options or ProcessOptions()
@@ -161,4 +189,5 @@ def process(session: Session | str | Path, options: ProcessOptions | None = None
                 raise ConfigError(f"{session}: not a session folder (no session.json)")
             session = Session.load(session)
         evaluate = session_evaluator(session) if options.truth else None
-    return process_session(session, options, evaluate=evaluate, on_event=on_event, map_pairs=map_pairs)
+    return process_session(session, options, evaluate=evaluate, on_event=on_event, map_pairs=map_pairs,
+                           decoded_views=decoded_views)

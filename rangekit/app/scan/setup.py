@@ -121,7 +121,7 @@ def prepare_scan(options: ScanOptions, progress: Callable | None = None) -> Scan
         devices, simulator, hw = _open_hardware(the_rig, rig_file, laser), None, {"rig_file": str(rig_file)}
     else:
         devices, simulator = _simulator(session, obj, seed, the_rig, laser,
-                                        object_file if session is None else None, passes)
+                                        object_file if session is None else None, passes, options.realtime)
         the_rig, hw = (session.rig if session else _scan_rig(devices.rig, laser, seed, progress)), None
         if session is None and object_file is not None:
             # The session keeps its own copy of the object's mesh, named relative to its folder.
@@ -130,7 +130,7 @@ def prepare_scan(options: ScanOptions, progress: Callable | None = None) -> Scan
     if spec is None:
         spec = LaserSequence(len(the_rig.lasers)) if laser else make_pattern_spec(
             patterns, (the_rig.projector.width, the_rig.projector.height))
-    capture = None if session else CaptureSettings.from_rig(the_rig, hardware=hardware)
+    capture = None if session else CaptureSettings.from_rig(the_rig, hardware=hardware or options.realtime)
     n_done = len(session.done_views) if session else 0
     setup = ScanSetup(options.folder, devices, the_rig, spec, n_views, resume is not None, n_done, capture,
                       simulator, hw, files, passes, session.capture.exposures_us if session else None)
@@ -248,19 +248,34 @@ def _scan_rig(true_rig: Rig, laser: bool, seed: int, progress: Callable | None =
     return cal.rig
 
 
+def _default_sim_rig() -> Rig:
+    from rangekit.sim.devices.sim_rig import default_rig
+
+    return default_rig()
+
+
 def _simulator(session: Session | None, obj: str, seed: int, rig: Rig | None, laser: bool = False,
-               object_file: tuple[str, bytes] | None = None, passes: int = 1):
+               object_file: tuple[str, bytes] | None = None, passes: int = 1, realtime: bool = False):
     """The simulated rig of a new scan (object, seed, default imaging) or of a resumed one (its settings).
     A laser scan renders the line lasers of :func:`rangekit.sim.laser.rig.laser_rig` (the simulator's truth;
     the session's rig holds the calibrated planes). ``object_file``: (name, bytes) the session will keep of
     a mesh file, which the simulator then reads (turned upright by ``--up``). ``passes`` > 1: the object
-    is turned over between passes (:func:`rangekit.sim.scene.passes.pass_motions`, recorded for the truth)."""
+    is turned over between passes (:func:`rangekit.sim.scene.passes.pass_motions`, recorded for the truth).
+    ``realtime``: the devices keep real time (:mod:`rangekit.sim.devices.realtime`), waiting the session's (or
+    the rig file's) pattern delay."""
     import tempfile
 
     from rangekit.sim import ImagingModel, SimRig, default_scene
     from rangekit.sim.laser.rig import laser_rig
 
     options = {"light": "laser"} if laser else {}
+    if realtime:
+        from rangekit.sim.devices.realtime import realtime_options
+
+        capture = session.capture if session is not None else None
+        delay = capture.pattern_delay_s if capture is not None else CaptureSettings.from_rig(
+            rig if rig is not None else _default_sim_rig(), hardware=True).pattern_delay_s
+        options.update(realtime_options(delay))
     if laser:
         rig = laser_rig(rig if rig is not None and not rig.lasers else None)
     if session is not None:

@@ -1,0 +1,229 @@
+"""Processing while the scan runs (issue 36): each view decoded as soon as its frames are on disk, placed beside
+the views already in, and integrated into a preview surface, while the next view is captured.
+
+:class:`StreamingProcessor` subscribes to the scan's events. On each :class:`~rangekit.app.events.ViewAcquired`
+(and, on a resumed scan, for every view already done) it queues the view; its thread then
+
+1. decodes the view into its cache (:func:`rangekit.app.process.view_cache.view_cloud`: ``cloud.ply``,
+   ``maps.npz``, ``cloud.json``, exactly what ``rangekit process`` would write), announced as
+   :class:`~rangekit.app.events.ViewDecoded`: the scan's processing afterwards reads every view from its cache,
+   so its mesh is the same bytes as ``rangekit process`` of the session, and a view decoded once is never
+   decoded again (an interrupted scan resumed, or processed later);
+2. places it: the turntable prior refined by ICP against the view before it, at a 2 mm voxel, the refinement
+   kept only within :data:`MAX_REFINE_DEG` and :data:`MAX_REFINE_M` of the prior
+   (:class:`~rangekit.app.events.ViewPlaced`, the growing model for a live view); the closing refinement of all
+   the views together is the processing's, once, at the end;
+3. integrates its depth map into a TSDF volume around the turntable (:mod:`rangekit.surface.tsdf_volume`).
+
+:meth:`StreamingProcessor.finish` waits for the views still queued and writes ``preview.ply``, the TSDF's surface
+(:class:`~rangekit.app.events.MeshReady` ``"preview"``). The scan's processing then takes each view's cloud and maps
+as they are (:attr:`StreamingProcessor.results`): no frame is read or checked twice, no cache read back. A multi-pass scan's preview holds its first pass (the
+object turned over is placed by the processing's pass registration).
+
+Acquisition comes first: the thread runs at a lower priority (nice + :data:`NICE`) with the decoder on one
+thread and one numba thread, so the kernel gives the capture's threads the cores whenever they need them, and
+processing takes what they leave.
+"""
+
+from __future__ import annotations
+
+import os
+import queue
+import threading
+from pathlib import Path
+
+import numpy as np
+
+from rangekit.app.events import MeshReady, OnEvent, ScanStarted, ViewAcquired, ViewDecoded, ViewPlaced, emit
+from rangekit.app.process.options import ProcessOptions
+from rangekit.formats.sessions.session import Session
+from rangekit.geometry import apply_T, compose, invert_T, rotation_angle
+from rangekit.surface.cloud import PointCloud
+
+__all__ = ["NICE", "PLACE_VOXEL_M", "MAX_REFINE_DEG", "MAX_REFINE_M", "PREVIEW_FILE", "StreamingProcessor"]
+
+#: How much lower the streaming thread's priority is than the capture's (Linux: per thread).
+NICE = 10
+#: Voxel of the clouds a view is placed with (metres).
+PLACE_VOXEL_M = 0.002
+#: The most a view's placement may move from the turntable prior (a calibrated axis is better than a pair's ICP
+#: over a small overlap, which slid 2.2 deg at 90 deg steps on the small rig): degrees, metres.
+MAX_REFINE_DEG, MAX_REFINE_M = 0.5, 0.001
+#: The preview surface, in the session folder.
+PREVIEW_FILE = "preview.ply"
+
+
+class StreamingProcessor:
+    """Decode, place and integrate each view of a coded-light scan while the scan runs (module doc).
+
+    ``folder``: the session folder; ``options``: the processing's (its triangulation method and table margin make
+    the cache's settings); ``on_event``: the scan's subscriber, given each event of this thread one at a time
+    (with ``lock``, the lock the acquisition's events hold). Use :meth:`on_event` as a subscriber of the scan's
+    events, then :meth:`finish` (or :meth:`stop` on an error).
+    """
+
+    def __init__(self, folder: str | Path, options: ProcessOptions, on_event: OnEvent | None = None, *,
+                 lock: threading.Lock | None = None) -> None:
+        self.folder, self.options, self._on_event = Path(folder), options, on_event
+        self._lock = lock if lock is not None else threading.Lock()
+        self._queue: queue.Queue = queue.Queue()
+        self._placed: dict[int, tuple[np.ndarray, PointCloud]] = {}
+        self._volume = None
+        self._stopping = False
+        self.error: BaseException | None = None    # the first failure of the thread (the processing decodes again)
+        self.decoded: list[int] = []               # views decoded here, in order
+        self.results: dict = {}                    # index -> (cloud, ViewMaps): the processing takes them as they are
+        self._thread = threading.Thread(target=self._run, name="rangekit-streaming", daemon=True)
+        self._thread.start()
+
+    # ------------------------------------------------------------ the scan's side
+    def on_event(self, event) -> None:
+        """A subscriber of the scan's events: queues each view as it is acquired (and the done views of a resumed
+        scan)."""
+        if isinstance(event, ScanStarted) and event.resume and not event.laser:
+            for view in Session.load(self.folder).done_views:
+                self._queue.put(view.index)
+        elif isinstance(event, ViewAcquired):
+            self._queue.put(event.index)
+
+    def finish(self) -> Path | None:
+        """Wait for every queued view, then write and announce the preview surface; its path (None if no view was
+        placed or the thread failed: :attr:`error`)."""
+        self._queue.put(None)
+        self._thread.join()
+        if self._volume is None or self.error is not None:
+            return None
+        from rangekit.formats.meshes import save_mesh
+        from rangekit.surface.mesh import mesh_from_open3d
+
+        mesh = mesh_from_open3d(self._volume.extract_triangle_mesh())
+        if len(mesh.triangles) == 0:
+            return None
+        path = self.folder / PREVIEW_FILE
+        save_mesh(path, mesh)
+        self._emit(MeshReady("preview", path, mesh))
+        return path
+
+    def stop(self) -> None:
+        """Stop after the view being decoded (its cache is complete or not written); the queued ones are left to
+        the resumed scan or ``rangekit process``."""
+        self._stopping = True
+        self._queue.put(None)
+        self._thread.join()
+
+    # ------------------------------------------------------------ the thread
+    def _emit(self, event) -> None:
+        with self._lock:
+            emit(self._on_event, event)
+
+    def _run(self) -> None:
+        _lower_priority()
+        try:
+            while True:
+                k = self._queue.get()
+                if k is None or self._stopping:
+                    return
+                if k not in self.decoded:
+                    self._stream(k)
+        except BaseException as exc:   # the scan goes on; its processing decodes the view and reports the error
+            self.error = exc
+
+    def _stream(self, k: int) -> None:
+        from rangekit._runtime.threads import one_blas_thread
+        from rangekit.app.process.view_cache import cache_settings, table_transform, view_cloud
+
+        session = Session.load(self.folder)
+        view, rig = session.views[k], session.rig
+        settings = cache_settings(session, self.options.method, self.options.table_margin)
+        with one_blas_thread(), _numba_threads(1):
+            cloud, maps = view_cloud(view, session.pattern, rig, settings, session.capture.full_scale,
+                                     table_transform(rig), self.options.table_margin, session)
+        self.decoded.append(k)
+        self.results[k] = (cloud, maps)
+        total = len(session.views)
+        self._emit(ViewDecoded(k, total, view.folder.name, cloud))
+        if rig.T_world_table is None or session.plan.view_passes()[k] != 0 or len(cloud) == 0:
+            return
+        T = self._place(k, cloud, session)
+        self._emit(ViewPlaced(k, total, view.folder.name, cloud, T))
+        self._integrate(maps.depth, T, session, cloud)
+
+    def _place(self, k: int, cloud: PointCloud, session: Session) -> np.ndarray:
+        """View ``k``'s pose in the first view's frame: the turntable prior, refined by ICP against the nearest
+        view placed before it (kept as the prior when ICP does not converge)."""
+        from rangekit.registration.icp import IcpOptions, icp
+        from rangekit.rig.rig_file import turntable_prior
+        from rangekit.surface.cloud import downsample_with_normals
+
+        angles = [session.views[0].angle, session.views[k].angle]
+        prior = turntable_prior(session.rig.T_world_table, angles)[1]
+        small = downsample_with_normals(cloud, PLACE_VOXEL_M)
+        T = prior
+        if self._placed:
+            j = min(self._placed, key=lambda i: abs(i - k))
+            T_j, target = self._placed[j]
+            try:
+                fit = icp(small, target, init_T_target_source=prior,
+                          options=IcpOptions(max_distance=4 * PLACE_VOXEL_M, max_iterations=30))
+                step = compose(fit.T_target_source, invert_T(prior))
+                if fit.converged and np.degrees(rotation_angle(step[:3, :3])) <= MAX_REFINE_DEG \
+                        and np.linalg.norm(step[:3, 3]) <= MAX_REFINE_M:
+                    T = fit.T_target_source
+            except Exception:   # noqa: BLE001 - a preview keeps the prior when a pair cannot be fitted
+                T = prior
+        self._placed[k] = (T, PointCloud(apply_T(T, small.points), normals=_rotated(T, small.normals)))
+        return T
+
+    def _integrate(self, depth: np.ndarray, T: np.ndarray, session: Session, cloud: PointCloud) -> None:
+        from rangekit.surface.tsdf_volume import integrate_view, tsdf_volume
+
+        rig = session.rig
+        if self._volume is None:
+            lo, hi = _turntable_box(apply_T(T, cloud.points), rig.T_world_table)
+            voxel = float(np.linalg.norm(hi - lo)) / 256
+            self._volume = tsdf_volume(lo, hi, voxel, 4 * voxel, colour=False, what="the scan's preview")
+        integrate_view(self._volume, depth, None, rig.camera.with_pose(compose(T, rig.camera.T_world_cam)))
+
+
+def _rotated(T: np.ndarray, normals: np.ndarray | None) -> np.ndarray | None:
+    return None if normals is None else normals @ T[:3, :3].T
+
+
+def _turntable_box(points: np.ndarray, T_world_table: np.ndarray, grow: float = 1.3) -> tuple[np.ndarray, np.ndarray]:
+    """The world box holding what the turntable carries, from one view's points (world): the cylinder about the
+    table's axis through the farthest of them (radius times ``grow``), between their lowest and highest along
+    the axis (10% more each way)."""
+    local = apply_T(invert_T(T_world_table), points)
+    radius = grow * float(np.max(np.hypot(local[:, 0], local[:, 1])))
+    z0, z1 = float(local[:, 2].min()), float(local[:, 2].max())
+    pad = 0.1 * (z1 - z0)
+    corners = np.array([[x, y, z] for x in (-radius, radius) for y in (-radius, radius) for z in (z0 - pad, z1 + pad)])
+    world = apply_T(T_world_table, corners)
+    return world.min(axis=0), world.max(axis=0)
+
+
+def _lower_priority() -> None:
+    """This thread at nice + :data:`NICE` (Linux schedules threads; elsewhere nothing)."""
+    try:
+        os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), NICE)
+    except (AttributeError, OSError):
+        pass
+
+
+class _numba_threads:
+    """numba's kernels on ``n`` threads within the block, on this thread only (numba's setting is per thread)."""
+
+    def __init__(self, n: int) -> None:
+        self.n, self.before = n, None
+
+    def __enter__(self):
+        import numba
+
+        self.before = numba.get_num_threads()
+        numba.set_num_threads(min(self.n, self.before))
+        return self
+
+    def __exit__(self, *exc) -> None:
+        import numba
+
+        numba.set_num_threads(self.before)

@@ -69,7 +69,12 @@ def _write(folder, layout, captures, camera=1):
         assert cv2.imwrite(str(folder / name), image)
 
 
-@pytest.mark.parametrize("name", sorted(LAYOUTS))
+#: The Gray codes run in make test; the fringe presets (each codec tested against the truth in tests/coded) in
+#: make test-slow, to keep make test's time.
+PRESETS = [name if name.endswith("graycode") else pytest.param(name, marks=pytest.mark.slow) for name in sorted(LAYOUTS)]
+
+
+@pytest.mark.parametrize("name", PRESETS)
 def test_a_preset_round_trips_on_the_simulator(rig, sim, tmp_path, name):
     layout = LAYOUTS[name]
     width, height = PROJECTOR

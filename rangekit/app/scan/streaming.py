@@ -70,6 +70,7 @@ class StreamingProcessor:
         self._placed: dict[int, tuple[np.ndarray, PointCloud]] = {}
         self._volume = None
         self._stopping = False
+        self._laser = False
         self.error: BaseException | None = None    # the first failure of the thread (the processing decodes again)
         self.decoded: list[int] = []               # views decoded here, in order
         self.results: dict = {}                    # index -> (cloud, ViewMaps): the processing takes them as they are
@@ -78,12 +79,14 @@ class StreamingProcessor:
 
     # ------------------------------------------------------------ the scan's side
     def on_event(self, event) -> None:
-        """A subscriber of the scan's events: queues each view as it is acquired (and the done views of a resumed
-        scan)."""
-        if isinstance(event, ScanStarted) and event.resume and not event.laser:
-            for view in Session.load(self.folder).done_views:
-                self._queue.put(view.index)
-        elif isinstance(event, ViewAcquired):
+        """A subscriber of the scan's events: queues each view of a coded-light scan as it is acquired (and the done
+        views of a resumed scan); a laser scan's steps are left to its processing."""
+        if isinstance(event, ScanStarted):
+            self._laser = event.laser          # a laser scan's profiles are placed by its own processing
+            if event.resume and not event.laser:
+                for view in Session.load(self.folder).done_views:
+                    self._queue.put(view.index)
+        elif isinstance(event, ViewAcquired) and not self._laser:
             self._queue.put(event.index)
 
     def finish(self) -> Path | None:

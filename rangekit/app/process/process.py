@@ -35,10 +35,10 @@ from rangekit._runtime.memory import release_free_memory
 from rangekit._runtime.threads import one_blas_thread
 from rangekit.app.events import OnEvent, StageClock, failures_announced, progress_of
 from rangekit.app.process.decode import decode
-from rangekit.app.process.evaluate import Evaluator, measure_closed, measure_views
+from rangekit.app.process.evaluate import Evaluator, measure_closed, measure_views, prepared_beside
 from rangekit.app.process.fuse import Fusion, poisson_child
 from rangekit.app.process.options import ProcessOptions
-from rangekit.app.process.register import register
+from rangekit.app.process.register import evaluator_angles, register
 from rangekit.errors import ConfigError
 from rangekit.formats.sessions.check import verify_views
 from rangekit.formats.sessions.lock import session_lock
@@ -104,8 +104,9 @@ def _process(session: Session, options: ProcessOptions, evaluate: Evaluator | No
     clock = StageClock(on_event)
     decoded = decode(session, options, clock, on_event, given=decoded_views)
     child = poisson_child(decoded, options, children)      # imports on the other core while the views register
-    registered = register(decoded, session, clock, on_event, map_pairs=map_pairs)
     measuring = evaluate is not None
+    with prepared_beside(evaluate, evaluator_angles(decoded.views, multi_pass=session.plan.passes > 1)):
+        registered = register(decoded, session, clock, on_event, map_pairs=map_pairs)
     with clock.stage("fuse"), Fusion(registered, session, options, child, on_event,
                                      measuring_beside=measuring) as fusion:
         fusion.save_merged()

@@ -3,6 +3,7 @@ scan from its prior and the passes to each other without one; the poses written 
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -11,11 +12,11 @@ from rangekit._runtime.memory import release_free_memory
 from rangekit.app.events import OnEvent, PairRegistered, StageClock, emit, progress_of
 from rangekit.app.process.decode import DecodedViews
 from rangekit.formats.poses import save_poses
-from rangekit.formats.sessions.session import Session
+from rangekit.formats.sessions.session import Session, SessionView
 from rangekit.formats.sessions.summary import Edge
 from rangekit.rig.rig_file import turntable_prior
 
-__all__ = ["RegisteredViews", "register", "held_to_prior", "PRIOR_TRUST_DEG"]
+__all__ = ["RegisteredViews", "evaluator_angles", "register", "held_to_prior", "PRIOR_TRUST_DEG"]
 
 #: Degrees a registration may move a view from the turntable's pose. A turntable's steps and calibrated axis
 #: are good to a fraction of a degree (the simulated 12-view scan: 0.001 deg); a view moved further was slid by
@@ -37,8 +38,7 @@ class RegisteredViews:
     @property
     def angles(self) -> list:
         """The evaluator's key of each view: its turntable angle (radians), with its pass in a multi-pass scan."""
-        views = self.decoded.views
-        return [v.angle for v in views] if self.view_passes is None else [(v.angle, v.scan_pass) for v in views]
+        return evaluator_angles(self.decoded.views, multi_pass=self.view_passes is not None)
 
     # What an evaluator reads of the views (rangekit.app.process.evaluate.RegisteredViewsLike), with T_world_view:
     @property
@@ -54,6 +54,12 @@ class RegisteredViews:
     @property
     def names(self) -> list[str]:
         return self.decoded.names
+
+
+def evaluator_angles(views: Sequence[SessionView], *, multi_pass: bool) -> list:
+    """The evaluator's key of each view (:mod:`rangekit.app.process.evaluate`): its turntable angle (radians),
+    with its pass, ``(angle, pass)``, in a multi-pass scan. Known before the views are registered."""
+    return [(v.angle, v.scan_pass) for v in views] if multi_pass else [v.angle for v in views]
 
 
 def register(decoded: DecodedViews, session: Session, clock: StageClock, on_event: OnEvent | None = None, *,

@@ -31,6 +31,7 @@ from contextlib import ExitStack
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from rangekit._runtime.child import call_beside
 from rangekit._runtime.memory import release_free_memory
 from rangekit._runtime.threads import one_blas_thread
 from rangekit.app.events import OnEvent, StageClock, failures_announced, progress_of
@@ -113,15 +114,18 @@ def _process(session: Session, options: ProcessOptions, evaluate: Evaluator | No
         measure_views(evaluate, registered, clock)          # beside the fusion
         release_free_memory()
         fused = fusion.meshes(clock, evaluate)
-    accuracy, truth, view_errors = (measure_closed(evaluate, fused, registered, clock, on_event)
-                                    if evaluate is not None else (None, None, None))
+    # The report's views' agreement (the observed mesh and the registered clouds) beside the closed mesh's
+    # evaluation, which leaves most of the second core free.
+    with _agreement_beside(options.report, fused, registered) as agreement:
+        accuracy, truth, view_errors = (measure_closed(evaluate, fused, registered, clock, on_event)
+                                        if evaluate is not None else (None, None, None))
     # Stage times are wall seconds; "evaluate" includes the part done beside the fusion (inside "fuse").
     result = ProcessResult(session.folder, decoded.names, registered.T_world_view, [len(c) for c in decoded.clouds],
                            registered.edges, registered.rmse, fused.observed_info, clock.seconds, accuracy,
                            watertight_mesh=fused.watertight_info, view_errors=view_errors,
                            view_passes=registered.view_passes, registration_note=registered.note)
     if options.report:
-        _report(result, registered, fused, session, truth, clock, on_event)
+        _report(result, registered, fused, session, truth, clock, on_event, agreement.result())
     atomic_write_json(session.folder / "summary.json", result.to_dict())   # last: the set is complete
     return result
 
@@ -144,8 +148,18 @@ def _start(session: Session, on_event: OnEvent | None) -> None:
         fsync_folder(out)
 
 
+def _agreement_beside(report: bool, fused, registered):
+    """The report's views' agreement (:func:`rangekit.app.report.context.views_agreement`) on a thread, as
+    ``with ... as call: ...; call.result()``; a call whose result is None without a report."""
+    from rangekit.app.report.context import views_agreement
+
+    if not report:
+        return call_beside(lambda: None, in_child=False)
+    return call_beside(views_agreement, fused.observed, registered.T_world_view, registered.clouds, in_child=False)
+
+
 def _report(result: ProcessResult, registered, fused, session: Session, truth, clock: StageClock,
-            on_event: OnEvent | None) -> None:
+            on_event: OnEvent | None, agreement: tuple | None) -> None:
     """``report.html``: the summary, the meshes, the per-view rows made as the views were decoded."""
     from rangekit.app.report.page import write_report
     from rangekit.surface.cloud import merge_clouds
@@ -156,4 +170,4 @@ def _report(result: ProcessResult, registered, fused, session: Session, truth, c
         release_free_memory()   # the evaluation's temporaries
         write_report(session.folder, result, clouds=d.clouds, maps=None, rows=d.rows,
                      merged=merge_clouds(d.clouds, registered.T_world_view), mesh=fused.observed, session=session,
-                     truth=truth, progress=progress_of(on_event), watertight=fused.watertight)
+                     truth=truth, progress=progress_of(on_event), watertight=fused.watertight, agreement=agreement)

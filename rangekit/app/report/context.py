@@ -18,7 +18,7 @@ if TYPE_CHECKING:
     from rangekit.surface.cloud import PointCloud
     from rangekit.surface.mesh import TriangleMesh
 
-__all__ = ["ReportContext", "SIDES", "SIDE_NAMES", "table_up", "OBSERVED_COLOUR", "INVENTED_COLOUR"]
+__all__ = ["ReportContext", "views_agreement", "SIDES", "SIDE_NAMES", "table_up", "OBSERVED_COLOUR", "INVENTED_COLOUR"]
 
 
 #: The sides the mesh is shown from: (azimuth, elevation) radians about the turntable axis, and their names.
@@ -47,6 +47,8 @@ class ReportContext:
     rows : the per-view part made as the views were decoded (:class:`rangekit.app.report.view_rows.ViewRows`), or
     maps : the views' maps to make it from.
     profiles : a laser scan's profiles (:class:`rangekit.app.laser.process.LaserProfiles`).
+    agreement : :func:`views_agreement` of ``mesh`` and the registered clouds when made already (processing
+    makes it beside the closed mesh's evaluation); None: made here when a panel needs it.
     size : each picture's (width, height) in pixels; progress : ``progress(msg, done, total)``.
     """
 
@@ -61,6 +63,7 @@ class ReportContext:
     rows: ViewRows | None = None
     maps: Sequence[ViewMaps] | None = None
     profiles: object | None = None
+    agreement: tuple | None = None
     size: tuple[int, int] = (230, 230)
     progress: Callable | None = None
 
@@ -72,10 +75,20 @@ class ReportContext:
     def quality(self) -> tuple:
         """The views' agreement on the mesh (:func:`rangekit.app.report.quality.mesh_quality`): its sample
         vertices and quality map, computed once for the panels that show it."""
-        from rangekit.app.report.quality import mesh_quality
-        from rangekit.geometry import apply_T
         from rangekit.progress import call_progress
 
         call_progress(self.progress, "report: views' agreement and coverage")
-        clouds_world = [apply_T(T, c.points) for T, c in zip(self.result.T_world_view, self.clouds)]
-        return mesh_quality(self.mesh.vertices, self.mesh.triangles, clouds_world, normal_sums=self.mesh.normal_sums)
+        if self.agreement is not None:
+            return self.agreement
+        return views_agreement(self.mesh, self.result.T_world_view, self.clouds)
+
+
+def views_agreement(mesh: TriangleMesh, T_world_view: np.ndarray, clouds: Sequence[PointCloud]) -> tuple:
+    """:func:`rangekit.app.report.quality.mesh_quality` of ``mesh`` (the observed surface, session world) and
+    the views' ``clouds`` (each in its own frame) placed by ``T_world_view`` (n, 4, 4): ``(vertices used,
+    QualityMap)``, the report's views' agreement and coverage."""
+    from rangekit.app.report.quality import mesh_quality
+    from rangekit.geometry import apply_T
+
+    clouds_world = [apply_T(T, c.points) for T, c in zip(T_world_view, clouds)]
+    return mesh_quality(mesh.vertices, mesh.triangles, clouds_world, normal_sums=mesh.normal_sums)

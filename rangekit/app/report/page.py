@@ -53,7 +53,7 @@ def write_report(folder: str | Path, result: "ProcessResult", *, clouds: Sequenc
                  maps: Sequence["ViewMaps"] | None, merged: "PointCloud", mesh: "TriangleMesh", session: "Session",
                  truth: "TriangleMesh | None" = None, progress: Callable | None = None,
                  size: tuple[int, int] = (230, 230), watertight: "TriangleMesh | None" = None,
-                 rows: "ViewRows | None" = None) -> Path:
+                 rows: "ViewRows | None" = None, agreement: tuple | None = None) -> Path:
     """Write ``folder/report.html`` (every panel of :data:`rangekit.app.report.panels.PANELS`, in order) and return
     its path; reads nothing from disk.
 
@@ -61,10 +61,12 @@ def write_report(folder: str | Path, result: "ProcessResult", *, clouds: Sequenc
     captures (as processing holds them), or None with ``rows``, the per-view part already made from them
     (:func:`rangekit.app.report.view_rows.view_rows`), ``merged`` and ``mesh`` (the observed surface) in the
     session world (the first view's frame), ``watertight`` the closed mesh there with its ``observed`` flag (shown
-    with the invented part in grey), ``truth`` the true surface in that frame (from an evaluator) for the heat map.
+    with the invented part in grey), ``truth`` the true surface in that frame (from an evaluator) for the heat map,
+    ``agreement`` the views' agreement on ``mesh`` when made already
+    (:func:`rangekit.app.report.context.views_agreement`).
     """
     ctx = ReportContext(Path(folder), result, session, mesh, watertight=watertight, truth=truth, merged=merged,
-                        clouds=clouds, rows=rows, maps=maps, size=size, progress=progress)
+                        clouds=clouds, rows=rows, maps=maps, size=size, progress=progress, agreement=agreement)
     return write_page(ctx.out, [panel(ctx) for panel in PANELS])
 
 

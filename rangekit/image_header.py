@@ -3,7 +3,7 @@
 
 :func:`read_image_header` knows the formats rangekit reads (``rangekit.formats.capture.IMAGE_SUFFIXES``)
 by their first bytes, not their names (OpenCV does the same): PNG (IHDR chunk), TIFF (first IFD, classic
-and BigTIFF), BMP (DIB header) and the netpbm PGM/PPM/PBM (text header). For anything else it returns None
+and BigTIFF), BMP (DIB header) the netpbm PGM/PPM/PBM (text header) and a session's ``.npy.zst`` frames (:mod:`rangekit.npy_zst`). For anything else it returns None
 and the image is checked only after OpenCV has read it.
 
 ``channels`` and ``bits`` describe the image as :func:`rangekit.io.read_png` returns it (alpha dropped;
@@ -20,6 +20,7 @@ from typing import Sequence
 
 from rangekit.budget import check_budget, format_bytes
 from rangekit.errors import FileFormatError
+from rangekit.npy_zst import is_npy_zst, npy_zst_header
 from rangekit.regular_files import read_regular_file
 
 __all__ = ["ImageHeader", "read_image_header", "check_image_files"]
@@ -30,7 +31,8 @@ _HEAD = 4096  # bytes read from each file: enough for every header above (TIFF: 
 @dataclass(frozen=True)
 class ImageHeader:
     """An image's size from its header: ``width`` x ``height`` pixels, ``channels`` (1 or 3) of ``bits``
-    (8, 16 or 32) each, as :func:`rangekit.io.read_png` returns it; ``format``: "png", "tiff", "bmp", "pnm"."""
+    (8, 16 or 32) each, as :func:`rangekit.io.read_png` returns it; ``format``: "png", "tiff", "bmp", "pnm",
+    "npy.zst"."""
 
     width: int
     height: int
@@ -132,6 +134,9 @@ def read_image_header(path: str | Path, data: bytes | None = None) -> ImageHeade
         kind, parse = "bmp", _bmp
     elif len(b) > 2 and b[:1] == b"P" and b[1:2] in b"123456" and b[2:3].isspace():
         kind, parse = "pnm", _pnm
+    elif is_npy_zst(b):    # a session's NNN.npy.zst frame: its header in the first zstd frame
+        shape, dtype = npy_zst_header(b, path)
+        return ImageHeader(shape[1], shape[0], 1 if len(shape) == 2 else 3, 8 * dtype.itemsize, "npy.zst")
     else:
         return None
     try:

@@ -13,9 +13,10 @@ import numpy as np
 
 from rangekit.errors import FileFormatError
 from rangekit.image_header import check_image_files
+from rangekit.npy_zst import NPY_ZST_SUFFIX, decode_npy_zst, encode_npy_zst, is_npy_zst
 from rangekit.regular_files import read_regular_file
 
-__all__ = ["atomic_write_bytes", "atomic_write_with", "fsync_folder", "atomic_write_text", "atomic_write_json", "encode_png", "write_png",
+__all__ = ["atomic_write_bytes", "atomic_write_with", "fsync_folder", "atomic_write_text", "atomic_write_json", "encode_png", "write_png", "write_frame",
            "read_png", "decode_image",
            "atomic_save_npz", "atomic_save_npy", "read_json"]
 
@@ -166,6 +167,15 @@ def write_png(path: str | Path, image: np.ndarray) -> bytes:
     return data
 
 
+def write_frame(path: str | Path, image: np.ndarray) -> bytes:
+    """Write a captured frame, atomically, in the format its name says: ``NNN.npy.zst``
+    (:mod:`rangekit.npy_zst`) or a PNG; returns the file's bytes (for its checksum)."""
+    data = (encode_npy_zst(image, where=path) if str(path).endswith(NPY_ZST_SUFFIX)
+            else encode_png(image, where=path))
+    atomic_write_bytes(path, data)
+    return data
+
+
 def encode_png(image: np.ndarray, *, where: str | Path = "image") -> bytes:
     """An (H, W) or (H, W, 3) RGB uint8/uint16 image as the bytes of a lossless PNG (fast compression)."""
     path = where
@@ -197,6 +207,8 @@ def decode_image(data: bytes, where: str | Path) -> np.ndarray:
     checked the header (:func:`rangekit.image_header.check_image_files` with ``contents``)."""
     if not data:
         raise FileFormatError(f"{where}: is empty (0 bytes); expected an image")
+    if is_npy_zst(data):   # a session's faster frame format (rangekit.npy_zst)
+        return decode_npy_zst(data, where)
     try:
         img = cv2.imdecode(np.frombuffer(data, dtype=np.uint8), cv2.IMREAD_UNCHANGED)
     except cv2.error:

@@ -33,9 +33,14 @@ def sim(seed: int = 3) -> SimRig:
     return SimRig(default_scene("lumpy"), small_rig(), seed=seed)
 
 
+def frame_paths(folder: Path, pattern: str = "view_*/*") -> list[Path]:
+    """The frame files (``000.png`` or ``000.npy.zst``) matching ``pattern`` under a session folder, sorted."""
+    return sorted(p for suffix in (".png", ".npy.zst") for p in folder.glob(pattern + suffix))
+
+
 def pngs(folder: Path) -> dict:
-    """Every finished view's frames (bytes), by path relative to the session folder."""
-    return {p.relative_to(folder).as_posix(): p.read_bytes() for p in sorted(folder.glob("view_*/*.png"))
+    """Every finished view's frames (bytes, PNG or .npy.zst), by path relative to the session folder."""
+    return {p.relative_to(folder).as_posix(): p.read_bytes() for p in frame_paths(folder)
             if not p.parent.name.endswith(".partial")}
 
 
@@ -64,7 +69,7 @@ def snapshot(folder: Path) -> dict:
 def frames(folder: Path) -> dict:
     """Every view's frames (bytes) and the recorded checksums: what a resumed scan must reproduce."""
     data = json.loads((folder / "session.json").read_text())
-    return {"frames": {p.relative_to(folder).as_posix(): p.read_bytes() for p in sorted(folder.glob("view_*/*.png"))},
+    return {"frames": {p.relative_to(folder).as_posix(): p.read_bytes() for p in frame_paths(folder)},
             "views": data["views"]}
 
 

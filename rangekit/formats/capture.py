@@ -23,7 +23,7 @@ from rangekit.rig.rig_file import Rig, load_rig
 __all__ = ["IMAGE_SUFFIXES", "list_images", "read_stack", "stack_from_bytes", "Capture", "load_capture", "pattern_spec_for",
            "save_decoded"]
 
-IMAGE_SUFFIXES = (".png", ".tif", ".tiff", ".bmp", ".pgm", ".ppm")
+IMAGE_SUFFIXES = (".png", ".tif", ".tiff", ".bmp", ".pgm", ".ppm", ".zst")   # .zst: NNN.npy.zst (rangekit.npy_zst)
 
 
 def _natural_key(path: Path):

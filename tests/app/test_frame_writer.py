@@ -11,7 +11,7 @@ from rangekit.app.acquire.acquire import acquire
 from rangekit.coded.patterns import make_pattern_spec
 from rangekit.errors import DeviceDisconnected, StorageError
 from rangekit.formats.sessions.session import ScanPlan, load_session
-from rangekit.io import write_png
+from rangekit.io import write_frame
 from sessions import pngs, sim
 from small_rigs import small_rig
 
@@ -31,9 +31,9 @@ def test_a_full_disk_on_a_worker_names_the_frame_and_keeps_the_finished_views(tm
     def full_disk(path, image):           # view 1, frame 5
         if path.parent.name == "view_001.partial" and path.name == SPEC.frame_files[5]:
             raise OSError(errno.ENOSPC, "No space left on device", str(path))
-        return write_png(path, image)
+        return write_frame(path, image)
 
-    monkeypatch.setattr(frame_writer, "write_png", full_disk)
+    monkeypatch.setattr(frame_writer, "write_frame", full_disk)
     out = tmp_path / "scan"
     with pytest.raises(StorageError, match=r"view 1 \(turntable 120\.0 deg\), frame 5 \(.*\): writing: cannot "
                                            r"write .*view_001\.partial.*No space left.*rangekit scan --resume"):
@@ -55,9 +55,9 @@ def test_the_error_named_is_the_earliest_frame_that_failed_whichever_thread_fail
             if path.name == SPEC.frame_files[3]:
                 time.sleep(0.5)           # the next frames fail first on the other thread
             raise OSError(errno.EFBIG, "File too large", str(path))
-        return write_png(path, image)
+        return write_frame(path, image)
 
-    monkeypatch.setattr(frame_writer, "write_png", full_disk_from_frame_3)
+    monkeypatch.setattr(frame_writer, "write_frame", full_disk_from_frame_3)
     with pytest.raises(StorageError, match=r"view 1 \(turntable 120\.0 deg\), frame 3 \(.*\): writing: .*"
                                            + SPEC.frame_files[3] + ": File too large"):
         acquire(sim(), small_rig(), SPEC, tmp_path / "scan", plan=PLAN)

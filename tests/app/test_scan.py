@@ -15,6 +15,7 @@ from rangekit.cli import main
 from rangekit.formats.meshes import load_mesh
 from rangekit.surface.mesh import TriangleMesh, distance_to_surface
 from rangekit.sim import default_scene
+from sessions import frame_paths
 
 SCAN = ["--views", "6", "--seed", "1"]   # the same settings for the reference and the interrupted scan
 
@@ -122,9 +123,9 @@ def test_interrupted_acquisition_resumes_to_the_same_frames(tmp_path):
     rc = subprocess.run([sys.executable, "-m", "rangekit", "scan", "--resume", str(out), "--no-process"],
                         capture_output=True, text=True, cwd=tmp_path)
     assert rc.returncode == 0, rc.stderr
-    frames = sorted(p.relative_to(ref) for p in ref.glob("view_*/*.png"))
-    assert len(frames) == 3 * len(list((ref / "view_000").glob("*.png"))) > 3
-    assert sorted(p.relative_to(out) for p in out.glob("view_*/*.png")) == frames
+    frames = [p.relative_to(ref) for p in frame_paths(ref)]
+    assert len(frames) == 3 * len(frame_paths(ref, "view_000/*")) > 3
+    assert [p.relative_to(out) for p in frame_paths(out)] == frames
     assert all((out / f).read_bytes() == (ref / f).read_bytes() for f in frames)
     assert not list(out.glob("*.partial"))
     assert "\r" not in log + stdout and "\x1b" not in log + stdout

@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 import rangekit as rk
-from sessions import N_VIEWS
+from sessions import N_VIEWS, frame_paths
 from file_reads import FileReads
 from rangekit.app import events as ev
 from rangekit.app.scan.options import SCAN_FIELDS, SCAN_FLAGS, ScanOptions
@@ -86,7 +86,7 @@ def test_the_call_acquires_what_the_command_acquires_with_every_view_announced(t
     assert [(e.index, e.total, e.folder.name) for e in acquired] == [(0, 2, "view_000"), (1, 2, "view_001")]
     assert seen.index(ev.StageStarted("acquire")) < seen.index(acquired[0])
     assert [type(e) for e in seen[-1:]] == [ev.StageFinished]
-    for name in ("view_000/000.png", "view_001/000.png", "patterns.json", "rig.json"):
+    for name in ("view_000/000.npy.zst", "view_001/000.npy.zst", "patterns.json", "rig.json"):
         assert (tmp_path / "cli" / name).read_bytes() == (tmp_path / "call" / name).read_bytes(), name
     cli, call = (json.loads((tmp_path / d / "session.json").read_text()) for d in ("cli", "call"))
     assert [v["sha256"] for v in cli["views"]] == [v["sha256"] for v in call["views"]]
@@ -99,10 +99,10 @@ def _watched(folder: Path) -> list[Path]:
 
 def _check_reads(folder: Path, reads: FileReads, session_reads: int) -> None:
     """Each frame read once, session.json ``session_reads`` times, nothing processing wrote read back."""
-    frames = sorted(p.relative_to(folder).as_posix() for p in folder.glob("view_*/*.png"))
+    frames = [p.relative_to(folder).as_posix() for p in frame_paths(folder)]
     assert frames and {name: reads.count(name) for name in frames} == {name: 1 for name in frames}
     assert reads.count("session.json") == session_reads
-    written = [p.relative_to(folder).as_posix() for p in folder.rglob("*") if p.is_file() and p.suffix != ".png"
+    written = [p.relative_to(folder).as_posix() for p in folder.rglob("*") if p.is_file() and p.suffix not in (".png", ".zst")
                and p.name not in ("session.json", "rig.json", "patterns.json", "view.json", ".lock")]
     assert written and {name: reads.count(name) for name in written} == {name: 0 for name in written}
 
@@ -151,9 +151,9 @@ def test_the_call_makes_the_files_of_the_command_and_reads_each_frame_once(tmp_p
     res = rk.scan(ScanOptions(out=by_call, object="lumpy"), on_event=on_event)
     watch["reads"].__exit__(None, None, None)
     reads = watch["reads"]
-    frames = sorted(p.relative_to(by_call).as_posix() for p in by_call.glob("view_*/*.png"))
+    frames = [p.relative_to(by_call).as_posix() for p in frame_paths(by_call)]
     assert frames and max(reads.count(name) for name in frames) <= 1
-    written = [p.relative_to(by_call).as_posix() for p in by_call.rglob("*") if p.is_file() and p.suffix != ".png"
+    written = [p.relative_to(by_call).as_posix() for p in by_call.rglob("*") if p.is_file() and p.suffix not in (".png", ".zst")
                and p.name not in ("session.json", "rig.json", "patterns.json", "view.json", ".lock")]
     assert written and not any(reads.count(name) for name in written)
     decoded = [e for e in seen if isinstance(e, ev.ViewDecoded)]

@@ -38,7 +38,7 @@ from small_rigs import small_rig
 
 from rangekit.app.acquire.acquire import acquire
 from rangekit.coded.patterns import make_pattern_spec
-from rangekit.formats.sessions.session import ScanPlan, load_session
+from rangekit.formats.sessions.session import FRAME_FORMATS, CaptureSettings, ScanPlan, load_session
 from rangekit.rig.camera_controls import CameraControls, controls_from_capture
 from rangekit.rig.checks import DEPTHAI_SOCKETS
 from rangekit.rig.rig_file import save_rig
@@ -75,7 +75,8 @@ def reference(tmp_path_factory):
     rig = hardware_rig("/dev/unused")
     out = tmp_path_factory.mktemp("reference") / "s"
     acquire(SimRig(default_scene("lumpy"), rig, seed=0), rig, make_pattern_spec(PATTERNS, PROJECTOR), out,
-            plan=ScanPlan(N_VIEWS))
+            plan=ScanPlan(N_VIEWS),   # in the frame format `rangekit scan` writes
+            capture=replace(CaptureSettings.from_rig(rig, hardware=False), frame_format=FRAME_FORMATS[0]))
     return pngs(out)
 
 

@@ -39,7 +39,7 @@ from rangekit.laser.sequence import LaserSequence
 from rangekit.rig.devices import RigDevices
 from rangekit.errors import ConfigError, DeviceError, StorageError
 from rangekit.formats.sessions.session import (CaptureSettings, ScanPlan, Session, SimulatorSettings, exposure_folder,
-                                      view_folder)
+                                               frame_files, view_folder)
 from rangekit.formats.sessions.check import verify_views
 from rangekit.formats.sessions.lock import session_lock
 from rangekit.app.acquire.frame_writer import FrameError, FrameWriter
@@ -181,7 +181,8 @@ def _acquire(devices, rig, spec, out: Path, plan, resume, capture, simulator, ha
                           f"that sets its exposure (set_controls); found {type(devices.camera).__name__}"
                           + (" and a laser scan" if isinstance(spec, LaserSequence) else ""))
     light = light_for(devices, spec, rig)
-    run = _Run(devices, light, rig, spec, out, plan, session.capture.turntable_settle_s,
+    run = _Run(devices, light, rig, spec, frame_files(spec, None, session.capture.frame_format), out, plan,
+               session.capture.turntable_settle_s,
                session.capture.pattern_delay_s,
                tuple((e, None if e is None else replace(controls, exposure_us=float(e))) for e in exposures),
                progress, on_event)
@@ -201,6 +202,7 @@ class _Run:
     light: object
     rig: Rig
     spec: PatternSpec | LaserSequence
+    files: list            # each frame's file in a view folder (Session.frame_files of one exposure)
     out: Path
     plan: ScanPlan
     settle_s: float
@@ -302,7 +304,7 @@ def _view(run: _Run, k: int, angle: float, state: dict, done: list, writer: Fram
           retake: bool = False) -> None:
     """Take view ``k``'s frames and hand them to ``writer``, with the view's finishing step; ``retake``: the view
     is taken again after a device came back, its light first put in a known state (``light.reset()``)."""
-    out, devices, light, names, files = run.out, run.devices, run.light, run.spec.frame_names, run.spec.frame_files
+    out, devices, light, names, files = run.out, run.devices, run.light, run.spec.frame_names, run.files
     final = view_folder(out, k)
     partial = out / f"view_{k:03d}.partial"
     t0 = time.time()

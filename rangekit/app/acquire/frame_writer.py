@@ -4,7 +4,7 @@
 the camera's frame) and hands each one here as a function that returns the image: a real camera's image
 already taken, or a simulated frame still to render (``SimCamera.capture_deferred``: the frame's noise,
 pattern and exposure fixed when it was taken, so its bytes do not depend on where it renders). Up to
-``workers`` threads turn them into PNG files (render, ``cv2.imencode`` and the atomic, fsynced write
+``workers`` threads turn them into frame files (render, encoding (``.npy.zst`` or PNG) and the atomic, fsynced write
 release the GIL) while the next frames are taken, and the next view's turntable move and ray cast run.
 
 At most ``max_pending`` frames wait (a waiting simulated frame holds no image, a real one its image), so
@@ -26,7 +26,7 @@ from pathlib import Path
 from typing import Callable
 
 from rangekit.formats.sessions.check import frame_sha256
-from rangekit.io import write_png
+from rangekit.io import write_frame
 
 __all__ = ["FrameError", "FrameWriter"]
 
@@ -97,7 +97,7 @@ class FrameWriter:
             try:
                 img = image()
                 step = f"{name}: writing"
-                return frame_sha256(write_png(target, img))
+                return frame_sha256(write_frame(target, img))
             except Exception as exc:
                 error = FrameError(view, angle, step, target, exc, order)
                 self._fail(error)

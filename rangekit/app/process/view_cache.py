@@ -157,7 +157,8 @@ def view_clouds(views: Sequence[SessionView], spec: PatternSpec, rig: Rig, setti
 def _stored_maps(m: dict, folders: list, white: int) -> ViewMaps:
     """:class:`ViewMaps` of the cache's arrays ``m`` (:data:`_MAP_NAMES`) and the white capture of the view's
     first frame folder (the shortest exposure's)."""
-    return ViewMaps(m["proj_col"], m["confidence"], m["depth"], read_png(folders[0] / f"{white:03d}.png"), m["sigma"])
+    white_file = list_images(folders[0])[white]     # 000.png or 000.npy.zst, in frame order
+    return ViewMaps(m["proj_col"], m["confidence"], m["depth"], read_png(white_file), m["sigma"])
 
 
 def _frame_folders(v: SessionView, settings: dict) -> list:

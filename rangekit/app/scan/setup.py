@@ -12,7 +12,7 @@ import numpy as np
 from rangekit.app.scan.options import LASER_STEPS, SCAN_DEFAULTS, ScanOptions
 from rangekit.coded.patterns import PatternSpec, make_pattern_spec
 from rangekit.errors import ConfigError, OptionError, RangekitError
-from rangekit.formats.sessions.session import CaptureSettings, Session, SimulatorSettings
+from rangekit.formats.sessions.session import FRAME_FORMATS, CaptureSettings, Session, SimulatorSettings
 from rangekit.geometry import R_up_to_z
 from rangekit.laser.sequence import LaserSequence
 from rangekit.laser.triangulate import check_plane_camera
@@ -130,7 +130,8 @@ def prepare_scan(options: ScanOptions, progress: Callable | None = None) -> Scan
     if spec is None:
         spec = LaserSequence(len(the_rig.lasers)) if laser else make_pattern_spec(
             patterns, (the_rig.projector.width, the_rig.projector.height))
-    capture = None if session else CaptureSettings.from_rig(the_rig, hardware=hardware or options.realtime)
+    capture = None if session else replace(CaptureSettings.from_rig(the_rig, hardware=hardware or options.realtime),
+                                           frame_format=options.frames or ("png" if laser else FRAME_FORMATS[0]))
     n_done = len(session.done_views) if session else 0
     setup = ScanSetup(options.folder, devices, the_rig, spec, n_views, resume is not None, n_done, capture,
                       simulator, hw, files, passes, session.capture.exposures_us if session else None)

@@ -1,6 +1,7 @@
 """``rangekit process`` of one session by two code trees side by side, alternating: wall, CPU, tree peak, accuracy.
 
-    PYTHONPATH=. python benchmarks/app/bench_process_vs.py SESSION OLD_TREE [--new-tree .] [--pairs 5]
+    PYTHONPATH=. python benchmarks/app/bench_process_vs.py SESSION OLD_TREE [--new-tree .] [--pairs 5] \
+        [--new-session SESSION2]
 
 ``SESSION``: a session as ``rangekit scan --out SESSION --no-process`` leaves it (issue 36 used the default one).
 ``OLD_TREE``: another checkout of rangekit, e.g. ``git worktree add ../wt-cc6 cc6da01`` with the links
@@ -13,6 +14,10 @@ COPY`` with ``PYTHONPATH`` at its tree, under ``benchmarks/harness/tree_peak.py`
 the command and its children, the peak of its process tree). Printed: the median, min and max of each figure
 and of the new/old ratio taken pair by pair (a machine whose speed drifts moves both runs of a pair), and the
 accuracy of each tree's last run against the simulator's truth (``summary.json``), which is deterministic.
+
+``--new-session SESSION2``: the new tree processes a copy of SESSION2 instead, the same scan in a format the old
+tree cannot read (``rangekit scan --out SESSION2 --no-process`` on the new tree writes ``.npy.zst`` frames, the
+same pixels as the old tree's PNGs: tests/formats/test_npy_zst_frames.py).
 """
 
 from __future__ import annotations
@@ -63,6 +68,7 @@ def main() -> int:
     ap.add_argument("old_tree", type=Path)
     ap.add_argument("--new-tree", type=Path, default=ROOT)
     ap.add_argument("--pairs", type=int, default=5)
+    ap.add_argument("--new-session", type=Path, default=None)
     args = ap.parse_args()
     if not (args.session / "session.json").is_file():
         raise SystemExit(f"{args.session}: not a session folder (no session.json)")
@@ -70,10 +76,11 @@ def main() -> int:
         raise SystemExit(f"{args.old_tree}: not a rangekit checkout (no rangekit/__init__.py)")
     trees = {"new": args.new_tree.resolve(), "old": args.old_tree.resolve()}
     copies = {}
+    sessions = {"new": args.new_session or args.session, "old": args.session}
     for name in trees:
-        copies[name] = args.session.with_name(f"{args.session.name}.{name}")
+        copies[name] = sessions[name].with_name(f"{sessions[name].name}.{name}")
         if not copies[name].exists():
-            shutil.copytree(args.session, copies[name])
+            shutil.copytree(sessions[name], copies[name])
     for name in trees:                                     # warm-up: numba's caches of each tree
         _run(trees[name], copies[name])
     runs: dict[str, list[dict]] = {"new": [], "old": []}

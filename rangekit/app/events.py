@@ -23,7 +23,7 @@ if TYPE_CHECKING:
     from rangekit.surface.cloud import PointCloud
     from rangekit.surface.mesh import TriangleMesh
 
-__all__ = ["StageStarted", "StageFinished", "Progress", "ScanStarted", "ViewAcquired", "ViewDecoded", "ViewPlaced",
+__all__ = ["StageStarted", "StageFinished", "Progress", "ScanStarted", "ViewAcquired", "CaptureLoad", "ViewDecoded", "ViewPlaced",
            "PairRegistered", "MeshReady", "JobFailed", "Event", "OnEvent", "emit", "progress_of", "progress_subscriber"]
 
 
@@ -76,6 +76,17 @@ class ViewAcquired:
     folder: Path
     angle: float
     n_frames: int
+
+
+@dataclass(frozen=True)
+class CaptureLoad:
+    """The capture's backlog: ``behind`` True when the frames waiting to be written reached the frame writer's
+    limit (``pending`` of them: the capture waits for them), False when they drained to half of it. Processing
+    that runs during the scan (:mod:`rangekit.app.scan.streaming`) pauses between views while the capture is
+    behind."""
+
+    behind: bool
+    pending: int
 
 
 @dataclass(frozen=True, eq=False)
@@ -132,8 +143,8 @@ class JobFailed:
     error: BaseException
 
 
-Event = Union[StageStarted, StageFinished, Progress, ScanStarted, ViewAcquired, ViewDecoded, ViewPlaced, PairRegistered,
-              MeshReady, JobFailed]
+Event = Union[StageStarted, StageFinished, Progress, ScanStarted, ViewAcquired, CaptureLoad, ViewDecoded, ViewPlaced,
+              PairRegistered, MeshReady, JobFailed]
 #: A subscriber: called with each event.
 OnEvent = Callable[[Event], None]
 

@@ -125,3 +125,31 @@ def test_a_camera_that_reuses_its_buffer_records_every_frame_as_taken(tmp_path, 
     out = tmp_path / "scan"
     acquire(devices, small_rig(), SPEC, out, plan=PLAN)
     assert pngs(out) == reference
+
+
+def test_the_backlog_is_announced_when_the_capture_waits_and_when_it_caught_up(tmp_path):
+    """With frames slower to write than to take, the writer says the capture is behind when max_pending frames
+    wait (the capture blocks there), and that it caught up at half of them: once each way, in that order."""
+    import threading
+
+    gate = threading.Event()
+    said = []
+    writer = frame_writer.FrameWriter(workers=1, max_pending=4, on_load=lambda behind, n: said.append((behind, n)))
+    image = np.zeros((4, 5), np.uint8)
+
+    def slow():
+        gate.wait(10)
+        return image
+
+    for i in range(4):
+        writer.frame(0, 0.0, f"{i:03d}.png", f"frame {i}", tmp_path / f"{i:03d}.png", slow)
+    assert said == []                         # full, but the capture has not waited yet
+    taker = threading.Thread(target=writer.frame, args=(0, 0.0, "004.png", "frame 4", tmp_path / "004.png", slow))
+    taker.start()
+    taker.join(0.3)
+    assert taker.is_alive() and said == [(True, 4)]   # the fifth frame waits for a slot
+    gate.set()
+    taker.join(10)
+    writer.close()
+    assert said[0] == (True, 4) and said[1][0] is False and said[1][1] <= 2 and len(said) == 2
+    assert sorted(p.name for p in tmp_path.iterdir()) == [f"{i:03d}.png" for i in range(5)]

@@ -166,3 +166,27 @@ def test_in_real_time_a_view_is_decoded_before_the_next_ones_last_frame(tmp_path
     print(f"\n{names}")
     for k in range(2):
         assert names.index(("ViewDecoded", k)) < names.index(("ViewAcquired", k + 1)), names
+
+
+def test_no_view_is_started_while_the_capture_is_behind(reference_session, tmp_path):
+    """Back-off: after CaptureLoad(behind=True) a queued view waits; CaptureLoad(behind=False) (or the end of the
+    acquisition) lets it go."""
+    import time
+
+    folder = copy_session(reference_session, tmp_path / "s")
+    streaming = StreamingProcessor(folder, ProcessOptions())
+    streaming.on_event(ev.ScanStarted(folder, N_VIEWS, 0, 60, False, None, False))
+    streaming.on_event(ev.CaptureLoad(True, 64))
+    streaming.on_event(ev.ViewAcquired(0, N_VIEWS, folder / "view_000", 0.0, 60))
+    time.sleep(0.5)
+    assert streaming.decoded == [] and streaming.paused == 1
+    streaming.on_event(ev.CaptureLoad(False, 32))
+    streaming.on_event(ev.CaptureLoad(True, 64))
+    streaming.on_event(ev.ViewAcquired(1, N_VIEWS, folder / "view_001", 0.0, 60))
+    deadline = time.monotonic() + 60
+    while streaming.paused < 2 and time.monotonic() < deadline:
+        time.sleep(0.05)
+    time.sleep(0.3)
+    assert streaming.decoded == [0] and streaming.paused == 2   # view 0 went when the capture caught up; view 1 waits
+    streaming.finish()                       # the acquisition is over: the rest goes
+    assert streaming.error is None and streaming.decoded == [0, 1]

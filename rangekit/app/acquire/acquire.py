@@ -43,7 +43,7 @@ from rangekit.formats.sessions.session import (CaptureSettings, ScanPlan, Sessio
 from rangekit.formats.sessions.check import verify_views
 from rangekit.formats.sessions.lock import session_lock
 from rangekit.app.acquire.frame_writer import FrameError, FrameWriter
-from rangekit.app.events import OnEvent, ViewAcquired, emit
+from rangekit.app.events import CaptureLoad, OnEvent, ViewAcquired, emit
 from rangekit.app.acquire.lights import light_for
 from rangekit.app.acquire.reconnect import MAX_RETAKES, reconnected
 from rangekit.io import atomic_write_bytes, atomic_write_json, fsync_folder
@@ -230,7 +230,7 @@ def _views(run: _Run, session: Session, angles: np.ndarray, turn_over=None) -> S
     the first view of a pass none of whose views is done, every earlier view is finished and ``turn_over(pass)``
     is called (hardware). Returns the session as recorded on disk."""
     done = [v.done for v in session.views]
-    writer, current = FrameWriter(), [-1]
+    writer, current = _writer(run), [-1]
     state = {"session": session,   # one bar over every frame still to take (with the exposures), with an ETA
              "frames": [0, int(np.count_nonzero(~np.asarray(done, bool))) * len(run.exposures) * run.spec.n_frames]}
     plan, devices = run.plan, run.devices
@@ -244,7 +244,7 @@ def _views(run: _Run, session: Session, angles: np.ndarray, turn_over=None) -> S
                     writer.close()      # every earlier view on disk before the object is touched
                     run.report(f"pass {p} of {plan.passes} done; the object is to be turned over")
                     turn_over(p)
-                    writer = FrameWriter()
+                    writer = _writer(run)
                 begun.add(p)
                 if start_pass is not None:
                     start_pass(p)
@@ -289,6 +289,11 @@ def _fail(out, k, exc: FrameError, done) -> None:
         raise StorageError(f"{where}: cannot write {exc.target}: {error.strerror or error}; free some space; "
                            f"{_resume_hint(out, sum(done))}") from error
     raise error
+
+
+def _writer(run: _Run) -> FrameWriter:
+    """The frame writer of an acquisition, its backlog announced (:class:`rangekit.app.events.CaptureLoad`)."""
+    return FrameWriter(on_load=lambda behind, pending: run.announce(CaptureLoad(behind, pending)))
 
 
 def _taken(camera):

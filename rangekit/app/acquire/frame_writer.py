@@ -8,7 +8,9 @@ pattern and exposure fixed when it was taken, so its bytes do not depend on wher
 release the GIL) while the next frames are taken, and the next view's turntable move and ray cast run.
 
 At most ``max_pending`` frames wait (a waiting simulated frame holds no image, a real one its image), so
-memory stays flat. A view is finished (``finish(sha256)``: view.json, the rename, session.json) by one
+memory stays flat. When they reach it the capture is behind (it waits for the writer): ``on_load(True, pending)``
+says so, and ``on_load(False, pending)`` once half of them are written (the scan announces both as
+:class:`rangekit.app.events.CaptureLoad`; processing during the scan backs off in between). A view is finished (``finish(sha256)``: view.json, the rename, session.json) by one
 finishing thread, in view order, only after every one of its frames is on disk, and not after a view
 that failed: the crash safety of :mod:`rangekit.app.acquire.acquire` is unchanged (a failure in one view leaves
 the views before it finished). The failure (a write, a render) earliest in capture order is kept as a
@@ -48,7 +50,8 @@ class FrameError(Exception):
 class FrameWriter:
     """Write frames on ``workers`` threads; finish views in order on one more (see the module docstring)."""
 
-    def __init__(self, *, workers: int = 2, max_pending: int = 64) -> None:
+    def __init__(self, *, workers: int = 2, max_pending: int = 64,
+                 on_load: Callable[[bool, int], None] | None = None) -> None:
         self._pool = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="rangekit-frames")
         self._finisher = ThreadPoolExecutor(max_workers=1, thread_name_prefix="rangekit-views")
         self._slots = threading.BoundedSemaphore(max_pending)
@@ -58,6 +61,7 @@ class FrameWriter:
         self._order = 0                                   # frames handed over so far
         self._broken = False                              # a view failed: the later ones are not finished
         self._lock = threading.Lock()
+        self._max_pending, self._pending, self._behind, self._on_load = max_pending, 0, False, on_load
 
     def _fail(self, error: FrameError) -> None:
         with self._lock:
@@ -79,11 +83,15 @@ class FrameWriter:
         ``frame 3 (x_bit03)``) of ``view``: ``image()`` gives the image, written to ``target``. Blocks
         while ``max_pending`` frames wait; raises an earlier failure first."""
         self.check()
-        self._slots.acquire()
+        if not self._slots.acquire(blocking=False):    # the writer is max_pending frames behind: say so, then wait
+            self._load(True)
+            self._slots.acquire()
+        with self._lock:
+            self._pending += 1
         try:
             self.check()
         except BaseException:
-            self._slots.release()
+            self._release()
             raise
         order, self._order = self._order, self._order + 1
         self._frames.append((key, self._pool.submit(self._write, view, angle, name, target, image, order)))
@@ -103,7 +111,25 @@ class FrameWriter:
                 self._fail(error)
                 raise error from exc
         finally:
-            self._slots.release()
+            self._release()
+
+    def _release(self) -> None:
+        """A frame's slot given back (written, failed or cancelled); the capture caught up at half the limit."""
+        with self._lock:
+            self._pending -= 1
+        self._slots.release()
+        if self._behind and self._pending <= self._max_pending // 2:
+            self._load(False)
+
+    def _load(self, behind: bool) -> None:
+        """``on_load(behind, pending)`` when the state changes (once each way)."""
+        with self._lock:
+            if self._behind == behind:
+                return
+            self._behind = behind
+            pending = self._pending
+        if self._on_load is not None:
+            self._on_load(behind, pending)
 
     def finish_view(self, view: int, angle: float, target: Path, finish: Callable[[dict], None]) -> None:
         """Once every frame queued since the last call is on disk, call ``finish(sha256)`` (file key ->
@@ -138,7 +164,7 @@ class FrameWriter:
         frames, self._frames = self._frames, []
         for _, future in frames:
             if future.cancel():
-                self._slots.release()     # the slot its _write would have released
+                self._release()           # the slot its _write would have released
         wait([future for _, future in frames])
 
     def cancel_view(self) -> None:

@@ -22,7 +22,9 @@ object turned over is placed by the processing's pass registration).
 
 Acquisition comes first: the thread runs at a lower priority (nice + :data:`NICE`) with the decoder on one
 thread and one numba thread, so the kernel gives the capture's threads the cores whenever they need them, and
-processing takes what they leave.
+processing takes what they leave. And it backs off: while the capture is behind (the frames waiting to be written
+reached the writer's limit, :class:`~rangekit.app.events.CaptureLoad`), no new view is started; it starts again
+when they have drained to half, or when the acquisition ends (:meth:`StreamingProcessor.finish`).
 """
 
 from __future__ import annotations
@@ -34,7 +36,8 @@ from pathlib import Path
 
 import numpy as np
 
-from rangekit.app.events import MeshReady, OnEvent, ScanStarted, ViewAcquired, ViewDecoded, ViewPlaced, emit
+from rangekit.app.events import (CaptureLoad, MeshReady, OnEvent, ScanStarted, ViewAcquired, ViewDecoded, ViewPlaced,
+                                 emit)
 from rangekit.app.process.options import ProcessOptions
 from rangekit.formats.sessions.session import Session
 from rangekit.geometry import apply_T, compose, invert_T, rotation_angle
@@ -71,6 +74,9 @@ class StreamingProcessor:
         self._volume = None
         self._stopping = False
         self._laser = False
+        self._capture_keeps_up = threading.Event()   # cleared while the capture is behind (CaptureLoad)
+        self._capture_keeps_up.set()
+        self.paused = 0                              # times a view waited for the capture to catch up
         self.error: BaseException | None = None    # the first failure of the thread (the processing decodes again)
         self.decoded: list[int] = []               # views decoded here, in order
         self.results: dict = {}                    # index -> (cloud, ViewMaps): the processing takes them as they are
@@ -88,10 +94,13 @@ class StreamingProcessor:
                     self._queue.put(view.index)
         elif isinstance(event, ViewAcquired) and not self._laser:
             self._queue.put(event.index)
+        elif isinstance(event, CaptureLoad):
+            (self._capture_keeps_up.clear if event.behind else self._capture_keeps_up.set)()
 
     def finish(self) -> Path | None:
         """Wait for every queued view, then write and announce the preview surface; its path (None if no view was
         placed or the thread failed: :attr:`error`)."""
+        self._capture_keeps_up.set()     # the acquisition is over: no more backlog to wait for
         self._queue.put(None)
         self._thread.join()
         if self._volume is None or self.error is not None:
@@ -111,6 +120,7 @@ class StreamingProcessor:
         """Stop after the view being decoded (its cache is complete or not written); the queued ones are left to
         the resumed scan or ``rangekit process``."""
         self._stopping = True
+        self._capture_keeps_up.set()
         self._queue.put(None)
         self._thread.join()
 
@@ -126,6 +136,11 @@ class StreamingProcessor:
                 k = self._queue.get()
                 if k is None or self._stopping:
                     return
+                if not self._capture_keeps_up.is_set():   # back off until the capture has caught up
+                    self.paused += 1
+                    self._capture_keeps_up.wait()
+                    if self._stopping:
+                        return
                 if k not in self.decoded:
                     self._stream(k)
         except BaseException as exc:   # the scan goes on; its processing decodes the view and reports the error

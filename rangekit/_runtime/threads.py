@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from contextlib import contextmanager
 
-__all__ = ["one_blas_thread"]
+__all__ = ["one_blas_thread", "numba_threads"]
 
 
 @contextmanager
@@ -26,3 +26,19 @@ def one_blas_thread():
 
     with threadpool_limits(limits=1, user_api="blas"):
         yield
+
+
+@contextmanager
+def numba_threads(n: int):
+    """numba's parallel kernels on at most ``n`` threads inside the block, on this thread only (numba's setting is
+    per thread; the OpenMP threading layer takes launches from several threads at once): two views decoded on
+    two threads with one numba thread each used 1.9 cores where one view on two numba threads used 1.5
+    (:mod:`rangekit.app.process.view_cache`)."""
+    import numba
+
+    before = numba.get_num_threads()
+    numba.set_num_threads(max(1, min(n, before)))
+    try:
+        yield
+    finally:
+        numba.set_num_threads(before)

@@ -147,13 +147,13 @@ class StreamingProcessor:
             self.error = exc
 
     def _stream(self, k: int) -> None:
-        from rangekit._runtime.threads import one_blas_thread
+        from rangekit._runtime.threads import numba_threads, one_blas_thread
         from rangekit.app.process.view_cache import cache_settings, table_transform, view_cloud
 
         session = Session.load(self.folder)
         view, rig = session.views[k], session.rig
         settings = cache_settings(session, self.options.method, self.options.table_margin)
-        with one_blas_thread(), _numba_threads(1):
+        with one_blas_thread(), numba_threads(1):
             cloud, maps = view_cloud(view, session.pattern, rig, settings, session.capture.full_scale,
                                      table_transform(rig), self.options.table_margin, session)
         self.decoded.append(k)
@@ -226,22 +226,3 @@ def _lower_priority() -> None:
         os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), NICE)
     except (AttributeError, OSError):
         pass
-
-
-class _numba_threads:
-    """numba's kernels on ``n`` threads within the block, on this thread only (numba's setting is per thread)."""
-
-    def __init__(self, n: int) -> None:
-        self.n, self.before = n, None
-
-    def __enter__(self):
-        import numba
-
-        self.before = numba.get_num_threads()
-        numba.set_num_threads(min(self.n, self.before))
-        return self
-
-    def __exit__(self, *exc) -> None:
-        import numba
-
-        numba.set_num_threads(self.before)

@@ -17,8 +17,8 @@ from sessions import copy_session, no_leftovers, snapshot
 from small_rigs import small_rig
 from rangekit.app.acquire.acquire import acquire
 from rangekit.formats.sessions.session import ScanPlan, Session
-from rangekit.formats.sessions.check import verify_views
 from rangekit.io import read_png, write_png
+from rangekit.formats.sessions.check import file_sha256, verify_views
 from rangekit.sim import SimRig, default_scene
 
 
@@ -53,12 +53,15 @@ def test_a_changed_missing_or_extra_frame_is_named(cli, reference_session, tmp_p
     run = cli("process", d) if command == "process" else cli("scan", "--resume", d, "--no-process")
     assert_error(run, 1, "view_001", *mentions)
     after = snapshot(d)
-    # Every file as it was; processing checks a frame as it reads it to decode, so the views before the
-    # damaged one may have their caches written (valid ones), the damaged view none.
+    # Every file as it was; processing checks a frame as it reads it to decode, two views at a time, so the
+    # other views may have their caches written (complete and valid ones), the damaged view none.
     new = set(after) - set(before)
     assert {k: after[k] for k in before} == before and not (d / "summary.json").exists()
-    assert all(name.split("/")[0] == "view_000" and name.split("/")[1] in ("cloud.ply", "maps.npz", "cloud.json")
+    assert all(name.split("/")[0] != "view_001" and name.split("/")[1] in ("cloud.ply", "maps.npz", "cloud.json")
                for name in new), new
+    for view in {name.split("/")[0] for name in new}:
+        meta = json.loads((d / view / "cloud.json").read_text())
+        assert {name: file_sha256(d / view / name) for name in meta["sha256"]} == meta["sha256"]
     no_leftovers(d)
 
 

@@ -31,7 +31,8 @@ bytecode: $(STAMP)
 	@$(BIN)/python -m compileall -q -j 0 rangekit sim drivers calib >/dev/null
 
 test: $(STAMP) browser bytecode
-	$(BIN)/python -m pytest -q -m "not slow"
+	@# Two pytest-xdist workers, one a core: 5 minutes instead of 8.5 here (summed RSS of the tree at most 3.6 GB).
+	$(BIN)/python -m pytest -q -m "not slow" -n 2
 
 test-slow: $(STAMP) browser bytecode
 	@# The full-size cases (whole calibration, 6-view scans to a mesh, 12-view registration, ...): CI runs them.

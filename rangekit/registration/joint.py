@@ -7,6 +7,7 @@ Poses: ``T_world_view`` maps a view's points into the world, which is the first 
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Callable, Sequence
 
@@ -33,7 +34,8 @@ class JointResult:
 def refine_jointly(clouds: Sequence[PointCloud], T_world_view: np.ndarray, pairs: Sequence[tuple[int, int]], *,
                    max_distance: float, iterations: int = 15, samples: int = 8000, kernel_k: float = 1.345,
                    tolerance: float = 1e-9, rng: int = 0, hold: dict | None = None,
-                   basis: Callable[[np.ndarray, np.ndarray, float], np.ndarray] | None = None) -> JointResult:
+                   basis: Callable[[np.ndarray, np.ndarray, float], np.ndarray] | None = None,
+                   trees: Sequence[cKDTree] | None = None, workers: int = 2) -> JointResult:
     """Multi-view ICP: refine every pose at once (view 0 fixed) by Gauss-Newton on point-to-plane residuals
     of all overlapping ``pairs`` in both directions, re-associating closest points each iteration.
 
@@ -49,11 +51,14 @@ def refine_jointly(clouds: Sequence[PointCloud], T_world_view: np.ndarray, pairs
     ``basis(T_world_view, centre, length)``: instead, the updates lie in the span of the (6(n-1), m)
     matrix it returns at each iteration (e.g. :func:`rangekit.registration.turntable.turntable_basis`:
     every view rotated about one common axis); ``hold`` is then not used.
+
+    ``trees``: each cloud's k-d tree of its points, when built already. ``workers``: threads that find the
+    directed pairs' correspondences (the k-d tree queries release the GIL); the result does not depend on it.
     """
     n = len(clouds)
     T = np.array(T_world_view, dtype=np.float64, copy=True)
     gen = np.random.default_rng(rng)
-    trees = [cKDTree(c.points) for c in clouds]
+    trees = list(trees) if trees is not None else [cKDTree(c.points) for c in clouds]
     picks = [gen.choice(len(c.points), min(samples, len(c.points)), replace=False) for c in clouds]
     subs = [c.points[k] for c, k in zip(clouds, picks)]
     sub_normals = [None if c.normals is None else c.normals[k] for c, k in zip(clouds, picks)]
@@ -61,69 +66,80 @@ def refine_jointly(clouds: Sequence[PointCloud], T_world_view: np.ndarray, pairs
     directed = [(i, j) for i, j in pairs] + [(j, i) for i, j in pairs]
     size = float(np.sqrt(np.mean([np.sum((apply_T(T[k], s) - centre) ** 2, axis=1).mean() for k, s in enumerate(subs)])))
     converged, it, rmse, pair_rmse = False, 0, float("nan"), {}
-    for it in range(1, iterations + 1):
-        Hm = np.zeros((6 * n, 6 * n))
-        g = np.zeros(6 * n)
-        res_all, pair_rmse = [], {}
-        for i, j in directed:  # target i, source j
-            p_j = subs[j]
-            T_i_j = invert_T(T[i]) @ T[j]
-            d, idx = trees[i].query(apply_T(T_i_j, p_j), k=1, distance_upper_bound=max_distance, workers=1)
-            ok = np.isfinite(d)
-            if sub_normals[j] is not None:
-                # Only surfaces facing the same way: the two faces of a thin part (a fin, a sheet) are
-                # closer than the gate but are not the same surface.
-                n_src = sub_normals[j] @ T_i_j[:3, :3].T
-                ok[ok] = np.einsum("ij,ij->i", n_src[ok], clouds[i].normals[idx[ok]]) > MIN_NORMAL_COS
-            if np.count_nonzero(ok) < 10:
-                continue
-            Ri = T[i][:3, :3]
-            pw = apply_T(T[j], p_j[ok]) - centre
-            qw = apply_T(T[i], clouds[i].points[idx[ok]]) - centre
-            nw = clouds[i].normals[idx[ok]] @ Ri.T
-            r = np.einsum("ij,ij->i", pw - qw, nw)
-            Jj = np.hstack([np.cross(pw, nw), nw])
-            Ji = -np.hstack([np.cross(qw, nw), nw])
-            res_all.append((i, j, r, Ji, Jj))
-            pair_rmse[(min(i, j), max(i, j))] = float(np.sqrt(np.mean(r ** 2)))
-        if not res_all:
-            raise RegistrationError("joint refinement: no pair has correspondences within max_distance")
-        r_cat = np.concatenate([x[2] for x in res_all])
-        scale = max(1.4826 * np.median(np.abs(r_cat)), 1e-12)
-        for i, j, r, Ji, Jj in res_all:
-            a = np.abs(r) / scale
-            w = np.minimum(1.0, kernel_k / np.maximum(a, 1e-12))  # Huber
-            si, sj = slice(6 * i, 6 * i + 6), slice(6 * j, 6 * j + 6)
-            Wi, Wj = Ji * w[:, None], Jj * w[:, None]
-            Hm[si, si] += Ji.T @ Wi
-            Hm[sj, sj] += Jj.T @ Wj
-            Hm[si, sj] += Ji.T @ Wj
-            Hm[sj, si] += Jj.T @ Wi
-            g[si] += Wi.T @ r
-            g[sj] += Wj.T @ r
-        rmse = float(np.sqrt(np.mean(r_cat ** 2)))
-        free = slice(6, 6 * n)
-        A = Hm[free, free]
-        B = basis(T, centre, size) if basis is not None else (_held_basis(n, hold, centre, size) if hold else None)
-        try:
-            if B is None:
-                xi = -np.linalg.solve(A + 1e-12 * np.trace(A) / len(A) * np.eye(len(A)), g[free])
-            else:
-                Ab = B.T @ A @ B
-                xi = -B @ np.linalg.solve(Ab + 1e-12 * np.trace(Ab) / len(Ab) * np.eye(len(Ab)), B.T @ g[free])
-        except np.linalg.LinAlgError as exc:
-            raise RegistrationError("joint refinement: the view graph does not constrain every pose") from exc
-        step = 0.0
-        for k in range(1, n):
-            om, v = xi[6 * (k - 1): 6 * (k - 1) + 3], xi[6 * (k - 1) + 3: 6 * k]
-            R = rotvec_to_R(om)
-            dT = make_T(R, v + centre - R @ centre)  # rotation about the centroid, then translation
-            T[k] = dT @ T[k]
-            step = max(step, np.linalg.norm(v) + np.linalg.norm(om) * np.linalg.norm(np.ptp(subs[k], axis=0)))
-        if step < tolerance:
-            converged = True
-            break
+    with ThreadPoolExecutor(max_workers=max(1, int(workers)), thread_name_prefix="rangekit-joint") as pool:
+        for it in range(1, iterations + 1):
+            Hm = np.zeros((6 * n, 6 * n))
+            g = np.zeros(6 * n)
+            # Each directed pair's correspondences on its own (the k-d tree queries release the GIL), two at a time,
+            # taken in order: the same sums in the same order as one after another.
+            terms = [x for x in pool.map(lambda ij: _pair_terms(ij[0], ij[1], T[ij[0]], T[ij[1]], clouds, trees, subs,
+                                                                sub_normals, centre, max_distance), directed)
+                     if x is not None]
+            res_all = [x[:5] for x in terms]
+            pair_rmse = {(min(i, j), max(i, j)): rmse_ij for i, j, _, _, _, rmse_ij in terms}
+            if not res_all:
+                raise RegistrationError("joint refinement: no pair has correspondences within max_distance")
+            r_cat = np.concatenate([x[2] for x in res_all])
+            scale = max(1.4826 * np.median(np.abs(r_cat)), 1e-12)
+            for i, j, r, Ji, Jj in res_all:
+                a = np.abs(r) / scale
+                w = np.minimum(1.0, kernel_k / np.maximum(a, 1e-12))  # Huber
+                si, sj = slice(6 * i, 6 * i + 6), slice(6 * j, 6 * j + 6)
+                Wi, Wj = Ji * w[:, None], Jj * w[:, None]
+                Hm[si, si] += Ji.T @ Wi
+                Hm[sj, sj] += Jj.T @ Wj
+                Hm[si, sj] += Ji.T @ Wj
+                Hm[sj, si] += Jj.T @ Wi
+                g[si] += Wi.T @ r
+                g[sj] += Wj.T @ r
+            rmse = float(np.sqrt(np.mean(r_cat ** 2)))
+            free = slice(6, 6 * n)
+            A = Hm[free, free]
+            B = basis(T, centre, size) if basis is not None else (_held_basis(n, hold, centre, size) if hold else None)
+            try:
+                if B is None:
+                    xi = -np.linalg.solve(A + 1e-12 * np.trace(A) / len(A) * np.eye(len(A)), g[free])
+                else:
+                    Ab = B.T @ A @ B
+                    xi = -B @ np.linalg.solve(Ab + 1e-12 * np.trace(Ab) / len(Ab) * np.eye(len(Ab)), B.T @ g[free])
+            except np.linalg.LinAlgError as exc:
+                raise RegistrationError("joint refinement: the view graph does not constrain every pose") from exc
+            step = 0.0
+            for k in range(1, n):
+                om, v = xi[6 * (k - 1): 6 * (k - 1) + 3], xi[6 * (k - 1) + 3: 6 * k]
+                R = rotvec_to_R(om)
+                dT = make_T(R, v + centre - R @ centre)  # rotation about the centroid, then translation
+                T[k] = dT @ T[k]
+                step = max(step, np.linalg.norm(v) + np.linalg.norm(om) * np.linalg.norm(np.ptp(subs[k], axis=0)))
+            if step < tolerance:
+                converged = True
+                break
     return JointResult(T, rmse, it, converged, pair_rmse)
+
+
+def _pair_terms(i: int, j: int, T_i: np.ndarray, T_j: np.ndarray, clouds: Sequence[PointCloud], trees: Sequence,
+                subs: list, sub_normals: list, centre: np.ndarray, max_distance: float):
+    """The residuals and Jacobians of directed pair (target ``i``, source ``j``) at poses ``T_i``, ``T_j``:
+    ``(i, j, r (m,), Ji (m, 6), Jj (m, 6), rms of r)`` over view j's sample points whose closest point in
+    view i lies within ``max_distance`` (metres) and faces the same way; None with fewer than 10."""
+    p_j = subs[j]
+    T_i_j = invert_T(T_i) @ T_j
+    d, idx = trees[i].query(apply_T(T_i_j, p_j), k=1, distance_upper_bound=max_distance, workers=1)
+    ok = np.isfinite(d)
+    if sub_normals[j] is not None:
+        # Only surfaces facing the same way: the two faces of a thin part (a fin, a sheet) are
+        # closer than the gate but are not the same surface.
+        n_src = sub_normals[j] @ T_i_j[:3, :3].T
+        ok[ok] = np.einsum("ij,ij->i", n_src[ok], clouds[i].normals[idx[ok]]) > MIN_NORMAL_COS
+    if np.count_nonzero(ok) < 10:
+        return None
+    pw = apply_T(T_j, p_j[ok]) - centre
+    qw = apply_T(T_i, clouds[i].points[idx[ok]]) - centre
+    nw = clouds[i].normals[idx[ok]] @ T_i[:3, :3].T
+    r = np.einsum("ij,ij->i", pw - qw, nw)
+    Jj = np.hstack([np.cross(pw, nw), nw])
+    Ji = -np.hstack([np.cross(qw, nw), nw])
+    return i, j, r, Ji, Jj, float(np.sqrt(np.mean(r ** 2)))
 
 
 def _held_basis(n: int, hold: dict, centre: np.ndarray, length: float) -> np.ndarray | None:

@@ -14,6 +14,7 @@ Relative edges are ``T_i_j`` (view j into view i).
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 from typing import Callable, Sequence
 
@@ -100,7 +101,8 @@ def _prepare(clouds: Sequence[PointCloud], voxel: float) -> list[PointCloud]:
             raise RegistrationError(f"view {k}: {len(pts)} points; a scan needs at least 50 to register")
         if not np.all(np.isfinite(pts)):
             raise RegistrationError(f"view {k}: has NaN or infinite points; drop them first")
-    return [downsample_with_normals(c, voxel) for c in clouds]
+    with ThreadPoolExecutor(max_workers=2, thread_name_prefix="rangekit-voxels") as pool:   # in order
+        return list(pool.map(lambda c: downsample_with_normals(c, voxel), clouds))
 
 
 OVERLAP_NEIGHBOURS = 8   # no prior: each view's most overlapping views (estimated) added to the candidates
@@ -272,8 +274,10 @@ def _register_views(clouds, init_T_world_view, options, progress, names, map_pai
         jobs = [PairJob(i, j, start(i, j), v, icp_opt, options.min_overlap, options.min_constraint,
                         options.max_rmse * v, prior, None if names is None else (names[i], names[j]))
                 for i, j in pairs]
-        if map_pairs is None:
-            refined = [refine_pair(job, level[job.i], level[job.j], trees[job.i], trees[job.j]) for job in jobs]
+        if map_pairs is None:   # two pairs at a time (their k-d tree queries release the GIL), taken in order
+            with ThreadPoolExecutor(max_workers=2, thread_name_prefix="rangekit-pairs") as pool:
+                refined = list(pool.map(lambda job: refine_pair(job, level[job.i], level[job.j], trees[job.i],
+                                                                trees[job.j]), jobs))
         else:
             refined = map_pairs(jobs, level)
         out_edges, out_holds = [], {}
@@ -345,7 +349,7 @@ def _register_views(clouds, init_T_world_view, options, progress, names, map_pai
                                     2 * fine) >= options.min_overlap]
         joint = refine_jointly(fine_clouds, T, pairs, max_distance=2.5 * fine, iterations=options.joint_iterations,
                                samples=options.joint_samples, tolerance=options.joint_tolerance, rng=options.rng,
-                               hold=_joint_holds(n, pairs, edges, holds, T), basis=basis)
+                               hold=_joint_holds(n, pairs, edges, holds, T), basis=basis, trees=trees)
         T = joint.T_world_view
         rmse, n_joint, converged = joint.rmse, len(pairs), bool(joint.converged)
         say(f"joint refinement of {n} views over {len(pairs)} pairs: rmse {joint.rmse * 1e3:.4f} mm, "

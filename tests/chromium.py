@@ -197,7 +197,8 @@ def _screenshot(client: _Client, sid: str, out: Path, width: int, height: int, f
 def open_page(html_path, *, width: int = 1280, height: int = 900,
               screenshot: str | Path | None = None, full_page: bool = True,
               timeout_s: float = 60, interact=None) -> dict:
-    """Load ``html_path`` in headless Chromium; report on its images, optionally screenshot it.
+    """Load ``html_path`` (a file, or an ``http://127.x.x.x`` URL) in headless Chromium; report on its images,
+    optionally screenshot it.
 
     Returns ``{"images": [{"index", "src_prefix", "complete", "naturalWidth",
     "naturalHeight", "alt"}, ...], "svg_count", "title", "scroll_height",
@@ -209,7 +210,8 @@ def open_page(html_path, *, width: int = 1280, height: int = 900,
     if paths is None:
         raise FileNotFoundError("chromium/chromedriver not found: apt-get install chromium chromium-driver")
     browser, driver = paths
-    url = Path(html_path).resolve().as_uri()
+    # a page file, or a URL on this machine (a local server: tests/ui)
+    url = str(html_path) if str(html_path).startswith("http://127.") else Path(html_path).resolve().as_uri()
     deadline = time.monotonic() + timeout_s
 
     profile = tempfile.mkdtemp(prefix="rangekit-chromium-")

@@ -29,7 +29,8 @@ LAYERS = {
     "formats": 2,
     "sim": 3, "drivers": 3, "calib": 3,
     "app": 4,
-    "cli": 5,
+    "ui": 5,
+    "cli": 6,
 }
 #: Pairs of parts on one layer that must not import each other either way.
 APART = [("sim", "drivers"), ("sim", "calib"), ("drivers", "calib")]

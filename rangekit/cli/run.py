@@ -14,6 +14,7 @@ import sys
 
 from rangekit.cli._common import configure_logging
 from rangekit.cli.check import add_parsers as add_check
+from rangekit.cli.ui import add_parsers as add_ui
 from rangekit.cli.coded import add_parsers as add_coded
 from rangekit.cli.photometric import add_parsers as add_photometric
 from rangekit.cli.range import add_parsers as add_range
@@ -58,6 +59,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_photometric(sub)
     add_range(sub)
     add_rig(sub)
+    add_ui(sub)
     for command in _leaf_parsers(parser):
         _add_verbosity(command, argparse.SUPPRESS)
     return parser

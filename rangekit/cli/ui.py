@@ -1,0 +1,67 @@
+"""rangekit ui: a local web app onto the rig (live camera, test patterns, turntable, device status)."""
+
+from __future__ import annotations
+
+import argparse
+import ipaddress
+import sys
+
+from rangekit.cli._common import check_output, say
+from rangekit.errors import UsageError
+
+
+def _port(text: str) -> int:
+    try:
+        port = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a port number 0-65535, found {text!r}") from None
+    if not 0 <= port <= 65535:
+        raise argparse.ArgumentTypeError(f"expected a port number 0-65535, found {port}")
+    return port
+
+
+def _is_loopback(host: str) -> bool:
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
+
+
+def cmd_ui(args: argparse.Namespace) -> int:
+    """rangekit ui [--rig sim|RIG.json] [--sessions DIR] [--port 8765] [--host 127.0.0.1]"""
+    from rangekit.ui.rig_holder import RigHolder
+    from rangekit.ui.server import serve, start
+
+    if args.rig not in (None, "sim"):
+        if args.object is not None:
+            raise UsageError("--object: a simulator option; leave it out with --rig RIG.json")
+        check_output(args.rig, option="--rig")
+        raise UsageError(f"--rig {args.rig}: the web app runs on the simulator in this version ('--rig sim'); "
+                         "use rangekit check/scan/calibrate --rig for the hardware")
+    holder = RigHolder.simulated(args.object or "lumpy")
+    server, sock = start(holder, args.host, args.port)
+    if not _is_loopback(args.host):
+        print(f"rangekit ui: warning: listening on {args.host}, not loopback: anyone who can reach it and has "
+              "the URL's token can drive the rig", file=sys.stderr)
+    say(f"rangekit ui on {server.host}:{server.port}, the simulated rig; open in a browser:")
+    print(server.url, flush=True)
+    try:
+        serve(server, sock)
+    finally:
+        sock.close()
+    return 0
+
+
+def add_parsers(sub) -> None:
+    p = sub.add_parser("ui", help="a local web app: the live camera, test patterns, the turntable, device status",
+                       description="Start a local web server and print its URL with a one-time token (open it in "
+                                   "a browser). It binds 127.0.0.1 unless --host says otherwise; every request "
+                                   "needs the token, and WebSockets only come from the app's own page.")
+    p.add_argument("--rig", help="'sim' (default): the simulated rig")
+    p.add_argument("--object", help="the simulated object on the turntable (default lumpy; 'shiny' saturates)")
+    p.add_argument("--sessions", help="folder of the sessions the app lists and writes (default: the current one)")
+    p.add_argument("--port", type=_port, default=8765, help="TCP port (default 8765; 0: any free one)")
+    p.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1: this machine only)")
+    p.set_defaults(func=cmd_ui)

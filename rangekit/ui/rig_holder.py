@@ -1,0 +1,130 @@
+"""The rig the web app shows: the simulator's (``--rig sim``) or a rig file's devices, opened once, used by one
+caller at a time.
+
+The Live page grabs frames, shows test patterns and jogs the turntable through it; a long job (a scan, a
+calibration) takes the whole rig with :meth:`RigHolder.hold` and the live stream waits meanwhile. Every device
+call is made under one lock, so two browsers cannot interleave a pattern and a frame.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from contextlib import contextmanager
+
+import numpy as np
+
+from rangekit.errors import RangekitError
+
+__all__ = ["PATTERNS", "RigHolder", "test_pattern"]
+
+#: The projector test patterns the Live page offers ("gray3": the Gray code's bit 3 of the column, ...).
+PATTERNS = ("white", "black", "checker") + tuple(f"gray{k}" for k in range(10))
+
+
+def test_pattern(name: str, width: int, height: int) -> np.ndarray:
+    """(height, width) uint8 projector image of test pattern ``name`` (:data:`PATTERNS`): all 255, all 0, a
+    checkerboard of 32-pixel squares, or bit ``k`` of the Gray code of each column (``gray<k>``)."""
+    if name == "white":
+        return np.full((height, width), 255, np.uint8)
+    if name == "black":
+        return np.zeros((height, width), np.uint8)
+    if name == "checker":
+        r, c = np.indices((height, width))
+        return (((r // 32) + (c // 32)) % 2 * 255).astype(np.uint8)
+    if name.startswith("gray") and name[4:].isdigit() and name in PATTERNS:
+        col = np.arange(width)
+        bit = ((col ^ (col >> 1)) >> int(name[4:])) & 1
+        return np.broadcast_to((bit * 255).astype(np.uint8), (height, width)).copy()
+    raise RangekitError(f"pattern {name!r}: unknown; expected one of {', '.join(PATTERNS)}")
+
+
+class RigHolder:
+    """The open rig: ``devices`` (a :class:`rangekit.sim.SimRig` or the drivers' ``HardwareRig``: ``camera``,
+    ``projector``, ``turntable``), its :class:`rangekit.rig.rig_file.Rig` and where it came from."""
+
+    def __init__(self, devices, rig, source: str, full_scale: float) -> None:
+        self.devices, self.rig, self.source, self.full_scale = devices, rig, source, float(full_scale)
+        self._lock = threading.RLock()
+        self.pattern = "white"
+        self.last_reply, self.fault = "opened", None
+        self.busy: str | None = None       # what holds the rig (a scan, a calibration), None: free
+        self._show(self.pattern)
+
+    @classmethod
+    def simulated(cls, obj: str = "lumpy") -> "RigHolder":
+        """The default simulated rig with ``obj`` on its turntable."""
+        from rangekit.sim import SimRig, default_scene
+
+        sim = SimRig(default_scene(obj))
+        return cls(sim, sim.rig, "simulator", float(sim.imaging.max_value))
+
+    @contextmanager
+    def hold(self, what: str):
+        """The rig for one job (``what`` says which, shown as the device status); refused while another holds it."""
+        with self._lock:
+            if self.busy is not None:
+                raise RangekitError(f"the rig is busy: {self.busy}; wait for it to finish")
+            self.busy = what
+        try:
+            yield self.devices
+        finally:
+            with self._lock:
+                self.busy = None
+
+    def grab(self) -> np.ndarray | None:
+        """One camera frame with the current pattern, or None while a job holds the rig."""
+        with self._lock:
+            if self.busy is not None:
+                return None
+            try:
+                image = self.devices.camera.capture()
+            except RangekitError as exc:
+                self.fault = str(exc)
+                raise
+            self.fault = None
+            return image
+
+    def _show(self, name: str) -> None:
+        proj = self.devices.projector
+        if proj is None:
+            return
+        w, h = proj.resolution
+        proj.show(test_pattern(name, w, h))
+
+    def show_pattern(self, name: str) -> None:
+        """Project test pattern ``name``."""
+        with self._lock:
+            self._refuse_if_busy()
+            test_pattern(name, 1, 1)      # the name checked before any device call
+            self._show(name)
+            self.pattern = name
+            self.last_reply = f"pattern {name} shown"
+
+    def turn(self, *, degrees: float | None = None, home: bool = False) -> float:
+        """Jog the turntable by ``degrees`` or send it home (0 degrees); returns its angle in degrees."""
+        with self._lock:
+            self._refuse_if_busy()
+            table = self.devices.turntable
+            if table is None:
+                raise RangekitError("this rig has no turntable")
+            target = 0.0 if home else float(np.degrees(table.angle)) + float(degrees)
+            started = time.perf_counter()
+            table.rotate_to(np.radians(target))
+            self.last_reply = f"turntable at {np.degrees(table.angle):.2f} deg ({time.perf_counter() - started:.2f} s)"
+            return float(np.degrees(table.angle))
+
+    def _refuse_if_busy(self) -> None:
+        if self.busy is not None:
+            raise RangekitError(f"the rig is busy: {self.busy}; wait for it to finish")
+
+    def status(self) -> dict:
+        """The device status the Live page shows."""
+        table = self.devices.turntable
+        return {"source": self.source, "busy": self.busy, "fault": self.fault, "last_reply": self.last_reply,
+                "pattern": self.pattern,
+                "camera": {"connected": self.devices.camera is not None,
+                           "width": self.rig.camera.width, "height": self.rig.camera.height},
+                "projector": {"connected": self.devices.projector is not None},
+                "turntable": {"connected": table is not None,
+                              "angle_deg": None if table is None else round(float(np.degrees(table.angle)), 3)}}

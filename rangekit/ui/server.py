@@ -1,0 +1,169 @@
+"""``rangekit ui``: the web app's server (Starlette on uvicorn, WebSockets for the live stream and the events).
+
+Routes (every one behind :class:`rangekit.ui.access.Gate`: the token, the app's own origin and host):
+
+- ``GET /``: the page (``static/index.html``); the ``?token=`` it was opened with is kept as a cookie;
+- ``GET /static/...``: the page's scripts and styles, shipped in the package (no network);
+- ``GET /api/status``: the devices' status; ``POST /api/pattern`` ``{"name"}``; ``POST /api/turntable``
+  ``{"degrees"}`` or ``{"home": true}``;
+- ``WS /ws/live``: the camera stream, each frame a text message (its figures, JSON) then a binary one (JPEG).
+
+A request the rig refuses gets 400 and ``{"error": one line}``, the CLI's words; nothing else reaches the page.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import socket
+from dataclasses import dataclass
+from pathlib import Path
+
+from rangekit.errors import RangekitError
+from rangekit.ui.access import COOKIE, Gate, new_token
+from rangekit.ui.rig_holder import PATTERNS, RigHolder
+from rangekit.ui.stream import LiveStream
+
+__all__ = ["UiServer", "bind", "make_app"]
+
+STATIC = Path(__file__).resolve().parent / "static"
+
+
+@dataclass(frozen=True)
+class UiServer:
+    """What ``rangekit ui`` started: its URL (with the token) and the ASGI app."""
+
+    url: str
+    token: str
+    app: object
+    host: str
+    port: int
+
+
+def bind(host: str, port: int) -> socket.socket:
+    """A listening TCP socket on ``host:port`` (port 0: a free one), or a one-line error naming them."""
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    sock = socket.socket(family, socket.SOCK_STREAM)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    try:
+        sock.bind((host, port))
+    except OSError as exc:
+        sock.close()
+        why = "is in use by another program" if exc.errno == 98 else f"cannot be opened ({exc.strerror})"
+        raise RangekitError(f"--host {host} --port {port}: {why}; choose another with --port") from None
+    sock.listen(64)
+    return sock
+
+
+def _json(data, status: int = 200):
+    from starlette.responses import JSONResponse
+
+    return JSONResponse(data, status_code=status)
+
+
+def _error(exc: Exception):
+    return _json({"error": str(exc)}, 400)
+
+
+async def _body(request) -> dict:
+    try:
+        data = json.loads(await request.body() or b"{}")
+    except ValueError:
+        raise RangekitError("request: not JSON") from None
+    if not isinstance(data, dict):
+        raise RangekitError("request: expected a JSON object")
+    return data
+
+
+def make_app(holder: RigHolder, token: str, host: str, port: int):
+    """The Starlette app for ``holder``'s rig, behind the token gate for ``host:port``."""
+    from starlette.applications import Starlette
+    from starlette.responses import FileResponse
+    from starlette.routing import Mount, Route, WebSocketRoute
+    from starlette.staticfiles import StaticFiles
+    from starlette.websockets import WebSocketDisconnect
+
+    stream = LiveStream(holder)
+
+    async def index(request):
+        response = FileResponse(STATIC / "index.html", headers={"Cache-Control": "no-store"})
+        if "token" in request.query_params:     # checked by the gate: kept for the page's own requests
+            response.set_cookie(COOKIE, request.query_params["token"], httponly=True, samesite="strict")
+        return response
+
+    async def status(request):
+        return _json({"rig": holder.status(), "patterns": list(PATTERNS), "live_error": stream.error})
+
+    async def pattern(request):
+        try:
+            body = await _body(request)
+            await asyncio.to_thread(holder.show_pattern, str(body.get("name")))
+        except RangekitError as exc:
+            return _error(exc)
+        return _json({"rig": holder.status()})
+
+    async def turntable(request):
+        try:
+            body = await _body(request)
+            if body.get("home"):
+                await asyncio.to_thread(holder.turn, home=True)
+            else:
+                degrees = body.get("degrees")
+                if isinstance(degrees, bool) or not isinstance(degrees, (int, float)):
+                    raise RangekitError(f"degrees: expected a number, found {degrees!r}")
+                await asyncio.to_thread(holder.turn, degrees=float(degrees))
+        except RangekitError as exc:
+            return _error(exc)
+        return _json({"rig": holder.status()})
+
+    async def live(ws):
+        await ws.accept()
+        stream.watch()
+        seq = 0
+        try:
+            while True:
+                frame = await asyncio.to_thread(stream.next_after, seq, 1.0)
+                if frame is None:
+                    await ws.send_text(json.dumps({"waiting": holder.busy or stream.error or "no frame yet"}))
+                    continue
+                seq = frame.seq
+                await ws.send_text(json.dumps(frame.figures()))
+                await ws.send_bytes(frame.jpeg)
+        except (WebSocketDisconnect, RuntimeError, OSError):
+            pass
+        finally:
+            stream.unwatch()
+
+    routes = [Route("/", index), Route("/api/status", status), Route("/api/pattern", pattern, methods=["POST"]),
+              Route("/api/turntable", turntable, methods=["POST"]), WebSocketRoute("/ws/live", live),
+              Mount("/static", StaticFiles(directory=STATIC), name="static")]
+    @contextlib.asynccontextmanager
+    async def lifespan(app):
+        yield
+        stream.close()
+
+    app = Starlette(routes=routes, lifespan=lifespan)
+    names = {host} | ({"localhost", "127.0.0.1"} if host in ("127.0.0.1", "localhost") else set())
+    hosts = {f"{h}:{port}" for h in names}
+    origins = {f"http://{h}" for h in hosts}
+    return Gate(app, token, hosts, origins)
+
+
+def start(holder: RigHolder, host: str, port: int) -> tuple[UiServer, socket.socket]:
+    """Bind ``host:port`` and make the app; the server runs with :func:`serve`."""
+    sock = bind(host, port)
+    port = sock.getsockname()[1]
+    token = new_token()
+    shown = f"[{host}]" if ":" in host else host
+    return UiServer(f"http://{shown}:{port}/?token={token}", token, make_app(holder, token, shown, port),
+                    host, port), sock
+
+
+def serve(server: UiServer, sock: socket.socket) -> None:
+    """Run until Ctrl-C (uvicorn's own handling: the open pages are closed, the rig released)."""
+    import uvicorn
+
+    config = uvicorn.Config(server.app, log_level="warning", access_log=False, lifespan="on",
+                            ws_max_size=1 << 20)
+    uvicorn.Server(config).run(sockets=[sock])

@@ -1,0 +1,77 @@
+// rangekit ui: the Live page. Same-origin requests only; the token travels as the cookie the first load set.
+"use strict";
+
+const $ = (id) => document.getElementById(id);
+
+function showError(text) { $("error").textContent = text || ""; }
+
+async function post(path, body) {
+  const r = await fetch(path, { method: "POST", headers: { "Content-Type": "application/json" },
+                                body: JSON.stringify(body) });
+  const data = await r.json().catch(() => ({ error: `HTTP ${r.status}` }));
+  if (!r.ok) { showError(data.error || `HTTP ${r.status}`); return null; }
+  showError("");
+  if (data.rig) showStatus(data.rig);
+  return data;
+}
+
+function showStatus(rig) {
+  $("rig-source").textContent = rig.source;
+  const rows = [
+    ["camera", rig.camera.connected ? `${rig.camera.width}x${rig.camera.height}` : "not connected"],
+    ["projector", rig.projector.connected ? `pattern ${rig.pattern}` : "not connected"],
+    ["turntable", rig.turntable.connected ? `${rig.turntable.angle_deg} deg` : "not connected"],
+    ["busy", rig.busy || "no"], ["fault", rig.fault || "none"], ["last reply", rig.last_reply]];
+  $("status").innerHTML = "";
+  for (const [k, v] of rows) {
+    const tr = $("status").insertRow(); tr.insertCell().outerHTML = `<th>${k}</th>`; tr.insertCell().textContent = v;
+  }
+  for (const b of document.querySelectorAll("#patterns button")) b.classList.toggle("on", b.dataset.name === rig.pattern);
+}
+
+async function loadStatus() {
+  const r = await fetch("/api/status");
+  const data = await r.json();
+  const box = $("patterns");
+  if (!box.children.length) {
+    for (const name of data.patterns) {
+      const b = document.createElement("button"); b.textContent = name; b.dataset.name = name;
+      b.onclick = () => post("/api/pattern", { name }); box.appendChild(b);
+    }
+  }
+  showStatus(data.rig);
+}
+
+function startLive() {
+  const ws = new WebSocket(`ws://${location.host}/ws/live`);
+  ws.binaryType = "blob";
+  const canvas = $("live-canvas"), ctx = canvas.getContext("2d");
+  let figures = null, shown = [];
+  ws.onmessage = async (ev) => {
+    if (typeof ev.data === "string") {
+      const msg = JSON.parse(ev.data);
+      if (msg.waiting) { $("live-waiting").hidden = false; $("live-waiting").textContent = msg.waiting; return; }
+      figures = msg; return;
+    }
+    const bitmap = await createImageBitmap(ev.data);
+    if (canvas.width !== bitmap.width) { canvas.width = bitmap.width; canvas.height = bitmap.height; }
+    ctx.drawImage(bitmap, 0, 0);
+    bitmap.close();
+    $("live-waiting").hidden = true;
+    const now = performance.now(); shown.push(now); shown = shown.filter((t) => now - t < 2000);
+    window.rangekitLive = { frames: (window.rangekitLive?.frames || 0) + 1, figures };
+    if (figures) {
+      $("fig-fps").textContent = `${(shown.length / 2).toFixed(1)} /s`;
+      $("fig-sat").textContent = `${figures.saturated_percent} %`;
+      $("fig-dark").textContent = `${figures.dark_percent} %`;
+      $("fig-focus").textContent = figures.focus.toFixed(1);
+    }
+  };
+  ws.onclose = () => { $("live-waiting").hidden = false; $("live-waiting").textContent = "reconnecting"; setTimeout(startLive, 1000); };
+}
+
+for (const b of document.querySelectorAll("[data-jog]")) b.onclick = () => post("/api/turntable", { degrees: Number(b.dataset.jog) });
+$("home").onclick = () => post("/api/turntable", { home: true });
+loadStatus();
+setInterval(loadStatus, 2000);
+startLive();

@@ -1,0 +1,121 @@
+"""Nobody else gets in (issue 37): the token on every request and WebSocket, the app's own origin and host,
+paths confined to the sessions folder. Each against the real server, ``rangekit ui`` on 127.0.0.1."""
+
+from __future__ import annotations
+
+import json
+import os
+import socket
+import subprocess
+import sys
+
+import pytest
+from websockets.exceptions import InvalidStatus
+from websockets.sync.client import connect
+
+from ui_server import start_ui
+from rangekit.cli.ui import _is_loopback
+from rangekit.ui.paths import PathRefused, confined
+
+
+@pytest.fixture(scope="module")
+def server():
+    s = start_ui()
+    yield s
+    s.stop()
+
+
+def test_the_page_needs_the_token_and_keeps_it_as_a_strict_cookie(server):
+    status, body, _ = server.request("/", token=None)
+    assert status == 403 and b"token missing or wrong" in body
+    assert server.request("/", token="not-the-token")[0] == 403
+    status, body, headers = server.request("/", token="query")
+    assert status == 200 and b"<canvas" in body
+    cookie = headers["set-cookie"]
+    assert f"rangekit_token={server.token}" in cookie and "HttpOnly" in cookie and "SameSite=strict" in cookie
+
+
+@pytest.mark.parametrize("path", ["/api/status", "/static/app.js", "/static/index.html", "/nowhere"])
+def test_every_route_needs_the_token(server, path):
+    assert server.request(path, token=None)[0] == 403
+    assert server.request(path, token="x" * 43)[0] == 403
+    assert server.request(path)[0] == (404 if path == "/nowhere" else 200)
+
+
+def test_a_foreign_host_header_is_refused(server):
+    """A page of another site whose name was made to resolve to 127.0.0.1 (DNS rebinding) sends its own Host."""
+    status, body, _ = server.request("/api/status", headers={"Host": "rebind.example:80"})
+    assert status == 403 and b"host" in body
+
+
+def _ws(server, origin: str | None, cookie: str | None):
+    headers = {} if cookie is None else {"Cookie": f"rangekit_token={cookie}"}
+    return connect(server.base.replace("http://", "ws://") + "/ws/live", origin=origin, additional_headers=headers,
+                   open_timeout=20)
+
+
+def test_a_websocket_from_another_origin_is_refused_even_with_the_token(server):
+    for origin in ("http://evil.example", "null", None, server.base.replace("127.0.0.1", "127.0.0.2")):
+        with pytest.raises(InvalidStatus) as refused:
+            _ws(server, origin, server.token).recv(timeout=5)
+        assert refused.value.response.status_code == 403
+    with pytest.raises(InvalidStatus):
+        _ws(server, server.base, None).recv(timeout=5)      # its own origin, no token
+
+
+def test_the_apps_own_websocket_streams_frames_that_change(server):
+    with _ws(server, server.base, server.token) as ws:
+        frames, figures = [], None
+        while len(frames) < 2:
+            msg = ws.recv(timeout=30)
+            if isinstance(msg, str):
+                figures = json.loads(msg)
+            else:
+                frames.append(msg)
+    assert all(f[:2] == b"\xff\xd8" for f in frames) and frames[0] != frames[1]   # JPEGs, new noise each
+    assert figures["width"] == 1280 and figures["saturated_percent"] >= 0 and figures["focus"] > 0
+
+
+def test_bad_input_gets_the_one_line_error_and_the_server_lives_on(server):
+    for path, data, words in [("/api/pattern", {"name": "nonsense"}, "pattern 'nonsense': unknown; expected one of"),
+                              ("/api/turntable", {"degrees": "ten"}, "degrees: expected a number, found 'ten'"),
+                              ("/api/turntable", [1, 2], "request: expected a JSON object")]:
+        status, body, _ = server.request(path, data=data)
+        assert status == 400 and json.loads(body) == {"error": words + json.loads(body)["error"][len(words):]}
+        assert "Traceback" not in body.decode() and "\n" not in json.loads(body)["error"]
+    status, body, _ = server.request("/api/turntable", data={"degrees": 30})
+    assert status == 200 and json.loads(body)["rig"]["turntable"]["angle_deg"] == pytest.approx(30.0)
+    status, body, _ = server.request("/api/turntable", data={"home": True})
+    assert json.loads(body)["rig"]["turntable"]["angle_deg"] == pytest.approx(0.0)
+
+
+def test_a_port_in_use_is_named_in_one_line():
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen(1)
+        port = busy.getsockname()[1]
+        run = subprocess.run([sys.executable, "-m", "rangekit", "ui", "--port", str(port)], capture_output=True,
+                             text=True, timeout=120, stdin=subprocess.DEVNULL, env=dict(os.environ))
+    assert run.returncode == 1 and "Traceback" not in run.stderr
+    assert f"--host 127.0.0.1 --port {port}: is in use by another program; choose another with --port" in run.stderr
+
+
+def test_only_loopback_hosts_go_without_a_warning():
+    assert all(_is_loopback(h) for h in ("127.0.0.1", "127.0.0.2", "localhost", "::1"))
+    assert not any(_is_loopback(h) for h in ("0.0.0.0", "192.168.1.10", "::", "example.org"))
+
+
+def test_paths_are_confined_to_the_sessions_folder(tmp_path):
+    root = tmp_path / "sessions"
+    (root / "scan1").mkdir(parents=True)
+    (tmp_path / "secret").mkdir()
+    (root / "out").symlink_to(tmp_path / "secret")
+    (root / "inside").symlink_to(root / "scan1")
+    assert confined(root, "scan1") == (root / "scan1").resolve()
+    assert confined(root, "inside") == (root / "scan1").resolve()
+    assert confined(root, "") == root.resolve()
+    for name, words in [("../secret", "'..' leads out"), ("scan1/../../secret", "'..' leads out"),
+                        ("/etc/passwd", "absolute"), ("~root", "absolute"), ("out", "a link out"),
+                        ("out/x", "a link out"), ("a\\..\\b", "'/' separated"), ("a\x00b", "'/' separated")]:
+        with pytest.raises(PathRefused, match=words):
+            confined(root, name)

@@ -1,0 +1,60 @@
+"""The web app in a real browser (issue 37): headless Chromium (Debian's) opens the URL ``rangekit ui`` printed."""
+
+from __future__ import annotations
+
+import time
+
+import pytest
+
+from chromium import chromium_paths, open_page
+from ui_server import start_ui
+
+pytestmark = pytest.mark.skipif(chromium_paths() is None, reason="headless browser missing: apt-get install "
+                                "chromium chromium-driver (`make test` installs them when run as root)")
+
+_CANVAS = """
+const c = document.getElementById('live-canvas');
+const d = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;
+let red = 0, sum = 0;
+for (let i = 0; i < d.length; i += 4) {
+  if (d[i] > 200 && d[i + 1] < 60 && d[i + 2] < 60) red++;
+  sum = (sum * 31 + d[i] + 7 * d[i + 1]) % 1000000007;
+}
+return {width: c.width, height: c.height, red: red, sum: sum,
+        frames: window.rangekitLive ? window.rangekitLive.frames : 0,
+        sat: document.getElementById('fig-sat').textContent, fps: document.getElementById('fig-fps').textContent};
+"""
+
+
+def _until(page, script: str, timeout: float = 60.0):
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        value = page.execute(script)
+        if value:
+            return value
+        time.sleep(0.1)
+    raise AssertionError(f"the page never satisfied: {script}")
+
+
+def test_the_live_page_streams_frames_and_marks_a_saturating_object(tmp_path):
+    server = start_ui("--object", "shiny")
+    try:
+        def look(page):
+            _until(page, "return window.rangekitLive && window.rangekitLive.frames >= 3;")
+            first = page.execute(_CANVAS)
+            _until(page, f"return window.rangekitLive.frames >= {first['frames'] + 3};")
+            second = page.execute(_CANVAS)
+            page.execute("document.querySelector('[data-name=checker]').click();")
+            _until(page, "return document.querySelector('[data-name=checker]').classList.contains('on');")
+            return first, second
+
+        out = open_page(server.url, width=1280, height=800, timeout_s=120, interact=look,
+                        screenshot=tmp_path / "live.png")
+        first, second = out["interaction"]
+    finally:
+        server.stop()
+    assert (first["width"], first["height"]) == (1280, 1024)
+    assert first["sum"] != second["sum"]            # the canvas changed between two reads
+    # The shiny object's highlights: 0.4% of the frame at full scale, drawn red (5,000 pixels of 1.3M).
+    assert first["red"] > 2000 and second["red"] > 2000
+    assert first["sat"].endswith("%") and float(first["sat"].split()[0]) > 0.1

@@ -3,8 +3,10 @@ event timed, printing (JSON) the acquisition time, how long after the last view 
 (preview.ply) and the observed mesh (mesh.ply) were written, each view's decoding lag and the accuracy.
 
     .venv/bin/python benchmarks/app/bench_realtime_scan.py /tmp/rt_scan      # about 3 minutes, 12 views
+    .venv/bin/python benchmarks/app/bench_realtime_scan.py /tmp/rt_scan --pairs 3
 
-Compare the acquisition time with ``/usr/bin/time rangekit scan --realtime --no-process --out DIR2`` run in turn.
+``--pairs N``: N pairs run in turn, a streaming scan then ``ScanOptions(process=False)`` (what ``rangekit scan
+--realtime --no-process`` does), each into a fresh folder, printing both acquisition times and their ratio.
 """
 
 from __future__ import annotations
@@ -40,5 +42,31 @@ def main(out: str) -> dict:
             "total_s": time.perf_counter() - t0}
 
 
+def acquisition_only(out: str) -> float:
+    """Seconds of a real-time scan's acquisition with no processing beside it."""
+    return rk.scan(rk.ScanOptions(out=out, realtime=True, process=False)).acquisition_seconds
+
+
+def pairs(out: str, n: int) -> None:
+    import shutil
+    import statistics
+
+    rows = []
+    for k in range(n):
+        shutil.rmtree(out, ignore_errors=True)
+        streamed = main(out)
+        shutil.rmtree(out, ignore_errors=True)
+        alone = acquisition_only(out)
+        rows.append((streamed["acquisition_s"], alone))
+        print(json.dumps({"pair": k + 1, "streaming": streamed, "no_process_acquisition_s": alone}), flush=True)
+    ratios = [a / b for a, b in rows]
+    print(json.dumps({"pairs": n, "acquisition_streaming_s": statistics.median(a for a, _ in rows),
+                      "acquisition_no_process_s": statistics.median(b for _, b in rows),
+                      "ratio_median": statistics.median(ratios), "ratio_range": [min(ratios), max(ratios)]}))
+
+
 if __name__ == "__main__":
-    print(json.dumps(main(sys.argv[1])))
+    if len(sys.argv) == 4 and sys.argv[2] == "--pairs":
+        pairs(sys.argv[1], int(sys.argv[3]))
+    else:
+        print(json.dumps(main(sys.argv[1])))

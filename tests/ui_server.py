@@ -53,10 +53,11 @@ class Server:
         return self.proc.stderr.read() if self.proc.stderr else ""
 
 
-def start_ui(*args: str, timeout: float = 60.0) -> Server:
-    """``rangekit ui --port 0 ARGS`` in a child process; returns once it printed its URL."""
+def start_ui(sessions, *args: str, timeout: float = 60.0) -> Server:
+    """``rangekit ui --port 0 --sessions SESSIONS ARGS`` in a child process; returns once it printed its URL."""
     env = dict(os.environ, PYTHONUNBUFFERED="1")
-    proc = subprocess.Popen([sys.executable, "-m", "rangekit", "ui", "--port", "0", *args], stdin=subprocess.DEVNULL,
+    proc = subprocess.Popen([sys.executable, "-m", "rangekit", "ui", "--port", "0", "--sessions", str(sessions), *args],
+                            stdin=subprocess.DEVNULL,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:

@@ -5,9 +5,14 @@ from __future__ import annotations
 import argparse
 import ipaddress
 import sys
+from pathlib import Path
 
 from rangekit.cli._common import check_output, say
 from rangekit.errors import UsageError
+
+
+#: The simulated rig's rig file in the sessions folder: the camera controls the app sets are written there.
+SIM_RIG_FILE = "sim-rig.json"
 
 
 def _port(text: str) -> int:
@@ -32,7 +37,7 @@ def _is_loopback(host: str) -> bool:
 def cmd_ui(args: argparse.Namespace) -> int:
     """rangekit ui [--rig sim|RIG.json] [--sessions DIR] [--port 8765] [--host 127.0.0.1]"""
     from rangekit.ui.rig_holder import RigHolder
-    from rangekit.ui.server import serve, start
+    from rangekit.ui.server import bind, serve, start
 
     if args.rig not in (None, "sim"):
         if args.object is not None:
@@ -40,12 +45,21 @@ def cmd_ui(args: argparse.Namespace) -> int:
         check_output(args.rig, option="--rig")
         raise UsageError(f"--rig {args.rig}: the web app runs on the simulator in this version ('--rig sim'); "
                          "use rangekit check/scan/calibrate --rig for the hardware")
-    holder = RigHolder.simulated(args.object or "lumpy")
-    server, sock = start(holder, args.host, args.port)
+    sessions = Path(args.sessions or ".")
+    if not sessions.is_dir():
+        raise UsageError(f"--sessions {sessions}: not a folder; create it first or name another")
+    rig_file = sessions / SIM_RIG_FILE
+    sock = bind(args.host, args.port)       # a port in use is said before anything is opened or written
+    try:
+        holder = RigHolder.simulated(rig_file, args.object or "lumpy")
+        server = start(holder, sock, args.host)
+    except BaseException:
+        sock.close()
+        raise
     if not _is_loopback(args.host):
         print(f"rangekit ui: warning: listening on {args.host}, not loopback: anyone who can reach it and has "
               "the URL's token can drive the rig", file=sys.stderr)
-    say(f"rangekit ui on {server.host}:{server.port}, the simulated rig; open in a browser:")
+    say(f"rangekit ui on {server.host}:{server.port}, the simulated rig (rig file {rig_file}); open in a browser:")
     print(server.url, flush=True)
     try:
         serve(server, sock)
@@ -61,7 +75,8 @@ def add_parsers(sub) -> None:
                                    "needs the token, and WebSockets only come from the app's own page.")
     p.add_argument("--rig", help="'sim' (default): the simulated rig")
     p.add_argument("--object", help="the simulated object on the turntable (default lumpy; 'shiny' saturates)")
-    p.add_argument("--sessions", help="folder of the sessions the app lists and writes (default: the current one)")
+    p.add_argument("--sessions", help="folder of the sessions the app lists and writes (default: the current one); the simulated "
+                                        f"rig's rig file is {SIM_RIG_FILE} there")
     p.add_argument("--port", type=_port, default=8765, help="TCP port (default 8765; 0: any free one)")
     p.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1: this machine only)")
     p.set_defaults(func=cmd_ui)

@@ -12,9 +12,15 @@ import threading
 import time
 from contextlib import contextmanager
 
+from dataclasses import replace
+from pathlib import Path
+
 import numpy as np
 
 from rangekit.errors import RangekitError
+from rangekit.rig.camera_controls import controls_from_capture
+from rangekit.rig.rig_edits import write_camera_controls
+from rangekit.rig.rig_file import load_rig, save_rig
 
 __all__ = ["PATTERNS", "RigHolder", "test_pattern"]
 
@@ -43,8 +49,9 @@ class RigHolder:
     """The open rig: ``devices`` (a :class:`rangekit.sim.SimRig` or the drivers' ``HardwareRig``: ``camera``,
     ``projector``, ``turntable``), its :class:`rangekit.rig.rig_file.Rig` and where it came from."""
 
-    def __init__(self, devices, rig, source: str, full_scale: float) -> None:
+    def __init__(self, devices, rig, source: str, full_scale: float, rig_file: Path) -> None:
         self.devices, self.rig, self.source, self.full_scale = devices, rig, source, float(full_scale)
+        self.rig_file = Path(rig_file)
         self._lock = threading.RLock()
         self.pattern = "white"
         self.last_reply, self.fault = "opened", None
@@ -52,12 +59,31 @@ class RigHolder:
         self._show(self.pattern)
 
     @classmethod
-    def simulated(cls, obj: str = "lumpy") -> "RigHolder":
-        """The default simulated rig with ``obj`` on its turntable."""
-        from rangekit.sim import SimRig, default_scene
+    def simulated(cls, rig_file: Path, obj: str = "lumpy") -> "RigHolder":
+        """The simulated rig with ``obj`` on its turntable, its rig file ``rig_file`` (the default rig's, written
+        there when missing; read, checked and used when present: its camera controls drive the simulated
+        camera)."""
+        from rangekit.sim import SimRig, default_rig, default_scene
 
-        sim = SimRig(default_scene(obj))
-        return cls(sim, sim.rig, "simulator", float(sim.imaging.max_value))
+        rig_file = Path(rig_file)
+        if not rig_file.exists():
+            save_rig(default_rig(), rig_file)
+        rig = load_rig(rig_file)
+        sim = SimRig(default_scene(obj), rig)
+        sim.camera.set_controls(controls_from_capture(rig.capture, where=str(rig_file)))
+        return cls(sim, sim.rig, "simulator", float(sim.imaging.max_value), rig_file)
+
+    def set_camera(self, changes: dict) -> dict:
+        """Write the ``capture.camera`` fields of ``changes`` into the rig file (atomically, checked first: a bad
+        value is the rig file's one-line error and nothing is written) and apply them to the camera; the
+        controls as written."""
+        with self._lock:
+            self._refuse_if_busy()
+            rig, controls = write_camera_controls(self.rig_file, changes)
+            self.devices.camera.set_controls(controls)
+            self.rig = replace(self.rig, capture={**self.rig.capture, **rig.capture})
+            self.last_reply = "camera: " + ", ".join(f"{k} {v}" for k, v in changes.items())
+            return dict(rig.capture.get("camera", {}))
 
     @contextmanager
     def hold(self, what: str):
@@ -121,7 +147,8 @@ class RigHolder:
     def status(self) -> dict:
         """The device status the Live page shows."""
         table = self.devices.turntable
-        return {"source": self.source, "busy": self.busy, "fault": self.fault, "last_reply": self.last_reply,
+        return {"source": self.source, "rig_file": str(self.rig_file), "busy": self.busy,
+                "controls": dict(self.rig.capture.get("camera", {})), "fault": self.fault, "last_reply": self.last_reply,
                 "pattern": self.pattern,
                 "camera": {"connected": self.devices.camera is not None,
                            "width": self.rig.camera.width, "height": self.rig.camera.height},

@@ -5,7 +5,8 @@ Routes (every one behind :class:`rangekit.ui.access.Gate`: the token, the app's 
 - ``GET /``: the page (``static/index.html``); the ``?token=`` it was opened with is kept as a cookie;
 - ``GET /static/...``: the page's scripts and styles, shipped in the package (no network);
 - ``GET /api/status``: the devices' status; ``POST /api/pattern`` ``{"name"}``; ``POST /api/turntable``
-  ``{"degrees"}`` or ``{"home": true}``;
+  ``{"degrees"}`` or ``{"home": true}``; ``POST /api/camera`` ``{"exposure_us", "iso", "white_balance_k",
+  "focus"}`` (any of them: written into the rig file's ``capture.camera``, then applied);
 - ``WS /ws/live``: the camera stream, each frame a text message (its figures, JSON) then a binary one (JPEG).
 
 A request the rig refuses gets 400 and ``{"error": one line}``, the CLI's words; nothing else reaches the page.
@@ -28,6 +29,8 @@ from rangekit.ui.stream import LiveStream
 __all__ = ["UiServer", "bind", "make_app"]
 
 STATIC = Path(__file__).resolve().parent / "static"
+#: The camera controls the Live page sets (the rig file's capture.camera fields).
+CAMERA_FIELDS = ("exposure_us", "iso", "white_balance_k", "focus")
 
 
 @dataclass(frozen=True)
@@ -117,6 +120,17 @@ def make_app(holder: RigHolder, token: str, host: str, port: int):
             return _error(exc)
         return _json({"rig": holder.status()})
 
+    async def camera(request):
+        try:
+            body = await _body(request)
+            unknown = sorted(set(body) - set(CAMERA_FIELDS))
+            if unknown:
+                raise RangekitError(f"camera: {unknown[0]}: not a control here; expected {', '.join(CAMERA_FIELDS)}")
+            await asyncio.to_thread(holder.set_camera, body)
+        except RangekitError as exc:
+            return _error(exc)
+        return _json({"rig": holder.status()})
+
     async def live(ws):
         await ws.accept()
         stream.watch()
@@ -136,7 +150,7 @@ def make_app(holder: RigHolder, token: str, host: str, port: int):
             stream.unwatch()
 
     routes = [Route("/", index), Route("/api/status", status), Route("/api/pattern", pattern, methods=["POST"]),
-              Route("/api/turntable", turntable, methods=["POST"]), WebSocketRoute("/ws/live", live),
+              Route("/api/turntable", turntable, methods=["POST"]), Route("/api/camera", camera, methods=["POST"]), WebSocketRoute("/ws/live", live),
               Mount("/static", StaticFiles(directory=STATIC), name="static")]
     @contextlib.asynccontextmanager
     async def lifespan(app):
@@ -150,14 +164,12 @@ def make_app(holder: RigHolder, token: str, host: str, port: int):
     return Gate(app, token, hosts, origins)
 
 
-def start(holder: RigHolder, host: str, port: int) -> tuple[UiServer, socket.socket]:
-    """Bind ``host:port`` and make the app; the server runs with :func:`serve`."""
-    sock = bind(host, port)
+def start(holder: RigHolder, sock: socket.socket, host: str) -> UiServer:
+    """The app for ``holder`` on the bound ``sock`` (:func:`bind`); the server runs with :func:`serve`."""
     port = sock.getsockname()[1]
     token = new_token()
     shown = f"[{host}]" if ":" in host else host
-    return UiServer(f"http://{shown}:{port}/?token={token}", token, make_app(holder, token, shown, port),
-                    host, port), sock
+    return UiServer(f"http://{shown}:{port}/?token={token}", token, make_app(holder, token, shown, port), host, port)
 
 
 def serve(server: UiServer, sock: socket.socket) -> None:

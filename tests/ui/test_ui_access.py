@@ -8,6 +8,7 @@ import os
 import socket
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 from websockets.exceptions import InvalidStatus
@@ -19,8 +20,8 @@ from rangekit.ui.paths import PathRefused, confined
 
 
 @pytest.fixture(scope="module")
-def server():
-    s = start_ui()
+def server(tmp_path_factory):
+    s = start_ui(tmp_path_factory.mktemp("sessions"))
     yield s
     s.stop()
 
@@ -89,15 +90,17 @@ def test_bad_input_gets_the_one_line_error_and_the_server_lives_on(server):
     assert json.loads(body)["rig"]["turntable"]["angle_deg"] == pytest.approx(0.0)
 
 
-def test_a_port_in_use_is_named_in_one_line():
+def test_a_port_in_use_is_named_in_one_line(tmp_path):
     with socket.socket() as busy:
         busy.bind(("127.0.0.1", 0))
         busy.listen(1)
         port = busy.getsockname()[1]
-        run = subprocess.run([sys.executable, "-m", "rangekit", "ui", "--port", str(port)], capture_output=True,
+        run = subprocess.run([sys.executable, "-m", "rangekit", "ui", "--port", str(port), "--sessions", str(tmp_path)],
+                             capture_output=True,
                              text=True, timeout=120, stdin=subprocess.DEVNULL, env=dict(os.environ))
     assert run.returncode == 1 and "Traceback" not in run.stderr
     assert f"--host 127.0.0.1 --port {port}: is in use by another program; choose another with --port" in run.stderr
+    assert not any(tmp_path.iterdir())     # said before anything was written
 
 
 def test_only_loopback_hosts_go_without_a_warning():
@@ -119,3 +122,33 @@ def test_paths_are_confined_to_the_sessions_folder(tmp_path):
                         ("out/x", "a link out"), ("a\\..\\b", "'/' separated"), ("a\x00b", "'/' separated")]:
         with pytest.raises(PathRefused, match=words):
             confined(root, name)
+
+
+def test_camera_controls_are_written_into_the_rig_file_and_change_the_frames(server, tmp_path):
+    rig_file = Path(json.loads(server.request("/api/status")[1])["rig"]["rig_file"])
+    before = json.loads(rig_file.read_text())
+
+    def dark_percent() -> float:
+        """The figures of the 4th frame after connecting (the first two may have been taken before a change)."""
+        with _ws(server, server.base, server.token) as ws:
+            got = []
+            while len(got) < 4:
+                msg = ws.recv(timeout=30)
+                if isinstance(msg, str) and "seq" in msg:
+                    got.append(json.loads(msg))
+        return got[-1]["dark_percent"]
+
+    dark_before = dark_percent()
+    status, body, _ = server.request("/api/camera", data={"exposure_us": 8000, "iso": 100})
+    assert status == 200, body
+    after = json.loads(rig_file.read_text())
+    assert after["capture"]["camera"] == {**before["capture"].get("camera", {}), "exposure_us": 8000, "iso": 100}
+    assert {k: v for k, v in after.items() if k != "capture"} == {k: v for k, v in before.items() if k != "capture"}
+    assert dark_percent() > dark_before + 1.0    # a quarter of the default 33 ms exposure: more pixels too dark
+    # A bad value: the rig file's own one-line error naming the field, and the file untouched.
+    status, body, _ = server.request("/api/camera", data={"exposure_us": "abc"})
+    assert status == 400 and json.loads(body)["error"].startswith(f"{rig_file}: capture.camera.exposure_us:")
+    assert json.loads(rig_file.read_text()) == after
+    status, body, _ = server.request("/api/camera", data={"shutter": 5})
+    assert status == 400 and "camera: shutter: not a control here" in json.loads(body)["error"]
+    assert server.request("/api/camera", data={"exposure_us": 33333})[0] == 200

@@ -37,7 +37,7 @@ def _until(page, script: str, timeout: float = 60.0):
 
 
 def test_the_live_page_streams_frames_and_marks_a_saturating_object(tmp_path):
-    server = start_ui("--object", "shiny")
+    server = start_ui(tmp_path, "--object", "shiny")
     try:
         def look(page):
             _until(page, "return window.rangekitLive && window.rangekitLive.frames >= 3;")
@@ -46,11 +46,15 @@ def test_the_live_page_streams_frames_and_marks_a_saturating_object(tmp_path):
             second = page.execute(_CANVAS)
             page.execute("document.querySelector('[data-name=checker]').click();")
             _until(page, "return document.querySelector('[data-name=checker]').classList.contains('on');")
-            return first, second
+            # A non-numeric exposure: the rig file's one-line error next to its field, nothing else changed.
+            page.execute("document.querySelector('[name=exposure_us]').value = 'abc';"
+                         "document.querySelector('#controls button').click();")
+            error = _until(page, "return document.querySelector('.field-error[data-for=exposure_us]').textContent;")
+            return first, second, error
 
         out = open_page(server.url, width=1280, height=800, timeout_s=120, interact=look,
                         screenshot=tmp_path / "live.png")
-        first, second = out["interaction"]
+        first, second, error = out["interaction"]
     finally:
         server.stop()
     assert (first["width"], first["height"]) == (1280, 1024)
@@ -58,3 +62,5 @@ def test_the_live_page_streams_frames_and_marks_a_saturating_object(tmp_path):
     # The shiny object's highlights: 0.4% of the frame at full scale, drawn red (5,000 pixels of 1.3M).
     assert first["red"] > 2000 and second["red"] > 2000
     assert first["sat"].endswith("%") and float(first["sat"].split()[0]) > 0.1
+    assert "capture.camera.exposure_us: expected a number" in error and "abc" in error and "\n" not in error
+    assert "Traceback" not in error

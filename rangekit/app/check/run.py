@@ -15,7 +15,8 @@ import numpy as np
 from rangekit.app.check.steps import CheckResult, run_check
 from rangekit.app.check.stats import check_figure
 from rangekit.rig.camera_controls import controls_from_capture
-from rangekit.io import atomic_write_json, read_json, write_png
+from rangekit.io import atomic_write_json, write_png
+from rangekit.rig.rig_edits import write_capture_fields
 from rangekit.rig.rig_file import Rig, load_rig, save_rig
 
 __all__ = ["check_simulated", "check_hardware", "write_check", "write_pattern_delay", "simulated_check_rig"]
@@ -63,10 +64,7 @@ def check_hardware(rig_file: str, *, progress=None) -> tuple[CheckResult, dict, 
 
 def write_pattern_delay(rig_file: str | Path, delay_s: float) -> None:
     """Rewrite ``rig_file`` atomically with ``capture.pattern_delay_s`` = ``delay_s``, nothing else changed."""
-    data = read_json(rig_file, what="rig file")
-    data.setdefault("capture", {})["pattern_delay_s"] = float(delay_s)
-    atomic_write_json(rig_file, data)
-    load_rig(rig_file)     # still a valid rig file
+    write_capture_fields(rig_file, {"pattern_delay_s": float(delay_s)})
 
 
 def write_check(out: str | Path, result: CheckResult, images: dict, full_scale: float,

@@ -15,8 +15,16 @@ async function post(path, body) {
   return data;
 }
 
+let controlsShown = false;
+
 function showStatus(rig) {
-  $("rig-source").textContent = rig.source;
+  $("rig-source").textContent = `${rig.source} - ${rig.rig_file}`;
+  if (!controlsShown) {   // the rig file's values, once: the user's typing is not overwritten
+    for (const input of $("controls").querySelectorAll("input")) {
+      const v = rig.controls[input.name]; input.value = v === undefined ? "" : v;
+    }
+    controlsShown = true;
+  }
   const rows = [
     ["camera", rig.camera.connected ? `${rig.camera.width}x${rig.camera.height}` : "not connected"],
     ["projector", rig.projector.connected ? `pattern ${rig.pattern}` : "not connected"],
@@ -69,6 +77,26 @@ function startLive() {
   };
   ws.onclose = () => { $("live-waiting").hidden = false; $("live-waiting").textContent = "reconnecting"; setTimeout(startLive, 1000); };
 }
+
+// Each field's error next to it (the rig file's own words name the field: capture.camera.<name>).
+$("controls").onsubmit = async (ev) => {
+  ev.preventDefault();
+  const changes = {};
+  for (const input of $("controls").querySelectorAll("input")) {
+    const text = input.value.trim();
+    if (text === "") continue;
+    changes[input.name] = /^-?[0-9.]+(e-?[0-9]+)?$/i.test(text) ? Number(text) : text;
+  }
+  for (const e of document.querySelectorAll(".field-error")) e.textContent = "";
+  const r = await fetch("/api/camera", { method: "POST", headers: { "Content-Type": "application/json" },
+                                         body: JSON.stringify(changes) });
+  const data = await r.json().catch(() => ({ error: `HTTP ${r.status}` }));
+  if (r.ok) { showError(""); showStatus(data.rig); return; }
+  const field = Object.keys(changes).find((k) => (data.error || "").includes(`camera.${k}`) ||
+                                                  (data.error || "").includes(`camera: ${k}`));
+  if (field) document.querySelector(`.field-error[data-for=${field}]`).textContent = data.error;
+  else showError(data.error);
+};
 
 for (const b of document.querySelectorAll("[data-jog]")) b.onclick = () => post("/api/turntable", { degrees: Number(b.dataset.jog) });
 $("home").onclick = () => post("/api/turntable", { home: true });

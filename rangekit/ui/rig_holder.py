@@ -19,7 +19,7 @@ import numpy as np
 
 from rangekit.errors import RangekitError
 from rangekit.rig.camera_controls import controls_from_capture
-from rangekit.rig.rig_edits import write_camera_controls
+from rangekit.rig.rig_edits import write_capture_fields
 from rangekit.rig.rig_file import load_rig, save_rig
 
 __all__ = ["PATTERNS", "RigHolder", "test_pattern"]
@@ -77,12 +77,18 @@ class RigHolder:
         """Write the ``capture.camera`` fields of ``changes`` into the rig file (atomically, checked first: a bad
         value is the rig file's one-line error and nothing is written) and apply them to the camera; the
         controls as written."""
+        return self.apply_capture({}, changes)
+
+    def apply_capture(self, fields: dict, camera: dict) -> dict:
+        """Write ``capture.<name>`` of ``fields`` and ``capture.camera.<name>`` of ``camera`` into the rig file
+        (checked first, then atomically) and apply the camera's controls; ``capture.camera`` as written."""
         with self._lock:
             self._refuse_if_busy()
-            rig, controls = write_camera_controls(self.rig_file, changes)
-            self.devices.camera.set_controls(controls)
+            rig = write_capture_fields(self.rig_file, fields, camera=camera)
+            self.devices.camera.set_controls(controls_from_capture(rig.capture, where=str(self.rig_file)))
             self.rig = replace(self.rig, capture={**self.rig.capture, **rig.capture})
-            self.last_reply = "camera: " + ", ".join(f"{k} {v}" for k, v in changes.items())
+            self.last_reply = "rig file: " + ", ".join([*(f"capture.{k} {v}" for k, v in fields.items()),
+                                                        *(f"capture.camera.{k} {v}" for k, v in camera.items())])
             return dict(rig.capture.get("camera", {}))
 
     @contextmanager

@@ -7,6 +7,8 @@ Routes (every one behind :class:`rangekit.ui.access.Gate`: the token, the app's 
 - ``GET /api/status``: the devices' status; ``POST /api/pattern`` ``{"name"}``; ``POST /api/turntable``
   ``{"degrees"}`` or ``{"home": true}``; ``POST /api/camera`` ``{"exposure_us", "iso", "white_balance_k",
   "focus"}`` (any of them: written into the rig file's ``capture.camera``, then applied);
+- ``GET /api/check`` (the latest check: idle, running with its progress, done, failed), ``POST /api/check/run``,
+  ``POST /api/check/apply`` (its suggested rig-file changes written), ``GET /api/check/figure.png``;
 - ``WS /ws/live``: the camera stream, each frame a text message (its figures, JSON) then a binary one (JPEG).
 
 A request the rig refuses gets 400 and ``{"error": one line}``, the CLI's words; nothing else reaches the page.
@@ -23,6 +25,7 @@ from pathlib import Path
 
 from rangekit.errors import RangekitError
 from rangekit.ui.access import COOKIE, Gate, new_token
+from rangekit.ui.check_job import CheckJob
 from rangekit.ui.rig_holder import PATTERNS, RigHolder
 from rangekit.ui.stream import LiveStream
 
@@ -82,12 +85,13 @@ async def _body(request) -> dict:
 def make_app(holder: RigHolder, token: str, host: str, port: int):
     """The Starlette app for ``holder``'s rig, behind the token gate for ``host:port``."""
     from starlette.applications import Starlette
-    from starlette.responses import FileResponse
+    from starlette.responses import FileResponse, Response
     from starlette.routing import Mount, Route, WebSocketRoute
     from starlette.staticfiles import StaticFiles
     from starlette.websockets import WebSocketDisconnect
 
     stream = LiveStream(holder)
+    check = CheckJob(holder)
 
     async def index(request):
         response = FileResponse(STATIC / "index.html", headers={"Cache-Control": "no-store"})
@@ -131,6 +135,26 @@ def make_app(holder: RigHolder, token: str, host: str, port: int):
             return _error(exc)
         return _json({"rig": holder.status()})
 
+    async def check_state(request):
+        return _json(check.snapshot())
+
+    async def check_start(request):
+        try:
+            return _json(check.start())
+        except RangekitError as exc:
+            return _error(exc)
+
+    async def check_apply(request):
+        try:
+            return _json({"rig": await asyncio.to_thread(check.apply)})
+        except RangekitError as exc:
+            return _error(exc)
+
+    async def check_figure(request):
+        if check.figure_png is None:
+            return _json({"error": "no check picture yet: run the check"}, 404)
+        return Response(check.figure_png, media_type="image/png", headers={"Cache-Control": "no-store"})
+
     async def live(ws):
         await ws.accept()
         stream.watch()
@@ -150,7 +174,9 @@ def make_app(holder: RigHolder, token: str, host: str, port: int):
             stream.unwatch()
 
     routes = [Route("/", index), Route("/api/status", status), Route("/api/pattern", pattern, methods=["POST"]),
-              Route("/api/turntable", turntable, methods=["POST"]), Route("/api/camera", camera, methods=["POST"]), WebSocketRoute("/ws/live", live),
+              Route("/api/turntable", turntable, methods=["POST"]), Route("/api/camera", camera, methods=["POST"]),
+              Route("/api/check", check_state), Route("/api/check/run", check_start, methods=["POST"]),
+              Route("/api/check/apply", check_apply, methods=["POST"]), Route("/api/check/figure.png", check_figure), WebSocketRoute("/ws/live", live),
               Mount("/static", StaticFiles(directory=STATIC), name="static")]
     @contextlib.asynccontextmanager
     async def lifespan(app):

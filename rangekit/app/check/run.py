@@ -36,15 +36,16 @@ def simulated_check_rig(sim, delay_s: float) -> Rig:
     return replace(sim.rig, capture={**sim.rig.capture, "pattern_delay_s": float(delay_s)})
 
 
-def check_simulated(sim, *, spec=None, progress=None) -> tuple[CheckResult, dict]:
-    """Check a :class:`rangekit.sim.SimRig` (its camera controls from its rig's ``capture.camera``); the
-    object mask is the truth's lit pixels of the objects other than the turntable disc."""
+def check_simulated(sim, *, spec=None, progress=None, rig: Rig | None = None) -> tuple[CheckResult, dict]:
+    """Check a :class:`rangekit.sim.SimRig` (its camera controls from ``rig``'s ``capture.camera``; None: the
+    simulator's own rig); the object mask is the truth's lit pixels of the objects other than the turntable disc."""
+    rig = sim.rig if rig is None else rig
     truth = sim.ground_truth()
     names = truth.object_names
     table = [i for i, n in enumerate(names) if "table" in n or "disc" in n]
     mask = truth.lit & (truth.object_id >= 0) & ~np.isin(truth.object_id, table)
-    controls = controls_from_capture(sim.rig.capture, where="simulated rig")
-    return run_check(sim, sim.rig, controls, full_scale=float(sim.imaging.max_value), mask=mask, truth=truth,
+    controls = controls_from_capture(rig.capture, where="simulated rig")
+    return run_check(sim, rig, controls, full_scale=float(sim.imaging.max_value), mask=mask, truth=truth,
                      spec=spec, progress=progress)
 
 

@@ -52,7 +52,7 @@ def cmd_ui(args: argparse.Namespace) -> int:
     sock = bind(args.host, args.port)       # a port in use is said before anything is opened or written
     try:
         holder = RigHolder.simulated(rig_file, args.object or "lumpy")
-        server = start(holder, sock, args.host)
+        server = start(holder, sock, args.host, sessions, args.object or "lumpy")
     except BaseException:
         sock.close()
         raise

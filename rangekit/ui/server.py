@@ -9,6 +9,9 @@ Routes (every one behind :class:`rangekit.ui.access.Gate`: the token, the app's 
   "focus"}`` (any of them: written into the rig file's ``capture.camera``, then applied);
 - ``GET /api/check`` (the latest check: idle, running with its progress, done, failed), ``POST /api/check/run``,
   ``POST /api/check/apply`` (its suggested rig-file changes written), ``GET /api/check/figure.png``;
+- ``GET /api/scan`` (the scan: running, its views, files, last lines), ``POST /api/scan/start`` ``{"name",
+  "views"}`` or ``{"name", "resume": true}``, ``POST /api/scan/stop``; ``GET
+  /api/sessions/NAME/views/K/points`` (a decoded view's points, float32 x y z in mm);
 - ``WS /ws/live``: the camera stream, each frame a text message (its figures, JSON) then a binary one (JPEG).
 
 A request the rig refuses gets 400 and ``{"error": one line}``, the CLI's words; nothing else reaches the page.
@@ -26,6 +29,8 @@ from pathlib import Path
 from rangekit.errors import RangekitError
 from rangekit.ui.access import COOKIE, Gate, new_token
 from rangekit.ui.check_job import CheckJob
+from rangekit.ui.paths import confined
+from rangekit.ui.scan_job import ScanJob, view_points
 from rangekit.ui.rig_holder import PATTERNS, RigHolder
 from rangekit.ui.stream import LiveStream
 
@@ -82,8 +87,9 @@ async def _body(request) -> dict:
     return data
 
 
-def make_app(holder: RigHolder, token: str, host: str, port: int):
-    """The Starlette app for ``holder``'s rig, behind the token gate for ``host:port``."""
+def make_app(holder: RigHolder, token: str, host: str, port: int, sessions: Path, obj: str = "lumpy"):
+    """The Starlette app for ``holder``'s rig and the sessions folder ``sessions``, behind the token gate for
+    ``host:port``."""
     from starlette.applications import Starlette
     from starlette.responses import FileResponse, Response
     from starlette.routing import Mount, Route, WebSocketRoute
@@ -92,6 +98,7 @@ def make_app(holder: RigHolder, token: str, host: str, port: int):
 
     stream = LiveStream(holder)
     check = CheckJob(holder)
+    scans = ScanJob(sessions, obj)
 
     async def index(request):
         response = FileResponse(STATIC / "index.html", headers={"Cache-Control": "no-store"})
@@ -155,6 +162,32 @@ def make_app(holder: RigHolder, token: str, host: str, port: int):
             return _json({"error": "no check picture yet: run the check"}, 404)
         return Response(check.figure_png, media_type="image/png", headers={"Cache-Control": "no-store"})
 
+    async def scan_state(request):
+        return _json(await asyncio.to_thread(scans.snapshot))
+
+    async def scan_start(request):
+        try:
+            body = await _body(request)
+            resume = bool(body.get("resume"))
+            return _json(await asyncio.to_thread(scans.start, str(body.get("name", "")), body.get("views", 6),
+                                                 resume=resume))
+        except RangekitError as exc:
+            return _error(exc)
+
+    async def scan_stop(request):
+        try:
+            return _json(scans.stop())
+        except RangekitError as exc:
+            return _error(exc)
+
+    async def scan_points(request):
+        try:
+            folder = confined(sessions, request.path_params["name"])
+            data = await asyncio.to_thread(view_points, folder, int(request.path_params["index"]))
+        except (RangekitError, ValueError) as exc:
+            return _error(exc)
+        return Response(data, media_type="application/octet-stream")
+
     async def live(ws):
         await ws.accept()
         stream.watch()
@@ -176,12 +209,16 @@ def make_app(holder: RigHolder, token: str, host: str, port: int):
     routes = [Route("/", index), Route("/api/status", status), Route("/api/pattern", pattern, methods=["POST"]),
               Route("/api/turntable", turntable, methods=["POST"]), Route("/api/camera", camera, methods=["POST"]),
               Route("/api/check", check_state), Route("/api/check/run", check_start, methods=["POST"]),
-              Route("/api/check/apply", check_apply, methods=["POST"]), Route("/api/check/figure.png", check_figure), WebSocketRoute("/ws/live", live),
+              Route("/api/check/apply", check_apply, methods=["POST"]), Route("/api/check/figure.png", check_figure),
+              Route("/api/scan", scan_state), Route("/api/scan/start", scan_start, methods=["POST"]),
+              Route("/api/scan/stop", scan_stop, methods=["POST"]),
+              Route("/api/sessions/{name}/views/{index}/points", scan_points), WebSocketRoute("/ws/live", live),
               Mount("/static", StaticFiles(directory=STATIC), name="static")]
     @contextlib.asynccontextmanager
     async def lifespan(app):
         yield
         stream.close()
+        await asyncio.to_thread(scans.close)
 
     app = Starlette(routes=routes, lifespan=lifespan)
     names = {host} | ({"localhost", "127.0.0.1"} if host in ("127.0.0.1", "localhost") else set())
@@ -190,12 +227,13 @@ def make_app(holder: RigHolder, token: str, host: str, port: int):
     return Gate(app, token, hosts, origins)
 
 
-def start(holder: RigHolder, sock: socket.socket, host: str) -> UiServer:
-    """The app for ``holder`` on the bound ``sock`` (:func:`bind`); the server runs with :func:`serve`."""
+def start(holder: RigHolder, sock: socket.socket, host: str, sessions: Path, obj: str = "lumpy") -> UiServer:
+    """The app for ``holder`` and ``sessions`` on the bound ``sock`` (:func:`bind`); it runs with :func:`serve`."""
     port = sock.getsockname()[1]
     token = new_token()
     shown = f"[{host}]" if ":" in host else host
-    return UiServer(f"http://{shown}:{port}/?token={token}", token, make_app(holder, token, shown, port), host, port)
+    return UiServer(f"http://{shown}:{port}/?token={token}", token, make_app(holder, token, shown, port, sessions, obj),
+                    host, port)
 
 
 def serve(server: UiServer, sock: socket.socket) -> None:

@@ -152,3 +152,24 @@ def test_camera_controls_are_written_into_the_rig_file_and_change_the_frames(ser
     status, body, _ = server.request("/api/camera", data={"shutter": 5})
     assert status == 400 and "camera: shutter: not a control here" in json.loads(body)["error"]
     assert server.request("/api/camera", data={"exposure_us": 33333})[0] == 200
+
+
+@pytest.mark.parametrize("body, words", [
+    ({"name": "../outside", "views": 6}, "path '../outside': refused ('..' leads out of the sessions folder)"),
+    ({"name": "/tmp/x", "views": 6}, "path '/tmp/x': refused (absolute"),
+    ({"name": "a/b", "views": 6}, "session 'a/b': a folder name directly under the sessions folder"),
+    ({"name": "s", "views": "six"}, "views: expected a whole number 2-360, found 'six'"),
+    ({"name": "s", "views": 1}, "views: expected a whole number 2-360, found 1"),
+])
+def test_a_scan_is_refused_outside_the_sessions_folder_or_with_bad_views(server, body, words):
+    status, reply, _ = server.request("/api/scan/start", data=body)
+    assert status == 400 and json.loads(reply)["error"].startswith(words)
+    assert not json.loads(server.request("/api/scan")[1])["running"]
+
+
+def test_no_scan_to_stop_and_no_points_out_of_the_sessions_folder(server):
+    status, reply, _ = server.request("/api/scan/stop", data={})
+    assert status == 400 and json.loads(reply)["error"] == "no scan is running"
+    for name in ("..", "%2E%2E", "nowhere"):
+        status, reply, _ = server.request(f"/api/sessions/{name}/views/0/points")
+        assert status in (400, 404) and b"Traceback" not in reply

@@ -64,3 +64,31 @@ def test_the_live_page_streams_frames_and_marks_a_saturating_object(tmp_path):
     assert first["sat"].endswith("%") and float(first["sat"].split()[0]) > 0.1
     assert "capture.camera.exposure_us: expected a number" in error and "abc" in error and "\n" not in error
     assert "Traceback" not in error
+
+
+@pytest.mark.slow
+def test_a_scan_started_in_the_page_shows_its_first_view_before_the_last_is_taken(tmp_path):
+    """6 views in real time (about 80 s of acquisition), then the processing."""
+    sessions = tmp_path / "sessions"
+    sessions.mkdir()
+    server = start_ui(sessions)
+    try:
+        def scan(page):
+            page.execute("location.hash = '#scan';")
+            page.execute("const f = document.getElementById('scan-form'); f.name.value = 'first';"
+                         "f.views.value = '6'; document.getElementById('scan-start').click();")
+            _until(page, "return window.rangekitScan3d && window.rangekitScan3d.count >= 1;", timeout=240)
+            taken = page.execute("return fetch('/api/scan').then(r => r.json())"
+                                 ".then(s => s.views.filter(v => v.done).length);")
+            shown = page.execute("return window.rangekitScan3d.points;")
+            _until(page, "return document.getElementById('scan-state').textContent.includes('ended (exit 0)');",
+                   timeout=600)
+            return taken, shown, page.execute("return window.rangekitScan3d.count;")
+
+        out = open_page(server.url, width=1280, height=800, timeout_s=900, interact=scan,
+                        screenshot=tmp_path / "scan.png")
+        taken, shown, count = out["interaction"]
+    finally:
+        server.stop()
+    assert 1 <= taken < 6 and shown > 5000          # the first view drawn while views were still to take
+    assert count == 6 and (sessions / "first" / "mesh.ply").is_file()    # an ordinary, finished session

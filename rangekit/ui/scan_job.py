@@ -1,0 +1,145 @@
+"""The Scan page's job: ``rangekit scan`` run as a child process into a session folder under ``--sessions``,
+watched through the files it writes.
+
+A session started here is an ordinary session: the child is the command line's own ``rangekit scan``, so
+``rangekit process`` and ``rangekit scan --resume`` work on it from the shell, and the reverse. Stopping sends
+the child Ctrl-C (SIGINT): the views taken are finished and recorded, as at a terminal, and ``resume`` continues
+it (``--resume``). Pages come and go without touching it; two pages see the same files. The growing model is read
+from the session folder: ``session.json`` (which views are done) and each view's cloud cache (``view_*/cloud.ply``,
+written as the view is decoded while the next one is captured), placed by the turntable's prior.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import threading
+from pathlib import Path
+
+import numpy as np
+
+from rangekit.errors import RangekitError
+from rangekit.ui.paths import confined
+
+__all__ = ["ScanJob", "POINTS_PER_VIEW", "view_points"]
+
+#: The most points of one view sent to a page (every n-th of the view's cloud).
+POINTS_PER_VIEW = 20_000
+
+
+class ScanJob:
+    """At most one ``rangekit scan`` child of the app at a time, into ``sessions/<name>``."""
+
+    def __init__(self, sessions: Path, obj: str = "lumpy") -> None:
+        self.sessions, self.obj = Path(sessions).resolve(), obj
+        self._lock = threading.Lock()
+        self._proc: subprocess.Popen | None = None
+        self.name: str | None = None
+        self.log: list[str] = []
+        self.exit_code: int | None = None
+
+    @property
+    def running(self) -> bool:
+        return self._proc is not None and self._proc.poll() is None
+
+    def start(self, name: str, views: int, *, resume: bool = False) -> dict:
+        """Start ``rangekit scan --out sessions/name --views N`` (or ``--resume sessions/name``); refused while a
+        scan runs. ``name``: a folder name under the sessions folder (:func:`rangekit.ui.paths.confined`)."""
+        folder = confined(self.sessions, name)
+        if folder.parent != self.sessions:
+            raise RangekitError(f"session {name!r}: a folder name directly under the sessions folder")
+        with self._lock:
+            if self.running:
+                raise RangekitError(f"a scan is running: {self.name}; stop it first")
+            if resume:
+                args = ["--resume", str(folder), "--realtime"]
+            else:
+                if isinstance(views, bool) or not isinstance(views, int) or not 2 <= views <= 360:
+                    raise RangekitError(f"views: expected a whole number 2-360, found {views!r}")
+                # The simulated rig keeps real time, as the hardware would (the rig file's pattern delay,
+                # exposure, the turntable's speed): each view decoded while the next is captured.
+                args = ["--out", str(folder), "--views", str(views), "--object", self.obj, "--realtime"]
+            self.name, self.log, self.exit_code = folder.name, [], None
+            self._proc = subprocess.Popen([sys.executable, "-m", "rangekit", "scan", *args], stdin=subprocess.DEVNULL,
+                                          stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                                          env=dict(os.environ, PYTHONUNBUFFERED="1"))
+            threading.Thread(target=self._read, args=(self._proc,), name="rangekit-scan-log", daemon=True).start()
+        return self.snapshot()
+
+    def _read(self, proc: subprocess.Popen) -> None:
+        for line in proc.stdout:
+            line = line.rstrip()
+            if line:
+                self.log = (self.log + [line])[-200:]
+        code = proc.wait()
+        with self._lock:
+            if proc is self._proc:
+                self.exit_code = code
+
+    def stop(self) -> dict:
+        """Ctrl-C to the running scan: its views taken are finished and recorded; ``resume`` continues it."""
+        with self._lock:
+            if not self.running:
+                raise RangekitError("no scan is running")
+            self._proc.send_signal(signal.SIGINT)
+        return self.snapshot()
+
+    def snapshot(self) -> dict:
+        """What a page shows: the session, whether it runs, its exit code, its last lines, its views."""
+        out = {"name": self.name, "running": self.running, "exit_code": self.exit_code, "log": self.log[-30:]}
+        if self.name is not None:
+            out.update(session_state(self.sessions / self.name))
+        return out
+
+    def close(self) -> None:
+        """At the app's end: a running scan is stopped as Ctrl-C would stop it (its session resumable)."""
+        if self.running:
+            self._proc.send_signal(signal.SIGINT)
+            try:
+                self._proc.wait(timeout=60)
+            except subprocess.TimeoutExpired:
+                self._proc.kill()
+
+
+def session_state(folder: Path) -> dict:
+    """``{"views": [{"index", "name", "done", "decoded"}], "files": [...]}`` of a session folder as it is on disk
+    now (an empty list before its session.json exists)."""
+    from rangekit.formats.sessions.session import Session
+
+    if not (folder / "session.json").is_file():
+        return {"views": [], "files": []}
+    try:
+        session = Session.load(folder)
+    except RangekitError as exc:
+        return {"views": [], "files": [], "error": str(exc)}
+    views = [{"index": v.index, "name": v.folder.name, "done": v.done,
+              "decoded": (v.folder / "cloud.json").is_file()} for v in session.views]
+    files = [n for n in ("preview.ply", "mesh.ply", "mesh_watertight.ply", "report.html", "summary.json")
+             if (folder / n).is_file()]
+    return {"views": views, "files": files}
+
+
+def view_points(folder: Path, index: int) -> bytes:
+    """Float32 (n, 3) bytes, x y z in millimetres, of view ``index``'s decoded cloud placed by the turntable prior
+    (the first view's frame), every k-th point so that n <= :data:`POINTS_PER_VIEW`."""
+    from rangekit.formats.clouds import load_cloud
+    from rangekit.formats.sessions.session import Session
+    from rangekit.geometry import apply_T
+    from rangekit.rig.rig_file import turntable_prior
+
+    session = Session.load(folder)
+    if not 0 <= index < len(session.views):
+        raise RangekitError(f"view {index}: the session has views 0-{len(session.views) - 1}")
+    view = session.views[index]
+    if not (view.folder / "cloud.json").is_file():
+        raise RangekitError(f"{view.folder.name}: not decoded yet")
+    cloud = load_cloud(view.folder / "cloud.ply")
+    step = max(1, -(-len(cloud) // POINTS_PER_VIEW))
+    points = cloud.points[::step]
+    rig = session.rig
+    if rig.T_world_table is not None:
+        T = turntable_prior(rig.T_world_table, [session.views[0].angle, view.angle])[1]
+        points = apply_T(T, points)
+    return (np.asarray(points, dtype=np.float32) * 1e3).tobytes()

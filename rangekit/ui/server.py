@@ -12,6 +12,8 @@ Routes (every one behind :class:`rangekit.ui.access.Gate`: the token, the app's 
 - ``GET /api/scan`` (the scan: running, its views, files, last lines), ``POST /api/scan/start`` ``{"name",
   "views"}`` or ``{"name", "resume": true}``, ``POST /api/scan/stop``; ``GET
   /api/sessions/NAME/views/K/points`` (a decoded view's points, float32 x y z in mm);
+- ``GET /api/sessions`` (each session under ``--sessions``: state, figures, files), ``GET
+  /api/sessions/NAME/files/FILE`` (its report.html, meshes, poses.json, summary.json);
 - ``WS /ws/live``: the camera stream, each frame a text message (its figures, JSON) then a binary one (JPEG).
 
 A request the rig refuses gets 400 and ``{"error": one line}``, the CLI's words; nothing else reaches the page.
@@ -31,6 +33,7 @@ from rangekit.ui.access import COOKIE, Gate, new_token
 from rangekit.ui.check_job import CheckJob
 from rangekit.ui.paths import confined
 from rangekit.ui.scan_job import ScanJob, view_points
+from rangekit.ui.sessions_list import list_sessions, session_file
 from rangekit.ui.rig_holder import PATTERNS, RigHolder
 from rangekit.ui.stream import LiveStream
 
@@ -188,6 +191,16 @@ def make_app(holder: RigHolder, token: str, host: str, port: int, sessions: Path
             return _error(exc)
         return Response(data, media_type="application/octet-stream")
 
+    async def sessions_list(request):
+        return _json({"sessions": await asyncio.to_thread(list_sessions, sessions)})
+
+    async def sessions_file(request):
+        try:
+            path = session_file(sessions, request.path_params["name"], request.path_params["file"])
+        except RangekitError as exc:
+            return _json({"error": str(exc)}, 404)
+        return FileResponse(path, headers={"Cache-Control": "no-store"})
+
     async def live(ws):
         await ws.accept()
         stream.watch()
@@ -212,7 +225,8 @@ def make_app(holder: RigHolder, token: str, host: str, port: int, sessions: Path
               Route("/api/check/apply", check_apply, methods=["POST"]), Route("/api/check/figure.png", check_figure),
               Route("/api/scan", scan_state), Route("/api/scan/start", scan_start, methods=["POST"]),
               Route("/api/scan/stop", scan_stop, methods=["POST"]),
-              Route("/api/sessions/{name}/views/{index}/points", scan_points), WebSocketRoute("/ws/live", live),
+              Route("/api/sessions/{name}/views/{index}/points", scan_points),
+              Route("/api/sessions", sessions_list), Route("/api/sessions/{name}/files/{file}", sessions_file), WebSocketRoute("/ws/live", live),
               Mount("/static", StaticFiles(directory=STATIC), name="static")]
     @contextlib.asynccontextmanager
     async def lifespan(app):

@@ -205,3 +205,25 @@ $("scan-stop").onclick = () => scanPost("/api/scan/stop", {});
 $("scan-resume").onclick = () => scanPost("/api/scan/start", { name: $("scan-form").name.value.trim(), resume: true });
 setInterval(pollScan, 700);
 pollScan();
+
+// -- Sessions: every session under --sessions, its figures and files (the report opens in a new tab)
+async function pollSessions() {
+  if (location.hash !== "#sessions") return;
+  const r = await fetch("/api/sessions");
+  const body = $("sessions-table").tBodies[0];
+  body.innerHTML = "";
+  for (const s of (await r.json()).sessions) {
+    const tr = body.insertRow();
+    const cells = [s.name, s.state + (s.error ? `: ${s.error}` : ""), s.views === undefined ? "" : `${s.views_done} / ${s.views}`,
+      s.points ?? "", s.vertices ?? "", s.rms_mm === null || s.rms_mm === undefined ? "" : `${s.rms_mm} mm`];
+    for (const c of cells) tr.insertCell().textContent = c;
+    const files = tr.insertCell();
+    for (const f of s.files) {
+      const a = document.createElement("a"); a.textContent = f; a.target = "_blank";
+      a.href = `/api/sessions/${encodeURIComponent(s.name)}/files/${f}`; files.appendChild(a); files.append(" ");
+    }
+  }
+}
+window.addEventListener("hashchange", pollSessions);
+setInterval(pollSessions, 2000);
+pollSessions();

@@ -1,0 +1,62 @@
+"""The Sessions page: the sessions under ``--sessions``, each with its state and figures, and the files a page
+may open from one (the report, the meshes), always confined to the sessions folder."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from rangekit.errors import RangekitError
+from rangekit.ui.paths import confined
+
+__all__ = ["SESSION_FILES", "list_sessions", "session_file"]
+
+#: The files of a session a page may open.
+SESSION_FILES = ("report.html", "mesh.ply", "mesh_watertight.ply", "preview.ply", "merged.ply", "poses.json",
+                 "summary.json")
+
+
+def _summary(folder: Path) -> dict:
+    try:
+        s = json.loads((folder / "summary.json").read_text())
+    except (OSError, ValueError):
+        return {}
+    acc = s.get("accuracy") or {}
+    mesh = s.get("mesh") or {}
+    return {"points": s.get("n_points"), "vertices": mesh.get("vertices"),
+            "rms_mm": None if acc.get("rms") is None else round(acc["rms"] * 1e3, 4),
+            "completeness_percent": None if acc.get("completeness") is None else round(100 * acc["completeness"], 2)}
+
+
+def list_sessions(sessions: Path) -> list[dict]:
+    """One dict per session folder directly under ``sessions`` (a folder with a session.json): name, views done
+    and planned, state (``acquiring`` while views are pending, ``acquired``, ``processed`` with summary.json),
+    its figures and the files a page may open; a session.json that does not load is listed with its error."""
+    from rangekit.formats.sessions.session import Session
+
+    root = Path(sessions).resolve()
+    out = []
+    for folder in sorted(p for p in root.iterdir() if (p / "session.json").is_file()):
+        if not folder.resolve().is_relative_to(root):      # a link out of the sessions folder is not listed
+            continue
+        row = {"name": folder.name, "files": [n for n in SESSION_FILES if (folder / n).is_file()]}
+        try:
+            session = Session.load(folder)
+        except RangekitError as exc:
+            out.append({**row, "state": "unreadable", "error": str(exc)})
+            continue
+        done = sum(v.done for v in session.views)
+        state = "processed" if "summary.json" in row["files"] else ("acquired" if done == len(session.views)
+                                                                    else "acquiring")
+        out.append({**row, "state": state, "views_done": done, "views": len(session.views), **_summary(folder)})
+    return out
+
+
+def session_file(sessions: Path, name: str, file: str) -> Path:
+    """The path of ``file`` (one of :data:`SESSION_FILES`) in session ``name``, inside ``sessions``."""
+    if file not in SESSION_FILES:
+        raise RangekitError(f"file {file!r}: not one a page may open; expected one of {', '.join(SESSION_FILES)}")
+    path = confined(sessions, f"{name}/{file}")
+    if not path.is_file():
+        raise RangekitError(f"{name}/{file}: not there (yet)")
+    return path

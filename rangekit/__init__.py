@@ -16,6 +16,20 @@ heavy dependency; everything else is in its module (``rangekit.camera``, ``range
 """
 
 import os as _os
+import sys as _sys
+
+if _sys.argv[:1] == ["-m"]:
+    # ``python -m rangekit``, while Python still imports this package to find its __main__: a Ctrl-C here
+    # would end in a traceback before the command line's own handling starts (rangekit.cli replaces this).
+    import signal as _signal
+
+    def _interrupted_while_starting(signum, frame):
+        _sys.stderr.write("rangekit: interrupted\n")
+        _sys.stderr.flush()
+        _os._exit(130)
+
+    if _signal.getsignal(_signal.SIGINT) is _signal.default_int_handler:
+        _signal.signal(_signal.SIGINT, _interrupted_while_starting)
 
 __version__ = "0.1.0"
 

@@ -29,6 +29,21 @@ __all__ = ["ScanJob", "POINTS_PER_VIEW", "view_points"]
 POINTS_PER_VIEW = 20_000
 
 
+#: Starts ``python -m rangekit ARGS`` so that it gets Ctrl-C (SIGINT) when the app's process ends, however it ends
+#: (Linux's parent-death signal, kept across exec): a server killed mid-scan leaves a session that ``--resume``
+#: completes, not a scan running on without a window.
+_LAUNCH = ("import ctypes, os, signal, sys\n"
+           "if sys.platform.startswith('linux'):\n"
+           "    ctypes.CDLL(None, use_errno=True).prctl(1, int(signal.SIGINT), 0, 0, 0)\n"
+           "    if os.getppid() != int(sys.argv[1]):\n"
+           "        sys.exit(130)\n"
+           "os.execv(sys.executable, [sys.executable, '-m', 'rangekit', *sys.argv[2:]])\n")
+
+
+def _child_command() -> list[str]:
+    return [sys.executable, "-c", _LAUNCH, str(os.getpid())]
+
+
 class ScanJob:
     """At most one ``rangekit scan`` child of the app at a time, into ``sessions/<name>``."""
 
@@ -62,7 +77,7 @@ class ScanJob:
                 # exposure, the turntable's speed): each view decoded while the next is captured.
                 args = ["--out", str(folder), "--views", str(views), "--object", self.obj, "--realtime"]
             self.name, self.log, self.exit_code = folder.name, [], None
-            self._proc = subprocess.Popen([sys.executable, "-m", "rangekit", "scan", *args], stdin=subprocess.DEVNULL,
+            self._proc = subprocess.Popen([*_child_command(), "scan", *args], stdin=subprocess.DEVNULL,
                                           stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
                                           env=dict(os.environ, PYTHONUNBUFFERED="1"))
             threading.Thread(target=self._read, args=(self._proc,), name="rangekit-scan-log", daemon=True).start()

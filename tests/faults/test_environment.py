@@ -82,6 +82,10 @@ def test_ctrl_c_while_the_libraries_load_exits_130(tmp_path, delay):
         pytest.skip(f"the SIGINT at {delay} s was lost before rangekit started; the command finished")
     # 130, or a death by SIGINT (-2) after the line: a shell shows both as $? = 130. A SIGINT landing while
     # Open3D's extension loads is handed back by it after rangekit has handled it (about 1 run in 8 at 0.4 s).
+    if "/rangekit/" not in err and "rangekit: interrupted" not in err:
+        # The SIGINT landed in the interpreter's own start-up (site, runpy), before any file of rangekit ran:
+        # a death by the signal, or Python's own traceback, nothing rangekit can handle. Reported, not passed.
+        pytest.skip(f"the SIGINT at {delay} s landed in Python's start-up, before rangekit's first line")
     assert proc.returncode in (130, -signal.SIGINT), (proc.returncode, err)
     assert err.strip().splitlines()[-1] == "rangekit: interrupted", err
     assert "Traceback" not in err and "initialization failed" not in err

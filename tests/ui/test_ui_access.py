@@ -82,7 +82,7 @@ def test_bad_input_gets_the_one_line_error_and_the_server_lives_on(server):
                               ("/api/turntable", {"degrees": "ten"}, "degrees: expected a number, found 'ten'"),
                               ("/api/turntable", [1, 2], "request: expected a JSON object")]:
         status, body, _ = server.request(path, data=data)
-        assert status == 400 and json.loads(body) == {"error": words + json.loads(body)["error"][len(words):]}
+        assert status == 400 and list(json.loads(body)) == ["error"] and json.loads(body)["error"].startswith(words)
         assert "Traceback" not in body.decode() and "\n" not in json.loads(body)["error"]
     status, body, _ = server.request("/api/turntable", data={"degrees": 30})
     assert status == 200 and json.loads(body)["rig"]["turntable"]["angle_deg"] == pytest.approx(30.0)

@@ -70,6 +70,8 @@ def watching_interrupts():
     _sigint_seen = _sigint_pending = False
     try:
         previous = signal.getsignal(signal.SIGINT)
+        if previous is getattr(sys.modules.get("rangekit"), "_interrupted_while_starting", None):
+            previous = signal.default_int_handler   # rangekit/__init__'s start-up handler ends here
         ours = previous is signal.default_int_handler
         if ours:
             signal.signal(signal.SIGINT, _on_sigint)

@@ -89,3 +89,25 @@ def test_ctrl_c_while_the_libraries_load_exits_130(tmp_path, delay):
     assert proc.returncode in (130, -signal.SIGINT), (proc.returncode, err)
     assert err.strip().splitlines()[-1] == "rangekit: interrupted", err
     assert "Traceback" not in err and "initialization failed" not in err
+
+
+def test_the_start_up_ctrl_c_handler_hands_over_to_the_command_lines(monkeypatch):
+    """``python -m rangekit`` installs a Ctrl-C handler while the package imports (rangekit/__init__.py);
+    the command line must replace it, or a Ctrl-C mid-scan would skip the 'Continue with' hint (CI's
+    slow scan tests caught this)."""
+    import rangekit
+    from rangekit._runtime.environment import watching_interrupts
+
+    def early(signum, frame):   # stands in for the start-up handler
+        raise AssertionError("the start-up handler is still installed")
+
+    monkeypatch.setattr(rangekit, "_interrupted_while_starting", early, raising=False)
+    before = signal.signal(signal.SIGINT, early)
+    try:
+        with watching_interrupts():
+            during = signal.getsignal(signal.SIGINT)
+        after = signal.getsignal(signal.SIGINT)
+    finally:
+        signal.signal(signal.SIGINT, before)
+    assert during not in (early, signal.default_int_handler, signal.SIG_IGN)
+    assert after is signal.default_int_handler

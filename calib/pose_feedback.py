@@ -14,7 +14,7 @@ every kept corner as a dot, the last pose's corners in yellow (kept) or red (rej
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Sequence
 
 import cv2
@@ -56,6 +56,8 @@ class PoseCheck:
     fit: str
     coverage: float
     reason: str = ""
+    normal: tuple[float, float, float] = (float("nan"),) * 3   # board z axis, camera frame (facing it: (0, 0, 1))
+    corners: np.ndarray | None = field(default=None, compare=False, repr=False)   # (n, 2) camera px, as detected
 
     @property
     def accepted(self) -> bool:
@@ -131,7 +133,7 @@ def check_pose(index: int, det: BoardDetection, board: Board, size: tuple[int, i
     n = len(ids)
     if n < limits.min_corners:
         return PoseCheck(index, n, nan, nan, nan, "", cover(),
-                         f"too few corners: {n}, at least {limits.min_corners} needed")
+                         f"too few corners: {n}, at least {limits.min_corners} needed", corners=uv)
     obj = board.object_points()[ids]
     area = float(cv2.contourArea(cv2.convexHull(uv.astype(np.float32)))) / (w * h)
     if len(kept) >= 3:
@@ -153,7 +155,8 @@ def check_pose(index: int, det: BoardDetection, board: Board, size: tuple[int, i
     elif not rms <= limits.max_reprojection_px:
         reason = (f"reprojection error {rms:.3f} px above {limits.max_reprojection_px:g} px (motion blur, a bent "
                   "board or a misdetection)")
-    return PoseCheck(index, n, rms, tilt, area, fit, cover([] if reason else [(ids, uv)]), reason)
+    return PoseCheck(index, n, rms, tilt, area, fit, cover([] if reason else [(ids, uv)]), reason,
+                     tuple(float(x) for x in R[:, 2]), uv)
 
 
 def coverage_image(kept: Sequence[tuple[np.ndarray, np.ndarray]], size: tuple[int, int],

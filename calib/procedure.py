@@ -176,8 +176,9 @@ def calibrate_rig(devices, *, settings: CalibrationSettings = CalibrationSetting
     progress : ``progress(msg, done=None, total=None)``.
     on_pose : ``on_pose(check, coverage)`` after each capture of a board pose, with its verdict
         (:func:`rangekit.calib.pose_feedback.check_pose`) and the coverage picture so far ((H, W, 3) uint8,
-        :func:`~rangekit.calib.pose_feedback.coverage_image`); a rejected pose is captured again (after
-        ``place_board(i, n)``) when it returns True, else skipped. Rejected poses never enter the solve.
+        :func:`~rangekit.calib.pose_feedback.coverage_image`); the pose is captured again (after
+        ``place_board(i, n)``) when it returns True (a rejected pose to retake, or a kept one the person would
+        rather redo), else a rejected pose is skipped. Rejected poses never enter the solve.
 
     Raises
     ------
@@ -222,7 +223,7 @@ def calibrate_rig(devices, *, settings: CalibrationSettings = CalibrationSetting
             if on_pose is not None:
                 shown = kept + [(det.ids, det.uv)] if check.accepted else kept
                 retake = bool(on_pose(check, coverage_image(shown, size, det.uv, check.accepted)))
-            if check.accepted or not retake or attempt == settings.max_attempts - 1:
+            if not retake or attempt == settings.max_attempts - 1:
                 break
             retaken += 1
             place_board(i, n)

@@ -156,6 +156,10 @@ class Page:
         """The WebDriver reference of the first element matching the CSS selector ``css``."""
         return self._client.call("POST", f"/session/{self._sid}/element", {"using": "css selector", "value": css})
 
+    def screenshot(self, out: str | Path) -> None:
+        """The viewport as it is now, a PNG at ``out`` (a page's state mid-interaction, for the docs)."""
+        _screenshot(self._client, self._sid, Path(out), 0, 0, full_page=False)
+
     def drag(self, element: dict, dx: int, dy: int, steps: int = 10) -> None:
         """Press the mouse at the centre of ``element``, move by (dx, dy) pixels in ``steps``, release."""
         moves = [{"type": "pointerMove", "duration": 20, "origin": "pointer", "x": round(dx / steps), "y": round(dy / steps)}

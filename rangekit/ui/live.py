@@ -8,7 +8,7 @@ it only compares frames of one scene (turn the focus ring to its maximum).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
@@ -37,12 +37,13 @@ class LiveFrame:
     saturated_fraction: float   # of all pixels, at full scale in any channel
     dark_fraction: float        # of all pixels, below DARK_FRACTION of full scale
     focus: float                # focus_measure of the frame
+    extra: dict = field(default_factory=dict)   # what a job adds (the Calibrate page's board corners), JSON
 
     def figures(self) -> dict:
         """The figures as the page shows them (JSON)."""
         return {"seq": self.seq, "width": self.width, "height": self.height,
                 "saturated_percent": round(100 * self.saturated_fraction, 2),
-                "dark_percent": round(100 * self.dark_fraction, 2), "focus": round(self.focus, 2)}
+                "dark_percent": round(100 * self.dark_fraction, 2), "focus": round(self.focus, 2), **self.extra}
 
 
 def focus_measure(image: np.ndarray, full_scale: float) -> float:

@@ -56,6 +56,7 @@ class RigHolder:
         self.pattern = "white"
         self.last_reply, self.fault = "opened", None
         self.busy: str | None = None       # what holds the rig (a scan, a calibration), None: free
+        self._live_while_busy = False      # the job holding the rig lets the stream grab (between its captures)
         self._show(self.pattern)
 
     @classmethod
@@ -69,9 +70,34 @@ class RigHolder:
         if not rig_file.exists():
             save_rig(default_rig(), rig_file)
         rig = load_rig(rig_file)
-        sim = SimRig(default_scene(obj), rig)
+        # The simulator's geometry is always its own truth; the rig file may hold a calibration of it.
+        sim = SimRig(default_scene(obj), default_rig())
         sim.camera.set_controls(controls_from_capture(rig.capture, where=str(rig_file)))
-        return cls(sim, sim.rig, "simulator", float(sim.imaging.max_value), rig_file)
+        return cls(sim, rig, "simulator", float(sim.imaging.max_value), rig_file)
+
+    @property
+    def simulated_rig(self) -> bool:
+        """Whether the devices are the simulator's (the app may move a board, knows the truth)."""
+        return hasattr(self.devices, "set_scene")
+
+    @contextmanager
+    def locked(self):
+        """The devices, with no other call of this holder's under way (a job moving the simulated board)."""
+        with self._lock:
+            yield self.devices
+
+    def allow_live(self, allowed: bool) -> None:
+        """While a job holds the rig: let the live stream grab frames (a calibration while the board is placed)
+        or not; returns once no frame is being grabbed."""
+        with self._lock:
+            self._live_while_busy = bool(allowed)
+
+    def replace_rig(self, rig) -> None:
+        """Write ``rig`` (a calibration's result) as the rig file, atomically, and use it from now on."""
+        with self._lock:
+            save_rig(rig, self.rig_file)
+            self.rig = rig
+            self.last_reply = f"rig file: {self.rig_file.name} written (calibrated)"
 
     def set_camera(self, changes: dict) -> dict:
         """Write the ``capture.camera`` fields of ``changes`` into the rig file (atomically, checked first: a bad
@@ -102,12 +128,12 @@ class RigHolder:
             yield self.devices
         finally:
             with self._lock:
-                self.busy = None
+                self.busy, self._live_while_busy = None, False
 
     def grab(self) -> np.ndarray | None:
         """One camera frame with the current pattern, or None while a job holds the rig."""
         with self._lock:
-            if self.busy is not None:
+            if self.busy is not None and not self._live_while_busy:
                 return None
             try:
                 image = self.devices.camera.capture()

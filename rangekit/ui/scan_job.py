@@ -54,6 +54,7 @@ class ScanJob:
         self.name: str | None = None
         self.log: list[str] = []
         self.exit_code: int | None = None
+        self.paused = False
 
     @property
     def running(self) -> bool:
@@ -65,22 +66,51 @@ class ScanJob:
         folder = confined(self.sessions, name)
         if folder.parent != self.sessions:
             raise RangekitError(f"session {name!r}: a folder name directly under the sessions folder")
+        if resume:
+            args = ["--resume", str(folder), "--realtime"]
+        else:
+            if isinstance(views, bool) or not isinstance(views, int) or not 2 <= views <= 360:
+                raise RangekitError(f"views: expected a whole number 2-360, found {views!r}")
+            # The simulated rig keeps real time, as the hardware would (the rig file's pattern delay,
+            # exposure, the turntable's speed): each view decoded while the next is captured.
+            args = ["--out", str(folder), "--views", str(views), "--object", self.obj, "--realtime"]
+        return self._launch(folder, ["scan", *args])
+
+    def process(self, name: str, *, fusion: str = "poisson", mesh_format: str = "ply", report: bool = True) -> dict:
+        """Reprocess session ``name`` with other options: ``rangekit process sessions/name --fusion F --format
+        FMT [--no-report]`` as a child (refused while a scan or another processing runs)."""
+        from rangekit.app.process.fused_outputs import MESH_EXPORT_FORMATS
+
+        folder = confined(self.sessions, name)
+        if folder.parent != self.sessions or not (folder / "session.json").is_file():
+            raise RangekitError(f"session {name!r}: no session folder of that name under the sessions folder")
+        if fusion not in ("poisson", "tsdf"):
+            raise RangekitError(f"fusion: expected poisson or tsdf, found {fusion!r}")
+        if mesh_format not in MESH_EXPORT_FORMATS:
+            raise RangekitError(f"format: expected one of {', '.join(MESH_EXPORT_FORMATS)}, found {mesh_format!r}")
+        return self._launch(folder, ["process", str(folder), "--fusion", fusion, "--format", mesh_format,
+                                     *([] if report else ["--no-report"])])
+
+    def _launch(self, folder: Path, args: list[str]) -> dict:
         with self._lock:
             if self.running:
                 raise RangekitError(f"a scan is running: {self.name}; stop it first")
-            if resume:
-                args = ["--resume", str(folder), "--realtime"]
-            else:
-                if isinstance(views, bool) or not isinstance(views, int) or not 2 <= views <= 360:
-                    raise RangekitError(f"views: expected a whole number 2-360, found {views!r}")
-                # The simulated rig keeps real time, as the hardware would (the rig file's pattern delay,
-                # exposure, the turntable's speed): each view decoded while the next is captured.
-                args = ["--out", str(folder), "--views", str(views), "--object", self.obj, "--realtime"]
-            self.name, self.log, self.exit_code = folder.name, [], None
-            self._proc = subprocess.Popen([*_child_command(), "scan", *args], stdin=subprocess.DEVNULL,
+            self.name, self.log, self.exit_code, self.paused = folder.name, [], None, False
+            self._proc = subprocess.Popen([*_child_command(), *args], stdin=subprocess.DEVNULL,
                                           stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
                                           env=dict(os.environ, PYTHONUNBUFFERED="1"))
             threading.Thread(target=self._read, args=(self._proc,), name="rangekit-scan-log", daemon=True).start()
+        return self.snapshot()
+
+    def pause(self, paused: bool) -> dict:
+        """Freeze the running scan between two instructions (SIGSTOP) or let it go on (SIGCONT). On the simulator
+        it picks up exactly where it was; on hardware the projector keeps its pattern and the turntable its angle
+        while paused (a real-time capture re-waits its pattern delay on the next frame)."""
+        with self._lock:
+            if not self.running:
+                raise RangekitError("no scan is running")
+            os.kill(self._proc.pid, signal.SIGSTOP if paused else signal.SIGCONT)
+            self.paused = bool(paused)
         return self.snapshot()
 
     def _read(self, proc: subprocess.Popen) -> None:
@@ -99,11 +129,15 @@ class ScanJob:
             if not self.running:
                 raise RangekitError("no scan is running")
             self._proc.send_signal(signal.SIGINT)
+            if self.paused:
+                self._proc.send_signal(signal.SIGCONT)
+                self.paused = False
         return self.snapshot()
 
     def snapshot(self) -> dict:
         """What a page shows: the session, whether it runs, its exit code, its last lines, its views."""
-        out = {"name": self.name, "running": self.running, "exit_code": self.exit_code, "log": self.log[-30:]}
+        out = {"name": self.name, "running": self.running, "paused": self.paused and self.running,
+               "exit_code": self.exit_code, "log": self.log[-30:]}
         if self.name is not None:
             out.update(session_state(self.sessions / self.name))
         return out
@@ -112,6 +146,7 @@ class ScanJob:
         """At the app's end: a running scan is stopped as Ctrl-C would stop it (its session resumable)."""
         if self.running:
             self._proc.send_signal(signal.SIGINT)
+            self._proc.send_signal(signal.SIGCONT)
             try:
                 self._proc.wait(timeout=60)
             except subprocess.TimeoutExpired:

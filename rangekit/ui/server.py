@@ -9,11 +9,21 @@ Routes (every one behind :class:`rangekit.ui.access.Gate`: the token, the app's 
   "focus"}`` (any of them: written into the rig file's ``capture.camera``, then applied);
 - ``GET /api/check`` (the latest check: idle, running with its progress, done, failed), ``POST /api/check/run``,
   ``POST /api/check/apply`` (its suggested rig-file changes written), ``GET /api/check/figure.png``;
+- ``GET /api/calibrate`` (the calibration wizard: its state, poses, hint, result), ``POST
+  /api/calibrate/ACTION`` (start ``{"poses", "seed"}``, capture, keep, retake, next, drag ``{"dx", "dy"}``,
+  cancel), ``GET /api/calibrate/picture/coverage.png`` and ``tilts.png``; ``GET /api/calibrate-recorded``, ``POST
+  /api/calibrate-recorded/start`` ``{"captures", "pattern", "projector", "out", "cols", "rows", "square_mm"}``
+  (recorded pose folders under ``--sessions``);
 - ``GET /api/scan`` (the scan: running, its views, files, last lines), ``POST /api/scan/start`` ``{"name",
-  "views"}`` or ``{"name", "resume": true}``, ``POST /api/scan/stop``; ``GET
+  "views"}`` or ``{"name", "resume": true}``, ``POST /api/scan/stop``, ``POST /api/scan/pause`` ``{"paused"}``; ``GET
   /api/sessions/NAME/views/K/points`` (a decoded view's points, float32 x y z in mm);
 - ``GET /api/sessions`` (each session under ``--sessions``: state, figures, files), ``GET
-  /api/sessions/NAME/files/FILE`` (its report.html, meshes, poses.json, summary.json);
+  /api/sessions/NAME/files/FILE`` (its report.html, meshes, poses.json, summary.json); ``POST
+  /api/sessions/NAME/process`` ``{"fusion", "format", "report"}`` (``rangekit process`` again, as the Scan page's
+  child), ``POST /api/sessions/NAME/export`` ``{"format"}`` (its meshes as obj, stl or glb beside the PLY);
+- ``GET /api/register`` (the registration: its pairs' residuals), ``GET /api/register/clouds`` (the cloud files
+  under ``--sessions``), ``POST /api/register/start`` ``{"files", "neighbours"}``, ``POST /api/register/save``
+  ``{"name"}``, ``GET /api/register/points/K`` (cloud K placed by its registered pose, float32 mm);
 - ``WS /ws/live``: the camera stream, each frame a text message (its figures, JSON) then a binary one (JPEG).
 
 A request the rig refuses gets 400 and ``{"error": one line}``, the CLI's words; nothing else reaches the page.
@@ -30,8 +40,11 @@ from pathlib import Path
 
 from rangekit.errors import RangekitError
 from rangekit.ui.access import COOKIE, Gate, new_token
+from rangekit.ui.calibrate_job import CalibrateJob
 from rangekit.ui.check_job import CheckJob
 from rangekit.ui.paths import confined
+from rangekit.ui.recorded_job import RecordedCalibrationJob
+from rangekit.ui.register_job import RegisterJob, list_clouds
 from rangekit.ui.scan_job import ScanJob, view_points
 from rangekit.ui.sessions_list import list_sessions, session_file
 from rangekit.ui.rig_holder import PATTERNS, RigHolder
@@ -101,6 +114,9 @@ def make_app(holder: RigHolder, token: str, host: str, port: int, sessions: Path
 
     stream = LiveStream(holder)
     check = CheckJob(holder)
+    calibration = CalibrateJob(holder, stream)
+    recorded = RecordedCalibrationJob(sessions)
+    registration = RegisterJob(sessions)
     scans = ScanJob(sessions, obj)
 
     async def index(request):
@@ -165,6 +181,75 @@ def make_app(holder: RigHolder, token: str, host: str, port: int, sessions: Path
             return _json({"error": "no check picture yet: run the check"}, 404)
         return Response(check.figure_png, media_type="image/png", headers={"Cache-Control": "no-store"})
 
+    async def calibrate_state(request):
+        return _json(calibration.snapshot())
+
+    async def calibrate_action(request):
+        action = request.path_params["action"]
+        try:
+            body = await _body(request)
+            if action == "start":
+                result = calibration.start(body.get("poses", 12), body.get("seed", 0))
+            elif action == "capture":
+                result = calibration.capture()
+            elif action in ("keep", "retake"):
+                result = calibration.decide(action == "keep")
+            elif action == "next":
+                result = await asyncio.to_thread(calibration.next_pose)
+            elif action == "drag":
+                result = await asyncio.to_thread(calibration.drag, body.get("dx"), body.get("dy"))
+            elif action == "cancel":
+                result = calibration.cancel()
+            else:
+                return _json({"error": f"calibrate: {action}: unknown; expected start, capture, keep, retake, next, "
+                                       "drag or cancel"}, 404)
+        except RangekitError as exc:
+            return _error(exc)
+        return _json(result)
+
+    async def calibrate_picture(request):
+        png = calibration.pictures.get(request.path_params["name"])
+        if not png:
+            return _json({"error": "no such picture yet: capture a pose first"}, 404)
+        return Response(png, media_type="image/png", headers={"Cache-Control": "no-store"})
+
+    async def recorded_state(request):
+        return _json(recorded.snapshot())
+
+    async def recorded_start(request):
+        try:
+            body = await _body(request)
+            return _json(await asyncio.to_thread(
+                recorded.start, body.get("captures", ""), body.get("pattern"), body.get("projector", ""),
+                body.get("out", "recorded-rig.json"), body.get("cols", 10), body.get("rows", 7),
+                body.get("square_mm", 20.0)))
+        except RangekitError as exc:
+            return _error(exc)
+
+    async def register_state(request):
+        return _json(registration.snapshot())
+
+    async def register_clouds(request):
+        return _json({"clouds": await asyncio.to_thread(list_clouds, sessions)})
+
+    async def register_action(request):
+        try:
+            body = await _body(request)
+            if request.path_params["action"] == "start":
+                return _json(await asyncio.to_thread(registration.start, body.get("files"), body.get("neighbours")))
+            if request.path_params["action"] == "save":
+                return _json(await asyncio.to_thread(registration.save, str(body.get("name", ""))))
+        except RangekitError as exc:
+            return _error(exc)
+        return _json({"error": "register: expected start or save"}, 404)
+
+    async def register_points(request):
+        try:
+            data = await asyncio.to_thread(registration.points, int(request.path_params["index"]))
+        except (RangekitError, ValueError) as exc:
+            return _error(exc)
+        return Response(data, media_type="application/octet-stream")
+
     async def scan_state(request):
         return _json(await asyncio.to_thread(scans.snapshot))
 
@@ -182,6 +267,35 @@ def make_app(holder: RigHolder, token: str, host: str, port: int, sessions: Path
             return _json(scans.stop())
         except RangekitError as exc:
             return _error(exc)
+
+    async def scan_pause(request):
+        try:
+            body = await _body(request)
+            return _json(scans.pause(bool(body.get("paused", True))))
+        except RangekitError as exc:
+            return _error(exc)
+
+    async def session_process(request):
+        try:
+            body = await _body(request)
+            return _json(await asyncio.to_thread(scans.process, request.path_params["name"],
+                                                 fusion=body.get("fusion", "poisson"),
+                                                 mesh_format=body.get("format", "ply"), report=body.get("report", True)))
+        except RangekitError as exc:
+            return _error(exc)
+
+    async def session_export(request):
+        from rangekit.app.process.fused_outputs import export_meshes
+
+        try:
+            body = await _body(request)
+            folder = confined(sessions, request.path_params["name"])
+            if scans.running and scans.name == folder.name:
+                raise RangekitError(f"{folder.name} is being scanned or processed; export when it has finished")
+            files = await asyncio.to_thread(export_meshes, folder, str(body.get("format")))
+        except RangekitError as exc:
+            return _error(exc)
+        return _json({"files": files})
 
     async def scan_points(request):
         try:
@@ -223,8 +337,19 @@ def make_app(holder: RigHolder, token: str, host: str, port: int, sessions: Path
               Route("/api/turntable", turntable, methods=["POST"]), Route("/api/camera", camera, methods=["POST"]),
               Route("/api/check", check_state), Route("/api/check/run", check_start, methods=["POST"]),
               Route("/api/check/apply", check_apply, methods=["POST"]), Route("/api/check/figure.png", check_figure),
+              Route("/api/calibrate", calibrate_state),
+              Route("/api/calibrate/{action}", calibrate_action, methods=["POST"]),
+              Route("/api/calibrate/picture/{name}.png", calibrate_picture),
+              Route("/api/calibrate-recorded", recorded_state),
+              Route("/api/calibrate-recorded/start", recorded_start, methods=["POST"]),
+              Route("/api/register", register_state), Route("/api/register/clouds", register_clouds),
+              Route("/api/register/points/{index}", register_points),
+              Route("/api/register/{action}", register_action, methods=["POST"]),
               Route("/api/scan", scan_state), Route("/api/scan/start", scan_start, methods=["POST"]),
               Route("/api/scan/stop", scan_stop, methods=["POST"]),
+              Route("/api/scan/pause", scan_pause, methods=["POST"]),
+              Route("/api/sessions/{name}/process", session_process, methods=["POST"]),
+              Route("/api/sessions/{name}/export", session_export, methods=["POST"]),
               Route("/api/sessions/{name}/views/{index}/points", scan_points),
               Route("/api/sessions", sessions_list), Route("/api/sessions/{name}/files/{file}", sessions_file), WebSocketRoute("/ws/live", live),
               Mount("/static", StaticFiles(directory=STATIC), name="static")]

@@ -13,7 +13,7 @@ __all__ = ["SESSION_FILES", "list_sessions", "session_file"]
 
 #: The files of a session a page may open.
 SESSION_FILES = ("report.html", "mesh.ply", "mesh_watertight.ply", "preview.ply", "merged.ply", "poses.json",
-                 "summary.json")
+                 "summary.json", *(f"{stem}.{fmt}" for fmt in ("obj", "stl", "glb") for stem in ("mesh", "mesh_watertight")))
 
 
 def _summary(folder: Path) -> dict:

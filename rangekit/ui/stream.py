@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import threading
 import time
+from dataclasses import replace
 
 from rangekit.errors import RangekitError
 from rangekit.progress import LOGGER
@@ -28,6 +29,8 @@ class LiveStream:
         self._watchers = 0
         self._stop = False
         self.error: str | None = None
+        #: ``annotate(image) -> dict`` adds figures to each frame (the Calibrate page's live board corners)
+        self.annotate = None
         self._thread = threading.Thread(target=self._run, name="rangekit-live", daemon=True)
         self._thread.start()
 
@@ -76,6 +79,12 @@ class LiveStream:
             if image is not None:
                 seq += 1
                 frame = live_frame(image, self.holder.full_scale, seq)
+                annotate = self.annotate
+                if annotate is not None:
+                    try:
+                        frame = replace(frame, extra=annotate(image))
+                    except Exception:  # noqa: BLE001 - a guide drawn on the picture; the frame goes out without it
+                        LOGGER.exception("live stream: annotating a frame failed")
                 with self._cond:
                     self._latest = frame
                     self._cond.notify_all()

@@ -16,6 +16,7 @@ from rangekit.boards import Board
 from rangekit.calib.camera import CalibrationWarning, Correspondences, calibrate_device
 from rangekit.calib.procedure import CalibrationSettings, calibrate_rig, compare_rigs
 from rangekit.errors import CalibrationError
+from calib_tolerances import outside_tolerances
 from fits import fit_sphere
 from rangekit.geometry import apply_T, make_T
 
@@ -53,6 +54,12 @@ def test_reprojection_errors(calibrated):
     assert res.bundle.rms_projector <= 0.15, res.summary_lines()
     # Measured 0.026 and 0.021 px: a corner bias of a tenth of a pixel would show.
     assert res.bundle.rms_camera <= 0.04 and res.bundle.rms_projector <= 0.04
+
+
+@pytest.mark.slow
+def test_every_parameter_is_within_the_shared_tolerances(calibrated):
+    _, _, dev, _ = calibrated
+    assert outside_tolerances(dev) == []
 
 
 @pytest.mark.slow

@@ -22,7 +22,7 @@ from rangekit.formats.sessions.summary import Accuracy, ClosedAccuracy, MeshFigu
 from rangekit.surface.mesh import TriangleMesh
 from rangekit.surface.observed import FusedMeshes
 
-__all__ = ["MESH_FILE", "WATERTIGHT_FILE", "MESH_EXPORT_FORMATS", "mesh_info", "save_fused",
+__all__ = ["MESH_FILE", "WATERTIGHT_FILE", "MESH_EXPORT_FORMATS", "export_meshes", "mesh_info", "save_fused",
            "save_one", "evaluate_fused", "evaluate_observed", "with_closed"]
 
 MESH_FILE = "mesh.ply"
@@ -83,3 +83,22 @@ def with_closed(evaluate: Callable, evaluation, watertight: TriangleMesh, angles
     closed = evaluate(watertight, angles, **options).accuracy
     figures = ClosedAccuracy(**{f.name: getattr(closed, f.name) for f in fields(ClosedAccuracy)})
     return replace(evaluation.accuracy, watertight=figures), evaluation.truth, evaluation.view_errors
+
+
+def export_meshes(folder: Path, mesh_format: str) -> list[str]:
+    """A processed session's two meshes written again as ``STEM.mesh_format`` beside their PLY (what ``--format``
+    would have written, from the PLY as saved; the web app's export); the files' names."""
+    from rangekit.errors import UsageError
+    from rangekit.formats.meshes import load_mesh, save_mesh
+
+    if mesh_format not in MESH_EXPORT_FORMATS:
+        raise UsageError(f"format {mesh_format!r}: expected one of {', '.join(MESH_EXPORT_FORMATS)}")
+    written = []
+    for file in (MESH_FILE, WATERTIGHT_FILE):
+        if not (Path(folder) / file).is_file():
+            raise UsageError(f"{Path(folder).name}/{file}: not there; process the session first")
+        name = f"{Path(file).stem}.{mesh_format}"
+        if mesh_format != "ply":
+            save_mesh(Path(folder) / name, load_mesh(Path(folder) / file))
+        written.append(name)
+    return written

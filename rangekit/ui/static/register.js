@@ -1,0 +1,72 @@
+// rangekit ui: the Registration page (clouds picked under --sessions registered as rangekit register does; each
+// pair's residual, the clouds placed in 3D, then saved under a name).
+"use strict";
+
+let registerShown = null;
+
+async function loadClouds() {
+  const box = $("register-clouds");
+  if (location.hash !== "#register" || box.dataset.loaded) return;
+  const clouds = (await (await fetch("/api/register/clouds")).json()).clouds;
+  box.innerHTML = "";
+  for (const c of clouds) {
+    const label = document.createElement("label"), input = document.createElement("input");
+    input.type = "checkbox"; input.value = c; label.append(input, " " + c); box.appendChild(label);
+  }
+  if (!clouds.length) box.textContent = "no cloud files under the sessions folder yet";
+  box.dataset.loaded = "1";
+}
+
+async function pollRegister() {
+  if (location.hash !== "#register") return;
+  loadClouds();
+  const s = await (await fetch("/api/register")).json();
+  $("register-state").textContent = s.state === "idle" ? "" : s.state + (s.rmse_mm !== undefined ? `: RMS ${s.rmse_mm} mm over all pairs` : "") +
+    (s.saved ? `; saved as ${s.saved}` : "");
+  $("register-error").textContent = s.state === "failed" ? s.error : "";
+  $("register-start").disabled = s.state === "running";
+  $("register-save-button").disabled = s.state !== "done" || !!s.saved;
+  $("register-lines").innerHTML = "";
+  for (const line of s.lines.slice(-8)) { const li = document.createElement("li"); li.textContent = line; $("register-lines").appendChild(li); }
+  const key = JSON.stringify([s.state, s.files, s.rmse_mm]);
+  if (key === registerShown) return;
+  registerShown = key;
+  $("register-pairs").innerHTML = ""; window.rangekitRegister3d.clear();
+  if (s.state !== "done") return;
+  const head = $("register-pairs").insertRow();
+  for (const h of ["pair", "residual RMS", "overlap", ""]) head.insertCell().outerHTML = `<th>${h}</th>`;
+  for (const p of s.pairs) {
+    const tr = $("register-pairs").insertRow(); tr.className = p.accepted ? "" : "bad";
+    for (const v of [`${p.a} - ${p.b}`, `${p.rmse_mm} mm`, `${p.overlap_percent} %`, p.accepted ? "kept" : `refused: ${p.reason}`]) tr.insertCell().textContent = v;
+  }
+  for (let k = 0; k < s.files.length; k++) {
+    const r = await fetch(`/api/register/points/${k}`);
+    if (r.ok) window.rangekitRegister3d.addView(k, new Float32Array(await r.arrayBuffer()));
+  }
+}
+
+$("register-form").onsubmit = async (ev) => {
+  ev.preventDefault();
+  const files = [...document.querySelectorAll("#register-clouds input:checked")].map((i) => i.value);
+  const text = $("register-form").neighbours.value.trim();
+  for (const e of document.querySelectorAll("#register-form .field-error, #register-save .field-error")) e.textContent = "";
+  const body = { files, neighbours: text === "" ? null : (/^[0-9]+$/.test(text) ? Number(text) : text) };
+  const r = await fetch("/api/register/start", { method: "POST", headers: { "Content-Type": "application/json" }, body: JSON.stringify(body) });
+  const data = await r.json();
+  if (!r.ok) {
+    if (data.error.startsWith("neighbours:")) document.querySelector("#register-form .field-error[data-for=neighbours]").textContent = data.error;
+    else $("register-error").textContent = data.error;
+  }
+  pollRegister();
+};
+$("register-save").onsubmit = async (ev) => {
+  ev.preventDefault();
+  const r = await fetch("/api/register/save", { method: "POST", headers: { "Content-Type": "application/json" },
+                                                body: JSON.stringify({ name: $("register-save").name.value.trim() }) });
+  const data = await r.json();
+  if (!r.ok) document.querySelector("#register-save .field-error[data-for=name]").textContent = data.error;
+  else $("register-clouds").dataset.loaded = "";
+  pollRegister();
+};
+window.addEventListener("hashchange", pollRegister);
+setInterval(pollRegister, 1000);

@@ -1,6 +1,7 @@
 # rangekit: two commands on a fresh machine.
 #   make scan   run the main job (simulated rig, no hardware, no arguments)
 #   make test   run the test suite
+#   make ui     then: the rig in a browser (rangekit ui; prints the URL to open)
 # Each creates .venv and installs what is missing on first use.
 
 PYTHON ?= python3
@@ -8,7 +9,7 @@ VENV   ?= .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.rangekit-installed
 
-.PHONY: setup test test-slow scan bench clean browser docs-figures bytecode
+.PHONY: setup test test-slow scan ui bench clean browser docs-figures bytecode
 
 setup: $(STAMP)
 
@@ -52,6 +53,11 @@ browser:
 scan: $(STAMP) bytecode
 	@# A full simulated scan to a mesh; a second run resumes (and reprocesses) scan1/.
 	@if [ -f scan1/session.json ]; then $(BIN)/rangekit scan --resume scan1; else $(BIN)/rangekit scan --out scan1; fi
+
+ui: $(STAMP) bytecode
+	@# The web app on the simulated rig (Live, Check, Calibrate, Scan, Sessions, Registration), sessions in ./sessions.
+	@mkdir -p sessions
+	$(BIN)/rangekit ui --sessions sessions
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/sim/bench_render.py

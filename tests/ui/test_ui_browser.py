@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+import os
 import time
+from pathlib import Path
 
 import pytest
 
+from calib_tolerances import outside_tolerances
 from chromium import chromium_paths, open_page
 from ui_server import start_ui
 
@@ -66,29 +69,141 @@ def test_the_live_page_streams_frames_and_marks_a_saturating_object(tmp_path):
     assert "Traceback" not in error
 
 
+def _shots(tmp_path):
+    """Where the page screenshots go: RANGEKIT_UI_SHOTS (docs/ui.md's pictures:
+    ``RANGEKIT_UI_SHOTS=docs/ui make test-slow`` or the pytest line in docs/ui.md) or the test's folder."""
+    folder = Path(os.environ.get("RANGEKIT_UI_SHOTS") or tmp_path)
+    folder.mkdir(parents=True, exist_ok=True)
+    return folder
+
+
+def _calibrate(page, shots) -> dict:
+    """12 simulated poses through the wizard: the board moved once by 'next pose' and once by a drag, one pose
+    retaken; returns what the page showed along the way."""
+    page.execute("location.hash = '#calibrate';")
+    page.execute("const f = document.getElementById('calibrate-form'); f.poses.value = '12';"
+                 "document.getElementById('calibrate-start').click();")
+    seen = {"corners": 0, "moved": False, "dragged": False, "retaken": False, "hints": set(), "errors": []}
+    deadline = time.monotonic() + 600
+    while time.monotonic() < deadline:
+        c = page.execute("return window.rangekitCalibrate || null;")
+        if c is None or c["state"] in ("starting", "capturing", "moving", "turntable"):
+            time.sleep(0.2)
+            continue
+        if c["state"] == "placing":
+            board = page.execute("const f = window.rangekitLive && window.rangekitLive.figures;"
+                                 "return f && f.board ? f.board.corners.length : 0;")
+            seen["corners"] = max(seen["corners"], board)
+            if c["pose"] == 1 and not seen["moved"]:
+                seen["moved"] = True
+                page.execute("document.getElementById('calibrate-next').click();")
+                time.sleep(1.0)
+                continue
+            if c["pose"] == 2 and not seen["dragged"]:
+                seen["dragged"] = True
+                page.drag(page.element("#calibrate-canvas"), 30, -20)
+                time.sleep(1.0)
+                continue
+            if c["pose"] == 0 and board == 0:
+                time.sleep(0.3)            # the first pose: wait for the live corners to show
+                continue
+            if c["pose"] == 2:
+                page.screenshot(shots / "ui-calibrate.png")
+            page.execute("document.getElementById('calibrate-capture').click();")
+        elif c["state"] == "review":
+            seen["hints"].add(c.get("hint", ""))
+            if c["pose"] == 3 and not seen["retaken"]:
+                seen["retaken"] = True
+                page.execute("document.getElementById('calibrate-retake').click();")
+            else:
+                page.execute("document.getElementById('calibrate-keep').click();")
+        elif c["state"] in ("done", "failed", "cancelled"):
+            seen["final"] = c
+            page.screenshot(shots / "ui-calibrate-done.png")
+            return seen
+        time.sleep(0.3)
+    raise AssertionError("the calibration did not finish in the page")
+
+
 @pytest.mark.slow
-def test_a_scan_started_in_the_page_shows_its_first_view_before_the_last_is_taken(tmp_path):
-    """6 views in real time (about 80 s of acquisition), then the processing."""
+def test_the_whole_path_in_a_browser(tmp_path):
+    """Check, apply its exposure; calibrate 12 poses; scan 6 views, the first view's points shown before the
+    last is taken; the mesh; the Sessions page opens the report; two view clouds registered and saved
+    (about 5 minutes: the simulated rig keeps real time)."""
+    from rangekit.calib.procedure import compare_rigs
+    from rangekit.rig.rig_file import load_rig
+    from rangekit.sim import default_rig
+
     sessions = tmp_path / "sessions"
     sessions.mkdir()
-    server = start_ui(sessions)
+    shots = _shots(tmp_path)
+    server = start_ui(sessions, "--object", "shiny")
     try:
-        def scan(page):
+        def path(page):
+            out = {}
+            _until(page, "return window.rangekitLive && window.rangekitLive.frames >= 3;")
+            page.screenshot(shots / "ui-live.png")
+            # Check: run, then apply its suggestion with one click.
+            page.execute("location.hash = '#check'; document.getElementById('check-run').click();")
+            _until(page, "return !document.getElementById('check-apply').disabled;", timeout=300)
+            out["suggested"] = page.execute("return fetch('/api/check').then(r => r.json()).then(c => c.suggested);")
+            page.execute("document.getElementById('check-apply').click();")
+            _until(page, "return document.getElementById('check-error').textContent.startsWith('applied');")
+            page.screenshot(shots / "ui-check.png")
+            out["calibration"] = _calibrate(page, shots)
+            # Scan: 6 views; the first view's points before the last view is taken.
             page.execute("location.hash = '#scan';")
             page.execute("const f = document.getElementById('scan-form'); f.name.value = 'first';"
                          "f.views.value = '6'; document.getElementById('scan-start').click();")
             _until(page, "return window.rangekitScan3d && window.rangekitScan3d.count >= 1;", timeout=240)
-            taken = page.execute("return fetch('/api/scan').then(r => r.json())"
-                                 ".then(s => s.views.filter(v => v.done).length);")
-            shown = page.execute("return window.rangekitScan3d.points;")
+            out["taken"] = page.execute("return fetch('/api/scan').then(r => r.json())"
+                                        ".then(s => s.views.filter(v => v.done).length);")
+            out["shown"] = page.execute("return window.rangekitScan3d.points;")
+            page.screenshot(shots / "ui-scan.png")
             _until(page, "return document.getElementById('scan-state').textContent.includes('ended (exit 0)');",
                    timeout=600)
-            return taken, shown, page.execute("return window.rangekitScan3d.count;")
+            out["count"] = page.execute("return window.rangekitScan3d.count;")
+            out["scan_mesh"] = _until(page, "return window.rangekitScan3d.vertices;", timeout=60)
+            page.screenshot(shots / "ui-scan-done.png")
+            # Sessions: the finished session opened from the Scan page's link: its report and its mesh.
+            page.execute("document.getElementById('scan-report').click();")
+            _until(page, "return window.rangekitSession3d.vertices > 0;", timeout=60)
+            out["report_title"] = _until(page, "const d = document.getElementById('session-report').contentDocument;"
+                                               "return d && d.readyState === 'complete' && d.title;", timeout=60)
+            page.screenshot(shots / "ui-sessions.png")
+            # Registration: the first two views' clouds, registered, residuals shown, saved.
+            page.execute("location.hash = '#register';")
+            _until(page, "return document.querySelectorAll('#register-clouds input').length >= 2;")
+            page.execute("for (const v of ['first/view_000/cloud.ply', 'first/view_001/cloud.ply'])"
+                         "  document.querySelector(`#register-clouds input[value='${v}']`).click();"
+                         "document.getElementById('register-start').click();")
+            _until(page, "return !document.getElementById('register-save-button').disabled;", timeout=180)
+            out["pairs"] = page.execute("return fetch('/api/register').then(r => r.json()).then(s => s.pairs);")
+            page.screenshot(shots / "ui-register.png")
+            page.execute("document.getElementById('register-save').name.value = 'two-views';"
+                         "document.getElementById('register-save-button').click();")
+            _until(page, "return document.getElementById('register-state').textContent.includes('saved as two-views');")
+            return out
 
-        out = open_page(server.url, width=1280, height=800, timeout_s=900, interact=scan,
-                        screenshot=tmp_path / "scan.png")
-        taken, shown, count = out["interaction"]
+        result = open_page(server.url, width=1400, height=1000, timeout_s=1500, interact=path,
+                           screenshot=tmp_path / "last.png")["interaction"]
     finally:
         server.stop()
-    assert 1 <= taken < 6 and shown > 5000          # the first view drawn while views were still to take
-    assert count == 6 and (sessions / "first" / "mesh.ply").is_file()    # an ordinary, finished session
+    # Check: the suggested exposure is the rig file's now.
+    rig = load_rig(sessions / "sim-rig.json")
+    assert rig.capture["camera"]["exposure_us"] == result["suggested"]["capture.camera.exposure_us"]
+    # Calibrate: 12 poses kept (one retaken), corners drawn live, a rig file within calibrate's tolerances.
+    cal = result["calibration"]
+    assert cal["final"]["state"] == "done", cal["final"]
+    assert cal["corners"] == 54 and cal["moved"] and cal["dragged"] and cal["retaken"]
+    assert len(cal["final"]["poses"]) == 12 and all(p["kept"] for p in cal["final"]["poses"])
+    assert all(h.startswith("next: the board near the") for h in cal["hints"])
+    assert outside_tolerances(compare_rigs(rig, default_rig())) == []
+    assert rig.capture["camera"]["exposure_us"] == result["suggested"]["capture.camera.exposure_us"]   # kept
+    # Scan: the first view drawn while views were still to take; an ordinary, finished session.
+    assert 1 <= result["taken"] < 6 and result["shown"] > 5000
+    assert result["count"] == 6 and (sessions / "first" / "mesh.ply").is_file() and result["scan_mesh"] > 1000
+    assert "rangekit" in result["report_title"].lower()
+    # Registration: one pair, its residual shown, the files saved under the name.
+    assert len(result["pairs"]) == 1 and result["pairs"][0]["accepted"] and result["pairs"][0]["rmse_mm"] < 0.5
+    assert (sessions / "two-views" / "poses.json").is_file() and (sessions / "two-views" / "merged.ply").is_file()

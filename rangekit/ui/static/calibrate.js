@@ -51,10 +51,12 @@ function showCalibration(c) {
   $("calibrate-result").innerHTML = ""; $("calibrate-deviation").innerHTML = "";
   if (c.state === "done") {
     const head = $("calibrate-result").insertRow();
-    for (const h of ["device", "fx", "fy", "cx", "cy", "distortion"]) head.insertCell().outerHTML = `<th>${h}</th>`;
+    for (const h of ["device", "fx", "fy", "cx", "cy"]) head.insertCell().outerHTML = `<th>${h}</th>`;
     for (const p of c.parameters) {
       const tr = $("calibrate-result").insertRow();
-      for (const v of [p.device, p.fx, p.fy, p.cx, p.cy, p.dist.join(" ")]) tr.insertCell().textContent = v;
+      for (const v of [p.device, p.fx, p.fy, p.cx, p.cy]) tr.insertCell().textContent = v;
+      const lens = $("calibrate-result").insertRow().insertCell();
+      lens.colSpan = 5; lens.className = "note"; lens.textContent = `distortion ${p.dist.join(" ")}`;
     }
     const lines = [`written to ${c.rig_file}`, ...(c.deviation_lines.length ? ["against the simulator's truth:", ...c.deviation_lines] : [])];
     for (const line of lines) { const li = document.createElement("li"); li.textContent = line; $("calibrate-deviation").appendChild(li); }

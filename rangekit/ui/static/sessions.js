@@ -6,10 +6,9 @@ let sessionOpen = null, sessionMeshShown = null;
 
 async function pollSessions() {
   if (location.hash !== "#sessions") return;
-  const r = await fetch("/api/sessions");
+  const list = (await (await fetch("/api/sessions")).json()).sessions;
   const body = $("sessions-table").tBodies[0];
   body.innerHTML = "";
-  const list = (await r.json()).sessions;
   for (const s of list) {
     const tr = body.insertRow();
     const cells = [s.name, s.state + (s.error ? `: ${s.error}` : ""), s.views === undefined ? "" : `${s.views_done} / ${s.views}`,

@@ -1,0 +1,110 @@
+"""Pages that come and go while a scan runs (issue 37): the scan is the server's child, not the page's, so a page
+that closes neither stops it nor loses a frame of it; a page opened later shows it where it is; two pages open at
+once show the same progress. Real Chromium pages, a real scan in real time on the simulator."""
+
+from __future__ import annotations
+
+import json
+import threading
+import time
+
+import pytest
+
+from chromium import chromium_paths, open_page
+from sessions import frame_paths
+from ui_server import start_ui
+
+pytestmark = [pytest.mark.slow,
+              pytest.mark.skipif(chromium_paths() is None, reason="headless browser missing: apt-get install "
+                                 "chromium chromium-driver (`make test` installs them when run as root)")]
+
+_PROGRESS = ("const t = document.getElementById('scan-state').textContent;"
+             "const m = t.match(/([0-9]+) of ([0-9]+) views taken, ([0-9]+) decoded/);"
+             "return m ? {taken: +m[1], views: +m[2], decoded: +m[3], shown: window.rangekitScan3d.count} : null;")
+
+
+def _until(page, script: str, timeout: float = 120.0):
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        value = page.execute(script)
+        if value:
+            return value
+        time.sleep(0.1)
+    raise AssertionError(f"the page never satisfied: {script}")
+
+
+def _scan_state(server) -> dict:
+    return json.loads(server.request("/api/scan")[1])
+
+
+def test_pages_closing_opening_and_side_by_side_leave_the_scan_alone(tmp_path):
+    sessions = tmp_path / "sessions"
+    sessions.mkdir()
+    server = start_ui(sessions)
+    first_closed = threading.Event()
+    results: dict = {}
+
+    def watch(name: str, stop_when, url_hash: str = "#scan"):
+        def interact(page):
+            page.execute(f"location.hash = '{url_hash}';")
+            seen = []
+            while not stop_when():
+                progress = page.execute(_PROGRESS)
+                if progress:
+                    seen.append((time.monotonic(), progress))
+                time.sleep(0.25)
+            return seen
+        try:
+            results[name] = open_page(server.url, width=1200, height=900, timeout_s=900, interact=interact)["interaction"]
+        except Exception as exc:  # noqa: BLE001 - reported by the assertions below
+            results[name] = exc
+
+    try:
+        status, body, _ = server.request("/api/scan/start", data={"name": "s", "views": 4})
+        assert status == 200, body
+        # Page A: open, then closed once the first view is decoded. Page B: open from the start to the end.
+        decoded = lambda k: sum(v["decoded"] for v in _scan_state(server)["views"]) >= k   # noqa: E731
+        ended = lambda: not _scan_state(server)["running"]                                  # noqa: E731
+        a = threading.Thread(target=watch, args=("a", lambda: decoded(1) or ended()))
+        b = threading.Thread(target=watch, args=("b", ended))
+        a.start()
+        b.start()
+        a.join()
+        first_closed.set()
+        closed_at = _scan_state(server)
+        # Page C: opened after A went away, while the scan runs: it shows the scan where it is.
+        c_seen = {}
+
+        def reopen(page):
+            page.execute("location.hash = '#scan';")
+            c_seen["first"] = _until(page, _PROGRESS, timeout=60)
+            c_seen["server"] = _scan_state(server)
+            c_seen["drawn"] = _until(page, "return window.rangekitScan3d.count >= "
+                                           f"{sum(v['decoded'] for v in c_seen['server']['views'])} && "
+                                           "window.rangekitScan3d.count;", timeout=60)
+            return c_seen
+        open_page(server.url, width=1200, height=900, timeout_s=300, interact=reopen)
+        b.join(timeout=900)
+        final = _scan_state(server)
+    finally:
+        server.stop()
+    assert not isinstance(results.get("a"), Exception) and not isinstance(results.get("b"), Exception), results
+    # Closing page A stopped nothing: the scan ran on to its end, every view taken, decoded and meshed.
+    assert closed_at["running"] and final["exit_code"] == 0, (closed_at, final["log"][-5:])
+    assert all(v["done"] and v["decoded"] for v in final["views"]) and len(final["views"]) == 4
+    folder = sessions / "s"
+    per_view = {len(frame_paths(folder, f"{v.name}/*")) for v in folder.glob("view_*")}
+    assert len(per_view) == 1 and len(frame_paths(folder)) == 4 * per_view.pop() > 4 and (folder / "mesh.ply").is_file()
+    # Page C showed the scan where it was when it opened: the server's views taken, its decoded views drawn.
+    first, server_then = c_seen["first"], c_seen["server"]
+    assert first["views"] == 4 and abs(first["taken"] - sum(v["done"] for v in server_then["views"])) <= 1
+    assert c_seen["drawn"] >= sum(v["decoded"] for v in closed_at["views"]) >= 1
+    # Pages A and B, open at once, showed the same progress: at each moment both were read, their counts agree
+    # to within the one view that can finish between two reads a quarter of a second apart.
+    a_seen, b_seen = results["a"], results["b"]
+    assert len(a_seen) >= 3 and len(b_seen) >= len(a_seen)
+    for t, pa in a_seen:
+        pb = min(b_seen, key=lambda item: abs(item[0] - t))[1]
+        assert abs(pa["taken"] - pb["taken"]) <= 1 and abs(pa["decoded"] - pb["decoded"]) <= 1, (pa, pb)
+    # ... and B followed the scan to its end.
+    assert b_seen[-1][1]["taken"] == 4 and b_seen[-1][1]["shown"] >= 3

@@ -69,12 +69,25 @@ def test_the_live_page_streams_frames_and_marks_a_saturating_object(tmp_path):
     assert "Traceback" not in error
 
 
-def _shots(tmp_path):
-    """Where the page screenshots go: RANGEKIT_UI_SHOTS (docs/ui.md's pictures:
-    ``RANGEKIT_UI_SHOTS=docs/ui make test-slow`` or the pytest line in docs/ui.md) or the test's folder."""
-    folder = Path(os.environ.get("RANGEKIT_UI_SHOTS") or tmp_path)
-    folder.mkdir(parents=True, exist_ok=True)
-    return folder
+class _Shots:
+    """The pages' screenshots: into the test's folder, and with RANGEKIT_UI_SHOTS=DIR also into DIR as 1000-px
+    JPEGs (docs/ui.md's pictures; the command is in docs/ui.md)."""
+
+    def __init__(self, tmp_path):
+        self.tmp, self.docs = tmp_path, os.environ.get("RANGEKIT_UI_SHOTS")
+
+    def take(self, page, name: str) -> None:
+        png = self.tmp / f"{name}.png"
+        page.screenshot(png)
+        if self.docs:
+            import cv2
+
+            image = cv2.imread(str(png))
+            scale = 1000 / image.shape[1]
+            Path(self.docs).mkdir(parents=True, exist_ok=True)
+            cv2.imwrite(str(Path(self.docs) / f"{name}.jpg"), cv2.resize(image, None, fx=scale, fy=scale,
+                                                                          interpolation=cv2.INTER_AREA),
+                        [cv2.IMWRITE_JPEG_QUALITY, 85])
 
 
 def _calibrate(page, shots) -> dict:
@@ -108,7 +121,7 @@ def _calibrate(page, shots) -> dict:
                 time.sleep(0.3)            # the first pose: wait for the live corners to show
                 continue
             if c["pose"] == 2:
-                page.screenshot(shots / "ui-calibrate.png")
+                shots.take(page, "ui-calibrate")
             page.execute("document.getElementById('calibrate-capture').click();")
         elif c["state"] == "review":
             seen["hints"].add(c.get("hint", ""))
@@ -119,7 +132,7 @@ def _calibrate(page, shots) -> dict:
                 page.execute("document.getElementById('calibrate-keep').click();")
         elif c["state"] in ("done", "failed", "cancelled"):
             seen["final"] = c
-            page.screenshot(shots / "ui-calibrate-done.png")
+            shots.take(page, "ui-calibrate-done")
             return seen
         time.sleep(0.3)
     raise AssertionError("the calibration did not finish in the page")
@@ -136,20 +149,20 @@ def test_the_whole_path_in_a_browser(tmp_path):
 
     sessions = tmp_path / "sessions"
     sessions.mkdir()
-    shots = _shots(tmp_path)
+    shots = _Shots(tmp_path)
     server = start_ui(sessions, "--object", "shiny")
     try:
         def path(page):
             out = {}
             _until(page, "return window.rangekitLive && window.rangekitLive.frames >= 3;")
-            page.screenshot(shots / "ui-live.png")
+            shots.take(page, "ui-live")
             # Check: run, then apply its suggestion with one click.
             page.execute("location.hash = '#check'; document.getElementById('check-run').click();")
             _until(page, "return !document.getElementById('check-apply').disabled;", timeout=300)
             out["suggested"] = page.execute("return fetch('/api/check').then(r => r.json()).then(c => c.suggested);")
             page.execute("document.getElementById('check-apply').click();")
             _until(page, "return document.getElementById('check-error').textContent.startsWith('applied');")
-            page.screenshot(shots / "ui-check.png")
+            shots.take(page, "ui-check")
             out["calibration"] = _calibrate(page, shots)
             # Scan: 6 views; the first view's points before the last view is taken.
             page.execute("location.hash = '#scan';")
@@ -159,18 +172,18 @@ def test_the_whole_path_in_a_browser(tmp_path):
             out["taken"] = page.execute("return fetch('/api/scan').then(r => r.json())"
                                         ".then(s => s.views.filter(v => v.done).length);")
             out["shown"] = page.execute("return window.rangekitScan3d.points;")
-            page.screenshot(shots / "ui-scan.png")
+            shots.take(page, "ui-scan")
             _until(page, "return document.getElementById('scan-state').textContent.includes('ended (exit 0)');",
                    timeout=600)
             out["count"] = page.execute("return window.rangekitScan3d.count;")
             out["scan_mesh"] = _until(page, "return window.rangekitScan3d.vertices;", timeout=60)
-            page.screenshot(shots / "ui-scan-done.png")
+            shots.take(page, "ui-scan-done")
             # Sessions: the finished session opened from the Scan page's link: its report and its mesh.
             page.execute("document.getElementById('scan-report').click();")
             _until(page, "return window.rangekitSession3d.vertices > 0;", timeout=60)
             out["report_title"] = _until(page, "const d = document.getElementById('session-report').contentDocument;"
                                                "return d && d.readyState === 'complete' && d.title;", timeout=60)
-            page.screenshot(shots / "ui-sessions.png")
+            shots.take(page, "ui-sessions")
             # Registration: the first two views' clouds, registered, residuals shown, saved.
             page.execute("location.hash = '#register';")
             _until(page, "return document.querySelectorAll('#register-clouds input').length >= 2;")
@@ -179,7 +192,7 @@ def test_the_whole_path_in_a_browser(tmp_path):
                          "document.getElementById('register-start').click();")
             _until(page, "return !document.getElementById('register-save-button').disabled;", timeout=180)
             out["pairs"] = page.execute("return fetch('/api/register').then(r => r.json()).then(s => s.pairs);")
-            page.screenshot(shots / "ui-register.png")
+            shots.take(page, "ui-register")
             page.execute("document.getElementById('register-save').name.value = 'two-views';"
                          "document.getElementById('register-save-button').click();")
             _until(page, "return document.getElementById('register-state').textContent.includes('saved as two-views');")

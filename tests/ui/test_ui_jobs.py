@@ -194,7 +194,7 @@ def test_export_writes_each_format_of_scan_format_from_the_same_mesh(processed):
 @pytest.mark.slow
 def test_slstudios_recorded_poses_calibrate_as_the_command_line_does(tmp_path):
     """SLStudio's five recorded poses (../shared/data/slstudio-skull/calibration, copied into a sessions folder)
-    calibrated from the page's form: the same rig file, byte for byte, as ``rangekit calibrate --captures``."""
+    calibrated from the page's form: the same rig file as ``rangekit calibrate --captures`` (to 1e-6)."""
     from rangekit.sim.scene.zoo import data_folders
 
     skull = next((f / "slstudio-skull" for f in data_folders() if (f / "slstudio-skull").is_dir()), None)
@@ -219,4 +219,14 @@ def test_slstudios_recorded_poses_calibrate_as_the_command_line_does(tmp_path):
                           "--projector", "1824x1140", "--cols", "14", "--rows", "10", "--square-mm", "10",
                           "--out", str(tmp_path / "cli-rig.json")], capture_output=True, text=True, timeout=900)
     assert cli.returncode == 0, cli.stderr
-    assert (sessions / "slstudio-rig.json").read_bytes() == (tmp_path / "cli-rig.json").read_bytes()
+    # The same rig: two runs of the command line itself differ by up to 5e-6 in a distortion coefficient and in
+    # the 8th digit of the focal lengths (OpenCV's threaded solvers), so every number of the file is compared to
+    # 1e-6 relative or 2e-5 absolute, every other field exactly.
+    def numbers(value):
+        if isinstance(value, dict):
+            return {k: numbers(v) for k, v in value.items()}
+        if isinstance(value, list):
+            return [numbers(v) for v in value]
+        return pytest.approx(value, rel=1e-6, abs=2e-5) if isinstance(value, float) else value
+    page_rig = json.loads((sessions / "slstudio-rig.json").read_text())
+    assert page_rig == numbers(json.loads((tmp_path / "cli-rig.json").read_text()))

@@ -259,9 +259,11 @@ def calibrate_rig(devices, *, settings: CalibrationSettings = CalibrationSetting
         angles = np.radians(settings.turntable_angles_deg)
         obs, poses, table_points = [], [], None
         mid = int(np.argmin(np.abs(angles - np.median(angles))))
+        reached = angles.astype(np.float64).copy()
         for k, a in enumerate(angles):
             call_progress(progress, f"turntable {np.degrees(a):+.0f} deg ({k + 1}/{len(angles)})", k, len(angles))
             turntable.rotate_to(float(a))
+            reached[k] = turntable.angle      # where the board says it stopped (a stepper rounds to a microstep)
             if settle_s > 0 and not hasattr(devices, "capture_sequence"):
                 time.sleep(settle_s)
             images = _capture(devices, frames, delay_s)
@@ -276,7 +278,7 @@ def calibrate_rig(devices, *, settings: CalibrationSettings = CalibrationSetting
                 tri = triangulate(camera, projector, dec.proj_col, dec.proj_row)
                 table_points = tri.xyz.reshape(-1, 3)
         turntable.rotate_to(0.0)
-        axis = fit_turntable_axis(camera, obj, angles, obs, poses)
+        axis = fit_turntable_axis(camera, obj, reached, obs, poses)
         T_cam_table, _ = turntable_frame(axis, table_points)
         T_cam_world = T_cam_table
         seconds["turntable"] = time.time() - t3

@@ -156,6 +156,17 @@ class Page:
         """The WebDriver reference of the first element matching the CSS selector ``css``."""
         return self._client.call("POST", f"/session/{self._sid}/element", {"using": "css selector", "value": css})
 
+    def until(self, script: str, timeout: float = 60.0):
+        """Run ``script`` every 0.1 s until it returns something true; that value (AssertionError after
+        ``timeout`` seconds, naming the script)."""
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            value = self.execute(script)
+            if value:
+                return value
+            time.sleep(0.1)
+        raise AssertionError(f"the page never satisfied: {script}")
+
     def screenshot(self, out: str | Path) -> None:
         """The viewport as it is now, a PNG at ``out`` (a page's state mid-interaction, for the docs)."""
         _screenshot(self._client, self._sid, Path(out), 0, 0, full_page=False)

@@ -41,6 +41,8 @@ GrayCodePattern order for graycode (column pairs MSB first, row pairs, then whit
 
 from __future__ import annotations
 
+import math
+
 from dataclasses import dataclass, field
 from functools import lru_cache
 from typing import Iterator
@@ -162,6 +164,9 @@ class PatternSpec:
             axes = ("columns",)
         if not isinstance(self.options, dict):
             raise PatternError(f"pattern options must be an object, found {show(self.options)}")
+        for key, value in self.options.items():       # NaN or infinity nowhere, used by the method or not
+            if not _all_finite(value):
+                raise PatternError(f"pattern options: {key}: expected finite numbers, found {show(value)}")
         opts = {**_DEFAULT_OPTIONS.get(self.method, {}), **dict(self.options)}
         object.__setattr__(self, "axes", axes)
         if self.method == "phase":
@@ -361,6 +366,17 @@ class PatternSpec:
 
     def __hash__(self) -> int:
         return hash((self.method, self.width, self.height, self.axes))
+
+
+def _all_finite(value) -> bool:
+    """Whether every number in ``value`` (nested lists and objects) is finite."""
+    if isinstance(value, float):
+        return math.isfinite(value)
+    if isinstance(value, dict):
+        return all(_all_finite(v) for v in value.values())
+    if isinstance(value, (list, tuple)):
+        return all(_all_finite(v) for v in value)
+    return True
 
 
 def make_pattern_spec(method: str, projector_size: tuple[int, int], **options) -> PatternSpec:

@@ -21,8 +21,8 @@ import numpy as np
 
 from rangekit.boards import Board
 from rangekit.errors import RangekitError
-from rangekit.progress import LOGGER
 from rangekit.ui.board_live import live_corners
+from rangekit.ui.job_state import failed
 from rangekit.ui.rig_holder import RigHolder, test_pattern
 
 __all__ = ["CalibrateJob"]
@@ -173,11 +173,8 @@ class CalibrateJob:
                       deviation_lines=comparison_lines(deviation) if deviation is not None else [])
         except _Cancelled:
             self._set(state="cancelled")
-        except RangekitError as exc:
-            self._set(state="failed", error=str(exc))
         except Exception as exc:  # noqa: BLE001 - the page gets one line, the log the details
-            LOGGER.exception("calibration failed")
-            self._set(state="failed", error=f"the calibration failed: {type(exc).__name__}: {exc}")
+            self._set(**failed(exc, "calibration"))
 
     def _scene_now(self) -> None:
         """Simulator: put the board at the pool's current pose, shifted by the drag."""

@@ -13,6 +13,7 @@ import threading
 import cv2
 
 from rangekit.errors import RangekitError
+from rangekit.ui.job_state import failed
 from rangekit.ui.rig_holder import RigHolder
 
 __all__ = ["CheckJob"]
@@ -58,13 +59,8 @@ class CheckJob:
                          "capture.pattern_delay_s": round(result.pattern_delay_s, 4)}
             state = {"state": "done", "result": result.to_dict(), "advice": result.advice(),
                      "suggested": suggested}
-        except RangekitError as exc:
-            state = {"state": "failed", "error": str(exc)}
         except Exception as exc:  # noqa: BLE001 - the page gets one line, the log the details
-            from rangekit.progress import LOGGER
-
-            LOGGER.exception("check failed")
-            state = {"state": "failed", "error": f"the check failed: {type(exc).__name__}: {exc}"}
+            state = failed(exc, "check")
         with self._lock:
             self.state = state
 

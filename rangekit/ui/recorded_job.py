@@ -12,7 +12,7 @@ import threading
 from pathlib import Path
 
 from rangekit.errors import RangekitError
-from rangekit.progress import LOGGER
+from rangekit.ui.job_state import failed
 from rangekit.ui.paths import confined
 
 __all__ = ["RecordedCalibrationJob", "parse_projector_size", "pose_folders"]
@@ -106,10 +106,7 @@ class RecordedCalibrationJob:
             for line in cal.result.summary_lines():
                 self._say(line)
             state = {"state": "done", "rig_file": rig_file.name}
-        except RangekitError as exc:
-            state = {"state": "failed", "error": str(exc)}
         except Exception as exc:  # noqa: BLE001 - the page gets one line, the log the details
-            LOGGER.exception("calibration from recorded captures failed")
-            state = {"state": "failed", "error": f"the calibration failed: {type(exc).__name__}: {exc}"}
+            state = failed(exc, "calibration")
         with self._lock:
             self.state = state

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from rangekit.errors import RangekitError
-from rangekit.progress import LOGGER
+from rangekit.ui.job_state import failed
 from rangekit.ui.paths import confined
 
 __all__ = ["CLOUD_SUFFIXES", "RegisterJob", "list_clouds"]
@@ -98,11 +98,8 @@ class RegisterJob:
                      "converged": bool(res.converged)}
             with self._lock:
                 self._report = report
-        except RangekitError as exc:
-            state = {"state": "failed", "files": files, "error": str(exc)}
         except Exception as exc:  # noqa: BLE001 - the page gets one line, the log the details
-            LOGGER.exception("registration failed")
-            state = {"state": "failed", "files": files, "error": f"the registration failed: {type(exc).__name__}: {exc}"}
+            state = {**failed(exc, "registration"), "files": files}
         with self._lock:
             self.state = state
 

@@ -57,6 +57,7 @@ class RigHolder:
         self.last_reply, self.fault = "opened", None
         self.busy: str | None = None       # what holds the rig (a scan, a calibration), None: free
         self._live_while_busy = False      # the job holding the rig lets the stream grab (between its captures)
+        self._closers: list = []
         self._show(self.pattern)
 
     @classmethod
@@ -73,7 +74,27 @@ class RigHolder:
         # The simulator's geometry is always its own truth; the rig file may hold a calibration of it.
         sim = SimRig(default_scene(obj), default_rig())
         sim.camera.set_controls(controls_from_capture(rig.capture, where=str(rig_file)))
-        return cls(sim, rig, "simulator", float(sim.imaging.max_value), rig_file)
+        # The turntable as on hardware: rangekit's Horus driver talking bytes over a pty to the simulated board,
+        # which turns in real time (30 deg/s); the simulated camera sees the angle the board reports.
+        from rangekit.drivers.turntable import HorusTurntable
+        from rangekit.sim.devices.firmware import start_firmware
+
+        firmware = start_firmware("horus", time_scale=1.0)
+        sim.turntable = HorusTurntable(firmware.port)
+        holder = cls(sim, rig, "simulator", float(sim.imaging.max_value), rig_file)
+        holder._closers += [sim.turntable.close, firmware.stop]
+        holder.last_reply = f"opened; turntable: Horus firmware on {firmware.port}"
+        return holder
+
+    def close(self) -> None:
+        """Close the devices (the turntable's serial port, the simulated board)."""
+        with self._lock:
+            for close in self._closers:
+                try:
+                    close()
+                except Exception:  # noqa: BLE001 - closing at the end: nothing left to tell
+                    pass
+            self._closers = []
 
     @property
     def simulated_rig(self) -> bool:

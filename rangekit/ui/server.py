@@ -358,6 +358,7 @@ def make_app(holder: RigHolder, token: str, host: str, port: int, sessions: Path
         yield
         stream.close()
         await asyncio.to_thread(scans.close)
+        holder.close()
 
     app = Starlette(routes=routes, lifespan=lifespan)
     names = {host} | ({"localhost", "127.0.0.1"} if host in ("127.0.0.1", "localhost") else set())

@@ -29,30 +29,20 @@ return {width: c.width, height: c.height, red: red, sum: sum,
 """
 
 
-def _until(page, script: str, timeout: float = 60.0):
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        value = page.execute(script)
-        if value:
-            return value
-        time.sleep(0.1)
-    raise AssertionError(f"the page never satisfied: {script}")
-
-
 def test_the_live_page_streams_frames_and_marks_a_saturating_object(tmp_path):
     server = start_ui(tmp_path, "--object", "shiny")
     try:
         def look(page):
-            _until(page, "return window.rangekitLive && window.rangekitLive.frames >= 3;")
+            page.until("return window.rangekitLive && window.rangekitLive.frames >= 3;")
             first = page.execute(_CANVAS)
-            _until(page, f"return window.rangekitLive.frames >= {first['frames'] + 3};")
+            page.until(f"return window.rangekitLive.frames >= {first['frames'] + 3};")
             second = page.execute(_CANVAS)
             page.execute("document.querySelector('[data-name=checker]').click();")
-            _until(page, "return document.querySelector('[data-name=checker]').classList.contains('on');")
+            page.until("return document.querySelector('[data-name=checker]').classList.contains('on');")
             # A non-numeric exposure: the rig file's one-line error next to its field, nothing else changed.
             page.execute("document.querySelector('[name=exposure_us]').value = 'abc';"
                          "document.querySelector('#controls button').click();")
-            error = _until(page, "return document.querySelector('.field-error[data-for=exposure_us]').textContent;")
+            error = page.until("return document.querySelector('.field-error[data-for=exposure_us]').textContent;")
             return first, second, error
 
         out = open_page(server.url, width=1280, height=800, timeout_s=120, interact=look,
@@ -154,48 +144,49 @@ def test_the_whole_path_in_a_browser(tmp_path):
     try:
         def path(page):
             out = {}
-            _until(page, "return window.rangekitLive && window.rangekitLive.frames >= 3;")
+            page.until("return window.rangekitLive && window.rangekitLive.frames >= 3;")
             shots.take(page, "ui-live")
             # Check: run, then apply its suggestion with one click.
             page.execute("location.hash = '#check'; document.getElementById('check-run').click();")
-            _until(page, "return !document.getElementById('check-apply').disabled;", timeout=300)
+            page.until("return !document.getElementById('check-apply').disabled;", timeout=300)
             out["suggested"] = page.execute("return fetch('/api/check').then(r => r.json()).then(c => c.suggested);")
             page.execute("document.getElementById('check-apply').click();")
-            _until(page, "return document.getElementById('check-error').textContent.startsWith('applied');")
+            out["applied"] = page.until("const t = document.getElementById('check-error').textContent;"
+                                        "return t.startsWith('applied') && t;")
             shots.take(page, "ui-check")
             out["calibration"] = _calibrate(page, shots)
             # Scan: 6 views; the first view's points before the last view is taken.
             page.execute("location.hash = '#scan';")
             page.execute("const f = document.getElementById('scan-form'); f.name.value = 'first';"
                          "f.views.value = '6'; document.getElementById('scan-start').click();")
-            _until(page, "return window.rangekitScan3d && window.rangekitScan3d.count >= 1;", timeout=240)
+            page.until("return window.rangekitScan3d && window.rangekitScan3d.count >= 1;", timeout=240)
             out["taken"] = page.execute("return fetch('/api/scan').then(r => r.json())"
                                         ".then(s => s.views.filter(v => v.done).length);")
             out["shown"] = page.execute("return window.rangekitScan3d.points;")
             shots.take(page, "ui-scan")
-            _until(page, "return document.getElementById('scan-state').textContent.includes('ended (exit 0)');",
+            page.until("return document.getElementById('scan-state').textContent.includes('ended (exit 0)');",
                    timeout=600)
             out["count"] = page.execute("return window.rangekitScan3d.count;")
-            out["scan_mesh"] = _until(page, "return window.rangekitScan3d.vertices;", timeout=60)
+            out["scan_mesh"] = page.until("return window.rangekitScan3d.vertices;", timeout=60)
             shots.take(page, "ui-scan-done")
             # Sessions: the finished session opened from the Scan page's link: its report and its mesh.
             page.execute("document.getElementById('scan-report').click();")
-            _until(page, "return window.rangekitSession3d.vertices > 0;", timeout=60)
-            out["report_title"] = _until(page, "const d = document.getElementById('session-report').contentDocument;"
+            page.until("return window.rangekitSession3d.vertices > 0;", timeout=60)
+            out["report_title"] = page.until("const d = document.getElementById('session-report').contentDocument;"
                                                "return d && d.readyState === 'complete' && d.title;", timeout=60)
             shots.take(page, "ui-sessions")
             # Registration: the first two views' clouds, registered, residuals shown, saved.
             page.execute("location.hash = '#register';")
-            _until(page, "return document.querySelectorAll('#register-clouds input').length >= 2;")
+            page.until("return document.querySelectorAll('#register-clouds input').length >= 2;")
             page.execute("for (const v of ['first/view_000/cloud.ply', 'first/view_001/cloud.ply'])"
                          "  document.querySelector(`#register-clouds input[value='${v}']`).click();"
                          "document.getElementById('register-start').click();")
-            _until(page, "return !document.getElementById('register-save-button').disabled;", timeout=180)
+            page.until("return !document.getElementById('register-save-button').disabled;", timeout=180)
             out["pairs"] = page.execute("return fetch('/api/register').then(r => r.json()).then(s => s.pairs);")
             shots.take(page, "ui-register")
             page.execute("document.getElementById('register-save').name.value = 'two-views';"
                          "document.getElementById('register-save-button').click();")
-            _until(page, "return document.getElementById('register-state').textContent.includes('saved as two-views');")
+            page.until("return document.getElementById('register-state').textContent.includes('saved as two-views');")
             return out
 
         result = open_page(server.url, width=1400, height=1000, timeout_s=1500, interact=path,
@@ -205,6 +196,9 @@ def test_the_whole_path_in_a_browser(tmp_path):
     # Check: the suggested exposure is the rig file's now.
     rig = load_rig(sessions / "sim-rig.json")
     assert rig.capture["camera"]["exposure_us"] == result["suggested"]["capture.camera.exposure_us"]
+    assert result["applied"] == ("applied: rig file: capture.pattern_delay_s "
+                                 f"{result['suggested']['capture.pattern_delay_s']}, capture.camera.exposure_us "
+                                 f"{result['suggested']['capture.camera.exposure_us']}")
     # Calibrate: 12 poses kept (one retaken), corners drawn live, a rig file within calibrate's tolerances.
     cal = result["calibration"]
     assert cal["final"]["state"] == "done", cal["final"]

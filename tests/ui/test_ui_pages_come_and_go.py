@@ -23,16 +23,6 @@ _PROGRESS = ("const t = document.getElementById('scan-state').textContent;"
              "return m ? {taken: +m[1], views: +m[2], decoded: +m[3], shown: window.rangekitScan3d.count} : null;")
 
 
-def _until(page, script: str, timeout: float = 120.0):
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        value = page.execute(script)
-        if value:
-            return value
-        time.sleep(0.1)
-    raise AssertionError(f"the page never satisfied: {script}")
-
-
 def _scan_state(server) -> dict:
     return json.loads(server.request("/api/scan")[1])
 
@@ -77,9 +67,9 @@ def test_pages_closing_opening_and_side_by_side_leave_the_scan_alone(tmp_path):
 
         def reopen(page):
             page.execute("location.hash = '#scan';")
-            c_seen["first"] = _until(page, _PROGRESS, timeout=60)
+            c_seen["first"] = page.until(_PROGRESS, timeout=60)
             c_seen["server"] = _scan_state(server)
-            c_seen["drawn"] = _until(page, "return window.rangekitScan3d.count >= "
+            c_seen["drawn"] = page.until("return window.rangekitScan3d.count >= "
                                            f"{sum(v['decoded'] for v in c_seen['server']['views'])} && "
                                            "window.rangekitScan3d.count;", timeout=60)
             return c_seen

@@ -32,7 +32,7 @@ function showCalibration(c) {
   $("calibrate-keep").disabled = $("calibrate-retake").disabled = c.state !== "review";
   $("calibrate-next").disabled = !(c.state === "placing" && c.simulated);
   $("calibrate-last").textContent = c.last || "";
-  $("calibrate-hint").textContent = c.hint || "";
+  $("calibrate-hint").textContent = running ? (c.hint || "") : "";
   $("calibrate-poses").innerHTML = "";
   for (const p of c.poses) {
     const tr = $("calibrate-poses").insertRow(); tr.insertCell().outerHTML = `<th>pose ${p.index + 1}</th>`;

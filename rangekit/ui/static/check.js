@@ -37,8 +37,8 @@ $("check-apply").onclick = async () => {
   const r = await fetch("/api/check/apply", { method: "POST" });
   const data = await r.json();
   if (!r.ok) { $("check-error").textContent = data.error; return; }
-  $("check-error").textContent = "applied: " + data.last_reply;
-  controlsShown = false; showStatus(data);
+  $("check-error").textContent = "applied: " + data.rig.last_reply;
+  controlsShown = false; showStatus(data.rig);
 };
 setInterval(pollCheck, 700);
 pollCheck();

@@ -7,7 +7,7 @@ import ipaddress
 import sys
 from pathlib import Path
 
-from rangekit.cli._common import check_output, say
+from rangekit.cli._common import say
 from rangekit.errors import UsageError
 
 
@@ -39,19 +39,18 @@ def cmd_ui(args: argparse.Namespace) -> int:
     from rangekit.ui.rig_holder import RigHolder
     from rangekit.ui.server import bind, serve, start
 
-    if args.rig not in (None, "sim"):
-        if args.object is not None:
-            raise UsageError("--object: a simulator option; leave it out with --rig RIG.json")
-        check_output(args.rig, option="--rig")
-        raise UsageError(f"--rig {args.rig}: the web app runs on the simulator in this version ('--rig sim'); "
-                         "use rangekit check/scan/calibrate --rig for the hardware")
+    hardware = args.rig not in (None, "sim")
+    if hardware and args.object is not None:
+        raise UsageError("--object: a simulator option; leave it out with --rig RIG.json")
     sessions = Path(args.sessions or ".")
     if not sessions.is_dir():
         raise UsageError(f"--sessions {sessions}: not a folder; create it first or name another")
-    rig_file = sessions / SIM_RIG_FILE
+    rig_file = Path(args.rig) if hardware else sessions / SIM_RIG_FILE
     sock = bind(args.host, args.port)       # a port in use is said before anything is opened or written
     try:
-        holder = RigHolder.simulated(rig_file, args.object or "lumpy")
+        # A hardware rig file that fails its checks ends here with its one-line error; a device that does not
+        # open is shown on the page (and retried from there).
+        holder = RigHolder.hardware(rig_file) if hardware else RigHolder.simulated(rig_file, args.object or "lumpy")
         server = start(holder, sock, args.host, sessions, args.object or "lumpy")
     except BaseException:
         sock.close()
@@ -59,7 +58,10 @@ def cmd_ui(args: argparse.Namespace) -> int:
     if not _is_loopback(args.host):
         print(f"rangekit ui: warning: listening on {args.host}, not loopback: anyone who can reach it and has "
               "the URL's token can drive the rig", file=sys.stderr)
-    say(f"rangekit ui on {server.host}:{server.port}, the simulated rig (rig file {rig_file}); open in a browser:")
+    what = f"the rig file {rig_file}" if hardware else f"the simulated rig (rig file {rig_file})"
+    say(f"rangekit ui on {server.host}:{server.port}, {what}; open in a browser:")
+    if holder.fault:
+        print(f"rangekit ui: warning: {holder.fault}", file=sys.stderr)
     print(server.url, flush=True)
     try:
         serve(server, sock)
@@ -73,7 +75,8 @@ def add_parsers(sub) -> None:
                        description="Start a local web server and print its URL with a one-time token (open it in "
                                    "a browser). It binds 127.0.0.1 unless --host says otherwise; every request "
                                    "needs the token, and WebSockets only come from the app's own page.")
-    p.add_argument("--rig", help="'sim' (default): the simulated rig")
+    p.add_argument("--rig", help="'sim' (default): the simulated rig; or a rig file whose 'devices' name the camera, "
+                                 "projector and turntable (rangekit rig init writes a template)")
     p.add_argument("--object", help="the simulated object on the turntable (default lumpy; 'shiny' saturates)")
     p.add_argument("--sessions", help="folder of the sessions the app lists and writes (default: the current one); the simulated "
                                         f"rig's rig file is {SIM_RIG_FILE} there")

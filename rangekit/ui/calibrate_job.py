@@ -72,6 +72,9 @@ class CalibrateJob:
                 raise RangekitError("a calibration is running already")
             if self.holder.busy is not None:
                 raise RangekitError(f"the rig is busy: {self.holder.busy}; wait for it to finish")
+            if self.holder.devices.camera is None or self.holder.devices.projector is None:
+                raise RangekitError(f"not connected: {self.holder.fault}" if self.holder.fault else
+                                    "calibrating needs a camera and a projector; this rig lacks one")
             self.state = {"state": "starting", "n": n_poses}
             self.poses, self.progress, self.pictures, self._uv = [], [], {}, {}
             self._placements = 0

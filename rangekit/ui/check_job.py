@@ -46,11 +46,19 @@ class CheckJob:
     def _run(self) -> None:
         from rangekit.app.check.run import check_simulated
         from rangekit.app.check.stats import check_figure
-        from rangekit.app.check.steps import MIN_CONFIDENCE
+        from rangekit.app.check.steps import MIN_CONFIDENCE, run_check
+        from rangekit.rig.camera_controls import controls_from_capture
 
         try:
-            with self.holder.hold("check") as sim:
-                result, images = check_simulated(sim, rig=self.holder.rig, progress=self.progress.append)
+            with self.holder.hold("check") as devices:
+                if self.holder.simulated_rig:
+                    result, images = check_simulated(devices, rig=self.holder.rig, progress=self.progress.append)
+                else:      # the opened hardware, as rangekit check --rig does with its own
+                    if devices.camera is None:
+                        raise RangekitError(f"not connected: {self.holder.fault}")
+                    controls = controls_from_capture(self.holder.rig.capture, where=str(self.holder.rig_file))
+                    result, images = run_check(devices, self.holder.rig, controls, full_scale=self.holder.full_scale,
+                                               progress=self.progress.append)
             figure = check_figure(images["white"], images["black"], self.holder.full_scale, images["mask"],
                                   MIN_CONFIDENCE, result.stats)
             ok, png = cv2.imencode(".png", cv2.cvtColor(figure, cv2.COLOR_RGB2BGR))

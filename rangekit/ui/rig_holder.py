@@ -45,6 +45,15 @@ def test_pattern(name: str, width: int, height: int) -> np.ndarray:
     raise RangekitError(f"pattern {name!r}: unknown; expected one of {', '.join(PATTERNS)}")
 
 
+class _NoDevices:
+    """A hardware rig whose devices are not open (they failed to, or a scan child holds them)."""
+
+    camera = projector = turntable = None
+
+    def close(self) -> None:
+        pass
+
+
 class RigHolder:
     """The open rig: ``devices`` (a :class:`rangekit.sim.SimRig` or the drivers' ``HardwareRig``: ``camera``,
     ``projector``, ``turntable``), its :class:`rangekit.rig.rig_file.Rig` and where it came from."""
@@ -85,6 +94,55 @@ class RigHolder:
         holder._closers += [sim.turntable.close, firmware.stop]
         holder.last_reply = f"opened; turntable: Horus firmware on {firmware.port}"
         return holder
+
+    @classmethod
+    def hardware(cls, rig_file: Path) -> "RigHolder":
+        """The devices a hardware rig file names (:func:`rangekit.drivers.open_rig_devices`). The rig file is checked
+        first: a bad field is its one-line error, raised before the server starts. A device that does not open
+        (unplugged, held by another program) is not: the app starts, the page shows the driver's one-line error
+        as the rig's fault, and :meth:`connect` tries again."""
+        from rangekit.rig.checks import validate_rig_for_hardware
+
+        rig_file = Path(rig_file)
+        rig = load_rig(rig_file)
+        validate_rig_for_hardware(rig, where=str(rig_file))
+        bits = rig.capture.get("bits")
+        holder = cls(_NoDevices(), rig, "hardware", float((1 << int(bits)) - 1) if bits else 255.0, rig_file)
+        holder.connect()
+        return holder
+
+    def connect(self) -> dict:
+        """Hardware: (re)open the rig file's devices; their failure is kept as the fault. The status."""
+        from rangekit.drivers import open_rig_devices
+
+        with self._lock:
+            self._refuse_if_busy()
+            if self.simulated_rig:
+                raise RangekitError("the simulated rig is always connected")
+            self.close()
+            try:
+                self.devices = open_rig_devices(self.rig, where=str(self.rig_file))
+            except RangekitError as exc:
+                self.devices, self.fault, self.last_reply = _NoDevices(), str(exc), "not connected"
+                return self.status()
+            self._closers = [self.devices.close]
+            self.fault, self.last_reply = None, "opened"
+            self._show(self.pattern)
+            return self.status()
+
+    def release(self, what: str) -> None:
+        """Hardware: close the devices for another process (a scan child) and mark the rig busy with ``what``."""
+        with self._lock:
+            self._refuse_if_busy()
+            self.busy = what
+            self.close()
+            self.devices = _NoDevices()
+
+    def reacquire(self) -> None:
+        """After :meth:`release`: free the rig and open its devices again."""
+        with self._lock:
+            self.busy = None
+        self.connect()
 
     def close(self) -> None:
         """Close the devices (the turntable's serial port, the simulated board)."""
@@ -132,7 +190,8 @@ class RigHolder:
         with self._lock:
             self._refuse_if_busy()
             rig = write_capture_fields(self.rig_file, fields, camera=camera)
-            self.devices.camera.set_controls(controls_from_capture(rig.capture, where=str(self.rig_file)))
+            if hasattr(self.devices.camera, "set_controls"):
+                self.devices.camera.set_controls(controls_from_capture(rig.capture, where=str(self.rig_file)))
             self.rig = replace(self.rig, capture={**self.rig.capture, **rig.capture})
             self.last_reply = "rig file: " + ", ".join([*(f"capture.{k} {v}" for k, v in fields.items()),
                                                         *(f"capture.camera.{k} {v}" for k, v in camera.items())])
@@ -156,6 +215,8 @@ class RigHolder:
         with self._lock:
             if self.busy is not None and not self._live_while_busy:
                 return None
+            if self.devices.camera is None:
+                raise RangekitError(f"not connected: {self.fault}" if self.fault else "no camera in this rig")
             try:
                 image = self.devices.camera.capture()
             except RangekitError as exc:
@@ -176,6 +237,8 @@ class RigHolder:
         with self._lock:
             self._refuse_if_busy()
             test_pattern(name, 1, 1)      # the name checked before any device call
+            if self.devices.projector is None:
+                raise RangekitError(f"not connected: {self.fault}" if self.fault else "this rig has no projector")
             self._show(name)
             self.pattern = name
             self.last_reply = f"pattern {name} shown"
@@ -186,7 +249,7 @@ class RigHolder:
             self._refuse_if_busy()
             table = self.devices.turntable
             if table is None:
-                raise RangekitError("this rig has no turntable")
+                raise RangekitError(f"not connected: {self.fault}" if self.fault else "this rig has no turntable")
             target = 0.0 if home else float(np.degrees(table.angle)) + float(degrees)
             started = time.perf_counter()
             table.rotate_to(np.radians(target))

@@ -47,8 +47,10 @@ def _child_command() -> list[str]:
 class ScanJob:
     """At most one ``rangekit scan`` child of the app at a time, into ``sessions/<name>``."""
 
-    def __init__(self, sessions: Path, obj: str = "lumpy") -> None:
-        self.sessions, self.obj = Path(sessions).resolve(), obj
+    def __init__(self, sessions: Path, obj: str = "lumpy", holder=None) -> None:
+        """``holder``: the app's :class:`rangekit.ui.rig_holder.RigHolder`; on hardware its devices are handed to
+        the scan child (closed here, ``--rig RIG.json`` there) and opened again when it ends."""
+        self.sessions, self.obj, self.holder = Path(sessions).resolve(), obj, holder
         self._lock = threading.Lock()
         self._proc: subprocess.Popen | None = None
         self.name: str | None = None
@@ -66,15 +68,17 @@ class ScanJob:
         folder = confined(self.sessions, name)
         if folder.parent != self.sessions:
             raise RangekitError(f"session {name!r}: a folder name directly under the sessions folder")
+        hardware = self.holder is not None and not self.holder.simulated_rig
         if resume:
-            args = ["--resume", str(folder), "--realtime"]
+            args = ["--resume", str(folder)] + ([] if hardware else ["--realtime"])
         else:
             if isinstance(views, bool) or not isinstance(views, int) or not 2 <= views <= 360:
                 raise RangekitError(f"views: expected a whole number 2-360, found {views!r}")
             # The simulated rig keeps real time, as the hardware would (the rig file's pattern delay,
             # exposure, the turntable's speed): each view decoded while the next is captured.
-            args = ["--out", str(folder), "--views", str(views), "--object", self.obj, "--realtime"]
-        return self._launch(folder, ["scan", *args])
+            args = ["--out", str(folder), "--views", str(views)] + (
+                ["--rig", str(self.holder.rig_file)] if hardware else ["--object", self.obj, "--realtime"])
+        return self._launch(folder, ["scan", *args], devices=hardware)
 
     def process(self, name: str, *, fusion: str = "poisson", mesh_format: str = "ply", report: bool = True) -> dict:
         """Reprocess session ``name`` with other options: ``rangekit process sessions/name --fusion F --format
@@ -91,15 +95,24 @@ class ScanJob:
         return self._launch(folder, ["process", str(folder), "--fusion", fusion, "--format", mesh_format,
                                      *([] if report else ["--no-report"])])
 
-    def _launch(self, folder: Path, args: list[str]) -> dict:
+    def _launch(self, folder: Path, args: list[str], devices: bool = False) -> dict:
+        """Start ``rangekit ARGS``; ``devices``: it opens the rig's hardware, released by the app meanwhile."""
         with self._lock:
             if self.running:
                 raise RangekitError(f"a scan is running: {self.name}; stop it first")
+            if devices:
+                self.holder.release(f"scan {folder.name}")
             self.name, self.log, self.exit_code, self.paused = folder.name, [], None, False
-            self._proc = subprocess.Popen([*_child_command(), *args], stdin=subprocess.DEVNULL,
-                                          stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-                                          env=dict(os.environ, PYTHONUNBUFFERED="1"))
-            threading.Thread(target=self._read, args=(self._proc,), name="rangekit-scan-log", daemon=True).start()
+            try:
+                self._proc = subprocess.Popen([*_child_command(), *args], stdin=subprocess.DEVNULL,
+                                              stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                                              env=dict(os.environ, PYTHONUNBUFFERED="1"))
+            except OSError:
+                if devices:
+                    self.holder.reacquire()
+                raise
+            threading.Thread(target=self._read, args=(self._proc, devices), name="rangekit-scan-log",
+                             daemon=True).start()
         return self.snapshot()
 
     def pause(self, paused: bool) -> dict:
@@ -113,7 +126,7 @@ class ScanJob:
             self.paused = bool(paused)
         return self.snapshot()
 
-    def _read(self, proc: subprocess.Popen) -> None:
+    def _read(self, proc: subprocess.Popen, devices: bool = False) -> None:
         for line in proc.stdout:
             line = line.rstrip()
             if line:
@@ -122,6 +135,8 @@ class ScanJob:
         with self._lock:
             if proc is self._proc:
                 self.exit_code = code
+        if devices:
+            self.holder.reacquire()
 
     def stop(self) -> dict:
         """Ctrl-C to the running scan: its views taken are finished and recorded; ``resume`` continues it."""

@@ -4,7 +4,7 @@ Routes (every one behind :class:`rangekit.ui.access.Gate`: the token, the app's 
 
 - ``GET /``: the page (``static/index.html``); the ``?token=`` it was opened with is kept as a cookie;
 - ``GET /static/...``: the page's scripts and styles, shipped in the package (no network);
-- ``GET /api/status``: the devices' status; ``POST /api/pattern`` ``{"name"}``; ``POST /api/turntable``
+- ``GET /api/status``: the devices' status; ``POST /api/reconnect`` (hardware: open the devices again); ``POST /api/pattern`` ``{"name"}``; ``POST /api/turntable``
   ``{"degrees"}`` or ``{"home": true}``; ``POST /api/camera`` ``{"exposure_us", "iso", "white_balance_k",
   "focus"}`` (any of them: written into the rig file's ``capture.camera``, then applied);
 - ``GET /api/check`` (the latest check: idle, running with its progress, done, failed), ``POST /api/check/run``,
@@ -117,7 +117,7 @@ def make_app(holder: RigHolder, token: str, host: str, port: int, sessions: Path
     calibration = CalibrateJob(holder, stream)
     recorded = RecordedCalibrationJob(sessions)
     registration = RegisterJob(sessions)
-    scans = ScanJob(sessions, obj)
+    scans = ScanJob(sessions, obj, holder)
 
     async def index(request):
         response = FileResponse(STATIC / "index.html", headers={"Cache-Control": "no-store"})
@@ -127,6 +127,12 @@ def make_app(holder: RigHolder, token: str, host: str, port: int, sessions: Path
 
     async def status(request):
         return _json({"rig": holder.status(), "patterns": list(PATTERNS), "live_error": stream.error})
+
+    async def reconnect(request):
+        try:
+            return _json({"rig": await asyncio.to_thread(holder.connect)})
+        except RangekitError as exc:
+            return _error(exc)
 
     async def pattern(request):
         try:
@@ -334,6 +340,7 @@ def make_app(holder: RigHolder, token: str, host: str, port: int, sessions: Path
             stream.unwatch()
 
     routes = [Route("/", index), Route("/api/status", status), Route("/api/pattern", pattern, methods=["POST"]),
+              Route("/api/reconnect", reconnect, methods=["POST"]),
               Route("/api/turntable", turntable, methods=["POST"]), Route("/api/camera", camera, methods=["POST"]),
               Route("/api/check", check_state), Route("/api/check/run", check_start, methods=["POST"]),
               Route("/api/check/apply", check_apply, methods=["POST"]), Route("/api/check/figure.png", check_figure),

@@ -35,6 +35,7 @@ function showStatus(rig) {
     const tr = $("status").insertRow(); tr.insertCell().outerHTML = `<th>${k}</th>`; tr.insertCell().textContent = v;
   }
   for (const b of document.querySelectorAll("#patterns button")) b.classList.toggle("on", b.dataset.name === rig.pattern);
+  $("reconnect").hidden = rig.source !== "hardware";
 }
 
 async function loadStatus() {
@@ -111,6 +112,7 @@ $("controls").onsubmit = async (ev) => {
 
 for (const b of document.querySelectorAll("[data-jog]")) b.onclick = () => post("/api/turntable", { degrees: Number(b.dataset.jog) });
 $("home").onclick = () => post("/api/turntable", { home: true });
+$("reconnect").onclick = () => post("/api/reconnect", {});
 loadStatus();
 setInterval(loadStatus, 2000);
 startLive();

@@ -67,6 +67,7 @@ class RigHolder:
         self.busy: str | None = None       # what holds the rig (a scan, a calibration), None: free
         self._live_while_busy = False      # the job holding the rig lets the stream grab (between its captures)
         self._closers: list = []
+        self._angle_deg: float | None = None   # the turntable's angle as last read (degrees)
         self._show(self.pattern)
 
     @classmethod
@@ -261,8 +262,16 @@ class RigHolder:
             raise RangekitError(f"the rig is busy: {self.busy}; wait for it to finish")
 
     def status(self) -> dict:
-        """The device status the Live page shows."""
+        """The device status the Live page shows. The turntable is asked for its angle only while no job holds the
+        rig (a job's own device calls are not interleaved with another thread's: one serial link, one talker);
+        meanwhile the last angle read is shown."""
         table = self.devices.turntable
+        with self._lock:
+            if table is not None and self.busy is None:
+                try:
+                    self._angle_deg = round(float(np.degrees(table.angle)), 3)
+                except RangekitError as exc:
+                    self.fault = str(exc)
         return {"source": self.source, "rig_file": str(self.rig_file), "busy": self.busy,
                 "controls": dict(self.rig.capture.get("camera", {})), "fault": self.fault, "last_reply": self.last_reply,
                 "pattern": self.pattern,
@@ -270,4 +279,4 @@ class RigHolder:
                            "width": self.rig.camera.width, "height": self.rig.camera.height},
                 "projector": {"connected": self.devices.projector is not None},
                 "turntable": {"connected": table is not None,
-                              "angle_deg": None if table is None else round(float(np.degrees(table.angle)), 3)}}
+                              "angle_deg": None if table is None else self._angle_deg}}

@@ -17,7 +17,11 @@ def _finished(server, timeout: float = 180.0) -> dict:
         state = json.loads(server.request("/api/check")[1])
         if state["state"] in ("done", "failed"):
             return state
-        time.sleep(0.3)
+        # A page polls the device status meanwhile: it must not talk to the turntable's serial link while the
+        # check does (interleaved queries once broke the check's status reads).
+        for _ in range(5):
+            assert json.loads(server.request("/api/status")[1])["rig"]["busy"] in ("check", None)
+        time.sleep(0.05)
     raise AssertionError("the check did not finish")
 
 

@@ -2,7 +2,7 @@
 and without a real-time scan running beside it; and a scan's acquisition with and without 20 page loads and 5
 WebSocket clients hammering the server.
 
-    .venv/bin/python benchmarks/ui/bench_live_stream.py [SECONDS]        # default 20 s a phase
+    .venv/bin/python benchmarks/ui/bench_live_stream.py [SECONDS [PAIRS]]   # default 20 s a phase, 1 pair
 
 Everything on 127.0.0.1: ``rangekit ui --port 0`` started for real. Prints JSON.
 """
@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import os
+import statistics
 import sys
 import tempfile
 import threading
@@ -22,6 +23,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "tests"))
 from websockets.sync.client import connect  # noqa: E402
 
 from ui_server import start_ui  # noqa: E402
+
+from rangekit.ui.server import STATIC  # noqa: E402
 
 
 def _cpu_s(pid: int) -> float:
@@ -61,7 +64,7 @@ def _wait_ended(server) -> None:
         time.sleep(0.5)
 
 
-def main(seconds: float) -> dict:
+def main(seconds: float, pairs: int = 1) -> dict:
     out: dict = {}
     with tempfile.TemporaryDirectory() as d:
         server = start_ui(d)
@@ -77,39 +80,51 @@ def main(seconds: float) -> dict:
             out["with_scan"] = _watch(server, seconds)
             out["with_scan"]["server_cpu_per_s"] = round((_cpu_s(server.proc.pid) - c0) / seconds, 3)
             _wait_ended(server)
-            # A scan's acquisition alone, then with 20 page loads and 5 WebSocket clients.
-            out["acquisition_alone_s"] = round(_scan_seconds(server, "quiet"), 2)
-            _wait_ended(server)
-            stop = threading.Event()
-
-            def loads() -> None:
-                while not stop.is_set():
-                    for _ in range(20):
-                        server.request("/?token=" + server.token, token=None)
-                        server.request("/static/app.js")
-                    time.sleep(1.0)
-
-            workers = [threading.Thread(target=loads)] + [
-                threading.Thread(target=_watch, args=(server, 10_000, stop)) for _ in range(5)]
-            for w in workers:
-                w.start()
-            out["acquisition_loaded_s"] = round(_scan_seconds(server, "loaded"), 2)
-            stop.set()
-            for w in workers:
-                w.join()
-            _wait_ended(server)
-            out["acquisition_ratio"] = round(out["acquisition_loaded_s"] / out["acquisition_alone_s"], 3)
-            # Every frame of the loaded scan on disk and equal to its recorded SHA-256 (raises otherwise).
+            # A scan's acquisition alone, then with 20 page loads (the page and every file it loads) and 5 WebSocket
+            # clients, ``pairs`` times in turn.
             from rangekit.formats.sessions.check import verify_views
             from rangekit.formats.sessions.session import Session
 
-            loaded = Session.load(Path(d) / "loaded")
-            verify_views(loaded)
-            out["loaded_frames_verified"] = sum(len(v.sha256 or {}) for v in loaded.views)
+            page_files = ["/?token=" + server.token] + [f"/static/{p.name}" for p in sorted(STATIC.iterdir())
+                                                        if p.suffix in (".js", ".css")]
+            ratios, verified = [], 0
+            for k in range(pairs):
+                alone = _scan_seconds(server, f"quiet{k}")
+                _wait_ended(server)
+                stop = threading.Event()
+
+                def loads() -> None:
+                    while not stop.is_set():
+                        for _ in range(20):
+                            for path in page_files:
+                                server.request(path, token=None if path.startswith("/?") else "cookie")
+                        time.sleep(1.0)
+
+                workers = [threading.Thread(target=loads)] + [
+                    threading.Thread(target=_watch, args=(server, 10_000, stop)) for _ in range(5)]
+                for w in workers:
+                    w.start()
+                loaded_s = _scan_seconds(server, f"loaded{k}")
+                stop.set()
+                for w in workers:
+                    w.join()
+                _wait_ended(server)
+                ratios.append(loaded_s / alone)
+                out.setdefault("acquisition_alone_s", []).append(round(alone, 2))
+                out.setdefault("acquisition_loaded_s", []).append(round(loaded_s, 2))
+                # Every frame of the loaded scan on disk and equal to its recorded SHA-256 (raises otherwise).
+                loaded = Session.load(Path(d) / f"loaded{k}")
+                verify_views(loaded)
+                verified += sum(len(v.sha256 or {}) for v in loaded.views)
+            out["acquisition_ratio_median"] = round(float(statistics.median(ratios)), 3)
+            out["acquisition_ratios"] = [round(r, 3) for r in ratios]
+            out["page_files_per_load"] = len(page_files)
+            out["loaded_frames_verified"] = verified
         finally:
             server.stop()
     return out
 
 
 if __name__ == "__main__":
-    print(json.dumps(main(float(sys.argv[1]) if len(sys.argv) > 1 else 20.0)))
+    print(json.dumps(main(float(sys.argv[1]) if len(sys.argv) > 1 else 20.0,
+                          int(sys.argv[2]) if len(sys.argv) > 2 else 1)))

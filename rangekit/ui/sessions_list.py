@@ -23,7 +23,10 @@ def _summary(folder: Path) -> dict:
         return {}
     acc = s.get("accuracy") or {}
     mesh = s.get("mesh") or {}
-    return {"points": s.get("n_points"), "vertices": mesh.get("vertices"),
+    points = s.get("n_points")
+    if isinstance(points, list):         # per view: the session's total
+        points = sum(p for p in points if isinstance(p, int))
+    return {"points": points, "vertices": mesh.get("vertices"),
             "rms_mm": None if acc.get("rms") is None else round(acc["rms"] * 1e3, 4),
             "completeness_percent": None if acc.get("completeness") is None else round(100 * acc["completeness"], 2)}
 

@@ -144,7 +144,7 @@ def test_the_whole_path_in_a_browser(tmp_path):
     try:
         def path(page):
             out = {}
-            page.until("return window.rangekitLive && window.rangekitLive.frames >= 3;")
+            page.until("return window.rangekitLive && window.rangekitLive.frames >= 40;")   # a steady frame rate shown
             shots.take(page, "ui-live")
             # Check: run, then apply its suggestion with one click.
             page.execute("location.hash = '#check'; document.getElementById('check-run').click();")

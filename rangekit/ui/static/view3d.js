@@ -5,7 +5,7 @@ import * as THREE from "three";
 import { OrbitControls } from "/static/vendor/three/OrbitControls.js";
 import { PLYLoader } from "/static/vendor/three/PLYLoader.js";
 
-function colour(k) { return new THREE.Color().setHSL((k * 0.137) % 1, 0.7, 0.6); }
+function colour(k) { return new THREE.Color().setHSL((k * 0.382) % 1, 0.7, 0.6); }   // golden-ratio hues: neighbours differ
 
 function makeViewer(canvas) {
   const renderer = new THREE.WebGLRenderer({ canvas, antialias: true, preserveDrawingBuffer: true });

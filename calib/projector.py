@@ -212,7 +212,8 @@ class BundleResult:
 def bundle_adjust(camera: PinholeCamera, projector: PinholeCamera, T_proj_cam: np.ndarray,
                   T_cam_board: dict, object_points: np.ndarray, cam_obs: dict, proj_obs: dict, *,
                   sigma_camera: float = 0.05, sigma_projector: float = 0.1, max_nfev: int = 200,
-                  fixed_camera: tuple[str, ...] = (), fixed_projector: tuple[str, ...] = ()) -> BundleResult:
+                  fixed_camera: tuple[str, ...] = (), fixed_projector: tuple[str, ...] = (),
+                  solver: str = "schur") -> BundleResult:
     """Joint refinement of both devices' intrinsics, their relative pose and the board poses.
 
     Parameters
@@ -228,10 +229,17 @@ def bundle_adjust(camera: PinholeCamera, projector: PinholeCamera, T_proj_cam: n
     fixed_camera, fixed_projector : intrinsics held at their initial values (names of :data:`INTRINSICS`;
         "aspect" keeps fy / fx), e.g. ``("k2", "p1", "p2")`` for a lens model of k1 alone.
 
+    solver : "schur" (default): Levenberg-Marquardt on the reduced system, the board poses eliminated through the
+        Schur complement, with the analytic Jacobian (:mod:`rangekit.calib.bundle_schur`,
+        :mod:`rangekit.calib.projection_jacobian`); "minpack": MINPACK's Levenberg-Marquardt
+        (``scipy.optimize.least_squares``) on a Jacobian of grouped finite differences, as before issue 38. Both
+        reach the same minimum (tests/calib/test_bundle_schur.py).
+
     Outliers are the caller's business (the corner fit drops corners it cannot estimate, and
-    :func:`rangekit.calib.calibrate_device` rejects bad views); the problem is small and well posed, so it is
-    solved with MINPACK's Levenberg-Marquardt on a Jacobian computed by grouped finite differences.
+    :func:`rangekit.calib.calibrate_device` rejects bad views).
     """
+    if solver not in ("schur", "minpack"):
+        raise CalibrationError(f"bundle_adjust: solver must be 'schur' or 'minpack', found {solver!r}")
     views = sorted(T_cam_board)
     obj = np.asarray(object_points, dtype=np.float64)
     k3c = float(camera.dist[4]) if len(camera.dist) > 4 else 0.0
@@ -321,11 +329,16 @@ def bundle_adjust(camera: PinholeCamera, projector: PinholeCamera, T_proj_cam: n
                 J[touches[:, c], c] = df[touches[:, c]] / hc
         return J
 
-    sol = least_squares(residuals, x0[free], jac=jacobian, method="lm", x_scale="jac", max_nfev=max_nfev,
-                        xtol=1e-12, ftol=1e-12, gtol=1e-12)
-    x = full(sol.x)
+    if solver == "minpack":
+        sol = least_squares(residuals, x0[free], jac=jacobian, method="lm", x_scale="jac", max_nfev=max_nfev,
+                            xtol=1e-12, ftol=1e-12, gtol=1e-12)
+        x_free, nfev = sol.x, int(sol.nfev)
+    else:
+        x_free, nfev = _solve_reduced(x0, free, ties, base, len(views), obs_view, obs_cam, obs_X, obs_uv, obs_sigma,
+                                      k3c, k3p, max_nfev)
+    x = full(x_free)
     ic, ip, R_pc, t_pc = unpack(x)
-    raw = residuals(sol.x, scaled=False)
+    raw = residuals(x_free, scaled=False)
     sq = {"camera": [], "projector": []}
     view_rms = {}
     for k, device, ids, _, r0 in blocks:
@@ -347,4 +360,66 @@ def bundle_adjust(camera: PinholeCamera, projector: PinholeCamera, T_proj_cam: n
     poses = {v: make_T(rotvec_to_R(x[base + 6 * k: base + 6 * k + 3]), x[base + 6 * k + 3: base + 6 * k + 6])
              for k, v in enumerate(views)}
     return BundleResult(camera=cam, projector=proj, rms_camera=rms["camera"], rms_projector=rms["projector"],
-                        view_rms={v: tuple(r) for v, r in view_rms.items()}, T_cam_board=poses, nfev=int(sol.nfev))
+                        view_rms={v: tuple(r) for v, r in view_rms.items()}, T_cam_board=poses, nfev=nfev)
+
+
+def _solve_reduced(x0, free, ties, base, n_views, obs_view, obs_cam, obs_X, obs_uv, obs_sigma, k3c, k3p, max_nfev):
+    """:func:`bundle_adjust`'s problem on the reduced system (``solver="schur"``): the free parameters at the
+    minimum and the number of evaluations. Rows are ordered by board pose (the observations' order is)."""
+    from rangekit.calib.bundle_schur import solve_reduced_lm
+    from rangekit.calib.projection_jacobian import pixel_jacobian, rotated_right_jacobian, rotation_jacobian, skew
+
+    shared_free = np.flatnonzero(free[:base])
+    n = len(obs_uv)
+    row_view = np.repeat(obs_view, 2)
+    if np.any(np.diff(row_view) < 0):
+        raise CalibrationError("bundle_adjust: observations must be grouped by board pose")
+    starts = np.searchsorted(row_view, np.arange(n_views + 1))
+    inv_sigma = (1.0 / obs_sigma).repeat(2, axis=1)                      # (n, 2)
+
+    def shared_full(g):
+        x = x0[:base].copy()
+        x[shared_free] = g
+        for dst, src, ratio in ties:
+            x[dst] = x[src] * ratio
+        return x
+
+    def evaluate(g, poses, jacobian):
+        x = shared_full(g)
+        ic, ip = x[:_N_INTR], x[_N_INTR:2 * _N_INTR]
+        r_pc, t_pc = x[2 * _N_INTR:2 * _N_INTR + 3], x[2 * _N_INTR + 3:base]
+        R_pc = rotvec_to_R(r_pc)
+        R_k = rotvec_to_R(poses[:, :3])                                  # (K, 3, 3)
+        Pc = np.einsum("nij,nj->ni", R_k[obs_view], obs_X) + poses[obs_view, 3:]
+        if not jacobian:
+            pred = np.empty((n, 2))
+            pred[obs_cam] = _project(Pc[obs_cam], ic, k3c)
+            pred[~obs_cam] = _project(Pc[~obs_cam] @ R_pc.T + t_pc, ip, k3p)
+            return ((pred - obs_uv) * inv_sigma).ravel(), None, None
+        # d(R X)/dr = -[R X]_x (R J_r(r)): the 3 x 3 R J_r once per pose (rotation_jacobian's identity).
+        dPc = np.empty((n, 3, 6))
+        dPc[:, :, :3] = -skew(Pc - poses[obs_view, 3:]) @ rotated_right_jacobian(poses[:, :3])[obs_view]
+        dPc[:, :, 3:] = np.eye(3)
+        uv = np.empty((n, 2))
+        Jg = np.zeros((n, 2, base))
+        Jp = np.empty((n, 2, 6))
+        c, q = obs_cam, ~obs_cam
+        uv[c], J_intr, J_P = pixel_jacobian(Pc[c], ic, k3c)
+        Jg[c, :, :_N_INTR] = J_intr
+        Jp[c] = J_P @ dPc[c]
+        Pp = Pc[q] @ R_pc.T + t_pc
+        uv[q], J_intr, J_P = pixel_jacobian(Pp, ip, k3p)
+        Jg[q, :, _N_INTR:2 * _N_INTR] = J_intr
+        Jg[q, :, 2 * _N_INTR:2 * _N_INTR + 3] = J_P @ rotation_jacobian(r_pc, Pc[q])
+        Jg[q, :, 2 * _N_INTR + 3:base] = J_P
+        Jp[q] = J_P @ R_pc @ dPc[q]
+        for dst, src, ratio in ties:                                    # fy = ratio * fx moves with fx
+            Jg[:, :, src] += ratio * Jg[:, :, dst]
+        scale = inv_sigma[:, :, None]
+        return (((uv - obs_uv) * inv_sigma).ravel(), (Jg[:, :, shared_free] * scale).reshape(2 * n, -1),
+                (Jp * scale).reshape(2 * n, 6))
+
+    sol = solve_reduced_lm(evaluate, x0[:base][shared_free], x0[base:].reshape(n_views, 6), starts,
+                           max_iterations=max_nfev)
+    x_free = np.concatenate([sol.shared, sol.poses.ravel()])
+    return x_free, sol.evaluations

@@ -29,7 +29,7 @@ from rangekit.registration.coarse import CoarseOptions, compute_features, coarse
 from rangekit.registration.icp import IcpOptions
 from rangekit.registration.joint import JointResult, refine_jointly
 from rangekit.registration.overlap_estimate import overlapping_pairs
-from rangekit.registration.coarse_graph import descriptor_distances, view_descriptor, widen_until_settled
+from rangekit.registration.coarse.graph import descriptor_distances, view_descriptor, widen_until_settled
 from rangekit.registration.pair_refine import (EdgeResult, PairJob, PairMapper, check_dense, edge_result,
                                                mutual_overlap, pairwise_overlap, refine_pair)
 from rangekit.registration.pairs import (PairChooser, PairsTried, all_pairs, chooser_label, nearest_and_long_links,
@@ -69,7 +69,7 @@ class MultiViewOptions:
                                          # 4 nearest in rotation (+ long links and the most overlapping with
                                          # no prior; all pairs with a non-turntable prior); see _register_views
     coarse_neighbours: int | None = 4    # no prior: coarse alignment of each view with its k most similar
-                                         # (registration.coarse_graph), widened as needed; None = all pairs
+                                         # (registration.coarse.graph), widened as needed; None = all pairs
     icp: IcpOptions = field(default_factory=lambda: IcpOptions(method="point_to_plane", kernel="huber",
                                                                max_iterations=60, tolerance=1e-6, max_samples=5000))
                                          # pairwise runs only start the joint refinement: 1 um and 5k

@@ -6,7 +6,7 @@ import pytest
 
 from rangekit.errors import InputError, RegistrationError
 from rangekit.geometry import axis_angle_to_R, make_T
-from rangekit.registration.coarse_graph import (Components, coarse_graph, descriptor_distances, similar_pairs,
+from rangekit.registration.coarse.graph import (Components, coarse_graph, descriptor_distances, similar_pairs,
                                                 view_descriptor)
 from rangekit.registration.pairs import (LONG_LINKS, PRIOR_NEIGHBOURS, _rotation_gaps, default_pairs, long_links,
                                          nearest_and_long_links, nearest_in_rotation)

@@ -24,7 +24,20 @@ import numpy as np
 from rangekit.camera import distort, distort_jacobian
 from rangekit.geometry import rotvec_to_R
 
-__all__ = ["pixel_jacobian", "rotated_right_jacobian", "rotation_jacobian", "skew"]
+__all__ = ["N_INTRINSICS", "project", "pixel_jacobian", "rotated_right_jacobian", "rotation_jacobian", "skew"]
+
+
+#: Intrinsics a device's bundle adjustment refines: fx, fy, cx, cy, k1, k2, p1, p2 (k3 kept at its initial value).
+N_INTRINSICS = 8
+
+
+def project(points_dev: np.ndarray, intr: np.ndarray, k3: float) -> np.ndarray:
+    """Pixels (n, 2) of device-frame points (n, 3) through intrinsics ``intr`` (8,) and ``k3``."""
+    z = points_dev[:, 2:3]
+    xy = points_dev[:, :2] / z
+    dist = np.array([intr[4], intr[5], intr[6], intr[7], k3])
+    xy = distort(xy, dist)
+    return np.column_stack([intr[0] * xy[:, 0] + intr[2], intr[1] * xy[:, 1] + intr[3]])
 
 
 def skew(v: np.ndarray) -> np.ndarray:

@@ -39,7 +39,8 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.sparse import lil_matrix
 
-from rangekit.camera import PinholeCamera, distort
+from rangekit.calib.projection_jacobian import N_INTRINSICS as _N_INTR, project as _project
+from rangekit.camera import PinholeCamera
 from rangekit.errors import CalibrationError
 from rangekit.geometry import R_to_rotvec, invert_T, make_T, nearest_rotation, rotvec_to_R
 
@@ -145,7 +146,6 @@ def _weighted_median(values: np.ndarray, weights: np.ndarray) -> np.ndarray:
 
 
 # --------------------------------------------------------------------------- bundle adjustment
-_N_INTR = 8   # fx, fy, cx, cy, k1, k2, p1, p2 (k3 kept at its initial value)
 #: The intrinsics :func:`bundle_adjust` refines, in its parameter order; ``fixed_*`` may name any of them, and
 #: "aspect" (fy kept at fx times its initial ratio).
 INTRINSICS = ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2")
@@ -165,14 +165,6 @@ def _intr_vector(dev: PinholeCamera) -> np.ndarray:
     d[:min(5, len(dev.dist))] = dev.dist[:5]
     K = dev.K
     return np.array([K[0, 0], K[1, 1], K[0, 2], K[1, 2], d[0], d[1], d[2], d[3]])
-
-
-def _project(points_dev: np.ndarray, intr: np.ndarray, k3: float) -> np.ndarray:
-    z = points_dev[:, 2:3]
-    xy = points_dev[:, :2] / z
-    dist = np.array([intr[4], intr[5], intr[6], intr[7], k3])
-    xy = distort(xy, dist)
-    return np.column_stack([intr[0] * xy[:, 0] + intr[2], intr[1] * xy[:, 1] + intr[3]])
 
 
 def initial_T_proj_cam(T_cam_board: dict, T_proj_board: dict) -> np.ndarray:
@@ -334,8 +326,10 @@ def bundle_adjust(camera: PinholeCamera, projector: PinholeCamera, T_proj_cam: n
                             xtol=1e-12, ftol=1e-12, gtol=1e-12)
         x_free, nfev = sol.x, int(sol.nfev)
     else:
-        x_free, nfev = _solve_reduced(x0, free, ties, base, len(views), obs_view, obs_cam, obs_X, obs_uv, obs_sigma,
-                                      k3c, k3p, max_nfev)
+        from rangekit.calib.bundle_reduced import solve_bundle_reduced
+
+        x_free, nfev = solve_bundle_reduced(x0, free, ties, base, len(views), obs_view, obs_cam, obs_X, obs_uv,
+                                            obs_sigma, k3c, k3p, max_nfev)
     x = full(x_free)
     ic, ip, R_pc, t_pc = unpack(x)
     raw = residuals(x_free, scaled=False)
@@ -362,64 +356,3 @@ def bundle_adjust(camera: PinholeCamera, projector: PinholeCamera, T_proj_cam: n
     return BundleResult(camera=cam, projector=proj, rms_camera=rms["camera"], rms_projector=rms["projector"],
                         view_rms={v: tuple(r) for v, r in view_rms.items()}, T_cam_board=poses, nfev=nfev)
 
-
-def _solve_reduced(x0, free, ties, base, n_views, obs_view, obs_cam, obs_X, obs_uv, obs_sigma, k3c, k3p, max_nfev):
-    """:func:`bundle_adjust`'s problem on the reduced system (``solver="schur"``): the free parameters at the
-    minimum and the number of evaluations. Rows are ordered by board pose (the observations' order is)."""
-    from rangekit.calib.bundle_schur import solve_reduced_lm
-    from rangekit.calib.projection_jacobian import pixel_jacobian, rotated_right_jacobian, rotation_jacobian, skew
-
-    shared_free = np.flatnonzero(free[:base])
-    n = len(obs_uv)
-    row_view = np.repeat(obs_view, 2)
-    if np.any(np.diff(row_view) < 0):
-        raise CalibrationError("bundle_adjust: observations must be grouped by board pose")
-    starts = np.searchsorted(row_view, np.arange(n_views + 1))
-    inv_sigma = (1.0 / obs_sigma).repeat(2, axis=1)                      # (n, 2)
-
-    def shared_full(g):
-        x = x0[:base].copy()
-        x[shared_free] = g
-        for dst, src, ratio in ties:
-            x[dst] = x[src] * ratio
-        return x
-
-    def evaluate(g, poses, jacobian):
-        x = shared_full(g)
-        ic, ip = x[:_N_INTR], x[_N_INTR:2 * _N_INTR]
-        r_pc, t_pc = x[2 * _N_INTR:2 * _N_INTR + 3], x[2 * _N_INTR + 3:base]
-        R_pc = rotvec_to_R(r_pc)
-        R_k = rotvec_to_R(poses[:, :3])                                  # (K, 3, 3)
-        Pc = np.einsum("nij,nj->ni", R_k[obs_view], obs_X) + poses[obs_view, 3:]
-        if not jacobian:
-            pred = np.empty((n, 2))
-            pred[obs_cam] = _project(Pc[obs_cam], ic, k3c)
-            pred[~obs_cam] = _project(Pc[~obs_cam] @ R_pc.T + t_pc, ip, k3p)
-            return ((pred - obs_uv) * inv_sigma).ravel(), None, None
-        # d(R X)/dr = -[R X]_x (R J_r(r)): the 3 x 3 R J_r once per pose (rotation_jacobian's identity).
-        dPc = np.empty((n, 3, 6))
-        dPc[:, :, :3] = -skew(Pc - poses[obs_view, 3:]) @ rotated_right_jacobian(poses[:, :3])[obs_view]
-        dPc[:, :, 3:] = np.eye(3)
-        uv = np.empty((n, 2))
-        Jg = np.zeros((n, 2, base))
-        Jp = np.empty((n, 2, 6))
-        c, q = obs_cam, ~obs_cam
-        uv[c], J_intr, J_P = pixel_jacobian(Pc[c], ic, k3c)
-        Jg[c, :, :_N_INTR] = J_intr
-        Jp[c] = J_P @ dPc[c]
-        Pp = Pc[q] @ R_pc.T + t_pc
-        uv[q], J_intr, J_P = pixel_jacobian(Pp, ip, k3p)
-        Jg[q, :, _N_INTR:2 * _N_INTR] = J_intr
-        Jg[q, :, 2 * _N_INTR:2 * _N_INTR + 3] = J_P @ rotation_jacobian(r_pc, Pc[q])
-        Jg[q, :, 2 * _N_INTR + 3:base] = J_P
-        Jp[q] = J_P @ R_pc @ dPc[q]
-        for dst, src, ratio in ties:                                    # fy = ratio * fx moves with fx
-            Jg[:, :, src] += ratio * Jg[:, :, dst]
-        scale = inv_sigma[:, :, None]
-        return (((uv - obs_uv) * inv_sigma).ravel(), (Jg[:, :, shared_free] * scale).reshape(2 * n, -1),
-                (Jp * scale).reshape(2 * n, 6))
-
-    sol = solve_reduced_lm(evaluate, x0[:base][shared_free], x0[base:].reshape(n_views, 6), starts,
-                           max_iterations=max_nfev)
-    x_free = np.concatenate([sol.shared, sol.poses.ravel()])
-    return x_free, sol.evaluations

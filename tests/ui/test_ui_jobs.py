@@ -141,10 +141,10 @@ def test_two_clouds_register_to_their_true_motion_and_save_under_a_name(server):
     assert state["state"] == "done", state
     (pair,) = state["pairs"]
     assert pair["accepted"] and pair["rmse_mm"] < 0.05 and pair["overlap_percent"] > 90, pair
-    poses = np.frombuffer(server.request("/api/register/points/1")[1], np.float32).reshape(-1, 3)
-    assert len(poses) == 20000
+    points_mm = np.frombuffer(server.request("/api/register/points/1")[1], np.float32).reshape(-1, 3)
+    assert len(points_mm) == 20000
     # b's points placed by the registered pose land on a's surface: the true motion recovered.
-    placed = poses.astype(np.float64) / 1e3
+    placed = points_mm.astype(np.float64) / 1e3
     assert np.sqrt(np.mean(np.sum((placed - b) ** 2, axis=1))) < 2e-5
     assert _post(server, "/api/register/save", {"name": "../out"})[1]["error"].startswith("path '../out': refused")
     assert _post(server, "/api/register/save", {"name": "pair"})[1]["error"] == (

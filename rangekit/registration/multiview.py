@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
-from typing import Callable, Sequence
+from typing import Callable, Protocol, Sequence
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -36,11 +36,23 @@ from rangekit.registration.pairs import (PairChooser, PairsTried, all_pairs, cho
                                          nearest_in_rotation)
 from rangekit.registration.stability import MIN_CONSTRAINT, HeldMotions
 from rangekit.registration.sync import SyncResult, synchronise
-from rangekit.registration.view_graph import EdgesDisagree, ViewsCutOff
+from rangekit.registration.view_graph import EdgesDisagree, cut_off_message, edges_connect_views
 from rangekit._runtime.threads import one_blas_thread
 
+
+class WorkAhead(Protocol):
+    """What :func:`register_views` takes of work done before every view was in (implemented by
+    :class:`rangekit.registration.ahead.RegistrationAhead`; a protocol here so that module may import this one)."""
+
+    def level(self, voxel: float, n: int) -> list[PointCloud] | None: ...
+    def mapper(self, fallback: PairMapper | None = None) -> PairMapper: ...
+    def trees(self, clouds: Sequence[PointCloud]) -> list[cKDTree] | None: ...
+    def overlap(self, a: PointCloud, b: PointCloud, tree_a: cKDTree, tree_b: cKDTree, T_a_b: np.ndarray,
+                radius: float) -> float: ...
+
+
 __all__ = ["MultiViewOptions", "EdgeResult", "MultiViewResult", "register_views", "pairwise_overlap",
-           "JointResult", "refine_jointly", "overlap_rms"]
+           "first_view_world", "refinement_pairs", "pair_jobs", "WorkAhead", "JointResult", "refine_jointly", "overlap_rms"]
 
 
 @dataclass(frozen=True)
@@ -94,13 +106,16 @@ class MultiViewResult:
         return f"MultiViewResult({len(self.T_world_view)} views, {acc}/{len(self.edges)} edges, rmse={self.rmse * 1e3:.3f} mm)"
 
 
-def _prepare(clouds: Sequence[PointCloud], voxel: float) -> list[PointCloud]:
+def _prepare(clouds: Sequence[PointCloud], voxel: float, given: list[PointCloud] | None = None) -> list[PointCloud]:
+    """Each cloud downsampled to ``voxel`` with normals (``given``: already so, by :class:`RegistrationAhead`)."""
     for k, c in enumerate(clouds):  # every view's own faults first, then those of the voxel
         pts = np.asarray(c.points)
         if len(pts) < 50:
             raise RegistrationError(f"view {k}: {len(pts)} points; a scan needs at least 50 to register")
         if not np.all(np.isfinite(pts)):
             raise RegistrationError(f"view {k}: has NaN or infinite points; drop them first")
+    if given is not None:
+        return given
     with ThreadPoolExecutor(max_workers=2, thread_name_prefix="rangekit-voxels") as pool:   # in order
         return list(pool.map(lambda c: downsample_with_normals(c, voxel), clouds))
 
@@ -111,47 +126,6 @@ def _sync(n: int, edges: list[EdgeResult]) -> SyncResult:
     if not acc:
         raise RegistrationError("no pair of views was registered reliably; the scans may not overlap")
     return synchronise(n, acc, robust=True)
-
-
-def _check_connected(n: int, edges: list[EdgeResult], names: Sequence[str] | None = None) -> None:
-    """ViewsCutOff (its views: those outside the largest connected part) unless the accepted edges connect
-    every view; the message names the views cut off and why the edges to them were refused (an ambiguous
-    overlap names the motion it leaves free)."""
-    parent = list(range(n))
-
-    def find(a):
-        while parent[a] != a:
-            parent[a] = parent[parent[a]]
-            a = parent[a]
-        return a
-
-    for e in edges:
-        if e.accepted:
-            parent[find(e.i)] = find(e.j)
-    groups: dict[int, list[int]] = {}
-    for k in range(n):
-        groups.setdefault(find(k), []).append(k)
-    if len(groups) > 1:
-        parts = sorted(groups.values(), key=len, reverse=True)
-        main = set(parts[0])
-        cut = [e for e in edges if (e.i in main) != (e.j in main) and e.reason]
-        ambiguous = [e for e in cut if e.unconstrained]
-        why = "; ".join(f"edge {e.i}-{e.j} {e.reason}" for e in (ambiguous or cut)[:3])
-        named = f" ({', '.join(names[k] for p in parts[1:] for k in p)})" if names is not None else ""
-        hint = ("the overlap does not fix the pose (a plane, sphere, cylinder or surface of revolution slides "
-                "on itself): give a prior (--init turntable:... or a poses.json) or scan more shape in the "
-                "overlap" if ambiguous else "scan more views in between or register those separately")
-        raise ViewsCutOff(f"the scans do not all overlap: views {parts[1:]}{named} have no reliable link to "
-                          f"views {parts[0]}{' (' + why + ')' if why else ''}; {hint}",
-                          sorted(k for p in parts[1:] for k in p))
-
-
-def _cut_off_message(views: list[int], names: Sequence[str] | None, voxel: float) -> str:
-    named = f" ({', '.join(names[k] for k in views)})" if names is not None else ""
-    return (f"views {views}{named} could not be registered: their pairwise alignments disagree with each other "
-            f"and with the rest, even measured again at a finer voxel. Give a prior (--init turntable:AX,AY,AZ:STEP "
-            f"or a poses.json), try every pair (--neighbours 0) or a finer voxel (--voxel-mm "
-            f"{voxel * 1e3 / 2:.3g}), or scan more views next to them")
 
 
 def _joint_holds(n: int, pairs: list, edges: list[EdgeResult], holds: dict, T: np.ndarray) -> dict:
@@ -173,7 +147,8 @@ def _joint_holds(n: int, pairs: list, edges: list[EdgeResult], holds: dict, T: n
 
 def register_views(clouds: Sequence[PointCloud], *, init_T_world_view: np.ndarray | None = None,
                    options: MultiViewOptions = MultiViewOptions(), progress: Callable[[str], None] | None = None,
-                   names: Sequence[str] | None = None, map_pairs: PairMapper | None = None) -> MultiViewResult:
+                   names: Sequence[str] | None = None, map_pairs: PairMapper | None = None,
+                   ahead: WorkAhead | None = None) -> MultiViewResult:
     """Register ``clouds`` (each in its own frame) into the first cloud's frame.
 
     Parameters
@@ -186,6 +161,9 @@ def register_views(clouds: Sequence[PointCloud], *, init_T_world_view: np.ndarra
     names : the views' names for error messages (e.g. file names).
     map_pairs : runs each refinement round's pair jobs (:data:`rangekit.registration.pair_refine.PairMapper`);
         None: one after another here. The Dask batch maps them onto its workers (the same bits).
+    ahead : the work a scan did while its views arrived (:class:`rangekit.registration.ahead.RegistrationAhead`):
+        each view's downsampled levels and first-round pairs, taken where they are exactly what this call would
+        compute (the same voxels, prior and pair jobs), so the result is the same bits with or without it.
 
     Ambiguous pairs (a rigid motion left free, rangekit.registration.stability): with no prior not edges (a
     view reached only through them: RegistrationError naming the views and the motion); with a prior, ICP
@@ -193,10 +171,33 @@ def register_views(clouds: Sequence[PointCloud], *, init_T_world_view: np.ndarra
     """
     with one_blas_thread():    # thin (n, 6) and (N, 3) products: rangekit._runtime.threads
         return _register_views([as_cloud(c, f"register_views clouds[{i}]") for i, c in enumerate(clouds)],
-                               init_T_world_view, options, progress, names, map_pairs)
+                               init_T_world_view, options, progress, names, map_pairs, ahead)
 
 
-def _register_views(clouds, init_T_world_view, options, progress, names, map_pairs) -> MultiViewResult:
+def first_view_world(T_world_view: np.ndarray) -> np.ndarray:
+    """(n, 4, 4) the poses with the first view's frame as the world."""
+    return np.einsum("ij,njk->nik", invert_T(T_world_view[0]), T_world_view)
+
+
+def refinement_pairs(options: MultiViewOptions, prior: bool) -> PairChooser:
+    """The chooser of the refinement's candidate pairs: ``options.pairs``, else on the turntable the neighbours
+    in angle, with no prior the neighbours in rotation, long links (and the most overlapping, estimated), with
+    any other prior every pair (it may be degrees off)."""
+    return options.pairs or (nearest_and_long_links() if not prior else
+                             nearest_in_rotation() if options.turntable else all_pairs)
+
+
+def pair_jobs(pairs: Sequence[tuple[int, int]], start: Callable[[int, int], np.ndarray], v: float,
+              options: MultiViewOptions, rnd: int, prior: bool, names: Sequence[str] | None) -> list[PairJob]:
+    """One :class:`PairJob` per pair of a refinement round ``rnd`` on the level of voxel ``v`` (metres), each from
+    ``start(i, j)`` (its T_i_j). A wide gate on a coarser level first (the prior may be degrees off), then a
+    2-voxel gate, so the final RMSE measures the overlap only and is comparable with the coarse stage's."""
+    icp_opt = replace(options.icp, max_distance=2.0 * v, voxel_sizes=(2.0 * v,), rng=options.rng + rnd)
+    return [PairJob(i, j, start(i, j), v, icp_opt, options.min_overlap, options.min_constraint, options.max_rmse * v,
+                    prior, None if names is None else (names[i], names[j])) for i, j in pairs]
+
+
+def _register_views(clouds, init_T_world_view, options, progress, names, map_pairs, ahead) -> MultiViewResult:
     say = progress or (lambda msg: None)
     n = len(clouds)
     if n < 2:
@@ -204,8 +205,10 @@ def _register_views(clouds, init_T_world_view, options, progress, names, map_pai
     diag = bbox_diagonal(clouds)
     voxel = diag / 110.0 if options.voxel is None else check_voxel(options.voxel, diag, what="voxel")
     fine = voxel / 3.0 if options.fine_voxel is None else check_voxel(options.fine_voxel, diag, what="fine_voxel")
-    coarse_clouds = _prepare(clouds, voxel)
-    fine_clouds = _prepare(clouds, fine)
+    coarse_clouds = _prepare(clouds, voxel, None if ahead is None else ahead.level(voxel, n))
+    fine_clouds = _prepare(clouds, fine, None if ahead is None else ahead.level(fine, n))
+    if ahead is not None:
+        map_pairs = ahead.mapper(map_pairs)
 
     n_coarse, coarse_label, seen = 0, "", set()
     if init_T_world_view is None:
@@ -222,7 +225,7 @@ def _register_views(clouds, init_T_world_view, options, progress, names, map_pai
                                options.max_coarse_rmse * voxel, prior=False)
 
         def settle(edges: list) -> np.ndarray:
-            _check_connected(n, edges, names)
+            edges_connect_views(n, edges, names)
             return _sync(n, edges).T_world_view
 
         k = options.coarse_neighbours
@@ -234,7 +237,7 @@ def _register_views(clouds, init_T_world_view, options, progress, names, map_pai
             try:
                 edges, T, k = widen_until_settled(dist, k, align, settle)
             except EdgesDisagree as cut:
-                raise EdgesDisagree(_cut_off_message(cut.views, names, voxel), cut.views) from None
+                raise EdgesDisagree(cut_off_message(cut.views, names, voxel), cut.views) from None
             coarse_label = f"k={k} most similar by FPFH histogram"
         n_coarse, seen = len(edges), {(e.i, e.j) for e in edges}
         say(f"coarse alignment of {n_coarse} of {n * (n - 1) // 2} pairs ({coarse_label}, voxel "
@@ -243,7 +246,7 @@ def _register_views(clouds, init_T_world_view, options, progress, names, map_pai
         T = np.asarray(init_T_world_view, dtype=np.float64).copy()
         if T.shape != (n, 4, 4):
             raise RegistrationError(f"init_T_world_view must be ({n}, 4, 4), found {T.shape}")
-        T = np.einsum("ij,njk->nik", invert_T(T[0]), T)  # world = first view
+        T = first_view_world(T)
     T_prior = T.copy()
 
     edges: list[EdgeResult] = []
@@ -251,8 +254,7 @@ def _register_views(clouds, init_T_world_view, options, progress, names, map_pai
     prior = init_T_world_view is not None
     # On the turntable the neighbours in angle; with no prior the neighbours in rotation, long links and the
     # most overlapping (O(n k)). Any other prior may be degrees off: every pair (options.pairs bounds it).
-    choose = options.pairs or (nearest_and_long_links() if init_T_world_view is None else
-                               nearest_in_rotation() if options.turntable else all_pairs)
+    choose = refinement_pairs(options, prior)
     n_candidates = n_refined = 0
 
     estimate = options.pairs is None and not prior   # + the most overlapping, as a prior's all pairs would
@@ -268,12 +270,7 @@ def _register_views(clouds, init_T_world_view, options, progress, names, map_pai
     def refine(pairs: list, start: Callable[[int, int], np.ndarray], level: list, trees: list, v: float,
                rnd: int) -> tuple[list, dict]:
         """ICP of each pair from ``start(i, j)`` (its T_i_j) on ``level`` with voxel ``v``: (edges, holds)."""
-        # Wide gate on a coarser level first (the prior may be degrees off), then a 2-voxel gate, so the
-        # final RMSE measures the overlap only and is comparable with the coarse stage's.
-        icp_opt = replace(options.icp, max_distance=2.0 * v, voxel_sizes=(2.0 * v,), rng=options.rng + rnd)
-        jobs = [PairJob(i, j, start(i, j), v, icp_opt, options.min_overlap, options.min_constraint,
-                        options.max_rmse * v, prior, None if names is None else (names[i], names[j]))
-                for i, j in pairs]
+        jobs = pair_jobs(pairs, start, v, options, rnd, prior, names)
         if map_pairs is None:   # two pairs at a time (their k-d tree queries release the GIL), taken in order
             with ThreadPoolExecutor(max_workers=2, thread_name_prefix="rangekit-pairs") as pool:
                 refined = list(pool.map(lambda job: refine_pair(job, level[job.i], level[job.j], trees[job.i],
@@ -298,7 +295,7 @@ def _register_views(clouds, init_T_world_view, options, progress, names, map_pai
         n_candidates = len(candidates)
         T_start = T
         edges, holds = refine(candidates, lambda i, j: invert_T(T_start[i]) @ T_start[j], level, trees, v, rnd)
-        _check_connected(n, edges, names)
+        edges_connect_views(n, edges, names)
         widened: set = set()
         while True:
             try:
@@ -309,7 +306,7 @@ def _register_views(clouds, init_T_world_view, options, progress, names, map_pai
                 # Stanford dragon a 15k-point view's 3 mm edges disagreed by 1.5 deg, its 1 mm edges agree).
                 new = [c for c in cut.views if c not in widened]
                 if not new:
-                    raise EdgesDisagree(_cut_off_message(cut.views, names, voxel), cut.views) from None
+                    raise EdgesDisagree(cut_off_message(cut.views, names, voxel), cut.views) from None
                 widened |= set(new)
                 pairs = sorted({(min(c, k), max(c, k)) for c in new for k in range(n) if k != c})
                 kept = {(e.i, e.j): e.T_i_j for e in edges if e.accepted}
@@ -341,11 +338,12 @@ def _register_views(clouds, init_T_world_view, options, progress, names, map_pai
             T, basis = onto_turntable(T_prior), turntable_basis
         # Pairs by overlap at the synchronised poses (not by which pairwise runs passed), so the same data
         # gives the same problem whatever the starting poses were.
-        trees = fine_trees or [cKDTree(c.points) for c in fine_clouds]
+        trees = fine_trees or (ahead is not None and ahead.trees(fine_clouds)) or [cKDTree(c.points) for c in fine_clouds]
         joint_candidates = candidates_at(T, fine_clouds, fine)
         seen |= set(joint_candidates)
+        overlap = mutual_overlap if ahead is None else ahead.overlap
         pairs = [(i, j) for i, j in joint_candidates
-                 if mutual_overlap(fine_clouds[i], fine_clouds[j], trees[i], trees[j], invert_T(T[i]) @ T[j],
+                 if overlap(fine_clouds[i], fine_clouds[j], trees[i], trees[j], invert_T(T[i]) @ T[j],
                                     2 * fine) >= options.min_overlap]
         joint = refine_jointly(fine_clouds, T, pairs, max_distance=2.5 * fine, iterations=options.joint_iterations,
                                samples=options.joint_samples, tolerance=options.joint_tolerance, rng=options.rng,

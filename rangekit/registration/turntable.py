@@ -8,6 +8,8 @@ joint refinement drifts there (0.9 mm on the simulated step gauge) while the tur
 
 - :func:`common_axis`: the axis (unit direction, a point on it) that best explains a set of poses.
 - :func:`onto_turntable`: the nearest poses of that family (the common axis, each view's angle about it).
+- :func:`swept_voxel`: the registration's voxel from the first view alone, the box its points sweep on the
+  table (a scan's registration can then start before the last view is in).
 - :func:`turntable_basis`: the (6(n-1), n-1+4) basis of the small motions of views 1..n-1 (view 0 is the
   world) that keep all the poses rotations about one axis, in the joint refinement's coordinates: each
   view's ``xi = (omega, v)``, a rotation ``omega`` about ``centre`` followed by a translation ``v``.
@@ -22,7 +24,13 @@ import numpy as np
 from rangekit.errors import RegistrationError
 from rangekit.geometry import R_to_rotvec, make_T, rotvec_to_R
 
-__all__ = ["common_axis", "onto_turntable", "turntable_basis"]
+__all__ = ["common_axis", "onto_turntable", "turntable_basis", "swept_voxel", "SWEPT_VOXELS"]
+
+#: The swept box's diagonal in voxels (:func:`swept_voxel`). Every view's own box holds what the views saw, a
+#: smaller box than the one the first view's points sweep round the axis: on the default 12-view scan 0.230 m
+#: against 0.268 m, so 110 voxels of the one (the voxel of :func:`rangekit.registration.multiview.register_views`
+#: by default) are 128 of the other: 2.09 mm both.
+SWEPT_VOXELS = 128
 
 
 def common_axis(T_world_view: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -91,3 +99,16 @@ def turntable_basis(T_world_view: np.ndarray, centre: np.ndarray, length: float)
     B = U[:, s > 1e-9 * s.max()]
     B[np.tile(np.arange(6) < 3, n - 1)] /= length
     return B
+
+
+def swept_voxel(points: np.ndarray, T_world_view: np.ndarray) -> float:
+    """Metres: the diagonal of the box that the first view's ``points`` ((N, 3), its own frame) fill when carried
+    into every view's frame by the poses ``T_world_view`` ((n, 4, 4), world = the first view's frame), divided by
+    :data:`SWEPT_VOXELS`; about 2000 of the points (every k-th) are used, as
+    :func:`rangekit.surface.cloud.bbox_diagonal` does. Known from the first view and the prior alone."""
+    P = np.asarray(points, dtype=np.float64)[::max(1, len(points) // 2000)]
+    T = np.asarray(T_world_view, dtype=np.float64)
+    inv = np.linalg.inv(T)                                  # view 0's frame into view k's
+    swept = np.einsum("kij,nj->kni", inv[:, :3, :3], P) + inv[:, None, :3, 3]
+    swept = swept.reshape(-1, 3)
+    return float(np.linalg.norm(swept.max(axis=0) - swept.min(axis=0))) / SWEPT_VOXELS

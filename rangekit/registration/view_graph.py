@@ -7,7 +7,7 @@ frame).
 
 from __future__ import annotations
 
-from typing import NamedTuple
+from typing import NamedTuple, Sequence
 
 import numpy as np
 import scipy.sparse as sp
@@ -17,7 +17,7 @@ from rangekit.errors import InputError, RegistrationError
 from rangekit.geometry import nearest_rotation
 
 __all__ = ["ViewGraph", "ViewsCutOff", "EdgesDisagree", "parse_view_graph", "check_connected", "check_rejection",
-           "triangles"]
+           "triangles", "edges_connect_views", "cut_off_message"]
 
 
 class ViewsCutOff(RegistrationError):
@@ -175,3 +175,45 @@ def triangles(g: ViewGraph) -> np.ndarray:
     tri = [(key[a, b], key[b, c], key[a, c])
            for (a, b) in key for c in nbrs[a] & nbrs[b] if c > b]
     return np.array(tri, dtype=np.int64).reshape(-1, 3)
+
+
+def edges_connect_views(n: int, edges: Sequence, names: Sequence[str] | None = None) -> None:
+    """ViewsCutOff (its views: those outside the largest connected part) unless the accepted ``edges``
+    (:class:`rangekit.registration.pair_refine.EdgeResult`) connect every view; the message names the views cut
+    off and why the edges to them were refused (an ambiguous overlap names the motion it leaves free)."""
+    parent = list(range(n))
+
+    def find(a):
+        while parent[a] != a:
+            parent[a] = parent[parent[a]]
+            a = parent[a]
+        return a
+
+    for e in edges:
+        if e.accepted:
+            parent[find(e.i)] = find(e.j)
+    groups: dict[int, list[int]] = {}
+    for k in range(n):
+        groups.setdefault(find(k), []).append(k)
+    if len(groups) > 1:
+        parts = sorted(groups.values(), key=len, reverse=True)
+        main = set(parts[0])
+        cut = [e for e in edges if (e.i in main) != (e.j in main) and e.reason]
+        ambiguous = [e for e in cut if e.unconstrained]
+        why = "; ".join(f"edge {e.i}-{e.j} {e.reason}" for e in (ambiguous or cut)[:3])
+        named = f" ({', '.join(names[k] for p in parts[1:] for k in p)})" if names is not None else ""
+        hint = ("the overlap does not fix the pose (a plane, sphere, cylinder or surface of revolution slides "
+                "on itself): give a prior (--init turntable:... or a poses.json) or scan more shape in the "
+                "overlap" if ambiguous else "scan more views in between or register those separately")
+        raise ViewsCutOff(f"the scans do not all overlap: views {parts[1:]}{named} have no reliable link to "
+                          f"views {parts[0]}{' (' + why + ')' if why else ''}; {hint}",
+                          sorted(k for p in parts[1:] for k in p))
+
+
+def cut_off_message(views: list[int], names: Sequence[str] | None, voxel: float) -> str:
+    """What to say of ``views`` whose pairwise alignments still disagree (measured again at a finer level)."""
+    named = f" ({', '.join(names[k] for k in views)})" if names is not None else ""
+    return (f"views {views}{named} could not be registered: their pairwise alignments disagree with each other "
+            f"and with the rest, even measured again at a finer voxel. Give a prior (--init turntable:AX,AY,AZ:STEP "
+            f"or a poses.json), try every pair (--neighbours 0) or a finer voxel (--voxel-mm "
+            f"{voxel * 1e3 / 2:.3g}), or scan more views next to them")

@@ -245,6 +245,10 @@ def truth_evaluator(obj: str, rig: Rig, **options) -> "TruthEvaluator":
     return TruthEvaluator(default_scene(obj), rig, options)
 
 
+def _angles_key(angles) -> tuple:
+    return tuple(np.asarray(angles, dtype=np.float64).reshape(-1).tolist())
+
+
 class TruthEvaluator:
     """``evaluate(mesh, angles, cloud=None, views=None)`` -> :class:`TruthEvaluation` (see
     :func:`truth_evaluator`); ``evaluate.prepare(angles, views)`` computes the half that does not depend on
@@ -259,9 +263,11 @@ class TruthEvaluator:
     def __init__(self, scene: Scene, rig: Rig, options: dict) -> None:
         self.scene, self.rig, self.options = scene, rig, dict(options)
         self._key, self._truth, self._views, self._view_errors = None, None, None, None
+        self._measured: dict = {}    # view index -> (angles key, cloud, proj_col, its pose-free errors)
+        self.views_taken = 0         # views whose errors prepare() took from prepare_view()
 
     def prepare(self, angles: Sequence[float], views=None) -> None:
-        key = tuple(np.asarray(angles, dtype=np.float64).reshape(-1).tolist())
+        key = _angles_key(angles)
         if self._key != key:
             self._truth = truth_samples(self.scene, self.rig, angles,
                                         **{k: v for k, v in self.options.items() if k in _TRUTH_OPTIONS})
@@ -269,9 +275,23 @@ class TruthEvaluator:
         if views is not None and views is not self._views:
             from rangekit.sim.truth.view_errors import view_errors
 
+            measured = {k: m[3] for k, m in self._measured.items()
+                        if k < len(views.clouds) and m[0] == key and m[1] is views.clouds[k]
+                        and m[2] is (views.proj_cols[k] if views.proj_cols else None)}
             errors = view_errors(self.scene, self.rig, angles, views.clouds, views.T_world_view, views.proj_cols,
-                                 views.names, pass_motions=self.options.get("pass_motions"))
-            self._views, self._view_errors = views, errors
+                                 views.names, pass_motions=self.options.get("pass_motions"), measured=measured)
+            self._views, self._view_errors, self._measured = views, errors, {}
+            self.views_taken += len(measured)
+
+    def prepare_view(self, angles: Sequence[float], k: int, cloud, proj_col: np.ndarray | None = None) -> None:
+        """View ``k``'s errors that its registered pose does not change, measured now (a scan's streaming
+        processor, as the view is decoded): :meth:`prepare` with ``views`` holding this very ``cloud`` and
+        ``proj_col`` (the same objects) at index ``k`` takes them instead of measuring again."""
+        from rangekit.sim.truth.view_errors import view_surface_errors
+
+        errors = view_surface_errors(self.scene, self.rig, angles, k, cloud, proj_col,
+                                     pass_motions=self.options.get("pass_motions"))
+        self._measured[k] = (_angles_key(angles), cloud, proj_col, errors)
 
     def __call__(self, mesh: TriangleMesh, angles: Sequence[float], cloud: np.ndarray | None = None,
                  views=None) -> TruthEvaluation:

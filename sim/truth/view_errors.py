@@ -31,7 +31,7 @@ from rangekit.sim.scene.raycast import cast_view
 from rangekit.sim.scene.passes import pass_scene, split_views, view_motions
 from rangekit.sim.scene.scene import Scene
 
-__all__ = ["view_errors", "depth_edges"]
+__all__ = ["view_errors", "view_surface_errors", "depth_edges"]
 
 #: Pixels within this many of a depth edge count as edge pixels.
 EDGE_PX = 2
@@ -111,53 +111,69 @@ def _stats(d: np.ndarray) -> dict:
 
 def view_errors(scene: Scene, rig: Rig, angles: Sequence[float], clouds: Sequence, T_world_view: np.ndarray,
                 proj_cols: Sequence[np.ndarray] | None = None, names: Sequence[str] | None = None,
-                pass_motions=None) -> list[dict]:
+                pass_motions=None, measured: dict | None = None) -> list[dict]:
     """One dict per view (see the module docstring): ``decoding`` (px), ``cloud`` (mm, with ``inside`` and
     ``edge`` parts and ``edge_share``), ``registration`` (deg, mm). ``clouds``: each view's PointCloud in
     its own frame; ``proj_cols``: each view's decoded (H, W) projector column (NaN where undecoded), or None
     to skip the decoding figure; ``scene``: the simulated scene (object first) at table angle 0. A multi-pass
     scan: ``pass_motions`` (P, 4, 4) and ``angles`` as ``(angle, pass)`` pairs (:mod:`rangekit.sim.scene.passes`);
-    the true pose of each view then includes its pass's turn-over."""
+    the true pose of each view then includes its pass's turn-over. ``measured``: view index -> what
+    :func:`view_surface_errors` gave for that view (made while the scan ran), used instead of measuring again."""
     obj = scene.objects[0]
     motions = view_motions(rig, angles, pass_motions)
-    angles, passes, F = split_views(angles, pass_motions)
     T_true = np.stack([motions[0] @ invert_T(Mk) for Mk in motions])
-    scenes = {p: scene if p == 0 else pass_scene(scene, F[p]) for p in np.unique(passes).tolist()}
-    camera = rig.camera
     centre = obj.world_vertices().mean(axis=0)
+    measured = measured or {}
     out = []
-    for k, (angle, cloud) in enumerate(zip(angles, clouds)):
-        M = motions[k]
-        truth = TriangleMesh(apply_T(M, obj.world_vertices()), obj.triangles)
+    for k, cloud in enumerate(clouds):
+        col = None if proj_cols is None else proj_cols[k]
+        surface = measured[k] if k in measured else view_surface_errors(scene, rig, angles, k, cloud, col,
+                                                                         pass_motions)
         P = cloud.points
-        d = distance_to_surface(P, truth) if len(P) else np.zeros(0)
-        uv = np.rint(camera.project(P)).astype(np.int64) if len(P) else np.zeros((0, 2), np.int64)
-        box = _box(uv, camera, _MARGIN)
-        geometry, edges = _truth_in_box(scenes[int(passes[k])].world_mesh(rig.T_world_rotated(float(angle))), camera,
-                                        rig.projector, box)
-        r0, c0 = (box[0].start, box[1].start) if box is not None else (0, 0)
-        H, W = edges.shape
-        u, v = uv[:, 0] - c0, uv[:, 1] - r0
-        inside_img = (u >= 0) & (u < W) & (v >= 0) & (v < H)
-        edge = np.zeros(len(P), dtype=bool)
-        edge[inside_img] = edges[v[inside_img], u[inside_img]]
-        sq = float(np.sum(d ** 2))
-        cloud_stats = {**_stats(d), "inside": _stats(d[~edge]), "edge": _stats(d[edge]),
-                       "edge_share": float(np.sum(d[edge] ** 2) / sq) if sq > 0 else 0.0}
         E = invert_T(T_true[k]) @ T_world_view[k]
-        c_view = apply_T(M, centre[None])[0]   # the object's centre in view k's frame
+        c_view = apply_T(motions[k], centre[None])[0]   # the object's centre in view k's frame
         moved = np.linalg.norm(apply_T(E, P) - P, axis=1) if len(P) else np.zeros(0)
         registration = {"rotation_deg": float(np.degrees(rotation_angle(E[:3, :3]))),
                         "translation_mm": float(np.linalg.norm(apply_T(E, c_view[None])[0] - c_view) * 1e3),
                         "point_rms_mm": float(np.sqrt(np.mean(moved ** 2)) * 1e3) if moved.size else None}
-        decoding = None
-        if proj_cols is not None:
-            col = proj_cols[k] if box is None else proj_cols[k][box]
-            both = np.isfinite(col) & np.isfinite(geometry.proj_col) & (geometry.object_id == 0)
-            e = (col - geometry.proj_col)[both]
-            decoding = {"rms_px": float(np.sqrt(np.mean(e ** 2))) if e.size else None,
-                        "p95_px": float(np.percentile(np.abs(e), 95)) if e.size else None, "n": int(e.size)}
-        out.append({"view": names[k] if names is not None else k, "decoding": decoding, "cloud": cloud_stats,
-                    "registration": registration})
-        del geometry, edges     # its pages serve the next view's cast (processing: reuse_freed_memory)
+        out.append({"view": names[k] if names is not None else k, "decoding": surface["decoding"],
+                    "cloud": surface["cloud"], "registration": registration})
     return out
+
+
+def view_surface_errors(scene: Scene, rig: Rig, angles: Sequence[float], k: int, cloud,
+                        proj_col: np.ndarray | None = None, pass_motions=None) -> dict:
+    """View ``k``'s errors that do not depend on its registered pose: ``{"decoding": ..., "cloud": ...}`` as in
+    :func:`view_errors` (``angles`` and ``pass_motions`` as there: every view's, ``cloud`` and ``proj_col`` this
+    view's). A scan's streaming processor measures each view with it as the view is decoded."""
+    obj = scene.objects[0]
+    motions = view_motions(rig, angles, pass_motions)
+    angle_k, passes, F = split_views(angles, pass_motions)
+    p = int(passes[k])
+    view_scene = scene if p == 0 else pass_scene(scene, F[p])
+    camera = rig.camera
+    truth = TriangleMesh(apply_T(motions[k], obj.world_vertices()), obj.triangles)
+    P = cloud.points
+    d = distance_to_surface(P, truth) if len(P) else np.zeros(0)
+    uv = np.rint(camera.project(P)).astype(np.int64) if len(P) else np.zeros((0, 2), np.int64)
+    box = _box(uv, camera, _MARGIN)
+    geometry, edges = _truth_in_box(view_scene.world_mesh(rig.T_world_rotated(float(angle_k[k]))), camera,
+                                    rig.projector, box)
+    r0, c0 = (box[0].start, box[1].start) if box is not None else (0, 0)
+    H, W = edges.shape
+    u, v = uv[:, 0] - c0, uv[:, 1] - r0
+    inside_img = (u >= 0) & (u < W) & (v >= 0) & (v < H)
+    edge = np.zeros(len(P), dtype=bool)
+    edge[inside_img] = edges[v[inside_img], u[inside_img]]
+    sq = float(np.sum(d ** 2))
+    cloud_stats = {**_stats(d), "inside": _stats(d[~edge]), "edge": _stats(d[edge]),
+                   "edge_share": float(np.sum(d[edge] ** 2) / sq) if sq > 0 else 0.0}
+    decoding = None
+    if proj_col is not None:
+        col = proj_col if box is None else proj_col[box]
+        both = np.isfinite(col) & np.isfinite(geometry.proj_col) & (geometry.object_id == 0)
+        e = (col - geometry.proj_col)[both]
+        decoding = {"rms_px": float(np.sqrt(np.mean(e ** 2))) if e.size else None,
+                    "p95_px": float(np.percentile(np.abs(e), 95)) if e.size else None, "n": int(e.size)}
+    del geometry, edges     # its pages serve the next view's cast (processing: reuse_freed_memory)
+    return {"decoding": decoding, "cloud": cloud_stats}

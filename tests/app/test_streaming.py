@@ -47,14 +47,14 @@ def streamed(tmp_path_factory):
     _acquire(out, sim(), streaming)
     preview = streaming.finish()
     assert streaming.error is None
-    return out, seen, preview, streaming.results
+    return out, seen, preview, streaming.results, streaming
 
 
 def test_each_view_is_decoded_into_the_cache_processing_reads(streamed, tmp_path):
     """The cache the streaming processor writes is, byte for byte, what processing writes for the view."""
     from rangekit.app.process.view_cache import cache_settings, table_transform, view_cloud
 
-    out, seen, _, _ = streamed
+    out, seen, _, _, _ = streamed
     assert [e.index for e in seen if isinstance(e, ev.ViewDecoded)] == list(range(N_VIEWS))
     fresh = copy_session(out, tmp_path / "fresh")
     for k in range(N_VIEWS):
@@ -81,7 +81,7 @@ def test_views_are_placed_near_their_true_poses_and_the_preview_lies_on_the_obje
     from rangekit.rig.rig_file import turntable_prior
     from rangekit.sim import default_scene
 
-    out, seen, preview, _ = streamed
+    out, seen, preview, _, _ = streamed
     placed = [e for e in seen if isinstance(e, ev.ViewPlaced)]
     assert [e.index for e in placed] == list(range(N_VIEWS))
     session = Session.load(out)
@@ -105,7 +105,7 @@ def test_views_are_placed_near_their_true_poses_and_the_preview_lies_on_the_obje
 def test_a_resumed_scan_decodes_nothing_twice(streamed, tmp_path):
     """Views 0 and 1 streamed, the scan stopped; resumed, the streaming processor takes the done views from their
     cache (files untouched) and decodes only views 2 and 3."""
-    out, _, _, _ = streamed
+    out, _, _, _, _ = streamed
     part = copy_session(out, tmp_path / "part", pending=(2, 3))
     before = {k: {n: (part / f"view_{k:03d}" / n).stat().st_mtime_ns for n in CACHE} for k in (0, 1)}
     seen = []
@@ -122,22 +122,41 @@ def test_a_resumed_scan_decodes_nothing_twice(streamed, tmp_path):
 
 @pytest.mark.slow
 def test_the_final_mesh_is_what_rangekit_process_makes(streamed, tmp_path):
-    """Processing after the streamed scan, given the decoded views (as the scan hands them on) or reading them
-    from their cache, writes the bytes ``rangekit process`` writes for the same session without any cache."""
+    """Processing after the streamed scan, given what the scan did while its views came (the decoded views, the
+    registration's levels and first-round pairs, each view's errors against the truth) or reading the views from
+    their cache, writes the bytes ``rangekit process`` writes for the same session without any cache; and takes
+    the work ahead (every level, every first-round pair, the errors of the views decoded while the capture ran)."""
+    import json
+
     from rangekit.app.scan.scan import process
 
-    out, _, _, results = streamed
+    out, _, _, results, streaming = streamed
+    ahead, evaluate = streaming.registration, streaming.evaluate
+    assert ahead is not None and ahead.views == list(range(N_VIEWS)) and evaluate is not None
     scanned = shutil.copytree(out, tmp_path / "scanned")
     cached = shutil.copytree(out, tmp_path / "cached")
     fresh = copy_session(out, tmp_path / "fresh")
     for k in range(N_VIEWS):
         for name in CACHE:
             (fresh / f"view_{k:03d}" / name).unlink()
-    process(scanned, ProcessOptions(report=False), decoded_views=results)
+    process(scanned, ProcessOptions(report=False), decoded_views=results, evaluate=evaluate,
+            registration_ahead=ahead)
+    # the errors of the views decoded while the capture ran (not the last one's: the processing measures it
+    # beside the fusion)
+    assert ahead.taken == {"levels": 2, "pairs": len(ahead._jobs), "overlaps": len(ahead._joint)}
+    assert evaluate.views_taken == len(streaming.measured) >= 1 and N_VIEWS - 1 not in streaming.measured
     process(cached, ProcessOptions(report=False))
     process(fresh, ProcessOptions(report=False))
     for name in ("mesh.ply", "mesh_watertight.ply", "merged.ply", "poses.json"):
         assert (scanned / name).read_bytes() == (fresh / name).read_bytes() == (cached / name).read_bytes(), name
+
+    def figures(folder):   # summary.json but its seconds
+        d = json.loads((folder / "summary.json").read_text())
+        d.pop("seconds", None)
+        return d
+
+    assert figures(scanned) == figures(fresh) == figures(cached)
+    assert figures(fresh)["view_errors"] is not None
 
 
 @pytest.mark.slow

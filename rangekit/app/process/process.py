@@ -1,7 +1,7 @@
 """From an acquired session to one mesh: decode and triangulate every view, register the views seeded by
 the turntable angles, fuse, measure against the truth when given an evaluator, report (the work behind
 ``rangekit process`` and the end of ``rangekit scan``). The pipeline is the same on hardware and on
-the simulator: it never imports :mod:`rangekit.sim` (see :func:`rangekit.app.scan.scan.session_evaluator`).
+the simulator: it never imports :mod:`rangekit.sim` (see :func:`rangekit.app.scan.truth.session_evaluator`).
 
 Writes into the session folder (atomically):
 
@@ -49,6 +49,7 @@ from rangekit.io import atomic_write_json, fsync_folder
 from rangekit.progress import call_progress
 
 if TYPE_CHECKING:
+    from rangekit.registration.ahead import RegistrationAhead
     from rangekit.registration.pair_refine import PairMapper
 
 __all__ = ["process_session"]
@@ -56,7 +57,8 @@ __all__ = ["process_session"]
 
 def process_session(session: Session | str | Path, options: ProcessOptions | None = None, *,
                     evaluate: Evaluator | None = None, on_event: OnEvent | None = None,
-                    map_pairs: PairMapper | None = None, decoded_views: dict | None = None) -> ProcessResult:
+                    map_pairs: PairMapper | None = None, decoded_views: dict | None = None,
+                    registration_ahead: RegistrationAhead | None = None) -> ProcessResult:
     """Process the completed views of a session (a loaded :class:`Session` or its folder) into ``mesh.ply``
     (the observed surface) and ``mesh_watertight.ply`` (closed, flagged; and ``summary.json``, ``report.html``).
 
@@ -74,6 +76,9 @@ def process_session(session: Session | str | Path, options: ProcessOptions | Non
         :func:`rangekit.app.process.view_cache.view_cloud` gives them, their frames checked when they were read
         (the scan's streaming processor, :mod:`rangekit.app.scan.streaming`); the others are decoded or read
         from their cache.
+    registration_ahead : what the scan's streaming processor registered as the views came
+        (:class:`rangekit.registration.ahead.RegistrationAhead`): taken where it is exactly what the register stage
+        computes, so the outputs are the same bytes with or without it.
 
     Raises
     ------
@@ -90,11 +95,13 @@ def process_session(session: Session | str | Path, options: ProcessOptions | Non
     with failures_announced(on_event), session_lock(folder), one_blas_thread(), ExitStack() as children:
         if not isinstance(session, Session):    # (one BLAS thread: thin products, rangekit._runtime.threads)
             session = Session.load(folder)
-        return _process(session, options, evaluate, on_event, map_pairs, children, decoded_views or {})
+        return _process(session, options, evaluate, on_event, map_pairs, children, decoded_views or {},
+                        registration_ahead)
 
 
 def _process(session: Session, options: ProcessOptions, evaluate: Evaluator | None, on_event: OnEvent | None,
-             map_pairs: PairMapper | None, children: ExitStack, decoded_views: dict) -> ProcessResult:
+             map_pairs: PairMapper | None, children: ExitStack, decoded_views: dict,
+             registration_ahead: RegistrationAhead | None) -> ProcessResult:
     """The stages in order: check the session, decode (with the report's per-view part), register, fuse (the
     views measured beside it), measure, report, and summary.json last."""
     _start(session, on_event)
@@ -107,7 +114,7 @@ def _process(session: Session, options: ProcessOptions, evaluate: Evaluator | No
     child = poisson_child(decoded, options, children)      # imports on the other core while the views register
     measuring = evaluate is not None
     with prepared_beside(evaluate, evaluator_angles(decoded.views, multi_pass=session.plan.passes > 1)):
-        registered = register(decoded, session, clock, on_event, map_pairs=map_pairs)
+        registered = register(decoded, session, clock, on_event, map_pairs=map_pairs, ahead=registration_ahead)
     with clock.stage("fuse"), Fusion(registered, session, options, child, on_event,
                                      measuring_beside=measuring) as fusion:
         fusion.save_merged()

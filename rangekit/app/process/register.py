@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -16,7 +17,11 @@ from rangekit.formats.sessions.session import Session, SessionView
 from rangekit.formats.sessions.summary import Edge
 from rangekit.rig.rig_file import turntable_prior
 
-__all__ = ["RegisteredViews", "evaluator_angles", "register", "held_to_prior", "PRIOR_TRUST_DEG"]
+if TYPE_CHECKING:
+    from rangekit.registration.ahead import RegistrationAhead
+    from rangekit.registration.multiview import MultiViewOptions
+
+__all__ = ["RegisteredViews", "evaluator_angles", "register", "turntable_registration", "held_to_prior", "PRIOR_TRUST_DEG"]
 
 #: Degrees a registration may move a view from the turntable's pose. A turntable's steps and calibrated axis
 #: are good to a fraction of a degree (the simulated 12-view scan: 0.001 deg); a view moved further was slid by
@@ -62,11 +67,28 @@ def evaluator_angles(views: Sequence[SessionView], *, multi_pass: bool) -> list:
     return [(v.angle, v.scan_pass) for v in views] if multi_pass else [v.angle for v in views]
 
 
+def turntable_registration(rig, views: Sequence[SessionView], first_cloud) -> tuple[np.ndarray, "MultiViewOptions"]:
+    """``(prior, options)`` of a one-pass turntable session's registration: the turntable's poses of ``views``
+    (world = the first view's frame) and the options that keep the joint refinement's views rotations about one
+    axis, with the voxel the first view's cloud sweeps (:func:`rangekit.registration.turntable.swept_voxel`), so
+    that a scan can register its views as they come (:class:`rangekit.registration.ahead.RegistrationAhead`)
+    and give the same poses as processing the session afterwards. A first view of under 50 points (which
+    registration refuses) leaves the voxel to the default rule."""
+    from rangekit.registration.multiview import MultiViewOptions
+    from rangekit.registration.turntable import swept_voxel
+
+    prior = turntable_prior(rig.T_world_table, [v.angle for v in views])
+    points = first_cloud.points
+    ok = len(points) >= 50 and bool(np.all(np.isfinite(points)))
+    return prior, MultiViewOptions(turntable=True, voxel=swept_voxel(points, prior) if ok else None)
+
+
 def register(decoded: DecodedViews, session: Session, clock: StageClock, on_event: OnEvent | None = None, *,
-             map_pairs=None) -> RegisteredViews:
+             map_pairs=None, ahead: RegistrationAhead | None = None) -> RegisteredViews:
     """Register the decoded views (``map_pairs``: runs the pair refinements elsewhere, e.g. as Dask tasks,
-    :data:`rangekit.registration.pair_refine.PairMapper`), write ``poses.json``, announce each pair as
-    :class:`PairRegistered`."""
+    :data:`rangekit.registration.pair_refine.PairMapper`; ``ahead``: what a scan's streaming processor
+    registered as the views came, taken where it is what this registration computes), write ``poses.json``,
+    announce each pair as :class:`PairRegistered`."""
     from rangekit.registration.multiview import MultiViewOptions, register_views
 
     views, clouds, rig = decoded.views, decoded.clouds, session.rig
@@ -78,10 +100,10 @@ def register(decoded: DecodedViews, session: Session, clock: StageClock, on_even
 
             res = register_session_passes(clouds, views, rig, progress=progress, map_pairs=map_pairs)
         else:
-            prior = None if rig.T_world_table is None else turntable_prior(rig.T_world_table, [v.angle for v in views])
-            # On the rig's turntable the views are rotations about one axis: the joint refinement keeps them so.
-            res = register_views(clouds, init_T_world_view=prior, progress=progress,
-                                 options=MultiViewOptions(turntable=prior is not None), map_pairs=map_pairs)
+            prior, options = (None, MultiViewOptions()) if rig.T_world_table is None else \
+                turntable_registration(rig, views, clouds[0])
+            res = register_views(clouds, init_T_world_view=prior, progress=progress, options=options,
+                                 map_pairs=map_pairs, ahead=ahead if ahead is not None and ahead.n == len(views) else None)
         T, note = res.T_world_view, ""
         if view_passes is None and prior is not None:
             T, note = held_to_prior(res.T_world_view, prior, decoded.names, converged=res.converged)

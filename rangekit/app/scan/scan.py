@@ -13,12 +13,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-import numpy as np
+from rangekit._runtime.child import call_beside
 from rangekit.app.events import OnEvent, ScanStarted, StageClock, emit, failures_announced, progress_of
 from rangekit.app.process.evaluate import Evaluator
 from rangekit.app.process.options import ProcessOptions
 from rangekit.app.process.process import process_session
 from rangekit.app.scan.options import ScanOptions
+from rangekit.app.scan.truth import session_evaluator
 from rangekit.errors import ConfigError
 from rangekit.formats.sessions.session import ScanPlan, Session
 from rangekit.formats.sessions.summary import ProcessResult
@@ -87,8 +88,11 @@ def scan(options: ScanOptions, on_event: OnEvent | None = None) -> ScanResult:
             acquisition_s = time.perf_counter() - t0
             if not options.process:
                 return ScanResult(options.folder, session, acquisition_s, None, time.perf_counter() - t0)
-            streaming.finish()
-            processed = process(session, process_options, on_event=on_event, decoded_views=streaming.results)
+            streaming.drain()
+            with call_beside(streaming.write_preview, in_child=False) as preview:   # the preview beside the processing
+                processed = process(session, process_options, on_event=on_event, decoded_views=streaming.results,
+                                    evaluate=streaming.evaluate, registration_ahead=streaming.registration)
+                preview.result()
     return ScanResult(options.folder, session, acquisition_s, processed, time.perf_counter() - t0)
 
 
@@ -162,24 +166,15 @@ def _scan_artefacts(options: ScanOptions, on_event: OnEvent | None, t0: float) -
     return ScanResult(Path(options.out), None, seconds, None, seconds, vdi2634=res)
 
 
-def session_evaluator(session: Session) -> Evaluator | None:
-    """The simulator's truth for a simulated session (:func:`rangekit.sim.truth.evaluate.truth_evaluator`);
-    None on hardware."""
-    if session.simulator is None:
-        return None
-    from rangekit.sim.truth.evaluate import truth_evaluator
-
-    motions = session.simulator.pass_motions    # the truth of a multi-pass scan: how the object was turned over
-    return truth_evaluator(session.simulator_object, session.rig, light="laser" if session.is_laser else "projector",
-                           **({"pass_motions": np.array(motions)} if motions is not None else {}))
-
-
 def process(session: Session | str | Path, options: ProcessOptions | None = None, *,
-            on_event=None, map_pairs=None, decoded_views: dict | None = None) -> ProcessResult:
+            on_event=None, map_pairs=None, decoded_views: dict | None = None, evaluate: Evaluator | None = None,
+            registration_ahead=None) -> ProcessResult:
     """Process a session (loaded, or its folder) as ``rangekit process`` does: :func:`process_session` with the
     simulator's truth as evaluator when the session is simulated and ``options.truth`` (the session loaded once
-    and handed on). ``on_event``: see :mod:`rangekit.app.events`; ``decoded_views``: views the scan decoded
-    already (:attr:`rangekit.app.scan.streaming.StreamingProcessor.results`)."""
+    and handed on). ``on_event``: see :mod:`rangekit.app.events`; what the scan did while its views came
+    (:class:`rangekit.app.scan.streaming.StreamingProcessor`): ``decoded_views`` the views it decoded,
+    ``evaluate`` its evaluator (the truth's samples and each view's errors made), ``registration_ahead`` its
+    :class:`rangekit.registration.ahead.RegistrationAhead`; the outputs are the same bytes with or without them."""
     from rangekit.app.events import failures_announced
 
     options = options or ProcessOptions()
@@ -188,6 +183,9 @@ def process(session: Session | str | Path, options: ProcessOptions | None = None
             if not (Path(session) / "session.json").is_file():
                 raise ConfigError(f"{session}: not a session folder (no session.json)")
             session = Session.load(session)
-        evaluate = session_evaluator(session) if options.truth else None
+        if not options.truth:
+            evaluate = None
+        elif evaluate is None:
+            evaluate = session_evaluator(session)
     return process_session(session, options, evaluate=evaluate, on_event=on_event, map_pairs=map_pairs,
-                           decoded_views=decoded_views)
+                           decoded_views=decoded_views, registration_ahead=registration_ahead)

@@ -13,7 +13,12 @@ the views already in, and integrated into a preview surface, while the next view
    kept only within :data:`MAX_REFINE_DEG` and :data:`MAX_REFINE_M` of the prior
    (:class:`~rangekit.app.events.ViewPlaced`, the growing model for a live view); the closing refinement of all
    the views together is the processing's, once, at the end;
-3. integrates its depth map into a TSDF volume around the turntable (:mod:`rangekit.surface.tsdf_volume`).
+3. integrates its depth map into a TSDF volume around the turntable (:mod:`rangekit.surface.tsdf_volume`);
+4. does ahead what the scan's processing would do with it after the last view (issue 36: the mesh within 10 s
+   of the last frame), each piece taken by the processing only where it is exactly its own, so the outputs are
+   the bytes ``rangekit process`` writes: the registration's levels and first-round pairs
+   (:attr:`registration`, :class:`rangekit.registration.ahead.RegistrationAhead`, one-pass turntable scans),
+   and on the simulator the truth's samples and the view's errors against the truth (:attr:`evaluate`).
 
 :meth:`StreamingProcessor.finish` waits for the views still queued and writes ``preview.ply``, the TSDF's surface
 (:class:`~rangekit.app.events.MeshReady` ``"preview"``). The scan's processing then takes each view's cloud and maps
@@ -73,6 +78,8 @@ class StreamingProcessor:
         self._placed: dict[int, tuple[np.ndarray, PointCloud]] = {}
         self._volume = None
         self._stopping = False
+        self._finishing = False   # the acquisition is over (drain)
+        self._unplaced: list = []  # the last views, placed in the preview by write_preview
         self._laser = False
         self._capture_keeps_up = threading.Event()   # cleared while the capture is behind (CaptureLoad)
         self._capture_keeps_up.set()
@@ -80,6 +87,9 @@ class StreamingProcessor:
         self.error: BaseException | None = None    # the first failure of the thread (the processing decodes again)
         self.decoded: list[int] = []               # views decoded here, in order
         self.results: dict = {}                    # index -> (cloud, ViewMaps): the processing takes them as they are
+        self.evaluate = None                       # the simulator's evaluator, prepared view by view (None on hardware)
+        self.measured: list[int] = []              # views whose errors against the truth were measured here
+        self.registration = None                   # RegistrationAhead of a one-pass turntable scan, from view 0 on
         self._thread = threading.Thread(target=self._run, name="rangekit-streaming", daemon=True)
         self._thread.start()
 
@@ -98,11 +108,26 @@ class StreamingProcessor:
             (self._capture_keeps_up.clear if event.behind else self._capture_keeps_up.set)()
 
     def finish(self) -> Path | None:
-        """Wait for every queued view, then write and announce the preview surface; its path (None if no view was
-        placed or the thread failed: :attr:`error`)."""
-        self._capture_keeps_up.set()     # the acquisition is over: no more backlog to wait for
+        """Wait for every queued view (:meth:`drain`), then write and announce the preview surface
+        (:meth:`write_preview`); its path (None if no view was placed or the thread failed: :attr:`error`)."""
+        self.drain()
+        return self.write_preview()
+
+    def drain(self) -> None:
+        """The acquisition is over: decode what is queued (what would only serve the processing beside the
+        fusion, the last views' errors against the truth, is left to it), then end the thread."""
+        self._finishing = True
+        self._capture_keeps_up.set()     # no more backlog to wait for
         self._queue.put(None)
         self._thread.join()
+
+    def write_preview(self) -> Path | None:
+        """After :meth:`drain`: place the last views, then write and announce the preview surface (the scan does it
+        beside its processing); its path, or None (no view placed, or the thread failed: :attr:`error`)."""
+        if self.error is None:
+            for k, cloud, depth, session in self._unplaced:
+                self._place_and_integrate(k, cloud, depth, session)
+        self._unplaced = []
         if self._volume is None or self.error is not None:
             return None
         from rangekit.formats.meshes import save_mesh
@@ -152,19 +177,63 @@ class StreamingProcessor:
 
         session = Session.load(self.folder)
         view, rig = session.views[k], session.rig
+        total = len(session.views)
+        # The last view (or any once the acquisition is over) is what the processing waits for: decoded on every
+        # core (the same maps: each pixel's decode is its own), its work ahead first, its preview placing after.
+        last = self._finishing or k == total - 1
         settings = cache_settings(session, self.options.method, self.options.table_margin)
-        with one_blas_thread(), numba_threads(1):
+        with one_blas_thread(), numba_threads(2 if last else 1):
             cloud, maps = view_cloud(view, session.pattern, rig, settings, session.capture.full_scale,
                                      table_transform(rig), self.options.table_margin, session)
         self.decoded.append(k)
         self.results[k] = (cloud, maps)
-        total = len(session.views)
         self._emit(ViewDecoded(k, total, view.folder.name, cloud))
-        if rig.T_world_table is None or session.plan.view_passes()[k] != 0 or len(cloud) == 0:
+        placed = rig.T_world_table is not None and session.plan.view_passes()[k] == 0 and len(cloud) > 0
+        if last:
+            self._ahead(k, cloud, maps, session, truth=False)   # its errors: beside the fusion
+            if placed:
+                self._unplaced.append((k, cloud, maps.depth, session))
             return
+        if placed:
+            self._place_and_integrate(k, cloud, maps.depth, session)
+        self._ahead(k, cloud, maps, session)
+
+    def _place_and_integrate(self, k: int, cloud: PointCloud, depth: np.ndarray, session: Session) -> None:
         T = self._place(k, cloud, session)
-        self._emit(ViewPlaced(k, total, view.folder.name, cloud, T))
-        self._integrate(maps.depth, T, session, cloud)
+        self._emit(ViewPlaced(k, len(session.views), session.views[k].folder.name, cloud, T))
+        self._integrate(depth, T, session, cloud)
+
+    def _ahead(self, k: int, cloud: PointCloud, maps, session: Session, *, truth: bool = True) -> None:
+        """What the processing would do with view ``k`` after the last view, done now (module doc, 4; ``truth``
+        False: not its errors against the truth); a failure here leaves that piece to the processing, which then
+        meets it itself."""
+        from rangekit._runtime.threads import one_blas_thread
+        from rangekit.app.process.register import evaluator_angles, turntable_registration
+        from rangekit.app.scan.truth import session_evaluator
+        from rangekit.registration.ahead import RegistrationAhead
+
+        with one_blas_thread():
+            try:
+                if self.options.truth and self.evaluate is None and k == 0:
+                    self.evaluate = session_evaluator(session)
+                if self.evaluate is not None and hasattr(self.evaluate, "prepare_view") and truth:
+                    angles = evaluator_angles(session.views, multi_pass=session.plan.passes > 1)
+                    self.evaluate.prepare(angles)                  # the truth's samples, once
+                    self.evaluate.prepare_view(angles, k, cloud, maps.proj_col)
+                    self.measured.append(k)
+            except Exception:   # noqa: BLE001 - the processing makes its own evaluator and meets the error
+                self.evaluate = None
+            if session.plan.passes != 1 or session.rig.T_world_table is None:
+                return
+            try:
+                if k == 0 and self.registration is None:
+                    prior, options = turntable_registration(session.rig, session.views, cloud)
+                    if options.voxel is not None:
+                        self.registration = RegistrationAhead(prior, options)
+                if self.registration is not None and k not in self.registration.views:
+                    self.registration.add(k, cloud)
+            except Exception:   # noqa: BLE001 - the processing registers the views itself and meets the error
+                self.registration = None
 
     def _place(self, k: int, cloud: PointCloud, session: Session) -> np.ndarray:
         """View ``k``'s pose in the first view's frame: the turntable prior, refined by ICP against the nearest

@@ -18,7 +18,7 @@ from rangekit.budget import check_budget
 from rangekit.camera import PinholeCamera, world_pixel_rays
 from rangekit.errors import InputError
 from rangekit.surface.mesh import TriangleMesh
-from rangekit.surface.raycast import mesh_scene
+from rangekit.surface.raycast import mesh_scene, query_scene
 
 __all__ = ["MESH_RENDER_BYTES_PER_PIXEL", "HITS_PER_MESH", "MeshHits", "raycast_mesh"]
 
@@ -82,19 +82,17 @@ def raycast_mesh(mesh: TriangleMesh, camera: PinholeCamera) -> MeshHits:
 
 def _cast_mesh(mesh: TriangleMesh, camera: PinholeCamera) -> MeshHits:
     """:func:`raycast_mesh` without the cache."""
-    import open3d as o3d
-
     H, W = camera.height, camera.width
 
     o, d = world_pixel_rays(camera)
     ok = np.all(np.isfinite(d), axis=1)
     d_cast = np.where(ok[:, None], d, [0.0, 0.0, 1.0])
     scene, c = mesh_scene(mesh)      # built once per mesh: the report renders one mesh ten times
-    out = scene.cast_rays(o3d.core.Tensor(np.concatenate([o - c, d_cast], axis=1).astype(np.float32)))
-    t32 = out["t_hit"].numpy().astype(np.float64)
+    out = query_scene(scene, "cast_rays", np.concatenate([o - c, d_cast], axis=1).astype(np.float32))
+    t32 = out["t_hit"].astype(np.float64)
     hit = ok & np.isfinite(t32)
     tri = np.full(H * W, -1, np.int64)
-    tri[hit] = out["primitive_ids"].numpy()[hit]
+    tri[hit] = out["primitive_ids"][hit]
     oh, dh = o[hit], d[hit]
     v0, v1, v2 = (mesh.vertices[mesh.triangles[tri[hit], k]] for k in range(3))
     e1, e2 = v1 - v0, v2 - v0
@@ -105,7 +103,7 @@ def _cast_mesh(mesh: TriangleMesh, camera: PinholeCamera) -> MeshHits:
         t = np.einsum("ij,ij->i", e2, qvec) / det
         b = np.column_stack([np.einsum("ij,ij->i", tvec, pvec), np.einsum("ij,ij->i", dh, qvec)]) / det[:, None]
     bad = ~(np.isfinite(t) & np.all(np.isfinite(b), axis=1))  # degenerate triangle: keep Open3D's float32
-    t[bad], b[bad] = t32[hit][bad], out["primitive_uvs"].numpy()[hit][bad]
+    t[bad], b[bad] = t32[hit][bad], out["primitive_uvs"][hit][bad]
     n = np.cross(e1, e2)
     n /= np.linalg.norm(n, axis=1, keepdims=True)
     n *= -np.sign(np.einsum("ij,ij->i", n, dh) + 1e-300)[:, None]  # face the camera

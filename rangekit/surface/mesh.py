@@ -145,9 +145,7 @@ def distance_to_surface(points: np.ndarray, mesh: TriangleMesh) -> np.ndarray:
     Open3D ``RaycastingScene.compute_distance`` (float32 inside; coordinates are taken relative to the
     mesh's centre first, so precision does not depend on where the mesh is).
     """
-    import open3d as o3d
-
-    from rangekit.surface.raycast import mesh_scene
+    from rangekit.surface.raycast import mesh_scene, query_scene
 
     P = np.asarray(points, dtype=np.float64)
     if P.ndim != 2 or P.shape[1] != 3:
@@ -157,5 +155,5 @@ def distance_to_surface(points: np.ndarray, mesh: TriangleMesh) -> np.ndarray:
     if len(P) == 0:
         return np.zeros(0)
     scene, c = mesh_scene(mesh)
-    return scene.compute_distance(o3d.core.Tensor((P - c).astype(np.float32))).numpy().astype(np.float64)
+    return query_scene(scene, "compute_distance", (P - c).astype(np.float32)).astype(np.float64)
 

@@ -18,6 +18,7 @@ from rangekit.camera import PinholeCamera
 from rangekit.errors import SceneError
 from rangekit.rig.lasers import LineLaser
 from rangekit.sim.scene.raycast import WorldMesh
+from rangekit.surface.raycast import query_scene
 
 __all__ = ["LitCurve", "slice_mesh", "fan_direction", "lit_curve", "cast_first_hits"]
 
@@ -83,12 +84,10 @@ def fan_direction(laser: LineLaser) -> np.ndarray:
 def cast_first_hits(rc_scene, origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """First hit of each ray in an Open3D ``RaycastingScene``: (t float64 with inf for misses, triangle id
     int64 with -1 for misses)."""
-    import open3d as o3d
-
     rays = np.concatenate([origins, directions], axis=1).astype(np.float32)
-    out = rc_scene.cast_rays(o3d.core.Tensor(rays))
-    t = out["t_hit"].numpy().astype(np.float64)
-    prim = out["primitive_ids"].numpy().astype(np.int64)
+    out = query_scene(rc_scene, "cast_rays", rays)
+    t = out["t_hit"].astype(np.float64)
+    prim = out["primitive_ids"].astype(np.int64)
     prim[~np.isfinite(t)] = -1
     return t, prim
 

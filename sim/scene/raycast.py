@@ -17,7 +17,7 @@ from rangekit.camera import PinholeCamera, world_pixel_rays
 from rangekit.errors import SceneError
 from rangekit.geometry import invert_T
 from rangekit.sim.scene.scene_object import PlanarTexture
-from rangekit.surface.raycast import raycasting_scene
+from rangekit.surface.raycast import query_scene, raycasting_scene
 
 __all__ = ["WorldMesh", "ViewGeometry", "cast_view", "pixel_corners"]
 
@@ -77,13 +77,11 @@ def _open3d_cast(vertices: np.ndarray, triangles: np.ndarray, origins: np.ndarra
 
 def _cast(scene, origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """As :func:`_open3d_cast` on a scene already built (:func:`rangekit.surface.raycast.raycasting_scene`)."""
-    import open3d as o3d  # imported here: it takes ~2 s and most of rangekit never needs it
-
     rays = np.empty((len(directions), 6), np.float32)   # filled in place: no (N, 6) float64 copy on the way
     rays[:, :3], rays[:, 3:] = origins, directions
-    out = scene.cast_rays(o3d.core.Tensor(rays))
-    t_hit = out["t_hit"].numpy()
-    prim = out["primitive_ids"].numpy().astype(np.int64)
+    out = query_scene(scene, "cast_rays", rays)
+    t_hit = out["t_hit"]
+    prim = out["primitive_ids"].astype(np.int64)
     prim[~np.isfinite(t_hit)] = -1
     return t_hit, prim
 

@@ -38,7 +38,7 @@ from rangekit.sim.sensors.lightstage_bounce import one_bounce
 from rangekit.sim.scene.raycast import cast_view
 from rangekit.sim.imaging.render import ImagingModel
 from rangekit.sim.scene.scene import Scene
-from rangekit.surface.raycast import raycasting_scene
+from rangekit.surface.raycast import query_scene, raycasting_scene
 
 __all__ = ["LightStageCapture", "LIGHT_STAGE_MODEL", "PLATE_OBJECTS", "light_stage_camera", "light_stage_lights",
            "light_stage_scene", "render_light_stage"]
@@ -277,15 +277,13 @@ def _occluded(vertices: np.ndarray, triangles: np.ndarray, T_world_cam: np.ndarr
 
     Only the (light, pixel) pairs in ``todo`` are cast, all in one Open3D batch (scene built once).
     """
-    import open3d as o3d  # imported here: it takes ~2 s and most of rangekit never needs it
-
     scene = raycasting_scene(vertices, triangles)
     fi, ni = np.nonzero(todo)
     R, t = T_world_cam[:3, :3], T_world_cam[:3, 3]
     origins = (x[ni] + eps * n[ni]) @ R.T + t
     dirs = l_dir[fi, ni] @ R.T
     rays = np.concatenate([origins, dirs], axis=1).astype(np.float32)
-    t_hit = scene.cast_rays(o3d.core.Tensor(rays))["t_hit"].numpy()
+    t_hit = query_scene(scene, "cast_rays", rays)["t_hit"]
     out = np.zeros(todo.shape, dtype=bool)
     out[fi, ni] = t_hit < dist[fi, ni] - eps
     return out

@@ -29,7 +29,7 @@ from rangekit.errors import InputError
 from rangekit.formats.sessions.summary import Accuracy
 from rangekit.geometry import apply_T, invert_T
 from rangekit.surface.mesh import TriangleMesh
-from rangekit.surface.raycast import mesh_scene, raycasting_scene
+from rangekit.surface.raycast import mesh_scene, query_scene, raycasting_scene
 from rangekit.rig.rig_file import Rig
 from rangekit.sim.truth.evaluate_laser import in_image as _inside, laser_visible_samples
 from rangekit.sim.scene.raycast import _cast
@@ -118,12 +118,10 @@ def visible_samples(truth: TriangleMesh, scene: Scene, rig: Rig, angles: np.ndar
 def _closest_on(mesh: TriangleMesh, P: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Closest point of ``mesh`` to each of ``P``: (distance (n,), point (n, 3), face (n,)); Open3D, float32
     inside, relative to the mesh's centre (its scene built once per mesh object)."""
-    import open3d as o3d
-
     scene, c = mesh_scene(mesh)
-    ans = scene.compute_closest_points(o3d.core.Tensor((P - c).astype(np.float32)))
-    Q = ans["points"].numpy().astype(np.float64) + c
-    return np.linalg.norm(P - Q, axis=1), Q, ans["primitive_ids"].numpy().astype(np.int64)
+    ans = query_scene(scene, "compute_closest_points", (P - c).astype(np.float32))
+    Q = ans["points"].astype(np.float64) + c
+    return np.linalg.norm(P - Q, axis=1), Q, ans["primitive_ids"].astype(np.int64)
 
 
 def _identity(T: np.ndarray) -> bool:

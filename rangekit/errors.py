@@ -24,6 +24,7 @@ __all__ = [
     "PatternError",
     "ConfigError",
     "DecodeError",
+    "MotionError",
     "CalibrationError",
     "RegistrationError",
     "MeshError",
@@ -100,6 +101,10 @@ class ConfigError(InputError):
 
 class DecodeError(RangekitError):
     """A capture stack cannot be decoded into projector coordinates."""
+
+
+class MotionError(DecodeError):
+    """The object moved during a coded-light capture (rangekit.coded.motion): the view must be captured again."""
 
 
 class CalibrationError(RangekitError):

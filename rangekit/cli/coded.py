@@ -30,7 +30,8 @@ def cmd_decode(args: argparse.Namespace) -> int:
         images = read_stack(paths)
         note(f"decoding {spec.method} ({'subpixel' if not args.integer else 'integer'})")
         with naming(args.images[0] if len(args.images) == 1 else f"{len(paths)} images from {paths[0]}"):
-            res = decode(images, spec, order=args.order, subpixel=not args.integer)
+            res = decode(images, spec, order=args.order, subpixel=not args.integer, motion=True,
+                         max_motion=args.max_motion)
         del images
     save_decoded(args.out, res, compress=args.compress)
     say(f"{res!r}")
@@ -59,7 +60,7 @@ def _decode_layout(args: argparse.Namespace, t0: float) -> int:
     del frames
     note(f"decoding {layout.name} ({layout.source})")
     with naming(args.images[0]):
-        res = decode(stack, spec, subpixel=not args.integer,
+        res = decode(stack, spec, subpixel=not args.integer, motion=True, max_motion=args.max_motion,
                      **layout.view_options.get("decode_options", {}))
     res = in_projector_pixels(res, layout, width, height)
     save_decoded(args.out, res, compress=args.compress)
@@ -145,7 +146,21 @@ def _reconstruct_laser(args: argparse.Namespace, t0: float) -> int:
     return 0
 
 
+def _share(text: str) -> float | None:
+    """``--max-motion``: a percentage ("2%" or "2"), or "none"."""
+    if text.strip().lower() == "none":
+        return None
+    try:
+        value = float(text.strip().rstrip("%")) / 100.0
+    except ValueError:
+        value = float("nan")
+    if not 0.0 <= value <= 1.0:
+        raise argparse.ArgumentTypeError(f"expected a percentage from 0 to 100 or 'none', found {text!r}")
+    return value
+
+
 def add_parsers(sub) -> None:
+    from rangekit.coded.motion import MAX_MOTION_SHARE
     from rangekit.coded.patterns import PATTERN_METHODS
     from rangekit.formats.layouts import LAYOUTS as CAPTURE_LAYOUTS
 
@@ -162,6 +177,9 @@ def add_parsers(sub) -> None:
     dec.add_argument("--integer", action="store_true", help="integer codes only (no subpixel refinement)")
     dec.add_argument("--compress", action="store_true",
                      help="deflate the .npz (6x smaller, 0.2 CPU-s more at 2048x1500); default: stored as np.savez")
+    dec.add_argument("--max-motion", type=_share, default=MAX_MOTION_SHARE, metavar="PERCENT",
+                     help="binary codes: refuse the capture when more than this share of the decoded pixels moved "
+                          f"during it (the 'motion' mask; default {MAX_MOTION_SHARE * 100:.0f}%%; 'none': never refuse)")
     dec.add_argument("--out", required=True, help="output .npz with proj_col, proj_row, confidence and masks")
     dec.set_defaults(func=cmd_decode)
 

@@ -31,8 +31,8 @@ def _sim_render(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     check_output(args.out, folder=True)
     if args.sensor == "laser":
-        given = [f for f, v in (("--patterns", args.patterns), ("--global-fraction", args.global_fraction))
-                 if v is not None]
+        given = [f for f, v in (("--patterns", args.patterns), ("--global-fraction", args.global_fraction),
+                                ("--motion-mm", args.motion_mm)) if v is not None]
         if given:
             raise UsageError(f"{', '.join(given)}: only for --sensor projector; the laser sensor draws line lasers "
                              "(docs/simulator.md)")
@@ -40,7 +40,8 @@ def _sim_render(args: argparse.Namespace) -> int:
         raise UsageError(f"--mono: only for --sensor laser, found --sensor {args.sensor}")
     if args.sensor not in ("projector", "laser"):
         given = [f for f, v in (("--object", args.object), ("--object-unit", args.object_unit),
-                                ("--patterns", args.patterns), ("--rig", args.rig)) if v is not None]
+                                ("--patterns", args.patterns), ("--rig", args.rig), ("--motion-mm", args.motion_mm))
+                 if v is not None]
         if given:
             raise UsageError(f"{', '.join(given)}: only for --sensor projector or laser; the {args.sensor} sensor "
                              "renders its own scene (docs/simulator.md)")
@@ -67,7 +68,8 @@ def _sim_render(args: argparse.Namespace) -> int:
     render_projector_capture(args.out, obj=args.object or "lumpy", patterns=args.patterns or "graycode",
                              rig_file=args.rig, angle=np.radians(args.angle_deg), bits=args.bits, seed=args.seed,
                              noise=not args.no_noise, global_fraction=args.global_fraction,
-                             object_unit=args.object_unit or "m", progress=console())
+                             object_unit=args.object_unit or "m", progress=console(),
+                             motion=None if not args.motion_mm else (args.motion, args.motion_mm * 1e-3))
     result(f"done in {time.perf_counter() - t0:.1f} s")
     return 0
 
@@ -118,6 +120,12 @@ def add_parsers(sub) -> None:
                         help="--sensor laser: a monochrome camera (default: RGB, the laser mostly in R)")
     render.add_argument("--global-fraction", type=non_negative_float, default=None,
                         help="interreflection term, fraction of the mean projected light (default 0)")
+    render.add_argument("--motion-mm", type=non_negative_float, default=None, metavar="MM",
+                        help="--sensor projector: the object moves MM millimetres along the world x axis during the "
+                             "sequence (a slip halfway through it, or see --motion); the truth is where it started")
+    render.add_argument("--motion", default="slip",
+                        help="how it moves with --motion-mm: slip (once, halfway), vibration or breathing (a period "
+                             "of 8 frames); default slip")
     tof = render.add_argument_group("time of flight (--sensor tof, tof-pulsed)")
     tof.add_argument("--plan", default="kinect", choices=("kinect", "luxonis"),
                      help="frequency plan: kinect = 16/80/120 MHz x 3 steps (18.7 m), luxonis = 80/100 MHz x 4 "

@@ -13,7 +13,7 @@ import numpy as np
 from rangekit.coded.frames import CaptureStack, row_chunks, run_parallel
 from rangekit.coded.patterns import PatternSpec, gray_decode, gray_encode
 
-__all__ = ["axis_code", "axis_subpixel", "gray_lut", "smooth_along_stripes"]
+__all__ = ["axis_code", "axis_crossings", "axis_subpixel", "edge_bit_lut", "gray_lut", "smooth_along_stripes"]
 
 
 def _decode_bits(fr: CaptureStack, spec: PatternSpec, axis: str, region, need_diffs: bool):
@@ -83,14 +83,13 @@ def gray_lut(nb: int) -> np.ndarray:
 _EDGE_LUTS: dict[int, np.ndarray] = {}
 
 
-def _edge_bit_lut(size: int) -> np.ndarray:
+def edge_bit_lut(size: int) -> np.ndarray:
     """For code c, the Gray bit that changes between c and c + 1 (which frame has the edge)."""
     if size not in _EDGE_LUTS:
         c = np.arange(size + 1)
         changed = gray_encode(c) ^ gray_encode(c + 1)
         _EDGE_LUTS[size] = np.log2(np.maximum(changed, 1)).astype(np.int64)
     return _EDGE_LUTS[size]
-
 
 
 def axis_code(fr: CaptureStack, spec: PatternSpec, axis: str, workers: int, chunk_rows: int) -> np.ndarray:
@@ -118,8 +117,10 @@ def axis_code(fr: CaptureStack, spec: PatternSpec, axis: str, workers: int, chun
     return code
 
 
-def axis_subpixel(fr: CaptureStack, spec: PatternSpec, axis: str, code: np.ndarray, max_gap: float) -> np.ndarray:
-    """Subpixel stripe-edge refinement of one axis's code map (compiled kernels; module doc)."""
+def axis_crossings(fr: CaptureStack, spec: PatternSpec, axis: str, code: np.ndarray) -> np.ndarray:
+    """Stripe-edge crossings of one axis's code map: (H, W-1) along camera rows for columns, (H-1, W) along camera
+    columns for rows; float32 fraction of the way from a pixel to its neighbour where the pattern and inverse of
+    the bit that changes between their codes cross, NaN where the codes do not differ by one (compiled)."""
     from rangekit.coded import _kernels as K
 
     H, W = fr.shape
@@ -127,15 +128,22 @@ def axis_subpixel(fr: CaptureStack, spec: PatternSpec, axis: str, code: np.ndarr
     nb = spec.bits(axis)
     p_by_bit = np.array([fr.index[f"{prefix}_b{b}"] for b in range(nb)], np.int64)
     i_by_bit = np.array([fr.index[f"{prefix}_b{b}_inv"] for b in range(nb)], np.int64)
-    edge_bit = _edge_bit_lut(spec.width if axis == "columns" else spec.height)
-    out = np.empty((H, W), np.float32)
+    edge_bit = edge_bit_lut(spec.width if axis == "columns" else spec.height)
+    vertical = axis == "rows"
+    t = np.empty((H - 1, W) if vertical else (H, W - 1), np.float32)
+    K.crossings(fr.stack, code, p_by_bit, i_by_bit, edge_bit, vertical, t)
+    return t
+
+
+def axis_subpixel(axis: str, code: np.ndarray, t: np.ndarray, max_gap: float) -> np.ndarray:
+    """Subpixel stripe-edge refinement of one axis's code map from its crossings (:func:`axis_crossings`;
+    compiled kernels; module doc)."""
+    from rangekit.coded import _kernels as K
+
+    out = np.empty(code.shape, np.float32)
     if axis == "columns":  # column stripes cross camera rows
-        t = np.empty((H, W - 1), np.float32)
-        K.crossings(fr.stack, code, p_by_bit, i_by_bit, edge_bit, False, t)
         K.interp_along_rows(code, t, np.float32(max_gap), out)
     else:
-        t = np.empty((H - 1, W), np.float32)
-        K.crossings(fr.stack, code, p_by_bit, i_by_bit, edge_bit, True, t)
         K.interp_along_cols(code, t, np.float32(max_gap), out)
     return out
 

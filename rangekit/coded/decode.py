@@ -45,12 +45,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from rangekit.errors import DecodeError
-from rangekit.coded.binary import axis_code, axis_subpixel, smooth_along_stripes
+from rangekit.errors import DecodeError, MotionError
+from rangekit.coded.binary import axis_code, axis_crossings, axis_subpixel, smooth_along_stripes
 from rangekit.coded.codecs.decoders import decode_fringes
 from rangekit.coded.codecs.fringes import FRINGE_METHODS
 from rangekit.coded.debruijn import decode_debruijn
 from rangekit.coded.frames import CaptureStack
+from rangekit.coded.motion import MAX_MOTION_SHARE, MOTION_LIMIT_CODES, check_motion
 from rangekit.coded.patterns import PatternSpec
 from rangekit.coded.phase import decode_phase_maps
 from rangekit.coded.response import phase_correction
@@ -65,6 +66,7 @@ def decode(stack, spec: PatternSpec, *, order: str = "rangekit", subpixel: bool 
            min_contrast: float = 0.015, shadow_threshold: float = 0.01, max_global_ratio: float | None = None,
            max_gap: float = 6.0, max_disagreement: float = 1.5, full_scale: float | None = None,
            response: ProjectorResponse | None = None, stripe_smoothing: int = 0,
+           motion: bool = False, max_motion: float | None = MAX_MOTION_SHARE,
            workers: int = 2, chunk_rows: int = 96) -> DecodeResult:
     """Decode a capture stack into projector coordinates.
 
@@ -104,6 +106,12 @@ def decode(stack, spec: PatternSpec, *, order: str = "rangekit", subpixel: bool 
         Subpixel edges: average each decoded coordinate along its stripes over ``2 n + 1`` pixels (binomial
         weights; :func:`rangekit.coded.binary.smooth_along_stripes`); 0, the default, leaves it per pixel. For
         captures whose stripe edges wander from row to row (a real projector's, docs/real-captures.md).
+    motion : binary codes (graycode, xor02, xor04): check that the object held still (:mod:`rangekit.coded.motion`):
+        pixels whose code mixes frames taken before and after a move are flagged in ``motion`` and rejected. Off by
+        default until the check holds on every rig (docs/coded-light.md, "Motion during a capture": it flags still
+        captures of cameras that undersample the projector); ``rangekit decode`` checks.
+    max_motion : the largest share of the decoded pixels that may be flagged; over it the capture is refused
+        (:class:`MotionError`, naming the frames taken after the move). None: never refused.
     workers, chunk_rows : threads and rows per chunk.
 
     The fringe codecs (micro, modulated, ftp, psp, faps) read ``min_contrast``, ``shadow_threshold``,
@@ -118,6 +126,8 @@ def decode(stack, spec: PatternSpec, *, order: str = "rangekit", subpixel: bool 
     DecodeError
         If the number of captures does not match the spec, sizes or dtypes differ, no pixel is lit
         (an all-black stack), or the captures look like another order or spec (white darker than black).
+    MotionError
+        (a DecodeError) If more than ``max_motion`` of the lit pixels moved during the capture.
     """
     if response is not None and not isinstance(response, ProjectorResponse):
         raise DecodeError(f"response must be a rangekit.rig.projector_response.ProjectorResponse or None, found "
@@ -157,18 +167,29 @@ def decode(stack, spec: PatternSpec, *, order: str = "rangekit", subpixel: bool 
     K.masks_rows(fr.stack, idx["white"], idx["black"], sep_p, sep_i, np.float32(shadow_threshold * fs),
                  np.float32(min_contrast * fs), np.float32(max_global_ratio), np.float32(1.0 / fs),
                  conf, shadow, low, glob_mask, direct, glob)
+    moved = None
     if spec.method in ("graycode", "xor02", "xor04"):
         # Binary codes: codes, subpixel edges and the final maps all in compiled passes.
         empty_i, empty_f = np.zeros((1, 1), np.int32), np.zeros((1, 1), np.float32)
-        codes, subs = {}, {}
+        codes, subs, cross = {}, {}, {}
         for axis in spec.axes:
             codes[axis] = axis_code(fr, spec, axis, workers, chunk_rows)
-            subs[axis] = axis_subpixel(fr, spec, axis, codes[axis], max_gap) if edges else empty_f
+            if edges or motion:
+                cross[axis] = axis_crossings(fr, spec, axis, codes[axis])
+            subs[axis] = axis_subpixel(axis, codes[axis], cross[axis], max_gap) if edges else empty_f
         proj_col, proj_row = np.empty((H, W), np.float32), np.empty((H, W), np.float32)
         incons = np.empty((H, W), bool)
         K.finalise_binary(codes.get("columns", empty_i), subs.get("columns", empty_f), codes.get("rows", empty_i),
                           subs.get("rows", empty_f), "columns" in codes, "rows" in codes, edges, shadow, low,
                           glob_mask, conf, proj_col, proj_row, incons)
+        if motion:
+            moved = check_motion(fr, spec, codes, np.isfinite(proj_col), cross, MOTION_LIMIT_CODES)
+            if max_motion is not None and moved.share > max_motion:
+                raise MotionError(f"the object moved during the capture: {moved.describe()}; more than "
+                                  f"{max_motion:.0%} moved (max_motion); capture the view again")
+            proj_col[moved.mask] = np.nan
+            proj_row[moved.mask] = np.nan
+            conf[moved.mask] = 0.0
         if edges and stripe_smoothing > 0:
             proj_col = smooth_along_stripes(proj_col, "columns", stripe_smoothing)
             proj_row = smooth_along_stripes(proj_row, "rows", stripe_smoothing)
@@ -200,6 +221,8 @@ def decode(stack, spec: PatternSpec, *, order: str = "rangekit", subpixel: bool 
                           "projector: the spec does not match the capture (projector size, method or order)")
     return DecodeResult(proj_col=proj_col, proj_row=proj_row, confidence=conf, shadow=shadow, low_contrast=low,
                         global_dominated=glob_mask, inconsistent=incons,
+                        motion=None if moved is None else moved.mask,
+                        moved_frames=() if moved is None else moved.moved_frames,
                         direct=direct if binary else None, global_light=glob if binary else None,
                         white=fr.colour_white if fr.colour else w_all, col_std=col_std, row_std=row_std)
 

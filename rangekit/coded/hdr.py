@@ -57,6 +57,9 @@ def merge_decodes(results: list[DecodeResult], exposures_us, full_scale: float) 
         if any(m is None for m in maps):
             out[f.name] = None
             continue
+        if f.name == "moved_frames":      # the frames any exposure found taken after a move
+            out[f.name] = tuple(dict.fromkeys(name for m in maps for name in m))
+            continue
         if f.name == "white":
             maps = [np.asarray(m, dtype=np.float32) * np.float32(exps[0] / e) for m, e in zip(maps, exps)]
         stack = np.stack(maps)

@@ -28,6 +28,9 @@ class DecodeResult:
     col_std: np.ndarray | None = None       # (H, W) float32 predicted std of proj_col, projector px; NaN where
                                             # invalid or unknown (rangekit.coded.uncertainty)
     row_std: np.ndarray | None = None       # (H, W) float32 the same for proj_row
+    motion: np.ndarray | None = None        # (H, W) bool: the code mixes frames taken before and after the object
+                                            # moved (rangekit.coded.motion; binary codes), rejected; None: unchecked
+    moved_frames: tuple = ()                # the frames taken after it moved, where they could be named
 
     @property
     def valid(self) -> np.ndarray:
@@ -38,5 +41,6 @@ class DecodeResult:
         n = self.proj_col.size
         return (f"DecodeResult({self.proj_col.shape[1]}x{self.proj_col.shape[0]}, valid={self.valid.sum() / n:.1%}, "
                 f"shadow={self.shadow.sum() / n:.1%}, low_contrast={self.low_contrast.sum() / n:.1%}, "
-                f"global={self.global_dominated.sum() / n:.1%}, inconsistent={self.inconsistent.sum() / n:.1%})")
+                f"global={self.global_dominated.sum() / n:.1%}, inconsistent={self.inconsistent.sum() / n:.1%}"
+                + ("" if self.motion is None else f", motion={self.motion.sum() / n:.1%}") + ")")
 

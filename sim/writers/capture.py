@@ -55,8 +55,11 @@ def preview_image(white: np.ndarray, truth: ViewGeometry, *, width: int = 480) -
 
 
 def write_capture(sim: SimRig, spec: PatternSpec, out_dir: str | Path, *, info: dict | None = None,
-                  progress: Callable[[str], None] | None = None) -> list[Path]:
+                  progress: Callable[[str], None] | None = None, motion=None) -> list[Path]:
     """Project every frame of ``spec`` on ``sim`` at its current state and write the capture folder.
+
+    ``motion``: the object moves during the sequence (:class:`rangekit.sim.devices.motion.Motion`; recorded in
+    capture.json with each frame's offset); the ground truth is the object where it was at the first frame.
 
     Returns the image paths in frame order.
     """
@@ -66,7 +69,13 @@ def write_capture(sim: SimRig, spec: PatternSpec, out_dir: str | Path, *, info: 
     say(f"ray casting {sim.rig.camera.width}x{sim.rig.camera.height} camera pixels")
     truth = sim.ground_truth()
     say(f"rendering {spec.n_frames} {spec.method} frame(s)")
-    images = sim.capture_sequence(list(spec.frames()))
+    if motion is None:
+        images, moved = sim.capture_sequence(list(spec.frames())), {}
+    else:
+        from rangekit.sim.devices.motion import capture_moving
+
+        images, offsets = capture_moving(sim, list(spec.frames()), motion)
+        moved = {"motion": asdict(motion), "frame_offsets_m": [float(o) for o in offsets]}
     paths = []
     for i, img in enumerate(images):
         path = out / f"{i:03d}.png"
@@ -78,7 +87,7 @@ def write_capture(sim: SimRig, spec: PatternSpec, out_dir: str | Path, *, info: 
     atomic_write_json(out / "capture.json", {
         "kind": "rangekit.sim.capture/1", "turntable_angle_rad": angle, "seed": sim.seed,
         "objects": list(sim.scene.names), "imaging": asdict(sim.imaging), "n_frames": spec.n_frames,
-        **(info or {})})
+        **moved, **(info or {})})
     atomic_save_npz(out / "ground_truth.npz", depth=truth.depth, xyz=truth.xyz, normals=truth.normal,
                     proj_col=truth.proj_col, proj_row=truth.proj_row, valid=truth.lit, hit=truth.hit,
                     T_world_cam=sim.rig.camera.T_world_cam)

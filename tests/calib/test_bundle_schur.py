@@ -61,8 +61,8 @@ def _largest_difference(a, b, views) -> float:
 @pytest.mark.parametrize("fixed", [(), ("aspect", "p1", "p2")])
 def test_the_reduced_system_reaches_minpacks_minimum(fixed):
     """The same minimum as MINPACK (the solver before issue 38), or a lower cost. With every intrinsic free MINPACK
-    started at the reduced solver's answer stays there to 1e-9. From the usual start it stops up to 3e-7 short
-    (a distortion coefficient; its tolerance on a finite-difference Jacobian), and with fy tied to fx ("aspect")
+    started at the reduced solver's answer stays there to 1e-9. From the usual start it stops 3e-7 to 2.2e-6 short
+    (machines differ; a distortion coefficient; its tolerance on a finite-difference Jacobian), and with fy tied to fx ("aspect")
     its finite differences move it 7e-8 away from the reduced solver's answer to a higher cost: that answer is
     the better minimum, a fixed point of the reduced solver itself to 1e-11."""
     truth, T_proj_cam, poses, start = bundle_problem(12)
@@ -75,8 +75,8 @@ def test_the_reduced_system_reaches_minpacks_minimum(fixed):
     minpack_at_new = bundle_adjust(**at_new, solver="minpack", **kw)
     assert _largest_difference(minpack_at_new, new, poses) < (1e-9 if not fixed else 1e-7)
     old = bundle_adjust(**start, solver="minpack", **kw)
-    assert _largest_difference(old, new, poses) < 1e-6
-    assert cost(new) <= min(cost(old), cost(minpack_at_new)) * (1 + 1e-15)
+    assert _largest_difference(old, new, poses) < 1e-5      # 3e-7 on one machine, 2.2e-6 on another (MINPACK's stop)
+    assert cost(new) <= min(cost(old), cost(minpack_at_new)) * (1 + 1e-12)      # 2e-14 above on one machine
     # ... and that minimum is the truth's, to the noise: 0.03 px of corner noise over 12 x 54 corners.
     assert abs(new.camera.K[0, 0] / truth.camera.K[0, 0] - 1) < 2e-4
     assert np.abs(new.T_cam_proj[:3, 3] - invert_T(T_proj_cam)[:3, 3]).max() < 2e-4

@@ -69,10 +69,11 @@ def _object_info(obj: str, object_unit: str) -> dict:
 def render_projector_capture(out: str | Path, *, obj: str = "lumpy", patterns: str = "graycode",
                              rig_file: str | Path | None = None, angle: float = 0.0, bits: int = 8, seed: int = 0,
                              noise: bool = True, global_fraction: float | None = None, object_unit: str = "m",
-                             progress: Callable | None = None) -> None:
+                             progress: Callable | None = None, motion=None) -> None:
     """Render ``patterns`` on ``obj`` (built-in name or mesh file, in ``object_unit``) at turntable ``angle``
     (radians) on the rig file's rig (default the simulator's), with a ``bits``-bit camera; write the capture
-    folder."""
+    folder. ``motion``: ``(kind, metres)``, the object moving along the world x axis during the sequence
+    (:class:`rangekit.sim.devices.motion.Motion`; a slip comes halfway through it)."""
     from rangekit.coded.patterns import make_pattern_spec
     from rangekit.rig.rig_file import load_rig
     from rangekit.sim import ImagingModel, SimRig
@@ -91,7 +92,12 @@ def render_projector_capture(out: str | Path, *, obj: str = "lumpy", patterns: s
     if sim.turntable is not None:
         sim.turntable.rotate_to(angle)
     spec = make_pattern_spec(patterns, sim.projector.resolution)
-    write_capture(sim, spec, out, info=_object_info(obj, object_unit), progress=progress)
+    moving = None
+    if motion is not None:
+        from rangekit.sim.devices.motion import Motion
+
+        moving = Motion(motion[0], motion[1], at_frame=spec.n_frames // 2)
+    write_capture(sim, spec, out, info=_object_info(obj, object_unit), progress=progress, motion=moving)
 
 
 def render_laser_capture(out: str | Path, *, obj: str = "lumpy", rig_file: str | Path | None = None,

@@ -24,7 +24,7 @@ from rangekit._runtime.threads import numba_threads, one_blas_thread
 from rangekit import __version__
 from rangekit.coded.reconstruct import EDGE_MARGIN_PX, reconstruct_view
 from rangekit.coded.patterns import PatternSpec
-from rangekit.errors import RangekitError
+from rangekit.errors import RangekitError, naming
 from rangekit.formats.capture import list_images, read_stack
 from rangekit.formats.sessions.session import Session, SessionView, exposure_folder
 from rangekit.geometry import apply_T, invert_T
@@ -186,8 +186,9 @@ def _decode_view(v: SessionView, stacks, white_image: np.ndarray, spec: PatternS
     """:func:`view_cloud` past its cache, on one BLAS thread: its products are thin, (N, 3) @ (3, 3), and two
     OpenBLAS threads spent 2x the CPU on them for the same bits."""
     exposures = settings.get("exposures_us")
-    rec = reconstruct_view(stacks, spec, rig.camera, rig.projector, method=settings["method"],
-                           full_scale=full_scale, response=rig.projector_response, exposures_us=exposures)
+    with naming(v.folder):      # a view refused (the object moved during it: MotionError) is named
+        rec = reconstruct_view(stacks, spec, rig.camera, rig.projector, method=settings["method"],
+                               full_scale=full_scale, response=rig.projector_response, exposures_us=exposures)
     xyz = rec.triangulated.xyz.copy()
     valid = np.isfinite(xyz[:, :, 0])
     c = rec.cloud

@@ -25,6 +25,10 @@ the views already in, and integrated into a preview surface, while the next view
 as they are (:attr:`StreamingProcessor.results`): no frame is read or checked twice, no cache read back. A multi-pass scan's preview holds its first pass (the
 object turned over is placed by the processing's pass registration).
 
+A view during which the object moved (:class:`~rangekit.errors.MotionError`, :mod:`rangekit.coded.motion`) is
+left out (:attr:`StreamingProcessor.moved`) and the others go on; the scan's processing meets the error again,
+naming the view.
+
 Acquisition comes first: the thread runs at a lower priority (nice + :data:`NICE`) with the decoder on one
 thread and one numba thread, so the kernel gives the capture's threads the cores whenever they need them, and
 processing takes what they leave. And it backs off: while the capture is behind (the frames waiting to be written
@@ -44,6 +48,7 @@ import numpy as np
 from rangekit.app.events import (CaptureLoad, MeshReady, OnEvent, ScanStarted, ViewAcquired, ViewDecoded, ViewPlaced,
                                  emit)
 from rangekit.app.process.options import ProcessOptions
+from rangekit.errors import MotionError
 from rangekit.formats.sessions.session import Session
 from rangekit.geometry import apply_T, compose, invert_T, rotation_angle
 from rangekit.surface.cloud import PointCloud
@@ -86,6 +91,7 @@ class StreamingProcessor:
         self.paused = 0                              # times a view waited for the capture to catch up
         self.error: BaseException | None = None    # the first failure of the thread (the processing decodes again)
         self.decoded: list[int] = []               # views decoded here, in order
+        self.moved: dict = {}                      # index -> MotionError: views the object moved during
         self.results: dict = {}                    # index -> (cloud, ViewMaps): the processing takes them as they are
         self.evaluate = None                       # the simulator's evaluator, prepared view by view (None on hardware)
         self.measured: list[int] = []              # views whose errors against the truth were measured here
@@ -166,8 +172,11 @@ class StreamingProcessor:
                     self._capture_keeps_up.wait()
                     if self._stopping:
                         return
-                if k not in self.decoded:
-                    self._stream(k)
+                if k not in self.decoded and k not in self.moved:
+                    try:
+                        self._stream(k)
+                    except MotionError as exc:   # this view is refused; the others go on (module doc)
+                        self.moved[k] = exc
         except BaseException as exc:   # the scan goes on; its processing decodes the view and reports the error
             self.error = exc
 

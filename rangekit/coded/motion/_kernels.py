@@ -1,0 +1,90 @@
+"""Compiled loops of the motion check of binary codes (:mod:`rangekit.coded.motion.check`; numba, cached on disk)."""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit, prange
+
+__all__ = ["MAX_TURN_BACK", "crossing_residuals", "flag_bracketed"]
+
+#: The largest step back (codes) that counts as codes turning back; a longer one is a depth edge. A step back of
+#: one code next to a step of one is the noise at a stripe edge (c, c+1, c), not motion.
+MAX_TURN_BACK = 8
+
+
+@njit(parallel=True, cache=True, nogil=True)
+def crossing_residuals(code, t, max_gap, res, lo):  # pragma: no cover - compiled
+    """Each stripe-edge crossing's disagreement with the code changes on either side of it along the row.
+
+    ``code`` (H, W) int32 integer codes (-1 invalid); ``t`` (H, W-1) float32 crossings between pixels x and x+1
+    (rangekit.coded._kernels.crossings; NaN: none). For each crossing (a step of one code between neighbours),
+    the previous and the next change of code along the row, each within ``max_gap`` pixels and with no invalid
+    pixel between:
+
+    - either goes the other way by 2 to :data:`MAX_TURN_BACK` codes (the codes turn back: ``c+1, c, c+3, c+2``, bits
+      from two surfaces): ``res = inf``;
+    - both are steps of one the same way (edges c-1|c, c|c+1, c+1|c+2): ``res[y, x] = (pos - (pos_prev +
+      pos_next) / 2) / s``, s the camera pixels per code between the outer two (signed), so the offset is in
+      codes: 0 up to noise where the three stripes were projected onto one surface, the shift between the frames
+      where they were not;
+    - otherwise NaN. ``lo[y, x]`` = the lower code of the crossing where ``res`` is set, else -1.
+    """
+    H, W = code.shape
+    for y in prange(H):
+        pos = np.empty(W, np.float64)     # each change of code along the row: where, which way, from which code
+        step = np.empty(W, np.int64)
+        low = np.empty(W, np.int64)
+        at = np.empty(W, np.int64)
+        run = np.empty(W, np.int64)       # changes with no invalid pixel between them share a run number
+        n = 0
+        r = 0
+        for x in range(W - 1):
+            res[y, x] = np.nan
+            lo[y, x] = -1
+            c0 = code[y, x]
+            c1 = code[y, x + 1]
+            if c0 < 0 or c1 < 0:
+                r += 1
+                continue
+            if c0 != c1:
+                tt = t[y, x]
+                pos[n] = x + (tt if tt == tt else 0.5)
+                step[n] = c1 - c0
+                low[n] = c0 if c0 < c1 else c1
+                at[n] = x if tt == tt else -1
+                run[n] = r
+                n += 1
+        for k in range(1, n - 1):
+            if at[k] < 0:
+                continue
+            if run[k - 1] != run[k] or run[k + 1] != run[k]:
+                continue
+            if pos[k] - pos[k - 1] > max_gap or pos[k + 1] - pos[k] > max_gap:
+                continue
+            back_a = step[k - 1] * step[k] < 0 and 2 <= abs(step[k - 1]) <= MAX_TURN_BACK
+            back_b = step[k + 1] * step[k] < 0 and 2 <= abs(step[k + 1]) <= MAX_TURN_BACK
+            if back_a or back_b:
+                res[y, at[k]] = np.inf
+                lo[y, at[k]] = low[k]
+            elif abs(step[k - 1]) == 1 and abs(step[k + 1]) == 1 and at[k - 1] >= 0 and at[k + 1] >= 0:
+                s = (pos[k + 1] - pos[k - 1]) / (step[k - 1] + step[k + 1])
+                res[y, at[k]] = (pos[k] - 0.5 * (pos[k - 1] + pos[k + 1])) / s
+                lo[y, at[k]] = low[k]
+
+
+@njit(parallel=True, cache=True, nogil=True)
+def flag_bracketed(t, res, limit, out):  # pragma: no cover - compiled
+    """``out[y, x]`` = True where a crossing bracketing pixel x along its row (the last one before it or the first
+    one after it) has ``|res| > limit``: its stripe edge was displaced, so the pixel's interpolated code is."""
+    H, W = out.shape
+    for y in prange(H):
+        bad_left = False
+        for x in range(W):
+            out[y, x] = bad_left
+            if x < W - 1 and t[y, x] == t[y, x]:
+                bad_left = abs(res[y, x]) > limit
+        bad_right = False
+        for x in range(W - 1, -1, -1):
+            if x < W - 1 and t[y, x] == t[y, x]:
+                bad_right = abs(res[y, x]) > limit
+            out[y, x] = out[y, x] or bad_right

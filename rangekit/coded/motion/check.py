@@ -1,0 +1,195 @@
+"""Motion during a binary-code capture (Fusiello 13.1: a sequential code assumes the scene holds still).
+
+A Gray code (or XOR code) sends each bit of a pixel's projector column in its own frame pair. If the object moves
+between two frames, the bits of a pixel come from two surfaces, and its code is one neither surface has.
+The codes then disagree between bits, and that is what is checked: between neighbouring camera pixels whose codes
+differ by one, exactly one bit changes, and its pattern and inverse cross at that stripe edge
+(:func:`rangekit.coded.binary.axis_crossings`). Successive edges along a camera row belong to different bits
+(a Gray code's edges run b0, b1, b0, b2, b0, b1, ...), and on a still surface they are evenly spaced up to the
+noise: each edge lies on the line through its two neighbours. Where the frames of some bits were taken after the
+object moved, their edges are displaced from their neighbours' by the motion, in projector codes:
+
+    residual_n = (pos_n - (pos_{n-1} + pos_{n+1}) / 2) / s        s: camera pixels per code there
+
+(:func:`rangekit.coded.motion._kernels.crossing_residuals`). Where the shift is larger than a stripe, the codes
+do not even run one way: ``c+1, c, c+3, c+2`` (the low bits from one surface, the high bits from the other), and
+a step back of 2 to 8 codes next to an edge counts as displaced too (a step back of one is the noise at a stripe
+edge, a longer one a depth edge). A pixel is flagged in the ``motion`` mask when an edge bracketing it along its row
+(or, for row codes, its column) is displaced by more than :data:`MOTION_LIMIT_CODES`, and the same holds for a
+neighbour along the stripe (a move displaces a stripe along its length; noise flags a pixel here and there), and
+so is every decoded pixel of a neighbourhood where over a quarter of the pixels were (:data:`REGION_SHARE`: there the
+pixels no edge could check are as suspect).
+
+The frames taken after the move are named from the residuals: each is ``o_b(n) - (o_b(n-1) + o_b(n+1)) / 2`` in
+the offsets ``o_b`` of the bits whose edges the three are, solved by least squares in tiles of 64 pixels (a move
+shifts the stripes by different amounts, either way, with the slope of the surface), the axis's first-captured
+bit with edges in the tile fixed at 0 (a move displaces only the surfaces that slope along it, so the 90th
+percentile of each bit's offset over the tiles); a bit displaced by over :data:`NAMED_OFFSET_CODES` and at least
+half as much as the most displaced one was captured after the move. Where the move exceeds a stripe, its codes turn
+back and leave no residual to solve with: the frames are then named from where it was smaller.
+
+What it cannot see: a move between the column frames and the row frames, or before the first bit, leaves each
+axis's bits consistent among themselves (the capture is then one of the moved object, up to its white and black
+frames). A repeat of the reference frames would see it; rangekit's sequences do not carry one.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from rangekit.coded.binary import axis_crossings, edge_bit_lut
+from rangekit.coded.frames import CaptureStack
+from rangekit.coded.patterns import PatternSpec
+
+__all__ = ["MAX_MOTION_SHARE", "MOTION_LIMIT_CODES", "MotionCheck", "check_motion"]
+
+#: A capture in which more of the decoded pixels than this moved is refused by default
+#: (:func:`rangekit.coded.decode.decode`'s ``max_motion``, ``rangekit decode --max-motion``).
+MAX_MOTION_SHARE = 0.02
+
+#: An edge displaced from its neighbours by more than this many projector codes flags its pixels (a still
+#: surface's residuals on the default rig: 0.05 codes at the 90th percentile; 0.25 flagged 0.098% of a still
+#: capture, 0.3 0.084%, 0.4 0.055% while missing more: benchmarks/coded/bench_motion.py).
+MOTION_LIMIT_CODES = 0.3
+#: Largest gap between successive edges (camera pixels) for a residual: wider gaps are not one surface.
+EDGE_GAP_PX = 6.0
+#: A decoded pixel is flagged too where more than this share of the decoded pixels within :data:`REGION_HALF_PX`
+#: moved: the pixels whose code no edge could check (no stripe edge on both sides: the integer code kept), among
+#: pixels that moved, are as suspect (on the default rig they held 10% of the pixels a 0.5 mm slip spoiled).
+REGION_SHARE = 0.15
+#: The frames are named (and the bits' offsets solved) only when more than this share of the pixels moved.
+NAMED_SHARE = 0.005
+REGION_HALF_PX = 10
+#: Frames are named as taken after a move when their bit's edges are displaced by more than this (codes) and by at
+#: least half the most displaced bit's: the 90th percentile over tiles of :data:`TILE_PX` pixels with at least
+#: :data:`MIN_TILE_EDGES` residuals (a still capture: 0.023 at most on the default rig).
+NAMED_OFFSET_CODES = 0.08
+TILE_PX = 64
+NAMED_PERCENTILE = 90
+MIN_TILE_EDGES = 50
+
+
+@dataclass(frozen=True, eq=False)
+class MotionCheck:
+    """The motion check of one capture (module doc)."""
+
+    mask: np.ndarray                  # (H, W) bool: pixels whose code mixes frames taken before and after a move
+    share: float                      # flagged pixels / decoded pixels
+    moved_frames: tuple[str, ...]     # frames whose bits' edges are displaced from the axis's first bit's
+    bit_offsets: dict                 # axis -> (nb,) displacement (codes) of each bit's edges, bit 0 first (solved
+                                      # only when over NAMED_SHARE moved)
+
+    def describe(self) -> str:
+        """One line for people: the share, and the frames taken after the move."""
+        frames = ", ".join(self.moved_frames) if self.moved_frames else "none named"
+        return (f"{self.share:.1%} of the decoded pixels mix frames taken before and after a move (frames after: "
+                f"{frames})")
+
+
+def check_motion(fr: CaptureStack, spec: PatternSpec, codes: dict[str, np.ndarray], decoded: np.ndarray,
+                 crossings: dict[str, np.ndarray] | None = None, limit: float = MOTION_LIMIT_CODES) -> MotionCheck:
+    """The motion check of a binary-code capture (module doc).
+
+    ``fr``: the capture; ``codes``: axis -> (H, W) int32 integer code map (:func:`rangekit.coded.binary.axis_code`);
+    ``decoded``: (H, W) bool, the pixels with a code (only they are flagged, and the share is of them); ``crossings``: axis -> the axis's crossings when
+    already made (:func:`rangekit.coded.binary.axis_crossings`); ``limit``: codes.
+    """
+    from rangekit.coded.motion import _kernels as M
+
+    mask = np.zeros(fr.shape, bool)
+    moved: list[str] = []
+    offsets: dict[str, np.ndarray] = {}
+    residuals: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+    for axis, code in codes.items():
+        t = crossings[axis] if crossings and axis in crossings else axis_crossings(fr, spec, axis, code)
+        along = axis == "rows"                     # row codes: their edges run down camera columns
+        c2 = np.ascontiguousarray(code.T) if along else code
+        t2 = np.ascontiguousarray(t.T) if along else t
+        res = np.empty(t2.shape, np.float64)
+        lo = np.empty(t2.shape, np.int64)
+        M.crossing_residuals(c2, t2, EDGE_GAP_PX, res, lo)
+        flags = np.empty(c2.shape, bool)
+        M.flag_bracketed(t2, res, float(limit), flags)
+        # A move displaces a stripe along its whole length; the noise at a stripe edge flags a pixel here and there.
+        # Kept: flags with a flagged neighbour along the stripe (the next camera row for column codes).
+        along_stripe = np.zeros_like(flags)
+        along_stripe[1:] |= flags[:-1]
+        along_stripe[:-1] |= flags[1:]
+        flags &= along_stripe
+        mask |= flags.T if along else flags
+        residuals[axis] = res, lo
+    mask &= decoded
+    mask |= decoded & (_local_share(mask, decoded) > REGION_SHARE)
+    share = float(np.count_nonzero(mask)) / max(int(np.count_nonzero(decoded)), 1)
+    if share > NAMED_SHARE:                    # something moved: which frames
+        for axis, (res, lo) in residuals.items():
+            size = spec.width if axis == "columns" else spec.height
+            o = _tiled_offsets(res, lo, edge_bit_lut(size), spec.bits(axis))
+            offsets[axis] = o
+            prefix = "col" if axis == "columns" else "row"
+            named = max(NAMED_OFFSET_CODES, 0.5 * float(o.max()))   # the bits displaced about as much as the most
+            for b in range(spec.bits(axis) - 1, -1, -1):          # in capture order: most significant first
+                if o[b] > named:
+                    moved += [f"{prefix}_b{b}", f"{prefix}_b{b}_inv"]
+    order = {name: i for i, name in enumerate(spec.frame_names)}
+    return MotionCheck(mask, share, tuple(sorted(moved, key=order.__getitem__)), offsets)
+
+
+def _local_share(mask: np.ndarray, decoded: np.ndarray, half: int = REGION_HALF_PX) -> np.ndarray:
+    """(H, W) the share of the decoded pixels flagged in the (2 half + 1)-pixel square around each pixel."""
+    flagged, there = _box_sum(mask, half), _box_sum(decoded, half)
+    return np.where(there > 0, flagged / np.maximum(there, 1), 0.0)
+
+
+def _box_sum(a: np.ndarray, half: int) -> np.ndarray:
+    """(H, W) int64 count of True in the (2 half + 1)-pixel square around each pixel (clipped at the borders)."""
+    c = np.zeros((a.shape[0] + 1, a.shape[1] + 1), np.int64)
+    np.cumsum(np.cumsum(a, axis=0, dtype=np.int64), axis=1, out=c[1:, 1:])
+    ys, xs = np.arange(a.shape[0]), np.arange(a.shape[1])
+    y0, y1 = np.maximum(ys - half, 0), np.minimum(ys + half + 1, a.shape[0])
+    x0, x1 = np.maximum(xs - half, 0), np.minimum(xs + half + 1, a.shape[1])
+    return c[y1][:, x1] - c[y0][:, x1] - c[y1][:, x0] + c[y0][:, x0]
+
+
+def _tiled_offsets(res: np.ndarray, lo: np.ndarray, edge_bit: np.ndarray, nb: int, tile: int = TILE_PX) -> np.ndarray:
+    """(nb,) each bit's displacement (codes, >= 0): the :data:`NAMED_PERCENTILE` th percentile over ``tile`` x ``tile``
+    pixel tiles (with at least
+    :data:`MIN_TILE_EDGES` residuals) of the size of the bit's offset in the tile. A move displaces stripes by
+    different amounts and either way across the image (with the slope of the surface), so the offsets are solved
+    where they are about constant: in each tile, the mean residual of each (previous, own, next) bit triple (each
+    residual clipped to +-1 code), then least squares over the triples, weighted by their counts, the most
+    significant bit with edges at 0."""
+    ys, xs = np.nonzero(np.isfinite(res))
+    if len(ys) == 0:
+        return np.zeros(nb)
+    r = np.clip(res[ys, xs], -1.0, 1.0)
+    c = lo[ys, xs]
+    top = len(edge_bit) - 1
+    triple = (edge_bit[np.clip(c - 1, 0, top)] * nb + edge_bit[c]) * nb + edge_bit[np.clip(c + 1, 0, top)]
+    tiles_x = -(-res.shape[1] // tile)
+    group = ((ys // tile) * tiles_x + xs // tile) * nb ** 3 + triple
+    groups, inverse, counts = np.unique(group, return_inverse=True, return_counts=True)
+    means = np.bincount(inverse, weights=r) / counts
+    tile_of, key = groups // nb ** 3, groups % nb ** 3
+    prev, own, nxt = key // (nb * nb), (key // nb) % nb, key % nb
+    A = np.zeros((len(groups), nb))
+    np.add.at(A, (np.arange(len(groups)), own), 1.0)
+    np.add.at(A, (np.arange(len(groups)), prev), -0.5)
+    np.add.at(A, (np.arange(len(groups)), nxt), -0.5)
+    w = np.sqrt(counts)
+    starts = np.flatnonzero(np.r_[True, tile_of[1:] != tile_of[:-1]])
+    stops = np.r_[starts[1:], len(groups)]
+    found = []
+    for s0, s1 in zip(starts, stops):
+        if counts[s0:s1].sum() < MIN_TILE_EDGES:
+            continue
+        At = A[s0:s1] * w[s0:s1, None]
+        seen = np.flatnonzero(np.any(At != 0, axis=0))
+        free = seen[seen != seen.max()]
+        o = np.zeros(nb)
+        if len(free):
+            o[free] = np.linalg.lstsq(At[:, free], means[s0:s1] * w[s0:s1], rcond=None)[0]
+        found.append(np.abs(o))
+    return np.percentile(found, NAMED_PERCENTILE, axis=0) if found else np.zeros(nb)

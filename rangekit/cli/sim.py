@@ -69,7 +69,8 @@ def _sim_render(args: argparse.Namespace) -> int:
                              rig_file=args.rig, angle=np.radians(args.angle_deg), bits=args.bits, seed=args.seed,
                              noise=not args.no_noise, global_fraction=args.global_fraction,
                              object_unit=args.object_unit or "m", progress=console(),
-                             motion=None if not args.motion_mm else (args.motion, args.motion_mm * 1e-3))
+                             motion=None if not args.motion_mm else (args.motion, args.motion_mm * 1e-3),
+                             readout_frames=args.readout_frames)
     result(f"done in {time.perf_counter() - t0:.1f} s")
     return 0
 
@@ -126,6 +127,9 @@ def add_parsers(sub) -> None:
     render.add_argument("--motion", default="slip",
                         help="how it moves with --motion-mm: slip (once, halfway), vibration or breathing (a period "
                              "of 8 frames); default slip")
+    render.add_argument("--readout-frames", type=non_negative_float, default=0.0, metavar="FRAMES",
+                        help="with --motion-mm: a rolling shutter whose last row is exposed FRAMES frames (0 to 1) "
+                             "after its first (default 0: a global shutter)")
     tof = render.add_argument_group("time of flight (--sensor tof, tof-pulsed)")
     tof.add_argument("--plan", default="kinect", choices=("kinect", "luxonis"),
                      help="frequency plan: kinect = 16/80/120 MHz x 3 steps (18.7 m), luxonis = 80/100 MHz x 4 "

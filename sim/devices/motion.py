@@ -11,6 +11,12 @@ world frame) by ``offset_m(t)`` at time ``t``, counted in frames from the first 
 :func:`capture_moving` captures a pattern sequence on a :class:`rangekit.sim.SimRig` with every frame exposed at
 its own offset (a global shutter): consecutive frames at the same offset are one ``capture_sequence`` of the moved
 scene, so a slip costs two renders of the geometry. The scene is put back afterwards.
+
+A rolling shutter (``readout_frames`` > 0) exposes camera row r of frame k at ``k + readout_frames * r / (H - 1)``:
+each band of ``band_rows`` rows takes the offset at its middle row's time, and a frame whose bands differ is rendered
+once for each offset and put together band by band (a slip during a frame's readout: its top rows see the object
+where it was, its lower rows where it went). Frames rendered more than once draw more of the noise stream, so the
+frames after them differ in their noise from a global-shutter capture.
 """
 
 from __future__ import annotations
@@ -61,13 +67,23 @@ class Motion:
 
     def motion(self, t_frames: float) -> np.ndarray:
         """(4, 4) world-frame motion of the object at time ``t_frames``."""
+        return self.motion_by(float(self.offset_m(t_frames)))
+
+    def motion_by(self, offset_m: float) -> np.ndarray:
+        """(4, 4) world-frame motion of the object displaced by ``offset_m`` along ``direction``."""
         d = np.asarray(self.direction, np.float64)
-        return make_T(np.eye(3), float(self.offset_m(t_frames)) * d / np.linalg.norm(d))
+        return make_T(np.eye(3), float(offset_m) * d / np.linalg.norm(d))
 
 
-def capture_moving(sim, patterns, motion: Motion, delay_s: float = 0.0) -> tuple[list[np.ndarray], np.ndarray]:
-    """Capture ``patterns`` on ``sim`` with the object moving by ``motion``, frame k exposed at time k; the frames
-    and each frame's offset (metres). The scene is restored afterwards."""
+def capture_moving(sim, patterns, motion: Motion, delay_s: float = 0.0, *, readout_frames: float = 0.0,
+                   band_rows: int = 16) -> tuple[list[np.ndarray], np.ndarray]:
+    """Capture ``patterns`` on ``sim`` with the object moving by ``motion``, frame k exposed at time k (its first
+    row; with ``readout_frames`` > 0 a rolling shutter, module doc); the frames and each frame's first row's offset
+    (metres). The scene is restored afterwards."""
+    if not (np.isfinite(readout_frames) and 0.0 <= readout_frames <= 1.0):
+        raise SceneError(f"capture_moving: readout_frames must be from 0 to 1 frame, found {readout_frames!r}")
+    if readout_frames > 0:
+        return _rolling(sim, list(patterns), motion, delay_s, readout_frames, max(int(band_rows), 1))
     patterns = list(patterns)
     offsets = motion.offset_m(np.arange(len(patterns)))
     base = sim.scene
@@ -88,3 +104,32 @@ def capture_moving(sim, patterns, motion: Motion, delay_s: float = 0.0) -> tuple
         if current != 0.0:
             sim.set_scene(base)
     return frames, offsets
+
+
+def _rolling(sim, patterns: list, motion: Motion, delay_s: float, readout: float,
+             band_rows: int) -> tuple[list[np.ndarray], np.ndarray]:
+    """:func:`capture_moving` with a rolling shutter: each frame rendered once per distinct band offset."""
+    H = sim.rig.camera.height
+    starts = np.arange(0, H, band_rows)
+    middle = np.minimum(starts + band_rows // 2, H - 1)
+    base = sim.scene
+    frames: list[np.ndarray] = []
+    current = 0.0
+    try:
+        for k, pattern in enumerate(patterns):
+            band_offsets = motion.offset_m(k + readout * middle / max(H - 1, 1))
+            image = None
+            for offset in np.unique(band_offsets):
+                if offset != current:
+                    sim.set_scene(pass_scene(base, motion.motion_by(offset)) if offset != 0 else base)
+                    current = offset
+                shot = sim.capture_sequence([pattern], delay_s)[0]
+                if image is None:
+                    image = shot.copy()
+                for b in np.flatnonzero(band_offsets == offset):
+                    image[starts[b]:starts[b] + band_rows] = shot[starts[b]:starts[b] + band_rows]
+            frames.append(image)
+    finally:
+        if current != 0.0:
+            sim.set_scene(base)
+    return frames, motion.offset_m(np.arange(len(patterns)))

@@ -55,11 +55,12 @@ def preview_image(white: np.ndarray, truth: ViewGeometry, *, width: int = 480) -
 
 
 def write_capture(sim: SimRig, spec: PatternSpec, out_dir: str | Path, *, info: dict | None = None,
-                  progress: Callable[[str], None] | None = None, motion=None) -> list[Path]:
+                  progress: Callable[[str], None] | None = None, motion=None, readout_frames: float = 0.0) -> list[Path]:
     """Project every frame of ``spec`` on ``sim`` at its current state and write the capture folder.
 
     ``motion``: the object moves during the sequence (:class:`rangekit.sim.devices.motion.Motion`; recorded in
     capture.json with each frame's offset); the ground truth is the object where it was at the first frame.
+    ``readout_frames``: with ``motion``, a rolling shutter whose last row is exposed that many frames after its first.
 
     Returns the image paths in frame order.
     """
@@ -74,8 +75,9 @@ def write_capture(sim: SimRig, spec: PatternSpec, out_dir: str | Path, *, info: 
     else:
         from rangekit.sim.devices.motion import capture_moving
 
-        images, offsets = capture_moving(sim, list(spec.frames()), motion)
-        moved = {"motion": asdict(motion), "frame_offsets_m": [float(o) for o in offsets]}
+        images, offsets = capture_moving(sim, list(spec.frames()), motion, readout_frames=readout_frames)
+        moved = {"motion": asdict(motion), "frame_offsets_m": [float(o) for o in offsets],
+                 "readout_frames": float(readout_frames)}
     paths = []
     for i, img in enumerate(images):
         path = out / f"{i:03d}.png"

@@ -36,3 +36,10 @@ def test_a_slipped_capture_is_flagged_and_refused_by_name_a_still_one_is_not(cli
     assert frames["method"] == "graycode"
     bad = cli("decode", still, "--pattern", still / "patterns.json", "--max-motion", "150%", "--out", tmp_path / "x.npz")
     assert bad.code == 2 and "percentage from 0 to 100" in bad.err
+    rolling = tmp_path / "rolling"
+    assert cli("sim", "render", "--rig", tmp_path / "rig.json", "--motion-mm", "2", "--readout-frames", "1",
+               "--out", rolling).code == 0
+    assert json.loads((rolling / "capture.json").read_text())["readout_frames"] == 1.0
+    run = cli("sim", "render", "--rig", tmp_path / "rig.json", "--motion-mm", "2", "--readout-frames", "3",
+              "--out", tmp_path / "r3")
+    assert_error(run, 1, "readout_frames must be from 0 to 1", "3")

@@ -48,3 +48,30 @@ def test_a_slip_shows_the_still_object_then_the_moved_one():
     assert sum(far(g, m) for g, m in zip(got[half:], moved[half:])) == 0
     assert sum(far(g, s) for g, s in zip(got[half:], still[half:])) > 200     # measured 376 (320 x 256 camera)
     assert far(moving.capture_sequence(frames[:1])[0], still[0]) == 0        # the scene put back
+
+
+def test_a_rolling_shutter_sees_a_slip_during_a_frames_readout_in_its_lower_rows():
+    """Readout over one frame, a slip at the middle of frame ``half``'s readout: frames before it are the still
+    capture byte for byte; that frame's top rows are still, its lower rows the moved object's (up to the noise);
+    the frames after it are the moved object's."""
+    spec = make_pattern_spec("graycode", (320, 200))
+    frames = list(spec.frames())
+    rig = small_projector_rig()
+    half = len(frames) // 2
+    motion = Motion("slip", 2e-3, at_frame=half + 0.5)
+    got, offsets = capture_moving(SimRig(default_scene("lumpy"), rig, seed=5), frames, motion, readout_frames=1.0,
+                                  band_rows=16)
+    assert offsets.tolist() == [0.0] * (half + 1) + [2e-3] * (len(frames) - half - 1)
+    still = SimRig(default_scene("lumpy"), rig, seed=5).capture_sequence(frames)
+    moved = SimRig(pass_scene(default_scene("lumpy"), Motion("slip", 2e-3).motion(0)), rig, seed=5).capture_sequence(
+        frames)
+    assert all(np.array_equal(a, b) for a, b in zip(got[:half], still[:half]))
+    far = lambda a, b: int(np.count_nonzero(np.abs(a.astype(int) - b.astype(int)) > 30))   # noqa: E731
+    H = rig.camera.height
+    # Band b's middle row is exposed at half + (16 b + 8) / (H - 1): the bands from H/2 on saw the moved object.
+    top, bottom = slice(0, 112), slice(144, H)
+    assert np.array_equal(got[half][top], still[half][top])
+    assert far(got[half][bottom], moved[half][bottom]) == 0 and far(got[half][bottom], still[half][bottom]) > 100
+    assert sum(far(g, m) for g, m in zip(got[half + 1:], moved[half + 1:])) == 0
+    with pytest.raises(SceneError, match="readout_frames must be from 0 to 1"):
+        capture_moving(SimRig(default_scene("lumpy"), rig, seed=5), frames[:2], motion, readout_frames=2.0)

@@ -69,11 +69,12 @@ def _object_info(obj: str, object_unit: str) -> dict:
 def render_projector_capture(out: str | Path, *, obj: str = "lumpy", patterns: str = "graycode",
                              rig_file: str | Path | None = None, angle: float = 0.0, bits: int = 8, seed: int = 0,
                              noise: bool = True, global_fraction: float | None = None, object_unit: str = "m",
-                             progress: Callable | None = None, motion=None) -> None:
+                             progress: Callable | None = None, motion=None, readout_frames: float = 0.0) -> None:
     """Render ``patterns`` on ``obj`` (built-in name or mesh file, in ``object_unit``) at turntable ``angle``
     (radians) on the rig file's rig (default the simulator's), with a ``bits``-bit camera; write the capture
     folder. ``motion``: ``(kind, metres)``, the object moving along the world x axis during the sequence
-    (:class:`rangekit.sim.devices.motion.Motion`; a slip comes halfway through it)."""
+    (:class:`rangekit.sim.devices.motion.Motion`; a slip comes halfway through it), seen by a rolling shutter whose
+    last row is exposed ``readout_frames`` frames after its first (0: a global shutter)."""
     from rangekit.coded.patterns import make_pattern_spec
     from rangekit.rig.rig_file import load_rig
     from rangekit.sim import ImagingModel, SimRig
@@ -97,7 +98,8 @@ def render_projector_capture(out: str | Path, *, obj: str = "lumpy", patterns: s
         from rangekit.sim.devices.motion import Motion
 
         moving = Motion(motion[0], motion[1], at_frame=spec.n_frames // 2)
-    write_capture(sim, spec, out, info=_object_info(obj, object_unit), progress=progress, motion=moving)
+    write_capture(sim, spec, out, info=_object_info(obj, object_unit), progress=progress, motion=moving,
+                  readout_frames=readout_frames)
 
 
 def render_laser_capture(out: str | Path, *, obj: str = "lumpy", rig_file: str | Path | None = None,

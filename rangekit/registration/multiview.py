@@ -25,7 +25,7 @@ from rangekit.errors import RegistrationError
 from rangekit.geometry import apply_T, invert_T
 from rangekit.surface.cloud import PointCloud, bbox_diagonal, check_voxel, downsample_with_normals
 from rangekit.surface.convert import as_cloud
-from rangekit.registration.coarse import CoarseOptions, compute_features, coarse_align
+from rangekit.registration.coarse import CoarseOptions, compute_features, coarse_align_seeds
 from rangekit.registration.icp import IcpOptions
 from rangekit.registration.joint import JointResult, refine_jointly
 from rangekit.registration.overlap_estimate import overlapping_pairs
@@ -217,12 +217,15 @@ def _register_views(clouds, init_T_world_view, options, progress, names, map_pai
         feats = [compute_features(c, copt) for c in coarse_clouds]
 
         def align(i: int, j: int) -> EdgeResult:
-            try:
-                r = coarse_align(feats[j], feats[i], copt)
+            def edge(r) -> EdgeResult:
+                return edge_result(i, j, r, r.fitness, options.min_overlap, options.min_constraint,
+                                   options.max_coarse_rmse * voxel, prior=False)
+
+            try:   # seeds in turn while the verified fit is refused (coarse.align.SEEDS)
+                r = coarse_align_seeds(feats[j], feats[i], copt, lambda r: edge(r).accepted)
             except RegistrationError as exc:   # this pair only (e.g. no feature matches): a refused edge
                 return EdgeResult(i, j, np.eye(4), np.inf, 0.0, False, str(exc).removeprefix("coarse alignment: "))
-            return edge_result(i, j, r, r.fitness, options.min_overlap, options.min_constraint,
-                               options.max_coarse_rmse * voxel, prior=False)
+            return edge(r)
 
         def settle(edges: list) -> np.ndarray:
             edges_connect_views(n, edges, names)

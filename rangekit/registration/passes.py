@@ -26,15 +26,12 @@ import numpy as np
 
 from rangekit.errors import RegistrationError
 from rangekit.geometry import rotation_angle
-from rangekit.registration.coarse import CoarseOptions, coarse_align, compute_features
+from rangekit.registration.coarse import CoarseOptions, coarse_align_seeds, compute_features
 from rangekit.registration.icp import IcpOptions, icp
 from rangekit.registration.multiview import EdgeResult, MultiViewOptions, MultiViewResult, register_views
 from rangekit.surface.cloud import PointCloud, bbox_diagonal, downsample_with_normals, merge_clouds
 
 __all__ = ["PassesResult", "register_passes"]
-
-#: Seeds of the RANSAC between two passes' merged clouds, tried in turn until one fit passes the gates.
-COARSE_SEEDS = 3
 
 
 @dataclass(frozen=True, eq=False)
@@ -64,28 +61,24 @@ def _align_pass(source: PointCloud, target: PointCloud, voxel: float, fine: floa
     the fine voxel) with no prior, and its edge record."""
     copt = CoarseOptions(voxel=voxel, rng=options.rng)
     coarse_s, coarse_t = (compute_features(c, copt) for c in (source, target))   # features once for every seed
-    best = None
-    for seed in range(COARSE_SEEDS):
-        try:
-            r = coarse_align(coarse_s, coarse_t, replace(copt, rng=options.rng + seed))
-        except RegistrationError:
-            continue
-        ok = r.rmse < options.max_coarse_rmse * voxel and r.fitness >= options.min_overlap
-        if best is None or (ok, r.fitness) > (best[0], best[1].fitness):
-            best = (ok, r)
-        if ok:      # verified: the later seeds only run when this one failed
-            break
-    if best is None or not best[0]:
-        found = "no fit" if best is None else f"ICP RMSE {best[1].rmse * 1e3:.3f} mm, fitness {best[1].fitness:.2f}"
+    def accept(r) -> bool:
+        return r.rmse < options.max_coarse_rmse * voxel and r.fitness >= options.min_overlap
+
+    try:
+        found = coarse_align_seeds(coarse_s, coarse_t, copt, accept)
+    except RegistrationError:
+        found = None
+    if found is None or not accept(found):
+        seen = "no fit" if found is None else f"ICP RMSE {found.rmse * 1e3:.3f} mm, fitness {found.fitness:.2f}"
         raise RegistrationError(f"pass {p + 1}: no alignment to pass 1 found without a prior (expected an ICP-verified "
                                 f"RMSE below {options.max_coarse_rmse * voxel * 1e3:.3f} mm and a fitness of at least "
-                                f"{options.min_overlap:.2f}, found {found}); the passes "
+                                f"{options.min_overlap:.2f}, found {seen}); the passes "
                                 "may not overlap: turn the object less far over or scan more views")
-    r = icp(source, target, init_T_target_source=best[1].T_target_source,
+    r = icp(source, target, init_T_target_source=found.T_target_source,
             options=IcpOptions(method="point_to_plane", kernel="huber", max_distance=2 * fine, max_iterations=60,
                                tolerance=1e-7, max_samples=20000))
     edge = EdgeResult(-1, -1, r.T_target_source, r.rmse, r.fitness, True,
-                      f"pass {p + 1} to pass 1, no prior: {best[1].reason}; fine ICP rmse {r.rmse * 1e3:.3f} mm")
+                      f"pass {p + 1} to pass 1, no prior: {found.reason}; fine ICP rmse {r.rmse * 1e3:.3f} mm")
     return r.T_target_source, edge
 
 

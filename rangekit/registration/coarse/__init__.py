@@ -2,6 +2,7 @@
 pairs of a view graph to try it on (:mod:`.graph`: view descriptors, similar pairs, the graph widened until it
 settles)."""
 
-from rangekit.registration.coarse.align import CoarseOptions, Features, coarse_align, compute_features
+from rangekit.registration.coarse.align import (CoarseOptions, Features, coarse_align, coarse_align_seeds,
+                                                compute_features)
 
-__all__ = ["CoarseOptions", "Features", "coarse_align", "compute_features"]
+__all__ = ["CoarseOptions", "Features", "coarse_align", "coarse_align_seeds", "compute_features"]

@@ -91,22 +91,45 @@ def npy_zst_header(data: bytes, where: str | Path) -> tuple[tuple[int, ...], np.
     return _parse_header(head, where)[:2]
 
 
-def decode_npy_zst(data: bytes, where: str | Path) -> np.ndarray:
-    """The image of a ``.npy.zst`` file's bytes: a new, writable (H, W) or (H, W, 3) array. FileFormatError
-    naming ``where`` when the data is damaged, cut short, longer than its header says, or not an image."""
+def decode_npy_zst(data: bytes, where: str | Path, *, out: np.ndarray | None = None) -> np.ndarray:
+    """The image of a ``.npy.zst`` file's bytes: a new, writable (H, W) or (H, W, 3) array, or ``out`` filled with
+    it (``out``: a writable C-contiguous array of the header's shape and dtype, e.g. one frame of a stack; the
+    pixels are copied once, from zstd's buffer into it). FileFormatError naming ``where`` when the data is damaged,
+    cut short, longer than its header says, not an image, or not ``out``'s shape and dtype."""
     import zstandard
 
     head, rest = _header_frame(data, where)
     shape, dtype, offset = _parse_header(head, where)
-    try:
-        d = zstandard.ZstdDecompressor().decompressobj()
-        pixels = head[offset:] + d.decompress(rest) if len(head) > offset else d.decompress(rest)
-        complete, extra = d.eof, d.unused_data
-    except zstandard.ZstdError as exc:
-        raise FileFormatError(f"{where}: damaged zstd data ({exc}); expected a {NPY_ZST_SUFFIX} frame") from None
+    if out is not None and (out.shape != shape or out.dtype != dtype):
+        raise FileFormatError(f"{where}: frame holds a {dtype} {shape} image; expected {out.dtype} {out.shape}")
     size = int(np.prod(shape)) * dtype.itemsize
+    pixels = None
+    try:   # rangekit's files: the pixels alone in the second frame, whose header says their size: one call
+        if len(head) == offset and zstandard.frame_content_size(rest) == size:
+            pixels, complete, extra = zstandard.ZstdDecompressor().decompress(rest, allow_extra_data=False), True, b""
+    except zstandard.ZstdError:   # cut short, bytes after the frame, damaged: as a stream, which says which
+        pixels = None
+    if pixels is None:
+        pixels, complete, extra = _streamed(head[offset:], rest, where)
     if len(pixels) != size or not complete or extra:
         raise FileFormatError(f"{where}: frame holds {len(pixels):,} bytes of pixels{'' if complete else ', cut short'}"
                               f"{f' and {len(extra):,} bytes after them' if extra else ''}; its header says {size:,} "
                               f"({dtype} {shape}); the file is cut short or damaged")
-    return np.frombuffer(pixels, dtype=dtype).reshape(shape).copy()   # writable, like OpenCV's images
+    image = np.frombuffer(pixels, dtype=dtype).reshape(shape)
+    if out is None:
+        return image.copy()   # writable, like OpenCV's images
+    out[...] = image
+    return out
+
+
+def _streamed(start: bytes, rest: bytes, where: str | Path) -> tuple[bytes, bool, bytes]:
+    """``(pixels, complete, extra bytes)``: ``rest`` decompressed as a stream (no content size needed) after the
+    header frame's own pixel bytes ``start``."""
+    import zstandard
+
+    try:
+        d = zstandard.ZstdDecompressor().decompressobj()
+        pixels = start + d.decompress(rest) if start else d.decompress(rest)
+        return pixels, d.eof, d.unused_data
+    except zstandard.ZstdError as exc:
+        raise FileFormatError(f"{where}: damaged zstd data ({exc}); expected a {NPY_ZST_SUFFIX} frame") from None

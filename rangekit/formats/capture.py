@@ -18,6 +18,7 @@ from rangekit.coded.patterns import PATTERN_METHODS, PatternSpec, make_pattern_s
 from rangekit.errors import ConfigError, FileFormatError, UsageError
 from rangekit.image_header import check_image_files
 from rangekit.io import atomic_save_npz, decode_image, read_json, read_png
+from rangekit.npy_zst import decode_npy_zst, is_npy_zst, npy_zst_header
 from rangekit.rig.rig_file import Rig, load_rig
 
 __all__ = ["IMAGE_SUFFIXES", "list_images", "read_stack", "stack_from_bytes", "Capture", "load_capture", "pattern_spec_for",
@@ -91,8 +92,11 @@ def stack_from_bytes(paths: Sequence[Path], contents: list[bytes], *, workers: i
     del first
 
     def load(k: int) -> None:
-        img = decode_image(contents[k], paths[k])
-        contents[k] = b""
+        data, contents[k] = contents[k], b""
+        if is_npy_zst(data) and npy_zst_header(data, paths[k]) == (stack.shape[1:], stack.dtype):
+            decode_npy_zst(data, paths[k], out=stack[k])   # straight into the stack: one copy fewer a frame
+            return
+        img = decode_image(data, paths[k])
         if img.shape != stack.shape[1:] or img.dtype != stack.dtype:
             raise FileFormatError(f"{paths[k]}: image is {img.dtype} {img.shape}, but {Path(paths[0]).name} is "
                                   f"{stack.dtype} {stack.shape[1:]}; {what} needs one size and depth")

@@ -27,6 +27,8 @@ TICK_EPS_S = 1e-9
 class SimClock:
     """Virtual time in seconds, from ``start``; :meth:`sleep` advances it at once."""
 
+    virtual = True   # its sleeps take no real time (acquisition opens no quiet window for them)
+
     def __init__(self, start: float = 0.0) -> None:
         self._t = float(start)
 

@@ -163,7 +163,8 @@ def test_the_final_mesh_is_what_rangekit_process_makes(streamed, tmp_path):
 def test_in_real_time_a_view_is_decoded_before_the_next_ones_last_frame(tmp_path):
     """The simulated rig on the wall clock (a 20 ms pattern delay, 30 frames a second, the turntable at its
     real-time speed): each view's ViewDecoded comes before the next view's ViewAcquired (sent once that view's
-    last frame is on disk), so processing keeps up with the capture."""
+    last frame is on disk), so processing keeps up with the capture; each view's TSDF integration started in one
+    of the capture's waits (rangekit.app.acquire.quiet)."""
     from rangekit.sim import SimRig, default_scene
     from rangekit.sim.devices.realtime import realtime_options
     from small_rigs import small_rig
@@ -171,6 +172,14 @@ def test_in_real_time_a_view_is_decoded_before_the_next_ones_last_frame(tmp_path
     devices = SimRig(default_scene("lumpy"), small_rig(), seed=3, **realtime_options(0.02))
     order = []
     streaming = StreamingProcessor(tmp_path / "s", ProcessOptions(), order.append)
+    integrations = []     # each TSDF integration's wait for a quiet window of the capture: went in one (True)
+
+    class Recorded(type(streaming.quiet)):
+        def wait(self, need_s, timeout_s=1.0):
+            ok = super().wait(need_s, timeout_s)
+            integrations.append(ok)
+            return ok
+    streaming.quiet = Recorded()
 
     def on_event(event):
         streaming.on_event(event)
@@ -179,8 +188,9 @@ def test_in_real_time_a_view_is_decoded_before_the_next_ones_last_frame(tmp_path
     spec = make_pattern_spec("graycode", (1280, 800))
     acquire(devices, devices.rig, spec, tmp_path / "s", plan=ScanPlan(3),
             capture=CaptureSettings(bits=8, pattern_delay_s=0.02, turntable_settle_s=0.05),
-            simulator=SimulatorSettings("lumpy", 3, asdict(ImagingModel())), on_event=on_event)
+            simulator=SimulatorSettings("lumpy", 3, asdict(ImagingModel())), on_event=on_event, quiet=streaming.quiet)
     streaming.finish()
+    assert len(integrations) == 3 and all(integrations), integrations   # none waited out its timeout
     names = [(type(e).__name__, e.index) for e in order if isinstance(e, (ev.ViewAcquired, ev.ViewDecoded))]
     print(f"\n{names}")
     for k in range(2):

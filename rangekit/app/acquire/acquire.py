@@ -27,6 +27,7 @@ from __future__ import annotations
 import shutil
 import threading
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Callable
@@ -45,6 +46,7 @@ from rangekit.formats.sessions.lock import session_lock
 from rangekit.app.acquire.frame_writer import FrameError, FrameWriter
 from rangekit.app.events import CaptureLoad, OnEvent, ViewAcquired, emit
 from rangekit.app.acquire.lights import light_for
+from rangekit.app.acquire.quiet import QuietWindows
 from rangekit.app.acquire.reconnect import MAX_RETAKES, reconnected
 from rangekit.io import atomic_write_bytes, atomic_write_json, fsync_folder
 from rangekit.progress import LOGGER, call_progress
@@ -58,7 +60,7 @@ def acquire(devices: RigDevices, rig: Rig, spec: PatternSpec, out_dir: str | Pat
             simulator: SimulatorSettings | None = None, hardware: dict | None = None,
             files: dict[str, bytes] | None = None, progress: Callable[[str], None] | None = None,
             allow_auto_exposure: bool = False, turn_over: Callable[[int], None] | None = None,
-            on_event: OnEvent | None = None) -> Session:
+            on_event: OnEvent | None = None, quiet: QuietWindows | None = None) -> Session:
     """Acquire (or resume) a session.
 
     Parameters
@@ -87,6 +89,9 @@ def acquire(devices: RigDevices, rig: Rig, spec: PatternSpec, out_dir: str | Pat
         are told each view's pass before it is taken (they turn the object over themselves).
     on_event : given :class:`rangekit.app.events.ViewAcquired` as each view is recorded done (from the frame
         writer's thread, one at a time with ``progress``).
+    quiet : told each wait on the devices (pattern delay, turntable settling) as it begins and ends, and the
+        end of the acquisition (:class:`rangekit.app.acquire.quiet.QuietWindows`): work beside the capture
+        starts its long GIL-holding calls in them.
 
     Returns
     -------
@@ -132,7 +137,7 @@ def acquire(devices: RigDevices, rig: Rig, spec: PatternSpec, out_dir: str | Pat
         if set_controls is not None:
             set_controls(controls)
         return _acquire(devices, rig, spec, out, plan, resume, capture, simulator, hardware, files or {}, progress,
-                        controls, turn_over, on_event)
+                        controls, turn_over, on_event, quiet)
 
 
 def _resume_hint(out: Path, n_done: int) -> str:
@@ -157,7 +162,7 @@ def _new_session(out: Path, plan, spec, rig, capture, simulator, hardware, files
 
 
 def _acquire(devices, rig, spec, out: Path, plan, resume, capture, simulator, hardware, files,
-             progress, controls, turn_over=None, on_event=None) -> Session:
+             progress, controls, turn_over=None, on_event=None, quiet=None) -> Session:
     angles = plan.angles()
     if resume:
         session = Session.load(out)
@@ -185,10 +190,12 @@ def _acquire(devices, rig, spec, out: Path, plan, resume, capture, simulator, ha
                session.capture.turntable_settle_s,
                session.capture.pattern_delay_s,
                tuple((e, None if e is None else replace(controls, exposure_us=float(e))) for e in exposures),
-               progress, on_event)
+               progress, on_event, quiet)
     try:
         return _views(run, session, angles, turn_over)
     finally:
+        if quiet is not None:
+            quiet.end()
         light.close()
 
 
@@ -210,6 +217,7 @@ class _Run:
     exposures: tuple
     progress: Callable | None
     on_event: OnEvent | None
+    quiet: QuietWindows | None = None
     lock: threading.Lock = field(default_factory=threading.Lock)
 
     def report(self, *args, **kwargs) -> None:
@@ -305,6 +313,21 @@ def _taken(camera):
     return capture
 
 
+@contextmanager
+def _quiet_window(run: _Run, real: bool, seconds: float | None = None):
+    """A quiet window open for the work beside the capture while the block waits on the devices (:mod:`.quiet`):
+    ``seconds`` long, or None: until the block ends (a turntable's move). ``real``: the waits take real time (not
+    the simulator's virtual clock's)."""
+    quiet = run.quiet if real else None
+    if quiet is not None:
+        quiet.open(seconds)
+    try:
+        yield
+    finally:
+        if quiet is not None:
+            quiet.close()
+
+
 def _view(run: _Run, k: int, angle: float, state: dict, done: list, writer: FrameWriter, *,
           retake: bool = False) -> None:
     """Take view ``k``'s frames and hand them to ``writer``, with the view's finishing step; ``retake``: the view
@@ -314,6 +337,7 @@ def _view(run: _Run, k: int, angle: float, state: dict, done: list, writer: Fram
     partial = out / f"view_{k:03d}.partial"
     t0 = time.time()
     sleep = getattr(devices, "sleep", time.sleep)    # the simulator's virtual clock, else the real one
+    real = not getattr(getattr(devices, "clock", None), "virtual", False)   # its sleeps take real time
     deferred = getattr(devices.camera, "capture_deferred", None)
     capture = deferred if deferred is not None else _taken(devices.camera)
     step, target, device = "turntable move", partial, None
@@ -327,9 +351,10 @@ def _view(run: _Run, k: int, angle: float, state: dict, done: list, writer: Fram
         step, device = "turntable move", "turntable"
         if devices.turntable is not None:
             LOGGER.debug("view %d/%d: turntable to %.1f deg", k + 1, run.plan.n_views, np.degrees(angle))
-            devices.turntable.rotate_to(float(angle))
-            if run.settle_s > 0:
-                sleep(run.settle_s)
+            with _quiet_window(run, real):
+                devices.turntable.rotate_to(float(angle))
+                if run.settle_s > 0:
+                    sleep(run.settle_s)
         for exposure, controls in run.exposures:
             sub = "" if exposure is None else f"{exposure_folder(exposure)}/"
             if exposure is not None:
@@ -341,7 +366,8 @@ def _view(run: _Run, k: int, angle: float, state: dict, done: list, writer: Fram
                 step, device = f"{sub}frame {i} ({name}): {light.device}", light.device
                 light.show(i)
                 if run.pattern_settle_s > 0:
-                    sleep(run.pattern_settle_s)
+                    with _quiet_window(run, real, run.pattern_settle_s):
+                        sleep(run.pattern_settle_s)
                 step, device = f"{sub}frame {i} ({name}): camera", "camera"
                 image = capture()
                 state["frames"][0] += 1

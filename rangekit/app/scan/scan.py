@@ -84,7 +84,8 @@ def scan(options: ScanOptions, on_event: OnEvent | None = None) -> ScanResult:
 
                 streaming = StreamingProcessor(options.folder, process_options, on_event, lock=one_at_a_time.lock)
                 held.callback(streaming.stop)     # an error or Ctrl-C: the view being decoded finishes, no more
-            session = _acquire(options, one_at_a_time.chained(streaming))
+            session = _acquire(options, one_at_a_time.chained(streaming),
+                               None if streaming is None else streaming.quiet)
             acquisition_s = time.perf_counter() - t0
             if not options.process:
                 return ScanResult(options.folder, session, acquisition_s, None, time.perf_counter() - t0)
@@ -116,8 +117,9 @@ class _serialised:
         return on_event
 
 
-def _acquire(options: ScanOptions, on_event: OnEvent | None) -> Session:
-    """Set up, then acquire every view not yet done (the stage "acquire")."""
+def _acquire(options: ScanOptions, on_event: OnEvent | None, quiet=None) -> Session:
+    """Set up, then acquire every view not yet done (the stage "acquire"); ``quiet``: the capture's waits told to
+    the streaming processing (:class:`rangekit.app.acquire.quiet.QuietWindows`)."""
     from rangekit.app.acquire.acquire import acquire
     from rangekit.app.scan.setup import prepare_scan
 
@@ -138,7 +140,7 @@ def _acquire(options: ScanOptions, on_event: OnEvent | None) -> Session:
                            plan=ScanPlan(n_views=setup.n_views, passes=setup.passes), resume=setup.resume,
                            capture=setup.capture, simulator=setup.simulator, hardware=setup.hardware,
                            files=setup.files, progress=progress, allow_auto_exposure=options.allow_auto_exposure,
-                           turn_over=turn_over, on_event=on_event)
+                           turn_over=turn_over, on_event=on_event, quiet=quiet)
     finally:
         setup.close()
 

@@ -45,6 +45,7 @@ from pathlib import Path
 
 import numpy as np
 
+from rangekit.app.acquire.quiet import QuietWindows
 from rangekit.app.events import (CaptureLoad, MeshReady, OnEvent, ScanStarted, ViewAcquired, ViewDecoded, ViewPlaced,
                                  emit)
 from rangekit.app.process.options import ProcessOptions
@@ -53,7 +54,7 @@ from rangekit.formats.sessions.session import Session
 from rangekit.geometry import apply_T, compose, invert_T, rotation_angle
 from rangekit.surface.cloud import PointCloud
 
-__all__ = ["NICE", "PLACE_VOXEL_M", "MAX_REFINE_DEG", "MAX_REFINE_M", "PREVIEW_FILE", "StreamingProcessor"]
+__all__ = ["NICE", "INTEGRATE_S", "PLACE_VOXEL_M", "MAX_REFINE_DEG", "MAX_REFINE_M", "PREVIEW_FILE", "StreamingProcessor"]
 
 #: How much lower the streaming thread's priority is than the capture's (Linux: per thread).
 NICE = 10
@@ -62,6 +63,9 @@ PLACE_VOXEL_M = 0.002
 #: The most a view's placement may move from the turntable prior (a calibrated axis is better than a pair's ICP
 #: over a small overlap, which slid 2.2 deg at 90 deg steps on the small rig): degrees, metres.
 MAX_REFINE_DEG, MAX_REFINE_M = 0.5, 0.001
+#: How long one view's TSDF integration holds the GIL (37 ms on the default rig), with a margin: it starts in a
+#: wait of the capture with at least this long left (:mod:`rangekit.app.acquire.quiet`).
+INTEGRATE_S = 0.06
 #: The preview surface, in the session folder.
 PREVIEW_FILE = "preview.ply"
 
@@ -96,6 +100,7 @@ class StreamingProcessor:
         self.evaluate = None                       # the simulator's evaluator, prepared view by view (None on hardware)
         self.measured: list[int] = []              # views whose errors against the truth were measured here
         self.registration = None                   # RegistrationAhead of a one-pass turntable scan, from view 0 on
+        self.quiet = QuietWindows()                # the capture's waits: the TSDF integration starts in one
         self._thread = threading.Thread(target=self._run, name="rangekit-streaming", daemon=True)
         self._thread.start()
 
@@ -278,7 +283,9 @@ class StreamingProcessor:
             lo, hi = _turntable_box(apply_T(T, cloud.points), rig.T_world_table)
             voxel = float(np.linalg.norm(hi - lo)) / 256
             self._volume = tsdf_volume(lo, hi, voxel, 4 * voxel, colour=False, what="the scan's preview")
-        integrate_view(self._volume, depth, None, rig.camera.with_pose(compose(T, rig.camera.T_world_cam)))
+        camera = rig.camera.with_pose(compose(T, rig.camera.T_world_cam))
+        self.quiet.wait(INTEGRATE_S)   # Open3D holds the GIL throughout: in a wait of the capture, not across a frame
+        integrate_view(self._volume, depth, None, camera)
 
 
 def _rotated(T: np.ndarray, normals: np.ndarray | None) -> np.ndarray | None:

@@ -58,6 +58,15 @@ def _exposures(text: str):
     return text if text == "auto" else int_in(1, 1_000_000)(text)
 
 
+def _bump(text: str):
+    """Argument type of --sim-bump: VIEW:FRAME:MM."""
+    try:
+        view, frame, mm = text.split(":")
+        return int(view), int(frame), float(mm)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected VIEW:FRAME:MM, e.g. 3:30:0.5, found {text!r}") from None
+
+
 def scan_options(args: argparse.Namespace):
     """The :class:`rangekit.app.scan.options.ScanOptions` of ``rangekit scan``'s parsed flags (one field per flag,
     :data:`rangekit.app.scan.options.SCAN_FLAGS`; ``--no-process`` and ``--no-report`` negated)."""
@@ -252,6 +261,9 @@ def add_parsers(sub) -> None:
                       help="the frame files of a new coded-light session: npy.zst (default: zstd-compressed NumPy "
                            "arrays, 3x faster to read than PNG and 4x to write, as many bytes; 'zstd -d' opens them) "
                            "or png")
+    scan.add_argument("--sim-bump", type=_bump, metavar="VIEW:FRAME:MM",
+                      help="simulator: knock the object MM along x from frame FRAME of view VIEW (from 0) to that "
+                           "view's end; the scan finds the view moved and takes it again (the motion check)")
     _processing_options(scan)
     scan.set_defaults(func=cmd_scan)
 

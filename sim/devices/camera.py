@@ -94,7 +94,7 @@ class SimCamera:
             out = self._rig.laser_image()
             return lambda: out
         image = self._rig.projector.image_at(t)
-        renderer, rng = self._rig.renderer(), self._rig.rng_for(image)
+        renderer, rng = self._rig.capture_renderer(), self._rig.rng_for(image)
         if not self.auto_exposure:
             return lambda: renderer.render(image, rng, exposure)
         out = renderer.render(image, rng, exposure)

@@ -208,6 +208,7 @@ class SimRig:
         self._cache_key = None
         self._cache = None
         self._counts: dict[tuple[int, int, int], int] = {}
+        self._knock, self._knocked_key, self._knocked = None, None, None   # inject_motion
         self.pass_motions = None if pass_motions is None else np.asarray(pass_motions, dtype=np.float64)
         self._pass, self._pass0_scene = 0, scene
 
@@ -255,6 +256,43 @@ class SimRig:
         if device not in ("camera", "projector", "turntable"):
             raise ValueError(f"inject_fault: device must be camera, projector or turntable, found {device!r}")
         self._faults.arm(device, after)
+
+    def inject_motion(self, T_move: np.ndarray, after: int = 0, frames: int = 1) -> None:
+        """Knock the object: from the camera's (after + 1)-th capture from now, for ``frames`` captures, the object
+        is displaced by ``T_move`` ((4, 4), world), then back in place (a bump during a view: the frames taken
+        while it lasts see the moved object, a view taken again afterwards a still one). For testing the motion
+        check (:mod:`rangekit.coded.motion`)."""
+        T = np.asarray(T_move, dtype=np.float64)
+        if T.shape != (4, 4) or not np.all(np.isfinite(T)) or int(after) < 0 or int(frames) < 1:
+            raise SceneError(f"inject_motion: expected a finite (4, 4) motion, after >= 0 and frames >= 1, found "
+                             f"{T.shape}, after={after!r}, frames={frames!r}")
+        self._knock = [int(after), int(frames), T]
+
+    def capture_renderer(self) -> ViewRenderer:
+        """The renderer of the camera's next capture: :meth:`renderer`, or the knocked object's while an
+        :meth:`inject_motion` lasts."""
+        knock = self._knock
+        if knock is None:
+            return self.renderer()
+        if knock[0] > 0:
+            knock[0] -= 1
+            return self.renderer()
+        knock[1] -= 1
+        if knock[1] == 0:
+            self._knock = None
+        from rangekit.sim.scene.passes import pass_scene
+
+        angle = self._state_angle()
+        motion = self.rig.T_world_rotated(angle) if self.turntable is not None else None
+        key = (self._scene_index, angle, knock[2].tobytes())
+        if self._knocked_key != key:
+            self._view()                   # the camera's rays, made once
+            with one_blas_thread():
+                geom = cast_view(pass_scene(self._scene, knock[2]).world_mesh(motion), self.rig.camera,
+                                 self.rig.projector, cam_rays=self._cam_rays, corner_rays=self._corner_rays)
+                self._knocked = ViewRenderer(geom, self.imaging, self.projector.resolution)
+            self._knocked_key = key
+        return self._knocked
 
     # ---------------------------------------------------------------- ground truth
     def _state_angle(self) -> float:
@@ -340,8 +378,8 @@ class SimRig:
     def capture_sequence(self, patterns, delay_s: float = 0.0) -> list[np.ndarray]:
         """Show each pattern, wait ``delay_s`` on the clock and capture it: the same bytes as show(),
         sleep() and capture() in turn. Renders on two threads when no frame depends on the one before
-        (no projector latency, no auto-exposure)."""
-        if self.camera.auto_exposure or self.projector.latency_s > 0:
+        (no projector latency, no auto-exposure, no :meth:`inject_motion` pending)."""
+        if self.camera.auto_exposure or self.projector.latency_s > 0 or self._knock is not None:
             out = []
             for p in patterns:
                 self.projector.show(p)

@@ -27,7 +27,6 @@ from __future__ import annotations
 import shutil
 import threading
 import time
-from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Callable
@@ -46,7 +45,7 @@ from rangekit.formats.sessions.lock import session_lock
 from rangekit.app.acquire.frame_writer import FrameError, FrameWriter
 from rangekit.app.events import CaptureLoad, OnEvent, ViewAcquired, emit
 from rangekit.app.acquire.lights import light_for
-from rangekit.app.acquire.quiet import QuietWindows
+from rangekit.app.acquire.quiet import QuietWindows, quiet_window
 from rangekit.app.acquire.reconnect import MAX_RETAKES, reconnected
 from rangekit.io import atomic_write_bytes, atomic_write_json, fsync_folder
 from rangekit.progress import LOGGER, call_progress
@@ -313,21 +312,6 @@ def _taken(camera):
     return capture
 
 
-@contextmanager
-def _quiet_window(run: _Run, real: bool, seconds: float | None = None):
-    """A quiet window open for the work beside the capture while the block waits on the devices (:mod:`.quiet`):
-    ``seconds`` long, or None: until the block ends (a turntable's move). ``real``: the waits take real time (not
-    the simulator's virtual clock's)."""
-    quiet = run.quiet if real else None
-    if quiet is not None:
-        quiet.open(seconds)
-    try:
-        yield
-    finally:
-        if quiet is not None:
-            quiet.close()
-
-
 def _view(run: _Run, k: int, angle: float, state: dict, done: list, writer: FrameWriter, *,
           retake: bool = False) -> None:
     """Take view ``k``'s frames and hand them to ``writer``, with the view's finishing step; ``retake``: the view
@@ -351,7 +335,7 @@ def _view(run: _Run, k: int, angle: float, state: dict, done: list, writer: Fram
         step, device = "turntable move", "turntable"
         if devices.turntable is not None:
             LOGGER.debug("view %d/%d: turntable to %.1f deg", k + 1, run.plan.n_views, np.degrees(angle))
-            with _quiet_window(run, real):
+            with quiet_window(run.quiet if real else None):
                 devices.turntable.rotate_to(float(angle))
                 if run.settle_s > 0:
                     sleep(run.settle_s)
@@ -366,7 +350,7 @@ def _view(run: _Run, k: int, angle: float, state: dict, done: list, writer: Fram
                 step, device = f"{sub}frame {i} ({name}): {light.device}", light.device
                 light.show(i)
                 if run.pattern_settle_s > 0:
-                    with _quiet_window(run, real, run.pattern_settle_s):
+                    with quiet_window(run.quiet if real else None, run.pattern_settle_s):
                         sleep(run.pattern_settle_s)
                 step, device = f"{sub}frame {i} ({name}): camera", "camera"
                 image = capture()

@@ -14,8 +14,9 @@ from __future__ import annotations
 
 import threading
 import time
+from contextlib import contextmanager
 
-__all__ = ["QuietWindows"]
+__all__ = ["QuietWindows", "quiet_window"]
 
 
 class QuietWindows:
@@ -63,3 +64,16 @@ class QuietWindows:
                     return False
                 self._changed.wait(deadline - now)
             return True
+
+
+@contextmanager
+def quiet_window(quiet: QuietWindows | None, seconds: float | None = None):
+    """A window of ``quiet`` (None: nothing) open while the block waits on the devices: ``seconds`` long, or None:
+    until the block ends (a turntable's move)."""
+    if quiet is not None:
+        quiet.open(seconds)
+    try:
+        yield
+    finally:
+        if quiet is not None:
+            quiet.close()

@@ -47,7 +47,7 @@ def decode(session: Session, options: ProcessOptions, clock: StageClock, on_even
     removed from it as they are used."""
     views = session.done_views
     rig, spec = session.rig, session.pattern
-    settings = cache_settings(session, options.method, options.table_margin)
+    settings = cache_settings(session, options.method, options.table_margin, options.max_motion)
     progress = progress_of(on_event)
     with clock.stage("decode"), reuse_freed_memory():   # each view's stacks reuse the last one's pages
         clouds: list[PointCloud] = []

@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from rangekit.coded.motion.check import MAX_MOTION_SHARE
 from rangekit.errors import ConfigError
 
 __all__ = ["FUSION_METHODS", "TRIANGULATION_METHODS", "ProcessOptions"]
@@ -35,6 +36,10 @@ class ProcessOptions:
         about triples the fusion's time. 8 measures the default scan as well as 9 did (0.012 mm RMS on 674k points
         against 0.017 mm at 9 on 404k) in a third of the time; fine parts of a small object (the thin object's
         1-2 mm fins) measure better at 9 (0.066 mm RMS against 0.069). docs/benchmarks.md, issue 36.
+    max_motion : a view of a Gray-code, XOR or hybrid capture in which more than this share of the decoded pixels
+        moved during the capture is refused (MotionError naming the view and the frames; ``rangekit scan`` takes
+        such a view again): :func:`rangekit.coded.motion.detect_motion`, which changes no pixel of a still view.
+        None: not checked.
     """
 
     fusion: str = "poisson"
@@ -44,6 +49,7 @@ class ProcessOptions:
     truth: bool = True
     mesh_format: str = "ply"
     poisson_depth: int = 8
+    max_motion: float | None = MAX_MOTION_SHARE
 
     def __post_init__(self) -> None:
         if self.fusion not in FUSION_METHODS:
@@ -60,6 +66,10 @@ class ProcessOptions:
         if (isinstance(self.poisson_depth, bool) or not isinstance(self.poisson_depth, int)
                 or not 1 <= self.poisson_depth <= 12):
             raise ConfigError(f"poisson_depth must be an integer in [1, 12], found {self.poisson_depth!r}")
+        if self.max_motion is not None and (isinstance(self.max_motion, bool)
+                                            or not isinstance(self.max_motion, (int, float))
+                                            or not 0 <= self.max_motion <= 1):
+            raise ConfigError(f"max_motion must be a share in [0, 1] or None, found {self.max_motion!r}")
         for name in ("report", "truth"):
             if not isinstance(getattr(self, name), bool):
                 raise ConfigError(f"{name} must be True or False, found {getattr(self, name)!r}")

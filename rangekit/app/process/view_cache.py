@@ -23,8 +23,9 @@ from rangekit._runtime.threads import numba_threads, one_blas_thread
 
 from rangekit import __version__
 from rangekit.coded.reconstruct import EDGE_MARGIN_PX, reconstruct_view
+from rangekit.coded.motion import MAX_MOTION_SHARE, MOTION_METHODS, detect_motion
 from rangekit.coded.patterns import PatternSpec
-from rangekit.errors import RangekitError, naming
+from rangekit.errors import MotionError, RangekitError, naming
 from rangekit.formats.capture import list_images, read_stack
 from rangekit.formats.sessions.session import Session, SessionView, exposure_folder
 from rangekit.geometry import apply_T, invert_T
@@ -50,16 +51,21 @@ class ViewMaps:
                                      # no point was kept or no prediction (rangekit.coded.uncertainty)
 
 
-def cache_settings(session: Session, method: str, table_margin: float) -> dict:
+def cache_settings(session: Session, method: str, table_margin: float,
+                   max_motion: float | None = MAX_MOTION_SHARE) -> dict:
     """The settings a coded-light session's views are decoded with, as ``cloud.json`` records them: a view's
     cache is reused only when they are equal. ``method`` is the triangulation method, ``table_margin`` in
-    metres (see :func:`view_cloud`). The one place they are built, for processing in one process
-    (:mod:`rangekit.app.process.process`) and as Dask tasks (:mod:`rangekit.app.process.batch`)."""
+    metres (see :func:`view_cloud`), ``max_motion`` the share of a view's decoded pixels that may have moved
+    during its capture (:func:`rangekit.coded.motion.detect_motion`; over it the view is refused, MotionError;
+    None: not checked; recorded for the patterns it reads). The one place they are built, for processing in one
+    process (:mod:`rangekit.app.process.process`) and as Dask tasks (:mod:`rangekit.app.process.batch`)."""
     rig, spec, full_scale = session.rig, session.pattern, session.capture.full_scale
     settings = {"rangekit": __version__, "method": method, "table_margin": table_margin,
                 "edge_margin_px": EDGE_MARGIN_PX,
                 "pattern": spec.to_dict()["method"], "full_scale": full_scale,
                 "projector_response": None if rig.projector_response is None else rig.projector_response.to_dict()}
+    if max_motion is not None and getattr(spec, "method", None) in MOTION_METHODS:
+        settings["max_motion"] = float(max_motion)
     if session.capture.exposures_us:      # multi-exposure: each exposure decoded, merged per pixel
         settings["exposures_us"] = list(session.capture.exposures_us)
     return settings
@@ -180,6 +186,17 @@ def _read_stacks(v: SessionView, folders: list, session: Session | None) -> list
     return [read_view_stack(session, v, f) for f in folders]
 
 
+def _check_still(stacks, spec: PatternSpec, decoded: np.ndarray, max_motion: float) -> None:
+    """MotionError when more than ``max_motion`` of the ``decoded`` pixels moved during a capture of ``stacks``
+    (each exposure's; :func:`rangekit.coded.motion.detect_motion`): the maps are not changed, a still view keeps
+    its bytes."""
+    for stack in stacks:
+        moved = detect_motion(stack, spec, decoded)
+        if moved.share > max_motion:
+            raise MotionError(f"the object moved during the capture: {moved.describe()}; more than {max_motion:.0%} "
+                              "moved (max_motion); capture the view again")
+
+
 def _decode_view(v: SessionView, stacks, white_image: np.ndarray, spec: PatternSpec, rig: Rig, settings: dict,
                  full_scale: float | None, T_table_world: np.ndarray | None,
                  table_margin: float) -> tuple[PointCloud, ViewMaps]:
@@ -189,6 +206,9 @@ def _decode_view(v: SessionView, stacks, white_image: np.ndarray, spec: PatternS
     with naming(v.folder):      # a view refused (the object moved during it: MotionError) is named
         rec = reconstruct_view(stacks, spec, rig.camera, rig.projector, method=settings["method"],
                                full_scale=full_scale, response=rig.projector_response, exposures_us=exposures)
+        if settings.get("max_motion") is not None:
+            _check_still(stacks if exposures else [stacks], spec, np.isfinite(rec.decoded.proj_col),
+                         settings["max_motion"])
     xyz = rec.triangulated.xyz.copy()
     valid = np.isfinite(xyz[:, :, 0])
     c = rec.cloud

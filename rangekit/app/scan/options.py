@@ -32,10 +32,10 @@ SCAN_FLAGS = {"out": "--out", "resume": "--resume", "method": "--method", "rig":
               "patterns": "--patterns", "seed": "--seed", "up": "--up", "artefact": "--artefact",
               "positions": "--positions", "allow_auto_exposure": "--allow-auto-exposure",
               "exposures": "--exposures", "process": "--no-process", "fusion": "--fusion", "report": "--no-report",
-              "format": "--format", "realtime": "--realtime", "frames": "--frames"}
+              "format": "--format", "realtime": "--realtime", "frames": "--frames", "sim_bump": "--sim-bump"}
 #: Options of a turntable scan that ``artefact`` (one view per artefact position, coded light) does not take.
 _NOT_WITH_ARTEFACT = ("resume", "method", "steps", "up", "object", "views", "patterns", "passes", "flipped",
-                      "frames")
+                      "frames", "sim_bump")
 
 
 @dataclass(frozen=True)
@@ -65,6 +65,8 @@ class ScanOptions:
     frames : the frame files of a new session: ``"npy.zst"`` (:mod:`rangekit.npy_zst`; the default for coded
         light: 3x faster to read than PNG, 4x to write, as many bytes) or ``"png"`` (the default, and the only
         format, for a laser scan).
+    sim_bump : (view, frame, mm): the simulated object is knocked ``mm`` along x from that frame of that view to
+        the view's end, then back in place (testing the motion check: the scan takes the view again).
     """
 
     out: str | Path | None = None
@@ -89,6 +91,7 @@ class ScanOptions:
     format: str = "ply"
     realtime: bool = False
     frames: str | None = None
+    sim_bump: tuple[int, int, float] | None = None
 
     def __post_init__(self) -> None:
         _check_values(self)
@@ -179,6 +182,15 @@ def _check_combination(o: ScanOptions) -> None:
                           "keeps it anyway: leave {realtime} out")
     if o.resume is not None and o.frames is not None:
         raise OptionError("{frames}: a resumed scan keeps its session's frame format; leave {frames} out")
+    if o.sim_bump is not None:
+        b = o.sim_bump
+        ok = (isinstance(b, tuple) and len(b) == 3 and _is_int(b[0]) and _is_int(b[1]) and b[0] >= 0 and b[1] >= 0
+              and isinstance(b[2], (int, float)) and not isinstance(b[2], bool) and 0 < b[2] <= 50)
+        if not ok:
+            raise OptionError(f"{{sim_bump}}: expected VIEW:FRAME:MM (whole numbers >= 0, 0 < MM <= 50), found {b!r}")
+        if o.rig not in (None, "sim") or o.method == "laser":
+            raise OptionError("{sim_bump} knocks the simulated object during a coded-light scan; leave it out with "
+                              f"{{rig}} {o.rig} or {{method}} {o.method}")
     if o.method == "laser" and o.frames not in (None, "png"):
         raise OptionError("{frames}: a laser scan's frames are PNG files; leave {frames} out")
     if o.method == "laser" and o.exposures is not None:

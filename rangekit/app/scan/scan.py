@@ -58,7 +58,9 @@ def scan(options: ScanOptions, on_event: OnEvent | None = None) -> ScanResult:
     fuse with :func:`process`. ``on_event`` is given every event (:mod:`rangekit.app.events`): the scan's
     :class:`ScanStarted`, each :class:`ViewAcquired` (from the frame writer's thread, one at a time), then the
     processing's stages, views, pairs and meshes. A resumed session's lock is held from its first read to the
-    end of processing: a second scan or process of the folder stops at once.
+    end of processing: a second scan or process of the folder stops at once. A view during which the object moved
+    (found as it is decoded while the scan runs: :class:`rangekit.errors.MotionError`) is taken once more after the
+    others; if it moved again, the processing refuses it, naming it.
 
     Raises
     ------
@@ -90,6 +92,8 @@ def scan(options: ScanOptions, on_event: OnEvent | None = None) -> ScanResult:
             if not options.process:
                 return ScanResult(options.folder, session, acquisition_s, None, time.perf_counter() - t0)
             streaming.drain()
+            if streaming.moved:       # the object moved during some views: each taken once more
+                session = _take_again(options, session, streaming.moved, one_at_a_time.chained(None))
             with call_beside(streaming.write_preview, in_child=False) as preview:   # the preview beside the processing
                 processed = process(session, process_options, on_event=on_event, decoded_views=streaming.results,
                                     evaluate=streaming.evaluate, registration_ahead=streaming.registration)
@@ -117,6 +121,20 @@ class _serialised:
         return on_event
 
 
+def _take_again(options: ScanOptions, session: Session, moved: dict, on_event: OnEvent | None) -> Session:
+    """The views the object moved during (``moved``: index -> the streaming's MotionError) taken once more: marked
+    pending, then the acquisition resumed (the simulator's knock, ``sim_bump``, is not repeated). The processing
+    checks them again, and refuses one that moved again, naming it."""
+    from dataclasses import replace
+
+    progress = progress_of(on_event)
+    for k, error in sorted(moved.items()):
+        progress(f"view {k}: {str(error).split(': ', 1)[-1]}; taking it again")
+        session = session.with_view_done(k, done=False)
+    session.save()
+    return _acquire(replace(options, out=None, resume=options.folder, sim_bump=None), on_event)
+
+
 def _acquire(options: ScanOptions, on_event: OnEvent | None, quiet=None) -> Session:
     """Set up, then acquire every view not yet done (the stage "acquire"); ``quiet``: the capture's waits told to
     the streaming processing (:class:`rangekit.app.acquire.quiet.QuietWindows`)."""
@@ -135,6 +153,8 @@ def _acquire(options: ScanOptions, on_event: OnEvent | None, quiet=None) -> Sess
             from rangekit.app.scan.passes import turn_over_prompt
 
             turn_over = turn_over_prompt(setup.folder, setup.passes, flipped=options.flipped)
+        if options.sim_bump is not None and setup.simulator is not None:
+            _knock(setup, *options.sim_bump)
         with StageClock(on_event).stage("acquire"):
             return acquire(setup.devices, setup.rig, spec, setup.folder,
                            plan=ScanPlan(n_views=setup.n_views, passes=setup.passes), resume=setup.resume,
@@ -143,6 +163,24 @@ def _acquire(options: ScanOptions, on_event: OnEvent | None, quiet=None) -> Sess
                            turn_over=turn_over, on_event=on_event, quiet=quiet)
     finally:
         setup.close()
+
+
+def _knock(setup, view: int, frame: int, mm: float) -> None:
+    """``sim_bump``: the simulated object knocked ``mm`` along the world x axis from frame ``frame`` of view ``view``
+    (counted among the views still to take, every exposure) to the end of that view, then back in place."""
+    import numpy as np
+
+    from rangekit.formats.sessions.session import Session as _Session
+
+    todo = [v.index for v in _Session.load(setup.folder).views if not v.done] if setup.resume else \
+        list(range(setup.n_views))
+    if view not in todo:
+        return
+    per_view = setup.spec.n_frames * max(1, len(setup.exposures_us or ()))
+    T = np.eye(4)
+    T[0, 3] = mm * 1e-3
+    before = todo.index(view) * per_view + frame
+    setup.devices.inject_motion(T, after=before, frames=per_view - frame)
 
 
 def _scan_artefacts(options: ScanOptions, on_event: OnEvent | None, t0: float) -> ScanResult:

@@ -25,9 +25,10 @@ the views already in, and integrated into a preview surface, while the next view
 as they are (:attr:`StreamingProcessor.results`): no frame is read or checked twice, no cache read back. A multi-pass scan's preview holds its first pass (the
 object turned over is placed by the processing's pass registration).
 
-A view during which the object moved (:class:`~rangekit.errors.MotionError`, :mod:`rangekit.coded.motion`) is
-left out (:attr:`StreamingProcessor.moved`) and the others go on; the scan's processing meets the error again,
-naming the view.
+A view during which the object moved (:class:`~rangekit.errors.MotionError`: the processing's check of each view,
+:func:`rangekit.coded.motion.detect_motion`, ``ProcessOptions.max_motion``) is left out (:attr:`StreamingProcessor.moved`)
+and the others go on; the scan takes such a view again once the others are in (:func:`rangekit.app.scan.scan.scan`),
+and its processing checks it again.
 
 Acquisition comes first: the thread runs at a lower priority (nice + :data:`NICE`) with the decoder on one
 thread and one numba thread, so the kernel gives the capture's threads the cores whenever they need them, and
@@ -195,7 +196,7 @@ class StreamingProcessor:
         # The last view (or any once the acquisition is over) is what the processing waits for: decoded on every
         # core (the same maps: each pixel's decode is its own), its work ahead first, its preview placing after.
         last = self._finishing or k == total - 1
-        settings = cache_settings(session, self.options.method, self.options.table_margin)
+        settings = cache_settings(session, self.options.method, self.options.table_margin, self.options.max_motion)
         with one_blas_thread(), numba_threads(2 if last else 1):
             cloud, maps = view_cloud(view, session.pattern, rig, settings, session.capture.full_scale,
                                      table_transform(rig), self.options.table_margin, session)

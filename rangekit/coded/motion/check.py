@@ -43,12 +43,16 @@ from rangekit.coded.binary import axis_crossings, edge_bit_lut
 from rangekit.coded.frames import CaptureStack
 from rangekit.coded.patterns import PatternSpec
 
-__all__ = ["MAX_MOTION_SHARE", "MOTION_LIMIT_CODES", "MotionCheck", "check_motion"]
+__all__ = ["MAX_CODE_STEP", "MAX_MOTION_SHARE", "MOTION_LIMIT_CODES", "MotionCheck", "check_motion", "code_step"]
 
 #: A capture in which more of the decoded pixels than this moved is refused by default
 #: (:func:`rangekit.coded.decode.decode`'s ``max_motion``, ``rangekit decode --max-motion``).
 MAX_MOTION_SHARE = 0.02
 
+#: An axis whose codes step by more than this between neighbouring camera pixels (the median, :func:`code_step`) is
+#: not checked: the camera undersamples the projector there, and noise turns codes back as a move would (the
+#: suite's 320x256 camera under a 1280x800 projector: 5.8% of a still capture flagged before this guard).
+MAX_CODE_STEP = 1.0
 #: An edge displaced from its neighbours by more than this many projector codes flags its pixels (a still
 #: surface's residuals on the default rig: 0.05 codes at the 90th percentile; 0.25 flagged 0.098% of a still
 #: capture, 0.3 0.084%, 0.4 0.055% while missing more: benchmarks/coded/bench_motion.py).
@@ -80,12 +84,16 @@ class MotionCheck:
     moved_frames: tuple[str, ...]     # frames whose bits' edges are displaced from the axis's first bit's
     bit_offsets: dict                 # axis -> (nb,) displacement (codes) of each bit's edges, bit 0 first (solved
                                       # only when over NAMED_SHARE moved)
+    undersampled: tuple[str, ...] = ()   # axes not checked: the camera does not resolve their codes
+                                         # (:data:`MAX_CODE_STEP`)
 
     def describe(self) -> str:
         """One line for people: the share, and the frames taken after the move."""
         frames = ", ".join(self.moved_frames) if self.moved_frames else "none named"
+        unchecked = (f"; {' and '.join(self.undersampled)} not checked (the camera does not resolve their codes)"
+                     if self.undersampled else "")
         return (f"{self.share:.1%} of the decoded pixels mix frames taken before and after a move (frames after: "
-                f"{frames})")
+                f"{frames}){unchecked}")
 
 
 def check_motion(fr: CaptureStack, spec: PatternSpec, codes: dict[str, np.ndarray], decoded: np.ndarray,
@@ -102,7 +110,12 @@ def check_motion(fr: CaptureStack, spec: PatternSpec, codes: dict[str, np.ndarra
     moved: list[str] = []
     offsets: dict[str, np.ndarray] = {}
     residuals: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+    undersampled: list[str] = []
     for axis, code in codes.items():
+        c_along = code.T if axis == "rows" else code
+        if code_step(c_along, decoded.T if axis == "rows" else decoded) > MAX_CODE_STEP:
+            undersampled.append(axis)      # noise turns codes back there: no edge tells a move from it
+            continue
         t = crossings[axis] if crossings and axis in crossings else axis_crossings(fr, spec, axis, code)
         along = axis == "rows"                     # row codes: their edges run down camera columns
         c2 = np.ascontiguousarray(code.T) if along else code
@@ -134,7 +147,16 @@ def check_motion(fr: CaptureStack, spec: PatternSpec, codes: dict[str, np.ndarra
                 if o[b] > named:
                     moved += [f"{prefix}_b{b}", f"{prefix}_b{b}_inv"]
     order = {name: i for i, name in enumerate(spec.frame_names)}
-    return MotionCheck(mask, share, tuple(sorted(moved, key=order.__getitem__)), offsets)
+    return MotionCheck(mask, share, tuple(sorted(moved, key=order.__getitem__)), offsets, tuple(undersampled))
+
+
+def code_step(code: np.ndarray, decoded: np.ndarray) -> float:
+    """The median step of ``code`` ((H, W) int) between neighbouring decoded pixels along its rows where it changes
+    (by at most 64 codes: larger steps are depth edges): 1 where the camera resolves every code (a camera pixel or
+    more per code), about the projector codes per camera pixel where it does not. 0 when nothing changes."""
+    steps = np.abs(np.diff(code, axis=1))
+    ok = decoded[:, 1:] & decoded[:, :-1] & (steps > 0) & (steps <= 64)
+    return float(np.median(steps[ok])) if ok.any() else 0.0
 
 
 def _local_share(mask: np.ndarray, decoded: np.ndarray, half: int = REGION_HALF_PX) -> np.ndarray:

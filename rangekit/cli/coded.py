@@ -74,6 +74,7 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
     from rangekit.app.commands.reconstruct import reconstruct_capture
     from rangekit.errors import ConfigError, UsageError
     from rangekit.formats.capture import load_capture
+    from rangekit.formats.dots_capture import is_dots_capture
     from rangekit.formats.laser_capture import is_laser_capture
     from rangekit.rig.rig_file import load_rig
     from rangekit.formats.clouds import CLOUD_WRITERS, save_cloud
@@ -91,6 +92,14 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
     args.capture = args.capture[0]
     if is_laser_capture(args.capture):
         return _reconstruct_laser(args, t0)
+    if is_dots_capture(args.capture):   # one camera, a dot projector and its reference image
+        from rangekit.app.commands.ranges import dots_depth_folder
+        from rangekit.surface.cloud import PointCloud
+
+        res = dots_depth_folder(args.capture, rig_file=args.rig, progress=say)
+        save_cloud(args.out, PointCloud(res.points))
+        result(f"wrote {len(res.points)} points to {args.out} in {time.perf_counter() - t0:.1f} s")
+        return 0
     cap = load_capture(args.capture)
     if cap.spec is None:
         raise ConfigError(f"{args.capture}: no patterns.json; decode the images with 'rangekit decode' and a "

@@ -115,7 +115,8 @@ def _process_options(args: argparse.Namespace):
     """The :class:`rangekit.app.process.options.ProcessOptions` of ``rangekit process``'s flags."""
     from rangekit.app.process.options import ProcessOptions
 
-    return ProcessOptions(fusion=args.fusion, report=not args.no_report, mesh_format=args.format)
+    return ProcessOptions(fusion=args.fusion, report=not args.no_report, mesh_format=args.format,
+                          max_motion=args.max_motion)
 
 
 def _process(folder: str, args: argparse.Namespace) -> int:
@@ -281,4 +282,9 @@ def add_parsers(sub) -> None:
     proc.add_argument("--workers", type=int_in(1, 256), metavar="N",
                       help="worker processes of --scheduler local, one thread each (default 2)")
     _processing_options(proc)
+    from rangekit.cli.coded import _share
+
+    proc.add_argument("--max-motion", type=_share, default=0.02, metavar="PERCENT",
+                      help="refuse a view in which more than this share of the decoded pixels moved during its "
+                           "capture (default 2%%; 'none': not checked; rangekit.coded.motion)")
     proc.set_defaults(func=cmd_process)

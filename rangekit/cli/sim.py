@@ -25,8 +25,8 @@ def cmd_sim_render(args: argparse.Namespace) -> int:
 
 def _sim_render(args: argparse.Namespace) -> int:
     """rangekit sim render [--sensor projector|laser|tof|tof-pulsed|stereo] [--object NAME_OR_MESH] --out DIR"""
-    from rangekit.app.commands.simulate import (render_laser_capture, render_projector_capture, render_stereo_capture,
-                                       render_tof_capture)
+    from rangekit.app.commands.simulate import (render_dots_capture, render_laser_capture, render_projector_capture,
+                                                render_stereo_capture, render_tof_capture)
 
     t0 = time.perf_counter()
     check_output(args.out, folder=True)
@@ -51,6 +51,11 @@ def _sim_render(args: argparse.Namespace) -> int:
                              noise=not args.no_noise, colour=not args.mono, object_unit=args.object_unit or "m",
                              progress=console())
         result(f"wrote {args.out} (off.png, laser<k>.png, rig.json, ground_truth.npz) in {time.perf_counter() - t0:.1f} s")
+        return 0
+    if args.sensor == "dots":
+        render_dots_capture(args.out, size=args.size or (640, 400), seed=args.seed, progress=console())
+        result(f"wrote {args.out} (image.png, reference.png, rig.json, capture.json, ground_truth.npz) in "
+               f"{time.perf_counter() - t0:.1f} s")
         return 0
     if args.sensor == "stereo":
         render_stereo_capture(args.out, size=args.size or (640, 400), dots=not args.no_dots, seed=args.seed,
@@ -96,10 +101,11 @@ def add_parsers(sub) -> None:
         "render", help="render a pattern sequence on a simulated object and write captures + ground truth",
         description="Render the captures a real rig would take of an object, plus ground_truth.npz "
                     "(depth, xyz, normals, proj_col, proj_row, valid), the rig file and a preview PNG.")
-    render.add_argument("--sensor", default="projector", choices=("projector", "laser", "tof", "tof-pulsed", "stereo"),
+    render.add_argument("--sensor", default="projector", choices=("projector", "laser", "tof", "tof-pulsed", "stereo", "dots"),
                         help="projector-camera rig (default), laser-line turntable scanner (Ciclop-like: off.png "
-                             "and one image per laser), continuous-wave or pulsed time of flight, or the "
-                             "active-stereo pair")
+                             "and one image per laser), continuous-wave or pulsed time of flight, the "
+                             "active-stereo pair, or one camera with a random-dot projector and its reference "
+                             "image (Kinect v1 style)")
     render.add_argument("--object", default=None,
                         help="built-in object (plane, sphere, box, cylinder, torus, board, lumpy, and the zoo: "
                              "bunny, thin, bowl, shiny, dark, steps; 'rangekit sim objects' lists them) or a "
@@ -143,7 +149,7 @@ def add_parsers(sub) -> None:
     tof.add_argument("--jitter-ps", type=non_negative_float, default=50.0, help="tof-pulsed: timing jitter, ps RMS (default 50)")
     sz = render.add_argument_group("time of flight and stereo")
     sz.add_argument("--size", type=size, default=None,
-                    help="sensor size WIDTHxHEIGHT (default: tof 320x240, stereo 640x400)")
+                    help="sensor size WIDTHxHEIGHT (default: tof 320x240, stereo and dots 640x400)")
     sz.add_argument("--no-dots", action="store_true", help="stereo: switch the dot projector off")
     render.set_defaults(func=cmd_sim_render)
     objects = sim_sub.add_parser(

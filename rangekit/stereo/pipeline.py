@@ -13,7 +13,7 @@ from rangekit.stereo.depth import left_points, raw_to_rectified
 from rangekit.stereo.matching import DisparityMap, as_grey, sgbm_disparity, sgm_disparity
 from rangekit.stereo.rectify import Rectification, rectify, rectify_images
 
-__all__ = ["StereoResult", "stereo_depth"]
+__all__ = ["StereoResult", "on_left_grid", "stereo_depth"]
 
 
 @dataclass(frozen=True, eq=False, repr=False)
@@ -88,6 +88,12 @@ def stereo_depth(left_img: np.ndarray, right_img: np.ndarray, left_cam: PinholeC
         num_disparities = min(num_disparities, 256, 16 * (rect.size[0] // 16))
     Lr, Rr = rectify_images(rect, as_grey(L, "left"), as_grey(R, "right"))
     dmap = methods[method](Lr, Rr, num_disparities=num_disparities, **options)
+    return on_left_grid(dmap, rect, left_cam)
+
+
+def on_left_grid(dmap: DisparityMap, rect: Rectification, left_cam: PinholeCamera) -> StereoResult:
+    """The :class:`StereoResult` of the disparity map ``dmap`` (``f B / Z`` on the rectified grid of ``rect``): depth
+    and confidence (nearest rectified pixel) on the raw left grid, world points."""
     X_left = left_points(dmap, rect, left_cam)
     depth = X_left[..., 2]
     ok = np.isfinite(depth)

@@ -39,3 +39,5 @@ def test_a_session_with_a_knocked_view_is_refused_by_name(tmp_path):
     with pytest.raises(MotionError, match=r"view_001.*moved during the capture.*col_b1"):
         rk.process(res.folder)
     assert not (res.folder / "mesh.ply").exists()
+    rk.process(res.folder, rk.ProcessOptions(max_motion=None, report=False))   # the user's call: not checked
+    assert (res.folder / "mesh.ply").exists()

@@ -120,17 +120,48 @@ def stereo_depth_files(left: str | Path, right: str | Path, rig_file: str | Path
                             f"{dmap.min_disparity + dmap.num_disparities}) px, baseline "
                             f"{res.rectification.baseline * 1e3:.1f} mm; depth for {ok.mean():.1%} of the left "
                             f"image in {time.perf_counter() - t0:.1f} s")
-    truth = load_ground_truth(Path(left).parent)
-    if truth is not None and "depth" in truth and truth["depth"].shape == res.depth.shape:
-        vis = truth.get("valid", np.isfinite(truth["depth"])) & np.isfinite(truth["depth"])
-        both = vis & ok
-        if both.any():
-            err = (res.depth - truth["depth"])[both]
-            call_progress(progress, f"against ground_truth.npz: depth for {both.sum() / max(vis.sum(), 1):.1%} of "
-                                    f"the {vis.sum():,} visible pixels, RMS {np.sqrt(np.mean(err ** 2)) * 1e3:.2f} "
-                                    f"mm, median |error| {np.median(np.abs(err)) * 1e3:.2f} mm")
+    report_depth_truth(Path(left).parent, res.depth, progress)
     names = write_depth_outputs(out, res.depth, res.points, confidence=res.confidence)
     return DepthRun(Path(out), names, len(res.points))
+
+
+def report_depth_truth(folder: Path, depth: np.ndarray, progress: Callable | None) -> None:
+    """Say how ``depth`` ((H, W) camera z, metres) compares with the simulator's ``ground_truth.npz`` in ``folder``
+    (when there is one of that size): coverage of its visible pixels, RMS and median error."""
+    truth = load_ground_truth(folder)
+    if truth is None or "depth" not in truth or truth["depth"].shape != depth.shape:
+        return
+    vis = truth.get("valid", np.isfinite(truth["depth"])) & np.isfinite(truth["depth"])
+    both = vis & np.isfinite(depth)
+    if both.any():
+        err = (depth - truth["depth"])[both]
+        call_progress(progress, f"against ground_truth.npz: depth for {both.sum() / max(vis.sum(), 1):.1%} of "
+                                f"the {vis.sum():,} visible pixels, RMS {np.sqrt(np.mean(err ** 2)) * 1e3:.2f} "
+                                f"mm, median |error| {np.median(np.abs(err)) * 1e3:.2f} mm")
+
+
+def dots_depth_folder(folder: str | Path, *, rig_file: str | Path | None = None, progress: Callable | None = None):
+    """Depth of a dot sensor's camera from its capture folder (:mod:`rangekit.formats.dots_capture`,
+    :func:`rangekit.stereo.dots.dots_depth`); ``rig_file`` replaces the folder's rig.json. Says its coverage and,
+    on a simulated capture, its errors against the truth. Returns the :class:`rangekit.stereo.StereoResult`."""
+    import time
+
+    from rangekit.formats.dots_capture import load_dots_capture
+    from rangekit.stereo.dots import dots_depth
+
+    t0 = time.perf_counter()
+    folder = Path(folder)
+    cap = load_dots_capture(folder, load_rig(rig_file) if rig_file else None)
+    with naming(rig_file or folder / "rig.json"):  # rectification refuses a rig without a usable baseline
+        res = dots_depth(cap.image, cap.reference, cap.rig.cameras[0], cap.rig.projector, cap.reference_distance,
+                         where=str(folder / "reference.png"))
+    dmap = res.disparity
+    call_progress(progress, f"dots against the reference at {cap.reference_distance:.3f} m: baseline "
+                            f"{res.rectification.baseline * 1e3:.1f} mm, disparities [{dmap.min_disparity}, "
+                            f"{dmap.min_disparity + dmap.num_disparities}) px; depth for "
+                            f"{np.isfinite(res.depth).mean():.1%} of the image in {time.perf_counter() - t0:.1f} s")
+    report_depth_truth(folder, res.depth, progress)
+    return res
 
 
 def write_depth_outputs(out: str | Path, depth: np.ndarray, points: np.ndarray, *,

@@ -21,8 +21,8 @@ __all__ = ["render_projector_capture", "render_laser_capture", "render_tof_captu
 #: small to a large sensor: ToF 4.6 KB/px, its 3x3 rays per pixel; pulsed ToF 0.54 KB; stereo 1.0 KB per
 #: pixel of one camera; projector-camera rig 0.5 KB), checked against the memory budget before rendering.
 #: Laser (estimated, not measured): the projector rig's ray cast plus the float32 RGB ambient, noise pool and
-#: per-laser xyz truth, 900 bytes.
-BYTES_PER_PIXEL = {"tof": 5000, "tof-pulsed": 640, "stereo": 1100, "projector": 640, "laser": 900}
+#: per-laser xyz truth, 900 bytes. Dots (estimated): as the stereo pair, two casts and two renders of one camera size.
+BYTES_PER_PIXEL = {"tof": 5000, "tof-pulsed": 640, "stereo": 1100, "projector": 640, "laser": 900, "dots": 1100}
 #: The units ``--object-unit`` reads a mesh file in.
 
 
@@ -180,6 +180,20 @@ def render_tof_capture(out: str | Path, *, pulsed: bool = False, near: float = 0
                             f"{camera.width}x{camera.height}, 3x3 rays per pixel)")
     cap = render_tof(scene, freq_plan, camera=camera, sensor=sensor, noise=noise, seed=seed)
     write_tof_capture(cap, out, info=info)
+
+
+def render_dots_capture(out: str | Path, *, size: tuple[int, int] = (640, 400), seed: int = 0,
+                        progress: Callable | None = None) -> None:
+    """The white box and sphere seen by the simulated one-camera dot sensor of ``size`` (W, H) pixels, with its
+    reference image of the dots on a plane at 1 m (:mod:`rangekit.sim.sensors.dots`)."""
+    from rangekit.sim.sensors.dots import dots_rig, render_dots, write_dots_capture
+    from rangekit.sim.sensors.stereo import stereo_scene
+
+    _check_size("dots", size)
+    rig = dots_rig(*size)
+    call_progress(progress, f"rendering the dot sensor's image and reference ({rig.cameras[0].width}x"
+                            f"{rig.cameras[0].height})")
+    write_dots_capture(render_dots(stereo_scene(), rig, seed=seed), rig, out)
 
 
 def render_stereo_capture(out: str | Path, *, size: tuple[int, int] = (640, 400), dots: bool = True, seed: int = 0,

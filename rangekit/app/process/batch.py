@@ -147,7 +147,8 @@ class BatchResult:
         return tuple(s for s in self.sessions if not s.ok)
 
 
-def decode_view_task(folder: str, index: int, method: str = "auto", table_margin: float = 0.002) -> ViewDone:
+def decode_view_task(folder: str, index: int, method: str = "auto", table_margin: float = 0.002,
+                     max_motion: float | None = 0.02) -> ViewDone:
     """Decode view ``index`` of the session in ``folder`` into its cache (a Dask task; idempotent: a view
     already cached with these settings is only read back). Raises FileFormatError when the view's frames
     differ from their recorded SHA-256s."""
@@ -163,7 +164,7 @@ def decode_view_task(folder: str, index: int, method: str = "auto", table_margin
                           f"{'pending' if any(v.index == index for v in session.views) else 'missing'}")
     verify_views(session, views=[view], workers=1, contents=False)   # the contents as the frames are read
     stamp = _stamp(view.folder / "cloud.json")
-    cloud, _ = view_cloud(view, session.pattern, session.rig, cache_settings(session, method, table_margin),
+    cloud, _ = view_cloud(view, session.pattern, session.rig, cache_settings(session, method, table_margin, max_motion),
                           session.capture.full_scale, table_transform(session.rig), table_margin, session)
     done = ViewDone(view.folder.name, len(cloud), _stamp(view.folder / "cloud.json") != stamp)
     del cloud
@@ -261,7 +262,8 @@ def _run(client, plans, folders, outcome, options, progress) -> None:
         for k, indices in group:
             name = folders[k].name
             group_of[k] = g
-            views_of[k] = [client.submit(decode_view_task, str(folders[k]), i, options.method, options.table_margin, key=f"decode-{name}-{i:03d}-{k}-{run}",
+            views_of[k] = [client.submit(decode_view_task, str(folders[k]), i, options.method, options.table_margin,
+                                         options.max_motion, key=f"decode-{name}-{i:03d}-{k}-{run}",
                                          pure=False, priority=len(groups) - g) for i in indices or ()]
             owner.update({f.key: (k, "view") for f in views_of[k]})
         left.append(sum(len(views_of[k]) for k, _ in group))

@@ -170,9 +170,7 @@ def _knock(setup, view: int, frame: int, mm: float) -> None:
     (counted among the views still to take, every exposure) to the end of that view, then back in place."""
     import numpy as np
 
-    from rangekit.formats.sessions.session import Session as _Session
-
-    todo = [v.index for v in _Session.load(setup.folder).views if not v.done] if setup.resume else \
+    todo = [v.index for v in Session.load(setup.folder).views if not v.done] if setup.resume else \
         list(range(setup.n_views))
     if view not in todo:
         return

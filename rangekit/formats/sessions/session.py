@@ -208,10 +208,8 @@ class Session:
         return object_source(self.folder, self.simulator.object, self.folder / "session.json")
 
     def with_view_done(self, index: int, sha256: dict | None = None, done: bool = True) -> "Session":
-        """This session with view ``index`` done (``done=False``: pending again, to be taken again);
-        ``sha256``: its frames' checksums (file name -> hex)."""
-        views = tuple(replace(v, done=done, sha256=sha256 if done else None) if v.index == index else v
-                      for v in self.views)
+        """This session with view ``index`` done, its frames' ``sha256`` (file -> hex); ``done=False``: pending again."""
+        views = tuple(replace(v, done=done, sha256=sha256 if done else None) if v.index == index else v for v in self.views)
         return replace(self, views=views)
 
     def to_dict(self) -> dict:

@@ -58,24 +58,17 @@ def colourise(values: np.ndarray, vmin: float, vmax: float, *, cmap: str = "turb
     nan = np.asarray(nan_colour, dtype=np.float64).reshape(-1)
     if nan.shape != (3,) or not np.all((nan >= 0) & (nan <= 255)):
         raise InputError(f"colourise nan_colour: expected an RGB triple in [0, 255], found {nan_colour!r}")
-    # In place on one float64 copy, a uint16 index (entry 256: the NaN colour) and np.take: the same
-    # operations and bytes as t = clip((v - vmin) / span, 0, 1); table[rint(255 t)], at a fifth of the time
-    # of float64 temporaries, fancy indexing and a masked assignment (the report colourises 1.3 Mpx maps).
-    t = np.array(values, dtype=np.float64)
-    bad = ~np.isfinite(t)
-    span = vmax - vmin
-    if span > 0:
-        t -= vmin
-        t /= span
-    else:
-        t = (t > vmin).astype(np.float64)
-    np.clip(t, 0.0, 1.0, out=t)
-    t *= 255
-    np.rint(t, out=t)
-    with np.errstate(invalid="ignore"):   # NaN entries cast to anything: replaced just below
-        idx = t.astype(np.uint16)
-    np.copyto(idx, 256, where=bad)
-    return np.take(_with_nan(table, nan.astype(np.uint8)), idx, axis=0)
+    # One compiled pass (rangekit._colour_kernels): the same float64 operations and bytes as
+    # t = clip((v - vmin) / span, 0, 1); table[rint(255 t)] (the report colourises 1.3 Mpx maps).
+    from rangekit._colour_kernels import colour_indices
+
+    v = np.asarray(values)
+    if v.dtype != np.float32 and v.dtype != np.float64:
+        v = v.astype(np.float64)
+    flat = np.ascontiguousarray(v).reshape(-1)
+    out = np.empty((flat.size, 3), dtype=np.uint8)
+    colour_indices(flat, float(vmin), float(vmax - vmin), _with_nan(table, nan.astype(np.uint8)), out)
+    return out.reshape(v.shape + (3,))
 
 
 def _with_nan(table: np.ndarray, nan: np.ndarray) -> np.ndarray:

@@ -15,7 +15,7 @@ from numba import njit, prange
 # OpenMP or numba's own workqueue; skips the TBB probe (and its warning where TBB is too old).
 numba.config.THREADING_LAYER_PRIORITY = ["omp", "workqueue", "tbb"]
 
-__all__ = ["distort_point", "distort_jacobian_point", "newton_pass", "newton_check"]
+__all__ = ["distort_point", "distort_jacobian_point", "distort_points", "newton_pass", "newton_check"]
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -48,6 +48,13 @@ def distort_jacobian_point(x, y, d):  # pragma: no cover - compiled
     j10 = 2 * x * y * drad + 2 * p1 * x + 2 * p2 * y + 2 * s3 * x + 4 * s4 * r2 * x
     j11 = radial + 2 * y * y * drad + 6 * p1 * y + 2 * p2 * x + 2 * s3 * y + 4 * s4 * r2 * y
     return j00, j01, j10, j11
+
+
+@njit(parallel=True, cache=True, nogil=True, error_model="numpy")
+def distort_points(xy, d, out):  # pragma: no cover - compiled
+    """``out`` (N, 2) = rangekit.camera.distort of every point of ``xy`` (N, 2), numpy's bits (NaN stays NaN)."""
+    for i in prange(xy.shape[0]):
+        out[i, 0], out[i, 1] = distort_point(xy[i, 0], xy[i, 1], d)
 
 
 @njit(parallel=True, cache=True, nogil=True, error_model="numpy")

@@ -30,9 +30,27 @@ def _full_coeffs(dist: np.ndarray) -> np.ndarray:
     return np.concatenate([dist[:_N_COEFFS], np.zeros(_N_COEFFS - min(len(dist), _N_COEFFS))])
 
 
+#: From this many points :func:`distort` runs compiled (:func:`rangekit._lens_kernels.distort_points`, the same
+#: bits): one pass instead of about twenty numpy passes, 1.7 CPU-ms instead of 12 for 200k points on one core.
+COMPILED_DISTORT_POINTS = 4096
+
+
 def distort(xy: np.ndarray, dist: np.ndarray) -> np.ndarray:
     """Apply OpenCV distortion to (N, 2) normalised image coordinates (x/z, y/z); returns (N, 2)."""
-    k1, k2, p1, p2, k3, k4, k5, k6, s1, s2, s3, s4 = _full_coeffs(np.asarray(dist, dtype=np.float64))
+    d = _full_coeffs(np.asarray(dist, dtype=np.float64))
+    if len(xy) >= COMPILED_DISTORT_POINTS:
+        from rangekit import _lens_kernels as LK
+
+        xy = np.ascontiguousarray(xy, dtype=np.float64)
+        out = np.empty_like(xy)
+        LK.distort_points(xy, d, out)
+        return out
+    return _distort_numpy(xy, d)
+
+
+def _distort_numpy(xy: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """:func:`distort` in numpy (``d``: the 12 coefficients): the formula the compiled kernel follows."""
+    k1, k2, p1, p2, k3, k4, k5, k6, s1, s2, s3, s4 = d
     x, y = xy[:, 0], xy[:, 1]
     r2 = x * x + y * y
     r4 = r2 * r2

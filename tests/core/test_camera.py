@@ -132,3 +132,17 @@ def test_bad_camera_fields_name_the_problem():
         PinholeCamera(np.eye(3), 10, 10, T_world_cam=np.diag([2.0, 1, 1, 1]))
     with pytest.raises(ConfigError, match=r"rig.json: projector: missing field"):
         PinholeCamera.from_dict({"K": np.eye(3).tolist()}, where="rig.json: projector")
+
+
+@pytest.mark.parametrize("dist", [[0.1, -0.2, 1e-3, 2e-3, 0.05], [0.1, -0.05, 0, 0, 0.01, 0.02, -0.01, 0.003],
+                                  [-0.3, 0.1, 1e-3, -2e-3, 0.01, 0.02, -0.01, 0.003, 1e-3, -1e-3, 2e-3, 5e-4]])
+def test_compiled_distort_is_the_numpy_formula_bit_for_bit(dist):
+    from rangekit.camera import COMPILED_DISTORT_POINTS, _distort_numpy, _full_coeffs, distort
+
+    xy = np.random.default_rng(len(dist)).normal(0.0, 0.4, (COMPILED_DISTORT_POINTS + 7, 2))
+    xy[::13] = np.nan                                   # NaN stays NaN
+    xy[1, 0] = np.inf
+    want = _distort_numpy(xy, _full_coeffs(np.asarray(dist, dtype=np.float64)))
+    assert np.array_equal(distort(xy, dist), want, equal_nan=True)
+    assert np.array_equal(distort(xy[:10], dist), want[:10], equal_nan=True)          # the numpy path, below the size
+    assert np.array_equal(distort(xy[:, ::-1][:, ::-1], dist), want, equal_nan=True)   # a strided view is copied

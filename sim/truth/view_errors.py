@@ -3,7 +3,7 @@
 For each view ``k`` (turntable angle ``a_k``) of a coded-light session:
 
 - **decoding**: the decoded projector column against the true one (the projector column of the surface
-  point each camera pixel sees, :func:`rangekit.sim.scene.raycast.cast_view`), over the pixels where both
+  point each camera pixel sees, :func:`rangekit.sim.scene.raycast.cast_codes`), over the pixels where both
   exist: RMS and 95th percentile in projector pixels;
 - **cloud**: each kept point's distance to the true surface posed at ``a_k`` (the view's own frame is the
   rig's world at ``a_k``): RMS, 95th percentile, max. Points are split by where they were seen: at a
@@ -27,7 +27,7 @@ from rangekit.camera import PinholeCamera, world_pixel_rays
 from rangekit.geometry import apply_T, invert_T, rotation_angle
 from rangekit.rig.rig_file import Rig
 from rangekit.surface.mesh import TriangleMesh, distance_to_surface
-from rangekit.sim.scene.raycast import cast_view
+from rangekit.sim.scene.raycast import cast_codes
 from rangekit.sim.scene.passes import pass_scene, split_views, view_motions
 from rangekit.sim.scene.scene import Scene
 
@@ -70,13 +70,13 @@ def _box(uv: np.ndarray, camera, margin: int) -> tuple[slice, slice] | None:
 
 def _truth_in_box(world, camera: PinholeCamera, projector, box: tuple[slice, slice] | None):
     """``(geometry, edges)`` of the truth cast over the pixel ``box`` only (None: the whole image), both the
-    box's size: :func:`rangekit.sim.scene.raycast.cast_view` through a camera cropped to the box (the same K shifted
+    box's size: :func:`rangekit.sim.scene.raycast.cast_codes` through a camera cropped to the box (the same K shifted
     by the box's corner, the same rays: sliced from the whole camera's), and :func:`depth_edges` of its depth
     with NaN around it, as if the whole image had been cast with nothing outside the box. The decoding
     errors leave out the object's pixels outside the box (its foot in the table band the cloud drops: 2 of
     186,034 pixels in one view of the 12-view scan, none in the others). Memory and rays scale with the box."""
     if box is None:
-        geometry = cast_view(world, camera, projector)
+        geometry = cast_codes(world, camera, projector)
         return geometry, depth_edges(geometry.depth)
     rows, cols = box
     h, w = rows.stop - rows.start, cols.stop - cols.start
@@ -86,7 +86,7 @@ def _truth_in_box(world, camera: PinholeCamera, projector, box: tuple[slice, sli
     crop = PinholeCamera(K, w, h, camera.dist, camera.T_world_cam, name=camera.name)
     o, d = world_pixel_rays(camera)
     d_box = d.reshape(camera.height, camera.width, 3)[rows, cols].reshape(-1, 3)
-    geometry = cast_view(world, crop, projector, cam_rays=(o[: h * w], d_box))
+    geometry = cast_codes(world, crop, projector, cam_rays=(o[: h * w], d_box))
     return geometry, _box_edges(geometry.depth, box, camera)
 
 

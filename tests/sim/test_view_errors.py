@@ -9,7 +9,7 @@ import pytest
 
 from rangekit.geometry import axis_angle_to_R, compose, make_T
 from rangekit.rig.rig_file import turntable_prior
-from rangekit.sim import default_scene
+from rangekit.sim import default_rig, default_scene
 from rangekit.sim.scene.raycast import cast_view
 from rangekit.sim.truth.view_errors import depth_edges, view_errors
 from rangekit.surface.cloud import PointCloud
@@ -64,3 +64,20 @@ def test_each_error_lands_in_its_part(exact):
     # the distance to the surface of a point pushed 0.5 mm along its ray is at most 0.5 mm
     assert 0.05 < v["cloud"]["edge"]["rms_mm"] <= 0.5 + 1e-6
     assert ve[0]["registration"]["rotation_deg"] < 1e-9 and ve[0]["cloud"]["rms_mm"] < 1e-4
+
+
+@pytest.mark.parametrize("obj", ["lumpy", "shiny", "steps"])
+def test_cast_codes_are_cast_views_maps_bit_for_bit(obj):
+    """The truth the views are measured against (cast_codes, no shading) is cast_view's depth, projector column
+    and object maps, to the bit: on a smooth object, a shiny one and one with shadows and depth jumps."""
+    from rangekit.sim.scene.raycast import cast_codes, cast_view
+
+    rig = default_rig()
+    cam = rig.camera.resized(320, 256)
+    world = default_scene(obj).world_mesh(rig.T_world_rotated(0.9))
+    whole, codes = cast_view(world, cam, rig.projector), cast_codes(world, cam, rig.projector)
+    assert np.isfinite(codes.proj_col).sum() > 1000 and (codes.object_id == 0).sum() > 1000
+    for name in ("depth", "proj_col", "object_id"):
+        assert np.array_equal(getattr(codes, name), getattr(whole, name), equal_nan=True), name
+    none = cast_codes(world, cam, None)
+    assert np.isnan(none.proj_col).all() and np.array_equal(none.depth, whole.depth, equal_nan=True)

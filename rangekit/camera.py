@@ -30,7 +30,7 @@ def _full_coeffs(dist: np.ndarray) -> np.ndarray:
     return np.concatenate([dist[:_N_COEFFS], np.zeros(_N_COEFFS - min(len(dist), _N_COEFFS))])
 
 
-#: From this many points :func:`distort` runs compiled (:func:`rangekit._lens_kernels.distort_points`, the same
+#: From this many points :func:`distort` runs compiled (:func:`rangekit._compiled.lens.distort_points`, the same
 #: bits): one pass instead of about twenty numpy passes, 1.7 CPU-ms instead of 12 for 200k points on one core.
 COMPILED_DISTORT_POINTS = 4096
 
@@ -39,7 +39,7 @@ def distort(xy: np.ndarray, dist: np.ndarray) -> np.ndarray:
     """Apply OpenCV distortion to (N, 2) normalised image coordinates (x/z, y/z); returns (N, 2)."""
     d = _full_coeffs(np.asarray(dist, dtype=np.float64))
     if len(xy) >= COMPILED_DISTORT_POINTS:
-        from rangekit import _lens_kernels as LK
+        from rangekit._compiled import lens as LK
 
         xy = np.ascontiguousarray(xy, dtype=np.float64)
         out = np.empty_like(xy)
@@ -102,14 +102,14 @@ def undistort(xy_distorted: np.ndarray, dist: np.ndarray, *, tol: float = 1e-14,
     (N, 2) float64 undistorted normalised coordinates; NaN rows where Newton did not converge (far outside
     the region where the distortion polynomial is invertible).
     """
-    from rangekit import _lens_kernels as LK
+    from rangekit._compiled import lens as LK
 
     d = _full_coeffs(np.asarray(dist, dtype=np.float64))
     target = np.ascontiguousarray(xy_distorted, dtype=np.float64)
     xy = target.copy()
     if not np.any(d) or len(xy) == 0:
         return xy
-    # Compiled passes (rangekit._lens_kernels), numpy's numbers: every point steps until the worst converges.
+    # Compiled passes (rangekit._compiled.lens), numpy's numbers: every point steps until the worst converges.
     nxt, res = np.empty_like(xy), np.empty(len(xy))
     for _ in range(max_iterations):
         LK.newton_pass(xy, target, d, nxt, res)

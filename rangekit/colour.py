@@ -58,9 +58,9 @@ def colourise(values: np.ndarray, vmin: float, vmax: float, *, cmap: str = "turb
     nan = np.asarray(nan_colour, dtype=np.float64).reshape(-1)
     if nan.shape != (3,) or not np.all((nan >= 0) & (nan <= 255)):
         raise InputError(f"colourise nan_colour: expected an RGB triple in [0, 255], found {nan_colour!r}")
-    # One compiled pass (rangekit._colour_kernels): the same float64 operations and bytes as
+    # One compiled pass (rangekit._compiled.colour): the same float64 operations and bytes as
     # t = clip((v - vmin) / span, 0, 1); table[rint(255 t)] (the report colourises 1.3 Mpx maps).
-    from rangekit._colour_kernels import colour_indices
+    from rangekit._compiled.colour import colour_indices
 
     v = np.asarray(values)
     if v.dtype != np.float32 and v.dtype != np.float64:

@@ -15,7 +15,7 @@ import numba
 import numpy as np
 from numba import njit, prange
 
-from rangekit._lens_kernels import distort_jacobian_point
+from rangekit._compiled.lens import distort_jacobian_point
 
 numba.config.THREADING_LAYER_PRIORITY = ["omp", "workqueue", "tbb"]
 

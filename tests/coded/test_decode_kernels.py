@@ -1,7 +1,7 @@
 """Issue 20, decode stage second pass: the compiled kernels give the numbers of the numpy code they replaced,
 bit for bit, and the exact answers of analytic constructions.
 
-Covered: the compiled undistortion (rangekit._lens_kernels) against the vectorised numpy Newton it
+Covered: the compiled undistortion (rangekit._compiled.lens) against the vectorised numpy Newton it
 replaced; the ray-ray kernel (points, residuals, along-ray derivatives) against the numpy midpoint formula
 and :func:`rangekit.coded.uncertainty.along_ray_jacobian`, and against points on a known plane; the phase
 sums and the projector-response correction against :func:`rangekit.coded.phase.phase_from_steps` and

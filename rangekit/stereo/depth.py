@@ -11,7 +11,7 @@ from rangekit.geometry import apply_T
 from rangekit.stereo.matching import DisparityMap
 from rangekit.stereo.rectify import Rectification
 
-__all__ = ["disparity_to_depth", "disparity_to_points", "depth_in_camera"]
+__all__ = ["disparity_to_depth", "disparity_to_points", "depth_in_camera", "disparity_points"]
 
 
 def _disparity_array(disparity, rect: Rectification) -> np.ndarray:
@@ -50,6 +50,20 @@ def disparity_to_points(disparity: np.ndarray | DisparityMap, rect: Rectificatio
     X_rect = _rect_points(z[ok], u.astype(np.float64), v.astype(np.float64), rect)
     X_left = X_rect @ rect.R1  # R1^T @ X for each row
     return X_left if T_world_left is None else apply_T(np.asarray(T_world_left, np.float64), X_left)
+
+
+def disparity_points(u, v, disparity, rect: Rectification) -> np.ndarray:
+    """(N, 3) float64 world points, metres, of scattered rectified-left pixels ``(u, v)`` (N,) at ``disparity``
+    (N,) rectified pixels: z = focal * baseline / d in the rectified-left frame, carried into the world by
+    ``rect.T_world_rect``. NaN rows where d <= 0 or any input is NaN."""
+    u, v, d = (np.asarray(a, dtype=np.float64).reshape(-1) for a in (u, v, disparity))
+    if not (u.shape == v.shape == d.shape):
+        raise InputError(f"disparity_points: u, v and disparity must have one length, found {u.size}, {v.size}, "
+                         f"{d.size}")
+    with np.errstate(divide="ignore", invalid="ignore"):
+        z = rect.focal * rect.baseline / d
+    z[~(d > 0)] = np.nan
+    return apply_T(rect.T_world_rect, _rect_points(z, u, v, rect))
 
 
 def raw_to_rectified(rect: Rectification, camera: PinholeCamera) -> tuple[np.ndarray, np.ndarray]:

@@ -15,7 +15,7 @@ from rangekit.camera import PinholeCamera
 from rangekit.errors import InputError
 from rangekit.geometry import invert_T, make_T
 
-__all__ = ["Rectification", "rectify", "rectify_images"]
+__all__ = ["Rectification", "rectify", "rectify_images", "rectify_pixels"]
 
 
 @dataclass(frozen=True, eq=False, repr=False)
@@ -137,3 +137,31 @@ def rectify_images(rect: Rectification, left_img: np.ndarray, right_img: np.ndar
             a = a.astype(np.float32)
         out.append(cv2.remap(a, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT))
     return out[0], out[1]
+
+
+def rectify_pixels(rect: Rectification, camera: PinholeCamera, uv: np.ndarray, *, right: bool = False) -> np.ndarray:
+    """(N, 2) float64 rectified pixels of raw (distorted) pixels ``uv`` (N, 2) of the rectification's left camera
+    (``right=True``: its right camera), ``camera`` being that camera: the lens model's inverse
+    (:meth:`PinholeCamera.pixels_to_normalized`), the rotation ``R1`` (``R2``), the rectified intrinsics. Points,
+    not images: no resampling. NaN where the lens model cannot be inverted or the ray points behind the rectified
+    image plane; a NaN pixel stays NaN.
+
+    Raises
+    ------
+    InputError
+        If ``camera`` does not have the rectification's size, or ``uv`` is not (N, 2).
+    """
+    if camera.size != tuple(rect.size):
+        raise InputError(f"rectify_pixels: camera {camera.name!r} is {camera.width}x{camera.height} but the "
+                         f"rectification is {rect.size[0]}x{rect.size[1]} (width x height)")
+    uv = np.asarray(uv, dtype=np.float64)
+    if uv.ndim != 2 or uv.shape[1] != 2:
+        raise InputError(f"rectify_pixels: uv must be an (N, 2) array of (u, v) pixels, found shape {uv.shape}")
+    finite = np.isfinite(uv).all(axis=1)
+    xy = camera.pixels_to_normalized(np.where(finite[:, None], uv, 0.0))
+    X = np.column_stack([xy, np.ones(len(xy))]) @ (rect.R2 if right else rect.R1).T
+    P = rect.P2 if right else rect.P1
+    with np.errstate(divide="ignore", invalid="ignore"):
+        out = np.column_stack([P[0, 0] * X[:, 0] / X[:, 2] + P[0, 2], P[1, 1] * X[:, 1] / X[:, 2] + P[1, 2]])
+    out[~finite | ~(X[:, 2] > 0)] = np.nan
+    return out

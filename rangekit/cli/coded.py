@@ -75,7 +75,7 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
     from rangekit.errors import ConfigError, UsageError
     from rangekit.formats.capture import load_capture
     from rangekit.formats.dots_capture import is_dots_capture
-    from rangekit.formats.laser_capture import is_laser_capture
+    from rangekit.formats.laser_capture import is_laser_capture, is_laser_stereo_capture
     from rangekit.rig.rig_file import load_rig
     from rangekit.formats.clouds import CLOUD_WRITERS, save_cloud
 
@@ -90,6 +90,11 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
         raise UsageError("--projector WxH is for --pattern PRESET with a rig of two cameras; a capture folder's "
                          "pattern set gives the projector's size")
     args.capture = args.capture[0]
+    if is_laser_stereo_capture(args.capture):   # a laser sheet seen by two cameras
+        return _reconstruct_laser_stereo(args, t0)
+    if args.pair_only:
+        raise UsageError(f"--pair-only: only for a two-camera laser capture (capture.json kind "
+                         f"'rangekit.laser_stereo/1'); {args.capture} is not one")
     if is_laser_capture(args.capture):
         return _reconstruct_laser(args, t0)
     if is_dots_capture(args.capture):   # one camera, a dot projector and its reference image
@@ -155,6 +160,32 @@ def _reconstruct_laser(args: argparse.Namespace, t0: float) -> int:
     return 0
 
 
+def _reconstruct_laser_stereo(args: argparse.Namespace, t0: float) -> int:
+    """``rangekit reconstruct`` of a two-camera laser capture folder (left/, right/): see docs/laser.md."""
+    from pathlib import Path
+
+    from rangekit.app.laser.sheet_stereo import reconstruct_laser_stereo_capture, report_laser_stereo_truth
+    from rangekit.errors import UsageError, naming
+    from rangekit.formats.clouds import save_cloud
+    from rangekit.formats.laser_capture import load_laser_stereo_capture
+    from rangekit.stereo.rectify import rectify
+
+    if args.peaks == "ridge":
+        raise UsageError("--peaks ridge: a two-camera laser capture needs one peak per row (gaussian, com or argmax)")
+    cap = load_laser_stereo_capture(args.capture, rig=args.rig)
+    note(f"two-camera laser capture: {cap.n_lasers} laser(s); line peaks ({args.peaks}) in both cameras, matched on "
+         "epipolar lines and triangulated by the pair (no laser plane)"
+         + ("" if args.pair_only else "; the left peaks the right camera misses met with each frame's fitted sheet"))
+    with naming(args.rig or Path(args.capture) / "rig.json"):   # a pair that cannot be rectified
+        rect = rectify(*cap.rig.cameras[:2])
+    rec = reconstruct_laser_stereo_capture(cap, method=args.peaks, rect=rect, fill=not args.pair_only)
+    save_cloud(args.out, rec.cloud)
+    say(rec.summary())
+    report_laser_stereo_truth(cap, rec, progress=say)
+    result(f"wrote {len(rec.cloud)} points to {args.out} in {time.perf_counter() - t0:.1f} s")
+    return 0
+
+
 def _share(text: str) -> float | None:
     """``--max-motion``: a percentage ("2%" or "2"), or "none"."""
     if text.strip().lower() == "none":
@@ -196,7 +227,7 @@ def add_parsers(sub) -> None:
                          description="Decode a capture folder (from 'rangekit sim render' or acquisition) and "
                                      "triangulate it against the projector into a coloured cloud with normals; "
                                      "a laser capture (off.png, laser0.png, ...) is triangulated against the "
-                                     "rig file's laser planes.")
+                                     "rig file's laser planes, a two-camera one (left/, right/) by the camera pair.")
     rec.add_argument("capture", metavar="CAPTURE_DIR", nargs="+",
                      help="capture folder (images + patterns.json); with --pattern, another tool's folder, two "
                           "folders (camera 1, camera 2) or OpenCV's image list")
@@ -211,5 +242,9 @@ def add_parsers(sub) -> None:
     rec.add_argument("--integer", action="store_true", help="integer codes only (no subpixel refinement)")
     rec.add_argument("--peaks", default="gaussian", choices=("gaussian", "com", "ridge", "argmax"),
                      help="laser captures: the line peak detector (default gaussian, docs/laser.md)")
+    rec.add_argument("--pair-only", action="store_true",
+                     help="two-camera laser captures: only the points the camera pair triangulates (default: also the "
+                          "left peaks the right camera does not see, met with the light sheet fitted to that frame's "
+                          "pair points; docs/laser.md)")
     rec.add_argument("--out", required=True, help="output cloud (.ply, .pcd, .xyz, .npy or .e57; checked before any work)")
     rec.set_defaults(func=cmd_reconstruct)

@@ -24,33 +24,42 @@ def cmd_sim_render(args: argparse.Namespace) -> int:
 
 
 def _sim_render(args: argparse.Namespace) -> int:
-    """rangekit sim render [--sensor projector|laser|tof|tof-pulsed|stereo] [--object NAME_OR_MESH] --out DIR"""
-    from rangekit.app.commands.simulate import (render_dots_capture, render_laser_capture, render_projector_capture,
-                                                render_stereo_capture, render_tof_capture)
+    """rangekit sim render [--sensor projector|laser|laser-stereo|tof|tof-pulsed|stereo|dots] [--object NAME_OR_MESH]
+    --out DIR"""
+    from rangekit.app.commands.simulate import (render_dots_capture, render_laser_capture, render_laser_stereo_capture,
+                                                render_projector_capture, render_stereo_capture, render_tof_capture)
 
     t0 = time.perf_counter()
     check_output(args.out, folder=True)
-    if args.sensor == "laser":
+    if args.sensor in ("laser", "laser-stereo"):
         given = [f for f, v in (("--patterns", args.patterns), ("--global-fraction", args.global_fraction),
                                 ("--motion-mm", args.motion_mm)) if v is not None]
         if given:
-            raise UsageError(f"{', '.join(given)}: only for --sensor projector; the laser sensor draws line lasers "
-                             "(docs/simulator.md)")
+            raise UsageError(f"{', '.join(given)}: only for --sensor projector; the {args.sensor} sensor draws line "
+                             "lasers (docs/simulator.md)")
     elif args.mono:
-        raise UsageError(f"--mono: only for --sensor laser, found --sensor {args.sensor}")
-    if args.sensor not in ("projector", "laser"):
+        raise UsageError(f"--mono: only for --sensor laser or laser-stereo, found --sensor {args.sensor}")
+    if args.sensor not in ("projector", "laser", "laser-stereo"):
         given = [f for f, v in (("--object", args.object), ("--object-unit", args.object_unit),
                                 ("--patterns", args.patterns), ("--rig", args.rig), ("--motion-mm", args.motion_mm))
                  if v is not None]
         if given:
-            raise UsageError(f"{', '.join(given)}: only for --sensor projector or laser; the {args.sensor} sensor "
-                             "renders its own scene (docs/simulator.md)")
+            raise UsageError(f"{', '.join(given)}: only for --sensor projector, laser or laser-stereo; the "
+                             f"{args.sensor} sensor renders its own scene (docs/simulator.md)")
     if args.sensor == "laser":
         render_laser_capture(args.out, obj=args.object or "lumpy", rig_file=args.rig,
                              angle=np.radians(args.angle_deg), bits=args.bits, seed=args.seed,
                              noise=not args.no_noise, colour=not args.mono, object_unit=args.object_unit or "m",
                              progress=console())
         result(f"wrote {args.out} (off.png, laser<k>.png, rig.json, ground_truth.npz) in {time.perf_counter() - t0:.1f} s")
+        return 0
+    if args.sensor == "laser-stereo":
+        render_laser_stereo_capture(args.out, obj=args.object or "lumpy", rig_file=args.rig,
+                                    angle=np.radians(args.angle_deg), bits=args.bits, seed=args.seed,
+                                    noise=not args.no_noise, colour=not args.mono,
+                                    object_unit=args.object_unit or "m", progress=console())
+        result(f"wrote {args.out} (left/ and right/ with off.png and laser<k>.png, rig.json, capture.json, "
+               f"ground_truth.npz) in {time.perf_counter() - t0:.1f} s")
         return 0
     if args.sensor == "dots":
         render_dots_capture(args.out, size=args.size or (640, 400), seed=args.seed, progress=console())
@@ -101,9 +110,11 @@ def add_parsers(sub) -> None:
         "render", help="render a pattern sequence on a simulated object and write captures + ground truth",
         description="Render the captures a real rig would take of an object, plus ground_truth.npz "
                     "(depth, xyz, normals, proj_col, proj_row, valid), the rig file and a preview PNG.")
-    render.add_argument("--sensor", default="projector", choices=("projector", "laser", "tof", "tof-pulsed", "stereo", "dots"),
+    render.add_argument("--sensor", default="projector",
+                        choices=("projector", "laser", "laser-stereo", "tof", "tof-pulsed", "stereo", "dots"),
                         help="projector-camera rig (default), laser-line turntable scanner (Ciclop-like: off.png "
-                             "and one image per laser), continuous-wave or pulsed time of flight, the "
+                             "and one image per laser), the same lasers seen by two cameras (laser-sheet stereo: "
+                             "left/ and right/), continuous-wave or pulsed time of flight, the "
                              "active-stereo pair, or one camera with a random-dot projector and its reference "
                              "image (Kinect v1 style)")
     render.add_argument("--object", default=None,
@@ -118,13 +129,14 @@ def add_parsers(sub) -> None:
     render.add_argument("--out", required=True, help="output folder (created if missing)")
     render.add_argument("--force", action="store_true", help="replace a set of files another command left in --out (a session, a capture, results)")
     render.add_argument("--rig", help="rig file to simulate (default: the built-in simulated rig; --sensor laser: "
-                                      "it plus two red line lasers; a laser rig file must list 'lasers')")
+                                      "it plus two red line lasers; a laser rig file must list 'lasers'; "
+                                      "--sensor laser-stereo: also a second camera beside the first)")
     render.add_argument("--angle-deg", type=finite_float, default=0.0, help="turntable angle in degrees (default 0)")
     render.add_argument("--bits", type=int, default=8, choices=(8, 10, 12, 16), help="camera bit depth")
     render.add_argument("--seed", type=seed, default=0, help="noise seed (default 0)")
     render.add_argument("--no-noise", action="store_true", help="disable shot and read noise")
     render.add_argument("--mono", action="store_true",
-                        help="--sensor laser: a monochrome camera (default: RGB, the laser mostly in R)")
+                        help="--sensor laser, laser-stereo: a monochrome camera (default: RGB, the laser mostly in R)")
     render.add_argument("--global-fraction", type=non_negative_float, default=None,
                         help="interreflection term, fraction of the mean projected light (default 0)")
     render.add_argument("--motion-mm", type=non_negative_float, default=None, metavar="MM",

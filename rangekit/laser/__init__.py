@@ -3,7 +3,9 @@ camera pixel triangulated against the laser's plane (ray-plane, eq. 13.7).
 
 Modules: ``peaks`` (subpixel line peaks in a laser-on minus laser-off image), ``triangulate`` (peak rays
 against a laser plane), ``plane_fit`` (robust plane fit), ``plane_calib`` (laser-plane calibration from board
-poses and the turntable plate), ``sequence`` (the frames a laser scan takes at each turntable step).
+poses and the turntable plate), ``sequence`` (the frames a laser scan takes at each turntable step),
+``sheet_stereo`` (laser-sheet stereo: the line seen by a calibrated camera pair, no laser plane; not re-exported
+here, it loads :mod:`rangekit.stereo`: import it as ``rangekit.laser.sheet_stereo``).
 """
 
 from rangekit.laser.peaks import LinePeaks, detect_peaks, require_peaks

@@ -20,26 +20,17 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
-__all__ = ["column_errors", "curve_distance"]
+__all__ = ["column_errors", "curve_at_rows", "curve_distance"]
 
 _K = 48            # neighbours looked at per peak (samples are <= 0.5 px apart: 6 px of curve is ~24)
 _RADIUS = 6.0      # px
 
 
-def column_errors(points: np.ndarray, curve_uv: np.ndarray, *, margin: float = 1.5,
-                  max_slope: float = 3.0) -> np.ndarray:
-    """(N,) float64 px: each peak's column ``points[:, 0]`` minus the curve's column at its row
-    ``points[:, 1]``; NaN where the truth is not one column (see the module docstring).
-
-    ``points`` (N, 2) (u, v) px; ``curve_uv`` (M, 2) the lit curve's samples (``LitCurve.uv``).
-    ``margin`` rows of curve required both ways; ``max_slope`` px per row.
-    """
-    points = np.asarray(points, np.float64).reshape(-1, 2)
-    curve_uv = np.asarray(curve_uv, np.float64).reshape(-1, 2)
+def _row_crossings(points: np.ndarray, curve_uv: np.ndarray, margin: float, max_slope: float):
+    """Where the curve crosses each point's row near it: (ok (N,) bool, ib, ia (N,) indices into ``curve_uv`` of
+    the samples at or above and below the row, f (N,) the fraction of the way from ib to ia); see
+    :func:`column_errors`."""
     n = len(points)
-    err = np.full(n, np.nan)
-    if n == 0 or len(curve_uv) < 2:
-        return err
     k = min(_K, len(curve_uv))
     dist, idx = cKDTree(curve_uv).query(points, k=k, distance_upper_bound=_RADIUS)
     dist, idx = dist.reshape(n, k), idx.reshape(n, k)
@@ -59,7 +50,6 @@ def column_errors(points: np.ndarray, curve_uv: np.ndarray, *, margin: float = 1
     with np.errstate(invalid="ignore", divide="ignore"):
         f = np.where(span > 1e-12, (points[:, 1] - v0) / span, 0.5)
         slope = np.where(span > 1e-12, np.abs(u1 - u0) / span, np.inf)
-    u_true = u0 + f * (u1 - u0)
     # the curve continues `margin` rows both ways without a gap (samples <= 0.5 px apart: gaps <= 0.75 rows)
     band = valid & (np.abs(dv) <= margin + 0.5)
     vs = np.sort(np.where(band, sv, np.nan), axis=1)          # NaN last
@@ -67,8 +57,44 @@ def column_errors(points: np.ndarray, curve_uv: np.ndarray, *, margin: float = 1
     no_gap = ~(np.nan_to_num(gaps, nan=0.0) > 0.75).any(axis=1)
     reach = (np.where(band, dv, np.inf).min(axis=1) <= -margin) & (np.where(band, dv, -np.inf).max(axis=1) >= margin)
     ok = have & (slope <= max_slope) & no_gap & reach
-    err[ok] = points[ok, 0] - u_true[ok]
+    pad = len(curve_uv)
+    return ok, np.where(ok, idx[r, ib], pad), np.where(ok, idx[r, ia], pad), f
+
+
+def column_errors(points: np.ndarray, curve_uv: np.ndarray, *, margin: float = 1.5,
+                  max_slope: float = 3.0) -> np.ndarray:
+    """(N,) float64 px: each peak's column ``points[:, 0]`` minus the curve's column at its row
+    ``points[:, 1]``; NaN where the truth is not one column (see the module docstring).
+
+    ``points`` (N, 2) (u, v) px; ``curve_uv`` (M, 2) the lit curve's samples (``LitCurve.uv``).
+    ``margin`` rows of curve required both ways; ``max_slope`` px per row.
+    """
+    points = np.asarray(points, np.float64).reshape(-1, 2)
+    curve_uv = np.asarray(curve_uv, np.float64).reshape(-1, 2)
+    err = np.full(len(points), np.nan)
+    if len(points) == 0 or len(curve_uv) < 2:
+        return err
+    ok, ib, ia, f = _row_crossings(points, curve_uv, margin, max_slope)
+    u0, u1 = curve_uv[ib[ok], 0], curve_uv[ia[ok], 0]
+    err[ok] = points[ok, 0] - (u0 + f[ok] * (u1 - u0))
     return err
+
+
+def curve_at_rows(points: np.ndarray, curve_uv: np.ndarray, curve_xyz: np.ndarray, *, margin: float = 1.5,
+                  max_slope: float = 3.0) -> np.ndarray:
+    """(N, 3) float64 world points, metres: where the lit curve crosses each peak's row, the world point there
+    (the two samples either side of the row interpolated as in :func:`column_errors`), NaN where the truth is not
+    one column. The truth of a point triangulated from a peak at that row (e.g. by laser-sheet stereo)."""
+    points = np.asarray(points, np.float64).reshape(-1, 2)
+    curve_uv = np.asarray(curve_uv, np.float64).reshape(-1, 2)
+    curve_xyz = np.asarray(curve_xyz, np.float64).reshape(-1, 3)
+    out = np.full((len(points), 3), np.nan)
+    if len(points) == 0 or len(curve_uv) < 2:
+        return out
+    ok, ib, ia, f = _row_crossings(points, curve_uv, margin, max_slope)
+    x0, x1 = curve_xyz[ib[ok]], curve_xyz[ia[ok]]
+    out[ok] = x0 + f[ok, None] * (x1 - x0)
+    return out
 
 
 def curve_distance(points: np.ndarray, curve_uv: np.ndarray) -> np.ndarray:

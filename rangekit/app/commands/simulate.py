@@ -14,15 +14,17 @@ from rangekit.budget import check_budget
 from rangekit.errors import InputError, UsageError
 from rangekit.progress import call_progress
 
-__all__ = ["render_projector_capture", "render_laser_capture", "render_tof_capture", "render_stereo_capture",
-           "BYTES_PER_PIXEL"]
+__all__ = ["render_projector_capture", "render_laser_capture", "render_laser_stereo_capture", "render_tof_capture",
+           "render_stereo_capture", "BYTES_PER_PIXEL"]
 
 #: Peak memory of a simulated capture per camera pixel, bytes (measured as the growth of the peak from a
 #: small to a large sensor: ToF 4.6 KB/px, its 3x3 rays per pixel; pulsed ToF 0.54 KB; stereo 1.0 KB per
 #: pixel of one camera; projector-camera rig 0.5 KB), checked against the memory budget before rendering.
 #: Laser (estimated, not measured): the projector rig's ray cast plus the float32 RGB ambient, noise pool and
 #: per-laser xyz truth, 900 bytes. Dots (estimated): as the stereo pair, two casts and two renders of one camera size.
-BYTES_PER_PIXEL = {"tof": 5000, "tof-pulsed": 640, "stereo": 1100, "projector": 640, "laser": 900, "dots": 1100}
+#: Laser stereo (estimated): two laser cameras, each without the per-laser xyz maps, 1600 bytes per pixel of one.
+BYTES_PER_PIXEL = {"tof": 5000, "tof-pulsed": 640, "stereo": 1100, "projector": 640, "laser": 900, "dots": 1100,
+                   "laser-stereo": 1600}
 #: The units ``--object-unit`` reads a mesh file in.
 
 
@@ -134,6 +136,41 @@ def render_laser_capture(out: str | Path, *, obj: str = "lumpy", rig_file: str |
     call_progress(progress, f"ray casting {rig.camera.width}x{rig.camera.height} camera pixels")
     view = LaserView(scene, rig, angle, imaging=imaging, seed=seed)
     write_laser_capture(view, out, seed=seed, info=_object_info(obj, object_unit), progress=progress)
+
+
+def render_laser_stereo_capture(out: str | Path, *, obj: str = "lumpy", rig_file: str | Path | None = None,
+                                angle: float = 0.0, bits: int = 8, seed: int = 0, noise: bool = True,
+                                colour: bool = True, object_unit: str = "m", progress: Callable | None = None) -> None:
+    """The laser-off frame and one frame per line laser of ``obj`` (built-in name or mesh file in ``object_unit``)
+    at turntable ``angle`` (radians), in both cameras of a two-camera laser rig: the rig file's (two cameras, the
+    turntable and the lasers the simulator draws), default :func:`rangekit.sim.laser.stereo.laser_stereo_rig`;
+    ``bits``-bit RGB (or mono) cameras; write the capture folder (:mod:`rangekit.sim.laser.stereo`)."""
+    from rangekit.errors import ConfigError
+    from rangekit.rig.rig_file import load_rig
+    from rangekit.sim import ImagingModel
+    from rangekit.sim.laser.stereo import LaserStereoView, laser_stereo_rig, write_laser_stereo_capture
+
+    imaging = ImagingModel(bits=bits, colour=colour)
+    if not noise:
+        imaging = imaging.noiseless()
+    if rig_file:
+        rig = load_rig(rig_file)
+        if len(rig.cameras) < 2 or not rig.lasers or rig.T_world_table is None:
+            raise ConfigError(f"{rig_file}: a two-camera laser capture needs two cameras (left, right), at least one "
+                              f"line laser and the turntable, found {len(rig.cameras)} camera(s), {len(rig.lasers)} "
+                              f"laser(s) and {'a' if rig.T_world_table is not None else 'no'} turntable "
+                              "(docs/laser.md, 'Two cameras, no plane calibration')")
+        for cam in rig.cameras[:2]:
+            _check_size("laser-stereo", (cam.width, cam.height), option=None, where=f"{rig_file}: ")
+    else:
+        rig = laser_stereo_rig()
+    if rig.capture.get("bits") != bits:
+        rig = replace(rig, capture={**rig.capture, "bits": bits})
+    scene = _object_scene(obj, object_unit)
+    call_progress(progress, f"ray casting two cameras' pixels ({rig.cameras[0].width}x{rig.cameras[0].height}, "
+                            f"{rig.cameras[1].width}x{rig.cameras[1].height})")
+    view = LaserStereoView(scene, rig, angle, imaging=imaging, seed=seed)
+    write_laser_stereo_capture(view, out, info=_object_info(obj, object_unit), progress=progress)
 
 
 def render_tof_capture(out: str | Path, *, pulsed: bool = False, near: float = 0.5, far: float = 15.0,

@@ -4,7 +4,7 @@
 A corner ``X`` of board pose k is seen by the camera at ``P_c = R(r_k) X + t_k`` and by the projector at
 ``P_p = R(r_pc) P_c + t_pc``; a device with intrinsics ``(fx, fy, cx, cy, k1, k2, p1, p2)`` (k3 held) sees
 ``P = (X, Y, Z)`` at ``u = fx xd + cx``, ``v = fy yd + cy``, ``(xd, yd)`` the distorted ``(X/Z, Y/Z)``
-(:func:`rangekit.camera.distort`). The derivatives:
+(:func:`rangekit.lens.distort`). The derivatives:
 
 - of the pixel in the intrinsics: ``(xd, 0)``, ``(0, yd)``, ``(1, 0)``, ``(0, 1)``, then ``(fx x r^2, fy y r^2)``,
   ``(fx x r^4, fy y r^4)``, ``(2 fx x y, fy (r^2 + 2 y^2))``, ``(fx (r^2 + 2 x^2), 2 fy x y)``;

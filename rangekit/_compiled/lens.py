@@ -1,7 +1,7 @@
 """Compiled OpenCV lens model (numba; cached on disk): the distortion and its Jacobian of one point, and the
-Newton passes of :func:`rangekit.camera.undistort`.
+Newton passes of :func:`rangekit.lens.undistort`.
 
-The scalar functions are the same operations in the same order as :func:`rangekit.camera.distort` and
+The scalar functions are the same operations in the same order as :func:`rangekit.lens.distort` and
 ``_distort_jacobian`` (no fused multiply-add), so the compiled undistortion gives numpy's bits: one pass
 per Newton step instead of about twenty numpy passes (issue 20).
 """
@@ -20,7 +20,7 @@ __all__ = ["distort_point", "distort_jacobian_point", "distort_points", "newton_
 
 @njit(cache=True, nogil=True, inline="always")
 def distort_point(x, y, d):  # pragma: no cover - compiled
-    """rangekit.camera.distort of one point (d: the 12 coefficients), the same operations."""
+    """rangekit.lens.distort of one point (d: the 12 coefficients), the same operations."""
     k1, k2, p1, p2, k3, k4, k5, k6 = d[0], d[1], d[2], d[3], d[4], d[5], d[6], d[7]
     s1, s2, s3, s4 = d[8], d[9], d[10], d[11]
     r2 = x * x + y * y
@@ -33,7 +33,7 @@ def distort_point(x, y, d):  # pragma: no cover - compiled
 
 @njit(cache=True, nogil=True, inline="always")
 def distort_jacobian_point(x, y, d):  # pragma: no cover - compiled
-    """rangekit.camera._distort_jacobian of one point: (j00, j01, j10, j11), the same operations."""
+    """rangekit.lens._distort_jacobian of one point: (j00, j01, j10, j11), the same operations."""
     k1, k2, p1, p2, k3, k4, k5, k6 = d[0], d[1], d[2], d[3], d[4], d[5], d[6], d[7]
     s1, s2, s3, s4 = d[8], d[9], d[10], d[11]
     r2 = x * x + y * y
@@ -52,7 +52,7 @@ def distort_jacobian_point(x, y, d):  # pragma: no cover - compiled
 
 @njit(parallel=True, cache=True, nogil=True, error_model="numpy")
 def distort_points(xy, d, out):  # pragma: no cover - compiled
-    """``out`` (N, 2) = rangekit.camera.distort of every point of ``xy`` (N, 2), numpy's bits (NaN stays NaN)."""
+    """``out`` (N, 2) = rangekit.lens.distort of every point of ``xy`` (N, 2), numpy's bits (NaN stays NaN)."""
     for i in prange(xy.shape[0]):
         out[i, 0], out[i, 1] = distort_point(xy[i, 0], xy[i, 1], d)
 
@@ -60,7 +60,7 @@ def distort_points(xy, d, out):  # pragma: no cover - compiled
 @njit(parallel=True, cache=True, nogil=True, error_model="numpy")
 def newton_pass(xy, target, d, out, res):  # pragma: no cover - compiled
     """One Newton step of every point (N, 2): ``res[i]`` = max |distort(xy[i]) - target[i]| (NaN ignored,
-    0 if both are NaN), ``out`` = xy after the closed-form 2x2 step (rangekit.camera.undistort)."""
+    0 if both are NaN), ``out`` = xy after the closed-form 2x2 step (rangekit.lens.undistort)."""
     for i in prange(xy.shape[0]):
         x, y = xy[i, 0], xy[i, 1]
         fx, fy = distort_point(x, y, d)

@@ -13,7 +13,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from rangekit.camera import PinholeCamera, _distort_jacobian, _full_coeffs, distort, undistort
+from rangekit.camera import PinholeCamera
+from rangekit.lens import _distort_jacobian, _full_coeffs, distort, undistort
 from rangekit.coded.frames import CaptureStack
 from rangekit.coded.patterns import make_pattern_spec
 from rangekit.coded.phase import _noise_variance, _stack_phase, phase_from_steps
@@ -31,7 +32,7 @@ DISTORTIONS = [
 
 
 def _numpy_undistort(xy_distorted, dist, tol=1e-14, max_iterations=30):
-    """The vectorised numpy Newton of rangekit.camera.undistort before the compiled kernels (the reference)."""
+    """The vectorised numpy Newton of rangekit.lens.undistort before the compiled kernels (the reference)."""
     d = _full_coeffs(np.asarray(dist, dtype=np.float64))
     target = np.asarray(xy_distorted, dtype=np.float64)
     xy = target.copy()

@@ -137,7 +137,7 @@ def test_bad_camera_fields_name_the_problem():
 @pytest.mark.parametrize("dist", [[0.1, -0.2, 1e-3, 2e-3, 0.05], [0.1, -0.05, 0, 0, 0.01, 0.02, -0.01, 0.003],
                                   [-0.3, 0.1, 1e-3, -2e-3, 0.01, 0.02, -0.01, 0.003, 1e-3, -1e-3, 2e-3, 5e-4]])
 def test_compiled_distort_is_the_numpy_formula_bit_for_bit(dist):
-    from rangekit.camera import COMPILED_DISTORT_POINTS, _distort_numpy, _full_coeffs, distort
+    from rangekit.lens import COMPILED_DISTORT_POINTS, _distort_numpy, _full_coeffs, distort
 
     xy = np.random.default_rng(len(dist)).normal(0.0, 0.4, (COMPILED_DISTORT_POINTS + 7, 2))
     xy[::13] = np.nan                                   # NaN stays NaN

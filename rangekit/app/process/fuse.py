@@ -118,10 +118,11 @@ class Fusion:
         save_cloud(self._session.folder / "merged.ply", self._merged, fields={"view": view_index(clouds)})
         self._merged = None
 
-    def meshes(self, clock: StageClock, evaluate=None) -> FusedViews:
+    def meshes(self, clock: StageClock, evaluate=None, beside_observed=None) -> FusedViews:
         """Wait for the surface, cut it to the observed mesh (what Poisson's input points support) and close it
         on a thread while the observed mesh is saved and, with an evaluator, measured; then save the closed one.
-        Both are announced as :class:`MeshReady`."""
+        Both are announced as :class:`MeshReady`. ``beside_observed(mesh)``: called with the observed mesh once it
+        is saved, to start work on it beside its evaluation (it must return at once)."""
         from rangekit.surface.observed import observed_rule
         from rangekit.surface.fusion import poisson_input
         from rangekit.surface.watertight import make_watertight
@@ -141,6 +142,8 @@ class Fusion:
             del full
             mesh_info = save_one(out, mesh, fusion, MESH_FILE, self._options.mesh_format)
             emit(self._on_event, MeshReady("observed", out / MESH_FILE, mesh))
+            if beside_observed is not None:
+                beside_observed(mesh)
             if evaluate is not None:
                 with clock.stage("evaluate"):
                     call_progress(progress_of(self._on_event),

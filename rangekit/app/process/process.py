@@ -115,24 +115,26 @@ def _process(session: Session, options: ProcessOptions, evaluate: Evaluator | No
     measuring = evaluate is not None
     with prepared_beside(evaluate, evaluator_angles(decoded.views, multi_pass=session.plan.passes > 1)):
         registered = register(decoded, session, clock, on_event, map_pairs=map_pairs, ahead=registration_ahead)
+    agreement = []     # the report's views' agreement, started as soon as the observed mesh is made
+
+    def start_agreement(observed) -> None:
+        agreement.append(children.enter_context(_agreement_beside(options.report, observed, registered)))
+
     with clock.stage("fuse"), Fusion(registered, session, options, child, on_event,
                                      measuring_beside=measuring) as fusion:
         fusion.save_merged()
         measure_views(evaluate, registered, clock)          # beside the fusion
         release_free_memory()
-        fused = fusion.meshes(clock, evaluate)
-    # The report's views' agreement (the observed mesh and the registered clouds) beside the closed mesh's
-    # evaluation, which leaves most of the second core free.
-    with _agreement_beside(options.report, fused, registered) as agreement:
-        accuracy, truth, view_errors = (measure_closed(evaluate, fused, registered, clock, on_event)
-                                        if evaluate is not None else (None, None, None))
+        fused = fusion.meshes(clock, evaluate, beside_observed=start_agreement)
+    accuracy, truth, view_errors = (measure_closed(evaluate, fused, registered, clock, on_event)
+                                    if evaluate is not None else (None, None, None))
     # Stage times are wall seconds; "evaluate" includes the part done beside the fusion (inside "fuse").
     result = ProcessResult(session.folder, decoded.names, registered.T_world_view, [len(c) for c in decoded.clouds],
                            registered.edges, registered.rmse, fused.observed_info, clock.seconds, accuracy,
                            watertight_mesh=fused.watertight_info, view_errors=view_errors,
                            view_passes=registered.view_passes, registration_note=registered.note)
     if options.report:
-        _report(result, registered, fused, session, truth, clock, on_event, agreement.result())
+        _report(result, registered, fused, session, truth, clock, on_event, agreement[0].result())
     atomic_write_json(session.folder / "summary.json", result.to_dict())   # last: the set is complete
     return result
 
@@ -155,14 +157,16 @@ def _start(session: Session, on_event: OnEvent | None) -> None:
         fsync_folder(out)
 
 
-def _agreement_beside(report: bool, fused, registered):
-    """The report's views' agreement (:func:`rangekit.app.report.context.views_agreement`) on a thread, as
-    ``with ... as call: ...; call.result()``; a call whose result is None without a report."""
+def _agreement_beside(report: bool, observed, registered):
+    """The report's views' agreement (:func:`rangekit.app.report.context.views_agreement`) of the ``observed`` mesh
+    and the registered clouds on a thread, as ``with ... as call: ...; call.result()``; a call whose result is
+    None without a report. Started as soon as the observed mesh is made, beside its evaluation and the closing of
+    the mesh, it is done before the closed mesh's evaluation ends (it finished 0.5 s after it, started then)."""
     from rangekit.app.report.context import views_agreement
 
     if not report:
         return call_beside(lambda: None, in_child=False)
-    return call_beside(views_agreement, fused.observed, registered.T_world_view, registered.clouds, in_child=False)
+    return call_beside(views_agreement, observed, registered.T_world_view, registered.clouds, in_child=False)
 
 
 def _report(result: ProcessResult, registered, fused, session: Session, truth, clock: StageClock,

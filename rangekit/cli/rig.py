@@ -46,7 +46,8 @@ def cmd_rig_import(args: argparse.Namespace) -> int:
 
     if args.out is not None:
         check_output(args.out, force=args.force, suffixes=RIG_SUFFIXES, what="rig")
-    data = import_rig(args.file, size=args.size, projector_size=args.projector_size, unit=args.unit, report=note)
+    data = import_rig(args.file, size=args.size, projector_size=args.projector_size, unit=args.unit,
+                      keep_projector_distortion=args.keep_projector_distortion, report=note)
     if args.out is None:
         _print_rig(data, f"rangekit rig import {args.file} > rig.json")
         return 0
@@ -227,6 +228,9 @@ def add_parsers(sub) -> None:
                      help="unit of the file's translation: an OpenCV file's T (default m) or a structured-light "
                           "tool's (default the tool's, mm; it prints the unit it read); depthai's cm and Horus's "
                           "mm are known")
+    imp.add_argument("--keep-projector-distortion", action="store_true",
+                     help="keep the projector's lens distortion of a tool whose own triangulation leaves it out "
+                          "(SLStudio: by default the import follows the tool, so its clouds and rangekit's agree)")
     imp.set_defaults(func=cmd_rig_import)
 
     dev = sub.add_parser("devices", help="list serial ports and depthai cameras",

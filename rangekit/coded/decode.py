@@ -53,7 +53,7 @@ from rangekit.coded.debruijn import decode_debruijn
 from rangekit.coded.frames import CaptureStack
 from rangekit.coded.motion import MAX_MOTION_SHARE, MOTION_LIMIT_CODES, check_motion
 from rangekit.coded.patterns import PatternSpec
-from rangekit.coded.phase import decode_phase_maps
+from rangekit.coded.phase import decode_phase_maps, smooth_coordinate_map, smoothed_std_factor
 from rangekit.coded.response import phase_correction
 from rangekit.coded.result import DecodeResult
 from rangekit.coded.uncertainty import GRAY_CODE_STD
@@ -65,7 +65,7 @@ __all__ = ["decode"]
 def decode(stack, spec: PatternSpec, *, order: str = "rangekit", subpixel: bool = True,
            min_contrast: float = 0.015, shadow_threshold: float = 0.01, max_global_ratio: float | None = None,
            max_gap: float = 6.0, max_disagreement: float = 1.5, full_scale: float | None = None,
-           response: ProjectorResponse | None = None, stripe_smoothing: int = 0,
+           response: ProjectorResponse | None = None, stripe_smoothing: int = 0, coord_smoothing: float = 0.0,
            motion: bool = False, max_motion: float | None = MAX_MOTION_SHARE,
            workers: int = 2, chunk_rows: int = 96) -> DecodeResult:
     """Decode a capture stack into projector coordinates.
@@ -106,6 +106,11 @@ def decode(stack, spec: PatternSpec, *, order: str = "rangekit", subpixel: bool 
         Subpixel edges: average each decoded coordinate along its stripes over ``2 n + 1`` pixels (binomial
         weights; :func:`rangekit.coded.binary.smooth_along_stripes`); 0, the default, leaves it per pixel. For
         captures whose stripe edges wander from row to row (a real projector's, docs/real-captures.md).
+    coord_smoothing : float
+        Phase methods: a Gaussian of this many camera pixels over each decoded coordinate map, over its decoded
+        pixels alone (:func:`rangekit.coded.phase.smooth_coordinate_map`), as SLStudio's single-period
+        3-step codec does (sigma 3); 0, the default, leaves it per pixel. The predicted stds fall by the
+        factor white noise does.
     motion : binary codes (graycode, xor02, xor04): check that the object held still (:mod:`rangekit.coded.motion`):
         pixels whose code mixes frames taken before and after a move are flagged in ``motion`` and rejected. Off by
         default until the check holds on every rig (docs/coded-light.md, "Motion during a capture": it flags still
@@ -206,6 +211,10 @@ def decode(stack, spec: PatternSpec, *, order: str = "rangekit", subpixel: bool 
         proj_col, proj_row, conf, incons, col_std, row_std = decode_phase_maps(
             fr, spec, shadow, low, glob_mask, conf, min_contrast * fs, fs, max_disagreement, corrections, workers,
             chunk_rows)
+        if coord_smoothing > 0:
+            proj_col, proj_row = (smooth_coordinate_map(c, coord_smoothing) for c in (proj_col, proj_row))
+            factor = np.float32(smoothed_std_factor(coord_smoothing))
+            col_std, row_std = col_std / factor, row_std / factor
     lit = ~shadow
     if not np.any(lit):
         raise DecodeError(f"no pixel is lit: white - black is below {shadow_threshold:.0%} of full scale "

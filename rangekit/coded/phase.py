@@ -16,7 +16,7 @@ from rangekit.coded.patterns import PatternSpec
 from rangekit.coded.response import PhaseCorrection
 from rangekit.coded.uncertainty import fit_noise_model, phase_coordinate_std
 
-__all__ = ["phase_from_steps", "decode_phase_maps"]
+__all__ = ["phase_from_steps", "decode_phase_maps", "smooth_coordinate_map"]
 
 
 def phase_from_steps(frames: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -174,3 +174,29 @@ def _coordinate_stds(fr: CaptureStack, spec: PatternSpec, fines: dict, ok: np.nd
         period, steps = spec.phase_plan(axis)[-1]
         out[axis] = phase_coordinate_std(f[0], f[1], noise, steps, period, f[3])
     return out
+
+
+def smooth_coordinate_map(coord: np.ndarray, sigma_px: float) -> np.ndarray:
+    """A decoded coordinate map (H, W) float32 under a Gaussian of ``sigma_px`` camera pixels, over its finite
+    pixels alone (normalised convolution: a NaN neither spreads nor counts); NaN stays NaN.
+
+    SLStudio's single-period 3-step codec blurs its column map this way (``CodecPhaseShift3.cpp``,
+    ``cv::GaussianBlur(up, up, Size(0, 0), 3, 3)``) before it masks steep columns: one period across the
+    screen leaves each pixel's column a few columns of noise, and without it neighbouring pixels differ by
+    more than the flying-pixel filter allows. The white noise of a coordinate falls by ``2 sqrt(pi) sigma``
+    (:func:`smoothed_std_factor`)."""
+    import cv2
+
+    valid = np.isfinite(coord)
+    weights = cv2.GaussianBlur(valid.astype(np.float32), (0, 0), sigma_px, sigmaY=sigma_px,
+                               borderType=cv2.BORDER_CONSTANT)
+    total = cv2.GaussianBlur(np.where(valid, coord, 0).astype(np.float32), (0, 0), sigma_px, sigmaY=sigma_px,
+                             borderType=cv2.BORDER_CONSTANT)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(valid, total / weights, np.float32(np.nan)).astype(np.float32)
+
+
+def smoothed_std_factor(sigma_px: float) -> float:
+    """The factor by which :func:`smooth_coordinate_map` divides the std of white noise: the Gaussian's
+    weights sum to 1 and their squares to ``1 / (4 pi sigma^2)``."""
+    return float(2 * np.sqrt(np.pi) * sigma_px)

@@ -53,7 +53,8 @@ def test_slstudio_micro_phase_shifting_frames():
 
 
 def test_slstudio_modulated_phase_shifting_frames():
-    """EncoderPhaseShiftModulated (USE_SINE_MODULATOR): Lx (pitch cols/8) x My (pitch rows/16, across rows),
+    """EncoderPhaseShiftModulated (USE_SINE_MODULATOR, slstudio f49eec5): Lx (pitch cols/nPhaseX, 24) x My (pitch
+    rows/nPhaseY, 16, across rows),
     cv::multiply(Lx, My, I, 255, CV_8U) for x outer, y inner; then 3 cue steps of one period
     (computePhaseVector); 12 frames."""
     W, H = SCREEN
@@ -63,7 +64,7 @@ def test_slstudio_modulated_phase_shifting_frames():
         return (0.5 + 0.5 * _cosf(np.float32(2) * PI * c / pitch - phase).astype(np.float64)).astype(np.float32)
 
     step = [np.float32(2) * PI / np.float32(3) * np.float32(i) for i in range(3)]   # 2 * pi / Nx * x, float
-    Lx = [amp(W, np.float32(W) / np.float32(8), step[x]) for x in range(3)]
+    Lx = [amp(W, np.float32(W) / np.float32(24), step[x]) for x in range(3)]
     My = [amp(H, np.float32(H) / np.float32(16), step[y]) for y in range(3)]
     tool = [np.rint(np.float32(255) * Lx[x][None, :] * My[y][:, None]).astype(np.uint8)
             for x in range(3) for y in range(3)]

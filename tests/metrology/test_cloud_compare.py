@@ -37,11 +37,12 @@ def test_a_sphere_adds_its_sag_and_nothing_else():
     cloud = R * u / np.linalg.norm(u, axis=1, keepdims=True)
     v = rng.normal(size=(300, 3))
     at = R * v / np.linalg.norm(v, axis=1, keepdims=True)
-    planes = local_planes(cloud, at, r, max_points=512)
+    planes = local_planes(cloud, at, r)
     # The sphere's cap within r of a point, fitted by a plane: its sag rho^2 / (2 R) is uniform over
     # [0, r^2 / (2 R)] on an evenly sampled disc (rho^2 is), so the residual RMS is r^2 / (2 R) / sqrt(12).
     expected = r ** 2 / (2 * R) / np.sqrt(12)
-    assert np.all(planes.count < 512)            # every point within r was used
+    inside = np.array([np.sum(np.linalg.norm(cloud - a, axis=1) <= r) for a in at[:20]])
+    np.testing.assert_array_equal(planes.count[:20], inside)     # every point within r was used, no more
     assert np.all(planes.count >= 6)
     assert 0.9 * expected < np.median(planes.rms) < 1.1 * expected, (np.median(planes.rms), expected)
     # The points themselves lie on the sphere: their distance to the local planes is about the mean sag.
@@ -74,3 +75,31 @@ def test_slstudios_own_cloud_scores_the_roughness_the_issue_states():
     assert len(xyz) == 93_876
     at = xyz[np.random.default_rng(0).choice(len(xyz), 4000, replace=False)]
     assert abs(np.nanmedian(roughness(xyz, at, 2.0)) - 0.063) < 0.001
+
+
+def test_a_denser_cloud_is_measured_over_the_same_patch():
+    """The same curved surface sampled 1x and 16x as densely, without noise: the same roughness at the same
+    points (its curvature's sag over the whole 2 mm patch); a cap at the nearest points would give the denser
+    cloud a smaller patch and a smaller figure."""
+    rng = np.random.default_rng(4)
+    R, r = 0.05, 0.002
+
+    def sphere(n):
+        u = rng.normal(size=(n, 3))
+        return R * u / np.linalg.norm(u, axis=1, keepdims=True)
+
+    at = sphere(200)
+    sparse, dense = roughness(sphere(100_000), at, r), roughness(sphere(1_600_000), at, r)
+    assert abs(np.median(dense) / np.median(sparse) - 1) < 0.05, (np.median(dense), np.median(sparse))
+
+
+def test_nearest_planes_give_the_shift_and_its_sign_and_nan_where_uncovered():
+    rng = np.random.default_rng(5)
+    ref = _plane(50_000, rng, offset=1.0)                      # z = 1 m: the origin (camera) below it
+    query = np.r_[_plane(500, rng, offset=1.0003) * [0.8, 0.8, 1], [[2.0, 2.0, 1.0]]]
+    from rangekit.metrology.cloud_compare import distances_to_nearest_planes
+
+    d = distances_to_nearest_planes(query, ref, max_radius=0.003, signed=True)
+    np.testing.assert_allclose(d[:-1], 0.3e-3, atol=1e-9)     # beyond the surface seen from the origin: +
+    assert np.isnan(d[-1])
+    np.testing.assert_allclose(distances_to_nearest_planes(query[:-1], ref, max_radius=0.003), 0.3e-3, atol=1e-9)

@@ -15,7 +15,8 @@ SLStudio ``pstools::computePhaseVector(n, phase, pitch)`` (``src/codec/pstools.c
     ``m0_s0 .. m0_s2``: ``computePhaseVector(n, -2 pi/3 * s, p_0)``, s = 0, 1, 2 (three steps of p_0);
     ``m1 .. m{F-1}``: ``computePhaseVector(n, pi if j odd else 0, p_j)`` (one frame per other period).
 ``modulated`` (SLStudio ``src/codec/CodecPhaseShiftModulated.cpp``, ``USE_SINE_MODULATOR``)
-    Fringe ``L_i(x) = float(0.5 + 0.5 cosf(2 pi_f x / P - 2 pi_f i / 3))``, P = float(n) / ``n_periods`` (8);
+    Fringe ``L_i(x) = float(0.5 + 0.5 cosf(2 pi_f x / P - 2 pi_f i / 3))``, P = float(n) / ``n_periods`` (24, SLStudio's ``nPhaseX``
+    since 2015; 8 for two days before);
     carrier across the other axis (y, of m pixels) ``M_k(y)``, the same with Q = float(m) / ``carrier_n_periods``
     (16). Frames, in order (9 + 3): ``fringe{i}_carrier{k}`` = ``rint(255 L_i(x) M_k(y))`` (``cv::multiply``
     with scale 255 to 8 bits), i outer, k inner; then ``cue_s0 .. cue_s2`` = ``computePhaseVector(n,
@@ -65,7 +66,7 @@ MAX_MICRO_PERIODS = 16
 
 _DEFAULTS = {
     "micro": {"periods": list(SLSTUDIO_MICRO_PERIODS)},
-    "modulated": {"n_periods": 8, "carrier_n_periods": 16},
+    "modulated": {"n_periods": 24, "carrier_n_periods": 16},   # CodecPhaseShiftModulated.cpp nPhaseX, nPhaseY
     "ftp": {"n_periods": 20, "shift": OPENCV_SHIFT, "cue": True},
     "psp": {"n_periods": 20, "shift": OPENCV_SHIFT, "cue": True},
     "faps": {"n_periods": 20, "shift": OPENCV_SHIFT, "cue": True},

@@ -10,10 +10,14 @@ order of each codec's encoder (``src/codec/Codec*.cpp``; docs/real-captures.md h
   03-05 three steps of one period (the cue), each ``(1 + cos(2 pi x / pitch - 2 pi k / 3)) / 2``:
   rangekit's ``phase`` method with periods (width, width / 16) and 3 steps each; no white or black frame.
 - ``slstudio:3ps`` (``CodecPhaseShift3``, columns): 00-02 three steps of one period across the screen (the
-  encoder adds noise of 5% to each frame): ``phase`` with the one period; no white or black frame.
+  encoder adds noise of 5% to each frame): ``phase`` with the one period; no white or black frame; the
+  decoded column blurred as its decoder blurs it (Gaussian, sigma 3 px).
 - ``slstudio:micro`` (``CodecPhaseShiftMicro``) and ``slstudio:modulated`` (``CodecPhaseShiftModulated``),
   00-11: rangekit's ``micro`` and ``modulated`` methods, whose frames are SLStudio's in its order
-  (:mod:`rangekit.coded.codecs.fringes`).
+  (:mod:`rangekit.coded.codecs.fringes`; modulated: 24 fringe periods, ``nPhaseX``).
+
+Read at SLStudio's commit f49eec5 (``CodecPhaseShiftModulated.cpp``, ``CodecPhaseShiftMicro.cpp``), 9e0bc5e
+(``CodecPhaseShift3.cpp``), 16df99b (``CodecGrayCode.cpp``), and e7c4246 (the example data's).
 """
 
 from __future__ import annotations
@@ -42,11 +46,19 @@ GRAY_BITS = 10          # CodecGrayCode.cpp: Nhorz, the column bits projected wh
 GRAY_VIEW_OPTIONS = {"decode_options": {"max_global_ratio": float("inf"), "stripe_smoothing": 2},
                      "min_confidence": 0.015}
 
-#: And its 2x3 phase shifting (the same measurement): ``min_confidence`` 0.015 as above, and ``edge_margin`` 0:
+#: And its phase codecs (the same measurement): ``min_confidence`` 0.015 as above, and ``edge_margin`` 0:
 #: three steps leave 0.6 projector columns of noise (as its 1.5 DN camera noise predicts), at low modulation
-#: a single pixel then jumps in range, and the margin grows each such pixel into a 5 x 5 hole: 91.8% of the
-#: authors' points are within 0.5 mm of the cloud with the margin, 95.7% without.
-PHASE_2X3_VIEW_OPTIONS = {"min_confidence": 0.015, "edge_margin": 0}
+#: a single pixel then jumps in range, and the margin grows each such pixel into a 5 x 5 hole. 2x3: 91.8% of
+#: the authors' points are within 0.5 mm of the cloud with the margin, 95.7% without; modulated: 72.5% and
+#: 86.5% (median 0.086 and 0.051 mm).
+PHASE_VIEW_OPTIONS = {"min_confidence": 0.015, "edge_margin": 0}
+
+#: Its single-period 3-step codec: SLStudio blurs the decoded column (``CodecPhaseShift3.cpp``: Gaussian,
+#: sigma 3 px) before masking, and so does rangekit here (``coord_smoothing``): one period across 1824
+#: columns leaves neighbouring pixels about 6 columns apart, and without it the flying-pixel filter kept no
+#: point of the skull; with it 35.8% of the authors' points lie within 0.5 mm, median 0.72 mm (SLStudio's own
+#: decoder, ported: 35.9%, 0.72 mm).
+PHASE_3PS_VIEW_OPTIONS = {**PHASE_VIEW_OPTIONS, "decode_options": {"coord_smoothing": 3.0}}
 
 
 def _gray_blocks(width: int, height: int) -> tuple[AxisBlocks, AxisBlocks]:
@@ -86,17 +98,17 @@ SLSTUDIO_LAYOUTS = {
         lambda w, h: PatternSpec("phase", w, h, ("columns",),
                                  {"steps": 3, "fine_steps": 3, "periods": [w, w / 16], "rounding": "down"}),
         lambda w, h: (WHITE_FROM_STEPS, BLACK_FROM_STEPS, 3, 4, 5, 0, 1, 2), (3, 4, 5),
-        view_options=PHASE_2X3_VIEW_OPTIONS),
+        view_options=PHASE_VIEW_OPTIONS),
     "slstudio:3ps": CaptureLayout(
         "slstudio:3ps", "slstudio src/codec/CodecPhaseShift3.cpp", FRAME_FILE, lambda w, h: 3,
         lambda w, h: PatternSpec("phase", w, h, ("columns",), {"periods": [w], "fine_steps": 3, "rounding": "down"}),
-        lambda w, h: (WHITE_FROM_STEPS, BLACK_FROM_STEPS, 0, 1, 2), (0, 1, 2)),
+        lambda w, h: (WHITE_FROM_STEPS, BLACK_FROM_STEPS, 0, 1, 2), (0, 1, 2), view_options=PHASE_3PS_VIEW_OPTIONS),
     "slstudio:micro": CaptureLayout(
         "slstudio:micro", "slstudio src/codec/CodecPhaseShiftMicro.cpp", FRAME_FILE,
         lambda w, h: _micro(w, h).n_frames, _micro, _same_order(_micro)),
     "slstudio:modulated": CaptureLayout(
         "slstudio:modulated", "slstudio src/codec/CodecPhaseShiftModulated.cpp", FRAME_FILE,
-        lambda w, h: _modulated(w, h).n_frames, _modulated, _same_order(_modulated)),
+        lambda w, h: _modulated(w, h).n_frames, _modulated, _same_order(_modulated), view_options=PHASE_VIEW_OPTIONS),
 }
 
 

@@ -87,13 +87,19 @@ class ToolCalibration:
     camera_size: SizeKeys | None       # None: not in the file (``size`` is required)
     second_size: SizeKeys | None       # the projector's (None: ``projector_size``) or the second camera's
     second: str = "projector"          # "projector", or "camera" for a two-camera file
+    #: Where the tool's own triangulation leaves the projector's lens distortion out although its file holds
+    #: one: the source line that says so. Its clouds (and a user's comparison with them) are then those of
+    #: the projector without it, and the import follows the tool unless told to keep it.
+    drops_projector_distortion: str | None = None
 
 
 TOOL_CALIBRATIONS = (
     ToolCalibration("SLStudio's calibration.xml", ("Kc",),
                     {"camera_K": ("Kc",), "camera_dist": ("kc",), "projector_K": ("Kp",), "projector_dist": ("kp",),
                      "R": ("Rp",), "T": ("Tp",)}, "mm", "SLStudio's calibration is in millimetres",
-                    SizeKeys(("frameWidth", "frameHeight")), SizeKeys(("screenResX", "screenResY"))),
+                    SizeKeys(("frameWidth", "frameHeight")), SizeKeys(("screenResX", "screenResY")),
+                    drops_projector_distortion="SLStudio's Triangulator.cpp builds each column's plane from Kp, Rp, "
+                                               "Tp alone"),
     ToolCalibration("kamino410 procam-calibration's calibration_result.xml", ("cam_int",),
                     {"camera_K": ("cam_int",), "camera_dist": ("cam_dist",), "projector_K": ("proj_int",),
                      "projector_dist": ("proj_dist",), "R": ("roration", "rotation"), "T": ("translation",)},
@@ -124,10 +130,12 @@ def tool_of(values: dict) -> ToolCalibration | None:
 
 def tool_rig(tool: ToolCalibration, values: dict, path: Path, *, size: tuple[int, int] | None = None,
              projector_size: tuple[int, int] | None = None, unit: str | None = None,
-             report: Callable[[str], None] | None = None) -> dict:
+             keep_projector_distortion: bool = False, report: Callable[[str], None] | None = None) -> dict:
     """The rig file of a tool's calibration (checked by :func:`.procam.procam_rig`). ``size`` /
     ``projector_size``: (width, height) pixels where the file has none; ``unit``: the unit of the file's
-    translation (default the tool's, ``tool.unit``); ``report``: told the tool and the unit read."""
+    translation (default the tool's, ``tool.unit``); ``report``: told the tool and the unit read.
+    A tool whose triangulation leaves the projector's distortion out (``drops_projector_distortion``) gets
+    a projector without it, as the tool reconstructs, unless ``keep_projector_distortion``."""
     path = Path(path)
     keys = {field: _matrix(tool, field, values, path) for field in tool.keys}   # every one, before any check
     if unit is not None and unit not in UNIT_SCALES:
@@ -145,6 +153,12 @@ def tool_rig(tool: ToolCalibration, values: dict, path: Path, *, size: tuple[int
     if report is not None:
         why = "as given" if unit is not None else f"{tool.unit_source}; --unit m, cm or mm if it is in another"
         report(f"{path}: read as {tool.name}; {keys['T'][0]} in {UNIT_NAMES[read_as]} ({why})")
+    dist_key, dist = keys["projector_dist"]
+    if tool.drops_projector_distortion and not keep_projector_distortion and np.any(np.asarray(dist, float) != 0):
+        keys["projector_dist"] = (dist_key, np.zeros_like(np.asarray(dist, dtype=np.float64)))
+        if report is not None:
+            report(f"{path}: {dist_key} left out, as the tool reconstructs ({tool.drops_projector_distortion}); "
+                   f"--keep-projector-distortion keeps it")
     return procam_rig(path, keys, read_as, cam_size, second_size, UNIT_SCALES, _UNIT_FIXES, second=tool.second)
 
 

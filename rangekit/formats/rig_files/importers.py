@@ -71,12 +71,14 @@ _UNIT_FIXES = {"mm": "use --unit mm", "m": "use --unit m (the default)"}
 
 def import_rig(path: str | Path, *, size: tuple[int, int] | None = None,
                projector_size: tuple[int, int] | None = None, unit: str | None = None,
-               report: Callable[[str], None] | None = None) -> dict:
+               keep_projector_distortion: bool = False, report: Callable[[str], None] | None = None) -> dict:
     """The rig file (plain JSON types, validated by :meth:`Rig.from_dict`) of the calibration in ``path``.
     ``size`` / ``projector_size``: (width, height) pixels where the file has none (Horus never has one);
     ``unit``: the translation's unit, "m", "cm" or "mm" (default: metres for an OpenCV file, the tool's unit
     for a tool's file; depthai's centimetres and Horus's millimetres are known); ``report``: told which
-    tool's file was read and the unit of its translation."""
+    tool's file was read and the unit of its translation. ``keep_projector_distortion``: keep the projector's
+    distortion of a tool whose own triangulation leaves it out (SLStudio's), which the import drops by default
+    (:func:`.import_tools.tool_rig`)."""
     from rangekit.formats.rig_files.import_json import depthai_rig, horus_rig
 
     path = Path(path)
@@ -105,7 +107,8 @@ def import_rig(path: str | Path, *, size: tuple[int, int] | None = None,
         tool = tool_of(values)
         rig = (opencv_rig(path, size=size, projector_size=projector_size, unit=unit or "m", values=values)
                if tool is None else tool_rig(tool, values, path, size=size, projector_size=projector_size,
-                                             unit=unit, report=report))
+                                             unit=unit, keep_projector_distortion=keep_projector_distortion,
+                                             report=report))
     Rig.from_dict(rig, where=str(path))        # every field checked as a rig file would be
     return rig
 

@@ -43,7 +43,8 @@ from rangekit.coded.binary import axis_crossings, edge_bit_lut
 from rangekit.coded.frames import CaptureStack
 from rangekit.coded.patterns import PatternSpec
 
-__all__ = ["MAX_CODE_STEP", "MAX_MOTION_SHARE", "MOTION_LIMIT_CODES", "MotionCheck", "check_motion", "code_step"]
+__all__ = ["MAX_CODE_STEP", "MAX_MOTION_SHARE", "MOTION_LIMIT_CODES", "MotionCheck", "check_motion", "code_step",
+           "still_baseline"]
 
 #: A capture in which more of the decoded pixels than this moved is refused by default
 #: (:func:`rangekit.coded.decode.decode`'s ``max_motion``, ``rangekit decode --max-motion``).
@@ -57,6 +58,9 @@ MAX_CODE_STEP = 1.0
 #: surface's residuals on the default rig: 0.05 codes at the 90th percentile; 0.25 flagged 0.098% of a still
 #: capture, 0.3 0.084%, 0.4 0.055% while missing more: benchmarks/coded/bench_motion.py).
 MOTION_LIMIT_CODES = 0.3
+#: The limit is at least this many times the capture's own edge noise (:func:`still_baseline`): a still capture's
+#: residuals past 3 sigma are 0.3% of its edges, and must also be flagged along the stripe to flag a pixel.
+NOISE_SIGMAS = 3.0
 #: Largest gap between successive edges (camera pixels) for a residual: wider gaps are not one surface.
 EDGE_GAP_PX = 6.0
 #: A decoded pixel is flagged too where more than this share of the decoded pixels within :data:`REGION_HALF_PX`
@@ -123,8 +127,10 @@ def check_motion(fr: CaptureStack, spec: PatternSpec, codes: dict[str, np.ndarra
         res = np.empty(t2.shape, np.float64)
         lo = np.empty(t2.shape, np.int64)
         M.crossing_residuals(c2, t2, EDGE_GAP_PX, res, lo)
+        size = spec.width if axis == "columns" else spec.height
+        res, axis_limit = still_baseline(res, lo, edge_bit_lut(size), spec.bits(axis), limit)
         flags = np.empty(c2.shape, bool)
-        M.flag_bracketed(t2, res, float(limit), flags)
+        M.flag_bracketed(t2, res, float(axis_limit), flags)
         # A move displaces a stripe along its whole length; the noise at a stripe edge flags a pixel here and there.
         # Kept: flags with a flagged neighbour along the stripe (the next camera row for column codes).
         along_stripe = np.zeros_like(flags)
@@ -148,6 +154,39 @@ def check_motion(fr: CaptureStack, spec: PatternSpec, codes: dict[str, np.ndarra
                     moved += [f"{prefix}_b{b}", f"{prefix}_b{b}_inv"]
     order = {name: i for i, name in enumerate(spec.frame_names)}
     return MotionCheck(mask, share, tuple(sorted(moved, key=order.__getitem__)), offsets, tuple(undersampled))
+
+
+def still_baseline(res: np.ndarray, lo: np.ndarray, edge_bit: np.ndarray, nb: int, limit: float
+                   ) -> tuple[np.ndarray, float]:
+    """The residuals measured against what the capture's own optics give a still surface, and the limit its noise
+    allows: ``(residuals, limit)``.
+
+    A real projector and lens move each bit's stripe edges by their own amount (a fine stripe is blurred more,
+    and a made inverse crosses its pattern off the true edge), the same over the whole image: each triple of bits
+    (previous, own, next edge) has its own median residual, which is taken off (the skull of SLStudio: up to
+    0.08 codes). A move displaces edges by an amount that changes sign with the surface's slope, so it barely
+    moves these medians. The edges wander from row to row by the projector's noise (SLStudio's: 0.12 codes
+    RMS, against 0.03 on the simulator): the limit is at least :data:`NOISE_SIGMAS` times that noise (the MAD's
+    sigma). Codes that turn back (``inf``) are left as they are: on SLStudio's still skull they are 27% of the
+    edges (misread coarse bits under interreflection and blur), as locally dense as a move's, and they are
+    most of what it still flags (docs/coded-light.md, "Motion during a capture")."""
+    finite = np.isfinite(res)
+    if not finite.any():
+        return res, limit
+    ys, xs = np.nonzero(finite)
+    c = lo[ys, xs]
+    top = len(edge_bit) - 1
+    triple = (edge_bit[np.clip(c - 1, 0, top)] * nb + edge_bit[c]) * nb + edge_bit[np.clip(c + 1, 0, top)]
+    r = res[ys, xs]
+    groups, inverse = np.unique(triple, return_inverse=True)
+    order = np.argsort(inverse, kind="stable")
+    starts = np.searchsorted(inverse[order], np.arange(len(groups)))
+    ends = np.r_[starts[1:], len(order)]
+    medians = np.array([np.median(r[order[a:b]]) for a, b in zip(starts, ends)])   # one per bit triple (<= nb^3)
+    out = res.copy()
+    out[ys, xs] = r - medians[inverse]
+    sigma = 1.4826 * float(np.median(np.abs(out[ys, xs])))
+    return out, max(limit, NOISE_SIGMAS * sigma)
 
 
 def code_step(code: np.ndarray, decoded: np.ndarray) -> float:

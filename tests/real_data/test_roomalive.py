@@ -94,5 +94,5 @@ def test_the_gray_code_cloud_against_the_kinect_depth(folder, roomalive_maps, de
               f"within 0.5 m), baseline {x.baseline_m * 1000:.1f} mm, range {x.range_m:.2f} m, 0.1 px moves a point "
               f"{x.limit_m * 1000:.1f} mm")
     assert plane.baseline_m == pytest.approx(0.1051, abs=1e-3)
-    assert ray.limit_m < plane.limit_m          # the projector sits above the camera: rows carry the depth
+    assert ray.limit_m < plane.limit_m          # the projector sits below the camera: rows carry the depth
     assert ray.median_m < 0.1 and plane.median_m < 0.25

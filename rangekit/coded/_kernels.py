@@ -19,8 +19,9 @@ __all__ = ["gray_rows", "masks_rows", "crossings", "interp_along_rows", "interp_
 
 
 @njit(parallel=True, cache=True, nogil=True)
-def gray_rows(stack, p_idx, i_idx, lut, size, code):  # pragma: no cover - compiled
-    """code[y, x] = binary column of the Gray code read MSB first from frames p_idx[j] > i_idx[j]; -1 if >= size."""
+def gray_rows(stack, p_idx, i_idx, lut, size, code, tie_bit=0):  # pragma: no cover - compiled
+    """code[y, x] = binary column of the Gray code read MSB first from frames p_idx[j] > i_idx[j] (``tie_bit``
+    where they are equal); -1 if >= size."""
     K, H, W = stack.shape
     nb = p_idx.shape[0]
     for y in prange(H):
@@ -29,7 +30,7 @@ def gray_rows(stack, p_idx, i_idx, lut, size, code):  # pragma: no cover - compi
             P = stack[p_idx[j], y]
             I = stack[i_idx[j], y]
             for x in range(W):
-                g[x] = (g[x] << 1) | (1 if P[x] > I[x] else 0)
+                g[x] = (g[x] << 1) | (1 if P[x] > I[x] else (tie_bit if P[x] == I[x] else 0))
         for x in range(W):
             c = lut[g[x]]
             code[y, x] = c if c < size else -1

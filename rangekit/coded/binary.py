@@ -11,6 +11,7 @@ import math
 import numpy as np
 
 from rangekit.coded.frames import CaptureStack, row_chunks, run_parallel
+from rangekit.errors import DecodeError
 from rangekit.coded.patterns import PatternSpec, gray_decode, gray_encode
 
 __all__ = ["axis_code", "axis_crossings", "axis_subpixel", "edge_bit_lut", "gray_lut", "smooth_along_stripes"]
@@ -92,8 +93,11 @@ def edge_bit_lut(size: int) -> np.ndarray:
     return _EDGE_LUTS[size]
 
 
-def axis_code(fr: CaptureStack, spec: PatternSpec, axis: str, workers: int, chunk_rows: int) -> np.ndarray:
-    """Integer code map of one axis: compiled Gray decoding, or chunked numpy for XOR codes."""
+def axis_code(fr: CaptureStack, spec: PatternSpec, axis: str, workers: int, chunk_rows: int, *,
+              ties: str = "zero") -> np.ndarray:
+    """Integer code map of one axis: compiled Gray decoding, or chunked numpy for XOR codes. ``ties``: the bit of a
+    pixel whose frame equals its inverse, "zero" (rangekit's rule, frame brighter than inverse) or "one" (Gray
+    codes only: RoomAlive's ``frame >= inverse``)."""
     from rangekit.coded import _kernels as K
 
     H, W = fr.shape
@@ -103,8 +107,11 @@ def axis_code(fr: CaptureStack, spec: PatternSpec, axis: str, workers: int, chun
     if spec.xor_base is None:
         p_idx = np.array([fr.index[f"{prefix}_b{b}"] for b in range(nb - 1, -1, -1)], np.int64)
         i_idx = np.array([fr.index[f"{prefix}_b{b}_inv"] for b in range(nb - 1, -1, -1)], np.int64)
-        K.gray_rows(fr.stack, p_idx, i_idx, gray_lut(nb), spec.width if axis == "columns" else spec.height, code)
+        K.gray_rows(fr.stack, p_idx, i_idx, gray_lut(nb), spec.width if axis == "columns" else spec.height, code,
+                    1 if ties == "one" else 0)
         return code
+    if ties != "zero":
+        raise DecodeError(f"ties={ties!r}: expected 'zero' for XOR codes ('one' is for Gray codes)")
     # XOR codes decide their high bits over windows across the stripes: rows need a halo of 2.
     halo = 2 if axis == "rows" else 0
 

@@ -66,7 +66,7 @@ def decode(stack, spec: PatternSpec, *, order: str = "rangekit", subpixel: bool 
            min_contrast: float = 0.015, shadow_threshold: float = 0.01, max_global_ratio: float | None = None,
            max_gap: float = 6.0, max_disagreement: float = 1.5, full_scale: float | None = None,
            response: ProjectorResponse | None = None, stripe_smoothing: int = 0, coord_smoothing: float = 0.0,
-           motion: bool = False, max_motion: float | None = MAX_MOTION_SHARE,
+           motion: bool = False, max_motion: float | None = MAX_MOTION_SHARE, ties: str = "zero",
            workers: int = 2, chunk_rows: int = 96) -> DecodeResult:
     """Decode a capture stack into projector coordinates.
 
@@ -117,6 +117,9 @@ def decode(stack, spec: PatternSpec, *, order: str = "rangekit", subpixel: bool 
         captures of cameras that undersample the projector); ``rangekit decode`` checks.
     max_motion : the largest share of the decoded pixels that may be flagged; over it the capture is refused
         (:class:`MotionError`, naming the frames taken after the move). None: never refused.
+    ties : {"zero", "one"}
+        Gray codes: the bit of a pixel whose frame equals its inverse; "zero" (frame brighter than inverse) or
+        "one" (frame at least its inverse: RoomAlive's rule, the ``roomalive:graycode`` layout's).
     workers, chunk_rows : threads and rows per chunk.
 
     The fringe codecs (micro, modulated, ftp, psp, faps) read ``min_contrast``, ``shadow_threshold``,
@@ -137,6 +140,8 @@ def decode(stack, spec: PatternSpec, *, order: str = "rangekit", subpixel: bool 
     if response is not None and not isinstance(response, ProjectorResponse):
         raise DecodeError(f"response must be a rangekit.rig.projector_response.ProjectorResponse or None, found "
                           f"{type(response).__name__} {response!r}; e.g. response=ProjectorResponse(gamma=2.2)")
+    if ties not in ("zero", "one"):
+        raise DecodeError(f"ties={ties!r}: expected 'zero' or 'one'")
     if spec.method in ("white", "black"):
         raise DecodeError(f"pattern {spec.method!r} carries no code; decode a graycode, xor02, xor04, phase, "
                           "hybrid, debruijn, micro, modulated, ftp, psp or faps capture")
@@ -178,7 +183,7 @@ def decode(stack, spec: PatternSpec, *, order: str = "rangekit", subpixel: bool 
         empty_i, empty_f = np.zeros((1, 1), np.int32), np.zeros((1, 1), np.float32)
         codes, subs, cross = {}, {}, {}
         for axis in spec.axes:
-            codes[axis] = axis_code(fr, spec, axis, workers, chunk_rows)
+            codes[axis] = axis_code(fr, spec, axis, workers, chunk_rows, ties=ties)
             if edges or motion:
                 cross[axis] = axis_crossings(fr, spec, axis, codes[axis])
             subs[axis] = axis_subpixel(axis, codes[axis], cross[axis], max_gap) if edges else empty_f

@@ -10,6 +10,10 @@ the same layout) holds:
   the first frequency, then the next). Pulsed: ``round_trip_s.npy`` (seconds, NaN where no return).
 * optionally ``ground_truth.npz`` (range, depth, xyz, hit, valid) from the simulator.
 
+A Kinect v2 depth map as RoomAlive Toolkit stores it (``cameraC/mean.bin``, ``variance.bin``; ``Calibrate.cs``
+``CaptureDepthAndColor``: the mean and variance of 100 depth frames, float32 millimetres and mm^2, 0 where a pixel
+had 50 valid samples or fewer) is read by :func:`read_kinect_depth` as a :class:`DepthMap`.
+
 The depth outputs of ``rangekit tof`` and ``rangekit stereo`` are written by
 :func:`rangekit.app.commands.ranges.write_depth_outputs`.
 """
@@ -30,7 +34,10 @@ from rangekit.io import read_json
 from rangekit.rig.rig_file import load_rig
 from rangekit.tof import FrequencyPlan, round_trip_problem
 
-__all__ = ["ToFFolder", "load_tof_folder", "load_ground_truth"]
+__all__ = ["ToFFolder", "load_tof_folder", "load_ground_truth", "DepthMap", "read_kinect_depth", "KINECT_DEPTH_SIZE"]
+
+#: A Kinect v2 depth image, width x height.
+KINECT_DEPTH_SIZE = (512, 424)
 
 TOF_KINDS = ("rangekit.tof.cw/1", "rangekit.tof.pulsed/1")
 
@@ -122,6 +129,64 @@ def _number(meta: dict, key: str, default: float | None, path: Path, *, positive
         raise FileFormatError(f"{path}: '{key}' must be a finite number {'> 0' if positive else '>= 0'}, found "
                               f"{json.dumps(value)[:200]}")
     return float(value)
+
+
+@dataclass(frozen=True, eq=False)
+class DepthMap:
+    """A depth camera's map: ``depth`` (H, W) float64 camera-frame z in metres and ``sigma`` its per-pixel standard
+    deviation in metres, NaN where invalid (both); ``valid`` where ``depth`` is finite."""
+
+    depth: np.ndarray
+    sigma: np.ndarray
+
+    @property
+    def valid(self) -> np.ndarray:
+        return np.isfinite(self.depth)
+
+    def points(self, camera: PinholeCamera) -> np.ndarray:
+        """(H, W, 3) world points of ``camera`` (its pixel rays scaled to ``depth``), NaN where invalid."""
+        from rangekit.camera import pixel_rays
+        from rangekit.geometry import apply_T
+
+        if camera.size != self.depth.shape[::-1]:
+            raise InputError(f"DepthMap.points: the map is {self.depth.shape[1]}x{self.depth.shape[0]}, camera "
+                             f"{camera.name!r} {camera.width}x{camera.height}")
+        rays = pixel_rays(camera)
+        p = (self.depth / rays[..., 2])[..., None] * rays
+        return apply_T(camera.T_world_cam, p.reshape(-1, 3)).reshape(p.shape)
+
+
+def read_kinect_depth(mean_path: str | Path, variance_path: str | Path | None = None, *,
+                      mirror: bool = True) -> DepthMap:
+    """RoomAlive's ``mean.bin`` (and ``variance.bin``): 512 x 424 little-endian float32, millimetres (mm^2), 0 =
+    invalid, as a :class:`DepthMap` in metres, ``sigma = sqrt(variance)`` (a variance just below 0, float32
+    cancellation in RoomAlive's running sums, reads 0; NaN without ``variance_path``). ``mirror``: flipped left to
+    right (the Kinect's images are mirror images; the rig ``rangekit rig import`` makes of RoomAlive's ensemble
+    describes them flipped, :mod:`rangekit.formats.rig_files.roomalive`). FileFormatError naming the file whose
+    size is not 512 x 424 x 4 bytes or that holds values that are not finite or negative depths."""
+    from rangekit.regular_files import read_regular_file
+
+    W, H = KINECT_DEPTH_SIZE
+    maps = []
+    for path, what in ((mean_path, "depth"), (variance_path, "variance")):
+        if path is None:
+            maps.append(None)
+            continue
+        data = read_regular_file(path, what=f"a Kinect v2 {what} map", limit=W * H * 4 + 1)
+        if len(data) != W * H * 4:
+            raise FileFormatError(f"{path}: expected a {W}x{H} float32 {what} map ({W * H * 4} bytes), found "
+                                  f"{len(data)} bytes")
+        m = np.frombuffer(data, dtype="<f4").reshape(H, W).astype(np.float64)
+        if not np.all(np.isfinite(m)) or (what == "depth" and np.any(m < 0)):
+            raise FileFormatError(f"{path}: expected finite {what} values (millimetres, 0 = invalid), found "
+                                  f"{np.count_nonzero(~np.isfinite(m) | (m < 0))} not finite or negative")
+        maps.append(np.fliplr(m) if mirror else m)
+    mean, variance = maps
+    valid = mean > 0
+    depth = np.where(valid, mean / 1000.0, np.nan)
+    sigma = np.full_like(depth, np.nan) if variance is None else \
+        np.where(valid, np.sqrt(np.maximum(variance, 0.0)) / 1000.0, np.nan)
+    return DepthMap(depth, sigma)
 
 
 _TRUTH_MAPS = {"range": "f", "depth": "f", "valid": "b", "hit": "b"}

@@ -36,11 +36,15 @@ GAMMA = ProjectorResponse(ImagingModel.gamma)
 #: - micro 0.37 px, 0.18%, 68%, 0.27 mm; modulated 0.72 px, 7.6%, 34%, 0.35 mm; OpenCV's psp 0.28 px, 0.11%,
 #:   64%, 0.21 mm; faps 0.49 px, 2.3%, 62%, 0.49 mm; ftp 0.93 px, 29% (FTP cannot follow the lumpy object's
 #:   fringe frequency), 62%, 2.1 mm;
+#: - RoomAlive's Gray code (its frames stored mirrored, as its Kinect does) 0.115 px, 94% decoded, but 50% with a
+#:   point (80% with edge_margin 0): its mask, a contrast over 10 levels in every coarse pair, leaves many
+#:   small holes on the object's darker, steeper parts, and the flying-pixel filter's margin grows each;
 #: - SLStudio's single-period 3ps 1.1 px and 59% gross: 8-bit noise on one period of 1100 columns is 175
 #:   columns a radian, every point is dropped as flying (docs/real-captures.md compares the codecs).
 LIMITS = {
     "opencv:graycode": (0.16, 0.0005, 0.9, 0.15), "procam:graycode": (0.16, 0.0005, 0.9, 0.15),
     "scan3d:graycode": (0.16, 0.0005, 0.9, 0.15), "slstudio:graycode": (0.1, 0.0005, 0.9, 0.07),
+    "roomalive:graycode": (0.16, 0.0005, 0.45, 0.15),
     "slstudio:2x3": (0.45, 0.005, 0.85, 0.42), "slstudio:calibration": (0.45, 0.005, 0.65, 0.35),
     "slstudio:micro": (0.5, 0.003, 0.6, 0.36), "slstudio:modulated": (0.95, 0.1, 0.3, 0.45),
     "opencv:psp": (0.36, 0.002, 0.55, 0.28), "opencv:faps": (0.64, 0.03, 0.55, 0.64),
@@ -61,9 +65,10 @@ def sim(rig):
 
 def _write(folder, layout, captures, camera=1):
     """The captures under the tool's own names (its first name pattern; a prefix the user picks: "scan"), as
-    8-bit images."""
+    8-bit images; mirrored (flipped left to right) for a tool whose camera stores them so (RoomAlive's Kinect)."""
     folder.mkdir(exist_ok=True)
     for k, image in enumerate(captures):
+        image = np.ascontiguousarray(np.fliplr(image)) if layout.mirror else image
         index = layout.first_index + k
         name = layout.file_name.replace("*", "scan").format(index, index=index, camera=camera)
         assert cv2.imwrite(str(folder / name), image)

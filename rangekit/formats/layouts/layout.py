@@ -10,6 +10,13 @@ of the same patterns, and for each frame of that spec where it comes from:
 - :class:`Inverse` ``(k)``: the inverse of a binary frame the tool projected without one, made as
   ``white + black - frame k``. rangekit's bit rule, ``frame - inverse > 0``, then reads
   ``2 frame > white + black``: the frame is nearer white than black, the rule of tools without inverses.
+- :data:`WHITE_FROM_PAIRS` / :data:`BLACK_FROM_PAIRS`: the references of a Gray code recorded without white
+  and black whose tool masks a pixel by its pairs' contrast (RoomAlive: every pair of ``pairs_for_references``
+  differing by more than a threshold): black is the darkest of those frames, white black plus the smallest
+  ``|frame - inverse|`` of the pairs, so that rangekit's ``white - black`` test is the tool's test, exactly.
+
+``mirror``: the tool's frames are mirror images (a Kinect v2's, flipped left to right by its SDK); :func:`arrange`
+flips them back, so that the camera is a pinhole camera of the room (the rig file describes it so).
 
 ``blocks``: per axis, how the tool's code counts projector pixels (:class:`AxisBlocks`): in blocks of ``size``
 pixels (a Gray code whose least significant bits are left out: its top bits are the Gray code of
@@ -35,10 +42,12 @@ from rangekit.camera import PinholeCamera
 from rangekit.coded.patterns import PatternSpec
 from rangekit.errors import FileFormatError
 
-__all__ = ["AxisBlocks", "CaptureLayout", "Inverse", "WHITE_FROM_STEPS", "BLACK_FROM_STEPS", "FRAME_SUFFIXES",
+__all__ = ["AxisBlocks", "CaptureLayout", "Inverse", "WHITE_FROM_STEPS", "BLACK_FROM_STEPS", "WHITE_FROM_PAIRS",
+           "BLACK_FROM_PAIRS", "FRAME_SUFFIXES",
            "layout_files", "arrange", "decoding_projector", "in_projector_pixels", "tool_frames"]
 
 WHITE_FROM_STEPS, BLACK_FROM_STEPS = "A+B", "A-B"
+WHITE_FROM_PAIRS, BLACK_FROM_PAIRS = "black + min |P - I|", "min of pairs"
 
 #: The image formats a tool's frames may come in (8 or 16 bit, grey or colour; JPEG as OpenCV's sample data).
 FRAME_SUFFIXES = (".bmp", ".png", ".tif", ".tiff", ".jpg", ".jpeg", ".pgm", ".ppm")
@@ -87,6 +96,9 @@ class CaptureLayout:
     view_options: dict = field(default_factory=dict)   # reconstruct_view's keywords for the tool's captures
     first_index: int = 0                               # the first file's index (OpenCV's and Moreno-Taubin's: 1)
     other_names: tuple[str, ...] = ()                  # file names tried when file_name's first file is missing
+    pairs_for_references: Callable[[int, int], tuple] = lambda w, h: ()   # (frame, inverse) file pairs whose
+                                                       # smallest contrast makes WHITE_/BLACK_FROM_PAIRS
+    mirror: bool = False                               # the frames are mirror images: arrange flips them
 
     def decoded_size(self, width: int, height: int) -> tuple[int, int]:
         """The size of the projector the spec codes: the codes of each axis (:class:`AxisBlocks`)."""
@@ -148,6 +160,8 @@ def arrange(images: Sequence[np.ndarray], layout: CaptureLayout, width: int, hei
                               f"{len(images)}")
     spec = layout.spec(*layout.decoded_size(width, height))
     frames = layout.frames(width, height)
+    if layout.mirror:
+        images = [np.fliplr(np.asarray(image)) for image in images]
     first = np.asarray(images[0])
     top = np.iinfo(first.dtype).max if first.dtype.kind in "ui" else np.inf
     made = {}
@@ -155,6 +169,15 @@ def arrange(images: Sequence[np.ndarray], layout: CaptureLayout, width: int, hei
         _, B, A = phase_from_steps([images[k] for k in layout.steps_for_references])
         made = {WHITE_FROM_STEPS: np.clip(A + B, 0, top).astype(first.dtype),
                 BLACK_FROM_STEPS: np.clip(A - B, 0, top).astype(first.dtype)}
+    pairs = layout.pairs_for_references(width, height)
+    if pairs:
+        black, low = np.asarray(images[pairs[0][0]]).copy(), None
+        for p, i in pairs:
+            P, I = np.asarray(images[p]), np.asarray(images[i])
+            np.minimum(black, np.minimum(P, I), out=black)
+            contrast = np.abs(P.astype(np.int32) - I)
+            low = contrast if low is None else np.minimum(low, contrast, out=low)
+        made = {BLACK_FROM_PAIRS: black, WHITE_FROM_PAIRS: (black + low).astype(first.dtype)}
 
     def frame(source) -> np.ndarray:
         if isinstance(source, Inverse):

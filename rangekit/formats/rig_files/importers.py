@@ -29,6 +29,8 @@ Four kinds of source, told apart by their content (:func:`import_rig`):
   and extrinsic convention); ``unit`` overrides the tool's unit.
 - **depthai EEPROM calibration** JSON (``CalibrationHandler.eepromToJson()``, :mod:`.rig_import_json`).
 - **Horus** ``calibration.json`` (Ciclop scanner, :mod:`.rig_import_json`).
+- **RoomAlive Toolkit**'s ``ProjectorCameraEnsemble`` XML (a Kinect v2's colour and depth cameras and a projector,
+  :mod:`.roomalive`), told by its root element.
 
 Every problem raises :class:`ConfigError` naming the file, the key, the expected and the found value.
 """
@@ -80,6 +82,7 @@ def import_rig(path: str | Path, *, size: tuple[int, int] | None = None,
     distortion of a tool whose own triangulation leaves it out (SLStudio's), which the import drops by default
     (:func:`.import_tools.tool_rig`)."""
     from rangekit.formats.rig_files.import_json import depthai_rig, horus_rig
+    from rangekit.formats.rig_files.roomalive import is_roomalive, roomalive_rig
 
     path = Path(path)
     if path.suffix.lower() not in IMPORT_SUFFIXES:
@@ -96,7 +99,9 @@ def import_rig(path: str | Path, *, size: tuple[int, int] | None = None,
         except RecursionError:
             raise ConfigError(f"{path}: expected a calibration JSON, found arrays or objects nested too deeply to "
                               f"read") from None
-    if isinstance(data, dict) and "cameraData" in data:
+    if path.suffix.lower() == ".xml" and is_roomalive(path):
+        rig = roomalive_rig(path, report=report)
+    elif isinstance(data, dict) and "cameraData" in data:
         rig = depthai_rig(data, str(path))
     elif isinstance(data, dict) and ("calibration_settings" in data or "camera_matrix" in data):
         rig = horus_rig(data, str(path), size=size)

@@ -116,6 +116,7 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
     rec = reconstruct_capture(cap, rig, subpixel=not args.integer, method=args.method)
     save_cloud(args.out, rec.cloud)
     say(f"{rec.decoded!r}")
+    note(rec.rig_check.describe())
     say(f"{rec.triangulated!r}")
     result(f"wrote {len(rec.cloud)} points to {args.out} in {time.perf_counter() - t0:.1f} s")
     return 0
@@ -140,6 +141,8 @@ def _reconstruct_layout(args: argparse.Namespace, t0: float) -> int:
                                    subpixel=not args.integer, method=args.method)
     save_cloud(args.out, rec.cloud)
     say(f"{rec.decoded!r}")
+    if getattr(rec, "rig_check", None) is not None:
+        note(rec.rig_check.describe())
     result(f"wrote {len(rec.cloud)} points to {args.out} in {time.perf_counter() - t0:.1f} s")
     return 0
 

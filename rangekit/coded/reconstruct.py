@@ -13,6 +13,7 @@ from rangekit.coded.result import DecodeResult
 from rangekit.errors import ConfigError, DecodeError
 from rangekit.coded.patterns import PatternSpec
 from rangekit.surface.cloud import PointCloud
+from rangekit.rig.capture_check import RigCheck, check_rig
 from rangekit.rig.projector_response import ProjectorResponse
 from rangekit.coded.uncertainty import point_sigma
 from rangekit.coded.triangulate import TriangulationResult, filter_range_map, triangulate
@@ -37,6 +38,7 @@ class Reconstruction:
                                        # and sigma where the decoder predicts its coordinates' std
     sigma: np.ndarray | None = None    # (H, W) float32 metres: predicted std along the camera ray, NaN where
                                        # no point or no prediction (rangekit.coded.uncertainty.point_sigma)
+    rig_check: RigCheck | None = None  # how well the rig explains the decoded coordinates (rangekit.rig.capture_check)
 
     def __repr__(self) -> str:
         return f"Reconstruction({self.decoded!r}, {self.cloud!r})"
@@ -81,6 +83,7 @@ def reconstruct_view(images, spec: PatternSpec, camera: PinholeCamera, projector
     weak = dec.confidence < min_confidence
     cols = np.where(weak, np.nan, dec.proj_col)
     rows = np.where(weak, np.nan, dec.proj_row) if np.any(np.isfinite(dec.proj_row)) else None
+    checked = check_rig(camera, projector, cols, rows)
     tri = triangulate(camera, projector, cols, rows, method=method)
     # flying pixels (and ray-ray points whose rays miss) dropped, normals of what is left: one compiled pass
     xyz, normals = filter_range_map(tri.xyz, camera.center, max_jump=max_jump, margin=edge_margin,
@@ -89,8 +92,9 @@ def reconstruct_view(images, spec: PatternSpec, camera: PinholeCamera, projector
                               tri.proj_xy, tri.gains)
     valid = tri.valid
     if not np.any(valid):
+        why = f"; {checked.describe()}" if checked.checkable else ""
         raise DecodeError("no 3D point survived decoding and triangulation; check the rig file and that the "
-                          "captures show the object lit by the projector")
+                          f"captures show the object lit by the projector{why}")
     normals = normals[valid]
     normals = np.where(np.isfinite(normals), normals, 0.0)
     white = np.asarray(dec.white, dtype=np.float32)
@@ -104,4 +108,4 @@ def reconstruct_view(images, spec: PatternSpec, camera: PinholeCamera, projector
         else:
             sigma = point_sigma(camera, projector, xyz, dec.col_std)
     return Reconstruction(dec, tri, PointCloud(xyz[valid], np.clip(colours, 0, 1), normals,
-                                               None if sigma is None else sigma[valid]), sigma)
+                                               None if sigma is None else sigma[valid]), sigma, checked)

@@ -26,7 +26,7 @@ from rangekit.io import write_png
 from rangekit.progress import call_progress
 from rangekit.rig.rig_file import save_rig
 
-__all__ = ["calibrate_recordings", "board_image", "board_image_source"]
+__all__ = ["calibrate_recordings", "board_image", "board_image_source", "board_reading_line"]
 
 
 def board_image_source(layout, width: int, height: int) -> str:
@@ -51,6 +51,12 @@ def board_image(frames: np.ndarray) -> np.ndarray:
     return np.clip(np.rint(mean * (65535.0 / top)), 0, 65535).astype(np.uint16)
 
 
+def board_reading_line(reading: Board, given: Board, where: str) -> str:
+    """How the board was read, in one line: "board read as 14 x 10 squares (given 10 x 14), found so in calseq1"."""
+    how = "as given" if reading == given else f"(given {given.cols} x {given.rows})"
+    return f"board read as {reading.cols} x {reading.rows} squares {how}, found so in {where}"
+
+
 def _names(captures: Sequence[Path]) -> list[str]:
     """Each pose's name: its folder's name, or the path as given where two folders share a name."""
     short = [p.name or str(p) for p in captures]
@@ -69,7 +75,9 @@ def calibrate_recordings(out: str | Path, captures: Sequence[str | Path], *, pat
     captures : one folder per board pose, each holding the layout's frames.
     pattern : the layout's name (:data:`rangekit.formats.layouts.LAYOUTS`); it must code columns and rows.
     projector_size : (width, height) of the projector's screen in the pixels the tool drew its patterns in.
-    board : the printed board (a checkerboard may have ``rows + cols`` even).
+    board : the printed board (a checkerboard may have ``rows + cols`` even), its cols and rows either way round:
+        each pose is searched under both readings (:func:`rangekit.calib.recorded.board_readings`) until one is
+        found, then under that one; ``report`` gets which.
     lens : a name of :data:`rangekit.calib.camera.LENS_MODELS`.
     corners : how each corner's projector coordinates are fitted, one of
         :data:`rangekit.calib.camera.CORNER_FITS` ("quadratic", rangekit's own; "homography", Moreno and
@@ -89,7 +97,7 @@ def calibrate_recordings(out: str | Path, captures: Sequence[str | Path], *, pat
     """
     from rangekit.calib.pose_feedback import FeedbackLimits, coverage_image
     from rangekit.calib.camera import CORNER_FITS
-    from rangekit.calib.recorded import MIN_POSES, calibrate_recorded, measure_pose, refused_pose
+    from rangekit.calib.recorded import MIN_POSES, board_readings, calibrate_recorded, measure_pose, refused_pose
     from rangekit.coded.decode import decode
     from rangekit.formats.capture import read_stack
     from rangekit.formats.layouts import LAYOUTS, arrange, in_projector_pixels, layout_files
@@ -124,6 +132,7 @@ def calibrate_recordings(out: str | Path, captures: Sequence[str | Path], *, pat
     limits = FeedbackLimits()
     coverage_png = out.parent / "coverage.png"
     poses, kept, camera_size = [], [], None
+    readings = board_readings(board)      # both ways round until a pose's board is found, then that one
     t0 = time.time()
     for i, (folder, name) in enumerate(zip(folders, names)):
         call_progress(progress, f"pose {i + 1}/{len(folders)}: {name}", i, len(folders))
@@ -144,8 +153,12 @@ def calibrate_recordings(out: str | Path, captures: Sequence[str | Path], *, pat
             pose = refused_pose(i, name, f"not decoded: {exc}")
         else:
             dec = in_projector_pixels(dec, layout, width, height)
-            pose = measure_pose(i, name, lit, dec.proj_col, dec.proj_row, board, confidence=dec.confidence,
+            pose = measure_pose(i, name, lit, dec.proj_col, dec.proj_row, readings, confidence=dec.confidence,
                                 kept=kept, limits=limits, corners=corners)
+            if pose.board is not None and len(readings) > 1:
+                readings = (pose.board,)
+                if report is not None:
+                    report(board_reading_line(pose.board, board, name))
         del stack
         poses.append(pose)
         if pose.check.accepted:
@@ -155,7 +168,7 @@ def calibrate_recordings(out: str | Path, captures: Sequence[str | Path], *, pat
         if report is not None:
             report(pose.line())
     call_progress(progress, f"decoded {len(folders)} board poses", len(folders), len(folders))
-    result = calibrate_recorded(poses, board, camera_size, (width, height), lens=lens,
+    result = calibrate_recorded(poses, readings[0], camera_size, (width, height), lens=lens,
                                 seconds={"decode": time.time() - t0})
     save_rig(result.rig, out)
     return Calibration(result, None, [])

@@ -1,7 +1,8 @@
 """``rangekit calibrate --captures DIR [DIR ...] --pattern PRESET --projector WxH``: a rig from board poses another
 tool recorded under its coded light, one folder per pose in a capture layout (:mod:`rangekit.formats.layouts`).
 
-Each folder is read (:func:`rangekit.formats.layouts.layout_files`: the layout's frames, no more, no fewer),
+Each folder is read (:func:`rangekit.formats.layouts.folder_frames`: the layout's frames, no more, no fewer, under
+the tool's names or, without them, in numeric order of the names),
 put in the layout's spec order (:func:`~rangekit.formats.layouts.arrange`), decoded
 (:func:`rangekit.coded.decode.decode`) and measured (:func:`rangekit.calib.recorded.measure_pose`: the board's
 corners in the mean of its frames (:func:`board_image`), the pose's checks, each corner's projector coordinates
@@ -100,7 +101,8 @@ def calibrate_recordings(out: str | Path, captures: Sequence[str | Path], *, pat
     from rangekit.calib.recorded import MIN_POSES, board_readings, calibrate_recorded, measure_pose, refused_pose
     from rangekit.coded.decode import decode
     from rangekit.formats.capture import read_stack
-    from rangekit.formats.layouts import LAYOUTS, arrange, in_projector_pixels, layout_files
+    from rangekit.formats.layouts import LAYOUTS, arrange, folder_frames, in_projector_pixels
+    from rangekit.formats.layouts.frame_files import NUMERIC_ORDER
 
     out = Path(out)
     if out.exists() and not force:
@@ -136,8 +138,10 @@ def calibrate_recordings(out: str | Path, captures: Sequence[str | Path], *, pat
     t0 = time.time()
     for i, (folder, name) in enumerate(zip(folders, names)):
         call_progress(progress, f"pose {i + 1}/{len(folders)}: {name}", i, len(folders))
-        files = layout_files(folder, layout, width, height)
-        frames = read_stack(files, what=f"a {pattern} capture")
+        found = folder_frames(folder, layout, width, height)
+        if found.order == NUMERIC_ORDER and report is not None:      # not the tool's names: say which files
+            report(f"{name}: {found.line()}")
+        frames = read_stack(found.files, what=f"a {pattern} capture")
         size = (frames.shape[2], frames.shape[1])
         if camera_size is None:
             camera_size = size

@@ -5,7 +5,8 @@ rangekit's pose checks and bundle adjustment. Per board pose (:func:`measure_pos
 
 1. the board's corners in the pose's lit image (:func:`rangekit.boards.detect_board`; a checkerboard with
    ``rows + cols`` even is accepted, its ids known up to a half turn, which poses solved each alone do not
-   mind);
+   mind), the board read as given or with its cols and rows swapped (:func:`board_readings`), as OpenCV's,
+   procam-calibration's and SLStudio's calibrators take its size either way round;
 2. the pose's checks (:func:`rangekit.calib.pose_feedback.check_pose`: corners, size, tilt, reprojection), and
    one more: enough corners lit by the projector;
 3. each corner's projector coordinates from the decoded maps around it, by one of
@@ -41,7 +42,7 @@ from rangekit.camera import PinholeCamera
 from rangekit.errors import CalibrationError
 from rangekit.rig.rig_file import Rig
 
-__all__ = ["RecordedPose", "measure_pose", "refused_pose", "calibrate_recorded", "MIN_POSES"]
+__all__ = ["RecordedPose", "board_readings", "measure_pose", "refused_pose", "calibrate_recorded", "MIN_POSES"]
 
 MIN_POSES = 3        # Zhang's method: three board poses at least, for each device
 
@@ -52,17 +53,51 @@ class RecordedPose:
 
     ``name``: how messages name it (its folder); ``check``: the verdict (:class:`PoseCheck`, ``reason`` "" when
     kept); ``corners``: the camera's corners (ids, uv in camera pixels; none when rejected); ``projector``: their
-    projector coordinates (NaN rows where not lit), None when rejected.
+    projector coordinates (NaN rows where not lit), None when rejected; ``board``: the reading of the board the
+    corners were found under (:func:`board_readings`; their ids are its corners), None when not found.
     """
 
     name: str
     check: PoseCheck
     corners: Correspondences
     projector: CornerFit | None
+    board: Board | None = None
 
     def line(self) -> str:
         """The pose's verdict, named: "calseq1: kept: 117 corners, ...", "calseq2: rejected: board not found"."""
         return f"{self.name}: {self.check.line().split(': ', 1)[1]}"
+
+
+def board_readings(board: Board) -> tuple[Board, ...]:
+    """The readings of ``board`` a recorded pose is searched under, in turn: as given, then (a checkerboard that is
+    not square) with its cols and rows swapped (:meth:`rangekit.boards.Board.transposed`).
+
+    rangekit's board frame starts at the dark corner square, so a checkerboard whose cols and rows are both even
+    (SLStudio's 14 x 10) is found only under the print's own reading: the other one has a light square there.
+    The rig does not depend on the reading: the board's corners are the same points in either frame."""
+    if board.kind != "checkerboard" or board.cols == board.rows:
+        return (board,)
+    return (board, board.transposed())
+
+
+def _detect(lit: np.ndarray, readings: Sequence[Board]):
+    """(the board's reading it was found under or None, the detection; when not found, the reason names each
+    reading tried)."""
+    tried = []
+    for reading in readings:
+        det = detect_board(lit, reading, symmetric_ok=True)
+        if det.found:
+            return reading, det
+        tried.append((reading, det.reason))
+    first = tried[0][1]
+    if len(tried) > 1 and all(reason == "board not found" for _, reason in tried):
+        sizes = " or ".join(f"{b.cols} x {b.rows}" for b, _ in tried)
+        first = f"board not found, read as {sizes} squares"
+    elif len(tried) > 1:
+        first = "; ".join(f"{reason} (read as {b.cols} x {b.rows} squares)" for b, reason in tried)
+    if readings[0].kind == "checkerboard" and first.startswith("board not found"):
+        first += " (a checkerboard is found whole or not at all: is all of it inside the image?)"
+    return None, dataclasses.replace(det, reason=first)
 
 
 def refused_pose(index: int, name: str, reason: str) -> RecordedPose:
@@ -76,7 +111,7 @@ def _none(reason: str) -> Correspondences:
 
 
 def measure_pose(index: int, name: str, lit: np.ndarray, proj_col: np.ndarray, proj_row: np.ndarray,
-                 board: Board, *, confidence: np.ndarray | None = None,
+                 board: Board | Sequence[Board], *, confidence: np.ndarray | None = None,
                  kept: Sequence[tuple[np.ndarray, np.ndarray]] = (), limits: FeedbackLimits = FeedbackLimits(),
                  corners: str = CORNER_FITS[0], radius: int = 10) -> RecordedPose:
     """Steps 1-3 of the module doc for one board pose.
@@ -89,7 +124,8 @@ def measure_pose(index: int, name: str, lit: np.ndarray, proj_col: np.ndarray, p
         :func:`rangekit.app.calibrate_recorded.board_image`).
     proj_col, proj_row : (H, W) float decoded projector column and row, NaN where the decoder masked the pixel.
     confidence : (H, W) float in [0, 1], the decoder's (the quadratic fit weights by it); None: 1 where decoded.
-    board : the printed board.
+    board : the printed board, searched under each of its readings (:func:`board_readings`); or the readings to
+        try, in turn (one: the reading earlier poses were found under). ``RecordedPose.board`` is the one used.
     kept : (ids, uv) of the poses kept before this one (the reprojection check fits a camera to them).
     limits : when a pose is rejected; ``min_corners`` also counts the corners the projector lights.
     corners : one of :data:`rangekit.calib.camera.CORNER_FITS`.
@@ -98,17 +134,11 @@ def measure_pose(index: int, name: str, lit: np.ndarray, proj_col: np.ndarray, p
     if corners not in CORNER_FITS:
         raise CalibrationError(f"corners must be one of {', '.join(CORNER_FITS)}, found {corners!r}")
     height, width = proj_col.shape
-    det = detect_board(lit, board, symmetric_ok=True)
-    if not det.found and board.kind == "checkerboard" and det.reason == "board not found":
-        det = dataclasses.replace(det, reason="board not found (a checkerboard is found whole or not at all: "
-                                              "is all of it inside the image?)")
-    elif not det.found and "orientation" in det.reason and (board.rows + board.cols) % 2 == 0 and board.cols % 2 == 0:
-        det = dataclasses.replace(det, reason=f"{det.reason}; rows + cols even: the same print read with cols and "
-                                              f"rows swapped ({board.rows}x{board.cols}) has its dark corner square "
-                                              "where this one is light")
-    check = check_pose(index, det, board, (width, height), kept=kept, limits=limits)
+    readings = board_readings(board) if isinstance(board, Board) else tuple(board)
+    reading, det = _detect(lit, readings)
+    check = check_pose(index, det, reading or readings[0], (width, height), kept=kept, limits=limits)
     if not check.accepted:
-        return RecordedPose(name, check, _none(check.reason), None)
+        return RecordedPose(name, check, _none(check.reason), None, reading)
     if corners == "homography":
         fit = local_homography_coords(proj_col, proj_row, det.uv, radius=radius)
     else:
@@ -118,8 +148,8 @@ def measure_pose(index: int, name: str, lit: np.ndarray, proj_col: np.ndarray, p
     if lit_corners < limits.min_corners:
         reason = (f"only {lit_corners} of its {len(det.ids)} corners in the projector's light, at least "
                   f"{limits.min_corners} needed")
-        return RecordedPose(name, dataclasses.replace(check, reason=reason), _none(reason), None)
-    return RecordedPose(name, check, Correspondences(det.ids, det.uv), fit)
+        return RecordedPose(name, dataclasses.replace(check, reason=reason), _none(reason), None, reading)
+    return RecordedPose(name, check, Correspondences(det.ids, det.uv), fit, reading)
 
 
 def calibrate_recorded(poses: Sequence[RecordedPose], board: Board, camera_size: tuple[int, int],
@@ -130,7 +160,7 @@ def calibrate_recorded(poses: Sequence[RecordedPose], board: Board, camera_size:
     Parameters
     ----------
     poses : every recorded pose, kept or rejected, in order.
-    board : the printed board.
+    board : the printed board, in the reading the poses' corners were found under (``RecordedPose.board``).
     camera_size, projector_size : (width, height) pixels; the projector's in the pixels its code counts.
     lens : a name of :data:`rangekit.calib.camera.LENS_MODELS`.
     seconds : time already spent, by stage (decoding); "solve" and "total" are added.

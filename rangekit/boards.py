@@ -16,6 +16,7 @@ and its first (top-left) square, which OpenCV 5 always draws black, is our dark 
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -107,6 +108,14 @@ class Board:
                                  f"'DICT_5X5_{250 if n_markers <= 250 else 1000}'")
 
     # ---------------------------------------------------------------- geometry
+    def transposed(self) -> "Board":
+        """The same print read the other way round: ``cols`` and ``rows`` exchanged, so board x and y are too.
+
+        A checkerboard with ``cols`` or ``rows`` odd is found under either reading (its dark corner square is
+        where the other reading needs it, a quarter turn away); one with both even only under the print's own,
+        which :func:`rangekit.calib.recorded.board_readings` tries in turn."""
+        return dataclasses.replace(self, cols=self.rows, rows=self.cols)
+
     @property
     def n_corners(self) -> int:
         """Number of inner corners, ``(cols - 1) * (rows - 1)``."""

@@ -1,7 +1,8 @@
 """``rangekit calibrate --captures DIR [DIR ...] --pattern PRESET --projector WxH``: a rig from board poses another
 tool recorded under its coded light, one folder per pose in a capture layout (:mod:`rangekit.formats.layouts`).
 
-Each folder is read (:func:`rangekit.formats.layouts.layout_files`: the layout's frames, no more, no fewer),
+Each folder is read (:func:`rangekit.formats.layouts.folder_frames`: the layout's frames, no more, no fewer, under
+the tool's names or, without them, in numeric order of the names),
 put in the layout's spec order (:func:`~rangekit.formats.layouts.arrange`), decoded
 (:func:`rangekit.coded.decode.decode`) and measured (:func:`rangekit.calib.recorded.measure_pose`: the board's
 corners in the mean of its frames (:func:`board_image`), the pose's checks, each corner's projector coordinates
@@ -26,7 +27,7 @@ from rangekit.io import write_png
 from rangekit.progress import call_progress
 from rangekit.rig.rig_file import save_rig
 
-__all__ = ["calibrate_recordings", "board_image", "board_image_source"]
+__all__ = ["calibrate_recordings", "board_image", "board_image_source", "board_reading_line"]
 
 
 def board_image_source(layout, width: int, height: int) -> str:
@@ -51,6 +52,12 @@ def board_image(frames: np.ndarray) -> np.ndarray:
     return np.clip(np.rint(mean * (65535.0 / top)), 0, 65535).astype(np.uint16)
 
 
+def board_reading_line(reading: Board, given: Board, where: str) -> str:
+    """How the board was read, in one line: "board read as 14 x 10 squares (given 10 x 14), found so in calseq1"."""
+    how = "as given" if reading == given else f"(given {given.cols} x {given.rows})"
+    return f"board read as {reading.cols} x {reading.rows} squares {how}, found so in {where}"
+
+
 def _names(captures: Sequence[Path]) -> list[str]:
     """Each pose's name: its folder's name, or the path as given where two folders share a name."""
     short = [p.name or str(p) for p in captures]
@@ -69,7 +76,9 @@ def calibrate_recordings(out: str | Path, captures: Sequence[str | Path], *, pat
     captures : one folder per board pose, each holding the layout's frames.
     pattern : the layout's name (:data:`rangekit.formats.layouts.LAYOUTS`); it must code columns and rows.
     projector_size : (width, height) of the projector's screen in the pixels the tool drew its patterns in.
-    board : the printed board (a checkerboard may have ``rows + cols`` even).
+    board : the printed board (a checkerboard may have ``rows + cols`` even), its cols and rows either way round:
+        each pose is searched under both readings (:func:`rangekit.calib.recorded.board_readings`) until one is
+        found, then under that one; ``report`` gets which.
     lens : a name of :data:`rangekit.calib.camera.LENS_MODELS`.
     corners : how each corner's projector coordinates are fitted, one of
         :data:`rangekit.calib.camera.CORNER_FITS` ("quadratic", rangekit's own; "homography", Moreno and
@@ -89,10 +98,11 @@ def calibrate_recordings(out: str | Path, captures: Sequence[str | Path], *, pat
     """
     from rangekit.calib.pose_feedback import FeedbackLimits, coverage_image
     from rangekit.calib.camera import CORNER_FITS
-    from rangekit.calib.recorded import MIN_POSES, calibrate_recorded, measure_pose, refused_pose
+    from rangekit.calib.recorded import MIN_POSES, board_readings, calibrate_recorded, measure_pose, refused_pose
     from rangekit.coded.decode import decode
     from rangekit.formats.capture import read_stack
-    from rangekit.formats.layouts import LAYOUTS, arrange, in_projector_pixels, layout_files
+    from rangekit.formats.layouts import LAYOUTS, arrange, folder_frames, in_projector_pixels
+    from rangekit.formats.layouts.frame_files import NUMERIC_ORDER
 
     out = Path(out)
     if out.exists() and not force:
@@ -124,11 +134,14 @@ def calibrate_recordings(out: str | Path, captures: Sequence[str | Path], *, pat
     limits = FeedbackLimits()
     coverage_png = out.parent / "coverage.png"
     poses, kept, camera_size = [], [], None
+    readings = board_readings(board)      # both ways round until a pose's board is found, then that one
     t0 = time.time()
     for i, (folder, name) in enumerate(zip(folders, names)):
         call_progress(progress, f"pose {i + 1}/{len(folders)}: {name}", i, len(folders))
-        files = layout_files(folder, layout, width, height)
-        frames = read_stack(files, what=f"a {pattern} capture")
+        found = folder_frames(folder, layout, width, height)
+        if found.order == NUMERIC_ORDER and report is not None:      # not the tool's names: say which files
+            report(f"{name}: {found.line()}")
+        frames = read_stack(found.files, what=f"a {pattern} capture")
         size = (frames.shape[2], frames.shape[1])
         if camera_size is None:
             camera_size = size
@@ -144,8 +157,12 @@ def calibrate_recordings(out: str | Path, captures: Sequence[str | Path], *, pat
             pose = refused_pose(i, name, f"not decoded: {exc}")
         else:
             dec = in_projector_pixels(dec, layout, width, height)
-            pose = measure_pose(i, name, lit, dec.proj_col, dec.proj_row, board, confidence=dec.confidence,
+            pose = measure_pose(i, name, lit, dec.proj_col, dec.proj_row, readings, confidence=dec.confidence,
                                 kept=kept, limits=limits, corners=corners)
+            if pose.board is not None and len(readings) > 1:
+                readings = (pose.board,)
+                if report is not None:
+                    report(board_reading_line(pose.board, board, name))
         del stack
         poses.append(pose)
         if pose.check.accepted:
@@ -155,7 +172,7 @@ def calibrate_recordings(out: str | Path, captures: Sequence[str | Path], *, pat
         if report is not None:
             report(pose.line())
     call_progress(progress, f"decoded {len(folders)} board poses", len(folders), len(folders))
-    result = calibrate_recorded(poses, board, camera_size, (width, height), lens=lens,
+    result = calibrate_recorded(poses, readings[0], camera_size, (width, height), lens=lens,
                                 seconds={"decode": time.time() - t0})
     save_rig(result.rig, out)
     return Calibration(result, None, [])

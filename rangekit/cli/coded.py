@@ -47,19 +47,21 @@ def _decode_layout(args: argparse.Namespace, t0: float) -> int:
     from rangekit.coded.decode import decode
     from rangekit.errors import UsageError, naming
     from rangekit.formats.capture import read_stack, save_decoded
-    from rangekit.formats.layouts import LAYOUTS, arrange, in_projector_pixels, layout_files
+    from rangekit.formats.layouts import LAYOUTS, arrange, capture_frames, in_projector_pixels
 
     if args.pattern not in LAYOUTS:
         raise UsageError(f"--pattern {args.pattern}: not a capture layout; known: {', '.join(sorted(LAYOUTS))}")
-    if args.projector is None or len(args.images) != 1:
-        raise UsageError(f"--pattern {args.pattern} reads one folder and needs --projector WxH (the size the tool "
-                         "projected at)")
+    if args.projector is None:
+        raise UsageError(f"--pattern {args.pattern} reads one camera's capture and needs --projector WxH (the size "
+                         "the tool projected at)")
     layout, (width, height) = LAYOUTS[args.pattern], args.projector
-    frames = read_stack(layout_files(args.images[0], layout, width, height), what=f"a {layout.name} capture")
+    (found,) = capture_frames(args.images, layout, width, height)
+    say(found.line())
+    frames = read_stack(found.files, what=f"a {layout.name} capture")
     stack, spec = arrange(list(frames), layout, width, height)
     del frames
     note(f"decoding {layout.name} ({layout.source})")
-    with naming(args.images[0]):
+    with naming(found.source):
         res = decode(stack, spec, subpixel=not args.integer, motion=True, max_motion=args.max_motion,
                      **layout.view_options.get("decode_options", {}))
     res = in_projector_pixels(res, layout, width, height)
@@ -136,9 +138,9 @@ def _reconstruct_layout(args: argparse.Namespace, t0: float) -> int:
                          "import' of the tool's calibration)")
     rig = load_rig(args.rig)
     layout = LAYOUTS[args.pattern]
-    note(f"reading {' and '.join(map(str, args.capture))} ({layout.name}: {layout.source})")
+    note(f"reading {layout.name} ({layout.source})")
     rec = reconstruct_tool_capture(args.capture, args.pattern, rig, projector_size=args.projector,
-                                   subpixel=not args.integer, method=args.method)
+                                   subpixel=not args.integer, method=args.method, report=say)
     save_cloud(args.out, rec.cloud)
     say(f"{rec.decoded!r}")
     if getattr(rec, "rig_check", None) is not None:
@@ -232,8 +234,9 @@ def add_parsers(sub) -> None:
                                      "a laser capture (off.png, laser0.png, ...) is triangulated against the "
                                      "rig file's laser planes, a two-camera one (left/, right/) by the camera pair.")
     rec.add_argument("capture", metavar="CAPTURE_DIR", nargs="+",
-                     help="capture folder (images + patterns.json); with --pattern, another tool's folder, two "
-                          "folders (camera 1, camera 2) or OpenCV's image list")
+                     help="capture folder (images + patterns.json); with --pattern, another tool's folder (its own "
+                          "names, or any names in numeric order), two folders (camera 1, camera 2), image files or "
+                          "a quoted glob ('caps/*.png'; one per camera), or OpenCV's image list")
     rec.add_argument("--rig", help="rig file (default: the folder's rig.json)")
     rec.add_argument("--pattern", choices=sorted(CAPTURE_LAYOUTS), default=None,
                      help="another tool's capture layout, read as it lies on disk (docs/real-captures.md); needs "

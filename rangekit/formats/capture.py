@@ -21,14 +21,16 @@ from rangekit.io import atomic_save_npz, decode_image, read_json, read_png
 from rangekit.npy_zst import decode_npy_zst, is_npy_zst, npy_zst_header
 from rangekit.rig.rig_file import Rig, load_rig
 
-__all__ = ["IMAGE_SUFFIXES", "list_images", "read_stack", "stack_from_bytes", "Capture", "load_capture", "pattern_spec_for",
+__all__ = ["IMAGE_SUFFIXES", "natural_key", "list_images", "read_stack", "stack_from_bytes", "Capture", "load_capture", "pattern_spec_for",
            "save_decoded"]
 
 IMAGE_SUFFIXES = (".png", ".tif", ".tiff", ".bmp", ".pgm", ".ppm", ".zst")   # .zst: NNN.npy.zst (rangekit.npy_zst)
 
 
-def _natural_key(path: Path):
-    return [int(t) if t.isdigit() else t.lower() for t in re.split(r"(\d+)", path.name)]
+def natural_key(path: Path):
+    """Sort key of a file name in natural numeric order: runs of digits compared as numbers (``2.png`` before
+    ``10.png``, ``01`` level with ``1``), the rest case-blind, as Qt's QCollator in numeric mode (SLStudio)."""
+    return [int(t) if t.isdigit() else t.lower() for t in re.split(r"(\d+)", Path(path).name)]
 
 
 def list_images(source: str | Path | Sequence[str | Path]) -> list[Path]:
@@ -38,7 +40,7 @@ def list_images(source: str | Path | Sequence[str | Path]) -> list[Path]:
                  and not p.name.startswith(".") and p.stem != "preview"]
         if not files:
             raise FileFormatError(f"{source}: no images ({', '.join(IMAGE_SUFFIXES)}) in this folder")
-        return sorted(files, key=_natural_key)
+        return sorted(files, key=natural_key)
     paths = [Path(source)] if isinstance(source, (str, Path)) else [Path(p) for p in source]
     for p in paths:
         if not p.is_file():

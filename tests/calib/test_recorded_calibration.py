@@ -86,20 +86,71 @@ def test_poses_without_a_board_are_named_and_too_few_left_is_one_line(cli, tmp_p
     assert not (tmp_path / "rig.json").exists()
 
 
-def test_a_symmetric_board_read_the_wrong_way_round_says_to_swap_cols_and_rows():
-    """SLStudio's board as --cols 10 --rows 14 instead of 14 x 10: the pose is refused, the reason saying how."""
+def test_a_board_given_the_other_way_round_is_read_as_printed():
+    """An 8 x 6 print (cols and rows even, like SLStudio's 14 x 10) given as --cols 6 --rows 8: that reading puts a
+    light square where the board's frame starts, so the pose is read as 8 x 6, the corners those of the print's own
+    reading; given one way only (the reading an earlier pose fixed), the other is refused naming the reading."""
     from rangekit.boards import Board
-    from rangekit.calib.recorded import measure_pose
+    from rangekit.calib.recorded import board_readings, measure_pose
 
-    img, _ = Board(cols=8, rows=6, square=0.01).texture(2e-4)           # 50 px squares, seen square on
+    printed, given = Board(cols=8, rows=6, square=0.01), Board(cols=6, rows=8, square=0.01)
+    img, _ = printed.texture(2e-4)                                       # 50 px squares, seen square on
     lit = np.pad((np.asarray(img) * 255).astype(np.uint8), 40, constant_values=230)
     maps = np.indices(lit.shape, dtype=np.float32)                       # a projector seen pixel for pixel
-    pose = measure_pose(0, "seq1", lit, maps[1], maps[0], Board(cols=6, rows=8, square=0.01))
-    assert not pose.check.accepted and pose.projector is None
-    assert "cols and rows swapped (8x6)" in pose.line() and pose.line().startswith("seq1: rejected: ")
-    pose = measure_pose(0, "seq1", lit, maps[1], maps[0], Board(cols=8, rows=6, square=0.01))
-    assert pose.check.accepted and pose.projector.ok.all()
-    assert np.abs(pose.projector.proj_uv - pose.corners.uv).max() < 1e-3
+    assert board_readings(given) == (given, printed)
+    as_given = measure_pose(0, "seq1", lit, maps[1], maps[0], printed)
+    swapped = measure_pose(0, "seq1", lit, maps[1], maps[0], given)
+    for pose in (as_given, swapped):
+        assert pose.check.accepted and pose.board == printed and pose.projector.ok.all()
+        assert np.abs(pose.projector.proj_uv - pose.corners.uv).max() < 1e-3
+    np.testing.assert_array_equal(swapped.corners.ids, as_given.corners.ids)
+    np.testing.assert_array_equal(swapped.corners.uv, as_given.corners.uv)
+    refused = measure_pose(0, "seq1", lit, maps[1], maps[0], (given,))
+    assert not refused.check.accepted and refused.board is None
+    assert refused.line().startswith("seq1: rejected: board found but its orientation could not be resolved")
+    blank = measure_pose(0, "seq1", np.full_like(lit, 128), maps[1], maps[0], given)
+    assert blank.line().startswith("seq1: rejected: board not found, read as 6 x 8 or 8 x 6 squares (a checkerboard")
+
+
+@pytest.mark.slow
+def test_the_rig_is_the_same_whichever_way_round_the_board_is_given(cli, tmp_path):
+    """Five simulated poses of a 14 x 10 board (SLStudio's shape: cols and rows even), and five of a 13 x 10 one
+    (an odd side), each calibrated with --cols and --rows as printed and swapped. 14 x 10 given as 10 x 14 is read
+    as 14 x 10 (said in one line), so the rig is the same to the last bit; 13 x 10 given as 10 x 13 is found under
+    that reading, a quarter turn from the print's frame: the same corners with other board coordinates, and the
+    same rig within the solver's convergence (measured: K within 5e-7 px, distortion 5e-9, the projector's pose
+    3e-10 m)."""
+    from rangekit.boards import Board
+    from rangekit.rig.rig_file import load_rig
+    from rangekit.sim.devices.sim_rig import default_rig
+    from rangekit.sim.imaging.render import ImagingModel
+    from rangekit.sim.writers.calibration import board_poses, write_layout_poses
+
+    truth = default_rig()
+    size = f"{truth.projector.width}x{truth.projector.height}"
+    for cols, rows, exact in ((14, 10, True), (13, 10, False)):
+        board = Board(cols=cols, rows=rows, square=0.014)
+        folders = write_layout_poses(tmp_path / f"b{cols}", truth, board, board_poses(truth, board, 5, seed=1),
+                                     LAYOUT, seed=0, imaging=ImagingModel(gamma=1.0))
+        rigs = []
+        for c, r in ((cols, rows), (rows, cols)):
+            out = tmp_path / f"rig_{cols}_{c}x{r}.json"
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                run = cli("calibrate", "--captures", *folders, "--pattern", "slstudio:calibration", "--projector",
+                          size, "--cols", c, "--rows", r, "--square-mm", "14", "--out", out)
+            assert run.code == 0, run.err
+            assert "board poses: 5 of 5 kept" in run.out
+            read = (cols, rows) if exact else (c, r)
+            how = "as given" if read == (c, r) else f"(given {c} x {r})"
+            assert f"board read as {read[0]} x {read[1]} squares {how}, found so in pose_01" in run.out
+            rigs.append(load_rig(out))
+        a, b = rigs
+        for dev_a, dev_b in ((a.camera, b.camera), (a.projector, b.projector)):
+            scale = 0 if exact else 1                                     # bit for bit, or about 20x the measured
+            np.testing.assert_allclose(dev_b.K, dev_a.K, rtol=0, atol=1e-5 * scale)
+            np.testing.assert_allclose(dev_b.dist, dev_a.dist, rtol=0, atol=1e-7 * scale)
+            np.testing.assert_allclose(dev_b.T_world_cam, dev_a.T_world_cam, rtol=0, atol=1e-8 * scale)
 
 
 # ------------------------------------------------------------------------------- the simulator's truth
@@ -258,3 +309,29 @@ def test_slstudios_recorded_poses_calibrate_its_rig(cli, tmp_path, corners):
           f"{figures[1]:.4f} mm; after a rigid fit ({figures[4]:.3f} deg, {figures[5]:.2f} mm): {figures[2]:.4f}, "
           f"{figures[3]:.4f} mm")
     assert figures[2] >= 0.95 and figures[3] <= 0.15
+
+
+@pytest.mark.slow
+def test_slstudios_poses_give_one_rig_whichever_way_round_the_board_is_given(cli, tmp_path):
+    """SLStudio's five recorded poses with its board given as --cols 14 --rows 10 and as --cols 10 --rows 14
+    (issue 47 item 4; OpenCV, procam-calibration and SLStudio take either): the second is read as 14 x 10, said
+    in one line, and both give the same rig to the last bit."""
+    from rangekit.rig.rig_file import load_rig
+
+    skull = _skull()
+    rigs = []
+    for cols, rows in ((14, 10), (10, 14)):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            run = cli("calibrate", "--captures", *(skull / "calibration" / s for s in SKULL_POSES), "--pattern",
+                      "slstudio:calibration", "--projector", "1824x1140", "--cols", cols, "--rows", rows,
+                      "--square-mm", "10", "--out", tmp_path / f"rig_{cols}x{rows}.json")
+        assert run.code == 0, run.err
+        how = "as given" if cols == 14 else "(given 10 x 14)"
+        assert f"board read as 14 x 10 squares {how}, found so in calseq1" in run.out
+        assert "board poses: 5 of 5 kept" in run.out
+        rigs.append(load_rig(tmp_path / f"rig_{cols}x{rows}.json"))
+    for a, b in ((rigs[0].camera, rigs[1].camera), (rigs[0].projector, rigs[1].projector)):
+        np.testing.assert_array_equal(b.K, a.K)
+        np.testing.assert_array_equal(b.dist, a.dist)
+        np.testing.assert_array_equal(b.T_world_cam, a.T_world_cam)

@@ -84,6 +84,35 @@ def test_two_cameras_from_one_folder_and_from_an_image_list(cli, pair, tmp_path)
         assert np.sqrt(np.mean(d ** 2)) <= 0.2 and np.percentile(d, 99) <= 0.6
 
 
+def test_two_cameras_in_two_folders_of_any_names(cli, pair, tmp_path):
+    """Camera 1's files as 1.png ... 44.png in one folder, camera 2's as 01.png ... 44.png in another (issue 47 item
+    5): each taken in numeric order of its names, said in one line per camera, and the cloud as from OpenCV's
+    names (the test above)."""
+    import shutil
+
+    from rangekit.formats.clouds import load_cloud
+
+    folder, _, truth = pair
+    n = len(list(folder.glob("pattern_cam1_im*.png")))
+    left, right = tmp_path / "left", tmp_path / "right"
+    left.mkdir(), right.mkdir()
+    for i in range(1, n + 1):
+        shutil.copy(folder / f"pattern_cam1_im{i}.png", left / f"{i}.png")
+        shutil.copy(folder / f"pattern_cam2_im{i}.png", right / f"{i:02d}.png")
+    run = cli("reconstruct", left, right, "--pattern", "opencv:graycode", "--rig", folder / "rig2.json",
+              "--projector", "1100x688", "--out", tmp_path / "c.ply")
+    assert run.code == 0, run.err
+    assert f"camera 1: {n} frames 1.png ... {n}.png (numeric order of the names) from {left}" in run.out
+    assert f"camera 2: {n} frames 01.png ... {n}.png (numeric order of the names) from {right}" in run.out
+    d, n_inside = _errors(np.asarray(load_cloud(tmp_path / "c.ply").points), truth)
+    assert len(d) >= 0.75 * n_inside
+    assert np.sqrt(np.mean(d ** 2)) <= 0.2 and np.percentile(d, 99) <= 0.6
+    run = cli("reconstruct", left, "--pattern", "opencv:graycode", "--rig", folder / "rig2.json",
+              "--projector", "1100x688", "--out", tmp_path / "d.ply")
+    assert_error(run, 1, str(left), "expected two cameras' captures", "pattern_cam1_im1.png, pattern_cam2_im1.png",
+                 "found one camera's")
+
+
 def test_a_pair_needs_the_projector_size_and_two_cameras(cli, pair, tmp_path):
     folder, rig, _ = pair
     run = cli("reconstruct", folder, "--pattern", "opencv:graycode", "--rig", folder / "rig2.json",

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 
+import cv2
 import numpy as np
 import pytest
 
@@ -227,6 +228,22 @@ def test_a_symmetric_checkerboard_is_found_up_to_a_half_turn():
         assert abs(step - 50) < 0.5                                    # neighbours along board x
     det = detect_board(image, Board(cols=6, rows=8, square=0.01), symmetric_ok=True)
     assert not det.found and "orientation could not be resolved" in det.reason
+
+
+def test_a_board_with_an_odd_side_is_found_either_way_round_in_its_own_frame():
+    """A 7 x 10 print (rows + cols odd: rangekit's own boards, ``rangekit calibrate`` on hardware) given as 10 x 7:
+    found under the reading as given, a quarter turn from the print's frame; each corner's board point is the
+    same physical point, so the corners fit the board by the same homography up to that turn."""
+    printed, given = Board(cols=7, rows=10, square=0.01), Board(cols=10, rows=7, square=0.01)
+    img, _ = printed.texture(2e-4)
+    lit = np.pad((np.asarray(img) * 255).astype(np.uint8), 40, constant_values=230)
+    for board in (printed, given):
+        det = detect_board(lit, board)
+        assert det.found and len(det.ids) == 54
+        H, _ = cv2.findHomography(board.object_points()[det.ids, :2], det.uv, 0)
+        fit = cv2.perspectiveTransform(board.object_points()[None, det.ids, :2], H)[0]
+        assert np.abs(fit - det.uv).max() < 0.05                         # a grid of the right size, in order
+        assert np.linalg.det(H[:2, :2]) > 0                              # seen from the printed side
 
 
 # --- poses -------------------------------------------------------------------------------------------

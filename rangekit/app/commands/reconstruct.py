@@ -7,7 +7,7 @@ the pattern set from a capture folder, or given, decoded and triangulated by
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Sequence
+from typing import Callable, Sequence
 
 import numpy as np
 
@@ -81,45 +81,35 @@ def _images(source) -> tuple[np.ndarray, Rig | None, PatternSpec | None, float |
 
 def reconstruct_tool_capture(captures: Sequence[str | Path], preset: str, rig: Rig, *,
                              projector_size: tuple[int, int] | None = None, subpixel: bool = True,
-                             method: str = "auto"):
+                             method: str = "auto", report: Callable[[str], object] | None = None):
     """Another tool's capture as it lies on disk (:data:`rangekit.formats.layouts.LAYOUTS` ``preset``) to a cloud.
 
     ``captures``: one folder (a camera with the rig's projector; or, for a rig of two cameras and no projector,
     both cameras' files where the layout's names carry the camera, as OpenCV's do), two folders (camera 1's,
-    camera 2's), or an image list file (OpenCV's ``pointcloud.cpp`` list). ``projector_size``: (width, height)
-    of the tool's projector, needed when the rig has none. Returns a
-    :class:`~rangekit.coded.reconstruct.Reconstruction` (camera and projector) or a
+    camera 2's), globs or image files (one camera per glob or per folder of the files), or an image list file
+    (OpenCV's ``pointcloud.cpp`` list); a folder without the tool's names is taken in numeric order of its images'
+    names (:func:`rangekit.formats.layouts.capture_frames`). ``projector_size``: (width, height) of the tool's
+    projector, needed when the rig has none. ``report`` gets one line per camera: which files, in which order.
+    Returns a :class:`~rangekit.coded.reconstruct.Reconstruction` (camera and projector) or a
     :class:`~rangekit.stereo.coded_pair.PairReconstruction` (two cameras).
     """
     from rangekit.formats.capture import read_stack
-    from rangekit.formats.layouts import LAYOUTS, arrange, decoding_projector, layout_files, read_image_list
+    from rangekit.formats.layouts import LAYOUTS, arrange, capture_frames, decoding_projector
     from rangekit.stereo.coded_pair import reconstruct_pair
 
     layout = LAYOUTS[preset]
     width, height = _projector_size(rig, projector_size, preset)
-    paths = [Path(c) for c in captures]
     pair = rig.projector is None
     if pair and len(rig.cameras) < 2:
         raise ConfigError(f"{preset}: the rig has neither a projector nor a second camera; give a rig with a "
                           "projector (camera + projector) or with two cameras (matched through the projector's codes)")
-    if len(paths) == 1 and paths[0].is_file():
-        lists = read_image_list(paths[0])
-    elif len(paths) == 1:
-        lists = [layout_files(paths[0], layout, width, height, camera=k + 1) for k in range(2 if pair else 1)]
-    else:
-        lists = [layout_files(p, layout, width, height, camera=k + 1) for k, p in enumerate(paths)]
-    n = layout.n_files(width, height)
-    where = str(paths[0])
-    for k, files in enumerate(lists):
-        if len(files) != n:
-            raise ConfigError(f"{where}: camera {k + 1} lists {len(files)} files; {preset} for a {width}x{height} "
-                              f"projector has {n}")
-    if len(lists) != (2 if pair else 1):
-        raise ConfigError(f"{where}: {len(lists)} camera(s) of captures for a rig with "
-                          f"{'two cameras and no projector' if pair else 'a camera and a projector'}")
+    found = capture_frames(captures, layout, width, height, cameras=2 if pair else 1)
+    where = found[0].source
     stacks, spec = [], None
-    for files in lists:
-        stack, spec = arrange(list(read_stack(files, what=f"a {preset} capture")), layout, width, height)
+    for frames in found:
+        if report is not None:
+            report(frames.line())
+        stack, spec = arrange(list(read_stack(frames.files, what=f"a {preset} capture")), layout, width, height)
         stacks.append(stack)
     with naming(where):
         if pair:

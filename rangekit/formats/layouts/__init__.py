@@ -6,13 +6,14 @@ from rangekit.formats.layouts.layout import (BLACK_FROM_PAIRS, BLACK_FROM_STEPS,
                                              arrange, decoding_projector, in_projector_pixels, layout_files,
                                              tool_frames)
 from rangekit.formats.layouts.opencv import OPENCV_LAYOUTS, read_image_list
+from rangekit.formats.layouts.frame_files import FrameFiles, capture_frames, folder_frames
 from rangekit.formats.layouts.procam import PROCAM_LAYOUTS
 from rangekit.formats.layouts.roomalive import ROOMALIVE_LAYOUTS
 from rangekit.formats.layouts.scan3d import SCAN3D_LAYOUTS
 from rangekit.formats.layouts.slstudio import SLSTUDIO_LAYOUTS
 
-__all__ = ["LAYOUTS", "AxisBlocks", "CaptureLayout", "Inverse", "WHITE_FROM_STEPS", "BLACK_FROM_STEPS",
-           "WHITE_FROM_PAIRS", "BLACK_FROM_PAIRS", "arrange",
+__all__ = ["LAYOUTS", "AxisBlocks", "CaptureLayout", "FrameFiles", "capture_frames", "folder_frames", "Inverse",
+           "WHITE_FROM_STEPS", "BLACK_FROM_STEPS", "WHITE_FROM_PAIRS", "BLACK_FROM_PAIRS", "arrange",
            "decoding_projector", "in_projector_pixels", "layout_files", "read_image_list", "tool_frames"]
 
 #: Every preset by its name ("tool:codec").

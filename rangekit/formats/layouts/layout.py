@@ -44,7 +44,7 @@ from rangekit.errors import FileFormatError
 
 __all__ = ["AxisBlocks", "CaptureLayout", "Inverse", "WHITE_FROM_STEPS", "BLACK_FROM_STEPS", "WHITE_FROM_PAIRS",
            "BLACK_FROM_PAIRS", "FRAME_SUFFIXES",
-           "layout_files", "arrange", "decoding_projector", "in_projector_pixels", "tool_frames"]
+           "layout_files", "tool_names", "arrange", "decoding_projector", "in_projector_pixels", "tool_frames"]
 
 WHITE_FROM_STEPS, BLACK_FROM_STEPS = "A+B", "A-B"
 WHITE_FROM_PAIRS, BLACK_FROM_PAIRS = "black + min |P - I|", "min of pairs"
@@ -112,10 +112,7 @@ def layout_files(folder: str | Path, layout: CaptureLayout, width: int, height: 
     camera ``camera`` where the names carry one); the tool's names first, then the same names as any of
     :data:`FRAME_SUFFIXES` (a folder converted to another format). FileFormatError naming the first missing."""
     n = layout.n_files(width, height)
-    given = (layout.file_name, *layout.other_names)
-    names = given + tuple(name.rsplit(".", 1)[0] + suffix for name in given for suffix in FRAME_SUFFIXES
-                          if not name.endswith(suffix))
-    names = tuple(_with_prefix(folder, name, layout.first_index, camera) for name in names)
+    names = tool_names(folder, layout, camera)
     found = next((name for name in names if (Path(folder) / name.format(layout.first_index, index=layout.first_index,
                                                                           camera=camera)).is_file()), names[0])
     indices = range(layout.first_index, layout.first_index + n)
@@ -130,6 +127,15 @@ def layout_files(folder: str | Path, layout: CaptureLayout, width: int, height: 
         raise FileFormatError(f"{folder}: expected the {n} frames of {layout.name} for a {width}x{height} "
                               f"projector, found more ({extra.name}): is the projector size right?")
     return paths
+
+
+def tool_names(folder: str | Path, layout: CaptureLayout, camera: int = 1) -> tuple[str, ...]:
+    """The name patterns the layout's frames may have in ``folder`` (``str.format`` of the index, and ``index``,
+    ``camera``): the tool's names, then the same as any of :data:`FRAME_SUFFIXES`, a prefix the user chose put in."""
+    given = (layout.file_name, *layout.other_names)
+    names = given + tuple(name.rsplit(".", 1)[0] + suffix for name in given for suffix in FRAME_SUFFIXES
+                          if not name.endswith(suffix))
+    return tuple(_with_prefix(folder, name, layout.first_index, camera) for name in names)
 
 
 def _with_prefix(folder: str | Path, name: str, first: int, camera: int) -> str:

@@ -48,7 +48,7 @@ def codecs(width: int, height: int) -> dict[str, PatternSpec]:
         "SLStudio single period, 3 steps (`phase`, period W)": PatternSpec(
             "phase", W, height, cols, {"periods": [W], "fine_steps": 3, "rounding": "down"}),
         "`micro` (SLStudio's 10 periods, 70-80 px)": PatternSpec("micro", W, height, cols),
-        "`modulated` (SLStudio: 8 periods x 16 carrier periods + cue)": PatternSpec("modulated", W, height, cols),
+        "`modulated` (SLStudio: 24 periods x 16 carrier periods + cue)": PatternSpec("modulated", W, height, cols),
         "`ftp` (OpenCV, 20 periods, + 3-frame cue)": PatternSpec("ftp", W, height, cols),
         "`psp` (OpenCV, 20 periods, + 3-frame cue)": PatternSpec("psp", W, height, cols),
         "`faps` (OpenCV, 20 periods, + 3-frame cue)": PatternSpec("faps", W, height, cols),

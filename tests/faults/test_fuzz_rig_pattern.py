@@ -122,7 +122,9 @@ def _rig_docs():
 
 
 def _pattern_docs():
-    docs = [make_pattern_spec(m, (64, 40)).to_dict() for m in PATTERN_METHODS]
+    # modulated: SLStudio's 24 periods do not fit 40 rows (two pixels a period at least): 8 here
+    docs = [make_pattern_spec(m, (64, 40), **({"n_periods": 8} if m == "modulated" else {})).to_dict()
+            for m in PATTERN_METHODS]
     docs.append(make_pattern_spec("phase", (64, 40), axes=("rows",), periods=[48.0, 12.0], steps=5).to_dict())
     docs.append(make_pattern_spec("debruijn", (96, 8), k=4, n=3, stripe_width=3).to_dict())
     return [json.loads(json.dumps(d)) for d in docs]

@@ -8,7 +8,7 @@
 # installs numpy + opencv-contrib-python-headless only if `cv2.structured_light` is not importable yet.
 set -euo pipefail
 
-ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)"
 VENV="${RANGEKIT_BENCH_VENV:-$ROOT/.venv-bench}"
 PY="$VENV/bin/python"
 

@@ -143,6 +143,8 @@ def _reconstruct_layout(args: argparse.Namespace, t0: float) -> int:
                                    subpixel=not args.integer, method=args.method, report=say)
     save_cloud(args.out, rec.cloud)
     say(f"{rec.decoded!r}")
+    if hasattr(rec, "pairing_line"):
+        note(rec.pairing_line())
     if getattr(rec, "rig_check", None) is not None:
         note(rec.rig_check.describe())
     result(f"wrote {len(rec.cloud)} points to {args.out} in {time.perf_counter() - t0:.1f} s")

@@ -8,6 +8,11 @@ the rig describes the capture. Each such pair is triangulated (the closest point
   that ray's light came from (decoding noise alone: a few tenths of a pixel);
 - ``median_mm``: how far the two rays miss each other, millimetres.
 
+For two cameras matched through the projector's codes (:func:`check_pair`), camera 1's pixel and camera 2's
+matched position are the two rays: ``median_px`` is then the epipolar distance, how far camera 2's ray turns
+out of the plane of camera 1's ray and the baseline, in camera-2 pixels (its focal length times the tangent of
+that angle), and ``median_mm`` the rays' miss as above.
+
 A capture that decodes columns only carries no check of the rig: every camera ray meets every column plane
 (:attr:`RigCheck.checkable` False, said in its line). The figures are medians over at most :data:`SAMPLE`
 pixels drawn evenly from the decoded ones, so a check costs milliseconds.
@@ -21,7 +26,7 @@ import numpy as np
 
 from rangekit.camera import PinholeCamera
 
-__all__ = ["POOR_FIT_PX", "SAMPLE", "RigCheck", "check_rig"]
+__all__ = ["POOR_FIT_PX", "SAMPLE", "RigCheck", "check_pair", "check_rig"]
 
 #: Pixels sampled for the check.
 SAMPLE = 20_000
@@ -38,6 +43,7 @@ class RigCheck:
     median_px: float                  # median projector-pixel distance of decoded and predicted (NaN: unchecked)
     median_mm: float                  # median miss of the camera and projector rays, millimetres (NaN: unchecked)
     p90_px: float = float("nan")
+    pair: bool = False                # two cameras (epipolar distance in camera-2 pixels), not camera and projector
 
     @property
     def checkable(self) -> bool:
@@ -55,6 +61,10 @@ class RigCheck:
         verdict = "fits the capture" if self.fits else (
             f"does NOT fit the capture (over {POOR_FIT_PX:g} px): check that the rig file belongs to this rig "
             "and that the camera has not moved")
+        if self.pair:
+            return (f"rig check: camera 2's matched points lie {self.median_px:.2f} px from camera 1's epipolar lines "
+                    f"(median; 90% within {self.p90_px:.2f} px), the two cameras' rays miss by {self.median_mm:.3f} mm "
+                    f"(median) over {self.n_pixels} pixels: it {verdict}")
         return (f"rig check: the rig predicts the decoded projector coordinates to {self.median_px:.2f} px "
                 f"(median; 90% within {self.p90_px:.2f} px), the camera and projector rays miss by "
                 f"{self.median_mm:.3f} mm (median) over {self.n_pixels} pixels: it {verdict}")
@@ -66,28 +76,64 @@ def check_rig(camera: PinholeCamera, projector: PinholeCamera, proj_col: np.ndar
     ``projector``'s pixels (NaN where not decoded), ``camera`` the rig's camera of size (W, H)."""
     if proj_row is None or not np.any(np.isfinite(proj_row)):
         return RigCheck(0, float("nan"), float("nan"))
-    ok = np.isfinite(proj_col) & np.isfinite(proj_row)
+    uv_cam, uv_proj, n = decoded_pairs(proj_col, proj_row, sample=sample)
+    if n == 0:
+        return RigCheck(0, float("nan"), float("nan"))
+    p1, _, miss_mm, ahead = _closest_points(camera, projector, uv_cam, uv_proj)
+    off_px = np.linalg.norm(projector.project(p1) - uv_proj, axis=1)
+    return _figures(n, off_px, miss_mm, ahead, pair=False)
+
+
+def check_pair(first: PinholeCamera, second: PinholeCamera, x2: np.ndarray, y2: np.ndarray, *,
+               sample: int = SAMPLE) -> RigCheck:
+    """Two cameras: ``x2``, ``y2`` (H, W) over ``first``'s pixels, the position in ``second`` matched to each (NaN
+    where none). ``median_px``: the epipolar distance in ``second``'s pixels (module doc)."""
+    uv1, uv2, n = decoded_pairs(x2, y2, sample=sample)
+    if n == 0:
+        return RigCheck(0, float("nan"), float("nan"), pair=True)
+    o1, d1 = first.rays(uv1)
+    o2, d2 = second.rays(uv2)
+    normal = np.cross(o2 - o1, d1)
+    normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+    d2 = d2 / np.linalg.norm(d2, axis=1, keepdims=True)
+    sin = np.abs(np.sum(normal * d2, 1))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        epipolar_px = float(np.sqrt(second.K[0, 0] * second.K[1, 1])) * sin / np.sqrt(1 - sin ** 2)
+    _, _, miss_mm, ahead = _closest_points(first, second, uv1, uv2)
+    return _figures(n, epipolar_px, miss_mm, ahead, pair=True)
+
+
+def decoded_pairs(u2: np.ndarray, v2: np.ndarray, *, sample: int = SAMPLE) -> tuple[np.ndarray, np.ndarray, int]:
+    """((m, 2) first device's pixels, (m, 2) second's coordinates, how many pixels have both): ``u2``, ``v2`` (H, W)
+    the second device's coordinates over the first's pixels, NaN where none; at most ``sample`` pixels, evenly."""
+    ok = np.isfinite(u2) & np.isfinite(v2)
     ys, xs = np.nonzero(ok)
     if len(ys) == 0:
-        return RigCheck(0, float("nan"), float("nan"))
+        return np.zeros((0, 2)), np.zeros((0, 2)), 0
     pick = np.linspace(0, len(ys) - 1, min(sample, len(ys))).round().astype(np.int64)
     ys, xs = ys[pick], xs[pick]
-    uv_cam = np.column_stack([xs, ys]).astype(np.float64)
-    uv_proj = np.column_stack([proj_col[ys, xs], proj_row[ys, xs]]).astype(np.float64)
-    o1, d1 = camera.rays(uv_cam)
-    o2, d2 = projector.rays(uv_proj)
+    return (np.column_stack([xs, ys]).astype(np.float64),
+            np.column_stack([u2[ys, xs], v2[ys, xs]]).astype(np.float64), int(ok.sum()))
+
+
+def _closest_points(first: PinholeCamera, second: PinholeCamera, uv1: np.ndarray, uv2: np.ndarray):
+    """(first ray's closest point (m, 3), second's, their distance in mm, whether the point is ahead of both)."""
+    o1, d1 = first.rays(uv1)
+    o2, d2 = second.rays(uv2)
     w = o1 - o2
     a, b, c = np.sum(d1 * d1, 1), np.sum(d1 * d2, 1), np.sum(d2 * d2, 1)
     d, e = np.sum(d1 * w, 1), np.sum(d2 * w, 1)
     den = a * c - b * b
     with np.errstate(divide="ignore", invalid="ignore"):
-        s = (b * e - c * d) / den                      # along the camera ray
-        t = (a * e - b * d) / den                      # along the projector ray
+        s = (b * e - c * d) / den                      # along the first ray
+        t = (a * e - b * d) / den                      # along the second ray
     p1, p2 = o1 + s[:, None] * d1, o2 + t[:, None] * d2
-    miss_mm = np.linalg.norm(p1 - p2, axis=1) * 1e3
-    off_px = np.linalg.norm(projector.project(p1) - uv_proj, axis=1)
-    good = np.isfinite(miss_mm) & np.isfinite(off_px) & (s > 0)
+    return p1, p2, np.linalg.norm(p1 - p2, axis=1) * 1e3, (s > 0) & (t > 0)
+
+
+def _figures(n: int, off_px: np.ndarray, miss_mm: np.ndarray, ahead: np.ndarray, *, pair: bool) -> RigCheck:
+    good = np.isfinite(miss_mm) & np.isfinite(off_px) & ahead
     if not good.any():
-        return RigCheck(int(len(ys)), float("inf"), float("inf"), float("inf"))
-    return RigCheck(int(ok.sum()), float(np.median(off_px[good])), float(np.median(miss_mm[good])),
-                    float(np.percentile(off_px[good], 90)))
+        return RigCheck(n, float("inf"), float("inf"), float("inf"), pair=pair)
+    return RigCheck(n, float(np.median(off_px[good])), float(np.median(miss_mm[good])),
+                    float(np.percentile(off_px[good], 90)), pair=pair)

@@ -14,6 +14,10 @@ pixels, a degenerate spread of codes, or a residual over ``max_fit_rms`` camera 
 depth edge) give no position. Camera 1's subpixel code is then looked up bilinearly between the four
 projector pixels around it (:func:`match_codes`); OpenCV's sample instead matches whole projector pixels by
 their cameras' mean positions, one point each.
+
+The rig is checked against the matches (:func:`rangekit.rig.capture_check.check_pair`: the epipolar distance and
+the rays' miss) for the cameras as given and exchanged (:func:`pair_cameras`): a capture whose files are named for
+the other camera than the rig calls them is triangulated with the pairing that fits, and says so.
 """
 
 from __future__ import annotations
@@ -28,9 +32,14 @@ from rangekit.coded.patterns import PatternSpec
 from rangekit.coded.result import DecodeResult
 from rangekit.coded.triangulate import TriangulationResult, filter_range_map, triangulate_ray_ray
 from rangekit.errors import ConfigError, DecodeError
+from rangekit.rig.capture_check import RigCheck, check_pair
 from rangekit.surface.cloud import PointCloud
 
-__all__ = ["PairReconstruction", "code_positions", "match_codes", "reconstruct_pair"]
+__all__ = ["PairReconstruction", "code_positions", "match_codes", "pair_cameras", "reconstruct_pair"]
+
+#: The exchanged pairing is taken when its epipolar distance is under this share of the given one's.
+EXCHANGE_SHARE = 0.5
+
 
 def _cell_moments(proj_col: np.ndarray, proj_row: np.ndarray, size: tuple[int, int]) -> dict:
     """Per projector pixel, the moments of the camera pixels decoding to it (codes relative to its centre)."""
@@ -127,6 +136,16 @@ class PairReconstruction:
     match: tuple[np.ndarray, np.ndarray]   # (H1, W1) camera 2's x and y of each camera-1 pixel, NaN if none
     triangulated: TriangulationResult       # organised on camera 1, flying pixels and rays that miss removed
     cloud: PointCloud                       # valid points, coloured by camera 1's white frame, normals to it
+    rig_check: RigCheck | None = None       # the pairing used, checked against the matches
+    exchanged: bool = False                 # the first capture was camera 2's (the rig's cameras exchanged)
+    cameras: tuple[PinholeCamera, PinholeCamera] | None = None   # the cameras triangulated with, first capture's first
+
+    def pairing_line(self) -> str:
+        """One line: which rig camera took which capture, and why."""
+        if not self.exchanged:
+            return "cameras: the first capture is the rig's camera 1, as named"
+        return ("cameras EXCHANGED: the first capture's files are camera 2's (the rig's cameras fit the captures only "
+                "the other way round); triangulated as such")
 
     def __repr__(self) -> str:
         return f"PairReconstruction({self.decoded[0]!r}, {self.cloud!r})"
@@ -142,28 +161,46 @@ def reconstruct_pair(stacks, spec: PatternSpec, cameras: tuple[PinholeCamera, Pi
     if "rows" not in spec.axes or "columns" not in spec.axes:
         raise ConfigError(f"two cameras match through the projector's columns and rows; the {spec.method} "
                           f"capture codes only {', '.join(spec.axes)}")
+    sizes = [(np.asarray(stack[0]).shape[1], np.asarray(stack[0]).shape[0]) for stack in stacks]
+    pairings = [p for p in ((0, 1), (1, 0)) if all(cameras[j].size == sizes[k] for k, j in enumerate(p))]
+    if not pairings:
+        raise ConfigError(f"the captures are {sizes[0][0]}x{sizes[0][1]} and {sizes[1][0]}x{sizes[1][1]} but the rig's "
+                          f"cameras {cameras[0].name!r} and {cameras[1].name!r} are {cameras[0].width}x"
+                          f"{cameras[0].height} and {cameras[1].width}x{cameras[1].height}, either way round")
     decs = []
-    for k, (stack, camera) in enumerate(zip(stacks, cameras)):
-        probe = np.asarray(stack[0])
-        if camera.size != (probe.shape[1], probe.shape[0]):
-            raise ConfigError(f"camera {k + 1}'s captures are {probe.shape[1]}x{probe.shape[0]} but the rig's "
-                              f"camera {camera.name!r} is {camera.width}x{camera.height}")
+    for stack in stacks:
         dec = decode(stack, spec, subpixel=subpixel, full_scale=full_scale, **(decode_options or {}))
         weak = dec.confidence < min_confidence
         decs.append((dec, np.where(weak, np.nan, dec.proj_col), np.where(weak, np.nan, dec.proj_row)))
     (dec1, c1, r1), (dec2, c2, r2) = decs
     positions = code_positions(c2, r2, (spec.width, spec.height))
     x2, y2 = match_codes(c1, r1, positions)
-    tri = triangulate_ray_ray(cameras[0], cameras[1], x2, y2)
-    xyz, normals = filter_range_map(tri.xyz, cameras[0].center, max_jump=max_jump, margin=edge_margin,
+    used, checked, exchanged = pair_cameras([(cameras[i], cameras[j]) for i, j in pairings], x2, y2,
+                                            exchanged=[p == (1, 0) for p in pairings])
+    tri = triangulate_ray_ray(used[0], used[1], x2, y2)
+    xyz, normals = filter_range_map(tri.xyz, used[0].center, max_jump=max_jump, margin=edge_margin,
                                     extra_drop=~(tri.residual <= max_residual))
     valid = np.isfinite(xyz[:, :, 0])
     if not np.any(valid):
         raise DecodeError("no camera-1 pixel was matched in camera 2 and triangulated; check that both cameras see "
-                          "the projector's light on the object and the rig's second camera pose")
+                          f"the projector's light on the object and the rig's second camera pose ({checked.describe()})")
     tri = TriangulationResult(xyz, np.where(valid, tri.residual, np.nan), "ray-ray")
     white = np.asarray(dec1.white, dtype=np.float32) / np.float32(full_scale or (255 if dec1.white.dtype == np.uint8
                                                                                   else 65535))
     colours = white[valid] if white.ndim == 3 else np.repeat(white[valid][:, None], 3, axis=1)
     n = np.where(np.isfinite(normals[valid]), normals[valid], 0.0)
-    return PairReconstruction((dec1, dec2), (x2, y2), tri, PointCloud(xyz[valid], np.clip(colours, 0, 1), n))
+    return PairReconstruction((dec1, dec2), (x2, y2), tri, PointCloud(xyz[valid], np.clip(colours, 0, 1), n),
+                              checked, exchanged, used)
+
+
+def pair_cameras(pairings: list[tuple[PinholeCamera, PinholeCamera]], x2: np.ndarray, y2: np.ndarray, *,
+                 exchanged: list[bool]) -> tuple[tuple[PinholeCamera, PinholeCamera], RigCheck, bool]:
+    """(the pairing to triangulate with, its check, whether it is the exchanged one): the first of ``pairings``
+    (the rig's order, when its sizes allow) unless another's epipolar distance over the matches ``x2``, ``y2``
+    (camera 2's position of each first-capture pixel) is under :data:`EXCHANGE_SHARE` of the first's."""
+    checks = [check_pair(a, b, x2, y2) for a, b in pairings]
+    best = 0
+    for k in range(1, len(pairings)):
+        if checks[k].median_px < EXCHANGE_SHARE * checks[best].median_px:
+            best = k
+    return pairings[best], checks[best], exchanged[best]

@@ -16,10 +16,10 @@ import pytest
 from scipy.ndimage import binary_erosion
 
 from cli_runs import assert_error
-from rangekit.formats.layouts import LAYOUTS, tool_frames
 from rangekit.geometry import axis_angle_to_R, make_T
 from rangekit.rig.rig_file import Rig, save_rig
-from rangekit.sim import ImagingModel, SimRig, default_rig, default_scene
+from rangekit.sim import default_rig
+from rangekit.sim.writers.tool_pair import write_tool_pair
 from rangekit.stereo.coded_pair import code_positions, match_codes
 
 PROJECTOR = (1100, 688)
@@ -27,25 +27,17 @@ PROJECTOR = (1100, 688)
 
 @pytest.fixture(scope="module")
 def pair(tmp_path_factory):
-    """(folder with both cameras' files, the rig of two cameras, camera 1's truth)."""
+    """(folder with both cameras' files, the rig of two cameras, camera 1's truth, camera 2's)."""
     r = default_rig()
     cam1 = r.camera.resized(640, 512)
     cam2 = replace(cam1.with_pose(make_T(axis_angle_to_R([0, 0, 1], np.radians(-25)), [0, 0, 0]) @ cam1.T_world_cam),
                    name="cam2")
-    projector = r.projector.resized(*PROJECTOR)
-    layout = LAYOUTS["opencv:graycode"]
-    frames = tool_frames(layout, *PROJECTOR)
     folder = tmp_path_factory.mktemp("opencv_pair")
-    truth = None
-    for k, (camera, seed) in enumerate(((cam1, 3), (cam2, 4))):
-        sim = SimRig(default_scene(), replace(r, cameras=(camera,), projector=projector), imaging=ImagingModel(),
-                     seed=seed)
-        for i, image in enumerate(sim.capture_sequence(frames)):
-            assert cv2.imwrite(str(folder / f"pattern_cam{k + 1}_im{i + 1}.png"), image)
-        truth = truth or sim.ground_truth()
+    truth, truth2 = write_tool_pair(folder, "opencv:graycode", replace(r, projector=r.projector.resized(*PROJECTOR)),
+                               (cam1, cam2))
     rig = Rig(cameras=(cam1, cam2), projector=None)
     save_rig(rig, folder / "rig2.json")
-    return folder, rig, truth
+    return folder, rig, truth, truth2
 
 
 def _errors(cloud_points, truth):
@@ -61,7 +53,7 @@ def _errors(cloud_points, truth):
 def test_two_cameras_from_one_folder_and_from_an_image_list(cli, pair, tmp_path):
     from rangekit.formats.clouds import load_cloud
 
-    folder, rig, truth = pair
+    folder, rig, truth, _ = pair
     n = len(list(folder.glob("pattern_cam1_im*.png")))
     listing = tmp_path / "images.yaml"
     fs = cv2.FileStorage(str(listing), cv2.FILE_STORAGE_WRITE)
@@ -92,7 +84,7 @@ def test_two_cameras_in_two_folders_of_any_names(cli, pair, tmp_path):
 
     from rangekit.formats.clouds import load_cloud
 
-    folder, _, truth = pair
+    folder, _, truth, _ = pair
     n = len(list(folder.glob("pattern_cam1_im*.png")))
     left, right = tmp_path / "left", tmp_path / "right"
     left.mkdir(), right.mkdir()
@@ -113,8 +105,36 @@ def test_two_cameras_in_two_folders_of_any_names(cli, pair, tmp_path):
                  "found one camera's")
 
 
+def test_crossed_file_names_are_caught_by_the_rig_check_and_named(cli, pair, tmp_path):
+    """Camera 1's frames under camera 2's names and the other way round (issue 47): the rig as given puts camera 2's
+    matches tens of pixels off camera 1's epipolar lines, exchanged they fit (0.02 px, decoding noise): the cloud
+    is made with the cameras exchanged, the line says so, and it is as accurate as from the right names."""
+    import shutil
+
+    from rangekit.formats.clouds import load_cloud
+
+    folder, _, _, truth2 = pair
+    crossed = tmp_path / "crossed"
+    crossed.mkdir()
+    for path in folder.glob("pattern_cam*_im*.png"):
+        other = "cam2" if "_cam1_" in path.name else "cam1"
+        shutil.copy(path, crossed / path.name.replace("cam1", "camX").replace("cam2", "camX").replace("camX", other))
+    run = cli("reconstruct", crossed, "--pattern", "opencv:graycode", "--rig", folder / "rig2.json",
+              "--projector", "1100x688", "--out", tmp_path / "c.ply")
+    assert run.code == 0, run.err
+    said = run.out + run.err
+    assert "cameras EXCHANGED: the first capture's files are camera 2's" in said
+    check = next(line for line in said.splitlines() if line.startswith("rig check:"))
+    assert float(check.split(" lie ")[1].split(" px")[0]) < 0.1 and "it fits the capture" in check
+    # the cloud lies on camera 2's pixels now: measure against camera 2's truth too
+    points = np.asarray(load_cloud(tmp_path / "c.ply").points)
+    d, n_inside = _errors(points, truth2)
+    assert len(points) >= 0.75 * n_inside
+    assert np.sqrt(np.mean(d ** 2)) <= 0.25 and np.median(d) <= 0.1
+
+
 def test_a_pair_needs_the_projector_size_and_two_cameras(cli, pair, tmp_path):
-    folder, rig, _ = pair
+    folder, rig, _, _ = pair
     run = cli("reconstruct", folder, "--pattern", "opencv:graycode", "--rig", folder / "rig2.json",
               "--out", tmp_path / "c.ply")
     assert_error(run, 1, "--projector WxH")

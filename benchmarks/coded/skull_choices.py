@@ -55,10 +55,10 @@ def main() -> int:
             "kp kept": Rig.from_dict(import_rig(calibration, keep_projector_distortion=True))}
     gray = LAYOUTS["slstudio:graycode"]
     for name, rig in rigs.items():
-        rec = reconstruct_tool_capture([skull / "skull_gray"], "slstudio:graycode", rig)
+        rec = reconstruct_tool_capture([skull / "skull_gray"], "slstudio:graycode", rig).reconstruction
         print(f"Gray code, {name}: {figures(rec)}")
     cols = in_projector_pixels(rec.decoded, gray, 1824, 1140).proj_col
-    whole = reconstruct_tool_capture([skull / "skull_gray"], "slstudio:graycode", rig, subpixel=False)
+    whole = reconstruct_tool_capture([skull / "skull_gray"], "slstudio:graycode", rig, subpixel=False).reconstruction
     block_centre = in_projector_pixels(whole.decoded, gray, 1824, 1140).proj_col     # each code at its block's centre
     ok = np.isfinite(cols) & np.isfinite(block_centre)
     print(f"Gray code subpixel columns - their 2-column block's centre: mean {np.mean(cols[ok] - block_centre[ok]):+.4f}"
@@ -74,7 +74,8 @@ def main() -> int:
 
     module.smooth_along_stripes = across_too
     try:
-        rec = reconstruct_tool_capture([skull / "skull_gray"], "slstudio:graycode", rigs["kp left out (default)"])
+        rec = reconstruct_tool_capture([skull / "skull_gray"], "slstudio:graycode",
+                                      rigs["kp left out (default)"]).reconstruction
         print(f"Gray code, smoothed across the stripes too (1 2 1): {figures(rec)}")
     finally:
         module.smooth_along_stripes = plain
@@ -84,7 +85,7 @@ def main() -> int:
         LAYOUTS["slstudio:modulated"] = replace(modulated, view_options={**modulated.view_options, "edge_margin": margin})
         try:
             rec = reconstruct_tool_capture([skull / "skull_modulatedps"], "slstudio:modulated",
-                                           rigs["kp left out (default)"])
+                                           rigs["kp left out (default)"]).reconstruction
         finally:
             LAYOUTS["slstudio:modulated"] = modulated
         print(f"modulated, edge_margin {margin}: {figures(rec)}")

@@ -72,13 +72,15 @@ def _decode_layout(args: argparse.Namespace, t0: float) -> int:
 
 
 def cmd_reconstruct(args: argparse.Namespace) -> int:
-    """rangekit reconstruct CAPTURE_DIR [--rig RIG.json] --out cloud.ply"""
-    from rangekit.app.commands.reconstruct import reconstruct_capture
+    """rangekit reconstruct CAPTURE_DIR [--rig RIG.json ...] --out cloud.ply"""
+    from pathlib import Path
+
+    from rangekit.app.commands.reconstruct import reconstruct_checked
+    from rangekit.app.commands.rig_choice import load_rigs
     from rangekit.errors import ConfigError, UsageError
     from rangekit.formats.capture import load_capture
     from rangekit.formats.dots_capture import is_dots_capture
     from rangekit.formats.laser_capture import is_laser_capture, is_laser_stereo_capture
-    from rangekit.rig.rig_file import load_rig
     from rangekit.formats.clouds import CLOUD_WRITERS, save_cloud
 
     t0 = time.perf_counter()
@@ -92,6 +94,12 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
         raise UsageError("--projector WxH is for --pattern PRESET with a rig of two cameras; a capture folder's "
                          "pattern set gives the projector's size")
     args.capture = args.capture[0]
+    rigs_given = args.rig
+    one_rig = args.rig[0] if args.rig else None
+    if args.rig and len(args.rig) > 1 and not (Path(args.capture) / "patterns.json").is_file():
+        raise UsageError(f"--rig: several rigs ({' '.join(args.rig)}) are ranked only for coded-light captures; "
+                         f"{args.capture} is not one")
+    args.rig = one_rig
     if is_laser_stereo_capture(args.capture):   # a laser sheet seen by two cameras
         return _reconstruct_laser_stereo(args, t0)
     if args.pair_only:
@@ -111,17 +119,35 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
     if cap.spec is None:
         raise ConfigError(f"{args.capture}: no patterns.json; decode the images with 'rangekit decode' and a "
                           "--pattern, or add the pattern spec to the folder")
-    rig = load_rig(args.rig) if args.rig else cap.rig
-    if rig is None or rig.projector is None:
+    if rigs_given:
+        rigs = load_rigs(rigs_given, report=note)
+    elif cap.rig is not None and cap.rig.projector is not None:
+        rigs = [(str(Path(args.capture) / "rig.json"), cap.rig)]
+    else:
         raise ConfigError(f"{args.capture}: no rig.json with a projector; pass --rig RIG.json")
     note(f"decoding {len(cap.images)} images ({cap.spec.method})")
-    rec = reconstruct_capture(cap, rig, subpixel=not args.integer, method=args.method)
+    checked = reconstruct_checked(cap, rigs, subpixel=not args.integer, method=args.method, refine=not args.no_refine,
+                                  free_intrinsics=args.refine_lens)
+    rec = checked.reconstruction
     save_cloud(args.out, rec.cloud)
     say(f"{rec.decoded!r}")
-    note(rec.rig_check.describe())
+    _rig_lines(args, checked)
     say(f"{rec.triangulated!r}")
     result(f"wrote {len(rec.cloud)} points to {args.out} in {time.perf_counter() - t0:.1f} s")
     return 0
+
+
+def _rig_lines(args: argparse.Namespace, checked, to_rig_projector=None) -> None:
+    """The rig check's lines, and the refined rig written beside the cloud when there is one."""
+    from rangekit.app.commands.rig_choice import refined_rig_files
+
+    for line in checked.lines():
+        note(line)
+    if checked.refined.refinement is not None:
+        rig_path, figures_path = refined_rig_files(args.out, checked.choice.rig, checked.refined,
+                                                   exchanged=checked.choice.exchanged,
+                                                   to_rig_projector=to_rig_projector)
+        note(f"wrote the refined rig to {rig_path} (its figures: {figures_path})")
 
 
 def _reconstruct_layout(args: argparse.Namespace, t0: float) -> int:
@@ -130,23 +156,24 @@ def _reconstruct_layout(args: argparse.Namespace, t0: float) -> int:
     from rangekit.app.commands.reconstruct import reconstruct_tool_capture
     from rangekit.errors import UsageError
     from rangekit.formats.clouds import save_cloud
-    from rangekit.formats.layouts import LAYOUTS
-    from rangekit.rig.rig_file import load_rig
+    from rangekit.app.commands.rig_choice import load_rigs
+    from rangekit.formats.layouts import LAYOUTS, from_decoding_projector
 
     if not args.rig:
         raise UsageError(f"--pattern {args.pattern}: give the rig with --rig RIG.json (e.g. from 'rangekit rig "
                          "import' of the tool's calibration)")
-    rig = load_rig(args.rig)
+    rigs = load_rigs(args.rig, report=note)
     layout = LAYOUTS[args.pattern]
     note(f"reading {layout.name} ({layout.source})")
-    rec = reconstruct_tool_capture(args.capture, args.pattern, rig, projector_size=args.projector,
-                                   subpixel=not args.integer, method=args.method, report=say)
+    checked = reconstruct_tool_capture(args.capture, args.pattern, rigs, projector_size=args.projector,
+                                       subpixel=not args.integer, method=args.method, report=say,
+                                       refine=not args.no_refine, free_intrinsics=args.refine_lens)
+    rec = checked.reconstruction
     save_cloud(args.out, rec.cloud)
     say(f"{rec.decoded!r}")
-    if hasattr(rec, "pairing_line"):
-        note(rec.pairing_line())
-    if getattr(rec, "rig_check", None) is not None:
-        note(rec.rig_check.describe())
+    rig = checked.choice.rig
+    _rig_lines(args, checked, None if rig.projector is None else
+               lambda p: from_decoding_projector(p, rig.projector, layout))
     result(f"wrote {len(rec.cloud)} points to {args.out} in {time.perf_counter() - t0:.1f} s")
     return 0
 
@@ -239,7 +266,15 @@ def add_parsers(sub) -> None:
                      help="capture folder (images + patterns.json); with --pattern, another tool's folder (its own "
                           "names, or any names in numeric order), two folders (camera 1, camera 2), image files or "
                           "a quoted glob ('caps/*.png'; one per camera), or OpenCV's image list")
-    rec.add_argument("--rig", help="rig file (default: the folder's rig.json)")
+    rec.add_argument("--rig", nargs="+", metavar="RIG",
+                     help="rig file (default: the folder's rig.json); several: each checked against the capture, the "
+                          "one that fits best used and the ranking printed (another tool's calibration file is "
+                          "imported on the way, as 'rangekit rig import' would)")
+    rec.add_argument("--no-refine", action="store_true",
+                     help="keep the rig as given when it does not fit the capture (default: its projector's or second "
+                          "camera's pose refined from the capture, written beside --out as NAME.refined-rig.json)")
+    rec.add_argument("--refine-lens", action="store_true",
+                     help="refine the projector's (or second camera's) focal lengths and principal point too")
     rec.add_argument("--pattern", choices=sorted(CAPTURE_LAYOUTS), default=None,
                      help="another tool's capture layout, read as it lies on disk (docs/real-captures.md); needs "
                           "--rig")

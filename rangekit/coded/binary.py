@@ -14,7 +14,7 @@ from rangekit.coded.frames import CaptureStack, row_chunks, run_parallel
 from rangekit.errors import DecodeError
 from rangekit.coded.patterns import PatternSpec, gray_decode, gray_encode
 
-__all__ = ["axis_code", "axis_crossings", "axis_subpixel", "edge_bit_lut", "gray_lut", "smooth_along_stripes"]
+__all__ = ["axis_code", "axis_crossings", "codes_beyond", "axis_subpixel", "edge_bit_lut", "gray_lut", "smooth_along_stripes"]
 
 
 def _decode_bits(fr: CaptureStack, spec: PatternSpec, axis: str, region, need_diffs: bool):
@@ -94,10 +94,12 @@ def edge_bit_lut(size: int) -> np.ndarray:
 
 
 def axis_code(fr: CaptureStack, spec: PatternSpec, axis: str, workers: int, chunk_rows: int, *,
-              ties: str = "zero") -> np.ndarray:
-    """Integer code map of one axis: compiled Gray decoding, or chunked numpy for XOR codes. ``ties``: the bit of a
-    pixel whose frame equals its inverse, "zero" (rangekit's rule, frame brighter than inverse) or "one" (Gray
-    codes only: RoomAlive's ``frame >= inverse``)."""
+              ties: str = "zero", keep_beyond: bool = False) -> np.ndarray:
+    """Integer code map of one axis: compiled Gray decoding, or chunked numpy for XOR codes; -1 where the code is
+    past the projector's width (height), or for Gray codes with ``keep_beyond`` the code itself (the caller
+    measures how many pixels decode past the projector, :func:`codes_beyond`). ``ties``: the bit of a pixel whose
+    frame equals its inverse, "zero" (rangekit's rule, frame brighter than inverse) or "one" (Gray codes only:
+    RoomAlive's ``frame >= inverse``)."""
     from rangekit.coded import _kernels as K
 
     H, W = fr.shape
@@ -107,8 +109,8 @@ def axis_code(fr: CaptureStack, spec: PatternSpec, axis: str, workers: int, chun
     if spec.xor_base is None:
         p_idx = np.array([fr.index[f"{prefix}_b{b}"] for b in range(nb - 1, -1, -1)], np.int64)
         i_idx = np.array([fr.index[f"{prefix}_b{b}_inv"] for b in range(nb - 1, -1, -1)], np.int64)
-        K.gray_rows(fr.stack, p_idx, i_idx, gray_lut(nb), spec.width if axis == "columns" else spec.height, code,
-                    1 if ties == "one" else 0)
+        limit = 1 << nb if keep_beyond else spec.width if axis == "columns" else spec.height
+        K.gray_rows(fr.stack, p_idx, i_idx, gray_lut(nb), limit, code, 1 if ties == "one" else 0)
         return code
     if ties != "zero":
         raise DecodeError(f"ties={ties!r}: expected 'zero' for XOR codes ('one' is for Gray codes)")
@@ -122,6 +124,26 @@ def axis_code(fr: CaptureStack, spec: PatternSpec, axis: str, workers: int, chun
 
     run_parallel(run, row_chunks(H, chunk_rows), workers)
     return code
+
+
+def codes_beyond(code: np.ndarray, spec: PatternSpec, axis: str, counted: np.ndarray) -> tuple[int, int, int, float]:
+    """(pixels of ``counted`` whose code is past the projector's width (height), the largest such code, pixels
+    counted, the share of those past it whose code continues a neighbour's: within 2 of the pixel's right or lower
+    neighbour): ``code`` (H, W) from :func:`axis_code` with ``keep_beyond``, set to -1 there in place. A capture
+    made for a larger projector decodes a smooth map past the edge (the share near 1); frames out of order decode
+    noise (near 0)."""
+    beyond = code >= (spec.width if axis == "columns" else spec.height)
+    seen = beyond & counted
+    n = int(np.count_nonzero(seen))
+    top, smooth = -1, 0.0
+    if n:
+        top = int(code[seen].max())
+        near = np.zeros(code.shape, bool)
+        near[:, :-1] |= np.abs(code[:, 1:] - code[:, :-1]) <= 2
+        near[:-1, :] |= np.abs(code[1:, :] - code[:-1, :]) <= 2
+        smooth = float(np.count_nonzero(near & seen)) / n
+    code[beyond] = -1
+    return n, top, int(np.count_nonzero(counted)), smooth
 
 
 def axis_crossings(fr: CaptureStack, spec: PatternSpec, axis: str, code: np.ndarray) -> np.ndarray:

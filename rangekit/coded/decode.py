@@ -46,7 +46,7 @@ from __future__ import annotations
 import numpy as np
 
 from rangekit.errors import DecodeError, MotionError
-from rangekit.coded.binary import axis_code, axis_crossings, axis_subpixel, smooth_along_stripes
+from rangekit.coded.binary import axis_code, axis_crossings, axis_subpixel, codes_beyond, smooth_along_stripes
 from rangekit.coded.codecs.decoders import decode_fringes
 from rangekit.coded.codecs.fringes import FRINGE_METHODS
 from rangekit.coded.debruijn import decode_debruijn
@@ -60,6 +60,26 @@ from rangekit.coded.uncertainty import GRAY_CODE_STD
 from rangekit.rig.projector_response import ProjectorResponse
 
 __all__ = ["decode"]
+
+
+#: A Gray-code capture whose lit pixels decode past the projector's width (height) in more than this share was made
+#: for a larger projector than the spec's (the rig's): refused, naming the extent (issue 47). A matching capture
+#: has none there but misread bits: 0.24% of SLStudio's skull (skull_gray), none of RoomAlive's capture.
+MAX_BEYOND_SHARE = 0.01
+
+
+def refuse_codes_beyond(counts: tuple[int, int, int, float], spec: PatternSpec, axis: str) -> None:
+    """DecodeError when more than :data:`MAX_BEYOND_SHARE` of the counted pixels decode past the projector in a
+    smooth map (``counts`` from :func:`rangekit.coded.binary.codes_beyond`; noise past it, frames out of order, is
+    left to the check of codes outside the projector)."""
+    n, top, counted, smooth = counts
+    if counted == 0 or n <= MAX_BEYOND_SHARE * counted or smooth < 0.5:
+        return
+    size = spec.width if axis == "columns" else spec.height
+    raise DecodeError(f"{n / counted:.1%} of the lit pixels decode to codes outside the {spec.width}x{spec.height} "
+                      f"projector the pattern set is for (projector {axis} {size}-{top}): the capture was projected at "
+                      f"a larger size (at least {top + 1} {axis}; give the rig's projector the size the patterns were "
+                      "made for), or its frames are in another order")
 
 
 def decode(stack, spec: PatternSpec, *, order: str = "rangekit", subpixel: bool = True,
@@ -177,13 +197,15 @@ def decode(stack, spec: PatternSpec, *, order: str = "rangekit", subpixel: bool 
     K.masks_rows(fr.stack, idx["white"], idx["black"], sep_p, sep_i, np.float32(shadow_threshold * fs),
                  np.float32(min_contrast * fs), np.float32(max_global_ratio), np.float32(1.0 / fs),
                  conf, shadow, low, glob_mask, direct, glob)
-    moved = None
+    moved, beyond = None, {}
     if spec.method in ("graycode", "xor02", "xor04"):
         # Binary codes: codes, subpixel edges and the final maps all in compiled passes.
         empty_i, empty_f = np.zeros((1, 1), np.int32), np.zeros((1, 1), np.float32)
         codes, subs, cross = {}, {}, {}
         for axis in spec.axes:
-            codes[axis] = axis_code(fr, spec, axis, workers, chunk_rows, ties=ties)
+            codes[axis] = axis_code(fr, spec, axis, workers, chunk_rows, ties=ties, keep_beyond=True)
+            if spec.xor_base is None:
+                beyond[axis] = codes_beyond(codes[axis], spec, axis, ~shadow & ~low)
             if edges or motion:
                 cross[axis] = axis_crossings(fr, spec, axis, codes[axis])
             subs[axis] = axis_subpixel(axis, codes[axis], cross[axis], max_gap) if edges else empty_f
@@ -230,6 +252,8 @@ def decode(stack, spec: PatternSpec, *, order: str = "rangekit", subpixel: bool 
         raise DecodeError("the white capture is darker than the black one in over 25% of the pixels: the "
                           "captures are not in this spec's order (try order='opencv') or the spec does not "
                           "match the capture")
+    for axis, counts in beyond.items():
+        refuse_codes_beyond(counts, spec, axis)
     if np.count_nonzero(lit) > 100 and np.count_nonzero(incons) > 0.5 * np.count_nonzero(lit):
         raise DecodeError(f"over half of the lit pixels decode to codes outside the {spec.width}x{spec.height} "
                           "projector: the spec does not match the capture (projector size, method or order)")

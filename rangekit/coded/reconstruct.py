@@ -18,7 +18,7 @@ from rangekit.rig.projector_response import ProjectorResponse
 from rangekit.coded.uncertainty import point_sigma
 from rangekit.coded.triangulate import TriangulationResult, filter_range_map, triangulate
 
-__all__ = ["EDGE_MARGIN_PX", "Reconstruction", "reconstruct_view"]
+__all__ = ["EDGE_MARGIN_PX", "Reconstruction", "decoded_coordinates", "reconstruct_decoded", "reconstruct_view"]
 
 #: Pixels dropped around depth edges beyond the one-pixel rim. Under the camera blur the points within
 #: 2 px of a depth edge mix the two surfaces: on the simulated bunny (4 views) they were 6.8% of the
@@ -80,9 +80,25 @@ def reconstruct_view(images, spec: PatternSpec, camera: PinholeCamera, projector
     else:
         dec = decode(images, spec, order=order, subpixel=subpixel, full_scale=full_scale, response=response,
                      **(decode_options or {}))
+    return reconstruct_decoded(dec, camera, projector, method=method, max_jump=max_jump, max_residual=max_residual,
+                               min_confidence=min_confidence, edge_margin=edge_margin, full_scale=full_scale)
+
+
+def decoded_coordinates(dec: DecodeResult, min_confidence: float) -> tuple[np.ndarray, np.ndarray | None]:
+    """(proj_col, proj_row or None where rows were not coded): ``dec``'s coordinates, NaN where its confidence
+    is under ``min_confidence`` (what :func:`reconstruct_decoded` triangulates and checks the rig against)."""
     weak = dec.confidence < min_confidence
     cols = np.where(weak, np.nan, dec.proj_col)
     rows = np.where(weak, np.nan, dec.proj_row) if np.any(np.isfinite(dec.proj_row)) else None
+    return cols, rows
+
+
+def reconstruct_decoded(dec: DecodeResult, camera: PinholeCamera, projector: PinholeCamera, *, method: str = "auto",
+                        max_jump: float = 0.004, max_residual: float = 0.002, min_confidence: float = 0.03,
+                        edge_margin: int = EDGE_MARGIN_PX, full_scale: float | None = None) -> Reconstruction:
+    """The decoded capture ``dec`` triangulated against ``projector`` and filtered (:func:`reconstruct_view`'s
+    second half, its keywords); the rig checked against it first (:attr:`Reconstruction.rig_check`)."""
+    cols, rows = decoded_coordinates(dec, min_confidence)
     checked = check_rig(camera, projector, cols, rows)
     tri = triangulate(camera, projector, cols, rows, method=method)
     # flying pixels (and ray-ray points whose rays miss) dropped, normals of what is left: one compiled pass

@@ -35,7 +35,8 @@ from rangekit.errors import ConfigError, DecodeError
 from rangekit.rig.capture_check import RigCheck, check_pair
 from rangekit.surface.cloud import PointCloud
 
-__all__ = ["PairReconstruction", "code_positions", "match_codes", "pair_cameras", "reconstruct_pair"]
+__all__ = ["PairMatch", "PairReconstruction", "code_positions", "match_codes", "match_pair", "pair_cameras", "pairings",
+           "reconstruct_pair", "triangulate_pair"]
 
 #: The exchanged pairing is taken when its epipolar distance is under this share of the given one's.
 EXCHANGE_SHARE = 0.5
@@ -151,34 +152,72 @@ class PairReconstruction:
         return f"PairReconstruction({self.decoded[0]!r}, {self.cloud!r})"
 
 
-def reconstruct_pair(stacks, spec: PatternSpec, cameras: tuple[PinholeCamera, PinholeCamera], *,
-                     subpixel: bool = True, max_jump: float = 0.004, max_residual: float = 0.002,
-                     min_confidence: float = 0.03, edge_margin: int = 1, full_scale: float | None = None,
-                     decode_options: dict | None = None) -> PairReconstruction:
-    """Decode both cameras' captures (``stacks``: two stacks in ``spec``'s frame order) and triangulate camera
-    1's pixels with camera 2's matching positions; filters as :func:`rangekit.coded.reconstruct.reconstruct_view`
-    (``max_residual``: metres between the two rays)."""
+@dataclass(frozen=True, eq=False)
+class PairMatch:
+    """Both cameras' decodings and camera 2's position of each first-capture pixel (:func:`match_pair`)."""
+
+    decoded: tuple[DecodeResult, DecodeResult]
+    x2: np.ndarray                          # (H1, W1) camera 2's x of each first-capture pixel, NaN if none
+    y2: np.ndarray
+    sizes: tuple[tuple[int, int], tuple[int, int]]   # each capture's (width, height)
+
+
+def match_pair(stacks, spec: PatternSpec, *, subpixel: bool = True, min_confidence: float = 0.03,
+               full_scale: float | None = None, decode_options: dict | None = None) -> PairMatch:
+    """Decode both captures (``stacks``: two stacks in ``spec``'s frame order) and match the first's pixels to the
+    second's positions through the codes (module doc); the rig never enters."""
     if "rows" not in spec.axes or "columns" not in spec.axes:
         raise ConfigError(f"two cameras match through the projector's columns and rows; the {spec.method} "
                           f"capture codes only {', '.join(spec.axes)}")
-    sizes = [(np.asarray(stack[0]).shape[1], np.asarray(stack[0]).shape[0]) for stack in stacks]
-    pairings = [p for p in ((0, 1), (1, 0)) if all(cameras[j].size == sizes[k] for k, j in enumerate(p))]
-    if not pairings:
-        raise ConfigError(f"the captures are {sizes[0][0]}x{sizes[0][1]} and {sizes[1][0]}x{sizes[1][1]} but the rig's "
-                          f"cameras {cameras[0].name!r} and {cameras[1].name!r} are {cameras[0].width}x"
-                          f"{cameras[0].height} and {cameras[1].width}x{cameras[1].height}, either way round")
+    sizes = tuple((np.asarray(stack[0]).shape[1], np.asarray(stack[0]).shape[0]) for stack in stacks)
     decs = []
     for stack in stacks:
         dec = decode(stack, spec, subpixel=subpixel, full_scale=full_scale, **(decode_options or {}))
         weak = dec.confidence < min_confidence
         decs.append((dec, np.where(weak, np.nan, dec.proj_col), np.where(weak, np.nan, dec.proj_row)))
     (dec1, c1, r1), (dec2, c2, r2) = decs
-    positions = code_positions(c2, r2, (spec.width, spec.height))
-    x2, y2 = match_codes(c1, r1, positions)
-    used, checked, exchanged = pair_cameras([(cameras[i], cameras[j]) for i, j in pairings], x2, y2,
-                                            exchanged=[p == (1, 0) for p in pairings])
-    tri = triangulate_ray_ray(used[0], used[1], x2, y2)
-    xyz, normals = filter_range_map(tri.xyz, used[0].center, max_jump=max_jump, margin=edge_margin,
+    x2, y2 = match_codes(c1, r1, code_positions(c2, r2, (spec.width, spec.height)))
+    return PairMatch((dec1, dec2), x2, y2, sizes)
+
+
+def pairings(cameras: tuple[PinholeCamera, PinholeCamera],
+             sizes) -> list[tuple[tuple[PinholeCamera, PinholeCamera], bool]]:
+    """The ways ``cameras`` can have taken captures of ``sizes`` ((pair, exchanged), the rig's order first);
+    ConfigError naming the sizes when neither can."""
+    out = [((cameras[i], cameras[j]), (i, j) == (1, 0)) for i, j in ((0, 1), (1, 0))
+           if cameras[i].size == tuple(sizes[0]) and cameras[j].size == tuple(sizes[1])]
+    if not out:
+        raise ConfigError(f"the captures are {sizes[0][0]}x{sizes[0][1]} and {sizes[1][0]}x{sizes[1][1]} but the rig's "
+                          f"cameras {cameras[0].name!r} and {cameras[1].name!r} are {cameras[0].width}x"
+                          f"{cameras[0].height} and {cameras[1].width}x{cameras[1].height}, either way round")
+    return out
+
+
+def reconstruct_pair(stacks, spec: PatternSpec, cameras: tuple[PinholeCamera, PinholeCamera], *,
+                     subpixel: bool = True, max_jump: float = 0.004, max_residual: float = 0.002,
+                     min_confidence: float = 0.03, edge_margin: int = 1, full_scale: float | None = None,
+                     decode_options: dict | None = None) -> PairReconstruction:
+    """Decode both cameras' captures (``stacks``: two stacks in ``spec``'s frame order) and triangulate camera
+    1's pixels with camera 2's matching positions, the cameras paired as the matches say (:func:`pair_cameras`);
+    filters as :func:`rangekit.coded.reconstruct.reconstruct_view` (``max_residual``: metres between the two
+    rays)."""
+    match = match_pair(stacks, spec, subpixel=subpixel, min_confidence=min_confidence, full_scale=full_scale,
+                       decode_options=decode_options)
+    options = pairings(cameras, match.sizes)
+    used, checked, exchanged = pair_cameras([p for p, _ in options], match.x2, match.y2,
+                                            exchanged=[e for _, e in options])
+    return triangulate_pair(match, used, checked=checked, exchanged=exchanged, max_jump=max_jump,
+                            max_residual=max_residual, edge_margin=edge_margin, full_scale=full_scale)
+
+
+def triangulate_pair(match: PairMatch, cameras: tuple[PinholeCamera, PinholeCamera], *, checked: RigCheck | None = None,
+                     exchanged: bool = False, max_jump: float = 0.004, max_residual: float = 0.002,
+                     edge_margin: int = 1, full_scale: float | None = None) -> PairReconstruction:
+    """``match`` triangulated with ``cameras`` (the first capture's camera first) and filtered."""
+    dec1 = match.decoded[0]
+    checked = checked if checked is not None else check_pair(cameras[0], cameras[1], match.x2, match.y2)
+    tri = triangulate_ray_ray(cameras[0], cameras[1], match.x2, match.y2)
+    xyz, normals = filter_range_map(tri.xyz, cameras[0].center, max_jump=max_jump, margin=edge_margin,
                                     extra_drop=~(tri.residual <= max_residual))
     valid = np.isfinite(xyz[:, :, 0])
     if not np.any(valid):
@@ -189,8 +228,8 @@ def reconstruct_pair(stacks, spec: PatternSpec, cameras: tuple[PinholeCamera, Pi
                                                                                   else 65535))
     colours = white[valid] if white.ndim == 3 else np.repeat(white[valid][:, None], 3, axis=1)
     n = np.where(np.isfinite(normals[valid]), normals[valid], 0.0)
-    return PairReconstruction((dec1, dec2), (x2, y2), tri, PointCloud(xyz[valid], np.clip(colours, 0, 1), n),
-                              checked, exchanged, used)
+    return PairReconstruction(match.decoded, (match.x2, match.y2), tri,
+                              PointCloud(xyz[valid], np.clip(colours, 0, 1), n), checked, exchanged, cameras)
 
 
 def pair_cameras(pairings: list[tuple[PinholeCamera, PinholeCamera]], x2: np.ndarray, y2: np.ndarray, *,

@@ -60,3 +60,25 @@ def test_columns_alone_cannot_check_the_rig(decoded):
     rig, dec = decoded
     check = check_rig(rig.camera, _turned(rig.projector, 5.0, "x"), dec.proj_col, None)
     assert not check.checkable and "none possible" in check.describe()
+
+
+def test_a_projector_size_the_capture_cannot_have_is_refused_naming_it(decoded):
+    """A capture made for the rig's projector decoded with a pattern set of a narrower one of as many bits (issue
+    47): the lit pixels past the narrower width are named, with the size they need; the capture's own size decodes
+    no pixel past its projector."""
+    from rangekit.errors import DecodeError
+
+    rig, _ = decoded
+    rig = replace(rig, projector=rig.projector.resized(400, 200))   # the camera sees its columns 70-330
+    W, H = rig.projector.width, rig.projector.height
+    spec = make_pattern_spec("graycode", (W, H))
+    images = SimRig(default_scene(), rig, seed=1).capture_sequence(list(spec.frames()))
+    narrow_w = (1 << (spec.bits("columns") - 1)) + 1                # the narrowest of as many bits
+    narrow = make_pattern_spec("graycode", (narrow_w, H))
+    assert narrow.bits("columns") == spec.bits("columns") and narrow.n_frames == spec.n_frames
+    with pytest.raises(DecodeError) as caught:
+        decode(images, narrow)
+    message = str(caught.value)
+    assert f"{narrow_w}x{H} projector" in message and f"(projector columns {narrow_w}-" in message
+    top = int(message.split("at least ")[1].split(" ")[0])
+    assert 300 < top < W, message

@@ -6,18 +6,21 @@ the pattern set from a capture folder, or given, decoded and triangulated by
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Sequence
 
 import numpy as np
 
 from rangekit.coded.patterns import PatternSpec, make_pattern_spec
-from rangekit.coded.reconstruct import Reconstruction, reconstruct_view
+from rangekit.app.commands.rig_choice import Refined, RigChoice, choose_rig, refine_from_capture
+from rangekit.coded.reconstruct import Reconstruction, decoded_coordinates, reconstruct_decoded, reconstruct_view
 from rangekit.errors import ConfigError, InputError, naming
 from rangekit.rig.rig_file import Rig, load_rig
+from rangekit.stereo.coded_pair import PairReconstruction
 from rangekit.surface.cloud import PointCloud
 
-__all__ = ["reconstruct", "reconstruct_capture", "reconstruct_tool_capture"]
+__all__ = ["CheckedReconstruction", "reconstruct", "reconstruct_capture", "reconstruct_checked", "reconstruct_tool_capture"]
 
 
 def reconstruct(images_or_folder, rig: Rig | str | Path | None = None, pattern: PatternSpec | str | None = None, *,
@@ -61,6 +64,39 @@ def reconstruct_capture(images_or_folder, rig: Rig | str | Path | None = None,
                                 full_scale=full_scale, response=rig.projector_response, **(view_options or {}))
 
 
+def reconstruct_checked(capture, rigs: Sequence[tuple[str, Rig]], *, subpixel: bool = True, method: str = "auto",
+                        refine: bool = True, free_intrinsics: bool = False) -> CheckedReconstruction:
+    """A rangekit capture folder (or one loaded) decoded once and reconstructed with the rig of ``rigs`` that fits
+    it best, refined from it when it does not fit (:func:`reconstruct_tool_capture`'s rules)."""
+    from rangekit.coded.decode import decode
+    from rangekit.rig.capture_check import check_rig
+
+    images, _, spec, full_scale, where = _images(capture)
+    if spec is None:
+        raise ConfigError(f"{where}: no patterns.json; give the pattern set")
+    with naming(where):
+        dec = decode(images, spec, subpixel=subpixel, full_scale=full_scale, response=rigs[0][1].projector_response)
+        cols, rows = decoded_coordinates(dec, 0.03)
+
+        def check(r: Rig):
+            if r.projector is None:
+                raise ConfigError("it has no projector")
+            if r.camera.size != (cols.shape[1], cols.shape[0]):
+                raise ConfigError(f"the captures are {cols.shape[1]}x{cols.shape[0]} but the rig's camera "
+                                  f"{r.camera.name!r} is {r.camera.width}x{r.camera.height}")
+            if r.projector.size != (spec.width, spec.height):
+                raise ConfigError(f"the pattern spec is for a {spec.width}x{spec.height} projector but the rig's "
+                                  f"projector is {r.projector.width}x{r.projector.height}")
+            return check_rig(r.camera, r.projector, cols, rows), False
+
+        choice = choose_rig(rigs, check)
+        refined = refine_from_capture(choice.rig.camera, choice.rig.projector, cols,
+                                      rows if rows is not None else np.full_like(cols, np.nan), choice.check,
+                                      refine=refine, free_intrinsics=free_intrinsics)
+        rec = reconstruct_decoded(dec, choice.rig.camera, refined.second, method=method, full_scale=full_scale)
+    return CheckedReconstruction(rec, choice, refined)
+
+
 def _images(source) -> tuple[np.ndarray, Rig | None, PatternSpec | None, float | None, str]:
     """(images, the folder's rig, the folder's pattern set, full scale, what to name in errors)."""
     from rangekit.formats.capture import Capture, list_images, load_capture, read_stack
@@ -79,30 +115,65 @@ def _images(source) -> tuple[np.ndarray, Rig | None, PatternSpec | None, float |
                      f"{type(source).__name__}" + (f" {source!r}" if isinstance(source, (str, Path)) else ""))
 
 
-def reconstruct_tool_capture(captures: Sequence[str | Path], preset: str, rig: Rig, *,
+@dataclass(frozen=True, eq=False)
+class CheckedReconstruction:
+    """A capture reconstructed with the rig that fits it best among those given, refined from it when needed."""
+
+    reconstruction: Reconstruction | PairReconstruction
+    choice: RigChoice                   # which rig, how each fitted, the chosen one's check as given
+    refined: Refined                    # the second device triangulated with, and the refinement's line
+
+    def lines(self) -> list[str]:
+        """What a person reads: the ranking (several rigs), the pairing (two cameras), the check, the refinement
+        and the check after it."""
+        rec = self.reconstruction
+        out = self.choice.lines()
+        if isinstance(rec, PairReconstruction):
+            out.append(rec.pairing_line())
+        out.append(self.choice.check.describe())
+        if self.refined.line:
+            out.append(self.refined.line)
+        if self.refined.refinement is not None and rec.rig_check is not None:
+            out.append("after refinement: " + rec.rig_check.describe())
+        return out
+
+
+def reconstruct_tool_capture(captures: Sequence[str | Path], preset: str, rig, *,
                              projector_size: tuple[int, int] | None = None, subpixel: bool = True,
-                             method: str = "auto", report: Callable[[str], object] | None = None):
+                             method: str = "auto", report: Callable[[str], object] | None = None,
+                             refine: bool = True, free_intrinsics: bool = False) -> CheckedReconstruction:
     """Another tool's capture as it lies on disk (:data:`rangekit.formats.layouts.LAYOUTS` ``preset``) to a cloud.
 
     ``captures``: one folder (a camera with the rig's projector; or, for a rig of two cameras and no projector,
     both cameras' files where the layout's names carry the camera, as OpenCV's do), two folders (camera 1's,
     camera 2's), globs or image files (one camera per glob or per folder of the files), or an image list file
     (OpenCV's ``pointcloud.cpp`` list); a folder without the tool's names is taken in numeric order of its images'
-    names (:func:`rangekit.formats.layouts.capture_frames`). ``projector_size``: (width, height) of the tool's
-    projector, needed when the rig has none. ``report`` gets one line per camera: which files, in which order.
-    Returns a :class:`~rangekit.coded.reconstruct.Reconstruction` (camera and projector) or a
+    names (:func:`rangekit.formats.layouts.capture_frames`). ``rig``: a :class:`Rig`, or (name, Rig) pairs to
+    choose from by their fit to the capture (:func:`rangekit.app.commands.rig_choice.choose_rig`; all of one
+    kind: camera and projector, or two cameras). ``projector_size``: (width, height) of the tool's projector,
+    needed when the rig has none. ``report`` gets one line per camera: which files, in which order. ``refine``:
+    the rig refined from the capture when it does not fit (``free_intrinsics``: the projector's or camera 2's
+    focal lengths and principal point too). The reconstruction is a
+    :class:`~rangekit.coded.reconstruct.Reconstruction` (camera and projector) or a
     :class:`~rangekit.stereo.coded_pair.PairReconstruction` (two cameras).
     """
+    from rangekit.coded.decode import decode
     from rangekit.formats.capture import read_stack
     from rangekit.formats.layouts import LAYOUTS, arrange, capture_frames, decoding_projector
-    from rangekit.stereo.coded_pair import reconstruct_pair
+    from rangekit.rig.capture_check import check_pair, check_rig
+    from rangekit.stereo.coded_pair import match_pair, pair_cameras, pairings, triangulate_pair
 
+    rigs = [("rig", rig)] if isinstance(rig, Rig) else list(rig)
     layout = LAYOUTS[preset]
-    width, height = _projector_size(rig, projector_size, preset)
-    pair = rig.projector is None
-    if pair and len(rig.cameras) < 2:
+    first = rigs[0][1]
+    width, height = _projector_size(first, projector_size, preset)
+    pair = first.projector is None
+    if pair and len(first.cameras) < 2:
         raise ConfigError(f"{preset}: the rig has neither a projector nor a second camera; give a rig with a "
                           "projector (camera + projector) or with two cameras (matched through the projector's codes)")
+    if any((r.projector is None) != pair for _, r in rigs):
+        raise ConfigError(f"--rig: {', '.join(n for n, _ in rigs)} mix camera-projector and two-camera rigs; give rigs "
+                          "of one kind")
     found = capture_frames(captures, layout, width, height, cameras=2 if pair else 1)
     where = found[0].source
     stacks, spec = [], None
@@ -111,12 +182,50 @@ def reconstruct_tool_capture(captures: Sequence[str | Path], preset: str, rig: R
             report(frames.line())
         stack, spec = arrange(list(read_stack(frames.files, what=f"a {preset} capture")), layout, width, height)
         stacks.append(stack)
+    options = dict(layout.view_options)
+    decode_options = options.pop("decode_options", {})
     with naming(where):
         if pair:
-            return reconstruct_pair(stacks, spec, rig.cameras[:2], subpixel=subpixel, **layout.view_options)
-        projector = decoding_projector(rig.projector, layout)
-        return reconstruct_view(stacks[0], spec, rig.camera, projector, subpixel=subpixel, method=method,
-                                response=rig.projector_response, **layout.view_options)
+            match = match_pair(stacks, spec, subpixel=subpixel, decode_options=decode_options,
+                               **{k: v for k, v in options.items() if k == "min_confidence"})
+
+            def check(r: Rig):
+                options_ = pairings(r.cameras[:2], match.sizes)
+                used, checked, exchanged = pair_cameras([p for p, _ in options_], match.x2, match.y2,
+                                                        exchanged=[e for _, e in options_])
+                return checked, exchanged
+
+            choice = choose_rig(rigs, check)
+            cams = choice.rig.cameras[:2][::-1] if choice.exchanged else choice.rig.cameras[:2]
+            refined = refine_from_capture(cams[0], cams[1], match.x2, match.y2, choice.check, refine=refine,
+                                          free_intrinsics=free_intrinsics)
+            rec = triangulate_pair(match, (cams[0], refined.second), exchanged=choice.exchanged,
+                                   **{k: v for k, v in options.items() if k != "min_confidence"})
+            return CheckedReconstruction(rec, choice, refined)
+        dec = decode(stacks[0], spec, subpixel=subpixel, response=first.projector_response, **decode_options)
+        cols, rows = decoded_coordinates(dec, options.get("min_confidence", 0.03))
+
+        def check(r: Rig):
+            _same_size(r, (width, height))
+            projector = decoding_projector(r.projector, layout)
+            if r.camera.size != (cols.shape[1], cols.shape[0]):
+                raise ConfigError(f"the captures are {cols.shape[1]}x{cols.shape[0]} but the rig's camera "
+                                  f"{r.camera.name!r} is {r.camera.width}x{r.camera.height}")
+            return check_rig(r.camera, projector, cols, rows), False
+
+        choice = choose_rig(rigs, check)
+        projector = decoding_projector(choice.rig.projector, layout)
+        refined = refine_from_capture(choice.rig.camera, projector, cols,
+                                      rows if rows is not None else np.full_like(cols, np.nan),
+                                      choice.check, refine=refine, free_intrinsics=free_intrinsics)
+        rec = reconstruct_decoded(dec, choice.rig.camera, refined.second, method=method, **options)
+        return CheckedReconstruction(rec, choice, refined)
+
+
+def _same_size(rig: Rig, size: tuple[int, int]) -> None:
+    if (rig.projector.width, rig.projector.height) != tuple(size):
+        raise ConfigError(f"its projector is {rig.projector.width}x{rig.projector.height}, the capture's frames are "
+                          f"for {size[0]}x{size[1]}")
 
 
 def _projector_size(rig: Rig, given: tuple[int, int] | None, preset: str) -> tuple[int, int]:

@@ -44,7 +44,8 @@ from rangekit.errors import FileFormatError
 
 __all__ = ["AxisBlocks", "CaptureLayout", "Inverse", "WHITE_FROM_STEPS", "BLACK_FROM_STEPS", "WHITE_FROM_PAIRS",
            "BLACK_FROM_PAIRS", "FRAME_SUFFIXES",
-           "layout_files", "tool_names", "arrange", "decoding_projector", "in_projector_pixels", "tool_frames"]
+           "layout_files", "tool_names", "arrange", "decoding_projector", "from_decoding_projector", "in_projector_pixels",
+           "tool_frames"]
 
 WHITE_FROM_STEPS, BLACK_FROM_STEPS = "A+B", "A-B"
 WHITE_FROM_PAIRS, BLACK_FROM_PAIRS = "black + min |P - I|", "min of pairs"
@@ -215,6 +216,17 @@ def decoding_projector(projector: PinholeCamera, layout: CaptureLayout) -> Pinho
         K[axis, 2] = (K[axis, 2] + blocks.offset - (blocks.size - 1) / 2) / blocks.size
     width, height = layout.decoded_size(projector.width, projector.height)
     return PinholeCamera(K, width, height, projector.dist, projector.T_world_cam, projector.name)
+
+
+def from_decoding_projector(decoding: PinholeCamera, projector: PinholeCamera, layout: CaptureLayout) -> PinholeCamera:
+    """:func:`decoding_projector` undone: ``projector`` (the rig file's) with ``decoding``'s pose and, mapped back
+    to its own pixels, its focal lengths and principal point (a refined decoding projector back into a rig file)."""
+    cols, rows = layout.blocks(projector.width, projector.height)
+    K = decoding.K.copy()
+    for axis, blocks in ((0, cols), (1, rows)):
+        K[axis, axis] *= blocks.size
+        K[axis, 2] = K[axis, 2] * blocks.size - blocks.offset + (blocks.size - 1) / 2
+    return PinholeCamera(K, projector.width, projector.height, projector.dist, decoding.T_world_cam, projector.name)
 
 
 def in_projector_pixels(decoded, layout: CaptureLayout, width: int, height: int):

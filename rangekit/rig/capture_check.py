@@ -21,7 +21,7 @@ import numpy as np
 
 from rangekit.camera import PinholeCamera
 
-__all__ = ["POOR_FIT_PX", "SAMPLE", "RigCheck", "check_rig"]
+__all__ = ["POOR_FIT_PX", "SAMPLE", "RigCheck", "check_rig", "closest_points", "ray_misses"]
 
 #: Pixels sampled for the check.
 SAMPLE = 20_000
@@ -74,20 +74,35 @@ def check_rig(camera: PinholeCamera, projector: PinholeCamera, proj_col: np.ndar
     ys, xs = ys[pick], xs[pick]
     uv_cam = np.column_stack([xs, ys]).astype(np.float64)
     uv_proj = np.column_stack([proj_col[ys, xs], proj_row[ys, xs]]).astype(np.float64)
-    o1, d1 = camera.rays(uv_cam)
-    o2, d2 = projector.rays(uv_proj)
+    off_px, miss_mm, good = ray_misses(camera, projector, uv_cam, uv_proj)
+    if not good.any():
+        return RigCheck(int(len(ys)), float("inf"), float("inf"), float("inf"))
+    return RigCheck(int(ok.sum()), float(np.median(off_px[good])), float(np.median(miss_mm[good])),
+                    float(np.percentile(off_px[good], 90)))
+
+
+def closest_points(o1: np.ndarray, d1: np.ndarray, o2: np.ndarray, d2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Where two sets of rays come closest: ``(s, t)``, (N,) each, such that ``o1 + s d1`` and ``o2 + t d2`` are
+    the closest points of ray pairs (origins (N, 3) or (3,), directions (N, 3), any frame and unit; s, t in the
+    directions' lengths). NaN or inf for parallel rays."""
     w = o1 - o2
     a, b, c = np.sum(d1 * d1, 1), np.sum(d1 * d2, 1), np.sum(d2 * d2, 1)
     d, e = np.sum(d1 * w, 1), np.sum(d2 * w, 1)
     den = a * c - b * b
     with np.errstate(divide="ignore", invalid="ignore"):
-        s = (b * e - c * d) / den                      # along the camera ray
-        t = (a * e - b * d) / den                      # along the projector ray
+        return (b * e - c * d) / den, (a * e - b * d) / den
+
+
+def ray_misses(first: PinholeCamera, second: PinholeCamera, uv_first: np.ndarray,
+               uv_second: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The check of N correspondences, ``uv_first`` (N, 2) pixels of ``first`` and ``uv_second`` (N, 2) of
+    ``second``: ``(off_px, miss_mm, good)``, (N,) each: the distance in ``second``'s pixels between ``uv_second``
+    and the projection of the first ray's closest point, how far the two rays miss each other (millimetres), and
+    where both are finite with the closest point in front of ``first``."""
+    o1, d1 = first.rays(uv_first)
+    o2, d2 = second.rays(uv_second)
+    s, t = closest_points(o1, d1, o2, d2)
     p1, p2 = o1 + s[:, None] * d1, o2 + t[:, None] * d2
     miss_mm = np.linalg.norm(p1 - p2, axis=1) * 1e3
-    off_px = np.linalg.norm(projector.project(p1) - uv_proj, axis=1)
-    good = np.isfinite(miss_mm) & np.isfinite(off_px) & (s > 0)
-    if not good.any():
-        return RigCheck(int(len(ys)), float("inf"), float("inf"), float("inf"))
-    return RigCheck(int(ok.sum()), float(np.median(off_px[good])), float(np.median(miss_mm[good])),
-                    float(np.percentile(off_px[good], 90)))
+    off_px = np.linalg.norm(second.project(p1) - uv_second, axis=1)
+    return off_px, miss_mm, np.isfinite(miss_mm) & np.isfinite(off_px) & (s > 0)

@@ -10,7 +10,9 @@ the rig describes the capture. Each such pair is triangulated (the closest point
 
 A capture that decodes columns only carries no check of the rig: every camera ray meets every column plane
 (:attr:`RigCheck.checkable` False, said in its line). The figures are medians over at most :data:`SAMPLE`
-pixels drawn evenly from the decoded ones, so a check costs milliseconds.
+pixels drawn evenly from the decoded ones, so a check costs milliseconds. :func:`ray_misses` is the check of any
+correspondences (a second camera's too) and :func:`closest_points` its triangulation, which
+:mod:`rangekit.rig.refine` shares.
 """
 
 from __future__ import annotations

@@ -1,7 +1,8 @@
 """The suite's shared fixtures: ``rig`` (the default simulated rig), ``small_rig`` (it with a 320x256 camera),
 ``cli(*args)`` (``rangekit ARGS`` in this process: a :class:`cli_runs.Run` with the exit code, stdout and
 stderr; argparse's own exits caught), ``reference_session`` (a small finished simulated session, made once per
-run: tests/sessions.py) and ``tmp_session`` (a fresh copy of it for one test to change); scenes and imaging."""
+run: tests/sessions.py) and ``tmp_session`` (a fresh copy of it for one test to change); ``decoded_graycode`` (the
+small projector rig's Gray-code capture of the default scene, decoded); scenes and imaging."""
 
 import ctypes
 import ctypes.util
@@ -79,6 +80,20 @@ def box_on_plane_scene():
 @pytest.fixture(scope="session")
 def noiseless():
     return ImagingModel().noiseless()
+
+
+@pytest.fixture(scope="session")
+def decoded_graycode():
+    """``(rig, DecodeResult)``: the small projector rig (tests/small_rigs.py) and its Gray-code capture (columns and
+    rows) of the default scene, seed 1, decoded."""
+    from rangekit.coded.decode import decode
+    from rangekit.coded.patterns import make_pattern_spec
+    from rangekit.sim import SimRig, default_scene
+    from small_rigs import small_projector_rig
+
+    rig = small_projector_rig()
+    spec = make_pattern_spec("graycode", (rig.projector.width, rig.projector.height))
+    return rig, decode(SimRig(default_scene(), rig, seed=1).capture_sequence(list(spec.frames())), spec)
 
 
 _LIBC = ctypes.CDLL(ctypes.util.find_library("c")) if ctypes.util.find_library("c") else None

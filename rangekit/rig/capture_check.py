@@ -15,7 +15,8 @@ that angle), and ``median_mm`` the rays' miss as above.
 
 A capture that decodes columns only carries no check of the rig: every camera ray meets every column plane
 (:attr:`RigCheck.checkable` False, said in its line). The figures are medians over at most :data:`SAMPLE`
-pixels drawn evenly from the decoded ones, so a check costs milliseconds.
+pixels drawn evenly from the decoded ones, so a check costs milliseconds. :func:`ray_misses` is the check of any
+correspondences and :func:`closest_points` its triangulation, which :mod:`rangekit.rig.refine` shares.
 """
 
 from __future__ import annotations
@@ -26,7 +27,8 @@ import numpy as np
 
 from rangekit.camera import PinholeCamera
 
-__all__ = ["POOR_FIT_PX", "SAMPLE", "RigCheck", "check_pair", "check_rig"]
+__all__ = ["POOR_FIT_PX", "SAMPLE", "RigCheck", "check_pair", "check_rig", "closest_points", "decoded_pairs",
+           "ray_misses"]
 
 #: Pixels sampled for the check.
 SAMPLE = 20_000
@@ -79,9 +81,8 @@ def check_rig(camera: PinholeCamera, projector: PinholeCamera, proj_col: np.ndar
     uv_cam, uv_proj, n = decoded_pairs(proj_col, proj_row, sample=sample)
     if n == 0:
         return RigCheck(0, float("nan"), float("nan"))
-    p1, _, miss_mm, ahead = _closest_points(camera, projector, uv_cam, uv_proj)
-    off_px = np.linalg.norm(projector.project(p1) - uv_proj, axis=1)
-    return _figures(n, off_px, miss_mm, ahead, pair=False)
+    off_px, miss_mm, good = ray_misses(camera, projector, uv_cam, uv_proj)
+    return _figures(n, off_px, miss_mm, good, pair=False)
 
 
 def check_pair(first: PinholeCamera, second: PinholeCamera, x2: np.ndarray, y2: np.ndarray, *,
@@ -99,8 +100,8 @@ def check_pair(first: PinholeCamera, second: PinholeCamera, x2: np.ndarray, y2: 
     sin = np.abs(np.sum(normal * d2, 1))
     with np.errstate(divide="ignore", invalid="ignore"):
         epipolar_px = float(np.sqrt(second.K[0, 0] * second.K[1, 1])) * sin / np.sqrt(1 - sin ** 2)
-    _, _, miss_mm, ahead = _closest_points(first, second, uv1, uv2)
-    return _figures(n, epipolar_px, miss_mm, ahead, pair=True)
+    _, miss_mm, good = ray_misses(first, second, uv1, uv2)
+    return _figures(n, epipolar_px, miss_mm, good, pair=True)
 
 
 def decoded_pairs(u2: np.ndarray, v2: np.ndarray, *, sample: int = SAMPLE) -> tuple[np.ndarray, np.ndarray, int]:
@@ -116,23 +117,35 @@ def decoded_pairs(u2: np.ndarray, v2: np.ndarray, *, sample: int = SAMPLE) -> tu
             np.column_stack([u2[ys, xs], v2[ys, xs]]).astype(np.float64), int(ok.sum()))
 
 
-def _closest_points(first: PinholeCamera, second: PinholeCamera, uv1: np.ndarray, uv2: np.ndarray):
-    """(first ray's closest point (m, 3), second's, their distance in mm, whether the point is ahead of both)."""
-    o1, d1 = first.rays(uv1)
-    o2, d2 = second.rays(uv2)
+def closest_points(o1: np.ndarray, d1: np.ndarray, o2: np.ndarray, d2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Where two sets of rays come closest: ``(s, t)``, (N,) each, such that ``o1 + s d1`` and ``o2 + t d2`` are
+    the closest points of ray pairs (origins (N, 3) or (3,), directions (N, 3), any frame and unit; s, t in the
+    directions' lengths). NaN or inf for parallel rays."""
     w = o1 - o2
     a, b, c = np.sum(d1 * d1, 1), np.sum(d1 * d2, 1), np.sum(d2 * d2, 1)
     d, e = np.sum(d1 * w, 1), np.sum(d2 * w, 1)
     den = a * c - b * b
     with np.errstate(divide="ignore", invalid="ignore"):
-        s = (b * e - c * d) / den                      # along the first ray
-        t = (a * e - b * d) / den                      # along the second ray
+        return (b * e - c * d) / den, (a * e - b * d) / den
+
+
+def ray_misses(first: PinholeCamera, second: PinholeCamera, uv_first: np.ndarray,
+               uv_second: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The check of N correspondences, ``uv_first`` (N, 2) pixels of ``first`` and ``uv_second`` (N, 2) of
+    ``second``: ``(off_px, miss_mm, good)``, (N,) each: the distance in ``second``'s pixels between ``uv_second``
+    and the projection of the first ray's closest point, how far the two rays miss each other (millimetres), and
+    where both are finite with the closest point in front of ``first``."""
+    o1, d1 = first.rays(uv_first)
+    o2, d2 = second.rays(uv_second)
+    s, t = closest_points(o1, d1, o2, d2)
     p1, p2 = o1 + s[:, None] * d1, o2 + t[:, None] * d2
-    return p1, p2, np.linalg.norm(p1 - p2, axis=1) * 1e3, (s > 0) & (t > 0)
+    miss_mm = np.linalg.norm(p1 - p2, axis=1) * 1e3
+    off_px = np.linalg.norm(second.project(p1) - uv_second, axis=1)
+    return off_px, miss_mm, np.isfinite(miss_mm) & np.isfinite(off_px) & (s > 0)
 
 
-def _figures(n: int, off_px: np.ndarray, miss_mm: np.ndarray, ahead: np.ndarray, *, pair: bool) -> RigCheck:
-    good = np.isfinite(miss_mm) & np.isfinite(off_px) & ahead
+def _figures(n: int, off_px: np.ndarray, miss_mm: np.ndarray, good: np.ndarray, *, pair: bool) -> RigCheck:
+    good = good & np.isfinite(off_px)
     if not good.any():
         return RigCheck(n, float("inf"), float("inf"), float("inf"), pair=pair)
     return RigCheck(n, float(np.median(off_px[good])), float(np.median(miss_mm[good])),

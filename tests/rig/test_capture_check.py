@@ -9,20 +9,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from rangekit.coded.decode import decode
-from rangekit.coded.patterns import make_pattern_spec
 from rangekit.geometry import make_T
 from rangekit.rig.capture_check import POOR_FIT_PX, check_rig
-from rangekit.sim import SimRig, default_scene
-from small_rigs import small_projector_rig
-
-
-@pytest.fixture(scope="module")
-def decoded():
-    rig = small_projector_rig()
-    spec = make_pattern_spec("graycode", (rig.projector.width, rig.projector.height))
-    images = SimRig(default_scene(), rig, seed=1).capture_sequence(list(spec.frames()))
-    return rig, decode(images, spec)
 
 
 def _turned(projector, degrees: float, axis: str = "x"):
@@ -35,8 +23,8 @@ def _turned(projector, degrees: float, axis: str = "x"):
     return replace(projector, T_world_cam=projector.T_world_cam @ make_T(R, np.zeros(3)))
 
 
-def test_the_true_rig_fits_to_the_decoding_noise(decoded):
-    rig, dec = decoded
+def test_the_true_rig_fits_to_the_decoding_noise(decoded_graycode):
+    rig, dec = decoded_graycode
     check = check_rig(rig.camera, rig.projector, dec.proj_col, dec.proj_row)
     assert check.checkable and check.fits
     assert check.median_px < 0.1, check           # measured 0.012 px, 0.016 mm (turned 0.5 deg: 3.24 px of 3.27)
@@ -44,8 +32,8 @@ def test_the_true_rig_fits_to_the_decoding_noise(decoded):
     assert "fits the capture" in check.describe()
 
 
-def test_a_projector_turned_by_half_a_degree_is_caught_by_about_what_it_moves(decoded):
-    rig, dec = decoded
+def test_a_projector_turned_by_half_a_degree_is_caught_by_about_what_it_moves(decoded_graycode):
+    rig, dec = decoded_graycode
     expected_px = rig.projector.K[1, 1] * np.radians(0.5)      # its rows move by f * angle
     check = check_rig(rig.camera, _turned(rig.projector, 0.5, "x"), dec.proj_col, dec.proj_row)
     assert not check.fits and check.median_px > POOR_FIT_PX
@@ -56,19 +44,22 @@ def test_a_projector_turned_by_half_a_degree_is_caught_by_about_what_it_moves(de
     assert along.median_px < 0.5 * check.median_px
 
 
-def test_columns_alone_cannot_check_the_rig(decoded):
-    rig, dec = decoded
+def test_columns_alone_cannot_check_the_rig(decoded_graycode):
+    rig, dec = decoded_graycode
     check = check_rig(rig.camera, _turned(rig.projector, 5.0, "x"), dec.proj_col, None)
     assert not check.checkable and "none possible" in check.describe()
 
 
-def test_a_projector_size_the_capture_cannot_have_is_refused_naming_it(decoded):
+def test_a_projector_size_the_capture_cannot_have_is_refused_naming_it(decoded_graycode):
     """A capture made for the rig's projector decoded with a pattern set of a narrower one of as many bits (issue
     47): the lit pixels past the narrower width are named, with the size they need; the capture's own size decodes
     no pixel past its projector."""
+    from rangekit.coded.decode import decode
+    from rangekit.coded.patterns import make_pattern_spec
     from rangekit.errors import DecodeError
+    from rangekit.sim import SimRig, default_scene
 
-    rig, _ = decoded
+    rig, _ = decoded_graycode
     rig = replace(rig, projector=rig.projector.resized(400, 200))   # the camera sees its columns 70-330
     W, H = rig.projector.width, rig.projector.height
     spec = make_pattern_spec("graycode", (W, H))

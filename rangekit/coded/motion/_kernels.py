@@ -12,17 +12,48 @@ __all__ = ["MAX_TURN_BACK", "crossing_residuals", "flag_bracketed"]
 MAX_TURN_BACK = 8
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _diff(stack, p_by_bit, i_by_bit, b, y, x, transposed):  # pragma: no cover - compiled
+    """Pattern minus inverse of bit ``b`` at (y, x) of the (possibly transposed) code map."""
+    if transposed:
+        return np.float32(stack[p_by_bit[b], x, y]) - np.float32(stack[i_by_bit[b], x, y])
+    return np.float32(stack[p_by_bit[b], y, x]) - np.float32(stack[i_by_bit[b], y, x])
+
+
+@njit(cache=True, nogil=True)
+def _misread(stack, p_by_bit, i_by_bit, words, nb, y, xa, ca, cb, weak, transposed):  # pragma: no cover - compiled
+    """Whether the step from code ``ca`` at pixel ``xa`` to ``cb`` at ``xa + 1`` (row ``y``) is one the noise can
+    make: every frame bit in which the two codes differ has ``|pattern - inverse| < weak`` on both pixels (those
+    bits are not read there, so the step says nothing about where their stripes lie)."""
+    differ = words[ca] ^ words[cb]
+    for b in range(nb):
+        if (differ >> b) & 1:
+            for j in range(2):
+                if abs(_diff(stack, p_by_bit, i_by_bit, b, y, xa + j, transposed)) >= weak:
+                    return False
+    return True
+
+
 @njit(parallel=True, cache=True, nogil=True)
-def crossing_residuals(code, t, max_gap, res, lo):  # pragma: no cover - compiled
+def crossing_residuals(code, t, max_gap, stack, p_by_bit, i_by_bit, edge_bit, words, weak, transposed,
+                       res, lo):  # pragma: no cover - compiled
     """Each stripe-edge crossing's disagreement with the code changes on either side of it along the row.
 
     ``code`` (H, W) int32 integer codes (-1 invalid); ``t`` (H, W-1) float32 crossings between pixels x and x+1
-    (rangekit.coded._kernels.crossings; NaN: none). For each crossing (a step of one code between neighbours),
+    (rangekit.coded._kernels.crossings; NaN: none). ``stack`` the capture ((K, H, W), or (K, W, H) of the
+    transposed maps: ``transposed``), ``p_by_bit``/``i_by_bit`` each bit's pattern and inverse frame,
+    ``edge_bit[c]`` the bit that changes between codes c and c+1, ``words[c]`` the frame bits of code c (which
+    frames are brighter than their inverses), ``weak``: a bit whose pattern and inverse differ by less than this
+    (grey levels) is read no better than the noise. For each crossing (a step of one code between neighbours),
     the previous and the next change of code along the row, each within ``max_gap`` pixels and with no invalid
     pixel between:
 
-    - either goes the other way by 2 to :data:`MAX_TURN_BACK` codes (the codes turn back: ``c+1, c, c+3, c+2``, bits
-      from two surfaces): ``res = inf``;
+    - a crossing whose bit's pattern - inverse changes across its pixel pair by less than ``weak`` is located no
+      better than the noise lets (``weak`` = k noise sigmas: to sqrt(2) / k of a pixel or worse): every residual
+      it takes part in is NaN;
+    - either neighbouring change goes the other way by 2 to :data:`MAX_TURN_BACK` codes (the codes turn back:
+      ``c+1, c, c+3, c+2``, bits from two surfaces): ``res = inf``, unless the bits that step differs in are
+      read below ``weak`` on both its pixels (:func:`_misread`: the noise's step, not a move), then NaN;
     - both are steps of one the same way (edges c-1|c, c|c+1, c+1|c+2): ``res[y, x] = (pos - (pos_prev +
       pos_next) / 2) / s``, s the camera pixels per code between the outer two (signed), so the offset is in
       codes: 0 up to noise where the three stripes were projected onto one surface, the shift between the frames
@@ -30,12 +61,15 @@ def crossing_residuals(code, t, max_gap, res, lo):  # pragma: no cover - compile
     - otherwise NaN. ``lo[y, x]`` = the lower code of the crossing where ``res`` is set, else -1.
     """
     H, W = code.shape
+    nb = p_by_bit.shape[0]
     for y in prange(H):
         pos = np.empty(W, np.float64)     # each change of code along the row: where, which way, from which code
         step = np.empty(W, np.int64)
         low = np.empty(W, np.int64)
         at = np.empty(W, np.int64)
         run = np.empty(W, np.int64)       # changes with no invalid pixel between them share a run number
+        sure = np.empty(W, np.bool_)      # a crossing located better than the noise
+        px = np.empty(W, np.int64)        # the pixel before the change
         n = 0
         r = 0
         for x in range(W - 1):
@@ -53,6 +87,13 @@ def crossing_residuals(code, t, max_gap, res, lo):  # pragma: no cover - compile
                 low[n] = c0 if c0 < c1 else c1
                 at[n] = x if tt == tt else -1
                 run[n] = r
+                sure[n] = True
+                px[n] = x
+                if tt == tt:
+                    b = edge_bit[low[n]]
+                    slope = (_diff(stack, p_by_bit, i_by_bit, b, y, x + 1, transposed)
+                             - _diff(stack, p_by_bit, i_by_bit, b, y, x, transposed))
+                    sure[n] = abs(slope) >= weak
                 n += 1
         for k in range(1, n - 1):
             if at[k] < 0:
@@ -64,9 +105,19 @@ def crossing_residuals(code, t, max_gap, res, lo):  # pragma: no cover - compile
             back_a = step[k - 1] * step[k] < 0 and 2 <= abs(step[k - 1]) <= MAX_TURN_BACK
             back_b = step[k + 1] * step[k] < 0 and 2 <= abs(step[k + 1]) <= MAX_TURN_BACK
             if back_a or back_b:
-                res[y, at[k]] = np.inf
-                lo[y, at[k]] = low[k]
-            elif abs(step[k - 1]) == 1 and abs(step[k + 1]) == 1 and at[k - 1] >= 0 and at[k + 1] >= 0:
+                misread = False
+                for kk in (k - 1, k + 1):
+                    if (kk == k - 1 and back_a) or (kk == k + 1 and back_b):
+                        xa = px[kk]
+                        ca = code[y, xa]
+                        cb = code[y, xa + 1]
+                        if _misread(stack, p_by_bit, i_by_bit, words, nb, y, xa, ca, cb, weak, transposed):
+                            misread = True
+                if not misread:
+                    res[y, at[k]] = np.inf
+                    lo[y, at[k]] = low[k]
+            elif (abs(step[k - 1]) == 1 and abs(step[k + 1]) == 1 and at[k - 1] >= 0 and at[k + 1] >= 0
+                  and sure[k - 1] and sure[k] and sure[k + 1]):
                 s = (pos[k + 1] - pos[k - 1]) / (step[k - 1] + step[k + 1])
                 res[y, at[k]] = (pos[k] - 0.5 * (pos[k - 1] + pos[k + 1])) / s
                 lo[y, at[k]] = low[k]
@@ -88,3 +139,4 @@ def flag_bracketed(t, res, limit, out):  # pragma: no cover - compiled
             if x < W - 1 and t[y, x] == t[y, x]:
                 bad_right = abs(res[y, x]) > limit
             out[y, x] = out[y, x] or bad_right
+

@@ -9,7 +9,7 @@ VENV   ?= .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.rangekit-installed
 
-.PHONY: setup test test-slow scan ui bench clean browser docs-figures bytecode
+.PHONY: setup test test-slow scan ui bench clean browser docs-figures bytecode peers
 
 setup: $(STAMP)
 
@@ -35,9 +35,14 @@ test: $(STAMP) browser bytecode
 	@# Two pytest-xdist workers, one a core: 5 minutes instead of 8.5 here (summed RSS of the tree at most 3.6 GB).
 	$(BIN)/python -m pytest -q -m "not slow" -n 2
 
-test-slow: $(STAMP) browser bytecode
+test-slow: $(STAMP) browser bytecode peers
 	@# The full-size cases (whole calibration, 6-view scans to a mesh, 12-view registration, ...): CI runs them.
 	$(BIN)/python -m pytest -q -m slow
+
+peers:
+	@# OpenCV contrib's structured-light module in .venv-bench (it cannot share .venv: both provide cv2), for the
+	@# tests and benchmarks that run OpenCV's own pipeline beside rangekit's; they skip, saying so, without it.
+	-bash benchmarks/coded/setup_opencv_contrib.sh
 
 browser:
 	@# Headless Chromium + chromedriver (Debian packages) for the report test in tests/app/test_scan.py and
@@ -63,7 +68,7 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/sim/bench_render.py
 
 clean:
-	rm -rf $(VENV) *.egg-info .pytest_cache
+	rm -rf $(VENV) .venv-bench *.egg-info .pytest_cache
 
 docs-figures: $(STAMP) browser bytecode
 	@# Reruns every figure quoted in README.md and docs/ (the blocks between <!-- figure: COMMAND --> and

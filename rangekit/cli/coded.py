@@ -145,7 +145,6 @@ def _rig_lines(args: argparse.Namespace, checked, to_rig_projector=None) -> None
         note(line)
     if checked.refined.refinement is not None:
         rig_path, figures_path = refined_rig_files(args.out, checked.choice.rig, checked.refined,
-                                                   exchanged=checked.choice.exchanged,
                                                    to_rig_projector=to_rig_projector)
         note(f"wrote the refined rig to {rig_path} (its figures: {figures_path})")
 
@@ -274,7 +273,7 @@ def add_parsers(sub) -> None:
                      help="keep the rig as given when it does not fit the capture (default: its projector's or second "
                           "camera's pose refined from the capture, written beside --out as NAME.refined-rig.json)")
     rec.add_argument("--refine-lens", action="store_true",
-                     help="refine the projector's (or second camera's) focal lengths and principal point too")
+                     help="refine the projector's (or second camera's) focal length too (two views cannot fix its principal point)")
     rec.add_argument("--pattern", choices=sorted(CAPTURE_LAYOUTS), default=None,
                      help="another tool's capture layout, read as it lies on disk (docs/real-captures.md); needs "
                           "--rig")

@@ -198,8 +198,9 @@ def reconstruct_tool_capture(captures: Sequence[str | Path], preset: str, rig, *
             choice = choose_rig(rigs, check)
             cams = choice.rig.cameras[:2][::-1] if choice.exchanged else choice.rig.cameras[:2]
             refined = refine_from_capture(cams[0], cams[1], match.x2, match.y2, choice.check, refine=refine,
-                                          free_intrinsics=free_intrinsics)
-            rec = triangulate_pair(match, (cams[0], refined.second), exchanged=choice.exchanged,
+                                          free_intrinsics=free_intrinsics, exchanged=choice.exchanged)
+            used = (refined.second, cams[1]) if choice.exchanged else (cams[0], refined.second)
+            rec = triangulate_pair(match, used, exchanged=choice.exchanged,
                                    **{k: v for k, v in options.items() if k != "min_confidence"})
             return CheckedReconstruction(rec, choice, refined)
         dec = decode(stacks[0], spec, subpixel=subpixel, response=first.projector_response, **decode_options)

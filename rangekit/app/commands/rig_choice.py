@@ -92,33 +92,38 @@ def choose_rig(rigs: Sequence[tuple[str, Rig]], check: Callable[[Rig], tuple[Rig
 class Refined:
     """The second device (projector, or camera 2) to triangulate with, and what the refinement did."""
 
-    second: PinholeCamera
+    second: PinholeCamera                      # the rig's projector, or its camera 2, refined or as given
     refinement: object | None                  # rangekit.rig.refine.RigRefinement when refined
     line: str                                  # one line for people ("" when the rig fits and nothing was tried)
 
 
 def refine_from_capture(first: PinholeCamera, second: PinholeCamera, u2: np.ndarray, v2: np.ndarray,
-                        checked: RigCheck, *, refine: bool = True, free_intrinsics: bool = False) -> Refined:
-    """``second`` refined from the correspondences ``u2``, ``v2`` ((H, W) its coordinates over ``first``'s pixels,
-    NaN where none) when ``checked`` says the rig does not fit the capture (module doc)."""
+                        checked: RigCheck, *, refine: bool = True, free_intrinsics: bool = False,
+                        exchanged: bool = False) -> Refined:
+    """The rig's second device refined from the correspondences ``u2``, ``v2`` ((H, W) ``second``'s coordinates over
+    ``first``'s pixels, NaN where none) when ``checked`` says the rig does not fit the capture (module doc).
+    ``exchanged``: ``first`` is the rig's camera 2 (two cameras, files named for the other), so ``second``, the
+    rig's camera 1, is held and ``first`` refined: the rig's first device anchors its world either way."""
+    held, moved = (second, first) if exchanged else (first, second)
     if not checked.checkable or checked.fits:
-        return Refined(second, None, "")
+        return Refined(moved, None, "")
     if not refine:
-        return Refined(second, None, "rig not refined (--no-refine): kept as given")
+        return Refined(moved, None, "rig not refined (--no-refine): kept as given")
     from rangekit.rig.refine import refine_extrinsics
 
     uv1, uv2, _ = decoded_pairs(u2, v2)
+    uv_held, uv_moved = (uv2, uv1) if exchanged else (uv1, uv2)
     try:
-        done = refine_extrinsics(first, second, uv1, uv2, free_intrinsics=free_intrinsics)
+        done = refine_extrinsics(held, moved, uv_held, uv_moved, free_intrinsics=free_intrinsics)
     except CalibrationError as exc:
-        return Refined(second, None, f"rig not refined: {exc}; kept as given")
+        return Refined(moved, None, f"rig not refined: {exc}; kept as given")
     return Refined(done.second, done, done.describe())
 
 
-def refined_rig_files(out: str | Path, rig: Rig, refined: Refined, *, exchanged: bool = False,
+def refined_rig_files(out: str | Path, rig: Rig, refined: Refined, *,
                       to_rig_projector: Callable[[PinholeCamera], PinholeCamera] | None = None) -> tuple[Path, Path]:
     """Write the refined rig beside the output ``out`` (``<out stem>.refined-rig.json``: ``rig`` with the refined
-    device in its place, camera 1 when ``exchanged``) and the refinement's figures (``<out stem>.refinement.json``);
+    projector or camera 2 in its place) and the refinement's figures (``<out stem>.refinement.json``);
     ``to_rig_projector``: the refined projector back in the rig file's projector pixels (a layout's blocks).
     Returns both paths."""
     from rangekit.formats.rig_files.json_text import rig_json_text
@@ -129,9 +134,7 @@ def refined_rig_files(out: str | Path, rig: Rig, refined: Refined, *, exchanged:
     if rig.projector is not None:
         new = replace(rig, projector=second)
     else:
-        cameras = list(rig.cameras)
-        cameras[0 if exchanged else 1] = second
-        new = replace(rig, cameras=tuple(cameras))
+        new = replace(rig, cameras=(rig.cameras[0], second) + tuple(rig.cameras[2:]))
     out = Path(out)
     rig_path, figures_path = out.with_name(out.stem + ".refined-rig.json"), out.with_name(out.stem + ".refinement.json")
     atomic_write_text(rig_path, rig_json_text(new.to_dict()))

@@ -3,7 +3,7 @@ whose calibration is a few pixels off, reconstructed by ``rangekit reconstruct``
 OpenCV's own pipeline (``pointcloud.cpp``: rectify, ``GrayCodePattern.decode``, reproject) given the true
 calibration and the files the right way round.
 
-    .venv/bin/python benchmarks/coded/pair_vs_opencv.py [--off-deg 0.5] [--keep DIR]
+    .venv/bin/python benchmarks/coded/pair_vs_opencv.py [--off-deg 0.5] [--keep DIR] [--markdown]
 
 Needs .venv-bench for OpenCV's side (``bash benchmarks/coded/setup_opencv_contrib.sh``); without it, rangekit's
 side alone is measured. Both clouds are measured the same way against the simulator's true surface: distance of
@@ -84,10 +84,10 @@ def figures(name: str, points: np.ndarray, mesh) -> dict:
             "within_0.5mm": float(np.mean(d <= 0.5))}
 
 
-def opencv_side(folder: Path, true_rig, mesh, work: Path) -> list[dict]:
+def opencv_side(folder: Path, true_rig, mesh, work: Path, log=print) -> list[dict]:
     py = bench_python()
     if py is None:
-        print("OpenCV's side skipped: no .venv-bench (bash benchmarks/coded/setup_opencv_contrib.sh)")
+        log("OpenCV's side skipped: no .venv-bench (bash benchmarks/coded/setup_opencv_contrib.sh)")
         return []
     from rangekit.geometry import invert_T
 
@@ -103,7 +103,7 @@ def opencv_side(folder: Path, true_rig, mesh, work: Path) -> list[dict]:
     run = subprocess.run([str(py), str(PEER), str(work / "cam1.npy"), str(work / "cam2.npy"), str(work / "calib.npz"),
                           str(work / "opencv.npz"), "--projector", f"{PROJECTOR[0]}x{PROJECTOR[1]}"],
                          capture_output=True, text=True, check=True)
-    print(run.stdout.strip())
+    log(run.stdout.strip())
     with np.load(work / "opencv.npz") as res:
         to_world = lambda p: p @ cam1.T_world_cam[:3, :3].T + cam1.T_world_cam[:3, 3]
         return [figures("OpenCV pointcloud.cpp (true rig, right names)", to_world(res["points"]), mesh),
@@ -114,7 +114,9 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--off-deg", type=float, default=0.5, help="camera 2 of the rig file turned by this (degrees)")
     ap.add_argument("--keep", type=Path, help="write the capture and clouds here (default: a temporary folder)")
+    ap.add_argument("--markdown", action="store_true", help="only the table on standard output (the rest on stderr)")
     args = ap.parse_args()
+    log = (lambda *a, **kw: print(*a, **kw, file=sys.stderr)) if args.markdown else print
     with tempfile.TemporaryDirectory() as tmp:
         work = args.keep or Path(tmp)
         folder = work / "capture"
@@ -123,20 +125,21 @@ def main() -> int:
         run = subprocess.run([sys.executable, "-m", "rangekit", "reconstruct", str(folder), "--pattern", PRESET,
                               "--rig", str(folder / "rig_off.json"), "--projector", f"{PROJECTOR[0]}x{PROJECTOR[1]}",
                               "--out", str(out)], capture_output=True, text=True)
-        print(run.stdout.strip(), run.stderr.strip(), sep="\n")
+        log(run.stdout.strip(), run.stderr.strip(), sep="\n")
         rows = []
         if run.returncode == 0:
             from rangekit.formats.clouds import load_cloud
 
             rows.append(figures("rangekit reconstruct (rig off, names crossed)", np.asarray(load_cloud(out).points),
                                 mesh))
-        rows += opencv_side(folder, true_rig, mesh, work)
-        print("\n| cloud | points | roughness mm | to the truth: RMS mm | median mm | p99 mm | within 0.5 mm |\n"
+        rows += opencv_side(folder, true_rig, mesh, work, log)
+        print(("" if args.markdown else "\n") + "| cloud | points | roughness mm | to the truth: RMS mm | median mm | p99 mm | within 0.5 mm |\n"
               "|---|---|---|---|---|---|---|")
         for r in rows:
             print(f"| {r['name']} | {r['points']} | {r['roughness_mm']:.3f} | {r['rms_mm']:.3f} | {r['median_mm']:.3f} | "
                   f"{r['p99_mm']:.3f} | {100 * r['within_0.5mm']:.1f}% |")
-        print(json.dumps(rows))
+        if not args.markdown:
+            print(json.dumps(rows))
     return 0 if run.returncode == 0 else 1
 
 

@@ -11,6 +11,7 @@ from pathlib import Path
 from rangekit.cli._common import (check_output, console, float_in, int_in, note, positive_float, result, say, seed,
                                   size)
 from rangekit.drivers.discovery import MAX_SEARCH_S
+from rangekit.errors import UsageError
 
 
 def cmd_rig_init(args: argparse.Namespace) -> int:
@@ -46,17 +47,48 @@ def cmd_rig_import(args: argparse.Namespace) -> int:
 
     if args.out is not None:
         check_output(args.out, force=args.force, suffixes=RIG_SUFFIXES, what="rig")
-    data = import_rig(args.file, size=args.size, projector_size=args.projector_size, unit=args.unit,
-                      keep_projector_distortion=args.keep_projector_distortion, report=note)
+    options = dict(size=args.size, projector_size=args.projector_size, unit=args.unit,
+                   keep_projector_distortion=args.keep_projector_distortion)
+    if len(args.file) > 1 or args.capture:
+        if not args.capture:
+            raise UsageError(f"{len(args.file)} calibration files: give --capture DIR to rank them by (the one that "
+                             "fits the capture best is written)")
+        path = _best_fitting(args, options)
+        args.file = [path]
+    data = import_rig(args.file[0], **options, report=note)
     if args.out is None:
-        _print_rig(data, f"rangekit rig import {args.file} > rig.json")
+        _print_rig(data, f"rangekit rig import {args.file[0]} > rig.json")
         return 0
     atomic_write_text(args.out, rig_json_text(data))
     kinds = [f"{len(data['cameras'])} camera(s)"] + (["a projector"] if data["projector"] else []) + (
         [f"{len(data['lasers'])} laser(s)"] if data.get("lasers") else []) + (
         ["the turntable"] if data["T_world_table"] is not None else ["no turntable (rangekit calibrate measures it)"])
-    result(f"wrote {args.out}: {', '.join(kinds)} from {args.file}")
+    result(f"wrote {args.out}: {', '.join(kinds)} from {args.file[0]}")
     return 0
+
+
+def _best_fitting(args: argparse.Namespace, options: dict) -> str:
+    """The calibration file of ``args.file`` that fits ``args.capture`` best (the ranking said, one line a file)."""
+    from rangekit.app.commands.reconstruct import reconstruct_checked, reconstruct_tool_capture
+    from rangekit.formats.rig_files.importers import import_rig
+    from rangekit.rig.rig_file import Rig
+
+    rigs = []
+    for path in args.file:
+        rigs.append((str(path), Rig.from_dict(import_rig(path, **options, report=say), where=str(path))))
+    if args.pattern is not None:
+        checked = reconstruct_tool_capture(args.capture, args.pattern, rigs, projector_size=args.projector,
+                                           refine=False, report=say)
+    else:
+        if len(args.capture) != 1:
+            raise UsageError("--capture: one rangekit capture folder, or another tool's with --pattern PRESET")
+        checked = reconstruct_checked(args.capture[0], rigs, refine=False)
+    for line in checked.choice.lines() or [f"rig 1 of 1: {rigs[0][0]}: {checked.choice.check.describe()}"]:
+        note(line)
+    if checked.choice.check.checkable and not checked.choice.check.fits:
+        note(f"the best of them, {checked.choice.name}, does NOT fit the capture either: "
+             f"{checked.choice.check.describe()}")
+    return checked.choice.name
 
 
 def cmd_calibrate(args: argparse.Namespace) -> int:
@@ -195,6 +227,8 @@ def add_calibrate_parser(sub) -> None:
 
 
 def add_parsers(sub) -> None:
+    from rangekit.formats.layouts import LAYOUTS as CAPTURE_LAYOUTS
+
     rig = sub.add_parser("rig", help="rig files: write a template, import a calibration",
                          description="Rig files (docs/rig.md documents every field).")
     rig_sub = rig.add_subparsers(dest="rig_command", metavar="SUBCOMMAND")
@@ -218,7 +252,16 @@ def add_parsers(sub) -> None:
                                          "docs/real-captures.md), a depthai EEPROM calibration "
                                          "(CalibrationHandler.eepromToJson()) or a Horus calibration.json "
                                          "(Ciclop: camera, laser planes, platform). Printed, or written to --out.")
-    imp.add_argument("file", metavar="FILE", help="the calibration file (.yaml, .yml, .xml or .json)")
+    imp.add_argument("file", metavar="FILE", nargs="+",
+                     help="the calibration file (.yaml, .yml, .xml or .json); several: each imported and checked "
+                          "against --capture, the one that fits it best written, the ranking printed")
+    imp.add_argument("--capture", nargs="+", metavar="DIR",
+                     help="with several files: the capture to rank them by (a rangekit capture folder, or another "
+                          "tool's with --pattern, as 'rangekit reconstruct' reads it)")
+    imp.add_argument("--pattern", choices=sorted(CAPTURE_LAYOUTS), default=None,
+                     help="with --capture: another tool's capture layout (docs/real-captures.md)")
+    imp.add_argument("--projector", type=size, default=None,
+                     help="with --capture --pattern and two-camera calibrations: the projector's size WxH")
     imp.add_argument("--out", help="rig file to write (default: print it)")
     imp.add_argument("--force", action="store_true", help="overwrite --out if it exists")
     imp.add_argument("--size", type=size, help="camera image size WxH where the file has none (Horus: read from camera_width, camera_height)")

@@ -96,3 +96,33 @@ def test_the_gray_code_cloud_against_the_kinect_depth(folder, roomalive_maps, de
     assert plane.baseline_m == pytest.approx(0.1051, abs=1e-3)
     assert ray.limit_m < plane.limit_m          # the projector sits below the camera: rows carry the depth
     assert ray.median_m < 0.1 and plane.median_m < 0.25
+
+
+def test_the_rig_check_ranks_the_files_and_refines_the_wrong_one_to_fit(cli, folder, tmp_path):
+    """Issue 47 item 1 on RoomAlive's capture: ``rig import`` of three of its ensembles against the capture writes
+    the one that fits (07181614.xml, 0.80 px; the others 452 and 532 px), and ``reconstruct`` with the one named
+    calibration.xml refines its projector from the capture to the same fit (measured 0.80 px after 532.41; it
+    turns 6.8 deg), the refined rig written beside the cloud."""
+    import json
+
+    files = [folder / name for name in ("calibration.xml", "07181614.xml", "07181554.xml")]
+    capture = folder / "projector0" / "camera0"
+    run = cli("rig", "import", *files, "--capture", capture, "--pattern", "roomalive:graycode",
+              "--out", tmp_path / "best.json")
+    assert run.code == 0, run.err
+    said = run.out + run.err
+    assert f"rig 1 of 3: {folder / '07181614.xml'}: 0.80 px" in said and "<- used" in said
+    assert "from " + str(folder / "07181614.xml") in said
+    run = cli("rig", "import", files[0], "--out", tmp_path / "wrong.json")
+    assert run.code == 0, run.err
+    run = cli("reconstruct", capture, "--pattern", "roomalive:graycode", "--rig", tmp_path / "wrong.json",
+              "--out", tmp_path / "c.ply")
+    assert run.code == 0, run.err
+    said = run.out + run.err
+    assert "532.41 px" in said and "does NOT fit" in said
+    figures = json.loads((tmp_path / "c.refinement.json").read_text())
+    print(f"\nRoomAlive calibration.xml refined: {figures['line']}")
+    assert figures["before_px"] > 500 and figures["after_px"] <= 0.9            # measured 0.80
+    after = next(line for line in said.splitlines() if line.startswith("after refinement:"))
+    assert "it fits the capture" in after
+    assert (tmp_path / "c.refined-rig.json").is_file()

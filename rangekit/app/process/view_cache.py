@@ -30,6 +30,7 @@ from rangekit.formats.capture import list_images, read_stack
 from rangekit.formats.sessions.session import Session, SessionView, exposure_folder
 from rangekit.geometry import apply_T, invert_T
 from rangekit.io import atomic_save_npz, atomic_write_json, atomic_write_with, read_json, read_png
+from rangekit.progress import LOGGER
 from rangekit.rig.rig_file import Rig
 from rangekit.formats.clouds import load_cloud
 from rangekit.formats.ply_write import write_cloud_ply
@@ -209,6 +210,9 @@ def _decode_view(v: SessionView, stacks, white_image: np.ndarray, spec: PatternS
         if settings.get("max_motion") is not None:
             _check_still(stacks if exposures else [stacks], spec, np.isfinite(rec.decoded.proj_col),
                          settings["max_motion"])
+    if rec.rig_check is not None and rec.rig_check.checkable and not rec.rig_check.fits:
+        # a session's rig is its own: said, not refined per view (rangekit reconstruct refines one capture's)
+        LOGGER.warning(f"{v.folder}: {rec.rig_check.describe()}")
     xyz = rec.triangulated.xyz.copy()
     valid = np.isfinite(xyz[:, :, 0])
     c = rec.cloud

@@ -91,6 +91,11 @@ class SceneError(InputError):
     """A simulated scene cannot be built or seen (empty mesh, camera that sees nothing)."""
 
 
+class MissingDataError(SceneError):
+    """The shared real data a built-in object or a figure needs (../shared/data, ``$RANGEKIT_DATA``) is not there;
+    the message names the file and the folders looked in (tests skip on it, naming them)."""
+
+
 class PatternError(InputError):
     """A pattern image or pattern spec does not fit the projector or the capture."""
 

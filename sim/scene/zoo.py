@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rangekit.errors import SceneError
+from rangekit.errors import MissingDataError, SceneError
 from rangekit.geometry import R_up_to_z
 from rangekit.sim.scene.scene_object import SceneObject
 
@@ -163,10 +163,11 @@ def steps(*, heights=STEP_HEIGHTS, width: float = 0.015, depth: float = 0.04, al
 
 
 def data_folders() -> list[Path]:
-    """Where the shared real data is looked for, in order: ``$RANGEKIT_DATA``, then ``../shared/data``
-    beside the checkout and beside the folder holding it (a git worktree)."""
+    """Where the shared real data is looked for: ``$RANGEKIT_DATA`` alone when set (an empty folder hides the
+    data: ``make test-bare``), else ``../shared/data`` beside the checkout and beside the folder holding it (a git
+    worktree)."""
     env = os.environ.get("RANGEKIT_DATA")
-    return ([Path(env)] if env else []) + [_ROOT.parent / "shared" / "data", _ROOT.parent.parent / "shared" / "data"]
+    return [Path(env)] if env else [_ROOT.parent / "shared" / "data", _ROOT.parent.parent / "shared" / "data"]
 
 
 def bunny_path() -> Path:
@@ -183,13 +184,13 @@ def bunny(path: str | os.PathLike | None = None, *, albedo=0.8, name: str = "bun
 
     Raises
     ------
-    SceneError
+    MissingDataError
         If the file is missing, naming the path and where the data is looked for.
     """
     p = Path(path) if path is not None else bunny_path()
     if not p.is_file():
         where = ", ".join(str(f) for f in data_folders())
-        raise SceneError(f"bunny: {p} not found; expected the Stanford bunny mesh {BUNNY_FILE} in a data folder "
+        raise MissingDataError(f"bunny: {p} not found; expected the Stanford bunny mesh {BUNNY_FILE} in a data folder "
                          f"(looked in {where}; set RANGEKIT_DATA to the folder holding stanford-bunny/)")
     verts, tris = _upright(str(p.resolve()))
     return SceneObject(name, verts, tris, albedo)

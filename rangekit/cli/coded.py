@@ -212,6 +212,8 @@ def _reconstruct_laser_stereo(args: argparse.Namespace, t0: float) -> int:
     with naming(args.rig or Path(args.capture) / "rig.json"):   # a pair that cannot be rectified
         rect = rectify(*cap.rig.cameras[:2])
     rec = reconstruct_laser_stereo_capture(cap, method=args.peaks, rect=rect, fill=not args.pair_only)
+    if rec.pairing_line():
+        note(rec.pairing_line())
     save_cloud(args.out, rec.cloud)
     say(rec.summary())
     report_laser_stereo_truth(cap, rec, progress=say)

@@ -45,6 +45,12 @@ class LaserStereoReconstruction:
     kept: tuple[np.ndarray, ...]
     n_points: tuple[int, ...]
     laser_index: np.ndarray
+    exchanged: bool = False        # left/ held the right camera's frames (the pair fits only so): taken as such
+
+    def pairing_line(self) -> str:
+        """One line when the folders were exchanged (empty otherwise)."""
+        return ("cameras EXCHANGED: left/ holds the rig's right camera's frames and right/ its left's (the pair "
+                "matches the laser line only so); triangulated as such") if self.exchanged else ""
 
     def summary(self) -> str:
         per = ", ".join(f"laser {k}: {n:,} points ({int((f & ok).sum()):,} filled in from the sheet) from "
@@ -76,11 +82,17 @@ def reconstruct_laser_stereo_capture(capture: LaserStereoCapture, *, method: str
     colour = off_l.ndim == 3
     saturation = full_scale or capture.full_scale or float(np.iinfo(off_l.dtype).max)
     points, colours, which, all_peaks, matched, counts, kept, xyzs, fills = [], [], [], [], [], [], [], [], []
+
+    def peaks_of(side: int, k: int):
+        return detect_peaks(capture.frames[side][k], capture.off[side], method=method,
+                            channel=capture.channels[k] if colour else None, saturation=saturation)
+
+    sides = _sides(capture, peaks_of, left_cam, right_cam, rect, match_options)
+    off_l = capture.off[sides[0]]
     for k in range(capture.n_lasers):
         pair = []
-        for side in (0, 1):
-            peaks = detect_peaks(capture.frames[side][k], capture.off[side], method=method,
-                                 channel=capture.channels[k] if colour else None, saturation=saturation)
+        for side in sides:
+            peaks = peaks_of(side, k)
             pair.append(require_peaks(peaks, str(capture.path(side, k))) if require else peaks)
         res = sheet_stereo(pair[0], pair[1], left_cam, right_cam, rect=rect, **match_options)
         xyz, filled = res.xyz, np.zeros(len(res.xyz), dtype=bool)
@@ -93,7 +105,8 @@ def reconstruct_laser_stereo_capture(capture: LaserStereoCapture, *, method: str
             ok &= continuous_runs(pair[0].rows, xyz, min_run=min_run,
                                   max_jump=JUMP_FOOTPRINTS * pixel_footprint(xyz, left_cam))
         if require and not ok.any():
-            raise DecodeError(f"{capture.path(0, k)} and {capture.path(1, k)}: {len(pair[0])} left and {len(pair[1])} "
+            raise DecodeError(f"{capture.path(sides[0], k)} and {capture.path(sides[1], k)}: {len(pair[0])} left and "
+                              f"{len(pair[1])} "
                               f"right line peaks, but no left peak meets the right line on its epipolar line "
                               f"({res.n_unmatched} unmatched, {res.n_ambiguous} ambiguous): do both cameras see laser "
                               f"{k}'s line, and is the rig's cameras[1] the right camera of this pair?")
@@ -113,7 +126,29 @@ def reconstruct_laser_stereo_capture(capture: LaserStereoCapture, *, method: str
     else:
         cloud = PointCloud(np.concatenate(points), colours=np.clip(np.concatenate(colours), 0, 1))
     return LaserStereoReconstruction(cloud, tuple(all_peaks), tuple(matched), tuple(xyzs), tuple(fills), tuple(kept),
-                                     tuple(counts), np.concatenate(which))
+                                     tuple(counts), np.concatenate(which), sides == (1, 0))
+
+
+#: The folders are taken exchanged when, so, the matched points lie on their light sheets this many times closer
+#: (the sheet's robust sigma; a swapped pair's points are the wrong rays' crossings, millimetres off any plane: on
+#: the simulator 2.50 mm as named against 0.039 mm exchanged).
+EXCHANGE_RATIO = 4.0
+
+
+def _sides(capture: LaserStereoCapture, peaks_of, left_cam, right_cam, rect, match_options) -> tuple[int, int]:
+    """(0, 1): left/ is the rig's left camera, as named; (1, 0) when the lasers' matched points lie
+    :data:`EXCHANGE_RATIO` times closer to their sheets the other way round (issue 48: exchanged folders gave
+    17.9 mm RMS). Lasers whose points fix no sheet either way do not vote; with none, as named."""
+    ratios = []
+    for k in range(capture.n_lasers):
+        peaks = [peaks_of(0, k), peaks_of(1, k)]
+        if min(len(peaks[0]), len(peaks[1])) == 0:
+            continue
+        sheets = [sheet_stereo(peaks[a], peaks[b], left_cam, right_cam, rect=rect, **match_options).sheet
+                  for a, b in ((0, 1), (1, 0))]
+        if all(sh is not None and sh.plane is not None and sh.sigma > 0 for sh in sheets):
+            ratios.append(sheets[0].sigma / sheets[1].sigma)
+    return (1, 0) if ratios and np.median(ratios) > EXCHANGE_RATIO else (0, 1)
 
 
 def report_laser_stereo_truth(capture: LaserStereoCapture, rec: LaserStereoReconstruction,

@@ -138,7 +138,20 @@ def capture_frames(captures: Sequence[str | Path], layout: CaptureLayout, width:
         else:
             _check_cameras([str(s) if isinstance(s, Path) else s[0] for s in sources], cameras, items[0])
             frames = tuple(_frames(source, layout, width, height, k + 1) for k, source in enumerate(sources))
+    _refuse_shared_files(frames)
     return frames
+
+
+def _refuse_shared_files(frames: tuple[FrameFiles, ...]) -> None:
+    """ConfigError when two cameras' lists name the same files (an image list whose camera 2 repeats camera 1's,
+    one folder given twice): matched with themselves they make a silently wrong cloud (issue 48)."""
+    if len(frames) < 2:
+        return
+    first, second = ({str(Path(f).resolve()) for f in fr.files} for fr in frames[:2])
+    shared = first & second
+    if shared:
+        raise ConfigError(f"{frames[1].source}: camera 2's frames include {len(shared)} of camera 1's files (e.g. "
+                          f"{sorted(shared)[0]}): each camera needs its own capture")
 
 
 def _check_cameras(sources: list[str], cameras: int, given: str) -> None:

@@ -94,15 +94,18 @@ def console():
 
 
 def size(text: str) -> tuple[int, int]:
-    """Argument type for image, sensor and projector sizes: WIDTHxHEIGHT in pixels, each 1..MAX_SIZE_PX."""
+    """Argument type for image, sensor and projector sizes: WIDTHxHEIGHT in pixels, each MIN_IMAGE_SIDE_PX ..
+    MAX_SIZE_PX (the rig file's one rule, rangekit.rig.plausibility)."""
+    from rangekit.rig.plausibility import MIN_IMAGE_SIDE_PX
+
     try:
         w, h = (int(v) for v in text.lower().split("x"))
-        if 0 < w <= MAX_SIZE_PX and 0 < h <= MAX_SIZE_PX:
+        if MIN_IMAGE_SIDE_PX <= w <= MAX_SIZE_PX and MIN_IMAGE_SIDE_PX <= h <= MAX_SIZE_PX:
             return w, h
     except ValueError:
         pass
-    raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT in pixels, each 1..{MAX_SIZE_PX}, e.g. 1280x800, "
-                                     f"found {text!r}")
+    raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT in pixels, each {MIN_IMAGE_SIDE_PX}..{MAX_SIZE_PX}, e.g. "
+                                     f"1280x800, found {text!r}")
 
 
 def _number(kind, text: str, test, expected: str):

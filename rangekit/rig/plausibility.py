@@ -10,7 +10,12 @@ like; one merely unusual is a warning on the ``rangekit`` logger. The one source
   or above 10 m, and refused when zero;
 - :data:`OBJECT_SIZE`: a simulated object's bounding-box diagonal is plausible from 5 mm to 2 m (the
   simulated rig's measuring volume is a few tens of centimetres), refused below 1 mm or above 5 m;
-- :data:`UNIT_SCALES`: the units a length in a file may be in, metres per unit.
+- :data:`UNIT_SCALES`: the units a length in a file may be in, metres per unit;
+- :data:`FOCAL_PER_WIDTH`, :data:`PRINCIPAL_SPAN`, :data:`MIN_IMAGE_SIDE_PX`: a camera's or projector's
+  intrinsics (:func:`intrinsics_problem`), the one rule of every rig file, import and preset: a focal length
+  from a 170-degree fisheye's (0.05 image widths) to a 0.6-degree telephoto's (100 widths), fx and fy within
+  5x of each other, the principal point within one image size beyond the image (projectors' offset optics put
+  it near or past an edge), an image of at least 8 pixels a side.
 
 :func:`check_length` applies a rule; :func:`check_stereo_baseline` is the check of a stereo rig file.
 """
@@ -25,7 +30,7 @@ import numpy as np
 
 from rangekit.errors import ConfigError, InputError
 
-__all__ = ["LengthRule", "BASELINE", "OBJECT_SIZE", "OBJECT_UNITS", "UNIT_SCALES", "UNIT_NAMES", "check_length",
+__all__ = ["FOCAL_PER_WIDTH", "MIN_IMAGE_SIDE_PX", "PRINCIPAL_SPAN", "intrinsics_problem", "LengthRule", "BASELINE", "OBJECT_SIZE", "OBJECT_UNITS", "UNIT_SCALES", "UNIT_NAMES", "check_length",
            "likely_unit", "format_length", "format_vector", "check_stereo_baseline"]
 
 #: Metres per unit of the lengths a file may hold; the order is the order units are guessed in.
@@ -33,6 +38,33 @@ UNIT_SCALES = {"mm": 1e-3, "m": 1.0, "cm": 1e-2}
 UNIT_NAMES = {"mm": "millimetres", "m": "metres", "cm": "centimetres"}
 #: The units an object mesh file may be given in (``sim render --object-unit``).
 OBJECT_UNITS = ("m", "mm")
+
+
+#: A focal length's plausible range in image widths (module doc).
+FOCAL_PER_WIDTH = (0.05, 100.0)
+#: How far the principal point may lie from the image, in image sizes on either side.
+PRINCIPAL_SPAN = 1.0
+#: The smallest image side a camera or projector can have, pixels.
+MIN_IMAGE_SIDE_PX = 8
+
+
+def intrinsics_problem(K: np.ndarray, width: int, height: int) -> str | None:
+    """What is implausible about a pinhole's ``K`` (3, 3) for a ``width`` x ``height`` image (pixels), in words
+    naming the value and the range; None when nothing is."""
+    if min(width, height) < MIN_IMAGE_SIDE_PX:
+        return f"an image of {width}x{height} pixels is smaller than {MIN_IMAGE_SIDE_PX} pixels a side"
+    lo, hi = FOCAL_PER_WIDTH
+    for name, f in (("fx", K[0, 0]), ("fy", K[1, 1])):
+        if not lo * width <= f <= hi * width:
+            return (f"{name} = {f:.6g} px is not a lens's focal length for a {width}-pixel-wide image (expected "
+                    f"{lo * width:g} to {hi * width:g} px)")
+    if not 0.2 <= K[0, 0] / K[1, 1] <= 5.0:
+        return f"fx / fy = {K[0, 0] / K[1, 1]:.4g}: pixels that much wider than high are no camera's (expected 0.2 to 5)"
+    for name, c, size in (("cx", K[0, 2], width), ("cy", K[1, 2], height)):
+        if not -PRINCIPAL_SPAN * size <= c <= (1 + PRINCIPAL_SPAN) * size:
+            return (f"{name} = {c:.6g} px lies more than an image size outside a {size}-pixel image (expected "
+                    f"{-PRINCIPAL_SPAN * size:g} to {(1 + PRINCIPAL_SPAN) * size:g} px)")
+    return None
 
 
 @dataclass(frozen=True)

@@ -37,6 +37,7 @@ from rangekit.errors import ConfigError, InputError
 from rangekit.geometry import axis_angle_to_R, compose, invert_T, make_T, rigid_problem
 from rangekit.io import atomic_write_json, read_json
 from rangekit.rig.lasers import LineLaser, laser_from_dict
+from rangekit.rig.plausibility import intrinsics_problem
 from rangekit.rig.projector_response import ProjectorResponse
 from rangekit.rig.checks import DEFAULT_SEARCH_S
 
@@ -292,6 +293,9 @@ def _camera(data, where: str, path: str) -> PinholeCamera:
     if not (K[0, 0] > 0 and K[1, 1] > 0 and K[0, 1] == 0 and K[1, 0] == 0 and np.array_equal(K[2], [0, 0, 1])):
         raise _error(where, f"{path}.K", "the intrinsic matrix 'K' must be [[fx, 0, cx], [0, fy, cy], [0, 0, 1]] "
                      f"with fx, fy > 0 and zero skew (as in OpenCV), found {K.tolist()}")
+    problem = intrinsics_problem(K, int(data["width"]), int(data["height"]))
+    if problem is not None:
+        raise _error(where, f"{path}.K", f"implausible intrinsics: {problem}")
     dist = data.get("dist", [])
     try:
         d = np.asarray(dist, dtype=np.float64)

@@ -145,8 +145,12 @@ def test_a_folder_with_other_frames_than_the_layout_is_one_line(cli, tmp_path):
     from rangekit.rig.rig_file import Rig, save_rig
     from rangekit.sim import default_rig
 
+    from rangekit.camera import PinholeCamera
+
     r = default_rig()
-    save_rig(Rig(cameras=(r.camera.resized(64, 8),), projector=r.projector.resized(256, 32)), tmp_path / "rig.json")
+    square = lambda d, w, h: PinholeCamera(np.array([[w, 0, (w - 1) / 2], [0, w, (h - 1) / 2], [0, 0, 1.0]]), w, h,
+                                           d.dist, d.T_world_cam, d.name)   # a lens, not a squashed resize
+    save_rig(Rig(cameras=(square(r.camera, 64, 8),), projector=square(r.projector, 256, 32)), tmp_path / "rig.json")
     capture = tmp_path / "capture"
     capture.mkdir()
     for k, frame in enumerate(_slstudio_2x3_frames(64, 8) + _slstudio_2x3_frames(64, 8)[:1]):

@@ -271,3 +271,48 @@ def test_slstudios_own_calibration_file_imports(cli, tmp_path):
     rig = load_rig(tmp_path / "rig.json")
     assert rig.cameras[0].K[0, 0] == pytest.approx(2195.12036, rel=1e-6)
     assert np.linalg.norm(rig.projector.T_world_cam[:3, 3]) == pytest.approx(0.164477, abs=1e-5)   # |Tp| = 164.5 mm
+
+
+@pytest.mark.parametrize("change, size, mentions", [
+    (lambda K: K * np.array([[1e-12, 1, 1], [1, 1e-12, 1], [1, 1, 1]]), "1280x800", ["fx = 1.23457e-09 px"]),
+    (lambda K: K * np.array([[1e12, 1, 1], [1, 1e12, 1], [1, 1, 1]]), "1280x800", ["fx = 1.23457e+15 px"]),
+    (lambda K: K + np.array([[0, 0, -5640.0], [0, 0, 0], [0, 0, 0]]), "1280x800", ["cx = -4999.88 px"]),
+    (lambda K: K, "1x1", ["an image of 1x1 pixels"]),
+], ids=["focal_1e-9", "focal_1e15", "principal_point", "one_pixel"])
+def test_implausible_intrinsics_are_refused_by_one_rule(tmp_path, change, size, mentions):
+    """Issue 48: rig import took a focal length of 1e-9 or 1e15 px, a principal point of -5000 px for a 1280-px
+    image and a 1x1 image without a word; the rig file's one plausibility rule (rangekit.rig.plausibility) refuses
+    each, naming the value and the range, for every import and every rig file."""
+    src = tmp_path / "calib.yaml"
+    _write_opencv(src, K1=change(K1))
+    run_args = ["rig", "import", str(src), "--size", size, "--projector-size", "1280x800", "--out",
+                str(tmp_path / "rig.json")]
+    with pytest.raises(ConfigError, match="implausible intrinsics") as refused:
+        import_rig(src, size=tuple(int(v) for v in size.split("x")), projector_size=(1280, 800))
+    for text in mentions:
+        assert text in str(refused.value)
+    if size != "1x1":                               # --size 1x1 itself is refused as an option (the test below)
+        assert main(run_args) == 1 and not (tmp_path / "rig.json").exists()
+
+
+@pytest.mark.parametrize("suffix", [".yaml", ".xml"])
+def test_a_key_given_twice_is_refused(tmp_path, suffix):
+    src = tmp_path / f"calib{suffix}"
+    _write_opencv(src)
+    text = src.read_text()
+    if suffix == ".xml":
+        text = text.replace("</opencv_storage>", "<T>1.0</T>\n</opencv_storage>")
+    else:
+        text += "T: 1.0\n"
+    src.write_text(text)
+    with pytest.raises(ConfigError, match="expected each key once, found 'T' given more than once"):
+        import_rig(src, size=(1280, 800), projector_size=(1280, 800))
+
+
+@pytest.mark.parametrize("preset", ["slstudio:2x3", "slstudio:micro", "opencv:graycode"])
+def test_a_one_pixel_projector_is_refused_for_every_preset(cli, tmp_path, preset):
+    """Issue 48: ``decode --pattern slstudio:2x3 --projector 1x1`` wrote maps (micro too); the option's size rule is
+    the rig file's (at least 8 pixels a side), for every preset."""
+    run = cli("decode", tmp_path, "--pattern", preset, "--projector", "1x1", "--out", tmp_path / "m.npz")
+    assert_error(run, 2, "--projector", "each 8..")
+    assert not (tmp_path / "m.npz").exists()

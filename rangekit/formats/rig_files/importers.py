@@ -140,8 +140,39 @@ def _node_value(node, path: Path, key: str):
     return None if m is None else np.asarray(m, dtype=np.float64)
 
 
+def _duplicate_keys(path: Path) -> list[str]:
+    """The top-level keys an OpenCV YAML or XML file gives more than once (FileStorage keeps one silently)."""
+    import re
+
+    text = read_regular_file(path, what="a calibration file").decode("utf-8", errors="replace")
+    if path.suffix.lower() == ".xml":
+        depth, keys = 0, []
+        for m in re.finditer(r"<(/?)([A-Za-z_][\w.-]*)([^>]*?)(/?)>", text):
+            closing, name, _, empty = m.groups()
+            if closing:
+                depth -= 1
+                continue
+            if depth == 1:
+                keys.append(name)
+            if not empty:
+                depth += 1
+    else:
+        keys = re.findall(r"^([A-Za-z_][\w.-]*)\s*:", text, flags=re.MULTILINE)
+    seen, twice = set(), []
+    for key in keys:
+        if key in seen and key not in twice:
+            twice.append(key)
+        seen.add(key)
+    return twice
+
+
 def read_opencv(path: Path) -> dict:
     import cv2
+
+    twice = _duplicate_keys(path)
+    if twice:
+        raise ConfigError(f"{path}: expected each key once, found {', '.join(map(repr, twice))} given more than once "
+                          "(OpenCV would keep one of them without a word): keep the one you mean")
 
     try:
         fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)

@@ -127,7 +127,7 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
         raise ConfigError(f"{args.capture}: no rig.json with a projector; pass --rig RIG.json")
     note(f"decoding {len(cap.images)} images ({cap.spec.method})")
     checked = reconstruct_checked(cap, rigs, subpixel=not args.integer, method=args.method, refine=not args.no_refine,
-                                  free_intrinsics=args.refine_lens)
+                                  free_intrinsics=args.refine_lens, max_motion=args.max_motion)
     rec = checked.reconstruction
     save_cloud(args.out, rec.cloud)
     say(f"{rec.decoded!r}")
@@ -166,7 +166,8 @@ def _reconstruct_layout(args: argparse.Namespace, t0: float) -> int:
     note(f"reading {layout.name} ({layout.source})")
     checked = reconstruct_tool_capture(args.capture, args.pattern, rigs, projector_size=args.projector,
                                        subpixel=not args.integer, method=args.method, report=say,
-                                       refine=not args.no_refine, free_intrinsics=args.refine_lens)
+                                       refine=not args.no_refine, free_intrinsics=args.refine_lens,
+                                       max_motion=args.max_motion)
     rec = checked.reconstruction
     save_cloud(args.out, rec.cloud)
     say(f"{rec.decoded!r}")
@@ -274,6 +275,9 @@ def add_parsers(sub) -> None:
     rec.add_argument("--no-refine", action="store_true",
                      help="keep the rig as given when it does not fit the capture (default: its projector's or second "
                           "camera's pose refined from the capture, written beside --out as NAME.refined-rig.json)")
+    rec.add_argument("--max-motion", type=_share, default=MAX_MOTION_SHARE, metavar="PERCENT",
+                     help="binary codes: refuse the capture when more than this share of the decoded pixels moved "
+                          f"during it, as 'rangekit decode' does (default {MAX_MOTION_SHARE * 100:.0f}%%; 'none')")
     rec.add_argument("--refine-lens", action="store_true",
                      help="refine the projector's (or second camera's) focal length too (two views cannot fix its principal point)")
     rec.add_argument("--pattern", choices=sorted(CAPTURE_LAYOUTS), default=None,

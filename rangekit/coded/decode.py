@@ -82,6 +82,16 @@ def refuse_codes_beyond(counts: tuple[int, int, int, float], spec: PatternSpec, 
                       "made for), or its frames are in another order")
 
 
+def _unchecked(asked: bool, spec: PatternSpec, moved) -> tuple[str, ...]:
+    """The axes the motion check was asked for but could not check (the camera does not resolve their codes, or a
+    code the check does not read), for the result to say "not checked" rather than "0%"."""
+    if not asked:
+        return ()
+    if moved is None:
+        return tuple(spec.axes)
+    return tuple(moved.undersampled)
+
+
 def decode(stack, spec: PatternSpec, *, order: str = "rangekit", subpixel: bool = True,
            min_contrast: float = 0.015, shadow_threshold: float = 0.01, max_global_ratio: float | None = None,
            max_gap: float = 6.0, max_disagreement: float = 1.5, full_scale: float | None = None,
@@ -259,7 +269,8 @@ def decode(stack, spec: PatternSpec, *, order: str = "rangekit", subpixel: bool 
                           "projector: the spec does not match the capture (projector size, method or order)")
     return DecodeResult(proj_col=proj_col, proj_row=proj_row, confidence=conf, shadow=shadow, low_contrast=low,
                         global_dominated=glob_mask, inconsistent=incons,
-                        motion=None if moved is None else moved.mask,
+                        motion=None if moved is None or set(moved.undersampled) >= set(spec.axes) else moved.mask,
+                        motion_unchecked=_unchecked(motion, spec, moved),
                         moved_frames=() if moved is None else moved.moved_frames,
                         direct=direct if binary else None, global_light=glob if binary else None,
                         white=fr.colour_white if fr.colour else w_all, col_std=col_std, row_std=row_std)

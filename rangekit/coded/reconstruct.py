@@ -9,6 +9,7 @@ import numpy as np
 from rangekit.camera import PinholeCamera
 from rangekit.coded.decode import decode
 from rangekit.coded.hdr import merge_decodes
+from rangekit.coded.motion import MAX_MOTION_SHARE
 from rangekit.coded.result import DecodeResult
 from rangekit.errors import ConfigError, DecodeError
 from rangekit.coded.patterns import PatternSpec
@@ -49,7 +50,8 @@ def reconstruct_view(images, spec: PatternSpec, camera: PinholeCamera, projector
                      max_jump: float = 0.004, max_residual: float = 0.002, min_confidence: float = 0.03,
                      edge_margin: int = EDGE_MARGIN_PX,
                      full_scale: float | None = None, response: ProjectorResponse | None = None,
-                     exposures_us=None, decode_options: dict | None = None) -> Reconstruction:
+                     exposures_us=None, decode_options: dict | None = None, motion: bool = False,
+                     max_motion: float | None = MAX_MOTION_SHARE) -> Reconstruction:
     """Decode ``images`` and triangulate against ``projector``.
 
     ``max_jump`` (relative range step, see :func:`rangekit.coded.triangulate.discontinuity_mask`, applied with
@@ -63,6 +65,8 @@ def reconstruct_view(images, spec: PatternSpec, camera: PinholeCamera, projector
     ``exposures_us`` (increasing): ``images`` is then one stack per exposure (multi-exposure capture), each
     decoded and merged per pixel (:func:`rangekit.coded.hdr.merge_decodes`). ``decode_options``: more keyword
     arguments of :func:`rangekit.coded.decode.decode` (a capture layout's, e.g. ``max_global_ratio``).
+    ``motion``, ``max_motion``: the decoder's motion check (binary codes; a capture over ``max_motion`` moved is a
+    MotionError), as ``rangekit decode`` runs it; off where the caller checks motion its own way (a scan's views).
     """
     probe = np.asarray(images[0][0] if exposures_us is not None else images[0])
     if camera.size != (probe.shape[1], probe.shape[0]):
@@ -74,12 +78,12 @@ def reconstruct_view(images, spec: PatternSpec, camera: PinholeCamera, projector
     if exposures_us is not None:
         stacks = list(images)
         decs = [decode(st, spec, order=order, subpixel=subpixel, full_scale=full_scale, response=response,
-                       **(decode_options or {})) for st in stacks]
+                       motion=motion, max_motion=max_motion, **(decode_options or {})) for st in stacks]
         top = full_scale or (255.0 if np.asarray(stacks[0][0]).dtype == np.uint8 else 65535.0)
         dec = merge_decodes(decs, exposures_us, top)[0]
     else:
         dec = decode(images, spec, order=order, subpixel=subpixel, full_scale=full_scale, response=response,
-                     **(decode_options or {}))
+                     motion=motion, max_motion=max_motion, **(decode_options or {}))
     return reconstruct_decoded(dec, camera, projector, method=method, max_jump=max_jump, max_residual=max_residual,
                                min_confidence=min_confidence, edge_margin=edge_margin, full_scale=full_scale)
 

@@ -31,6 +31,7 @@ class DecodeResult:
     motion: np.ndarray | None = None        # (H, W) bool: the code mixes frames taken before and after the object
                                             # moved (rangekit.coded.motion; binary codes), rejected; None: unchecked
     moved_frames: tuple = ()                # the frames taken after it moved, where they could be named
+    motion_unchecked: tuple = ()            # axes the motion check was asked for and could not check
 
     @property
     def valid(self) -> np.ndarray:
@@ -42,5 +43,11 @@ class DecodeResult:
         return (f"DecodeResult({self.proj_col.shape[1]}x{self.proj_col.shape[0]}, valid={self.valid.sum() / n:.1%}, "
                 f"shadow={self.shadow.sum() / n:.1%}, low_contrast={self.low_contrast.sum() / n:.1%}, "
                 f"global={self.global_dominated.sum() / n:.1%}, inconsistent={self.inconsistent.sum() / n:.1%}"
-                + ("" if self.motion is None else f", motion={self.motion.sum() / n:.1%}") + ")")
+                + self._motion_text(n) + ")")
+
+    def _motion_text(self, n: int) -> str:
+        unchecked = " and ".join(self.motion_unchecked)
+        if self.motion is None:
+            return f", motion=not checked ({unchecked})" if unchecked else ""
+        return f", motion={self.motion.sum() / n:.1%}" + (f" ({unchecked} not checked)" if unchecked else "")
 

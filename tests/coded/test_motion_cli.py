@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import pytest
 
 from cli_runs import assert_error
 from rangekit.rig.rig_file import save_rig
@@ -30,6 +31,17 @@ def test_a_slipped_capture_is_flagged_and_refused_by_name_a_still_one_is_not(cli
     assert run.code == 0 and "motion=" in run.out
     maps = np.load(tmp_path / "m.npz")
     assert maps["motion"].mean() > 0.02 and not np.any(np.isfinite(maps["proj_col"][maps["motion"]]))
+    # reconstruct and rk.reconstruct refuse what decode refuses (issue 48: they made a cloud of it)
+    run = cli("reconstruct", moving, "--out", tmp_path / "moving.ply")
+    assert_error(run, 1, "the object moved during the capture", "max_motion")
+    assert not (tmp_path / "moving.ply").exists()
+    import rangekit as rk
+    from rangekit.errors import MotionError
+
+    with pytest.raises(MotionError, match="the object moved during the capture"):
+        rk.reconstruct(moving)
+    assert cli("reconstruct", moving, "--max-motion", "none", "--out", tmp_path / "moving.ply").code == 0
+    assert cli("reconstruct", still, "--out", tmp_path / "still.ply").code == 0
     assert cli("decode", still, "--pattern", still / "patterns.json", "--out", tmp_path / "s.npz").code == 0
     calm = np.load(tmp_path / "s.npz")
     assert calm["motion"].sum() < 0.005 * np.isfinite(calm["proj_col"]).sum()     # 0.21% here (0.084% on the default rig)

@@ -73,3 +73,17 @@ def test_where_the_camera_undersamples_the_projector_nothing_is_checked():
     full = check_motion(CaptureStack(still, spec, "rangekit"), spec, {"columns": code}, decoded)
     assert full.undersampled == ("columns",) and full.share == 0.0 and not full.mask.any()
     assert "not checked" in detect_motion(still, spec, decoded).describe()
+
+
+def test_a_capture_too_fine_for_the_camera_says_not_checked():
+    """Issue 48: a capture whose codes the camera does not resolve reported motion=0.0%; it says not checked."""
+    from rangekit.coded.decode import decode
+    from rangekit.coded.patterns import make_pattern_spec
+    from rangekit.sim import SimRig, default_scene
+    from small_rigs import small_rig
+
+    rig = small_rig()                       # a 320x256 camera under a 1280x800 projector
+    spec = make_pattern_spec("graycode", (rig.projector.width, rig.projector.height))
+    res = decode(SimRig(default_scene(), rig, seed=1).capture_sequence(list(spec.frames())), spec, motion=True)
+    assert res.motion is None and res.motion_unchecked == ("columns", "rows")
+    assert "motion=not checked (columns and rows)" in repr(res) and "motion=0" not in repr(res)

@@ -12,6 +12,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
+from rangekit.coded.motion import MAX_MOTION_SHARE
 from rangekit.coded.patterns import PatternSpec, make_pattern_spec
 from rangekit.app.commands.rig_choice import Refined, RigChoice, choose_rig, refine_from_capture
 from rangekit.coded.reconstruct import Reconstruction, decoded_coordinates, reconstruct_decoded, reconstruct_view
@@ -61,11 +62,13 @@ def reconstruct_capture(images_or_folder, rig: Rig | str | Path | None = None,
                           "patterns.json in the folder")
     with naming(where):
         return reconstruct_view(images, spec, rig.camera, rig.projector, subpixel=subpixel, method=method,
-                                full_scale=full_scale, response=rig.projector_response, **(view_options or {}))
+                                full_scale=full_scale, response=rig.projector_response, motion=True,
+                                **(view_options or {}))
 
 
 def reconstruct_checked(capture, rigs: Sequence[tuple[str, Rig]], *, subpixel: bool = True, method: str = "auto",
-                        refine: bool = True, free_intrinsics: bool = False) -> CheckedReconstruction:
+                        refine: bool = True, free_intrinsics: bool = False,
+                        max_motion: float | None = MAX_MOTION_SHARE) -> CheckedReconstruction:
     """A rangekit capture folder (or one loaded) decoded once and reconstructed with the rig of ``rigs`` that fits
     it best, refined from it when it does not fit (:func:`reconstruct_tool_capture`'s rules)."""
     from rangekit.coded.decode import decode
@@ -75,7 +78,8 @@ def reconstruct_checked(capture, rigs: Sequence[tuple[str, Rig]], *, subpixel: b
     if spec is None:
         raise ConfigError(f"{where}: no patterns.json; give the pattern set")
     with naming(where):
-        dec = decode(images, spec, subpixel=subpixel, full_scale=full_scale, response=rigs[0][1].projector_response)
+        dec = decode(images, spec, subpixel=subpixel, full_scale=full_scale, response=rigs[0][1].projector_response,
+                     motion=True, max_motion=max_motion)
         cols, rows = decoded_coordinates(dec, 0.03)
 
         def check(r: Rig):
@@ -141,7 +145,8 @@ class CheckedReconstruction:
 def reconstruct_tool_capture(captures: Sequence[str | Path], preset: str, rig, *,
                              projector_size: tuple[int, int] | None = None, subpixel: bool = True,
                              method: str = "auto", report: Callable[[str], object] | None = None,
-                             refine: bool = True, free_intrinsics: bool = False) -> CheckedReconstruction:
+                             refine: bool = True, free_intrinsics: bool = False,
+                             max_motion: float | None = MAX_MOTION_SHARE) -> CheckedReconstruction:
     """Another tool's capture as it lies on disk (:data:`rangekit.formats.layouts.LAYOUTS` ``preset``) to a cloud.
 
     ``captures``: one folder (a camera with the rig's projector; or, for a rig of two cameras and no projector,
@@ -186,7 +191,8 @@ def reconstruct_tool_capture(captures: Sequence[str | Path], preset: str, rig, *
     decode_options = options.pop("decode_options", {})
     with naming(where):
         if pair:
-            match = match_pair(stacks, spec, subpixel=subpixel, decode_options=decode_options,
+            match = match_pair(stacks, spec, subpixel=subpixel,
+                               decode_options={**decode_options, "motion": True, "max_motion": max_motion},
                                **{k: v for k, v in options.items() if k == "min_confidence"})
 
             def check(r: Rig):
@@ -203,7 +209,8 @@ def reconstruct_tool_capture(captures: Sequence[str | Path], preset: str, rig, *
             rec = triangulate_pair(match, used, exchanged=choice.exchanged,
                                    **{k: v for k, v in options.items() if k != "min_confidence"})
             return CheckedReconstruction(rec, choice, refined)
-        dec = decode(stacks[0], spec, subpixel=subpixel, response=first.projector_response, **decode_options)
+        dec = decode(stacks[0], spec, subpixel=subpixel, response=first.projector_response, motion=True,
+                     max_motion=max_motion, **decode_options)
         cols, rows = decoded_coordinates(dec, options.get("min_confidence", 0.03))
 
         def check(r: Rig):

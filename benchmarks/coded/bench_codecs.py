@@ -19,6 +19,10 @@ does). Per codec:
   and the share of points more than 1 mm off;
 - decode CPU s/MP: :func:`rangekit.coded.decode.decode` alone, CPU seconds of the process (every thread)
   per megapixel of the camera, median of ``--repeat`` runs after one untimed (numba's compile and cache).
+
+SLStudio's single-period 3-step codec has two rows: as rangekit decodes it by default, and with its column map
+blurred as SLStudio blurs it (``decode(..., coord_smoothing=3)``, what the ``slstudio:3ps`` layout passes;
+the other rows' filters as they are, not that layout's).
 """
 
 from __future__ import annotations
@@ -35,6 +39,12 @@ from rangekit.coded.triangulate import triangulate_ray_plane
 from rangekit.sim import SimRig, default_scene
 
 
+#: The single-period 3-step codec decoded as SLStudio decodes it: the column map blurred (sigma 3 camera pixels,
+#: ``CodecPhaseShift3.cpp``), as the ``slstudio:3ps`` capture layout does (``coord_smoothing``).
+SMOOTHED_3PS = "SLStudio single period, 3 steps, column blurred as SLStudio does (`coord_smoothing=3`)"
+DECODE_OPTIONS = {SMOOTHED_3PS: {"coord_smoothing": 3.0}}
+
+
 def codecs(width: int, height: int) -> dict[str, PatternSpec]:
     """Codec name -> spec on a ``width`` x ``height`` projector, columns only."""
     W = width
@@ -47,6 +57,7 @@ def codecs(width: int, height: int) -> dict[str, PatternSpec]:
             "phase", W, height, cols, {"periods": [W, W / 16], "steps": 3, "fine_steps": 3, "rounding": "down"}),
         "SLStudio single period, 3 steps (`phase`, period W)": PatternSpec(
             "phase", W, height, cols, {"periods": [W], "fine_steps": 3, "rounding": "down"}),
+        SMOOTHED_3PS: PatternSpec("phase", W, height, cols, {"periods": [W], "fine_steps": 3, "rounding": "down"}),
         "`micro` (SLStudio's 10 periods, 70-80 px)": PatternSpec("micro", W, height, cols),
         "`modulated` (SLStudio: 24 periods x 16 carrier periods + cue)": PatternSpec("modulated", W, height, cols),
         "`ftp` (OpenCV, 20 periods, + 3-frame cue)": PatternSpec("ftp", W, height, cols),
@@ -55,19 +66,21 @@ def codecs(width: int, height: int) -> dict[str, PatternSpec]:
     }
 
 
-def measure(sim: SimRig, spec: PatternSpec, repeat: int) -> dict:
+def measure(sim: SimRig, spec: PatternSpec, repeat: int, options: dict | None = None) -> dict:
     """One codec's row: frames, decoded share and median error, points' share, RMS and share > 1 mm, decode CPU seconds
-    per megapixel."""
+    per megapixel; ``options``: more keyword arguments of ``decode``."""
     rig = sim.rig
+    options = options or {}
     stack = np.stack(sim.capture_sequence(list(spec.frames())))
     truth = sim.ground_truth()
-    dec = decode(stack, spec, response=rig.projector_response)     # also compiles / loads numba's cache
+    dec = decode(stack, spec, response=rig.projector_response, **options)     # also compiles / loads numba's cache
     cpu = []
     for _ in range(repeat):
         t = time.process_time()
-        decode(stack, spec, response=rig.projector_response)
+        decode(stack, spec, response=rig.projector_response, **options)
         cpu.append(time.process_time() - t)
-    rec = reconstruct_view(stack, spec, rig.camera, rig.projector, response=rig.projector_response)
+    rec = reconstruct_view(stack, spec, rig.camera, rig.projector, response=rig.projector_response,
+                           decode_options=options)
     visible = truth.hit & (truth.object_id == 0)
     raw = triangulate_ray_plane(rig.camera, rig.projector, dec.proj_col)
     decoded = raw.valid & visible
@@ -93,7 +106,7 @@ def main() -> int:
     sim = SimRig(default_scene(args.object), seed=args.seed)
     rows = {}
     for name, spec in codecs(*sim.rig.projector.size).items():
-        rows[name] = measure(sim, spec, args.repeat)
+        rows[name] = measure(sim, spec, args.repeat, DECODE_OPTIONS.get(name))
         if not args.markdown:
             r = rows[name]
             print(f"{name}: {r['frames']} frames, decoded {r['decoded']:.1%} (median {r['median_decoded_mm']:.3f} mm), "

@@ -43,7 +43,7 @@ GRAY_BITS = 10          # CodecGrayCode.cpp: Nhorz, the column bits projected wh
 #:   cloud zigzagged from one edge to the next along each row. The authors keep the coarser bits' edges alone
 #:   too. Median distance to their cloud 0.032 -> 0.023 mm, to the 2x3's 0.086 -> 0.062 mm; ``max_gap`` 12
 #:   (twice the default, as the edges are twice as far apart): with 6 the pixels where they are over 6 px
-#:   apart kept their integer code (roughness 1.12x the authors' instead of 1.00x at smoothing 2);
+#:   apart kept their integer code (roughness 1.12x the authors' instead of 1.005x at smoothing 2);
 #: - ``stripe_smoothing`` 3 (1 6 15 20 15 6 1 along the stripes, a Gaussian of 1.22 camera pixels): the
 #:   edges of bits 1 and up wander from row to row by 0.17-0.23 camera pixels RMS (their second differences
 #:   down the stripes), more than the camera's noise moves a crossing (its 2x3 phase noise gives 1.5 DN);

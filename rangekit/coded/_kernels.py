@@ -15,7 +15,8 @@ from numba import njit, prange
 # OpenMP or numba's own workqueue; skips the TBB probe (and its warning where TBB is too old).
 numba.config.THREADING_LAYER_PRIORITY = ["omp", "workqueue", "tbb"]
 
-__all__ = ["gray_rows", "masks_rows", "crossings", "interp_along_rows", "interp_along_cols", "range_filter_normals"]
+__all__ = ["gray_rows", "masks_rows", "crossings", "smooth_along", "interp_along_rows", "interp_along_cols",
+           "range_filter_normals"]
 
 
 @njit(parallel=True, cache=True, nogil=True)
@@ -76,12 +77,13 @@ def masks_rows(stack, white_i, black_i, sep_p, sep_i, t_shadow, t_low, ratio, in
 
 
 @njit(parallel=True, cache=True, nogil=True)
-def crossings(stack, code, p_by_bit, i_by_bit, edge_bit, vertical, out):  # pragma: no cover - compiled
+def crossings(stack, code, p_by_bit, i_by_bit, edge_bit, vertical, out, min_bit=0):  # pragma: no cover - compiled
     """Stripe-edge crossings between neighbouring pixels whose codes differ by one.
 
     vertical == False: pairs (y, x)-(y, x+1), out (H, W-1); True: pairs (y, x)-(y+1, x), out (H-1, W).
     out = t in [0, 1], the fraction of the way from the first pixel to the crossing of pattern and
-    inverse of the frame whose stripes change between the two codes; NaN where there is none.
+    inverse of the frame whose stripes change between the two codes; NaN where there is none, or where
+    that frame's bit is below ``min_bit`` (edges of finer stripes left out).
     """
     Ho = out.shape[0]
     Wo = out.shape[1]
@@ -96,11 +98,37 @@ def crossings(stack, code, p_by_bit, i_by_bit, edge_bit, vertical, out):  # prag
             if c0 >= 0 and c1 >= 0 and (c1 - c0 == 1 or c0 - c1 == 1):
                 lo = c0 if c0 < c1 else c1
                 b = edge_bit[lo]
-                d0 = np.float32(stack[p_by_bit[b], y, x]) - np.float32(stack[i_by_bit[b], y, x])
-                d1 = np.float32(stack[p_by_bit[b], y1, x1]) - np.float32(stack[i_by_bit[b], y1, x1])
-                if d0 * d1 <= 0 and d0 != d1:
-                    t = d0 / (d0 - d1)
+                if b >= min_bit:
+                    d0 = np.float32(stack[p_by_bit[b], y, x]) - np.float32(stack[i_by_bit[b], y, x])
+                    d1 = np.float32(stack[p_by_bit[b], y1, x1]) - np.float32(stack[i_by_bit[b], y1, x1])
+                    if d0 * d1 <= 0 and d0 != d1:
+                        t = d0 / (d0 - d1)
             out[y, x] = t
+
+
+@njit(parallel=True, cache=True, nogil=True)
+def smooth_along(coord, taps, max_step, vertical, out):  # pragma: no cover - compiled
+    """``coord`` (H, W) float32 averaged with ``taps`` (2 h + 1, float64, summing to 1) along camera columns
+    (``vertical``) or rows, summed in float64 in tap order; the pixel's own value where a tap is outside the
+    image, NaN or over ``max_step`` per pixel of distance off it (:func:`rangekit.coded.binary.smooth_along_stripes`)."""
+    H, W = coord.shape
+    n = taps.shape[0]
+    half = n // 2
+    dy = 1 if vertical else 0
+    for y in prange(H):
+        for x in range(W):
+            c = np.float64(coord[y, x])
+            acc = 0.0
+            kept = c == c
+            for k in range(n if kept else 0):
+                yy = np.int64(y) + (k - half) * dy
+                xx = np.int64(x) + (k - half) * (1 - dy)
+                v = np.float64(coord[yy, xx]) if 0 <= yy < H and 0 <= xx < W else np.nan
+                if not (v == v) or abs(v - c) > max_step * abs(k - half):
+                    kept = False
+                    break
+                acc += taps[k] * v
+            out[y, x] = np.float32(acc) if kept else coord[y, x]
 
 
 @njit(cache=True, nogil=True, inline="always")

@@ -146,10 +146,11 @@ def codes_beyond(code: np.ndarray, spec: PatternSpec, axis: str, counted: np.nda
     return n, top, int(np.count_nonzero(counted)), smooth
 
 
-def axis_crossings(fr: CaptureStack, spec: PatternSpec, axis: str, code: np.ndarray) -> np.ndarray:
+def axis_crossings(fr: CaptureStack, spec: PatternSpec, axis: str, code: np.ndarray, min_bit: int = 0) -> np.ndarray:
     """Stripe-edge crossings of one axis's code map: (H, W-1) along camera rows for columns, (H-1, W) along camera
     columns for rows; float32 fraction of the way from a pixel to its neighbour where the pattern and inverse of
-    the bit that changes between their codes cross, NaN where the codes do not differ by one (compiled)."""
+    the bit that changes between their codes cross, NaN where the codes do not differ by one or that bit is below
+    ``min_bit`` (the finer stripes' edges left out: ``decode(..., min_edge_bit=...)``; compiled)."""
     from rangekit.coded import _kernels as K
 
     H, W = fr.shape
@@ -160,7 +161,7 @@ def axis_crossings(fr: CaptureStack, spec: PatternSpec, axis: str, code: np.ndar
     edge_bit = edge_bit_lut(spec.width if axis == "columns" else spec.height)
     vertical = axis == "rows"
     t = np.empty((H - 1, W) if vertical else (H, W - 1), np.float32)
-    K.crossings(fr.stack, code, p_by_bit, i_by_bit, edge_bit, vertical, t)
+    K.crossings(fr.stack, code, p_by_bit, i_by_bit, edge_bit, vertical, t, min_bit)
     return t
 
 
@@ -181,24 +182,18 @@ def smooth_along_stripes(coord: np.ndarray, axis: str, half: int, max_step: floa
     """A decoded coordinate map (H, W) float32 averaged along its stripes: camera columns for projector
     columns (stripes of a column code stand about upright in the camera), camera rows for projector rows.
 
-    Binomial weights over ``2 half + 1`` pixels (``half`` 1: 1 2 1; 2: 1 4 6 4 1, a Gaussian of 1 px). A pixel
-    keeps its value where a tap is NaN or differs from it by more than ``max_step`` codes per pixel between
-    them (a depth edge: the stripes there belong to two surfaces). Used where a real projector's stripe edges
-    wander from one camera row to the next more than the camera's noise explains (docs/real-captures.md).
+    Binomial weights over ``2 half + 1`` pixels (``half`` 1: 1 2 1; 2: 1 4 6 4 1, a Gaussian of 1 px; 3: 1 6 15
+    20 15 6 1, of 1.22 px). A pixel keeps its value where a tap is outside the image, NaN or differs from it by
+    more than ``max_step`` codes per pixel between them (a depth edge: the stripes there belong to two
+    surfaces). Used where a real projector's stripe edges wander from one camera row to the next more than the
+    camera's noise explains (docs/real-captures.md). One compiled pass (:func:`rangekit.coded._kernels.smooth_along`).
     """
+    from rangekit.coded import _kernels as K
+
     if half <= 0:
         return coord
     taps = np.array([math.comb(2 * half, k) for k in range(2 * half + 1)], np.float64)
     taps /= taps.sum()
-    along = 0 if axis == "columns" else 1
-    pad = [(half, half) if a == along else (0, 0) for a in range(2)]
-    padded = np.pad(coord.astype(np.float64), pad, constant_values=np.nan)
-    n = coord.shape[along]
-    centre = coord.astype(np.float64)
-    acc = np.zeros_like(centre)
-    with np.errstate(invalid="ignore"):
-        for k, w in enumerate(taps):
-            tap = np.take(padded, np.arange(k, k + n), axis=along)
-            far = np.abs(tap - centre) > max_step * abs(k - half)
-            acc += w * np.where(far, np.nan, tap)
-    return np.where(np.isfinite(acc), acc, coord).astype(np.float32)
+    out = np.empty(coord.shape, np.float32)
+    K.smooth_along(np.ascontiguousarray(coord, dtype=np.float32), taps, float(max_step), axis == "columns", out)
+    return out

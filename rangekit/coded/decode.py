@@ -95,7 +95,8 @@ def _unchecked(asked: bool, spec: PatternSpec, moved) -> tuple[str, ...]:
 def decode(stack, spec: PatternSpec, *, order: str = "rangekit", subpixel: bool = True,
            min_contrast: float = 0.015, shadow_threshold: float = 0.01, max_global_ratio: float | None = None,
            max_gap: float = 6.0, max_disagreement: float = 1.5, full_scale: float | None = None,
-           response: ProjectorResponse | None = None, stripe_smoothing: int = 0, coord_smoothing: float = 0.0,
+           response: ProjectorResponse | None = None, stripe_smoothing: int = 0, min_edge_bit: int = 0,
+           coord_smoothing: float = 0.0,
            motion: bool = False, max_motion: float | None = MAX_MOTION_SHARE, ties: str = "zero",
            workers: int = 2, chunk_rows: int = 96) -> DecodeResult:
     """Decode a capture stack into projector coordinates.
@@ -136,6 +137,14 @@ def decode(stack, spec: PatternSpec, *, order: str = "rangekit", subpixel: bool 
         Subpixel edges: average each decoded coordinate along its stripes over ``2 n + 1`` pixels (binomial
         weights; :func:`rangekit.coded.binary.smooth_along_stripes`); 0, the default, leaves it per pixel. For
         captures whose stripe edges wander from row to row (a real projector's, docs/real-captures.md).
+    min_edge_bit : int
+        Subpixel edges: place the edges from the crossings of Gray bits ``min_edge_bit`` and up alone; a pixel
+        between two of them is interpolated over the finer stripes' edges, whose bits still decide its code
+        (``max_gap`` must reach across them: about ``2 ** min_edge_bit`` times the width of one code in camera
+        pixels). 0, the default, uses every edge. For captures whose finest stripes cross off the coarser ones:
+        a blur that is not symmetric shifts a fine, nearly sinusoidal stripe's crossing by another amount than a
+        sharp edge's (SLStudio's skull: the finest bit's edges 0.19 camera pixels off the others on average, up
+        to 0.5; docs/real-captures.md).
     coord_smoothing : float
         Phase methods: a Gaussian of this many camera pixels over each decoded coordinate map, over its decoded
         pixels alone (:func:`rangekit.coded.phase.smooth_coordinate_map`), as SLStudio's single-period
@@ -172,6 +181,8 @@ def decode(stack, spec: PatternSpec, *, order: str = "rangekit", subpixel: bool 
                           f"{type(response).__name__} {response!r}; e.g. response=ProjectorResponse(gamma=2.2)")
     if ties not in ("zero", "one"):
         raise DecodeError(f"ties={ties!r}: expected 'zero' or 'one'")
+    if isinstance(min_edge_bit, bool) or not isinstance(min_edge_bit, (int, np.integer)) or min_edge_bit < 0:
+        raise DecodeError(f"min_edge_bit={min_edge_bit!r}: expected a whole number of bits >= 0")
     if spec.method in ("white", "black"):
         raise DecodeError(f"pattern {spec.method!r} carries no code; decode a graycode, xor02, xor04, phase, "
                           "hybrid, debruijn, micro, modulated, ftp, psp or faps capture")
@@ -190,6 +201,10 @@ def decode(stack, spec: PatternSpec, *, order: str = "rangekit", subpixel: bool 
     binary = spec.method in ("graycode", "xor02", "xor04", "hybrid")
     edges = subpixel and spec.method in ("graycode", "xor02", "xor04")
     idx = fr.index
+    short = [a for a in spec.axes if edges and min_edge_bit >= spec.bits(a)]
+    if short:
+        raise DecodeError(f"min_edge_bit={min_edge_bit}: the {short[0]} code has {spec.bits(short[0])} bits "
+                          f"(0-{spec.bits(short[0]) - 1}), no stripe edge would be left")
     if max_global_ratio is None:
         max_global_ratio = np.inf if spec.xor_base is not None else 1.0
 
@@ -216,9 +231,12 @@ def decode(stack, spec: PatternSpec, *, order: str = "rangekit", subpixel: bool 
             codes[axis] = axis_code(fr, spec, axis, workers, chunk_rows, ties=ties, keep_beyond=True)
             if spec.xor_base is None:
                 beyond[axis] = codes_beyond(codes[axis], spec, axis, ~shadow & ~low)
-            if edges or motion:
+            if motion or (edges and not min_edge_bit):
                 cross[axis] = axis_crossings(fr, spec, axis, codes[axis])
-            subs[axis] = axis_subpixel(axis, codes[axis], cross[axis], max_gap) if edges else empty_f
+            subs[axis] = empty_f
+            if edges:
+                t = cross[axis] if not min_edge_bit else axis_crossings(fr, spec, axis, codes[axis], min_edge_bit)
+                subs[axis] = axis_subpixel(axis, codes[axis], t, max_gap)
         proj_col, proj_row = np.empty((H, W), np.float32), np.empty((H, W), np.float32)
         incons = np.empty((H, W), bool)
         K.finalise_binary(codes.get("columns", empty_i), subs.get("columns", empty_f), codes.get("rows", empty_i),

@@ -204,3 +204,39 @@ def test_view_clouds_reads_ahead_and_gives_view_clouds_results_in_order(tmp_path
     assert len(next(it)[0]) > 500 and len(next(it)[0]) > 500      # views 0 and 1 come first
     with pytest.raises(RangekitError, match="007.png"):
         next(it)
+
+
+def _numpy_smooth_along(coord, axis, half, max_step):
+    """The numpy rule of smooth_along_stripes before its compiled kernel (the reference)."""
+    import math
+
+    taps = np.array([math.comb(2 * half, k) for k in range(2 * half + 1)], np.float64)
+    taps /= taps.sum()
+    along = 0 if axis == "columns" else 1
+    pad = [(half, half) if a == along else (0, 0) for a in range(2)]
+    padded = np.pad(coord.astype(np.float64), pad, constant_values=np.nan)
+    n = coord.shape[along]
+    centre = coord.astype(np.float64)
+    acc = np.zeros_like(centre)
+    with np.errstate(invalid="ignore"):
+        for k, w in enumerate(taps):
+            tap = np.take(padded, np.arange(k, k + n), axis=along)
+            far = np.abs(tap - centre) > max_step * abs(k - half)
+            acc += w * np.where(far, np.nan, tap)
+    return np.where(np.isfinite(acc), acc, coord).astype(np.float32)
+
+
+@pytest.mark.parametrize("axis", ["columns", "rows"])
+def test_compiled_stripe_smoothing_is_the_numpy_rule_bit_for_bit(axis):
+    from rangekit.coded.binary import smooth_along_stripes
+
+    rng = np.random.default_rng(3)
+    y, x = np.mgrid[0:301, 0:257]
+    coord = (0.37 * y + 1.7 * x + rng.normal(0, 0.3, y.shape)).astype(np.float32)
+    coord[rng.random(coord.shape) < 0.05] = np.nan          # undecoded pixels
+    coord[150:] += 40                                         # depth edges across and along
+    coord[:, 100:] -= 7
+    for half in (1, 2, 3, 4):
+        for max_step in (2.0, 0.5):
+            np.testing.assert_array_equal(smooth_along_stripes(coord, axis, half, max_step),
+                                          _numpy_smooth_along(coord, axis, half, max_step))

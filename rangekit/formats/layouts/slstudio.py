@@ -37,13 +37,22 @@ GRAY_BITS = 10          # CodecGrayCode.cpp: Nhorz, the column bits projected wh
 #: authors' cloud (tests/formats/test_capture_layouts.py, docs/real-captures.md):
 #: - no direct/global separation (``max_global_ratio`` inf): it needs true inverses; with made ones a blurred
 #:   stripe reads as global light, and rejected 53% of the pixels the authors kept (eye sockets, rims);
-#: - ``stripe_smoothing`` 2 (1 4 6 4 1 along the stripes, a Gaussian of 1 camera pixel): the stripe edges of
-#:   its projector wander from row to row by 0.34 projector columns RMS, white in both directions, five
-#:   times what the camera's noise moves a crossing (its 2x3 phase noise gives 1.5 DN); per pixel the
-#:   cloud is 12% rougher than the authors' (who keep one point per stripe edge), with it 1.9% smoother;
+#: - ``min_edge_bit`` 1 with ``max_gap`` 12: the edges placed from bits 1 and up alone (bit 0 still decides
+#:   the code). The finest stripes (2 codes, 3.5 camera pixels wide) cross 0.19 camera pixels off the coarser
+#:   bits' edges on average, up to 0.5 in parts of the skull, the same way at rising and falling edges: the
+#:   cloud zigzagged from one edge to the next along each row. The authors keep the coarser bits' edges alone
+#:   too. Median distance to their cloud 0.032 -> 0.023 mm, to the 2x3's 0.086 -> 0.062 mm; ``max_gap`` 12
+#:   (twice the default, as the edges are twice as far apart): with 6 the pixels where they are over 6 px
+#:   apart kept their integer code (roughness 1.12x the authors' instead of 1.005x at smoothing 2);
+#: - ``stripe_smoothing`` 3 (1 6 15 20 15 6 1 along the stripes, a Gaussian of 1.22 camera pixels): the
+#:   edges of bits 1 and up wander from row to row by 0.17-0.23 camera pixels RMS (their second differences
+#:   down the stripes), more than the camera's noise moves a crossing (its 2x3 phase noise gives 1.5 DN);
+#:   roughness 0.98x the authors' (2: 1.005x; 4: 0.96x, median 0.023 mm);
 #: - ``min_confidence`` 0.015 (the decoder's own ``min_contrast``; 3.8 DN of white - black, 2.5 times the
 #:   camera's noise): 0.03, tuned on the simulator's camera, drops 2% of the skull the authors kept.
-GRAY_VIEW_OPTIONS = {"decode_options": {"max_global_ratio": float("inf"), "stripe_smoothing": 2},
+#: ``benchmarks/coded/skull_choices.py`` measures each.
+GRAY_VIEW_OPTIONS = {"decode_options": {"max_global_ratio": float("inf"), "min_edge_bit": 1, "max_gap": 12.0,
+                                        "stripe_smoothing": 3},
                      "min_confidence": 0.015}
 
 #: And its phase codecs (the same measurement): ``min_confidence`` 0.015 as above, and ``edge_margin`` 0:

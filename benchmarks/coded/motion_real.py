@@ -6,12 +6,15 @@ simulator's 0.5 mm slip (issue 38: its spoiled pixels caught).
 Printed, one JSON line per capture: the share of the decoded pixels the ``motion`` mask flags
 (:func:`rangekit.coded.decode.decode` with ``motion=True``, ``max_motion=None``; the decoded pixels are those of the
 same decode without the check), and for the slip the share of its spoiled pixels flagged
-(benchmarks/coded/bench_motion.py's definition). The still real captures are every binary-coded one in the shared
+(benchmarks/coded/bench_motion.py's definition); ``detect_share``: the share :func:`rangekit.coded.motion.detect_motion`
+(what ``rangekit process`` and ``rangekit scan`` refuse a view by, over ``max_motion`` 2%) finds moved, and
+``detect_share_every_bit``: the same reading every bit (``read_sigmas=0``, the rule before issue 47). The still
+real captures are every binary-coded one in the shared
 data (``$RANGEKIT_DATA`` or ``../shared/data``): SLStudio's skull under its Gray code (``slstudio:graycode``; its
 calibration sequences are phase-shifted, not binary) and RoomAlive's Gray code (``roomalive:graycode``). The
 simulated ones: the default rig and object still, with the projector and camera defocused (projector sigma 2 px,
 camera 1.5 px), and with interreflection (30% of the direct light, blurred over 20 camera pixels). ``--time``: the
-decode's CPU seconds with and without the check (best of 3) on the skull and the default rig.
+decode's CPU seconds with and without the check, and detect_motion's (best of 3) on the skull and the default rig.
 """
 
 from __future__ import annotations
@@ -23,6 +26,7 @@ import time
 import numpy as np
 
 from rangekit.coded.decode import decode
+from rangekit.coded.motion import detect_motion
 
 
 def _cpu(f) -> float:
@@ -42,7 +46,14 @@ def flagged_share(stack, spec, options: dict) -> dict:
     flagged = checked.motion & decoded
     return {"decoded": int(decoded.sum()), "flagged": int(flagged.sum()),
             "flagged_share": round(float(flagged.sum() / max(decoded.sum(), 1)), 5),
-            "frames_named": list(checked.moved_frames)}
+            "frames_named": list(checked.moved_frames), **detect_shares(stack, spec, decoded)}
+
+
+def detect_shares(stack, spec, decoded: np.ndarray) -> dict:
+    """detect_motion's share of a capture (``decoded``: its decoded pixels), with the rule of the bits read and
+    with every bit read (before issue 47)."""
+    return {"detect_share": round(detect_motion(stack, spec, decoded).share, 5),
+            "detect_share_every_bit": round(detect_motion(stack, spec, decoded, read_sigmas=0.0).share, 5)}
 
 
 def real_captures() -> dict:
@@ -98,7 +109,8 @@ def sim_cases() -> dict:
     out["sim 0.5 mm slip"] = {"spoiled": int(spoiled.sum()),
                               "spoiled_flagged": round(float((checked.motion & spoiled).sum() / max(spoiled.sum(), 1)), 4),
                               "flagged_share": round(float((checked.motion & decoded).sum() / decoded.sum()), 4),
-                              "frames_named": list(checked.moved_frames)}
+                              "frames_named": list(checked.moved_frames),
+                              **detect_shares(np.stack(moving), spec, np.isfinite(ds.proj_col))}
     return out
 
 
@@ -123,9 +135,11 @@ def main() -> None:
         spec = make_pattern_spec("graycode", (rig.projector.width, rig.projector.height))
         timed["sim still"] = SimRig(default_scene(), rig, seed=5).capture_sequence(list(spec.frames())), spec, {}
         for name, (stack, spec, options) in timed.items():
+            decoded = np.isfinite(decode(stack, spec, motion=False, **options).proj_col)
             print(json.dumps({"timed": name, "decode_cpu_s": {
                 "checked": round(_cpu(lambda: decode(stack, spec, motion=True, max_motion=None, **options)), 3),
-                "unchecked": round(_cpu(lambda: decode(stack, spec, motion=False, **options)), 3)}}), flush=True)
+                "unchecked": round(_cpu(lambda: decode(stack, spec, motion=False, **options)), 3)},
+                "detect_motion_cpu_s": round(_cpu(lambda: detect_motion(stack, spec, decoded)), 3)}), flush=True)
 
 
 if __name__ == "__main__":

@@ -57,7 +57,7 @@ def merge_decodes(results: list[DecodeResult], exposures_us, full_scale: float) 
         if any(m is None for m in maps):
             out[f.name] = None
             continue
-        if f.name == "moved_frames":      # the frames any exposure found taken after a move
+        if f.name in ("moved_frames", "motion_unchecked"):   # the frames any exposure found moved; axes unchecked
             out[f.name] = tuple(dict.fromkeys(name for m in maps for name in m))
             continue
         if f.name == "white":

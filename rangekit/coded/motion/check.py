@@ -28,6 +28,16 @@ that weak on both its pixels is such a misread, not a move (NaN, not ``inf``), a
 inverse changes by less than that across its pixel pair is located no better than the noise lets, so it checks no
 residual. A move's steps back are read clearly (the simulator's slip: 13 noise sigmas and more).
 
+A bit is read or not over a region too, not only at an edge (a defocused projector: the finest bit pure noise,
+the next at a third of its contrast, whose steps back mix the unread bit with readable edges). In each tile of
+:data:`READ_TILE_PX` pixels, a bit under that limit on over :data:`UNREAD_SHARE` of the decoded pixels (at its
+stripes' peaks too: a resolved stripe is weak only near its edges) is not read there, and the tile is checked with
+that bit and every finer one masked off (:func:`unread_levels`): codes ``c >> m``, the Gray code of the bits kept,
+whose edges are those bits' own, their residuals and limits in codes of those bits (the simulator with its
+projector blurred to a 2-pixel sigma: 40.8% of a still capture flagged without this, none with it). A move leaves
+every bit read (the slip: 99.2% caught either way). XOR codes are checked whole (each of their frames holds the
+finest stripes).
+
 The frames taken after the move are named from the residuals: each is ``o_b(n) - (o_b(n-1) + o_b(n+1)) / 2`` in
 the offsets ``o_b`` of the bits whose edges the three are, solved by least squares in tiles of 64 pixels (a move
 shifts the stripes by different amounts, either way, with the slope of the surface), the axis's first-captured
@@ -52,7 +62,7 @@ from rangekit.coded.frames import CaptureStack
 from rangekit.coded.patterns import PatternSpec, gray_encode
 
 __all__ = ["MAX_CODE_STEP", "MAX_MOTION_SHARE", "MOTION_LIMIT_CODES", "MotionCheck", "check_motion", "code_step",
-           "still_baseline"]
+           "still_baseline", "unread_levels"]
 
 #: A capture in which more of the decoded pixels than this moved is refused by default
 #: (:func:`rangekit.coded.decode.decode`'s ``max_motion``, ``rangekit decode --max-motion``).
@@ -86,6 +96,13 @@ REGION_SHARE = 0.15
 #: The frames are named (and the bits' offsets solved) only when more than this share of the pixels moved.
 NAMED_SHARE = 0.005
 REGION_HALF_PX = 10
+#: A bit is not read in a tile of :data:`READ_TILE_PX` pixels where over this share of its decoded pixels have the
+#: bit's pattern and inverse within :data:`READ_SIGMAS` noise sigmas (:func:`unread_levels`): its stripes' peaks
+#: too (the default rig's bit 0, resolved, is that weak on 16% of its pixels, its edges'). The defocused simulator:
+#: nothing flagged with any share from 0.5 to 0.9; SLStudio's skull (fine stripes half read): 0.28% at 0.5 (its
+#: tiles checked on their coarser bits, whose edges span the skull's folds), 0.15% at 0.9, as without the rule.
+UNREAD_SHARE = 0.9
+READ_TILE_PX = 32
 #: Frames are named as taken after a move when their bit's edges are displaced by more than this (codes) and by at
 #: least half the most displaced bit's: the 90th percentile over tiles of :data:`TILE_PX` pixels with at least
 #: :data:`MIN_TILE_EDGES` residuals (a still capture: 0.023 at most on the default rig).
@@ -118,73 +135,131 @@ class MotionCheck:
 
 def check_motion(fr: CaptureStack, spec: PatternSpec, codes: dict[str, np.ndarray], decoded: np.ndarray,
                  crossings: dict[str, np.ndarray] | None = None, limit: float = MOTION_LIMIT_CODES,
-                 read_sigmas: float = READ_SIGMAS) -> MotionCheck:
+                 read_sigmas: float = READ_SIGMAS, tile: tuple[int, int] = (READ_TILE_PX, READ_TILE_PX),
+                 region_half: tuple[int, int] = (REGION_HALF_PX, REGION_HALF_PX), line_pairs: bool = False
+                 ) -> MotionCheck:
     """The motion check of a binary-code capture (module doc).
 
     ``fr``: the capture; ``codes``: axis -> (H, W) int32 integer code map (:func:`rangekit.coded.binary.axis_code`);
-    ``decoded``: (H, W) bool, the pixels with a code (only they are flagged, and the share is of them); ``crossings``: axis -> the axis's crossings when
-    already made (:func:`rangekit.coded.binary.axis_crossings`); ``limit``: codes; ``read_sigmas``: bits read
-    under this many noise sigmas are not checked (:data:`READ_SIGMAS`; 0: every bit is, the check before issue 47).
+    ``decoded``: (H, W) bool, the pixels with a code (only they are flagged, and the share is of them);
+    ``crossings``: axis -> the axis's crossings when already made (:func:`rangekit.coded.binary.axis_crossings`);
+    ``limit``: codes; ``read_sigmas``: bits read under this many noise sigmas are not checked (:data:`READ_SIGMAS`;
+    0: every bit is, the check before issue 47); ``tile``: (rows, columns) of the tiles over which a bit is read or
+    not (:func:`unread_levels`; pixels of ``fr``); ``region_half``: (rows, columns) of the neighbourhood's half
+    size (:data:`REGION_SHARE`); ``line_pairs``: ``fr`` holds pairs of neighbouring camera lines (rows 2k and 2k+1
+    of the column codes' frames, columns of the row codes'), each pair's neighbour along a stripe its other line
+    (:func:`rangekit.coded.motion.detect.detect_motion`'s layout).
     """
-    from rangekit.coded.motion import _kernels as M
-
     mask = np.zeros(fr.shape, bool)
     moved: list[str] = []
     offsets: dict[str, np.ndarray] = {}
-    residuals: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+    residuals: dict[str, tuple[np.ndarray, ...]] = {}
     undersampled: list[str] = []
     for axis, code in codes.items():
         c_along = code.T if axis == "rows" else code
         if code_step(c_along, decoded.T if axis == "rows" else decoded) > MAX_CODE_STEP:
             undersampled.append(axis)      # noise turns codes back there: no edge tells a move from it
             continue
-        t = crossings[axis] if crossings and axis in crossings else axis_crossings(fr, spec, axis, code)
         along = axis == "rows"                     # row codes: their edges run down camera columns
-        c2 = np.ascontiguousarray(code.T) if along else code
-        t2 = np.ascontiguousarray(t.T) if along else t
-        res = np.empty(t2.shape, np.float64)
-        lo = np.empty(t2.shape, np.int64)
-        size = spec.width if axis == "columns" else spec.height
         prefix = "col" if axis == "columns" else "row"
         nb = spec.bits(axis)
         p_by_bit = np.array([fr.index[f"{prefix}_b{b}"] for b in range(nb)], np.int64)
         i_by_bit = np.array([fr.index[f"{prefix}_b{b}_inv"] for b in range(nb)], np.int64)
         weak = (read_sigmas * pair_noise(fr, int(p_by_bit[-1]), int(i_by_bit[-1]), decoded, along)
                 if read_sigmas else 0.0)
-        M.crossing_residuals(c2, t2, EDGE_GAP_PX, fr.stack, p_by_bit, i_by_bit, edge_bit_lut(size),
-                             frame_words(nb, spec.xor_base), float(weak), along, res, lo)
-        res, axis_limit = still_baseline(res, lo, edge_bit_lut(size), spec.bits(axis), limit)
-        flags = np.empty(c2.shape, bool)
-        M.flag_bracketed(t2, res, float(axis_limit), flags)
-        # A move displaces a stripe along its whole length; the noise at a stripe edge flags a pixel here and there.
-        # Kept: flags with a flagged neighbour along the stripe (the next camera row for column codes).
-        along_stripe = np.zeros_like(flags)
-        along_stripe[1:] |= flags[:-1]
-        along_stripe[:-1] |= flags[1:]
-        flags &= along_stripe
-        mask |= flags.T if along else flags
-        residuals[axis] = res, lo
+        level = (unread_levels(fr, p_by_bit, i_by_bit, decoded, weak, tile) if weak and spec.xor_base is None
+                 else np.zeros(fr.shape, np.int8))
+        t = crossings[axis] if crossings and axis in crossings else axis_crossings(fr, spec, axis, code)
+        flags, res, lo, lv = _flag_axis(fr.stack, spec, axis, code, t, level, (p_by_bit, i_by_bit), weak, limit,
+                                        line_pairs)
+        mask |= flags
+        residuals[axis] = res, lo, lv
     mask &= decoded
-    mask |= decoded & (_local_share(mask, decoded) > REGION_SHARE)
+    mask |= decoded & (_local_share(mask, decoded, region_half) > REGION_SHARE)
     share = float(np.count_nonzero(mask)) / max(int(np.count_nonzero(decoded)), 1)
     if share > NAMED_SHARE:                    # something moved: which frames
-        for axis, (res, lo) in residuals.items():
+        for axis, (res, lo, lv) in residuals.items():
             size = spec.width if axis == "columns" else spec.height
-            o = _tiled_offsets(res, lo, edge_bit_lut(size), spec.bits(axis))
+            nb = spec.bits(axis)
+            o = _tiled_offsets(res, lo, lv, edge_bit_lut(size), nb)
             offsets[axis] = o
             prefix = "col" if axis == "columns" else "row"
             named = max(NAMED_OFFSET_CODES, 0.5 * float(o.max()))   # the bits displaced about as much as the most
-            for b in range(spec.bits(axis) - 1, -1, -1):          # in capture order: most significant first
+            for b in range(nb - 1, -1, -1):                        # in capture order: most significant first
                 if o[b] > named:
                     moved += [f"{prefix}_b{b}", f"{prefix}_b{b}_inv"]
     order = {name: i for i, name in enumerate(spec.frame_names)}
     return MotionCheck(mask, share, tuple(sorted(moved, key=order.__getitem__)), offsets, tuple(undersampled))
 
 
-def still_baseline(res: np.ndarray, lo: np.ndarray, edge_bit: np.ndarray, nb: int, limit: float
-                   ) -> tuple[np.ndarray, float]:
+def unread_levels(fr: CaptureStack, p_by_bit: np.ndarray, i_by_bit: np.ndarray, decoded: np.ndarray, weak: float,
+                  tile: tuple[int, int]) -> np.ndarray:
+    """(H, W) int8: how many of an axis's finest bits the capture does not read around each pixel (0: it reads
+    them all). In each ``tile`` (rows, columns; pixels), a bit is not read where over :data:`UNREAD_SHARE` of the
+    decoded pixels have its pattern and inverse within ``weak`` grey levels (a stripe the optics blurred away, a
+    dark surface): then neither it nor any finer bit is checked there. ``p_by_bit``/``i_by_bit``: each bit's
+    pattern and inverse frame (bit 0 first)."""
+    from rangekit.coded.motion import _kernels as M
+
+    H, W = fr.shape
+    ty, tx = max(int(tile[0]), 1), max(int(tile[1]), 1)
+    counts = np.empty((-(-H // ty), -(-W // tx), len(p_by_bit) + 1), np.int64)
+    M.tile_unread(fr.stack, p_by_bit, i_by_bit, decoded, np.float32(weak), ty, tx, counts)
+    unread = counts[..., 1:] > UNREAD_SHARE * counts[..., :1]
+    top = len(p_by_bit) - np.argmax(unread[..., ::-1], axis=-1)          # 1 + the coarsest unread bit
+    levels = np.where(unread.any(axis=-1), top, 0).astype(np.int8)
+    return np.repeat(np.repeat(levels, ty, axis=0), tx, axis=1)[:H, :W]
+
+
+def _flag_axis(stack: np.ndarray, spec: PatternSpec, axis: str, code: np.ndarray, t: np.ndarray, level: np.ndarray,
+               frames: tuple[np.ndarray, np.ndarray], weak: float, limit: float, line_pairs: bool
+               ) -> tuple[np.ndarray, ...]:
+    """One axis's check (:func:`check_motion`): ``(flags (H, W) bool, residuals, lower codes, levels)``, the last
+    three along rows of the axis's crossings (camera rows for column codes, camera columns for row codes; each
+    residual in codes of its level: :func:`rangekit.coded.motion._kernels.crossing_residuals`). ``code``: (H, W)
+    the axis's codes; ``t``: their crossings (:func:`rangekit.coded.binary.axis_crossings`); ``level``: (H, W) how
+    many finest bits are not checked at each pixel (:func:`unread_levels`); ``frames``: each bit's pattern and
+    inverse frame in ``stack`` (bit 0 first); ``weak``: grey levels; ``limit``: codes (of each level)."""
+    from rangekit.coded.motion import _kernels as M
+
+    along = axis == "rows"                     # row codes: their edges run down camera columns
+    c2 = np.ascontiguousarray(code.T) if along else code
+    t2 = np.ascontiguousarray(t.T) if along else t
+    l2 = np.ascontiguousarray(level.T) if along else level
+    p_by_bit, i_by_bit = frames
+    nb = len(p_by_bit)
+    lut = edge_bit_lut(spec.width if axis == "columns" else spec.height)
+    if l2.any():
+        tl = np.empty(t2.shape, np.float32)
+        M.level_crossings(stack, c2, l2, t2, p_by_bit, i_by_bit, lut, along, tl)
+    else:
+        tl = t2
+    res = np.empty(t2.shape, np.float64)
+    lo = np.empty(t2.shape, np.int64)
+    M.crossing_residuals(c2, l2, tl, EDGE_GAP_PX, stack, p_by_bit, i_by_bit, lut, frame_words(nb, spec.xor_base),
+                         float(weak), along, res, lo)
+    lv = l2[:, :-1]
+    res, limits = still_baseline(res, lo, lv, lut, nb, limit)
+    flags = np.empty(c2.shape, bool)
+    M.flag_bracketed(tl, res / limits[lv] if l2.any() else res, 1.0 if l2.any() else float(limits[0]), flags)
+    # A move displaces a stripe along its whole length; the noise at a stripe edge flags a pixel here and there.
+    # Kept: flags with a flagged neighbour along the stripe (the next camera row for column codes).
+    along_stripe = np.zeros_like(flags)
+    if line_pairs:                                   # each line's neighbour: the other line of its pair
+        n = len(flags) // 2 * 2
+        along_stripe[0:n:2], along_stripe[1:n:2] = flags[1:n:2], flags[0:n:2]
+    else:
+        along_stripe[1:] |= flags[:-1]
+        along_stripe[:-1] |= flags[1:]
+    flags &= along_stripe
+    return (flags.T if along else flags), res, lo, lv
+
+
+def still_baseline(res: np.ndarray, lo: np.ndarray, level: np.ndarray, edge_bit: np.ndarray, nb: int, limit: float
+                   ) -> tuple[np.ndarray, np.ndarray]:
     """The residuals measured against what the capture's own optics give a still surface, and the limit its noise
-    allows: ``(residuals, limit)``.
+    allows: ``(residuals, limits)``, ``limits`` (nb + 1,) one per level (``level``: each residual's, the finest
+    bits masked off; its residual and limit are in codes of that level).
 
     A real projector and lens move each bit's stripe edges by their own amount (a fine stripe is blurred more,
     and a made inverse crosses its pattern off the true edge), the same over the whole image: each triple of bits
@@ -192,30 +267,40 @@ def still_baseline(res: np.ndarray, lo: np.ndarray, edge_bit: np.ndarray, nb: in
     0.08 codes). A move displaces edges by an amount that changes sign with the surface's slope, so it barely
     moves these medians. The edges wander from row to row by the projector's noise (SLStudio's: 0.12 codes
     RMS, against 0.03 on the simulator): the limit is at least :data:`NOISE_SIGMAS` times that noise (the MAD's
-    sigma). Codes that turn back (``inf``) are left as they are (those the noise explains are NaN already:
-    :data:`READ_SIGMAS`)."""
+    sigma, over each level's residuals). Codes that turn back (``inf``) are left as they are (those the noise
+    explains are NaN already: :data:`READ_SIGMAS`)."""
+    limits = np.full(nb + 1, float(limit))
     finite = np.isfinite(res)
     if not finite.any():
-        return res, limit
-    # Each code's triple looked up from a table of the codes (a few thousand), not worked out per edge; the
-    # triples are small, so a stable argsort of them is numpy's radix sort (a fifth of np.unique's two sorts).
-    top = len(edge_bit) - 1
-    codes = np.arange(top + 1)
-    table = (edge_bit[np.clip(codes - 1, 0, top)] * nb + edge_bit) * nb + edge_bit[np.clip(codes + 1, 0, top)]
-    triple = table.astype(np.uint16 if table.max() < 1 << 16 else np.int64)[lo[finite]]
-    r = res[finite]
-    counts = np.bincount(triple)
-    groups = np.flatnonzero(counts)
-    ends = np.cumsum(counts[groups])
-    by_triple = r[np.argsort(triple, kind="stable")]
-    medians = np.zeros(len(counts))              # one per bit triple present (<= nb^3)
-    for g, a, b in zip(groups, ends - counts[groups], ends):
-        medians[g] = np.median(by_triple[a:b])
-    taken_off = r - medians[triple]
+        return res, limits
+    ys, xs = np.nonzero(finite)
+    key, m = _bit_triples(lo[ys, xs], level[ys, xs], edge_bit, nb)
+    r = res[ys, xs]
+    order = np.argsort(key.astype(np.uint16) if key.max() < 1 << 16 else key, kind="stable")   # radix sort
+    ks, rs = key[order], r[order]
+    starts = np.flatnonzero(np.r_[True, ks[1:] != ks[:-1]])
+    ends = np.r_[starts[1:], len(ks)]
+    medians = np.array([np.median(rs[a:b]) for a, b in zip(starts, ends)])   # one per bit triple (<= nb^3 a level)
+    dev = np.empty_like(r)
+    dev[order] = rs - np.repeat(medians, ends - starts)
     out = res.copy()
-    out[finite] = taken_off
-    sigma = 1.4826 * float(np.median(np.abs(taken_off)))
-    return out, max(limit, NOISE_SIGMAS * sigma)
+    out[ys, xs] = dev
+    levels = np.unique(m)
+    for k in levels:
+        sigma = 1.4826 * float(np.median(np.abs(dev if len(levels) == 1 else dev[m == k])))
+        limits[k] = max(limit, NOISE_SIGMAS * sigma)
+    return out, limits
+
+
+def _bit_triples(c: np.ndarray, m: np.ndarray, edge_bit: np.ndarray, nb: int) -> tuple[np.ndarray, np.ndarray]:
+    """For edges with lower codes ``c`` at levels ``m`` (their ``m`` finest bits masked off), the key of each one's
+    (level, previous edge's bit, own bit, next edge's bit), and the levels as int64: the neighbouring edges of a
+    level-m edge are ``1 << m`` codes away."""
+    m = m.astype(np.int64)
+    top = len(edge_bit) - 1
+    gap = np.left_shift(1, m)
+    key = ((m * nb + edge_bit[np.clip(c - gap, 0, top)]) * nb + edge_bit[c]) * nb + edge_bit[np.clip(c + gap, 0, top)]
+    return key, m
 
 
 def frame_words(nb: int, xor_base: int | None) -> np.ndarray:
@@ -260,42 +345,43 @@ def code_step(code: np.ndarray, decoded: np.ndarray) -> float:
     return float(np.median(steps[ok])) if ok.any() else 0.0
 
 
-def _local_share(mask: np.ndarray, decoded: np.ndarray, half: int = REGION_HALF_PX) -> np.ndarray:
-    """(H, W) the share of the decoded pixels flagged in the (2 half + 1)-pixel square around each pixel."""
+def _local_share(mask: np.ndarray, decoded: np.ndarray, half: tuple[int, int]) -> np.ndarray:
+    """(H, W) the share of the decoded pixels flagged in the (2 half[0] + 1) x (2 half[1] + 1) pixels around each
+    pixel."""
+    if not mask.any():
+        return np.zeros(mask.shape)
     flagged, there = _box_sum(mask, half), _box_sum(decoded, half)
     return np.where(there > 0, flagged / np.maximum(there, 1), 0.0)
 
 
-def _box_sum(a: np.ndarray, half: int) -> np.ndarray:
-    """(H, W) int64 count of True in the (2 half + 1)-pixel square around each pixel (clipped at the borders)."""
-    c = np.zeros((a.shape[0] + 1, a.shape[1] + 1), np.int64)
-    np.cumsum(np.cumsum(a, axis=0, dtype=np.int64), axis=1, out=c[1:, 1:])
-    ys, xs = np.arange(a.shape[0]), np.arange(a.shape[1])
-    y0, y1 = np.maximum(ys - half, 0), np.minimum(ys + half + 1, a.shape[0])
-    x0, x1 = np.maximum(xs - half, 0), np.minimum(xs + half + 1, a.shape[1])
-    return c[y1][:, x1] - c[y0][:, x1] - c[y1][:, x0] + c[y0][:, x0]
+def _box_sum(a: np.ndarray, half: tuple[int, int]) -> np.ndarray:
+    """(H, W) float64 count of True in the (2 half[0] + 1) x (2 half[1] + 1) pixels around each pixel (clipped at
+    the borders): OpenCV's unnormalised box filter, exact for counts (17x the cumulative sums' speed at 1280x1024)."""
+    import cv2
+
+    return cv2.boxFilter(np.ascontiguousarray(a).view(np.uint8), cv2.CV_64F, (2 * half[1] + 1, 2 * half[0] + 1),
+                         normalize=False, borderType=cv2.BORDER_CONSTANT)
 
 
-def _tiled_offsets(res: np.ndarray, lo: np.ndarray, edge_bit: np.ndarray, nb: int, tile: int = TILE_PX) -> np.ndarray:
-    """(nb,) each bit's displacement (codes, >= 0): the :data:`NAMED_PERCENTILE` th percentile over ``tile`` x ``tile``
-    pixel tiles (with at least
-    :data:`MIN_TILE_EDGES` residuals) of the size of the bit's offset in the tile. A move displaces stripes by
-    different amounts and either way across the image (with the slope of the surface), so the offsets are solved
-    where they are about constant: in each tile, the mean residual of each (previous, own, next) bit triple (each
-    residual clipped to +-1 code), then least squares over the triples, weighted by their counts, the most
-    significant bit with edges at 0."""
+def _tiled_offsets(res: np.ndarray, lo: np.ndarray, level: np.ndarray, edge_bit: np.ndarray, nb: int,
+                   tile: int = TILE_PX) -> np.ndarray:
+    """(nb,) each bit's displacement (codes, >= 0): the :data:`NAMED_PERCENTILE` th percentile over ``tile`` x
+    ``tile`` pixel tiles (with at least :data:`MIN_TILE_EDGES` residuals) of the size of the bit's offset in the
+    tile. A move displaces stripes by different amounts and either way across the image (with the slope of the
+    surface), so the offsets are solved where they are about constant: in each tile, the mean residual of each
+    (level, previous, own, next) bit triple (each residual clipped to +-1 code of its level, then in codes), then
+    least squares over the triples, weighted by their counts, the most significant bit with edges at 0."""
     ys, xs = np.nonzero(np.isfinite(res))
     if len(ys) == 0:
         return np.zeros(nb)
-    r = np.clip(res[ys, xs], -1.0, 1.0)
-    c = lo[ys, xs]
-    top = len(edge_bit) - 1
-    triple = (edge_bit[np.clip(c - 1, 0, top)] * nb + edge_bit[c]) * nb + edge_bit[np.clip(c + 1, 0, top)]
+    key, m = _bit_triples(lo[ys, xs], level[ys, xs], edge_bit, nb)
+    r = np.clip(res[ys, xs], -1.0, 1.0) * np.left_shift(1, m)
+    keys = (nb + 1) * nb ** 3
     tiles_x = -(-res.shape[1] // tile)
-    group = ((ys // tile) * tiles_x + xs // tile) * nb ** 3 + triple
+    group = ((ys // tile) * tiles_x + xs // tile) * keys + key
     groups, inverse, counts = np.unique(group, return_inverse=True, return_counts=True)
     means = np.bincount(inverse, weights=r) / counts
-    tile_of, key = groups // nb ** 3, groups % nb ** 3
+    tile_of, key = groups // keys, groups % nb ** 3
     prev, own, nxt = key // (nb * nb), (key // nb) % nb, key % nb
     A = np.zeros((len(groups), nb))
     np.add.at(A, (np.arange(len(groups)), own), 1.0)

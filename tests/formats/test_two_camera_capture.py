@@ -137,7 +137,7 @@ def test_crossed_names_and_a_rig_7px_off_are_caught_exchanged_and_refined(cli, p
     """Issue 47's simulator acceptance (the OpenCV side: benchmarks/coded/pair_vs_opencv.py, the slow test below):
     camera 1's frames under camera 2's names and a rig whose camera 2 is turned 0.5 deg (7 px of epipolar
     distance). The exchange is named, camera 2 is refined back to the truth (tolerances 0.01 deg, 0.05 mm: measured
-    0.002 deg, 0.01 mm) with camera 1 held, and the cloud is as accurate as from the true rig and right names."""
+    0.005 deg, 0.011 mm) with camera 1 held, and the cloud lies within 0.1 mm (median) of the true surface."""
     import shutil
 
     from rangekit.formats.clouds import load_cloud
@@ -165,9 +165,21 @@ def test_crossed_names_and_a_rig_7px_off_are_caught_exchanged_and_refined(cli, p
     shift = np.linalg.norm(refined.T_world_cam[:3, 3] - cam2.T_world_cam[:3, 3]) * 1e3
     assert angle < 0.01 and shift < 0.05, (angle, shift)
     points = np.asarray(load_cloud(tmp_path / "c.ply").points)
-    d, n_inside = _errors(points, truth2)
+    _, n_inside = _errors(points, truth2)
     assert len(points) >= 0.75 * n_inside
-    assert np.sqrt(np.mean(d ** 2)) <= 0.25 and np.median(d) <= 0.1
+    # measured RMS 0.107 mm, median 0.062 (the true rig: 0.082, 0.029): what the refined pose's 0.005 deg left does
+    d = _surface_errors(points)
+    assert np.sqrt(np.mean(d ** 2)) <= 0.15 and np.median(d) <= 0.1
+
+
+def _surface_errors(points) -> np.ndarray:
+    """Distance of each point to the default scene's true surface (its mesh), mm."""
+    from rangekit.sim import default_scene
+    from rangekit.surface.raycast import mesh_scene, query_scene
+
+    scene, c = mesh_scene(default_scene().world_mesh())
+    closest = query_scene(scene, "compute_closest_points", (points - c).astype(np.float32))["points"]
+    return np.linalg.norm(points - c - closest.astype(np.float64), axis=1) * 1e3
 
 
 @pytest.mark.slow

@@ -12,6 +12,7 @@ written as the view is decoded while the next one is captured), placed by the tu
 from __future__ import annotations
 
 import os
+import queue
 import signal
 import subprocess
 import sys
@@ -50,6 +51,46 @@ _LAUNCH = ("import ctypes, os, signal, sys\n"
 
 def _child_command() -> list[str]:
     return [sys.executable, "-c", _LAUNCH, str(os.getpid()), _RUN]
+
+
+class _Spawner:
+    """Starts the children from one thread that lives as long as the app: Linux's parent-death signal follows the
+    *thread* that started a child, and a thread of Starlette's pool ends when idle, which would stop a scan."""
+
+    def __init__(self) -> None:
+        self._jobs: queue.Queue = queue.Queue()
+        threading.Thread(target=self._run, name="rangekit-spawner", daemon=True).start()
+
+    def _run(self) -> None:
+        while True:
+            args, box, done = self._jobs.get()
+            try:
+                box.append(_spawn(args))
+            except Exception as exc:  # noqa: BLE001 - handed to the caller's thread
+                box.append(exc)
+            done.set()
+
+    def spawn(self, args: list[str]) -> subprocess.Popen:
+        box: list = []
+        done = threading.Event()
+        self._jobs.put((args, box, done))
+        done.wait()
+        if isinstance(box[0], Exception):
+            raise box[0]
+        return box[0]
+
+
+_SPAWNER: _Spawner | None = None
+_SPAWNER_LOCK = threading.Lock()
+
+
+def _spawned(args: list[str]) -> subprocess.Popen:
+    """``rangekit ARGS`` started by the app's one spawning thread (:class:`_Spawner`)."""
+    global _SPAWNER
+    with _SPAWNER_LOCK:
+        if _SPAWNER is None:
+            _SPAWNER = _Spawner()
+    return _SPAWNER.spawn(args)
 
 
 def _spawn(args: list[str]) -> subprocess.Popen:
@@ -122,7 +163,7 @@ class ScanJob:
                 self.holder.release(f"scan {folder.name}")
             self.name, self.log, self.exit_code, self.paused = folder.name, [], None, False
             try:
-                self._proc = _spawn(args)
+                self._proc = _spawned(args)
             except OSError:
                 if devices:
                     self.holder.reacquire()

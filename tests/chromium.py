@@ -167,6 +167,16 @@ class Page:
             time.sleep(0.1)
         raise AssertionError(f"the page never satisfied: {script}")
 
+    def goto(self, url: str) -> None:
+        """Navigate this tab to ``url`` (an http://127.x.x.x page: another local server, the app again)."""
+        self._client.call("POST", f"/session/{self._sid}/url", {"url": url})
+
+    def frame(self, css: str | None) -> None:
+        """Run the next scripts inside the iframe matching ``css`` (even one of another origin, as a sandboxed
+        one is); None: back to the top page."""
+        target = None if css is None else self.element(css)
+        self._client.call("POST", f"/session/{self._sid}/frame", {"id": target})
+
     def screenshot(self, out: str | Path) -> None:
         """The viewport as it is now, a PNG at ``out`` (a page's state mid-interaction, for the docs)."""
         _screenshot(self._client, self._sid, Path(out), 0, 0, full_page=False)

@@ -20,26 +20,35 @@ class Server:
     token: str
     base: str           # http://127.0.0.1:PORT
 
-    def request(self, path: str, *, data=None, token: str | None = "cookie", headers: dict | None = None):
-        """(status, body bytes, headers) of a request to ``path``; ``token``: "cookie" (the token as the page's
-        cookie), "query", None (no token) or another string (a wrong one, as a cookie)."""
+    def request(self, path: str, *, data=None, token: str | None = "header", headers: dict | None = None,
+                method: str | None = None, raw: bytes | None = None):
+        """(status, body bytes, headers) of a request to ``path``, as the app's page makes it: the token in its
+        ``X-Rangekit-Token`` header and, for a POST, the app's own ``Origin`` and a JSON body (``data``; ``raw``:
+        these bytes instead). ``token``: "header", "query" (``?token=``), None (no token) or another string (a
+        wrong one, in the header); ``headers`` override any of these."""
         headers = dict(headers or {})
         url = self.base + path
         if token == "query":
             url += ("&" if "?" in url else "?") + f"token={self.token}"
-        elif token == "cookie":
-            headers.setdefault("Cookie", f"rangekit_token={self.token}")
         elif token is not None:
-            headers.setdefault("Cookie", f"rangekit_token={token}")
-        body = None if data is None else json.dumps(data).encode()
+            headers.setdefault("X-Rangekit-Token", self.token if token == "header" else token)
+        body = raw if raw is not None else (None if data is None else json.dumps(data).encode())
         if body is not None:
             headers.setdefault("Content-Type", "application/json")
-        req = urllib.request.Request(url, data=body, headers=headers, method="POST" if body is not None else "GET")
+            headers.setdefault("Origin", self.base)
+        req = urllib.request.Request(url, data=body, headers={k: v for k, v in headers.items() if v is not None},
+                                     method=method or ("POST" if body is not None else "GET"))
         try:
             with urllib.request.urlopen(req, timeout=30) as r:
                 return r.status, r.read(), dict(r.headers)
         except urllib.error.HTTPError as e:
             return e.code, e.read(), dict(e.headers)
+
+    def ticket(self, path: str) -> str:
+        """A single-use ticket for ``path`` (the WebSocket, a session's file), as the page asks for one."""
+        status, body, _ = self.request("/api/ticket", data={"path": path})
+        assert status == 200, body
+        return json.loads(body)["ticket"]
 
     def stop(self) -> str:
         """Stop the server (SIGINT, as Ctrl-C); its stderr."""
@@ -53,10 +62,11 @@ class Server:
         return self.proc.stderr.read() if self.proc.stderr else ""
 
 
-def start_ui(sessions, *args: str, timeout: float = 60.0) -> Server:
-    """``rangekit ui --port 0 --sessions SESSIONS ARGS`` in a child process; returns once it printed its URL."""
+def start_ui(sessions, *args: str, timeout: float = 60.0, port: int = 0) -> Server:
+    """``rangekit ui --port PORT --sessions SESSIONS ARGS`` in a child process (port 0: a free one); returns once
+    it printed its URL."""
     env = dict(os.environ, PYTHONUNBUFFERED="1")
-    proc = subprocess.Popen([sys.executable, "-m", "rangekit", "ui", "--port", "0", "--sessions", str(sessions), *args],
+    proc = subprocess.Popen([sys.executable, "-m", "rangekit", "ui", "--port", str(port), "--sessions", str(sessions), *args],
                             stdin=subprocess.DEVNULL,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
     deadline = time.monotonic() + timeout

@@ -73,8 +73,9 @@ def cmd_ui(args: argparse.Namespace) -> int:
 def add_parsers(sub) -> None:
     p = sub.add_parser("ui", help="a local web app: the live camera, test patterns, the turntable, device status",
                        description="Start a local web server and print its URL with a one-time token (open it in "
-                                   "a browser). It binds 127.0.0.1 unless --host says otherwise; every request "
-                                   "needs the token, and WebSockets only come from the app's own page.")
+                                   "a browser). It binds 127.0.0.1 unless --host says otherwise; every API request "
+                                   "needs the token (the page sends it in a header, never a cookie), and changes "
+                                   "and WebSockets only come from the app's own page.")
     p.add_argument("--rig", help="'sim' (default): the simulated rig; or a rig file whose 'devices' name the camera, "
                                  "projector and turntable (rangekit rig init writes a template)")
     p.add_argument("--object", help="the simulated object on the turntable (default lumpy; 'shiny' saturates)")

@@ -19,6 +19,7 @@ import numpy as np
 from rangekit.errors import RangekitError
 from rangekit.ui.job_state import failed
 from rangekit.ui.paths import confined
+from rangekit.ui.sessions_list import readable_name
 
 __all__ = ["CLOUD_SUFFIXES", "RegisterJob", "list_clouds"]
 
@@ -32,7 +33,7 @@ _NOT_CLOUDS = {"mesh.ply", "mesh_watertight.ply", "preview.ply"}   # meshes, not
 
 def list_clouds(sessions: Path) -> list[str]:
     """The cloud files under ``sessions`` (relative POSIX paths, sorted; meshes, frames and the staging folder
-    left out), at most :data:`MAX_LISTED`."""
+    left out, and any whose path is not UTF-8: a page could not name it back), at most :data:`MAX_LISTED`."""
     root = Path(sessions).resolve()
     out = []
     for dirpath, dirnames, filenames in os.walk(root):
@@ -40,7 +41,7 @@ def list_clouds(sessions: Path) -> list[str]:
         for name in sorted(filenames):
             if Path(name).suffix.lower() in CLOUD_SUFFIXES and name not in _NOT_CLOUDS:
                 path = Path(dirpath) / name
-                if path.resolve().is_relative_to(root):
+                if path.resolve().is_relative_to(root) and readable_name(str(path)) is not None:
                     out.append(path.relative_to(root).as_posix())
                     if len(out) >= MAX_LISTED:
                         return out

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from rangekit.errors import RangekitError
-from rangekit.rig.camera_controls import controls_from_capture
+from rangekit.rig.camera_controls import CONTROL_FIELDS, CameraControls, controls_from_capture
 from rangekit.rig.rig_edits import write_capture_fields
 from rangekit.rig.rig_file import load_rig, save_rig
 
@@ -68,6 +68,7 @@ class RigHolder:
         self._live_while_busy = False      # the job holding the rig lets the stream grab (between its captures)
         self._closers: list = []
         self._angle_deg: float | None = None   # the turntable's angle as last read (degrees)
+        self.turning = False                   # a jog under way (the status shows the last angle meanwhile)
         self._show(self.pattern)
 
     @classmethod
@@ -253,30 +254,42 @@ class RigHolder:
                 raise RangekitError(f"not connected: {self.fault}" if self.fault else "this rig has no turntable")
             target = 0.0 if home else float(np.degrees(table.angle)) + float(degrees)
             started = time.perf_counter()
-            table.rotate_to(np.radians(target))
-            self.last_reply = f"turntable at {np.degrees(table.angle):.2f} deg ({time.perf_counter() - started:.2f} s)"
-            return float(np.degrees(table.angle))
+            self.turning, self.last_reply = True, f"turntable turning to {target:.2f} deg"
+            try:
+                table.rotate_to(np.radians(target))
+            finally:
+                self.turning = False
+            self._angle_deg = round(float(np.degrees(table.angle)), 3)
+            self.last_reply = f"turntable at {self._angle_deg:.2f} deg ({time.perf_counter() - started:.2f} s)"
+            return self._angle_deg
 
     def _refuse_if_busy(self) -> None:
         if self.busy is not None:
             raise RangekitError(f"the rig is busy: {self.busy}; wait for it to finish")
 
     def status(self) -> dict:
-        """The device status the Live page shows. The turntable is asked for its angle only while no job holds the
-        rig (a job's own device calls are not interleaved with another thread's: one serial link, one talker);
-        meanwhile the last angle read is shown."""
+        """The device status the Live page shows, at once: it never waits for the rig. The turntable is asked for
+        its angle only when no other call holds the rig (a jog, a job: one serial link, one talker) and no job
+        holds it; otherwise the last angle read is shown. ``controls``: the rig file's ``capture.camera``;
+        ``controls_in_force``: what the camera uses, the defaults where the rig file says nothing."""
         table = self.devices.turntable
-        with self._lock:
-            if table is not None and self.busy is None:
-                try:
-                    self._angle_deg = round(float(np.degrees(table.angle)), 3)
-                except RangekitError as exc:
-                    self.fault = str(exc)
+        if table is not None and self.busy is None and self._lock.acquire(blocking=False):
+            try:
+                self._angle_deg = round(float(np.degrees(table.angle)), 3)
+            except RangekitError as exc:
+                self.fault = str(exc)
+            finally:
+                self._lock.release()
+        written = dict(self.rig.capture.get("camera", {}))
+        try:
+            in_force = controls_from_capture(self.rig.capture, where=str(self.rig_file)).to_dict()
+        except RangekitError:
+            in_force = CameraControls().to_dict()
         return {"source": self.source, "rig_file": str(self.rig_file), "busy": self.busy,
-                "controls": dict(self.rig.capture.get("camera", {})), "fault": self.fault, "last_reply": self.last_reply,
-                "pattern": self.pattern,
+                "controls": written, "controls_in_force": {k: in_force.get(k) for k in CONTROL_FIELDS},
+                "fault": self.fault, "last_reply": self.last_reply, "pattern": self.pattern,
                 "camera": {"connected": self.devices.camera is not None,
                            "width": self.rig.camera.width, "height": self.rig.camera.height},
                 "projector": {"connected": self.devices.projector is not None},
-                "turntable": {"connected": table is not None,
+                "turntable": {"connected": table is not None, "turning": self.turning,
                               "angle_deg": None if table is None else self._angle_deg}}

@@ -1,9 +1,11 @@
 """``rangekit ui``: the web app's server (Starlette on uvicorn, WebSockets for the live stream and the events).
 
-Routes (every one behind :class:`rangekit.ui.access.Gate`: the token, the app's own origin and host):
+Routes (every one behind :class:`rangekit.ui.access.Gate`: the token in its header, the app's own origin for a
+change, the host; see there):
 
-- ``GET /``: the page (``static/index.html``); the ``?token=`` it was opened with is kept as a cookie;
+- ``GET /``: the page (``static/index.html``); its script keeps the ``?token=`` it was opened with;
 - ``GET /static/...``: the page's scripts and styles, shipped in the package (no network);
+- ``POST /api/ticket`` ``{"path"}``: a single-use ticket opening ``path`` once (the WebSocket, a report's iframe);
 - ``GET /api/status``: the devices' status; ``POST /api/reconnect`` (hardware: open the devices again); ``POST /api/pattern`` ``{"name"}``; ``POST /api/turntable``
   ``{"degrees"}`` or ``{"home": true}``; ``POST /api/camera`` ``{"exposure_us", "iso", "white_balance_k",
   "focus"}`` (any of them: written into the rig file's ``capture.camera``, then applied);
@@ -27,11 +29,13 @@ Routes (every one behind :class:`rangekit.ui.access.Gate`: the token, the app's 
 - ``WS /ws/live``: the camera stream, each frame a text message (its figures, JSON) then a binary one (JPEG).
 
 A request the rig refuses gets 400 and ``{"error": one line}``, the CLI's words; nothing else reaches the page.
+Every JSON field is type-checked first (:mod:`rangekit.ui.guard.fields`), the body bounded
+(:mod:`rangekit.ui.guard.body`), and every device call and file access runs off the event loop (Starlette's
+thread pool), so a turning turntable never stalls another page's request.
 """
 
 from __future__ import annotations
 
-import asyncio
 import contextlib
 import json
 import socket
@@ -39,14 +43,18 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from rangekit.errors import RangekitError
-from rangekit.ui.access import COOKIE, Gate, new_token
+from rangekit.ui.access import Gate, new_token
 from rangekit.ui.calibrate_job import CalibrateJob
 from rangekit.ui.check_job import CheckJob
+from rangekit.ui.guard.body import BodyRefused, read_json
+from rangekit.ui.guard.fields import Field, flag, number, take, text, texts
+from rangekit.ui.guard.headers import page_policy
+from rangekit.ui.guard.names import check_folder_name
 from rangekit.ui.paths import confined
 from rangekit.ui.recorded_job import RecordedCalibrationJob
 from rangekit.ui.register_job import RegisterJob, list_clouds
 from rangekit.ui.scan_job import ScanJob, view_points
-from rangekit.ui.sessions_list import list_sessions, session_file
+from rangekit.ui.sessions_list import session_file, sessions_listing
 from rangekit.ui.rig_holder import PATTERNS, RigHolder
 from rangekit.ui.stream import LiveStream
 
@@ -55,6 +63,10 @@ __all__ = ["UiServer", "bind", "make_app"]
 STATIC = Path(__file__).resolve().parent / "static"
 #: The camera controls the Live page sets (the rig file's capture.camera fields).
 CAMERA_FIELDS = ("exposure_us", "iso", "white_balance_k", "focus")
+#: The largest turntable jog (degrees, either way).
+MAX_JOG_DEG = 360.0
+#: The live streams open at once (each holds a thread of the pool while it waits for a frame).
+MAX_STREAMS = 8
 
 
 @dataclass(frozen=True)
@@ -79,35 +91,87 @@ def bind(host: str, port: int) -> socket.socket:
         sock.close()
         why = "is in use by another program" if exc.errno == 98 else f"cannot be opened ({exc.strerror})"
         raise RangekitError(f"--host {host} --port {port}: {why}; choose another with --port") from None
-    sock.listen(64)
+    sock.listen(128)
     return sock
 
 
 def _json(data, status: int = 200):
     from starlette.responses import JSONResponse
 
-    return JSONResponse(data, status_code=status)
+    return JSONResponse(data, status_code=status, headers={"Cache-Control": "no-store"})
 
 
-def _error(exc: Exception):
-    return _json({"error": str(exc)}, 400)
+def _os_error(exc: OSError) -> str:
+    name = Path(exc.filename).name if isinstance(exc.filename, str) else "file"
+    return f"{name[:80]}: {exc.strerror or exc}"
 
 
-async def _body(request) -> dict:
+def _given(default=None) -> Field:
+    """A field whose job checks its type and range itself (with the words the page shows by the field)."""
+    return Field(lambda name, value: value, default)
+
+
+def _camera_value(name, value):
+    if isinstance(value, (bool, list, dict)) or value is None:
+        raise RangekitError(f"camera: {name}: expected a number or 'auto', found {value!r}"[:200])
+    return value
+
+
+async def _answer(call, *args, status_for_refusal: int = 400):
+    """``call(*args)`` on the thread pool, its result as JSON (or as the Response it is); a refusal as one line."""
+    from starlette.concurrency import run_in_threadpool
+    from starlette.responses import Response
+
     try:
-        data = json.loads(await request.body() or b"{}")
-    except ValueError:
-        raise RangekitError("request: not JSON") from None
-    if not isinstance(data, dict):
-        raise RangekitError("request: expected a JSON object")
-    return data
+        result = await run_in_threadpool(call, *args)
+    except RangekitError as exc:
+        return _json({"error": str(exc)}, status_for_refusal)
+    except OSError as exc:
+        return _json({"error": _os_error(exc)}, status_for_refusal)
+    return result if isinstance(result, Response) else _json(result)
+
+
+def _action(what: str, spec: dict, act):
+    """A POST endpoint: its JSON body read within bounds, its fields checked by ``spec``, then
+    ``act(request, fields)`` on the thread pool."""
+    async def endpoint(request):
+        try:
+            fields = take(await read_json(request), spec, what)
+        except BodyRefused as exc:
+            return _json({"error": str(exc)}, exc.status)
+        except RangekitError as exc:
+            return _json({"error": str(exc)}, 400)
+        return await _answer(act, request, fields)
+    return endpoint
+
+
+def _reading(act, status_for_refusal: int = 400):
+    """A GET endpoint: ``act(request)`` on the thread pool."""
+    async def endpoint(request):
+        return await _answer(act, request, status_for_refusal=status_for_refusal)
+    return endpoint
+
+
+def _png(data: bytes | None, missing: str):
+    from starlette.responses import Response
+
+    if not data:
+        return _json({"error": missing}, 404)
+    return Response(data, media_type="image/png", headers={"Cache-Control": "no-store"})
+
+
+def _binary(data: bytes):
+    from starlette.responses import Response
+
+    return Response(data, media_type="application/octet-stream", headers={"Cache-Control": "no-store"})
 
 
 def make_app(holder: RigHolder, token: str, host: str, port: int, sessions: Path, obj: str = "lumpy"):
     """The Starlette app for ``holder``'s rig and the sessions folder ``sessions``, behind the token gate for
     ``host:port``."""
     from starlette.applications import Starlette
-    from starlette.responses import FileResponse, Response
+    from starlette.concurrency import run_in_threadpool
+    from starlette.responses import FileResponse
     from starlette.routing import Mount, Route, WebSocketRoute
     from starlette.staticfiles import StaticFiles
     from starlette.websockets import WebSocketDisconnect
@@ -118,216 +182,115 @@ def make_app(holder: RigHolder, token: str, host: str, port: int, sessions: Path
     recorded = RecordedCalibrationJob(sessions)
     registration = RegisterJob(sessions)
     scans = ScanJob(sessions, obj, holder)
+    gate: Gate | None = None      # set below: the ticket route issues its tickets
+    streams = {"open": 0}
 
     async def index(request):
-        response = FileResponse(STATIC / "index.html", headers={"Cache-Control": "no-store"})
-        if "token" in request.query_params:     # checked by the gate: kept for the page's own requests
-            response.set_cookie(COOKIE, request.query_params["token"], httponly=True, samesite="strict")
-        return response
+        return FileResponse(STATIC / "index.html", headers={"Cache-Control": "no-store"})
 
-    async def status(request):
-        return _json({"rig": holder.status(), "patterns": list(PATTERNS), "live_error": stream.error})
+    def rig(*_):
+        return {"rig": holder.status()}
 
-    async def reconnect(request):
+    def status(request):
+        return {"rig": holder.status(), "patterns": list(PATTERNS), "live_error": stream.error}
+
+    def ticket(request, f):
+        path = f["path"]
+        if path != "/ws/live" and not (path.startswith("/api/sessions/") and "/files/" in path):
+            raise RangekitError(f"path: {path[:80]!r}: no ticket for it; expected /ws/live or a session's file")
+        return {"ticket": gate.tickets.issue(path)}
+
+    def pattern(request, f):
+        holder.show_pattern(f["name"])
+        return rig()
+
+    def turntable(request, f):
+        if f["home"]:
+            holder.turn(home=True)
+        elif f["degrees"] is None:
+            raise RangekitError(f"degrees: missing; expected a number -{MAX_JOG_DEG:g} to {MAX_JOG_DEG:g} "
+                                "(or home: true)")
+        else:
+            holder.turn(degrees=f["degrees"])
+        return rig()
+
+    def camera(request, f):
+        holder.set_camera(f)
+        return rig()
+
+    async def camera_endpoint(request):
         try:
-            return _json({"rig": await asyncio.to_thread(holder.connect)})
-        except RangekitError as exc:
-            return _error(exc)
-
-    async def pattern(request):
+            body = await read_json(request)
+        except BodyRefused as exc:
+            return _json({"error": str(exc)}, exc.status)
+        unknown = sorted(set(body) - set(CAMERA_FIELDS))
+        if unknown:
+            return _json({"error": f"camera: {str(unknown[0])[:80]}: not a control here; expected "
+                                   f"{', '.join(CAMERA_FIELDS)}"}, 400)
+        spec = {name: Field(_camera_value, None) for name in CAMERA_FIELDS}
         try:
-            body = await _body(request)
-            await asyncio.to_thread(holder.show_pattern, str(body.get("name")))
+            fields = {k: v for k, v in take(body, spec, "camera").items() if k in body}
         except RangekitError as exc:
-            return _error(exc)
-        return _json({"rig": holder.status()})
+            return _json({"error": str(exc)}, 400)
+        return await _answer(camera, request, fields)
 
-    async def turntable(request):
-        try:
-            body = await _body(request)
-            if body.get("home"):
-                await asyncio.to_thread(holder.turn, home=True)
-            else:
-                degrees = body.get("degrees")
-                if isinstance(degrees, bool) or not isinstance(degrees, (int, float)):
-                    raise RangekitError(f"degrees: expected a number, found {degrees!r}")
-                await asyncio.to_thread(holder.turn, degrees=float(degrees))
-        except RangekitError as exc:
-            return _error(exc)
-        return _json({"rig": holder.status()})
-
-    async def camera(request):
-        try:
-            body = await _body(request)
-            unknown = sorted(set(body) - set(CAMERA_FIELDS))
-            if unknown:
-                raise RangekitError(f"camera: {unknown[0]}: not a control here; expected {', '.join(CAMERA_FIELDS)}")
-            await asyncio.to_thread(holder.set_camera, body)
-        except RangekitError as exc:
-            return _error(exc)
-        return _json({"rig": holder.status()})
-
-    async def check_state(request):
-        return _json(check.snapshot())
-
-    async def check_start(request):
-        try:
-            return _json(check.start())
-        except RangekitError as exc:
-            return _error(exc)
-
-    async def check_apply(request):
-        try:
-            return _json({"rig": await asyncio.to_thread(check.apply)})
-        except RangekitError as exc:
-            return _error(exc)
-
-    async def check_figure(request):
-        if check.figure_png is None:
-            return _json({"error": "no check picture yet: run the check"}, 404)
-        return Response(check.figure_png, media_type="image/png", headers={"Cache-Control": "no-store"})
-
-    async def calibrate_state(request):
-        return _json(calibration.snapshot())
-
-    async def calibrate_action(request):
+    def calibrate_action(request, f):
         action = request.path_params["action"]
-        try:
-            body = await _body(request)
-            if action == "start":
-                result = calibration.start(body.get("poses", 12), body.get("seed", 0))
-            elif action == "capture":
-                result = calibration.capture()
-            elif action in ("keep", "retake"):
-                result = calibration.decide(action == "keep")
-            elif action == "next":
-                result = await asyncio.to_thread(calibration.next_pose)
-            elif action == "drag":
-                result = await asyncio.to_thread(calibration.drag, body.get("dx"), body.get("dy"))
-            elif action == "cancel":
-                result = calibration.cancel()
-            else:
-                return _json({"error": f"calibrate: {action}: unknown; expected start, capture, keep, retake, next, "
-                                       "drag or cancel"}, 404)
-        except RangekitError as exc:
-            return _error(exc)
-        return _json(result)
+        if action == "start":
+            return calibration.start(f["poses"], f["seed"])
+        if action == "drag":
+            return calibration.drag(f["dx"], f["dy"])
+        acts = {"capture": calibration.capture, "keep": lambda: calibration.decide(True),
+                "retake": lambda: calibration.decide(False), "next": calibration.next_pose,
+                "cancel": calibration.cancel}
+        return acts[action]()
 
-    async def calibrate_picture(request):
-        png = calibration.pictures.get(request.path_params["name"])
-        if not png:
-            return _json({"error": "no such picture yet: capture a pose first"}, 404)
-        return Response(png, media_type="image/png", headers={"Cache-Control": "no-store"})
+    async def calibrate_endpoint(request):
+        action = request.path_params["action"]
+        specs = {"start": {"poses": _given(12), "seed": _given(0)}, "drag": {"dx": _given(), "dy": _given()},
+                 **{a: {} for a in ("capture", "keep", "retake", "next", "cancel")}}
+        if action not in specs:
+            return _json({"error": f"calibrate: {action[:40]}: unknown; expected start, capture, keep, retake, "
+                                   "next, drag or cancel"}, 404)
+        return await _action(f"calibrate {action}", specs[action], calibrate_action)(request)
 
-    async def recorded_state(request):
-        return _json(recorded.snapshot())
+    def recorded_start(request, f):
+        return recorded.start(f["captures"], f["pattern"], f["projector"], f["out"], f["cols"], f["rows"],
+                              f["square_mm"])
 
-    async def recorded_start(request):
-        try:
-            body = await _body(request)
-            return _json(await asyncio.to_thread(
-                recorded.start, body.get("captures", ""), body.get("pattern"), body.get("projector", ""),
-                body.get("out", "recorded-rig.json"), body.get("cols", 10), body.get("rows", 7),
-                body.get("square_mm", 20.0)))
-        except RangekitError as exc:
-            return _error(exc)
+    def register_save(request, f):
+        return registration.save(check_folder_name(f["name"]))
 
-    async def register_state(request):
-        return _json(registration.snapshot())
+    def scan_start(request, f):
+        return scans.start(check_folder_name(f["name"]), f["views"], resume=f["resume"])
 
-    async def register_clouds(request):
-        return _json({"clouds": await asyncio.to_thread(list_clouds, sessions)})
+    def session_process(request, f):
+        return scans.process(request.path_params["name"], fusion=f["fusion"], mesh_format=f["format"],
+                             report=f["report"])
 
-    async def register_action(request):
-        try:
-            body = await _body(request)
-            if request.path_params["action"] == "start":
-                return _json(await asyncio.to_thread(registration.start, body.get("files"), body.get("neighbours")))
-            if request.path_params["action"] == "save":
-                return _json(await asyncio.to_thread(registration.save, str(body.get("name", ""))))
-        except RangekitError as exc:
-            return _error(exc)
-        return _json({"error": "register: expected start or save"}, 404)
-
-    async def register_points(request):
-        try:
-            data = await asyncio.to_thread(registration.points, int(request.path_params["index"]))
-        except (RangekitError, ValueError) as exc:
-            return _error(exc)
-        return Response(data, media_type="application/octet-stream")
-
-    async def scan_state(request):
-        return _json(await asyncio.to_thread(scans.snapshot))
-
-    async def scan_start(request):
-        try:
-            body = await _body(request)
-            resume = bool(body.get("resume"))
-            return _json(await asyncio.to_thread(scans.start, str(body.get("name", "")), body.get("views", 6),
-                                                 resume=resume))
-        except RangekitError as exc:
-            return _error(exc)
-
-    async def scan_stop(request):
-        try:
-            return _json(scans.stop())
-        except RangekitError as exc:
-            return _error(exc)
-
-    async def scan_pause(request):
-        try:
-            body = await _body(request)
-            return _json(scans.pause(bool(body.get("paused", True))))
-        except RangekitError as exc:
-            return _error(exc)
-
-    async def session_process(request):
-        try:
-            body = await _body(request)
-            return _json(await asyncio.to_thread(scans.process, request.path_params["name"],
-                                                 fusion=body.get("fusion", "poisson"),
-                                                 mesh_format=body.get("format", "ply"), report=body.get("report", True)))
-        except RangekitError as exc:
-            return _error(exc)
-
-    async def session_export(request):
+    def session_export(request, f):
         from rangekit.app.process.fused_outputs import export_meshes
 
-        try:
-            body = await _body(request)
-            folder = confined(sessions, request.path_params["name"])
-            if scans.running and scans.name == folder.name:
-                raise RangekitError(f"{folder.name} is being scanned or processed; export when it has finished")
-            files = await asyncio.to_thread(export_meshes, folder, str(body.get("format")))
-        except RangekitError as exc:
-            return _error(exc)
-        return _json({"files": files})
+        folder = confined(sessions, request.path_params["name"])
+        if scans.running and scans.name == folder.name:
+            raise RangekitError(f"{folder.name} is being scanned or processed; export when it has finished")
+        return {"files": export_meshes(folder, f["format"])}
 
-    async def scan_points(request):
-        try:
-            folder = confined(sessions, request.path_params["name"])
-            data = await asyncio.to_thread(view_points, folder, int(request.path_params["index"]))
-        except (RangekitError, ValueError) as exc:
-            return _error(exc)
-        return Response(data, media_type="application/octet-stream")
-
-    async def sessions_list(request):
-        return _json({"sessions": await asyncio.to_thread(list_sessions, sessions)})
-
-    async def sessions_file(request):
-        try:
-            path = session_file(sessions, request.path_params["name"], request.path_params["file"])
-        except RangekitError as exc:
-            return _json({"error": str(exc)}, 404)
+    def sessions_file(request):
+        path = session_file(sessions, request.path_params["name"], request.path_params["file"])
         return FileResponse(path, headers={"Cache-Control": "no-store"})
 
     async def live(ws):
+        if streams["open"] >= MAX_STREAMS:
+            await ws.close(code=1013, reason=f"at most {MAX_STREAMS} live streams at once")
+            return
         await ws.accept()
+        streams["open"] += 1
         stream.watch()
         seq = 0
         try:
             while True:
-                frame = await asyncio.to_thread(stream.next_after, seq, 1.0)
+                frame = await run_in_threadpool(stream.next_after, seq, 1.0)
                 if frame is None:
                     await ws.send_text(json.dumps({"waiting": holder.busy or stream.error or "no frame yet"}))
                     continue
@@ -337,41 +300,62 @@ def make_app(holder: RigHolder, token: str, host: str, port: int, sessions: Path
         except (WebSocketDisconnect, RuntimeError, OSError):
             pass
         finally:
+            streams["open"] -= 1
             stream.unwatch()
 
-    routes = [Route("/", index), Route("/api/status", status), Route("/api/pattern", pattern, methods=["POST"]),
-              Route("/api/reconnect", reconnect, methods=["POST"]),
-              Route("/api/turntable", turntable, methods=["POST"]), Route("/api/camera", camera, methods=["POST"]),
-              Route("/api/check", check_state), Route("/api/check/run", check_start, methods=["POST"]),
-              Route("/api/check/apply", check_apply, methods=["POST"]), Route("/api/check/figure.png", check_figure),
-              Route("/api/calibrate", calibrate_state),
-              Route("/api/calibrate/{action}", calibrate_action, methods=["POST"]),
-              Route("/api/calibrate/picture/{name}.png", calibrate_picture),
-              Route("/api/calibrate-recorded", recorded_state),
-              Route("/api/calibrate-recorded/start", recorded_start, methods=["POST"]),
-              Route("/api/register", register_state), Route("/api/register/clouds", register_clouds),
-              Route("/api/register/points/{index}", register_points),
-              Route("/api/register/{action}", register_action, methods=["POST"]),
-              Route("/api/scan", scan_state), Route("/api/scan/start", scan_start, methods=["POST"]),
-              Route("/api/scan/stop", scan_stop, methods=["POST"]),
-              Route("/api/scan/pause", scan_pause, methods=["POST"]),
-              Route("/api/sessions/{name}/process", session_process, methods=["POST"]),
-              Route("/api/sessions/{name}/export", session_export, methods=["POST"]),
-              Route("/api/sessions/{name}/views/{index}/points", scan_points),
-              Route("/api/sessions", sessions_list), Route("/api/sessions/{name}/files/{file}", sessions_file), WebSocketRoute("/ws/live", live),
-              Mount("/static", StaticFiles(directory=STATIC), name="static")]
+    post, get = (lambda path, what, spec, act: Route(path, _action(what, spec, act), methods=["POST"])), Route
+    routes = [
+        get("/", index), get("/api/status", _reading(status)),
+        post("/api/ticket", "ticket", {"path": text()}, ticket),
+        post("/api/pattern", "pattern", {"name": text()}, pattern),
+        post("/api/reconnect", "reconnect", {}, lambda r, f: {"rig": holder.connect()}),
+        post("/api/turntable", "turntable", {"degrees": number(-MAX_JOG_DEG, MAX_JOG_DEG, None),
+                                             "home": flag(False)}, turntable),
+        Route("/api/camera", camera_endpoint, methods=["POST"]),
+        get("/api/check", _reading(lambda r: check.snapshot())),
+        post("/api/check/run", "check", {}, lambda r, f: check.start()),
+        post("/api/check/apply", "check apply", {}, lambda r, f: {"rig": check.apply()}),
+        get("/api/check/figure.png", _reading(lambda r: _png(check.figure_png, "no check picture yet: run the check"))),
+        get("/api/calibrate", _reading(lambda r: calibration.snapshot())),
+        Route("/api/calibrate/{action}", calibrate_endpoint, methods=["POST"]),
+        get("/api/calibrate/picture/{name}.png", _reading(lambda r: _png(
+            calibration.pictures.get(r.path_params["name"]), "no such picture yet: capture a pose first"))),
+        get("/api/calibrate-recorded", _reading(lambda r: recorded.snapshot())),
+        post("/api/calibrate-recorded/start", "calibrate-recorded", {
+            "captures": text(""), "pattern": text(""), "projector": text(""), "out": text("recorded-rig.json"),
+            "cols": _given(10), "rows": _given(7), "square_mm": _given(20.0)}, recorded_start),
+        get("/api/register", _reading(lambda r: registration.snapshot())),
+        get("/api/register/clouds", _reading(lambda r: {"clouds": list_clouds(sessions)})),
+        get("/api/register/points/{index:int}", _reading(lambda r: _binary(registration.points(r.path_params["index"])))),
+        post("/api/register/start", "register", {"files": texts(2000), "neighbours": _given(None)},
+             lambda r, f: registration.start(f["files"], f["neighbours"])),
+        post("/api/register/save", "register save", {"name": text()}, register_save),
+        get("/api/scan", _reading(lambda r: scans.snapshot())),
+        post("/api/scan/start", "scan", {"name": text(), "views": _given(6), "resume": flag(False)}, scan_start),
+        post("/api/scan/stop", "scan stop", {}, lambda r, f: scans.stop()),
+        post("/api/scan/pause", "scan pause", {"paused": flag(True)}, lambda r, f: scans.pause(f["paused"])),
+        post("/api/sessions/{name}/process", "process", {"fusion": text("poisson"), "format": text("ply"),
+                                                         "report": flag(True)}, session_process),
+        post("/api/sessions/{name}/export", "export", {"format": text("")}, session_export),
+        get("/api/sessions/{name}/views/{index:int}/points", _reading(lambda r: _binary(view_points(
+            confined(sessions, r.path_params["name"]), r.path_params["index"])))),
+        get("/api/sessions", _reading(lambda r: sessions_listing(sessions))),
+        get("/api/sessions/{name}/files/{file}", _reading(sessions_file, status_for_refusal=404)),
+        WebSocketRoute("/ws/live", live), Mount("/static", StaticFiles(directory=STATIC), name="static")]
+
     @contextlib.asynccontextmanager
     async def lifespan(app):
         yield
         stream.close()
-        await asyncio.to_thread(scans.close)
+        await run_in_threadpool(scans.close)
         holder.close()
 
     app = Starlette(routes=routes, lifespan=lifespan)
     names = {host} | ({"localhost", "127.0.0.1"} if host in ("127.0.0.1", "localhost") else set())
     hosts = {f"{h}:{port}" for h in names}
     origins = {f"http://{h}" for h in hosts}
-    return Gate(app, token, hosts, origins)
+    gate = Gate(app, token, hosts, origins, page_policy(STATIC / "index.html"))
+    return gate
 
 
 def start(holder: RigHolder, sock: socket.socket, host: str, sessions: Path, obj: str = "lumpy") -> UiServer:
@@ -384,9 +368,12 @@ def start(holder: RigHolder, sock: socket.socket, host: str, sessions: Path, obj
 
 
 def serve(server: UiServer, sock: socket.socket) -> None:
-    """Run until Ctrl-C (uvicorn's own handling: the open pages are closed, the rig released)."""
+    """Run until Ctrl-C (uvicorn's own handling: the open pages are closed, the rig released), within the bounds
+    of :mod:`rangekit.ui.guard.connections`."""
     import uvicorn
 
+    from rangekit.ui.guard.connections import server_options
+
     config = uvicorn.Config(server.app, log_level="warning", access_log=False, lifespan="on",
-                            ws_max_size=1 << 20)
+                            ws_max_size=1 << 20, **server_options())
     uvicorn.Server(config).run(sockets=[sock])

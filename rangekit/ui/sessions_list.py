@@ -9,7 +9,7 @@ from pathlib import Path
 from rangekit.errors import RangekitError
 from rangekit.ui.paths import confined
 
-__all__ = ["SESSION_FILES", "list_sessions", "session_file"]
+__all__ = ["SESSION_FILES", "list_sessions", "readable_name", "session_file", "sessions_listing"]
 
 #: The files of a session a page may open.
 SESSION_FILES = ("report.html", "mesh.ply", "mesh_watertight.ply", "preview.ply", "merged.ply", "poses.json",
@@ -31,16 +31,42 @@ def _summary(folder: Path) -> dict:
             "completeness_percent": None if acc.get("completeness") is None else round(100 * acc["completeness"], 2)}
 
 
-def list_sessions(sessions: Path) -> list[dict]:
+def readable_name(name: str) -> str | None:
+    """``name`` as a page can show and send it back, or None: a name that is not UTF-8 (its bytes decoded as
+    surrogates) cannot travel in JSON or a URL and is skipped, said so by :func:`sessions_listing`."""
+    try:
+        name.encode("utf-8")
+    except UnicodeEncodeError:
+        return None
+    return name
+
+
+def shown_bytes(name: str) -> str:
+    """A name that is not UTF-8, its bytes written out (``caf\\xe9``), for the line saying it was skipped."""
+    return name.encode("utf-8", "surrogateescape").decode("ascii", "backslashreplace")
+
+
+def sessions_listing(sessions: Path) -> dict:
+    """``{"sessions": list_sessions(...), "skipped": [one line per folder left out]}``."""
+    skipped: list[str] = []
+    return {"sessions": list_sessions(sessions, skipped), "skipped": skipped}
+
+
+def list_sessions(sessions: Path, skipped: list[str] | None = None) -> list[dict]:
     """One dict per session folder directly under ``sessions`` (a folder with a session.json): name, views done
     and planned, state (``acquiring`` while views are pending, ``acquired``, ``processed`` with summary.json),
-    its figures and the files a page may open; a session.json that does not load is listed with its error."""
+    its figures and the files a page may open; a session.json that does not load is listed with its error. A
+    folder whose name is not UTF-8 is left out, a line saying so appended to ``skipped``."""
     from rangekit.formats.sessions.session import Session
 
     root = Path(sessions).resolve()
     out = []
     for folder in sorted(p for p in root.iterdir() if (p / "session.json").is_file()):
         if not folder.resolve().is_relative_to(root):      # a link out of the sessions folder is not listed
+            continue
+        if readable_name(folder.name) is None:
+            if skipped is not None:
+                skipped.append(f"{shown_bytes(folder.name)}: skipped: its name is not UTF-8; rename it to open it here")
             continue
         row = {"name": folder.name, "files": [n for n in SESSION_FILES if (folder / n).is_file()]}
         try:

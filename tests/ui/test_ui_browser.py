@@ -149,7 +149,7 @@ def test_the_whole_path_in_a_browser(tmp_path):
             # Check: run, then apply its suggestion with one click.
             page.execute("location.hash = '#check'; document.getElementById('check-run').click();")
             page.until("return !document.getElementById('check-apply').disabled;", timeout=300)
-            out["suggested"] = page.execute("return fetch('/api/check').then(r => r.json()).then(c => c.suggested);")
+            out["suggested"] = page.execute("return api('/api/check').then(r => r.json()).then(c => c.suggested);")
             page.execute("document.getElementById('check-apply').click();")
             out["applied"] = page.until("const t = document.getElementById('check-error').textContent;"
                                         "return t.startsWith('applied') && t;")
@@ -160,7 +160,7 @@ def test_the_whole_path_in_a_browser(tmp_path):
             page.execute("const f = document.getElementById('scan-form'); f.name.value = 'first';"
                          "f.views.value = '6'; document.getElementById('scan-start').click();")
             page.until("return window.rangekitScan3d && window.rangekitScan3d.count >= 1;", timeout=240)
-            out["taken"] = page.execute("return fetch('/api/scan').then(r => r.json())"
+            out["taken"] = page.execute("return api('/api/scan').then(r => r.json())"
                                         ".then(s => s.views.filter(v => v.done).length);")
             out["shown"] = page.execute("return window.rangekitScan3d.points;")
             shots.take(page, "ui-scan")
@@ -172,8 +172,12 @@ def test_the_whole_path_in_a_browser(tmp_path):
             # Sessions: the finished session opened from the Scan page's link: its report and its mesh.
             page.execute("document.getElementById('scan-report').click();")
             page.until("return window.rangekitSession3d.vertices > 0;", timeout=60)
-            out["report_title"] = page.until("const d = document.getElementById('session-report').contentDocument;"
-                                               "return d && d.readyState === 'complete' && d.title;", timeout=60)
+            # The report runs sandboxed (its own origin: no contentDocument from here): read inside its frame.
+            page.until("return !!document.getElementById('session-report').getAttribute('src');", timeout=60)
+            page.frame("#session-report")
+            out["report_title"] = page.until("return document.readyState === 'complete' && document.title;",
+                                             timeout=60)
+            page.frame(None)
             shots.take(page, "ui-sessions")
             # Registration: the first two views' clouds, registered, residuals shown, saved.
             page.execute("location.hash = '#register';")
@@ -182,7 +186,7 @@ def test_the_whole_path_in_a_browser(tmp_path):
                          "  document.querySelector(`#register-clouds input[value='${v}']`).click();"
                          "document.getElementById('register-start').click();")
             page.until("return !document.getElementById('register-save-button').disabled;", timeout=180)
-            out["pairs"] = page.execute("return fetch('/api/register').then(r => r.json()).then(s => s.pairs);")
+            out["pairs"] = page.execute("return api('/api/register').then(r => r.json()).then(s => s.pairs);")
             shots.take(page, "ui-register")
             page.execute("document.getElementById('register-save').name.value = 'two-views';"
                          "document.getElementById('register-save-button').click();")

@@ -146,7 +146,8 @@ def test_two_clouds_register_to_their_true_motion_and_save_under_a_name(server):
     # b's points placed by the registered pose land on a's surface: the true motion recovered.
     placed = points_mm.astype(np.float64) / 1e3
     assert np.sqrt(np.mean(np.sum((placed - b) ** 2, axis=1))) < 2e-5
-    assert _post(server, "/api/register/save", {"name": "../out"})[1]["error"].startswith("path '../out': refused")
+    assert _post(server, "/api/register/save", {"name": "../out"})[1]["error"].startswith("name: '../out': begins with '.'")
+    assert _post(server, "/api/register/save", {"name": ".registering"})[1]["error"].startswith("name: '.registering'")
     assert _post(server, "/api/register/save", {"name": "pair"})[1]["error"] == (
         "name: pair: exists under the sessions folder; choose another name")
     assert _post(server, "/api/register/save", {"name": "pair-registered"})[1]["saved"] == "pair-registered"

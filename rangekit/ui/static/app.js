@@ -1,13 +1,70 @@
-// rangekit ui: what every page shares (requests, the page switch, the device status) and the Live page. Same-origin requests only; the token travels as the cookie the first load set.
+// rangekit ui: what every page shares (requests, the page switch, the device status) and the Live page.
+// The token: read once from the URL rangekit ui printed (?token=), kept in this tab's sessionStorage (this origin
+// only), and the address replaced so it leaves the address bar and the history. Every request carries it in the
+// X-Rangekit-Token header (no cookie: every port of 127.0.0.1 would see one); what cannot carry a header (the
+// WebSocket, a report's iframe) opens with a single-use ticket, images are fetched and shown as blob URLs.
 "use strict";
 
 const $ = (id) => document.getElementById(id);
 
+const TOKEN = (() => {
+  const given = new URLSearchParams(location.search).get("token");
+  if (given) {
+    sessionStorage.setItem("rangekit-token", given);
+    history.replaceState(null, "", location.pathname + location.hash);
+  }
+  return sessionStorage.getItem("rangekit-token") || "";
+})();
+
+// The banner over every page: the server gone, or back with another token (it restarted: its new URL holds it).
+let serverState = TOKEN ? "ok" : "no-token";
+function showServerState(state) {
+  if (serverState === "stale" || serverState === "no-token") return;    // final: only the new URL helps
+  serverState = state;
+  const words = { gone: "The server does not answer: reconnecting.",
+                  stale: "The server restarted: this page's token is no longer valid. Open the new URL rangekit ui printed.",
+                  "no-token": "This page has no token: open the URL rangekit ui printed (it holds the token)." };
+  $("banner").textContent = words[state] || ""; $("banner").hidden = state === "ok";
+}
+if (!TOKEN) { serverState = "ok"; showServerState("no-token"); }
+
+// Every request of the page: the token in its header; a body (POST) as JSON. The Response, or a refusal's.
+async function api(path, body) {
+  const init = { headers: { "X-Rangekit-Token": TOKEN }, cache: "no-store" };
+  if (body !== undefined) {
+    init.method = "POST"; init.headers["Content-Type"] = "application/json"; init.body = JSON.stringify(body);
+  }
+  let r;
+  try { r = await fetch(path, init); } catch (e) {
+    showServerState("gone");
+    return new Response(JSON.stringify({ error: "the server does not answer" }), { status: 503 });
+  }
+  if (r.status === 403 && (await r.clone().text()).includes("token missing or wrong")) showServerState("stale");
+  else if (serverState === "gone") showServerState("ok");
+  return r;
+}
+
+// A single-use ticket for what the page opens without a header (the WebSocket, a report), or null.
+async function ticket(path) {
+  const r = await api("/api/ticket", { path });
+  return r.ok ? (await r.json()).ticket : null;
+}
+
+// An image of the API shown in img (fetched with the header, shown as a blob URL).
+async function showImage(img, path) {
+  const r = await api(path);
+  if (!r.ok) return false;
+  const old = img.src;
+  img.src = URL.createObjectURL(await r.blob());
+  if (old.startsWith("blob:")) URL.revokeObjectURL(old);
+  img.hidden = false;
+  return true;
+}
+
 function showError(text) { $("error").textContent = text || ""; }
 
 async function post(path, body) {
-  const r = await fetch(path, { method: "POST", headers: { "Content-Type": "application/json" },
-                                body: JSON.stringify(body) });
+  const r = await api(path, body);
   const data = await r.json().catch(() => ({ error: `HTTP ${r.status}` }));
   if (!r.ok) { showError(data.error || `HTTP ${r.status}`); return null; }
   showError("");
@@ -19,16 +76,18 @@ let controlsShown = false;
 
 function showStatus(rig) {
   $("rig-source").textContent = `${rig.source} - ${rig.rig_file}`;
-  if (!controlsShown) {   // the rig file's values, once: the user's typing is not overwritten
+  if (!controlsShown) {   // the rig file's values, else the defaults in force, once: the user's typing stays
     for (const input of $("controls").querySelectorAll("input")) {
-      const v = rig.controls[input.name]; input.value = v === undefined ? "" : v;
+      const v = rig.controls[input.name] ?? rig.controls_in_force?.[input.name];
+      input.value = v === undefined || v === null ? "" : v;
+      input.title = rig.controls[input.name] === undefined ? "the default (the rig file does not set it)" : "";
     }
     controlsShown = true;
   }
   const rows = [
     ["camera", rig.camera.connected ? `${rig.camera.width}x${rig.camera.height}` : "not connected"],
     ["projector", rig.projector.connected ? `pattern ${rig.pattern}` : "not connected"],
-    ["turntable", rig.turntable.connected ? `${rig.turntable.angle_deg} deg` : "not connected"],
+    ["turntable", rig.turntable.connected ? `${rig.turntable.angle_deg} deg${rig.turntable.turning ? " (turning)" : ""}` : "not connected"],
     ["busy", rig.busy || "no"], ["fault", rig.fault || "none"], ["last reply", rig.last_reply]];
   $("status").innerHTML = "";
   for (const [k, v] of rows) {
@@ -39,7 +98,8 @@ function showStatus(rig) {
 }
 
 async function loadStatus() {
-  const r = await fetch("/api/status");
+  const r = await api("/api/status");
+  if (!r.ok) return;
   const data = await r.json();
   const box = $("patterns");
   if (!box.children.length) {
@@ -59,8 +119,16 @@ function drawCorners(ctx, board) {
   if (board.corners.length) { const [u, v] = board.corners[0]; ctx.strokeRect(u - 3 * r, v - 3 * r, 6 * r, 6 * r); }
 }
 
-function startLive() {
-  const ws = new WebSocket(`ws://${location.host}/ws/live`);
+function liveWaiting(text) { $("live-waiting").hidden = false; $("live-waiting").textContent = text; }
+
+async function startLive() {
+  const t = await ticket("/ws/live");
+  if (!t) {     // the server gone (try again), or another token (stale: the banner says so; no retry)
+    if (serverState !== "stale" && serverState !== "no-token") { liveWaiting("reconnecting"); setTimeout(startLive, 1000); }
+    else liveWaiting("the server restarted: open the new URL it printed");
+    return;
+  }
+  const ws = new WebSocket(`ws://${location.host}/ws/live?ticket=${encodeURIComponent(t)}`);
   ws.binaryType = "blob";
   let figures = null, shown = [];
   ws.onmessage = async (ev) => {
@@ -87,7 +155,7 @@ function startLive() {
       $("fig-focus").textContent = figures.focus.toFixed(1);
     }
   };
-  ws.onclose = () => { $("live-waiting").hidden = false; $("live-waiting").textContent = "reconnecting"; setTimeout(startLive, 1000); };
+  ws.onclose = () => { liveWaiting("reconnecting"); setTimeout(startLive, 1000); };
 }
 
 // Each field's error next to it (the rig file's own words name the field: capture.camera.<name>).
@@ -100,8 +168,7 @@ $("controls").onsubmit = async (ev) => {
     changes[input.name] = /^-?[0-9.]+(e-?[0-9]+)?$/i.test(text) ? Number(text) : text;
   }
   for (const e of document.querySelectorAll(".field-error")) e.textContent = "";
-  const r = await fetch("/api/camera", { method: "POST", headers: { "Content-Type": "application/json" },
-                                         body: JSON.stringify(changes) });
+  const r = await api("/api/camera", changes);
   const data = await r.json().catch(() => ({ error: `HTTP ${r.status}` }));
   if (r.ok) { showError(""); showStatus(data.rig); return; }
   const field = Object.keys(changes).find((k) => (data.error || "").includes(`camera.${k}`) ||
@@ -117,9 +184,10 @@ loadStatus();
 setInterval(loadStatus, 2000);
 startLive();
 
-// -- pages: the hash names the section shown
+// -- pages: the hash names the section shown (one that names none: the first page)
 function showPage() {
-  const name = (location.hash || "#live").slice(1);
+  const pages = [...document.querySelectorAll("main > section")].map((sec) => sec.id);
+  const asked = location.hash.slice(1), name = pages.includes(asked) ? asked : pages[0];
   for (const sec of document.querySelectorAll("main > section")) sec.hidden = sec.id !== name;
   for (const a of document.querySelectorAll("header nav a")) a.classList.toggle("on", a.getAttribute("href") === `#${name}`);
 }

@@ -5,8 +5,7 @@
 function calError(text) { $("calibrate-error").textContent = text || ""; }
 
 async function calPost(action, body) {
-  const r = await fetch(`/api/calibrate/${action}`, { method: "POST", headers: { "Content-Type": "application/json" },
-                                                      body: JSON.stringify(body || {}) });
+  const r = await api(`/api/calibrate/${action}`, body || {});
   const data = await r.json().catch(() => ({ error: `HTTP ${r.status}` }));
   for (const e of document.querySelectorAll("#calibrate-form .field-error")) e.textContent = "";
   if (!r.ok) {
@@ -43,7 +42,7 @@ function showCalibration(c) {
   const key = c.pictures.join() + c.poses.length + c.state;
   if (c.pictures.length && key !== calPictures) {
     calPictures = key;
-    for (const name of c.pictures) { const img = $(`calibrate-${name}`); img.src = `/api/calibrate/picture/${name}.png?t=${Date.now()}`; img.hidden = false; }
+    for (const name of c.pictures) showImage($(`calibrate-${name}`), `/api/calibrate/picture/${name}.png`);
   }
   $("calibrate-progress").innerHTML = "";
   for (const line of c.progress || []) { const li = document.createElement("li"); li.textContent = line; $("calibrate-progress").appendChild(li); }
@@ -65,7 +64,7 @@ function showCalibration(c) {
 
 async function pollCalibrate() {
   if (location.hash !== "#calibrate" && window.rangekitCalibrate) return;
-  const r = await fetch("/api/calibrate");
+  const r = await api("/api/calibrate");
   if (r.ok) showCalibration(await r.json());
 }
 
@@ -104,7 +103,7 @@ async function showRecorded(c) {
 }
 async function pollRecorded() {
   if (location.hash !== "#calibrate" && $("recorded-form").pattern.options.length) return;
-  const r = await fetch("/api/calibrate-recorded");
+  const r = await api("/api/calibrate-recorded");
   if (r.ok) showRecorded(await r.json());
 }
 $("recorded-form").onsubmit = async (ev) => {
@@ -114,7 +113,7 @@ $("recorded-form").onsubmit = async (ev) => {
   const num = (t) => (/^[0-9.]+$/.test(t.trim()) ? Number(t) : t);
   const body = { captures: f.captures.value.trim(), pattern: f.pattern.value, projector: f.projector.value.trim(), out: f.out.value.trim(),
                  cols: num(f.cols.value), rows: num(f.rows.value), square_mm: num(f.square_mm.value) };
-  const r = await fetch("/api/calibrate-recorded/start", { method: "POST", headers: { "Content-Type": "application/json" }, body: JSON.stringify(body) });
+  const r = await api("/api/calibrate-recorded/start", body);
   const data = await r.json();
   if (!r.ok) {
     const field = ["captures", "projector", "out", "cols", "rows", "square_mm"].find((k) => data.error.startsWith(`${k}:`));

@@ -5,7 +5,8 @@
 let checkShown = null;
 function fmtPct(x) { return `${(100 * x).toFixed(2)} %`; }
 async function pollCheck() {
-  const r = await fetch("/api/check");
+  const r = await api("/api/check");
+  if (!r.ok) return;
   const c = await r.json();
   $("check-state").textContent = c.state === "idle" ? "" : c.state;
   $("check-run").disabled = c.state === "running";
@@ -24,17 +25,17 @@ async function pollCheck() {
     for (const line of c.advice) { const li = document.createElement("li"); li.textContent = line; $("check-advice").appendChild(li); }
     $("check-suggested").innerHTML = "";
     for (const [k, v] of Object.entries(c.suggested)) { const tr = $("check-suggested").insertRow(); tr.insertCell().outerHTML = `<th>${k}</th>`; tr.insertCell().textContent = v; }
-    $("check-figure").src = `/api/check/figure.png?t=${Date.now()}`; $("check-figure").hidden = false;
+    showImage($("check-figure"), "/api/check/figure.png");
     $("check-apply").disabled = false;
   }
 }
 $("check-run").onclick = async () => {
-  const r = await fetch("/api/check/run", { method: "POST" });
+  const r = await api("/api/check/run", {});
   if (!r.ok) $("check-error").textContent = (await r.json()).error;
   pollCheck();
 };
 $("check-apply").onclick = async () => {
-  const r = await fetch("/api/check/apply", { method: "POST" });
+  const r = await api("/api/check/apply", {});
   const data = await r.json();
   if (!r.ok) { $("check-error").textContent = data.error; return; }
   $("check-error").textContent = "applied: " + data.rig.last_reply;

@@ -7,7 +7,9 @@ let registerShown = null;
 async function loadClouds() {
   const box = $("register-clouds");
   if (location.hash !== "#register" || box.dataset.loaded) return;
-  const clouds = (await (await fetch("/api/register/clouds")).json()).clouds;
+  const r = await api("/api/register/clouds");
+  if (!r.ok) return;
+  const clouds = (await r.json()).clouds;
   box.innerHTML = "";
   for (const c of clouds) {
     const label = document.createElement("label"), input = document.createElement("input");
@@ -20,7 +22,9 @@ async function loadClouds() {
 async function pollRegister() {
   if (location.hash !== "#register") return;
   loadClouds();
-  const s = await (await fetch("/api/register")).json();
+  const got = await api("/api/register");
+  if (!got.ok) return;
+  const s = await got.json();
   $("register-state").textContent = s.state === "idle" ? "" : s.state + (s.rmse_mm !== undefined ? `: RMS ${s.rmse_mm} mm over all pairs` : "") +
     (s.saved ? `; saved as ${s.saved}` : "");
   $("register-error").textContent = s.state === "failed" ? s.error : "";
@@ -40,7 +44,7 @@ async function pollRegister() {
     for (const v of [`${p.a} - ${p.b}`, `${p.rmse_mm} mm`, `${p.overlap_percent} %`, p.accepted ? "kept" : `refused: ${p.reason}`]) tr.insertCell().textContent = v;
   }
   for (let k = 0; k < s.files.length; k++) {
-    const r = await fetch(`/api/register/points/${k}`);
+    const r = await api(`/api/register/points/${k}`);
     if (r.ok) window.rangekitRegister3d.addView(k, new Float32Array(await r.arrayBuffer()));
   }
 }
@@ -51,7 +55,7 @@ $("register-form").onsubmit = async (ev) => {
   const text = $("register-form").neighbours.value.trim();
   for (const e of document.querySelectorAll("#register-form .field-error, #register-save .field-error")) e.textContent = "";
   const body = { files, neighbours: text === "" ? null : (/^[0-9]+$/.test(text) ? Number(text) : text) };
-  const r = await fetch("/api/register/start", { method: "POST", headers: { "Content-Type": "application/json" }, body: JSON.stringify(body) });
+  const r = await api("/api/register/start", body);
   const data = await r.json();
   if (!r.ok) {
     if (data.error.startsWith("neighbours:")) document.querySelector("#register-form .field-error[data-for=neighbours]").textContent = data.error;
@@ -61,8 +65,7 @@ $("register-form").onsubmit = async (ev) => {
 };
 $("register-save").onsubmit = async (ev) => {
   ev.preventDefault();
-  const r = await fetch("/api/register/save", { method: "POST", headers: { "Content-Type": "application/json" },
-                                                body: JSON.stringify({ name: $("register-save").name.value.trim() }) });
+  const r = await api("/api/register/save", { name: $("register-save").name.value.trim() });
   const data = await r.json();
   if (!r.ok) document.querySelector("#register-save .field-error[data-for=name]").textContent = data.error;
   else $("register-clouds").dataset.loaded = "";

@@ -5,7 +5,8 @@
 let scanName = null, scanMesh = null;
 const loading = new Set();
 async function pollScan() {
-  const r = await fetch("/api/scan");
+  const r = await api("/api/scan");
+  if (!r.ok) return;
   const s = await r.json();
   $("scan-stop").disabled = $("scan-pause").disabled = !s.running;
   $("scan-pause").textContent = s.paused ? "continue" : "pause";
@@ -31,14 +32,14 @@ async function pollScan() {
   for (const v of s.views) {
     if (!v.decoded || loading.has(v.index) || window.rangekitScan3d.has(v.index)) continue;
     loading.add(v.index);
-    const p = await fetch(`/api/sessions/${encodeURIComponent(s.name)}/views/${v.index}/points`);
+    const p = await api(`/api/sessions/${encodeURIComponent(s.name)}/views/${v.index}/points`);
     if (p.ok) window.rangekitScan3d.addView(v.index, new Float32Array(await p.arrayBuffer()));
     loading.delete(v.index);
   }
 }
 async function scanPost(path, body) {
   for (const e of document.querySelectorAll("#scan-form .field-error")) e.textContent = "";
-  const r = await fetch(path, { method: "POST", headers: { "Content-Type": "application/json" }, body: JSON.stringify(body) });
+  const r = await api(path, body);
   const data = await r.json();
   if (!r.ok) {
     const field = ["views", "name"].find((k) => data.error.startsWith(`${k}:`) || data.error.startsWith("session") && k === "name");

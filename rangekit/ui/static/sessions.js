@@ -6,7 +6,10 @@ let sessionOpen = null, sessionMeshShown = null;
 
 async function pollSessions() {
   if (location.hash !== "#sessions") return;
-  const list = (await (await fetch("/api/sessions")).json()).sessions;
+  const got = await api("/api/sessions");
+  if (!got.ok) return;
+  const { sessions: list, skipped } = await got.json();
+  $("sessions-skipped").textContent = skipped.join("; ");
   const body = $("sessions-table").tBodies[0];
   body.innerHTML = "";
   for (const s of list) {
@@ -16,8 +19,9 @@ async function pollSessions() {
     for (const c of cells) tr.insertCell().textContent = c;
     const files = tr.insertCell();
     for (const f of s.files) {
-      const a = document.createElement("a"); a.textContent = f; a.target = "_blank";
-      a.href = `/api/sessions/${encodeURIComponent(s.name)}/files/${f}`; files.appendChild(a); files.append(" ");
+      const a = document.createElement("a"); a.textContent = f; a.href = "#sessions";
+      a.onclick = (ev) => { ev.preventDefault(); download(`/api/sessions/${encodeURIComponent(s.name)}/files/${f}`, f); };
+      files.appendChild(a); files.append(" ");
     }
     const open = document.createElement("button"); open.textContent = "open"; open.dataset.session = s.name;
     open.onclick = () => openSession(s.name); tr.insertCell().appendChild(open);
@@ -26,13 +30,32 @@ async function pollSessions() {
   if (current) showSession(current);
 }
 
-function openSession(name) { sessionOpen = name; sessionMeshShown = null; $("session-report").removeAttribute("src"); pollSessions(); }
+// A session's file saved (fetched with the header, handed to the browser as a download: never opened here, where
+// a report received from someone else would run as the app).
+async function download(path, name) {
+  const r = await api(path);
+  if (!r.ok) { $("session-error").textContent = (await r.json().catch(() => ({}))).error || `HTTP ${r.status}`; return; }
+  const a = document.createElement("a"); a.href = URL.createObjectURL(await r.blob()); a.download = name;
+  a.click(); setTimeout(() => URL.revokeObjectURL(a.href), 60000);
+}
+
+// The report in its sandboxed iframe (sandbox="allow-scripts": its own origin, never the app's), opened once with
+// a single-use ticket.
+async function showReport(path) {
+  const frame = $("session-report");
+  frame.dataset.path = path;
+  const t = await ticket(path);
+  if (t && frame.dataset.path === path) frame.src = `${path}?ticket=${encodeURIComponent(t)}`;
+}
+
+function clearReport() { $("session-report").removeAttribute("src"); delete $("session-report").dataset.path; }
+function openSession(name) { sessionOpen = name; sessionMeshShown = null; clearReport(); pollSessions(); }
 
 async function showSession(s) {
   $("session-detail").hidden = false;
   $("session-title").textContent = `${s.name}: ${s.state}`;
   const base = `/api/sessions/${encodeURIComponent(s.name)}/files/`;
-  if (s.files.includes("report.html") && !$("session-report").getAttribute("src")) $("session-report").src = base + "report.html";
+  if (s.files.includes("report.html") && !$("session-report").dataset.path) showReport(base + "report.html");
   const key = s.name + (s.vertices ?? "");
   if (s.files.includes("mesh.ply") && sessionMeshShown !== key) {
     sessionMeshShown = key;
@@ -40,13 +63,12 @@ async function showSession(s) {
     const n = await window.rangekitSession3d.showMesh(base + "mesh.ply");
     $("session-mesh-note").textContent = `mesh.ply: ${n} vertices (drag to turn, wheel to zoom)`;
   } else if (!s.files.includes("mesh.ply")) $("session-mesh-note").textContent = "no mesh yet: process the session";
-  const job = await (await fetch("/api/scan")).json();
+  const job = await (await api("/api/scan")).json();
   $("session-state").textContent = job.name === s.name && job.running ? `processing: ${job.log.slice(-1)[0] || ""}` : "";
 }
 
 async function sessionPost(path, body) {
-  const r = await fetch(`/api/sessions/${encodeURIComponent(sessionOpen)}/${path}`, { method: "POST",
-    headers: { "Content-Type": "application/json" }, body: JSON.stringify(body) });
+  const r = await api(`/api/sessions/${encodeURIComponent(sessionOpen)}/${path}`, body);
   const data = await r.json();
   $("session-error").textContent = r.ok ? "" : data.error;
   return r.ok ? data : null;
@@ -55,7 +77,7 @@ $("session-process").onsubmit = async (ev) => {
   ev.preventDefault();
   const f = $("session-process");
   if (await sessionPost("process", { fusion: f.fusion.value, format: f.format.value, report: f.report.checked })) {
-    sessionMeshShown = null; $("session-report").removeAttribute("src");
+    sessionMeshShown = null; clearReport();
   }
 };
 for (const b of document.querySelectorAll("#session-export button")) {

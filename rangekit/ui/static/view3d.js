@@ -45,9 +45,11 @@ function makeViewer(canvas) {
       views.clear(); box.makeEmpty(); viewer.points = 0;
       if (mesh) { scene.remove(mesh); mesh = null; viewer.vertices = 0; }
     },
-    // The mesh of a PLY file at url (metres), shown instead of the points.
+    // The mesh of a PLY file at url (metres), shown instead of the points (fetched with the page's token).
     async showMesh(url) {
-      const geometry = await new PLYLoader().loadAsync(url);
+      const r = await api(url);
+      if (!r.ok) return 0;
+      const geometry = new PLYLoader().parse(await r.arrayBuffer());
       geometry.scale(1000, 1000, 1000);
       if (!geometry.attributes.normal) geometry.computeVertexNormals();
       geometry.computeBoundingBox();

@@ -15,6 +15,7 @@ __all__ = [
     "naming",
     "RangekitError",
     "InputError",
+    "ArgumentTypeError",
     "UsageError",
     "OptionError",
     "BudgetError",
@@ -46,6 +47,13 @@ class RangekitError(Exception):
 
 class InputError(RangekitError, ValueError):
     """An argument has the wrong shape, type or value."""
+
+
+class ArgumentTypeError(InputError, TypeError):
+    """An argument of the wrong type: None where a value is needed, a string where a number or a flag is, a number
+    where a path is (:mod:`rangekit._runtime.arguments`, the front door's checks). An :class:`InputError`, so the
+    CLI and ``except RangekitError`` take it as any other bad input; and a ``TypeError``, as Python's own functions
+    raise for a wrong type, so ``except TypeError`` written against the call still catches it."""
 
 
 class UsageError(InputError):

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from rangekit._runtime.arguments import as_points
 from rangekit.errors import InputError
 
 __all__ = [
@@ -36,10 +37,7 @@ __all__ = [
 
 
 def _as_points(points: np.ndarray, name: str = "points") -> np.ndarray:
-    P = np.asarray(points, dtype=np.float64)
-    if P.ndim != 2 or P.shape[1] != 3:
-        raise InputError(f"{name}: expected an (N, 3) array, found shape {P.shape}")
-    return P
+    return as_points(name, points)
 
 
 def make_T(R: np.ndarray | None = None, t: np.ndarray | None = None, *, scale: float = 1.0) -> np.ndarray:

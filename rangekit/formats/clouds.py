@@ -23,6 +23,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from rangekit._runtime.arguments import check_instance, check_path
 from rangekit.regular_files import check_regular_file
 from rangekit.errors import FileFormatError
 from rangekit.formats.parsing import cloud_of_finite_rows, read_bytes
@@ -65,12 +66,14 @@ def save_cloud(path: str | Path, cloud, *, fields: dict[str, np.ndarray] | None 
     array, an Open3D or trimesh cloud) in the format given by the file extension (:data:`CLOUD_WRITERS`),
     atomically. ``fields``: extra per-point properties (name -> (N,) array), PLY only (e.g. merged.ply's
     ``view``, :func:`rangekit.surface.cloud.view_index`)."""
+    check_path("path", path, what="a point cloud file")
+    check_instance("fields", fields, dict, "a dict of per-point arrays", optional=True)
     path = Path(path)
     writer = CLOUD_WRITERS.get(path.suffix.lower())
     if writer is None:
         raise FileFormatError(f"{path}: unknown point cloud format {path.suffix!r}; known: "
                               f"{', '.join(CLOUD_WRITERS)}")
-    cloud = as_cloud(cloud, "save_cloud")
+    cloud = as_cloud(cloud, "save_cloud cloud")
     if fields and writer is not cloud_ply_bytes:
         raise FileFormatError(f"{path}: extra point fields ({', '.join(fields)}) are written to '.ply' only, "
                               f"found {path.suffix!r}")
@@ -111,7 +114,7 @@ def load_cloud(path: str | Path) -> PointCloud:
         If the suffix is unknown, the file is missing or a folder, malformed or truncated, or no finite point
         is left.
     """
-    path = Path(path)
+    path = Path(check_path("path", path, what="a point cloud file"))
     if path.is_dir():
         raise FileFormatError(f"{path}: is a folder, expected a point cloud file ({', '.join(CLOUD_READERS)})")
     reader = CLOUD_READERS.get(path.suffix.lower())
@@ -143,7 +146,7 @@ def load_range_grid(path: str | Path) -> RangeGrid:
         element or no ``num_rows`` / ``num_cols``), an entry lists more than one vertex or an index is
         out of range, or no finite vertex is left.
     """
-    path = Path(path)
+    path = Path(check_path("path", path, what="a range-grid PLY file"))
     if path.suffix.lower() != ".ply":
         raise FileFormatError(f"{path}: a range grid is read from a '.ply' file, found {path.suffix!r}")
     header, elements = read_ply(path, ("vertex", "range_grid"))

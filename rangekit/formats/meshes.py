@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
+from rangekit._runtime.arguments import check_path, check_text
 from rangekit.regular_files import check_regular_file, read_regular_file
 from rangekit.errors import FileFormatError
 from rangekit.formats.ply import ply_observed, ply_vertex_attributes, read_ply
@@ -47,9 +48,10 @@ def save_mesh(path: str | Path, mesh, *, units: str = "metres") -> None:
     ``units`` names the coordinates' unit in a PLY's comment. The write is atomic (temporary file + rename). STL keeps no colours; OBJ and GLB keep them as vertex
     colours.
     """
-    path = Path(path)
+    path = Path(check_path("path", path, what="a mesh file"))
+    check_text("units", units, what="the coordinates' unit")
     suffix = _check_suffix(path)
-    mesh = as_mesh(mesh, "save_mesh")
+    mesh = as_mesh(mesh, "save_mesh mesh")
     atomic_write_bytes(path, mesh_ply_bytes(mesh, units) if suffix == ".ply" else MESH_FORMATS[suffix](mesh))
 
 
@@ -115,7 +117,7 @@ def load_mesh(path: str | Path) -> TriangleMesh:
         If the file is missing, a folder, has an unknown extension, is malformed, holds no triangles or
         a vertex that is not finite.
     """
-    path = Path(path)
+    path = Path(check_path("path", path, what="a mesh file"))
     suffix = _check_suffix(path, (*MESH_FORMATS, *_READ_ONLY))
     if path.is_dir():
         raise FileFormatError(f"{path}: is a folder, expected a mesh file")

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from rangekit._runtime.arguments import as_array
 from rangekit.errors import InputError
 from rangekit.image import to_grey
 from rangekit.photometric.cavity_light import CavityLight, cavity_light
@@ -86,7 +87,7 @@ def check_mask(mask, shape: tuple[int, int], images: np.ndarray) -> np.ndarray:
 
 
 def check_lights(lights, f: int) -> np.ndarray:
-    L = np.asarray(lights, dtype=np.float64)
+    L = as_array("lights", lights, f"a ({f}, 3) array of unit directions")
     if L.shape != (f, 3):
         raise InputError(f"lights: expected shape ({f}, 3) (one unit direction per image), found {L.shape}")
     if not np.all(np.isfinite(L)):

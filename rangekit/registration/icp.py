@@ -12,6 +12,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from scipy.spatial import cKDTree
 
+from rangekit._runtime.arguments import check_choice, check_instance, check_items, check_number, check_pose
 from rangekit.camera import PinholeCamera
 from rangekit.errors import InputError, RegistrationError
 from rangekit.geometry import apply_T, make_T, procrustes, rotation_angle, rotvec_to_R, transform_vectors
@@ -45,13 +46,17 @@ class IcpOptions:
     rng: int = 0
 
     def __post_init__(self) -> None:
-        if self.method not in METHODS:
-            raise InputError(f"IcpOptions: method must be one of {METHODS}, found {self.method!r}")
-        if self.kernel not in KERNELS:
-            raise InputError(f"IcpOptions: kernel must be one of {KERNELS}, found {self.kernel!r}")
-        if not (self.max_distance > 0 and self.max_iterations >= 1 and 0 <= self.trim < 1):
-            raise InputError(f"IcpOptions: need max_distance > 0, max_iterations >= 1, 0 <= trim < 1; found "
-                             f"{self.max_distance}, {self.max_iterations}, {self.trim}")
+        check_choice("method", self.method, METHODS)
+        check_choice("kernel", self.kernel, KERNELS)
+        check_number("max_distance", self.max_distance, lo=0, lo_open=True, unit="metres")
+        check_number("max_iterations", self.max_iterations, lo=1, integer=True)
+        check_number("kernel_scale", self.kernel_scale, lo=0, lo_open=True, unit="metres", optional=True)
+        check_number("trim", self.trim, lo=0, hi=1, hi_open=True)
+        for k, voxel in enumerate(check_items("voxel_sizes", self.voxel_sizes, "a tuple of voxel sizes (metres)")):
+            check_number(f"voxel_sizes[{k}]", voxel, lo=0, unit="metres")
+        check_number("max_samples", self.max_samples, lo=1, integer=True, optional=True)
+        check_number("tolerance", self.tolerance, lo=0, unit="metres")
+        check_number("rng", self.rng, lo=0, integer=True)
 
 
 @dataclass(frozen=True, eq=False)
@@ -294,6 +299,10 @@ def icp(source, target, *, init_T_target_source: np.ndarray | None = None, optio
     RegistrationResult. A run that ends with too few correspondences returns ``converged=False`` with a
     reason, not an exception; empty inputs raise RegistrationError.
     """
+    check_instance("options", options, IcpOptions, "an IcpOptions")
+    check_instance("target_scan", target_scan, OrganisedScan, "an OrganisedScan", optional=True)
+    check_instance("hold", hold, HeldMotions, "a HeldMotions", optional=True)
+    init = check_pose("init_T_target_source", init_T_target_source, optional=True)
     src = _as_cloud(source, "source")
     if target_scan is not None:
         tgt = target_scan.cloud()
@@ -306,9 +315,7 @@ def icp(source, target, *, init_T_target_source: np.ndarray | None = None, optio
                                 "(rangekit.surface.cloud.estimate_normals) or use method='point_to_point'")
     if options.method == "symmetric" and src.normals is None:
         raise RegistrationError("symmetric ICP needs source normals too; give PointCloud(points, normals=...)")
-    T = np.eye(4) if init_T_target_source is None else np.asarray(init_T_target_source, dtype=np.float64).copy()
-    if T.shape != (4, 4):
-        raise InputError(f"icp: init_T_target_source must be 4x4, found {T.shape}")
+    T = np.eye(4) if init is None else init.copy()
     size = float(np.linalg.norm(np.ptp(tgt.points, axis=0)))
     rng = np.random.default_rng(options.rng)
     total = 0

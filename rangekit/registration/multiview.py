@@ -21,6 +21,8 @@ from typing import Callable, Protocol, Sequence
 import numpy as np
 from scipy.spatial import cKDTree
 
+from rangekit._runtime.arguments import (check_bool, check_callable, check_instance, check_items, check_number,
+                                         check_pose, check_text, refuse)
 from rangekit.errors import RegistrationError
 from rangekit.geometry import apply_T, invert_T
 from rangekit.surface.cloud import PointCloud, bbox_diagonal, check_voxel, downsample_with_normals
@@ -90,6 +92,23 @@ class MultiViewOptions:
                                          # refinement keeps them rotations about one common axis (its
                                          # 4 parameters and each view's angle: rangekit.registration.turntable)
     rng: int = 0
+
+    def __post_init__(self) -> None:
+        for name in ("voxel", "fine_voxel"):
+            check_number(name, getattr(self, name), lo=0, lo_open=True, unit="metres", optional=True)
+        check_number("min_overlap", self.min_overlap, lo=0, hi=1)
+        for name in ("max_rmse", "max_coarse_rmse"):
+            check_number(name, getattr(self, name), lo=0, lo_open=True, unit="voxels")
+        check_number("rounds", self.rounds, lo=1, integer=True)
+        check_number("min_constraint", self.min_constraint, lo=0)
+        check_number("joint_iterations", self.joint_iterations, lo=0, integer=True)
+        check_number("joint_tolerance", self.joint_tolerance, lo=0, unit="metres")
+        check_number("joint_samples", self.joint_samples, lo=1, integer=True)
+        check_callable("pairs", self.pairs)
+        check_number("coarse_neighbours", self.coarse_neighbours, lo=1, integer=True, optional=True)
+        check_instance("icp", self.icp, IcpOptions, "an IcpOptions")
+        check_bool("turntable", self.turntable)
+        check_number("rng", self.rng, lo=0, integer=True)
 
 
 @dataclass(frozen=True, eq=False)
@@ -169,6 +188,17 @@ def register_views(clouds: Sequence[PointCloud], *, init_T_world_view: np.ndarra
     view reached only through them: RegistrationError naming the views and the motion); with a prior, ICP
     solves the constrained motions, keeps the prior along the free ones and the edge's ``reason`` says so.
     """
+    clouds = check_items("clouds", clouds, "a list of clouds", min_items=1)
+    init_T_world_view = check_pose("init_T_world_view", init_T_world_view, count=len(clouds), optional=True)
+    check_instance("options", options, MultiViewOptions, "a MultiViewOptions")
+    check_callable("progress", progress)
+    for k, name in enumerate(check_items("names", names, f"{len(clouds)} names, one per cloud", optional=True) or ()):
+        check_text(f"names[{k}]", name, what="a view's name")
+    if names is not None and len(list(names)) != len(clouds):
+        refuse("names", names, f"{len(clouds)} names, one per cloud")
+    check_callable("map_pairs", map_pairs)
+    if ahead is not None and not callable(getattr(ahead, "level", None)):
+        refuse("ahead", ahead, "a RegistrationAhead or None", wrong_type=True)
     with one_blas_thread():    # thin (n, 6) and (N, 3) products: rangekit._runtime.threads
         return _register_views([as_cloud(c, f"register_views clouds[{i}]") for i, c in enumerate(clouds)],
                                init_T_world_view, options, progress, names, map_pairs, ahead)
@@ -246,10 +276,7 @@ def _register_views(clouds, init_T_world_view, options, progress, names, map_pai
         say(f"coarse alignment of {n_coarse} of {n * (n - 1) // 2} pairs ({coarse_label}, voxel "
             f"{voxel * 1e3:.2f} mm): {sum(e.accepted for e in edges)} accepted")
     else:
-        T = np.asarray(init_T_world_view, dtype=np.float64).copy()
-        if T.shape != (n, 4, 4):
-            raise RegistrationError(f"init_T_world_view must be ({n}, 4, 4), found {T.shape}")
-        T = first_view_world(T)
+        T = first_view_world(init_T_world_view)   # (n, 4, 4), checked by register_views
     T_prior = T.copy()
 
     edges: list[EdgeResult] = []

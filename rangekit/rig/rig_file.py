@@ -30,6 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
+from rangekit._runtime.arguments import check_instance, check_items, check_path
 from rangekit.budget import MAX_IMAGE_SIDE_PX
 from rangekit.camera import PinholeCamera
 from rangekit.rig.camera_controls import CameraControls
@@ -66,10 +67,16 @@ class Rig:
     lasers: tuple[LineLaser, ...] = ()  # line lasers fixed to the rig (planes in the world frame)
 
     def __post_init__(self) -> None:
-        if not self.cameras:
+        cameras = check_items("cameras", self.cameras, "a tuple of PinholeCameras")
+        if not cameras:
             raise ConfigError("rig: needs at least one camera in 'cameras'")
-        object.__setattr__(self, "cameras", tuple(self.cameras))
-        object.__setattr__(self, "lasers", tuple(self.lasers))
+        for k, camera in enumerate(cameras):
+            check_instance(f"cameras[{k}]", camera, PinholeCamera, "a PinholeCamera")
+        check_instance("projector", self.projector, PinholeCamera, "a PinholeCamera", optional=True)
+        check_instance("devices", self.devices, dict, "a dict (the rig file's 'devices')")
+        check_instance("capture", self.capture, dict, "a dict (the rig file's 'capture')")
+        object.__setattr__(self, "cameras", tuple(cameras))
+        object.__setattr__(self, "lasers", tuple(check_items("lasers", self.lasers, "a tuple of LineLasers")))
         if not all(isinstance(laser, LineLaser) for laser in self.lasers):
             raise ConfigError("rig: lasers must be LineLaser objects")
         if self.T_world_table is not None:
@@ -177,11 +184,14 @@ RIG_SUFFIXES = (".json",)
 
 def save_rig(rig: Rig, path: str | Path) -> None:
     """Write the rig file atomically."""
+    check_instance("rig", rig, Rig, "a rangekit Rig")
+    check_path("path", path, what="a rig file")
     atomic_write_json(path, rig.to_dict())
 
 
 def load_rig(path: str | Path) -> Rig:
     """Read and validate a rig file; errors name the file and the field."""
+    check_path("path", path, what="a rig file")
     return Rig.from_dict(read_json(path, what="rig file"), where=str(path))
 
 

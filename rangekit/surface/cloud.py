@@ -11,6 +11,7 @@ from typing import Sequence
 
 import numpy as np
 
+from rangekit._runtime.arguments import as_array, as_points, check_instance, check_items, check_number, check_pose, check_vector
 from rangekit.errors import InputError, MeshError
 
 __all__ = ["PointCloud", "cloud_to_open3d", "voxel_downsample", "MAX_VOXELS_PER_DIAGONAL", "bbox_diagonal",
@@ -29,19 +30,17 @@ class PointCloud:
                                        # (rangekit.coded.uncertainty); NaN where unknown
 
     def __post_init__(self) -> None:
-        P = np.asarray(self.points, dtype=np.float64)
-        if P.ndim != 2 or P.shape[1] != 3:
-            raise InputError(f"PointCloud: points must be (N, 3), found {P.shape}")
+        P = as_points("points", self.points)
         object.__setattr__(self, "points", P)
         for name in ("colours", "normals"):
             a = getattr(self, name)
             if a is not None:
-                a = np.asarray(a, dtype=np.float32 if name == "colours" else np.float64)
+                a = as_array(name, a, f"an {P.shape} array or None", dtype=np.float32 if name == "colours" else np.float64)
                 if a.shape != P.shape:
                     raise InputError(f"PointCloud: {name} must be {P.shape}, found {a.shape}")
                 object.__setattr__(self, name, a)
         if self.sigma is not None:
-            sg = np.asarray(self.sigma, dtype=np.float32)
+            sg = as_array("sigma", self.sigma, f"a ({len(P)},) array or None", dtype=np.float32)
             if sg.shape != (len(P),):
                 raise InputError(f"PointCloud: sigma must be ({len(P)},), found {sg.shape}")
             object.__setattr__(self, "sigma", sg)
@@ -123,7 +122,10 @@ def voxel_downsample(points: np.ndarray, voxel: float, *,
     (points, normals) : (M, 3) float64 means, one row per occupied voxel (ordered by voxel key), and
     their (M, 3) unit mean normals, or None when no normals were given. Always a pair.
     """
-    P = np.asarray(points, dtype=np.float64)
+    P = as_points("points", points)
+    check_number("voxel", voxel, unit="metres")
+    if normals is not None and as_points("normals", normals).shape != P.shape:
+        raise InputError(f"normals: expected an {P.shape} array like points, found shape {np.shape(normals)}")
     if voxel <= 0 or len(P) == 0:
         return P, normals
     cells = np.floor(P / voxel)
@@ -181,6 +183,9 @@ def downsample_with_normals(cloud: PointCloud, voxel: float) -> PointCloud:
 
 def estimate_normals(points: np.ndarray, *, k: int = 20, viewpoint: np.ndarray | None = None) -> np.ndarray:
     """(N, 3) unit normals from the k nearest neighbours (PCA via Open3D), facing ``viewpoint`` if given."""
+    points = as_points("points", points)
+    check_number("k", k, lo=1, integer=True)
+    check_vector("viewpoint", viewpoint, 3, optional=True)
     import open3d as o3d
 
     pc = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.asarray(points, dtype=np.float64)))
@@ -262,9 +267,8 @@ def oriented_normals_cloud(points: np.ndarray, *, voxel: float | None = None) ->
 def transform_cloud(cloud: PointCloud, T_a_b: np.ndarray) -> PointCloud:
     """``cloud`` (frame b) in frame a: points mapped by ``T_a_b``, normals rotated, colours and sigma kept
     (a rigid motion does not change a length)."""
-    T = np.asarray(T_a_b, dtype=np.float64)
-    if T.shape != (4, 4):
-        raise InputError(f"transform_cloud: T_a_b must be (4, 4), found {T.shape}")
+    check_instance("cloud", cloud, PointCloud, "a rangekit PointCloud")
+    T = check_pose("T_a_b", T_a_b)
     points = cloud.points @ T[:3, :3].T + T[:3, 3]
     normals = None if cloud.normals is None else cloud.normals @ T[:3, :3].T
     return PointCloud(points, cloud.colours, normals, cloud.sigma)
@@ -283,11 +287,10 @@ def merge_clouds(clouds: Sequence[PointCloud], T_world_view: np.ndarray | Sequen
     PointCloud with all points in view order; normals (float64) when every view has normals, colours
     when every view has colours, sigma when every view has sigma, otherwise None.
     """
-    clouds = list(clouds)
-    T = np.asarray(T_world_view, dtype=np.float64)
-    if not clouds or T.shape != (len(clouds), 4, 4):
-        raise InputError(f"merge_clouds: expected one (4, 4) pose per cloud ({len(clouds)} clouds, at least one), "
-                         f"found poses of shape {T.shape}")
+    clouds = check_items("clouds", clouds, "a list of PointClouds", min_items=1)
+    for k, c in enumerate(clouds):
+        check_instance(f"clouds[{k}]", c, PointCloud, "a rangekit PointCloud")
+    T = check_pose("T_world_view", T_world_view, count=len(clouds))
     moved = [transform_cloud(c, Tk) for c, Tk in zip(clouds, T)]
     points = np.concatenate([c.points for c in moved])
     normals = None

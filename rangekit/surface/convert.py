@@ -13,7 +13,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from rangekit.errors import InputError
+from rangekit._runtime.arguments import check_text
+from rangekit.errors import ArgumentTypeError, InputError
 from rangekit.surface.cloud import PointCloud
 from rangekit.surface.cloud import cloud_to_open3d as _cloud_to_open3d
 from rangekit.surface.mesh import TriangleMesh, mesh_from_open3d
@@ -51,7 +52,8 @@ def from_open3d(x) -> PointCloud | TriangleMesh:
         return PointCloud(np.asarray(x.points).copy(), colours, normals)
     if _library(x) == "open3d" and name == "TriangleMesh":
         return mesh_from_open3d(x)
-    raise InputError(f"from_open3d: expected an open3d.geometry.PointCloud or TriangleMesh, found {_type_name(x)}")
+    raise ArgumentTypeError(f"from_open3d(x): expected an open3d.geometry.PointCloud or TriangleMesh, found "
+                            f"{_type_name(x)}")
 
 
 def _rgb01(colours) -> np.ndarray:
@@ -73,17 +75,17 @@ def from_trimesh(x) -> PointCloud | TriangleMesh:
     if _library(x) == "trimesh" and name == "Trimesh":
         colours = _rgb01(x.visual.vertex_colors) if x.visual.kind == "vertex" else None
         return TriangleMesh(np.asarray(x.vertices, dtype=np.float64), np.asarray(x.faces, dtype=np.int64), colours)
-    raise InputError(f"from_trimesh: expected a trimesh.Trimesh, PointCloud or Scene, found {_type_name(x)}")
+    raise ArgumentTypeError(f"from_trimesh(x): expected a trimesh.Trimesh, PointCloud or Scene, found {_type_name(x)}")
 
 
 def to_trimesh(x):
     """A ``trimesh.Trimesh`` of a mesh (:meth:`TriangleMesh.to_trimesh`) or a ``trimesh.PointCloud`` of a
     cloud (8-bit RGBA colours when it has them); anything :func:`as_mesh` / :func:`as_cloud` accepts."""
     if isinstance(x, TriangleMesh) or (_library(x) and type(x).__name__ in ("TriangleMesh", "Trimesh", "Scene")):
-        return as_mesh(x).to_trimesh()
+        return as_mesh(x, "to_trimesh(x)").to_trimesh()
     import trimesh
 
-    cloud = as_cloud(x)
+    cloud = as_cloud(x, "to_trimesh(x)")
     colours = None
     if cloud.colours is not None:
         colours = np.clip(np.rint(cloud.colours * 255), 0, 255).astype(np.uint8)
@@ -95,8 +97,8 @@ def to_open3d(x):
     ``open3d.geometry.PointCloud`` of a cloud (:func:`rangekit.surface.cloud.cloud_to_open3d`); anything
     :func:`as_mesh` / :func:`as_cloud` accepts."""
     if isinstance(x, TriangleMesh) or (_library(x) and type(x).__name__ in ("TriangleMesh", "Trimesh", "Scene")):
-        return as_mesh(x).to_open3d()
-    return _cloud_to_open3d(as_cloud(x))
+        return as_mesh(x, "to_open3d(x)").to_open3d()
+    return _cloud_to_open3d(as_cloud(x, "to_open3d(x)"))
 
 
 def as_cloud(x, what: str = "cloud") -> PointCloud:
@@ -113,8 +115,10 @@ def as_cloud(x, what: str = "cloud") -> PointCloud:
     Raises
     ------
     InputError
-        For anything else, naming the type (or the array shape) found.
+        For anything else, naming the type (or the array shape) found (an ArgumentTypeError, also a TypeError,
+        for a type that is no cloud).
     """
+    check_text("what", what, what="the argument's name")
     if isinstance(x, PointCloud):
         return x
     if isinstance(x, TriangleMesh):
@@ -132,8 +136,8 @@ def as_cloud(x, what: str = "cloud") -> PointCloud:
         if a is not None and a.ndim == 2 and a.shape[1] in (3, 6):
             return PointCloud(a[:, :3], normals=a[:, 3:] if a.shape[1] == 6 else None)
         found = f"an array of shape {a.shape}" if a is not None else f"a {type(x).__name__} that is not numeric"
-        raise InputError(f"{what}: expected {CLOUD_KINDS}, found {found}")
-    raise InputError(f"{what}: expected {CLOUD_KINDS}, found {_type_name(x)}")
+        raise (InputError if a is not None else ArgumentTypeError)(f"{what}: expected {CLOUD_KINDS}, found {found}")
+    raise ArgumentTypeError(f"{what}: expected {CLOUD_KINDS}, found {_type_name(x)}")
 
 
 def as_mesh(x, what: str = "mesh") -> TriangleMesh:
@@ -148,8 +152,10 @@ def as_mesh(x, what: str = "mesh") -> TriangleMesh:
     Raises
     ------
     InputError
-        For anything else (a point cloud included: it has no triangles), naming the type found.
+        For anything else (a point cloud included: it has no triangles), naming the type found (an
+        ArgumentTypeError, also a TypeError).
     """
+    check_text("what", what, what="the argument's name")
     if isinstance(x, TriangleMesh):
         return x
     lib = _library(x)
@@ -158,4 +164,4 @@ def as_mesh(x, what: str = "mesh") -> TriangleMesh:
     if isinstance(x, tuple) and len(x) == 2:
         return TriangleMesh(np.asarray(x[0], dtype=np.float64), np.asarray(x[1]))
     found = f"an array of shape {np.shape(x)}" if isinstance(x, np.ndarray) else _type_name(x)
-    raise InputError(f"{what}: expected {MESH_KINDS}, found {found}")
+    raise ArgumentTypeError(f"{what}: expected {MESH_KINDS}, found {found}")

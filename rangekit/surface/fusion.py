@@ -18,6 +18,7 @@ import numpy as np
 from rangekit.camera import PinholeCamera, pixel_rays
 from rangekit.errors import InputError, MeshError
 from rangekit.geometry import transform_vectors
+from rangekit._runtime.arguments import check_bool, check_number
 from rangekit._runtime.memory import release_free_memory
 from rangekit.surface.cloud import PointCloud, spread_problem
 from rangekit.surface.cloud import cloud_to_open3d as _cloud_to_open3d
@@ -87,16 +88,16 @@ def _poisson_surface(cloud: PointCloud, depth: int, density_quantile: float, wat
                      n_threads: int) -> tuple[TriangleMesh, TriangleMesh, PointCloud]:
     """The density-trimmed (open) Poisson surface, the untrimmed one, and the cloud they were made of (finite
     points with a normal)."""
+    check_number("depth", depth, lo=1, hi=12, integer=True)
+    check_number("density_quantile", density_quantile, lo=0, hi=1, hi_open=True)
+    check_bool("watertight", watertight)
+    check_number("n_threads", n_threads, lo=-1, integer=True, unit="-1: all")
     if not isinstance(cloud, PointCloud):
         raise InputError(f"poisson_mesh: expected a rangekit PointCloud, found {type(cloud).__name__}")
     if cloud.normals is None:
         raise InputError("poisson_mesh: the cloud has no normals; Poisson needs oriented normals. Compute them "
                          "per view with rangekit.coded.triangulate.range_normals(xyz, camera.center) (or estimate them "
                          "and call orient_normals_to_sensor) before merging the views")
-    if not 1 <= int(depth) <= 12:
-        raise InputError(f"poisson_mesh: depth must be in [1, 12], found {depth}")
-    if not 0.0 <= density_quantile < 1.0:
-        raise InputError(f"poisson_mesh: density_quantile must be in [0, 1), found {density_quantile}")
     ok = poisson_input(cloud)
     problem = poisson_input_problem(cloud.points[ok], watertight=watertight,
                                     noun=("point with a normal", "points with a normal"))

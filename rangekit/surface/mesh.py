@@ -13,6 +13,7 @@ from functools import cached_property
 
 import numpy as np
 
+from rangekit._runtime.arguments import as_array, as_points
 from rangekit.errors import InputError
 
 __all__ = ["TriangleMesh", "mesh_from_open3d", "signed_volume", "distance_to_surface"]
@@ -28,12 +29,10 @@ class TriangleMesh:
     observed: np.ndarray | None = None        # (V,) bool: some view's points support the vertex (fusion)
 
     def __post_init__(self) -> None:
-        V = np.asarray(self.vertices, dtype=np.float64)
-        if V.ndim != 2 or V.shape[1] != 3:
-            raise InputError(f"TriangleMesh: vertices must be (V, 3), found {V.shape}")
+        V = as_points("vertices", self.vertices, rows="V")
         if not np.all(np.isfinite(V)):
             raise InputError(f"TriangleMesh: {np.count_nonzero(~np.isfinite(V).all(1))} vertices are not finite")
-        F = np.asarray(self.triangles)
+        F = as_array("triangles", self.triangles, "an (F, 3) integer array", dtype=None)
         if F.size == 0:
             F = F.reshape(0, 3)
         if F.ndim != 2 or F.shape[1] != 3 or not (np.issubdtype(F.dtype, np.integer) or F.size == 0):
@@ -45,12 +44,12 @@ class TriangleMesh:
         object.__setattr__(self, "vertices", V)
         object.__setattr__(self, "triangles", F)
         if self.vertex_colours is not None:
-            C = np.asarray(self.vertex_colours, dtype=np.float32)
+            C = as_array("vertex_colours", self.vertex_colours, f"a {V.shape} array or None", dtype=np.float32)
             if C.shape != V.shape:
                 raise InputError(f"TriangleMesh: vertex_colours must be {V.shape}, found {C.shape}")
             object.__setattr__(self, "vertex_colours", C)
         if self.observed is not None:
-            O = np.asarray(self.observed)
+            O = as_array("observed", self.observed, f"a ({len(V)},) bool array or None", dtype=None)
             if O.shape != (len(V),):
                 raise InputError(f"TriangleMesh: observed must be ({len(V)},) bool, found shape {O.shape}")
             object.__setattr__(self, "observed", O.astype(bool))

@@ -18,6 +18,7 @@ from scipy.sparse.csgraph import connected_components, depth_first_order
 from scipy.sparse.linalg import splu
 
 from rangekit.errors import InputError, MeshError
+from rangekit.surface.convert import as_mesh
 from rangekit.surface.mesh import TriangleMesh, signed_volume
 from rangekit.surface.topology import directed_edges as _edges
 from rangekit.surface.topology import merged_vertex_ids, unique_rows
@@ -321,7 +322,7 @@ def make_watertight(mesh: TriangleMesh) -> TriangleMesh:
     MeshError
         If the winding cannot be made consistent (non-orientable surface) or the result is not watertight.
     """
-    cleaned = clean_mesh(mesh, fill=True)
+    cleaned = clean_mesh(as_mesh(mesh, "make_watertight mesh"), fill=True)
     V, F, C = cleaned.vertices, cleaned.triangles, cleaned.vertex_colours
     if not _consistent_winding(F):
         m = cleaned.to_open3d()

@@ -17,7 +17,7 @@ from rangekit.formats.meshes import load_mesh
 
 @pytest.mark.parametrize("depth", [0, 13, 8.0, True, "8"])
 def test_a_depth_out_of_range_or_not_an_integer_is_refused(depth):
-    with pytest.raises(ConfigError, match=r"poisson_depth must be an integer in \[1, 12\], found"):
+    with pytest.raises(ConfigError, match=r"poisson_depth: expected an integer in 1\.\.12, found"):
         ProcessOptions(poisson_depth=depth)
 
 

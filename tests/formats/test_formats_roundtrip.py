@@ -237,7 +237,7 @@ def test_anything_else_is_an_input_error_naming_the_type(bad, found):
         rk.register_views([_lumpy(100), bad])
     with pytest.raises(InputError, match=f"poisson_mesh cloud: expected .* found .*{found}"):
         rk.poisson_mesh(bad)
-    with pytest.raises(InputError, match="render: expected"):
+    with pytest.raises(InputError, match="render x: expected"):
         rk.render(bad if not isinstance(bad, str) else 3.5)
     with pytest.raises(InputError, match="mesh: expected .* found .*PointCloud"):
         rk.as_mesh(rk.to_open3d(_lumpy(10)))

@@ -15,6 +15,7 @@ from typing import Callable
 
 import numpy as np
 
+from rangekit._runtime.arguments import check_callable, check_choice, check_path
 from rangekit.errors import naming
 from rangekit.io import atomic_save_npy, write_png
 from rangekit.progress import call_progress
@@ -27,6 +28,10 @@ def photometric_folder(folder: str | Path, out: str | Path, *, method: str = "ro
     """Normals (``method`` "ls", "robust" or "uncalibrated"), albedo, depth and a mesh from ``folder``,
     written into ``out``; reports each step (and the angular error against Normal_gt.mat when the folder
     has one) through ``progress(msg)``. Returns ``out``."""
+    check_path("folder", folder, what="a DiLiGenT-style folder")
+    check_path("out", out, what="a folder")
+    check_choice("method", method, ("ls", "robust", "uncalibrated"))
+    check_callable("progress", progress)
     from rangekit.photometric import (angular_error, depth_to_mesh, integrate_normals, photometric_stereo,
                                       uncalibrated_photometric_stereo)
     from rangekit.photometric.diligent import load_diligent

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import re
 from dataclasses import dataclass
 from pathlib import Path
@@ -9,7 +10,8 @@ from typing import Sequence
 
 import numpy as np
 
-from rangekit.budget import check_budget
+from rangekit._runtime.arguments import check_bool, check_items, check_number, check_path, check_vector, refuse
+from rangekit.budget import MAX_IMAGE_SIDE_PX, check_budget
 from rangekit.errors import FileFormatError, MeshError
 
 __all__ = ["Picture", "render", "render_file"]
@@ -48,6 +50,20 @@ def _is_mesh_object(x) -> bool:
     return isinstance(x, TriangleMesh) or type(x).__name__ in ("TriangleMesh", "Trimesh", "Scene")
 
 
+def _check_view(azimuths, elevation, size, up, colour) -> None:
+    """:func:`render`'s arguments but ``x``, each on its own."""
+    for k, azimuth in enumerate(check_items("azimuths", azimuths, "a list of angles (radians)", min_items=1)):
+        check_number(f"azimuths[{k}]", azimuth, unit="radians")
+    check_number("elevation", elevation, unit="radians")
+    sides = check_items("size", size, "(width, height) in pixels")
+    if len(sides) != 2:
+        refuse("size", size, "(width, height) in pixels")
+    for side in sides:
+        check_number("size", side, lo=1, hi=MAX_IMAGE_SIDE_PX, integer=True, unit="pixels")
+    check_vector("up", up, 3, nonzero=True)
+    check_bool("colour", colour)
+
+
 def render(x, *, azimuths: Sequence[float] = (np.radians(30.0),),
            elevation: float = np.radians(25.0), size: tuple[int, int] = (800, 600),
            up: Sequence[float] = (0.0, 0.0, 1.0), colour: bool = False) -> Picture:
@@ -71,9 +87,10 @@ def render(x, *, azimuths: Sequence[float] = (np.radians(30.0),),
     from rangekit.regular_files import check_regular_file
     from rangekit.surface.convert import as_cloud, as_mesh
 
+    _check_view(azimuths, elevation, size, up, colour)
     mesh = cloud = None
-    if isinstance(x, (str, Path)):
-        src = Path(x)
+    if isinstance(x, (str, os.PathLike)):
+        src = Path(check_path("x", x, what="a mesh or point cloud file"))
         if src.is_dir():
             raise FileFormatError(f"{src}: is a folder, expected a mesh or a point cloud file")
         check_regular_file(src, what="a mesh or a point cloud file")
@@ -82,9 +99,9 @@ def render(x, *, azimuths: Sequence[float] = (np.radians(30.0),),
         src = "render"
         is_mesh = _is_mesh_object(x)
         if is_mesh:
-            mesh = as_mesh(x, "render")
+            mesh = as_mesh(x, "render x")
         else:
-            cloud = as_cloud(x, "render")
+            cloud = as_cloud(x, "render x")
     w, h = (int(v) for v in size)
     per_px = MESH_RENDER_BYTES_PER_PIXEL if is_mesh else CLOUD_RENDER_BYTES_PER_PIXEL
     kind = "mesh" if is_mesh else "cloud"

@@ -10,13 +10,17 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Sequence
 
+import os
+
 import numpy as np
 
+from rangekit._runtime.arguments import check_bool, check_choice, check_path, check_text, refuse
+from rangekit.app.process.options import TRIANGULATION_METHODS
 from rangekit.coded.motion import MAX_MOTION_SHARE
 from rangekit.coded.patterns import PatternSpec, make_pattern_spec
 from rangekit.app.commands.rig_choice import Refined, RigChoice, choose_rig, refine_from_capture
 from rangekit.coded.reconstruct import Reconstruction, decoded_coordinates, reconstruct_decoded, reconstruct_view
-from rangekit.errors import ConfigError, InputError, naming
+from rangekit.errors import ConfigError, FileFormatError, InputError, naming
 from rangekit.rig.rig_file import Rig, load_rig
 from rangekit.stereo.coded_pair import PairReconstruction
 from rangekit.surface.cloud import PointCloud
@@ -36,8 +40,20 @@ def reconstruct(images_or_folder, rig: Rig | str | Path | None = None, pattern: 
     made for the rig's projector). ``method``: triangulation (``"auto"``, ``"ray-plane"``, ``"ray-ray"``).
 
     Raises ConfigError naming what is missing (no rig with a projector, no pattern set), FileFormatError for
-    an unreadable image, PatternError when the images do not fit the pattern set.
+    an unreadable image, PatternError when the images do not fit the pattern set; an argument of the wrong type or
+    value is refused before anything is read (InputError naming it).
     """
+    if isinstance(images_or_folder, (str, os.PathLike)):
+        check_path("images_or_folder", images_or_folder, what="a capture folder")
+        if not Path(images_or_folder).is_dir():
+            refuse("images_or_folder", images_or_folder, "a capture folder (or a list of image files or arrays); "
+                   "there is no such folder", error=FileFormatError)
+    if not isinstance(rig, Rig):
+        check_path("rig", rig, what="a Rig or a rig file", optional=True)
+    if not isinstance(pattern, PatternSpec):
+        check_text("pattern", pattern, what="a PatternSpec or a pattern method name", optional=True)
+    check_choice("method", method, TRIANGULATION_METHODS)
+    check_bool("subpixel", subpixel)
     return reconstruct_capture(images_or_folder, rig, pattern, method=method, subpixel=subpixel).cloud
 
 

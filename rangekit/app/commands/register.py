@@ -9,6 +9,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
+from rangekit._runtime.arguments import check_bool, check_callable, check_items, check_number, check_path, check_text
 from rangekit.app.commands.handedness import check_handedness
 from rangekit.errors import ConfigError, RegistrationError, UsageError, naming
 from rangekit.formats.clouds import load_cloud, save_cloud
@@ -74,6 +75,15 @@ def register(paths: Sequence[str | Path], out_dir: str | Path, *, init: str | No
     ``neighbours``: the view graph's k (each view with its k nearest in rotation plus a few long links,
     and with no prior coarse alignment of its k most similar); 0 = every pair; None = register_views'
     defaults (k = 4; with a prior from a file or --init turntable:..., every pair)."""
+    paths = check_items("paths", paths, "a list of cloud files", min_items=1)
+    for k, p in enumerate(paths):
+        check_path(f"paths[{k}]", p, what="a cloud file")
+    check_path("out_dir", out_dir, what="a folder")
+    check_text("init", init, what="prior poses (a poses.json, a Stanford .conf or turntable:...)", optional=True)
+    check_number("voxel", voxel, lo=0, lo_open=True, unit="metres", optional=True)
+    check_bool("mesh", mesh)
+    check_callable("progress", progress)
+    check_number("neighbours", neighbours, lo=0, integer=True, optional=True)
     say = progress or (lambda msg: None)
     paths = [Path(p) for p in paths]
     clouds = []
@@ -83,8 +93,6 @@ def register(paths: Sequence[str | Path], out_dir: str | Path, *, init: str | No
     prior = parse_init(init, len(paths), [str(p) for p in paths])
     if voxel is not None:  # the caller's option, checked against the scans before any work
         check_voxel(voxel, bbox_diagonal(clouds), what=f"--voxel-mm {voxel * 1e3:g}", error=UsageError)
-    if neighbours is not None and not (isinstance(neighbours, (int, np.integer)) and neighbours >= 0):
-        raise UsageError(f"--neighbours: expected an integer >= 0, found {neighbours!r}")
     graph = ({} if neighbours is None else dict(pairs=all_pairs, coarse_neighbours=None) if neighbours == 0 else
              dict(pairs=nearest_and_long_links(int(neighbours)), coarse_neighbours=int(neighbours)))
     options = MultiViewOptions(voxel=voxel, **graph)

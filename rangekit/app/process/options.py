@@ -3,9 +3,9 @@ map their flags onto it)."""
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
+from rangekit._runtime.arguments import check_bool, check_choice, check_number
 from rangekit.coded.motion.check import MAX_MOTION_SHARE
 from rangekit.errors import ConfigError
 
@@ -52,24 +52,13 @@ class ProcessOptions:
     max_motion: float | None = MAX_MOTION_SHARE
 
     def __post_init__(self) -> None:
-        if self.fusion not in FUSION_METHODS:
-            raise ConfigError(f"fusion must be one of {', '.join(FUSION_METHODS)}, found {self.fusion!r}")
-        if self.method not in TRIANGULATION_METHODS:
-            raise ConfigError(f"method must be one of {', '.join(TRIANGULATION_METHODS)}, found {self.method!r}")
-        if (isinstance(self.table_margin, bool) or not isinstance(self.table_margin, (int, float))
-                or not math.isfinite(self.table_margin) or not 0 <= self.table_margin < 1):
-            raise ConfigError(f"table_margin must be a height in metres in [0, 1), found {self.table_margin!r}")
         from rangekit.app.process.fused_outputs import MESH_EXPORT_FORMATS
 
-        if self.mesh_format not in MESH_EXPORT_FORMATS:
-            raise ConfigError(f"mesh_format must be one of {', '.join(MESH_EXPORT_FORMATS)}, found {self.mesh_format!r}")
-        if (isinstance(self.poisson_depth, bool) or not isinstance(self.poisson_depth, int)
-                or not 1 <= self.poisson_depth <= 12):
-            raise ConfigError(f"poisson_depth must be an integer in [1, 12], found {self.poisson_depth!r}")
-        if self.max_motion is not None and (isinstance(self.max_motion, bool)
-                                            or not isinstance(self.max_motion, (int, float))
-                                            or not 0 <= self.max_motion <= 1):
-            raise ConfigError(f"max_motion must be a share in [0, 1] or None, found {self.max_motion!r}")
+        check_choice("fusion", self.fusion, FUSION_METHODS, error=ConfigError)
+        check_choice("method", self.method, TRIANGULATION_METHODS, error=ConfigError)
+        check_number("table_margin", self.table_margin, lo=0, hi=1, hi_open=True, unit="metres", error=ConfigError)
+        check_choice("mesh_format", self.mesh_format, MESH_EXPORT_FORMATS, error=ConfigError)
+        check_number("poisson_depth", self.poisson_depth, lo=1, hi=12, integer=True, error=ConfigError)
+        check_number("max_motion", self.max_motion, lo=0, hi=1, unit="a share", optional=True, error=ConfigError)
         for name in ("report", "truth"):
-            if not isinstance(getattr(self, name), bool):
-                raise ConfigError(f"{name} must be True or False, found {getattr(self, name)!r}")
+            check_bool(name, getattr(self, name), error=ConfigError)

@@ -8,10 +8,10 @@ session's own settings; an option given with ``resume`` must equal the session's
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, fields
 from pathlib import Path
 
+from rangekit._runtime.arguments import check_items, check_path, check_vector, is_int as _is_int
 from rangekit.errors import OptionError
 
 __all__ = ["ScanOptions", "SCAN_FLAGS", "SCAN_METHODS", "SCAN_DEFAULTS", "LASER_STEPS", "ARTEFACTS"]
@@ -114,6 +114,9 @@ def _check_values(o: ScanOptions) -> None:
     from rangekit.app.process.options import FUSION_METHODS
     from rangekit.coded.patterns import PATTERN_METHODS
 
+    for name, what in (("out", "a new session folder"), ("resume", "a session folder"), ("rig", "'sim' or a rig file"),
+                       ("object", "a built-in object's name or a mesh file")):
+        check_path(f"{{{name}}}", getattr(o, name), what=what, optional=True, error=OptionError)
     for name, lo, hi in (("views", 2, 720), ("steps", 2, 3600), ("passes", 1, 8), ("seed", 0, 2**32 - 1)):
         value = getattr(o, name)
         if value is not None and (not _is_int(value) or not lo <= value <= hi):
@@ -131,12 +134,14 @@ def _check_values(o: ScanOptions) -> None:
     for name in ("flipped", "allow_auto_exposure", "process", "report", "realtime"):
         if not isinstance(getattr(o, name), bool):
             raise OptionError(f"{{{name}}}: expected True or False, found {getattr(o, name)!r}")
-    if o.up is not None and (len(tuple(o.up)) != 3 or not all(_is_number(v) and math.isfinite(v) for v in o.up)):
-        raise OptionError(f"{{up}}: expected three finite numbers X Y Z, found {o.up!r}")
-    if o.positions is not None and (len(tuple(o.positions)) != 3 or not all(_is_int(n) for n in o.positions)):
+    check_vector("{up}", o.up, 3, optional=True, error=OptionError)
+    if o.positions is not None and (len(check_items("{positions}", o.positions, "three integers SPHERES BARS PLANES",
+                                                    error=OptionError)) != 3
+                                    or not all(_is_int(n) for n in o.positions)):
         raise OptionError(f"{{positions}}: expected three integers SPHERES BARS PLANES, found {o.positions!r}")
     if o.exposures is not None:
-        given = tuple(o.exposures)
+        given = tuple(check_items("{exposures}", o.exposures, "'auto' alone or 2 to 8 exposures in microseconds",
+                                  error=OptionError))
         if given != ("auto",) and not all(_is_int(e) and 1 <= e <= 1_000_000 for e in given):
             raise OptionError("{exposures}: expected 'auto' alone or 2 to 8 exposures in microseconds (1..1000000), "
                               f"found {' '.join(map(str, given))}")
@@ -195,18 +200,6 @@ def _check_combination(o: ScanOptions) -> None:
         raise OptionError("{frames}: a laser scan's frames are PNG files; leave {frames} out")
     if o.method == "laser" and o.exposures is not None:
         raise OptionError("{exposures}: multi-exposure capture is for coded light; leave it out with {method} laser")
-
-
-def _is_int(value) -> bool:
-    import numbers
-
-    return isinstance(value, numbers.Integral) and not isinstance(value, bool)
-
-
-def _is_number(value) -> bool:
-    import numbers
-
-    return isinstance(value, numbers.Real) and not isinstance(value, bool)
 
 
 #: Every field, in order (the command line's test checks each has its flag and the reverse).

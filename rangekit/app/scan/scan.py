@@ -13,6 +13,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from rangekit._runtime.arguments import check_callable, check_instance, check_path
 from rangekit._runtime.child import call_beside
 from rangekit.app.events import OnEvent, ScanStarted, StageClock, emit, failures_announced, progress_of
 from rangekit.app.process.evaluate import Evaluator
@@ -69,8 +70,13 @@ def scan(options: ScanOptions, on_event: OnEvent | None = None) -> ScanResult:
     ConfigError, DeviceError, StorageError, SessionLocked, TurnOverNeeded
         As :func:`rangekit.app.acquire.acquire.acquire` and :func:`process` raise them; completed views stay
         on disk and ``ScanOptions(resume=folder)`` continues.
+    InputError
+        ``options`` is not a :class:`ScanOptions` or ``on_event`` not a callable (before anything is done).
     """
     from rangekit.formats.sessions.lock import session_lock
+
+    check_instance("options", options, ScanOptions, "a ScanOptions (rk.scan(rk.ScanOptions(out=FOLDER)))")
+    check_callable("on_event", on_event)
 
     t0 = time.perf_counter()
     with failures_announced(on_event):
@@ -214,7 +220,15 @@ def process(session: Session | str | Path, options: ProcessOptions | None = None
     ``evaluate`` its evaluator (the truth's samples and each view's errors made), ``registration_ahead`` its
     :class:`rangekit.registration.ahead.RegistrationAhead`; the outputs are the same bytes with or without them."""
     from rangekit.app.events import failures_announced
+    from rangekit.registration.ahead import RegistrationAhead
 
+    if not isinstance(session, Session):
+        check_path("session", session, what="a Session or a session folder")
+    check_instance("options", options, ProcessOptions, "a ProcessOptions", optional=True)
+    for name, value in (("on_event", on_event), ("map_pairs", map_pairs), ("evaluate", evaluate)):
+        check_callable(name, value)
+    check_instance("decoded_views", decoded_views, dict, "a dict of decoded views", optional=True)
+    check_instance("registration_ahead", registration_ahead, RegistrationAhead, "a RegistrationAhead", optional=True)
     options = options or ProcessOptions()
     with failures_announced(on_event):
         if not isinstance(session, Session):

@@ -1,5 +1,5 @@
-"""The package's front door: one capture to a cloud with ``rk.reconstruct`` (a folder, files or arrays; the rig
-and the pattern from the folder or given), checked against the simulator's truth; the names follow one rule."""
+"""``rk.reconstruct``: one capture to a cloud (a folder, files or arrays; the rig and the pattern from the folder or
+given), checked against the simulator's truth (the door's argument checks: tests/test_front_door.py)."""
 
 from __future__ import annotations
 
@@ -53,20 +53,3 @@ def test_what_is_missing_is_named(capture, small_rig):
         rk.reconstruct(paths, pattern="hybrid")
     with pytest.raises(ConfigError, match="no pattern set; give pattern="):
         rk.reconstruct(paths, small_rig)
-
-
-def test_one_name_for_each_thing():
-    """load_*/save_* for files; the device protocol and the rig file have distinct names; one to_open3d."""
-    import rangekit.formats.meshes as meshes
-    import rangekit.rig.devices as devices
-    import rangekit.sim as sim
-    import rangekit.surface as surface
-
-    assert rk.load_mesh is meshes.load_mesh and not hasattr(meshes, "load_mesh_file")
-    assert not hasattr(sim, "load_mesh") and callable(sim.load_scene_object)
-    assert rk.Rig is not devices.RigDevices and not hasattr(devices, "Rig")
-    assert surface.to_open3d is rk.to_open3d
-    for name in ("scan", "process", "reconstruct", "register", "photometric_folder", "photometric_stereo",
-                 "load_rig", "ScanOptions"):
-        assert name in dir(rk) and callable(getattr(rk, name))
-    assert rk.photometric.integrate_normals is not None   # a subpackage through the same door

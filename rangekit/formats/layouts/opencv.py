@@ -60,14 +60,39 @@ OPENCV_LAYOUTS = {
 }
 
 
+#: The most frames an image list may name per camera: a capture is tens of frames, an HDR one hundreds
+#: (OpenCV's FileNode finds item k by walking k items, so a list of 200,000 took over a minute to read).
+MAX_LIST_ENTRIES = 10_000
+#: The largest image list read, bytes (10,000 paths of 1 KB).
+MAX_LIST_BYTES = 10 << 20
+
+
 def read_image_list(path: str | Path) -> list[list[Path]]:
     """The files of each camera (one or two lists) in an image list as OpenCV's ``pointcloud.cpp`` reads it:
     the first node a sequence (camera 1), then ``cam2`` (camera 2) if there. A relative name is relative to the
-    list's folder. FileFormatError naming the file and what is missing."""
+    list's folder. FileFormatError naming the file and what is missing or wrong: a file OpenCV cannot parse
+    (binary, nested too deep), an XML document type or entity (never expanded), more than
+    :data:`MAX_LIST_ENTRIES` names."""
     import cv2
 
+    from rangekit.regular_files import read_regular_file
+
     path = Path(path)
-    fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
+    if path.stat().st_size > MAX_LIST_BYTES:
+        raise FileFormatError(f"{path}: expected an OpenCV image list of at most {MAX_LIST_BYTES >> 20} MB, found "
+                              f"{path.stat().st_size / 2**20:.0f} MB")
+    head = read_regular_file(path, what="an image list")
+    if b"\0" in head:
+        raise FileFormatError(f"{path}: expected an OpenCV image list (YAML or XML text), found binary data")
+    if b"<!DOCTYPE" in head.upper() or b"<!ENTITY" in head.upper():
+        raise FileFormatError(f"{path}: expected an OpenCV image list, found an XML document type or entity "
+                              "declaration (not expanded: remove it)")
+    try:
+        fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
+    except (cv2.error, SystemError, RecursionError) as exc:    # SystemError: cv2's binding over a parse error
+        said = (str(exc.__cause__ or exc).strip().splitlines() or ["?"])[-1]
+        raise FileFormatError(f"{path}: expected an OpenCV image list (YAML or XML), found one OpenCV cannot parse "
+                              f"({said.split('error: ')[-1][:160]})") from None
     try:
         if not fs.isOpened():
             raise FileFormatError(f"{path}: expected an OpenCV image list (YAML or XML), found a file OpenCV cannot "
@@ -80,7 +105,14 @@ def read_image_list(path: str | Path) -> list[list[Path]]:
             if not node.isSeq() or node.size() == 0:
                 raise FileFormatError(f"{path}: expected {node.name() or 'the first node'} to be a sequence of image "
                                       "file names, found none")
-            names = [node.at(k).string() for k in range(node.size())]
+            if node.size() > MAX_LIST_ENTRIES:
+                raise FileFormatError(f"{path}: expected at most {MAX_LIST_ENTRIES} frames a camera, found "
+                                      f"{node.size()} in {node.name() or 'the first node'}")
+            items = [node.at(k) for k in range(node.size())]
+            if not all(item.isString() for item in items):
+                raise FileFormatError(f"{path}: expected {node.name() or 'the first node'} to list file names, found "
+                                      "other items in it")
+            names = [item.string() for item in items]
             lists.append([p if p.is_absolute() else path.parent / p for p in map(Path, names)])
     finally:
         fs.release()

@@ -140,15 +140,6 @@ def _collect_after_module():
     _free_memory()
 
 
-def require_bunny() -> None:
-    """Skip, naming where it was looked for, when the Stanford bunny of the shared data is missing: for a test that
-    reaches it through the command line (whose exit status hides the MissingDataError the hook below skips on)."""
-    from rangekit.sim.scene.zoo import bunny_path, data_folders
-
-    if not bunny_path().is_file():
-        pytest.skip(f"the Stanford bunny is not in {', '.join(str(f) for f in data_folders())}")
-
-
 @pytest.hookimpl(hookwrapper=True)
 def pytest_runtest_makereport(item, call):
     """A test (or its fixture) that needs the shared real data and finds it missing (MissingDataError, naming the

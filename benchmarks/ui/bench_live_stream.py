@@ -35,8 +35,8 @@ def _cpu_s(pid: int) -> float:
 
 def _watch(server, seconds: float, stop: threading.Event | None = None) -> dict:
     frames, first = 0, None
-    with connect(server.base.replace("http://", "ws://") + "/ws/live", origin=server.base,
-                 additional_headers={"Cookie": f"rangekit_token={server.token}"}) as ws:
+    with connect(server.base.replace("http://", "ws://") + "/ws/live?ticket=" + server.ticket("/ws/live"),
+                 origin=server.base) as ws:
         end = time.monotonic() + seconds
         while time.monotonic() < end and not (stop and stop.is_set()):
             msg = ws.recv(timeout=30)
@@ -97,7 +97,7 @@ def main(seconds: float, pairs: int = 1) -> dict:
                     while not stop.is_set():
                         for _ in range(20):
                             for path in page_files:
-                                server.request(path, token=None if path.startswith("/?") else "cookie")
+                                server.request(path, token=None if path.startswith("/?") else "header")
                         time.sleep(1.0)
 
                 workers = [threading.Thread(target=loads)] + [

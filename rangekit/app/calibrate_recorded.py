@@ -15,6 +15,7 @@ poses' corners cover, as the hardware calibration's does.
 from __future__ import annotations
 
 import time
+from collections import Counter
 from pathlib import Path
 from typing import Callable, Sequence
 
@@ -126,6 +127,11 @@ def calibrate_recordings(out: str | Path, captures: Sequence[str | Path], *, pat
         if not folder.is_dir():
             raise UsageError(f"--captures {folder}: expected a folder of {pattern} frames, found "
                              f"{'a file' if folder.exists() else 'nothing'}")
+    counts = Counter(f.resolve() for f in folders)
+    twice = [(next(f for f in folders if f.resolve() == where), n) for where, n in counts.items() if n > 1]
+    if twice:
+        raise UsageError(f"--captures: {', '.join(f'{f} given {n} times' for f, n in twice)}; give each board pose "
+                         f"once ({len(counts)} distinct folders of the {len(folders)} given)")
     names = _names(folders)
     if report is not None:
         report(f"{len(folders)} board poses, {pattern} ({layout.source}); corners found in each pose's "

@@ -33,7 +33,7 @@ import numpy as np
 from rangekit.budget import MAX_IMAGE_SIDE_PX
 from rangekit.camera import PinholeCamera
 from rangekit.rig.camera_controls import CameraControls
-from rangekit.errors import ConfigError, InputError
+from rangekit.errors import ConfigError, InputError, shown
 from rangekit.geometry import axis_angle_to_R, compose, invert_T, make_T, rigid_problem
 from rangekit.io import atomic_write_json, read_json
 from rangekit.rig.lasers import LineLaser, laser_from_dict
@@ -235,9 +235,8 @@ def _error(where: str, path: str, problem: str) -> ConfigError:
 
 
 def _show(value) -> str:
-    """A short repr of a found value for messages."""
-    text = repr(value)
-    return text if len(text) <= 80 else text[:77] + "..."
+    """A short repr of a found value for messages (:func:`rangekit.errors.shown`)."""
+    return shown(value)
 
 
 def _array(value, shape: tuple[int, ...], where: str, path: str, expected: str) -> np.ndarray:

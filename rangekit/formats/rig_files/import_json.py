@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from rangekit.errors import ConfigError
+from rangekit.errors import ConfigError, shown as found_value
 from rangekit.formats.rig_files.entries import camera_entry, rig_dict
 from rangekit.geometry import invert_T, make_T, nearest_rotation
 from rangekit.rig.lasers import LineLaser, laser_plane
@@ -142,7 +142,7 @@ def horus_rig(data: dict, where: str, *, size: tuple[int, int] | None) -> dict:
     dist = np.asarray(_horus_value(settings, "distortion_vector", where), dtype=np.float64).ravel()
     if dist.size not in (4, 5, 8, 12, 14) or not np.all(np.isfinite(dist)):
         raise ConfigError(f"{where}: distortion_vector: expected 4, 5, 8, 12 or 14 finite numbers, found "
-                          f"{dist.tolist()}")
+                          f"{found_value(dist)}")
     R = _array(_horus_value(settings, "rotation_matrix", where), (3, 3), where, "rotation_matrix")
     t = _array(_horus_value(settings, "translation_vector", where), (3,), where, "translation_vector") * 1e-3
     lasers = []

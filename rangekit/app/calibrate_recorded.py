@@ -173,12 +173,15 @@ def calibrate_recordings(out: str | Path, captures: Sequence[str | Path], *, pat
         poses.append(pose)
         if pose.check.accepted:
             kept.append((pose.corners.ids, pose.corners.uv))
-        write_png(coverage_png, coverage_image(kept, camera_size, pose.corners.uv if pose.check.accepted else None,
-                                               pose.check.accepted))
         if report is not None:
             report(pose.line())
     call_progress(progress, f"decoded {len(folders)} board poses", len(folders), len(folders))
     result = calibrate_recorded(poses, readings[0], camera_size, (width, height), lens=lens,
                                 seconds={"decode": time.time() - t0})
+    # Written with the rig, once it is calibrated: a failed run leaves no coverage.png (issue 48: it replaced
+    # an earlier calibration's), nothing is recorded live to watch.
+    last = poses[-1]
+    write_png(coverage_png, coverage_image(kept, camera_size, last.corners.uv if last.check.accepted else None,
+                                           last.check.accepted))
     save_rig(result.rig, out)
     return Calibration(result, None, [])

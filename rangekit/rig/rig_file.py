@@ -76,7 +76,7 @@ class Rig:
             object.__setattr__(self, "T_world_table", _rigid(self.T_world_table, "rig", "T_world_table"))
         if self.projector_response is not None and not isinstance(self.projector_response, ProjectorResponse):
             raise ConfigError(f"rig: projector_response must be a ProjectorResponse or None, found "
-                              f"{self.projector_response!r}")
+                              f"{shown(self.projector_response)}")
 
     @property
     def camera(self) -> PinholeCamera:
@@ -107,7 +107,7 @@ class Rig:
         if not isinstance(data, dict):
             raise ConfigError(f"{where}: expected a JSON object (a rig file), found {type(data).__name__}")
         if data.get("schema") != SCHEMA:
-            raise _error(where, "schema", f"must be {SCHEMA!r}, found {data.get('schema')!r}")
+            raise _error(where, "schema", f"must be {SCHEMA!r}, found {shown(data.get('schema'))}")
         unknown = [k for k in data if k not in RIG_FIELDS]
         if unknown:
             raise ConfigError(f"{where}: unknown top-level field(s) {', '.join(map(repr, unknown))}; a rig file "

@@ -113,3 +113,19 @@ def test_any_plausible_square_can_be_simulated():
     for square in (0.02005, 0.00055, 0.0073):
         obj = board_object(Board(cols=4, rows=3, square=square))
         assert obj.texture is not None
+
+
+@pytest.mark.parametrize("field", ["schema", "projector_response", "capture"])
+def test_a_huge_value_in_a_rig_file_gives_a_short_error(tmp_path, field):
+    import json
+
+    from rangekit.rig.rig_file import load_rig
+    from rangekit.sim import default_rig
+
+    data = default_rig().to_dict()
+    data[field] = list(range(100_000))                     # 700 kB of numbers where an object or a name goes
+    (tmp_path / "rig.json").write_text(json.dumps(data))
+    with pytest.raises(ConfigError) as caught:
+        load_rig(tmp_path / "rig.json")
+    assert len(str(caught.value)) < 400, str(caught.value)[:1000]
+    assert "100000 items" in str(caught.value)

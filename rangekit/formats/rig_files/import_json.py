@@ -46,7 +46,7 @@ def _array(value, shape, where: str, key: str) -> np.ndarray:
 
 def _xyz(value, where: str, key: str) -> np.ndarray:
     if not isinstance(value, dict) or not all(k in value for k in "xyz"):
-        raise ConfigError(f"{where}: {key}: expected {{\"x\", \"y\", \"z\"}}, found {value!r}")
+        raise ConfigError(f"{where}: {key}: expected {{\"x\", \"y\", \"z\"}}, found {found_value(value)}")
     return _array([value["x"], value["y"], value["z"]], (3,), where, key)
 
 
@@ -127,7 +127,7 @@ def _horus_size(settings: dict, where: str) -> tuple[int, int]:
     w, h = (_horus_value(settings, k, where) for k in ("camera_width", "camera_height"))
     if not all(isinstance(v, int) and v > 0 for v in (w, h)):
         raise ConfigError(f"{where}: camera_width, camera_height: expected positive whole numbers, found "
-                          f"{w!r}, {h!r}")
+                          f"{found_value(w)}, {found_value(h)}")
     rotate = "camera_rotate" not in settings or bool(_horus_value(settings, "camera_rotate", where))  # Horus: on
     return (h, w) if rotate else (w, h)
 

@@ -45,6 +45,7 @@ def _sim_render(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     check_output(args.out, folder=True)
     _check_motion_options(args)
+    _check_sensor_options(args)
     if args.sensor in ("laser", "laser-stereo"):
         given = [f for f, v in (("--patterns", args.patterns), ("--global-fraction", args.global_fraction),
                                 ("--motion-mm", args.motion_mm)) if v is not None]
@@ -104,6 +105,32 @@ def _sim_render(args: argparse.Namespace) -> int:
                              readout_frames=args.readout_frames or 0.0)
     result(f"done in {time.perf_counter() - t0:.1f} s")
     return 0
+
+
+def _check_sensor_options(args: argparse.Namespace) -> None:
+    """The options of one kind of sensor refused with another (they were ignored), and --frequencies-mhz checked in
+    the user's MHz (UsageError naming the option)."""
+    tof = (("--steps", args.steps), ("--frequencies-mhz", args.frequencies_mhz), ("--multipath", args.multipath))
+    given = [f for f, v in tof if v is not None]
+    if args.sensor == "tof-pulsed" and given:
+        raise UsageError(f"{', '.join(given)}: only for --sensor tof (continuous wave); the pulsed sensor measures "
+                         "round trips (--jitter-ps)")
+    if args.sensor not in ("tof", "tof-pulsed") and given:
+        raise UsageError(f"{', '.join(given)}: only for --sensor tof, found --sensor {args.sensor}")
+    if args.size is not None and args.sensor in ("projector", "laser", "laser-stereo"):
+        raise UsageError(f"--size: only for --sensor tof, tof-pulsed, stereo or dots; the {args.sensor} sensor's "
+                         "camera is the rig file's (--rig)")
+    if args.no_dots and args.sensor != "stereo":
+        raise UsageError(f"--no-dots: only for --sensor stereo, found --sensor {args.sensor}")
+    if args.frequencies_mhz:
+        from rangekit.tof.plan import MAX_FREQUENCIES
+
+        mhz = args.frequencies_mhz
+        twice = sorted({f"{f:g}" for f in mhz if mhz.count(f) > 1})
+        if twice or len(mhz) > MAX_FREQUENCIES:
+            raise UsageError(f"--frequencies-mhz {' '.join(f'{f:g}' for f in mhz[:8])}{' ...' if len(mhz) > 8 else ''}: expected at most "
+                             f"{MAX_FREQUENCIES} frequencies, distinct, in MHz" + (
+                                 f", found {', '.join(twice)} more than once" if twice else f", found {len(mhz)}"))
 
 
 def _check_motion_options(args: argparse.Namespace) -> None:

@@ -129,3 +129,18 @@ def test_a_huge_value_in_a_rig_file_gives_a_short_error(tmp_path, field):
         load_rig(tmp_path / "rig.json")
     assert len(str(caught.value)) < 400, str(caught.value)[:1000]
     assert "100000 items" in str(caught.value)
+
+
+@pytest.mark.parametrize("args, mentions", [
+    (["--sensor", "tof-pulsed", "--steps", "4"], ["--steps", "only for --sensor tof"]),
+    (["--sensor", "stereo", "--multipath", "0.2", "1"], ["--multipath", "only for --sensor tof"]),
+    (["--size", "320x256"], ["--size", "only for --sensor tof, tof-pulsed, stereo or dots"]),
+    (["--sensor", "dots", "--no-dots"], ["--no-dots", "only for --sensor stereo"]),
+    (["--sensor", "tof", "--frequencies-mhz", "80", "80"], ["--frequencies-mhz 80 80", "frequencies, distinct, in MHz",
+                                                              "80 more than once"]),
+])
+def test_an_option_of_another_sensor_is_refused(cli, tmp_path, args, mentions):
+    run = cli("sim", "render", *args, "--out", tmp_path / "cap")
+    line = assert_error(run, 2, *mentions)
+    assert "80000000" not in line and "FrequencyPlan" not in line
+    assert not (tmp_path / "cap").exists()

@@ -66,15 +66,15 @@ def set_in(folder: str | Path) -> OutputSet | None:
     return next((s for s in OUTPUT_SETS if any((folder / m).is_file() for m in s.markers)), None)
 
 
-def same_file(path: str | Path, inputs: Iterable[str | Path]) -> Path | None:
-    """The input of ``inputs`` that ``path`` is (paths resolved, links followed), or the input folder it lies
-    in (directly: a capture folder's own files); None when it is none of them."""
+def same_file(path: str | Path, inputs: Iterable[str | Path], *, within: bool = True) -> Path | None:
+    """The input of ``inputs`` that ``path`` is (paths resolved, links followed), or with ``within`` the input
+    folder it lies in (directly: a capture folder's own files); None when it is none of them."""
     target = Path(path).resolve()
     for given in inputs:
         if given is None:
             continue
         where = Path(given).resolve()
-        if target == where or target.parent == where:
+        if target == where or (within and target.parent == where):
             return Path(given)
     return None
 
@@ -111,7 +111,8 @@ def claim_folder(folder: str | Path, writes: str, *, force: bool, option: str = 
         patterns = list(mine.members if names is None else names)
         for pattern in patterns if found is None else mine.members:   # a rerun may remove any member
             for path in sorted(folder_path.glob(pattern)):
-                given = same_file(path, inputs)
+                # an input file; the other files of an input folder are not read (photometric DIR --out DIR)
+                given = same_file(path, inputs, within=False)
                 if given is not None:
                     raise UsageError(f"{option} {folder}: {path} is this command's input {given}; writing {short} "
                                      f"there would replace it: choose another folder, or pass --force")

@@ -139,3 +139,14 @@ def test_depth_maps_are_a_set_of_their_own(tmp_path):
     claim_folder(tmp_path, "depth", force=False)         # a rerun of tof or stereo
     with pytest.raises(UsageError, match="holds depth maps"):
         claim_folder(tmp_path, "registration", force=False)
+
+
+def test_a_rerun_into_its_input_folder_writes_its_own_files_and_removes_no_input(tmp_path):
+    (tmp_path / "normals.npy").write_bytes(b"an earlier run's")      # photometric DIR --out DIR, run before
+    (tmp_path / "mask.png").write_bytes(b"an input")
+    claim_folder(tmp_path, "photometric", force=False, inputs=[tmp_path])   # its own set: not refused
+    (tmp_path / "ground_truth.npz").write_bytes(b"a capture")       # tof RAW --out RAW --force
+    (tmp_path / "tof.json").write_text("{}")
+    (tmp_path / "normals.npy").unlink()
+    replace = claim_folder(tmp_path, "depth", force=True, inputs=[tmp_path])
+    assert replace() == [] and (tmp_path / "tof.json").exists()      # the input folder's files stay

@@ -38,6 +38,10 @@ __all__ = [
     "QUOTE_LIMIT",
     "quote",
     "one_line",
+    "SHOWN_LIMIT",
+    "shown",
+    "MESSAGE_LIMIT",
+    "bounded_message",
 ]
 
 
@@ -189,6 +193,43 @@ def quote(data: bytes | bytearray | str, limit: int = QUOTE_LIMIT) -> str:
         return repr(data)
     unit = "characters" if isinstance(data, str) else "bytes"
     return f"{data[:limit]!r}... ({len(data)} {unit})"
+
+
+#: The most characters of a found value (a matrix, a list, a repr) an error message shows.
+SHOWN_LIMIT = 80
+#: The most characters of an error message the command line prints (its start and its end).
+MESSAGE_LIMIT = 2000
+
+
+def shown(value, limit: int = SHOWN_LIMIT) -> str:
+    """A found value for an error message in at most about ``limit`` characters: its ``repr`` (an array or
+    a numpy number as a list, rounded to 6 significant digits), cut with ``...`` and how big it was when
+    longer: ``[[1.0, 0.0, 320.0], [0.0, 1.0, 24 ... (shape (300, 300))]``. Every matrix, vector or list an
+    error quotes goes through it (issue 48: a 300 x 300 "camera matrix" made a 710 kB line)."""
+    size = None
+    if hasattr(value, "tolist") and hasattr(value, "shape"):   # numpy, without importing it here
+        size = f"shape {tuple(value.shape)}"
+        try:
+            value = value.round(6) if value.dtype.kind == "f" else value
+        except (AttributeError, TypeError):
+            pass
+        value = value.tolist()
+    elif isinstance(value, (list, tuple)):
+        size = f"{len(value)} items"
+    text = repr(value)
+    if len(text) <= limit:
+        return text
+    tail = f" ... ({size or f'{len(text)} characters'})"
+    return text[:max(limit - len(tail), 20)] + tail
+
+
+def bounded_message(message: str, limit: int = MESSAGE_LIMIT) -> str:
+    """``message`` in at most about ``limit`` characters (its start and its end, where the found value and the
+    way out are), so that no error fills a terminal: the command line's last net behind :func:`shown`."""
+    if len(message) <= limit:
+        return message
+    half = (limit - 40) // 2
+    return f"{message[:half]} ... ({len(message) - 2 * half} characters left out) ... {message[-half:]}"
 
 
 def one_line(exc: BaseException | str, limit: int = QUOTE_LIMIT) -> str:

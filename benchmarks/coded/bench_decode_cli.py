@@ -63,7 +63,8 @@ def run_cli(folder: Path, out: Path, extra: list[str] = (), options: list[str] =
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t = time.perf_counter()
     p = subprocess.run([sys.executable, *extra, "-m", "rangekit", "decode", str(folder), "--pattern",
-                        str(folder / "patterns.json"), *options, "--out", str(out)], env=_env(), capture_output=True,
+                        str(folder / "patterns.json"), *options, "--out", str(out), "--force"], env=_env(),
+                       capture_output=True,
                        text=True)
     wall = time.perf_counter() - t
     after = resource.getrusage(resource.RUSAGE_CHILDREN)

@@ -124,7 +124,7 @@ def main() -> int:
         out = work / "rangekit.ply"
         run = subprocess.run([sys.executable, "-m", "rangekit", "reconstruct", str(folder), "--pattern", PRESET,
                               "--rig", str(folder / "rig_off.json"), "--projector", f"{PROJECTOR[0]}x{PROJECTOR[1]}",
-                              "--out", str(out)], capture_output=True, text=True)
+                              "--out", str(out), "--force"], capture_output=True, text=True)
         log(run.stdout.strip(), run.stderr.strip(), sep="\n")
         rows = []
         if run.returncode == 0:

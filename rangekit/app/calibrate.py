@@ -127,9 +127,14 @@ def calibrate(out: str | Path, *, rig: str = "sim", board: Board, n_poses: int =
             return False
         answer = ask(f"pose {check.index + 1} rejected ({check.reason}); retake it? [Y/n] ")
         return not str(answer).strip().lower().startswith("n")
+    coverage_was_there = coverage_png.exists()
     try:
         res = calibrate_rig(devices, settings=settings, place_board=place, place_on_turntable=on_turntable,
                             template=template, progress=progress, on_pose=on_pose)
+    except BaseException:
+        if not coverage_was_there:   # the live picture of a failed run goes with it: a rerun is not refused for it
+            coverage_png.unlink(missing_ok=True)
+        raise
     finally:
         if hardware:
             devices.close()

@@ -15,6 +15,7 @@ poses' corners cover, as the hardware calibration's does.
 from __future__ import annotations
 
 import time
+from collections import Counter
 from pathlib import Path
 from typing import Callable, Sequence
 
@@ -126,6 +127,11 @@ def calibrate_recordings(out: str | Path, captures: Sequence[str | Path], *, pat
         if not folder.is_dir():
             raise UsageError(f"--captures {folder}: expected a folder of {pattern} frames, found "
                              f"{'a file' if folder.exists() else 'nothing'}")
+    counts = Counter(f.resolve() for f in folders)
+    twice = [(next(f for f in folders if f.resolve() == where), n) for where, n in counts.items() if n > 1]
+    if twice:
+        raise UsageError(f"--captures: {', '.join(f'{f} given {n} times' for f, n in twice)}; give each board pose "
+                         f"once ({len(counts)} distinct folders of the {len(folders)} given)")
     names = _names(folders)
     if report is not None:
         report(f"{len(folders)} board poses, {pattern} ({layout.source}); corners found in each pose's "
@@ -167,12 +173,15 @@ def calibrate_recordings(out: str | Path, captures: Sequence[str | Path], *, pat
         poses.append(pose)
         if pose.check.accepted:
             kept.append((pose.corners.ids, pose.corners.uv))
-        write_png(coverage_png, coverage_image(kept, camera_size, pose.corners.uv if pose.check.accepted else None,
-                                               pose.check.accepted))
         if report is not None:
             report(pose.line())
     call_progress(progress, f"decoded {len(folders)} board poses", len(folders), len(folders))
     result = calibrate_recorded(poses, readings[0], camera_size, (width, height), lens=lens,
                                 seconds={"decode": time.time() - t0})
+    # Written with the rig, once it is calibrated: a failed run leaves no coverage.png (issue 48: it replaced
+    # an earlier calibration's), nothing is recorded live to watch.
+    last = poses[-1]
+    write_png(coverage_png, coverage_image(kept, camera_size, last.corners.uv if last.check.accepted else None,
+                                           last.check.accepted))
     save_rig(result.rig, out)
     return Calibration(result, None, [])

@@ -166,13 +166,19 @@ def seed(text: str) -> int:
 
 
 def check_output(path: str | os.PathLike, *, option: str = "--out", folder: bool = False,
-                 force: bool = True, session: bool = False, suffixes=None, what: str = "output") -> Path:
+                 force: bool = False, session: bool = False, suffixes=None, what: str = "output",
+                 inputs=()) -> Path:
     """Check before any work that ``path`` can be written: a file where a file is expected (not an existing
     folder), a folder where a folder is expected, its nearest existing parent a writable folder with at
     least :data:`MIN_FREE_BYTES` free. Raises :class:`UsageError` naming the option and the path; with
     ``session=True`` the folder is also read (a session to resume or process), so a file there is bad data
     (:class:`FileFormatError`, exit 1). ``suffixes``: the extensions a file output may have (the formats
-    module's own list, e.g. ``MESH_FORMATS``), ``what`` names them in the error."""
+    module's own list, e.g. ``MESH_FORMATS``), ``what`` names them in the error.
+
+    A file output that exists is written over only with ``force`` (the command's ``--force``): a named file
+    is never this run's own output, and it may be one of the command's ``inputs`` (compared resolved) or
+    belong to another command's set of files (:func:`rangekit.formats.output_sets.file_owner`); the error
+    says which. A folder's files are claimed by :func:`rangekit.formats.output_sets.claim_folder`."""
     raw = os.fsdecode(path)
     if not raw:
         raise UsageError(f"{option}: an empty path; expected a {'folder' if folder else 'file name'}")
@@ -192,8 +198,9 @@ def check_output(path: str | os.PathLike, *, option: str = "--out", folder: bool
     if suffixes is not None and out.suffix.lower() not in suffixes:
         raise UsageError(f"{option} {out}: expected a {what} file ({', '.join(suffixes)}), found "
                          f"{repr(out.suffix) if out.suffix else 'no extension'}")
-    if not folder and out.exists() and not force:
-        raise UsageError(f"{option} {out}: exists; choose another file or pass --force to overwrite it")
+    if not folder and (out.exists() or out.is_symlink()) and not force:
+        raise UsageError(f"{option} {out}: {_existing_file(out, inputs)}; choose another file, or pass --force to "
+                         f"overwrite it")
     parent = out if folder and out.is_dir() else out.parent
     parent = parent.resolve()
     while not parent.exists():
@@ -207,6 +214,32 @@ def check_output(path: str | os.PathLike, *, option: str = "--out", folder: bool
         raise UsageError(f"{option} {out}: only {free / 2**20:.1f} MB free on the disk of {parent}; "
                          f"expected at least {MIN_FREE_BYTES / 2**20:.0f} MB")
     return out
+
+
+def _existing_file(out: Path, inputs) -> str:
+    """What an existing output file is, for the refusal: one of the inputs, another command's, or just there."""
+    from rangekit.formats.output_sets import file_owner, same_file
+
+    given = same_file(out, [p for p in inputs if p is not None])
+    if given is not None:
+        if Path(given).resolve() == out.resolve():
+            return f"is this command's input {given}"
+        return f"exists in this command's input folder {given}"
+    owner = file_owner(out)
+    if owner is not None:
+        return f"exists and belongs to {owner.what} ({next(m for m in owner.markers if (out.parent / m).is_file())})"
+    return "exists"
+
+
+def check_beside(out: str | os.PathLike, names, *, force: bool, option: str = "--out", inputs=()) -> None:
+    """The files a command writes beside its ``--out`` file (``coverage.png``, ``<stem>.refined-rig.json``),
+    checked as ``--out`` is: one that exists is written over only with ``force``. UsageError naming it."""
+    out = Path(out)
+    for name in names:
+        side = out.with_name(name)
+        if (side.exists() or side.is_symlink()) and not force:
+            raise UsageError(f"{option} {out}: {side}, written beside it, {_existing_file(side, inputs)}; choose "
+                             f"another --out folder, or pass --force to overwrite it")
 
 
 class LazyChoices:

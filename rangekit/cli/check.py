@@ -20,7 +20,9 @@ def cmd_check(args: argparse.Namespace) -> int:
     replace = lambda: []  # noqa: E731
     if args.out is not None:
         check_output(args.out, option="--out", folder=True)
-        replace = claim_folder(args.out, "check", force=args.force)
+        simulated = args.rig in (None, "sim")
+        replace = claim_folder(args.out, "check", force=args.force, inputs=[None if simulated else args.rig],
+                               names=("check.json", "check.png") + (("rig.json",) if simulated else ()))
     hardware = args.rig not in (None, "sim")
     if hardware:
         given = [opt for opt, v in (("--object", args.object), ("--seed", args.seed),
@@ -28,7 +30,7 @@ def cmd_check(args: argparse.Namespace) -> int:
         if given:
             raise UsageError(f"{', '.join(given)}: simulator options; a check of --rig {args.rig} looks at the real "
                              "object and measures the real latency: leave them out")
-        check_output(args.rig, option="--rig")
+        check_output(args.rig, option="--rig", force=True)   # its pattern delay is rewritten in place
         result, images, rig = check_hardware(args.rig, progress=console())
         write_pattern_delay(args.rig, result.pattern_delay_s)
         rig_note = f"wrote capture.pattern_delay_s {result.pattern_delay_s:g} into {args.rig} (no other field changed)"
@@ -79,7 +81,7 @@ def add_parsers(sub) -> None:
     p.add_argument("--rig", help="'sim' (default) or a rig file whose 'devices' name the projector and camera; its "
                                  "capture.pattern_delay_s is rewritten with the measured delay")
     p.add_argument("--out", help="folder for check.png, check.json (and, on the simulator, rig.json)")
-    p.add_argument("--force", action="store_true", help="replace a set of files another command left in --out (a session, a capture, results)")
+    p.add_argument("--force", action="store_true", help="write over files in --out this run did not make: another command's set (a session, a capture, results), files of yours, an input")
     p.add_argument("--object", help="simulated object (default lumpy; 'shiny' saturates)")
     p.add_argument("--seed", type=seed, help="simulator noise seed (default 0)")
     p.add_argument("--latency-ms", type=float_in(0.0, 1000.0), help="the simulated projector's latency, ms "

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import time
 
-from rangekit.cli._common import check_output, note, result, say, size
+from rangekit.cli._common import check_beside, check_output, note, result, say, size
 
 
 def cmd_decode(args: argparse.Namespace) -> int:
@@ -20,7 +20,8 @@ def cmd_decode(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     from rangekit.formats.capture import DECODED_SUFFIXES
 
-    check_output(args.out, suffixes=DECODED_SUFFIXES, what="decoded maps")
+    check_output(args.out, suffixes=DECODED_SUFFIXES, what="decoded maps", force=args.force,
+                 inputs=list(args.images) + ([args.pattern] if ":" not in args.pattern else []))
     if ":" in args.pattern:
         return _decode_layout(args, t0)
     paths = list_images(args.images[0] if len(args.images) == 1 else args.images)
@@ -84,7 +85,12 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
     from rangekit.formats.clouds import CLOUD_WRITERS, save_cloud
 
     t0 = time.perf_counter()
-    check_output(args.out, suffixes=CLOUD_WRITERS, what="point cloud")
+    check_output(args.out, suffixes=CLOUD_WRITERS, what="point cloud", force=args.force,
+                 inputs=list(args.capture) + list(args.rig or []))
+    if not args.no_refine:   # the refined rig and its figures, when the capture refines the rig
+        stem = Path(args.out).stem
+        check_beside(args.out, (f"{stem}.refined-rig.json", f"{stem}.refinement.json"), force=args.force,
+                     inputs=list(args.capture) + list(args.rig or []))
     if args.pattern is not None:
         return _reconstruct_layout(args, t0)
     if len(args.capture) != 1:
@@ -257,6 +263,7 @@ def add_parsers(sub) -> None:
                      help="binary codes: refuse the capture when more than this share of the decoded pixels moved "
                           f"during it (the 'motion' mask; default {MAX_MOTION_SHARE * 100:.0f}%%; 'none': never refuse)")
     dec.add_argument("--out", required=True, help="output .npz with proj_col, proj_row, confidence and masks")
+    dec.add_argument("--force", action="store_true", help="overwrite --out if it exists")
     dec.set_defaults(func=cmd_decode)
 
     rec = sub.add_parser("reconstruct", help="decode and triangulate a capture folder into a point cloud",
@@ -295,4 +302,6 @@ def add_parsers(sub) -> None:
                           "left peaks the right camera does not see, met with the light sheet fitted to that frame's "
                           "pair points; docs/laser.md)")
     rec.add_argument("--out", required=True, help="output cloud (.ply, .pcd, .xyz, .npy or .e57; checked before any work)")
+    rec.add_argument("--force", action="store_true",
+                     help="overwrite --out (and the refined rig written beside it) if it exists")
     rec.set_defaults(func=cmd_reconstruct)

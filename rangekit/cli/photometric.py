@@ -15,7 +15,7 @@ def cmd_photometric(args: argparse.Namespace) -> int:
 
     t0 = time.perf_counter()
     check_output(args.out, folder=True)
-    replace = claim_folder(args.out, "photometric", force=args.force)
+    replace = claim_folder(args.out, "photometric", force=args.force, inputs=[args.folder])
     out = photometric_folder(args.folder, args.out, method=args.method, progress=say)
     replace()
     result(f"wrote {out}/normals.npy, normals.png, albedo.png, depth.npy, mesh.ply (pixel units, orthographic) in "
@@ -33,5 +33,5 @@ def add_parsers(sub) -> None:
     pst.add_argument("--method", default="robust", choices=("ls", "robust", "uncalibrated"),
                      help="least squares, robust to shadows and highlights (default), or without light directions")
     pst.add_argument("--out", required=True, help="output folder")
-    pst.add_argument("--force", action="store_true", help="replace a set of files another command left in --out (a session, a capture, results)")
+    pst.add_argument("--force", action="store_true", help="write over files in --out this run did not make: another command's set (a session, a capture, results), files of yours, an input")
     pst.set_defaults(func=cmd_photometric)

@@ -8,6 +8,10 @@ import time
 
 from rangekit.cli._common import check_output, fraction, int_in, non_negative_float, positive_float, result, say, size
 from rangekit.errors import UsageError
+from rangekit.formats.output_sets import claim_folder
+
+#: What ``tof`` and ``stereo`` write into --out (``stereo --device`` also the pair, its rig, the device's depth).
+_DEPTH_FILES = ("depth.npy", "depth.png", "range.npy", "confidence.npy", "confidence.png", "cloud.ply")
 
 
 def cmd_tof(args: argparse.Namespace) -> int:
@@ -16,9 +20,11 @@ def cmd_tof(args: argparse.Namespace) -> int:
 
     t0 = time.perf_counter()
     check_output(args.out, folder=True)
+    replace = claim_folder(args.out, "depth", force=args.force, inputs=[args.raw_dir], names=_DEPTH_FILES)
     run = tof_depth_files(args.raw_dir, args.out, min_snr=args.min_snr,
                           flying_angle=None if args.keep_flying else math.radians(args.flying_angle_deg),
                           max_range=args.max_range, min_fill=None if args.keep_flying else 0.5, progress=say)
+    replace()
     result(f"wrote {args.out}/{', '.join(run.names)} ({run.n_points:,} points) in {time.perf_counter() - t0:.1f} s")
     return 0
 
@@ -42,9 +48,12 @@ def cmd_stereo(args: argparse.Namespace) -> int:
     if missing:
         raise UsageError(f"stereo: expected LEFT RIGHT --rig RIG.json (or --device), missing {', '.join(missing)}")
     check_output(args.out, folder=True)
+    replace = claim_folder(args.out, "depth", force=args.force, inputs=[args.left, args.right, args.rig],
+                           names=_DEPTH_FILES)
     run = stereo_depth_files(args.left, args.right, args.rig, args.out, method=args.method,
                              min_depth=args.min_depth, alpha=args.alpha, num_disparities=args.num_disparities,
                              progress=say)
+    replace()
     result(f"wrote {args.out}/{', '.join(run.names)} ({run.n_points:,} points)")
     return 0
 
@@ -53,13 +62,20 @@ def _stereo_device(args: argparse.Namespace) -> int:
     from rangekit.app.commands.stereo_live import stereo_depth_device
 
     check_output(args.out, folder=True)
+    replace = claim_folder(args.out, "depth", force=args.force,
+                           names=_DEPTH_FILES + ("left.png", "right.png", "rig.json", "device_depth.*"))
     run = stereo_depth_device(args.out, device_id=args.device_id, size=args.size or (640, 400),
                               dots=0.8 if args.dots is None else args.dots,
                               flood=0.0 if args.flood is None else args.flood, on_device=args.on_device,
                               method=args.method, min_depth=args.min_depth, alpha=args.alpha,
                               num_disparities=args.num_disparities, progress=say)
+    replace()
     result(f"wrote {args.out}/{', '.join(run.names)} ({run.n_points:,} points)")
     return 0
+
+
+FORCE_HELP = ("write over files in --out this run did not make: another command's set (a session, a capture, "
+              "results), files of yours, an input")
 
 
 def add_parsers(sub) -> None:
@@ -70,6 +86,7 @@ def add_parsers(sub) -> None:
     tofp.add_argument("raw_dir", metavar="RAW_DIR", help="ToF capture folder (tof.json, rig.json, samples/)")
     tofp.add_argument("--out", required=True, help="output folder: depth.npy (z, metres, NaN invalid), range.npy, "
                                                     "confidence.npy/png, depth.png, cloud.ply")
+    tofp.add_argument("--force", action="store_true", help=FORCE_HELP)
     tofp.add_argument("--max-range", type=positive_float, help="metres; default the plan's unambiguous range")
     tofp.add_argument("--min-snr", type=non_negative_float, default=3.0,
                       help="drop pixels whose phase noise exceeds 1/MIN_SNR rad (default 3)")
@@ -100,6 +117,7 @@ def add_parsers(sub) -> None:
                           "ours and prints the difference")
     stp.add_argument("--out", required=True, help="output folder: depth.npy (left z, metres, NaN invalid), depth.png, "
                                                    "confidence.npy/png, cloud.ply")
+    stp.add_argument("--force", action="store_true", help=FORCE_HELP)
     stp.add_argument("--method", default="census-sgm", choices=("census-sgm", "sgbm"),
                      help="our census + semi-global matcher (default) or OpenCV's StereoSGBM")
     stp.add_argument("--num-disparities", type=int_in(16, 1024), help="disparity search range (multiple of 16; default from "

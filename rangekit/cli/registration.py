@@ -18,7 +18,9 @@ def cmd_register(args: argparse.Namespace) -> int:
 
     t0 = time.perf_counter()
     check_output(args.out, folder=True)
-    replace = claim_folder(args.out, "registration", force=args.force)
+    replace = claim_folder(args.out, "registration", force=args.force,
+                           inputs=list(args.scans) + [args.init],
+                           names=("poses.json", "merged.ply") + (() if args.no_mesh else ("mesh.ply",)))
     voxel = args.voxel_mm * 1e-3 if args.voxel_mm else None
     rep = register(args.scans, args.out, init=args.init, voxel=voxel, mesh=not args.no_mesh, progress=say,
                          neighbours=args.neighbours)
@@ -54,7 +56,7 @@ def cmd_mesh(args: argparse.Namespace) -> int:
     from rangekit.surface.fusion import poisson_input_problem, poisson_mesh
 
     t0 = time.perf_counter()
-    check_output(args.out, suffixes=MESH_FORMATS, what="mesh")
+    check_output(args.out, suffixes=MESH_FORMATS, what="mesh", force=args.force, inputs=[args.cloud])
     cloud = load_cloud(args.cloud)
     problem = poisson_input_problem(cloud.points)
     if problem:  # before estimating normals, which needs less
@@ -87,7 +89,7 @@ def add_parsers(sub) -> None:
                           "0 tries every pair (default: 4 with --init none, every pair with a prior)")
     reg.add_argument("--no-mesh", action="store_true", help="skip meshing")
     reg.add_argument("--out", required=True, help="output folder")
-    reg.add_argument("--force", action="store_true", help="replace a set of files another command left in --out (a session, a capture, results)")
+    reg.add_argument("--force", action="store_true", help="write over files in --out this run did not make: another command's set (a session, a capture, results), files of yours, an input")
     reg.set_defaults(func=cmd_register)
 
     mesh = sub.add_parser("mesh", help="fuse one cloud into a watertight mesh (screened Poisson)",
@@ -95,4 +97,5 @@ def add_parsers(sub) -> None:
     mesh.add_argument("cloud", metavar="CLOUD", help="point cloud file (normals are estimated if missing)")
     mesh.add_argument("--depth", type=int_in(4, 12), default=9, help="octree depth (default 9)")
     mesh.add_argument("--out", required=True, help="output mesh (.ply, .obj, .stl or .glb; checked before any work)")
+    mesh.add_argument("--force", action="store_true", help="overwrite --out if it exists")
     mesh.set_defaults(func=cmd_mesh)

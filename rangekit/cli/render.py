@@ -14,7 +14,7 @@ def cmd_render(args: argparse.Namespace) -> int:
     from rangekit.app.commands.picture import render_file
     from rangekit.io import PNG_SUFFIXES, write_png
 
-    check_output(args.out, suffixes=PNG_SUFFIXES, what="PNG image")
+    check_output(args.out, suffixes=PNG_SUFFIXES, what="PNG image", force=args.force, inputs=[args.input])
     pic = render_file(args.input, azimuths=[np.radians(az) for az in args.azimuth],
                       elevation=np.radians(args.elevation), size=args.size, up=args.up, colour=args.colour)
     write_png(args.out, pic.image)
@@ -29,6 +29,7 @@ def add_parsers(sub) -> None:
     ren.add_argument("input", metavar="MESH_OR_CLOUD", help="mesh (.ply with faces, .obj, .stl, .off, .glb) or "
                                                             "cloud (.ply, .xyz, .npy, .pcd, .txt, .e57)")
     ren.add_argument("--out", required=True, help="output PNG")
+    ren.add_argument("--force", action="store_true", help="overwrite --out if it exists")
     ren.add_argument("--azimuth", type=finite_float, nargs="+", default=[30.0],
                      help="viewing azimuth(s) in degrees about --up; several give a montage (default 30)")
     ren.add_argument("--elevation", type=finite_float, default=25.0, help="degrees above the horizontal (default 25)")

@@ -8,7 +8,7 @@ import sys
 import time
 from pathlib import Path
 
-from rangekit.cli._common import (check_output, console, float_in, int_in, note, positive_float, result, say, seed,
+from rangekit.cli._common import (check_beside, check_output, console, float_in, int_in, note, positive_float, result, say, seed,
                                   size)
 from rangekit.drivers.discovery import MAX_SEARCH_S
 from rangekit.errors import UsageError
@@ -46,7 +46,8 @@ def cmd_rig_import(args: argparse.Namespace) -> int:
     from rangekit.rig.rig_file import RIG_SUFFIXES
 
     if args.out is not None:
-        check_output(args.out, force=args.force, suffixes=RIG_SUFFIXES, what="rig")
+        check_output(args.out, force=args.force, suffixes=RIG_SUFFIXES, what="rig",
+                     inputs=list(args.file) + list(args.capture or []))
     options = dict(size=args.size, projector_size=args.projector_size, unit=args.unit,
                    keep_projector_distortion=args.keep_projector_distortion)
     if len(args.file) > 1 or args.capture:
@@ -102,7 +103,10 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
 
     t0 = time.perf_counter()
     _check_captures_options(args)
-    check_output(args.out, force=args.force, suffixes=RIG_SUFFIXES, what="rig")
+    inputs = list(args.captures or []) + ([args.rig] if args.rig != "sim" else [])
+    check_output(args.out, force=args.force, suffixes=RIG_SUFFIXES, what="rig", inputs=inputs)
+    check_beside(args.out, ("coverage.png",), force=args.force, inputs=inputs)
+    _check_square(args.square_mm)
     board = Board(kind=args.board, cols=args.cols, rows=args.rows, square=args.square_mm / 1000.0)
     if args.captures:
         from rangekit.app.calibrate_recorded import calibrate_recordings
@@ -130,6 +134,17 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
             say(line)
     result(f"wrote {args.out} in {time.perf_counter() - t0:.1f} s")
     return 0
+
+
+def _check_square(square_mm: float) -> None:
+    """--square-mm against the one rule of a board's square (rangekit.rig.plausibility.BOARD_SQUARE): refused
+    before any pose (a 1e9 mm square otherwise fails as "no pose found" or as poses nearly parallel)."""
+    from rangekit.rig.plausibility import BOARD_SQUARE, check_length
+
+    check_length(square_mm / 1000.0, BOARD_SQUARE, where="--square-mm", shown=f"{square_mm:g} mm",
+                 what="square side", read_as="mm", units=("m", "cm"), source="the number",
+                 fixes={"m": f"give millimetres, --square-mm {square_mm * 1000:g}",
+                        "cm": f"give millimetres, --square-mm {square_mm * 10:g}"}, error=UsageError)
 
 
 def _check_captures_options(args: argparse.Namespace) -> None:
@@ -194,7 +209,7 @@ def add_calibrate_parser(sub) -> None:
     cal.add_argument("--rig", default="sim", help="'sim' (default) or a rig file naming the devices (its geometry "
                                                    "is replaced)")
     cal.add_argument("--out", required=True, help="rig file to write")
-    cal.add_argument("--force", action="store_true", help="overwrite --out if it exists")
+    cal.add_argument("--force", action="store_true", help="overwrite --out and coverage.png beside it if they exist")
     cal.add_argument("--poses", type=int_in(3, 200), default=20, help="board poses (default 20)")
     cal.add_argument("--board", default="checkerboard", choices=("checkerboard", "charuco"), help="board type")
     cal.add_argument("--cols", type=int_in(3, 60), default=10, help="squares along the board's width (default 10)")

@@ -23,7 +23,7 @@ from rangekit.cli.render import add_parsers as add_render
 from rangekit.cli.rig import add_calibrate_parser, add_parsers as add_rig
 from rangekit.cli.scan import add_parsers as add_scan
 from rangekit.cli.sim import add_parsers as add_sim
-from rangekit.errors import RangekitError, UsageError
+from rangekit.errors import RangekitError, UsageError, bounded_message
 from rangekit._runtime.environment import interrupted, memory_shortage
 from rangekit._runtime.open3d_viewer import defer_plotly_viewer
 from rangekit._runtime.threads import one_blas_thread
@@ -128,7 +128,7 @@ def main(argv: list[str] | None = None) -> int:
 
 def _fail(message: str, code: int) -> int:
     try:
-        print(f"rangekit: error: {message}", file=sys.stderr, flush=True)
+        print(f"rangekit: error: {bounded_message(message)}", file=sys.stderr, flush=True)
     except OSError:
         pass
     return code

@@ -9,7 +9,7 @@ import time
 import numpy as np
 
 from rangekit.formats.output_sets import claim_folder
-from rangekit.cli._common import (check_output, console, finite_float, int_in, non_negative_float, positive_float,
+from rangekit.cli._common import (LazyChoices, check_output, console, finite_float, float_in, int_in, non_negative_float, positive_float,
                                   result, seed, size)
 from rangekit.errors import UsageError
 
@@ -17,10 +17,23 @@ from rangekit.errors import UsageError
 def cmd_sim_render(args: argparse.Namespace) -> int:
     """rangekit sim render: the capture, written where no other command's set of files is (--force replaces one)."""
     check_output(args.out, folder=True)
-    replace = claim_folder(args.out, "capture", force=args.force)
+    replace = claim_folder(args.out, "capture", force=args.force, inputs=[args.rig, args.object],
+                           names=_WRITES[args.sensor])
     code = _sim_render(args)
     replace()
     return code
+
+
+#: What each sensor writes into --out (rangekit.formats.output_sets: the capture set's members).
+_WRITES = {
+    "projector": ("[0-9][0-9][0-9].png", "patterns.json", "rig.json", "capture.json", "ground_truth.npz", "preview.png"),
+    "laser": ("off.png", "laser*.png", "rig.json", "capture.json", "ground_truth.npz"),
+    "laser-stereo": ("left", "right", "rig.json", "capture.json", "ground_truth.npz"),
+    "dots": ("image.png", "reference.png", "rig.json", "capture.json", "ground_truth.npz"),
+    "stereo": ("left.png", "right.png", "rig.json", "capture.json", "ground_truth.npz", "preview.png"),
+    "tof": ("samples", "tof.json", "rig.json", "ground_truth.npz", "preview.png"),
+    "tof-pulsed": ("round_trip_s.npy", "tof.json", "rig.json", "ground_truth.npz", "preview.png"),
+}
 
 
 def _sim_render(args: argparse.Namespace) -> int:
@@ -31,6 +44,8 @@ def _sim_render(args: argparse.Namespace) -> int:
 
     t0 = time.perf_counter()
     check_output(args.out, folder=True)
+    _check_motion_options(args)
+    _check_sensor_options(args)
     if args.sensor in ("laser", "laser-stereo"):
         given = [f for f, v in (("--patterns", args.patterns), ("--global-fraction", args.global_fraction),
                                 ("--motion-mm", args.motion_mm)) if v is not None]
@@ -72,6 +87,9 @@ def _sim_render(args: argparse.Namespace) -> int:
         result(f"wrote {args.out} (left.png, right.png, rig.json, ground_truth.npz) in {time.perf_counter() - t0:.1f} s")
         return 0
     if args.sensor in ("tof", "tof-pulsed"):
+        if not args.near < args.far:
+            raise UsageError(f"--near {args.near:g}, --far {args.far:g}: expected the nearest panel nearer than the "
+                             "farthest (metres)")
         render_tof_capture(args.out, pulsed=args.sensor == "tof-pulsed", near=args.near, far=args.far,
                            size=args.size or (320, 240), plan=args.plan,
                            frequencies=[f * 1e6 for f in args.frequencies_mhz] if args.frequencies_mhz else None,
@@ -83,10 +101,52 @@ def _sim_render(args: argparse.Namespace) -> int:
                              rig_file=args.rig, angle=np.radians(args.angle_deg), bits=args.bits, seed=args.seed,
                              noise=not args.no_noise, global_fraction=args.global_fraction,
                              object_unit=args.object_unit or "m", progress=console(),
-                             motion=None if not args.motion_mm else (args.motion, args.motion_mm * 1e-3),
-                             readout_frames=args.readout_frames)
+                             motion=None if not args.motion_mm else (args.motion or "slip", args.motion_mm * 1e-3),
+                             readout_frames=args.readout_frames or 0.0)
     result(f"done in {time.perf_counter() - t0:.1f} s")
     return 0
+
+
+def _check_sensor_options(args: argparse.Namespace) -> None:
+    """The options of one kind of sensor refused with another (they were ignored), and --frequencies-mhz checked in
+    the user's MHz (UsageError naming the option)."""
+    tof = (("--steps", args.steps), ("--frequencies-mhz", args.frequencies_mhz), ("--multipath", args.multipath))
+    given = [f for f, v in tof if v is not None]
+    if args.sensor == "tof-pulsed" and given:
+        raise UsageError(f"{', '.join(given)}: only for --sensor tof (continuous wave); the pulsed sensor measures "
+                         "round trips (--jitter-ps)")
+    if args.sensor not in ("tof", "tof-pulsed") and given:
+        raise UsageError(f"{', '.join(given)}: only for --sensor tof, found --sensor {args.sensor}")
+    if args.size is not None and args.sensor in ("projector", "laser", "laser-stereo"):
+        raise UsageError(f"--size: only for --sensor tof, tof-pulsed, stereo or dots; the {args.sensor} sensor's "
+                         "camera is the rig file's (--rig)")
+    if args.no_dots and args.sensor != "stereo":
+        raise UsageError(f"--no-dots: only for --sensor stereo, found --sensor {args.sensor}")
+    if args.frequencies_mhz:
+        from rangekit.tof.plan import MAX_FREQUENCIES
+
+        mhz = args.frequencies_mhz
+        twice = sorted({f"{f:g}" for f in mhz if mhz.count(f) > 1})
+        if twice or len(mhz) > MAX_FREQUENCIES:
+            raise UsageError(f"--frequencies-mhz {' '.join(f'{f:g}' for f in mhz[:8])}{' ...' if len(mhz) > 8 else ''}: expected at most "
+                             f"{MAX_FREQUENCIES} frequencies, distinct, in MHz" + (
+                                 f", found {', '.join(twice)} more than once" if twice else f", found {len(mhz)}"))
+
+
+def _check_motion_options(args: argparse.Namespace) -> None:
+    """--motion and --readout-frames only with --motion-mm; --motion-mm within what the simulator moves (UsageError
+    in the user's millimetres, before any rendering)."""
+    from rangekit.sim.devices.motion import MAX_AMPLITUDE_M
+
+    if not args.motion_mm:
+        given = [f"{f} {v:g}" if isinstance(v, float) else f"{f} {v}"
+                 for f, v in (("--readout-frames", args.readout_frames), ("--motion", args.motion)) if v is not None]
+        if given:
+            raise UsageError(f"{', '.join(given)}: only with --motion-mm MM (the object moving during the sequence); "
+                             f"found {'--motion-mm 0' if args.motion_mm == 0 else 'no --motion-mm'}")
+    elif args.motion_mm > MAX_AMPLITUDE_M * 1e3:
+        raise UsageError(f"--motion-mm {args.motion_mm:g}: expected at most {MAX_AMPLITUDE_M * 1e3:g} mm (a slip or "
+                         "a vibration of the object on the table, not a move out of the view)")
 
 
 def cmd_sim_objects(args: argparse.Namespace) -> int:
@@ -127,7 +187,7 @@ def add_parsers(sub) -> None:
     render.add_argument("--patterns", default=None, choices=PATTERN_METHODS,
                         help="pattern set to project; default: graycode (44 frames on the default rig)")
     render.add_argument("--out", required=True, help="output folder (created if missing)")
-    render.add_argument("--force", action="store_true", help="replace a set of files another command left in --out (a session, a capture, results)")
+    render.add_argument("--force", action="store_true", help="write over files in --out this run did not make: another command's set (a session, a capture, results), files of yours, an input")
     render.add_argument("--rig", help="rig file to simulate (default: the built-in simulated rig; --sensor laser: "
                                       "it plus two red line lasers; a laser rig file must list 'lasers'; "
                                       "--sensor laser-stereo: also a second camera beside the first)")
@@ -142,10 +202,11 @@ def add_parsers(sub) -> None:
     render.add_argument("--motion-mm", type=non_negative_float, default=None, metavar="MM",
                         help="--sensor projector: the object moves MM millimetres along the world x axis during the "
                              "sequence (a slip halfway through it, or see --motion); the truth is where it started")
-    render.add_argument("--motion", default="slip",
+    render.add_argument("--motion", default=None, choices=LazyChoices("rangekit.sim.devices.motion", "MOTION_KINDS"),
+                        metavar="{slip,vibration,breathing}",
                         help="how it moves with --motion-mm: slip (once, halfway), vibration or breathing (a period "
                              "of 8 frames); default slip")
-    render.add_argument("--readout-frames", type=non_negative_float, default=0.0, metavar="FRAMES",
+    render.add_argument("--readout-frames", type=float_in(0.0, 1.0), default=None, metavar="FRAMES",
                         help="with --motion-mm: a rolling shutter whose last row is exposed FRAMES frames (0 to 1) "
                              "after its first (default 0: a global shutter)")
     tof = render.add_argument_group("time of flight (--sensor tof, tof-pulsed)")

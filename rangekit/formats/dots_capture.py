@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rangekit.errors import FileFormatError
+from rangekit.errors import FileFormatError, shown
 from rangekit.image_header import check_image_files
 from rangekit.io import read_json, read_png
 from rangekit.rig.rig_file import Rig, load_rig
@@ -57,7 +57,7 @@ def load_dots_capture(folder: str | Path, rig: Rig | None = None) -> DotsFolder:
     z0 = info.get("reference_distance_m") if isinstance(info, dict) else None
     if isinstance(z0, bool) or not isinstance(z0, (int, float)) or not math.isfinite(z0) or z0 <= 0:
         raise FileFormatError(f"{folder / 'capture.json'}: reference_distance_m: expected the reference plane's "
-                              f"distance in metres (> 0), found {z0!r}")
+                              f"distance in metres (> 0), found {shown(z0)}")
     rig = rig if rig is not None else load_rig(folder / "rig.json")
     if not rig.cameras or rig.projector is None:
         raise FileFormatError(f"{folder / 'rig.json'}: a dot sensor needs its camera (cameras[0]) and its dot "

@@ -33,7 +33,7 @@ import math
 
 import numpy as np
 
-from rangekit.errors import FileFormatError
+from rangekit.errors import FileFormatError, shown
 from rangekit.image_header import check_image_files
 from rangekit.formats.capture import capture_full_scale
 from rangekit.io import read_json, read_png
@@ -143,11 +143,11 @@ def _stereo_info(folder: Path) -> tuple[dict, int, tuple[str, ...] | None, float
     info = read_json(where, what="capture description")
     if not isinstance(info, dict) or info.get("kind") != LASER_STEREO_KIND:
         found = info.get("kind") if isinstance(info, dict) else type(info).__name__
-        raise FileFormatError(f"{where}: kind: expected {LASER_STEREO_KIND!r}, found {found!r}")
+        raise FileFormatError(f"{where}: kind: expected {LASER_STEREO_KIND!r}, found {shown(found)}")
     n = info.get("n_lasers")
     if isinstance(n, bool) or not isinstance(n, int) or not 1 <= n <= _MAX_LASERS:
         raise FileFormatError(f"{where}: n_lasers: expected the number of laser frames per camera, 1 to {_MAX_LASERS}, "
-                              f"found {n!r}")
+                              f"found {shown(n)}")
     channels = info.get("channels")
     if channels is not None and (not isinstance(channels, list) or len(channels) != n
                                  or any(c not in _CHANNELS for c in channels)):
@@ -155,7 +155,7 @@ def _stereo_info(folder: Path) -> tuple[dict, int, tuple[str, ...] | None, float
                               f"{str(channels)[:120]}")
     angle = info.get("turntable_angle_rad", 0.0)
     if isinstance(angle, bool) or not isinstance(angle, (int, float)) or not math.isfinite(angle):
-        raise FileFormatError(f"{where}: turntable_angle_rad: expected a finite angle in radians, found {angle!r}")
+        raise FileFormatError(f"{where}: turntable_angle_rad: expected a finite angle in radians, found {shown(angle)}")
     return info, n, None if channels is None else tuple(channels), float(angle)
 
 

@@ -8,6 +8,13 @@ user passes ``--force``; it returns the function to call once the command has wr
 which removes the members of the set found there that this run did not rewrite (with ``--force``, the
 other command's whole set; on a rerun of the same command, what the earlier run wrote and this one did
 not, such as a ``mesh.ply`` after ``--no-mesh``). Files that belong to no set are never touched.
+
+The one rule of every command (README, "Command line"): no command writes over a file it did not make in
+this run's output set, or over one of its own inputs, unless told ``--force``. A folder that holds no set
+but already has a file the command would write (the user's own ``rig.json`` or ``image.png``) is refused
+like a folder of another set, and an input is never taken for the command's own earlier output (paths are
+resolved and compared): :func:`claim_folder` for a folder, :func:`file_owner` and
+``rangekit.cli._common.check_output`` for a file.
 """
 
 from __future__ import annotations
@@ -17,11 +24,11 @@ import shutil
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
+from typing import Callable, Iterable
 
 from rangekit.errors import UsageError
 
-__all__ = ["OutputSet", "OUTPUT_SETS", "set_in", "claim_folder"]
+__all__ = ["OutputSet", "OUTPUT_SETS", "set_in", "claim_folder", "file_owner", "same_file"]
 
 
 @dataclass(frozen=True)
@@ -38,13 +45,17 @@ OUTPUT_SETS: tuple[OutputSet, ...] = (
               ("session.json", ".lock", "view_*", "pass_*", "rig.json", "patterns.json", "summary.json",
                "report.html", "mesh*.*", "merged.ply", "poses.json", "events.jsonl")),
     OutputSet("capture", "a capture (rangekit sim render)", ("ground_truth.npz",),
-              ("[0-9][0-9][0-9].png", "off.png", "laser*.png", "left.png", "right.png", "tof.json", "capture.json",
+              ("[0-9][0-9][0-9].png", "off.png", "laser*.png", "left.png", "right.png", "left", "right",
+               "image.png", "reference.png", "tof.json", "samples", "round_trip_s.npy", "capture.json",
                "patterns.json", "rig.json", "ground_truth.npz", "preview.png")),
     OutputSet("check", "a check (rangekit check)", ("check.json",), ("check.json", "check.png", "rig.json")),
     OutputSet("registration", "registered scans (rangekit register)", ("poses.json",),
               ("poses.json", "merged.ply", "mesh.ply")),
     OutputSet("photometric", "photometric stereo results (rangekit photometric)", ("normals.npy",),
               ("normals.npy", "normals.png", "albedo.png", "depth.npy", "mesh.ply")),
+    OutputSet("depth", "depth maps (rangekit tof, stereo)", ("depth.png",),
+              ("depth.npy", "depth.png", "range.npy", "confidence.npy", "confidence.png", "cloud.ply", "left.png",
+               "right.png", "rig.json", "device_depth.npy", "device_depth.png")),
 )
 _BY_NAME = {s.name: s for s in OUTPUT_SETS}
 
@@ -55,18 +66,60 @@ def set_in(folder: str | Path) -> OutputSet | None:
     return next((s for s in OUTPUT_SETS if any((folder / m).is_file() for m in s.markers)), None)
 
 
-def claim_folder(folder: str | Path, writes: str, *, force: bool, option: str = "--out") -> Callable[[], list[str]]:
+def same_file(path: str | Path, inputs: Iterable[str | Path], *, within: bool = True) -> Path | None:
+    """The input of ``inputs`` that ``path`` is (paths resolved, links followed), or with ``within`` the input
+    folder it lies in (directly: a capture folder's own files); None when it is none of them."""
+    target = Path(path).resolve()
+    for given in inputs:
+        if given is None:
+            continue
+        where = Path(given).resolve()
+        if target == where or (within and target.parent == where):
+            return Path(given)
+    return None
+
+
+def file_owner(path: str | Path) -> OutputSet | None:
+    """The set of :data:`OUTPUT_SETS` the file ``path`` belongs to: its folder holds that set (its marker) and
+    the name is one of the set's members; None otherwise."""
+    path = Path(path)
+    found = set_in(path.parent) if path.parent.is_dir() else None
+    if found is None or not any(path.match(m) for m in found.members):
+        return None
+    return found
+
+
+def claim_folder(folder: str | Path, writes: str, *, force: bool, option: str = "--out", inputs=(),
+                 names: Iterable[str] | None = None) -> Callable[[], list[str]]:
     """Check that the command writing the set ``writes`` may use ``folder``; returns ``replace()``, to call
     after the command wrote its files: it removes the members of the set found there that were not
-    rewritten since this call, and returns their names. UsageError (exit 2) names the set found and the
-    way out when it belongs to another command and ``force`` is False."""
+    rewritten since this call (never one of ``inputs``), and returns their names. Without ``force``, a
+    UsageError (exit 2) names the way out when the folder holds another command's set, when it holds no
+    set but a file this command writes (``names``: the member patterns this run writes, default all of the
+    set's), or when a file it writes or may remove there is one of the command's ``inputs``."""
     mine = _BY_NAME[writes]
-    found = set_in(folder) if Path(folder).is_dir() else None
+    folder_path = Path(folder)
+    found = set_in(folder) if folder_path.is_dir() else None
+    short = mine.what.split(" (")[0]
     if found is not None and found is not mine and not force:
-        marker = next(m for m in found.markers if (Path(folder) / m).is_file())
-        raise UsageError(f"{option} {folder}: holds {found.what} ({marker}); writing {mine.what.split(' (')[0]} "
+        marker = next(m for m in found.markers if (folder_path / m).is_file())
+        raise UsageError(f"{option} {folder}: holds {found.what} ({marker}); writing {short} "
                          f"there would leave the two mixed: choose another folder, or pass --force to replace "
                          f"that set")
+    inputs = [p for p in inputs if p is not None]
+    if not force and folder_path.is_dir():
+        patterns = list(mine.members if names is None else names)
+        for pattern in patterns if found is None else mine.members:   # a rerun may remove any member
+            for path in sorted(folder_path.glob(pattern)):
+                # an input file; the other files of an input folder are not read (photometric DIR --out DIR)
+                given = same_file(path, inputs, within=False)
+                if given is not None:
+                    raise UsageError(f"{option} {folder}: {path} is this command's input {given}; writing {short} "
+                                     f"there would replace it: choose another folder, or pass --force")
+                if found is None and any(path.match(p) for p in patterns):
+                    raise UsageError(f"{option} {folder}: {path} exists and was not written by "
+                                     f"{mine.what.split(' (')[1].rstrip(')')} (no {mine.markers[0]} beside it): "
+                                     f"choose another folder, or pass --force to overwrite it")
     started = time.time()
 
     def replace() -> list[str]:
@@ -75,6 +128,8 @@ def claim_folder(folder: str | Path, writes: str, *, force: bool, option: str = 
         removed = []
         for pattern in found.members:
             for path in sorted(Path(folder).glob(pattern)):
+                if same_file(path, inputs) is not None:
+                    continue   # an input is never removed
                 if path.is_symlink() or path.is_file():
                     if os.lstat(path).st_mtime >= started:
                         continue   # written by this run

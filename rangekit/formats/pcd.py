@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rangekit.errors import FileFormatError
+from rangekit.errors import FileFormatError, shown
 from rangekit.formats.parsing import ascii_rows, cloud_of_finite_rows, read_bytes, truncated_error
 from rangekit.surface.cloud import PointCloud
 
@@ -91,7 +91,7 @@ def read_pcd(path: Path) -> PointCloud:
     elif kind == "binary_compressed":
         return _read_compressed(path, names, n)
     else:
-        raise FileFormatError(f"{path}: expected PCD 'DATA ascii', 'binary' or 'binary_compressed', found {' '.join(header['DATA'])!r}")
+        raise FileFormatError(f"{path}: expected PCD 'DATA ascii', 'binary' or 'binary_compressed', found {shown(' '.join(header['DATA']))}")
 
     if not all(c in columns for c in "xyz"):
         raise FileFormatError(f"{path}: expected PCD fields x, y, z, found {' '.join(names)}")

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rangekit.errors import FileFormatError
+from rangekit.errors import FileFormatError, shown
 from rangekit.formats.parsing import ascii_rows, read_bytes, truncated_error
 
 __all__ = ["PlyLists", "PlyHeader", "read_ply", "ply_points", "ply_observed", "ply_vertex_attributes", "ply_vertex_scalar"]
@@ -114,7 +114,7 @@ def _parse_ply_header(path: Path, data: bytes) -> PlyHeader:
             else:
                 raise ValueError("'format', 'comment', 'obj_info', 'element' or 'property'")
         except ValueError as exc:
-            raise FileFormatError(f"{path}: PLY header line {number}: expected {exc}, found {line!r}") from None
+            raise FileFormatError(f"{path}: PLY header line {number}: expected {exc}, found {shown(line)}") from None
     if fmt is None:
         raise FileFormatError(f"{path}: expected a 'format' line in the PLY header, found none")
     return PlyHeader(_PLY_FORMATS[fmt], tuple(elements), obj_info, end.end(), len(lines) + 1)

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from rangekit._runtime.arguments import as_array
-from rangekit.errors import InputError
+from rangekit.errors import InputError, shown
 from rangekit.image import to_grey
 from rangekit.photometric.cavity_light import CavityLight, cavity_light
 
@@ -91,7 +91,7 @@ def check_lights(lights, f: int) -> np.ndarray:
     if L.shape != (f, 3):
         raise InputError(f"lights: expected shape ({f}, 3) (one unit direction per image), found {L.shape}")
     if not np.all(np.isfinite(L)):
-        raise InputError(f"lights: rows {np.flatnonzero(~np.isfinite(L).all(1)).tolist()} contain NaN/inf")
+        raise InputError(f"lights: rows {shown(np.flatnonzero(~np.isfinite(L).all(1)))} contain NaN/inf")
     norms = np.linalg.norm(L, axis=1)
     bad = np.flatnonzero(np.abs(norms - 1.0) > 1e-3)
     if bad.size:

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rangekit.errors import InputError
+from rangekit.errors import InputError, shown
 from rangekit.geometry import apply_T, invert_T, procrustes, rotation_angle
 
 __all__ = ["GPAResult", "gpa"]
@@ -133,7 +133,7 @@ def _initial_alignment(X: np.ndarray, w: np.ndarray, scale: bool) -> np.ndarray:
         if overlap[i] < 3:
             lonely = np.flatnonzero(~placed).tolist()
             raise InputError(f"gpa: sets {lonely} share fewer than 3 landmarks with sets "
-                             f"{np.flatnonzero(placed).tolist()} (best overlap: {overlap[i]}), so they cannot be "
+                             f"{shown(np.flatnonzero(placed))} (best overlap: {overlap[i]}), so they cannot be "
                              f"brought into one frame; check the landmark numbering or drop those sets")
         ok = W > 0
         C = np.full_like(S, np.nan)
@@ -141,7 +141,7 @@ def _initial_alignment(X: np.ndarray, w: np.ndarray, scale: bool) -> np.ndarray:
         try:
             fit = procrustes(X[i], C, weights=np.where(ok, w[i], 0.0), scale=scale)
         except InputError as exc:
-            raise InputError(f"gpa: set {i} cannot be aligned to sets {np.flatnonzero(placed).tolist()}: "
+            raise InputError(f"gpa: set {i} cannot be aligned to sets {shown(np.flatnonzero(placed))}: "
                              f"{exc}") from exc
         Ts[i] = fit.T_dst_src
         placed[i] = True

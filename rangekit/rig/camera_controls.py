@@ -26,7 +26,7 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass
 
-from rangekit.errors import ConfigError
+from rangekit.errors import ConfigError, shown
 
 __all__ = ["CameraControls", "CONTROL_FIELDS", "controls_from_capture", "check_refresh", "require_locked",
            "round_to_refresh"]
@@ -79,7 +79,7 @@ def _number(value, name: str, where: str):
     if not ok or not (lo <= value <= hi):
         choices = "".join(f" or {w!r}" for w in words)
         raise ConfigError(f"{where}: capture.camera.{name}: expected {'an integer' if integer else 'a number'} "
-                          f"{lo}..{hi} ({unit}){choices}, found {value!r}")
+                          f"{lo}..{hi} ({unit}){choices}, found {shown(value)}")
     return value
 
 
@@ -88,14 +88,14 @@ def controls_from_capture(capture: dict | None, *, where: str) -> CameraControls
     where absent). Raises ConfigError naming ``where`` (the rig file) and the field."""
     cam = (capture or {}).get("camera", {})
     if not isinstance(cam, dict):
-        raise ConfigError(f"{where}: capture.camera: expected an object {{...}}, found {cam!r}")
+        raise ConfigError(f"{where}: capture.camera: expected an object {{...}}, found {shown(cam)}")
     unknown = sorted(set(cam) - set(CONTROL_FIELDS) - set(_FLAGS))
     if unknown:
         raise ConfigError(f"{where}: capture.camera.{unknown[0]}: unknown field; capture.camera has only "
                           f"{', '.join([*CONTROL_FIELDS, *_FLAGS])}")
     for flag in _FLAGS:
         if flag in cam and not isinstance(cam[flag], bool):
-            raise ConfigError(f"{where}: capture.camera.{flag}: expected true or false, found {cam[flag]!r}")
+            raise ConfigError(f"{where}: capture.camera.{flag}: expected true or false, found {shown(cam[flag])}")
     d = CameraControls()
     v = {k: _number(cam[k], k, where) for k in CONTROL_FIELDS if k in cam}
     wb = v.get("white_balance_k", d.white_balance_k)

@@ -92,6 +92,9 @@ class LengthRule:
 BASELINE = LengthRule("baseline", plausible=(0.005, 2.0), limits=(0.001, 10.0))
 #: A simulated object's size: its bounding-box diagonal.
 OBJECT_SIZE = LengthRule("object", plausible=(0.005, 2.0), limits=(0.001, 5.0))
+#: A calibration board's square side (``--square-mm``): printed boards from a 2 mm grid to a 200 mm poster;
+#: below 0.5 mm no camera resolves it, above 0.5 m it is no board a camera sees whole.
+BOARD_SQUARE = LengthRule("board square", plausible=(0.002, 0.2), limits=(0.0005, 0.5))
 
 
 def format_length(length: float) -> str:
@@ -104,8 +107,11 @@ def format_length(length: float) -> str:
 
 
 def format_vector(values) -> str:
-    """``(200, 0, 0)``: numbers as the file wrote them (4 significant digits)."""
-    return "(" + ", ".join(f"{float(v):.4g}" for v in np.asarray(values, dtype=np.float64).ravel()) + ")"
+    """``(200, 0, 0)``: numbers as the file wrote them (4 significant digits); at most 8 of them, then how many
+    there were (an error quotes it: rangekit.errors.shown)."""
+    flat = np.asarray(values, dtype=np.float64).ravel()
+    more = f", ... ({flat.size} numbers)" if flat.size > 8 else ""
+    return "(" + ", ".join(f"{float(v):.4g}" for v in flat[:8]) + more + ")"
 
 
 def likely_unit(length: float, rule: LengthRule, read_as: str = "m", units: Iterable[str] | None = None) -> str | None:

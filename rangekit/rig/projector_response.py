@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rangekit.errors import InputError
+from rangekit.errors import InputError, shown
 
 __all__ = ["ProjectorResponse"]
 
@@ -32,7 +32,7 @@ class ProjectorResponse:
         if isinstance(g, bool) or not isinstance(g, (int, float, np.floating, np.integer)) \
                 or not math.isfinite(g) or g <= 0:
             raise InputError(f"projector response: gamma must be a finite number > 0 (1 = linear projector), "
-                             f"found {g!r}")
+                             f"found {shown(g)}")
         object.__setattr__(self, "gamma", float(g))
 
     @property
@@ -50,7 +50,7 @@ class ProjectorResponse:
     def from_dict(cls, data: dict, *, where: str = "projector_response") -> "ProjectorResponse":
         """Inverse of :meth:`to_dict`. Errors read ``{where}: ...`` or ``{where}.gamma: ...``."""
         if not isinstance(data, dict):
-            raise InputError(f"{where}: must be an object {{\"gamma\": number}} or null, found {data!r}")
+            raise InputError(f"{where}: must be an object {{\"gamma\": number}} or null, found {shown(data)}")
         unknown = [k for k in data if k != "gamma"]
         if unknown:
             raise InputError(f"{where}: unknown field(s) {', '.join(map(repr, unknown))}; a projector response "
@@ -62,4 +62,4 @@ class ProjectorResponse:
             return cls(gamma=data["gamma"])
         except InputError:
             raise InputError(f"{where}.gamma: must be a finite number > 0 (1 = linear projector), found "
-                             f"{data['gamma']!r}") from None
+                             f"{shown(data['gamma'])}") from None

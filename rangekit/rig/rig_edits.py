@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from rangekit.errors import ConfigError
+from rangekit.errors import ConfigError, shown
 from rangekit.io import atomic_write_json, read_json
 from rangekit.rig.camera_controls import CameraControls, controls_from_capture
 from rangekit.rig.rig_file import Rig
@@ -23,12 +23,12 @@ def write_capture_fields(rig_file: str | Path, fields: dict, *, camera: dict | N
         raise ConfigError(f"{rig_file}: expected a JSON object {{...}}")
     capture = data.setdefault("capture", {})
     if not isinstance(capture, dict):
-        raise ConfigError(f"{rig_file}: capture: expected an object {{...}}, found {capture!r}")
+        raise ConfigError(f"{rig_file}: capture: expected an object {{...}}, found {shown(capture)}")
     capture.update(fields)
     if camera:
         cam = capture.setdefault("camera", {})
         if not isinstance(cam, dict):
-            raise ConfigError(f"{rig_file}: capture.camera: expected an object {{...}}, found {cam!r}")
+            raise ConfigError(f"{rig_file}: capture.camera: expected an object {{...}}, found {shown(cam)}")
         cam.update(camera)
     rig = Rig.from_dict(data, where=str(rig_file))      # the whole file checked before it is written
     controls_from_capture(rig.capture, where=str(rig_file))

@@ -34,7 +34,7 @@ from rangekit._runtime.arguments import check_instance, check_items, check_path
 from rangekit.budget import MAX_IMAGE_SIDE_PX
 from rangekit.camera import PinholeCamera
 from rangekit.rig.camera_controls import CameraControls
-from rangekit.errors import ConfigError, InputError
+from rangekit.errors import ConfigError, InputError, shown
 from rangekit.geometry import axis_angle_to_R, compose, invert_T, make_T, rigid_problem
 from rangekit.io import atomic_write_json, read_json
 from rangekit.rig.lasers import LineLaser, laser_from_dict
@@ -83,7 +83,7 @@ class Rig:
             object.__setattr__(self, "T_world_table", _rigid(self.T_world_table, "rig", "T_world_table"))
         if self.projector_response is not None and not isinstance(self.projector_response, ProjectorResponse):
             raise ConfigError(f"rig: projector_response must be a ProjectorResponse or None, found "
-                              f"{self.projector_response!r}")
+                              f"{shown(self.projector_response)}")
 
     @property
     def camera(self) -> PinholeCamera:
@@ -114,7 +114,7 @@ class Rig:
         if not isinstance(data, dict):
             raise ConfigError(f"{where}: expected a JSON object (a rig file), found {type(data).__name__}")
         if data.get("schema") != SCHEMA:
-            raise _error(where, "schema", f"must be {SCHEMA!r}, found {data.get('schema')!r}")
+            raise _error(where, "schema", f"must be {SCHEMA!r}, found {shown(data.get('schema'))}")
         unknown = [k for k in data if k not in RIG_FIELDS]
         if unknown:
             raise ConfigError(f"{where}: unknown top-level field(s) {', '.join(map(repr, unknown))}; a rig file "
@@ -245,9 +245,8 @@ def _error(where: str, path: str, problem: str) -> ConfigError:
 
 
 def _show(value) -> str:
-    """A short repr of a found value for messages."""
-    text = repr(value)
-    return text if len(text) <= 80 else text[:77] + "..."
+    """A short repr of a found value for messages (:func:`rangekit.errors.shown`)."""
+    return shown(value)
 
 
 def _array(value, shape: tuple[int, ...], where: str, path: str, expected: str) -> np.ndarray:

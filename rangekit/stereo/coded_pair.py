@@ -31,7 +31,7 @@ from rangekit.coded.decode import decode
 from rangekit.coded.patterns import PatternSpec
 from rangekit.coded.result import DecodeResult
 from rangekit.coded.triangulate import TriangulationResult, filter_range_map, triangulate_ray_ray
-from rangekit.errors import ConfigError, DecodeError
+from rangekit.errors import ConfigError, DecodeError, naming
 from rangekit.rig.capture_check import RigCheck, check_pair
 from rangekit.surface.cloud import PointCloud
 
@@ -163,16 +163,20 @@ class PairMatch:
 
 
 def match_pair(stacks, spec: PatternSpec, *, subpixel: bool = True, min_confidence: float = 0.03,
-               full_scale: float | None = None, decode_options: dict | None = None) -> PairMatch:
+               full_scale: float | None = None, decode_options: dict | None = None,
+               sources=None) -> PairMatch:
     """Decode both captures (``stacks``: two stacks in ``spec``'s frame order) and match the first's pixels to the
-    second's positions through the codes (module doc); the rig never enters."""
+    second's positions through the codes (module doc); the rig never enters. ``sources``: each capture's name
+    (its folder), put in front of an error decoding it (a dark camera 2 is named as camera 2's folder);
+    default "camera 1", "camera 2"."""
     if "rows" not in spec.axes or "columns" not in spec.axes:
         raise ConfigError(f"two cameras match through the projector's columns and rows; the {spec.method} "
                           f"capture codes only {', '.join(spec.axes)}")
     sizes = tuple((np.asarray(stack[0]).shape[1], np.asarray(stack[0]).shape[0]) for stack in stacks)
     decs = []
-    for stack in stacks:
-        dec = decode(stack, spec, subpixel=subpixel, full_scale=full_scale, **(decode_options or {}))
+    for stack, source in zip(stacks, sources or ("camera 1", "camera 2")):
+        with naming(source):
+            dec = decode(stack, spec, subpixel=subpixel, full_scale=full_scale, **(decode_options or {}))
         weak = dec.confidence < min_confidence
         decs.append((dec, np.where(weak, np.nan, dec.proj_col), np.where(weak, np.nan, dec.proj_row)))
     (dec1, c1, r1), (dec2, c2, r2) = decs

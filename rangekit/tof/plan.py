@@ -9,7 +9,7 @@ from functools import reduce
 
 import numpy as np
 
-from rangekit.errors import InputError
+from rangekit.errors import InputError, shown
 
 __all__ = ["C_LIGHT", "FrequencyPlan", "MAX_FREQUENCIES", "MAX_STEPS"]
 
@@ -101,7 +101,7 @@ class FrequencyPlan:
     @classmethod
     def from_dict(cls, data: dict, *, where: str = "frequency plan") -> "FrequencyPlan":
         if not isinstance(data, dict) or "frequencies_hz" not in data or "steps_rad" not in data:
-            raise InputError(f"{where}: expected an object with 'frequencies_hz' and 'steps_rad', found {data!r}")
+            raise InputError(f"{where}: expected an object with 'frequencies_hz' and 'steps_rad', found {shown(data)}")
         try:
             return cls(tuple(data["frequencies_hz"]), tuple(tuple(s) for s in data["steps_rad"]))
         except (TypeError, ValueError) as exc:

@@ -32,6 +32,8 @@ from rangekit.sim.scene.passes import pass_scene
 __all__ = ["MOTION_KINDS", "Motion", "capture_moving"]
 
 MOTION_KINDS = ("slip", "vibration", "breathing")
+#: The largest displacement simulated, metres (``rangekit sim render --motion-mm`` is checked against it).
+MAX_AMPLITUDE_M = 0.05
 
 
 @dataclass(frozen=True)
@@ -47,7 +49,7 @@ class Motion:
     def __post_init__(self) -> None:
         if self.kind not in MOTION_KINDS:
             raise SceneError(f"motion: kind must be one of {', '.join(MOTION_KINDS)}, found {self.kind!r}")
-        if not (np.isfinite(self.amplitude_m) and abs(self.amplitude_m) <= 0.05):
+        if not (np.isfinite(self.amplitude_m) and abs(self.amplitude_m) <= MAX_AMPLITUDE_M):
             raise SceneError(f"motion: amplitude must be a finite number of metres up to 0.05, found {self.amplitude_m!r}")
         d = np.asarray(self.direction, np.float64)
         if d.shape != (3,) or not np.all(np.isfinite(d)) or np.linalg.norm(d) == 0:

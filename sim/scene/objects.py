@@ -144,16 +144,21 @@ def torus(major_radius: float = 0.06, minor_radius: float = 0.02, *, major_secti
     return SceneObject(name, verts, _grid_triangles(nu, nv, True, True), albedo, specular, shininess)
 
 
-def board_object(board: Board, *, name: str = "board", texel: float = 1e-4) -> SceneObject:
+def board_object(board: Board, *, name: str = "board", texel: float | None = None) -> SceneObject:
     """A flat calibration board: one quad over the board's texture extent, textured with ``board.texture``.
 
     Board frame as in :mod:`rangekit.boards`: z = 0 plane, corners at ``board.object_points()``, printed
     side facing -z (the triangles face -z, so the texture is seen from -z and the back is plain). Flat
     shaded; the vertex albedo is the texture's mean (what ``to_trimesh`` and views from behind show).
-    ``texel`` (metres) must divide ``board.square``.
+    ``texel`` (metres) must divide ``board.square``; default 0.1 mm, or the texel nearest it that divides the
+    square (a 20.05 mm square: 0.10025 mm), so that any square a user gives (``--square-mm``) can be drawn.
     """
     if not isinstance(board, Board):
         raise SceneError(f"board_object: board must be a rangekit.boards.Board, found {type(board).__name__}")
+    if texel is None:
+        texel, n = 1e-4, board.square / 1e-4
+        if abs(n - round(n)) > 1e-6 * max(n, 1.0):
+            texel = board.square / max(1, round(n))
     try:
         tex = _board_texture(board, float(texel))
     except InputError as exc:

@@ -138,7 +138,8 @@ def test_the_rig_is_the_same_whichever_way_round_the_board_is_given(cli, tmp_pat
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 run = cli("calibrate", "--captures", *folders, "--pattern", "slstudio:calibration", "--projector",
-                          size, "--cols", c, "--rows", r, "--square-mm", "14", "--out", out)
+                          size, "--cols", c, "--rows", r, "--square-mm", "14", "--out", out,
+                          "--force")   # coverage.png beside it is the previous run's (issue 48: refused without)
             assert run.code == 0, run.err
             assert "board poses: 5 of 5 kept" in run.out
             read = (cols, rows) if exact else (c, r)
@@ -327,7 +328,8 @@ def test_slstudios_poses_give_one_rig_whichever_way_round_the_board_is_given(cli
             warnings.simplefilter("ignore")
             run = cli("calibrate", "--captures", *(skull / "calibration" / s for s in SKULL_POSES), "--pattern",
                       "slstudio:calibration", "--projector", "1824x1140", "--cols", cols, "--rows", rows,
-                      "--square-mm", "10", "--out", tmp_path / f"rig_{cols}x{rows}.json")
+                      "--square-mm", "10", "--out", tmp_path / f"rig_{cols}x{rows}.json",
+                      "--force")   # coverage.png beside it is the previous run's (issue 48: refused without)
         assert run.code == 0, run.err
         how = "as given" if cols == 14 else "(given 10 x 14)"
         assert f"board read as 14 x 10 squares {how}, found so in calseq1" in run.out

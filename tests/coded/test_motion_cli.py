@@ -54,4 +54,4 @@ def test_a_slipped_capture_is_flagged_and_refused_by_name_a_still_one_is_not(cli
     assert json.loads((rolling / "capture.json").read_text())["readout_frames"] == 1.0
     run = cli("sim", "render", "--rig", tmp_path / "rig.json", "--motion-mm", "2", "--readout-frames", "3",
               "--out", tmp_path / "r3")
-    assert_error(run, 1, "readout_frames must be from 0 to 1", "3")
+    assert_error(run, 2, "--readout-frames", "a number in 0..1", "'3'")   # an option error (issue 48), was exit 1

@@ -254,3 +254,21 @@ def test_an_image_list_whose_camera_2_repeats_camera_1_is_refused(cli, pair, tmp
               "--projector", "1100x688", "--out", tmp_path / "c.ply")
     assert_error(run, 1, "camera 2's frames include 44 of camera 1's files", "each camera needs its own capture")
     assert not (tmp_path / "c.ply").exists()
+
+
+def test_a_dark_camera_2_is_named_by_its_own_folder(cli, pair, tmp_path):
+    """Issue 48: camera 2's frames all black were refused as "no pixel is lit" in camera 1's folder."""
+    import shutil
+
+    folder, _, _, _ = pair
+    n = len(list(folder.glob("pattern_cam1_im*.png")))
+    left, right = tmp_path / "left", tmp_path / "right"
+    left.mkdir(), right.mkdir()
+    black = np.zeros_like(cv2.imread(str(folder / "pattern_cam2_im1.png"), cv2.IMREAD_UNCHANGED))
+    for i in range(1, n + 1):
+        shutil.copy(folder / f"pattern_cam1_im{i}.png", left / f"{i}.png")
+        cv2.imwrite(str(right / f"{i}.png"), black)
+    run = cli("reconstruct", left, right, "--pattern", "opencv:graycode", "--rig", folder / "rig2.json",
+              "--projector", "1100x688", "--out", tmp_path / "c.ply")
+    line = assert_error(run, 1, str(right), "no pixel is lit")
+    assert str(left) not in line, line

@@ -205,11 +205,12 @@ def reconstruct_tool_capture(captures: Sequence[str | Path], preset: str, rig, *
         stacks.append(stack)
     options = dict(layout.view_options)
     decode_options = options.pop("decode_options", {})
+    if pair:   # each camera's decoding named by its own folder (a dark camera 2 is camera 2's)
+        match = match_pair(stacks, spec, subpixel=subpixel, sources=[frames.source for frames in found],
+                           decode_options={**decode_options, "motion": True, "max_motion": max_motion},
+                           **{k: v for k, v in options.items() if k == "min_confidence"})
     with naming(where):
         if pair:
-            match = match_pair(stacks, spec, subpixel=subpixel,
-                               decode_options={**decode_options, "motion": True, "max_motion": max_motion},
-                               **{k: v for k, v in options.items() if k == "min_confidence"})
 
             def check(r: Rig):
                 options_ = pairings(r.cameras[:2], match.sizes)

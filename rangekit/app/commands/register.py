@@ -46,7 +46,7 @@ def parse_init(init: str | None, n: int, sources: Sequence[str]) -> np.ndarray |
                              "a non-zero axis and a step of at most 360 degrees, e.g. turntable:0,1,0:24") from exc
         # View i is turned by +i * STEP: the prior of a table turning by -i * STEP between views.
         return turntable_prior(table_frame(axis, point), -step * np.arange(n))
-    srcs, T = load_stanford_conf(init) if init.endswith(".conf") else load_poses(init)
+    srcs, T = load_stanford_conf(init, expected=n) if init.endswith(".conf") else load_poses(init)
     if len(T) != n:
         raise ConfigError(f"{init}: has {len(T)} views, but {n} scans were given")
     names = [Path(s).name for s in sources]

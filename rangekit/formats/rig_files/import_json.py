@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from rangekit.errors import ConfigError
+from rangekit.errors import ConfigError, shown as found_value
 from rangekit.formats.rig_files.entries import camera_entry, rig_dict
 from rangekit.geometry import invert_T, make_T, nearest_rotation
 from rangekit.rig.lasers import LineLaser, laser_plane
@@ -46,7 +46,7 @@ def _array(value, shape, where: str, key: str) -> np.ndarray:
 
 def _xyz(value, where: str, key: str) -> np.ndarray:
     if not isinstance(value, dict) or not all(k in value for k in "xyz"):
-        raise ConfigError(f"{where}: {key}: expected {{\"x\", \"y\", \"z\"}}, found {value!r}")
+        raise ConfigError(f"{where}: {key}: expected {{\"x\", \"y\", \"z\"}}, found {found_value(value)}")
     return _array([value["x"], value["y"], value["z"]], (3,), where, key)
 
 
@@ -127,7 +127,7 @@ def _horus_size(settings: dict, where: str) -> tuple[int, int]:
     w, h = (_horus_value(settings, k, where) for k in ("camera_width", "camera_height"))
     if not all(isinstance(v, int) and v > 0 for v in (w, h)):
         raise ConfigError(f"{where}: camera_width, camera_height: expected positive whole numbers, found "
-                          f"{w!r}, {h!r}")
+                          f"{found_value(w)}, {found_value(h)}")
     rotate = "camera_rotate" not in settings or bool(_horus_value(settings, "camera_rotate", where))  # Horus: on
     return (h, w) if rotate else (w, h)
 
@@ -142,7 +142,7 @@ def horus_rig(data: dict, where: str, *, size: tuple[int, int] | None) -> dict:
     dist = np.asarray(_horus_value(settings, "distortion_vector", where), dtype=np.float64).ravel()
     if dist.size not in (4, 5, 8, 12, 14) or not np.all(np.isfinite(dist)):
         raise ConfigError(f"{where}: distortion_vector: expected 4, 5, 8, 12 or 14 finite numbers, found "
-                          f"{dist.tolist()}")
+                          f"{found_value(dist)}")
     R = _array(_horus_value(settings, "rotation_matrix", where), (3, 3), where, "rotation_matrix")
     t = _array(_horus_value(settings, "translation_vector", where), (3,), where, "translation_vector") * 1e-3
     lasers = []

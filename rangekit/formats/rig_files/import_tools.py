@@ -53,7 +53,7 @@ from typing import Callable
 
 import numpy as np
 
-from rangekit.errors import ConfigError
+from rangekit.errors import ConfigError, shown as found_value
 from rangekit.formats.rig_files.procam import procam_rig
 from rangekit.rig.plausibility import UNIT_NAMES, UNIT_SCALES
 
@@ -201,5 +201,5 @@ def _size(values: dict, where: SizeKeys | None, path: Path, label: str, given, o
         found = [None if v is None else np.asarray(v).tolist() for v in present]
         expected = ("a width and a height in pixels" if len(where.keys) == 2 else
                     "[height, width] in pixels" if where.order == "hw" else "[width, height] in pixels")
-        raise ConfigError(f"{path}: {shown}: expected {expected}, found {found if len(found) > 1 else found[0]}")
+        raise ConfigError(f"{path}: {shown}: expected {expected}, found {found_value(found if len(found) > 1 else found[0])}")
     return int(numbers[0]), int(numbers[1])

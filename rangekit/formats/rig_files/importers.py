@@ -44,7 +44,7 @@ from typing import Callable
 import numpy as np
 
 from rangekit.regular_files import read_regular_file
-from rangekit.errors import ConfigError
+from rangekit.errors import ConfigError, shown as found_value
 from rangekit.formats.rig_files.procam import procam_rig
 from rangekit.rig.plausibility import UNIT_SCALES
 from rangekit.rig.rig_file import Rig
@@ -210,7 +210,7 @@ def _size(values: dict, field: str, prefix: str, label: str, given, option: str,
         return given
     v = np.asarray(v, dtype=np.float64).ravel()
     if v.size != 2 or not np.all(v == np.round(v)) or not np.all(v > 0):
-        raise ConfigError(f"{path}: {key}: expected [width, height] in pixels, found {v.tolist()}")
+        raise ConfigError(f"{path}: {key}: expected [width, height] in pixels, found {found_value(v)}")
     return int(v[0]), int(v[1])
 
 

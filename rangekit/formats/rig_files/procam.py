@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rangekit.errors import ConfigError
+from rangekit.errors import ConfigError, shown as found_value
 from rangekit.formats.rig_files.entries import camera_entry, rig_dict
 from rangekit.geometry import invert_T, make_T, nearest_rotation
 from rangekit.rig.plausibility import BASELINE, UNIT_SCALES, check_length, format_vector
@@ -46,12 +46,12 @@ def procam_rig(path: Path, keys: dict, unit: str, cam_size, proj_size, units, fi
         found = f"max |R R^T - I| = {error:.2g}, det {np.linalg.det(R):.4g}" if np.isfinite(error) else \
             f"shape {R.shape}" if R.shape != (3, 3) else "values that are not finite"
         raise ConfigError(f"{path}: {rkey}: expected a 3x3 rotation (orthonormal within {ROTATION_TOLERANCE:g}, "
-                          f"determinant +1) or a Rodrigues vector, found {found}: {np.round(R, 4).tolist()}")
+                          f"determinant +1) or a Rodrigues vector, found {found}: {found_value(R)}")
     R = nearest_rotation(R)   # a file written in float32 (SLStudio's) is orthonormal to 1e-7 only
     tkey, t = keys["T"]
     t = np.asarray(t, dtype=np.float64).ravel()
     if t.size != 3 or not np.all(np.isfinite(t)):
-        raise ConfigError(f"{path}: {tkey}: expected 3 finite numbers, found {t.tolist()}")
+        raise ConfigError(f"{path}: {tkey}: expected 3 finite numbers, found {found_value(t)}")
     what = "camera-projector baseline" if second == "projector" else "stereo baseline"
     check_length(float(np.linalg.norm(t)) * UNIT_SCALES[unit], BASELINE, where=str(path), read_as=unit,
                  units=units, shown=f"{tkey} = {format_vector(t)} {unit}", what=what, fixes=fixes)
@@ -73,17 +73,17 @@ def _intrinsics(path: Path, K_entry, dist_entry) -> tuple[np.ndarray, np.ndarray
     K = np.asarray(K, dtype=np.float64)
     if K.shape != (3, 3) or not np.all(np.isfinite(K)):
         raise ConfigError(f"{path}: {kkey}: expected a finite 3x3 camera matrix, found "
-                          f"{'shape ' + str(K.shape) if K.shape != (3, 3) else np.round(K, 4).tolist()}")
+                          f"{'shape ' + str(K.shape) if K.shape != (3, 3) else found_value(K)}")
     if not (K[0, 0] > 0 and K[1, 1] > 0):
         raise ConfigError(f"{path}: {kkey}: expected positive focal lengths fx, fy (pixels), found fx = "
                           f"{K[0, 0]:.6g}, fy = {K[1, 1]:.6g}")
     if K[0, 1] != 0 or K[1, 0] != 0 or np.any(K[2] != (0.0, 0.0, 1.0)):
         raise ConfigError(f"{path}: {kkey}: expected [[fx, 0, cx], [0, fy, cy], [0, 0, 1]] (OpenCV's, no skew), "
-                          f"found {np.round(K, 6).tolist()}")
+                          f"found {found_value(K)}")
     dkey, d = dist_entry
     d = np.asarray(d, dtype=np.float64).ravel()
     if d.size not in _DIST_COUNTS or not np.all(np.isfinite(d)):
         raise ConfigError(f"{path}: {dkey}: expected {', '.join(map(str, _DIST_COUNTS[:-1]))} or "
                           f"{_DIST_COUNTS[-1]} finite OpenCV distortion coefficients, found {d.size}: "
-                          f"{np.round(d, 6).tolist()[:16]}")
+                          f"{found_value(d)}")
     return K, d

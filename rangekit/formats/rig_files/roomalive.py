@@ -44,7 +44,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rangekit.errors import ConfigError
+from rangekit.errors import ConfigError, shown as found_value
 from rangekit.formats.rig_files.entries import camera_entry, rig_dict
 from rangekit.formats.rig_files.procam import ROTATION_TOLERANCE
 from rangekit.geometry import invert_T, nearest_rotation
@@ -145,7 +145,7 @@ def _matrix(element, key: str, path: Path) -> np.ndarray:
     except (TypeError, ValueError):
         raise ConfigError(f"{path}: {key}: expected columns of numbers (ArrayOfDouble), found others") from None
     if m.ndim != 2 or m.size == 0 or not np.all(np.isfinite(m)):
-        raise ConfigError(f"{path}: {key}: expected a matrix of finite numbers, found {m.tolist()}")
+        raise ConfigError(f"{path}: {key}: expected a matrix of finite numbers, found {found_value(m)}")
     return m
 
 
@@ -153,7 +153,7 @@ def _pose(element, key: str, path: Path, shown: str, m=None) -> np.ndarray:
     """A 4x4 rigid transform (rotation within :data:`ROTATION_TOLERANCE`, re-orthonormalised)."""
     m = _matrix(element, key, path) if m is None else m
     if m.shape != (4, 4) or np.any(m[3] != (0.0, 0.0, 0.0, 1.0)):
-        raise ConfigError(f"{path}: {shown}: expected a 4x4 rigid transform, found {np.round(m, 6).tolist()}")
+        raise ConfigError(f"{path}: {shown}: expected a 4x4 rigid transform, found {found_value(m)}")
     R = m[:3, :3]
     error = float(np.abs(R @ R.T - np.eye(3)).max())
     if not error <= ROTATION_TOLERANCE or np.linalg.det(R) <= 0:
@@ -170,7 +170,7 @@ def _flipped(K: np.ndarray, size, col_offset: int, path: Path, key: str) -> np.n
     ``W - u``), ``cy' = H - cy``."""
     if K.shape != (3, 3) or not (K[0, 0] > 0 and K[1, 1] > 0) or K[0, 1] != 0 or np.any(K[2] != (0, 0, 1)):
         raise ConfigError(f"{path}: {key}: expected [[fx, 0, cx], [0, fy, cy], [0, 0, 1]] with fx, fy > 0, found "
-                          f"{np.round(K, 6).tolist()}")
+                          f"{found_value(K)}")
     out = K.copy()
     out[0, 2] = size[0] - col_offset - K[0, 2]
     out[1, 2] = size[1] - K[1, 2]
@@ -180,5 +180,5 @@ def _flipped(K: np.ndarray, size, col_offset: int, path: Path, key: str) -> np.n
 def _radial(d: np.ndarray, path: Path, key: str) -> np.ndarray:
     d = d.ravel()
     if d.size != 2:
-        raise ConfigError(f"{path}: {key}: expected 2 radial coefficients (k1, k2), found {d.size}: {d.tolist()}")
+        raise ConfigError(f"{path}: {key}: expected 2 radial coefficients (k1, k2), found {d.size}: {found_value(d)}")
     return np.array([d[0], d[1], 0.0, 0.0, 0.0])

@@ -37,7 +37,7 @@ import numpy as np
 
 from rangekit.coded.patterns import PatternSpec
 from rangekit.laser.sequence import LASER_METHOD, LaserSequence
-from rangekit.errors import ConfigError, RangekitError
+from rangekit.errors import ConfigError, RangekitError, shown
 from rangekit.formats.sessions.summary import ProcessResult
 from rangekit.io import atomic_write_json, read_json
 from rangekit.rig.rig_file import Rig, load_rig
@@ -351,7 +351,7 @@ def _views(value, path: Path, folder: Path, plan: ScanPlan, frame_files: list[st
         _int(d["index"], path, f"{key}.index", i, i)
         angle = _number(d["angle_rad"], path, f"{key}.angle_rad", -MAX_ANGLE_RAD, MAX_ANGLE_RAD)
         if abs(angle - angles[i]) > 1e-9:
-            raise _error(path, f"{key}.angle_rad", f"{angles[i]!r} (the plan's angle of view {i})", angle)
+            raise _error(path, f"{key}.angle_rad", f"{shown(angles[i])} (the plan's angle of view {i})", angle)
         if d["state"] not in ("done", "pending"):
             raise _error(path, f"{key}.state", "'done' or 'pending'", d["state"])
         name = view_folder(folder, i).name

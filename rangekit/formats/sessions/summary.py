@@ -196,11 +196,11 @@ class ProcessResult:
     def from_dict(cls, d: dict, folder: str | Path) -> "ProcessResult":
         """The result a ``summary.json`` (schema ``rangekit.summary/1``) of the session in ``folder`` holds.
         Raises FileFormatError naming the schema found when it is another."""
-        from rangekit.errors import FileFormatError
+        from rangekit.errors import FileFormatError, shown
 
         if d.get("schema") != SUMMARY_SCHEMA:
             raise FileFormatError(f"{Path(folder) / 'summary.json'}: schema: expected {SUMMARY_SCHEMA!r}, found "
-                                  f"{d.get('schema')!r}")
+                                  f"{shown(d.get('schema'))}")
         rmse = d.get("registration_rmse_m")
         acc, closed = d.get("accuracy"), d.get("mesh_watertight")
         return cls(Path(folder), list(d["views"]), np.array(d["T_world_view"], dtype=np.float64), list(d["n_points"]),

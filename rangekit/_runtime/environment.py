@@ -61,6 +61,19 @@ def prepare() -> None:
             pass   # not a text stream we own (a test's capture, a closed stream)
 
 
+def _quiet_interrupt(hook):
+    """An unraisable-exception hook that says nothing of a KeyboardInterrupt a C callback swallowed (a Ctrl-C while
+    numba's compiler wrote its cache: llvmlite's callback printed a traceback) and leaves it pending, so the next
+    import raises it (:class:`_InterruptAtNextImport`); anything else goes to ``hook``."""
+    def quiet(unraisable) -> None:
+        global _sigint_pending
+        if isinstance(unraisable.exc_value, KeyboardInterrupt):
+            _sigint_pending = True
+            return
+        hook(unraisable)
+    return quiet
+
+
 @contextmanager
 def watching_interrupts():
     """While the command runs: note SIGINTs, and raise one a library swallowed at the next first import
@@ -79,10 +92,13 @@ def watching_interrupts():
         ours = False
     if ours:
         sys.meta_path.insert(0, _InterruptAtNextImport)
+        hook = sys.unraisablehook
+        sys.unraisablehook = _quiet_interrupt(hook)
     try:
         yield
     finally:
         if ours:
+            sys.unraisablehook = hook
             # Interrupted, the process is about to exit 130: a SIGINT re-delivered late (Open3D's extension
             # hands one back after its initialisation) or a second Ctrl-C must not kill it by signal then.
             signal.signal(signal.SIGINT, signal.SIG_IGN if _sigint_seen else previous)

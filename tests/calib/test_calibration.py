@@ -250,7 +250,7 @@ def test_calibrate_command_refuses_bad_input_before_any_work(tmp_path, capsys):
     existing = tmp_path / "rig.json"
     existing.write_text("{}")
     assert main(["calibrate", "--out", str(existing)]) == 2
-    assert "exists; choose another file or pass --force" in capsys.readouterr().err
+    assert "exists; choose another file, or pass --force" in capsys.readouterr().err
     with pytest.raises(SystemExit) as stop:
         main(["calibrate", "--out", str(tmp_path / "new.json"), "--poses", "2"])
     assert stop.value.code == 2

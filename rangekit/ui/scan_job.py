@@ -208,7 +208,9 @@ class ScanJob:
 
     def snapshot(self) -> dict:
         """What a page shows: the session, whether it runs, its exit code, its last lines, its views."""
-        out = {"name": self.name, "running": self.running, "paused": self.paused and self.running,
+        # running until its exit code is recorded: the child may have ended while its last lines are still read
+        running = self.running or (self._proc is not None and self.exit_code is None)
+        out = {"name": self.name, "running": running, "paused": self.paused and self.running,
                "exit_code": self.exit_code, "log": self.log[-30:]}
         if self.name is not None:
             out.update(session_state(self.sessions / self.name))

@@ -12,6 +12,7 @@ from rangekit.formats.output_sets import claim_folder
 from rangekit.cli._common import (LazyChoices, check_output, console, finite_float, float_in, int_in, non_negative_float, positive_float,
                                   result, seed, size)
 from rangekit.errors import UsageError
+from rangekit.app.commands.simulate import TOF_FAR_M, TOF_JITTER_PS, TOF_MHZ, TOF_NEAR_M
 
 
 def cmd_sim_render(args: argparse.Namespace) -> int:
@@ -56,21 +57,23 @@ def _sim_render(args: argparse.Namespace) -> int:
         raise UsageError(f"--mono: only for --sensor laser or laser-stereo, found --sensor {args.sensor}")
     if args.sensor not in ("projector", "laser", "laser-stereo"):
         given = [f for f, v in (("--object", args.object), ("--object-unit", args.object_unit),
-                                ("--patterns", args.patterns), ("--rig", args.rig), ("--motion-mm", args.motion_mm))
+                                ("--patterns", args.patterns), ("--rig", args.rig), ("--motion-mm", args.motion_mm),
+                                ("--global-fraction", args.global_fraction), ("--angle-deg", args.angle_deg),
+                                ("--bits", args.bits))
                  if v is not None]
         if given:
             raise UsageError(f"{', '.join(given)}: only for --sensor projector, laser or laser-stereo; the "
                              f"{args.sensor} sensor renders its own scene (docs/simulator.md)")
     if args.sensor == "laser":
         render_laser_capture(args.out, obj=args.object or "lumpy", rig_file=args.rig,
-                             angle=np.radians(args.angle_deg), bits=args.bits, seed=args.seed,
+                             angle=np.radians(args.angle_deg or 0.0), bits=args.bits or 8, seed=args.seed,
                              noise=not args.no_noise, colour=not args.mono, object_unit=args.object_unit or "m",
                              progress=console())
         result(f"wrote {args.out} (off.png, laser<k>.png, rig.json, ground_truth.npz) in {time.perf_counter() - t0:.1f} s")
         return 0
     if args.sensor == "laser-stereo":
         render_laser_stereo_capture(args.out, obj=args.object or "lumpy", rig_file=args.rig,
-                                    angle=np.radians(args.angle_deg), bits=args.bits, seed=args.seed,
+                                    angle=np.radians(args.angle_deg or 0.0), bits=args.bits or 8, seed=args.seed,
                                     noise=not args.no_noise, colour=not args.mono,
                                     object_unit=args.object_unit or "m", progress=console())
         result(f"wrote {args.out} (left/ and right/ with off.png and laser<k>.png, rig.json, capture.json, "
@@ -87,18 +90,21 @@ def _sim_render(args: argparse.Namespace) -> int:
         result(f"wrote {args.out} (left.png, right.png, rig.json, ground_truth.npz) in {time.perf_counter() - t0:.1f} s")
         return 0
     if args.sensor in ("tof", "tof-pulsed"):
-        if not args.near < args.far:
-            raise UsageError(f"--near {args.near:g}, --far {args.far:g}: expected the nearest panel nearer than the "
+        near = TOF_NEAR_M if args.near is None else args.near
+        far = TOF_FAR_M if args.far is None else args.far
+        if not near < far:
+            raise UsageError(f"--near {near:g}, --far {far:g}: expected the nearest panel nearer than the "
                              "farthest (metres)")
-        render_tof_capture(args.out, pulsed=args.sensor == "tof-pulsed", near=args.near, far=args.far,
-                           size=args.size or (320, 240), plan=args.plan,
+        render_tof_capture(args.out, pulsed=args.sensor == "tof-pulsed", near=near, far=far,
+                           size=args.size or (320, 240), plan=args.plan or "kinect",
                            frequencies=[f * 1e6 for f in args.frequencies_mhz] if args.frequencies_mhz else None,
-                           steps=args.steps, multipath=args.multipath, jitter=args.jitter_ps * 1e-12,
+                           steps=args.steps, multipath=args.multipath,
+                           jitter=(TOF_JITTER_PS if args.jitter_ps is None else args.jitter_ps) * 1e-12,
                            noise=not args.no_noise, seed=args.seed, progress=console())
         result(f"wrote {args.out} (tof.json, rig.json, ground_truth.npz, preview.png) in {time.perf_counter() - t0:.1f} s")
         return 0
     render_projector_capture(args.out, obj=args.object or "lumpy", patterns=args.patterns or "graycode",
-                             rig_file=args.rig, angle=np.radians(args.angle_deg), bits=args.bits, seed=args.seed,
+                             rig_file=args.rig, angle=np.radians(args.angle_deg or 0.0), bits=args.bits or 8, seed=args.seed,
                              noise=not args.no_noise, global_fraction=args.global_fraction,
                              object_unit=args.object_unit or "m", progress=console(),
                              motion=None if not args.motion_mm else (args.motion or "slip", args.motion_mm * 1e-3),
@@ -110,16 +116,29 @@ def _sim_render(args: argparse.Namespace) -> int:
 def _check_sensor_options(args: argparse.Namespace) -> None:
     """The options of one kind of sensor refused with another (they were ignored), and --frequencies-mhz checked in
     the user's MHz (UsageError naming the option)."""
-    tof = (("--steps", args.steps), ("--frequencies-mhz", args.frequencies_mhz), ("--multipath", args.multipath))
+    tof = (("--plan", args.plan), ("--steps", args.steps), ("--frequencies-mhz", args.frequencies_mhz),
+           ("--multipath", args.multipath))
     given = [f for f, v in tof if v is not None]
     if args.sensor == "tof-pulsed" and given:
         raise UsageError(f"{', '.join(given)}: only for --sensor tof (continuous wave); the pulsed sensor measures "
                          "round trips (--jitter-ps)")
     if args.sensor not in ("tof", "tof-pulsed") and given:
         raise UsageError(f"{', '.join(given)}: only for --sensor tof, found --sensor {args.sensor}")
+    if args.jitter_ps is not None and args.sensor != "tof-pulsed":
+        raise UsageError(f"--jitter-ps: only for --sensor tof-pulsed, found --sensor {args.sensor}")
+    panels = [f for f, v in (("--near", args.near), ("--far", args.far)) if v is not None]
+    if panels and args.sensor not in ("tof", "tof-pulsed"):
+        raise UsageError(f"{', '.join(panels)}: only for --sensor tof or tof-pulsed (its panels); the {args.sensor} "
+                         "sensor renders --object")
+    if args.plan is not None and args.frequencies_mhz:
+        raise UsageError(f"--plan {args.plan} with --frequencies-mhz: give one of them (--frequencies-mhz replaces "
+                         "the plan)")
     if args.size is not None and args.sensor in ("projector", "laser", "laser-stereo"):
         raise UsageError(f"--size: only for --sensor tof, tof-pulsed, stereo or dots; the {args.sensor} sensor's "
                          "camera is the rig file's (--rig)")
+    if args.no_noise and args.sensor in ("stereo", "dots"):
+        raise UsageError(f"--no-noise: not for --sensor {args.sensor}; its images always carry shot and read noise "
+                         "(--seed sets it)")
     if args.no_dots and args.sensor != "stereo":
         raise UsageError(f"--no-dots: only for --sensor stereo, found --sensor {args.sensor}")
     if args.frequencies_mhz:
@@ -191,14 +210,16 @@ def add_parsers(sub) -> None:
     render.add_argument("--rig", help="rig file to simulate (default: the built-in simulated rig; --sensor laser: "
                                       "it plus two red line lasers; a laser rig file must list 'lasers'; "
                                       "--sensor laser-stereo: also a second camera beside the first)")
-    render.add_argument("--angle-deg", type=finite_float, default=0.0, help="turntable angle in degrees (default 0)")
-    render.add_argument("--bits", type=int, default=8, choices=(8, 10, 12, 16), help="camera bit depth")
+    render.add_argument("--angle-deg", type=finite_float, default=None,
+                        help="turntable angle in degrees (default 0; projector and laser sensors)")
+    render.add_argument("--bits", type=int, default=None, choices=(8, 10, 12, 16),
+                        help="camera bit depth (default 8; projector and laser sensors)")
     render.add_argument("--seed", type=seed, default=0, help="noise seed (default 0)")
     render.add_argument("--no-noise", action="store_true", help="disable shot and read noise")
     render.add_argument("--mono", action="store_true",
                         help="--sensor laser, laser-stereo: a monochrome camera (default: RGB, the laser mostly in R)")
-    render.add_argument("--global-fraction", type=non_negative_float, default=None,
-                        help="interreflection term, fraction of the mean projected light (default 0)")
+    render.add_argument("--global-fraction", type=float_in(0.0, 1.0), default=None,
+                        help="interreflection term, fraction of the mean projected light, 0 to 1 (default 0)")
     render.add_argument("--motion-mm", type=non_negative_float, default=None, metavar="MM",
                         help="--sensor projector: the object moves MM millimetres along the world x axis during the "
                              "sequence (a slip halfway through it, or see --motion); the truth is where it started")
@@ -210,16 +231,18 @@ def add_parsers(sub) -> None:
                         help="with --motion-mm: a rolling shutter whose last row is exposed FRAMES frames (0 to 1) "
                              "after its first (default 0: a global shutter)")
     tof = render.add_argument_group("time of flight (--sensor tof, tof-pulsed)")
-    tof.add_argument("--plan", default="kinect", choices=("kinect", "luxonis"),
+    tof.add_argument("--plan", default=None, choices=("kinect", "luxonis"),
                      help="frequency plan: kinect = 16/80/120 MHz x 3 steps (18.7 m), luxonis = 80/100 MHz x 4 "
                           "steps (7.5 m); default kinect")
-    tof.add_argument("--frequencies-mhz", type=positive_float, nargs="+", help="custom frequencies in MHz (instead of --plan)")
+    tof.add_argument("--frequencies-mhz", type=float_in(TOF_MHZ[0], TOF_MHZ[1]), nargs="+",
+                     help=f"custom frequencies in MHz, {TOF_MHZ[0]:g} to {TOF_MHZ[1]:g} (instead of --plan)")
     tof.add_argument("--steps", type=int_in(3, 64), help="phase steps per frequency (default: the plan's, or 4)")
-    tof.add_argument("--near", type=positive_float, default=0.5, help="nearest panel, metres (default 0.5)")
-    tof.add_argument("--far", type=positive_float, default=15.0, help="farthest panel, metres (default 15)")
+    tof.add_argument("--near", type=positive_float, default=None, help=f"nearest panel, metres (default {TOF_NEAR_M:g})")
+    tof.add_argument("--far", type=positive_float, default=None, help=f"farthest panel, metres (default {TOF_FAR_M:g})")
     tof.add_argument("--multipath", type=non_negative_float, nargs=2, metavar=("STRENGTH", "EXTRA_M"),
                      help="add a second return of STRENGTH x the direct light, EXTRA_M metres longer round trip")
-    tof.add_argument("--jitter-ps", type=non_negative_float, default=50.0, help="tof-pulsed: timing jitter, ps RMS (default 50)")
+    tof.add_argument("--jitter-ps", type=non_negative_float, default=None,
+                     help=f"tof-pulsed: timing jitter, ps RMS (default {TOF_JITTER_PS:g})")
     sz = render.add_argument_group("time of flight and stereo")
     sz.add_argument("--size", type=size, default=None,
                     help="sensor size WIDTHxHEIGHT (default: tof 320x240, stereo and dots 640x400)")

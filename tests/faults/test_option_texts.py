@@ -138,6 +138,21 @@ def test_a_huge_value_in_a_rig_file_gives_a_short_error(tmp_path, field):
     (["--sensor", "dots", "--no-dots"], ["--no-dots", "only for --sensor stereo"]),
     (["--sensor", "tof", "--frequencies-mhz", "80", "80"], ["--frequencies-mhz 80 80", "frequencies, distinct, in MHz",
                                                               "80 more than once"]),
+    # options with defaults once silently ignored by the other sensors
+    (["--sensor", "dots", "--jitter-ps", "3"], ["--jitter-ps", "only for --sensor tof-pulsed"]),
+    (["--sensor", "tof", "--jitter-ps", "3"], ["--jitter-ps", "only for --sensor tof-pulsed"]),
+    (["--sensor", "stereo", "--plan", "luxonis"], ["--plan", "only for --sensor tof"]),
+    (["--sensor", "tof-pulsed", "--plan", "luxonis"], ["--plan", "only for --sensor tof (continuous wave)"]),
+    (["--near", "1"], ["--near", "only for --sensor tof or tof-pulsed"]),
+    (["--sensor", "dots", "--far", "3"], ["--far", "only for --sensor tof or tof-pulsed"]),
+    (["--sensor", "tof", "--global-fraction", "0.2"], ["--global-fraction", "only for --sensor projector"]),
+    (["--sensor", "dots", "--bits", "12"], ["--bits", "only for --sensor projector"]),
+    (["--sensor", "stereo", "--angle-deg", "30"], ["--angle-deg", "only for --sensor projector"]),
+    (["--sensor", "dots", "--no-noise"], ["--no-noise", "not for --sensor dots"]),
+    (["--sensor", "tof", "--plan", "kinect", "--frequencies-mhz", "20", "30"], ["--plan kinect with --frequencies-mhz"]),
+    # out of what the simulator models
+    (["--global-fraction", "50"], ["--global-fraction", "expected a number in 0..1", "'50'"]),
+    (["--sensor", "tof", "--frequencies-mhz", "1e-9"], ["--frequencies-mhz", "expected a number in 1..1000", "'1e-9'"]),
 ])
 def test_an_option_of_another_sensor_is_refused(cli, tmp_path, args, mentions):
     run = cli("sim", "render", *args, "--out", tmp_path / "cap")

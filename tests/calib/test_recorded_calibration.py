@@ -198,12 +198,9 @@ def test_simulated_recordings_give_back_the_true_rig(cli, tmp_path, corners):
 
 # ------------------------------------------------------------------------------- SLStudio's own recordings
 def _skull():
-    from rangekit.sim.scene.zoo import data_folders
+    from shared_data import require_shared
 
-    skull = next((f / "slstudio-skull" for f in data_folders() if (f / "slstudio-skull").is_dir()), None)
-    if skull is None:
-        pytest.skip("../shared/data/slstudio-skull is absent")
-    return skull
+    return require_shared("slstudio-skull")
 
 
 SKULL_POSES = ("calseq1", "calseq3", "calseq4", "calseq5", "calseq6")

@@ -107,14 +107,14 @@ def test_decode_command_errors(tmp_path, capsys):
         main(["decode", str(cap), "--pattern", "graycode", "--projector", "1280by800", "--out", "x.npz"])
 
 
-BUNNY = __import__("pathlib").Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "stanford-bunny"
 
 
 @pytest.mark.slow
 def test_register_and_mesh_commands(tmp_path, capsys):
-    if not BUNNY.is_dir():
-        pytest.skip("../shared/data/stanford-bunny is absent")
-    scans = [str(BUNNY / n) for n in ("bun000.ply", "bun045.ply", "bun315.ply", "chin.ply")]
+    from shared_data import require_shared
+
+    bunny = require_shared("stanford-bunny")
+    scans = [str(bunny / n) for n in ("bun000.ply", "bun045.ply", "bun315.ply", "chin.ply")]
     out = tmp_path / "reg"
     assert main(["register", *scans, "--init", "none", "--out", str(out)]) == 0
     text = capsys.readouterr().out

@@ -10,8 +10,6 @@ from rangekit.errors import FileFormatError
 from rangekit.formats.clouds import CLOUD_READERS, CLOUD_WRITERS, load_cloud, load_range_grid, save_cloud
 from rangekit.surface.cloud import PointCloud
 
-DATA = Path(__file__).parents[2] / ".." / "shared" / "data"
-BUNNY = DATA / "stanford-bunny" / "bun000.ply"
 
 
 def _cloud(n=50, *, normals=True, colours=True, seed=0):
@@ -274,9 +272,9 @@ def test_range_grid_needs_grid_size(tmp_path):
 
 @pytest.fixture(scope="module")
 def bunny():
-    if not BUNNY.is_file():
-        pytest.skip(f"real data not found at {DATA}")
-    return BUNNY
+    from shared_data import require_shared
+
+    return require_shared("stanford-bunny", "bun000.ply")
 
 
 def test_stanford_bun000(bunny):

@@ -216,7 +216,6 @@ def test_rig_init_prints_each_matrix_on_one_line(capsys):
 
 
 # --------------------------------------------------------------------------- structured-light tools' files
-SLSTUDIO = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "slstudio-skull" / "calibration"
 
 
 def _slstudio_xml(path, *, Rp=None, drop=()):
@@ -264,9 +263,10 @@ def test_slstudio_calibration_with_a_bad_rotation_or_a_missing_size_is_named(cli
     assert_error(run, 1, "b.xml", "screenResX/screenResY", "width and a height")
 
 
-@pytest.mark.skipif(not (SLSTUDIO / "calibration.xml").is_file(), reason="../shared/data/slstudio-skull is absent")
 def test_slstudios_own_calibration_file_imports(cli, tmp_path):
-    run = cli("rig", "import", SLSTUDIO / "calibration.xml", "--out", tmp_path / "rig.json")
+    from shared_data import require_shared
+
+    run = cli("rig", "import", require_shared("slstudio-skull", "calibration", "calibration.xml"), "--out", tmp_path / "rig.json")
     assert run.code == 0, run.err
     rig = load_rig(tmp_path / "rig.json")
     assert rig.cameras[0].K[0, 0] == pytest.approx(2195.12036, rel=1e-6)

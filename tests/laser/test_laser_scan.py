@@ -108,7 +108,6 @@ def test_laser_session_refuses_tsdf(laser_scan, capsys):
     assert "fuses with poisson" in capsys.readouterr().err
 
 
-_BUNNY = __import__("pathlib").Path(__file__).resolve().parents[2].parent / "shared/data/stanford-bunny/bun_zipper.ply"
 
 
 @pytest.mark.slow
@@ -116,9 +115,10 @@ _BUNNY = __import__("pathlib").Path(__file__).resolve().parents[2].parent / "sha
 def test_full_laser_scan_with_calibrated_planes(obj, tmp_path):
     """The acceptance scan: 400 steps, two lasers, planes calibrated from 10 simulated board poses; the merged
     cloud within 0.1 mm RMS of the true surface, for lumpy and for the Stanford bunny standing upright."""
-    if obj == "bunny" and not _BUNNY.is_file():
-        pytest.skip(f"{_BUNNY} not found (../shared/data)")
-    args = ["--object", str(_BUNNY), "--up", "0", "1", "0"] if obj == "bunny" else []
+    from shared_data import require_shared
+
+    bunny = require_shared("stanford-bunny", "bun_zipper.ply") if obj == "bunny" else None
+    args = ["--object", str(bunny), "--up", "0", "1", "0"] if obj == "bunny" else []
     out = tmp_path / "scan"
     assert main(["scan", "--method", "laser", "--out", str(out), "--no-report", *args]) == 0
     summary = json.loads((out / "summary.json").read_text())

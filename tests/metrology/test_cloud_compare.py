@@ -64,12 +64,9 @@ def test_slstudios_own_cloud_scores_the_roughness_the_issue_states():
     import pytest
     import scipy.io
 
-    from rangekit.sim.scene.zoo import data_folders
+    from shared_data import require_shared
 
-    found = [f / "slstudio-skull" / "skull_gray" / "pointCloud.mat" for f in data_folders()]
-    path = next((p for p in found if p.is_file()), None)
-    if path is None:
-        pytest.skip("../shared/data/slstudio-skull is absent")
+    path = require_shared("slstudio-skull", "skull_gray", "pointCloud.mat")
     xyz = scipy.io.loadmat(path)["xyz"].reshape(-1, 3)          # millimetres
     xyz = xyz[np.isfinite(xyz).all(axis=1)]
     assert len(xyz) == 93_876

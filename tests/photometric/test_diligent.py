@@ -9,14 +9,13 @@ import pytest
 from rangekit.photometric.diligent import load_diligent
 from rangekit.errors import FileFormatError
 
-BALL = (Path(__file__).parents[2] / ".." / "shared" / "data" / "diligent-ball").resolve()
 
 
 @pytest.fixture(scope="module")
 def ball():
-    if not (BALL / "filenames.txt").is_file():
-        pytest.skip(f"DiLiGenT ball not found at {BALL}")
-    return load_diligent(BALL)
+    from shared_data import require_shared
+
+    return load_diligent(require_shared("diligent-ball", "filenames.txt").parent)
 
 
 def _angles_deg(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -69,7 +68,7 @@ def test_ball_with_rangekit_photometric(ball):
 def test_photometric_command_on_the_ball(ball, tmp_path, capsys):
     from rangekit.cli import main
 
-    assert main(["photometric", str(BALL), "--out", str(tmp_path / "ball"), "--method", "ls"]) == 0
+    assert main(["photometric", str(ball.folder), "--out", str(tmp_path / "ball"), "--method", "ls"]) == 0
     out = capsys.readouterr().out
     assert "mean 4.17" in out
     n = np.load(tmp_path / "ball" / "normals.npy")

@@ -15,7 +15,6 @@ from rangekit.registration.multiview import MultiViewOptions, overlap_rms, refin
 from rangekit.registration.sync import synchronise
 from rangekit.sim.writers.scans import perturb_poses, turntable_scans
 
-BUNNY = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "stanford-bunny"
 
 
 @pytest.fixture(scope="module")
@@ -105,10 +104,11 @@ def _bunny():
     from rangekit.formats.clouds import load_cloud
     from rangekit.formats.stanford_conf import load_stanford_conf
 
-    if not BUNNY.is_dir():
-        pytest.skip("../shared/data/stanford-bunny is absent")
-    names, poses = load_stanford_conf(BUNNY / "bun.conf")
-    return names, [load_cloud(BUNNY / n) for n in names], poses
+    from shared_data import require_shared
+
+    bunny = require_shared("stanford-bunny", "bun.conf").parent
+    names, poses = load_stanford_conf(bunny / "bun.conf")
+    return names, [load_cloud(bunny / n) for n in names], poses
 
 
 @pytest.mark.slow

@@ -196,11 +196,9 @@ def test_export_writes_each_format_of_scan_format_from_the_same_mesh(processed):
 def test_slstudios_recorded_poses_calibrate_as_the_command_line_does(tmp_path):
     """SLStudio's five recorded poses (../shared/data/slstudio-skull/calibration, copied into a sessions folder)
     calibrated from the page's form: the same rig file as ``rangekit calibrate --captures`` (to 1e-6)."""
-    from rangekit.sim.scene.zoo import data_folders
+    from shared_data import require_shared
 
-    skull = next((f / "slstudio-skull" for f in data_folders() if (f / "slstudio-skull").is_dir()), None)
-    if skull is None:
-        pytest.skip("../shared/data/slstudio-skull is absent")
+    skull = require_shared("slstudio-skull")
     sessions = tmp_path / "sessions"
     for seq in ("calseq1", "calseq3", "calseq4", "calseq5", "calseq6"):
         shutil.copytree(skull / "calibration" / seq, sessions / "calib" / seq)

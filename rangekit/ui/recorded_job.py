@@ -66,9 +66,11 @@ class RecordedCalibrationJob:
         with self._lock:
             return {**self.state, "lines": list(self.lines[-40:]), "layouts": sorted(LAYOUTS)}
 
-    def start(self, captures: str, pattern: str, projector: str, out: str, cols=10, rows=7, square_mm=20.0) -> dict:
+    def start(self, captures: str, pattern: str, projector: str, out: str, cols=10, rows=7, square_mm=20.0,
+              replace: bool = False) -> dict:
         """Check the inputs (each error names its field), then calibrate on a thread. The board: ``cols`` x ``rows``
-        squares of ``square_mm`` millimetres (``rangekit calibrate --cols --rows --square-mm``)."""
+        squares of ``square_mm`` millimetres (``rangekit calibrate --cols --rows --square-mm``). An existing ``out``
+        is replaced only when ``replace`` says so (the command line's ``--force``)."""
         from rangekit.boards import Board
         from rangekit.formats.layouts import LAYOUTS
 
@@ -79,6 +81,9 @@ class RecordedCalibrationJob:
         if not isinstance(out, str) or not out.endswith(".json"):
             raise RangekitError(f"out: expected a rig file name ending in .json, found {out!r}")
         rig_file = confined(self.sessions, out)
+        if rig_file.exists() and not replace:
+            raise RangekitError(f"out: {out} exists under the sessions folder; choose another name or tick "
+                                "'replace it'")
         for name, v, low in (("cols", cols, 3), ("rows", rows, 3)):
             if isinstance(v, bool) or not isinstance(v, int) or not low <= v <= 60:
                 raise RangekitError(f"{name}: expected a whole number of squares 3-60, found {v!r}")
@@ -89,7 +94,7 @@ class RecordedCalibrationJob:
             if self.state["state"] == "running":
                 raise RangekitError("a calibration from recorded captures is running already")
             self.state, self.lines = {"state": "running", "poses": len(folders)}, []
-        threading.Thread(target=self._run, args=(folders, pattern, size, rig_file, board), daemon=True,
+        threading.Thread(target=self._run, args=(folders, pattern, size, rig_file, board, replace), daemon=True,
                          name="rangekit-calibrate-recorded").start()
         return self.snapshot()
 
@@ -97,12 +102,13 @@ class RecordedCalibrationJob:
         with self._lock:
             self.lines.append(str(line))
 
-    def _run(self, folders: list[Path], pattern: str, size: tuple[int, int], rig_file: Path, board) -> None:
+    def _run(self, folders: list[Path], pattern: str, size: tuple[int, int], rig_file: Path, board,
+             replace: bool) -> None:
         from rangekit.app.calibrate_recorded import calibrate_recordings
 
         try:
             cal = calibrate_recordings(rig_file, folders, pattern=pattern, projector_size=size, board=board,
-                                       force=True, progress=self._say, report=self._say)
+                                       force=replace, progress=self._say, report=self._say)
             for line in cal.result.summary_lines():
                 self._say(line)
             state = {"state": "done", "rig_file": rig_file.name}

@@ -131,6 +131,9 @@ class ScanJob:
         if resume:
             args = ["--resume", str(folder)] + ([] if hardware else ["--realtime"])
         else:
+            if folder.exists():
+                raise RangekitError(f"name: {name} exists under the sessions folder; choose another name (or resume "
+                                    "it from the sessions list)")
             if isinstance(views, bool) or not isinstance(views, int) or not 2 <= views <= 360:
                 raise RangekitError(f"views: expected a whole number 2-360, found {views!r}")
             # The simulated rig keeps real time, as the hardware would (the rig file's pattern delay,

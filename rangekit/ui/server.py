@@ -14,7 +14,8 @@ change, the host; see there):
 - ``GET /api/calibrate`` (the calibration wizard: its state, poses, hint, result), ``POST
   /api/calibrate/ACTION`` (start ``{"poses", "seed"}``, capture, keep, retake, next, drag ``{"dx", "dy"}``,
   cancel), ``GET /api/calibrate/picture/coverage.png`` and ``tilts.png``; ``GET /api/calibrate-recorded``, ``POST
-  /api/calibrate-recorded/start`` ``{"captures", "pattern", "projector", "out", "cols", "rows", "square_mm"}``
+  /api/calibrate-recorded/start`` ``{"captures", "pattern", "projector", "out", "cols", "rows", "square_mm",
+  "replace"}``
   (recorded pose folders under ``--sessions``);
 - ``GET /api/scan`` (the scan: running, its views, files, last lines), ``POST /api/scan/start`` ``{"name",
   "views"}`` or ``{"name", "resume": true}``, ``POST /api/scan/stop``, ``POST /api/scan/pause`` ``{"paused"}``; ``GET
@@ -256,7 +257,7 @@ def make_app(holder: RigHolder, token: str, host: str, port: int, sessions: Path
 
     def recorded_start(request, f):
         return recorded.start(f["captures"], f["pattern"], f["projector"], f["out"], f["cols"], f["rows"],
-                              f["square_mm"])
+                              f["square_mm"], replace=f["replace"])
 
     def register_save(request, f):
         return registration.save(check_folder_name(f["name"]))
@@ -323,7 +324,8 @@ def make_app(holder: RigHolder, token: str, host: str, port: int, sessions: Path
         get("/api/calibrate-recorded", _reading(lambda r: recorded.snapshot())),
         post("/api/calibrate-recorded/start", "calibrate-recorded", {
             "captures": text(""), "pattern": text(""), "projector": text(""), "out": text("recorded-rig.json"),
-            "cols": _given(10), "rows": _given(7), "square_mm": _given(20.0)}, recorded_start),
+            "cols": _given(10), "rows": _given(7), "square_mm": _given(20.0),
+            "replace": flag(False)}, recorded_start),
         get("/api/register", _reading(lambda r: registration.snapshot())),
         get("/api/register/clouds", _reading(lambda r: {"clouds": list_clouds(sessions)})),
         get("/api/register/points/{index:int}", _reading(lambda r: _binary(registration.points(r.path_params["index"])))),

@@ -107,6 +107,14 @@ def test_recorded_folders_are_confined_and_checked_field_by_field(server):
     state = _wait(server, "/api/calibrate-recorded", lambda s: s["state"] != "running")
     assert state["state"] == "failed" and "\n" not in state["error"] and "at least 3" in state["error"], state
     assert not (server.sessions / "r.json").exists()
+    # A file already there is the user's: refused by its field unless the page says to replace it.
+    (server.sessions / "mine.json").write_text("{}")
+    status, reply = _post(server, "/api/calibrate-recorded/start", {**base, "out": "mine.json"})
+    assert status == 400 and reply["error"].startswith("out: mine.json exists under the sessions folder"), reply
+    assert (server.sessions / "mine.json").read_text() == "{}"
+    assert _post(server, "/api/calibrate-recorded/start", {**base, "out": "mine.json", "replace": True})[0] == 200
+    assert _wait(server, "/api/calibrate-recorded", lambda s: s["state"] != "running")["state"] == "failed"
+    assert (server.sessions / "mine.json").read_text() == "{}"     # a failed run replaces nothing
 
 
 def _surface(n: int, rng) -> np.ndarray:

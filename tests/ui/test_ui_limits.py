@@ -131,6 +131,15 @@ def test_a_scan_name_a_folder_cannot_take_is_refused_before_the_scan_starts(serv
     assert status == 400 and "Traceback" not in reply.decode()
 
 
+def test_a_scan_into_a_folder_already_there_is_refused_and_the_folder_kept(server):
+    (server.sessions / "mine").mkdir()
+    (server.sessions / "mine" / "notes.txt").write_text("keep")
+    status, reply, _ = server.request("/api/scan/start", data={"name": "mine", "views": 2})
+    assert status == 400 and json.loads(reply)["error"].startswith("name: mine exists under the sessions folder"), reply
+    assert json.loads(server.request("/api/scan")[1])["name"] is None
+    assert [p.name for p in (server.sessions / "mine").iterdir()] == ["notes.txt"]
+
+
 def test_a_folder_name_that_is_not_utf8_is_skipped_and_said(server):
     folder = os.path.join(os.fsencode(server.sessions), b"caf\xe9")
     os.makedirs(folder)

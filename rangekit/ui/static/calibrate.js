@@ -112,7 +112,8 @@ $("recorded-form").onsubmit = async (ev) => {
   for (const e of f.querySelectorAll(".field-error")) e.textContent = "";
   const num = (t) => (/^[0-9.]+$/.test(t.trim()) ? Number(t) : t);
   const body = { captures: f.captures.value.trim(), pattern: f.pattern.value, projector: f.projector.value.trim(), out: f.out.value.trim(),
-                 cols: num(f.cols.value), rows: num(f.rows.value), square_mm: num(f.square_mm.value) };
+                 cols: num(f.cols.value), rows: num(f.rows.value), square_mm: num(f.square_mm.value),
+                 replace: f.replace.checked };
   const r = await api("/api/calibrate-recorded/start", body);
   const data = await r.json();
   if (!r.ok) {

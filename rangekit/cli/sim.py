@@ -12,7 +12,12 @@ from rangekit.formats.output_sets import claim_folder
 from rangekit.cli._common import (LazyChoices, check_output, console, finite_float, float_in, int_in, non_negative_float, positive_float,
                                   result, seed, size)
 from rangekit.errors import UsageError
-from rangekit.app.commands.simulate import TOF_FAR_M, TOF_JITTER_PS, TOF_MHZ, TOF_NEAR_M
+from rangekit.tof.plan import FREQUENCY_RANGE_HZ
+
+#: The ToF panel scene's defaults: nearest and farthest panel (m), the pulsed sensor's timing jitter (ps RMS).
+TOF_NEAR_M, TOF_FAR_M, TOF_JITTER_PS = 0.5, 15.0, 50.0
+#: --frequencies-mhz: the frequencies a continuous-wave sensor may be given, MHz.
+TOF_MHZ = (FREQUENCY_RANGE_HZ[0] / 1e6, FREQUENCY_RANGE_HZ[1] / 1e6)
 
 
 def cmd_sim_render(args: argparse.Namespace) -> int:

@@ -11,7 +11,7 @@ import numpy as np
 
 from rangekit.errors import InputError, shown
 
-__all__ = ["C_LIGHT", "FrequencyPlan", "MAX_FREQUENCIES", "MAX_STEPS"]
+__all__ = ["C_LIGHT", "FREQUENCY_RANGE_HZ", "FrequencyPlan", "MAX_FREQUENCIES", "MAX_STEPS"]
 
 
 #: Speed of light in vacuum, m/s (exact by definition of the metre).
@@ -19,6 +19,9 @@ C_LIGHT = 299_792_458.0
 #: The most modulation frequencies in a plan, and phase steps per frequency (real sensors use 2-3 and 3-4).
 MAX_FREQUENCIES = 16
 MAX_STEPS = 64
+#: Modulation frequencies a continuous-wave ToF camera uses, Hz: 1 MHz unwraps 150 m, 1 GHz 15 cm (sensors: 10-320
+#: MHz). ``rangekit sim render --frequencies-mhz`` refuses others.
+FREQUENCY_RANGE_HZ = (1e6, 1e9)
 
 
 @dataclass(frozen=True)

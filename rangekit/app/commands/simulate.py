@@ -173,18 +173,13 @@ def render_laser_stereo_capture(out: str | Path, *, obj: str = "lumpy", rig_file
     write_laser_stereo_capture(view, out, info=_object_info(obj, object_unit), progress=progress)
 
 
-#: The ToF panel scene's defaults: nearest and farthest panel (m), pulsed timing jitter (ps RMS), and the
-#: frequencies a continuous-wave sensor may be given (MHz: 1 MHz unwraps 150 m, 1 GHz 15 cm).
-TOF_NEAR_M, TOF_FAR_M, TOF_JITTER_PS = 0.5, 15.0, 50.0
-TOF_MHZ = (1.0, 1000.0)
-
-
-def render_tof_capture(out: str | Path, *, pulsed: bool = False, near: float = TOF_NEAR_M, far: float = TOF_FAR_M,
+def render_tof_capture(out: str | Path, *, near: float, far: float, jitter: float, pulsed: bool = False,
                        size: tuple[int, int] = (320, 240), plan: str = "kinect",
                        frequencies: Sequence[float] | None = None, steps: int | None = None,
-                       multipath: tuple[float, float] | None = None, jitter: float = TOF_JITTER_PS * 1e-12, noise: bool = True,
+                       multipath: tuple[float, float] | None = None, noise: bool = True,
                        seed: int = 0, progress: Callable | None = None) -> None:
-    """The panel scene from ``near`` to ``far`` metres seen by a ToF sensor of ``size`` (W, H) pixels.
+    """The panel scene from ``near`` to ``far`` metres seen by a ToF sensor of ``size`` (W, H) pixels (the defaults
+    are ``rangekit sim render``'s: :data:`rangekit.cli.sim.TOF_NEAR_M`, ...).
 
     Continuous wave: the ``plan`` ("kinect" or "luxonis") or ``frequencies`` in Hz with ``steps`` phase
     steps each (default the plan's, or 4); ``multipath`` = (strength, extra round trip in metres).

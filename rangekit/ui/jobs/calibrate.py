@@ -14,6 +14,7 @@ deviation from the simulator's truth.
 
 from __future__ import annotations
 
+import threading
 from enum import Enum
 
 import cv2

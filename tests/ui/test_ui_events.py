@@ -91,7 +91,7 @@ def test_a_browser_shows_every_view_as_it_is_decoded_from_the_events_and_replays
                     break
                 time.sleep(0.25)
             final = page.until("const s = window.rangekitScanView;"
-                               "return window.rangekitScan3d.vertices > 0 && s.exitCode;", timeout=120)
+                               "return window.rangekitScan3d.vertices > 0 && `exit ${s.exitCode}`;", timeout=120)
             return seen, dropped, final, page.execute(_SEEN)
 
         seen, dropped, final, last = open_page(server.url, width=1200, height=900, timeout_s=1200,
@@ -100,7 +100,7 @@ def test_a_browser_shows_every_view_as_it_is_decoded_from_the_events_and_replays
         server.stop()
     lines = (sessions / "ev" / "events.jsonl").read_text().splitlines()
     kinds = [json.loads(line)["type"] for line in lines]
-    assert final == 0 and kinds[-1] == "JobExited"
+    assert final == "exit 0" and kinds[-1] == "JobExited"
     # Every view shown as it was decoded: the page's count of decoded views rose one at a time with the events,
     # while views were still to take, and all four were drawn; the page never polled GET /api/scan.
     decoded_counts = sorted({s["decoded"] for s in seen})

@@ -63,15 +63,16 @@ def _media_type(value: str) -> str:
 
 
 class Gate:
-    """An ASGI middleware refusing what lacks the token, a change from another origin, or a foreign Host; it adds
+    """An ASGI middleware (Starlette's ``Middleware(Gate, ...)``, :func:`rangekit.ui.server.make_app`) refusing what lacks the token, a change from another origin, or a foreign Host; it adds
     the security headers to every response.
 
     ``hosts``: the ``host:port`` values the Host header may name; ``origins``: the ``Origin`` values a change or a
     WebSocket may come from; ``page_csp``: the app page's Content-Security-Policy (``{host}`` filled in)."""
 
-    def __init__(self, app, token: str, hosts: set[str], origins: set[str], page_csp: str) -> None:
+    def __init__(self, app, token: str, hosts: set[str], origins: set[str], page_csp: str,
+                 tickets: Tickets | None = None) -> None:
         self.app, self.token, self.hosts, self.origins, self.page_csp = app, token, hosts, origins, page_csp
-        self.tickets = Tickets()
+        self.tickets = tickets if tickets is not None else Tickets()
 
     def _refusal(self, scope, headers: dict) -> tuple[int, str] | None:
         if headers.get("host", "") not in self.hosts:

@@ -91,12 +91,15 @@ def test_the_apps_own_websocket_streams_frames_that_change(server):
 
 
 def test_bad_input_gets_the_one_line_error_and_the_server_lives_on(server):
-    for path, data, words in [("/api/pattern", {"name": "nonsense"}, "pattern 'nonsense': unknown; expected one of"),
-                              ("/api/turntable", {"degrees": "ten"}, "degrees: expected a number -360 to 360, found 'ten'"),
-                              ("/api/turntable", {"degrees": 1000}, "degrees: expected a number -360 to 360, found 1000"),
-                              ("/api/turntable", [1, 2], "request: expected a JSON object")]:
+    # (issue 49: the one error handler adds the request field the line names, as jupyter_server's write_error)
+    for path, data, words, field in [
+            ("/api/pattern", {"name": "nonsense"}, "pattern 'nonsense': unknown; expected one of", None),
+            ("/api/turntable", {"degrees": "ten"}, "degrees: expected a number -360 to 360, found 'ten'", "degrees"),
+            ("/api/turntable", {"degrees": 1000}, "degrees: expected a number -360 to 360, found 1000", "degrees"),
+            ("/api/turntable", [1, 2], "request: expected a JSON object", None)]:
         status, body, _ = server.request(path, data=data)
-        assert status == 400 and list(json.loads(body)) == ["error"] and json.loads(body)["error"].startswith(words)
+        assert status == 400 and list(json.loads(body)) == ["error"] + ([] if field is None else ["field"])
+        assert json.loads(body)["error"].startswith(words) and json.loads(body).get("field") == field
         assert "Traceback" not in body.decode() and "\n" not in json.loads(body)["error"]
     status, body, _ = server.request("/api/turntable", data={"degrees": 30})
     # The simulated Horus board over its pty stops on a microstep (3200 a turn: 0.1125 deg), as a real one does.

@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING
 
 from rangekit._runtime.arguments import check_callable, check_instance, check_path
 from rangekit._runtime.child import call_beside
+from rangekit.app.event_log import logged
 from rangekit.app.events import OnEvent, ScanStarted, StageClock, emit, failures_announced, progress_of
 from rangekit.app.process.evaluate import Evaluator
 from rangekit.app.process.options import ProcessOptions
@@ -77,6 +78,7 @@ def scan(options: ScanOptions, on_event: OnEvent | None = None) -> ScanResult:
 
     check_instance("options", options, ScanOptions, "a ScanOptions (rk.scan(rk.ScanOptions(out=FOLDER)))")
     check_callable("on_event", on_event)
+    on_event = logged(options.folder, on_event)     # events.jsonl in the session folder (rangekit.app.event_log)
 
     t0 = time.perf_counter()
     with failures_announced(on_event):
@@ -235,6 +237,7 @@ def process(session: Session | str | Path, options: ProcessOptions | None = None
             if not (Path(session) / "session.json").is_file():
                 raise ConfigError(f"{session}: not a session folder (no session.json)")
             session = Session.load(session)
+        on_event = logged(session.folder, on_event)
         if not options.truth:
             evaluate = None
         elif evaluate is None:

@@ -5,15 +5,9 @@
 function calError(text) { $("calibrate-error").textContent = text || ""; }
 
 async function calPost(action, body) {
-  const r = await api(`/api/calibrate/${action}`, body || {});
-  const data = await r.json().catch(() => ({ error: `HTTP ${r.status}` }));
-  for (const e of document.querySelectorAll("#calibrate-form .field-error")) e.textContent = "";
-  if (!r.ok) {
-    if (/^poses:/.test(data.error)) document.querySelector("#calibrate-form .field-error[data-for=poses]").textContent = data.error;
-    else calError(data.error);
-    return null;
-  }
-  calError(""); showCalibration(data); return data;
+  const data = await send(`/api/calibrate/${action}`, body || {}, { form: $("calibrate-form"), error: $("calibrate-error") });
+  if (data) showCalibration(data);
+  return data;
 }
 
 let calPictures = "";
@@ -45,7 +39,7 @@ function showCalibration(c) {
     for (const name of c.pictures) showImage($(`calibrate-${name}`), `/api/calibrate/picture/${name}.png`);
   }
   $("calibrate-progress").innerHTML = "";
-  for (const line of c.progress || []) { const li = document.createElement("li"); li.textContent = line; $("calibrate-progress").appendChild(li); }
+  showLines($("calibrate-progress"), c.progress || []);
   if (c.state === "failed") calError(c.error);
   $("calibrate-result").innerHTML = ""; $("calibrate-deviation").innerHTML = "";
   if (c.state === "done") {
@@ -58,20 +52,19 @@ function showCalibration(c) {
       lens.colSpan = 5; lens.className = "note"; lens.textContent = `distortion ${p.dist.join(" ")}`;
     }
     const lines = [`written to ${c.rig_file}`, ...(c.deviation_lines.length ? ["against the simulator's truth:", ...c.deviation_lines] : [])];
-    for (const line of lines) { const li = document.createElement("li"); li.textContent = line; $("calibrate-deviation").appendChild(li); }
+    showLines($("calibrate-deviation"), lines);
   }
 }
 
 async function pollCalibrate() {
   if (location.hash !== "#calibrate" && window.rangekitCalibrate) return;
-  const r = await api("/api/calibrate");
-  if (r.ok) showCalibration(await r.json());
+  const c = await getJson("/api/calibrate");
+  if (c) showCalibration(c);
 }
 
 $("calibrate-form").onsubmit = (ev) => {
   ev.preventDefault();
-  const text = $("calibrate-form").poses.value.trim();
-  calPost("start", { poses: /^[0-9]+$/.test(text) ? Number(text) : text });
+  calPost("start", { poses: typed($("calibrate-form").poses.value) });
 };
 $("calibrate-cancel").onclick = () => calPost("cancel");
 $("calibrate-capture").onclick = () => calPost("capture");
@@ -97,31 +90,23 @@ async function showRecorded(c) {
   $("recorded-state").textContent = c.state === "idle" ? "" : c.state + (c.error ? `: ${c.error}` : c.rig_file ? `: wrote ${c.rig_file}` : "");
   $("recorded-start").disabled = c.state === "running";
   $("recorded-lines").innerHTML = "";
-  for (const line of c.lines || []) { const li = document.createElement("li"); li.textContent = line; $("recorded-lines").appendChild(li); }
+  showLines($("recorded-lines"), c.lines || []);
   const select = $("recorded-form").pattern;
   if (!select.options.length) for (const name of c.layouts || []) select.add(new Option(name, name));
 }
 async function pollRecorded() {
   if (location.hash !== "#calibrate" && $("recorded-form").pattern.options.length) return;
-  const r = await api("/api/calibrate-recorded");
-  if (r.ok) showRecorded(await r.json());
+  const c = await getJson("/api/calibrate-recorded");
+  if (c) showRecorded(c);
 }
 $("recorded-form").onsubmit = async (ev) => {
   ev.preventDefault();
-  const f = $("recorded-form");
-  for (const e of f.querySelectorAll(".field-error")) e.textContent = "";
-  const num = (t) => (/^[0-9.]+$/.test(t.trim()) ? Number(t) : t);
+  const f = $("recorded-form"), num = (t) => typed(t, /^[0-9.]+$/);
   const body = { captures: f.captures.value.trim(), pattern: f.pattern.value, projector: f.projector.value.trim(), out: f.out.value.trim(),
                  cols: num(f.cols.value), rows: num(f.rows.value), square_mm: num(f.square_mm.value),
                  replace: f.replace.checked };
-  const r = await api("/api/calibrate-recorded/start", body);
-  const data = await r.json();
-  if (!r.ok) {
-    const field = ["captures", "projector", "out", "cols", "rows", "square_mm"].find((k) => data.error.startsWith(`${k}:`));
-    if (field) f.querySelector(`.field-error[data-for=${field}]`).textContent = data.error; else $("recorded-state").textContent = data.error;
-    return;
-  }
-  showRecorded(data);
+  const data = await send("/api/calibrate-recorded/start", body, { form: f, error: $("recorded-state") });
+  if (data) showRecorded(data);
 };
 
 setInterval(() => { pollCalibrate(); pollRecorded(); }, 600);

@@ -1,17 +1,19 @@
 // rangekit ui: the Check page (rangekit check on the app's rig, its suggestions applied with one click).
 "use strict";
 
-// -- Check: one check at a time, the same for every page open
+// One check at a time, the same for every page open; read while its page shows or it runs.
 let checkShown = null;
 function fmtPct(x) { return `${(100 * x).toFixed(2)} %`; }
+let checkRunning = false;
 async function pollCheck() {
-  const r = await api("/api/check");
-  if (!r.ok) return;
-  const c = await r.json();
+  if (location.hash !== "#check" && !checkRunning && checkShown !== null) return;   // hidden and idle: nothing new
+  const c = await getJson("/api/check");
+  if (!c) return;
+  checkRunning = c.state === "running";
   $("check-state").textContent = c.state === "idle" ? "" : c.state;
   $("check-run").disabled = c.state === "running";
   $("check-progress").innerHTML = "";
-  for (const line of c.progress || []) { const li = document.createElement("li"); li.textContent = line; $("check-progress").appendChild(li); }
+  showLines($("check-progress"), c.progress || []);
   $("check-error").textContent = c.state === "failed" ? c.error : "";
   if (c.state === "done" && checkShown !== JSON.stringify(c.result)) {
     checkShown = JSON.stringify(c.result);
@@ -22,7 +24,7 @@ async function pollCheck() {
     $("check-figures").innerHTML = "";
     for (const [k, v] of rows) { const tr = $("check-figures").insertRow(); tr.insertCell().outerHTML = `<th>${k}</th>`; tr.insertCell().textContent = v; }
     $("check-advice").innerHTML = "";
-    for (const line of c.advice) { const li = document.createElement("li"); li.textContent = line; $("check-advice").appendChild(li); }
+    showLines($("check-advice"), c.advice);
     $("check-suggested").innerHTML = "";
     for (const [k, v] of Object.entries(c.suggested)) { const tr = $("check-suggested").insertRow(); tr.insertCell().outerHTML = `<th>${k}</th>`; tr.insertCell().textContent = v; }
     showImage($("check-figure"), "/api/check/figure.png");
@@ -30,14 +32,12 @@ async function pollCheck() {
   }
 }
 $("check-run").onclick = async () => {
-  const r = await api("/api/check/run", {});
-  if (!r.ok) $("check-error").textContent = (await r.json()).error;
+  if (await send("/api/check/run", {}, { error: $("check-error") })) checkRunning = true;
   pollCheck();
 };
 $("check-apply").onclick = async () => {
-  const r = await api("/api/check/apply", {});
-  const data = await r.json();
-  if (!r.ok) { $("check-error").textContent = data.error; return; }
+  const data = await send("/api/check/apply", {}, { error: $("check-error") });
+  if (!data) return;
   $("check-error").textContent = "applied: " + data.rig.last_reply;
   controlsShown = false; showStatus(data.rig);
 };

@@ -22,16 +22,14 @@ async function loadClouds() {
 async function pollRegister() {
   if (location.hash !== "#register") return;
   loadClouds();
-  const got = await api("/api/register");
-  if (!got.ok) return;
-  const s = await got.json();
+  const s = await getJson("/api/register");
+  if (!s) return;
   $("register-state").textContent = s.state === "idle" ? "" : s.state + (s.rmse_mm !== undefined ? `: RMS ${s.rmse_mm} mm over all pairs` : "") +
     (s.saved ? `; saved as ${s.saved}` : "");
   $("register-error").textContent = s.state === "failed" ? s.error : "";
   $("register-start").disabled = s.state === "running";
   $("register-save-button").disabled = s.state !== "done" || !!s.saved;
-  $("register-lines").innerHTML = "";
-  for (const line of s.lines.slice(-8)) { const li = document.createElement("li"); li.textContent = line; $("register-lines").appendChild(li); }
+  showLines($("register-lines"), s.lines.slice(-8));
   const key = JSON.stringify([s.state, s.files, s.rmse_mm]);
   if (key === registerShown) return;
   registerShown = key;
@@ -53,22 +51,16 @@ $("register-form").onsubmit = async (ev) => {
   ev.preventDefault();
   const files = [...document.querySelectorAll("#register-clouds input:checked")].map((i) => i.value);
   const text = $("register-form").neighbours.value.trim();
-  for (const e of document.querySelectorAll("#register-form .field-error, #register-save .field-error")) e.textContent = "";
-  const body = { files, neighbours: text === "" ? null : (/^[0-9]+$/.test(text) ? Number(text) : text) };
-  const r = await api("/api/register/start", body);
-  const data = await r.json();
-  if (!r.ok) {
-    if (data.error.startsWith("neighbours:")) document.querySelector("#register-form .field-error[data-for=neighbours]").textContent = data.error;
-    else $("register-error").textContent = data.error;
-  }
+  for (const e of document.querySelectorAll("#register-save .field-error")) e.textContent = "";
+  await send("/api/register/start", { files, neighbours: text === "" ? null : typed(text) },
+             { form: $("register-form"), error: $("register-error") });
   pollRegister();
 };
 $("register-save").onsubmit = async (ev) => {
   ev.preventDefault();
-  const r = await api("/api/register/save", { name: $("register-save").name.value.trim() });
-  const data = await r.json();
-  if (!r.ok) document.querySelector("#register-save .field-error[data-for=name]").textContent = data.error;
-  else $("register-clouds").dataset.loaded = "";
+  const data = await send("/api/register/save", { name: $("register-save").name.value.trim() },
+                          { form: $("register-save"), error: $("register-error") });
+  if (data) $("register-clouds").dataset.loaded = "";
   pollRegister();
 };
 window.addEventListener("hashchange", pollRegister);

@@ -63,15 +63,13 @@ async function showSession(s) {
     const n = await window.rangekitSession3d.showMesh(base + "mesh.ply");
     $("session-mesh-note").textContent = `mesh.ply: ${n} vertices (drag to turn, wheel to zoom)`;
   } else if (!s.files.includes("mesh.ply")) $("session-mesh-note").textContent = "no mesh yet: process the session";
-  const job = await (await api("/api/scan")).json();
-  $("session-state").textContent = job.name === s.name && job.running ? `processing: ${job.log.slice(-1)[0] || ""}` : "";
+  const job = window.rangekitScanView;     // the scan job as its events tell it (scan.js)
+  const busy = job.name === s.name && job.launched && job.exitCode === null;
+  $("session-state").textContent = busy ? `processing: ${job.lines.slice(-1)[0] || ""}` : "";
 }
 
-async function sessionPost(path, body) {
-  const r = await api(`/api/sessions/${encodeURIComponent(sessionOpen)}/${path}`, body);
-  const data = await r.json();
-  $("session-error").textContent = r.ok ? "" : data.error;
-  return r.ok ? data : null;
+function sessionPost(path, body) {
+  return send(`/api/sessions/${encodeURIComponent(sessionOpen)}/${path}`, body, { error: $("session-error") });
 }
 $("session-process").onsubmit = async (ev) => {
   ev.preventDefault();

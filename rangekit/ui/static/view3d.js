@@ -72,3 +72,4 @@ function makeViewer(canvas) {
 window.rangekitScan3d = makeViewer(document.getElementById("scan-canvas"));
 window.rangekitSession3d = makeViewer(document.getElementById("session-canvas"));
 window.rangekitRegister3d = makeViewer(document.getElementById("register-canvas"));
+window.dispatchEvent(new Event("rangekit3d"));     // the classic scripts waiting for the viewers (scan.js)

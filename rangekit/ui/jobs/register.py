@@ -11,13 +11,12 @@ from __future__ import annotations
 
 import os
 import shutil
-import threading
 from pathlib import Path
 
 import numpy as np
 
 from rangekit.errors import RangekitError
-from rangekit.ui.job_state import failed
+from rangekit.ui.jobs.base import Job, JobState
 from rangekit.ui.paths import confined
 from rangekit.ui.sessions_list import readable_name
 
@@ -48,19 +47,15 @@ def list_clouds(sessions: Path) -> list[str]:
     return out
 
 
-class RegisterJob:
+class RegisterJob(Job):
     """The latest registration of clouds under ``sessions``."""
 
-    def __init__(self, sessions: Path) -> None:
-        self.sessions = Path(sessions).resolve()
-        self._lock = threading.Lock()
-        self.state: dict = {"state": "idle"}
-        self.lines: list[str] = []
-        self._report = None
+    WHAT, SHOWN_LINES = "registration", 30
 
-    def snapshot(self) -> dict:
-        with self._lock:
-            return {**self.state, "lines": list(self.lines[-30:])}
+    def __init__(self, sessions: Path) -> None:
+        super().__init__()
+        self.sessions = Path(sessions).resolve()
+        self._report = None
 
     def start(self, files: list, neighbours=None) -> dict:
         """Register ``files`` (paths relative to the sessions folder, 2 or more) on a thread."""
@@ -72,37 +67,24 @@ class RegisterJob:
                 raise RangekitError(f"clouds: {f}: no such file under the sessions folder")
         if neighbours is not None and (isinstance(neighbours, bool) or not isinstance(neighbours, int) or neighbours < 0):
             raise RangekitError(f"neighbours: expected a whole number >= 0 (0: every pair), found {neighbours!r}")
-        with self._lock:
-            if self.state["state"] == "running":
-                raise RangekitError("a registration is running already")
-            self.state, self.lines, self._report = {"state": "running", "files": list(files)}, [], None
-        threading.Thread(target=self._run, args=(paths, list(files), neighbours), daemon=True,
-                         name="rangekit-register").start()
+        self.begin(files=list(files))
+        self._report = None
+        self.launch(self._run, paths, list(files), neighbours, keep={"files": list(files)})
         return self.snapshot()
 
-    def _say(self, line: str, *args, **kwargs) -> None:
-        with self._lock:
-            self.lines.append(str(line))
-
-    def _run(self, paths: list[Path], files: list[str], neighbours) -> None:
+    def _run(self, paths: list[Path], files: list[str], neighbours) -> dict:
         from rangekit.app.commands.register import register
 
         staging = self.sessions / STAGING
         shutil.rmtree(staging, ignore_errors=True)
-        try:
-            report = register(paths, staging, mesh=False, progress=self._say, neighbours=neighbours)
-            res = report.result
-            pairs = [{"i": e.i, "j": e.j, "a": files[e.i], "b": files[e.j], "rmse_mm": round(e.rmse * 1e3, 4),
-                      "overlap_percent": round(100 * e.overlap, 1), "accepted": bool(e.accepted), "reason": e.reason}
-                     for e in res.edges]
-            state = {"state": "done", "files": files, "pairs": pairs, "rmse_mm": round(res.rmse * 1e3, 4),
-                     "converged": bool(res.converged)}
-            with self._lock:
-                self._report = report
-        except Exception as exc:  # noqa: BLE001 - the page gets one line, the log the details
-            state = {**failed(exc, "registration"), "files": files}
-        with self._lock:
-            self.state = state
+        report = register(paths, staging, mesh=False, progress=self.say, neighbours=neighbours)
+        res = report.result
+        pairs = [{"i": e.i, "j": e.j, "a": files[e.i], "b": files[e.j], "rmse_mm": round(e.rmse * 1e3, 4),
+                  "overlap_percent": round(100 * e.overlap, 1), "accepted": bool(e.accepted), "reason": e.reason}
+                 for e in res.edges]
+        with self._cond:
+            self._report = report
+        return {"pairs": pairs, "rmse_mm": round(res.rmse * 1e3, 4), "converged": bool(res.converged)}
 
     def points(self, k: int) -> bytes:
         """Float32 (n, 3) bytes, millimetres in the first cloud's frame: cloud ``k`` of the last registration,
@@ -110,7 +92,7 @@ class RegisterJob:
         from rangekit.formats.clouds import load_cloud
         from rangekit.geometry import apply_T
 
-        with self._lock:
+        with self._cond:
             report = self._report
         if report is None:
             raise RangekitError("no finished registration: register the clouds first")
@@ -126,11 +108,11 @@ class RegisterJob:
         folder = confined(self.sessions, name)
         if folder.parent != self.sessions or name.startswith("."):
             raise RangekitError(f"name: {name!r}: a folder name directly under the sessions folder")
-        with self._lock:
-            if self.state.get("state") != "done":
+        with self._cond:
+            if self.state is not JobState.DONE:
                 raise RangekitError("nothing to save: register the clouds first")
             if folder.exists():
                 raise RangekitError(f"name: {name}: exists under the sessions folder; choose another name")
             os.replace(self.sessions / STAGING, folder)
-            self.state = {**self.state, "saved": name}
+            self.fields = {**self.fields, "saved": name}
         return self.snapshot()

@@ -15,6 +15,7 @@ deviation from the simulator's truth.
 from __future__ import annotations
 
 import threading
+from enum import Enum
 
 import cv2
 import numpy as np
@@ -22,12 +23,21 @@ import numpy as np
 from rangekit.boards import Board
 from rangekit.errors import RangekitError
 from rangekit.ui.board_live import live_corners
-from rangekit.ui.job_state import failed
+from rangekit.ui.jobs.base import Job, JobState, failed
 from rangekit.ui.rig_holder import RigHolder, test_pattern
 
-__all__ = ["CalibrateJob"]
+__all__ = ["CalibrateJob", "Step"]
 
-_WAITING = ("placing", "review")
+
+class Step(str, Enum):
+    """Where a running calibration is (its value is the page's ``"state"`` while it runs)."""
+
+    STARTING = "starting"
+    PLACING = "placing"          # waiting for *capture*, the live stream on
+    CAPTURING = "capturing"
+    REVIEW = "review"            # waiting for *keep* or *retake*
+    MOVING = "moving"            # a retake: the board moved back
+    TURNTABLE = "turntable"      # the board on the turntable
 
 
 class _Cancelled(Exception):
@@ -39,16 +49,17 @@ def _png(rgb: np.ndarray) -> bytes:
     return buf.tobytes() if ok else b""
 
 
-class CalibrateJob:
+class CalibrateJob(Job):
     """The calibration of ``holder``'s rig (at most one at a time); ``stream`` (a
     :class:`rangekit.ui.stream.LiveStream`) gets the board-corner annotation while a pose is placed."""
 
+    WHAT, LINES = "calibration", "progress"
+
     def __init__(self, holder: RigHolder, stream=None) -> None:
         self.holder, self.stream = holder, stream
-        self._cond = threading.Condition()
-        self.state: dict = {"state": "idle"}
+        super().__init__()
+        self.step = Step.STARTING
         self.poses: list[dict] = []
-        self.progress: list[str] = []
         self.pictures: dict[str, bytes] = {}
         self._go = False
         self._decision: bool | None = None
@@ -68,15 +79,15 @@ class CalibrateJob:
         if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
             raise RangekitError(f"seed: expected a whole number >= 0, found {seed!r}")
         with self._cond:
-            if self.state["state"] not in ("idle", "done", "failed", "cancelled"):
+            if self.running:
                 raise RangekitError("a calibration is running already")
             if self.holder.busy is not None:
                 raise RangekitError(f"the rig is busy: {self.holder.busy}; wait for it to finish")
             if self.holder.devices.camera is None or self.holder.devices.projector is None:
                 raise RangekitError(f"not connected: {self.holder.fault}" if self.holder.fault else
                                     "calibrating needs a camera and a projector; this rig lacks one")
-            self.state = {"state": "starting", "n": n_poses}
-            self.poses, self.progress, self.pictures, self._uv = [], [], {}, {}
+            self.state, self.step, self.fields = JobState.RUNNING, Step.STARTING, {"n": n_poses}
+            self.poses, self.lines, self.pictures, self._uv = [], [], {}, {}
             self._placements = 0
             self._go, self._decision, self._cancel = False, None, False
         threading.Thread(target=self._run, args=(n_poses, seed), name="rangekit-calibrate", daemon=True).start()
@@ -87,7 +98,7 @@ class CalibrateJob:
         with self._cond:
             self._expect("placing", "capture")
             self._go = True
-            self.state = {**self.state, "state": "capturing"}
+            self.step = Step.CAPTURING
             self._cond.notify_all()
         return self.snapshot()
 
@@ -96,7 +107,7 @@ class CalibrateJob:
         with self._cond:
             self._expect("review", "keep or retake")
             self._decision = not keep
-            self.state = {**self.state, "state": "capturing" if keep else "moving"}
+            self.step = Step.CAPTURING if keep else Step.MOVING
             self._cond.notify_all()
         return self.snapshot()
 
@@ -115,7 +126,7 @@ class CalibrateJob:
 
     def cancel(self) -> dict:
         with self._cond:
-            if self.state["state"] in ("idle", "done", "failed", "cancelled"):
+            if not self.running:
                 raise RangekitError("no calibration is running")
             self._cancel = True
             self._cond.notify_all()
@@ -123,17 +134,27 @@ class CalibrateJob:
 
     def snapshot(self) -> dict:
         with self._cond:
-            return {**self.state, "poses": list(self.poses), "progress": list(self.progress[-12:]),
+            return {"state": self._shown(), **self.fields, "poses": list(self.poses),
+                    "progress": list(self.lines[-12:]),
                     "simulated": self.holder.simulated_rig, "pictures": sorted(self.pictures)}
 
     # -- the thread -------------------------------------------------------------------------------------------
     def _expect(self, state: str, action: str) -> None:
-        if self.state["state"] != state:
-            raise RangekitError(f"{action}: the calibration is {self.state['state']}, not {state}")
+        if self._shown() != state:
+            raise RangekitError(f"{action}: the calibration is {self._shown()}, not {state}")
 
-    def _set(self, **fields) -> None:
+    def _shown(self) -> str:
+        return self.step.value if self.running else self.state.value
+
+    def _set(self, state: str | None = None, **fields) -> None:
+        """The wizard's step (a :class:`Step`'s value) or its end (``done``, ``failed``, ``cancelled``), and the
+        fields the page shows with it."""
         with self._cond:
-            self.state = {**self.state, **fields}
+            if state in (JobState.DONE, JobState.FAILED, JobState.CANCELLED):
+                self.state = JobState(state)
+            elif state is not None:
+                self.step = Step(state)
+            self.fields = {**self.fields, **fields}
             self._cond.notify_all()
 
     def _wait(self, ready) -> None:
@@ -141,10 +162,6 @@ class CalibrateJob:
             self._cond.wait_for(lambda: self._cancel or ready())
             if self._cancel:
                 raise _Cancelled()
-
-    def _say(self, msg: str, *args, **kwargs) -> None:
-        with self._cond:
-            self.progress = (self.progress + [str(msg)])[-200:]
 
     def _run(self, n_poses: int, seed: int) -> None:
         from rangekit.calib.procedure import CalibrationSettings, calibrate_rig, compare_rigs, comparison_lines
@@ -161,7 +178,7 @@ class CalibrateJob:
                 try:
                     res = calibrate_rig(devices, settings=CalibrationSettings(board=board, n_poses=n_poses),
                                         place_board=self._place, place_on_turntable=self._on_turntable,
-                                        template=holder.rig, progress=self._say, on_pose=self._on_pose)
+                                        template=holder.rig, progress=self.say, on_pose=self._on_pose)
                 finally:
                     if self.stream is not None:
                         self.stream.annotate = None
@@ -177,7 +194,7 @@ class CalibrateJob:
         except _Cancelled:
             self._set(state="cancelled")
         except Exception as exc:  # noqa: BLE001 - the page gets one line, the log the details
-            self._set(**failed(exc, "calibration"))
+            self._set("failed", error=failed(exc, "calibration"))
 
     def _scene_now(self) -> None:
         """Simulator: put the board at the pool's current pose, shifted by the drag."""
@@ -268,7 +285,7 @@ class CalibrateJob:
             from rangekit.sim.writers.calibration import turntable_board_scene
 
             self.holder.devices.set_scene(turntable_board_scene(self.holder.devices.rig, self._board))
-            self._say("turntable: the app stood the board on the turntable")
+            self.say("turntable: the app stood the board on the turntable")
             self._set(state="turntable")
             return
         self._set(state="placing", pose="turntable")

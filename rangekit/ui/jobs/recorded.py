@@ -8,11 +8,10 @@ spaces or commas) and confined to it (:func:`rangekit.ui.paths.confined`); the r
 
 from __future__ import annotations
 
-import threading
 from pathlib import Path
 
 from rangekit.errors import RangekitError
-from rangekit.ui.job_state import failed
+from rangekit.ui.jobs.base import Job
 from rangekit.ui.paths import confined
 
 __all__ = ["RecordedCalibrationJob", "parse_projector_size", "pose_folders"]
@@ -51,20 +50,19 @@ def pose_folders(sessions: Path, text: str) -> list[Path]:
     return folders
 
 
-class RecordedCalibrationJob:
+class RecordedCalibrationJob(Job):
     """The latest calibration from recorded captures under ``sessions``."""
 
+    WHAT = "calibration from recorded captures"
+
     def __init__(self, sessions: Path) -> None:
+        super().__init__()
         self.sessions = Path(sessions).resolve()
-        self._lock = threading.Lock()
-        self.state: dict = {"state": "idle"}
-        self.lines: list[str] = []
 
     def snapshot(self) -> dict:
         from rangekit.formats.layouts import LAYOUTS
 
-        with self._lock:
-            return {**self.state, "lines": list(self.lines[-40:]), "layouts": sorted(LAYOUTS)}
+        return {**super().snapshot(), "layouts": sorted(LAYOUTS)}
 
     def start(self, captures: str, pattern: str, projector: str, out: str, cols=10, rows=7, square_mm=20.0,
               replace: bool = False) -> dict:
@@ -90,29 +88,16 @@ class RecordedCalibrationJob:
         if isinstance(square_mm, bool) or not isinstance(square_mm, (int, float)) or not 0 < square_mm < 1000:
             raise RangekitError(f"square_mm: expected the square's side in millimetres (0-1000), found {square_mm!r}")
         board = Board(cols=cols, rows=rows, square=square_mm / 1000.0)
-        with self._lock:
-            if self.state["state"] == "running":
-                raise RangekitError("a calibration from recorded captures is running already")
-            self.state, self.lines = {"state": "running", "poses": len(folders)}, []
-        threading.Thread(target=self._run, args=(folders, pattern, size, rig_file, board, replace), daemon=True,
-                         name="rangekit-calibrate-recorded").start()
+        self.begin(poses=len(folders))
+        self.launch(self._run, folders, pattern, size, rig_file, board, replace)
         return self.snapshot()
 
-    def _say(self, line: str, *args, **kwargs) -> None:
-        with self._lock:
-            self.lines.append(str(line))
-
     def _run(self, folders: list[Path], pattern: str, size: tuple[int, int], rig_file: Path, board,
-             replace: bool) -> None:
+             replace: bool) -> dict:
         from rangekit.app.calibrate_recorded import calibrate_recordings
 
-        try:
-            cal = calibrate_recordings(rig_file, folders, pattern=pattern, projector_size=size, board=board,
-                                       force=replace, progress=self._say, report=self._say)
-            for line in cal.result.summary_lines():
-                self._say(line)
-            state = {"state": "done", "rig_file": rig_file.name}
-        except Exception as exc:  # noqa: BLE001 - the page gets one line, the log the details
-            state = failed(exc, "calibration")
-        with self._lock:
-            self.state = state
+        cal = calibrate_recordings(rig_file, folders, pattern=pattern, projector_size=size, board=board,
+                                   force=replace, progress=self.say, report=self.say)
+        for line in cal.result.summary_lines():
+            self.say(line)
+        return {"rig_file": rig_file.name}

@@ -7,8 +7,8 @@ import sys
 import time
 from pathlib import Path
 
-from rangekit.cli._common import (LazyChoices, check_output, console, finite_float, note, result, int_in, say, scheduler_address,
-                                  seed)
+from rangekit.cli._common import (LazyChoices, check_output, console, finite_float, int_in, note, result, say,
+                                  scheduler_address)
 from rangekit.errors import UsageError
 
 
@@ -49,7 +49,8 @@ def cmd_scan(args: argparse.Namespace) -> int:
     if res.processed is None:
         say(f"process it later with: rangekit process {res.folder}")
         return 0
-    _print_processed(res.folder, res.processed, args, res.seconds, acquisition_s=res.acquisition_seconds)
+    _print_processed(res.folder, res.processed, options.processing, res.seconds,
+                     acquisition_s=res.acquisition_seconds)
     return 0
 
 
@@ -67,17 +68,32 @@ def _bump(text: str):
         raise argparse.ArgumentTypeError(f"expected VIEW:FRAME:MM, e.g. 3:30:0.5, found {text!r}") from None
 
 
+#: ``rangekit process``'s flags that are not options of one session's processing: the sessions themselves and the
+#: Dask batch's (a scan processes its one session in this process).
+BATCH_ONLY = ("session", "scheduler", "workers")
+#: ScanOptions' fields that are ``processing``'s shorthands (their flags are ``processing``'s, shared by both
+#: commands: :func:`_processing_options`).
+_SHORTHANDS = ("fusion", "report", "format")
+
+
 def scan_options(args: argparse.Namespace):
     """The :class:`rangekit.app.scan.options.ScanOptions` of ``rangekit scan``'s parsed flags (one field per flag,
-    :data:`rangekit.app.scan.options.SCAN_FLAGS`; ``--no-process`` and ``--no-report`` negated)."""
+    :data:`rangekit.app.scan.options.SCAN_FLAGS`; ``--no-process`` negated; the processing flags make
+    ``processing``, :func:`process_options`)."""
     from rangekit.app.scan.options import SCAN_FIELDS, ScanOptions
+    from rangekit.errors import OptionError
 
-    values = {name: getattr(args, name) for name in SCAN_FIELDS if name not in ("process", "report")}
-    values.update(process=not args.no_process, report=not args.no_report)
+    values = {name: getattr(args, name) for name in SCAN_FIELDS
+              if name not in ("process", "processing", *_SHORTHANDS)}
+    values.update(process=not args.no_process)
     for name in ("up", "positions", "exposures"):
         if values[name] is not None:
             values[name] = tuple(values[name])
-    return ScanOptions(**values)
+    try:
+        processing = process_options(args)
+    except OptionError as exc:
+        raise exc.within("processing") from None
+    return ScanOptions(**values, processing=processing)
 
 
 class _ScanPrinter:
@@ -111,31 +127,36 @@ class _ScanPrinter:
             self._progress(event)
 
 
-def _process_options(args: argparse.Namespace):
-    """The :class:`rangekit.app.process.options.ProcessOptions` of ``rangekit process``'s flags."""
-    from rangekit.app.process.options import ProcessOptions
+def process_options(args: argparse.Namespace):
+    """The :class:`rangekit.app.process.options.ProcessOptions` of the processing flags given (those of
+    :func:`_processing_options`, on both commands; a flag ``--no-X`` negated); the others take the dataclass's
+    defaults, the one place they are written."""
+    from rangekit.app.process.options import PROCESS_FLAGS, ProcessOptions
 
-    return ProcessOptions(fusion=args.fusion, report=not args.no_report, mesh_format=args.format,
-                          max_motion=args.max_motion)
+    given = {}
+    for field, flag in PROCESS_FLAGS.items():
+        dest = flag.lstrip("-").replace("-", "_")
+        if hasattr(args, dest):
+            given[field] = not getattr(args, dest) if flag.startswith("--no-") else getattr(args, dest)
+    return ProcessOptions(**given)
 
 
-def _process(folder: str, args: argparse.Namespace) -> int:
+def _process(folder: str, args: argparse.Namespace, options) -> int:
     from rangekit.app.events import progress_subscriber
     from rangekit.app.scan.scan import process
 
     t0 = time.perf_counter()
     try:
-        res = process(folder, _process_options(args), on_event=progress_subscriber(console()))
+        res = process(folder, options, on_event=progress_subscriber(console()))
     except KeyboardInterrupt:
         print(f"rangekit: interrupted; the views decoded so far are cached. Continue with: rangekit process {folder}",
               file=sys.stderr)
         return 130
-    _print_processed(Path(folder), res, args, time.perf_counter() - t0)
+    _print_processed(Path(folder), res, options, time.perf_counter() - t0)
     return 0
 
 
-def _print_processed(folder: Path, res, args: argparse.Namespace, seconds: float, *,
-                     acquisition_s: float | None = None) -> None:
+def _print_processed(folder: Path, res, options, seconds: float, *, acquisition_s: float | None = None) -> None:
     """The end-of-run summary and the files written."""
     from rangekit.progress import format_seconds
 
@@ -145,25 +166,33 @@ def _print_processed(folder: Path, res, args: argparse.Namespace, seconds: float
         say(f"acquisition: {format_seconds(acquisition_s)}")
     for line in res.summary_lines():
         say(line)
-    exported = [] if args.format == "ply" else [f"mesh.{args.format}", f"mesh_watertight.{args.format}"]
+    fmt = options.mesh_format
+    exported = [] if fmt == "ply" else [f"mesh.{fmt}", f"mesh_watertight.{fmt}"]
     result(f"wrote {folder}/mesh.ply (observed surface), mesh_watertight.ply (closed), "
            + "".join(f"{name}, " for name in exported) + "merged.ply, poses.json, summary.json"
-           + ("" if args.no_report else ", report.html") + f" in {format_seconds(seconds)}")
+           + (", report.html" if options.report else "") + f" in {format_seconds(seconds)}")
 
 
 def cmd_process(args: argparse.Namespace) -> int:
     """rangekit process DIR [DIR ...] [--fusion poisson|tsdf] [--scheduler local|ADDRESS] [--workers N]: decode,
     register and fuse each session into DIR/mesh.ply; several sessions (or --scheduler) on Dask"""
+    from rangekit.app.process.options import PROCESS_FLAGS
+    from rangekit.errors import OptionError
+
+    try:
+        options = process_options(args)
+    except OptionError as exc:
+        raise exc.named(PROCESS_FLAGS) from None
     if len(args.session) == 1 and args.scheduler is None:
         if args.workers is not None:
             raise UsageError(f"--workers: Dask workers for several sessions or --scheduler; found {args.workers} "
                              "with one session and no --scheduler (give --scheduler local, or leave --workers out)")
         check_output(args.session[0], option="DIR", folder=True, session=True)
-        return _process(args.session[0], args)
-    return _process_batch(args)
+        return _process(args.session[0], args, options)
+    return _process_batch(args, options)
 
 
-def _process_batch(args: argparse.Namespace) -> int:
+def _process_batch(args: argparse.Namespace, options) -> int:
     """Several sessions on Dask (rangekit.app.process.batch): a line per view and session, then each session done or
     failed; exit 1 when any failed."""
     from rangekit.app.process.batch import process_sessions
@@ -180,7 +209,7 @@ def _process_batch(args: argparse.Namespace) -> int:
     where = f"a local cluster of {args.workers or 2} worker processes" if scheduler == "local" else scheduler
     note(f"processing {len(args.session)} session(s) on {where}")
     try:
-        res = process_sessions(args.session, _process_options(args), scheduler=scheduler, workers=args.workers or 2,
+        res = process_sessions(args.session, options, scheduler=scheduler, workers=args.workers or 2,
                                progress=console())
     except KeyboardInterrupt:
         print(f"rangekit: interrupted; the views decoded so far are cached. Continue with: rangekit process "
@@ -199,17 +228,48 @@ def _process_batch(args: argparse.Namespace) -> int:
 
 
 def _processing_options(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--fusion", default="poisson", choices=LazyChoices("rangekit.app.process.options", "FUSION_METHODS"),
+    """The processing flags, the same on ``rangekit scan`` and ``rangekit process``: one per flag of
+    :data:`rangekit.app.process.options.PROCESS_FLAGS`, its range and default read from
+    :class:`~rangekit.app.process.options.ProcessOptions` (no argparse default: a flag left out is a field left
+    out, :func:`process_options`)."""
+    from rangekit._runtime.option_fields import default_of, specs
+    from rangekit.app.process.options import POISSON_DEFAULTS, ProcessOptions
+    from rangekit.cli.coded import _share
+
+    given = argparse.SUPPRESS
+    p.add_argument("--fusion", default=given, choices=LazyChoices("rangekit.app.process.options", "FUSION_METHODS"),
                    metavar="{poisson,tsdf}",
-                   help="fusion into one mesh: poisson (default, screened Poisson of the merged cloud) or tsdf")
-    p.add_argument("--no-report", action="store_true", help="skip report.html")
-    p.add_argument("--format", default="ply", choices=LazyChoices("rangekit.app.process.fused_outputs", "MESH_EXPORT_FORMATS"),
+                   help=f"fusion into one mesh: poisson (default {default_of(ProcessOptions, 'fusion')}: screened "
+                        "Poisson of the merged cloud) or tsdf")
+    p.add_argument("--no-report", action="store_true", default=given, help="skip report.html")
+    p.add_argument("--format", default=given,
+                   choices=LazyChoices("rangekit.app.process.fused_outputs", "MESH_EXPORT_FORMATS"),
                    metavar="{ply,obj,stl,glb}",
-                   help="mesh files: ply (default; mesh.ply and mesh_watertight.ply, with vertex normals and the "
-                        "'observed' flag) or obj, stl, glb written beside them as mesh.FMT and mesh_watertight.FMT")
+                   help=f"mesh files: ply (default {default_of(ProcessOptions, 'mesh_format')}; mesh.ply and "
+                        "mesh_watertight.ply, with vertex normals and the 'observed' flag) or obj, stl, glb written "
+                        "beside them as mesh.FMT and mesh_watertight.FMT")
+    depth = specs(ProcessOptions)["poisson_depth"]
+    p.add_argument("--poisson-depth", type=int_in(depth.lo, depth.hi), default=given, metavar="DEPTH",
+                   help=f"screened Poisson's octree depth, {depth.lo}..{depth.hi} (default the method's: "
+                        + ", ".join(f"{d} for {m}" for m, (d, _) in POISSON_DEFAULTS.items())
+                        + "; each step up quadruples the mesh and about triples the fusion's time)")
+    p.add_argument("--max-motion", type=_share, default=given, metavar="PERCENT",
+                   help="refuse a view in which more than this share of the decoded pixels moved during its "
+                        f"capture (default {default_of(ProcessOptions, 'max_motion') * 100:g}%%; 'none': not "
+                        "checked; rangekit.coded.motion)")
+
+
+def _ranged(option: str):
+    """Argument type of ScanOptions' field ``option``: an integer in its range (the dataclass's metadata)."""
+    from rangekit._runtime.option_fields import specs
+    from rangekit.app.scan.options import ScanOptions
+
+    s = specs(ScanOptions)[option]
+    return int_in(s.lo, s.hi)
 
 
 def add_parsers(sub) -> None:
+    from rangekit.app.scan.options import LASER_STEPS, SCAN_DEFAULTS as NEW
     from rangekit.coded.patterns import PATTERN_METHODS
 
     scan = sub.add_parser("scan", help="scan: acquire a turntable session (resumable), then process it into a mesh",
@@ -224,23 +284,24 @@ def add_parsers(sub) -> None:
     scan.add_argument("--method", choices=("coded", "laser"),
                       help="coded (default: projector patterns, views registered) or laser (the rig's line lasers, "
                            "switched by the turntable board, one profile per turntable step)")
-    scan.add_argument("--steps", type=int_in(2, 3600), help="turntable steps over a full turn of a laser scan "
-                                                            "(default 400)")
+    scan.add_argument("--steps", type=_ranged("steps"), help="turntable steps over a full turn of a laser scan "
+                                                             f"(default {LASER_STEPS})")
     scan.add_argument("--up", type=finite_float, nargs=3, metavar=("X", "Y", "Z"),
                       help="a mesh file object's up direction, stood upright on the turntable (Stanford scans: 0 1 0)")
     scan.add_argument("--rig", help="'sim' (default) or a rig file whose 'devices' name the turntable, projector and "
                                     "camera")
-    scan.add_argument("--object", help="simulated object: built-in name (default lumpy) or mesh file (copied into "
-                                       "the session)")
-    scan.add_argument("--views", type=int_in(2, 720), help="turntable views over a full turn (default 12)")
-    scan.add_argument("--passes", type=int_in(1, 8),
+    scan.add_argument("--object", help=f"simulated object: built-in name (default {NEW['object']}) or mesh file "
+                                       "(copied into the session)")
+    scan.add_argument("--views", type=_ranged("views"),
+                      help=f"turntable views over a full turn (default {NEW['views']})")
+    scan.add_argument("--passes", type=_ranged("passes"),
                       help="turntable passes of --views views each, the object turned over between them to see its "
-                           "bottom (default 1; the simulator turns it over itself, a real rig asks)")
+                           f"bottom (default {NEW['passes']}; the simulator turns it over itself, a real rig asks)")
     scan.add_argument("--flipped", action="store_true",
                       help="with --resume: the object has been turned over for the next pass (no terminal to ask on)")
-    scan.add_argument("--patterns", choices=PATTERN_METHODS, help="pattern set (default hybrid: Gray code + phase "
+    scan.add_argument("--patterns", choices=PATTERN_METHODS, help=f"pattern set (default {NEW['patterns']}: Gray code + phase "
                                                                   "shift)")
-    scan.add_argument("--seed", type=seed, help="simulator noise seed (default 0)")
+    scan.add_argument("--seed", type=_ranged("seed"), help=f"simulator noise seed (default {NEW['seed']})")
     scan.add_argument("--artefact", choices=("vdi2634",),
                       help="simulator: scan the VDI/VDE 2634-2 artefacts (sphere, ball bar, plane; one view per "
                            "position) with the rig calibrated by 'rangekit calibrate' (--rig RIG.json, else calibrated "
@@ -282,9 +343,4 @@ def add_parsers(sub) -> None:
     proc.add_argument("--workers", type=int_in(1, 256), metavar="N",
                       help="worker processes of --scheduler local, one thread each (default 2)")
     _processing_options(proc)
-    from rangekit.cli.coded import _share
-
-    proc.add_argument("--max-motion", type=_share, default=0.02, metavar="PERCENT",
-                      help="refuse a view in which more than this share of the decoded pixels moved during its "
-                           "capture (default 2%%; 'none': not checked; rangekit.coded.motion)")
     proc.set_defaults(func=cmd_process)

@@ -24,7 +24,24 @@ import numpy as np
 from rangekit.errors import RangekitError
 from rangekit.ui.paths import confined
 
-__all__ = ["ScanJob", "POINTS_PER_VIEW", "view_points"]
+__all__ = ["ScanJob", "POINTS_PER_VIEW", "view_points", "option_limits"]
+
+
+def option_limits() -> dict:
+    """The Scan page's form, from the options' own dataclasses (the command line's parser and their checks read the
+    same metadata, :mod:`rangekit._runtime.option_fields`): ``{"scan": {field: {"flag", "min", "max", "integer",
+    "default", ...}}, "process": {...}}``, each ranged option of :class:`~rangekit.app.scan.options.ScanOptions` and
+    :class:`~rangekit.app.process.options.ProcessOptions`, and the processing's ``fusion`` and ``mesh_format`` with
+    their ``choices`` and ``default`` (``GET /api/options``)."""
+    from rangekit._runtime.option_fields import default_of, limits
+    from rangekit.app.process.fused_outputs import MESH_EXPORT_FORMATS
+    from rangekit.app.process.options import FUSION_METHODS, ProcessOptions
+    from rangekit.app.scan.options import ScanOptions
+
+    process = limits(ProcessOptions)
+    for name, choices in (("fusion", FUSION_METHODS), ("mesh_format", MESH_EXPORT_FORMATS)):
+        process[name] = {"choices": list(choices), "default": default_of(ProcessOptions, name)}
+    return {"scan": limits(ScanOptions), "process": process}
 
 #: The most points of one view sent to a page (every n-th of the view's cloud).
 POINTS_PER_VIEW = 20_000
@@ -134,8 +151,9 @@ class ScanJob:
             if folder.exists():
                 raise RangekitError(f"name: {name} exists under the sessions folder; choose another name (or resume "
                                     "it from the sessions list)")
-            if isinstance(views, bool) or not isinstance(views, int) or not 2 <= views <= 360:
-                raise RangekitError(f"views: expected a whole number 2-360, found {views!r}")
+            lo, hi = (option_limits()["scan"]["views"][k] for k in ("min", "max"))   # rangekit scan's --views
+            if isinstance(views, bool) or not isinstance(views, int) or not lo <= views <= hi:
+                raise RangekitError(f"views: expected a whole number {lo}-{hi}, found {views!r}")
             # The simulated rig keeps real time, as the hardware would (the rig file's pattern delay,
             # exposure, the turntable's speed): each view decoded while the next is captured.
             args = ["--out", str(folder), "--views", str(views)] + (

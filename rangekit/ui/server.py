@@ -17,7 +17,8 @@ change, the host; see there):
   /api/calibrate-recorded/start`` ``{"captures", "pattern", "projector", "out", "cols", "rows", "square_mm",
   "replace"}``
   (recorded pose folders under ``--sessions``);
-- ``GET /api/scan`` (the scan: running, its views, files, last lines), ``POST /api/scan/start`` ``{"name",
+- ``GET /api/options`` (the scan's and the processing's ranges and defaults, from their dataclasses:
+  :func:`rangekit.ui.scan_job.option_limits`), ``GET /api/scan`` (the scan: running, its views, files, last lines), ``POST /api/scan/start`` ``{"name",
   "views"}`` or ``{"name", "resume": true}``, ``POST /api/scan/stop``, ``POST /api/scan/pause`` ``{"paused"}``; ``GET
   /api/sessions/NAME/views/K/points`` (a decoded view's points, float32 x y z in mm);
 - ``GET /api/sessions`` (each session under ``--sessions``: state, figures, files), ``GET
@@ -54,7 +55,7 @@ from rangekit.ui.guard.names import check_folder_name
 from rangekit.ui.paths import confined
 from rangekit.ui.recorded_job import RecordedCalibrationJob
 from rangekit.ui.register_job import RegisterJob, list_clouds
-from rangekit.ui.scan_job import ScanJob, view_points
+from rangekit.ui.scan_job import ScanJob, option_limits, view_points
 from rangekit.ui.sessions_list import session_file, sessions_listing
 from rangekit.ui.rig_holder import PATTERNS, RigHolder
 from rangekit.ui.stream import LiveStream
@@ -333,7 +334,9 @@ def make_app(holder: RigHolder, token: str, host: str, port: int, sessions: Path
              lambda r, f: registration.start(f["files"], f["neighbours"])),
         post("/api/register/save", "register save", {"name": text()}, register_save),
         get("/api/scan", _reading(lambda r: scans.snapshot())),
-        post("/api/scan/start", "scan", {"name": text(), "views": _given(6), "resume": flag(False)}, scan_start),
+        get("/api/options", _reading(lambda r: option_limits())),
+        post("/api/scan/start", "scan", {"name": text(), "views": _given(option_limits()["scan"]["views"]["default"]),
+                                         "resume": flag(False)}, scan_start),
         post("/api/scan/stop", "scan stop", {}, lambda r, f: scans.stop()),
         post("/api/scan/pause", "scan pause", {"paused": flag(True)}, lambda r, f: scans.pause(f["paused"])),
         post("/api/sessions/{name}/process", "process", {"fusion": text("poisson"), "format": text("ply"),

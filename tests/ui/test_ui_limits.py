@@ -94,7 +94,7 @@ def test_a_body_over_the_limit_is_refused_before_it_is_read(server):
     ("/api/scan/pause", {"paused": "no"}, "paused: expected true or false, found 'no'"),
     ("/api/scan/start", {"name": ["x"], "views": 2}, "name: expected a string, found ['x']"),
     ("/api/scan/start", {"name": "s", "views": 2, "resume": "yes"}, "resume: expected true or false, found 'yes'"),
-    ("/api/scan/start", {"name": "s", "views": 2.5}, "views: expected a whole number 2-360, found 2.5"),
+    ("/api/scan/start", {"name": "s", "views": 2.5}, "views: expected a whole number 2-720, found 2.5"),
     ("/api/scan/start", {"name": "s", "view": 2}, "scan: 'view': not a field here; expected name, views, resume"),
     ("/api/pattern", {"name": 3}, "name: expected a string, found 3"),
     ("/api/pattern", {}, "name: missing; pattern needs it"),

@@ -164,12 +164,13 @@ class ScanJob:
         """Reprocess session ``name`` with other options: ``rangekit process sessions/name --fusion F --format
         FMT [--no-report]`` as a child (refused while a scan or another processing runs)."""
         from rangekit.app.process.fused_outputs import MESH_EXPORT_FORMATS
+        from rangekit.app.process.options import FUSION_METHODS
 
         folder = confined(self.sessions, name)
         if folder.parent != self.sessions or not (folder / "session.json").is_file():
             raise RangekitError(f"session {name!r}: no session folder of that name under the sessions folder")
-        if fusion not in ("poisson", "tsdf"):
-            raise RangekitError(f"fusion: expected poisson or tsdf, found {fusion!r}")
+        if fusion not in FUSION_METHODS:
+            raise RangekitError(f"fusion: expected {' or '.join(FUSION_METHODS)}, found {fusion!r}")
         if mesh_format not in MESH_EXPORT_FORMATS:
             raise RangekitError(f"format: expected one of {', '.join(MESH_EXPORT_FORMATS)}, found {mesh_format!r}")
         return self._launch(folder, ["process", str(folder), "--fusion", fusion, "--format", mesh_format,

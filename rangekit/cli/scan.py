@@ -7,8 +7,8 @@ import sys
 import time
 from pathlib import Path
 
-from rangekit.cli._common import (LazyChoices, check_output, console, finite_float, int_in, note, result, say,
-                                  scheduler_address)
+from rangekit.cli._common import (LazyChoices, LazyHelp, check_output, console, finite_float, int_in, lazy_help, note,
+                                  option_range, result, say, scheduler_address)
 from rangekit.errors import UsageError
 
 
@@ -227,52 +227,66 @@ def _process_batch(args: argparse.Namespace, options) -> int:
     return 1 if res.failed else 0
 
 
+def processing_help() -> dict:
+    """The values the processing flags' help shows, from :class:`~rangekit.app.process.options.ProcessOptions` (read
+    when help is shown: :class:`rangekit.cli._common.LazyHelp`)."""
+    from rangekit._runtime.option_fields import default_of, specs
+    from rangekit.app.process.options import POISSON_DEFAULTS, ProcessOptions
+
+    depth = specs(ProcessOptions)["poisson_depth"]
+    return {"fusion": default_of(ProcessOptions, "fusion"), "format": default_of(ProcessOptions, "mesh_format"),
+            "depth_lo": depth.lo, "depth_hi": depth.hi,
+            "depths": ", ".join(f"{d} for {m}" for m, (d, _) in POISSON_DEFAULTS.items()),
+            "motion": f"{default_of(ProcessOptions, 'max_motion') * 100:g}"}
+
+
 def _processing_options(p: argparse.ArgumentParser) -> None:
     """The processing flags, the same on ``rangekit scan`` and ``rangekit process``: one per flag of
     :data:`rangekit.app.process.options.PROCESS_FLAGS`, its range and default read from
-    :class:`~rangekit.app.process.options.ProcessOptions` (no argparse default: a flag left out is a field left
-    out, :func:`process_options`)."""
-    from rangekit._runtime.option_fields import default_of, specs
-    from rangekit.app.process.options import POISSON_DEFAULTS, ProcessOptions
+    :class:`~rangekit.app.process.options.ProcessOptions` when a value is parsed or help shown (building the
+    parser imports no ``rangekit.app``); no argparse default: a flag left out is a field left out
+    (:func:`process_options`)."""
     from rangekit.cli.coded import _share
 
-    given = argparse.SUPPRESS
-    p.add_argument("--fusion", default=given, choices=LazyChoices("rangekit.app.process.options", "FUSION_METHODS"),
-                   metavar="{poisson,tsdf}",
-                   help=f"fusion into one mesh: poisson (default {default_of(ProcessOptions, 'fusion')}: screened "
-                        "Poisson of the merged cloud) or tsdf")
+    given, values, options = argparse.SUPPRESS, "rangekit.cli.scan:processing_help", \
+        "rangekit.app.process.options:ProcessOptions"
+    lazy_help(p.add_argument("--fusion", default=given, choices=LazyChoices("rangekit.app.process.options",
+                                                                            "FUSION_METHODS"),
+                             metavar="{poisson,tsdf}", help="fusion into one mesh: poisson (screened Poisson of the "
+                                                            "merged cloud) or tsdf; default {fusion}"), values)
     p.add_argument("--no-report", action="store_true", default=given, help="skip report.html")
-    p.add_argument("--format", default=given,
-                   choices=LazyChoices("rangekit.app.process.fused_outputs", "MESH_EXPORT_FORMATS"),
-                   metavar="{ply,obj,stl,glb}",
-                   help=f"mesh files: ply (default {default_of(ProcessOptions, 'mesh_format')}; mesh.ply and "
-                        "mesh_watertight.ply, with vertex normals and the 'observed' flag) or obj, stl, glb written "
-                        "beside them as mesh.FMT and mesh_watertight.FMT")
-    depth = specs(ProcessOptions)["poisson_depth"]
-    p.add_argument("--poisson-depth", type=int_in(depth.lo, depth.hi), default=given, metavar="DEPTH",
-                   help=f"screened Poisson's octree depth, {depth.lo}..{depth.hi} (default the method's: "
-                        + ", ".join(f"{d} for {m}" for m, (d, _) in POISSON_DEFAULTS.items())
-                        + "; each step up quadruples the mesh and about triples the fusion's time)")
-    p.add_argument("--max-motion", type=_share, default=given, metavar="PERCENT",
-                   help="refuse a view in which more than this share of the decoded pixels moved during its "
-                        f"capture (default {default_of(ProcessOptions, 'max_motion') * 100:g}%%; 'none': not "
-                        "checked; rangekit.coded.motion)")
+    lazy_help(p.add_argument("--format", default=given,
+                             choices=LazyChoices("rangekit.app.process.fused_outputs", "MESH_EXPORT_FORMATS"),
+                             metavar="{ply,obj,stl,glb}",
+                             help="mesh files: ply (mesh.ply and mesh_watertight.ply, with vertex normals and the "
+                                  "'observed' flag) or obj, stl, glb written beside them as mesh.FMT and "
+                                  "mesh_watertight.FMT; default {format}"), values)
+    lazy_help(p.add_argument("--poisson-depth", type=option_range(options, "poisson_depth"), default=given,
+                             metavar="DEPTH",
+                             help="screened Poisson's octree depth, {depth_lo}..{depth_hi} (default the method's: "
+                                  "{depths}; each step up quadruples the mesh and about triples the fusion's time)"),
+              values)
+    lazy_help(p.add_argument("--max-motion", type=_share, default=given, metavar="PERCENT",
+                             help="refuse a view in which more than this share of the decoded pixels moved during "
+                                  "its capture (default {motion}%%; 'none': not checked; rangekit.coded.motion)"),
+              values)
 
 
-def _ranged(option: str):
-    """Argument type of ScanOptions' field ``option``: an integer in its range (the dataclass's metadata)."""
-    from rangekit._runtime.option_fields import specs
-    from rangekit.app.scan.options import ScanOptions
+def scan_help() -> dict:
+    """The values ``rangekit scan``'s help shows: a new scan's defaults
+    (:data:`rangekit.app.scan.options.SCAN_DEFAULTS`)."""
+    from rangekit.app.scan.options import SCAN_DEFAULTS
 
-    s = specs(ScanOptions)[option]
-    return int_in(s.lo, s.hi)
+    return dict(SCAN_DEFAULTS)
 
 
 def add_parsers(sub) -> None:
-    from rangekit.app.scan.options import LASER_STEPS, SCAN_DEFAULTS as NEW
     from rangekit.coded.patterns import PATTERN_METHODS
 
+    options, values = "rangekit.app.scan.options:ScanOptions", "rangekit.cli.scan:scan_help"
+
     scan = sub.add_parser("scan", help="scan: acquire a turntable session (resumable), then process it into a mesh",
+                          formatter_class=LazyHelp,
                           description="Acquire a crash-safe scan session (every turntable view, every pattern; "
                                       "--resume continues an interrupted one without redoing finished views), then "
                                       "decode, register and fuse it into DIR/mesh.ply.")
@@ -284,24 +298,26 @@ def add_parsers(sub) -> None:
     scan.add_argument("--method", choices=("coded", "laser"),
                       help="coded (default: projector patterns, views registered) or laser (the rig's line lasers, "
                            "switched by the turntable board, one profile per turntable step)")
-    scan.add_argument("--steps", type=_ranged("steps"), help="turntable steps over a full turn of a laser scan "
-                                                             f"(default {LASER_STEPS})")
+    lazy_help(scan.add_argument("--steps", type=option_range(options, "steps"),
+                                help="turntable steps over a full turn of a laser scan (default {steps})"), values)
     scan.add_argument("--up", type=finite_float, nargs=3, metavar=("X", "Y", "Z"),
                       help="a mesh file object's up direction, stood upright on the turntable (Stanford scans: 0 1 0)")
     scan.add_argument("--rig", help="'sim' (default) or a rig file whose 'devices' name the turntable, projector and "
                                     "camera")
-    scan.add_argument("--object", help=f"simulated object: built-in name (default {NEW['object']}) or mesh file "
-                                       "(copied into the session)")
-    scan.add_argument("--views", type=_ranged("views"),
-                      help=f"turntable views over a full turn (default {NEW['views']})")
-    scan.add_argument("--passes", type=_ranged("passes"),
-                      help="turntable passes of --views views each, the object turned over between them to see its "
-                           f"bottom (default {NEW['passes']}; the simulator turns it over itself, a real rig asks)")
+    lazy_help(scan.add_argument("--object", help="simulated object: built-in name (default {object}) or mesh file "
+                                                 "(copied into the session)"), values)
+    lazy_help(scan.add_argument("--views", type=option_range(options, "views"),
+                                help="turntable views over a full turn (default {views})"), values)
+    lazy_help(scan.add_argument("--passes", type=option_range(options, "passes"),
+                                help="turntable passes of --views views each, the object turned over between them to "
+                                     "see its bottom (default {passes}; the simulator turns it over itself, a real rig "
+                                     "asks)"), values)
     scan.add_argument("--flipped", action="store_true",
                       help="with --resume: the object has been turned over for the next pass (no terminal to ask on)")
-    scan.add_argument("--patterns", choices=PATTERN_METHODS, help=f"pattern set (default {NEW['patterns']}: Gray code + phase "
-                                                                  "shift)")
-    scan.add_argument("--seed", type=_ranged("seed"), help=f"simulator noise seed (default {NEW['seed']})")
+    lazy_help(scan.add_argument("--patterns", choices=PATTERN_METHODS,
+                                help="pattern set (default {patterns}: Gray code + phase shift)"), values)
+    lazy_help(scan.add_argument("--seed", type=option_range(options, "seed"),
+                                help="simulator noise seed (default {seed})"), values)
     scan.add_argument("--artefact", choices=("vdi2634",),
                       help="simulator: scan the VDI/VDE 2634-2 artefacts (sphere, ball bar, plane; one view per "
                            "position) with the rig calibrated by 'rangekit calibrate' (--rig RIG.json, else calibrated "
@@ -330,6 +346,7 @@ def add_parsers(sub) -> None:
     scan.set_defaults(func=cmd_scan)
 
     proc = sub.add_parser("process", help="decode, register and fuse an acquired session into a mesh",
+                          formatter_class=LazyHelp,
                           description="Process a session folder (from 'rangekit scan'): every view decoded and "
                                       "triangulated, registered from the turntable angles, fused into mesh.ply. "
                                       "Several folders are processed on Dask: every view's decoding and then "

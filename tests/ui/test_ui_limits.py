@@ -182,13 +182,6 @@ def test_a_pause_then_a_stop_right_after_a_start_ends_without_a_traceback(server
         assert not any("Traceback" in line or "KeyboardInterrupt" in line for line in state["log"]), state["log"]
 
 
-def test_each_refusal_is_logged_once(server):
-    """(Last in this module: the log of all the above.)"""
-    log = server.stop()
-    assert "Traceback" not in log and len(log) < 5000, log[-3000:]
-    assert log.count("too many connections") <= 1 and log.count("did not arrive within") <= 1
-
-
 def test_the_form_s_ranges_and_defaults_are_the_options_own(server):
     """``GET /api/options``: the Scan form's ranges and defaults, read from ScanOptions and ProcessOptions (issue 49),
     the ones the command line's --views and the scan's check use."""
@@ -200,3 +193,11 @@ def test_the_form_s_ranges_and_defaults_are_the_options_own(server):
     assert status == 200 and (views["min"], views["max"], views["default"]) == (s.lo, s.hi, SCAN_DEFAULTS["views"])
     status, body = server.request("/api/scan/start", data={"name": "s", "views": s.hi + 1})[:2]
     assert status == 400 and json.loads(body)["error"] == f"views: expected a whole number {s.lo}-{s.hi}, found {s.hi + 1}"
+
+
+def test_each_refusal_is_logged_once(server):
+    """(Last in this module: the log of all the above.)"""
+    log = server.stop()
+    assert "Traceback" not in log and len(log) < 5000, log[-3000:]
+    assert log.count("too many connections") <= 1 and log.count("did not arrive within") <= 1
+

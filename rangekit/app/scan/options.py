@@ -8,7 +8,7 @@ session's own settings; an option given with ``resume`` must equal the session's
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, fields
 from pathlib import Path
 
 from rangekit._runtime.arguments import check_instance, check_items, check_path, check_vector, is_int as _is_int
@@ -71,7 +71,7 @@ class ScanOptions:
     rig: str | Path | None = option(None, "--rig", initial="sim")
     object: str | Path | None = option(None, "--object", initial="lumpy")
     views: int | None = option(None, "--views", lo=2, hi=720, integer=True, initial=12)
-    steps: int | None = option(None, "--steps", lo=2, hi=3600, integer=True)
+    steps: int | None = option(None, "--steps", lo=2, hi=3600, integer=True, initial=LASER_STEPS)
     passes: int | None = option(None, "--passes", lo=1, hi=8, integer=True, initial=1)
     flipped: bool = option(False, "--flipped")
     patterns: str | None = option(None, "--patterns", initial="hybrid")

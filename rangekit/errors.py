@@ -66,9 +66,10 @@ class UsageError(InputError):
 
 
 class OptionError(UsageError):
-    """A bad value of a job's options (:class:`rangekit.app.scan.options.ScanOptions`). ``template`` names the
-    options as ``{field}`` placeholders: the message shows the Python field names (``views``), and the command
-    line re-raises it with its flags (:meth:`named`: ``--views``)."""
+    """A bad value of a job's options (:class:`rangekit.app.scan.options.ScanOptions`,
+    :class:`rangekit.app.process.options.ProcessOptions`). ``template`` names the options as ``{field}`` placeholders
+    (a section's field as ``{section.field}``): the message shows the Python field names (``views``,
+    ``processing.poisson_depth``), and the command line re-raises it with its flags (:meth:`named`: ``--views``)."""
 
     def __init__(self, template: str) -> None:
         self.template = template
@@ -77,7 +78,14 @@ class OptionError(UsageError):
     def _render(self, names: dict) -> str:
         import re
 
-        return re.sub(r"\{([a-z_]+)\}", lambda m: names.get(m.group(1), m.group(1)), self.template)
+        return re.sub(r"\{([a-z_.]+)\}", lambda m: names.get(m.group(1), m.group(1)), self.template)
+
+    def within(self, section: str) -> "OptionError":
+        """The same error with each ``{field}`` a field of ``section`` (``{processing.field}``): a section's error
+        as the enclosing options name it."""
+        import re
+
+        return OptionError(re.sub(r"\{([a-z_.]+)\}", lambda m: f"{{{section}.{m.group(1)}}}", self.template))
 
     def named(self, names: dict) -> "OptionError":
         """The same error, each ``{field}`` shown as ``names[field]`` (a field not in ``names`` as itself)."""

@@ -130,13 +130,14 @@ ARGUMENTS = {
                     "passes": optional(NUMBER), "flipped": FLAG, "patterns": optional(NAME), "seed": optional(NUMBER),
                     "up": optional(VECTOR), "artefact": optional(NAME), "positions": optional(VECTOR),
                     "allow_auto_exposure": FLAG, "exposures": {**optional(VECTOR), "wrong type": 5}, "process": FLAG,
-                    "fusion": NAME, "report": FLAG, "format": NAME, "realtime": FLAG, "frames": optional(NAME),
-                    "sim_bump": optional(VECTOR)},
+                    "fusion": optional(NAME), "report": optional(FLAG), "format": optional(NAME), "realtime": FLAG,
+                    "frames": optional(NAME), "sim_bump": optional(VECTOR), "processing": optional(OBJECT)},
     "process": {"session": PATH, "options": optional(OBJECT), "on_event": CALLBACK, "map_pairs": CALLBACK,
                 "decoded_views": but(optional(OBJECT), "empty"), "evaluate": CALLBACK,
                 "registration_ahead": optional(OBJECT)},
     "ProcessOptions": {"fusion": NAME, "method": NAME, "table_margin": NUMBER, "report": FLAG, "truth": FLAG,
-                       "mesh_format": NAME, "poisson_depth": NUMBER, "max_motion": optional(NUMBER)},
+                       "mesh_format": NAME, "poisson_depth": optional(NUMBER), "max_motion": optional(NUMBER),
+                       "poisson_points": optional(NUMBER)},
 }
 
 #: Public names that take no arguments to check, and why.

@@ -263,3 +263,40 @@ class LazyChoices:
 
     def __len__(self) -> int:
         return len(self._values())
+
+
+def _load(path: str):
+    """``"module:NAME"`` -> the module's ``NAME``, imported now."""
+    import importlib
+
+    module, _, name = path.partition(":")
+    return getattr(importlib.import_module(module), name)
+
+
+class LazyHelp(argparse.HelpFormatter):
+    """Help strings whose ``{name}`` fields are filled when help is shown, from the action's ``help_values``
+    (``"module:FUNCTION"``, called for a dict), so that building the parser imports nothing the values come from
+    (``rangekit decode`` starts without importing ``rangekit.app``; :func:`lazy_help`)."""
+
+    def _get_help_string(self, action) -> str:
+        text = super()._get_help_string(action)
+        values = getattr(action, "help_values", None)
+        return text if values is None else text.format(**_load(values)())
+
+
+def lazy_help(action: argparse.Action, values: str) -> argparse.Action:
+    """``action``'s help filled by ``values`` (``"module:FUNCTION"``) when shown (:class:`LazyHelp`)."""
+    action.help_values = values
+    return action
+
+
+def option_range(options: str, field: str):
+    """Argument type: an integer in the range of field ``field`` of the options dataclass ``options``
+    (``"module:Class"``, its metadata: :mod:`rangekit._runtime.option_fields`), read on the first value parsed."""
+    def parse(text: str) -> int:
+        from rangekit._runtime.option_fields import specs
+
+        s = specs(_load(options))[field]
+        return int_in(s.lo, s.hi)(text)
+    parse.__name__ = f"{field}_range"
+    return parse

@@ -7,8 +7,8 @@ import sys
 import time
 from pathlib import Path
 
-from rangekit.cli._common import (LazyChoices, check_output, console, finite_float, note, result, int_in, say, scheduler_address,
-                                  seed)
+from rangekit.cli._common import (LazyChoices, LazyHelp, check_output, console, finite_float, int_in, lazy_help, note,
+                                  option_range, result, say, scheduler_address)
 from rangekit.errors import UsageError
 
 
@@ -49,7 +49,8 @@ def cmd_scan(args: argparse.Namespace) -> int:
     if res.processed is None:
         say(f"process it later with: rangekit process {res.folder}")
         return 0
-    _print_processed(res.folder, res.processed, args, res.seconds, acquisition_s=res.acquisition_seconds)
+    _print_processed(res.folder, res.processed, options.processing, res.seconds,
+                     acquisition_s=res.acquisition_seconds)
     return 0
 
 
@@ -67,17 +68,32 @@ def _bump(text: str):
         raise argparse.ArgumentTypeError(f"expected VIEW:FRAME:MM, e.g. 3:30:0.5, found {text!r}") from None
 
 
+#: ``rangekit process``'s flags that are not options of one session's processing: the sessions themselves and the
+#: Dask batch's (a scan processes its one session in this process).
+BATCH_ONLY = ("session", "scheduler", "workers")
+#: ScanOptions' fields that are ``processing``'s shorthands (their flags are ``processing``'s, shared by both
+#: commands: :func:`_processing_options`).
+_SHORTHANDS = ("fusion", "report", "format")
+
+
 def scan_options(args: argparse.Namespace):
     """The :class:`rangekit.app.scan.options.ScanOptions` of ``rangekit scan``'s parsed flags (one field per flag,
-    :data:`rangekit.app.scan.options.SCAN_FLAGS`; ``--no-process`` and ``--no-report`` negated)."""
+    :data:`rangekit.app.scan.options.SCAN_FLAGS`; ``--no-process`` negated; the processing flags make
+    ``processing``, :func:`process_options`)."""
     from rangekit.app.scan.options import SCAN_FIELDS, ScanOptions
+    from rangekit.errors import OptionError
 
-    values = {name: getattr(args, name) for name in SCAN_FIELDS if name not in ("process", "report")}
-    values.update(process=not args.no_process, report=not args.no_report)
+    values = {name: getattr(args, name) for name in SCAN_FIELDS
+              if name not in ("process", "processing", *_SHORTHANDS)}
+    values.update(process=not args.no_process)
     for name in ("up", "positions", "exposures"):
         if values[name] is not None:
             values[name] = tuple(values[name])
-    return ScanOptions(**values)
+    try:
+        processing = process_options(args)
+    except OptionError as exc:
+        raise exc.within("processing") from None
+    return ScanOptions(**values, processing=processing)
 
 
 class _ScanPrinter:
@@ -111,31 +127,36 @@ class _ScanPrinter:
             self._progress(event)
 
 
-def _process_options(args: argparse.Namespace):
-    """The :class:`rangekit.app.process.options.ProcessOptions` of ``rangekit process``'s flags."""
-    from rangekit.app.process.options import ProcessOptions
+def process_options(args: argparse.Namespace):
+    """The :class:`rangekit.app.process.options.ProcessOptions` of the processing flags given (those of
+    :func:`_processing_options`, on both commands; a flag ``--no-X`` negated); the others take the dataclass's
+    defaults, the one place they are written."""
+    from rangekit.app.process.options import PROCESS_FLAGS, ProcessOptions
 
-    return ProcessOptions(fusion=args.fusion, report=not args.no_report, mesh_format=args.format,
-                          max_motion=args.max_motion)
+    given = {}
+    for field, flag in PROCESS_FLAGS.items():
+        dest = flag.lstrip("-").replace("-", "_")
+        if hasattr(args, dest):
+            given[field] = not getattr(args, dest) if flag.startswith("--no-") else getattr(args, dest)
+    return ProcessOptions(**given)
 
 
-def _process(folder: str, args: argparse.Namespace) -> int:
+def _process(folder: str, args: argparse.Namespace, options) -> int:
     from rangekit.app.events import progress_subscriber
     from rangekit.app.scan.scan import process
 
     t0 = time.perf_counter()
     try:
-        res = process(folder, _process_options(args), on_event=progress_subscriber(console()))
+        res = process(folder, options, on_event=progress_subscriber(console()))
     except KeyboardInterrupt:
         print(f"rangekit: interrupted; the views decoded so far are cached. Continue with: rangekit process {folder}",
               file=sys.stderr)
         return 130
-    _print_processed(Path(folder), res, args, time.perf_counter() - t0)
+    _print_processed(Path(folder), res, options, time.perf_counter() - t0)
     return 0
 
 
-def _print_processed(folder: Path, res, args: argparse.Namespace, seconds: float, *,
-                     acquisition_s: float | None = None) -> None:
+def _print_processed(folder: Path, res, options, seconds: float, *, acquisition_s: float | None = None) -> None:
     """The end-of-run summary and the files written."""
     from rangekit.progress import format_seconds
 
@@ -145,25 +166,33 @@ def _print_processed(folder: Path, res, args: argparse.Namespace, seconds: float
         say(f"acquisition: {format_seconds(acquisition_s)}")
     for line in res.summary_lines():
         say(line)
-    exported = [] if args.format == "ply" else [f"mesh.{args.format}", f"mesh_watertight.{args.format}"]
+    fmt = options.mesh_format
+    exported = [] if fmt == "ply" else [f"mesh.{fmt}", f"mesh_watertight.{fmt}"]
     result(f"wrote {folder}/mesh.ply (observed surface), mesh_watertight.ply (closed), "
            + "".join(f"{name}, " for name in exported) + "merged.ply, poses.json, summary.json"
-           + ("" if args.no_report else ", report.html") + f" in {format_seconds(seconds)}")
+           + (", report.html" if options.report else "") + f" in {format_seconds(seconds)}")
 
 
 def cmd_process(args: argparse.Namespace) -> int:
     """rangekit process DIR [DIR ...] [--fusion poisson|tsdf] [--scheduler local|ADDRESS] [--workers N]: decode,
     register and fuse each session into DIR/mesh.ply; several sessions (or --scheduler) on Dask"""
+    from rangekit.app.process.options import PROCESS_FLAGS
+    from rangekit.errors import OptionError
+
+    try:
+        options = process_options(args)
+    except OptionError as exc:
+        raise exc.named(PROCESS_FLAGS) from None
     if len(args.session) == 1 and args.scheduler is None:
         if args.workers is not None:
             raise UsageError(f"--workers: Dask workers for several sessions or --scheduler; found {args.workers} "
                              "with one session and no --scheduler (give --scheduler local, or leave --workers out)")
         check_output(args.session[0], option="DIR", folder=True, session=True)
-        return _process(args.session[0], args)
-    return _process_batch(args)
+        return _process(args.session[0], args, options)
+    return _process_batch(args, options)
 
 
-def _process_batch(args: argparse.Namespace) -> int:
+def _process_batch(args: argparse.Namespace, options) -> int:
     """Several sessions on Dask (rangekit.app.process.batch): a line per view and session, then each session done or
     failed; exit 1 when any failed."""
     from rangekit.app.process.batch import process_sessions
@@ -180,7 +209,7 @@ def _process_batch(args: argparse.Namespace) -> int:
     where = f"a local cluster of {args.workers or 2} worker processes" if scheduler == "local" else scheduler
     note(f"processing {len(args.session)} session(s) on {where}")
     try:
-        res = process_sessions(args.session, _process_options(args), scheduler=scheduler, workers=args.workers or 2,
+        res = process_sessions(args.session, options, scheduler=scheduler, workers=args.workers or 2,
                                progress=console())
     except KeyboardInterrupt:
         print(f"rangekit: interrupted; the views decoded so far are cached. Continue with: rangekit process "
@@ -198,21 +227,66 @@ def _process_batch(args: argparse.Namespace) -> int:
     return 1 if res.failed else 0
 
 
+def processing_help() -> dict:
+    """The values the processing flags' help shows, from :class:`~rangekit.app.process.options.ProcessOptions` (read
+    when help is shown: :class:`rangekit.cli._common.LazyHelp`)."""
+    from rangekit._runtime.option_fields import default_of, specs
+    from rangekit.app.process.options import POISSON_DEFAULTS, ProcessOptions
+
+    depth = specs(ProcessOptions)["poisson_depth"]
+    return {"fusion": default_of(ProcessOptions, "fusion"), "format": default_of(ProcessOptions, "mesh_format"),
+            "depth_lo": depth.lo, "depth_hi": depth.hi,
+            "depths": ", ".join(f"{d} for {m}" for m, (d, _) in POISSON_DEFAULTS.items()),
+            "motion": f"{default_of(ProcessOptions, 'max_motion') * 100:g}"}
+
+
 def _processing_options(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--fusion", default="poisson", choices=LazyChoices("rangekit.app.process.options", "FUSION_METHODS"),
-                   metavar="{poisson,tsdf}",
-                   help="fusion into one mesh: poisson (default, screened Poisson of the merged cloud) or tsdf")
-    p.add_argument("--no-report", action="store_true", help="skip report.html")
-    p.add_argument("--format", default="ply", choices=LazyChoices("rangekit.app.process.fused_outputs", "MESH_EXPORT_FORMATS"),
-                   metavar="{ply,obj,stl,glb}",
-                   help="mesh files: ply (default; mesh.ply and mesh_watertight.ply, with vertex normals and the "
-                        "'observed' flag) or obj, stl, glb written beside them as mesh.FMT and mesh_watertight.FMT")
+    """The processing flags, the same on ``rangekit scan`` and ``rangekit process``: one per flag of
+    :data:`rangekit.app.process.options.PROCESS_FLAGS`, its range and default read from
+    :class:`~rangekit.app.process.options.ProcessOptions` when a value is parsed or help shown (building the
+    parser imports no ``rangekit.app``); no argparse default: a flag left out is a field left out
+    (:func:`process_options`)."""
+    from rangekit.cli.coded import _share
+
+    given, values, options = argparse.SUPPRESS, "rangekit.cli.scan:processing_help", \
+        "rangekit.app.process.options:ProcessOptions"
+    lazy_help(p.add_argument("--fusion", default=given, choices=LazyChoices("rangekit.app.process.options",
+                                                                            "FUSION_METHODS"),
+                             metavar="{poisson,tsdf}", help="fusion into one mesh: poisson (screened Poisson of the "
+                                                            "merged cloud) or tsdf; default {fusion}"), values)
+    p.add_argument("--no-report", action="store_true", default=given, help="skip report.html")
+    lazy_help(p.add_argument("--format", default=given,
+                             choices=LazyChoices("rangekit.app.process.fused_outputs", "MESH_EXPORT_FORMATS"),
+                             metavar="{ply,obj,stl,glb}",
+                             help="mesh files: ply (mesh.ply and mesh_watertight.ply, with vertex normals and the "
+                                  "'observed' flag) or obj, stl, glb written beside them as mesh.FMT and "
+                                  "mesh_watertight.FMT; default {format}"), values)
+    lazy_help(p.add_argument("--poisson-depth", type=option_range(options, "poisson_depth"), default=given,
+                             metavar="DEPTH",
+                             help="screened Poisson's octree depth, {depth_lo}..{depth_hi} (default the method's: "
+                                  "{depths}; each step up quadruples the mesh and about triples the fusion's time)"),
+              values)
+    lazy_help(p.add_argument("--max-motion", type=_share, default=given, metavar="PERCENT",
+                             help="refuse a view in which more than this share of the decoded pixels moved during "
+                                  "its capture (default {motion}%%; 'none': not checked; rangekit.coded.motion)"),
+              values)
+
+
+def scan_help() -> dict:
+    """The values ``rangekit scan``'s help shows: a new scan's defaults
+    (:data:`rangekit.app.scan.options.SCAN_DEFAULTS`)."""
+    from rangekit.app.scan.options import SCAN_DEFAULTS
+
+    return dict(SCAN_DEFAULTS)
 
 
 def add_parsers(sub) -> None:
     from rangekit.coded.patterns import PATTERN_METHODS
 
+    options, values = "rangekit.app.scan.options:ScanOptions", "rangekit.cli.scan:scan_help"
+
     scan = sub.add_parser("scan", help="scan: acquire a turntable session (resumable), then process it into a mesh",
+                          formatter_class=LazyHelp,
                           description="Acquire a crash-safe scan session (every turntable view, every pattern; "
                                       "--resume continues an interrupted one without redoing finished views), then "
                                       "decode, register and fuse it into DIR/mesh.ply.")
@@ -224,23 +298,26 @@ def add_parsers(sub) -> None:
     scan.add_argument("--method", choices=("coded", "laser"),
                       help="coded (default: projector patterns, views registered) or laser (the rig's line lasers, "
                            "switched by the turntable board, one profile per turntable step)")
-    scan.add_argument("--steps", type=int_in(2, 3600), help="turntable steps over a full turn of a laser scan "
-                                                            "(default 400)")
+    lazy_help(scan.add_argument("--steps", type=option_range(options, "steps"),
+                                help="turntable steps over a full turn of a laser scan (default {steps})"), values)
     scan.add_argument("--up", type=finite_float, nargs=3, metavar=("X", "Y", "Z"),
                       help="a mesh file object's up direction, stood upright on the turntable (Stanford scans: 0 1 0)")
     scan.add_argument("--rig", help="'sim' (default) or a rig file whose 'devices' name the turntable, projector and "
                                     "camera")
-    scan.add_argument("--object", help="simulated object: built-in name (default lumpy) or mesh file (copied into "
-                                       "the session)")
-    scan.add_argument("--views", type=int_in(2, 720), help="turntable views over a full turn (default 12)")
-    scan.add_argument("--passes", type=int_in(1, 8),
-                      help="turntable passes of --views views each, the object turned over between them to see its "
-                           "bottom (default 1; the simulator turns it over itself, a real rig asks)")
+    lazy_help(scan.add_argument("--object", help="simulated object: built-in name (default {object}) or mesh file "
+                                                 "(copied into the session)"), values)
+    lazy_help(scan.add_argument("--views", type=option_range(options, "views"),
+                                help="turntable views over a full turn (default {views})"), values)
+    lazy_help(scan.add_argument("--passes", type=option_range(options, "passes"),
+                                help="turntable passes of --views views each, the object turned over between them to "
+                                     "see its bottom (default {passes}; the simulator turns it over itself, a real rig "
+                                     "asks)"), values)
     scan.add_argument("--flipped", action="store_true",
                       help="with --resume: the object has been turned over for the next pass (no terminal to ask on)")
-    scan.add_argument("--patterns", choices=PATTERN_METHODS, help="pattern set (default hybrid: Gray code + phase "
-                                                                  "shift)")
-    scan.add_argument("--seed", type=seed, help="simulator noise seed (default 0)")
+    lazy_help(scan.add_argument("--patterns", choices=PATTERN_METHODS,
+                                help="pattern set (default {patterns}: Gray code + phase shift)"), values)
+    lazy_help(scan.add_argument("--seed", type=option_range(options, "seed"),
+                                help="simulator noise seed (default {seed})"), values)
     scan.add_argument("--artefact", choices=("vdi2634",),
                       help="simulator: scan the VDI/VDE 2634-2 artefacts (sphere, ball bar, plane; one view per "
                            "position) with the rig calibrated by 'rangekit calibrate' (--rig RIG.json, else calibrated "
@@ -269,6 +346,7 @@ def add_parsers(sub) -> None:
     scan.set_defaults(func=cmd_scan)
 
     proc = sub.add_parser("process", help="decode, register and fuse an acquired session into a mesh",
+                          formatter_class=LazyHelp,
                           description="Process a session folder (from 'rangekit scan'): every view decoded and "
                                       "triangulated, registered from the turntable angles, fused into mesh.ply. "
                                       "Several folders are processed on Dask: every view's decoding and then "
@@ -282,9 +360,4 @@ def add_parsers(sub) -> None:
     proc.add_argument("--workers", type=int_in(1, 256), metavar="N",
                       help="worker processes of --scheduler local, one thread each (default 2)")
     _processing_options(proc)
-    from rangekit.cli.coded import _share
-
-    proc.add_argument("--max-motion", type=_share, default=0.02, metavar="PERCENT",
-                      help="refuse a view in which more than this share of the decoded pixels moved during its "
-                           "capture (default 2%%; 'none': not checked; rangekit.coded.motion)")
     proc.set_defaults(func=cmd_process)

@@ -27,6 +27,7 @@ import numpy as np
 
 from rangekit.errors import InputError
 from rangekit.formats.sessions.summary import Accuracy
+from rangekit.formats.sessions.view_errors import ViewErrors
 from rangekit.geometry import apply_T, invert_T
 from rangekit.surface.mesh import TriangleMesh
 from rangekit.surface.raycast import mesh_scene, query_scene, raycasting_scene
@@ -232,7 +233,7 @@ class TruthEvaluation:
 
     accuracy: Accuracy
     truth: TriangleMesh   # the true surface in the session world (the table at the first view's angle)
-    view_errors: list | None = None   # per view, where the error comes from (rangekit.sim.truth.view_errors)
+    view_errors: ViewErrors | None = None   # per view, where the error comes from (rangekit.sim.truth.view_errors)
 
 
 def truth_evaluator(obj: str, rig: Rig, **options) -> "TruthEvaluator":
@@ -257,6 +258,9 @@ class TruthEvaluator:
     (:class:`rangekit.app.process.evaluate.RegisteredViewsLike`; :func:`rangekit.sim.truth.view_errors.view_errors`),
     for the per-view error breakdown.
     """
+
+    #: A :class:`rangekit.app.process.evaluate.Truth` that measures (the simulator knows the true surface).
+    measures = True
 
     def __init__(self, scene: Scene, rig: Rig, options: dict) -> None:
         self.scene, self.rig, self.options = scene, rig, dict(options)

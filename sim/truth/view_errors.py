@@ -24,6 +24,8 @@ import numpy as np
 from scipy.ndimage import binary_dilation, maximum_filter, minimum_filter
 
 from rangekit.camera import PinholeCamera, world_pixel_rays
+from rangekit.formats.sessions.view_errors import (CloudErrors, DecodingErrors, DistanceStats, PoseErrors, ViewError,
+                                                   ViewErrors)
 from rangekit.geometry import apply_T, invert_T, rotation_angle
 from rangekit.rig.rig_file import Rig
 from rangekit.surface.mesh import TriangleMesh, distance_to_surface
@@ -102,18 +104,19 @@ def _box_edges(depth_box: np.ndarray, box: tuple[slice, slice], camera) -> np.nd
     return edges[pad[0][0]: edges.shape[0] - pad[0][1], pad[1][0]: edges.shape[1] - pad[1][1]]
 
 
-def _stats(d: np.ndarray) -> dict:
+def _stats(d: np.ndarray) -> DistanceStats:
+    """RMS, 95th percentile and max of the distances ``d`` (metres)."""
     if d.size == 0:
-        return {"rms_mm": None, "p95_mm": None, "max_mm": None, "n": 0}
-    return {"rms_mm": float(np.sqrt(np.mean(d ** 2)) * 1e3), "p95_mm": float(np.percentile(d, 95) * 1e3),
-            "max_mm": float(d.max() * 1e3), "n": int(d.size)}
+        return DistanceStats(None, None, None, 0)
+    return DistanceStats(float(np.sqrt(np.mean(d ** 2))), float(np.percentile(d, 95)), float(d.max()), int(d.size))
 
 
 def view_errors(scene: Scene, rig: Rig, angles: Sequence[float], clouds: Sequence, T_world_view: np.ndarray,
                 proj_cols: Sequence[np.ndarray] | None = None, names: Sequence[str] | None = None,
-                pass_motions=None, measured: dict | None = None) -> list[dict]:
-    """One dict per view (see the module docstring): ``decoding`` (px), ``cloud`` (mm, with ``inside`` and
-    ``edge`` parts and ``edge_share``), ``registration`` (deg, mm). ``clouds``: each view's PointCloud in
+                pass_motions=None, measured: dict | None = None) -> ViewErrors:
+    """One :class:`~rangekit.formats.sessions.view_errors.ViewError` per view (see the module docstring): ``decoding``
+    (px), ``cloud`` (metres, with ``inside`` and ``edge`` parts and ``edge_share``), ``registration`` (radians,
+    metres). ``clouds``: each view's PointCloud in
     its own frame; ``proj_cols``: each view's decoded (H, W) projector column (NaN where undecoded), or None
     to skip the decoding figure; ``scene``: the simulated scene (object first) at table angle 0. A multi-pass
     scan: ``pass_motions`` (P, 4, 4) and ``angles`` as ``(angle, pass)`` pairs (:mod:`rangekit.sim.scene.passes`);
@@ -133,17 +136,17 @@ def view_errors(scene: Scene, rig: Rig, angles: Sequence[float], clouds: Sequenc
         E = invert_T(T_true[k]) @ T_world_view[k]
         c_view = apply_T(motions[k], centre[None])[0]   # the object's centre in view k's frame
         moved = np.linalg.norm(apply_T(E, P) - P, axis=1) if len(P) else np.zeros(0)
-        registration = {"rotation_deg": float(np.degrees(rotation_angle(E[:3, :3]))),
-                        "translation_mm": float(np.linalg.norm(apply_T(E, c_view[None])[0] - c_view) * 1e3),
-                        "point_rms_mm": float(np.sqrt(np.mean(moved ** 2)) * 1e3) if moved.size else None}
-        out.append({"view": names[k] if names is not None else k, "decoding": surface["decoding"],
-                    "cloud": surface["cloud"], "registration": registration})
-    return out
+        registration = PoseErrors(float(rotation_angle(E[:3, :3])),
+                                  float(np.linalg.norm(apply_T(E, c_view[None])[0] - c_view)),
+                                  float(np.sqrt(np.mean(moved ** 2))) if moved.size else None)
+        decoding, cloud_errors = surface
+        out.append(ViewError(names[k] if names is not None else k, decoding, cloud_errors, registration))
+    return ViewErrors(tuple(out))
 
 
 def view_surface_errors(scene: Scene, rig: Rig, angles: Sequence[float], k: int, cloud,
-                        proj_col: np.ndarray | None = None, pass_motions=None) -> dict:
-    """View ``k``'s errors that do not depend on its registered pose: ``{"decoding": ..., "cloud": ...}`` as in
+                        proj_col: np.ndarray | None = None, pass_motions=None) -> tuple[DecodingErrors | None, CloudErrors]:
+    """View ``k``'s errors that do not depend on its registered pose: ``(decoding, cloud)`` as in
     :func:`view_errors` (``angles`` and ``pass_motions`` as there: every view's, ``cloud`` and ``proj_col`` this
     view's). A scan's streaming processor measures each view with it as the view is decoded."""
     obj = scene.objects[0]
@@ -166,14 +169,14 @@ def view_surface_errors(scene: Scene, rig: Rig, angles: Sequence[float], k: int,
     edge = np.zeros(len(P), dtype=bool)
     edge[inside_img] = edges[v[inside_img], u[inside_img]]
     sq = float(np.sum(d ** 2))
-    cloud_stats = {**_stats(d), "inside": _stats(d[~edge]), "edge": _stats(d[edge]),
-                   "edge_share": float(np.sum(d[edge] ** 2) / sq) if sq > 0 else 0.0}
+    cloud_stats = CloudErrors(_stats(d), _stats(d[~edge]), _stats(d[edge]),
+                              float(np.sum(d[edge] ** 2) / sq) if sq > 0 else 0.0)
     decoding = None
     if proj_col is not None:
         col = proj_col if box is None else proj_col[box]
         both = np.isfinite(col) & np.isfinite(geometry.proj_col) & (geometry.object_id == 0)
         e = (col - geometry.proj_col)[both]
-        decoding = {"rms_px": float(np.sqrt(np.mean(e ** 2))) if e.size else None,
-                    "p95_px": float(np.percentile(np.abs(e), 95)) if e.size else None, "n": int(e.size)}
+        decoding = DecodingErrors(float(np.sqrt(np.mean(e ** 2))) if e.size else None,
+                                  float(np.percentile(np.abs(e), 95)) if e.size else None, int(e.size))
     del geometry, edges     # its pages serve the next view's cast (processing: reuse_freed_memory)
-    return {"decoding": decoding, "cloud": cloud_stats}
+    return decoding, cloud_stats

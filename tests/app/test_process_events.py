@@ -15,7 +15,7 @@ from sessions import N_VIEWS
 from rangekit.app import events as ev
 from rangekit.app.process.options import ProcessOptions
 from rangekit.cli import main
-from rangekit.errors import ConfigError, RangekitError
+from rangekit.errors import OptionError, RangekitError
 
 
 @pytest.fixture(scope="module")
@@ -80,5 +80,5 @@ def test_a_failure_is_announced_then_raised(tmp_path):
                                        ({"table_margin": float("nan")}, "table_margin"),
                                        ({"report": "yes"}, "report")])
 def test_options_are_checked_in_one_place(bad, what):
-    with pytest.raises(ConfigError, match=what):
+    with pytest.raises(OptionError, match=f"^{what}: expected "):
         ProcessOptions(**bad)

@@ -16,6 +16,7 @@ import rangekit as rk
 from sessions import N_VIEWS, frame_paths
 from file_reads import FileReads
 from rangekit.app import events as ev
+from rangekit.app.process.options import PROCESS_FLAGS
 from rangekit.app.scan.options import SCAN_FIELDS, SCAN_FLAGS, ScanOptions
 from rangekit.cli import main
 from rangekit.errors import OptionError, UsageError
@@ -34,7 +35,9 @@ def test_every_scan_flag_has_its_field_and_the_reverse():
     common = {"--help", "--verbose", "--quiet"}   # every command's
     flags = {s for a in _scan_parser()._actions for s in a.option_strings if s.startswith("--")} - common
     assert flags == set(SCAN_FLAGS.values())
-    assert set(SCAN_FLAGS) == set(SCAN_FIELDS) == {f.name for f in fields(ScanOptions)}
+    assert set(SCAN_FIELDS) == {f.name for f in fields(ScanOptions)}
+    # Every field has its flag, but the section ``processing``, whose fields have theirs (rangekit process's).
+    assert set(SCAN_FLAGS) == set(SCAN_FIELDS) - {"processing"} | {f"processing.{name}" for name in PROCESS_FLAGS}
 
 
 def test_the_command_line_maps_each_flag_onto_its_field(tmp_path):
@@ -54,7 +57,7 @@ def test_the_command_line_maps_each_flag_onto_its_field(tmp_path):
     ({"out": "x", "method": "laser", "patterns": "hybrid"}, "patterns: a laser scan projects no patterns; leave "
      "patterns out with method laser", "--patterns: a laser scan projects no patterns; leave --patterns out with "
      "--method laser"),
-    ({"out": "x", "views": 1}, "views: expected an integer in 2..720, found 1", None),
+    ({"out": "x", "views": 1}, "views: expected an integer in 2..720 or None, found 1", None),
     ({}, "out and resume: expected one of them", None),
     ({"out": "x", "format": "dxf"}, "format must be one of ply, obj, stl, glb, found 'dxf'", None),
 ])

@@ -36,10 +36,10 @@ def test_exact_views_score_zero(exact):
     rig, scene, angles, clouds, cols, _ = exact
     T = turntable_prior(rig.T_world_table, angles)
     ve = view_errors(scene, rig, angles, clouds, T, cols, ["a", "b"])
-    for v in ve:
-        assert v["cloud"]["rms_mm"] < 1e-4 and v["decoding"]["rms_px"] < 1e-9
-        assert v["registration"]["rotation_deg"] < 1e-9 and v["registration"]["point_rms_mm"] < 1e-9
-        assert 0 < v["cloud"]["edge"]["n"] < v["cloud"]["n"]
+    for v in ve:     # metres and radians inside
+        assert v.cloud.all.rms < 1e-7 and v.decoding.rms_px < 1e-9
+        assert np.degrees(v.registration.rotation) < 1e-9 and v.registration.point_rms < 1e-12
+        assert 0 < v.cloud.edge.n < v.cloud.all.n
 
 
 def test_each_error_lands_in_its_part(exact):
@@ -57,13 +57,20 @@ def test_each_error_lands_in_its_part(exact):
     moved = [clouds[0], PointCloud(P)]
     ve = view_errors(scene, rig, angles, moved, T_off, [cols[0], cols[1] + 0.25])
     v = ve[1]
-    assert v["registration"]["rotation_deg"] == pytest.approx(0.05, abs=1e-9)
-    assert v["decoding"]["rms_px"] == pytest.approx(0.25, abs=1e-9)
-    assert v["cloud"]["inside"]["rms_mm"] < 1e-4      # inside points untouched
-    assert v["cloud"]["edge_share"] > 0.99
+    assert np.degrees(v.registration.rotation) == pytest.approx(0.05, abs=1e-9)
+    assert v.decoding.rms_px == pytest.approx(0.25, abs=1e-9)
+    assert v.cloud.inside.rms < 1e-7      # inside points untouched
+    assert v.cloud.edge_share > 0.99
     # the distance to the surface of a point pushed 0.5 mm along its ray is at most 0.5 mm
-    assert 0.05 < v["cloud"]["edge"]["rms_mm"] <= 0.5 + 1e-6
-    assert ve[0]["registration"]["rotation_deg"] < 1e-9 and ve[0]["cloud"]["rms_mm"] < 1e-4
+    assert 0.05e-3 < v.cloud.edge.rms <= 0.5e-3 + 1e-9
+    assert np.degrees(ve[0].registration.rotation) < 1e-9 and ve[0].cloud.all.rms < 1e-7
+    # summary.json keeps its keys and units (mm, degrees) and reads back the same values
+    from rangekit.formats.sessions.view_errors import ViewErrors
+
+    listed = ve.to_list()
+    assert listed[1]["cloud"]["edge"]["rms_mm"] == v.cloud.edge.rms * 1e3
+    assert listed[1]["registration"]["rotation_deg"] == pytest.approx(0.05, abs=1e-9)
+    assert ViewErrors.from_list(listed).to_list() == listed
 
 
 @pytest.mark.parametrize("obj", ["lumpy", "shiny", "steps"])

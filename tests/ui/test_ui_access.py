@@ -177,8 +177,8 @@ def test_camera_controls_are_written_into_the_rig_file_and_change_the_frames(ser
     ({"name": "../outside", "views": 6}, "name: '../outside': begins with '.'; begin with a letter or a digit"),
     ({"name": "/tmp/x", "views": 6}, "name: '/tmp/x': begins with '/'"),
     ({"name": "a/b", "views": 6}, "name: 'a/b': '/' not allowed"),
-    ({"name": "s", "views": "six"}, "views: expected a whole number 2-360, found 'six'"),
-    ({"name": "s", "views": 1}, "views: expected a whole number 2-360, found 1"),
+    ({"name": "s", "views": "six"}, "views: expected a whole number 2-720, found 'six'"),
+    ({"name": "s", "views": 1}, "views: expected a whole number 2-720, found 1"),
 ])
 def test_a_scan_is_refused_outside_the_sessions_folder_or_with_bad_views(server, body, words):
     status, reply, _ = server.request("/api/scan/start", data=body)

@@ -94,7 +94,7 @@ def test_a_body_over_the_limit_is_refused_before_it_is_read(server):
     ("/api/scan/pause", {"paused": "no"}, "paused: expected true or false, found 'no'"),
     ("/api/scan/start", {"name": ["x"], "views": 2}, "name: expected a string, found ['x']"),
     ("/api/scan/start", {"name": "s", "views": 2, "resume": "yes"}, "resume: expected true or false, found 'yes'"),
-    ("/api/scan/start", {"name": "s", "views": 2.5}, "views: expected a whole number 2-360, found 2.5"),
+    ("/api/scan/start", {"name": "s", "views": 2.5}, "views: expected a whole number 2-720, found 2.5"),
     ("/api/scan/start", {"name": "s", "view": 2}, "scan: 'view': not a field here; expected name, views, resume"),
     ("/api/pattern", {"name": 3}, "name: expected a string, found 3"),
     ("/api/pattern", {}, "name: missing; pattern needs it"),
@@ -182,8 +182,22 @@ def test_a_pause_then_a_stop_right_after_a_start_ends_without_a_traceback(server
         assert not any("Traceback" in line or "KeyboardInterrupt" in line for line in state["log"]), state["log"]
 
 
+def test_the_form_s_ranges_and_defaults_are_the_options_own(server):
+    """``GET /api/options``: the Scan form's ranges and defaults, read from ScanOptions and ProcessOptions (issue 49),
+    the ones the command line's --views and the scan's check use."""
+    from rangekit._runtime.option_fields import specs
+    from rangekit.app.scan.options import SCAN_DEFAULTS, ScanOptions
+
+    status, body = server.request("/api/options")[:2]
+    views, s = json.loads(body)["scan"]["views"], specs(ScanOptions)["views"]
+    assert status == 200 and (views["min"], views["max"], views["default"]) == (s.lo, s.hi, SCAN_DEFAULTS["views"])
+    status, body = server.request("/api/scan/start", data={"name": "s", "views": s.hi + 1})[:2]
+    assert status == 400 and json.loads(body)["error"] == f"views: expected a whole number {s.lo}-{s.hi}, found {s.hi + 1}"
+
+
 def test_each_refusal_is_logged_once(server):
     """(Last in this module: the log of all the above.)"""
     log = server.stop()
     assert "Traceback" not in log and len(log) < 5000, log[-3000:]
     assert log.count("too many connections") <= 1 and log.count("did not arrive within") <= 1
+

@@ -34,6 +34,7 @@ from rangekit.app.process.options import ProcessOptions
 from rangekit.errors import ConfigError, DecodeError
 from rangekit.formats.clouds import save_cloud
 from rangekit.formats.poses import save_poses
+from rangekit.formats.sessions.laser_summary import LaserFigures, LaserSummary
 from rangekit.formats.sessions.summary import ProcessResult
 from rangekit.formats.laser_capture import load_laser_capture
 from rangekit.formats.sessions.session import Session
@@ -223,10 +224,12 @@ def process_laser(session: Session, options: ProcessOptions, evaluate, on_event:
         merged = oriented_profiles(profiles)
         save_cloud(out / "merged.ply", merged)
         call_progress(progress, f"fusing {len(merged):,} points (poisson)")
-        step = max(1, len(merged) // 400_000)
+        depth, most = options.poisson(laser=True)      # the laser's own by default: depth 9, 400k points
+        step = max(1, len(merged) // most)
         # One thread: Open3D's multi-threaded Poisson is not deterministic (see process.py).
         fused = poisson_meshes(PointCloud(merged.points[::step], merged.colours[::step], merged.normals[::step]),
-                               depth=9, n_threads=1, spacing=profile_spacing(profiles, session.rig.T_world_table)[::step])
+                               depth=depth, n_threads=1,
+                               spacing=profile_spacing(profiles, session.rig.T_world_table)[::step])
         mesh_info, watertight_info = save_fused(out, fused, fusion, options.mesh_format)
         mesh = fused.observed
         emit(on_event, MeshReady("observed", out / MESH_FILE, mesh))
@@ -238,13 +241,13 @@ def process_laser(session: Session, options: ProcessOptions, evaluate, on_event:
             call_progress(progress, "measuring the cloud and the meshes against the true surface")
             accuracy, truth, _ = evaluate_fused(evaluate, fused, angles, cloud=merged.points)
     per_step = profiles.n_points.sum(axis=1)
-    laser_info = {"lasers": [{"name": laser.name, "points": int(profiles.n_points[:, i].sum()),
-                              "steps_without_line": int((profiles.n_points[:, i] == 0).sum()),
-                              "table_points": int(profiles.on_table[i]),
-                              "rejected_rows": profiles.rejected[i]} for i, laser in enumerate(session.rig.lasers)],
-                  "peak_method": method}
+    laser_info = LaserSummary(tuple(LaserFigures(laser.name, int(profiles.n_points[:, i].sum()),
+                                                 int((profiles.n_points[:, i] == 0).sum()), int(profiles.on_table[i]),
+                                                 profiles.rejected[i])
+                                    for i, laser in enumerate(session.rig.lasers)), method)
     result = ProcessResult(out, profiles.names, profiles.T_world_view, [int(n) for n in per_step], [], float("nan"),
-                           mesh_info, timer.seconds, accuracy, laser=laser_info, watertight_mesh=watertight_info)
+                           mesh_info, timer.seconds, accuracy, laser=laser_info, watertight_mesh=watertight_info,
+                           options=options.to_dict())
     if options.report:
         with timer.stage("report"):
             from rangekit.app.laser.report import write_laser_report

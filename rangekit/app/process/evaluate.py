@@ -23,20 +23,21 @@ from rangekit.app.process.fused_outputs import with_closed
 from rangekit.app.process.register import RegisteredViews
 from rangekit.camera import forget_pixel_rays
 from rangekit.formats.sessions.summary import Accuracy
+from rangekit.formats.sessions.view_errors import ViewErrors
 from rangekit.progress import call_progress
 from rangekit.surface.mesh import TriangleMesh
 
-__all__ = ["Evaluation", "Evaluator", "RegisteredViewsLike", "measure_views", "measure_closed", "prepared_beside"]
+__all__ = ["Evaluation", "Truth", "Evaluator", "NoTruth", "NO_TRUTH", "measuring", "RegisteredViewsLike",
+           "measure_views", "measure_closed", "prepared_beside"]
 
 
 class Evaluation(Protocol):
     """What an evaluator returns: the mesh's :class:`Accuracy`, ``truth`` (the true surface in the session world,
-    for the report's heat map) and ``view_errors`` (a list of per-view dicts, the summary's "view_errors", or
-    None)."""
+    for the report's heat map) and ``view_errors`` (the per-view breakdown, the summary's "view_errors", or None)."""
 
     accuracy: Accuracy
     truth: TriangleMesh
-    view_errors: list | None
+    view_errors: ViewErrors | None
 
 
 class RegisteredViewsLike(Protocol):
@@ -50,20 +51,59 @@ class RegisteredViewsLike(Protocol):
     names: list[str]
 
 
-class Evaluator(Protocol):
-    """Measures a scan against the truth; processing is given one and never imports the simulator (which
-    provides it: :func:`rangekit.sim.truth.evaluate.truth_evaluator`).
+class Truth(Protocol):
+    """What a scan is measured against; processing is given one and never imports the simulator (which provides
+    it: :func:`rangekit.sim.truth.evaluate.truth_evaluator`); on hardware :data:`NO_TRUTH`.
 
-    ``evaluate(mesh, angles, cloud=None, views=None)``: the fused mesh (session world) and the views' turntable
-    angles (radians; ``(angle, pass)`` pairs in a multi-pass scan) to an :class:`Evaluation`; ``cloud`` the merged
-    points (session world), ``views`` the registered views for the per-view breakdown. ``prepare(angles,
-    views)`` computes ahead, beside the fusion, what does not depend on the mesh (the same ``views`` object is
-    then recognised by identity)."""
+    ``measures``: False when there is nothing to measure against (:class:`NoTruth`): the stages then skip the
+    evaluation (:func:`measuring`). ``truth(mesh, angles, cloud=None, views=None)``: the fused mesh (session world)
+    and the views' turntable angles (radians; ``(angle, pass)`` pairs in a multi-pass scan) to an
+    :class:`Evaluation`; ``cloud`` the merged points (session world), ``views`` the registered views for the
+    per-view breakdown. ``prepare(angles, views)`` computes ahead, beside the fusion, what does not depend on the
+    mesh (the same ``views`` object is then recognised by identity). ``prepare_view(angles, k, cloud, proj_col)``:
+    view ``k``'s errors that its registered pose does not change, measured as the view is decoded (a scan's
+    streaming processor), taken by ``prepare`` when its ``views`` hold these very objects."""
+
+    measures: bool
 
     def __call__(self, mesh: TriangleMesh, angles: Sequence, cloud: np.ndarray | None = None,
                  views: RegisteredViewsLike | None = None) -> Evaluation: ...
 
     def prepare(self, angles: Sequence, views: RegisteredViewsLike | None = None) -> None: ...
+
+    def prepare_view(self, angles: Sequence, k: int, cloud, proj_col: np.ndarray | None = None) -> None: ...
+
+
+#: The name processing has used for a :class:`Truth`.
+Evaluator = Truth
+
+
+class NoTruth:
+    """The truth of a hardware scan: nothing to measure against (``measures`` False); preparing does nothing, and
+    measuring is refused (the stages do not call it: :func:`measuring`)."""
+
+    measures = False
+
+    def __call__(self, mesh, angles, cloud=None, views=None) -> Evaluation:
+        raise TypeError("NoTruth: a hardware scan has no truth to measure against (check Truth.measures first)")
+
+    def prepare(self, angles, views=None) -> None:
+        return None
+
+    def prepare_view(self, angles, k, cloud, proj_col=None) -> None:
+        return None
+
+    def __repr__(self) -> str:
+        return "NO_TRUTH"
+
+
+#: The one :class:`NoTruth`.
+NO_TRUTH = NoTruth()
+
+
+def measuring(truth: Truth | None) -> Truth | None:
+    """``truth`` when it measures, else None: the stages take None as "no evaluation"."""
+    return truth if truth is not None and truth.measures else None
 
 
 @contextmanager

@@ -23,7 +23,7 @@ from rangekit._runtime.memory import release_free_memory
 from rangekit.app.events import MeshReady, OnEvent, StageClock, emit, progress_of
 from rangekit.app.process.decode import DecodedViews
 from rangekit.app.process.fused_outputs import MESH_FILE, WATERTIGHT_FILE, evaluate_observed, save_one
-from rangekit.app.process.options import ProcessOptions
+from rangekit.app.process.options import POISSON_POINTS, ProcessOptions
 from rangekit.app.process.register import RegisteredViews
 from rangekit.formats.clouds import save_cloud
 from rangekit.formats.sessions.session import Session
@@ -39,12 +39,6 @@ __all__ = ["CHILD_MIN_POINTS", "POISSON_POINTS", "CHILD_IMPORTS", "FusedViews", 
 #: Fewest sampled points whose Poisson runs in a child process: below, it takes less than the child's start
 #: (about 1 s of imports, on the other core).
 CHILD_MIN_POINTS = 100_000
-#: Poisson's input: every k-th merged point, k the smallest that leaves at most this many. With the octree at
-#: depth 8 (:class:`ProcessOptions`' ``poisson_depth``) more points per cell average more noise out: on the default
-#: 12-view scan (2.02M points) 674k points measure 0.012 mm RMS against the truth where 404k measured 0.017 mm;
-#: every point (2.02M) measured 0.008 mm but the observed cut, spaced by these points, then kept less (completeness
-#: 99.4% against 99.6%). docs/benchmarks.md, issue 36.
-POISSON_POINTS = 700_000
 #: What the Poisson child imports while the views are registered (Open3D alone: 0.6 s).
 CHILD_IMPORTS = ("open3d", "rangekit.surface.fusion")
 
@@ -61,15 +55,15 @@ class FusedViews:
     evaluation: object | None
 
 
-def _sample_step(decoded: DecodedViews) -> int:
-    """Poisson's sample: every step-th merged point, at most :data:`POISSON_POINTS`."""
-    return max(1, -(-sum(len(c) for c in decoded.clouds) // POISSON_POINTS))
+def _sample_step(decoded: DecodedViews, options: ProcessOptions) -> int:
+    """Poisson's sample: every step-th merged point, at most ``options``' points (:data:`POISSON_POINTS` by default)."""
+    return max(1, -(-sum(len(c) for c in decoded.clouds) // options.poisson(laser=False)[1]))
 
 
 def poisson_child(decoded: DecodedViews, options: ProcessOptions, children: ExitStack):
     """A child process for a Poisson fusion large enough to gain from one, started now so that it imports what
     it needs on the other core while the views register (ended with ``children``); None otherwise."""
-    step = _sample_step(decoded)
+    step = _sample_step(decoded, options)
     if options.fusion != "poisson" or -(-sum(len(c) for c in decoded.clouds) // step) < CHILD_MIN_POINTS:
         return None
     child = spawn_child(CHILD_IMPORTS)
@@ -90,7 +84,7 @@ class Fusion:
         self._registered, self._session, self._options, self._on_event = registered, session, options, on_event
         clouds, T = registered.decoded.clouds, registered.T_world_view
         merged = merge_clouds(clouds, T)
-        step = _sample_step(registered.decoded)
+        step = _sample_step(registered.decoded, options)
         self._sample = PointCloud(merged.points[::step].copy(), merged.colours[::step].copy(),
                                   merged.normals[::step].copy())
         self._merged = merged
@@ -99,8 +93,8 @@ class Fusion:
                       + ("; measuring the views against the true surface alongside" if measuring_beside else ""))
         if options.fusion == "poisson":
             in_child = -(-self.n_merged // step) >= CHILD_MIN_POINTS
-            self._call = call_beside(poisson_surfaces, self._sample, depth=options.poisson_depth, n_threads=1, in_child=in_child,
-                                     child=child)
+            self._call = call_beside(poisson_surfaces, self._sample, depth=options.poisson(laser=False)[0], n_threads=1,
+                                     in_child=in_child, child=child)
         else:
             self._call = call_beside(_tsdf_surface, registered.decoded.maps, T, session.rig, in_child=False)
 

@@ -132,7 +132,8 @@ def _process(session: Session, options: ProcessOptions, evaluate: Evaluator | No
     result = ProcessResult(session.folder, decoded.names, registered.T_world_view, [len(c) for c in decoded.clouds],
                            registered.edges, registered.rmse, fused.observed_info, clock.seconds, accuracy,
                            watertight_mesh=fused.watertight_info, view_errors=view_errors,
-                           view_passes=registered.view_passes, registration_note=registered.note)
+                           view_passes=registered.view_passes, registration_note=registered.note,
+                           options=options.to_dict())
     if options.report:
         _report(result, registered, fused, session, truth, clock, on_event, agreement[0].result())
     atomic_write_json(session.folder / "summary.json", result.to_dict())   # last: the set is complete

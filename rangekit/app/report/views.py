@@ -18,6 +18,8 @@ from typing import Sequence
 
 import numpy as np
 
+from rangekit.formats.sessions.view_errors import ViewErrors
+
 __all__ = ["saturated_fraction", "view_errors_section", "view_table_figures", "view_table_section"]
 
 
@@ -62,8 +64,8 @@ def _f(value, fmt: str) -> str:
     return "-" if value is None else format(value, fmt)
 
 
-def view_errors_section(view_errors: list[dict] | None) -> list[str]:
-    """HTML sections (a heading, a note and the table), or [] without per-view figures."""
+def view_errors_section(view_errors: ViewErrors | None) -> list[str]:
+    """HTML sections (a heading, a note and the table), or [] without per-view figures (shown in mm and degrees)."""
     if not view_errors:
         return []
     head = ("<tr><th>view</th><th>decoding RMS px</th><th>cloud RMS mm</th><th>p95 mm</th><th>max mm</th>"
@@ -71,9 +73,10 @@ def view_errors_section(view_errors: list[dict] | None) -> list[str]:
             "<th>pose error deg</th><th>pose error mm</th></tr>")
     rows = []
     for v in view_errors:
-        c, r, d = v["cloud"], v["registration"], v.get("decoding") or {}
+        c, r = v.cloud.to_dict(), v.registration.to_dict()      # mm and degrees, as summary.json has them
+        rms_px = None if v.decoding is None else v.decoding.rms_px
         rows.append("<tr>" + "".join(f"<td>{html.escape(str(x))}</td>" for x in (
-            v["view"], _f(d.get("rms_px"), ".3f"), _f(c["rms_mm"], ".4f"), _f(c["p95_mm"], ".4f"),
+            v.view, _f(rms_px, ".3f"), _f(c["rms_mm"], ".4f"), _f(c["p95_mm"], ".4f"),
             _f(c["max_mm"], ".3f"), _f(c["inside"]["rms_mm"], ".4f"), _f(c["edge"]["rms_mm"], ".4f"),
             f"{c['edge']['n']:,}", f"{c['edge_share']:.0%}", _f(r["rotation_deg"], ".4f"),
             _f(r["translation_mm"], ".4f"))) + "</tr>")

@@ -11,7 +11,9 @@ from __future__ import annotations
 from dataclasses import dataclass, fields
 from pathlib import Path
 
-from rangekit._runtime.arguments import check_items, check_path, check_vector, is_int as _is_int
+from rangekit._runtime.arguments import check_instance, check_items, check_path, check_vector, is_int as _is_int
+from rangekit._runtime.option_fields import UNSET, check_ranges, flags, option, specs
+from rangekit.app.process.options import ProcessOptions
 from rangekit.errors import OptionError
 
 __all__ = ["ScanOptions", "SCAN_FLAGS", "SCAN_METHODS", "SCAN_DEFAULTS", "LASER_STEPS", "ARTEFACTS"]
@@ -19,20 +21,10 @@ __all__ = ["ScanOptions", "SCAN_FLAGS", "SCAN_METHODS", "SCAN_DEFAULTS", "LASER_
 #: Scan methods: coded light (projector patterns, views registered) and laser lines (profiles at small
 #: turntable steps, placed by the turntable angle).
 SCAN_METHODS = ("coded", "laser")
-#: The options of a new scan left None.
-SCAN_DEFAULTS = {"method": "coded", "rig": "sim", "object": "lumpy", "views": 12, "patterns": "hybrid", "seed": 0,
-                 "passes": 1}
 #: Turntable steps of a laser scan over a full turn (0.9 degrees each).
 LASER_STEPS = 400
 #: ``artefact``: the simulated acceptance test of VDI/VDE 2634 part 2 (:mod:`rangekit.app.scan.vdi2634`).
 ARTEFACTS = ("vdi2634",)
-#: Each field's ``rangekit scan`` flag (``process`` and ``report`` are the flags' negations).
-SCAN_FLAGS = {"out": "--out", "resume": "--resume", "method": "--method", "rig": "--rig", "object": "--object",
-              "views": "--views", "steps": "--steps", "passes": "--passes", "flipped": "--flipped",
-              "patterns": "--patterns", "seed": "--seed", "up": "--up", "artefact": "--artefact",
-              "positions": "--positions", "allow_auto_exposure": "--allow-auto-exposure",
-              "exposures": "--exposures", "process": "--no-process", "fusion": "--fusion", "report": "--no-report",
-              "format": "--format", "realtime": "--realtime", "frames": "--frames", "sim_bump": "--sim-bump"}
 #: Options of a turntable scan that ``artefact`` (one view per artefact position, coded light) does not take.
 _NOT_WITH_ARTEFACT = ("resume", "method", "steps", "up", "object", "views", "patterns", "passes", "flipped",
                       "frames", "sim_bump")
@@ -58,8 +50,12 @@ class ScanOptions:
         ``seed``); positions : (spheres, ball bars, planes) of it.
     allow_auto_exposure : scan although the rig file's exposure is ``"auto"``.
     exposures : multi-exposure capture, 2 to 8 exposures in microseconds, or ``("auto",)``.
-    process : decode, register and fuse after acquisition; fusion, report, format : how
-        (:class:`rangekit.app.process.options.ProcessOptions`).
+    process : decode, register and fuse after acquisition; processing : how
+        (:class:`rangekit.app.process.options.ProcessOptions`, every option of ``rangekit process``; None: its
+        defaults). After the check it is never None.
+    fusion, report, format : shorthands kept for the callers of older versions: each, when given, fills the field
+        of ``processing`` it names (``fusion``, ``report``, ``mesh_format``) and reads None afterwards, so that
+        ``processing`` is the one source; given together with a ``processing`` whose field differs, refused.
     realtime : the simulator keeps real time: the rig file's waits and frame rate, the projector's latency,
         the turntable's speed (:mod:`rangekit.sim.devices.realtime`); the frames are the same bytes.
     frames : the frame files of a new session: ``"npy.zst"`` (:mod:`rangekit.npy_zst`; the default for coded
@@ -69,33 +65,35 @@ class ScanOptions:
         the view's end, then back in place (testing the motion check: the scan takes the view again).
     """
 
-    out: str | Path | None = None
-    resume: str | Path | None = None
-    method: str | None = None
-    rig: str | Path | None = None
-    object: str | Path | None = None
-    views: int | None = None
-    steps: int | None = None
-    passes: int | None = None
-    flipped: bool = False
-    patterns: str | None = None
-    seed: int | None = None
-    up: tuple[float, float, float] | None = None
-    artefact: str | None = None
-    positions: tuple[int, int, int] | None = None
-    allow_auto_exposure: bool = False
-    exposures: tuple | None = None
-    process: bool = True
-    fusion: str = "poisson"
-    report: bool = True
-    format: str = "ply"
-    realtime: bool = False
-    frames: str | None = None
-    sim_bump: tuple[int, int, float] | None = None
+    out: str | Path | None = option(None, "--out")
+    resume: str | Path | None = option(None, "--resume")
+    method: str | None = option(None, "--method", initial="coded")
+    rig: str | Path | None = option(None, "--rig", initial="sim")
+    object: str | Path | None = option(None, "--object", initial="lumpy")
+    views: int | None = option(None, "--views", lo=2, hi=720, integer=True, initial=12)
+    steps: int | None = option(None, "--steps", lo=2, hi=3600, integer=True, initial=LASER_STEPS)
+    passes: int | None = option(None, "--passes", lo=1, hi=8, integer=True, initial=1)
+    flipped: bool = option(False, "--flipped")
+    patterns: str | None = option(None, "--patterns", initial="hybrid")
+    seed: int | None = option(None, "--seed", lo=0, hi=2**32 - 1, integer=True, initial=0)
+    up: tuple[float, float, float] | None = option(None, "--up")
+    artefact: str | None = option(None, "--artefact")
+    positions: tuple[int, int, int] | None = option(None, "--positions")
+    allow_auto_exposure: bool = option(False, "--allow-auto-exposure")
+    exposures: tuple | None = option(None, "--exposures")
+    process: bool = option(True, "--no-process")
+    fusion: str | None = option(None, "--fusion")
+    report: bool | None = option(None, "--no-report")
+    format: str | None = option(None, "--format")
+    realtime: bool = option(False, "--realtime")
+    frames: str | None = option(None, "--frames")
+    sim_bump: tuple[int, int, float] | None = option(None, "--sim-bump")
+    processing: ProcessOptions | None = None
 
     def __post_init__(self) -> None:
         _check_values(self)
         _check_combination(self)
+        _fill_processing(self)
 
     @property
     def folder(self) -> Path:
@@ -117,10 +115,7 @@ def _check_values(o: ScanOptions) -> None:
     for name, what in (("out", "a new session folder"), ("resume", "a session folder"), ("rig", "'sim' or a rig file"),
                        ("object", "a built-in object's name or a mesh file")):
         check_path(f"{{{name}}}", getattr(o, name), what=what, optional=True, error=OptionError)
-    for name, lo, hi in (("views", 2, 720), ("steps", 2, 3600), ("passes", 1, 8), ("seed", 0, 2**32 - 1)):
-        value = getattr(o, name)
-        if value is not None and (not _is_int(value) or not lo <= value <= hi):
-            raise OptionError(f"{{{name}}}: expected an integer in {lo}..{hi}, found {value!r}")
+    check_ranges(o, OptionError)
     from rangekit.formats.sessions.session import FRAME_FORMATS
 
     for name, choices in (("method", SCAN_METHODS), ("patterns", PATTERN_METHODS), ("artefact", ARTEFACTS),
@@ -129,11 +124,12 @@ def _check_values(o: ScanOptions) -> None:
         if value is not None and value not in choices:
             raise OptionError(f"{{{name}}} must be one of {', '.join(choices)}, found {value!r}")
     for name, choices in (("fusion", FUSION_METHODS), ("format", MESH_EXPORT_FORMATS)):
-        if getattr(o, name) not in choices:
+        if getattr(o, name) is not None and getattr(o, name) not in choices:
             raise OptionError(f"{{{name}}} must be one of {', '.join(choices)}, found {getattr(o, name)!r}")
     for name in ("flipped", "allow_auto_exposure", "process", "report", "realtime"):
-        if not isinstance(getattr(o, name), bool):
+        if not isinstance(getattr(o, name), bool) and not (name == "report" and o.report is None):
             raise OptionError(f"{{{name}}}: expected True or False, found {getattr(o, name)!r}")
+    check_instance("{processing}", o.processing, ProcessOptions, "a ProcessOptions", optional=True, error=OptionError)
     check_vector("{up}", o.up, 3, optional=True, error=OptionError)
     if o.positions is not None and (len(check_items("{positions}", o.positions, "three integers SPHERES BARS PLANES",
                                                     error=OptionError)) != 3
@@ -202,6 +198,33 @@ def _check_combination(o: ScanOptions) -> None:
         raise OptionError("{exposures}: multi-exposure capture is for coded light; leave it out with {method} laser")
 
 
+#: The shorthands of ``processing``'s fields: ScanOptions' field -> ProcessOptions' field.
+_SHORTHANDS = {"fusion": "fusion", "report": "report", "format": "mesh_format"}
+
+
+def _fill_processing(o: ScanOptions) -> None:
+    """``processing`` made whole: the shorthands given (``fusion``, ``report``, ``format``) written into it, then
+    read as None; a shorthand that differs from the ``processing`` given is refused (one value per option)."""
+    given = {_SHORTHANDS[name]: getattr(o, name) for name in _SHORTHANDS if getattr(o, name) is not None}
+    section = o.processing
+    if section is None:
+        section = ProcessOptions(**given)
+    else:
+        for name, value in given.items():
+            if getattr(section, name) != value:
+                short = next(k for k, v in _SHORTHANDS.items() if v == name)
+                raise OptionError(f"{{{short}}} {value!r} and {{processing.{name}}} {getattr(section, name)!r}: two "
+                                  f"values of one option; give it once, in {{processing}}")
+    object.__setattr__(o, "processing", section)
+    for name in _SHORTHANDS:
+        object.__setattr__(o, name, None)
+
+
 #: Every field, in order (the command line's test checks each has its flag and the reverse).
 SCAN_FIELDS = tuple(f.name for f in fields(ScanOptions))
+#: The options of a new scan left None (each field's ``initial``, :mod:`rangekit._runtime.option_fields`).
+SCAN_DEFAULTS = {name: s.initial for name, s in specs(ScanOptions).items() if s.initial is not UNSET}
+#: Each field's ``rangekit scan`` flag (``process`` and ``report`` are the flags' negations), ``processing``'s
+#: fields as ``processing.NAME`` with ``rangekit process``'s flags (the same on both commands).
+SCAN_FLAGS = {**flags(ScanOptions), **flags(ProcessOptions, prefix="processing.")}
 __all__ += ["SCAN_FIELDS"]

@@ -17,7 +17,7 @@ from rangekit._runtime.arguments import check_callable, check_instance, check_pa
 from rangekit._runtime.child import call_beside
 from rangekit.app.event_log import logged
 from rangekit.app.events import OnEvent, ScanStarted, StageClock, emit, failures_announced, progress_of
-from rangekit.app.process.evaluate import Evaluator
+from rangekit.app.process.evaluate import Evaluator, measuring
 from rangekit.app.process.options import ProcessOptions
 from rangekit.app.process.process import process_session
 from rangekit.app.scan.options import ScanOptions
@@ -87,7 +87,7 @@ def scan(options: ScanOptions, on_event: OnEvent | None = None) -> ScanResult:
         with ExitStack() as held:
             if options.resume is not None and (options.folder / "session.json").is_file():
                 held.enter_context(session_lock(options.folder))
-            process_options = ProcessOptions(fusion=options.fusion, report=options.report, mesh_format=options.format)
+            process_options = options.processing
             one_at_a_time, streaming = _serialised(on_event), None
             if options.process:
                 from rangekit.app.scan.streaming import StreamingProcessor
@@ -242,5 +242,6 @@ def process(session: Session | str | Path, options: ProcessOptions | None = None
             evaluate = None
         elif evaluate is None:
             evaluate = session_evaluator(session)
+        evaluate = measuring(evaluate)      # NO_TRUTH (hardware): no evaluation
     return process_session(session, options, evaluate=evaluate, on_event=on_event, map_pairs=map_pairs,
                            decoded_views=decoded_views, registration_ahead=registration_ahead)

@@ -98,7 +98,7 @@ class StreamingProcessor:
         self.decoded: list[int] = []               # views decoded here, in order
         self.moved: dict = {}                      # index -> MotionError: views the object moved during
         self.results: dict = {}                    # index -> (cloud, ViewMaps): the processing takes them as they are
-        self.evaluate = None                       # the simulator's evaluator, prepared view by view (None on hardware)
+        self.evaluate = None                       # the session's Truth, prepared view by view (NO_TRUTH on hardware)
         self.measured: list[int] = []              # views whose errors against the truth were measured here
         self.registration = None                   # RegistrationAhead of a one-pass turntable scan, from view 0 on
         self.quiet = QuietWindows()                # the capture's waits: the TSDF integration starts in one
@@ -231,7 +231,7 @@ class StreamingProcessor:
             try:
                 if self.options.truth and self.evaluate is None and k == 0:
                     self.evaluate = session_evaluator(session)
-                if self.evaluate is not None and hasattr(self.evaluate, "prepare_view") and truth:
+                if truth and self.evaluate is not None and self.evaluate.measures:
                     angles = evaluator_angles(session.views, multi_pass=session.plan.passes > 1)
                     self.evaluate.prepare(angles)                  # the truth's samples, once
                     self.evaluate.prepare_view(angles, k, cloud, maps.proj_col)

@@ -14,7 +14,11 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["SUMMARY_SCHEMA", "Edge", "MeshFigures", "Accuracy", "ClosedAccuracy", "ProcessResult"]
+from rangekit.formats.sessions.laser_summary import LaserSummary
+from rangekit.formats.sessions.view_errors import ViewErrors
+
+__all__ = ["SUMMARY_SCHEMA", "Edge", "MeshFigures", "Accuracy", "ClosedAccuracy", "ProcessResult", "LaserSummary",
+           "ViewErrors"]
 
 SUMMARY_SCHEMA = "rangekit.summary/1"
 
@@ -164,11 +168,12 @@ class ProcessResult:
     mesh: MeshFigures               # mesh.ply, the observed surface
     seconds: dict = field(default_factory=dict)   # wall time per stage
     accuracy: Accuracy | None = None   # against the truth when an evaluator was given
-    laser: dict | None = None       # a laser scan: per laser its points, steps without a line, rejected rows
+    laser: LaserSummary | None = None   # a laser scan: per laser its points, steps without a line, rejected rows
     watertight_mesh: MeshFigures | None = None   # the closed mesh (mesh_watertight.ply)
-    view_errors: list | None = None  # simulator: per view, decoding / cloud (inside, edge) / registration errors
+    view_errors: ViewErrors | None = None   # simulator: per view, decoding / cloud (inside, edge) / pose errors
     view_passes: list | None = None  # a multi-pass scan: each view's turntable pass (0, 1, ...)
     registration_note: str = ""     # a registration that failed and what was kept instead (the turntable's poses)
+    options: dict | None = None     # the processing's options (ProcessOptions.to_dict: every field by name)
 
     @property
     def mesh_path(self) -> Path:
@@ -186,11 +191,12 @@ class ProcessResult:
                 "registration_rmse_m": None if np.isnan(self.registration_rmse) else self.registration_rmse,
                 "mesh": self.mesh.to_dict(), "seconds": self.seconds,
                 "accuracy": None if self.accuracy is None else self.accuracy.to_dict(),
-                **({"laser": self.laser} if self.laser is not None else {}),
+                **({"laser": self.laser.to_dict()} if self.laser is not None else {}),
                 **({"mesh_watertight": self.watertight_mesh.to_dict()} if self.watertight_mesh is not None else {}),
-                **({"view_errors": self.view_errors} if self.view_errors is not None else {}),
+                **({"view_errors": self.view_errors.to_list()} if self.view_errors is not None else {}),
                 **({"view_passes": self.view_passes} if self.view_passes is not None else {}),
-                **({"registration_note": self.registration_note} if self.registration_note else {})}
+                **({"registration_note": self.registration_note} if self.registration_note else {}),
+                **({"options": self.options} if self.options is not None else {})}
 
     @classmethod
     def from_dict(cls, d: dict, folder: str | Path) -> "ProcessResult":
@@ -203,12 +209,15 @@ class ProcessResult:
                                   f"{shown(d.get('schema'))}")
         rmse = d.get("registration_rmse_m")
         acc, closed = d.get("accuracy"), d.get("mesh_watertight")
+        laser, errors, options = d.get("laser"), d.get("view_errors"), d.get("options")
         return cls(Path(folder), list(d["views"]), np.array(d["T_world_view"], dtype=np.float64), list(d["n_points"]),
                    [Edge.from_dict(e) for e in d["edges"]], float("nan") if rmse is None else rmse,
                    MeshFigures.from_dict(d["mesh"]), dict(d.get("seconds", {})),
-                   None if acc is None else Accuracy.from_dict(acc), d.get("laser"),
-                   None if closed is None else MeshFigures.from_dict(closed), d.get("view_errors"), d.get("view_passes"),
-                   str(d.get("registration_note", "")))
+                   None if acc is None else Accuracy.from_dict(acc),
+                   None if laser is None else LaserSummary.from_dict(laser),
+                   None if closed is None else MeshFigures.from_dict(closed),
+                   None if errors is None else ViewErrors.from_list(errors), d.get("view_passes"),
+                   str(d.get("registration_note", "")), None if options is None else dict(options))
 
     def summary_lines(self) -> list[str]:
         """The end-of-run summary, one line per fact, for people (mm and degrees here only)."""
@@ -221,10 +230,8 @@ class ProcessResult:
         if self.view_passes is not None:
             lines[-1] += f"; {max(self.view_passes) + 1} passes of {self.view_passes.count(0)} views"
         if self.laser is not None:
-            lines.append("registration: none, each laser profile placed by its turntable angle; " + "; ".join(
-                f"{d['name']}: {d['points']:,} points, no line in {d['steps_without_line']} step(s)"
-                + (f", {d['rejected_rows'].get('saturated', 0):,} saturated rows" if d["rejected_rows"].get("saturated")
-                   else "") for d in self.laser["lasers"]))
+            lines.append("registration: none, each laser profile placed by its turntable angle; "
+                         + "; ".join(laser.summary() for laser in self.laser.lasers))
         else:
             lines.append(f"registration: {len(acc)}/{len(self.edges)} pairs accepted, pair ICP RMSE median "
                          f"{np.median([e.rmse * 1e3 for e in acc]):.4f} mm, joint RMS {self.registration_rmse * 1e3:.4f} "
@@ -255,7 +262,7 @@ class ProcessResult:
                 lines.append(f"cloud against the true surface: RMS {a.cloud_rms * 1e3:.3f} mm, 95th percentile "
                              f"{a.cloud_p95 * 1e3:.3f} mm over {a.n_cloud:,} points")
             if self.view_errors:
-                lines.append(_view_errors_line(self.view_errors))
+                lines.append(self.view_errors.summary_line())
             lines.append(f"  ({a.visible_fraction:.0%} of the object is visible within "
                          f"{round(math.degrees(a.max_incidence), 9):g} deg of incidence; {a.unobserved_area:.1%} of the "
                          f"mesh lies where no view can see, RMS {a.unobserved_rms * 1e3:.2f} mm there)")
@@ -271,17 +278,3 @@ class ProcessResult:
         return (f"ProcessResult({len(self.n_points)} views, {sum(self.n_points)} points, mesh watertight "
                 f"{self.mesh_watertight}; {t})")
 
-
-def _view_errors_line(views: list[dict]) -> str:
-    """One summary line of the per-view breakdown: the ranges over the views."""
-    def span(values, fmt):
-        values = [v for v in values if v is not None]
-        return f"{min(values):{fmt}}-{max(values):{fmt}}" if values else "n/a"
-
-    cloud = [v["cloud"] for v in views]
-    reg = [v["registration"] for v in views]
-    dec = [v["decoding"]["rms_px"] for v in views if v.get("decoding")]
-    return (f"per view against the truth: cloud RMS {span([c['rms_mm'] for c in cloud], '.4f')} mm (depth-edge "
-            f"points {span([100 * c['edge_share'] for c in cloud], '.0f')}% of the squared error), decoding RMS "
-            f"{span(dec, '.3f')} px, registration within {max(r['rotation_deg'] for r in reg):.4f} deg and "
-            f"{max(r['translation_mm'] for r in reg):.4f} mm of the true turntable poses")

@@ -26,6 +26,7 @@ from rangekit.ui.jobs.base import Job, JobState
 from rangekit.ui.jobs.child import spawned
 from rangekit.ui.jobs.scan_view import ScanView
 from rangekit.ui.paths import confined
+from rangekit.ui.scan_options import option_limits
 
 __all__ = ["Followed", "ScanJob"]
 
@@ -73,8 +74,9 @@ class ScanJob(Job):
             if folder.exists():
                 raise RangekitError(f"name: {name} exists under the sessions folder; choose another name (or resume "
                                     "it from the sessions list)")
-            if isinstance(views, bool) or not isinstance(views, int) or not 2 <= views <= 360:
-                raise RangekitError(f"views: expected a whole number 2-360, found {views!r}")
+            lo, hi = (option_limits()["scan"]["views"][k] for k in ("min", "max"))   # rangekit scan's --views
+            if isinstance(views, bool) or not isinstance(views, int) or not lo <= views <= hi:
+                raise RangekitError(f"views: expected a whole number {lo}-{hi}, found {views!r}")
             # The simulated rig keeps real time, as the hardware would (the rig file's pattern delay,
             # exposure, the turntable's speed): each view decoded while the next is captured.
             args = ["--out", str(folder), "--views", str(views)] + (
@@ -85,12 +87,13 @@ class ScanJob(Job):
         """Reprocess session ``name`` with other options: ``rangekit process sessions/name --fusion F --format
         FMT [--no-report]`` as a child (refused while a scan or another processing runs)."""
         from rangekit.app.process.fused_outputs import MESH_EXPORT_FORMATS
+        from rangekit.app.process.options import FUSION_METHODS
 
         folder = confined(self.sessions, name)
         if folder.parent != self.sessions or not (folder / "session.json").is_file():
             raise RangekitError(f"session {name!r}: no session folder of that name under the sessions folder")
-        if fusion not in ("poisson", "tsdf"):
-            raise RangekitError(f"fusion: expected poisson or tsdf, found {fusion!r}")
+        if fusion not in FUSION_METHODS:
+            raise RangekitError(f"fusion: expected {' or '.join(FUSION_METHODS)}, found {fusion!r}")
         if mesh_format not in MESH_EXPORT_FORMATS:
             raise RangekitError(f"format: expected one of {', '.join(MESH_EXPORT_FORMATS)}, found {mesh_format!r}")
         return self._launch(folder, ["process", str(folder), "--fusion", fusion, "--format", mesh_format,

@@ -120,4 +120,11 @@ $("scan-stop").onclick = () => scanPost("/api/scan/stop", {});
 $("scan-pause").onclick = () => scanPost("/api/scan/pause", { paused: $("scan-pause").textContent === "pause" });
 $("scan-report").onclick = () => { if (scanView.name) openSession(scanView.name); };
 $("scan-resume").onclick = () => scanPost("/api/scan/start", { name: $("scan-form").name.value.trim(), resume: true });
+// The form's ranges and defaults: the server's, read from the options' dataclasses (as rangekit scan's flags are).
+getJson("/api/options").then((options) => {
+  if (!options) return;
+  const views = options.scan.views, input = $("scan-form").views;
+  input.min = views.min; input.max = views.max; input.title = `${views.min} to ${views.max} views`;
+  if (!input.value) input.value = views.default;
+});
 renderScan();

@@ -185,39 +185,88 @@ def calibrate_rig(devices, *, settings: CalibrationSettings = CalibrationSetting
     CalibrationError
         Too few usable poses, degenerate poses, no corners for the projector; the message says which views.
     """
-    board = settings.board
-    obj = board.object_points()
     capture_settings = template.capture if template is not None else {}
-    delay_s = float(capture_settings.get("pattern_delay_s", 0.0))
-    settle_s = float(capture_settings.get("turntable_settle_s", 0.0))
     W, H = devices.projector.resolution
     spec = make_pattern_spec(settings.patterns, (W, H))
-    frames = list(spec.frames())
-    white_index = spec.frame_names.index("white")
+    light = _CodedLight(devices, spec, list(spec.frames()), spec.frame_names.index("white"),
+                        float(capture_settings.get("pattern_delay_s", 0.0)))
+    settle_s = float(capture_settings.get("turntable_settle_s", 0.0))
     seconds: dict[str, float] = {}
-    t0 = time.time()
-
-    response_fit = None
-    response = None
-    n = settings.n_poses
-    place_board(0, n)
+    t0, response_fit = time.time(), None
+    place_board(0, settings.n_poses)
     if settings.measure_response:
         call_progress(progress, "projector response: grey levels")
         levels = np.linspace(0.0, 1.0, settings.response_levels)
         response_fit = measure_response(devices.projector, devices.camera, levels=levels)
-        response = response_fit.response
         seconds["response"] = time.time() - t0
-
+    response = None if response_fit is None else response_fit.response
     t1 = time.time()
+    poses = _board_poses(light, settings, place_board, on_pose, response, progress)
+    t2 = time.time()
+    seconds["capture"] = t2 - t1
+    pair = calibrate_pair(poses.cam_views, poses.proj_fits, settings.board.object_points(),
+                          devices.camera.calibration.size, (W, H),
+                          names=[f"pose {i + 1}" for i in range(settings.n_poses)], lens=LENS_MODELS[settings.lens])
+    bundle, seconds["solve"] = pair.bundle, time.time() - t2
+    axis, T_cam_world = None, np.eye(4)      # world = camera frame
+    turntable = getattr(devices, "turntable", None)
+    if turntable is not None:
+        if place_on_turntable is None:
+            raise CalibrationError("turntable: the rig has a turntable but no way to place the board on it "
+                                   "(place_on_turntable)")
+        t3 = time.time()
+        place_on_turntable()
+        axis, T_cam_world = _turntable(light, turntable, bundle, settings, response, settle_s, progress)
+        seconds["turntable"] = time.time() - t3
+    rig = _calibrated_rig(bundle, T_cam_world, axis is not None, template, response)
+    seconds["total"] = time.time() - t0
+    return RigCalibration(rig=rig, camera=pair.camera, projector=pair.projector, bundle=bundle, axis=axis,
+                          response=response_fit, corner_std_projector=pair.corner_std_projector, seconds=seconds,
+                          pose_checks=poses.checks, retaken=poses.retaken, lens=pair.lens.name)
+
+
+@dataclass(frozen=True, eq=False)
+class _CodedLight:
+    """The coded light a calibration projects: the ``devices``, the pattern ``spec``, its ``frames`` and the index
+    of its white frame (the board's corners are found in it), the wait after showing each frame (seconds)."""
+
+    devices: object
+    spec: object
+    frames: list
+    white_index: int
+    delay_s: float
+
+    def capture(self) -> list[np.ndarray]:
+        """One capture of every frame (:func:`_capture`)."""
+        return _capture(self.devices, self.frames, self.delay_s)
+
+
+@dataclass(frozen=True, eq=False)
+class _BoardPoses:
+    """Per board pose the camera's corners (``cam_views``; a rejected pose's empty, with why), their projector
+    coordinates (``proj_fits``; None if rejected) and its verdict (``checks``); how many captures were ``retaken``."""
+
+    cam_views: list
+    proj_fits: list
+    checks: tuple
+    retaken: int
+
+
+def _board_poses(light: _CodedLight, settings: CalibrationSettings, place_board: Callable[[int, int], None],
+                 on_pose: Callable | None, response, progress: Callable | None) -> _BoardPoses:
+    """Each board pose placed (:func:`calibrate_rig`'s ``place_board``; the first is in place), captured, checked,
+    taken again while ``on_pose`` asks (at most ``settings.max_attempts`` captures); a kept pose's corners and their
+    projector coordinates from its decoded maps (integer Gray code, corrected for ``response``)."""
+    n, board = settings.n_poses, settings.board
+    size = light.devices.camera.calibration.size
     cam_views, proj_fits, checks, kept, retaken = [], [], [], [], 0
-    size = devices.camera.calibration.size
     for i in range(n):
         if i > 0:
             place_board(i, n)
         for attempt in range(max(1, settings.max_attempts)):
-            call_progress(progress, f"board pose {i + 1}/{n}: {len(frames)} frames", i, n)
-            images = _capture(devices, frames, delay_s)
-            det = detect_board(images[white_index], board)
+            call_progress(progress, f"board pose {i + 1}/{n}: {len(light.frames)} frames", i, n)
+            images = light.capture()
+            det = detect_board(images[light.white_index], board)
             check = check_pose(i, det, board, size, kept=kept, limits=settings.feedback)
             retake = False
             if on_pose is not None:
@@ -231,69 +280,61 @@ def calibrate_rig(devices, *, settings: CalibrationSettings = CalibrationSetting
         if check.accepted:
             kept.append((det.ids, det.uv))
             cam_views.append(Correspondences(det.ids, det.uv))
-            dec = decode(images, spec, subpixel=False, response=response)
+            dec = decode(images, light.spec, subpixel=False, response=response)
             proj_fits.append(corner_projector_coords(dec.proj_col, dec.proj_row, dec.confidence, det.uv,
                                                      radius=settings.corner_radius))
         else:
             cam_views.append(Correspondences(np.zeros(0, np.int64), np.zeros((0, 2)), check.reason))
             proj_fits.append(None)
     call_progress(progress, f"captured {n} board poses", n, n)
-    seconds["capture"] = time.time() - t1
+    return _BoardPoses(cam_views, proj_fits, tuple(checks), retaken)
 
-    t2 = time.time()
-    names = [f"pose {i + 1}" for i in range(n)]
-    pair = calibrate_pair(cam_views, proj_fits, obj, size, (W, H), names=names, lens=LENS_MODELS[settings.lens])
-    bundle = pair.bundle
-    seconds["solve"] = time.time() - t2
 
-    camera, projector = bundle.camera, bundle.projector         # world = camera frame
-    axis = None
-    T_cam_world = np.eye(4)
-    turntable = getattr(devices, "turntable", None)
-    if turntable is not None:
-        if place_on_turntable is None:
-            raise CalibrationError("turntable: the rig has a turntable but no way to place the board on it "
-                                   "(place_on_turntable)")
-        t3 = time.time()
-        place_on_turntable()
-        angles = np.radians(settings.turntable_angles_deg)
-        obs, poses, table_points = [], [], None
-        mid = int(np.argmin(np.abs(angles - np.median(angles))))
-        reached = angles.astype(np.float64).copy()
-        for k, a in enumerate(angles):
-            call_progress(progress, f"turntable {np.degrees(a):+.0f} deg ({k + 1}/{len(angles)})", k, len(angles))
-            turntable.rotate_to(float(a))
-            reached[k] = turntable.angle      # where the board says it stopped (a stepper rounds to a microstep)
-            if settle_s > 0 and not hasattr(devices, "capture_sequence"):
-                time.sleep(settle_s)
-            images = _capture(devices, frames, delay_s)
-            det = detect_board(images[white_index], board)
-            if not det.found:
-                raise CalibrationError(f"turntable: the board is not found at {np.degrees(a):+.1f} deg "
-                                       f"({det.reason}); mount it so the camera sees it at every angle")
-            obs.append((det.ids, det.uv))
-            poses.append(_pose_from_corners(camera, obj, det.ids, det.uv))
-            if k == mid:
-                dec = decode(images, spec, subpixel=False, response=response)
-                tri = triangulate(camera, projector, dec.proj_col, dec.proj_row)
-                table_points = tri.xyz.reshape(-1, 3)
-        turntable.rotate_to(0.0)
-        axis = fit_turntable_axis(camera, obj, reached, obs, poses)
-        T_cam_table, _ = turntable_frame(axis, table_points)
-        T_cam_world = T_cam_table
-        seconds["turntable"] = time.time() - t3
+def _turntable(light: _CodedLight, turntable, bundle: BundleResult, settings: CalibrationSettings, response,
+               settle_s: float, progress: Callable | None) -> tuple[AxisFit, np.ndarray]:
+    """The turntable phase, the board on the table: a capture at each of ``settings.turntable_angles_deg`` (waiting
+    ``settle_s`` seconds on hardware), the board's pose at each by PnP, the axis fitted to the angles the table
+    reached, the table top from the scene triangulated at the middle angle: (the axis fit, ``T_cam_table``)."""
+    camera, projector = bundle.camera, bundle.projector
+    obj = settings.board.object_points()
+    angles = np.radians(settings.turntable_angles_deg)
+    obs, poses, table_points = [], [], None
+    mid = int(np.argmin(np.abs(angles - np.median(angles))))
+    reached = angles.astype(np.float64).copy()
+    for k, a in enumerate(angles):
+        call_progress(progress, f"turntable {np.degrees(a):+.0f} deg ({k + 1}/{len(angles)})", k, len(angles))
+        turntable.rotate_to(float(a))
+        reached[k] = turntable.angle      # where the board says it stopped (a stepper rounds to a microstep)
+        if settle_s > 0 and not hasattr(light.devices, "capture_sequence"):
+            time.sleep(settle_s)
+        images = light.capture()
+        det = detect_board(images[light.white_index], settings.board)
+        if not det.found:
+            raise CalibrationError(f"turntable: the board is not found at {np.degrees(a):+.1f} deg "
+                                   f"({det.reason}); mount it so the camera sees it at every angle")
+        obs.append((det.ids, det.uv))
+        poses.append(_pose_from_corners(camera, obj, det.ids, det.uv))
+        if k == mid:
+            dec = decode(images, light.spec, subpixel=False, response=response)
+            tri = triangulate(camera, projector, dec.proj_col, dec.proj_row)
+            table_points = tri.xyz.reshape(-1, 3)
+    turntable.rotate_to(0.0)
+    axis = fit_turntable_axis(camera, obj, reached, obs, poses)
+    T_cam_table, _ = turntable_frame(axis, table_points)
+    return axis, T_cam_table
 
+
+def _calibrated_rig(bundle: BundleResult, T_cam_world: np.ndarray, turntable: bool, template: Rig | None,
+                    response) -> Rig:
+    """The rig of the bundle-adjusted devices in the world ``T_cam_world`` (the turntable frame, or the camera's),
+    with the template's ``devices`` and ``capture`` sections and the measured projector response."""
     T_world_cam = invert_T(T_cam_world)
-    rig = Rig(cameras=(camera.with_pose(T_world_cam),),
-              projector=projector.with_pose(compose(T_world_cam, projector.T_world_cam)),
-              T_world_table=None if axis is None else np.eye(4),
-              devices=dict(template.devices) if template is not None else {},
-              capture=dict(template.capture) if template is not None else {},
-              projector_response=response)
-    seconds["total"] = time.time() - t0
-    return RigCalibration(rig=rig, camera=pair.camera, projector=pair.projector, bundle=bundle, axis=axis,
-                          response=response_fit, corner_std_projector=pair.corner_std_projector, seconds=seconds,
-                          pose_checks=tuple(checks), retaken=retaken, lens=pair.lens.name)
+    return Rig(cameras=(bundle.camera.with_pose(T_world_cam),),
+               projector=bundle.projector.with_pose(compose(T_world_cam, bundle.projector.T_world_cam)),
+               T_world_table=np.eye(4) if turntable else None,
+               devices=dict(template.devices) if template is not None else {},
+               capture=dict(template.capture) if template is not None else {},
+               projector_response=response)
 
 
 def _axis_in_camera(rig: Rig) -> tuple[np.ndarray, np.ndarray]:

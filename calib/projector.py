@@ -37,12 +37,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import least_squares
-from scipy.sparse import lil_matrix
 
-from rangekit.calib.projection_jacobian import N_INTRINSICS as _N_INTR, project as _project
+from rangekit.calib.bundle_problem import BundleProblem, make_bundle_problem
 from rangekit.camera import PinholeCamera
 from rangekit.errors import CalibrationError
-from rangekit.geometry import R_to_rotvec, invert_T, make_T, nearest_rotation, rotvec_to_R
+from rangekit.geometry import invert_T, make_T, nearest_rotation, rotvec_to_R
 
 __all__ = ["CornerFit", "corner_projector_coords", "BundleResult", "bundle_adjust", "initial_T_proj_cam"]
 
@@ -146,27 +145,6 @@ def _weighted_median(values: np.ndarray, weights: np.ndarray) -> np.ndarray:
 
 
 # --------------------------------------------------------------------------- bundle adjustment
-#: The intrinsics :func:`bundle_adjust` refines, in its parameter order; ``fixed_*`` may name any of them, and
-#: "aspect" (fy kept at fx times its initial ratio).
-INTRINSICS = ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2")
-
-
-def _free_intrinsics(fixed, device: str) -> np.ndarray:
-    """(8,) bool: which of :data:`INTRINSICS` vary; CalibrationError naming an unknown name."""
-    unknown = sorted(set(fixed) - set(INTRINSICS) - {"aspect"})
-    if unknown:
-        raise CalibrationError(f"bundle_adjust: fixed_{device}: expected names among {', '.join(INTRINSICS)}, "
-                               f"aspect; found {', '.join(map(repr, unknown))}")
-    return np.array([n not in fixed and not (n == "fy" and "aspect" in fixed) for n in INTRINSICS])
-
-
-def _intr_vector(dev: PinholeCamera) -> np.ndarray:
-    d = np.zeros(5)
-    d[:min(5, len(dev.dist))] = dev.dist[:5]
-    K = dev.K
-    return np.array([K[0, 0], K[1, 1], K[0, 2], K[1, 2], d[0], d[1], d[2], d[3]])
-
-
 def initial_T_proj_cam(T_cam_board: dict, T_proj_board: dict) -> np.ndarray:
     """``T_proj_cam`` from board poses seen by both devices: chordal mean of the rotations, median translation."""
     common = sorted(set(T_cam_board) & set(T_proj_board))
@@ -218,7 +196,7 @@ def bundle_adjust(camera: PinholeCamera, projector: PinholeCamera, T_proj_cam: n
     sigma_camera, sigma_projector : expected noise of each device's corners (px); residuals are divided by
         them, so the two devices are weighted by their precision.
     max_nfev : iteration limit of ``least_squares``.
-    fixed_camera, fixed_projector : intrinsics held at their initial values (names of :data:`INTRINSICS`;
+    fixed_camera, fixed_projector : intrinsics held at their initial values (names of :data:`rangekit.calib.bundle_problem.INTRINSICS`;
         "aspect" keeps fy / fx), e.g. ``("k2", "p1", "p2")`` for a lens model of k1 alone.
 
     solver : "schur" (default): Levenberg-Marquardt on the reduced system, the board poses eliminated through the
@@ -232,114 +210,38 @@ def bundle_adjust(camera: PinholeCamera, projector: PinholeCamera, T_proj_cam: n
     """
     if solver not in ("schur", "minpack"):
         raise CalibrationError(f"bundle_adjust: solver must be 'schur' or 'minpack', found {solver!r}")
-    views = sorted(T_cam_board)
-    obj = np.asarray(object_points, dtype=np.float64)
-    k3c = float(camera.dist[4]) if len(camera.dist) > 4 else 0.0
-    k3p = float(projector.dist[4]) if len(projector.dist) > 4 else 0.0
-    x0 = [_intr_vector(camera), _intr_vector(projector), R_to_rotvec(T_proj_cam[:3, :3]), T_proj_cam[:3, 3]]
-    for v in views:
-        T = T_cam_board[v]
-        x0 += [R_to_rotvec(T[:3, :3]), T[:3, 3]]
-    x0 = np.concatenate(x0)
-    base = 2 * _N_INTR + 6
-    free = np.ones(len(x0), bool)
-    free[:2 * _N_INTR] = np.concatenate([_free_intrinsics(fixed_camera, "camera"),
-                                         _free_intrinsics(fixed_projector, "projector")])
-    # "aspect": fy follows fx at its initial ratio (fy is then not free).
-    ties = [(k + 1, k, x0[k + 1] / x0[k]) for k, fixed in ((0, fixed_camera), (_N_INTR, fixed_projector))
-            if "aspect" in fixed]
-    free_index = np.flatnonzero(free)
-
-    blocks = []   # (view k, device, ids, uv, row offset)
-    rows = 0
-    for k, v in enumerate(views):
-        for device, obs in (("camera", cam_obs), ("projector", proj_obs)):
-            if v in obs and len(obs[v][0]):
-                ids, uvs = np.asarray(obs[v][0]), np.asarray(obs[v][1], dtype=np.float64)
-                blocks.append((k, device, ids, uvs, rows))
-                rows += 2 * len(ids)
-    S = lil_matrix((rows, len(x0)), dtype=np.int8)
-    for k, device, ids, _, r0 in blocks:
-        r1 = r0 + 2 * len(ids)
-        S[r0:r1, base + 6 * k: base + 6 * k + 6] = 1
-        if device == "camera":
-            S[r0:r1, 0:_N_INTR] = 1
-        else:
-            S[r0:r1, _N_INTR:2 * _N_INTR + 6] = 1
-
-    def full(x_free):
-        x = x0.copy()
-        x[free_index] = x_free
-        for dst, src, ratio in ties:
-            x[dst] = x[src] * ratio
-        return x
-
-    def unpack(x):
-        ic, ip = x[:_N_INTR], x[_N_INTR:2 * _N_INTR]
-        R_pc = rotvec_to_R(x[2 * _N_INTR:2 * _N_INTR + 3])
-        t_pc = x[2 * _N_INTR + 3:base]
-        return ic, ip, R_pc, t_pc
-
-    # Every observation at once: its view, device, corner and measured pixel, in the row order of ``blocks``.
-    obs_view = np.concatenate([np.full(len(ids), k) for k, _, ids, _, _ in blocks])
-    obs_cam = np.concatenate([np.full(len(ids), dev == "camera") for _, dev, ids, _, _ in blocks])
-    obs_X = obj[np.concatenate([ids for _, _, ids, _, _ in blocks])]
-    obs_uv = np.concatenate([uvs for _, _, _, uvs, _ in blocks])
-    obs_sigma = np.where(obs_cam, sigma_camera, sigma_projector)[:, None]
-
-    def residuals(x_free, scaled=True):
-        x = full(x_free)
-        ic, ip, R_pc, t_pc = unpack(x)
-        p = x[base:].reshape(-1, 6)
-        R = rotvec_to_R(p[:, :3])                                          # (V, 3, 3)
-        X = np.einsum("nij,nj->ni", R[obs_view], obs_X) + p[obs_view, 3:]  # camera frame
-        pred = np.empty_like(obs_uv)
-        pred[obs_cam] = _project(X[obs_cam], ic, k3c)
-        pred[~obs_cam] = _project(X[~obs_cam] @ R_pc.T + t_pc, ip, k3p)
-        e = pred - obs_uv
-        return (e / obs_sigma if scaled else e).ravel()
-
-    # Finite differences by column groups that share no residual row: parameter j of every board pose
-    # (each pose touches only its own view's rows) moves in one evaluation, so a Jacobian costs
-    # 2 * 8 + 6 + 6 evaluations whatever the number of views. The result is small and solved densely.
-    # Columns are positions in the free parameters (a fixed intrinsic has none).
-    position = np.cumsum(free) - 1
-    groups = [[position[c]] for c in range(base) if free[c]] + \
-        [list(position[base + j::6]) for j in range(6)]
-
-    touches = S.toarray().astype(bool)[:, free]    # a tied fy's rows are its fx's: the device's own rows
-
-    def jacobian(x):
-        f0 = residuals(x)
-        J = np.zeros((rows, len(x)))
-        for cols in groups:
-            h = 1e-7 * np.maximum(np.abs(x[cols]), 1e-2)
-            xh = x.copy()
-            xh[cols] += h
-            df = residuals(xh) - f0
-            for c, hc in zip(cols, h):
-                J[touches[:, c], c] = df[touches[:, c]] / hc
-        return J
-
+    problem = make_bundle_problem(camera, projector, T_proj_cam, T_cam_board, object_points, cam_obs, proj_obs,
+                                  sigma_camera=sigma_camera, sigma_projector=sigma_projector,
+                                  fixed_camera=fixed_camera, fixed_projector=fixed_projector)
     if solver == "minpack":
-        sol = least_squares(residuals, x0[free], jac=jacobian, method="lm", x_scale="jac", max_nfev=max_nfev,
-                            xtol=1e-12, ftol=1e-12, gtol=1e-12)
+        sol = least_squares(problem.residuals, problem.x0[problem.free], jac=problem.finite_difference_jacobian(),
+                            method="lm", x_scale="jac", max_nfev=max_nfev, xtol=1e-12, ftol=1e-12, gtol=1e-12)
         x_free, nfev = sol.x, int(sol.nfev)
     else:
         from rangekit.calib.bundle_reduced import solve_bundle_reduced
 
-        x_free, nfev = solve_bundle_reduced(x0, free, ties, base, len(views), obs_view, obs_cam, obs_X, obs_uv,
-                                            obs_sigma, k3c, k3p, max_nfev)
-    x = full(x_free)
-    ic, ip, R_pc, t_pc = unpack(x)
-    raw = residuals(x_free, scaled=False)
+        p = problem
+        x_free, nfev = solve_bundle_reduced(p.x0, p.free, p.ties, p.base, len(p.views), p.obs_view, p.obs_cam,
+                                            p.obs_X, p.obs_uv, p.obs_sigma, p.k3c, p.k3p, max_nfev)
+    return _bundle_result(problem, camera, projector, x_free, nfev)
+
+
+def _bundle_result(problem: BundleProblem, camera: PinholeCamera, projector: PinholeCamera, x_free: np.ndarray,
+                   nfev: int) -> BundleResult:
+    """The :class:`BundleResult` at the solution ``x_free`` (the problem's free parameters): both devices (world =
+    the camera's frame; ``camera``'s and ``projector``'s sizes and names), the reprojection RMS per device and view
+    in pixels, the board poses."""
+    x = problem.full(x_free)
+    ic, ip, R_pc, t_pc = problem.unpack(x)
+    raw = problem.residuals(x_free, scaled=False)
     sq = {"camera": [], "projector": []}
     view_rms = {}
-    for k, device, ids, _, r0 in blocks:
+    for k, device, ids, _, r0 in problem.blocks:
         e2 = raw[r0:r0 + 2 * len(ids)].reshape(-1, 2)
         d2 = np.sum(e2 ** 2, axis=1)
         sq[device].append(d2)
-        view_rms.setdefault(views[k], [np.nan, np.nan])[0 if device == "camera" else 1] = float(np.sqrt(d2.mean()))
+        view_rms.setdefault(problem.views[k], [np.nan, np.nan])[0 if device == "camera" else 1] = \
+            float(np.sqrt(d2.mean()))
     rms = {d: float(np.sqrt(np.concatenate(v).mean())) if v else float("nan") for d, v in sq.items()}
 
     def model(dev: PinholeCamera, intr: np.ndarray, k3: float, T_world: np.ndarray) -> PinholeCamera:
@@ -349,10 +251,10 @@ def bundle_adjust(camera: PinholeCamera, projector: PinholeCamera, T_proj_cam: n
                              name=dev.name)
 
     T_proj_cam_final = make_T(R_pc, t_pc)
-    cam = model(camera, ic, k3c, np.eye(4))
-    proj = model(projector, ip, k3p, invert_T(T_proj_cam_final))
+    cam = model(camera, ic, problem.k3c, np.eye(4))
+    proj = model(projector, ip, problem.k3p, invert_T(T_proj_cam_final))
+    base = problem.base
     poses = {v: make_T(rotvec_to_R(x[base + 6 * k: base + 6 * k + 3]), x[base + 6 * k + 3: base + 6 * k + 6])
-             for k, v in enumerate(views)}
+             for k, v in enumerate(problem.views)}
     return BundleResult(camera=cam, projector=proj, rms_camera=rms["camera"], rms_projector=rms["projector"],
                         view_rms={v: tuple(r) for v, r in view_rms.items()}, T_cam_board=poses, nfev=nfev)
-

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
+from rangekit.app.board_placer import AskedPlacer, SimulatedPlacer
 from rangekit.boards import Board
 from rangekit.errors import ConfigError, UsageError
 from rangekit.io import write_png
@@ -18,13 +19,6 @@ from rangekit.rig.rig_file import Rig, load_rig, save_rig
 from rangekit.rig.checks import validate_rig_for_hardware
 
 __all__ = ["Calibration", "calibrate"]
-
-_POSE_HINTS = ("facing the camera, tilted ~30 deg to the left", "tilted ~30 deg to the right",
-               "top edge tilted ~30 deg away", "bottom edge tilted ~30 deg away", "turned ~20 deg in its plane, tilted left",
-               "near the left edge of the view, tilted right", "near the right edge of the view, tilted left",
-               "near the top of the view, tilted down", "near the bottom of the view, tilted up",
-               "closer to the camera, tilted ~40 deg", "further away, tilted ~20 deg")
-
 
 @dataclass(frozen=True, eq=False)
 class Calibration:
@@ -66,7 +60,7 @@ def calibrate(out: str | Path, *, rig: str = "sim", board: Board, n_poses: int =
     CalibrationError
         A laser plane cannot be calibrated (named).
     """
-    from rangekit.calib.procedure import CalibrationSettings, calibrate_rig, compare_rigs, comparison_lines
+    from rangekit.calib.procedure import CalibrationSettings, compare_rigs, comparison_lines
 
     out = Path(out)
     if out.exists() and not force:
@@ -82,62 +76,14 @@ def calibrate(out: str | Path, *, rig: str = "sim", board: Board, n_poses: int =
         return _calibrate_hardware_lasers(out, rig, board=board, n_poses=laser_poses, interactive=interactive,
                                           ask=ask, progress=progress)
     if hardware:
-        from rangekit.drivers import open_rig_devices
-
-        template = load_rig(rig)
-        validate_rig_for_hardware(template, where=rig)
-        if template.projector is None or "display" not in ((template.devices or {}).get("projector") or {}):
-            raise ConfigError(f"{rig}: devices.projector.display: expected a projector display (the camera and "
-                              "turntable are calibrated with its coded light), found none; a rig without a "
-                              "projector (Ciclop, FabScan) takes its camera from the depthai factory calibration "
-                              "(docs/rig.md) and can then calibrate its lasers with --lasers (docs/laser.md)")
-        if not interactive:
-            raise ConfigError("calibrating real hardware is interactive (you move the board between captures); "
-                              "run 'rangekit calibrate' in a terminal")
-        devices = open_rig_devices(template, where=rig)
-
-        def place(i: int, n: int) -> None:
-            ask(f"pose {i + 1}/{n}: hold the {board.cols}x{board.rows} board still, {_POSE_HINTS[i % len(_POSE_HINTS)]}, "
-                "wholly inside the projected light; press Enter to capture ")
-
-        def on_turntable() -> None:
-            ask("turntable: fix the board on the turntable, standing and tilted back towards the camera, off the "
-                "axis, so that it stays visible while the table turns +-40 deg; press Enter ")
-        truth = None
+        template, devices = _open_hardware(rig, interactive)
+        truth, placer = None, AskedPlacer(board, ask)
     else:
-        from rangekit.sim.writers.calibration import board_poses, board_scene, turntable_board_scene
-        from rangekit.sim.devices.sim_rig import SimRig, default_rig
-
-        template = truth = default_rig()
-        poses = board_poses(truth, board, n_poses, seed=seed)
-        devices = SimRig(board_scene(board, poses[0]), truth, seed=seed)
-
-        def place(i: int, n: int) -> None:
-            devices.set_scene(board_scene(board, poses[i]))
-
-        def on_turntable() -> None:
-            devices.set_scene(turntable_board_scene(truth, board))
-    coverage_png = out.parent / "coverage.png"
-
-    def on_pose(check, coverage) -> bool:
-        write_png(coverage_png, coverage)
-        if report is not None:
-            report(check.line())
-        if check.accepted or not (hardware and interactive):
-            return False
-        answer = ask(f"pose {check.index + 1} rejected ({check.reason}); retake it? [Y/n] ")
-        return not str(answer).strip().lower().startswith("n")
-    coverage_was_there = coverage_png.exists()
-    try:
-        res = calibrate_rig(devices, settings=settings, place_board=place, place_on_turntable=on_turntable,
-                            template=template, progress=progress, on_pose=on_pose)
-    except BaseException:
-        if not coverage_was_there:   # the live picture of a failed run goes with it: a rerun is not refused for it
-            coverage_png.unlink(missing_ok=True)
-        raise
-    finally:
-        if hardware:
-            devices.close()
+        template, devices, placer = _open_simulator(board, n_poses, seed)
+        truth = template
+    on_pose = _pose_reporter(out.parent / "coverage.png", report, ask if hardware and interactive else None)
+    res = _watched_calibration(devices, settings, placer, template, progress, on_pose, out.parent / "coverage.png",
+                               close=hardware)
     laser_cal = None
     out_rig = res.rig
     if lasers:
@@ -152,6 +98,72 @@ def calibrate(out: str | Path, *, rig: str = "sim", board: Board, n_poses: int =
     save_rig(out_rig, out)
     deviation = comparison_lines(compare_rigs(res.rig, truth)) if truth is not None else []
     return Calibration(res, truth, deviation, laser_cal)
+
+
+def _open_hardware(rig: str, interactive: bool) -> tuple[Rig, object]:
+    """The rig file ``rig`` (the template) and its opened devices; ConfigError for a rig without a projector
+    display, or when no one is there to move the board (not ``interactive``), before any device is opened."""
+    from rangekit.drivers import open_rig_devices
+
+    template = load_rig(rig)
+    validate_rig_for_hardware(template, where=rig)
+    if template.projector is None or "display" not in ((template.devices or {}).get("projector") or {}):
+        raise ConfigError(f"{rig}: devices.projector.display: expected a projector display (the camera and "
+                          "turntable are calibrated with its coded light), found none; a rig without a "
+                          "projector (Ciclop, FabScan) takes its camera from the depthai factory calibration "
+                          "(docs/rig.md) and can then calibrate its lasers with --lasers (docs/laser.md)")
+    if not interactive:
+        raise ConfigError("calibrating real hardware is interactive (you move the board between captures); "
+                          "run 'rangekit calibrate' in a terminal")
+    return template, open_rig_devices(template, where=rig)
+
+
+def _open_simulator(board: Board, n_poses: int, seed: int) -> tuple[Rig, object, SimulatedPlacer]:
+    """The simulator's true rig, its devices showing the board at the first of ``n_poses`` poses (seeded), and the
+    placer that moves it."""
+    from rangekit.sim.writers.calibration import board_poses, board_scene
+    from rangekit.sim.devices.sim_rig import SimRig, default_rig
+
+    truth = default_rig()
+    poses = board_poses(truth, board, n_poses, seed=seed)
+    devices = SimRig(board_scene(board, poses[0]), truth, seed=seed)
+    return truth, devices, SimulatedPlacer(devices, board, poses, truth)
+
+
+def _pose_reporter(coverage_png: Path, report: Callable[[str], object] | None,
+                   ask: Callable[[str], object] | None) -> Callable[[object, object], bool]:
+    """``on_pose(check, coverage) -> retake`` for :func:`rangekit.calib.procedure.calibrate_rig`: the coverage
+    picture written to ``coverage_png``, the verdict's line to ``report``; a rejected pose retaken unless the person
+    answers no when ``ask`` is given (hardware, interactive), else skipped."""
+    def on_pose(check, coverage) -> bool:
+        write_png(coverage_png, coverage)
+        if report is not None:
+            report(check.line())
+        if check.accepted or ask is None:
+            return False
+        answer = ask(f"pose {check.index + 1} rejected ({check.reason}); retake it? [Y/n] ")
+        return not str(answer).strip().lower().startswith("n")
+    return on_pose
+
+
+def _watched_calibration(devices, settings, placer, template: Rig, progress: Callable | None, on_pose,
+                         coverage_png: Path, *, close: bool):
+    """:func:`rangekit.calib.procedure.calibrate_rig` on ``devices`` moved by ``placer``; a failed run takes the
+    ``coverage_png`` it wrote with it (a rerun is not refused for it); the devices closed after when ``close``."""
+    from rangekit.calib.procedure import calibrate_rig
+
+    coverage_was_there = coverage_png.exists()
+    try:
+        return calibrate_rig(devices, settings=settings, place_board=placer.place,
+                             place_on_turntable=placer.on_turntable, template=template, progress=progress,
+                             on_pose=on_pose)
+    except BaseException:
+        if not coverage_was_there:   # the live picture of a failed run goes with it: a rerun is not refused for it
+            coverage_png.unlink(missing_ok=True)
+        raise
+    finally:
+        if close:
+            devices.close()
 
 
 def _calibrate_hardware_lasers(out: Path, rig: str, *, board: Board, n_poses: int, interactive: bool,

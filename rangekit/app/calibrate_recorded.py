@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import time
 from collections import Counter
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Sequence
 
@@ -97,15 +98,38 @@ def calibrate_recordings(out: str | Path, captures: Sequence[str | Path], *, pat
     CalibrationError
         Fewer than 3 poses usable (each rejected pose named with its reason), degenerate poses.
     """
-    from rangekit.calib.pose_feedback import FeedbackLimits, coverage_image
-    from rangekit.calib.camera import CORNER_FITS
-    from rangekit.calib.recorded import MIN_POSES, board_readings, calibrate_recorded, measure_pose, refused_pose
-    from rangekit.coded.decode import decode
-    from rangekit.formats.capture import read_stack
-    from rangekit.formats.layouts import LAYOUTS, arrange, folder_frames, in_projector_pixels
-    from rangekit.formats.layouts.frame_files import NUMERIC_ORDER
+    from rangekit.calib.pose_feedback import coverage_image
+    from rangekit.calib.recorded import calibrate_recorded
 
     out = Path(out)
+    layout, width, height = _checked_layout(out, force, pattern, corners, projector_size)
+    folders = _checked_folders(captures, pattern)
+    names = _names(folders)
+    if report is not None:
+        report(f"{len(folders)} board poses, {pattern} ({layout.source}); corners found in each pose's "
+               f"{board_image_source(layout, width, height)}; their projector coordinates by a local {corners} "
+               "fit")
+    t0 = time.time()
+    measured = _measured_poses(folders, names, pattern, layout, width, height, board, corners, report, progress)
+    result = calibrate_recorded(measured.poses, measured.board, measured.camera_size, (width, height), lens=lens,
+                                seconds={"decode": time.time() - t0})
+    # Written with the rig, once it is calibrated: a failed run leaves no coverage.png (issue 48: it replaced
+    # an earlier calibration's), nothing is recorded live to watch.
+    last = measured.poses[-1]
+    write_png(out.parent / "coverage.png", coverage_image(measured.kept, measured.camera_size,
+                                                          last.corners.uv if last.check.accepted else None,
+                                                          last.check.accepted))
+    save_rig(result.rig, out)
+    return Calibration(result, None, [])
+
+
+def _checked_layout(out: Path, force: bool, pattern: str, corners: str, projector_size) -> tuple:
+    """``(layout, width, height)``: the capture layout named ``pattern`` and the ``projector_size`` it was drawn
+    on; UsageError for an existing ``out`` without ``force``, an unknown layout or corner fit, a layout that does
+    not code the projector's columns and rows with a white frame."""
+    from rangekit.calib.camera import CORNER_FITS
+    from rangekit.formats.layouts import LAYOUTS
+
     if out.exists() and not force:
         raise UsageError(f"--out {out}: exists; choose another file or pass --force to overwrite it")
     if pattern not in LAYOUTS:
@@ -119,6 +143,14 @@ def calibrate_recordings(out: str | Path, captures: Sequence[str | Path], *, pat
         raise UsageError(f"--pattern {pattern}: codes only the projector's {' and '.join(spec.axes)}; calibrating "
                          "the projector needs its columns and rows at every board corner (e.g. "
                          "slstudio:calibration)")
+    return layout, width, height
+
+
+def _checked_folders(captures: Sequence[str | Path], pattern: str) -> list[Path]:
+    """The pose folders; UsageError for fewer than the poses a calibration needs, one that is not a folder, or one
+    given twice."""
+    from rangekit.calib.recorded import MIN_POSES
+
     folders = [Path(c) for c in captures]
     if len(folders) < MIN_POSES:
         raise UsageError(f"--captures: {len(folders)} folder(s); at least {MIN_POSES} board poses are needed "
@@ -132,16 +164,37 @@ def calibrate_recordings(out: str | Path, captures: Sequence[str | Path], *, pat
     if twice:
         raise UsageError(f"--captures: {', '.join(f'{f} given {n} times' for f, n in twice)}; give each board pose "
                          f"once ({len(counts)} distinct folders of the {len(folders)} given)")
-    names = _names(folders)
-    if report is not None:
-        report(f"{len(folders)} board poses, {pattern} ({layout.source}); corners found in each pose's "
-               f"{board_image_source(layout, width, height)}; their projector coordinates by a local {corners} "
-               "fit")
+    return folders
+
+
+@dataclass(frozen=True, eq=False)
+class _MeasuredPoses:
+    """Every pose folder measured: the ``poses`` (:class:`rangekit.calib.recorded.RecordedPose`, in order), the
+    kept ones' corners (``kept``: (ids, uv) each), the camera's (width, height) and the ``board`` as it was read."""
+
+    poses: list
+    kept: list
+    camera_size: tuple[int, int]
+    board: Board
+
+
+def _measured_poses(folders: list[Path], names: list[str], pattern: str, layout, width: int, height: int,
+                    board: Board, corners: str, report: Callable[[str], object] | None,
+                    progress: Callable | None) -> _MeasuredPoses:
+    """Each folder read, put in the layout's spec order, decoded and measured, one at a time (only its corners
+    kept); a folder that does not decode is a refused pose, not a failed run. The board is searched both ways round
+    until one pose finds it, then that way alone. FileFormatError for images of another size than the first
+    pose's."""
+    from rangekit.calib.pose_feedback import FeedbackLimits
+    from rangekit.calib.recorded import board_readings, measure_pose, refused_pose
+    from rangekit.coded.decode import decode
+    from rangekit.formats.capture import read_stack
+    from rangekit.formats.layouts import arrange, folder_frames, in_projector_pixels
+    from rangekit.formats.layouts.frame_files import NUMERIC_ORDER
+
     limits = FeedbackLimits()
-    coverage_png = out.parent / "coverage.png"
     poses, kept, camera_size = [], [], None
     readings = board_readings(board)      # both ways round until a pose's board is found, then that one
-    t0 = time.time()
     for i, (folder, name) in enumerate(zip(folders, names)):
         call_progress(progress, f"pose {i + 1}/{len(folders)}: {name}", i, len(folders))
         found = folder_frames(folder, layout, width, height)
@@ -176,12 +229,4 @@ def calibrate_recordings(out: str | Path, captures: Sequence[str | Path], *, pat
         if report is not None:
             report(pose.line())
     call_progress(progress, f"decoded {len(folders)} board poses", len(folders), len(folders))
-    result = calibrate_recorded(poses, readings[0], camera_size, (width, height), lens=lens,
-                                seconds={"decode": time.time() - t0})
-    # Written with the rig, once it is calibrated: a failed run leaves no coverage.png (issue 48: it replaced
-    # an earlier calibration's), nothing is recorded live to watch.
-    last = poses[-1]
-    write_png(coverage_png, coverage_image(kept, camera_size, last.corners.uv if last.check.accepted else None,
-                                           last.check.accepted))
-    save_rig(result.rig, out)
-    return Calibration(result, None, [])
+    return _MeasuredPoses(poses, kept, camera_size, readings[0])

@@ -43,6 +43,9 @@ Memory: the stack is read in chunks of rows (uint8/uint16 as captured; float32 o
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
+from typing import Callable
+
 import numpy as np
 
 from rangekit.errors import DecodeError, MotionError
@@ -176,6 +179,46 @@ def decode(stack, spec: PatternSpec, *, order: str = "rangekit", subpixel: bool 
     MotionError
         (a DecodeError) If more than ``max_motion`` of the lit pixels moved during the capture.
     """
+    _check_options(response, ties, min_edge_bit)
+    codec = codec_of(spec.method)
+    return codec(stack, spec, DecodeOptions(
+        order=order, subpixel=subpixel, min_contrast=min_contrast, shadow_threshold=shadow_threshold,
+        max_global_ratio=max_global_ratio, max_gap=max_gap, max_disagreement=max_disagreement, full_scale=full_scale,
+        response=response, stripe_smoothing=stripe_smoothing, min_edge_bit=min_edge_bit,
+        coord_smoothing=coord_smoothing, motion=motion, max_motion=max_motion, ties=ties, workers=workers,
+        chunk_rows=chunk_rows))
+
+
+@dataclass(frozen=True)
+class DecodeOptions:
+    """:func:`decode`'s keyword options, as it documents them (its signature holds their defaults), handed to a
+    codec of :data:`CODECS`."""
+
+    order: str
+    subpixel: bool
+    min_contrast: float
+    shadow_threshold: float
+    max_global_ratio: float | None
+    max_gap: float
+    max_disagreement: float
+    full_scale: float | None
+    response: ProjectorResponse | None
+    stripe_smoothing: int
+    min_edge_bit: int
+    coord_smoothing: float
+    motion: bool
+    max_motion: float | None
+    ties: str
+    workers: int
+    chunk_rows: int
+
+
+#: A codec: ``codec(stack, spec, options) -> DecodeResult``, the stack and spec as :func:`decode` takes them.
+Codec = Callable[[object, PatternSpec, DecodeOptions], DecodeResult]
+
+
+def _check_options(response, ties: str, min_edge_bit) -> None:
+    """DecodeError naming the first of ``response``, ``ties`` and ``min_edge_bit`` that :func:`decode` cannot take."""
     if response is not None and not isinstance(response, ProjectorResponse):
         raise DecodeError(f"response must be a rangekit.rig.projector_response.ProjectorResponse or None, found "
                           f"{type(response).__name__} {response!r}; e.g. response=ProjectorResponse(gamma=2.2)")
@@ -183,33 +226,90 @@ def decode(stack, spec: PatternSpec, *, order: str = "rangekit", subpixel: bool 
         raise DecodeError(f"ties={ties!r}: expected 'zero' or 'one'")
     if isinstance(min_edge_bit, bool) or not isinstance(min_edge_bit, (int, np.integer)) or min_edge_bit < 0:
         raise DecodeError(f"min_edge_bit={min_edge_bit!r}: expected a whole number of bits >= 0")
-    if spec.method in ("white", "black"):
-        raise DecodeError(f"pattern {spec.method!r} carries no code; decode a graycode, xor02, xor04, phase, "
+
+
+def codec_of(method: str) -> Codec:
+    """The codec of a pattern method (:data:`CODECS`); DecodeError for a pattern that carries no code."""
+    if method not in CODECS:
+        raise DecodeError(f"pattern {method!r} carries no code; decode a graycode, xor02, xor04, phase, "
                           "hybrid, debruijn, micro, modulated, ftp, psp or faps capture")
-    if spec.method == "debruijn":
-        return decode_debruijn(stack, spec, min_contrast=min_contrast, shadow_threshold=shadow_threshold,
-                               full_scale=full_scale)
-    if spec.method in FRINGE_METHODS:
-        return decode_fringes(stack, spec, order=order, min_contrast=min_contrast,
-                              shadow_threshold=shadow_threshold, full_scale=full_scale, response=response,
-                              workers=workers)
+    return CODECS[method]
+
+
+def _decode_debruijn(stack, spec: PatternSpec, o: DecodeOptions) -> DecodeResult:
+    """De Bruijn colour stripes (:func:`rangekit.coded.debruijn.decode_debruijn`)."""
+    return decode_debruijn(stack, spec, min_contrast=o.min_contrast, shadow_threshold=o.shadow_threshold,
+                           full_scale=o.full_scale)
+
+
+def _decode_fringes(stack, spec: PatternSpec, o: DecodeOptions) -> DecodeResult:
+    """Other tools' fringe codecs (:func:`rangekit.coded.codecs.decoders.decode_fringes`)."""
+    return decode_fringes(stack, spec, order=o.order, min_contrast=o.min_contrast,
+                          shadow_threshold=o.shadow_threshold, full_scale=o.full_scale, response=o.response,
+                          workers=o.workers)
+
+
+def _decode_binary(stack, spec: PatternSpec, o: DecodeOptions) -> DecodeResult:
+    """Binary codes (graycode, xor02, xor04): the masks, the maps (integer or subpixel edges, the motion check),
+    their plausibility."""
+    fr, fs = _frames(stack, spec, o)
+    short = [a for a in spec.axes if o.subpixel and o.min_edge_bit >= spec.bits(a)]
+    if short:
+        raise DecodeError(f"min_edge_bit={o.min_edge_bit}: the {short[0]} code has {spec.bits(short[0])} bits "
+                          f"(0-{spec.bits(short[0]) - 1}), no stripe edge would be left")
+    masks = _masks(fr, spec, fs, o, binary=True)
+    maps = _binary_maps(fr, spec, masks, o)
+    _refuse_implausible(fr, spec, fs, o, masks.shadow, maps)
+    return _result(fr, spec, o, masks, maps, binary=True)
+
+
+def _decode_phase(stack, spec: PatternSpec, o: DecodeOptions) -> DecodeResult:
+    """Phase shifting (phase; hybrid, its periods counted by a Gray code): the masks, the unwrapped maps, their
+    plausibility."""
+    fr, fs = _frames(stack, spec, o)
+    masks = _masks(fr, spec, fs, o, binary=spec.method == "hybrid")
+    maps = _phase_maps(fr, spec, masks, fs, o)
+    _refuse_implausible(fr, spec, fs, o, masks.shadow, maps)
+    return _result(fr, spec, o, masks, maps, binary=spec.method == "hybrid")
+
+
+#: The codec of each pattern method that carries a code (white and black carry none).
+CODECS: dict[str, Codec] = {"graycode": _decode_binary, "xor02": _decode_binary, "xor04": _decode_binary,
+                            "phase": _decode_phase, "hybrid": _decode_phase, "debruijn": _decode_debruijn,
+                            **{m: _decode_fringes for m in FRINGE_METHODS}}
+
+
+def _frames(stack, spec: PatternSpec, o: DecodeOptions) -> tuple[CaptureStack, float]:
+    """The capture as :class:`CaptureStack` in ``spec``'s order, and its full scale (the largest raw value)."""
+    fr = CaptureStack(stack, spec, o.order)
+    return fr, float(o.full_scale if o.full_scale is not None else (255 if fr.dtype == np.uint8 else 65535))
+
+
+@dataclass(frozen=True, eq=False)
+class _Masks:
+    """The pass over white, black and the finest stripes, each (H, W): ``confidence`` float32 in [0, 1], the
+    ``shadow``, ``low`` contrast and ``global_dominated`` bool masks, the ``direct`` and ``global_light`` float32
+    (fractions of full scale; zeros where the method has no plain fine stripes to separate them)."""
+
+    confidence: np.ndarray
+    shadow: np.ndarray
+    low: np.ndarray
+    global_dominated: np.ndarray
+    direct: np.ndarray
+    global_light: np.ndarray
+
+
+def _masks(fr: CaptureStack, spec: PatternSpec, fs: float, o: DecodeOptions, binary: bool) -> _Masks:
+    """Masks, confidence and direct/global separation (module doc) in one compiled pass; ``binary``: the method
+    has Gray-code stripes to separate the light with (the method's own plain fine frames: XOR frames above the
+    base are too narrow for it)."""
     from rangekit.coded import _kernels as K
 
-    fr = CaptureStack(stack, spec, order)
     H, W = fr.shape
-    fs = float(full_scale if full_scale is not None else (255 if fr.dtype == np.uint8 else 65535))
-    binary = spec.method in ("graycode", "xor02", "xor04", "hybrid")
-    edges = subpixel and spec.method in ("graycode", "xor02", "xor04")
     idx = fr.index
-    short = [a for a in spec.axes if edges and min_edge_bit >= spec.bits(a)]
-    if short:
-        raise DecodeError(f"min_edge_bit={min_edge_bit}: the {short[0]} code has {spec.bits(short[0])} bits "
-                          f"(0-{spec.bits(short[0]) - 1}), no stripe edge would be left")
+    max_global_ratio = o.max_global_ratio
     if max_global_ratio is None:
         max_global_ratio = np.inf if spec.xor_base is not None else 1.0
-
-    # Masks, confidence and direct/global separation: one pass over white, black and the finest stripes
-    # (the method's own plain fine frames: XOR frames above the base are too narrow for it).
     sep_axis = spec.axes[0]
     sep_prefix = "col" if sep_axis == "columns" else "row"
     sep_bits = [b for b in {"xor02": (0,), "xor04": (0, 1)}.get(spec.method, (1, 2))
@@ -219,77 +319,124 @@ def decode(stack, spec: PatternSpec, *, order: str = "rangekit", subpixel: bool 
     conf = np.empty((H, W), np.float32)
     shadow, low, glob_mask = (np.empty((H, W), bool) for _ in range(3))
     direct, glob = np.zeros((H, W), np.float32), np.zeros((H, W), np.float32)
-    K.masks_rows(fr.stack, idx["white"], idx["black"], sep_p, sep_i, np.float32(shadow_threshold * fs),
-                 np.float32(min_contrast * fs), np.float32(max_global_ratio), np.float32(1.0 / fs),
+    K.masks_rows(fr.stack, idx["white"], idx["black"], sep_p, sep_i, np.float32(o.shadow_threshold * fs),
+                 np.float32(o.min_contrast * fs), np.float32(max_global_ratio), np.float32(1.0 / fs),
                  conf, shadow, low, glob_mask, direct, glob)
-    moved, beyond = None, {}
-    if spec.method in ("graycode", "xor02", "xor04"):
-        # Binary codes: codes, subpixel edges and the final maps all in compiled passes.
-        empty_i, empty_f = np.zeros((1, 1), np.int32), np.zeros((1, 1), np.float32)
-        codes, subs, cross = {}, {}, {}
+    return _Masks(conf, shadow, low, glob_mask, direct, glob)
+
+
+@dataclass(frozen=True, eq=False)
+class _Maps:
+    """A codec's decoded maps, each (H, W): ``proj_col``, ``proj_row`` float32 projector pixels (NaN where not
+    decoded), ``confidence`` float32, ``inconsistent`` bool, ``col_std``, ``row_std`` float32 projector pixels; the
+    motion check (:func:`rangekit.coded.motion.check_motion`, None when not asked) and the counts of codes past the
+    projector per axis (:func:`rangekit.coded.binary.codes_beyond`)."""
+
+    proj_col: np.ndarray
+    proj_row: np.ndarray
+    confidence: np.ndarray
+    inconsistent: np.ndarray
+    col_std: np.ndarray
+    row_std: np.ndarray
+    moved: object = None
+    beyond: dict = field(default_factory=dict)
+
+
+def _binary_maps(fr: CaptureStack, spec: PatternSpec, masks: _Masks, o: DecodeOptions) -> _Maps:
+    """Binary codes: codes, subpixel edges and the final maps all in compiled passes; the motion check (its pixels
+    rejected, MotionError over ``max_motion``), the smoothing along the stripes. ``masks.confidence`` is
+    completed in place."""
+    from rangekit.coded import _kernels as K
+
+    H, W = fr.shape
+    edges, min_edge_bit, conf = o.subpixel, o.min_edge_bit, masks.confidence
+    empty_i, empty_f = np.zeros((1, 1), np.int32), np.zeros((1, 1), np.float32)
+    codes, subs, cross, beyond = {}, {}, {}, {}
+    for axis in spec.axes:
+        codes[axis] = axis_code(fr, spec, axis, o.workers, o.chunk_rows, ties=o.ties, keep_beyond=True)
+        if spec.xor_base is None:
+            beyond[axis] = codes_beyond(codes[axis], spec, axis, ~masks.shadow & ~masks.low)
+        if o.motion or (edges and not min_edge_bit):
+            cross[axis] = axis_crossings(fr, spec, axis, codes[axis])
+        subs[axis] = empty_f
+        if edges:
+            t = cross[axis] if not min_edge_bit else axis_crossings(fr, spec, axis, codes[axis], min_edge_bit)
+            subs[axis] = axis_subpixel(axis, codes[axis], t, o.max_gap)
+    proj_col, proj_row = np.empty((H, W), np.float32), np.empty((H, W), np.float32)
+    incons = np.empty((H, W), bool)
+    K.finalise_binary(codes.get("columns", empty_i), subs.get("columns", empty_f), codes.get("rows", empty_i),
+                      subs.get("rows", empty_f), "columns" in codes, "rows" in codes, edges, masks.shadow, masks.low,
+                      masks.global_dominated, conf, proj_col, proj_row, incons)
+    moved = None
+    if o.motion:
+        moved = check_motion(fr, spec, codes, np.isfinite(proj_col), cross, MOTION_LIMIT_CODES)
+        if o.max_motion is not None and moved.share > o.max_motion:
+            raise MotionError(f"the object moved during the capture: {moved.describe()}; more than "
+                              f"{o.max_motion:.0%} moved (max_motion); capture the view again")
+        proj_col[moved.mask] = np.nan
+        proj_row[moved.mask] = np.nan
+        conf[moved.mask] = 0.0
+    if edges and o.stripe_smoothing > 0:
+        proj_col = smooth_along_stripes(proj_col, "columns", o.stripe_smoothing)
+        proj_row = smooth_along_stripes(proj_row, "rows", o.stripe_smoothing)
+    # Integer codes are uniform within their stripe; subpixel edges have no noise model yet (NaN).
+    std = np.float32(GRAY_CODE_STD if not edges else np.nan)
+    return _Maps(proj_col, proj_row, conf, incons, np.where(np.isfinite(proj_col), std, np.float32(np.nan)),
+                 np.where(np.isfinite(proj_row), std, np.float32(np.nan)), moved, beyond)
+
+
+def _phase_maps(fr: CaptureStack, spec: PatternSpec, masks: _Masks, fs: float, o: DecodeOptions) -> _Maps:
+    """Phase methods: each wrapped phase corrected for the projector's response, unwrapped
+    (:func:`rangekit.coded.phase.decode_phase_maps`), then smoothed over ``coord_smoothing`` pixels if asked."""
+    corrections = {}
+    if o.response is not None and not o.response.is_linear:
         for axis in spec.axes:
-            codes[axis] = axis_code(fr, spec, axis, workers, chunk_rows, ties=ties, keep_beyond=True)
-            if spec.xor_base is None:
-                beyond[axis] = codes_beyond(codes[axis], spec, axis, ~shadow & ~low)
-            if motion or (edges and not min_edge_bit):
-                cross[axis] = axis_crossings(fr, spec, axis, codes[axis])
-            subs[axis] = empty_f
-            if edges:
-                t = cross[axis] if not min_edge_bit else axis_crossings(fr, spec, axis, codes[axis], min_edge_bit)
-                subs[axis] = axis_subpixel(axis, codes[axis], t, max_gap)
-        proj_col, proj_row = np.empty((H, W), np.float32), np.empty((H, W), np.float32)
-        incons = np.empty((H, W), bool)
-        K.finalise_binary(codes.get("columns", empty_i), subs.get("columns", empty_f), codes.get("rows", empty_i),
-                          subs.get("rows", empty_f), "columns" in codes, "rows" in codes, edges, shadow, low,
-                          glob_mask, conf, proj_col, proj_row, incons)
-        if motion:
-            moved = check_motion(fr, spec, codes, np.isfinite(proj_col), cross, MOTION_LIMIT_CODES)
-            if max_motion is not None and moved.share > max_motion:
-                raise MotionError(f"the object moved during the capture: {moved.describe()}; more than "
-                                  f"{max_motion:.0%} moved (max_motion); capture the view again")
-            proj_col[moved.mask] = np.nan
-            proj_row[moved.mask] = np.nan
-            conf[moved.mask] = 0.0
-        if edges and stripe_smoothing > 0:
-            proj_col = smooth_along_stripes(proj_col, "columns", stripe_smoothing)
-            proj_row = smooth_along_stripes(proj_row, "rows", stripe_smoothing)
-        # Integer codes are uniform within their stripe; subpixel edges have no noise model yet (NaN).
-        std = np.float32(GRAY_CODE_STD if not edges else np.nan)
-        col_std = np.where(np.isfinite(proj_col), std, np.float32(np.nan))
-        row_std = np.where(np.isfinite(proj_row), std, np.float32(np.nan))
-    else:
-        corrections = {}
-        if response is not None and not response.is_linear:
-            for axis in spec.axes:
-                for _, steps in spec.phase_plan(axis):
-                    corrections[steps] = phase_correction(response, steps)
-        proj_col, proj_row, conf, incons, col_std, row_std = decode_phase_maps(
-            fr, spec, shadow, low, glob_mask, conf, min_contrast * fs, fs, max_disagreement, corrections, workers,
-            chunk_rows)
-        if coord_smoothing > 0:
-            proj_col, proj_row = (smooth_coordinate_map(c, coord_smoothing) for c in (proj_col, proj_row))
-            factor = np.float32(smoothed_std_factor(coord_smoothing))
-            col_std, row_std = col_std / factor, row_std / factor
+            for _, steps in spec.phase_plan(axis):
+                corrections[steps] = phase_correction(o.response, steps)
+    proj_col, proj_row, conf, incons, col_std, row_std = decode_phase_maps(
+        fr, spec, masks.shadow, masks.low, masks.global_dominated, masks.confidence, o.min_contrast * fs, fs,
+        o.max_disagreement, corrections, o.workers, o.chunk_rows)
+    if o.coord_smoothing > 0:
+        proj_col, proj_row = (smooth_coordinate_map(c, o.coord_smoothing) for c in (proj_col, proj_row))
+        factor = np.float32(smoothed_std_factor(o.coord_smoothing))
+        col_std, row_std = col_std / factor, row_std / factor
+    return _Maps(proj_col, proj_row, conf, incons, col_std, row_std)
+
+
+def _refuse_implausible(fr: CaptureStack, spec: PatternSpec, fs: float, o: DecodeOptions, shadow: np.ndarray,
+                        maps: _Maps) -> None:
+    """DecodeError when the decoded capture cannot be this spec's: no pixel lit, white darker than black (another
+    order), codes past the projector's extent (:func:`refuse_codes_beyond`) or over half the lit pixels
+    inconsistent."""
     lit = ~shadow
     if not np.any(lit):
-        raise DecodeError(f"no pixel is lit: white - black is below {shadow_threshold:.0%} of full scale "
-                          f"({shadow_threshold * fs:.0f}) everywhere; was the projector on and the capture exposed?")
-    w_all, b_all = fr.stack[idx["white"]], fr.stack[idx["black"]]
+        raise DecodeError(f"no pixel is lit: white - black is below {o.shadow_threshold:.0%} of full scale "
+                          f"({o.shadow_threshold * fs:.0f}) everywhere; was the projector on and the capture exposed?")
+    H, W = fr.shape
+    w_all, b_all = fr.stack[fr.index["white"]], fr.stack[fr.index["black"]]
     step = max(1, int(np.sqrt(H * W / 250000)))
     if np.mean(w_all[::step, ::step] < b_all[::step, ::step]) > 0.25:
         raise DecodeError("the white capture is darker than the black one in over 25% of the pixels: the "
                           "captures are not in this spec's order (try order='opencv') or the spec does not "
                           "match the capture")
-    for axis, counts in beyond.items():
+    for axis, counts in maps.beyond.items():
         refuse_codes_beyond(counts, spec, axis)
-    if np.count_nonzero(lit) > 100 and np.count_nonzero(incons) > 0.5 * np.count_nonzero(lit):
+    if np.count_nonzero(lit) > 100 and np.count_nonzero(maps.inconsistent) > 0.5 * np.count_nonzero(lit):
         raise DecodeError(f"over half of the lit pixels decode to codes outside the {spec.width}x{spec.height} "
                           "projector: the spec does not match the capture (projector size, method or order)")
-    return DecodeResult(proj_col=proj_col, proj_row=proj_row, confidence=conf, shadow=shadow, low_contrast=low,
-                        global_dominated=glob_mask, inconsistent=incons,
-                        motion=None if moved is None or set(moved.undersampled) >= set(spec.axes) else moved.mask,
-                        motion_unchecked=_unchecked(motion, spec, moved),
-                        moved_frames=() if moved is None else moved.moved_frames,
-                        direct=direct if binary else None, global_light=glob if binary else None,
-                        white=fr.colour_white if fr.colour else w_all, col_std=col_std, row_std=row_std)
 
+
+def _result(fr: CaptureStack, spec: PatternSpec, o: DecodeOptions, masks: _Masks, maps: _Maps,
+            binary: bool) -> DecodeResult:
+    """The :class:`DecodeResult` of a binary or phase codec's masks and maps (``binary``: with the separated
+    direct and global light)."""
+    moved = maps.moved
+    return DecodeResult(proj_col=maps.proj_col, proj_row=maps.proj_row, confidence=maps.confidence,
+                        shadow=masks.shadow, low_contrast=masks.low, global_dominated=masks.global_dominated,
+                        inconsistent=maps.inconsistent,
+                        motion=None if moved is None or set(moved.undersampled) >= set(spec.axes) else moved.mask,
+                        motion_unchecked=_unchecked(o.motion, spec, moved),
+                        moved_frames=() if moved is None else moved.moved_frames,
+                        direct=masks.direct if binary else None, global_light=masks.global_light if binary else None,
+                        white=fr.colour_white if fr.colour else fr.stack[fr.index["white"]], col_std=maps.col_std,
+                        row_std=maps.row_std)

@@ -59,15 +59,8 @@ def integrate_normals(normals, mask=None, *, pixel_size: float = 1.0, camera=Non
         non-positive ``median_depth`` for perspective.
     """
     N = np.asarray(normals, dtype=np.float64)
-    if N.ndim != 3 or N.shape[2] != 3:
-        raise InputError(f"normals: expected (H, W, 3), found shape {N.shape}")
-    H, W = N.shape[:2]
-    valid = np.isfinite(N).all(2) & (np.nan_to_num(N[..., 2]) < 0)
-    mask = valid if mask is None else (np.asarray(mask, dtype=bool) & valid)
-    if mask.shape != (H, W):
-        raise InputError(f"mask: expected shape {(H, W)}, found {mask.shape}")
-    if not mask.any():
-        raise InputError("mask: no pixel with a finite normal facing the camera (n_z < 0) to integrate")
+    mask = _integrable(N, mask)
+    H, W = mask.shape
     if method not in ("lsq", "fft"):
         raise InputError(f"method: expected 'lsq' or 'fft', found {method!r}")
     if method == "fft":
@@ -83,7 +76,38 @@ def integrate_normals(normals, mask=None, *, pixel_size: float = 1.0, camera=Non
         median_depth = 0.0 if K is None else 1.0
     if K is not None and median_depth <= 0:
         raise InputError(f"median_depth: perspective depth must be positive, found {median_depth}")
+    i0, i1, a, b = _pair_equations(N, mask, K, pixel_size)
+    z, labels, n_comp = _solve_gauged(i0, i1, a, b, int(mask.sum()))
+    # Each region: median (of Z, or of log Z) set to the requested value.
+    med = _median_by_label(z, labels, n_comp)
+    z = z - med[labels] + median_depth if K is None else np.exp(z - med[labels]) * median_depth
+    Z = np.full((H, W), np.nan)
+    Z[mask] = z
+    return Z
 
+
+def _integrable(N: np.ndarray, mask) -> np.ndarray:
+    """(H, W) bool: the pixels to integrate, ``mask`` (default all) where the normal ``N`` ((H, W, 3), camera
+    frame) is finite and faces the camera (``n_z < 0``); InputError on wrong shapes or no such pixel."""
+    if N.ndim != 3 or N.shape[2] != 3:
+        raise InputError(f"normals: expected (H, W, 3), found shape {N.shape}")
+    H, W = N.shape[:2]
+    valid = np.isfinite(N).all(2) & (np.nan_to_num(N[..., 2]) < 0)
+    mask = valid if mask is None else (np.asarray(mask, dtype=bool) & valid)
+    if mask.shape != (H, W):
+        raise InputError(f"mask: expected shape {(H, W)}, found {mask.shape}")
+    if not mask.any():
+        raise InputError("mask: no pixel with a finite normal facing the camera (n_z < 0) to integrate")
+    return mask
+
+
+def _pair_equations(N: np.ndarray, mask: np.ndarray, K: np.ndarray | None,
+                    pixel_size: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """One equation ``a (z[i1] - z[i0]) = b`` per pair of neighbouring masked pixels, horizontal pairs then
+    vertical ones, with the normal averaged over the pair (:func:`integrate_normals`' formulas): ``i0, i1`` (m,)
+    int64 indices into the masked pixels in row-major order, ``a, b`` (m,) float64. ``z`` is the depth in units
+    of ``pixel_size`` (orthographic, ``K`` None) or the log-depth (perspective, ``K`` the (3, 3) intrinsics)."""
+    H, W = mask.shape
     idx = np.full((H, W), -1, dtype=np.int64)
     idx[mask] = np.arange(int(mask.sum()))
     rows_a, rows_b, coef, rhs = [], [], [], []
@@ -106,9 +130,14 @@ def integrate_normals(normals, mask=None, *, pixel_size: float = 1.0, camera=Non
         rows_b.append(idx[sl1][pair])
         coef.append(a)
         rhs.append(b)
-    i0, i1 = np.concatenate(rows_a), np.concatenate(rows_b)
-    a, b = np.concatenate(coef), np.concatenate(rhs)
-    n = int(mask.sum())
+    return np.concatenate(rows_a), np.concatenate(rows_b), np.concatenate(coef), np.concatenate(rhs)
+
+
+def _solve_gauged(i0: np.ndarray, i1: np.ndarray, a: np.ndarray, b: np.ndarray,
+                  n: int) -> tuple[np.ndarray, np.ndarray, int]:
+    """The least-squares solution of :func:`_pair_equations`' system over ``n`` unknowns: ``z`` (n,) float64, each
+    connected region's constant fixed by pinning its first pixel (re-centred by the caller), with each pixel's
+    region ``labels`` (n,) and the number of regions."""
     m = len(a)
     A = sp.csr_matrix((np.concatenate([-a, a]), (np.tile(np.arange(m), 2), np.concatenate([i0, i1]))),
                       shape=(m, n))
@@ -123,17 +152,7 @@ def integrate_normals(normals, mask=None, *, pixel_size: float = 1.0, camera=Non
     # Symmetric-mode SuperLU with minimum-degree ordering of A + A^T: ~2x faster than spsolve here.
     lu = spla.splu(AtA + sp.diags(pin, format="csc"), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
                    options=dict(SymmetricMode=True))
-    z = lu.solve(Atb)
-    # Each region: median (of Z, or of log Z) set to the requested value.
-    if K is None:
-        med = _median_by_label(z, labels, n_comp)
-        z = z - med[labels] + median_depth
-    else:
-        med = _median_by_label(z, labels, n_comp)
-        z = np.exp(z - med[labels]) * median_depth
-    Z = np.full((H, W), np.nan)
-    Z[mask] = z
-    return Z
+    return lu.solve(Atb), labels, n_comp
 
 
 def _median_by_label(x: np.ndarray, labels: np.ndarray, n: int) -> np.ndarray:

@@ -27,17 +27,15 @@ from rangekit.errors import RegistrationError
 from rangekit.geometry import apply_T, invert_T
 from rangekit.surface.cloud import PointCloud, bbox_diagonal, check_voxel, downsample_with_normals
 from rangekit.surface.convert import as_cloud
-from rangekit.registration.coarse import CoarseOptions, compute_features, coarse_align_seeds
+from rangekit.registration.coarse.views import coarse_poses
 from rangekit.registration.icp import IcpOptions
 from rangekit.registration.joint import JointResult, refine_jointly
 from rangekit.registration.overlap_estimate import overlapping_pairs
-from rangekit.registration.coarse.graph import descriptor_distances, view_descriptor, widen_until_settled
-from rangekit.registration.pair_refine import (EdgeResult, PairJob, PairMapper, check_dense, edge_result,
-                                               mutual_overlap, pairwise_overlap, refine_pair)
+from rangekit.registration.pair_refine import EdgeResult, PairJob, PairMapper, mutual_overlap, pairwise_overlap, refine_pair
 from rangekit.registration.pairs import (PairChooser, PairsTried, all_pairs, chooser_label, nearest_and_long_links,
                                          nearest_in_rotation)
 from rangekit.registration.stability import MIN_CONSTRAINT, HeldMotions
-from rangekit.registration.sync import SyncResult, synchronise
+from rangekit.registration.sync import SyncResult, synchronise_accepted
 from rangekit.registration.view_graph import EdgesDisagree, cut_off_message, edges_connect_views
 from rangekit._runtime.threads import one_blas_thread
 
@@ -140,11 +138,6 @@ def _prepare(clouds: Sequence[PointCloud], voxel: float, given: list[PointCloud]
 
 
 OVERLAP_NEIGHBOURS = 8   # no prior: each view's most overlapping views (estimated) added to the candidates
-def _sync(n: int, edges: list[EdgeResult]) -> SyncResult:
-    acc = [(e.i, e.j, e.T_i_j) for e in edges if e.accepted]
-    if not acc:
-        raise RegistrationError("no pair of views was registered reliably; the scans may not overlap")
-    return synchronise(n, acc, robust=True)
 
 
 def _joint_holds(n: int, pairs: list, edges: list[EdgeResult], holds: dict, T: np.ndarray) -> dict:
@@ -228,6 +221,8 @@ def pair_jobs(pairs: Sequence[tuple[int, int]], start: Callable[[int, int], np.n
 
 
 def _register_views(clouds, init_T_world_view, options, progress, names, map_pairs, ahead) -> MultiViewResult:
+    """:func:`register_views` on checked arguments: the levels, the coarse poses (no prior), the refinement
+    rounds, the joint refinement."""
     say = progress or (lambda msg: None)
     n = len(clouds)
     if n < 2:
@@ -239,74 +234,72 @@ def _register_views(clouds, init_T_world_view, options, progress, names, map_pai
     fine_clouds = _prepare(clouds, fine, None if ahead is None else ahead.level(fine, n))
     if ahead is not None:
         map_pairs = ahead.mapper(map_pairs)
-
-    n_coarse, coarse_label, seen = 0, "", set()
-    if init_T_world_view is None:
-        copt = CoarseOptions(voxel=voxel, rng=options.rng)
-        check_dense(coarse_clouds, range(n), voxel, names)
-        feats = [compute_features(c, copt) for c in coarse_clouds]
-
-        def align(i: int, j: int) -> EdgeResult:
-            def edge(r) -> EdgeResult:
-                return edge_result(i, j, r, r.fitness, options.min_overlap, options.min_constraint,
-                                   options.max_coarse_rmse * voxel, prior=False)
-
-            try:   # seeds in turn while the verified fit is refused (coarse.align.SEEDS)
-                r = coarse_align_seeds(feats[j], feats[i], copt, lambda r: edge(r).accepted)
-            except RegistrationError as exc:   # this pair only (e.g. no feature matches): a refused edge
-                return EdgeResult(i, j, np.eye(4), np.inf, 0.0, False, str(exc).removeprefix("coarse alignment: "))
-            return edge(r)
-
-        def settle(edges: list) -> np.ndarray:
-            edges_connect_views(n, edges, names)
-            return _sync(n, edges).T_world_view
-
-        k = options.coarse_neighbours
-        if k is None:
-            edges, coarse_label = [align(i, j) for i, j in all_pairs(coarse_clouds)], "all pairs"
-            T = settle(edges)
-        else:
-            dist = descriptor_distances(np.stack([view_descriptor(f.fpfh) for f in feats]))
-            try:
-                edges, T, k = widen_until_settled(dist, k, align, settle)
-            except EdgesDisagree as cut:
-                raise EdgesDisagree(cut_off_message(cut.views, names, voxel), cut.views) from None
-            coarse_label = f"k={k} most similar by FPFH histogram"
-        n_coarse, seen = len(edges), {(e.i, e.j) for e in edges}
-        say(f"coarse alignment of {n_coarse} of {n * (n - 1) // 2} pairs ({coarse_label}, voxel "
-            f"{voxel * 1e3:.2f} mm): {sum(e.accepted for e in edges)} accepted")
+    prior = init_T_world_view is not None
+    steps = _Refinement(n, options, prior, names, map_pairs, say, (coarse_clouds, voxel), (fine_clouds, fine))
+    n_coarse, coarse_label = 0, ""
+    if not prior:
+        coarse = coarse_poses(coarse_clouds, voxel, neighbours=options.coarse_neighbours,
+                              min_overlap=options.min_overlap, min_constraint=options.min_constraint,
+                              max_rmse=options.max_coarse_rmse * voxel, rng=options.rng, names=names, say=say)
+        T, n_coarse, coarse_label = coarse.T_world_view, len(coarse.edges), coarse.label
+        steps.seen |= {(e.i, e.j) for e in coarse.edges}
     else:
         T = first_view_world(init_T_world_view)   # (n, 4, 4), checked by register_views
     T_prior = T.copy()
-
     edges: list[EdgeResult] = []
     holds: dict = {}
-    prior = init_T_world_view is not None
-    # On the turntable the neighbours in angle; with no prior the neighbours in rotation, long links and the
-    # most overlapping (O(n k)). Any other prior may be degrees off: every pair (options.pairs bounds it).
-    choose = refinement_pairs(options, prior)
-    n_candidates = n_refined = 0
+    sync = None
+    for rnd in range(options.rounds):
+        T, edges, holds, sync = steps.run_round(T, rnd)
+    acc = [e for e in edges if e.accepted]
+    rmse, n_joint, converged = float(np.mean([e.rmse for e in acc])), 0, True
+    if options.joint_iterations > 0:
+        T, rmse, n_joint, converged = steps.joint(T, T_prior, edges, holds, ahead)
+    label = chooser_label(steps.choose) + (f" + {OVERLAP_NEIGHBOURS} most overlapping (estimated)" if steps.estimate
+                                           else "")
+    tried = PairsTried(n, len(steps.seen), n_coarse, steps.n_candidates, steps.n_refined, n_joint, label, coarse_label)
+    say(tried.summary())
+    return MultiViewResult(T, tuple(edges), sync, rmse, tried, converged)
 
-    estimate = options.pairs is None and not prior   # + the most overlapping, as a prior's all pairs would
 
-    def candidates_at(T: np.ndarray, level: list, v: float) -> list:
-        pairs = choose(T, prior)
-        if estimate:
-            pairs = sorted(set(pairs) | set(overlapping_pairs([apply_T(T[k], level[k].points) for k in range(n)],
-                                                              2 * v, OVERLAP_NEIGHBOURS, options.min_overlap)))
+class _Refinement:
+    """The refinement's steps over one registration's views and their state. ``coarse`` and ``fine``: each
+    (the views downsampled with normals, that voxel in metres), the first round's level and the later rounds' and
+    joint refinement's; ``prior``: the poses came from a prior (else from the coarse stage); ``map_pairs``: runs a
+    round's pair jobs (None: two at a time here). State: ``seen``, every pair tried; ``n_candidates`` and
+    ``n_refined``, the last round's candidate pairs and pairs measured; the fine level's k-d trees, built once."""
+
+    def __init__(self, n: int, options: MultiViewOptions, prior: bool, names: Sequence[str] | None,
+                 map_pairs: PairMapper | None, say: Callable[[str], None], coarse: tuple[list, float],
+                 fine: tuple[list, float]) -> None:
+        self.n, self.options, self.prior, self.names, self.map_pairs, self.say = n, options, prior, names, map_pairs, say
+        self.coarse, self.fine = coarse, fine
+        # On the turntable the neighbours in angle; with no prior the neighbours in rotation, long links and the
+        # most overlapping (O(n k)). Any other prior may be degrees off: every pair (options.pairs bounds it).
+        self.choose = refinement_pairs(options, prior)
+        self.estimate = options.pairs is None and not prior   # + the most overlapping, as a prior's all pairs would
+        self.seen: set = set()
+        self.n_candidates = self.n_refined = 0
+        self.fine_trees: list | None = None
+
+    def candidates(self, T: np.ndarray, level: list, v: float) -> list:
+        """The candidate pairs at poses ``T`` (n, 4, 4) on ``level`` (voxel ``v``, metres)."""
+        pairs = self.choose(T, self.prior)
+        if self.estimate:
+            pairs = sorted(set(pairs) | set(overlapping_pairs([apply_T(T[k], level[k].points) for k in range(self.n)],
+                                                              2 * v, OVERLAP_NEIGHBOURS, self.options.min_overlap)))
         return pairs
-    fine_trees: list | None = None
 
-    def refine(pairs: list, start: Callable[[int, int], np.ndarray], level: list, trees: list, v: float,
+    def refine(self, pairs: list, start: Callable[[int, int], np.ndarray], level: list, trees: list, v: float,
                rnd: int) -> tuple[list, dict]:
         """ICP of each pair from ``start(i, j)`` (its T_i_j) on ``level`` with voxel ``v``: (edges, holds)."""
-        jobs = pair_jobs(pairs, start, v, options, rnd, prior, names)
-        if map_pairs is None:   # two pairs at a time (their k-d tree queries release the GIL), taken in order
+        jobs = pair_jobs(pairs, start, v, self.options, rnd, self.prior, self.names)
+        if self.map_pairs is None:   # two pairs at a time (their k-d tree queries release the GIL), taken in order
             with ThreadPoolExecutor(max_workers=2, thread_name_prefix="rangekit-pairs") as pool:
                 refined = list(pool.map(lambda job: refine_pair(job, level[job.i], level[job.j], trees[job.i],
                                                                 trees[job.j]), jobs))
         else:
-            refined = map_pairs(jobs, level)
+            refined = self.map_pairs(jobs, level)
         out_edges, out_holds = [], {}
         for job, out in zip(jobs, refined):
             if out is not None:
@@ -315,51 +308,61 @@ def _register_views(clouds, init_T_world_view, options, progress, names, map_pai
                     out_holds[job.i, job.j] = out[1]
         return out_edges, out_holds
 
-    sync = None
-    for rnd in range(options.rounds):
-        level = coarse_clouds if rnd == 0 else fine_clouds
-        v = voxel if rnd == 0 else fine
+    def run_round(self, T: np.ndarray, rnd: int) -> tuple[np.ndarray, list, dict, SyncResult]:
+        """Refinement round ``rnd`` from poses ``T``: its candidate pairs refined, measured again where their
+        edges disagree, synchronised: (poses, edges, holds, the synchronisation)."""
+        level, v = self.coarse if rnd == 0 else self.fine
         trees = [cKDTree(c.points) for c in level]
-        candidates = candidates_at(T, level, v)
-        seen |= set(candidates)
-        n_candidates = len(candidates)
-        T_start = T
-        edges, holds = refine(candidates, lambda i, j: invert_T(T_start[i]) @ T_start[j], level, trees, v, rnd)
-        edges_connect_views(n, edges, names)
+        candidates = self.candidates(T, level, v)
+        self.seen |= set(candidates)
+        self.n_candidates = len(candidates)
+        edges, holds = self.refine(candidates, lambda i, j: invert_T(T[i]) @ T[j], level, trees, v, rnd)
+        edges_connect_views(self.n, edges, self.names)
+        edges, holds, sync = self.remeasure(edges, holds, T, rnd)
+        self.n_refined = len(edges)
+        acc = [e for e in edges if e.accepted]
+        self.say(f"round {rnd + 1}: {len(acc)}/{len(edges)} overlapping pairs accepted, mean rmse "
+                 f"{np.mean([e.rmse for e in acc]) * 1e3:.3f} mm")
+        return sync.T_world_view, edges, holds, sync
+
+    def remeasure(self, edges: list, holds: dict, T_start: np.ndarray, rnd: int) -> tuple[list, dict, SyncResult]:
+        """The round's edges synchronised; while some views' edges disagree, every pair of theirs measured again
+        on the fine level (on the Stanford dragon a 15k-point view's 3 mm edges disagreed by 1.5 deg, its 1 mm
+        edges agree), each from its accepted edge or the round's start ``T_start``. EdgesDisagree when the same
+        views disagree again."""
+        fine_clouds, fine = self.fine
         widened: set = set()
         while True:
             try:
-                sync = _sync(n, edges)
-                break
+                return edges, holds, synchronise_accepted(self.n, edges)
             except EdgesDisagree as cut:
-                # The views' edges disagree: measure every pair of theirs again, on the fine level (on the
-                # Stanford dragon a 15k-point view's 3 mm edges disagreed by 1.5 deg, its 1 mm edges agree).
                 new = [c for c in cut.views if c not in widened]
                 if not new:
-                    raise EdgesDisagree(cut_off_message(cut.views, names, voxel), cut.views) from None
+                    raise EdgesDisagree(cut_off_message(cut.views, self.names, self.coarse[1]), cut.views) from None
                 widened |= set(new)
-                pairs = sorted({(min(c, k), max(c, k)) for c in new for k in range(n) if k != c})
+                pairs = sorted({(min(c, k), max(c, k)) for c in new for k in range(self.n) if k != c})
                 kept = {(e.i, e.j): e.T_i_j for e in edges if e.accepted}
-                if fine_trees is None:
-                    fine_trees = [cKDTree(c.points) for c in fine_clouds]
-                more, more_holds = refine(pairs, lambda i, j: kept.get((i, j), invert_T(T_start[i]) @ T_start[j]),
-                                          fine_clouds, fine_trees, fine, rnd)
+                if self.fine_trees is None:
+                    self.fine_trees = [cKDTree(c.points) for c in fine_clouds]
+                more, more_holds = self.refine(
+                    pairs, lambda i, j: kept.get((i, j), invert_T(T_start[i]) @ T_start[j]), fine_clouds,
+                    self.fine_trees, fine, rnd)
                 redo = set(pairs)
                 edges = [e for e in edges if (e.i, e.j) not in redo] + more
                 holds = {k: h for k, h in holds.items() if k not in redo} | more_holds
-                seen |= redo
-                say(f"views {new}: edges disagree; {len(pairs)} pairs measured again at {fine * 1e3:.2f} mm, "
-                    f"{sum(e.accepted for e in more)} accepted")
-        n_refined = len(edges)
-        T = sync.T_world_view
-        acc = [e for e in edges if e.accepted]
-        say(f"round {rnd + 1}: {len(acc)}/{len(edges)} overlapping pairs accepted, mean rmse "
-            f"{np.mean([e.rmse for e in acc]) * 1e3:.3f} mm")
-    acc = [e for e in edges if e.accepted]
-    rmse, n_joint, converged = float(np.mean([e.rmse for e in acc])), 0, True
-    if options.joint_iterations > 0:
+                self.seen |= redo
+                self.say(f"views {new}: edges disagree; {len(pairs)} pairs measured again at {fine * 1e3:.2f} mm, "
+                         f"{sum(e.accepted for e in more)} accepted")
+
+    def joint(self, T: np.ndarray, T_prior: np.ndarray, edges: list, holds: dict,
+              ahead: WorkAhead | None) -> tuple[np.ndarray, float, int, bool]:
+        """The joint refinement of every view on the fine level from the synchronised poses ``T`` (on the turntable
+        from the prior ``T_prior`` put onto one axis, moving the axis and the angles only): (poses, rmse in metres,
+        the pairs it used, converged)."""
+        fine_clouds, fine = self.fine
+        options, n = self.options, self.n
         basis = None
-        if options.turntable and prior:
+        if options.turntable and self.prior:
             # The turntable's own poses start the joint refinement, which then moves the axis and the
             # angles only: they are in the family already, and on sparse clouds (8k points a view) the
             # pairwise results synchronised to poses 1.4 deg and 3.6 mm off, where no pair overlapped.
@@ -368,24 +371,20 @@ def _register_views(clouds, init_T_world_view, options, progress, names, map_pai
             T, basis = onto_turntable(T_prior), turntable_basis
         # Pairs by overlap at the synchronised poses (not by which pairwise runs passed), so the same data
         # gives the same problem whatever the starting poses were.
-        trees = fine_trees or (ahead is not None and ahead.trees(fine_clouds)) or [cKDTree(c.points) for c in fine_clouds]
-        joint_candidates = candidates_at(T, fine_clouds, fine)
-        seen |= set(joint_candidates)
+        trees = (self.fine_trees or (ahead is not None and ahead.trees(fine_clouds))
+                 or [cKDTree(c.points) for c in fine_clouds])
+        joint_candidates = self.candidates(T, fine_clouds, fine)
+        self.seen |= set(joint_candidates)
         overlap = mutual_overlap if ahead is None else ahead.overlap
         pairs = [(i, j) for i, j in joint_candidates
                  if overlap(fine_clouds[i], fine_clouds[j], trees[i], trees[j], invert_T(T[i]) @ T[j],
-                                    2 * fine) >= options.min_overlap]
+                            2 * fine) >= options.min_overlap]
         joint = refine_jointly(fine_clouds, T, pairs, max_distance=2.5 * fine, iterations=options.joint_iterations,
                                samples=options.joint_samples, tolerance=options.joint_tolerance, rng=options.rng,
                                hold=_joint_holds(n, pairs, edges, holds, T), basis=basis, trees=trees)
-        T = joint.T_world_view
-        rmse, n_joint, converged = joint.rmse, len(pairs), bool(joint.converged)
-        say(f"joint refinement of {n} views over {len(pairs)} pairs: rmse {joint.rmse * 1e3:.4f} mm, "
-            f"{joint.n_iterations} iterations{'' if joint.converged else ' (not converged)'}")
-    label = chooser_label(choose) + (f" + {OVERLAP_NEIGHBOURS} most overlapping (estimated)" if estimate else "")
-    tried = PairsTried(n, len(seen), n_coarse, n_candidates, n_refined, n_joint, label, coarse_label)
-    say(tried.summary())
-    return MultiViewResult(T, tuple(edges), sync, rmse, tried, converged)
+        self.say(f"joint refinement of {n} views over {len(pairs)} pairs: rmse {joint.rmse * 1e3:.4f} mm, "
+                 f"{joint.n_iterations} iterations{'' if joint.converged else ' (not converged)'}")
+        return joint.T_world_view, joint.rmse, len(pairs), bool(joint.converged)
 
 
 def overlap_rms(clouds: Sequence[PointCloud], T_world_view: np.ndarray, *, radius: float = 0.001) -> float:

@@ -34,13 +34,13 @@ from scipy.linalg import eigh
 from scipy.sparse.linalg import spsolve
 from scipy.spatial.transform import Rotation
 
-from rangekit.errors import InputError
+from rangekit.errors import InputError, RegistrationError
 from rangekit.geometry import make_T, nearest_rotation
 from rangekit.registration.view_graph import (ViewGraph, check_connected, check_rejection, parse_view_graph,
                                               triangles)
 
 __all__ = ["SyncResult", "RotationSync", "TranslationSync", "synchronise_rotations",
-           "synchronise_translations", "synchronise"]
+           "synchronise_translations", "synchronise", "synchronise_accepted"]
 
 _INLIER_K = 5.0          # hard inlier threshold, in units of the MAD scale
 _CAUCHY_C = 2.3849       # Cauchy kernel width in units of the scale (95 % efficiency under Gaussian noise)
@@ -324,3 +324,12 @@ def synchronise(n: int, edges, *, robust: bool = True, weights=None, max_iterati
               f"|r| <= {_INLIER_K:g} scale" if robust else "spectral rotations, least-squares translations")
     return SyncResult(T_world_view=T, edge_rotation_error=rot_err, edge_translation_error=tr_err,
                       inlier=rot_in & tr_in, n_iterations=it_r + it_t, method=method)
+
+
+def synchronise_accepted(n: int, edges) -> SyncResult:
+    """:func:`synchronise` (robust) over the accepted ones of ``edges`` (each with ``i``, ``j``, ``T_i_j`` and
+    ``accepted``, as :class:`rangekit.registration.pair_refine.EdgeResult`); RegistrationError when none is."""
+    acc = [(e.i, e.j, e.T_i_j) for e in edges if e.accepted]
+    if not acc:
+        raise RegistrationError("no pair of views was registered reliably; the scans may not overlap")
+    return synchronise(n, acc, robust=True)

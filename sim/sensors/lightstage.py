@@ -174,6 +174,38 @@ def render_light_stage(scene: Scene, lights: np.ndarray, *, camera: PinholeCamer
         If ``lights`` is not (f, 3) finite, directional lights are not unit length, ``kind`` is unknown
         or ``intensities`` does not match. :class:`SceneError` if the camera sees nothing.
     """
+    L, s = _checked_lights(lights, kind, intensities, bounce_samples)
+    f = len(L)
+    camera = light_stage_camera() if camera is None else camera
+    rng = np.random.default_rng(rng)
+    H, W = camera.height, camera.width
+    srf = _seen_surface(scene, camera, specular)
+    l_dir, falloff, cos_i, lit, cast = _light_paths(srf, L, kind, model.ref_distance, camera.T_world_cam, shadows,
+                                                    shadow_eps)
+    spec = _blinn_phong(srf, l_dir)
+    C = 3 if model.colour else 1
+    alb_c = srf.albedo if model.colour else srf.albedo.mean(axis=1, keepdims=True)  # (N, C)
+    direct = (alb_c[None] * np.where(lit, cos_i, 0.0)[..., None] + np.where(lit, spec, 0.0)[..., None]) \
+        * (model.gain * s[:, None] * falloff)[..., None]    # (f, N, C)
+    if bounce_samples > 0:
+        direct += model.gain * alb_c[None] * one_bounce(
+            srf.mesh, camera.T_cam_world, srf.x, srf.n, L, kind, s, model.ref_distance, samples=int(bounce_samples),
+            rng=rng.spawn(1)[0], eps=shadow_eps, colour=model.colour)
+    img = np.zeros((f, H * W, C), np.float32)
+    img[:, srf.idx] = direct + model.gain * model.ambient * alb_c[None]
+    img = _exposed(img.reshape(f, H, W, C), model, rng)
+    idx = srf.idx
+    return LightStageCapture(
+        images=img if model.colour else img[..., 0], lights=L.copy(), intensities=s, kind=kind,
+        normals_true=_per_pixel(srf.n, idx, (H, W), np.nan, (3,)),
+        albedo_true=_per_pixel(srf.albedo.mean(axis=1), idx, (H, W), np.nan),
+        depth_true=_per_pixel(srf.x[:, 2], idx, (H, W), np.nan), mask=srf.hit.copy(),
+        shadowed=_per_light(~lit, idx, (H, W)), cast_shadow=_per_light(cast, idx, (H, W)), camera=camera)
+
+
+def _checked_lights(lights, kind: str, intensities, bounce_samples) -> tuple[np.ndarray, np.ndarray]:
+    """``(L, s)``: the lights as a finite (f, 3) float64 array (unit directions for ``kind`` "directional") and
+    their (f,) intensities (default 1); InputError naming what is wrong, ``kind`` and ``bounce_samples`` too."""
     if kind not in ("directional", "point"):
         raise InputError(f"render_light_stage: kind must be 'directional' or 'point', found {kind!r}")
     L = np.asarray(lights, dtype=np.float64)
@@ -189,59 +221,81 @@ def render_light_stage(scene: Scene, lights: np.ndarray, *, camera: PinholeCamer
         raise InputError(f"render_light_stage: intensities must be {f} finite values >= 0, found shape {s.shape}")
     if int(bounce_samples) != bounce_samples or not 0 <= bounce_samples <= 4096:
         raise InputError(f"render_light_stage: bounce_samples must be an integer in 0..4096, found {bounce_samples!r}")
-    camera = light_stage_camera() if camera is None else camera
-    rng = np.random.default_rng(rng)
-    H, W = camera.height, camera.width
+    return L, s
 
-    # Geometry once, moved to the camera frame.
+
+@dataclass(frozen=True, eq=False)
+class _SeenSurface:
+    """What the camera sees, cast once for every light: the world ``mesh``, the (H, W) bool ``hit`` map and, for
+    its N hit pixels (flat indices ``idx`` (N,) into H * W), the points ``x`` (N, 3) metres and unit normals ``n``
+    (N, 3) facing the camera, both in the camera frame, ``albedo`` (N, 3), specular weight ``ks`` and ``shininess``
+    (N,) of each pixel's object."""
+
+    mesh: object
+    hit: np.ndarray
+    idx: np.ndarray
+    x: np.ndarray
+    n: np.ndarray
+    albedo: np.ndarray
+    ks: np.ndarray
+    shininess: np.ndarray
+
+
+def _seen_surface(scene: Scene, camera: PinholeCamera, specular: bool) -> _SeenSurface:
+    """The scene as ``camera`` sees it (:class:`_SeenSurface`); ``specular`` False: every ``ks`` 0."""
     mesh = scene.world_mesh()
     g = cast_view(mesh, camera, None)
     idx = np.flatnonzero(g.hit.ravel())
     R_cw, t_cw = camera.T_cam_world[:3, :3], camera.T_cam_world[:3, 3]
-    x = g.xyz.reshape(-1, 3)[idx] @ R_cw.T + t_cw           # (N, 3) camera frame, metres
-    n = g.normal.reshape(-1, 3)[idx] @ R_cw.T               # (N, 3) unit, facing the camera
-    albedo = g.albedo.reshape(-1, 3)[idx]                   # (N, 3)
     obj = g.object_id.ravel()[idx]
-    ks = np.array([o.specular for o in scene.objects])[obj] if specular else np.zeros(len(idx))
-    shin = np.array([o.shininess for o in scene.objects])[obj]
+    return _SeenSurface(mesh=mesh, hit=g.hit, idx=idx, x=g.xyz.reshape(-1, 3)[idx] @ R_cw.T + t_cw,
+                        n=g.normal.reshape(-1, 3)[idx] @ R_cw.T, albedo=g.albedo.reshape(-1, 3)[idx],
+                        ks=np.array([o.specular for o in scene.objects])[obj] if specular else np.zeros(len(idx)),
+                        shininess=np.array([o.shininess for o in scene.objects])[obj])
 
-    # Per light and pixel: direction to the light, falloff, attached shadow.
+
+def _light_paths(srf: _SeenSurface, L: np.ndarray, kind: str, ref_distance: float, T_world_cam: np.ndarray,
+                 shadows: bool, shadow_eps: float) -> tuple[np.ndarray, ...]:
+    """Per light and seen pixel, the path to the light (camera frame): ``l_dir`` (f, N, 3) unit directions towards
+    it, ``falloff`` (f, N) (1 for directional lights, ``(ref_distance / distance) ** 2`` for point lights),
+    ``cos_i`` (f, N) = n . l, ``lit`` (f, N) bool (neither attached nor, with ``shadows``, cast shadow) and
+    ``cast`` (f, N) bool (a triangle between the point and the light)."""
+    f, N = len(L), len(srf.idx)
     if kind == "directional":
-        l_dir = np.broadcast_to(L[:, None, :], (f, len(idx), 3))
-        dist = np.full((f, len(idx)), np.inf)
-        falloff = np.ones((f, len(idx)))
+        l_dir = np.broadcast_to(L[:, None, :], (f, N, 3))
+        dist = np.full((f, N), np.inf)
+        falloff = np.ones((f, N))
     else:
-        to = L[:, None, :] - x[None]                        # (f, N, 3)
+        to = L[:, None, :] - srf.x[None]                    # (f, N, 3)
         dist = np.linalg.norm(to, axis=2)
         l_dir = to / dist[..., None]
-        falloff = (model.ref_distance / dist) ** 2
-    cos_i = np.einsum("fnk,nk->fn", l_dir, n)
+        falloff = (ref_distance / dist) ** 2
+    cos_i = np.einsum("fnk,nk->fn", l_dir, srf.n)
     lit = cos_i > 0
     cast = np.zeros_like(lit)
     if shadows:
-        cast = lit & _occluded(mesh.vertices, mesh.triangles, camera.T_world_cam, x, n, l_dir, dist, lit,
+        cast = lit & _occluded(srf.mesh.vertices, srf.mesh.triangles, T_world_cam, srf.x, srf.n, l_dir, dist, lit,
                                shadow_eps)
         lit &= ~cast
-    # Blinn-Phong half vector between the light and the camera (at the origin of the camera frame).
-    v = -x / np.linalg.norm(x, axis=1, keepdims=True)
-    spec = np.zeros((f, len(idx)))
-    if np.any(ks > 0):
-        h = l_dir + v[None]
-        h /= np.linalg.norm(h, axis=2, keepdims=True)
-        nh = np.clip(np.einsum("fnk,nk->fn", h, n), 0.0, 1.0)
-        spec = ks[None] * nh ** shin[None]
+    return l_dir, falloff, cos_i, lit, cast
 
-    C = 3 if model.colour else 1
-    alb_c = albedo if model.colour else albedo.mean(axis=1, keepdims=True)  # (N, C)
-    direct = (alb_c[None] * np.where(lit, cos_i, 0.0)[..., None] + np.where(lit, spec, 0.0)[..., None]) \
-        * (model.gain * s[:, None] * falloff)[..., None]    # (f, N, C)
-    if bounce_samples > 0:
-        direct += model.gain * alb_c[None] * one_bounce(
-            mesh, camera.T_cam_world, x, n, L, kind, s, model.ref_distance, samples=int(bounce_samples), rng=rng.spawn(1)[0],
-            eps=shadow_eps, colour=model.colour)
-    img = np.zeros((f, H * W, C), np.float32)
-    img[:, idx] = direct + model.gain * model.ambient * alb_c[None]
-    img = img.reshape(f, H, W, C)
+
+def _blinn_phong(srf: _SeenSurface, l_dir: np.ndarray) -> np.ndarray:
+    """(f, N) the specular term ``ks (n . h) ** shininess``, ``h`` the half vector between the light ``l_dir``
+    (f, N, 3) and the camera (at the origin of the camera frame); zeros where no object is specular."""
+    v = -srf.x / np.linalg.norm(srf.x, axis=1, keepdims=True)
+    if not np.any(srf.ks > 0):
+        return np.zeros(l_dir.shape[:2])
+    h = l_dir + v[None]
+    h /= np.linalg.norm(h, axis=2, keepdims=True)
+    nh = np.clip(np.einsum("fnk,nk->fn", h, srf.n), 0.0, 1.0)
+    return srf.ks[None] * nh ** srf.shininess[None]
+
+
+def _exposed(img: np.ndarray, model: ImagingModel, rng: np.random.Generator) -> np.ndarray:
+    """The sensor on the irradiance ``img`` (f, H, W, C) float32, in place: lens blur, shot and read noise (from
+    ``rng``), clipping and quantisation to ``model.bits``, back in [0, 1]."""
+    f, H, W, C = img.shape
     if model.camera_blur > 0:
         for i in range(f):  # one OpenCV call per image, not per pixel
             img[i] = cv2.GaussianBlur(img[i], (0, 0), model.camera_blur,
@@ -253,22 +307,21 @@ def render_light_stage(scene: Scene, lights: np.ndarray, *, camera: PinholeCamer
     np.clip(img, 0, model.max_value, out=img)
     np.rint(img, out=img)
     img /= np.float32(model.max_value)
-    images = img if model.colour else img[..., 0]
+    return img
 
-    def field(values: np.ndarray, fill, shape=()) -> np.ndarray:
-        out = np.full((H * W,) + shape, fill, dtype=values.dtype)
-        out[idx] = values
-        return out.reshape((H, W) + shape)
 
-    def stack(per_light: np.ndarray) -> np.ndarray:
-        out = np.zeros((f, H * W), dtype=bool)
-        out[:, idx] = per_light
-        return out.reshape(f, H, W)
+def _per_pixel(values: np.ndarray, idx: np.ndarray, size: tuple[int, int], fill, shape=()) -> np.ndarray:
+    """(H, W, *shape) image of per-seen-pixel ``values`` (N, *shape) at flat indices ``idx``, ``fill`` elsewhere."""
+    out = np.full((size[0] * size[1],) + shape, fill, dtype=values.dtype)
+    out[idx] = values
+    return out.reshape(size + shape)
 
-    return LightStageCapture(
-        images=images, lights=L.copy(), intensities=s, kind=kind, normals_true=field(n, np.nan, (3,)),
-        albedo_true=field(albedo.mean(axis=1), np.nan), depth_true=field(x[:, 2], np.nan), mask=g.hit.copy(),
-        shadowed=stack(~lit), cast_shadow=stack(cast), camera=camera)
+
+def _per_light(per_light: np.ndarray, idx: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    """(f, H, W) bool images of the (f, N) per-seen-pixel ``per_light``, False where no pixel is seen."""
+    out = np.zeros((len(per_light), size[0] * size[1]), dtype=bool)
+    out[:, idx] = per_light
+    return out.reshape((len(per_light),) + size)
 
 
 def _occluded(vertices: np.ndarray, triangles: np.ndarray, T_world_cam: np.ndarray, x: np.ndarray,

@@ -23,10 +23,12 @@ from concurrent.futures import ThreadPoolExecutor
 from contextlib import AbstractContextManager, nullcontext
 from enum import Enum
 from itertools import islice
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
-from rangekit._runtime.child import ChildCall, ThreadCall, call_beside
 from rangekit.errors import ConfigError
+
+if TYPE_CHECKING:
+    from rangekit._runtime.child import ChildCall, ThreadCall
 
 __all__ = ["WORKERS_ENV", "Where", "worker_count", "start", "ordered_map", "thread_pool", "Done"]
 
@@ -101,6 +103,8 @@ def start(where: Where, fn: Callable, *args, child: ChildCall | None = None, **k
     if where is Where.DASK:
         raise ConfigError("where: a single call runs here, on a thread or in a child; Dask runs tasks "
                           "(rangekit.app.process.batch)")
+    from rangekit._runtime.child import call_beside
+
     return call_beside(fn, *args, in_child=where is Where.CHILD, child=child, **kwargs)
 
 

@@ -49,6 +49,7 @@ import numpy as np
 from rangekit.app.acquire.quiet import QuietWindows
 from rangekit.app.events import (CaptureLoad, MeshReady, OnEvent, ScanStarted, ViewAcquired, ViewDecoded, ViewPlaced,
                                  emit)
+from rangekit._runtime.executor import worker_count
 from rangekit.app.process.options import ProcessOptions
 from rangekit.errors import MotionError
 from rangekit.formats.sessions.session import Session
@@ -194,7 +195,7 @@ class StreamingProcessor:
         # core (the same maps: each pixel's decode is its own), its work ahead first, its preview placing after.
         last = self._finishing or k == total - 1
         settings = cache_settings(session, self.options.method, self.options.table_margin, self.options.max_motion)
-        with one_blas_thread(), numba_threads(2 if last else 1):
+        with one_blas_thread(), numba_threads(worker_count() if last else 1):
             cloud, maps = view_cloud(view, session.pattern, rig, settings, session.capture.full_scale,
                                      table_transform(rig), self.options.table_margin, session)
         self.decoded.append(k)

@@ -116,7 +116,8 @@ def _process(session: Session, options: ProcessOptions, evaluate: Evaluator | No
     if child is not None:
         children.enter_context(child)    # ended if anything below fails
     angles = evaluator_angles(decoded.views, multi_pass=session.plan.passes > 1)
-    with runner.beside(Work.TRUTH_PREPARE, evaluate.prepare if evaluate is not None else _nothing, angles) as truth:
+    with (runner.beside(Work.TRUTH_PREPARE, evaluate.prepare, angles) if evaluate is not None else
+          runner.beside(Work.TRUTH_PREPARE, _nothing, where=Where.HERE)) as truth:
         with runner.stage(Stage.REGISTER, release_after=True):   # the registration's k-d trees and samples
             registered = register(decoded, session, progress=runner.progress, map_pairs=runner.pair_mapper(),
                                   ahead=runner.memo.registration)

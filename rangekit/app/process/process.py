@@ -157,7 +157,8 @@ def _decoded_views(session: Session, options: ProcessOptions, runner: Runner) ->
     settings = cache_settings(session, options.method, options.table_margin, options.max_motion)
     handed = {v.index for v in views if v.index in given}
     rest = view_clouds([v for v in views if v.index not in handed], session.pattern, session.rig, settings,
-                       session.capture.full_scale, table_transform(session.rig), options.table_margin, session)
+                       session.capture.full_scale, table_transform(session.rig), options.table_margin, session,
+                       map_views=runner.map_views)
     for k, v in enumerate(views):
         cloud, maps = given.pop(v.index) if v.index in handed else next(rest)
         if v.index not in handed:

@@ -123,7 +123,7 @@ def view_cloud(v: SessionView, spec: PatternSpec, rig: Rig, settings: dict, full
 def view_clouds(views: Sequence[SessionView], spec: PatternSpec, rig: Rig, settings: dict,
                 full_scale: float | None, T_table_world: np.ndarray | None,
                 table_margin: float, session: Session | None = None, *,
-                workers: int = 0) -> Iterator[tuple[PointCloud, ViewMaps]]:
+                workers: int = 0, map_views=None) -> Iterator[tuple[PointCloud, ViewMaps]]:
     """:func:`view_cloud` of each view, yielded in order, ``workers`` views at a time on as many threads
     (:func:`rangekit._runtime.executor.ordered_map`; 0: the configured number, each with one numba and one BLAS
     thread; 1: on this thread, one view after another): two views side by side used
@@ -132,7 +132,8 @@ def view_clouds(views: Sequence[SessionView], spec: PatternSpec, rig: Rig, setti
 
     ``session``: each frame is checked against the SHA-256 recorded in its ``session.json``, taken from the bytes
     read for decoding (:func:`rangekit.formats.sessions.check.read_view_stack`: each frame read once); a view
-    taken from its cache has its frames hashed there instead. None: the frames are read unchecked."""
+    taken from its cache has its frames hashed there instead. None: the frames are read unchecked. ``map_views(fn,
+    views)``: the job runner's map (in order, on the configured number of threads) instead of this one's."""
     shape = (rig.camera.height, rig.camera.width)
     white = white_frame_index(spec)
 
@@ -151,6 +152,9 @@ def view_clouds(views: Sequence[SessionView], spec: PatternSpec, rig: Rig, setti
                                 rig, settings, full_scale, T_table_world, table_margin)
 
     n = worker_count(workers)
+    if map_views is not None:   # the job runner's map over views (rangekit.app.runner.Runner.map_views)
+        yield from map_views(one, views)
+        return
     yield from ordered_map(one, views, workers=n, name="rangekit-views")
 
 

@@ -132,9 +132,7 @@ ARGUMENTS = {
                     "allow_auto_exposure": FLAG, "exposures": {**optional(VECTOR), "wrong type": 5}, "process": FLAG,
                     "fusion": optional(NAME), "report": optional(FLAG), "format": optional(NAME), "realtime": FLAG,
                     "frames": optional(NAME), "sim_bump": optional(VECTOR), "processing": optional(OBJECT)},
-    "process": {"session": PATH, "options": optional(OBJECT), "on_event": CALLBACK, "map_pairs": CALLBACK,
-                "decoded_views": but(optional(OBJECT), "empty"), "evaluate": CALLBACK,
-                "registration_ahead": optional(OBJECT)},
+    "process": {"session": PATH, "options": optional(OBJECT), "on_event": CALLBACK, "evaluate": CALLBACK},
     "ProcessOptions": {"fusion": NAME, "method": NAME, "table_margin": NUMBER, "report": FLAG, "truth": FLAG,
                        "mesh_format": NAME, "poisson_depth": optional(NUMBER), "max_motion": optional(NUMBER),
                        "poisson_points": optional(NUMBER)},
@@ -157,7 +155,8 @@ def _cases():
 def test_every_public_name_and_argument_is_probed():
     assert set(rk.__all__) == set(ARGUMENTS) | set(NOT_CHECKED)
     for name, arguments in ARGUMENTS.items():
-        parameters = set(inspect.signature(getattr(rk, name)).parameters)
+        parameters = {p for p, kind in inspect.signature(getattr(rk, name)).parameters.items()
+                      if kind.kind is not kind.VAR_KEYWORD}   # rk.process's **removed: the keywords of before
         assert {a.split("=")[0] for a in arguments} == parameters, name
 
 
@@ -188,6 +187,14 @@ def test_the_issue_s_calls_are_refused_naming_the_argument(base, call, argument)
     """The probe of issue 48: each raised an AttributeError or TypeError from inside (``subpixel="no"`` was True)."""
     with pytest.raises(InputError, match=rf"^{argument}: expected .*, found "):
         call(base)
+
+
+@pytest.mark.parametrize("keyword", ["decoded_views", "registration_ahead", "map_pairs"])
+def test_the_process_hand_over_keywords_are_refused_naming_them(base, keyword):
+    """Issue 49: the scan hands its work on inside the job runner (its memo); the keywords are gone from rk.process
+    and a call still giving one is told so, by name, before any work."""
+    with pytest.raises(InputError, match=rf"^{keyword}: .*removed in issue 49"):
+        rk.process(base["process"]["session"], **{keyword: None})
 
 
 def test_a_wrong_type_is_also_a_type_error_and_a_wrong_value_is_not(tmp_path):

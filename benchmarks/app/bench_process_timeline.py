@@ -30,7 +30,7 @@ import rangekit.surface.watertight as watertight  # noqa: E402
 CALLS = ((process_module, "decode"), (process_module, "register"), (process_module, "measure_views"),
          (process_module, "measure_closed"), (process_module, "_report"), (evaluate, "truth_samples"),
          (evaluate, "mesh_accuracy"), (view_errors, "view_errors"), (watertight, "make_watertight"),
-         (fuse, "save_one"), (fuse, "save_cloud"), (fuse, "evaluate_observed"))
+         (fuse, "save_one"), (fuse, "save_cloud"), (process_module, "evaluate_observed"))
 
 
 def _cpu() -> tuple[float, float]:

@@ -205,9 +205,12 @@ class _Chain:
 
 
 def logged(folder: str | Path, on_event):
-    """``on_event`` with ``folder``'s :class:`EventLog` in front; a chain already logging there as it is."""
-    if isinstance(on_event, _Chain) and on_event.log.folder == Path(folder):
-        return on_event
+    """``on_event`` with ``folder``'s :class:`EventLog` in front; a chain already logging there as it is, and so an
+    event bus one of whose subscribers is such a chain (:attr:`rangekit.app.bus.EventBus.subscribers`: a scan's
+    processing is given the scan's bus)."""
+    for chain in getattr(on_event, "subscribers", (on_event,)):
+        if isinstance(chain, _Chain) and chain.log.folder == Path(folder):
+            return on_event
     return _Chain(EventLog(folder), on_event)
 
 

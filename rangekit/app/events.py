@@ -1,8 +1,8 @@
 """What a running job tells its subscribers: typed events, one frozen dataclass each.
 
 A job (:func:`rangekit.app.scan.scan.scan`, :func:`rangekit.app.process.process.process_session`) takes
-``on_event``, a callable given every event in the order things happen, one at a time (on the job's thread;
-:class:`ViewAcquired` on the frame writer's). The
+``on_event``, a callable given every event in the order things happen, one at a time, on the thread of the
+job's event bus (:class:`rangekit.app.bus.EventBus`): never on the capture's or the frame writer's. The
 command line's progress bar is one subscriber (:func:`progress_subscriber`); a web view or a notebook is
 another. A subscriber that raises stops the job with its exception (nothing is swallowed).
 
@@ -14,6 +14,7 @@ from __future__ import annotations
 import time
 from contextlib import contextmanager
 from dataclasses import dataclass
+from enum import Enum
 from pathlib import Path
 from typing import TYPE_CHECKING, Callable, Iterator, Union
 
@@ -27,11 +28,28 @@ __all__ = ["StageStarted", "StageFinished", "Progress", "ScanStarted", "ViewAcqu
            "PairRegistered", "MeshReady", "JobFailed", "Event", "OnEvent", "emit", "progress_of", "progress_subscriber"]
 
 
+class Stage(str, Enum):
+    """The stages of a job, as its events and summary.json's ``seconds`` name them (a ``str``: ``Stage.DECODE ==
+    "decode"``). A coded-light session is decoded, registered, fused, evaluated and reported; a laser session's
+    profiles take the place of the first two."""
+
+    ACQUIRE = "acquire"
+    DECODE = "decode"
+    REGISTER = "register"
+    PROFILES = "profiles"
+    FUSE = "fuse"
+    EVALUATE = "evaluate"
+    REPORT = "report"
+
+    def __str__(self) -> str:
+        return self.value
+
+
 @dataclass(frozen=True)
 class StageStarted:
-    """A stage began: ``"acquire"``, ``"decode"``, ``"register"``, ``"fuse"``, ``"evaluate"`` or ``"report"``."""
+    """A stage began (:class:`Stage`)."""
 
-    stage: str
+    stage: Stage
 
 
 @dataclass(frozen=True)
@@ -39,7 +57,7 @@ class StageFinished:
     """A stage ended after ``seconds`` of wall time (a stage run in parts, such as ``"evaluate"`` beside the
     fusion and after it, finishes once per part)."""
 
-    stage: str
+    stage: Stage
     seconds: float
 
 
@@ -199,12 +217,13 @@ class StageClock(StageTimer):
         self._on_event = on_event
 
     @contextmanager
-    def stage(self, name: str) -> Iterator[None]:
+    def stage(self, name: Stage | str) -> Iterator[None]:
+        name = Stage(name)
         emit(self._on_event, StageStarted(name))
         t0 = time.perf_counter()
-        with super().stage(name):
+        with super().stage(name.value):
             yield
         emit(self._on_event, StageFinished(name, time.perf_counter() - t0))
 
 
-__all__ += ["StageClock", "failures_announced"]
+__all__ += ["Stage", "StageClock", "failures_announced"]

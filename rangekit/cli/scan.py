@@ -206,10 +206,13 @@ def _process_batch(args: argparse.Namespace, options) -> int:
         raise UsageError(f"DIR: expected different session folders, found one given twice in {' '.join(args.session)}")
     for s in args.session:
         check_output(s, option="DIR", folder=True)
-    where = f"a local cluster of {args.workers or 2} worker processes" if scheduler == "local" else scheduler
+    from rangekit._runtime.executor import worker_count
+
+    workers = worker_count(args.workers or 0)
+    where = f"a local cluster of {workers} worker processes" if scheduler == "local" else scheduler
     note(f"processing {len(args.session)} session(s) on {where}")
     try:
-        res = process_sessions(args.session, options, scheduler=scheduler, workers=args.workers or 2,
+        res = process_sessions(args.session, options, scheduler=scheduler, workers=workers,
                                progress=console())
     except KeyboardInterrupt:
         print(f"rangekit: interrupted; the views decoded so far are cached. Continue with: rangekit process "
@@ -358,6 +361,7 @@ def add_parsers(sub) -> None:
                       help="Dask scheduler: 'local' (default with several sessions: a local cluster of --workers "
                            "processes) or the address tcp://HOST:PORT of a running 'dask scheduler' (docs/scale.md)")
     proc.add_argument("--workers", type=int_in(1, 256), metavar="N",
-                      help="worker processes of --scheduler local, one thread each (default 2)")
+                      help="worker processes of --scheduler local, one thread each (default: RANGEKIT_WORKERS, else "
+                           "the cores rangekit may use)")
     _processing_options(proc)
     proc.set_defaults(func=cmd_process)

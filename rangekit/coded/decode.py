@@ -101,7 +101,7 @@ def decode(stack, spec: PatternSpec, *, order: str = "rangekit", subpixel: bool 
            response: ProjectorResponse | None = None, stripe_smoothing: int = 0, min_edge_bit: int = 0,
            coord_smoothing: float = 0.0,
            motion: bool = False, max_motion: float | None = MAX_MOTION_SHARE, ties: str = "zero",
-           workers: int = 2, chunk_rows: int = 96) -> DecodeResult:
+           workers: int = 0, chunk_rows: int = 96) -> DecodeResult:
     """Decode a capture stack into projector coordinates.
 
     Parameters
@@ -162,7 +162,7 @@ def decode(stack, spec: PatternSpec, *, order: str = "rangekit", subpixel: bool 
     ties : {"zero", "one"}
         Gray codes: the bit of a pixel whose frame equals its inverse; "zero" (frame brighter than inverse) or
         "one" (frame at least its inverse: RoomAlive's rule, the ``roomalive:graycode`` layout's).
-    workers, chunk_rows : threads and rows per chunk.
+    workers, chunk_rows : threads (0: the configured number, rangekit._runtime.executor) and rows per chunk.
 
     The fringe codecs (micro, modulated, ftp, psp, faps) read ``min_contrast``, ``shadow_threshold``,
     ``full_scale``, ``response`` and ``workers``; the other options are the binary and phase codes'.

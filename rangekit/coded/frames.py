@@ -10,6 +10,7 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
+from rangekit._runtime.executor import worker_count
 from rangekit.errors import DecodeError
 from rangekit.coded.patterns import PatternSpec
 
@@ -64,7 +65,9 @@ def row_chunks(n: int, size: int) -> list[slice]:
 
 
 def run_parallel(fn, items, workers: int) -> None:
-    """Call ``fn`` on every item, on ``workers`` threads (in order on one)."""
+    """Call ``fn`` on every item, on ``workers`` threads (in order on one; 0: the configured number,
+    :func:`rangekit._runtime.executor.worker_count`)."""
+    workers = worker_count(workers)
     if workers <= 1:
         for it in items:
             fn(it)

@@ -14,6 +14,7 @@ from typing import Sequence
 
 import numpy as np
 
+from rangekit._runtime.executor import worker_count
 from rangekit.coded.patterns import PATTERN_METHODS, PatternSpec, make_pattern_spec
 from rangekit.errors import ConfigError, FileFormatError, UsageError
 from rangekit.image_header import check_image_files
@@ -48,7 +49,7 @@ def list_images(source: str | Path | Sequence[str | Path]) -> list[Path]:
     return paths
 
 
-def read_stack(paths: Sequence[Path], *, workers: int = 2, what: str = "a capture") -> np.ndarray:
+def read_stack(paths: Sequence[Path], *, workers: int = 0, what: str = "a capture") -> np.ndarray:
     """Read images (lossless, own bit depth, RGB order) on ``workers`` threads into one (K, H, W) or
     (K, H, W, 3) array; sizes must agree.
 
@@ -74,13 +75,13 @@ def read_stack(paths: Sequence[Path], *, workers: int = 2, what: str = "a captur
                                   f"{stack.dtype} {stack.shape[1:]}; {what} needs one size and depth")
         stack[k] = img
 
-    with ThreadPoolExecutor(max_workers=max(1, workers)) as pool:
+    with ThreadPoolExecutor(max_workers=worker_count(workers)) as pool:
         for _ in pool.map(load, range(1, len(paths))):
             pass
     return stack
 
 
-def stack_from_bytes(paths: Sequence[Path], contents: list[bytes], *, workers: int = 2,
+def stack_from_bytes(paths: Sequence[Path], contents: list[bytes], *, workers: int = 0,
                      what: str = "a capture") -> np.ndarray:
     """:func:`read_stack` of files already read: ``contents[k]`` the bytes of ``paths[k]`` (which name them in
     errors; no file is opened). The headers are checked first, then each image decoded into the stack on
@@ -105,7 +106,7 @@ def stack_from_bytes(paths: Sequence[Path], contents: list[bytes], *, workers: i
         stack[k] = img
 
     contents[0] = b""
-    with ThreadPoolExecutor(max_workers=max(1, workers)) as pool:
+    with ThreadPoolExecutor(max_workers=worker_count(workers)) as pool:
         for _ in pool.map(load, range(1, len(paths))):
             pass
     return stack
@@ -137,7 +138,7 @@ def capture_full_scale(info: dict, rig: Rig | None) -> float | None:
     return float((1 << bits) - 1) if isinstance(bits, int) and 0 < bits <= 32 else None
 
 
-def load_capture(folder: str | Path, *, workers: int = 2) -> Capture:
+def load_capture(folder: str | Path, *, workers: int = 0) -> Capture:
     """Read a capture folder; ``spec``/``rig`` are None when patterns.json / rig.json are absent."""
     folder = Path(folder)
     if not folder.is_dir():

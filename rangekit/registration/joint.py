@@ -14,6 +14,7 @@ from typing import Callable, Sequence
 import numpy as np
 from scipy.spatial import cKDTree
 
+from rangekit._runtime.executor import worker_count
 from rangekit.errors import RegistrationError
 from rangekit.geometry import apply_T, invert_T, make_T, rotvec_to_R
 from rangekit.registration.icp import MIN_NORMAL_COS
@@ -35,7 +36,7 @@ def refine_jointly(clouds: Sequence[PointCloud], T_world_view: np.ndarray, pairs
                    max_distance: float, iterations: int = 15, samples: int = 8000, kernel_k: float = 1.345,
                    tolerance: float = 1e-9, rng: int = 0, hold: dict | None = None,
                    basis: Callable[[np.ndarray, np.ndarray, float], np.ndarray] | None = None,
-                   trees: Sequence[cKDTree] | None = None, workers: int = 2) -> JointResult:
+                   trees: Sequence[cKDTree] | None = None, workers: int = 0) -> JointResult:
     """Multi-view ICP: refine every pose at once (view 0 fixed) by Gauss-Newton on point-to-plane residuals
     of all overlapping ``pairs`` in both directions, re-associating closest points each iteration.
 
@@ -66,7 +67,7 @@ def refine_jointly(clouds: Sequence[PointCloud], T_world_view: np.ndarray, pairs
     directed = [(i, j) for i, j in pairs] + [(j, i) for i, j in pairs]
     size = float(np.sqrt(np.mean([np.sum((apply_T(T[k], s) - centre) ** 2, axis=1).mean() for k, s in enumerate(subs)])))
     converged, it, rmse, pair_rmse = False, 0, float("nan"), {}
-    with ThreadPoolExecutor(max_workers=max(1, int(workers)), thread_name_prefix="rangekit-joint") as pool:
+    with ThreadPoolExecutor(max_workers=worker_count(int(workers)), thread_name_prefix="rangekit-joint") as pool:
         for it in range(1, iterations + 1):
             Hm = np.zeros((6 * n, 6 * n))
             g = np.zeros(6 * n)

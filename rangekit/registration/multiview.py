@@ -21,6 +21,7 @@ from typing import Callable, Protocol, Sequence
 import numpy as np
 from scipy.spatial import cKDTree
 
+from rangekit._runtime.executor import worker_count
 from rangekit._runtime.arguments import (check_bool, check_callable, check_instance, check_items, check_number,
                                          check_pose, check_text, refuse)
 from rangekit.errors import RegistrationError
@@ -133,7 +134,7 @@ def _prepare(clouds: Sequence[PointCloud], voxel: float, given: list[PointCloud]
             raise RegistrationError(f"view {k}: has NaN or infinite points; drop them first")
     if given is not None:
         return given
-    with ThreadPoolExecutor(max_workers=2, thread_name_prefix="rangekit-voxels") as pool:   # in order
+    with ThreadPoolExecutor(max_workers=worker_count(), thread_name_prefix="rangekit-voxels") as pool:   # in order
         return list(pool.map(lambda c: downsample_with_normals(c, voxel), clouds))
 
 
@@ -294,8 +295,8 @@ class _Refinement:
                rnd: int) -> tuple[list, dict]:
         """ICP of each pair from ``start(i, j)`` (its T_i_j) on ``level`` with voxel ``v``: (edges, holds)."""
         jobs = pair_jobs(pairs, start, v, self.options, rnd, self.prior, self.names)
-        if self.map_pairs is None:   # two pairs at a time (their k-d tree queries release the GIL), taken in order
-            with ThreadPoolExecutor(max_workers=2, thread_name_prefix="rangekit-pairs") as pool:
+        if self.map_pairs is None:   # pairs side by side (their k-d tree queries release the GIL), taken in order
+            with ThreadPoolExecutor(max_workers=worker_count(), thread_name_prefix="rangekit-pairs") as pool:
                 refined = list(pool.map(lambda job: refine_pair(job, level[job.i], level[job.j], trees[job.i],
                                                                 trees[job.j]), jobs))
         else:

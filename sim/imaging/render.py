@@ -32,6 +32,7 @@ from dataclasses import asdict, dataclass
 import cv2
 import numpy as np
 
+from rangekit._runtime.executor import worker_count
 from rangekit.errors import InputError, PatternError
 from rangekit.sim.imaging._kernels import add_direct
 from rangekit.sim.scene.raycast import ViewGeometry
@@ -228,8 +229,10 @@ class ViewRenderer:
         return digitise(self.expected(pattern), self.model, exposure or Exposure(), rng)
 
     def render_many(self, patterns: list[np.ndarray], rngs: list[np.random.Generator], *,
-                    workers: int = 2, exposures: list[Exposure] | None = None) -> list[np.ndarray]:
-        """Render several patterns on ``workers`` threads (numpy and OpenCV release the GIL)."""
+                    workers: int = 0, exposures: list[Exposure] | None = None) -> list[np.ndarray]:
+        """Render several patterns on ``workers`` threads (numpy and OpenCV release the GIL; 0: the configured
+        number, :func:`rangekit._runtime.executor.worker_count`)."""
+        workers = worker_count(workers)
         if len(patterns) != len(rngs):
             raise InputError(f"render_many: {len(patterns)} patterns but {len(rngs)} generators")
         exposures = exposures if exposures is not None else [Exposure()] * len(patterns)

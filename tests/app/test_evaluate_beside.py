@@ -1,5 +1,6 @@
-"""The evaluator's mesh-independent part runs beside the registration (rangekit.app.process.evaluate.prepared_beside):
-the same call, on another thread, while the block runs; its error raised when the block ends."""
+"""The evaluator's mesh-independent part runs beside the registration, where the job runner places it
+(rangekit.app.runner: Work.TRUTH_PREPARE, a thread in every plan): the same call, on another thread, while the block
+runs; its error raised when its result is taken; without an evaluator, no thread."""
 
 from __future__ import annotations
 
@@ -7,7 +8,24 @@ import threading
 
 import pytest
 
-from rangekit.app.process.evaluate import prepared_beside
+from contextlib import contextmanager
+
+from rangekit._runtime.executor import Where
+from rangekit.app.runner import PLACEMENTS, Plan, Runner, Work
+
+
+@contextmanager
+def prepared_beside(evaluate, angles):
+    """As rangekit.app.process.process runs it around the register stage."""
+    runner = Runner(plan=Plan.LOCAL)
+    with (runner.beside(Work.TRUTH_PREPARE, evaluate.prepare, angles) if evaluate is not None else
+          runner.beside(Work.TRUTH_PREPARE, lambda: threading.current_thread(), where=Where.HERE)) as truth:
+        yield
+        truth.result()
+
+
+def test_the_truth_is_prepared_on_a_thread_in_every_plan():
+    assert {PLACEMENTS[Work.TRUTH_PREPARE][plan] for plan in Plan} == {Where.THREAD}
 
 
 class _Recorder:
@@ -44,3 +62,5 @@ def test_its_error_is_raised_when_the_block_ends():
 def test_no_evaluator_no_thread():
     with prepared_beside(None, [0.0]):
         pass
+    with Runner().beside(Work.TRUTH_PREPARE, threading.current_thread, where=Where.HERE) as here:
+        assert here.result() is threading.current_thread()

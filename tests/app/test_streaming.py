@@ -128,6 +128,8 @@ def test_the_final_mesh_is_what_rangekit_process_makes(streamed, tmp_path):
     the work ahead (every level, every first-round pair, the errors of the views decoded while the capture ran)."""
     import json
 
+    from rangekit.app.process.process import process_session
+    from rangekit.app.runner import Memo, Plan
     from rangekit.app.scan.scan import process
 
     out, _, _, results, streaming = streamed
@@ -139,8 +141,8 @@ def test_the_final_mesh_is_what_rangekit_process_makes(streamed, tmp_path):
     for k in range(N_VIEWS):
         for name in CACHE:
             (fresh / f"view_{k:03d}" / name).unlink()
-    process(scanned, ProcessOptions(report=False), decoded_views=results, evaluate=evaluate,
-            registration_ahead=ahead)
+    process_session(scanned, ProcessOptions(report=False), evaluate=evaluate, plan=Plan.STREAMING,
+                    memo=Memo(results, ahead, evaluate))
     # the errors of the views decoded while the capture ran (not the last one's: the processing measures it
     # beside the fusion)
     assert ahead.taken == {"levels": 2, "pairs": len(ahead._jobs), "overlaps": len(ahead._joint)}

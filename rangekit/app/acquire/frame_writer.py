@@ -27,6 +27,7 @@ from concurrent.futures import Future, ThreadPoolExecutor, wait
 from pathlib import Path
 from typing import Callable
 
+from rangekit._runtime.executor import worker_count
 from rangekit.formats.sessions.check import frame_sha256
 from rangekit.io import write_frame
 
@@ -50,9 +51,9 @@ class FrameError(Exception):
 class FrameWriter:
     """Write frames on ``workers`` threads; finish views in order on one more (see the module docstring)."""
 
-    def __init__(self, *, workers: int = 2, max_pending: int = 64,
+    def __init__(self, *, workers: int = 0, max_pending: int = 64,
                  on_load: Callable[[bool, int], None] | None = None) -> None:
-        self._pool = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="rangekit-frames")
+        self._pool = ThreadPoolExecutor(max_workers=worker_count(workers), thread_name_prefix="rangekit-frames")
         self._finisher = ThreadPoolExecutor(max_workers=1, thread_name_prefix="rangekit-views")
         self._slots = threading.BoundedSemaphore(max_pending)
         self._frames: list[tuple[str, Future]] = []      # the view being taken: (file key, future of its SHA-256)

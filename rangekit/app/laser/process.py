@@ -22,13 +22,12 @@ saturated in at least :data:`SATURATED_SHARE` of the rows where it was seen (pow
 
 from __future__ import annotations
 
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
 
-from rangekit.app.events import OnEvent
+from rangekit._runtime.executor import thread_pool
 from rangekit.app.laser.reconstruct import reconstruct_laser_capture
 from rangekit.app.process.options import ProcessOptions
 from rangekit.errors import ConfigError, DecodeError
@@ -48,7 +47,7 @@ from rangekit.surface.cloud import PointCloud
 __all__ = ["LaserProfiles", "laser_profiles", "oriented_profiles", "profile_spacing", "process_laser", "SATURATED_SHARE"]
 
 #: Steps processed at once (threads: PNG decoding and the peak finder release the GIL).
-WORKERS = 2
+WORKERS = 0   # automatic: rangekit._runtime.executor.worker_count
 #: A laser saturated in this share of the rows where its line was seen (saturated rows over saturated
 #: rows plus the points kept on the object) is an error: the scan's power or exposure is wrong, not a shiny patch.
 SATURATED_SHARE = 0.9
@@ -113,7 +112,7 @@ def laser_profiles(session: Session, *, method: str = "gaussian", table_margin: 
 
     points, colours, steps, lasers, counts, rejected = [], [], [], [], [], [{} for _ in rig.lasers]
     on_table = np.zeros(len(rig.lasers), dtype=np.int64)
-    with ThreadPoolExecutor(max_workers=WORKERS) as pool:
+    with thread_pool(WORKERS) as pool:
         for k, (P, C, which, n, rej, table) in enumerate(pool.map(one, range(len(views)))):
             on_table += table
             points.append(P)
@@ -200,26 +199,26 @@ def profile_spacing(profiles: LaserProfiles, T_world_table: np.ndarray | None) -
     return np.maximum(s, np.hypot(local[:, 0], local[:, 1]) * step)
 
 
-def process_laser(session: Session, options: ProcessOptions, evaluate, on_event: OnEvent | None = None,
+def process_laser(session: Session, options: ProcessOptions, evaluate, runner,
                   method: str = "gaussian") -> ProcessResult:
     """The laser branch of :func:`rangekit.app.process.process.process_session` (same outputs, same set rule:
-    ``summary.json`` last; stages "profiles", "fuse", "evaluate", "report" announced to ``on_event``, each mesh
-    as :class:`rangekit.app.events.MeshReady`). ``evaluate(mesh, angles, cloud=points)`` also measures the
-    merged cloud."""
-    from rangekit.app.events import MeshReady, StageClock, emit, progress_of
+    ``summary.json`` last; stages PROFILES, FUSE, EVALUATE, REPORT timed and announced by ``runner``
+    (:class:`rangekit.app.runner.Runner`), each mesh as :class:`rangekit.app.events.MeshReady`).
+    ``evaluate(mesh, angles, cloud=points)`` also measures the merged cloud."""
+    from rangekit.app.events import MeshReady, Stage
     from rangekit.app.process.fused_outputs import MESH_FILE, WATERTIGHT_FILE, evaluate_fused, save_fused
     from rangekit.surface.fusion import poisson_meshes
 
-    out, fusion, table_margin, progress = session.folder, options.fusion, options.table_margin, progress_of(on_event)
+    out, fusion, table_margin, progress = session.folder, options.fusion, options.table_margin, runner.progress
     if fusion != "poisson":
         raise ConfigError(f"--fusion {fusion}: a laser scan has profiles, not depth maps; it fuses with poisson")
-    timer = StageClock(on_event)
-    with timer.stage("profiles"):
+    timer = runner
+    with timer.stage(Stage.PROFILES):
         profiles = laser_profiles(session, method=method, table_margin=table_margin, progress=progress)
         save_poses(out / "poses.json", profiles.names, profiles.T_world_view,
                    world=f"frame of {profiles.names[0]} (the rig's world at its turntable angle); each step "
                          "placed by its turntable angle")
-    with timer.stage("fuse"):
+    with timer.stage(Stage.FUSE):
         call_progress(progress, f"normals of {len(profiles.cloud):,} points")
         merged = oriented_profiles(profiles)
         save_cloud(out / "merged.ply", merged)
@@ -232,12 +231,12 @@ def process_laser(session: Session, options: ProcessOptions, evaluate, on_event:
                                spacing=profile_spacing(profiles, session.rig.T_world_table)[::step])
         mesh_info, watertight_info = save_fused(out, fused, fusion, options.mesh_format)
         mesh = fused.observed
-        emit(on_event, MeshReady("observed", out / MESH_FILE, mesh))
-        emit(on_event, MeshReady("watertight", out / WATERTIGHT_FILE, fused.watertight))
+        runner.emit(MeshReady("observed", out / MESH_FILE, mesh))
+        runner.emit(MeshReady("watertight", out / WATERTIGHT_FILE, fused.watertight))
     angles = [v.angle for v in session.done_views]
     accuracy, truth = None, None
     if evaluate is not None:
-        with timer.stage("evaluate"):
+        with timer.stage(Stage.EVALUATE):
             call_progress(progress, "measuring the cloud and the meshes against the true surface")
             accuracy, truth, _ = evaluate_fused(evaluate, fused, angles, cloud=merged.points)
     per_step = profiles.n_points.sum(axis=1)
@@ -249,7 +248,7 @@ def process_laser(session: Session, options: ProcessOptions, evaluate, on_event:
                            mesh_info, timer.seconds, accuracy, laser=laser_info, watertight_mesh=watertight_info,
                            options=options.to_dict())
     if options.report:
-        with timer.stage("report"):
+        with timer.stage(Stage.REPORT):
             from rangekit.app.laser.report import write_laser_report
 
             call_progress(progress, "writing report.html")

@@ -26,6 +26,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Sequence
 
+from rangekit._runtime.executor import worker_count
 from rangekit.app.process.options import ProcessOptions
 from rangekit.errors import ConfigError, RangekitError
 from rangekit.progress import call_progress
@@ -185,15 +186,15 @@ def finish_session_task(folder: str, views: Sequence[ViewDone], options: Process
     """Register, fuse, evaluate (a simulated session, with ``options.truth``) and report the session in
     ``folder`` once its ``views`` are decoded (a Dask task; they come from the cache). Returns the end-of-run
     summary lines."""
-    from rangekit.app.process.batch_pairs import dask_pair_mapper
-    from rangekit.app.scan.scan import process
+    from rangekit.app.runner import Plan
+    from rangekit.app.scan.scan import process_placed
 
-    pairs = dask_pair_mapper()   # each view pair's registration a task of its own (rangekit.app.process.batch_pairs)
-    return tuple(process(folder, options, map_pairs=pairs).summary_lines())
+    # the Dask placement of the plan: each view pair's registration a task of its own (PLACEMENTS, batch_pairs)
+    return tuple(process_placed(folder, options, plan=Plan.DASK).summary_lines())
 
 
 def process_sessions(folders: Sequence[str | Path], options: ProcessOptions | None = None, *,
-                     scheduler: str = "local", workers: int = 2, progress: Callable | None = None,
+                     scheduler: str = "local", workers: int = 0, progress: Callable | None = None,
                      timeout: float = CONNECT_TIMEOUT_S) -> BatchResult:
     """Process every session folder on Dask; each into its ``mesh.ply`` etc. as
     :func:`rangekit.app.process.process.process_session` does (the same bytes).
@@ -202,8 +203,8 @@ def process_sessions(folders: Sequence[str | Path], options: ProcessOptions | No
     ----------
     options : how (:class:`ProcessOptions`; ``truth``: measure simulated sessions against their truth, as
         ``rangekit process`` does); the defaults if None.
-    scheduler : "local" (a ``LocalCluster`` of ``workers`` processes on 127.0.0.1, one thread each) or the
-        address of a running ``dask scheduler`` (``tcp://host:port``; ``workers`` is then unused).
+    scheduler : "local" (a ``LocalCluster`` of ``workers`` processes on 127.0.0.1, one thread each; 0: the
+        configured number, :func:`rangekit._runtime.executor.worker_count`) or the address of a running ``dask scheduler`` (``tcp://host:port``; ``workers`` is then unused).
     progress : ``progress(msg, done=None, total=None)``: a line per view and per session done or failed.
     timeout : seconds to wait for the scheduler at an address.
 
@@ -214,8 +215,8 @@ def process_sessions(folders: Sequence[str | Path], options: ProcessOptions | No
         raise: its :class:`SessionOutcome` holds the error.
     """
     options = options or ProcessOptions()
-    if scheduler == "local" and not (isinstance(workers, int) and workers >= 1):
-        raise ConfigError(f"workers: expected a whole number >= 1, found {workers!r}")
+    if scheduler == "local" and not (isinstance(workers, int) and not isinstance(workers, bool) and workers >= 0):
+        raise ConfigError(f"workers: expected a whole number >= 1 (0: the configured number), found {workers!r}")
     t0 = time.perf_counter()
     folders = [Path(f) for f in folders]
     outcome: dict[int, dict] = {k: {"folder": f} for k, f in enumerate(folders)}
@@ -339,7 +340,7 @@ class _client:
             os.environ.update(WORKER_MALLOC)
             try:
                 with dask.config.set({"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None, **QUIET_DASK}):
-                    self.cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
+                    self.cluster = LocalCluster(n_workers=worker_count(self.workers), threads_per_worker=1, processes=True,
                                                 host="127.0.0.1", dashboard_address=None, env=dict(WORKER_ENV),
                                                 silence_logs=logging.ERROR)
             finally:

@@ -2,33 +2,28 @@
 simulator's, :func:`rangekit.sim.truth.evaluate.truth_evaluator`; none on hardware). Processing never imports
 the simulator.
 
-It runs in three parts around the fusion: the views beside it (:func:`measure_views`), the observed mesh while
-the closed one is made (:meth:`rangekit.app.process.fuse.Fusion.meshes`), the closed mesh at the end
-(:func:`measure_closed`).
+The runner (:mod:`rangekit.app.process.process`) runs it in parts around the registration and the fusion: the
+truth's mesh-independent part beside the registration (:meth:`Evaluator.prepare`), the views beside the fusion
+(:func:`measure_views`), the observed mesh while the closed one is made
+(:func:`rangekit.app.process.fused_outputs.evaluate_observed`), the closed mesh at the end (:func:`measure_closed`).
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterator
-from concurrent.futures import ThreadPoolExecutor, wait
-from contextlib import contextmanager
 from typing import Protocol, Sequence
 
 import numpy as np
 
-from rangekit._runtime.memory import reuse_freed_memory
-from rangekit.app.events import OnEvent, StageClock, progress_of
 from rangekit.app.process.fuse import FusedViews
 from rangekit.app.process.fused_outputs import with_closed
 from rangekit.app.process.register import RegisteredViews
 from rangekit.camera import forget_pixel_rays
 from rangekit.formats.sessions.summary import Accuracy
 from rangekit.formats.sessions.view_errors import ViewErrors
-from rangekit.progress import call_progress
 from rangekit.surface.mesh import TriangleMesh
 
 __all__ = ["Evaluation", "Truth", "Evaluator", "NoTruth", "NO_TRUTH", "measuring", "RegisteredViewsLike",
-           "measure_views", "measure_closed", "prepared_beside"]
+           "measure_views", "measure_closed"]
 
 
 class Evaluation(Protocol):
@@ -106,41 +101,20 @@ def measuring(truth: Truth | None) -> Truth | None:
     return truth if truth is not None and truth.measures else None
 
 
-@contextmanager
-def prepared_beside(evaluate: Evaluator | None, angles: Sequence) -> Iterator[None]:
-    """``with prepared_beside(evaluate, angles): register...``: the evaluator's mesh-independent part
-    (``evaluate.prepare(angles)``: the truth's samples and what the views can see of them) on a thread beside
-    the block, which runs on one core (the registration: 1.0 core for 4.5 s on the 12-view scan); waited for
-    on exit, its error raised then. Nothing without an evaluator."""
-    if evaluate is None:
-        yield
-        return
-    with ThreadPoolExecutor(max_workers=1, thread_name_prefix="rangekit-truth") as pool:
-        ahead = pool.submit(evaluate.prepare, angles)
-        try:
-            yield
-        finally:
-            wait([ahead])
-        ahead.result()
-
-
-def measure_views(evaluate: Evaluator | None, registered: RegisteredViews, clock: StageClock) -> None:
+def measure_views(evaluate: Evaluator | None, registered: RegisteredViews) -> None:
     """Beside the fusion: the evaluator's ``prepare`` (each view against the truth), after which the decoded
     projector columns (12 maps, 63 MB) are let go; then the camera's cached rays (63 MB, used by the decoding
-    and the per-view errors) are let go, with or without an evaluator. The views' casts and distances reuse freed
-    pages (:func:`rangekit._runtime.memory.reuse_freed_memory`): 0.8 GB of fresh pages faulted in and zeroed on the
-    12-view scan became 0.12 GB, with the same peak (issue 36)."""
+    and the per-view errors) are let go, with or without an evaluator. (The runner has the views' casts and
+    distances reuse freed pages, :func:`rangekit._runtime.memory.reuse_freed_memory`: 0.8 GB of fresh pages
+    faulted in and zeroed on the 12-view scan became 0.12 GB, with the same peak, issue 36.)"""
     if evaluate is not None:
-        with clock.stage("evaluate"), reuse_freed_memory():   # each view's casts reuse the last view's pages
-            evaluate.prepare(registered.angles, registered)
+        evaluate.prepare(registered.angles, registered)
         registered.decoded.proj_cols.clear()   # made into the per-view errors: not kept beside Poisson
     forget_pixel_rays()
 
 
-def measure_closed(evaluate: Evaluator, fused: FusedViews, registered: RegisteredViews, clock: StageClock,
-                   on_event: OnEvent | None = None) -> tuple[Accuracy, TriangleMesh, list | None]:
+def measure_closed(evaluate: Evaluator, fused: FusedViews,
+                   registered: RegisteredViews) -> tuple[Accuracy, TriangleMesh, ViewErrors | None]:
     """The observed mesh's :class:`Accuracy` with the closed mesh's figures as its ``watertight``: ``(accuracy,
     truth, view errors)`` (:func:`rangekit.app.process.fused_outputs.with_closed`)."""
-    with clock.stage("evaluate"):
-        call_progress(progress_of(on_event), "measuring the closed mesh against the true surface")
-        return with_closed(evaluate, fused.evaluation, fused.watertight, registered.angles)
+    return with_closed(evaluate, fused.evaluation, fused.watertight, registered.angles)

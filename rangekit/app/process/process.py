@@ -20,6 +20,10 @@ mesh as an uninterrupted run.
 
 The outputs are written as a set: a stale ``summary.json`` is removed first and the new one written
 last, so a folder with ``summary.json`` always has the mesh, poses and merged cloud of the same run.
+The stages (decode, register, fuse, evaluate, report) are pure steps; this module is their plan, run by the job
+runner (:mod:`rangekit.app.runner`): it times and announces each stage, places each piece of work (a thread, a
+child process, Dask: :data:`rangekit.app.runner.PLACEMENTS`) and takes what was done ahead from its memo.
+
 Processing holds the session's lock and checks every view's frames against their recorded SHA-256s, taken
 from the bytes it reads to decode them (:mod:`rangekit.formats.sessions.check`). Nothing it writes is read
 back in the same run.
@@ -27,38 +31,36 @@ back in the same run.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from contextlib import ExitStack
 from pathlib import Path
-from typing import TYPE_CHECKING
 
-from rangekit._runtime.child import call_beside
-from rangekit._runtime.memory import release_free_memory
+from rangekit._runtime.child import spawn_child
+from rangekit._runtime.executor import Where
 from rangekit._runtime.threads import one_blas_thread
-from rangekit.app.events import OnEvent, StageClock, failures_announced, progress_of
-from rangekit.app.process.decode import decode
-from rangekit.app.process.evaluate import Evaluator, measure_closed, measure_views, prepared_beside
-from rangekit.app.process.fuse import Fusion, poisson_child
+from rangekit.app.events import (MeshReady, OnEvent, PairRegistered, Stage, ViewDecoded, failures_announced)
+from rangekit.app.process.decode import DecodedViews, decode
+from rangekit.app.process.evaluate import Evaluator, measure_closed, measure_views
+from rangekit.app.process.fuse import (CHILD_IMPORTS, FusedViews, close, fusion_input, large_poisson, observed_rule,
+                                       save_closed, save_merged, save_observed, summary_line, surfaces)
+from rangekit.app.process.fused_outputs import MESH_FILE, WATERTIGHT_FILE, evaluate_observed
 from rangekit.app.process.options import ProcessOptions
-from rangekit.app.process.register import evaluator_angles, register
+from rangekit.app.process.register import RegisteredViews, evaluator_angles, register
+from rangekit.app.process.view_cache import cache_settings, table_transform, view_clouds
+from rangekit.app.runner import Memo, Plan, Runner, Work
 from rangekit.errors import ConfigError
 from rangekit.formats.sessions.check import verify_views
 from rangekit.formats.sessions.lock import session_lock
 from rangekit.formats.sessions.session import Session
 from rangekit.formats.sessions.summary import ProcessResult
 from rangekit.io import atomic_write_json, fsync_folder
-from rangekit.progress import call_progress
-
-if TYPE_CHECKING:
-    from rangekit.registration.ahead import RegistrationAhead
-    from rangekit.registration.pair_refine import PairMapper
 
 __all__ = ["process_session"]
 
 
 def process_session(session: Session | str | Path, options: ProcessOptions | None = None, *,
-                    evaluate: Evaluator | None = None, on_event: OnEvent | None = None,
-                    map_pairs: PairMapper | None = None, decoded_views: dict | None = None,
-                    registration_ahead: RegistrationAhead | None = None) -> ProcessResult:
+                    evaluate: Evaluator | None = None, on_event: OnEvent | None = None, plan: Plan = Plan.LOCAL,
+                    memo: Memo | None = None) -> ProcessResult:
     """Process the completed views of a session (a loaded :class:`Session` or its folder) into ``mesh.ply``
     (the observed surface) and ``mesh_watertight.ply`` (closed, flagged; and ``summary.json``, ``report.html``).
 
@@ -67,18 +69,13 @@ def process_session(session: Session | str | Path, options: ProcessOptions | Non
     options : how (:class:`ProcessOptions`: fusion, triangulation, table margin, report); the defaults if None.
     evaluate : measures the mesh against the truth (:data:`rangekit.app.process.evaluate.Evaluator`); None on
         hardware. Processing itself never imports the simulator.
-    on_event : given every event (:mod:`rangekit.app.events`): stages, progress lines, each view's cloud as it
-        is decoded (before the fusion starts), each registered pair, each mesh written; an error as
-        :class:`JobFailed` before it is raised.
-    map_pairs : runs the registration's pair refinements (:func:`rangekit.registration.multiview.register_views`;
-        the Dask batch maps them onto its workers); None: here, one after another.
-    decoded_views : views already decoded in this run, by index: ``(cloud, ViewMaps)`` as
-        :func:`rangekit.app.process.view_cache.view_cloud` gives them, their frames checked when they were read
-        (the scan's streaming processor, :mod:`rangekit.app.scan.streaming`); the others are decoded or read
-        from their cache.
-    registration_ahead : what the scan's streaming processor registered as the views came
-        (:class:`rangekit.registration.ahead.RegistrationAhead`): taken where it is exactly what the register stage
-        computes, so the outputs are the same bytes with or without it.
+    on_event : given every event (:mod:`rangekit.app.events`) on the job's event bus: stages, progress lines,
+        each view's cloud as it is decoded (before the fusion starts), each registered pair, each mesh written; an
+        error as :class:`JobFailed` before it is raised.
+    plan : where the work runs (:class:`rangekit.app.runner.Plan`: one process, a scan's, a Dask task's).
+    memo : what was done ahead (:class:`rangekit.app.runner.Memo`: a scan's views decoded as they came, its
+        registration's first pairs, its prepared evaluator), taken where it is exactly what the stages compute:
+        the outputs are the same bytes with or without it.
 
     Raises
     ------
@@ -89,58 +86,136 @@ def process_session(session: Session | str | Path, options: ProcessOptions | Non
     """
     options = options or ProcessOptions()
     folder = Path(session.folder if isinstance(session, Session) else session)
-    with failures_announced(on_event):
-        if not (folder / "session.json").is_file():
-            raise ConfigError(f"{folder}: not a session folder (no session.json)")
-    with failures_announced(on_event), session_lock(folder), one_blas_thread(), ExitStack() as children:
-        if not isinstance(session, Session):    # (one BLAS thread: thin products, rangekit._runtime.threads)
-            session = Session.load(folder)
-        return _process(session, options, evaluate, on_event, map_pairs, children, decoded_views or {},
-                        registration_ahead)
+    runner = Runner(on_event, plan=plan, memo=memo)
+    try:
+        with failures_announced(runner.emit):
+            if not (folder / "session.json").is_file():
+                raise ConfigError(f"{folder}: not a session folder (no session.json)")
+        with failures_announced(runner.emit), session_lock(folder), one_blas_thread(), ExitStack() as children:
+            if not isinstance(session, Session):    # (one BLAS thread: thin products, rangekit._runtime.threads)
+                session = Session.load(folder)
+            return _process(session, options, evaluate, runner, children)
+    finally:
+        runner.close()
 
 
-def _process(session: Session, options: ProcessOptions, evaluate: Evaluator | None, on_event: OnEvent | None,
-             map_pairs: PairMapper | None, children: ExitStack, decoded_views: dict,
-             registration_ahead: RegistrationAhead | None) -> ProcessResult:
+def _process(session: Session, options: ProcessOptions, evaluate: Evaluator | None, runner: Runner,
+             children: ExitStack) -> ProcessResult:
     """The stages in order: check the session, decode (with the report's per-view part), register, fuse (the
     views measured beside it), measure, report, and summary.json last."""
-    _start(session, on_event)
+    _start(session, runner)
     if session.is_laser:
         from rangekit.app.laser.process import process_laser
 
-        return process_laser(session, options, evaluate, on_event)
-    clock = StageClock(on_event)
-    decoded = decode(session, options, clock, on_event, given=decoded_views)
-    child = poisson_child(decoded, options, children)      # imports on the other core while the views register
-    measuring = evaluate is not None
-    with prepared_beside(evaluate, evaluator_angles(decoded.views, multi_pass=session.plan.passes > 1)):
-        registered = register(decoded, session, clock, on_event, map_pairs=map_pairs, ahead=registration_ahead)
+        return process_laser(session, options, evaluate, runner)
+    with runner.stage(Stage.DECODE, reuse_memory=True):   # each view's stacks reuse the last one's pages
+        decoded = decode(session, options, _decoded_views(session, options, runner))
+    # the Poisson child imports on the other core while the views register
+    child = spawn_child(CHILD_IMPORTS) if large_poisson(decoded, options) and \
+        runner.where(Work.POISSON) is Where.CHILD else None
+    if child is not None:
+        children.enter_context(child)    # ended if anything below fails
+    angles = evaluator_angles(decoded.views, multi_pass=session.plan.passes > 1)
+    with (runner.beside(Work.TRUTH_PREPARE, evaluate.prepare, angles) if evaluate is not None else
+          runner.beside(Work.TRUTH_PREPARE, _nothing, where=Where.HERE)) as truth:
+        with runner.stage(Stage.REGISTER, release_after=True):   # the registration's k-d trees and samples
+            registered = register(decoded, session, progress=runner.progress, map_pairs=runner.pair_mapper(),
+                                  ahead=runner.memo.registration)
+            for e in registered.edges:
+                runner.emit(PairRegistered(e.i, e.j, e.rmse, e.overlap, e.accepted, e.reason))
+        truth.result()
     agreement = []     # the report's views' agreement, started as soon as the observed mesh is made
-
-    def start_agreement(observed) -> None:
-        agreement.append(children.enter_context(_agreement_beside(options.report, observed, registered)))
-
-    with clock.stage("fuse"), Fusion(registered, session, options, child, on_event,
-                                     measuring_beside=measuring) as fusion:
-        fusion.save_merged()
-        measure_views(evaluate, registered, clock)          # beside the fusion
-        release_free_memory()
-        fused = fusion.meshes(clock, evaluate, beside_observed=start_agreement)
-    accuracy, truth, view_errors = (measure_closed(evaluate, fused, registered, clock, on_event)
-                                    if evaluate is not None else (None, None, None))
+    with runner.stage(Stage.FUSE):
+        fused = _fuse(registered, session, options, evaluate, child, runner, agreement, children)
+    accuracy = truth_mesh = view_errors = None
+    if evaluate is not None:
+        with runner.stage(Stage.EVALUATE):
+            runner.say("measuring the closed mesh against the true surface")
+            accuracy, truth_mesh, view_errors = measure_closed(evaluate, fused, registered)
     # Stage times are wall seconds; "evaluate" includes the part done beside the fusion (inside "fuse").
     result = ProcessResult(session.folder, decoded.names, registered.T_world_view, [len(c) for c in decoded.clouds],
-                           registered.edges, registered.rmse, fused.observed_info, clock.seconds, accuracy,
+                           registered.edges, registered.rmse, fused.observed_info, runner.seconds, accuracy,
                            watertight_mesh=fused.watertight_info, view_errors=view_errors,
                            view_passes=registered.view_passes, registration_note=registered.note,
                            options=options.to_dict())
     if options.report:
-        _report(result, registered, fused, session, truth, clock, on_event, agreement[0].result())
+        _report(result, registered, fused, session, truth_mesh, runner, agreement[0].result())
     atomic_write_json(session.folder / "summary.json", result.to_dict())   # last: the set is complete
     return result
 
 
-def _start(session: Session, on_event: OnEvent | None) -> None:
+def _nothing(*_args) -> None:
+    return None
+
+
+def _decoded_views(session: Session, options: ProcessOptions, runner: Runner) -> Iterator:
+    """Each completed view's ``(cloud, ViewMaps)`` in order, for the decode stage: taken from the memo (decoded
+    ahead, its frames checked then; taken out as it is used, so its maps are freed with the others') or decoded
+    on the runner's worker threads, the next view's frames read while one decodes, each frame once (its SHA-256
+    checked from the bytes read). Each view is announced as :class:`ViewDecoded` (a view from the memo was, when
+    it was decoded) and as a progress line."""
+    views, given = session.done_views, runner.memo.decoded
+    settings = cache_settings(session, options.method, options.table_margin, options.max_motion)
+    handed = {v.index for v in views if v.index in given}
+    rest = view_clouds([v for v in views if v.index not in handed], session.pattern, session.rig, settings,
+                       session.capture.full_scale, table_transform(session.rig), options.table_margin, session,
+                       map_views=runner.map_views)
+    for k, v in enumerate(views):
+        cloud, maps = given.pop(v.index) if v.index in handed else next(rest)
+        if v.index not in handed:
+            runner.emit(ViewDecoded(k, len(views), v.folder.name, cloud))
+        runner.say(f"decoded {v.folder.name}: {len(cloud):,} points", k + 1, len(views))
+        yield cloud, maps
+        del cloud, maps
+
+
+def _fuse(registered: RegisteredViews, session: Session, options: ProcessOptions, evaluate: Evaluator | None,
+          child, runner: Runner, agreement: list, children: ExitStack) -> FusedViews:
+    """The fuse stage's steps, placed: the fusion beside this thread (a child for a large Poisson, else a
+    thread) while the merged cloud is written and the views are measured; then the observed mesh cut and saved,
+    and measured, while the rest is closed on a thread; the report's views' agreement started on a thread as soon
+    as the observed mesh is saved."""
+    out = session.folder
+    given = fusion_input(registered, options)
+    runner.say(f"fusing {given.n_merged:,} points ({options.fusion})"
+               + ("; measuring the views against the true surface alongside" if evaluate is not None else ""))
+    fn, args, kwargs = surfaces(given if options.fusion == "poisson" else registered, options, session.rig)
+    work = Work.POISSON if options.fusion == "poisson" else Work.TSDF
+    where = runner.where(work) if options.fusion != "poisson" or large_poisson(registered.decoded, options) \
+        else Where.THREAD
+    with runner.beside(work, fn, *args, where=where, child=child, **kwargs) as fusion:
+        save_merged(out, given, registered)
+        if evaluate is not None:
+            with runner.stage(Stage.EVALUATE, reuse_memory=True):   # each view's casts reuse the last's pages
+                measure_views(evaluate, registered)
+        else:
+            measure_views(None, registered)
+        runner.release_memory()
+        rule = observed_rule(given, options)
+        del given
+        runner.release_memory()   # what this process freed beside Poisson, before the closing and the evaluation
+        full, trimmed = fusion.result()
+        evaluation = None
+        with runner.beside(Work.CLOSING, close, trimmed) as closing:
+            del trimmed
+            mesh, mesh_info = save_observed(out, full, rule, options)
+            del full
+            runner.emit(MeshReady("observed", out / MESH_FILE, mesh))
+            agreement.append(children.enter_context(_agreement_beside(options.report, mesh, registered, runner)))
+            if evaluate is not None:
+                with runner.stage(Stage.EVALUATE):
+                    runner.say("measuring the observed mesh and each view against the true surface")
+                    evaluation = evaluate_observed(evaluate, mesh, registered.angles, views=registered)
+            closed = closing.result()
+        runner.release_memory()   # the fusion's and the evaluator's temporaries
+        watertight, watertight_info = save_closed(out, closed, rule, options)
+        del closed, rule
+        runner.emit(MeshReady("watertight", out / WATERTIGHT_FILE, watertight))
+        runner.say(summary_line(mesh, watertight_info))
+    return FusedViews(mesh, watertight, mesh_info, watertight_info, evaluation)
+
+
+def _start(session: Session, runner: Runner) -> None:
     """Check the session before any work: at least two completed views, each with its recorded frames and no
     others (their contents are checked as they are read for decoding); then remove a stale summary.json, so
     that the outputs are a set (it comes back last)."""
@@ -150,36 +225,38 @@ def _start(session: Session, on_event: OnEvent | None) -> None:
                           "(resume the scan)")
     unverified = verify_views(session, contents=False)
     if unverified:
-        call_progress(progress_of(on_event), f"{', '.join(unverified)}: no frame checksums in session.json "
-                                             "(written by an older rangekit); their frames are not verified")
+        runner.say(f"{', '.join(unverified)}: no frame checksums in session.json (written by an older rangekit); "
+                   "their frames are not verified")
     stale = out / "summary.json"
     if stale.exists():
         stale.unlink()
         fsync_folder(out)
 
 
-def _agreement_beside(report: bool, observed, registered):
+def _agreement_beside(report: bool, observed, registered: RegisteredViews, runner: Runner):
     """The report's views' agreement (:func:`rangekit.app.report.context.views_agreement`) of the ``observed`` mesh
-    and the registered clouds on a thread, as ``with ... as call: ...; call.result()``; a call whose result is
-    None without a report. Started as soon as the observed mesh is made, beside its evaluation and the closing of
-    the mesh, it is done before the closed mesh's evaluation ends (it finished 0.5 s after it, started then)."""
+    and the registered clouds beside this thread, as ``with ... as call: ...; call.result()``; a call whose result
+    is None without a report. Started as soon as the observed mesh is made, beside its evaluation and the closing
+    of the mesh, it is done before the closed mesh's evaluation ends (it finished 0.5 s after it, started then)."""
     from rangekit.app.report.context import views_agreement
 
     if not report:
-        return call_beside(lambda: None, in_child=False)
-    return call_beside(views_agreement, observed, registered.T_world_view, registered.clouds, in_child=False)
+        return runner.beside(Work.AGREEMENT, _nothing)
+    return runner.beside(Work.AGREEMENT, views_agreement, observed, registered.T_world_view, registered.clouds)
 
 
-def _report(result: ProcessResult, registered, fused, session: Session, truth, clock: StageClock,
-            on_event: OnEvent | None, agreement: tuple | None) -> None:
-    """``report.html``: the summary, the meshes, the per-view rows made as the views were decoded."""
+def _report(result: ProcessResult, registered: RegisteredViews, fused: FusedViews, session: Session, truth,
+            runner: Runner, agreement: tuple | None) -> None:
+    """``report.html``: the summary, the meshes, the per-view rows made as the views were decoded; its panels on
+    the runner's worker threads."""
     from rangekit.app.report.page import write_report
     from rangekit.surface.cloud import merge_clouds
 
     d = registered.decoded
-    with clock.stage("report"):
-        call_progress(progress_of(on_event), "writing report.html")
-        release_free_memory()   # the evaluation's temporaries
+    with runner.stage(Stage.REPORT):
+        runner.say("writing report.html")
+        runner.release_memory()   # the evaluation's temporaries
         write_report(session.folder, result, clouds=d.clouds, maps=None, rows=d.rows,
                      merged=merge_clouds(d.clouds, registered.T_world_view), mesh=fused.observed, session=session,
-                     truth=truth, progress=progress_of(on_event), watertight=fused.watertight, agreement=agreement)
+                     truth=truth, progress=runner.progress, watertight=fused.watertight, agreement=agreement,
+                     map_panels=runner.map_ordered)

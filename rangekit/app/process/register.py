@@ -9,8 +9,6 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from rangekit._runtime.memory import release_free_memory
-from rangekit.app.events import OnEvent, PairRegistered, StageClock, emit, progress_of
 from rangekit.app.process.decode import DecodedViews
 from rangekit.formats.poses import save_poses
 from rangekit.formats.sessions.session import Session, SessionView
@@ -83,41 +81,37 @@ def turntable_registration(rig, views: Sequence[SessionView], first_cloud) -> tu
     return prior, MultiViewOptions(turntable=True, voxel=swept_voxel(points, prior) if ok else None)
 
 
-def register(decoded: DecodedViews, session: Session, clock: StageClock, on_event: OnEvent | None = None, *,
-             map_pairs=None, ahead: RegistrationAhead | None = None) -> RegisteredViews:
-    """Register the decoded views (``map_pairs``: runs the pair refinements elsewhere, e.g. as Dask tasks,
-    :data:`rangekit.registration.pair_refine.PairMapper`; ``ahead``: what a scan's streaming processor
-    registered as the views came, taken where it is what this registration computes), write ``poses.json``,
-    announce each pair as :class:`PairRegistered`."""
+def register(decoded: DecodedViews, session: Session, *, progress=None, map_pairs=None,
+             ahead: RegistrationAhead | None = None) -> RegisteredViews:
+    """Register the decoded views and write ``poses.json``. ``progress(msg)``: the registration's lines;
+    ``map_pairs``: runs the pair refinements where the runner places them (e.g. as Dask tasks,
+    :data:`rangekit.registration.pair_refine.PairMapper`; None: threads here); ``ahead``: what a scan's live
+    processing registered as the views came (the runner's memo), taken where it is what this registration
+    computes."""
     from rangekit.registration.multiview import MultiViewOptions, register_views
 
     views, clouds, rig = decoded.views, decoded.clouds, session.rig
     view_passes = [v.scan_pass for v in views] if session.plan.passes > 1 else None
-    progress = progress_of(on_event)
-    with clock.stage("register"):
-        if view_passes is not None:    # each pass from its turntable prior, the passes to each other without one
-            from rangekit.app.scan.passes import register_session_passes
+    if view_passes is not None:    # each pass from its turntable prior, the passes to each other without one
+        from rangekit.app.scan.passes import register_session_passes
 
-            res = register_session_passes(clouds, views, rig, progress=progress, map_pairs=map_pairs)
-        else:
-            prior, options = (None, MultiViewOptions()) if rig.T_world_table is None else \
-                turntable_registration(rig, views, clouds[0])
-            res = register_views(clouds, init_T_world_view=prior, progress=progress, options=options,
-                                 map_pairs=map_pairs, ahead=ahead if ahead is not None and ahead.n == len(views) else None)
-        T, note = res.T_world_view, ""
-        if view_passes is None and prior is not None:
-            T, note = held_to_prior(res.T_world_view, prior, decoded.names, converged=res.converged)
-            if note:
-                from rangekit.progress import LOGGER
+        res = register_session_passes(clouds, views, rig, progress=progress, map_pairs=map_pairs)
+    else:
+        prior, options = (None, MultiViewOptions()) if rig.T_world_table is None else \
+            turntable_registration(rig, views, clouds[0])
+        res = register_views(clouds, init_T_world_view=prior, progress=progress, options=options,
+                             map_pairs=map_pairs, ahead=ahead if ahead is not None and ahead.n == len(views) else None)
+    T, note = res.T_world_view, ""
+    if view_passes is None and prior is not None:
+        T, note = held_to_prior(res.T_world_view, prior, decoded.names, converged=res.converged)
+        if note:
+            from rangekit.progress import LOGGER
 
-                LOGGER.warning(note)
-        save_poses(session.folder / "poses.json", decoded.names, T,
-                   world=f"frame of {views[0].folder.name} (the rig's world at its turntable angle)",
-                   extra=None if view_passes is None else [{"pass": p} for p in view_passes])
-        edges = _edge_rows(res)
-        for e in res.edges:
-            emit(on_event, PairRegistered(e.i, e.j, float(e.rmse), float(e.overlap), bool(e.accepted), e.reason))
-        release_free_memory()   # the registration's k-d trees and samples
+            LOGGER.warning(note)
+    save_poses(session.folder / "poses.json", decoded.names, T,
+               world=f"frame of {views[0].folder.name} (the rig's world at its turntable angle)",
+               extra=None if view_passes is None else [{"pass": p} for p in view_passes])
+    edges = _edge_rows(res)
     return RegisteredViews(decoded, T, edges, float(res.rmse), view_passes, note)
 
 

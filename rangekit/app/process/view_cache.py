@@ -11,14 +11,12 @@ uninterrupted run. A damaged cache (a file missing, truncated, edited or unreada
 from __future__ import annotations
 
 import zipfile
-from collections import deque
 from collections.abc import Iterator, Sequence
 from contextlib import nullcontext
-from itertools import islice
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
+from rangekit._runtime.executor import ordered_map, worker_count
 from rangekit._runtime.threads import numba_threads, one_blas_thread
 
 from rangekit import __version__
@@ -125,15 +123,17 @@ def view_cloud(v: SessionView, spec: PatternSpec, rig: Rig, settings: dict, full
 def view_clouds(views: Sequence[SessionView], spec: PatternSpec, rig: Rig, settings: dict,
                 full_scale: float | None, T_table_world: np.ndarray | None,
                 table_margin: float, session: Session | None = None, *,
-                workers: int = 2) -> Iterator[tuple[PointCloud, ViewMaps]]:
-    """:func:`view_cloud` of each view, yielded in order, ``workers`` views at a time on as many threads (each
-    with one numba and one BLAS thread; 1: on this thread, one view after another): two views side by side used
+                workers: int = 0, map_views=None) -> Iterator[tuple[PointCloud, ViewMaps]]:
+    """:func:`view_cloud` of each view, yielded in order, ``workers`` views at a time on as many threads
+    (:func:`rangekit._runtime.executor.ordered_map`; 0: the configured number, each with one numba and one BLAS
+    thread; 1: on this thread, one view after another): two views side by side used
     1.9 cores of 2 where one view with two numba threads used 1.5 (the default session's 12 views: 6.5 s instead of
     9.4). A view's error is raised when its turn comes.
 
     ``session``: each frame is checked against the SHA-256 recorded in its ``session.json``, taken from the bytes
     read for decoding (:func:`rangekit.formats.sessions.check.read_view_stack`: each frame read once); a view
-    taken from its cache has its frames hashed there instead. None: the frames are read unchecked."""
+    taken from its cache has its frames hashed there instead. None: the frames are read unchecked. ``map_views(fn,
+    views)``: the job runner's map (in order, on the configured number of threads) instead of this one's."""
     shape = (rig.camera.height, rig.camera.width)
     white = white_frame_index(spec)
 
@@ -146,25 +146,16 @@ def view_clouds(views: Sequence[SessionView], spec: PatternSpec, rig: Rig, setti
             return cached[0], _stored_maps(cached[1], folders, white)
         stacks = _read_stacks(v, folders, session)
         images = stacks[0]
-        with one_blas_thread(), (numba_threads(1) if workers > 1 else nullcontext()):   # thin products
+        with one_blas_thread(), (numba_threads(1) if n > 1 else nullcontext()):   # thin products
             # the white capture copied out: a view of it would keep the view's whole stack alive
             return _decode_view(v, stacks if settings.get("exposures_us") else images, images[white].copy(), spec,
                                 rig, settings, full_scale, T_table_world, table_margin)
 
-    if workers <= 1:
-        for v in views:
-            yield one(v)
+    n = worker_count(workers)
+    if map_views is not None:   # the job runner's map over views (rangekit.app.runner.Runner.map_views)
+        yield from map_views(one, views)
         return
-    with ThreadPoolExecutor(max_workers=workers, thread_name_prefix="rangekit-views") as pool:
-        queued = iter(views)
-        running = deque(pool.submit(one, v) for v in islice(queued, workers))
-        while running:
-            out = running.popleft().result()
-            following = next(queued, None)
-            if following is not None:
-                running.append(pool.submit(one, following))
-            yield out
-            del out
+    yield from ordered_map(one, views, workers=n, name="rangekit-views")
 
 
 def _stored_maps(m: dict, folders: list, white: int) -> ViewMaps:

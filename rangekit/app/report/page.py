@@ -15,7 +15,6 @@ forbids any request: it works offline and never phones anywhere.
 from __future__ import annotations
 
 import html
-from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import TYPE_CHECKING, Callable, Sequence
 
@@ -54,7 +53,8 @@ def write_report(folder: str | Path, result: "ProcessResult", *, clouds: Sequenc
                  maps: Sequence["ViewMaps"] | None, merged: "PointCloud", mesh: "TriangleMesh", session: "Session",
                  truth: "TriangleMesh | None" = None, progress: Callable | None = None,
                  size: tuple[int, int] = (230, 230), watertight: "TriangleMesh | None" = None,
-                 rows: "ViewRows | None" = None, agreement: tuple | None = None) -> Path:
+                 rows: "ViewRows | None" = None, agreement: tuple | None = None,
+                 map_panels: Callable = map) -> Path:
     """Write ``folder/report.html`` (every panel of :data:`rangekit.app.report.panels.PANELS`, in order) and return
     its path; reads nothing from disk.
 
@@ -64,15 +64,17 @@ def write_report(folder: str | Path, result: "ProcessResult", *, clouds: Sequenc
     session world (the first view's frame), ``watertight`` the closed mesh there with its ``observed`` flag (shown
     with the invented part in grey), ``truth`` the true surface in that frame (from an evaluator) for the heat map,
     ``agreement`` the views' agreement on ``mesh`` when made already
-    (:func:`rangekit.app.report.context.views_agreement`).
+    (:func:`rangekit.app.report.context.views_agreement`). ``map_panels(fn, panels)``: makes the panels, in order
+    (the job runner's worker threads, :meth:`rangekit.app.runner.Runner.map_ordered`; by default one after
+    another).
     """
     ctx = ReportContext(Path(folder), result, session, mesh, watertight=watertight, truth=truth, merged=merged,
                         clouds=clouds, rows=rows, maps=maps, size=size, progress=progress, agreement=agreement)
-    # Two panels at a time, in PANELS' order on the page: each makes its own pictures; the context's shared parts
-    # are cached properties (Python 3.11 computes one once under its lock; 3.12 may compute it twice, the same
-    # value). The report stage 1.2-1.5 s -> 1.0-1.2 s on two cores, the same bytes (docs/benchmarks.md, issue 36).
-    with ThreadPoolExecutor(max_workers=2, thread_name_prefix="rangekit-report") as pool:
-        return write_page(ctx.out, list(pool.map(lambda panel: panel(ctx), PANELS)))
+    # Panels side by side (map_panels), in PANELS' order on the page: each makes its own pictures; the context's
+    # shared parts are cached properties (Python 3.11 computes one once under its lock; 3.12 may compute it twice,
+    # the same value). The report stage 1.2-1.5 s -> 1.0-1.2 s on two cores, the same bytes (docs/benchmarks.md,
+    # issue 36).
+    return write_page(ctx.out, list(map_panels(lambda panel: panel(ctx), PANELS)))
 
 
 def write_page(out: Path, sections: Sequence[str]) -> Path:

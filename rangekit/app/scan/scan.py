@@ -14,9 +14,11 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from rangekit._runtime.arguments import check_callable, check_instance, check_path
-from rangekit._runtime.child import call_beside
+from rangekit._runtime.executor import Where, start
+from rangekit.app.bus import EventBus
 from rangekit.app.event_log import logged
-from rangekit.app.events import OnEvent, ScanStarted, StageClock, emit, failures_announced, progress_of
+from rangekit.app.events import OnEvent, ScanStarted, Stage, StageClock, emit, failures_announced, progress_of
+from rangekit.app.runner import Memo, Plan
 from rangekit.app.process.evaluate import Evaluator, measuring
 from rangekit.app.process.options import ProcessOptions
 from rangekit.app.process.process import process_session
@@ -30,7 +32,7 @@ from rangekit.laser.sequence import LaserSequence
 if TYPE_CHECKING:
     from rangekit.app.scan.vdi2634 import Vdi2634Result
 
-__all__ = ["ScanResult", "scan", "session_evaluator", "process"]
+__all__ = ["ScanResult", "scan", "session_evaluator", "process", "process_placed", "REMOVED_KEYWORDS"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -74,59 +76,48 @@ def scan(options: ScanOptions, on_event: OnEvent | None = None) -> ScanResult:
     InputError
         ``options`` is not a :class:`ScanOptions` or ``on_event`` not a callable (before anything is done).
     """
-    from rangekit.formats.sessions.lock import session_lock
-
     check_instance("options", options, ScanOptions, "a ScanOptions (rk.scan(rk.ScanOptions(out=FOLDER)))")
     check_callable("on_event", on_event)
     on_event = logged(options.folder, on_event)     # events.jsonl in the session folder (rangekit.app.event_log)
 
     t0 = time.perf_counter()
-    with failures_announced(on_event):
+    with EventBus(on_event) as bus:   # every subscriber on the bus's thread, never the capture's
+        return _scan(options, bus, t0)
+
+
+def _scan(options: ScanOptions, bus: EventBus, t0: float) -> ScanResult:
+    """:func:`scan` with its event bus (:class:`rangekit.app.bus.EventBus`): the streaming processor's subscriber
+    first (it queues the views as they are acquired), then the caller's."""
+    from rangekit.formats.sessions.lock import session_lock
+
+    with failures_announced(bus):
         if options.artefact is not None:
-            return _scan_artefacts(options, on_event, t0)
+            return _scan_artefacts(options, bus, t0)
         with ExitStack() as held:
             if options.resume is not None and (options.folder / "session.json").is_file():
                 held.enter_context(session_lock(options.folder))
             process_options = options.processing
-            one_at_a_time, streaming = _serialised(on_event), None
+            streaming = None
             if options.process:
                 from rangekit.app.scan.streaming import StreamingProcessor
 
-                streaming = StreamingProcessor(options.folder, process_options, on_event, lock=one_at_a_time.lock)
+                streaming = StreamingProcessor(options.folder, process_options, bus)
+                bus.subscribe(streaming.on_event, first=True)
                 held.callback(streaming.stop)     # an error or Ctrl-C: the view being decoded finishes, no more
-            session = _acquire(options, one_at_a_time.chained(streaming),
-                               None if streaming is None else streaming.quiet)
+            session = _acquire(options, bus, None if streaming is None else streaming.quiet)
             acquisition_s = time.perf_counter() - t0
             if not options.process:
                 return ScanResult(options.folder, session, acquisition_s, None, time.perf_counter() - t0)
+            bus.flush()               # every view acquired is queued for the streaming processor
             streaming.drain()
             if streaming.moved:       # the object moved during some views: each taken once more
-                session = _take_again(options, session, streaming.moved, one_at_a_time.chained(None))
-            with call_beside(streaming.write_preview, in_child=False) as preview:   # the preview beside the processing
-                processed = process(session, process_options, on_event=on_event, decoded_views=streaming.results,
-                                    evaluate=streaming.evaluate, registration_ahead=streaming.registration)
+                bus.unsubscribe(streaming.on_event)
+                session = _take_again(options, session, streaming.moved, bus)
+            memo = Memo(streaming.results, streaming.registration, streaming.evaluate)
+            with start(Where.THREAD, streaming.write_preview) as preview:   # the preview beside the processing
+                processed = _process(session, process_options, bus, Plan.STREAMING, memo)
                 preview.result()
     return ScanResult(options.folder, session, acquisition_s, processed, time.perf_counter() - t0)
-
-
-class _serialised:
-    """The scan's subscriber given one event at a time from any thread (the capture's, the frame writer's, the
-    streaming processor's): each call holds ``lock``."""
-
-    def __init__(self, on_event: OnEvent | None) -> None:
-        import threading
-
-        self.on_event, self.lock = on_event, threading.Lock()
-
-    def chained(self, streaming) -> OnEvent:
-        """The subscriber acquisition is given: the streaming processor's first (it queues views), then the
-        scan's."""
-        def on_event(event) -> None:
-            with self.lock:
-                if streaming is not None:
-                    streaming.on_event(event)
-                emit(self.on_event, event)
-        return on_event
 
 
 def _take_again(options: ScanOptions, session: Session, moved: dict, on_event: OnEvent | None) -> Session:
@@ -163,7 +154,7 @@ def _acquire(options: ScanOptions, on_event: OnEvent | None, quiet=None) -> Sess
             turn_over = turn_over_prompt(setup.folder, setup.passes, flipped=options.flipped)
         if options.sim_bump is not None and setup.simulator is not None:
             _knock(setup, *options.sim_bump)
-        with StageClock(on_event).stage("acquire"):
+        with StageClock(on_event).stage(Stage.ACQUIRE):
             return acquire(setup.devices, setup.rig, spec, setup.folder,
                            plan=ScanPlan(n_views=setup.n_views, passes=setup.passes), resume=setup.resume,
                            capture=setup.capture, simulator=setup.simulator, hardware=setup.hardware,
@@ -212,36 +203,54 @@ def _scan_artefacts(options: ScanOptions, on_event: OnEvent | None, t0: float) -
     return ScanResult(Path(options.out), None, seconds, None, seconds, vdi2634=res)
 
 
+#: The hand-over keywords ``rk.process`` took before issue 49: the scan's live processing now hands its work on
+#: through the job runner's memo (:class:`rangekit.app.runner.Memo`), and Dask places the pairs itself.
+REMOVED_KEYWORDS = ("decoded_views", "registration_ahead", "map_pairs")
+
+
 def process(session: Session | str | Path, options: ProcessOptions | None = None, *,
-            on_event=None, map_pairs=None, decoded_views: dict | None = None, evaluate: Evaluator | None = None,
-            registration_ahead=None) -> ProcessResult:
+            on_event=None, evaluate: Evaluator | None = None, **removed) -> ProcessResult:
     """Process a session (loaded, or its folder) as ``rangekit process`` does: :func:`process_session` with the
     simulator's truth as evaluator when the session is simulated and ``options.truth`` (the session loaded once
-    and handed on). ``on_event``: see :mod:`rangekit.app.events`; what the scan did while its views came
-    (:class:`rangekit.app.scan.streaming.StreamingProcessor`): ``decoded_views`` the views it decoded,
-    ``evaluate`` its evaluator (the truth's samples and each view's errors made), ``registration_ahead`` its
-    :class:`rangekit.registration.ahead.RegistrationAhead`; the outputs are the same bytes with or without them."""
-    from rangekit.app.events import failures_announced
-    from rangekit.registration.ahead import RegistrationAhead
+    and handed on; ``evaluate``: another evaluator). ``on_event``: see :mod:`rangekit.app.events`.
 
+    The keywords ``decoded_views``, ``registration_ahead`` and ``map_pairs`` were removed (issue 49): what a scan
+    does while its views come reaches processing inside the job runner (:class:`rangekit.app.runner.Memo`); given,
+    they are an InputError naming them."""
+    from rangekit.errors import InputError
+
+    for name in removed:
+        raise InputError(f"{name}: not a keyword of rk.process (found {name}=...); "
+                         + (f"{name} was removed in issue 49: a scan hands its work on to processing inside the job "
+                            "runner (rangekit.app.runner.Memo), a Dask batch places its pairs itself"
+                            if name in REMOVED_KEYWORDS else "expected session, options, on_event or evaluate"))
     if not isinstance(session, Session):
         check_path("session", session, what="a Session or a session folder")
     check_instance("options", options, ProcessOptions, "a ProcessOptions", optional=True)
-    for name, value in (("on_event", on_event), ("map_pairs", map_pairs), ("evaluate", evaluate)):
+    for name, value in (("on_event", on_event), ("evaluate", evaluate)):
         check_callable(name, value)
-    check_instance("decoded_views", decoded_views, dict, "a dict of decoded views", optional=True)
-    check_instance("registration_ahead", registration_ahead, RegistrationAhead, "a RegistrationAhead", optional=True)
-    options = options or ProcessOptions()
+    return _process(session, options or ProcessOptions(), on_event, Plan.LOCAL, Memo(evaluate=evaluate))
+
+
+def _process(session: Session | str | Path, options: ProcessOptions, on_event, plan: Plan, memo: Memo) -> ProcessResult:
+    """:func:`process` placed by ``plan``, with ``memo`` (its evaluator, else the simulator's truth when
+    ``options.truth``)."""
     with failures_announced(on_event):
         if not isinstance(session, Session):
             if not (Path(session) / "session.json").is_file():
                 raise ConfigError(f"{session}: not a session folder (no session.json)")
             session = Session.load(session)
         on_event = logged(session.folder, on_event)
+        evaluate = memo.evaluate
         if not options.truth:
             evaluate = None
         elif evaluate is None:
             evaluate = session_evaluator(session)
         evaluate = measuring(evaluate)      # NO_TRUTH (hardware): no evaluation
-    return process_session(session, options, evaluate=evaluate, on_event=on_event, map_pairs=map_pairs,
-                           decoded_views=decoded_views, registration_ahead=registration_ahead)
+    return process_session(session, options, evaluate=evaluate, on_event=on_event, plan=plan, memo=memo)
+
+
+def process_placed(session: Session | str | Path, options: ProcessOptions, *, plan: Plan,
+                   on_event=None) -> ProcessResult:
+    """:func:`process` as a placement of the plan runs it (a Dask session task: ``Plan.DASK``)."""
+    return _process(session, options, on_event, plan, Memo())

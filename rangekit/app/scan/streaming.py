@@ -49,6 +49,7 @@ import numpy as np
 from rangekit.app.acquire.quiet import QuietWindows
 from rangekit.app.events import (CaptureLoad, MeshReady, OnEvent, ScanStarted, ViewAcquired, ViewDecoded, ViewPlaced,
                                  emit)
+from rangekit._runtime.executor import worker_count
 from rangekit.app.process.options import ProcessOptions
 from rangekit.errors import MotionError
 from rangekit.formats.sessions.session import Session
@@ -75,15 +76,13 @@ class StreamingProcessor:
     """Decode, place and integrate each view of a coded-light scan while the scan runs (module doc).
 
     ``folder``: the session folder; ``options``: the processing's (its triangulation method and table margin make
-    the cache's settings); ``on_event``: the scan's subscriber, given each event of this thread one at a time
-    (with ``lock``, the lock the acquisition's events hold). Use :meth:`on_event` as a subscriber of the scan's
+    the cache's settings); ``on_event``: the scan's event bus (:class:`rangekit.app.bus.EventBus`), given each event
+    of this thread. Use :meth:`on_event` as a subscriber of the scan's
     events, then :meth:`finish` (or :meth:`stop` on an error).
     """
 
-    def __init__(self, folder: str | Path, options: ProcessOptions, on_event: OnEvent | None = None, *,
-                 lock: threading.Lock | None = None) -> None:
+    def __init__(self, folder: str | Path, options: ProcessOptions, on_event: OnEvent | None = None) -> None:
         self.folder, self.options, self._on_event = Path(folder), options, on_event
-        self._lock = lock if lock is not None else threading.Lock()
         self._queue: queue.Queue = queue.Queue()
         self._placed: dict[int, tuple[np.ndarray, PointCloud]] = {}
         self._volume = None
@@ -163,8 +162,7 @@ class StreamingProcessor:
 
     # ------------------------------------------------------------ the thread
     def _emit(self, event) -> None:
-        with self._lock:
-            emit(self._on_event, event)
+        emit(self._on_event, event)   # the bus: thread-safe, its subscribers on its own thread
 
     def _run(self) -> None:
         _lower_priority()
@@ -197,7 +195,7 @@ class StreamingProcessor:
         # core (the same maps: each pixel's decode is its own), its work ahead first, its preview placing after.
         last = self._finishing or k == total - 1
         settings = cache_settings(session, self.options.method, self.options.table_margin, self.options.max_motion)
-        with one_blas_thread(), numba_threads(2 if last else 1):
+        with one_blas_thread(), numba_threads(worker_count() if last else 1):
             cloud, maps = view_cloud(view, session.pattern, rig, settings, session.capture.full_scale,
                                      table_transform(rig), self.options.table_margin, session)
         self.decoded.append(k)

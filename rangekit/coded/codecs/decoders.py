@@ -20,7 +20,7 @@ __all__ = ["decode_fringes"]
 
 def decode_fringes(stack, spec: PatternSpec, *, order: str = "rangekit", min_contrast: float = 0.015,
                    shadow_threshold: float = 0.01, full_scale: float | None = None,
-                   response: ProjectorResponse | None = None, workers: int = 2) -> DecodeResult:
+                   response: ProjectorResponse | None = None, workers: int = 0) -> DecodeResult:
     """Decode a ``micro``, ``modulated``, ``ftp``, ``psp`` or ``faps`` capture (arguments as
     :func:`rangekit.coded.decode.decode`, which calls this). Columns and rows as the spec codes them."""
     fr = CaptureStack(stack, spec, order)

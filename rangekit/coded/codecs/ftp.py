@@ -21,6 +21,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from rangekit._runtime.executor import worker_count
+
 __all__ = ["carrier_peak", "analytic_signal", "DC_RADIUS", "WINDOW_SIGMA"]
 
 DC_RADIUS = 4.0        # bins around zero frequency that cannot be the carrier
@@ -52,7 +54,7 @@ def _window(shape: tuple[int, int], peak: tuple[float, float], sigma_fraction: f
 
 
 def analytic_signal(image: np.ndarray, vertical: bool, *, peak: tuple[float, float] | None = None,
-                    sigma_fraction: float = WINDOW_SIGMA, workers: int = 2
+                    sigma_fraction: float = WINDOW_SIGMA, workers: int = 0
                     ) -> tuple[np.ndarray, tuple[float, float]]:
     """The analytic signal ``z`` (H, W) complex64 of one fringe ``image`` (H, W), and the carrier peak used
     (found with :func:`carrier_peak` unless given: frames of one sequence share it). ``arg z`` is the
@@ -60,6 +62,7 @@ def analytic_signal(image: np.ndarray, vertical: bool, *, peak: tuple[float, flo
     import scipy.fft   # 0.16 s to import: only the FTP codec needs it, not every decode
 
     img = np.asarray(image, dtype=np.float32)
+    workers = worker_count(workers)
     F = scipy.fft.fft2(img - np.float32(img.mean()), workers=workers)
     if peak is None:
         peak = carrier_peak(F, vertical)

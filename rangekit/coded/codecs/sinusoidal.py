@@ -110,7 +110,7 @@ def _measured_steps(z0: np.ndarray, z1: np.ndarray, z2: np.ndarray, peak: tuple[
 
 
 def decode_sinusoidal_axis(fr: CaptureStack, spec: PatternSpec, axis: str, response: ProjectorResponse | None,
-                           *, shadow_level: float, workers: int = 2) -> AxisMaps:
+                           *, shadow_level: float, workers: int = 0) -> AxisMaps:
     """One coded axis of an ``ftp``, ``psp`` or ``faps`` capture; ``shadow_level`` (raw units) marks the
     pixels that choose FTP's sign."""
     method, o = spec.method, spec.options

@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+from rangekit._runtime.executor import worker_count
 from rangekit.errors import FileFormatError
 from rangekit.regular_files import read_regular_file
 from rangekit.formats.capture import IMAGE_SUFFIXES
@@ -63,7 +64,7 @@ def _problem(session: Session, v: SessionView, frame: str, what: str) -> FileFor
                            "the original frame, or scan the view again into a new session")
 
 
-def verify_views(session: Session, *, workers: int = 2, views: list[SessionView] | None = None,
+def verify_views(session: Session, *, workers: int = 0, views: list[SessionView] | None = None,
                  contents: bool = True) -> list[str]:
     """Check every done view's frames (or those of ``views``, some of the done views: one view's Dask task,
     :mod:`rangekit.app.process.batch`) against the recorded SHA-256s; ``contents=False``: only that each
@@ -91,7 +92,7 @@ def verify_views(session: Session, *, workers: int = 2, views: list[SessionView]
             unverified.append(v.folder.name)
         elif contents:
             jobs += [(v, name) for name in sorted(recorded)]
-    with ThreadPoolExecutor(max_workers=max(1, workers)) as pool:
+    with ThreadPoolExecutor(max_workers=worker_count(workers)) as pool:
         digests = list(pool.map(lambda job: file_sha256(job[0].folder / job[1]), jobs))
     for (v, name), digest in zip(jobs, digests):
         if digest is None:
@@ -102,7 +103,7 @@ def verify_views(session: Session, *, workers: int = 2, views: list[SessionView]
     return unverified
 
 
-def read_view_stack(session: Session, v: SessionView, folder: Path, *, workers: int = 2) -> np.ndarray:
+def read_view_stack(session: Session, v: SessionView, folder: Path, *, workers: int = 0) -> np.ndarray:
     """The frames of ``folder`` (view ``v``'s folder or one of its exposure sub-folders) as one stack
     (:func:`rangekit.formats.capture.read_stack`), each file read once: its SHA-256 taken from the bytes read
     and checked against ``session.json`` before any pixel is decoded (FileFormatError naming the view and the
@@ -119,7 +120,7 @@ def read_view_stack(session: Session, v: SessionView, folder: Path, *, workers: 
                            f"cannot be read ({str(exc).split(': ', 1)[-1]})") from None
         return data, None if v.sha256 is None else frame_sha256(data)
 
-    with ThreadPoolExecutor(max_workers=max(1, workers)) as pool:
+    with ThreadPoolExecutor(max_workers=worker_count(workers)) as pool:
         read_files = list(pool.map(read, paths))
     contents = [data for data, _ in read_files]
     if v.sha256 is not None:

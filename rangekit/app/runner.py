@@ -1,0 +1,198 @@
+"""The job runner: it owns a job's concurrency, so the stages do not (issue 49).
+
+A stage (:mod:`rangekit.app.process.decode`, ``register``, ``fuse``, ``evaluate``, the report's writer) takes a
+typed input and returns a typed output; it does not time itself, announce itself, start a thread or a process,
+or manage memory. The runner does: it times each stage and announces it on the job's event bus
+(:class:`rangekit.app.bus.EventBus`, its own thread), runs a call beside another, maps a call over the views,
+and returns freed memory between stages.
+
+Where each piece of work runs is the placement table, :data:`PLACEMENTS`: one plan, three placements of it.
+
+    ============== =============== ===================================== ========================
+    work           LOCAL           STREAMING (a scan)                    DASK (a batch)
+                   rangekit process                                      rangekit process S1 S2
+    ============== =============== ===================================== ========================
+    view decode    threads         the streaming thread as views come    a task per view
+    pair refine    threads         ahead as views come, then threads     a task per pair
+    truth prepare  a thread        ahead as views come, then a thread    a thread
+    poisson        a child         a child                               a thread (1 core/worker)
+    tsdf           a thread        a thread                              a thread
+    closing        a thread        a thread                              a thread
+    agreement      a thread        a thread                              a thread
+    report panels  threads         threads                               threads
+    ============== =============== ===================================== ========================
+
+What the streaming placement or Dask did ahead reaches the runner in a :class:`Memo` (decoded views, the
+registration's levels and first pairs, the prepared evaluator; Dask's decoded views are its view caches on disk),
+taken only where it is exactly what the stage would compute: the outputs are the same bytes in every placement.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from enum import Enum
+from typing import TYPE_CHECKING, Any
+
+from rangekit._runtime.executor import Where, ordered_map, start
+from rangekit._runtime.memory import release_free_memory, reuse_freed_memory
+from rangekit.app.bus import EventBus
+from rangekit.app.events import Progress, Stage, StageClock
+
+if TYPE_CHECKING:
+    from rangekit.registration.ahead import RegistrationAhead
+
+__all__ = ["Plan", "Work", "PLACEMENTS", "Memo", "Runner"]
+
+
+class Plan(str, Enum):
+    """The three placements of the one plan (:data:`PLACEMENTS`)."""
+
+    LOCAL = "local"          # rangekit process: one process, its threads and a child
+    STREAMING = "streaming"  # rangekit scan: views processed as they are acquired, the rest as LOCAL
+    DASK = "dask"            # several sessions: tasks on a Dask cluster, each session's last part one task
+
+
+class Work(str, Enum):
+    """The pieces of a job that can run elsewhere than the job's thread."""
+
+    VIEW_DECODE = "view decode"
+    PAIR_REFINE = "pair refine"
+    TRUTH_PREPARE = "truth prepare"
+    POISSON = "poisson"
+    TSDF = "tsdf"
+    CLOSING = "closing"
+    AGREEMENT = "agreement"
+    REPORT_PANELS = "report panels"
+
+
+_T, _C, _D = Where.THREAD, Where.CHILD, Where.DASK
+#: Which work runs where, per plan (the module doc's table). A STREAMING view or pair done ahead comes in the
+#: :class:`Memo`; what is left runs as shown.
+PLACEMENTS: dict[Work, dict[Plan, Where]] = {
+    Work.VIEW_DECODE: {Plan.LOCAL: _T, Plan.STREAMING: _T, Plan.DASK: _D},
+    Work.PAIR_REFINE: {Plan.LOCAL: _T, Plan.STREAMING: _T, Plan.DASK: _D},
+    Work.TRUTH_PREPARE: {Plan.LOCAL: _T, Plan.STREAMING: _T, Plan.DASK: _T},
+    Work.POISSON: {Plan.LOCAL: _C, Plan.STREAMING: _C, Plan.DASK: _T},
+    Work.TSDF: {Plan.LOCAL: _T, Plan.STREAMING: _T, Plan.DASK: _T},
+    Work.CLOSING: {Plan.LOCAL: _T, Plan.STREAMING: _T, Plan.DASK: _T},
+    Work.AGREEMENT: {Plan.LOCAL: _T, Plan.STREAMING: _T, Plan.DASK: _T},
+    Work.REPORT_PANELS: {Plan.LOCAL: _T, Plan.STREAMING: _T, Plan.DASK: _T},
+}
+
+
+@dataclass(eq=False)
+class Memo:
+    """What was computed ahead of the stages, by the scan's live processing (:mod:`rangekit.app.scan.streaming`):
+    ``decoded`` each view decoded (index -> ``(cloud, ViewMaps)``, its frames checked when read; taken out as it
+    is used, so its maps are freed with the others'), ``registration`` the registration's levels and first-round
+    pairs (:class:`rangekit.registration.ahead.RegistrationAhead`), ``evaluate`` the evaluator with the truth's
+    samples and the views' errors made. Dask's views are its view caches on disk (no memo needed)."""
+
+    decoded: dict = field(default_factory=dict)
+    registration: RegistrationAhead | None = None
+    evaluate: Any = None
+
+
+class Runner:
+    """One job's runner (module doc): ``plan`` (:class:`Plan`) places its work, ``on_event`` is its subscriber
+    (an :class:`EventBus` given is used as it is; anything else gets a bus of its own, closed by :meth:`close`),
+    ``memo`` what was done ahead."""
+
+    def __init__(self, on_event: Callable | None = None, *, plan: Plan = Plan.LOCAL, memo: Memo | None = None) -> None:
+        self.plan = plan
+        self.memo = memo if memo is not None else Memo()
+        self._own_bus = not isinstance(on_event, EventBus)
+        self.bus: EventBus = EventBus(on_event) if self._own_bus else on_event
+        self._clock = StageClock(None if self.bus.quiet else self.bus)
+
+    # ------------------------------------------------------------ events
+    def emit(self, event) -> None:
+        """Publish ``event`` on the job's bus."""
+        if not self.bus.quiet:
+            self.bus.publish(event)
+
+    @property
+    def progress(self) -> Callable | None:
+        """``progress(msg, done=None, total=None)`` as :class:`Progress` events (None without a subscriber: the
+        library's long functions then say nothing)."""
+        if self.bus.quiet:
+            return None
+
+        def progress(msg: str, done: int | None = None, total: int | None = None) -> None:
+            self.bus.publish(Progress(msg, done, total))
+
+        return progress
+
+    def say(self, msg: str, done: int | None = None, total: int | None = None) -> None:
+        """One progress line (nothing without a subscriber)."""
+        if not self.bus.quiet:
+            self.bus.publish(Progress(msg, done, total))
+
+    def close(self) -> None:
+        """Hand on every event published (its own bus: ended)."""
+        if self._own_bus:
+            self.bus.close()
+        else:
+            self.bus.flush()
+
+    # ------------------------------------------------------------ stages
+    @property
+    def seconds(self) -> dict[str, float]:
+        """Wall seconds of each stage, in the order they started (a stage run in parts adds up)."""
+        return self._clock.seconds
+
+    @contextmanager
+    def stage(self, stage: Stage, *, reuse_memory: bool = False, release_after: bool = False) -> Iterator[None]:
+        """Time ``stage`` and announce it (StageStarted, StageFinished); ``reuse_memory``: freed arrays reused
+        inside (:func:`rangekit._runtime.memory.reuse_freed_memory`), ``release_after``: free pages returned as it
+        ends."""
+        with self._clock.stage(stage):
+            if reuse_memory:
+                with reuse_freed_memory():
+                    yield
+            else:
+                yield
+            if release_after:
+                release_free_memory()
+
+    @staticmethod
+    def release_memory() -> None:
+        """Return the pages a stage just freed (:func:`rangekit._runtime.memory.release_free_memory`)."""
+        release_free_memory()
+
+    @staticmethod
+    @contextmanager
+    def memory_reused() -> Iterator[None]:
+        """Inside, freed arrays are reused (:func:`rangekit._runtime.memory.reuse_freed_memory`)."""
+        with reuse_freed_memory():
+            yield
+
+    # ------------------------------------------------------------ placement
+    def where(self, work: Work) -> Where:
+        return PLACEMENTS[work][self.plan]
+
+    def beside(self, work: Work, fn: Callable, *args, where: Where | None = None, child=None, **kwargs):
+        """Start ``fn(*args, **kwargs)`` where the table places ``work`` (or ``where``), beside this thread; use as
+        ``with runner.beside(...) as call: ...; call.result()``."""
+        return start(where or self.where(work), fn, *args, child=child, **kwargs)
+
+    def map_views(self, fn: Callable, items: Iterable, *, each: Callable | None = None) -> Iterator:
+        """``fn`` of each item in order, on the configured number of worker threads
+        (:func:`rangekit._runtime.executor.ordered_map`; ``each(n)``: the context each call runs in)."""
+        return ordered_map(fn, items, name="rangekit-views", each=each)
+
+    def map_ordered(self, fn: Callable, items: Iterable) -> list:
+        """``[fn(item) for item in items]`` on the configured number of worker threads, in order (the report's
+        panels: each makes its own pictures)."""
+        return list(ordered_map(fn, items, name="rangekit-report"))
+
+    def pair_mapper(self):
+        """The registration's pair mapper where the table places pair refinement (None: threads, in
+        :func:`rangekit.registration.multiview.register_views`)."""
+        if self.where(Work.PAIR_REFINE) is Where.DASK:
+            from rangekit.app.process.batch_pairs import dask_pair_mapper
+
+            return dask_pair_mapper()
+        return None

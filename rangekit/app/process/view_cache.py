@@ -16,7 +16,6 @@ from collections.abc import Iterator, Sequence
 from contextlib import nullcontext
 from itertools import islice
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
 
 import numpy as np
 from rangekit._runtime.threads import numba_threads, one_blas_thread
@@ -35,21 +34,10 @@ from rangekit.rig.rig_file import Rig
 from rangekit.formats.clouds import load_cloud
 from rangekit.formats.ply_write import write_cloud_ply
 from rangekit.formats.sessions.check import file_sha256, read_view_stack, verify_views
+from rangekit.formats.sessions.view_maps import ViewMaps
 from rangekit.surface.cloud import PointCloud
 
 __all__ = ["ViewMaps", "cache_settings", "table_transform", "view_cloud", "view_clouds", "white_frame_index"]
-
-
-@dataclass(frozen=True, eq=False)
-class ViewMaps:
-    """What a view's decoding left, per camera pixel (H, W): for the TSDF fusion and the report."""
-
-    proj_col: np.ndarray     # (H, W) float32 projector column, NaN where undecoded
-    confidence: np.ndarray   # (H, W) float32 in [0, 1]
-    depth: np.ndarray        # (H, W) float32 camera-frame z in metres, NaN where no point was kept
-    capture: np.ndarray      # (H, W[, 3]) the capture under the white pattern, as read
-    sigma: np.ndarray | None = None  # (H, W) float32 metres: predicted std along the camera ray, NaN where
-                                     # no point was kept or no prediction (rangekit.coded.uncertainty)
 
 
 def cache_settings(session: Session, method: str, table_margin: float,

@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING, Callable, Sequence
 import numpy as np
 
 if TYPE_CHECKING:
-    from rangekit.app.process.view_cache import ViewMaps
+    from rangekit.formats.sessions.view_maps import ViewMaps
     from rangekit.app.report.view_rows import ViewRows
     from rangekit.formats.sessions.session import Session
     from rangekit.formats.sessions.summary import ProcessResult

@@ -38,7 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import least_squares
 
-from rangekit.calib.bundle_problem import BundleProblem, make_bundle_problem
+from rangekit.calib.bundle.problem import BundleProblem, make_bundle_problem
 from rangekit.camera import PinholeCamera
 from rangekit.errors import CalibrationError
 from rangekit.geometry import invert_T, make_T, nearest_rotation, rotvec_to_R
@@ -196,11 +196,11 @@ def bundle_adjust(camera: PinholeCamera, projector: PinholeCamera, T_proj_cam: n
     sigma_camera, sigma_projector : expected noise of each device's corners (px); residuals are divided by
         them, so the two devices are weighted by their precision.
     max_nfev : iteration limit of ``least_squares``.
-    fixed_camera, fixed_projector : intrinsics held at their initial values (names of :data:`rangekit.calib.bundle_problem.INTRINSICS`;
+    fixed_camera, fixed_projector : intrinsics held at their initial values (names of :data:`rangekit.calib.bundle.problem.INTRINSICS`;
         "aspect" keeps fy / fx), e.g. ``("k2", "p1", "p2")`` for a lens model of k1 alone.
 
     solver : "schur" (default): Levenberg-Marquardt on the reduced system, the board poses eliminated through the
-        Schur complement, with the analytic Jacobian (:mod:`rangekit.calib.bundle_schur`,
+        Schur complement, with the analytic Jacobian (:mod:`rangekit.calib.bundle.schur`,
         :mod:`rangekit.calib.projection_jacobian`); "minpack": MINPACK's Levenberg-Marquardt
         (``scipy.optimize.least_squares``) on a Jacobian of grouped finite differences, as before issue 38. Both
         reach the same minimum (tests/calib/test_bundle_schur.py).
@@ -218,7 +218,7 @@ def bundle_adjust(camera: PinholeCamera, projector: PinholeCamera, T_proj_cam: n
                             method="lm", x_scale="jac", max_nfev=max_nfev, xtol=1e-12, ftol=1e-12, gtol=1e-12)
         x_free, nfev = sol.x, int(sol.nfev)
     else:
-        from rangekit.calib.bundle_reduced import solve_bundle_reduced
+        from rangekit.calib.bundle.reduced import solve_bundle_reduced
 
         p = problem
         x_free, nfev = solve_bundle_reduced(p.x0, p.free, p.ties, p.base, len(p.views), p.obs_view, p.obs_cam,

@@ -33,8 +33,8 @@ __all__ = ["HardwareRig", "open_rig_devices", "CAMERA_DRIVERS"]
 
 
 def _open_depthai(sec: dict, rig, *, coded_light: bool, where: str):
-    """An OAK camera (:class:`rangekit.drivers.depthai_camera.DepthaiCamera`) of a ``devices.camera`` entry."""
-    from rangekit.drivers.depthai_camera import DepthaiCamera
+    """An OAK camera (:class:`rangekit.drivers.depthai.camera.DepthaiCamera`) of a ``devices.camera`` entry."""
+    from rangekit.drivers.depthai.camera import DepthaiCamera
 
     return DepthaiCamera(sec.get("id"), socket=sec.get("socket", "CAM_A"), size=(rig.camera.width, rig.camera.height),
                          controls=controls_from_capture(rig.capture, where=where), coded_light=coded_light,

@@ -97,7 +97,7 @@ def list_depthai_devices(timeout_s: float = 1.0) -> list[dict]:
 
 def open_depthai_device(dai, device_id: str | None, search_timeout_s: float):
     """Find the depthai device ``device_id`` (id, name or IP; None: the first free one) and open it:
-    ``dai.Device``, for :class:`rangekit.drivers.depthai_camera.DepthaiCamera` and the stereo pair.
+    ``dai.Device``, for :class:`rangekit.drivers.depthai.camera.DepthaiCamera` and the stereo pair.
 
     The search polls, so the timeout holds on every call.
 

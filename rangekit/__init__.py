@@ -40,28 +40,9 @@ __version__ = "0.1.0"
 # any OpenMP runtime starts; a user's own setting wins. See rangekit._runtime.threads.
 _os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
-from rangekit._runtime.lazy import lazy_exports
+# The one re-export mechanism of rangekit's packages: each name of __init__.pyi loads on first use
+# (rangekit._runtime.lazy.attach_stub), so ``import rangekit`` stays light.
+from rangekit._runtime.lazy import attach_stub
 
-# name -> the module that defines it (relative to rangekit), imported on first access (PEP 562): the one
-# re-export mechanism of rangekit's packages (rangekit._runtime.lazy), so ``import rangekit`` stays light.
-_MODULE_OF = {
-    "load_cloud": "formats.clouds", "save_cloud": "formats.clouds", "load_range_grid": "formats.clouds",
-    "load_mesh": "formats.meshes", "save_mesh": "formats.meshes",
-    "load_rig": "rig.rig_file", "save_rig": "rig.rig_file", "Rig": "rig.rig_file",
-    "PointCloud": "surface.cloud", "TriangleMesh": "surface.mesh",
-    "as_cloud": "surface.convert", "as_mesh": "surface.convert", "from_open3d": "surface.convert",
-    "from_trimesh": "surface.convert", "to_trimesh": "surface.convert", "to_open3d": "surface.convert",
-    "estimate_normals": "surface.cloud", "voxel_downsample": "surface.cloud", "merge_clouds": "surface.cloud",
-    "transform_cloud": "surface.cloud",
-    "poisson_mesh": "surface.fusion", "make_watertight": "surface.watertight",
-    "icp": "registration.icp", "IcpOptions": "registration.icp",
-    "register_views": "registration.multiview", "MultiViewOptions": "registration.multiview",
-    "render": "app.commands.picture",
-    "reconstruct": "app.commands.reconstruct",
-    "register": "app.commands.register", "photometric_folder": "app.commands.photometric",
-    "photometric_stereo": "photometric.calibrated",
-    "scan": "app.scan.scan", "ScanOptions": "app.scan.options", "ScanResult": "app.scan.scan",
-    "process": "app.scan.scan", "ProcessOptions": "app.process.options",
-}
-__all__ = ["__version__", *_MODULE_OF]
-__getattr__, __dir__ = lazy_exports(__name__, _MODULE_OF, __all__)
+__getattr__, __dir__, __all__ = attach_stub(__name__, __file__)
+__all__ = ["__version__", *__all__]

@@ -8,7 +8,7 @@ from dataclasses import replace
 import numpy as np
 
 from rangekit.boards import Board
-from rangekit.calib.bundle_problem import intrinsics_vector as _intr_vector
+from rangekit.calib.bundle.problem import intrinsics_vector as _intr_vector
 from rangekit.calib.projection_jacobian import project as _project
 from rangekit.geometry import R_to_rotvec, make_T, rotvec_to_R
 

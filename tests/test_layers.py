@@ -196,3 +196,45 @@ def test_every_package_is_installed():
     found = {_module_name(p) for p in _sources().values() if p.name == "__init__.py"}
     assert found - listed == set(), "packages missing from pyproject.toml: " + ", ".join(sorted(found - listed))
     assert listed - found == set(), "pyproject.toml lists packages that do not exist: " + ", ".join(sorted(listed - found))
+
+
+#: Modules of one folder whose names share a first or last word (``scan_job``, ``check_job``, ...): at this many
+#: they are a family, and a family gets a room of its own (``ui/jobs/``), a folder named for the idea.
+FAMILY_SIZE = 3
+
+
+def _families(names: list[str]) -> dict[str, list[str]]:
+    """Families among module names (stems): ``{"*_job": [...], "depthai_*": [...]}`` with at least FAMILY_SIZE."""
+    found: dict[str, list[str]] = {}
+    for name in names:
+        words = name.strip("_").split("_")
+        if len(words) > 1:
+            found.setdefault(f"{words[0]}_*", []).append(name)
+            found.setdefault(f"*_{words[-1]}", []).append(name)
+    return {k: sorted(v) for k, v in found.items() if len(v) >= FAMILY_SIZE}
+
+
+def test_a_family_of_modules_has_its_own_folder():
+    crowded = []
+    for folder in (f for f in _folders() if f.relative_to(ROOT).parts[0] in FOLDERS):   # benchmarks: bench_*
+        names = [p.stem for p in folder.glob("*.py") if p.stem != "__init__"]
+        crowded += [f"{folder.relative_to(ROOT)}: {k} {v}" for k, v in _families(names).items()]
+    assert not crowded, "modules named for one idea (give them a folder of that name):\n" + "\n".join(crowded)
+
+
+def test_the_family_rule_finds_a_family():
+    assert _families(["scan_job", "check_job", "register_job", "paths"]) == {
+        "*_job": ["check_job", "register_job", "scan_job"]}
+    assert _families(["bundle_schur", "bundle_reduced", "camera"]) == {}
+
+
+def _app_room(module: str) -> str | None:
+    parts = module.split(".")
+    return ".".join(parts[:3]) if len(parts) > 3 and parts[1] == "app" else None
+
+
+def test_no_two_app_rooms_import_each_other(graph):
+    edges = {(_app_room(m), _app_room(d)) for m, deps in graph.items() for d in deps
+             if _app_room(m) and _app_room(d) and _app_room(m) != _app_room(d)}
+    both = sorted(f"{a} <-> {b}" for a, b in edges if (b, a) in edges and a < b)
+    assert not both, "app folders importing each other both ways (one of them is the lower room):\n" + "\n".join(both)

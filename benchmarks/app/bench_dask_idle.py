@@ -50,7 +50,7 @@ def idle_cost(config: dict, seconds: float) -> float:
 
 
 def main() -> None:
-    from rangekit.app.process.batch import QUIET_DASK
+    from rangekit.app.batch.sessions import QUIET_DASK
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--seconds", type=float, default=30.0)

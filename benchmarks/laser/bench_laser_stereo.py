@@ -37,7 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rangekit.app.laser.process import LaserProfiles, oriented_profiles, profile_spacing
+from rangekit.app.process.laser import LaserProfiles, oriented_profiles, profile_spacing
 from rangekit.app.laser.reconstruct import reconstruct_laser_capture
 from rangekit.app.laser.sheet_stereo import reconstruct_laser_stereo_capture
 from rangekit.formats.laser_capture import LaserCapture, LaserStereoCapture

@@ -33,7 +33,7 @@ def cpu_seconds() -> float:
 
 
 def register(session: Session, clouds):
-    from rangekit.app.scan.passes import register_session_passes
+    from rangekit.app.process.register import register_session_passes
     from rangekit.registration.multiview import MultiViewOptions, register_views
     from rangekit.rig.rig_file import turntable_prior
 

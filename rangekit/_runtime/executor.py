@@ -45,7 +45,7 @@ class Where(str, Enum):
     HERE = "here"        # on the calling thread, when it is called
     THREAD = "thread"    # on a thread of this process, beside the caller
     CHILD = "child"      # in a spawned child process (library code that holds the GIL: Open3D's Poisson)
-    DASK = "dask"        # a task on a Dask cluster (rangekit.app.process.batch)
+    DASK = "dask"        # a task on a Dask cluster (rangekit.app.batch.sessions)
 
 
 def worker_count(workers: int = 0) -> int:
@@ -102,7 +102,7 @@ def start(where: Where, fn: Callable, *args, child: ChildCall | None = None, **k
         return Done(fn, args, kwargs)
     if where is Where.DASK:
         raise ConfigError("where: a single call runs here, on a thread or in a child; Dask runs tasks "
-                          "(rangekit.app.process.batch)")
+                          "(rangekit.app.batch.sessions)")
     from rangekit._runtime.child import call_beside
 
     return call_beside(fn, *args, in_child=where is Where.CHILD, child=child, **kwargs)

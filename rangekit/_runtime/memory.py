@@ -7,7 +7,7 @@ freed on the fusion thread, the process keeps hundreds of MB it no longer uses, 
 allocations (on another thread's arena) come on top. :func:`release_free_memory` calls ``malloc_trim(0)``
 (every arena) where a stage has just freed a lot; it changes no result. A no-op without glibc, and in a
 process started with one arena (``MALLOC_ARENA_MAX=1``, as rangekit's Dask workers are,
-:data:`rangekit.app.process.batch.WORKER_MALLOC`): there every thread reuses the freed pages, and trimming them would
+:data:`rangekit.app.batch.sessions.WORKER_MALLOC`): there every thread reuses the freed pages, and trimming them would
 only make the next stage or task fault them in again.
 
 The other way round, :func:`reuse_freed_memory`: inside its block arrays up to a threshold come from the heap

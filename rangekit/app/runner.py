@@ -192,7 +192,7 @@ class Runner:
         """The registration's pair mapper where the table places pair refinement (None: threads, in
         :func:`rangekit.registration.multiview.register_views`)."""
         if self.where(Work.PAIR_REFINE) is Where.DASK:
-            from rangekit.app.process.batch_pairs import dask_pair_mapper
+            from rangekit.app.batch.pairs import dask_pair_mapper
 
             return dask_pair_mapper()
         return None

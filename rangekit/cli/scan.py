@@ -193,9 +193,9 @@ def cmd_process(args: argparse.Namespace) -> int:
 
 
 def _process_batch(args: argparse.Namespace, options) -> int:
-    """Several sessions on Dask (rangekit.app.process.batch): a line per view and session, then each session done or
+    """Several sessions on Dask (rangekit.app.batch.sessions): a line per view and session, then each session done or
     failed; exit 1 when any failed."""
-    from rangekit.app.process.batch import process_sessions
+    from rangekit.app.batch.sessions import process_sessions
     from rangekit.progress import format_seconds
 
     scheduler = args.scheduler or "local"

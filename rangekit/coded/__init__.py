@@ -8,25 +8,6 @@ propagation to a per-point sigma along the camera ray); ``codecs/`` holds other 
 micro and modulated phase shifting, OpenCV's FTP, PSP and FAPS).
 """
 
-from rangekit.coded.debruijn import decode_debruijn
-from rangekit.coded.decode import decode
-from rangekit.coded.patterns import (DEBRUIJN_PALETTE, PATTERN_METHODS, PatternSpec, de_bruijn,
-                                     debruijn_stripe_colours, gray_decode, gray_encode, make_pattern_spec,
-                                     n_bits_for)
-from rangekit.coded.phase import phase_from_steps
-from rangekit.coded.response import PhaseCorrection, ResponseFit, fit_response, phase_correction
-from rangekit.coded.result import DecodeResult
-from rangekit.coded.triangulate import (TriangulationResult, discontinuity_mask, range_normals, triangulate,
-                                        triangulate_ray_plane, triangulate_ray_ray)
-from rangekit.coded.uncertainty import (GRAY_CODE_STD, NoiseModel, along_ray_jacobian, fit_noise_model,
-                                        phase_coordinate_std, point_sigma)
+from rangekit._runtime.lazy import attach_stub
 
-__all__ = [
-    "PatternSpec", "PATTERN_METHODS", "make_pattern_spec", "gray_encode", "gray_decode", "n_bits_for",
-    "de_bruijn", "DEBRUIJN_PALETTE", "debruijn_stripe_colours",
-    "DecodeResult", "decode", "decode_debruijn", "phase_from_steps",
-    "ResponseFit", "PhaseCorrection", "fit_response", "phase_correction",
-    "TriangulationResult", "triangulate_ray_plane", "triangulate_ray_ray", "triangulate", "range_normals",
-    "discontinuity_mask",
-    "NoiseModel", "fit_noise_model", "phase_coordinate_std", "GRAY_CODE_STD", "along_ray_jacobian", "point_sigma",
-]
+__getattr__, __dir__, __all__ = attach_stub(__name__, __file__)

@@ -8,13 +8,6 @@ poses and the turntable plate), ``sequence`` (the frames a laser scan takes at e
 here, it loads :mod:`rangekit.stereo`: import it as ``rangekit.laser.sheet_stereo``).
 """
 
-from rangekit.laser.peaks import LinePeaks, detect_peaks, require_peaks
-from rangekit.laser.plane_calib import (board_view, calibrate_laser_plane, calibrated_laser, plane_errors, plate_view,
-                                        report_lines)
-from rangekit.laser.plane_fit import PlaneFit, fit_plane
-from rangekit.laser.sequence import LaserSequence
-from rangekit.laser.triangulate import LaserPoints, to_turntable_frame, triangulate_peaks
+from rangekit._runtime.lazy import attach_stub
 
-__all__ = ["LinePeaks", "detect_peaks", "require_peaks", "triangulate_peaks", "to_turntable_frame", "LaserPoints",
-           "fit_plane", "PlaneFit", "board_view", "plate_view", "calibrate_laser_plane", "calibrated_laser",
-           "plane_errors", "report_lines", "LaserSequence"]
+__getattr__, __dir__, __all__ = attach_stub(__name__, __file__)

@@ -4,10 +4,6 @@ Modules: ``sphere_fit`` (Gaussian sphere fit, Gauss-Newton from an algebraic sta
 (Gaussian plane fit), ``vdi2634`` (probing errors PF and PS, sphere-spacing error SD, flatness F).
 """
 
-from rangekit.metrology.plane_fit import LsqPlane, fit_plane_lsq
-from rangekit.metrology.sphere_fit import SphereFit, fit_sphere
-from rangekit.metrology.vdi2634 import (MAX_OUTLIER_FRACTION, FlatnessResult, ProbingResult, flatness,
-                                        kept_after_outliers, probing, sphere_spacing)
+from rangekit._runtime.lazy import attach_stub
 
-__all__ = ["SphereFit", "fit_sphere", "LsqPlane", "fit_plane_lsq", "MAX_OUTLIER_FRACTION", "ProbingResult",
-           "FlatnessResult", "probing", "sphere_spacing", "flatness", "kept_after_outliers"]
+__getattr__, __dir__, __all__ = attach_stub(__name__, __file__)

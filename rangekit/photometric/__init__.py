@@ -14,19 +14,6 @@ Everything per pixel is vectorised: pixels are processed in chunks of batched 3x
 never in a Python loop over pixels.
 """
 
-from rangekit.photometric.accuracy import AngularError, angular_error
-from rangekit.photometric.calibrated import photometric_stereo
-from rangekit.photometric.integrate import integrate_normals
-from rangekit.photometric.mesh import depth_to_mesh
-from rangekit.photometric.solve import PhotometricResult
-from rangekit.photometric.uncalibrated import uncalibrated_photometric_stereo
+from rangekit._runtime.lazy import attach_stub
 
-__all__ = [
-    "PhotometricResult",
-    "AngularError",
-    "photometric_stereo",
-    "uncalibrated_photometric_stereo",
-    "angular_error",
-    "integrate_normals",
-    "depth_to_mesh",
-]
+__getattr__, __dir__, __all__ = attach_stub(__name__, __file__)

@@ -1,6 +1,6 @@
 """One refinement of one view pair, the unit that :func:`rangekit.registration.multiview.register_views` maps
 over a round's candidate pairs: serially by default, or as one Dask task a pair (``map_pairs``,
-:mod:`rangekit.app.process.batch`). A pair's result depends only on its two downsampled clouds and its
+:mod:`rangekit.app.batch.sessions`). A pair's result depends only on its two downsampled clouds and its
 :class:`PairJob`, so the two give the same bits.
 
 Frames: ``T_i_j`` maps view j's points into view i's frame; ``target`` is view i, ``source`` view j.

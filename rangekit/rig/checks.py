@@ -23,7 +23,7 @@ __all__ = ["validate_devices", "validate_capture", "validate_rig_for_hardware", 
 TURNTABLE_PROTOCOLS = ("horus", "fabscan")
 #: Projector control protocols (rangekit.drivers.projector_control): Epson serial, PJLink over TCP.
 PROJECTOR_PROTOCOLS = ("escvp21", "pjlink")
-#: depthai camera board sockets (rangekit.drivers.depthai_camera).
+#: depthai camera board sockets (rangekit.drivers.depthai.camera).
 DEPTHAI_SOCKETS = ("CAM_A", "CAM_B", "CAM_C", "CAM_D", "CAM_E", "CAM_F", "CAM_G", "CAM_H")
 #: The longest depthai device search accepted (seconds; depthai takes it as a C int of milliseconds), and
 #: the search a camera opened from a rig file gets without ``devices.camera.search_timeout_s``.
@@ -45,7 +45,7 @@ DEVICE_FIELDS = {
     "devices.projector": ("type", "display", "control", "refresh_hz", "reconnect_timeout_s"),
     "devices.projector.control": ("protocol", "port", "baud", "timeout", "password"),
     "devices.camera": ("type", "id", "socket", "search_timeout_s", "reconnect_timeout_s"),
-    "devices.depthai": ("device_id", "sockets", "size"),  # written by depthai_camera.calibration_to_rig
+    "devices.depthai": ("device_id", "sockets", "size"),  # written by depthai.camera.calibration_to_rig
 }
 #: The ``capture`` settings: name -> (smallest, largest allowed value, unit). ``bits`` is the camera's
 #: ADC bit depth, one of CAPTURE_BITS; a session records it once (rangekit.formats.sessions.session.CaptureSettings)

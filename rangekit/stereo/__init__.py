@@ -23,12 +23,6 @@ Frames: the rectified-left frame is the left camera frame rotated by ``R1`` (``X
 origin at the left centre. Disparities are in rectified pixels, depths in metres.
 """
 
-from rangekit.stereo.depth import depth_in_camera, disparity_to_depth, disparity_to_points
-from rangekit.stereo.dots import dots_depth, reference_disparity
-from rangekit.stereo.matching import DisparityMap, census_cost, census_transform, sgbm_disparity, sgm_disparity
-from rangekit.stereo.pipeline import StereoResult, stereo_depth
-from rangekit.stereo.rectify import Rectification, rectify, rectify_images
+from rangekit._runtime.lazy import attach_stub
 
-__all__ = ["Rectification", "DisparityMap", "StereoResult", "rectify", "rectify_images", "census_transform",
-           "census_cost", "sgm_disparity", "sgbm_disparity", "disparity_to_depth", "disparity_to_points",
-           "depth_in_camera", "stereo_depth", "dots_depth", "reference_disparity"]
+__getattr__, __dir__, __all__ = attach_stub(__name__, __file__)

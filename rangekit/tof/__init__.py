@@ -28,29 +28,6 @@ A ToF camera measures radial distance along the pixel's ray, not ``z``: :func:`r
 :func:`range_to_points` convert with the camera model (lens distortion included).
 """
 
-from rangekit.tof.decode import ToFResult, decode_cw
-from rangekit.tof.phase import (PhaseMaps, UnwrapResult, phase_amplitude_offset, phase_to_range, range_sigma,
-                                unwrap_ranges)
-from rangekit.tof.plan import C_LIGHT, FrequencyPlan
-from rangekit.tof.pulsed import MAX_ROUND_TRIP_S, pulsed_range, round_trip_problem
-from rangekit.tof.range_maps import flying_pixels, partial_pixels, range_to_depth, range_to_points
+from rangekit._runtime.lazy import attach_stub
 
-__all__ = [
-    "C_LIGHT",
-    "FrequencyPlan",
-    "PhaseMaps",
-    "UnwrapResult",
-    "ToFResult",
-    "pulsed_range",
-    "round_trip_problem",
-    "MAX_ROUND_TRIP_S",
-    "phase_amplitude_offset",
-    "phase_to_range",
-    "range_sigma",
-    "unwrap_ranges",
-    "flying_pixels",
-    "partial_pixels",
-    "range_to_depth",
-    "range_to_points",
-    "decode_cw",
-]
+__getattr__, __dir__, __all__ = attach_stub(__name__, __file__)

@@ -1,4 +1,4 @@
-"""Many sessions on Dask (rangekit.app.process.batch): real worker processes, no mocks. The outputs are the
+"""Many sessions on Dask (rangekit.app.batch.sessions): real worker processes, no mocks. The outputs are the
 bytes of serial processing; a failing session is reported by name while the others finish; a worker
 killed in the middle loses nothing and no view is decoded twice; an unreachable scheduler is a clear
 error within 10 s."""
@@ -19,7 +19,7 @@ from pathlib import Path
 import pytest
 
 from sessions import N_VIEWS
-from rangekit.app.process.batch import WORKER_ENV, SchedulerUnreachable, process_sessions
+from rangekit.app.batch.sessions import WORKER_ENV, SchedulerUnreachable, process_sessions
 from rangekit.app.process.options import ProcessOptions
 from rangekit.app.process.process import process_session
 from rangekit.cli import main
@@ -238,15 +238,15 @@ def test_sessions_are_finished_in_groups_one_a_worker(sessions):
     group = max(views["group_a"] + views["group_b"])
     assert session["group_a"] >= group and session["group_b"] >= group
     assert session["group_c"] >= max(views["group_c"])
-    # each view pair's registration ran as a task of its own (rangekit.app.process.batch_pairs), none redone in a session
+    # each view pair's registration ran as a task of its own (rangekit.app.batch.pairs), none redone in a session
     pairs = {t.key for t in log if t.key.startswith("refine_pair-") and t.finish == "memory"}
     assert len(pairs) >= 3 * (N_VIEWS - 1), len(pairs)
 
 
 def test_local_workers_keep_their_pages_and_quiet_housekeeping():
     """The local cluster's workers start with one malloc arena that is never trimmed (rangekit._runtime.memory then
-    keeps freed pages for the next task) and Dask's periodic housekeeping slowed down (rangekit.app.process.batch)."""
-    from rangekit.app.process.batch import QUIET_DASK, WORKER_MALLOC, _client
+    keeps freed pages for the next task) and Dask's periodic housekeeping slowed down (rangekit.app.batch.sessions)."""
+    from rangekit.app.batch.sessions import QUIET_DASK, WORKER_MALLOC, _client
 
     def inside():
         import dask
@@ -271,7 +271,7 @@ def test_the_cluster_recipe_in_docs_matches_the_local_workers():
     import dask
     import yaml
 
-    from rangekit.app.process.batch import QUIET_DASK, WORKER_MALLOC
+    from rangekit.app.batch.sessions import QUIET_DASK, WORKER_MALLOC
 
     page = (ROOT / "docs" / "scale.md").read_text()
     assert all(f"{k}={v}" in page for k, v in WORKER_MALLOC.items())
@@ -288,7 +288,7 @@ def test_pairs_shipped_away_and_back_give_the_bits_of_serial_registration():
 
     import numpy as np
 
-    from rangekit.app.process.batch_pairs import dask_pair_mapper
+    from rangekit.app.batch.pairs import dask_pair_mapper
     from rangekit.registration.multiview import MultiViewOptions, register_views
     from rangekit.registration.pair_refine import refine_pair
     from rangekit.sim.writers.scans import perturb_poses, turntable_scans

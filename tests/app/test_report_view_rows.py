@@ -6,7 +6,7 @@ import re
 import numpy as np
 
 from rangekit.app.report.view_rows import _compact, _expand, view_rows
-from rangekit.app.process.view_cache import ViewMaps
+from rangekit.formats.sessions.view_maps import ViewMaps
 from rangekit.sim.devices.sim_rig import default_rig
 from rangekit.surface.cloud import PointCloud
 

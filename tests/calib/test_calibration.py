@@ -206,7 +206,7 @@ def test_depthai_converted_rig_triangulates_in_the_simulator(tmp_path):
     """The simulator's camera stored as a depthai calibration (EEPROM JSON), converted back with
     calibration_to_rig, triangulates a simulated scan as well as the true rig does."""
     dai = pytest.importorskip("depthai")
-    from rangekit.drivers.depthai_camera import calibration_to_rig
+    from rangekit.drivers.depthai.camera import calibration_to_rig
     from rangekit.geometry import invert_T
     from rangekit.coded.patterns import make_pattern_spec
     from rangekit.coded.reconstruct import reconstruct_view

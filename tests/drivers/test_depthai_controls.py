@@ -231,7 +231,7 @@ def test_rig_controls_reach_the_device_as_documented(dai_log):
 
 
 def test_stereo_depth_only_when_asked(dai_log):
-    from rangekit.drivers.depthai_camera import DepthaiCamera
+    from rangekit.drivers.depthai.camera import DepthaiCamera
 
     DepthaiCamera(search_timeout_s=0).close()
     assert not any(who == "StereoDepth" for who, _, _ in dai_log)
@@ -243,7 +243,7 @@ def test_stereo_depth_only_when_asked(dai_log):
 
 def test_auto_modes_and_mono(dai_log):
     """Unlocked controls map to depthai's auto modes; 'mono' gives grey frames with the balance held."""
-    from rangekit.drivers.depthai_camera import DepthaiCamera
+    from rangekit.drivers.depthai.camera import DepthaiCamera
 
     dai = __import__("sys").modules["depthai"]
     controls = CameraControls(exposure_us=None, iso=800, white_balance_k=None, focus=None, lock_focus=True)
@@ -265,7 +265,7 @@ def test_auto_modes_and_mono(dai_log):
 
 def test_auto_exposure_refused_for_coded_light_unless_allowed(dai_log):
     from rangekit.drivers import open_rig_devices
-    from rangekit.drivers.depthai_camera import DepthaiCamera
+    from rangekit.drivers.depthai.camera import DepthaiCamera
 
     auto = _rig(exposure_us="auto")  # refresh_hz does not constrain auto-exposure
     with pytest.raises(ConfigError, match=r"rig.json: capture.camera.exposure_us: coded light needs a locked"):
@@ -286,7 +286,7 @@ def test_auto_exposure_refused_for_coded_light_unless_allowed(dai_log):
 
 
 def test_set_controls_sends_one_message(dai_log):
-    from rangekit.drivers.depthai_camera import DepthaiCamera
+    from rangekit.drivers.depthai.camera import DepthaiCamera
 
     cam = DepthaiCamera(search_timeout_s=0, controls=CameraControls())
     dai_log.clear()
@@ -300,7 +300,7 @@ def test_set_controls_sends_one_message(dai_log):
 
 
 def test_impossible_controls_refused(dai_log):
-    from rangekit.drivers.depthai_camera import DepthaiCamera
+    from rangekit.drivers.depthai.camera import DepthaiCamera
 
     with pytest.raises(DeviceError, match=r"exposure_us 50000 us is longer than a frame at capture.camera.fps 30"):
         DepthaiCamera(search_timeout_s=0, controls=CameraControls(exposure_us=50000))
@@ -310,7 +310,7 @@ def test_impossible_controls_refused(dai_log):
 
 
 def test_not_found_names_the_rig_field(dai_log, monkeypatch):
-    from rangekit.drivers.depthai_camera import DepthaiCamera
+    from rangekit.drivers.depthai.camera import DepthaiCamera
 
     dai = __import__("sys").modules["depthai"]
     monkeypatch.setattr(dai.XLinkConnection, "getAllConnectedDevices", lambda timeoutMs: [])
@@ -321,7 +321,7 @@ def test_not_found_names_the_rig_field(dai_log, monkeypatch):
 def test_mapping_on_real_depthai():
     """The mapping on a real depthai.CameraControl: the message holds what the fake recorded."""
     dai = pytest.importorskip("depthai")
-    from rangekit.drivers.depthai_controls import apply_controls
+    from rangekit.drivers.depthai.controls import apply_controls
 
     ctrl = dai.CameraControl()
     apply_controls(ctrl, CameraControls(exposure_us=16667, iso=400, white_balance_k=4500, focus=120), dai, name="x")

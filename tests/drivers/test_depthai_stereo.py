@@ -320,7 +320,7 @@ def test_bad_options_are_usage_errors(argv, expected, tmp_path, monkeypatch, cap
 
 def test_every_depthai_stereo_name_exists():
     dai = pytest.importorskip("depthai")
-    from rangekit.drivers.depthai_stereo import DEPTHAI_STEREO_NAMES
+    from rangekit.drivers.depthai.stereo import DEPTHAI_STEREO_NAMES
 
     from depthai_names import missing_names
 
@@ -331,7 +331,7 @@ def test_every_depthai_stereo_name_exists():
 @pytest.mark.hardware
 def test_live_pair_from_a_real_device_or_skip(tmp_path):
     pytest.importorskip("depthai")
-    from rangekit.drivers.depthai_stereo import capture_stereo_pair
+    from rangekit.drivers.depthai.stereo import capture_stereo_pair
     from rangekit.errors import DeviceError
 
     try:

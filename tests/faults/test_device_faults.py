@@ -68,7 +68,7 @@ def test_opening_a_depthai_camera_with_short_timeouts_never_aborts():
     code = (
         "import time\n"
         "import depthai\n"
-        "from rangekit.drivers.depthai_camera import DepthaiCamera\n"
+        "from rangekit.drivers.depthai.camera import DepthaiCamera\n"
         "from rangekit.errors import RangekitError\n"
         "for t in (0.0, 0.05, 0.2, float('nan')):\n"
         "    try:\n"

@@ -13,7 +13,7 @@ import time
 
 import pytest
 
-from rangekit.app.process.batch import SchedulerUnreachable, probe_scheduler
+from rangekit.app.batch.sessions import SchedulerUnreachable, probe_scheduler
 
 
 @pytest.fixture

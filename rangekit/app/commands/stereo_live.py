@@ -1,5 +1,5 @@
 """``rangekit stereo --device``: capture a synchronised pair from an attached OAK-D with the dot projector on
-(:func:`rangekit.drivers.depthai_stereo.capture_stereo_pair`), run the same matcher as ``rangekit stereo`` on
+(:func:`rangekit.drivers.depthai.stereo.capture_stereo_pair`), run the same matcher as ``rangekit stereo`` on
 files (:func:`rangekit.stereo.stereo_depth`) and write the same depth outputs, plus the pair itself
 (``left.png``, ``right.png``) and the device's calibration (``rig.json``), so the run can be repeated
 offline with ``rangekit stereo OUT/left.png OUT/right.png --rig OUT/rig.json``.
@@ -72,7 +72,7 @@ def stereo_depth_device(out: str | Path, *, device_id: str | None = None, size: 
                         search_timeout_s: float = 3.0, progress: Callable | None = None) -> LiveStereoRun:
     """Capture, match and write (module doc); ``progress(msg)`` gets one line per fact."""
     from rangekit.colour import colourise
-    from rangekit.drivers.depthai_stereo import capture_stereo_pair
+    from rangekit.drivers.depthai.stereo import capture_stereo_pair
     from rangekit.stereo import stereo_depth
 
     t0 = time.perf_counter()

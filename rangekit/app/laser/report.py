@@ -78,7 +78,7 @@ def write_laser_report(folder: str | Path, result, *, profiles, merged, mesh, se
                        progress: Callable | None = None, size: tuple[int, int] = (230, 230),
                        watertight=None) -> Path:
     """Write ``folder/report.html`` of a laser scan (see the module docstring); returns its path.
-    ``profiles``: :class:`rangekit.app.laser.process.LaserProfiles`; ``merged`` and ``mesh`` in the session
+    ``profiles``: :class:`rangekit.app.process.laser.LaserProfiles`; ``merged`` and ``mesh`` in the session
     world (``mesh`` the observed surface, ``watertight`` the closed one with its ``observed`` flag); ``truth``
     the true surface there (simulator) for the heat map."""
     ctx = ReportContext(Path(folder), result, session, mesh, watertight=watertight, truth=truth, merged=merged,

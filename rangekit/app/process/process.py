@@ -105,7 +105,7 @@ def _process(session: Session, options: ProcessOptions, evaluate: Evaluator | No
     views measured beside it), measure, report, and summary.json last."""
     _start(session, runner)
     if session.is_laser:
-        from rangekit.app.laser.process import process_laser
+        from rangekit.app.process.laser import process_laser
 
         return process_laser(session, options, evaluate, runner)
     with runner.stage(Stage.DECODE, reuse_memory=True):   # each view's stacks reuse the last one's pages

@@ -19,7 +19,8 @@ if TYPE_CHECKING:
     from rangekit.registration.ahead import RegistrationAhead
     from rangekit.registration.multiview import MultiViewOptions
 
-__all__ = ["RegisteredViews", "evaluator_angles", "register", "turntable_registration", "held_to_prior", "PRIOR_TRUST_DEG"]
+__all__ = ["RegisteredViews", "evaluator_angles", "register", "register_session_passes", "turntable_registration",
+           "held_to_prior", "PRIOR_TRUST_DEG"]
 
 #: Degrees a registration may move a view from the turntable's pose. A turntable's steps and calibrated axis
 #: are good to a fraction of a degree (the simulated 12-view scan: 0.001 deg); a view moved further was slid by
@@ -93,8 +94,6 @@ def register(decoded: DecodedViews, session: Session, *, progress=None, map_pair
     views, clouds, rig = decoded.views, decoded.clouds, session.rig
     view_passes = [v.scan_pass for v in views] if session.plan.passes > 1 else None
     if view_passes is not None:    # each pass from its turntable prior, the passes to each other without one
-        from rangekit.app.scan.passes import register_session_passes
-
         res = register_session_passes(clouds, views, rig, progress=progress, map_pairs=map_pairs)
     else:
         prior, options = (None, MultiViewOptions()) if rig.T_world_table is None else \
@@ -148,3 +147,24 @@ def _edge_rows(res) -> list[Edge]:
         edges.append(Edge(int(e.i), int(e.j), float(e.rmse), float(e.overlap), bool(e.accepted), e.reason, rotation,
                           translation))
     return edges
+
+
+def register_session_passes(clouds, views, rig, *, progress=None, map_pairs=None):
+    """Register a multi-pass session's views (:func:`rangekit.registration.passes.register_passes`): each
+    pass from the turntable prior of its angles (None without a turntable in the rig), the passes to each
+    other without a prior. ``views``: the session's done views (``scan_pass``, ``angle``); ``map_pairs``: see
+    :func:`rangekit.registration.multiview.register_views`."""
+    import numpy as np
+
+    from rangekit.registration.multiview import MultiViewOptions
+    from rangekit.registration.passes import register_passes
+    from rangekit.rig.rig_file import turntable_prior
+
+    vp = np.array([v.scan_pass for v in views])
+    passes = sorted(set(vp.tolist()))
+    remap = {p: k for k, p in enumerate(passes)}    # passes with no view done are left out
+    priors = [None if rig.T_world_table is None else
+              turntable_prior(rig.T_world_table, [v.angle for v in views if v.scan_pass == p]) for p in passes]
+    return register_passes(clouds, [remap[p] for p in vp.tolist()], priors, progress=progress,
+                           names=[v.folder.name for v in views],
+                           options=MultiViewOptions(turntable=rig.T_world_table is not None), map_pairs=map_pairs)

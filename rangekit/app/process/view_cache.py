@@ -13,7 +13,6 @@ from __future__ import annotations
 import zipfile
 from collections.abc import Iterator, Sequence
 from contextlib import nullcontext
-from dataclasses import dataclass
 
 import numpy as np
 from rangekit._runtime.executor import ordered_map, worker_count
@@ -33,21 +32,10 @@ from rangekit.rig.rig_file import Rig
 from rangekit.formats.clouds import load_cloud
 from rangekit.formats.ply_write import write_cloud_ply
 from rangekit.formats.sessions.check import file_sha256, read_view_stack, verify_views
+from rangekit.formats.sessions.view_maps import ViewMaps
 from rangekit.surface.cloud import PointCloud
 
 __all__ = ["ViewMaps", "cache_settings", "table_transform", "view_cloud", "view_clouds", "white_frame_index"]
-
-
-@dataclass(frozen=True, eq=False)
-class ViewMaps:
-    """What a view's decoding left, per camera pixel (H, W): for the TSDF fusion and the report."""
-
-    proj_col: np.ndarray     # (H, W) float32 projector column, NaN where undecoded
-    confidence: np.ndarray   # (H, W) float32 in [0, 1]
-    depth: np.ndarray        # (H, W) float32 camera-frame z in metres, NaN where no point was kept
-    capture: np.ndarray      # (H, W[, 3]) the capture under the white pattern, as read
-    sigma: np.ndarray | None = None  # (H, W) float32 metres: predicted std along the camera ray, NaN where
-                                     # no point was kept or no prediction (rangekit.coded.uncertainty)
 
 
 def cache_settings(session: Session, method: str, table_margin: float,
@@ -57,7 +45,7 @@ def cache_settings(session: Session, method: str, table_margin: float,
     metres (see :func:`view_cloud`), ``max_motion`` the share of a view's decoded pixels that may have moved
     during its capture (:func:`rangekit.coded.motion.detect_motion`; over it the view is refused, MotionError;
     None: not checked; recorded for the patterns it reads). The one place they are built, for processing in one
-    process (:mod:`rangekit.app.process.process`) and as Dask tasks (:mod:`rangekit.app.process.batch`)."""
+    process (:mod:`rangekit.app.process.process`) and as Dask tasks (:mod:`rangekit.app.batch.sessions`)."""
     rig, spec, full_scale = session.rig, session.pattern, session.capture.full_scale
     settings = {"rangekit": __version__, "method": method, "table_margin": table_margin,
                 "edge_margin_px": EDGE_MARGIN_PX,

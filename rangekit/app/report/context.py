@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING, Callable, Sequence
 import numpy as np
 
 if TYPE_CHECKING:
-    from rangekit.app.process.view_cache import ViewMaps
+    from rangekit.formats.sessions.view_maps import ViewMaps
     from rangekit.app.report.view_rows import ViewRows
     from rangekit.formats.sessions.session import Session
     from rangekit.formats.sessions.summary import ProcessResult
@@ -46,7 +46,7 @@ class ReportContext:
     merged, clouds : the registered merged cloud, and each view's cloud in its own frame (coded light).
     rows : the per-view part made as the views were decoded (:class:`rangekit.app.report.view_rows.ViewRows`), or
     maps : the views' maps to make it from.
-    profiles : a laser scan's profiles (:class:`rangekit.app.laser.process.LaserProfiles`).
+    profiles : a laser scan's profiles (:class:`rangekit.app.process.laser.LaserProfiles`).
     agreement : :func:`views_agreement` of ``mesh`` and the registered clouds when made already (processing
     makes it beside the closed mesh's evaluation); None: made here when a panel needs it.
     size : each picture's (width, height) in pixels; progress : ``progress(msg, done, total)``.

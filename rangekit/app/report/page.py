@@ -23,7 +23,7 @@ from rangekit.app.report.panels import PANELS
 from rangekit.io import atomic_write_text
 
 if TYPE_CHECKING:
-    from rangekit.app.process.view_cache import ViewMaps
+    from rangekit.formats.sessions.view_maps import ViewMaps
     from rangekit.app.report.view_rows import ViewRows
     from rangekit.formats.sessions.session import Session
     from rangekit.formats.sessions.summary import ProcessResult

@@ -19,7 +19,7 @@ from rangekit.app.report.figures import THUMB_W, crop as _crop, figure as _img, 
 from rangekit.progress import call_progress
 
 if TYPE_CHECKING:
-    from rangekit.app.process.view_cache import ViewMaps
+    from rangekit.formats.sessions.view_maps import ViewMaps
     from rangekit.rig.rig_file import Rig
     from rangekit.surface.cloud import PointCloud
 

@@ -53,24 +53,3 @@ def turn_over_prompt(folder: str | Path, passes: int, *, flipped: bool = False, 
             raise TurnOverNeeded(f"{folder}: pass {p + 1} of {passes}: no answer (end of input); {again}")
 
     return turn_over
-
-
-def register_session_passes(clouds, views, rig, *, progress=None, map_pairs=None):
-    """Register a multi-pass session's views (:func:`rangekit.registration.passes.register_passes`): each
-    pass from the turntable prior of its angles (None without a turntable in the rig), the passes to each
-    other without a prior. ``views``: the session's done views (``scan_pass``, ``angle``); ``map_pairs``: see
-    :func:`rangekit.registration.multiview.register_views`."""
-    import numpy as np
-
-    from rangekit.registration.multiview import MultiViewOptions
-    from rangekit.registration.passes import register_passes
-    from rangekit.rig.rig_file import turntable_prior
-
-    vp = np.array([v.scan_pass for v in views])
-    passes = sorted(set(vp.tolist()))
-    remap = {p: k for k, p in enumerate(passes)}    # passes with no view done are left out
-    priors = [None if rig.T_world_table is None else
-              turntable_prior(rig.T_world_table, [v.angle for v in views if v.scan_pass == p]) for p in passes]
-    return register_passes(clouds, [remap[p] for p in vp.tolist()], priors, progress=progress,
-                           names=[v.folder.name for v in views],
-                           options=MultiViewOptions(turntable=rig.T_world_table is not None), map_pairs=map_pairs)

@@ -2,8 +2,6 @@
 codes, pixel by pixel), :mod:`rangekit.coded.motion.detect` (whether a view moved, on a pair of lines in 16: what the
 scan and the processing refuse a view by), :mod:`rangekit.coded.motion._kernels` (their compiled loops)."""
 
-from rangekit.coded.motion.check import MAX_CODE_STEP, MAX_MOTION_SHARE, MOTION_LIMIT_CODES, MotionCheck, check_motion
-from rangekit.coded.motion.detect import DETECT_STEP, MOTION_METHODS, detect_motion
+from rangekit._runtime.lazy import attach_stub
 
-__all__ = ["DETECT_STEP", "MAX_CODE_STEP", "MAX_MOTION_SHARE", "MOTION_LIMIT_CODES", "MOTION_METHODS", "MotionCheck",
-           "check_motion", "detect_motion"]
+__getattr__, __dir__, __all__ = attach_stub(__name__, __file__)

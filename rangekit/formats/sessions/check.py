@@ -67,7 +67,7 @@ def _problem(session: Session, v: SessionView, frame: str, what: str) -> FileFor
 def verify_views(session: Session, *, workers: int = 0, views: list[SessionView] | None = None,
                  contents: bool = True) -> list[str]:
     """Check every done view's frames (or those of ``views``, some of the done views: one view's Dask task,
-    :mod:`rangekit.app.process.batch`) against the recorded SHA-256s; ``contents=False``: only that each
+    :mod:`rangekit.app.batch.sessions`) against the recorded SHA-256s; ``contents=False``: only that each
     view has its recorded frames and no others (no frame read: :func:`read_view_stack` checks the contents).
 
     Returns the names of the done views without recorded checksums (a session written before they were

@@ -2,7 +2,6 @@
 pairs of a view graph to try it on (:mod:`.graph`: view descriptors, similar pairs, the graph widened until it
 settles); every view's first pose from them (:mod:`.views`, imported from there: it needs the pairs' refinement)."""
 
-from rangekit.registration.coarse.align import (CoarseOptions, Features, coarse_align, coarse_align_seeds,
-                                                compute_features)
+from rangekit._runtime.lazy import attach_stub
 
-__all__ = ["CoarseOptions", "Features", "coarse_align", "coarse_align_seeds", "compute_features"]
+__getattr__, __dir__, __all__ = attach_stub(__name__, __file__)

@@ -7,7 +7,7 @@ flood light, and returns the pair with both cameras' calibration (world = the le
 ``on_device`` it also starts ``node.StereoDepth`` on the same two outputs, aligned to the left camera,
 and returns its depth in the same synchronised group; without it no StereoDepth node is created.
 
-depthai is imported inside the function (see :mod:`rangekit.drivers.depthai_camera`, whose device
+depthai is imported inside the function (see :mod:`rangekit.drivers.depthai.camera`, whose device
 search, socket and calibration helpers are used here). The emitters are switched off again on close.
 """
 
@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from rangekit.camera import PinholeCamera
-from rangekit.drivers.depthai_camera import _socket, pinhole_from_calibration
+from rangekit.drivers.depthai.camera import _socket, pinhole_from_calibration
 from rangekit.drivers.discovery import open_depthai_device
 from rangekit.errors import ConfigError, DeviceDisconnected, DeviceError, DeviceTimeout
 

@@ -1,6 +1,6 @@
 """The camera-projector bundle adjustment (:func:`rangekit.calib.projector.bundle_adjust`) posed for the reduced
 system: its residuals and analytic Jacobian (:mod:`rangekit.calib.projection_jacobian`) in the shared columns and
-one 6-column block per board pose, solved by :func:`rangekit.calib.bundle_schur.solve_reduced_lm`."""
+one 6-column block per board pose, solved by :func:`rangekit.calib.bundle.schur.solve_reduced_lm`."""
 
 from __future__ import annotations
 
@@ -17,7 +17,7 @@ __all__ = ["solve_bundle_reduced"]
 def solve_bundle_reduced(x0, free, ties, base, n_views, obs_view, obs_cam, obs_X, obs_uv, obs_sigma, k3c, k3p, max_nfev):
     """:func:`rangekit.calib.projector.bundle_adjust`'s problem on the reduced system (``solver="schur"``): the free parameters at the
     minimum and the number of evaluations. Rows are ordered by board pose (the observations' order is)."""
-    from rangekit.calib.bundle_schur import solve_reduced_lm
+    from rangekit.calib.bundle.schur import solve_reduced_lm
 
     shared_free = np.flatnonzero(free[:base])
     n = len(obs_uv)

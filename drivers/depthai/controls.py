@@ -1,6 +1,6 @@
 """The rig file's camera controls (:class:`rangekit.rig.camera_controls.CameraControls`) as depthai v3 commands.
 
-A depthai ``CameraControl`` message carries the commands; :class:`~rangekit.drivers.depthai_camera.
+A depthai ``CameraControl`` message carries the commands; :class:`~rangekit.drivers.depthai.camera.
 DepthaiCamera` fills the camera node's ``initialControl`` with them before the pipeline starts, and
 sends a fresh message through ``Camera.inputControl.createInputQueue()`` when they change later
 (``set_controls``). The mapping, one field at a time (docs/hardware.md):

@@ -2,7 +2,7 @@
 
 depthai is imported inside the functions and methods that need it, never at module level: importing it
 takes over a second, and opening a device searches for one (10 s by default). ``import
-rangekit.drivers.depthai_camera`` is therefore cheap and works without depthai.
+rangekit.drivers.depthai.camera`` is therefore cheap and works without depthai.
 
 Conventions at this boundary (see ARCHITECTURE.md):
 
@@ -28,7 +28,7 @@ import numpy as np
 
 from rangekit.camera import PinholeCamera
 from rangekit.rig.camera_controls import CameraControls, require_locked
-from rangekit.drivers.depthai_controls import AUTO_CONTROLS, CONTROL_NAMES, apply_controls, check_frame_period
+from rangekit.drivers.depthai.controls import AUTO_CONTROLS, CONTROL_NAMES, apply_controls, check_frame_period
 from rangekit.drivers.discovery import open_depthai_device
 from rangekit.errors import ConfigError, DeviceDisconnected, DeviceError, DeviceTimeout, one_line
 from rangekit.rig.rig_file import Rig
@@ -172,7 +172,7 @@ class DepthaiCamera:
     size : (width, height) of captured frames; intrinsics are rescaled to it.
     controls : CameraControls, optional
         Exposure, ISO, white balance (``mono``: (H, W) uint8 grey frames instead of (H, W, 3) RGB), focus
-        and frame rate (the rig file's ``capture.camera``; mapping: :mod:`rangekit.drivers.depthai_controls`),
+        and frame rate (the rig file's ``capture.camera``; mapping: :mod:`rangekit.drivers.depthai.controls`),
         applied before the first frame; None: the camera's own automatic controls at 30 fps.
     coded_light : bool
         Opened for coded light: auto-exposure is refused (ConfigError) unless ``controls.allow_auto_exposure``.

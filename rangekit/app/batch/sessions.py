@@ -5,7 +5,7 @@ against their SHA-256s, then decodes, triangulates and filters the view into its
 (:mod:`rangekit.app.process.view_cache`: ``cloud.json`` is written last and vouches for the rest). Then, per
 session, one task (:func:`finish_session_task`) runs :func:`rangekit.app.scan.scan.process` (registration,
 fusion, evaluation on the simulator, report), which finds every view in the cache; each view pair's
-registration within it is a task of its own (:mod:`rangekit.app.process.batch_pairs`). Its outputs are the bytes of
+registration within it is a task of its own (:mod:`rangekit.app.batch.pairs`). Its outputs are the bytes of
 processing the session in one process. A laser session is one task.
 
 Tasks are idempotent through the cache: a task retried after its worker died, or a rerun of the whole

@@ -1,5 +1,5 @@
 """Each view pair's registration as a Dask task (issue 21): the pair mapper a session task of
-:mod:`rangekit.app.process.batch` hands to :func:`rangekit.app.process.process.process_session`.
+:mod:`rangekit.app.batch.sessions` hands to :func:`rangekit.app.process.process.process_session`.
 
 In every refinement round, :func:`rangekit.registration.multiview.register_views` maps its pair jobs
 (:class:`rangekit.registration.pair_refine.PairJob`) through it: the round's downsampled clouds are
@@ -19,7 +19,7 @@ from typing import Sequence
 
 __all__ = ["PAIR_PRIORITY", "dask_pair_mapper"]
 
-#: Dask priority of the pair tasks: ahead of every view and session task (rangekit.app.process.batch), since a
+#: Dask priority of the pair tasks: ahead of every view and session task (rangekit.app.batch.sessions), since a
 #: session task waits for them.
 PAIR_PRIORITY = 1 << 30
 

@@ -61,9 +61,16 @@ def copy_session(reference: Path, dest: Path, pending=(), checksums: bool = True
 
 
 def snapshot(folder: Path) -> dict:
-    """Every file's bytes (the lock file aside: it holds the last user's pid by design)."""
+    """Every file's bytes, but the lock file (it holds the last user's pid by design) and the job's journal,
+    events.jsonl: a run, refused or not, appends its events to it (:func:`journal`, only ever appended)."""
     return {p.relative_to(folder).as_posix(): p.read_bytes() for p in sorted(folder.rglob("*"))
-            if p.is_file() and p.name != ".lock"}
+            if p.is_file() and p.name not in (".lock", "events.jsonl")}
+
+
+def journal(folder: Path) -> bytes:
+    """The session's events.jsonl as it is (b"" when there is none): a later run's must begin with these bytes."""
+    path = folder / "events.jsonl"
+    return path.read_bytes() if path.is_file() else b""
 
 
 def frames(folder: Path) -> dict:

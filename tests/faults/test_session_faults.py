@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from cli_runs import assert_error
-from sessions import copy_session, no_leftovers, snapshot
+from sessions import copy_session, journal, no_leftovers, snapshot
 from small_rigs import small_rig
 from rangekit.app.acquire.acquire import acquire
 from rangekit.formats.sessions.session import ScanPlan, Session
@@ -49,7 +49,7 @@ def test_a_changed_missing_or_extra_frame_is_named(cli, reference_session, tmp_p
     d = copy_session(reference_session, tmp_path / "s")
     do, mentions = DAMAGE[damage]
     do(d)
-    before = snapshot(d)
+    before, log = snapshot(d), journal(d)
     run = cli("process", d) if command == "process" else cli("scan", "--resume", d, "--no-process")
     assert_error(run, 1, "view_001", *mentions)
     after = snapshot(d)
@@ -57,6 +57,7 @@ def test_a_changed_missing_or_extra_frame_is_named(cli, reference_session, tmp_p
     # other views may have their caches written (complete and valid ones), the damaged view none.
     new = set(after) - set(before)
     assert {k: after[k] for k in before} == before and not (d / "summary.json").exists()
+    assert journal(d).startswith(log)     # the run's events (its failure too) only appended
     assert all(name.split("/")[0] != "view_001" and name.split("/")[1] in ("cloud.ply", "maps.npz", "cloud.json")
                for name in new), new
     for view in {name.split("/")[0] for name in new}:
@@ -145,10 +146,10 @@ def test_a_malformed_session_json_names_the_field(cli, reference_session, tmp_pa
     d = copy_session(reference_session, tmp_path / "s")
     mutate, mentions = MALFORMED[case]
     (d / "session.json").write_text(json.dumps(mutate(json.loads((d / "session.json").read_text()))))
-    before = snapshot(d)
+    before, log = snapshot(d), journal(d)
     run = cli("process", d) if command == "process" else cli("scan", "--resume", d, "--no-process")
     assert_error(run, 1, "session.json", *mentions)
-    assert snapshot(d) == before
+    assert snapshot(d) == before and journal(d).startswith(log)
     no_leftovers(d)
 
 

@@ -17,7 +17,7 @@ from pathlib import Path
 import pytest
 
 from cli_runs import ROOT, assert_error, cli_process
-from sessions import copy_session, frames, no_leftovers, snapshot
+from sessions import copy_session, frames, journal, no_leftovers, snapshot
 from small_rigs import small_rig
 from rangekit.app.acquire.acquire import acquire
 from rangekit.coded.patterns import make_pattern_spec
@@ -35,9 +35,9 @@ from rangekit.sim import SimRig, default_scene
 def test_resume_with_an_option_that_differs_from_the_session_stops(cli, reference_session, tmp_path, option, value,
                                                                    recorded):
     d = copy_session(reference_session, tmp_path / "s", pending=(3,))
-    before = snapshot(d)
+    before, log = snapshot(d), journal(d)
     assert_error(cli("scan", "--resume", d, "--no-process", option, value), 2, option, value, recorded, str(d))
-    assert snapshot(d) == before and not (d / "view_003").exists()
+    assert snapshot(d) == before and not (d / "view_003").exists() and journal(d).startswith(log)
 
 
 def test_resume_with_the_sessions_own_options_goes_on(cli, reference_session, tmp_path):
@@ -156,7 +156,7 @@ def test_every_rename_of_acquisition_is_followed_by_a_folder_fsync(tmp_path, mon
 
 def test_a_full_disk_mid_scan_says_how_to_resume_and_the_resume_completes(cli, reference_session, tmp_path):
     d = copy_session(reference_session, tmp_path / "s", pending=(3,))
-    before = snapshot(d)
+    before, log = snapshot(d), journal(d)
     limit = min(p.stat().st_size for p in (d / "view_000").glob("*.png")) // 2
     assert limit > 1000   # the lock file and the first bytes fit, a frame does not
 
@@ -166,7 +166,7 @@ def test_a_full_disk_mid_scan_says_how_to_resume_and_the_resume_completes(cli, r
 
     run = cli_process("scan", "--resume", d, "--no-process", preexec_fn=small_files)
     assert_error(run, 1, "view 3", "000.png", "File too large", f"rangekit scan --resume {d}")
-    assert snapshot(d) == before   # finished views intact, nothing half-written
+    assert snapshot(d) == before and journal(d).startswith(log)   # finished views intact, nothing half-written
     no_leftovers(d)
     assert cli("scan", "--resume", d, "--no-process").code == 0
     assert frames(d) == frames(reference_session)

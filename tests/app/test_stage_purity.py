@@ -14,7 +14,7 @@ ROOT = Path(__file__).resolve().parents[2]
 
 #: The stage modules: each takes a typed input and returns a typed output.
 STAGES = ("rangekit/app/process/decode.py", "rangekit/app/process/register.py", "rangekit/app/process/fuse.py",
-          "rangekit/app/process/evaluate.py", "rangekit/app/process/fused_outputs.py",
+          "rangekit/app/process/evaluate.py", "rangekit/app/process/fused_outputs.py", "rangekit/app/process/laser.py",
           "rangekit/app/report/page.py")
 #: What a stage may not import (a module or anything under it).
 FORBIDDEN = ("rangekit._runtime", "threading", "concurrent.futures", "multiprocessing")

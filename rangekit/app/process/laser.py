@@ -27,7 +27,6 @@ from typing import Callable
 
 import numpy as np
 
-from rangekit._runtime.executor import thread_pool
 from rangekit.app.laser.reconstruct import reconstruct_laser_capture
 from rangekit.app.process.options import ProcessOptions
 from rangekit.errors import ConfigError, DecodeError
@@ -46,8 +45,6 @@ from rangekit.surface.cloud import PointCloud
 
 __all__ = ["LaserProfiles", "laser_profiles", "oriented_profiles", "profile_spacing", "process_laser", "SATURATED_SHARE"]
 
-#: Steps processed at once (threads: PNG decoding and the peak finder release the GIL).
-WORKERS = 0   # automatic: rangekit._runtime.executor.worker_count
 #: A laser saturated in this share of the rows where its line was seen (saturated rows over saturated
 #: rows plus the points kept on the object) is an error: the scan's power or exposure is wrong, not a shiny patch.
 SATURATED_SHARE = 0.9
@@ -80,8 +77,10 @@ class LaserProfiles:
 
 
 def laser_profiles(session: Session, *, method: str = "gaussian", table_margin: float = 0.002,
-                   progress: Callable | None = None) -> LaserProfiles:
+                   progress: Callable | None = None, map_steps: Callable | None = None) -> LaserProfiles:
     """Triangulate every done step of a laser ``session`` into the world (see the module docstring).
+    ``map_steps(fn, steps)``: ``fn`` of each step, in order (the runner's map over views,
+    :meth:`rangekit.app.runner.Runner.map_views`); None: one after another here.
 
     Raises DecodeError when a laser lights nothing but the turntable top in every step, or is saturated in
     :data:`SATURATED_SHARE` of its rows (naming it, its frames and what to change), FileFormatError for an
@@ -112,20 +111,19 @@ def laser_profiles(session: Session, *, method: str = "gaussian", table_margin: 
 
     points, colours, steps, lasers, counts, rejected = [], [], [], [], [], [{} for _ in rig.lasers]
     on_table = np.zeros(len(rig.lasers), dtype=np.int64)
-    with thread_pool(WORKERS) as pool:
-        for k, (P, C, which, n, rej, table) in enumerate(pool.map(one, range(len(views)))):
-            on_table += table
-            points.append(P)
-            colours.append(C)
-            lasers.append(which)
-            steps.append(np.full(len(P), k, dtype=np.int64))
-            counts.append(n)
-            for total, r in zip(rejected, rej):
-                for reason, m in r.items():
-                    total[reason] = total.get(reason, 0) + int(m)
-            if (k + 1) % 20 == 0 or k + 1 == len(views):
-                call_progress(progress, f"laser profiles: {k + 1}/{len(views)} steps, "
-                                        f"{sum(len(p) for p in points):,} points", k + 1, len(views))
+    for k, (P, C, which, n, rej, table) in enumerate((map_steps or map)(one, range(len(views)))):
+        on_table += table
+        points.append(P)
+        colours.append(C)
+        lasers.append(which)
+        steps.append(np.full(len(P), k, dtype=np.int64))
+        counts.append(n)
+        for total, r in zip(rejected, rej):
+            for reason, m in r.items():
+                total[reason] = total.get(reason, 0) + int(m)
+        if (k + 1) % 20 == 0 or k + 1 == len(views):
+            call_progress(progress, f"laser profiles: {k + 1}/{len(views)} steps, "
+                                    f"{sum(len(p) for p in points):,} points", k + 1, len(views))
     n_points = np.asarray(counts, dtype=np.int64).reshape(len(views), len(rig.lasers))
     if regions is not None and (n_points.sum(axis=0) == 0).any():
         # A laser without a line above the table: is there one on the table (no object)? A few steps tell.
@@ -214,7 +212,8 @@ def process_laser(session: Session, options: ProcessOptions, evaluate, runner,
         raise ConfigError(f"--fusion {fusion}: a laser scan has profiles, not depth maps; it fuses with poisson")
     timer = runner
     with timer.stage(Stage.PROFILES):
-        profiles = laser_profiles(session, method=method, table_margin=table_margin, progress=progress)
+        profiles = laser_profiles(session, method=method, table_margin=table_margin, progress=progress,
+                                  map_steps=runner.map_views)
         save_poses(out / "poses.json", profiles.names, profiles.T_world_view,
                    world=f"frame of {profiles.names[0]} (the rig's world at its turntable angle); each step "
                          "placed by its turntable angle")

@@ -132,3 +132,31 @@ def test_a_reconnecting_socket_replays_from_its_offset_and_another_session_from_
         assert _events(server, f"&session=other&offset={middle}") == whole      # not this session: from 0
     finally:
         server.stop()
+
+
+def test_a_scan_refused_before_it_made_its_folder_says_so_on_the_events_socket(tmp_path):
+    """No folder, so no events file to hold its JobExited: the socket's job message carries it (the page would
+    otherwise show the scan running for ever)."""
+    import trimesh
+
+    sessions = tmp_path / "sessions"
+    sessions.mkdir()
+    mesh = tmp_path / "ball.ply"
+    trimesh.creation.icosphere(subdivisions=2, radius=0.05).export(mesh)
+    server = start_ui(sessions, "--object", str(mesh))
+    try:
+        mesh.unlink()          # the scan child's --object is gone: it refuses before it makes its folder
+        status, body, _ = server.request("/api/scan/start", data={"name": "gone", "views": 2})
+        assert status == 200, body
+        for _ in range(600):        # a hang guard, not a speed figure: the child refuses at once
+            if not json.loads(server.request("/api/scan")[1])["running"]:
+                break
+            time.sleep(0.2)
+        state = json.loads(server.request("/api/scan")[1])
+        head = _events(server)[0]
+    finally:
+        server.stop()
+    assert not state["running"] and state["exit_code"] not in (None, 0), state
+    assert head["session"] == "gone" and head["exited"]["type"] == "JobExited", head
+    assert head["exited"]["exit_code"] == state["exit_code"] and head["exited"]["last_lines"], head
+    assert not (sessions / "gone").exists()

@@ -17,10 +17,11 @@ import os
 import signal
 import subprocess
 import threading
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
-from rangekit.app.event_log import EVENTS_FILE, JobExited, JobLaunched, JobPaused, append_event, read_events
+from rangekit.app.event_log import (EVENTS_FILE, JobExited, JobLaunched, JobPaused, append_event, read_events,
+                                    to_json)
 from rangekit.errors import RangekitError
 from rangekit.ui.jobs.base import Job, JobState
 from rangekit.ui.jobs.child import spawned
@@ -37,12 +38,14 @@ KEPT_LOG = 200
 @dataclass(frozen=True)
 class Followed:
     """The events file of the job launched last: ``launch`` counts the launches, ``start`` the file's size
-    when this one started (its own events come after)."""
+    when this one started (its own events come after); ``exited``: its :class:`JobExited` as a JSON object when
+    it ended with no folder to hold its events (a new scan refused before it made its folder)."""
 
     launch: int
     name: str | None
     path: Path | None
     start: int
+    exited: dict | None = None
 
 
 class ScanJob(Job):
@@ -156,8 +159,13 @@ class ScanJob(Job):
             if line:
                 self.log = (self.log + [line])[-KEPT_LOG:]
         code = proc.wait()
+        exited = JobExited(code, () if code in (0, 130) else tuple(self.log[-8:]))
         if folder.is_dir():
-            append_event(folder, JobExited(code, () if code in (0, 130) else tuple(self.log[-8:])))
+            append_event(folder, exited)
+        else:                      # no file to say it in: the events socket says it with the job
+            with self._cond:
+                if proc is self._proc:
+                    self.followed = replace(self.followed, exited=to_json(exited))
         if devices:
             self.holder.reacquire()
         with self._cond:

@@ -6,7 +6,8 @@ Messages, each one JSON text:
 - ``{"session": NAME, "launch": K, "start": S, "offset": N}``: from now on the socket follows NAME's file from byte
   N (the job launched last, the app's K-th; ``start`` where its own events begin,
   :class:`rangekit.ui.jobs.scan.Followed`). Sent first, and
-  again whenever the app launches another job. ``NAME`` null: no job since the app started.
+  again whenever the app launches another job. ``NAME`` null: no job since the app started. With ``"exited":
+  {...}`` (a JobExited) when the job ended with no folder to hold its events (refused before it made it).
 - ``{"event": {...}, "offset": END}``: one line of the file (:func:`rangekit.app.event_log.to_json`'s object), END
   the byte offset after it.
 
@@ -69,7 +70,7 @@ def routes(ui: Ui) -> list:
                         offset = 0
                     followed, session = job, job.name
                     await ws.send_json({"session": job.name, "launch": job.launch, "start": job.start,
-                                        "offset": offset})
+                                        "offset": offset, **({"exited": job.exited} if job.exited else {})})
                 lines = await run_in_threadpool(new_lines, job.path, offset)
                 for obj, end in lines:
                     await ws.send_json({"event": obj, "offset": end})

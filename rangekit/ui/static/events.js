@@ -28,6 +28,8 @@ const rangekitEvents = (() => {
         const fresh = msg.session !== client.session;
         Object.assign(client, { session: msg.session, start: msg.start, offset: msg.offset });
         tell({ kind: "job", session: msg.session, start: msg.start, launch: msg.launch, fresh });
+        // ended with no folder for its events (refused before it made it): its exit comes with the job
+        if (msg.exited) tell({ kind: "event", event: msg.exited, offset: msg.offset, current: true });
         return;
       }
       client.offset = msg.offset; client.received += 1;

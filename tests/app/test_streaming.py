@@ -17,7 +17,8 @@ import pytest
 from rangekit.app import events as ev
 from rangekit.app.acquire.acquire import acquire
 from rangekit.app.process.options import ProcessOptions
-from rangekit.app.scan.streaming import PREVIEW_FILE, StreamingProcessor
+from rangekit.app.scan.streaming import StreamingProcessor
+from rangekit.formats.sessions.files import PREVIEW_FILE
 from rangekit.coded.patterns import make_pattern_spec
 from rangekit.formats.sessions.session import CaptureSettings, ScanPlan, Session, SimulatorSettings
 from rangekit.sim import ImagingModel

@@ -24,7 +24,7 @@ from rangekit.app.process.options import ProcessOptions
 from rangekit.app.process.process import process_session
 from rangekit.cli import main
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 OUTPUTS = ("mesh.ply", "mesh_watertight.ply", "poses.json", "merged.ply")
 
 

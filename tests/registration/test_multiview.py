@@ -104,7 +104,7 @@ def _bunny():
     from rangekit.formats.clouds import load_cloud
     from rangekit.formats.stanford_conf import load_stanford_conf
 
-    from shared_data import require_shared
+    from support.shared_data import require_shared
 
     bunny = require_shared("stanford-bunny", "bun.conf").parent
     names, poses = load_stanford_conf(bunny / "bun.conf")

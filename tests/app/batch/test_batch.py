@@ -18,7 +18,7 @@ from pathlib import Path
 
 import pytest
 
-from sessions import N_VIEWS
+from support.sessions import N_VIEWS
 from rangekit.app.batch.sessions import WORKER_ENV, SchedulerUnreachable, process_sessions
 from rangekit.app.process.options import ProcessOptions
 from rangekit.app.process.process import process_session

@@ -51,7 +51,7 @@ peers:
 	-bash benchmarks/coded/setup_opencv_contrib.sh
 
 browser:
-	@# Headless Chromium + chromedriver (Debian packages) for the report test in tests/app/test_scan.py and
+	@# Headless Chromium + chromedriver (Debian packages) for the report test in tests/app/scan/test_scan.py and
 	@# tests/test_chromium_harness.py; without them (not root, no apt) those tests skip.
 	@if [ ! -x /usr/bin/chromium ] || [ ! -x /usr/bin/chromedriver ]; then \
 	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null; then \

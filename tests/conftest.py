@@ -1,7 +1,7 @@
 """The suite's shared fixtures: ``rig`` (the default simulated rig), ``small_rig`` (it with a 320x256 camera),
 ``cli(*args)`` (``rangekit ARGS`` in this process: a :class:`cli_runs.Run` with the exit code, stdout and
 stderr; argparse's own exits caught), ``reference_session`` (a small finished simulated session, made once per
-run: tests/sessions.py) and ``tmp_session`` (a fresh copy of it for one test to change); ``decoded_graycode`` (the
+run: tests/support/sessions.py) and ``tmp_session`` (a fresh copy of it for one test to change); ``decoded_graycode`` (the
 small projector rig's Gray-code capture of the default scene, decoded); scenes and imaging."""
 
 import ctypes
@@ -25,14 +25,14 @@ def rig():
 
 @pytest.fixture(scope="session")
 def small_rig():
-    from small_rigs import small_rig as make
+    from support.small_rigs import small_rig as make
 
     return make()
 
 
 @pytest.fixture
 def cli(capsys):
-    from cli_runs import Run
+    from support.cli_runs import Run
     from rangekit.cli import main
 
     def run(*args) -> Run:
@@ -49,9 +49,9 @@ def cli(capsys):
 
 @pytest.fixture(scope="session")
 def reference_session(tmp_path_factory):
-    """A finished simulated session as ``rangekit scan`` makes it (tests/sessions.py: 4 views of the lumpy object,
+    """A finished simulated session as ``rangekit scan`` makes it (tests/support/sessions.py: 4 views of the lumpy object,
     seed 1, Gray code, the small rig). Read it; copy it (``tmp_session``) to change it."""
-    from sessions import make_reference
+    from support.sessions import make_reference
 
     return make_reference(tmp_path_factory.mktemp("reference") / "s")
 
@@ -84,12 +84,12 @@ def noiseless():
 
 @pytest.fixture(scope="session")
 def decoded_graycode():
-    """``(rig, DecodeResult)``: the small projector rig (tests/small_rigs.py) and its Gray-code capture (columns and
+    """``(rig, DecodeResult)``: the small projector rig (tests/support/small_rigs.py) and its Gray-code capture (columns and
     rows) of the default scene, seed 1, decoded."""
     from rangekit.coded.decode import decode
     from rangekit.coded.patterns import make_pattern_spec
     from rangekit.sim import SimRig, default_scene
-    from small_rigs import small_projector_rig
+    from support.small_rigs import small_projector_rig
 
     rig = small_projector_rig()
     spec = make_pattern_spec("graycode", (rig.projector.width, rig.projector.height))

@@ -1,5 +1,5 @@
 """A bare clone passes ``make test`` (issue 48): every test that needs the shared real data (../shared/data) finds
-it through ``tests/shared_data.py`` or :func:`rangekit.sim.scene.zoo.data_folders`, so ``RANGEKIT_DATA`` hides it
+it through ``tests/support/shared_data.py`` or :func:`rangekit.sim.scene.zoo.data_folders`, so ``RANGEKIT_DATA`` hides it
 and the test skips naming the folder; the suite collects with the data hidden. ``make test-bare`` (run by
 ``.ci/run``) runs the whole fast suite that way."""
 

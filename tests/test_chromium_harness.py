@@ -1,15 +1,13 @@
-"""The headless-Chromium harness (tests/chromium.py) reports broken images and takes screenshots."""
+"""The headless-Chromium harness (tests/support/chromium.py) reports broken images and takes screenshots."""
 
 import base64
-import sys
 from pathlib import Path
 
 import cv2
 import numpy as np
 import pytest
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from chromium import chromium_paths, open_page  # noqa: E402
+from support.chromium import chromium_paths, open_page
 
 pytestmark = pytest.mark.skipif(
     chromium_paths() is None,

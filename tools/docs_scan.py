@@ -102,7 +102,7 @@ def report_png() -> str:
     """Screenshot the shared scan's report into docs/img/report.png; the markdown that shows it."""
     ensure_scan()
     out = REPO / "docs" / "img" / "report.png"
-    done = subprocess.run([sys.executable, str(REPO / "tests" / "chromium.py"), str(SCAN / "report.html"),
+    done = subprocess.run([sys.executable, str(REPO / "tests" / "support" / "chromium.py"), str(SCAN / "report.html"),
                            "--screenshot", str(out), "--viewport-only"], cwd=REPO, stdout=subprocess.DEVNULL,
                           stderr=subprocess.PIPE, text=True, stdin=subprocess.DEVNULL)
     if done.returncode:

@@ -5,7 +5,7 @@ on the reduced system with the analytic Jacobian (issue 38 item 5), side by side
 
 The problem: the simulator's true camera and projector, POSES hand-held board poses (54 corners each, seen by
 both devices with 0.03 px of noise), started from focal lengths 1% off, no distortion and poses 0.5 deg / 2 mm
-off (tests/bundle_problems.py). Prints JSON: per solver the median seconds, the evaluations, the weighted cost.
+off (tests/support/bundle_problems.py). Prints JSON: per solver the median seconds, the evaluations, the weighted cost.
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "tests"))
 
-from bundle_problems import bundle_problem  # noqa: E402
+from support.bundle_problems import bundle_problem  # noqa: E402
 
 from rangekit.calib.projector import bundle_adjust  # noqa: E402
 

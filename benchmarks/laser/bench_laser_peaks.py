@@ -1,7 +1,7 @@
 """Laser-line peak detection on one 1280x960 8-bit frame: time per frame and RMS error against the known
 centres, for a plain per-row argmax, centre of mass, the Gaussian fit and the ridge detector.
 
-Frames from tests/laser_lines.py: a pixel-integrated Gaussian profile at a known subpixel column per row
+Frames from tests/support/laser_lines.py: a pixel-integrated Gaussian profile at a known subpixel column per row
 (a smooth curve with every subpixel phase), 200 DN high, 1/e^2 widths 3, 5, 8 px, Gaussian noise of
 1 and 2 DN in both the laser-on and the laser-off frame, rounded to 8 bits. The ridge detector's error
 is the distance to the curve along its normal; the row methods' the column error per row. A second
@@ -26,7 +26,7 @@ ROOT = Path(__file__).resolve().parents[2]  # the repo (this is benchmarks/ROOM/
 sys.path[:0] = [str(ROOT / "benchmarks" / "harness"), str(ROOT / "tools")]  # _timing, tree_peak; docs_scan
 sys.path.insert(0, str(ROOT / "tests"))
 from _timing import timed  # noqa: E402
-from laser_lines import curve_line, row_line, slanted  # noqa: E402
+from support.laser_lines import curve_line, row_line, slanted  # noqa: E402
 
 H, W = 960, 1280
 V = np.arange(H)

@@ -16,7 +16,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "tests"))
 
-from bearing_networks import compare_with_translation_sync  # noqa: E402
+from support.bearing_networks import compare_with_translation_sync  # noqa: E402
 
 
 def main() -> None:

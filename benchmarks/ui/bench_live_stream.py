@@ -22,7 +22,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "tests"))
 
 from websockets.sync.client import connect  # noqa: E402
 
-from ui_server import start_ui  # noqa: E402
+from support.ui_server import start_ui  # noqa: E402
 
 from rangekit.ui.server import STATIC  # noqa: E402
 

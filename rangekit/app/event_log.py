@@ -29,12 +29,12 @@ import numpy as np
 
 from rangekit.app import events as ev
 from rangekit.errors import FileFormatError
+from rangekit.formats.sessions.files import EVENTS_FILE
 
-__all__ = ["EVENTS_FILE", "EventLog", "JobExited", "JobLaunched", "JobPaused", "LoggedCloud", "LoggedError",
+__all__ = ["EventLog", "JobExited", "JobLaunched", "JobPaused", "LoggedCloud", "LoggedError",
            "LoggedMesh", "append_event", "from_json", "logged", "read_events", "to_json"]
 
 #: The file's name in a session folder (listed in :data:`rangekit.formats.output_sets.OUTPUT_SETS`).
-EVENTS_FILE = "events.jsonl"
 #: The longest line read back (bytes): a longer one is refused as not a log of this kind.
 MAX_LINE_BYTES = 1 << 20
 

@@ -14,6 +14,7 @@ from pathlib import Path
 
 from rangekit.budget import MAX_IMAGE_SIDE_PX as MAX_SIZE_PX
 from rangekit.errors import FileFormatError, UsageError
+from rangekit.formats.sessions.files import SESSION_FILE
 
 #: Free space an output folder needs before a command starts, bytes.
 MIN_FREE_BYTES = 64 * 2**20
@@ -191,7 +192,7 @@ def check_output(path: str | os.PathLike, *, option: str = "--out", folder: bool
     out = Path(path)
     if folder and out.exists() and not out.is_dir():
         if session:
-            raise FileFormatError(f"{out}: expected a session folder (with session.json), found a file")
+            raise FileFormatError(f"{out}: expected a session folder (with {SESSION_FILE}), found a file")
         raise UsageError(f"{option} {out}: expected a folder, found an existing file")
     if not folder and out.is_dir():
         raise UsageError(f"{option} {out}: expected a file name, found an existing folder")

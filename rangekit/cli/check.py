@@ -9,6 +9,7 @@ import time
 from rangekit.cli._common import check_output, console, float_in, result as final, say, seed
 from rangekit.errors import UsageError
 from rangekit.formats.output_sets import claim_folder
+from rangekit.formats.sessions.files import RIG_FILE
 
 
 def cmd_check(args: argparse.Namespace) -> int:
@@ -22,7 +23,7 @@ def cmd_check(args: argparse.Namespace) -> int:
         check_output(args.out, option="--out", folder=True)
         simulated = args.rig in (None, "sim")
         replace = claim_folder(args.out, "check", force=args.force, inputs=[None if simulated else args.rig],
-                               names=("check.json", "check.png") + (("rig.json",) if simulated else ()))
+                               names=("check.json", "check.png") + ((RIG_FILE,) if simulated else ()))
     hardware = args.rig not in (None, "sim")
     if hardware:
         given = [opt for opt, v in (("--object", args.object), ("--seed", args.seed),
@@ -43,7 +44,7 @@ def cmd_check(args: argparse.Namespace) -> int:
         result, images = check_simulated(sim, progress=console())
         out_rig = simulated_check_rig(sim, result.pattern_delay_s)
         full_scale = float(sim.imaging.max_value)
-        rig_note = (f"wrote {args.out}/rig.json with capture.pattern_delay_s {result.pattern_delay_s:g}"
+        rig_note = (f"wrote {args.out}/{RIG_FILE} with capture.pattern_delay_s {result.pattern_delay_s:g}"
                     if args.out else "give --out DIR to write the rig file with the measured delay")
     s = result.stats
     say("")
@@ -80,7 +81,7 @@ def add_parsers(sub) -> None:
                                    "coded-light view. On the simulator by default, on hardware with --rig.")
     p.add_argument("--rig", help="'sim' (default) or a rig file whose 'devices' name the projector and camera; its "
                                  "capture.pattern_delay_s is rewritten with the measured delay")
-    p.add_argument("--out", help="folder for check.png, check.json (and, on the simulator, rig.json)")
+    p.add_argument("--out", help=f"folder for check.png, check.json (and, on the simulator, {RIG_FILE})")
     p.add_argument("--force", action="store_true", help="write over files in --out this run did not make: another command's set (a session, a capture, results), files of yours, an input")
     p.add_argument("--object", help="simulated object (default lumpy; 'shiny' saturates)")
     p.add_argument("--seed", type=seed, help="simulator noise seed (default 0)")

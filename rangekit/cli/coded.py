@@ -6,6 +6,7 @@ import argparse
 import time
 
 from rangekit.cli._common import check_beside, check_output, note, result, say, size
+from rangekit.formats.sessions.files import MAPS_FILE, PATTERNS_FILE, RIG_FILE
 
 
 def cmd_decode(args: argparse.Namespace) -> int:
@@ -102,7 +103,7 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
     args.capture = args.capture[0]
     rigs_given = args.rig
     one_rig = args.rig[0] if args.rig else None
-    if args.rig and len(args.rig) > 1 and not (Path(args.capture) / "patterns.json").is_file():
+    if args.rig and len(args.rig) > 1 and not (Path(args.capture) / PATTERNS_FILE).is_file():
         raise UsageError(f"--rig: several rigs ({' '.join(args.rig)}) are ranked only for coded-light captures; "
                          f"{args.capture} is not one")
     args.rig = one_rig
@@ -123,14 +124,14 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
         return 0
     cap = load_capture(args.capture)
     if cap.spec is None:
-        raise ConfigError(f"{args.capture}: no patterns.json; decode the images with 'rangekit decode' and a "
+        raise ConfigError(f"{args.capture}: no {PATTERNS_FILE}; decode the images with 'rangekit decode' and a "
                           "--pattern, or add the pattern spec to the folder")
     if rigs_given:
         rigs = load_rigs(rigs_given, report=note)
     elif cap.rig is not None and cap.rig.projector is not None:
-        rigs = [(str(Path(args.capture) / "rig.json"), cap.rig)]
+        rigs = [(str(Path(args.capture) / RIG_FILE), cap.rig)]
     else:
-        raise ConfigError(f"{args.capture}: no rig.json with a projector; pass --rig RIG.json")
+        raise ConfigError(f"{args.capture}: no {RIG_FILE} with a projector; pass --rig RIG.json")
     note(f"decoding {len(cap.images)} images ({cap.spec.method})")
     checked = reconstruct_checked(cap, rigs, subpixel=not args.integer, method=args.method, refine=not args.no_refine,
                                   free_intrinsics=args.refine_lens, max_motion=args.max_motion)
@@ -216,7 +217,7 @@ def _reconstruct_laser_stereo(args: argparse.Namespace, t0: float) -> int:
     note(f"two-camera laser capture: {cap.n_lasers} laser(s); line peaks ({args.peaks}) in both cameras, matched on "
          "epipolar lines and triangulated by the pair (no laser plane)"
          + ("" if args.pair_only else "; the left peaks the right camera misses met with each frame's fitted sheet"))
-    with naming(args.rig or Path(args.capture) / "rig.json"):   # a pair that cannot be rectified
+    with naming(args.rig or Path(args.capture) / RIG_FILE):   # a pair that cannot be rectified
         rect = rectify(*cap.rig.cameras[:2])
     rec = reconstruct_laser_stereo_capture(cap, method=args.peaks, rect=rect, fill=not args.pair_only)
     if rec.pairing_line():
@@ -246,12 +247,12 @@ def add_parsers(sub) -> None:
     from rangekit.coded.patterns import PATTERN_METHODS
     from rangekit.formats.layouts import LAYOUTS as CAPTURE_LAYOUTS
 
-    dec = sub.add_parser("decode", help="decode coded-light images into projector coordinates (maps.npz)",
+    dec = sub.add_parser("decode", help=f"decode coded-light images into projector coordinates ({MAPS_FILE})",
                          description="Decode a capture into per-pixel projector column/row maps with confidence.")
     dec.add_argument("images", nargs="+", metavar="IMAGES",
                      help="a folder (images taken in natural numeric order) or a list of image files")
     dec.add_argument("--pattern", required=True,
-                     help=f"pattern method ({', '.join(PATTERN_METHODS)}), a patterns.json spec file, or another "
+                     help=f"pattern method ({', '.join(PATTERN_METHODS)}), a {PATTERNS_FILE} spec file, or another "
                           f"tool's capture layout ({', '.join(sorted(CAPTURE_LAYOUTS))}; docs/real-captures.md)")
     dec.add_argument("--projector", type=size, help="projector resolution WxH, e.g. 1280x800")
     dec.add_argument("--order", default="rangekit", choices=("rangekit", "opencv"),
@@ -272,11 +273,11 @@ def add_parsers(sub) -> None:
                                      "a laser capture (off.png, laser0.png, ...) is triangulated against the "
                                      "rig file's laser planes, a two-camera one (left/, right/) by the camera pair.")
     rec.add_argument("capture", metavar="CAPTURE_DIR", nargs="+",
-                     help="capture folder (images + patterns.json); with --pattern, another tool's folder (its own "
+                     help=f"capture folder (images + {PATTERNS_FILE}); with --pattern, another tool's folder (its own "
                           "names, or any names in numeric order), two folders (camera 1, camera 2), image files or "
                           "a quoted glob ('caps/*.png'; one per camera), or OpenCV's image list")
     rec.add_argument("--rig", nargs="+", metavar="RIG",
-                     help="rig file (default: the folder's rig.json); several: each checked against the capture, the "
+                     help=f"rig file (default: the folder's {RIG_FILE}); several: each checked against the capture, the "
                           "one that fits best used and the ranking printed (another tool's calibration file is "
                           "imported on the way, as 'rangekit rig import' would)")
     rec.add_argument("--no-refine", action="store_true",

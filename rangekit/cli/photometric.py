@@ -7,6 +7,7 @@ import time
 
 from rangekit.cli._common import check_output, result, say
 from rangekit.formats.output_sets import claim_folder
+from rangekit.formats.sessions.files import MESH_FILE
 
 
 def cmd_photometric(args: argparse.Namespace) -> int:
@@ -18,7 +19,7 @@ def cmd_photometric(args: argparse.Namespace) -> int:
     replace = claim_folder(args.out, "photometric", force=args.force, inputs=[args.folder])
     out = photometric_folder(args.folder, args.out, method=args.method, progress=say)
     replace()
-    result(f"wrote {out}/normals.npy, normals.png, albedo.png, depth.npy, mesh.ply (pixel units, orthographic) in "
+    result(f"wrote {out}/normals.npy, normals.png, albedo.png, depth.npy, {MESH_FILE} (pixel units, orthographic) in "
         f"{time.perf_counter() - t0:.1f} s")
     return 0
 

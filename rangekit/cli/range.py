@@ -9,9 +9,10 @@ import time
 from rangekit.cli._common import check_output, fraction, int_in, non_negative_float, positive_float, result, say, size
 from rangekit.errors import UsageError
 from rangekit.formats.output_sets import claim_folder
+from rangekit.formats.sessions.files import CLOUD_FILE, RIG_FILE
 
 #: What ``tof`` and ``stereo`` write into --out (``stereo --device`` also the pair, its rig, the device's depth).
-_DEPTH_FILES = ("depth.npy", "depth.png", "range.npy", "confidence.npy", "confidence.png", "cloud.ply")
+_DEPTH_FILES = ("depth.npy", "depth.png", "range.npy", "confidence.npy", "confidence.png", CLOUD_FILE)
 
 
 def cmd_tof(args: argparse.Namespace) -> int:
@@ -63,7 +64,7 @@ def _stereo_device(args: argparse.Namespace) -> int:
 
     check_output(args.out, folder=True)
     replace = claim_folder(args.out, "depth", force=args.force,
-                           names=_DEPTH_FILES + ("left.png", "right.png", "rig.json", "device_depth.*"))
+                           names=_DEPTH_FILES + ("left.png", "right.png", RIG_FILE, "device_depth.*"))
     run = stereo_depth_device(args.out, device_id=args.device_id, size=args.size or (640, 400),
                               dots=0.8 if args.dots is None else args.dots,
                               flood=0.0 if args.flood is None else args.flood, on_device=args.on_device,
@@ -83,9 +84,9 @@ def add_parsers(sub) -> None:
                           description="Decode a ToF capture folder (rangekit sim render --sensor tof|tof-pulsed, "
                                       "layout in docs/tof.md): N-bucket phase, amplitude and offset per frequency, "
                                       "multi-frequency unwrapping, flying-pixel filter, radial range to depth.")
-    tofp.add_argument("raw_dir", metavar="RAW_DIR", help="ToF capture folder (tof.json, rig.json, samples/)")
+    tofp.add_argument("raw_dir", metavar="RAW_DIR", help=f"ToF capture folder (tof.json, {RIG_FILE}, samples/)")
     tofp.add_argument("--out", required=True, help="output folder: depth.npy (z, metres, NaN invalid), range.npy, "
-                                                    "confidence.npy/png, depth.png, cloud.ply")
+                                                    f"confidence.npy/png, depth.png, {CLOUD_FILE}")
     tofp.add_argument("--force", action="store_true", help=FORCE_HELP)
     tofp.add_argument("--max-range", type=positive_float, help="metres; default the plan's unambiguous range")
     tofp.add_argument("--min-snr", type=non_negative_float, default=3.0,
@@ -107,7 +108,7 @@ def add_parsers(sub) -> None:
     stp.add_argument("--rig", help="rig file with two cameras (left first); not with --device")
     stp.add_argument("--device", action="store_true",
                      help="capture a synchronised pair from an attached OAK-D (CAM_B left, CAM_C right, dot projector "
-                          "on, flood off) with its own calibration; writes left.png, right.png and rig.json too")
+                          f"on, flood off) with its own calibration; writes left.png, right.png and {RIG_FILE} too")
     stp.add_argument("--device-id", help="with --device: device id (MXID), name or IP (default the first found)")
     stp.add_argument("--dots", type=fraction, help="with --device: IR dot projector power 0..1 (default 0.8)")
     stp.add_argument("--flood", type=fraction, help="with --device: IR flood light power 0..1 (default 0: off)")
@@ -116,7 +117,7 @@ def add_parsers(sub) -> None:
                      help="with --device: also run the camera's own StereoDepth; saves device_depth.npy/png next to "
                           "ours and prints the difference")
     stp.add_argument("--out", required=True, help="output folder: depth.npy (left z, metres, NaN invalid), depth.png, "
-                                                   "confidence.npy/png, cloud.ply")
+                                                   f"confidence.npy/png, {CLOUD_FILE}")
     stp.add_argument("--force", action="store_true", help=FORCE_HELP)
     stp.add_argument("--method", default="census-sgm", choices=("census-sgm", "sgbm"),
                      help="our census + semi-global matcher (default) or OpenCV's StereoSGBM")

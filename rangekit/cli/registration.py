@@ -9,6 +9,7 @@ import numpy as np
 
 from rangekit.formats.output_sets import claim_folder
 from rangekit.cli._common import check_output, int_in, note, positive_float, result, say
+from rangekit.formats.sessions.files import MERGED_FILE, MESH_FILE, POSES_FILE
 
 
 def cmd_register(args: argparse.Namespace) -> int:
@@ -20,7 +21,7 @@ def cmd_register(args: argparse.Namespace) -> int:
     check_output(args.out, folder=True)
     replace = claim_folder(args.out, "registration", force=args.force,
                            inputs=list(args.scans) + [args.init],
-                           names=("poses.json", "merged.ply") + (() if args.no_mesh else ("mesh.ply",)))
+                           names=(POSES_FILE, MERGED_FILE) + (() if args.no_mesh else (MESH_FILE,)))
     voxel = args.voxel_mm * 1e-3 if args.voxel_mm else None
     rep = register(args.scans, args.out, init=args.init, voxel=voxel, mesh=not args.no_mesh, progress=say,
                          neighbours=args.neighbours)
@@ -33,7 +34,7 @@ def cmd_register(args: argparse.Namespace) -> int:
     held = [e for e in res.edges if e.accepted and e.unconstrained]
     if held:
         say(f"warning: {len(held)} accepted edges are ambiguous (their overlap leaves a motion free); the prior "
-            f"--init {args.init} was kept along it and is not checked by the data (see 'prior_kept' in poses.json)")
+            f"--init {args.init} was kept along it and is not checked by the data (see 'prior_kept' in {POSES_FILE})")
     rot = np.degrees(np.asarray(res.sync.edge_rotation_error))
     tr = np.asarray(res.sync.edge_translation_error) * 1e3
     say(f"synchronisation over {n_accepted} accepted edges: rotation residual mean {np.mean(rot):.4f} deg, "
@@ -42,7 +43,7 @@ def cmd_register(args: argparse.Namespace) -> int:
         say(f"  view {k}: {rep.sources[k]}: rotation {np.degrees(rotation_angle(T[:3, :3])):8.3f} deg, "
             f"translation {np.linalg.norm(T[:3, 3]) * 1e3:8.2f} mm")
     removed = replace()
-    result(f"wrote {args.out}/poses.json, merged.ply{', mesh.ply' if rep.mesh_path else ''} in "
+    result(f"wrote {args.out}/{POSES_FILE}, {MERGED_FILE}{', ' + MESH_FILE if rep.mesh_path else ''} in "
         f"{time.perf_counter() - t0:.1f} s" + (f"; removed the earlier {', '.join(removed)}" if removed else ""))
     return 0
 
@@ -76,10 +77,10 @@ def cmd_mesh(args: argparse.Namespace) -> int:
 def add_parsers(sub) -> None:
     reg = sub.add_parser("register", help="register scans into one frame, merge and mesh them",
                          description="Register point clouds (PLY incl. Stanford range grids, PCD, XYZ, NPY) into "
-                                     "the first scan's frame; writes DIR/poses.json, DIR/merged.ply, DIR/mesh.ply.")
+                                     f"the first scan's frame; writes DIR/{POSES_FILE}, DIR/{MERGED_FILE}, DIR/{MESH_FILE}.")
     reg.add_argument("scans", nargs="+", metavar="SCAN", help="scan files")
     reg.add_argument("--init", default="none",
-                     help="prior poses: none (coarse alignment, see --neighbours), a poses.json, a Stanford .conf, or "
+                     help=f"prior poses: none (coarse alignment, see --neighbours), a {POSES_FILE}, a Stanford .conf, or "
                           "turntable:AX,AY,AZ:STEP_DEG[:PX,PY,PZ] (view i turned i*STEP degrees about the axis)")
     reg.add_argument("--voxel-mm", type=positive_float, default=None,
                      help="voxel for features and the first ICP round, mm (default: scene diagonal / 80)")

@@ -12,6 +12,7 @@ from rangekit.cli._common import (check_beside, check_output, console, float_in,
                                   size)
 from rangekit.drivers.discovery import MAX_SEARCH_S
 from rangekit.errors import UsageError
+from rangekit.formats.sessions.files import RIG_FILE
 
 
 def cmd_rig_init(args: argparse.Namespace) -> int:
@@ -24,7 +25,7 @@ def cmd_rig_init(args: argparse.Namespace) -> int:
         from rangekit.rig.rig_file import template_rig
 
         data = template_rig()
-    _print_rig(data, "rangekit rig init > rig.json")
+    _print_rig(data, f"rangekit rig init > {RIG_FILE}")
     return 0
 
 
@@ -58,7 +59,7 @@ def cmd_rig_import(args: argparse.Namespace) -> int:
         args.file = [path]
     data = import_rig(args.file[0], **options, report=note)
     if args.out is None:
-        _print_rig(data, f"rangekit rig import {args.file[0]} > rig.json")
+        _print_rig(data, f"rangekit rig import {args.file[0]} > {RIG_FILE}")
         return 0
     atomic_write_text(args.out, rig_json_text(data))
     kinds = [f"{len(data['cameras'])} camera(s)"] + (["a projector"] if data["projector"] else []) + (
@@ -248,7 +249,7 @@ def add_parsers(sub) -> None:
                          description="Rig files (docs/rig.md documents every field).")
     rig_sub = rig.add_subparsers(dest="rig_command", metavar="SUBCOMMAND")
     rig_sub.required = True
-    init = rig_sub.add_parser("init", help="print a template rig file for real hardware (rangekit rig init > rig.json)",
+    init = rig_sub.add_parser("init", help=f"print a template rig file for real hardware (rangekit rig init > {RIG_FILE})",
                               description="Print a rig file to standard output: a template to edit for real "
                                           "hardware, or with --sim the simulator's default rig (its true "
                                           "parameters).")

@@ -10,6 +10,8 @@ from pathlib import Path
 from rangekit.cli._common import (LazyChoices, LazyHelp, check_output, console, finite_float, int_in, lazy_help, note,
                                   option_range, result, say, scheduler_address)
 from rangekit.errors import UsageError
+from rangekit.formats.sessions.files import (MERGED_FILE, MESH_FILE, POSES_FILE, REPORT_FILE, SUMMARY_FILE,
+                                             WATERTIGHT_FILE)
 
 
 def cmd_scan(args: argparse.Namespace) -> int:
@@ -168,9 +170,9 @@ def _print_processed(folder: Path, res, options, seconds: float, *, acquisition_
         say(line)
     fmt = options.mesh_format
     exported = [] if fmt == "ply" else [f"mesh.{fmt}", f"mesh_watertight.{fmt}"]
-    result(f"wrote {folder}/mesh.ply (observed surface), mesh_watertight.ply (closed), "
-           + "".join(f"{name}, " for name in exported) + "merged.ply, poses.json, summary.json"
-           + (", report.html" if options.report else "") + f" in {format_seconds(seconds)}")
+    result(f"wrote {folder}/{MESH_FILE} (observed surface), {WATERTIGHT_FILE} (closed), "
+           + "".join(f"{name}, " for name in exported) + f"{MERGED_FILE}, {POSES_FILE}, {SUMMARY_FILE}"
+           + (f", {REPORT_FILE}" if options.report else "") + f" in {format_seconds(seconds)}")
 
 
 def cmd_process(args: argparse.Namespace) -> int:
@@ -257,11 +259,11 @@ def _processing_options(p: argparse.ArgumentParser) -> None:
                                                                             "FUSION_METHODS"),
                              metavar="{poisson,tsdf}", help="fusion into one mesh: poisson (screened Poisson of the "
                                                             "merged cloud) or tsdf; default {fusion}"), values)
-    p.add_argument("--no-report", action="store_true", default=given, help="skip report.html")
+    p.add_argument("--no-report", action="store_true", default=given, help=f"skip {REPORT_FILE}")
     lazy_help(p.add_argument("--format", default=given,
                              choices=LazyChoices("rangekit.app.process.fused_outputs", "MESH_EXPORT_FORMATS"),
                              metavar="{ply,obj,stl,glb}",
-                             help="mesh files: ply (mesh.ply and mesh_watertight.ply, with vertex normals and the "
+                             help=f"mesh files: ply ({MESH_FILE} and {WATERTIGHT_FILE}, with vertex normals and the "
                                   "'observed' flag) or obj, stl, glb written beside them as mesh.FMT and "
                                   "mesh_watertight.FMT; default {format}"), values)
     lazy_help(p.add_argument("--poisson-depth", type=option_range(options, "poisson_depth"), default=given,
@@ -292,7 +294,7 @@ def add_parsers(sub) -> None:
                           formatter_class=LazyHelp,
                           description="Acquire a crash-safe scan session (every turntable view, every pattern; "
                                       "--resume continues an interrupted one without redoing finished views), then "
-                                      "decode, register and fuse it into DIR/mesh.ply.")
+                                      f"decode, register and fuse it into DIR/{MESH_FILE}.")
     where = scan.add_mutually_exclusive_group(required=True)  # --artefact takes --out
     where.add_argument("--out", help="new session folder")
     where.add_argument("--resume", metavar="DIR", help="continue the session in DIR")
@@ -351,7 +353,7 @@ def add_parsers(sub) -> None:
     proc = sub.add_parser("process", help="decode, register and fuse an acquired session into a mesh",
                           formatter_class=LazyHelp,
                           description="Process a session folder (from 'rangekit scan'): every view decoded and "
-                                      "triangulated, registered from the turntable angles, fused into mesh.ply. "
+                                      f"triangulated, registered from the turntable angles, fused into {MESH_FILE}. "
                                       "Several folders are processed on Dask: every view's decoding and then "
                                       "each session's registration and fusion are tasks of a local cluster or "
                                       "of a running 'dask scheduler' (--scheduler).")

@@ -13,6 +13,7 @@ from rangekit.cli._common import (LazyChoices, check_output, console, finite_flo
                                   result, seed, size)
 from rangekit.errors import UsageError
 from rangekit.tof.plan import FREQUENCY_RANGE_HZ
+from rangekit.formats.sessions.files import PATTERNS_FILE, RIG_FILE
 
 #: The ToF panel scene's defaults: nearest and farthest panel (m), the pulsed sensor's timing jitter (ps RMS).
 TOF_NEAR_M, TOF_FAR_M, TOF_JITTER_PS = 0.5, 15.0, 50.0
@@ -32,13 +33,13 @@ def cmd_sim_render(args: argparse.Namespace) -> int:
 
 #: What each sensor writes into --out (rangekit.formats.output_sets: the capture set's members).
 _WRITES = {
-    "projector": ("[0-9][0-9][0-9].png", "patterns.json", "rig.json", "capture.json", "ground_truth.npz", "preview.png"),
-    "laser": ("off.png", "laser*.png", "rig.json", "capture.json", "ground_truth.npz"),
-    "laser-stereo": ("left", "right", "rig.json", "capture.json", "ground_truth.npz"),
-    "dots": ("image.png", "reference.png", "rig.json", "capture.json", "ground_truth.npz"),
-    "stereo": ("left.png", "right.png", "rig.json", "capture.json", "ground_truth.npz", "preview.png"),
-    "tof": ("samples", "tof.json", "rig.json", "ground_truth.npz", "preview.png"),
-    "tof-pulsed": ("round_trip_s.npy", "tof.json", "rig.json", "ground_truth.npz", "preview.png"),
+    "projector": ("[0-9][0-9][0-9].png", PATTERNS_FILE, RIG_FILE, "capture.json", "ground_truth.npz", "preview.png"),
+    "laser": ("off.png", "laser*.png", RIG_FILE, "capture.json", "ground_truth.npz"),
+    "laser-stereo": ("left", "right", RIG_FILE, "capture.json", "ground_truth.npz"),
+    "dots": ("image.png", "reference.png", RIG_FILE, "capture.json", "ground_truth.npz"),
+    "stereo": ("left.png", "right.png", RIG_FILE, "capture.json", "ground_truth.npz", "preview.png"),
+    "tof": ("samples", "tof.json", RIG_FILE, "ground_truth.npz", "preview.png"),
+    "tof-pulsed": ("round_trip_s.npy", "tof.json", RIG_FILE, "ground_truth.npz", "preview.png"),
 }
 
 
@@ -74,25 +75,25 @@ def _sim_render(args: argparse.Namespace) -> int:
                              angle=np.radians(args.angle_deg or 0.0), bits=args.bits or 8, seed=args.seed,
                              noise=not args.no_noise, colour=not args.mono, object_unit=args.object_unit or "m",
                              progress=console())
-        result(f"wrote {args.out} (off.png, laser<k>.png, rig.json, ground_truth.npz) in {time.perf_counter() - t0:.1f} s")
+        result(f"wrote {args.out} (off.png, laser<k>.png, {RIG_FILE}, ground_truth.npz) in {time.perf_counter() - t0:.1f} s")
         return 0
     if args.sensor == "laser-stereo":
         render_laser_stereo_capture(args.out, obj=args.object or "lumpy", rig_file=args.rig,
                                     angle=np.radians(args.angle_deg or 0.0), bits=args.bits or 8, seed=args.seed,
                                     noise=not args.no_noise, colour=not args.mono,
                                     object_unit=args.object_unit or "m", progress=console())
-        result(f"wrote {args.out} (left/ and right/ with off.png and laser<k>.png, rig.json, capture.json, "
+        result(f"wrote {args.out} (left/ and right/ with off.png and laser<k>.png, {RIG_FILE}, capture.json, "
                f"ground_truth.npz) in {time.perf_counter() - t0:.1f} s")
         return 0
     if args.sensor == "dots":
         render_dots_capture(args.out, size=args.size or (640, 400), seed=args.seed, progress=console())
-        result(f"wrote {args.out} (image.png, reference.png, rig.json, capture.json, ground_truth.npz) in "
+        result(f"wrote {args.out} (image.png, reference.png, {RIG_FILE}, capture.json, ground_truth.npz) in "
                f"{time.perf_counter() - t0:.1f} s")
         return 0
     if args.sensor == "stereo":
         render_stereo_capture(args.out, size=args.size or (640, 400), dots=not args.no_dots, seed=args.seed,
                               progress=console())
-        result(f"wrote {args.out} (left.png, right.png, rig.json, ground_truth.npz) in {time.perf_counter() - t0:.1f} s")
+        result(f"wrote {args.out} (left.png, right.png, {RIG_FILE}, ground_truth.npz) in {time.perf_counter() - t0:.1f} s")
         return 0
     if args.sensor in ("tof", "tof-pulsed"):
         near = TOF_NEAR_M if args.near is None else args.near
@@ -106,7 +107,7 @@ def _sim_render(args: argparse.Namespace) -> int:
                            steps=args.steps, multipath=args.multipath,
                            jitter=(TOF_JITTER_PS if args.jitter_ps is None else args.jitter_ps) * 1e-12,
                            noise=not args.no_noise, seed=args.seed, progress=console())
-        result(f"wrote {args.out} (tof.json, rig.json, ground_truth.npz, preview.png) in {time.perf_counter() - t0:.1f} s")
+        result(f"wrote {args.out} (tof.json, {RIG_FILE}, ground_truth.npz, preview.png) in {time.perf_counter() - t0:.1f} s")
         return 0
     render_projector_capture(args.out, obj=args.object or "lumpy", patterns=args.patterns or "graycode",
                              rig_file=args.rig, angle=np.radians(args.angle_deg or 0.0), bits=args.bits or 8, seed=args.seed,

@@ -21,6 +21,7 @@ from rangekit.image_header import check_image_files
 from rangekit.io import atomic_save_npz, decode_image, read_json, read_png
 from rangekit.npy_zst import decode_npy_zst, is_npy_zst, npy_zst_header
 from rangekit.rig.rig_file import Rig, load_rig
+from rangekit.formats.sessions.files import PATTERNS_FILE, RIG_FILE
 
 __all__ = ["IMAGE_SUFFIXES", "natural_key", "list_images", "read_stack", "stack_from_bytes", "Capture", "load_capture", "pattern_spec_for",
            "save_decoded"]
@@ -143,12 +144,12 @@ def load_capture(folder: str | Path, *, workers: int = 0) -> Capture:
     folder = Path(folder)
     if not folder.is_dir():
         raise FileFormatError(f"{folder}: not a folder; expected a capture folder with 000.png ... and "
-                              "patterns.json")
+                              f"{PATTERNS_FILE}")
     spec = None
-    if (folder / "patterns.json").exists():
-        spec = PatternSpec.from_dict(read_json(folder / "patterns.json", what="pattern spec"),
-                                     where=str(folder / "patterns.json"))
-    rig = load_rig(folder / "rig.json") if (folder / "rig.json").exists() else None
+    if (folder / PATTERNS_FILE).exists():
+        spec = PatternSpec.from_dict(read_json(folder / PATTERNS_FILE, what="pattern spec"),
+                                     where=str(folder / PATTERNS_FILE))
+    rig = load_rig(folder / RIG_FILE) if (folder / RIG_FILE).exists() else None
     info = read_json(folder / "capture.json", what="capture info") if (folder / "capture.json").exists() else {}
     return Capture(folder, read_stack(list_images(folder), workers=workers), spec, rig, info)
 

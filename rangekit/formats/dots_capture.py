@@ -23,6 +23,7 @@ from rangekit.errors import FileFormatError, shown
 from rangekit.image_header import check_image_files
 from rangekit.io import read_json, read_png
 from rangekit.rig.rig_file import Rig, load_rig
+from rangekit.formats.sessions.files import RIG_FILE
 
 __all__ = ["DOTS_KIND", "DotsFolder", "is_dots_capture", "load_dots_capture"]
 
@@ -58,9 +59,9 @@ def load_dots_capture(folder: str | Path, rig: Rig | None = None) -> DotsFolder:
     if isinstance(z0, bool) or not isinstance(z0, (int, float)) or not math.isfinite(z0) or z0 <= 0:
         raise FileFormatError(f"{folder / 'capture.json'}: reference_distance_m: expected the reference plane's "
                               f"distance in metres (> 0), found {shown(z0)}")
-    rig = rig if rig is not None else load_rig(folder / "rig.json")
+    rig = rig if rig is not None else load_rig(folder / RIG_FILE)
     if not rig.cameras or rig.projector is None:
-        raise FileFormatError(f"{folder / 'rig.json'}: a dot sensor needs its camera (cameras[0]) and its dot "
+        raise FileFormatError(f"{folder / RIG_FILE}: a dot sensor needs its camera (cameras[0]) and its dot "
                               f"projector (projector), found {len(rig.cameras)} camera(s) and "
                               f"{'a' if rig.projector is not None else 'no'} projector")
     paths = [folder / "image.png", folder / "reference.png"]
@@ -74,5 +75,5 @@ def load_dots_capture(folder: str | Path, rig: Rig | None = None) -> DotsFolder:
     for path, img in zip(paths, (image, reference)):
         if img.shape[:2] != (cam.height, cam.width):
             raise FileFormatError(f"{path}: image is {img.shape[1]}x{img.shape[0]}, expected the camera's "
-                                  f"{cam.width}x{cam.height} (rig.json)")
+                                  f"{cam.width}x{cam.height} ({RIG_FILE})")
     return DotsFolder(folder, image, reference, rig, float(z0))

@@ -38,6 +38,7 @@ from rangekit.image_header import check_image_files
 from rangekit.formats.capture import capture_full_scale
 from rangekit.io import read_json, read_png
 from rangekit.rig.rig_file import Rig, load_rig
+from rangekit.formats.sessions.files import RIG_FILE
 
 __all__ = ["LaserCapture", "is_laser_capture", "load_laser_capture", "LASER_STEREO_KIND", "LaserStereoCapture",
            "is_laser_stereo_capture", "load_laser_stereo_capture"]
@@ -80,10 +81,10 @@ def load_laser_capture(folder: str | Path, rig: Rig | None = None) -> LaserCaptu
     folder = Path(folder)
     if not folder.is_dir():
         raise FileFormatError(f"{folder}: not a folder; expected a laser capture with off.png, laser0.png ... "
-                              "and rig.json")
-    rig = rig if rig is not None else load_rig(folder / "rig.json")
+                              f"and {RIG_FILE}")
+    rig = rig if rig is not None else load_rig(folder / RIG_FILE)
     if not rig.lasers:
-        raise FileFormatError(f"{folder / 'rig.json'}: no 'lasers'; a laser capture needs the lasers' planes "
+        raise FileFormatError(f"{folder / RIG_FILE}: no 'lasers'; a laser capture needs the lasers' planes "
                               "(calibrate them with rangekit calibrate --lasers, docs/rig.md)")
     paths = [folder / "off.png"] + [folder / f"laser{k}.png" for k in range(len(rig.lasers))]
     missing = [p.name for p in paths if not p.is_file()]
@@ -95,7 +96,7 @@ def load_laser_capture(folder: str | Path, rig: Rig | None = None) -> LaserCaptu
     cam = rig.camera
     if images[0].shape[:2] != (cam.height, cam.width):
         raise FileFormatError(f"{paths[0]}: image is {images[0].shape[1]}x{images[0].shape[0]} but the camera in "
-                              f"rig.json is {cam.width}x{cam.height}")
+                              f"{RIG_FILE} is {cam.width}x{cam.height}")
     info = read_json(folder / "capture.json", what="capture description") if (folder / "capture.json").exists() else {}
     return LaserCapture(folder, rig, images[0], tuple(images[1:]), info if isinstance(info, dict) else {})
 
@@ -165,9 +166,9 @@ def load_laser_stereo_capture(folder: str | Path, rig: Rig | str | Path | None =
     folder = Path(folder)
     if not folder.is_dir():
         raise FileFormatError(f"{folder}: not a folder; expected a two-camera laser capture with left/, right/, "
-                              "rig.json and capture.json")
+                              f"{RIG_FILE} and capture.json")
     info, n, channels, angle = _stereo_info(folder)
-    rig_where = rig if isinstance(rig, (str, Path)) else folder / "rig.json" if rig is None else "the rig given"
+    rig_where = rig if isinstance(rig, (str, Path)) else folder / RIG_FILE if rig is None else "the rig given"
     rig = rig if isinstance(rig, Rig) else load_rig(rig_where)
     if len(rig.cameras) < 2:
         raise FileFormatError(f"{rig_where}: cameras: a two-camera laser capture needs the calibrated pair (left = "

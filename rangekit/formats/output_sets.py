@@ -27,6 +27,8 @@ from pathlib import Path
 from typing import Callable, Iterable
 
 from rangekit.errors import UsageError
+from rangekit.formats.sessions.files import (CLOUD_FILE, MERGED_FILE, MESH_FILE, PATTERNS_FILE, POSES_FILE, RIG_FILE,
+                                             SESSION_FILE, SESSION_MEMBERS)
 
 __all__ = ["OutputSet", "OUTPUT_SETS", "set_in", "claim_folder", "file_owner", "same_file"]
 
@@ -41,21 +43,19 @@ class OutputSet:
 
 #: Checked in this order: a processed session holds poses.json too, so the session comes first.
 OUTPUT_SETS: tuple[OutputSet, ...] = (
-    OutputSet("session", "a scan session (rangekit scan)", ("session.json",),
-              ("session.json", ".lock", "view_*", "pass_*", "rig.json", "patterns.json", "summary.json",
-               "report.html", "mesh*.*", "merged.ply", "poses.json", "events.jsonl")),
+    OutputSet("session", "a scan session (rangekit scan)", (SESSION_FILE,), SESSION_MEMBERS),
     OutputSet("capture", "a capture (rangekit sim render)", ("ground_truth.npz",),
               ("[0-9][0-9][0-9].png", "off.png", "laser*.png", "left.png", "right.png", "left", "right",
                "image.png", "reference.png", "tof.json", "samples", "round_trip_s.npy", "capture.json",
-               "patterns.json", "rig.json", "ground_truth.npz", "preview.png")),
-    OutputSet("check", "a check (rangekit check)", ("check.json",), ("check.json", "check.png", "rig.json")),
-    OutputSet("registration", "registered scans (rangekit register)", ("poses.json",),
-              ("poses.json", "merged.ply", "mesh.ply")),
+               PATTERNS_FILE, RIG_FILE, "ground_truth.npz", "preview.png")),
+    OutputSet("check", "a check (rangekit check)", ("check.json",), ("check.json", "check.png", RIG_FILE)),
+    OutputSet("registration", "registered scans (rangekit register)", (POSES_FILE,),
+              (POSES_FILE, MERGED_FILE, MESH_FILE)),
     OutputSet("photometric", "photometric stereo results (rangekit photometric)", ("normals.npy",),
-              ("normals.npy", "normals.png", "albedo.png", "depth.npy", "mesh.ply")),
+              ("normals.npy", "normals.png", "albedo.png", "depth.npy", MESH_FILE)),
     OutputSet("depth", "depth maps (rangekit tof, stereo)", ("depth.png",),
-              ("depth.npy", "depth.png", "range.npy", "confidence.npy", "confidence.png", "cloud.ply", "left.png",
-               "right.png", "rig.json", "device_depth.npy", "device_depth.png")),
+              ("depth.npy", "depth.png", "range.npy", "confidence.npy", "confidence.png", CLOUD_FILE, "left.png",
+               "right.png", RIG_FILE, "device_depth.npy", "device_depth.png")),
 )
 _BY_NAME = {s.name: s for s in OUTPUT_SETS}
 

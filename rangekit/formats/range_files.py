@@ -33,6 +33,7 @@ from rangekit.image_header import check_image_files
 from rangekit.io import read_json
 from rangekit.rig.rig_file import load_rig
 from rangekit.tof import FrequencyPlan, round_trip_problem
+from rangekit.formats.sessions.files import RIG_FILE
 
 __all__ = ["ToFFolder", "load_tof_folder", "load_ground_truth", "DepthMap", "read_kinect_depth", "KINECT_DEPTH_SIZE"]
 
@@ -65,7 +66,7 @@ def load_tof_folder(folder: str | Path) -> ToFFolder:
     """Read and check a ToF capture folder; errors name the file and what was expected."""
     folder = Path(folder)
     if not folder.is_dir():
-        raise FileFormatError(f"{folder}: not a folder (expected a ToF capture folder with tof.json, rig.json and "
+        raise FileFormatError(f"{folder}: not a folder (expected a ToF capture folder with tof.json, {RIG_FILE} and "
                               "samples/)")
     meta = read_json(folder / "tof.json", what="ToF capture description")
     if not isinstance(meta, dict):
@@ -74,7 +75,7 @@ def load_tof_folder(folder: str | Path) -> ToFFolder:
     kind = meta.get("kind")
     if kind not in TOF_KINDS:
         raise FileFormatError(f"{folder / 'tof.json'}: 'kind' must be one of {', '.join(TOF_KINDS)}, found {kind!r}")
-    rig = load_rig(folder / "rig.json")
+    rig = load_rig(folder / RIG_FILE)
     cam = rig.camera
     if kind == "rangekit.tof.pulsed/1":
         path = folder / "round_trip_s.npy"
@@ -84,7 +85,7 @@ def load_tof_folder(folder: str | Path) -> ToFFolder:
         except (OSError, ValueError, EOFError) as exc:
             raise FileFormatError(f"{path}: cannot read the round-trip times ({str(exc)[:200]})") from None
         if dt.shape != (cam.height, cam.width):
-            raise FileFormatError(f"{path}: shape {dt.shape} but the camera in rig.json is {cam.width}x{cam.height}")
+            raise FileFormatError(f"{path}: shape {dt.shape} but the camera in {RIG_FILE} is {cam.width}x{cam.height}")
         problem = round_trip_problem(dt)
         if problem:
             raise FileFormatError(f"{path}: {problem}")
@@ -104,14 +105,14 @@ def load_tof_folder(folder: str | Path) -> ToFFolder:
     headers = check_image_files(files, what="ToF raw samples")  # read_stack checks them again; cheap
     if headers and headers[0] is not None and (headers[0].width, headers[0].height) != (cam.width, cam.height):
         raise FileFormatError(f"{files[0]}: samples are {headers[0].width}x{headers[0].height} (width x height) "
-                              f"but the camera in rig.json is {cam.width}x{cam.height}")
+                              f"but the camera in {RIG_FILE} is {cam.width}x{cam.height}")
     stack = read_stack(files, what="ToF raw samples")
     if stack.ndim != 3:
         raise FileFormatError(f"{folder / 'samples'}: expected single-channel (grey) raw samples, found images of "
                               f"shape {stack.shape[1:]} ({files[0].name})")
     if stack.shape[1:] != (cam.height, cam.width):
         raise FileFormatError(f"{folder / 'samples'}: samples are {stack.shape[2]}x{stack.shape[1]} but the "
-                              f"camera in rig.json is {cam.width}x{cam.height}")
+                              f"camera in {RIG_FILE} is {cam.width}x{cam.height}")
     g = _number(meta, "electrons_per_dn", 1.0, folder / "tof.json", positive=True)
     rn = _number(meta, "read_noise_e", 0.0, folder / "tof.json")
     sat = _number(meta, "saturation_dn", None, folder / "tof.json", positive=True)
@@ -202,7 +203,7 @@ def _check_npy_shape(path: Path, shape: tuple[int, ...]) -> None:
     except (OSError, ValueError) as exc:
         raise FileFormatError(f"{path}: cannot read the round-trip times ({exc})") from None
     if found != shape:
-        raise FileFormatError(f"{path}: shape {found} but the camera in rig.json is {shape[1]}x{shape[0]}")
+        raise FileFormatError(f"{path}: shape {found} but the camera in {RIG_FILE} is {shape[1]}x{shape[0]}")
 
 
 def load_ground_truth(folder: str | Path, *, shape: tuple[int, int] | None = None) -> dict | None:

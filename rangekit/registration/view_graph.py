@@ -203,7 +203,7 @@ def edges_connect_views(n: int, edges: Sequence, names: Sequence[str] | None = N
         why = "; ".join(f"edge {e.i}-{e.j} {e.reason}" for e in (ambiguous or cut)[:3])
         named = f" ({', '.join(names[k] for p in parts[1:] for k in p)})" if names is not None else ""
         hint = ("the overlap does not fix the pose (a plane, sphere, cylinder or surface of revolution slides "
-                "on itself): give a prior (--init turntable:... or a poses.json) or scan more shape in the "
+                "on itself): give a prior (--init turntable:... or a poses file) or scan more shape in the "
                 "overlap" if ambiguous else "scan more views in between or register those separately")
         raise ViewsCutOff(f"the scans do not all overlap: views {parts[1:]}{named} have no reliable link to "
                           f"views {parts[0]}{' (' + why + ')' if why else ''}; {hint}",
@@ -215,5 +215,5 @@ def cut_off_message(views: list[int], names: Sequence[str] | None, voxel: float)
     named = f" ({', '.join(names[k] for k in views)})" if names is not None else ""
     return (f"views {views}{named} could not be registered: their pairwise alignments disagree with each other "
             f"and with the rest, even measured again at a finer voxel. Give a prior (--init turntable:AX,AY,AZ:STEP "
-            f"or a poses.json), try every pair (--neighbours 0) or a finer voxel (--voxel-mm "
+            f"or a poses file), try every pair (--neighbours 0) or a finer voxel (--voxel-mm "
             f"{voxel * 1e3 / 2:.3g}), or scan more views next to them")

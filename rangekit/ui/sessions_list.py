@@ -8,17 +8,20 @@ from pathlib import Path
 
 from rangekit.errors import RangekitError
 from rangekit.ui.paths import confined
+from rangekit.formats.sessions.files import (MERGED_FILE, MESH_FILE, POSES_FILE, PREVIEW_FILE, REPORT_FILE, SESSION_FILE,
+                                             SUMMARY_FILE, WATERTIGHT_FILE)
 
 __all__ = ["SESSION_FILES", "list_sessions", "readable_name", "session_file", "sessions_listing"]
 
 #: The files of a session a page may open.
-SESSION_FILES = ("report.html", "mesh.ply", "mesh_watertight.ply", "preview.ply", "merged.ply", "poses.json",
-                 "summary.json", *(f"{stem}.{fmt}" for fmt in ("obj", "stl", "glb") for stem in ("mesh", "mesh_watertight")))
+SESSION_FILES = (REPORT_FILE, MESH_FILE, WATERTIGHT_FILE, PREVIEW_FILE, MERGED_FILE, POSES_FILE,
+                 SUMMARY_FILE, *(f"{stem}.{fmt}" for fmt in ("obj", "stl", "glb")
+                                 for stem in (Path(MESH_FILE).stem, Path(WATERTIGHT_FILE).stem)))
 
 
 def _summary(folder: Path) -> dict:
     try:
-        s = json.loads((folder / "summary.json").read_text())
+        s = json.loads((folder / SUMMARY_FILE).read_text())
     except (OSError, ValueError):
         return {}
     acc = s.get("accuracy") or {}
@@ -61,7 +64,7 @@ def list_sessions(sessions: Path, skipped: list[str] | None = None) -> list[dict
 
     root = Path(sessions).resolve()
     out = []
-    for folder in sorted(p for p in root.iterdir() if (p / "session.json").is_file()):
+    for folder in sorted(p for p in root.iterdir() if (p / SESSION_FILE).is_file()):
         if not folder.resolve().is_relative_to(root):      # a link out of the sessions folder is not listed
             continue
         if readable_name(folder.name) is None:
@@ -75,7 +78,7 @@ def list_sessions(sessions: Path, skipped: list[str] | None = None) -> list[dict
             out.append({**row, "state": "unreadable", "error": str(exc)})
             continue
         done = sum(v.done for v in session.views)
-        state = "processed" if "summary.json" in row["files"] else ("acquired" if done == len(session.views)
+        state = "processed" if SUMMARY_FILE in row["files"] else ("acquired" if done == len(session.views)
                                                                     else "acquiring")
         out.append({**row, "state": state, "views_done": done, "views": len(session.views), **_summary(folder)})
     return out

@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from rangekit.errors import RangekitError
+from rangekit.formats.sessions.files import CLOUD_FILE, CLOUD_INFO_FILE
 
 __all__ = ["POINTS_PER_VIEW", "view_points"]
 
@@ -28,9 +29,9 @@ def view_points(folder: Path, index: int) -> bytes:
     if not 0 <= index < len(session.views):
         raise RangekitError(f"view {index}: the session has views 0-{len(session.views) - 1}")
     view = session.views[index]
-    if not (view.folder / "cloud.json").is_file():
+    if not (view.folder / CLOUD_INFO_FILE).is_file():
         raise RangekitError(f"{view.folder.name}: not decoded yet")
-    cloud = load_cloud(view.folder / "cloud.ply")
+    cloud = load_cloud(view.folder / CLOUD_FILE)
     step = max(1, -(-len(cloud) // POINTS_PER_VIEW))
     points = cloud.points[::step]
     rig = session.rig

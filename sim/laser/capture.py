@@ -29,6 +29,7 @@ from rangekit.errors import SceneError
 from rangekit.io import atomic_save_npz, atomic_write_json, write_png
 from rangekit.rig.rig_file import save_rig
 from rangekit.sim.laser.frames import LaserView
+from rangekit.formats.sessions.files import RIG_FILE
 
 __all__ = ["write_laser_capture", "LASER_CAPTURE_KIND"]
 
@@ -60,11 +61,11 @@ def write_laser_capture(view: LaserView, out_dir: str | Path, *, seed: int = 0, 
         truth[f"laser{k}_xyz"] = frame.xyz
         truth[f"laser{k}_curve_uv"] = frame.curve.uv
         truth[f"laser{k}_curve_xyz"] = frame.curve.xyz
-    save_rig(view.rig, out / "rig.json")
+    save_rig(view.rig, out / RIG_FILE)
     atomic_write_json(out / "capture.json", {
         "kind": LASER_CAPTURE_KIND, "turntable_angle_rad": view.angle, "seed": int(seed),
         "objects": list(view.mesh.object_names), "imaging": asdict(view.imaging), "look": asdict(view.look),
         "frames": [p.stem for p in paths], "n_lasers": n, **(info or {})})
     atomic_save_npz(out / "ground_truth.npz", **truth)
-    say(f"wrote {len(paths)} image(s), ground_truth.npz and rig.json to {out}")
+    say(f"wrote {len(paths)} image(s), ground_truth.npz and {RIG_FILE} to {out}")
     return paths

@@ -36,6 +36,7 @@ from rangekit.sim.laser.curve import cast_first_hits
 from rangekit.sim.laser.frames import LaserLook, LaserView
 from rangekit.sim.laser.rig import laser_rig
 from rangekit.sim.scene.scene import Scene
+from rangekit.formats.sessions.files import RIG_FILE
 
 __all__ = ["RIGHT_AZIMUTH_DEG", "RIGHT_SEED_OFFSET", "laser_stereo_rig", "LaserStereoView", "seen_by",
            "write_laser_stereo_capture"]
@@ -159,12 +160,12 @@ def write_laser_stereo_capture(view: LaserStereoView, out_dir: str | Path, *, in
             truth[f"{side}_laser{k}_curve_xyz"] = frame.curve.xyz
     for k in range(n):
         truth[f"left_laser{k}_both"] = view.both(k)
-    save_rig(view.rig, out / "rig.json")
+    save_rig(view.rig, out / RIG_FILE)
     atomic_write_json(out / "capture.json", {
         "kind": LASER_STEREO_KIND, "n_lasers": n, "channels": [laser.channel for laser in view.rig.lasers],
         "turntable_angle_rad": view.angle, "seed": view.seed, "right_seed": view.seed + RIGHT_SEED_OFFSET,
         "objects": list(view.left.mesh.object_names), "imaging": asdict(view.left.imaging),
         "look": asdict(view.left.look), **(info or {})})
     atomic_save_npz(out / "ground_truth.npz", **truth)
-    say(f"wrote {len(paths)} image(s), ground_truth.npz and rig.json to {out}")
+    say(f"wrote {len(paths)} image(s), ground_truth.npz and {RIG_FILE} to {out}")
     return paths

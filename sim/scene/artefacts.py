@@ -3,7 +3,7 @@
 **Measuring volume.** A box in the world (turntable) frame: x and y in [-100, 100] mm, z in [40, 140] mm
 above the table top (:data:`MEASURING_VOLUME`, 200 x 200 x 100 mm). It is the largest round box centred on
 the turntable axis whose corners the default rig's camera and projector both see at least 20 pixels
-inside their images (checked by ``tests/app/test_vdi2634.py``). Its diagonal ``L0`` = 300 mm.
+inside their images (checked by ``tests/app/scan/test_vdi2634.py``). Its diagonal ``L0`` = 300 mm.
 
 **Sizes**, from ``L0`` as the guideline asks (:func:`artefact_sizes`):
 
@@ -21,7 +21,7 @@ not modelled (it is thin and lies outside the spheres' evaluation caps).
 
 **Spheres are icospheres** of 6 subdivisions with every vertex exactly on the sphere: the facets lie
 inside it by at most 7.1e-5 R (1.6 um on the 45 mm sphere, 1.1 um on the 30 mm balls), which bounds what
-the tessellation adds to PF and PS (``tests/app/test_vdi2634.py`` measures it).
+the tessellation adds to PF and PS (``tests/app/scan/test_vdi2634.py`` measures it).
 """
 
 from __future__ import annotations

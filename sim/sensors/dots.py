@@ -30,6 +30,7 @@ from rangekit.sim.scene.objects import make_object
 from rangekit.sim.scene.raycast import cast_view
 from rangekit.sim.scene.scene import Scene
 from rangekit.sim.sensors.stereo import STEREO_MODEL, speckle_pattern, stereo_rig
+from rangekit.formats.sessions.files import RIG_FILE
 
 __all__ = ["REFERENCE_DISTANCE_M", "DotsCapture", "dots_rig", "reference_scene", "render_dots",
            "write_dots_capture"]
@@ -138,7 +139,7 @@ def write_dots_capture(capture: DotsCapture, rig: Rig, out_dir: str | Path, *,
     paths = [out / "image.png", out / "reference.png"]
     write_png(paths[0], capture.image)
     write_png(paths[1], capture.reference)
-    save_rig(rig, out / "rig.json")
+    save_rig(rig, out / RIG_FILE)
     atomic_write_json(out / "capture.json", {"kind": DOTS_KIND, "reference_distance_m": capture.reference_distance,
                                              "seed": capture.seed,
                                              **({"imaging": asdict(model)} if model is not None else {})})

@@ -34,6 +34,7 @@ from rangekit.sim.scene.objects import make_object
 from rangekit.sim.scene.raycast import cast_view
 from rangekit.sim.imaging.render import ImagingModel, ViewRenderer
 from rangekit.sim.scene.scene import Scene
+from rangekit.formats.sessions.files import RIG_FILE
 
 __all__ = ["STEREO_MODEL", "StereoCapture", "stereo_rig", "speckle_pattern", "stereo_scene", "render_stereo",
            "write_stereo_capture"]
@@ -229,7 +230,7 @@ def write_stereo_capture(capture: StereoCapture, rig: Rig, out_dir: str | Path, 
     paths = [out / "left.png", out / "right.png"]
     write_png(paths[0], capture.left)
     write_png(paths[1], capture.right)
-    save_rig(rig, out / "rig.json")
+    save_rig(rig, out / RIG_FILE)
     atomic_write_json(out / "capture.json", {
         "kind": "rangekit.sim.stereo/1", "dots": capture.dots, "seed": capture.seed,
         "objects": list(capture.object_names), **({"imaging": asdict(model)} if model is not None else {})})

@@ -43,6 +43,7 @@ from rangekit.sim.scene.raycast import cast_view
 from rangekit.sim.scene.scene import Scene
 from rangekit.tof.plan import C_LIGHT, FrequencyPlan
 from rangekit.tof.range_maps import range_to_points
+from rangekit.formats.sessions.files import RIG_FILE
 
 __all__ = ["ToFSensor", "ToFCapture", "PulsedCapture", "KINECT_V2_PLAN", "LUXONIS_PLAN", "tof_camera", "tof_scene",
            "render_tof", "render_pulsed", "write_tof_capture", "write_pulsed_capture"]
@@ -311,7 +312,7 @@ def write_tof_capture(capture: ToFCapture, out_dir: str | Path, *, info: dict | 
         "sample_model": "S_k = B + A cos(phi - theta_k), phi = 4 pi f r / c",
         "electrons_per_dn": sensor.electrons_per_dn, "read_noise_e": sensor.read_noise_e,
         "saturation_dn": (1 << sensor.bits) - 1, "sensor": asdict(sensor), **(info or {})})
-    save_rig(Rig(cameras=(capture.camera,), devices={"camera": {"type": "sim", "sensor": "tof"}}), out / "rig.json")
+    save_rig(Rig(cameras=(capture.camera,), devices={"camera": {"type": "sim", "sensor": "tof"}}), out / RIG_FILE)
     _truth(out, range_true=capture.range_true, depth_true=capture.depth_true, hit=capture.hit, camera=capture.camera,
            xyz=capture.xyz_true, valid=capture.hit & ~capture.mixed, mixed=capture.mixed)
     sl = capture.plan.slices()[0]
@@ -332,7 +333,7 @@ def write_pulsed_capture(capture: PulsedCapture, out_dir: str | Path, *, info: d
     atomic_save_npy(path, capture.round_trip_s)
     atomic_write_json(out / "tof.json", {"kind": "rangekit.tof.pulsed/1", "jitter_s": capture.jitter_s, **(info or {})})
     save_rig(Rig(cameras=(capture.camera,), devices={"camera": {"type": "sim", "sensor": "tof-pulsed"}}),
-             out / "rig.json")
+             out / RIG_FILE)
     _truth(out, range_true=capture.range_true, depth_true=capture.depth_true,
            xyz=range_to_points(capture.range_true, capture.camera), hit=capture.hit, camera=capture.camera,
            valid=capture.hit)

@@ -28,6 +28,7 @@ from rangekit.coded.patterns import PatternSpec
 from rangekit.rig.rig_file import save_rig
 from rangekit.sim.devices.sim_rig import SimRig
 from rangekit.sim.scene.raycast import ViewGeometry
+from rangekit.formats.sessions.files import PATTERNS_FILE, RIG_FILE
 
 __all__ = ["write_capture", "preview_image"]
 
@@ -83,8 +84,8 @@ def write_capture(sim: SimRig, spec: PatternSpec, out_dir: str | Path, *, info: 
         path = out / f"{i:03d}.png"
         write_png(path, img)
         paths.append(path)
-    atomic_write_json(out / "patterns.json", spec.to_dict())
-    save_rig(sim.rig, out / "rig.json")
+    atomic_write_json(out / PATTERNS_FILE, spec.to_dict())
+    save_rig(sim.rig, out / RIG_FILE)
     angle = 0.0 if sim.turntable is None else sim.turntable.angle
     atomic_write_json(out / "capture.json", {
         "kind": "rangekit.sim.capture/1", "turntable_angle_rad": angle, "seed": sim.seed,
@@ -95,5 +96,5 @@ def write_capture(sim: SimRig, spec: PatternSpec, out_dir: str | Path, *, info: 
                     T_world_cam=sim.rig.camera.T_world_cam)
     white_index = spec.frame_names.index("white") if "white" in spec.frame_names else 0
     write_png(out / "preview.png", preview_image(images[white_index], truth))
-    say(f"wrote {len(paths)} image(s), ground_truth.npz, rig.json and preview.png to {out}")
+    say(f"wrote {len(paths)} image(s), ground_truth.npz, {RIG_FILE} and preview.png to {out}")
     return paths

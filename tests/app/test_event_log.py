@@ -13,7 +13,8 @@ import pytest
 
 import rangekit as rk
 from rangekit.app import events as ev
-from rangekit.app.event_log import (EVENTS_FILE, EventLog, JobExited, LoggedCloud, LoggedError, from_json,
+from rangekit.formats.sessions.files import EVENTS_FILE
+from rangekit.app.event_log import (EventLog, JobExited, LoggedCloud, LoggedError, from_json,
                                     read_events, to_json)
 from rangekit.app.scan.options import ScanOptions
 from rangekit.errors import FileFormatError

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from rangekit.calib.projection_jacobian import pixel_jacobian, project as _project, rotation_jacobian
-from bundle_problems import bundle_problem
+from support.bundle_problems import bundle_problem
 from rangekit.calib.projector import bundle_adjust
 from rangekit.geometry import invert_T, rotvec_to_R
 

@@ -16,8 +16,8 @@ from rangekit.boards import Board
 from rangekit.calib.camera import CalibrationWarning, Correspondences, calibrate_device
 from rangekit.calib.procedure import CalibrationSettings, calibrate_rig, compare_rigs
 from rangekit.errors import CalibrationError
-from calib_tolerances import outside_tolerances
-from fits import fit_sphere
+from support.calib_tolerances import outside_tolerances
+from support.fits import fit_sphere
 from rangekit.geometry import apply_T, make_T
 
 pytestmark = pytest.mark.filterwarnings("ignore::rangekit.calib.camera.CalibrationWarning")

@@ -13,7 +13,7 @@ import cv2
 import numpy as np
 import pytest
 
-from cli_runs import assert_error
+from support.cli_runs import assert_error
 from rangekit.formats.layouts import LAYOUTS, tool_frames
 
 LAYOUT = LAYOUTS["slstudio:calibration"]
@@ -198,7 +198,7 @@ def test_simulated_recordings_give_back_the_true_rig(cli, tmp_path, corners):
 
 # ------------------------------------------------------------------------------- SLStudio's own recordings
 def _skull():
-    from shared_data import require_shared
+    from support.shared_data import require_shared
 
     return require_shared("slstudio-skull")
 

@@ -111,7 +111,7 @@ def test_decode_command_errors(tmp_path, capsys):
 
 @pytest.mark.slow
 def test_register_and_mesh_commands(tmp_path, capsys):
-    from shared_data import require_shared
+    from support.shared_data import require_shared
 
     bunny = require_shared("stanford-bunny")
     scans = [str(bunny / n) for n in ("bun000.ply", "bun045.ply", "bun315.ply", "chin.ply")]

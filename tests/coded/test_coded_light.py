@@ -9,7 +9,7 @@ from typing import NamedTuple
 
 import numpy as np
 import pytest
-from fits import fit_sphere
+from support.fits import fit_sphere
 from scipy.ndimage import binary_erosion
 
 from rangekit.coded.decode import decode

@@ -22,7 +22,7 @@ from rangekit.coded.response import phase_correction
 from rangekit.coded.triangulate import triangulate_ray_ray
 from rangekit.coded.uncertainty import along_ray_jacobian, point_sigma
 from rangekit.geometry import look_at
-from small_rigs import small_rig
+from support.small_rigs import small_rig
 
 DISTORTIONS = [
     [-0.02, 0.01, 0.0, 0.0, 0.0],

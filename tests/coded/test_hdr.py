@@ -6,7 +6,7 @@ import json
 import numpy as np
 import pytest
 
-from small_rigs import small_projector_rig
+from support.small_rigs import small_projector_rig
 
 from rangekit.app.acquire.acquire import acquire
 from rangekit.app.process.view_cache import view_cloud

@@ -8,9 +8,9 @@ import json
 import numpy as np
 import pytest
 
-from cli_runs import assert_error
+from support.cli_runs import assert_error
 from rangekit.rig.rig_file import save_rig
-from small_rigs import small_projector_rig
+from support.small_rigs import small_projector_rig
 
 
 def test_a_slipped_capture_is_flagged_and_refused_by_name_a_still_one_is_not(cli, tmp_path):

@@ -12,7 +12,7 @@ from rangekit.coded.motion import MAX_MOTION_SHARE, check_motion, detect_motion
 from rangekit.coded.motion.check import code_step
 from rangekit.coded.patterns import make_pattern_spec
 from rangekit.sim import SimRig, default_rig, default_scene
-from small_rigs import small_projector_rig, small_rig
+from support.small_rigs import small_projector_rig, small_rig
 
 
 def _capture(rig, pattern: str, knock_from: int | None = None, mm: float = 0.5):
@@ -82,7 +82,7 @@ def test_a_capture_too_fine_for_the_camera_says_not_checked():
     from rangekit.coded.decode import decode
     from rangekit.coded.patterns import make_pattern_spec
     from rangekit.sim import SimRig, default_scene
-    from small_rigs import small_rig
+    from support.small_rigs import small_rig
 
     rig = small_rig()                       # a 320x256 camera under a 1280x800 projector
     spec = make_pattern_spec("graycode", (rig.projector.width, rig.projector.height))

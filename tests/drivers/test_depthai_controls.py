@@ -1,188 +1,29 @@
 """Camera controls from the rig file to a depthai device, and the rig file's new fields.
 
-A fake ``depthai`` module (tests only) stands at the API boundary: it is put in ``sys.modules`` before the
-driver imports depthai and records every call the driver makes on it, so the tests read exactly which
-commands a real OAK camera would receive. The names the fake offers are checked against the installed
+A fake ``depthai`` module (tests only, tests/support/fake_depthai.py) stands at the API boundary: it is put in
+``sys.modules`` before the driver imports depthai and records every call the driver makes on it, so the tests read
+exactly which commands a real OAK camera would receive. The names the fake offers are checked against the installed
 depthai by tests/drivers/test_depthai_driver.py (``DEPTHAI_NAMES``), and :func:`test_mapping_on_real_depthai`
 applies the same mapping to a real ``depthai.CameraControl`` message.
 """
 
 import copy
 import datetime
-import types
 
-import numpy as np
 import pytest
 
+from support.fake_depthai import FakeDepthai
 from rangekit.rig.camera_controls import CameraControls
 from rangekit.errors import ConfigError, DeviceDisconnected, DeviceError
 from rangekit.rig.rig_file import Rig, template_rig
 from rangekit.rig.checks import validate_rig_for_hardware
 
 
-# ----------------------------------------------------------------------------- the fake depthai
-class _Named:
-    def __init__(self, name):
-        self.name = name
-
-    def __repr__(self):
-        return self.name
-
-
-def _enum(*names):
-    return types.SimpleNamespace(**{n: _Named(n) for n in names})
-
-
-class _Recorder:
-    """Records every ``set*`` call as (owner, method, args) in the shared ``log``."""
-
-    def __init__(self, log, owner):
-        self._log, self._owner = log, owner
-
-    def __getattr__(self, name):
-        if not name.startswith("set"):
-            raise AttributeError(name)
-
-        def call(*args, **kwargs):
-            self._log.append((self._owner, name, args))
-            return self
-        return call
-
-
-def fake_depthai(log, sockets=("CAM_A", "CAM_B", "CAM_C")):
-    """A module with just the depthai v3 API the driver uses; ``log`` collects what it is asked to do."""
-    dai = types.ModuleType("depthai")
-    dai.CameraBoardSocket = _enum(*(f"CAM_{c}" for c in "ABCDEFGH"))
-    dai.XLinkDeviceState = _enum("X_LINK_BOOTED", "X_LINK_UNBOOTED")
-    dai.ImgFrame = types.SimpleNamespace(Type=_enum("RGB888i", "GRAY8"))
-    dai.ImgResizeMode = _enum("CROP")
-    dai.CameraExposureOffset = _enum("START")
-    dai.Clock = types.SimpleNamespace(now=lambda: datetime.timedelta(0))
-    dai.MessageQueue = types.SimpleNamespace(QueueException=type("QueueException", (Exception,), {}))
-
-    class CameraControl(_Recorder):
-        AutoWhiteBalanceMode = _enum("OFF", "AUTO")
-        AutoFocusMode = _enum("OFF", "AUTO", "CONTINUOUS_VIDEO")
-
-        def __init__(self):
-            super().__init__(log, "control")
-    dai.CameraControl = CameraControl
-
-    class Info:
-        name, state = "1.1", dai.XLinkDeviceState.X_LINK_UNBOOTED
-
-        def getDeviceId(self):
-            return "FAKE-MXID"
-
-    def search(timeoutMs):
-        log.append(("xlink", "getAllConnectedDevices", (timeoutMs,)))
-        return [Info()]
-    dai.XLinkConnection = types.SimpleNamespace(getAllConnectedDevices=search)
-
-    class Device:
-        def __init__(self, info):
-            log.append(("device", "open", (info.getDeviceId(),)))
-
-        def getDeviceId(self):
-            return "FAKE-MXID"
-
-        def getConnectedCameras(self):
-            return [getattr(dai.CameraBoardSocket, s) for s in sockets]
-
-        def readCalibration(self):
-            return None
-
-        def close(self):
-            log.append(("device", "close", ()))
-    dai.Device = Device
-
-    class Frame:
-        def __init__(self, shape):
-            self.shape = shape
-
-        def getWidth(self):
-            return self.shape[1]
-
-        def getHeight(self):
-            return self.shape[0]
-
-        def getFrame(self):
-            return np.zeros(int(np.prod(self.shape)), np.uint8)
-
-        def getTimestamp(self, offset=None):
-            return datetime.timedelta(seconds=1)
-
-    class Queue:
-        def __init__(self, owner):
-            self.owner = owner
-
-        def get(self, timeout):
-            return Frame(self.owner)
-
-        def send(self, msg):
-            log.append(("inputControl", "send", (msg,)))
-
-    class Output:
-        def __init__(self, shape):
-            self.shape = shape
-
-        def createOutputQueue(self, maxSize, blocking):
-            return Queue(self.shape)
-
-    class Camera:
-        def build(self, socket, sensorFps=None):
-            log.append(("Camera", "build", (socket.name, sensorFps)))
-            self.initialControl = _Recorder(log, f"initialControl {socket.name}")
-            self.inputControl = types.SimpleNamespace(createInputQueue=lambda: Queue(None))
-            return self
-
-        def requestOutput(self, size, kind, mode, fps=None):
-            log.append(("Camera", "requestOutput", (tuple(size), kind.name, mode.name, fps)))
-            return Output((size[1], size[0]) if kind.name == "GRAY8" else (size[1], size[0], 3))
-
-        def requestFullResolutionOutput(self):
-            return Output((800, 1280))
-
-    class StereoDepth:
-        PresetMode = _enum("DEFAULT")
-
-        def build(self, *args):
-            log.append(("StereoDepth", "build", ()))
-            self.depth = Output((800, 1280))
-            return self
-
-        def setDepthAlign(self, sock):
-            pass
-
-        def setOutputSize(self, w, h):
-            pass
-    dai.node = types.SimpleNamespace(Camera=Camera, StereoDepth=StereoDepth)
-
-    class Pipeline:
-        def __init__(self, device):
-            self.running = False
-
-        def create(self, kind):
-            return kind()
-
-        def start(self):
-            log.append(("Pipeline", "start", ()))
-            self.running = True
-
-        def isRunning(self):
-            return self.running
-
-        def stop(self):
-            self.running = False
-    dai.Pipeline = Pipeline
-    return dai
-
-
 @pytest.fixture
 def dai_log(monkeypatch):
     """The fake depthai in sys.modules; yields the list of calls made on it."""
     log = []
-    monkeypatch.setitem(__import__("sys").modules, "depthai", fake_depthai(log))
+    FakeDepthai(log).install(monkeypatch)
     monkeypatch.setenv("DEPTHAI_SEARCH_TIMEOUT", "1")
     return log
 

@@ -36,7 +36,7 @@ def test_every_depthai_name_exists():
     dai = pytest.importorskip("depthai")
     from rangekit.drivers.depthai.camera import DEPTHAI_NAMES
 
-    from depthai_names import missing_names
+    from support.depthai_names import missing_names
 
     missing = missing_names(dai, DEPTHAI_NAMES)
     assert not missing, f"depthai {dai.__version__} lacks {missing}"

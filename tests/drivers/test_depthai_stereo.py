@@ -1,212 +1,88 @@
 """``rangekit stereo --device`` against a fake ``depthai`` module at the API boundary.
 
-The fake records every node, link and emitter call and streams a simulated OAK-D-Pro-like pair
-(:func:`rangekit.sim.sensors.stereo.render_stereo`, 320 x 200) through a Sync node's message groups, with the
-simulator's true depth as the "device's StereoDepth". So the tests check the pipeline the driver builds
+The fake (tests/support/fake_depthai.py) records every node, link and emitter call and streams a simulated
+OAK-D-Pro-like pair (:func:`rangekit.sim.sensors.stereo.render_stereo`, 320 x 200) through a Sync node's message
+groups, with the simulator's true depth as the "device's StereoDepth". So the tests check the pipeline the driver builds
 (synchronised left/right mono frames, dot projector and flood as asked, StereoDepth only with
 --on-device) and that the matcher's depth of the captured pair agrees with the truth.
 """
 
 from __future__ import annotations
 
-import enum
-import sys
-import types
-
 import numpy as np
 import pytest
 
+from support.fake_depthai import SOCKETS as _Socket, FakeDepthai, Frame
 from rangekit.cli.run import main
 
 W, H = 320, 200
 
 
-class _Socket(enum.Enum):
-    CAM_A = 0
-    CAM_B = 1
-    CAM_C = 2
-    CAM_D = 3
+class _StereoDevice(FakeDepthai):
+    """The fake depthai over a simulated pair (``truth``, the cameras of ``rig``): its calibration is the rig's two
+    cameras, a Sync node's messages are groups {input name: frame} of the simulator's left and right images and true
+    depth (the 4th group's right frame one sequence number off), and its dot projector is there or not."""
 
+    mxid = "FAKE-OAK-D-PRO"
+    SHORT = {("device", "open"): "open", ("device", "setIrLaserDotProjectorIntensity"): "dots",
+             ("device", "setIrFloodLightIntensity"): "flood", ("device", "close"): "close",
+             ("Pipeline", "start"): "start", ("Pipeline", "stop"): "stop", ("queue", "get"): "get"}
 
-class _Output:
-    def __init__(self, node, kind: str, size=None, frame_type=None):
-        self.node, self.kind, self.size, self.frame_type, self.links = node, kind, size, frame_type, []
+    def __init__(self, truth, rig, *, dot_projector: bool = True):
+        self.truth, self.rig, self.has_dots = truth, rig, dot_projector
+        super().__init__()
 
-    def link(self, inp) -> None:
-        self.links.append(inp)
-        inp.source = self
+    @property
+    def calls(self) -> list[tuple]:
+        """The calls as these tests read them: ("open", id), ("dots", x), ("flood", x), ("start",), ("get", n),
+        ("stop",), ("close",)."""
+        return [(self.SHORT[who, method], *args) for who, method, args in self.log if (who, method) in self.SHORT]
 
-    def createOutputQueue(self, maxSize=4, blocking=False):
-        return _Queue(self)
+    def dot_projector(self, intensity: float) -> bool:
+        return self.has_dots
 
+    def calibration(self):
+        return _Handler(self.module, {_Socket.CAM_B: self.rig.cameras[0], _Socket.CAM_C: self.rig.cameras[1]})
 
-class _Input:
-    def __init__(self, name: str):
-        self.name, self.source = name, None
-
-
-class _Frame:
-    def __init__(self, data: np.ndarray, seq: int):
-        self.data, self.seq = data, seq
-
-    def getFrame(self):
-        return self.data
-
-    def getWidth(self):
-        return self.data.shape[1]
-
-    def getHeight(self):
-        return self.data.shape[0]
-
-    def getSequenceNum(self):
-        return self.seq
-
-
-class _Queue:
-    """Sync groups: {input name: frame}; the 4th group's right frame is one sequence number off."""
-
-    def __init__(self, output: _Output):
-        self.output, self.n = output, 0
-
-    def get(self, timeout=None):
-        dai = self.output.node.pipeline.dai
-        sync = self.output.node
-        assert isinstance(sync, dai.node.Sync), "frames are read from the Sync node's output"
-        self.n += 1
+    def message(self, queue):
+        sync = queue.node
+        assert isinstance(sync, self.module.node.Sync), "frames are read from the Sync node's output"
         group = {}
         for name, inp in sync.inputs.items():
             src = inp.source
             if src.kind == "camera":
-                img = dai.truth.left if src.node.socket == _Socket.CAM_B else dai.truth.right
-                seq = self.n + (1 if self.n == 4 and src.node.socket == _Socket.CAM_C else 0)
-                group[name] = _Frame(img, seq)
+                img = self.truth.left if src.node.socket == _Socket.CAM_B else self.truth.right
+                seq = queue.n + (1 if queue.n == 4 and src.node.socket == _Socket.CAM_C else 0)
+                group[name] = Frame(img, seq)
             else:
-                mm = np.where(dai.truth.hit, np.rint(dai.truth.depth * 1000.0), 0).astype(np.uint16)
-                group[name] = _Frame(mm, self.n)
-        dai.calls.append(("get", self.n))
+                mm = np.where(self.truth.hit, np.rint(self.truth.depth * 1000.0), 0).astype(np.uint16)
+                group[name] = Frame(mm, queue.n)
+        self.log.append(("queue", "get", (queue.n,)))
         return group
 
 
-def _fake_depthai(truth, rig, *, dot_projector: bool = True):
-    dai = types.ModuleType("depthai")
-    dai.truth, dai.calls, dai.created = truth, [], []
-    dai.CameraBoardSocket = _Socket
-    dai.CameraModel = types.SimpleNamespace(Perspective="perspective")
-    dai.LengthUnit = types.SimpleNamespace(METER="m")
-    dai.ImgFrame = types.SimpleNamespace(Type=types.SimpleNamespace(GRAY8="GRAY8", RGB888i="RGB888i"))
-    dai.ImgResizeMode = types.SimpleNamespace(CROP="CROP")
-    dai.XLinkDeviceState = types.SimpleNamespace(X_LINK_BOOTED="booted", X_LINK_UNBOOTED="unbooted")
-    dai.MessageQueue = types.SimpleNamespace(QueueException=type("QueueException", (Exception,), {}))
-    info = types.SimpleNamespace(name="1.1", state="unbooted", getDeviceId=lambda: "FAKE-OAK-D-PRO")
-    dai.XLinkConnection = types.SimpleNamespace(getAllConnectedDevices=lambda timeoutMs=0: [info])
-    cams = {_Socket.CAM_B: rig.cameras[0], _Socket.CAM_C: rig.cameras[1]}
+class _Handler:
+    """The device's calibration: ``cams`` {socket: PinholeCamera}."""
 
-    class Handler:
-        def hasCameraCalibration(self, s):
-            return s in cams
+    def __init__(self, dai, cams):
+        self.dai, self.cams = dai, cams
 
-        def getDistortionModel(self, s):
-            return "perspective"
+    def hasCameraCalibration(self, s):
+        return s in self.cams
 
-        def getDefaultIntrinsics(self, s):
-            c = cams[s]
-            return c.K.tolist(), c.width, c.height
+    def getDistortionModel(self, s):
+        return self.dai.CameraModel.Perspective
 
-        def getDistortionCoefficients(self, s):
-            return list(cams[s].dist) + [0.0] * (14 - len(cams[s].dist))
+    def getDefaultIntrinsics(self, s):
+        c = self.cams[s]
+        return c.K.tolist(), c.width, c.height
 
-        def getCameraExtrinsics(self, src, dst, unit=None):
-            assert unit == "m"
-            return (np.linalg.inv(cams[dst].T_world_cam) @ cams[src].T_world_cam).tolist()   # T_dst_src
+    def getDistortionCoefficients(self, s):
+        return list(self.cams[s].dist) + [0.0] * (14 - len(self.cams[s].dist))
 
-    class Device:
-        def __init__(self, found):
-            dai.calls.append(("open", found.getDeviceId()))
-
-        def getDeviceId(self):
-            return "FAKE-OAK-D-PRO"
-
-        def getConnectedCameras(self):
-            return [_Socket.CAM_A, _Socket.CAM_B, _Socket.CAM_C]
-
-        def readCalibration(self):
-            return Handler()
-
-        def setIrLaserDotProjectorIntensity(self, x, mask=-1):
-            dai.calls.append(("dots", x))
-            return dot_projector
-
-        def setIrFloodLightIntensity(self, x, mask=-1):
-            dai.calls.append(("flood", x))
-            return True
-
-        def close(self):
-            dai.calls.append(("close",))
-
-    class Node:
-        def __init__(self, pipeline):
-            self.pipeline = pipeline
-            dai.created.append(self)
-
-    class Camera(Node):
-        def build(self, socket):
-            self.socket = socket
-            return self
-
-        def requestOutput(self, size, frame_type, mode):
-            assert mode == "CROP"
-            return _Output(self, "camera", tuple(size), frame_type)
-
-    class Inputs(dict):
-        def __missing__(self, name):
-            self[name] = _Input(name)
-            return self[name]
-
-    class Sync(Node):
-        def __init__(self, pipeline):
-            super().__init__(pipeline)
-            self.inputs, self.out, self.threshold = Inputs(), _Output(self, "sync"), None
-
-        def setSyncThreshold(self, td):
-            self.threshold = td
-
-    class StereoDepth(Node):
-        PresetMode = types.SimpleNamespace(DEFAULT="default")
-
-        def build(self, left, right, preset):
-            self.sources, self.depth = (left, right), _Output(self, "depth")
-            return self
-
-        def setLeftRightCheck(self, on):
-            self.lr_check = on
-
-        def setDepthAlign(self, socket):
-            self.align = socket
-
-        def setOutputSize(self, w, h):
-            self.size = (w, h)
-
-    class Pipeline:
-        def __init__(self, device):
-            self.dai, self.running = dai, False
-
-        def create(self, cls):
-            return cls(self)
-
-        def start(self):
-            self.running = True
-            dai.calls.append(("start",))
-
-        def isRunning(self):
-            return self.running
-
-        def stop(self):
-            self.running = False
-            dai.calls.append(("stop",))
-
-    dai.Device, dai.Pipeline = Device, Pipeline
-    dai.node = types.SimpleNamespace(Camera=Camera, Sync=Sync, StereoDepth=StereoDepth)
-    return dai
+    def getCameraExtrinsics(self, src, dst, unit=None):
+        assert unit is self.dai.LengthUnit.METER
+        return (np.linalg.inv(self.cams[dst].T_world_cam) @ self.cams[src].T_world_cam).tolist()   # T_dst_src
 
 
 @pytest.fixture(scope="module")
@@ -220,8 +96,8 @@ def sim_pair():
 @pytest.fixture
 def fake(sim_pair, monkeypatch):
     rig, cap = sim_pair
-    dai = _fake_depthai(cap, rig)
-    monkeypatch.setitem(sys.modules, "depthai", dai)
+    dai = _StereoDevice(cap, rig)
+    dai.install(monkeypatch)
     return dai
 
 
@@ -246,8 +122,9 @@ def test_stereo_device_asks_for_synchronised_frames_sets_the_emitters_and_matche
     assert set(sync.inputs) == {"left", "right"}
     assert {sync.inputs["left"].source.node.socket, sync.inputs["right"].source.node.socket} == \
         {_Socket.CAM_B, _Socket.CAM_C} and sync.inputs["left"].source.node.socket == _Socket.CAM_B
-    assert all(sync.inputs[k].source.frame_type == "GRAY8" and sync.inputs[k].source.size == (W, H)
+    assert all(sync.inputs[k].source.frame_type.name == "GRAY8" and sync.inputs[k].source.size == (W, H)
                for k in ("left", "right"))
+    assert {args[2] for who, method, args in fake.log if method == "requestOutput"} == {"CROP"}
     assert _nodes(fake, "StereoDepth") == []                     # not started without --on-device
     calls = fake.calls
     assert calls.index(("dots", 0.6)) < calls.index(("start",)) and ("flood", 0.0) in calls
@@ -294,8 +171,8 @@ def test_the_comparison_summary_against_a_known_offset():
 
 def test_no_dot_projector_is_a_device_error(sim_pair, monkeypatch, tmp_path, capsys):
     rig, cap = sim_pair
-    dai = _fake_depthai(cap, rig, dot_projector=False)
-    monkeypatch.setitem(sys.modules, "depthai", dai)
+    dai = _StereoDevice(cap, rig, dot_projector=False)
+    dai.install(monkeypatch)
     assert main(["stereo", "--device", "--size", f"{W}x{H}", "--out", str(tmp_path / "o")]) == 1
     assert "--dots 0" in capsys.readouterr().err
     assert ("start",) not in dai.calls and dai.calls[-1] == ("close",)
@@ -322,7 +199,7 @@ def test_every_depthai_stereo_name_exists():
     dai = pytest.importorskip("depthai")
     from rangekit.drivers.depthai.stereo import DEPTHAI_STEREO_NAMES
 
-    from depthai_names import missing_names
+    from support.depthai_names import missing_names
 
     missing = missing_names(dai, DEPTHAI_STEREO_NAMES)
     assert not missing, f"depthai {dai.__version__} lacks {missing}"

@@ -7,7 +7,7 @@ import os
 
 import pytest
 
-from cli_runs import assert_error
+from support.cli_runs import assert_error
 
 KINDS = ("missing", "empty", "junk", "folder")
 # Each command, with {} where the bad input goes; {json} and {png} are the same input with that suffix.

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from cli_runs import Run, assert_error, cli_process
+from support.cli_runs import Run, assert_error, cli_process
 
 # Commands whose --out is a file, and whose --out is a folder (each with the other arguments it needs; the
 # inputs need not exist: the output is checked first).

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import pytest
 
-from cli_runs import assert_error
+from support.cli_runs import assert_error
 
 
 @pytest.mark.parametrize("args, mentions", [

@@ -13,7 +13,7 @@ import cv2
 import numpy as np
 import pytest
 
-from cli_runs import assert_error
+from support.cli_runs import assert_error
 
 
 def _sim(tmp_path_factory, name: str, *args) -> Path:

@@ -21,7 +21,7 @@ from contextlib import contextmanager
 
 import pytest
 
-from cli_runs import ROOT, Run, assert_error, cli_process
+from support.cli_runs import ROOT, Run, assert_error, cli_process
 
 from rangekit.errors import QUOTE_LIMIT, ConfigError, DeviceError, DeviceTimeout, ProtocolError
 

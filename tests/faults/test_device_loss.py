@@ -5,9 +5,9 @@
 - the turntable: the real Horus driver on the simulated firmware over a pty (:mod:`rangekit.sim.devices.firmware`),
   named in the rig file by a link kept to the board's pty, as udev's ``/dev/serial/by-id/...`` links are;
 - the projector: the real pygame display driver on SDL's dummy video driver;
-- the camera: the real depthai driver on a fake ``depthai`` module at the API boundary (as in
-  tests/drivers/test_depthai_controls.py) whose frames are the simulator's camera looking at what the pygame
-  window shows, with the table where the simulated board turned it. It raises what real depthai raises when
+- the camera: the real depthai driver on the fake ``depthai`` module at the API boundary
+  (tests/support/fake_depthai.py, as in tests/drivers/test_depthai_controls.py) whose frames are the simulator's
+  camera looking at what the pygame window shows, with the table where the simulated board turned it. It raises what real depthai raises when
   a device resets (RuntimeError "Communication exception ... (X_LINK_ERROR)") and finds no device while it is away.
 
 Each case: the device lost and not back in time ends the scan with exit 1 and one error line naming the device
@@ -19,28 +19,25 @@ again: the same bytes.
 
 from __future__ import annotations
 
-import datetime
 import json
 import math
-import sys
 import threading
 import time
-import types
 from dataclasses import replace
 from typing import Callable
 
 import numpy as np
 import pytest
 
-from cli_runs import assert_error
-from sessions import pngs
-from small_rigs import small_rig
+from support.cli_runs import assert_error
+from support.sessions import pngs
+from support.small_rigs import small_rig
+from support.fake_depthai import FakeDepthai, Frame
 
 from rangekit.app.acquire.acquire import acquire
 from rangekit.coded.patterns import make_pattern_spec
 from rangekit.formats.sessions.session import FRAME_FORMATS, CaptureSettings, ScanPlan, load_session
 from rangekit.rig.camera_controls import CameraControls, controls_from_capture
-from rangekit.rig.checks import DEPTHAI_SOCKETS
 from rangekit.rig.rig_file import save_rig
 from rangekit.sim import SimRig, default_scene
 from rangekit.sim.devices.firmware import start_firmware
@@ -125,110 +122,30 @@ class Oak:
         return image
 
 
-def fake_depthai(oak: Oak) -> types.ModuleType:
-    """The depthai v3 API the driver uses (DEPTHAI_NAMES), over ``oak``."""
-    dai = types.ModuleType("depthai")
+class OakDepthai(FakeDepthai):
+    """The fake depthai (tests/support/fake_depthai.py) over ``oak``: one camera, CAM_A, found while the Oak
+    answers; its frames the Oak's; a queue of a device opened before the Oak went away fails as depthai's do
+    (X_LINK_ERROR, a RuntimeError, when it reset; MessageQueue.QueueException when it was unplugged)."""
 
-    def enum(*names):     # members hashable by identity, with their name
-        return types.SimpleNamespace(**{n: type(n, (), {"name": n})() for n in names})
-    dai.CameraBoardSocket = enum(*DEPTHAI_SOCKETS)
-    dai.XLinkDeviceState = enum("X_LINK_BOOTED", "X_LINK_UNBOOTED")
-    dai.ImgFrame = types.SimpleNamespace(Type=enum("RGB888i", "GRAY8"))
-    dai.ImgResizeMode, dai.CameraExposureOffset = enum("CROP"), enum("START")
-    dai.Clock = types.SimpleNamespace(now=lambda: datetime.timedelta(seconds=time.monotonic()))
-    dai.MessageQueue = types.SimpleNamespace(QueueException=type("QueueException", (RuntimeError,), {}))
+    mxid = MXID
 
-    class CameraControl:
-        AutoWhiteBalanceMode, AutoFocusMode = enum("OFF", "AUTO"), enum("OFF", "AUTO", "CONTINUOUS_VIDEO")
+    def __init__(self, oak: Oak):
+        self.oak = oak
+        super().__init__(sockets=("CAM_A",))
 
-        def __getattr__(self, name):
-            if not name.startswith("set"):
-                raise AttributeError(name)
-            return lambda *args: self
-    dai.CameraControl = CameraControl
-    info = types.SimpleNamespace(name="1.1", state=dai.XLinkDeviceState.X_LINK_UNBOOTED, getDeviceId=lambda: MXID)
-    dai.XLinkConnection = types.SimpleNamespace(getAllConnectedDevices=lambda timeoutMs: [info] if oak.answers()
-                                                else [])
+    def answers(self) -> bool:
+        return self.oak.answers()
 
-    class Device:
-        def __init__(self, found):
-            self.generation = oak.generation
+    def opened(self, device) -> None:
+        device.generation = self.oak.generation
 
-        def getDeviceId(self):
-            return MXID
+    def check(self, queue) -> None:
+        if queue.device.generation != self.oak.generation:
+            raise (RuntimeError(X_LINK_ERROR) if self.oak.how == "reset" else
+                   self.module.MessageQueue.QueueException("MessageQueue was closed"))
 
-        def getConnectedCameras(self):
-            return [dai.CameraBoardSocket.CAM_A]
-
-        def readCalibration(self):
-            return None
-
-        def close(self):
-            pass
-    dai.Device = Device
-
-    class Frame:
-        def __init__(self, image):
-            self.image, self.t = image, dai.Clock.now()
-
-        def getWidth(self):
-            return self.image.shape[1]
-
-        def getHeight(self):
-            return self.image.shape[0]
-
-        def getFrame(self):
-            return self.image.reshape(-1)
-
-        def getTimestamp(self, offset=None):
-            return self.t
-
-    class Queue:
-        def __init__(self, device):
-            self.device = device
-
-        def check(self):
-            if self.device.generation != oak.generation:
-                raise (RuntimeError(X_LINK_ERROR) if oak.how == "reset" else
-                       dai.MessageQueue.QueueException("MessageQueue was closed"))
-
-        def get(self, timeout):
-            self.check()
-            return Frame(oak.frame())
-
-        def send(self, message):
-            self.check()
-
-    class Camera:
-        def __init__(self, pipeline):
-            self.device = pipeline.device
-
-        def build(self, socket, sensorFps=None):
-            self.initialControl = CameraControl()
-            self.inputControl = types.SimpleNamespace(createInputQueue=lambda: Queue(self.device))
-            return self
-
-        def requestOutput(self, size, kind, mode, fps=None):
-            return types.SimpleNamespace(createOutputQueue=lambda maxSize, blocking: Queue(self.device))
-    dai.node = types.SimpleNamespace(Camera=Camera)
-
-    class Pipeline:
-        def __init__(self, device):
-            self.device, self.running = device, False
-
-        def create(self, kind):
-            return kind(self)
-
-        def start(self):
-            self.running = True
-
-        def isRunning(self):
-            return self.running
-
-        def stop(self):
-            self.running = False
-    dai.Pipeline = Pipeline
-    return dai
+    def message(self, queue):
+        return Frame(self.oak.frame())
 
 
 @pytest.fixture
@@ -245,7 +162,7 @@ def rig_world(tmp_path, monkeypatch):
         path = tmp_path / "rig.json"
         save_rig(rig, path)
         oak = Oak(fw, rig)
-        monkeypatch.setitem(sys.modules, "depthai", fake_depthai(oak))
+        OakDepthai(oak).install(monkeypatch)
         return path, fw, oak
 
     yield make

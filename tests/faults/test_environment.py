@@ -16,7 +16,7 @@ import time
 import numpy as np
 import pytest
 
-from cli_runs import ROOT, assert_error, cli_process
+from support.cli_runs import ROOT, assert_error, cli_process
 
 
 def _env(**extra) -> dict:

@@ -10,7 +10,7 @@ import struct
 import numpy as np
 import pytest
 
-from cli_runs import assert_error
+from support.cli_runs import assert_error
 
 _XYZ = np.arange(12, dtype="<f4").reshape(4, 3)
 _TRI = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], "<f4").tobytes()

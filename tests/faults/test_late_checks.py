@@ -13,7 +13,7 @@ import sys
 import numpy as np
 import pytest
 
-from cli_runs import ROOT, assert_error
+from support.cli_runs import ROOT, assert_error
 
 
 def _ply_declaring(path, faces: int, binary: bool = True) -> None:

@@ -14,7 +14,7 @@ import cv2
 import numpy as np
 import pytest
 
-from cli_runs import assert_error
+from support.cli_runs import assert_error
 from rangekit.budget import (ENV_VAR, array_bytes, cgroup_memory_limit, check_budget, format_bytes, memory_budget,
                              parse_bytes, physical_memory)
 from rangekit.errors import BudgetError, BudgetUsageError, FileFormatError, UsageError

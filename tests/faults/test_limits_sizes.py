@@ -11,7 +11,7 @@ import cv2
 import numpy as np
 import pytest
 
-from cli_runs import assert_error
+from support.cli_runs import assert_error
 from rangekit.boards import MAX_SQUARES, Board
 from rangekit.camera import PinholeCamera
 from rangekit.coded.patterns import PatternSpec

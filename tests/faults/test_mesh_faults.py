@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cli_runs import assert_error
+from support.cli_runs import assert_error
 
 _RNG = np.random.default_rng(16)
 _SPHERE = _RNG.normal(size=(200, 3))

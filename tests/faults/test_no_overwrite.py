@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import pytest
 
-from cli_runs import assert_error
+from support.cli_runs import assert_error
 from rangekit.errors import UsageError
 from rangekit.formats.output_sets import claim_folder, file_owner
 

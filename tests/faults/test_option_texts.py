@@ -11,7 +11,7 @@ import cv2
 import numpy as np
 import pytest
 
-from cli_runs import assert_error
+from support.cli_runs import assert_error
 from rangekit.errors import ConfigError, MESSAGE_LIMIT, bounded_message, shown
 
 

@@ -10,7 +10,7 @@ import time
 import numpy as np
 import pytest
 
-from cli_runs import assert_error
+from support.cli_runs import assert_error
 from rangekit.errors import UsageError
 from rangekit.formats.clouds import save_cloud
 from rangekit.formats.output_sets import claim_folder, set_in

@@ -10,8 +10,8 @@ from pathlib import Path
 
 import pytest
 
-from cli_runs import assert_error, cli_process
-from sessions import copy_session
+from support.cli_runs import assert_error, cli_process
+from support.sessions import copy_session
 
 
 def _non_utf8(parent: Path, stem: bytes) -> Path:

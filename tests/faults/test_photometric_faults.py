@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 import scipy.io
 
-from cli_runs import assert_error
+from support.cli_runs import assert_error
 
 H = W = 24
 N_LIGHTS = 8

@@ -14,7 +14,7 @@ import json
 import numpy as np
 import pytest
 
-from cli_runs import assert_error
+from support.cli_runs import assert_error
 from rangekit.errors import RegistrationError
 from rangekit.formats.clouds import save_cloud
 from rangekit.formats.poses import load_poses, save_poses

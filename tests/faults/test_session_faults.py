@@ -1,6 +1,6 @@
 """Sessions nobody can corrupt, what a session holds: frames checked by SHA-256, a malformed
 session.json, the simulated object's path, a damaged view cache. (What a run does to it: test_session_runs.py.)
-Each test works on a copy of the small reference session (tests/sessions.py).
+Each test works on a copy of the small reference session (tests/support/sessions.py).
 """
 
 from __future__ import annotations
@@ -12,9 +12,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cli_runs import assert_error
-from sessions import copy_session, journal, no_leftovers, snapshot
-from small_rigs import small_rig
+from support.cli_runs import assert_error
+from support.sessions import copy_session, journal, no_leftovers, snapshot
+from support.small_rigs import small_rig
 from rangekit.app.acquire.acquire import acquire
 from rangekit.formats.sessions.session import ScanPlan, Session
 from rangekit.io import read_png, write_png

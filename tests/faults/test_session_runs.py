@@ -1,6 +1,6 @@
 """Sessions nobody can corrupt, what a run does to one: resume options that differ from the
 session, the lock (one process per session), process outputs written as a set, a full disk mid-scan.
-Each test works on a copy of the small reference session (tests/sessions.py).
+Each test works on a copy of the small reference session (tests/support/sessions.py).
 """
 
 from __future__ import annotations
@@ -16,9 +16,9 @@ from pathlib import Path
 
 import pytest
 
-from cli_runs import ROOT, assert_error, cli_process
-from sessions import copy_session, frames, journal, no_leftovers, snapshot
-from small_rigs import small_rig
+from support.cli_runs import ROOT, assert_error, cli_process
+from support.sessions import copy_session, frames, journal, no_leftovers, snapshot
+from support.small_rigs import small_rig
 from rangekit.app.acquire.acquire import acquire
 from rangekit.coded.patterns import make_pattern_spec
 from rangekit.formats.sessions.session import ScanPlan, Session

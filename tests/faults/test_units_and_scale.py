@@ -19,7 +19,7 @@ import cv2
 import numpy as np
 import pytest
 
-from cli_runs import assert_error
+from support.cli_runs import assert_error
 from rangekit.formats.clouds import save_cloud
 from rangekit.formats.poses import save_poses
 from rangekit.geometry import apply_T, axis_angle_to_R, invert_T, make_T

@@ -8,7 +8,7 @@ import cv2
 import numpy as np
 import pytest
 
-from cli_runs import assert_error
+from support.cli_runs import assert_error
 from rangekit.coded.decode import decode
 from rangekit.errors import FileFormatError
 from rangekit.formats.layouts import LAYOUTS, arrange, decoding_projector, layout_files

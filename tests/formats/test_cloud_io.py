@@ -272,7 +272,7 @@ def test_range_grid_needs_grid_size(tmp_path):
 
 @pytest.fixture(scope="module")
 def bunny():
-    from shared_data import require_shared
+    from support.shared_data import require_shared
 
     return require_shared("stanford-bunny", "bun000.ply")
 

@@ -289,7 +289,8 @@ def test_merged_ply_view_field_read_by_plyfile(tmp_path):
 
 @pytest.mark.parametrize("fmt", ["obj", "stl", "glb"])
 def test_meshes_are_written_beside_the_ply_files_in_another_format(tmp_path, fmt):
-    from rangekit.app.process.fused_outputs import MESH_FILE, WATERTIGHT_FILE, save_one
+    from rangekit.app.process.fused_outputs import save_one
+    from rangekit.formats.sessions.files import MESH_FILE, WATERTIGHT_FILE
 
     mesh = _sphere_mesh()
     save_one(tmp_path, mesh, "poisson", MESH_FILE, fmt)

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 from scipy.ndimage import binary_erosion
 
-from cli_runs import assert_error
+from support.cli_runs import assert_error
 from rangekit.coded.decode import decode
 from rangekit.errors import ConfigError, DecodeError, FileFormatError
 from rangekit.formats.capture import read_stack

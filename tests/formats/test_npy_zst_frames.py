@@ -22,7 +22,7 @@ from rangekit.image_header import read_image_header
 from rangekit.io import decode_image, read_png, write_frame
 from rangekit.npy_zst import encode_npy_zst
 from rangekit.sim import ImagingModel
-from sessions import N_VIEWS, sim
+from support.sessions import N_VIEWS, sim
 
 IMAGES = {
     "grey 8-bit": np.arange(37 * 53, dtype=np.uint64).reshape(37, 53).astype(np.uint8),

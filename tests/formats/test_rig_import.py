@@ -8,7 +8,7 @@ import cv2
 import numpy as np
 import pytest
 
-from cli_runs import assert_error
+from support.cli_runs import assert_error
 from rangekit.cli import main
 from rangekit.errors import ConfigError
 from rangekit.formats.rig_files.importers import import_rig
@@ -264,7 +264,7 @@ def test_slstudio_calibration_with_a_bad_rotation_or_a_missing_size_is_named(cli
 
 
 def test_slstudios_own_calibration_file_imports(cli, tmp_path):
-    from shared_data import require_shared
+    from support.shared_data import require_shared
 
     run = cli("rig", "import", require_shared("slstudio-skull", "calibration", "calibration.xml"), "--out", tmp_path / "rig.json")
     assert run.code == 0, run.err

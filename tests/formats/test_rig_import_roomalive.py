@@ -8,7 +8,7 @@ import cv2
 import numpy as np
 import pytest
 
-from cli_runs import assert_error
+from support.cli_runs import assert_error
 from rangekit.formats.rig_files.importers import import_rig
 from rangekit.geometry import apply_T, invert_T, make_T
 from rangekit.rig.rig_file import Rig

@@ -10,7 +10,7 @@ import cv2
 import numpy as np
 import pytest
 
-from cli_runs import assert_error
+from support.cli_runs import assert_error
 from rangekit.errors import ConfigError
 from rangekit.formats.rig_files.importers import import_rig
 from rangekit.geometry import invert_T

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from scipy.ndimage import binary_erosion
 
-from cli_runs import assert_error
+from support.cli_runs import assert_error
 from rangekit.geometry import axis_angle_to_R, make_T
 from rangekit.rig.rig_file import Rig, load_rig, save_rig
 from rangekit.sim import default_rig

@@ -1,6 +1,6 @@
 """Laser-line peak detection against synthetic lines with exactly known centres.
 
-Frames from tests/laser_lines.py: pixel-integrated Gaussian profiles (1/e^2 widths 3-8 px) at a known
+Frames from tests/support/laser_lines.py: pixel-integrated Gaussian profiles (1/e^2 widths 3-8 px) at a known
 subpixel column per row (or a known slanted or curved line for the ridge detector), Gaussian noise,
 8-bit quantisation, and a laser-off frame with its own noise.
 """
@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from laser_lines import circle, curve_line, row_line, slanted
+from support.laser_lines import circle, curve_line, row_line, slanted
 from rangekit.errors import DecodeError, InputError
 from rangekit.laser.peaks import (STATUS_DOUBLE, STATUS_OK, STATUS_SATURATED, STATUS_WEAK, detect_peaks,
                                   estimate_noise, laser_difference, require_peaks)

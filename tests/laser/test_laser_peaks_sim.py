@@ -10,7 +10,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from laser_lines import row_line
+from support.laser_lines import row_line
 from rangekit.errors import InputError
 from rangekit.laser import detect_peaks
 from rangekit.sim import ImagingModel, default_scene

@@ -184,7 +184,7 @@ def test_ridge_peaks_and_a_wrong_size_are_refused(rig, bunny_views):
 @pytest.fixture(scope="module")
 def capture(tmp_path_factory, rig):
     """``rangekit sim render --sensor laser-stereo`` of the bunny with the small rig (its rig file as --rig)."""
-    from shared_data import require_bunny
+    from support.shared_data import require_bunny
     from rangekit.cli import main
     from rangekit.rig.rig_file import save_rig
 

@@ -64,7 +64,7 @@ def test_slstudios_own_cloud_scores_the_roughness_the_issue_states():
     import pytest
     import scipy.io
 
-    from shared_data import require_shared
+    from support.shared_data import require_shared
 
     path = require_shared("slstudio-skull", "skull_gray", "pointCloud.mat")
     xyz = scipy.io.loadmat(path)["xyz"].reshape(-1, 3)          # millimetres

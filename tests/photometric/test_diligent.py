@@ -13,7 +13,7 @@ from rangekit.errors import FileFormatError
 
 @pytest.fixture(scope="module")
 def ball():
-    from shared_data import require_shared
+    from support.shared_data import require_shared
 
     return load_diligent(require_shared("diligent-ball", "filenames.txt").parent)
 

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from rangekit.errors import InputError, RegistrationError
-from bearing_networks import compare_with_translation_sync, network
+from support.bearing_networks import compare_with_translation_sync, network
 from rangekit.registration import localisability, locate_from_bearings
 
 DATA = Path(__file__).resolve().parents[1] / "fixtures"

@@ -104,7 +104,7 @@ def _bunny():
     from rangekit.formats.clouds import load_cloud
     from rangekit.formats.stanford_conf import load_stanford_conf
 
-    from shared_data import require_shared
+    from support.shared_data import require_shared
 
     bunny = require_shared("stanford-bunny", "bun.conf").parent
     names, poses = load_stanford_conf(bunny / "bun.conf")
@@ -173,7 +173,7 @@ def test_prior_chosen_pairs_register_to_ground_truth():
 def test_threads_change_no_bit_of_the_joint_refinement():
     """The directed pairs' correspondences found on 2 threads give the poses one thread gives, bit for bit, and
     they are the truth's. (The pairs refined and the clouds voxelised two at a time are taken in order too:
-    tests/app/test_streaming.py's mesh equals the batch run's.)"""
+    tests/app/scan/test_streaming.py's mesh equals the batch run's.)"""
     scans = turntable_scans(n_views=5, noise=0.0005, resolution=(640, 512), rng=3)
     prior = perturb_poses(scans.T_world_view, max_angle=np.radians(1), max_translation=0.005 * scans.diag, rng=2)
     fine = _prepare(scans.clouds, scans.diag / 200)

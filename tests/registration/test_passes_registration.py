@@ -11,7 +11,7 @@ from rangekit.rig.rig_file import turntable_prior
 from rangekit.sim import SimRig, default_scene
 from rangekit.sim.scene.passes import pass_motions, view_motions
 from rangekit.surface.cloud import PointCloud
-from small_rigs import small_rig
+from support.small_rigs import small_rig
 
 N_PER_PASS = 6
 

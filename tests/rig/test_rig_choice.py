@@ -28,7 +28,7 @@ def capture(tmp_path_factory):
     """(capture folder with the true rig.json, the true rig, a rig file with the projector 0.5 deg off)."""
     from rangekit.sim import SimRig, default_scene
     from rangekit.sim.writers.capture import write_capture
-    from small_rigs import small_projector_rig
+    from support.small_rigs import small_projector_rig
 
     rig = small_projector_rig()
     folder = tmp_path_factory.mktemp("procam")

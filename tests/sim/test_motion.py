@@ -11,7 +11,7 @@ from rangekit.errors import SceneError
 from rangekit.sim import SimRig, default_scene
 from rangekit.sim.devices.motion import Motion, capture_moving
 from rangekit.sim.scene.passes import pass_scene
-from small_rigs import small_projector_rig
+from support.small_rigs import small_projector_rig
 
 
 def test_each_kind_moves_as_documented():

@@ -8,7 +8,7 @@ import cv2
 import numpy as np
 import pytest
 
-from small_rigs import small_projector_rig
+from support.small_rigs import small_projector_rig
 
 from rangekit.app.acquire.acquire import acquire
 from rangekit.coded.reconstruct import reconstruct_view

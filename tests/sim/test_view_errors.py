@@ -13,7 +13,7 @@ from rangekit.sim import default_rig, default_scene
 from rangekit.sim.scene.raycast import cast_view
 from rangekit.sim.truth.view_errors import depth_edges, view_errors
 from rangekit.surface.cloud import PointCloud
-from small_rigs import small_rig
+from support.small_rigs import small_rig
 
 
 @pytest.fixture(scope="module")

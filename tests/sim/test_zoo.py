@@ -16,7 +16,7 @@ from rangekit.rig.rig_file import save_rig
 from rangekit.sim import default_scene, make_object
 from rangekit.sim.scene import zoo
 from rangekit.sim.scene.objects import BUILTIN_OBJECTS, OBJECT_NOTES, lumpy
-from small_rigs import small_rig
+from support.small_rigs import small_rig
 
 MM = 1e-3
 ZOO = ("thin", "bowl", "steps", "shiny", "dark")

@@ -14,7 +14,7 @@ import pytest
 from websockets.exceptions import InvalidStatus
 from websockets.sync.client import connect
 
-from ui_server import start_ui
+from support.ui_server import start_ui
 from rangekit.cli.ui import _is_loopback
 from rangekit.ui.paths import PathRefused, confined
 

@@ -8,9 +8,9 @@ from pathlib import Path
 
 import pytest
 
-from calib_tolerances import outside_tolerances
-from chromium import chromium_paths, open_page
-from ui_server import start_ui
+from support.calib_tolerances import outside_tolerances
+from support.chromium import chromium_paths, open_page
+from support.ui_server import start_ui
 
 pytestmark = pytest.mark.skipif(chromium_paths() is None, reason="headless browser missing: apt-get install "
                                 "chromium chromium-driver (`make test` installs them when run as root)")

@@ -8,7 +8,7 @@ import time
 
 import pytest
 
-from ui_server import start_ui
+from support.ui_server import start_ui
 
 
 def _finished(server, timeout: float = 180.0) -> dict:

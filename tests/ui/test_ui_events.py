@@ -11,8 +11,8 @@ import time
 import pytest
 from websockets.sync.client import connect
 
-from chromium import chromium_paths, open_page
-from ui_server import start_ui
+from support.chromium import chromium_paths, open_page
+from support.ui_server import start_ui
 
 _SEEN = ("const s = window.rangekitScanView, v = [...s.views.values()];"
          "return {taken: v.filter((x) => x.done).length, decoded: v.filter((x) => x.decoded).length, total: s.total,"

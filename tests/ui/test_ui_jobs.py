@@ -13,7 +13,7 @@ import time
 import numpy as np
 import pytest
 
-from ui_server import start_ui
+from support.ui_server import start_ui
 
 
 def _post(server, path, data=None):
@@ -204,7 +204,7 @@ def test_export_writes_each_format_of_scan_format_from_the_same_mesh(processed):
 def test_slstudios_recorded_poses_calibrate_as_the_command_line_does(tmp_path):
     """SLStudio's five recorded poses (../shared/data/slstudio-skull/calibration, copied into a sessions folder)
     calibrated from the page's form: the same rig file as ``rangekit calibrate --captures`` (to 1e-6)."""
-    from shared_data import require_shared
+    from support.shared_data import require_shared
 
     skull = require_shared("slstudio-skull")
     sessions = tmp_path / "sessions"

@@ -13,7 +13,7 @@ import time
 
 import pytest
 
-from ui_server import start_ui
+from support.ui_server import start_ui
 
 
 @pytest.fixture(scope="module")

@@ -6,8 +6,8 @@ from __future__ import annotations
 
 import pytest
 
-from chromium import chromium_paths, open_page
-from ui_server import start_ui
+from support.chromium import chromium_paths, open_page
+from support.ui_server import start_ui
 
 pytestmark = pytest.mark.skipif(chromium_paths() is None, reason="headless browser missing: apt-get install "
                                 "chromium chromium-driver (`make test` installs them when run as root)")

@@ -10,9 +10,9 @@ import time
 
 import pytest
 
-from chromium import chromium_paths, open_page
-from sessions import frame_paths
-from ui_server import start_ui
+from support.chromium import chromium_paths, open_page
+from support.sessions import frame_paths
+from support.ui_server import start_ui
 
 pytestmark = [pytest.mark.slow,
               pytest.mark.skipif(chromium_paths() is None, reason="headless browser missing: apt-get install "

@@ -13,9 +13,9 @@ import time
 
 import pytest
 
-from attacker_server import AttackerServer
-from chromium import chromium_paths, open_page
-from ui_server import start_ui
+from support.attacker_server import AttackerServer
+from support.chromium import chromium_paths, open_page
+from support.ui_server import start_ui
 
 pytestmark = pytest.mark.skipif(chromium_paths() is None, reason="headless browser missing: apt-get install "
                                 "chromium chromium-driver (`make test` installs them when run as root)")

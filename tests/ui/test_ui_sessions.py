@@ -10,7 +10,7 @@ import sys
 
 import pytest
 
-from ui_server import start_ui
+from support.ui_server import start_ui
 
 
 @pytest.fixture(scope="module")

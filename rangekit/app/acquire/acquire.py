@@ -50,6 +50,7 @@ from rangekit.app.acquire.reconnect import MAX_RETAKES, reconnected
 from rangekit.io import atomic_write_bytes, atomic_write_json, fsync_folder
 from rangekit.progress import LOGGER, call_progress
 from rangekit.rig.rig_file import Rig, save_rig
+from rangekit.formats.sessions.files import PATTERNS_FILE, RIG_FILE, SESSION_FILE, VIEW_FILE, partial_view_folder
 
 __all__ = ["acquire"]
 
@@ -119,12 +120,12 @@ def acquire(devices: RigDevices, rig: Rig, spec: PatternSpec, out_dir: str | Pat
         controls = replace(controls, allow_auto_exposure=True)
     require_locked(controls, where="rig file", method="laser-line scanning" if isinstance(spec, LaserSequence)
                    else "coded light")
-    if (out / "session.json").exists():
+    if (out / SESSION_FILE).exists():
         if not resume:
-            raise ConfigError(f"{out}: already holds a session (session.json); use resume to continue it or "
+            raise ConfigError(f"{out}: already holds a session ({SESSION_FILE}); use resume to continue it or "
                               "choose another folder")
     elif resume:
-        raise ConfigError(f"{out}: no session.json to resume")
+        raise ConfigError(f"{out}: no {SESSION_FILE} to resume")
     else:
         try:
             out.mkdir(parents=True, exist_ok=True)
@@ -145,14 +146,14 @@ def _resume_hint(out: Path, n_done: int) -> str:
 
 
 def _new_session(out: Path, plan, spec, rig, capture, simulator, hardware, files: dict) -> Session:
-    if (out / "session.json").exists():  # another process made it meanwhile
-        raise ConfigError(f"{out}: already holds a session (session.json); choose another folder")
+    if (out / SESSION_FILE).exists():  # another process made it meanwhile
+        raise ConfigError(f"{out}: already holds a session ({SESSION_FILE}); choose another folder")
     session = Session.new(out, plan, spec, rig, capture=capture, simulator=simulator, hardware=hardware)
     try:
         for name, data in files.items():
             atomic_write_bytes(out / name, data)
-        save_rig(rig, out / "rig.json")
-        atomic_write_json(out / "patterns.json", spec.to_dict())
+        save_rig(rig, out / RIG_FILE)
+        atomic_write_json(out / PATTERNS_FILE, spec.to_dict())
         session.save()   # last: a folder with session.json has everything else
     except OSError as exc:
         raise StorageError(f"{getattr(exc, 'filename', None) or out}: cannot write the new session: "
@@ -174,7 +175,7 @@ def _acquire(devices, rig, spec, out: Path, plan, resume, capture, simulator, ha
                               "resume it with the same settings")
         unverified = verify_views(session)
         if unverified:
-            call_progress(progress, f"{', '.join(unverified)}: no frame checksums in session.json (written by an "
+            call_progress(progress, f"{', '.join(unverified)}: no frame checksums in {SESSION_FILE} (written by an "
                                     "older rangekit); their frames are not verified")
     else:
         session = _new_session(out, plan, spec, rig, capture, simulator, hardware, files)
@@ -288,7 +289,7 @@ def _fail(out, k, exc: FrameError, done) -> None:
     """Raise the error of ``exc.step`` of view ``exc.view`` as acquisition states it; the unfinished views'
     partial folders (that view's and the current one, ``k``) are removed."""
     for index in {exc.view, k} - {-1}:
-        shutil.rmtree(out / f"view_{index:03d}.partial", ignore_errors=True)
+        shutil.rmtree(partial_view_folder(out, index), ignore_errors=True)
     where, error = f"view {exc.view} (turntable {np.degrees(exc.angle):.1f} deg), {exc.step}", exc.error
     if isinstance(error, DeviceError):
         raise type(error)(f"{where}: {error}; {_resume_hint(out, sum(done))}") from error
@@ -318,7 +319,7 @@ def _view(run: _Run, k: int, angle: float, state: dict, done: list, writer: Fram
     is taken again after a device came back, its light first put in a known state (``light.reset()``)."""
     out, devices, light, names, files = run.out, run.devices, run.light, run.spec.frame_names, run.files
     final = view_folder(out, k)
-    partial = out / f"view_{k:03d}.partial"
+    partial = partial_view_folder(out, k)
     t0 = time.time()
     sleep = getattr(devices, "sleep", time.sleep)    # the simulator's virtual clock, else the real one
     real = not getattr(getattr(devices, "clock", None), "virtual", False)   # its sleeps take real time
@@ -364,16 +365,16 @@ def _view(run: _Run, k: int, angle: float, state: dict, done: list, writer: Fram
         raise FrameError(k, angle, step, target, exc, device=device) from exc
 
     def finish(sha256: dict) -> None:
-        step, target = "writing view.json", partial
+        step, target = f"writing {VIEW_FILE}", partial
         try:
             # Each view is a self-contained capture folder (rangekit reconstruct view_NNN works on it).
-            atomic_write_json(partial / "patterns.json", run.spec.to_dict())
-            save_rig(run.rig, partial / "rig.json")
-            atomic_write_json(partial / "view.json", {"index": k, "angle_rad": float(angle), "started": t0,
+            atomic_write_json(partial / PATTERNS_FILE, run.spec.to_dict())
+            save_rig(run.rig, partial / RIG_FILE)
+            atomic_write_json(partial / VIEW_FILE, {"index": k, "angle_rad": float(angle), "started": t0,
                                                       "finished": time.time(), "n_frames": len(sha256)})
             partial.rename(final)
             fsync_folder(out)
-            step, target = "recording the view", out / "session.json"
+            step, target = "recording the view", out / SESSION_FILE
             state["session"] = state["session"].with_view_done(k, sha256)
             state["session"].save()
         except OSError as exc:

@@ -30,6 +30,7 @@ from rangekit._runtime.executor import worker_count
 from rangekit.app.process.options import ProcessOptions
 from rangekit.errors import ConfigError, RangekitError
 from rangekit.progress import call_progress
+from rangekit.formats.sessions.files import CLOUD_INFO_FILE, SESSION_FILE
 
 __all__ = ["WORKER_ENV", "BatchResult", "SchedulerUnreachable", "SessionOutcome", "ViewDone", "decode_view_task",
            "finish_session_task", "process_sessions"]
@@ -161,13 +162,13 @@ def decode_view_task(folder: str, index: int, method: str = "auto", table_margin
     session = Session.load(folder)
     view = next((v for v in session.done_views if v.index == index), None)
     if view is None:
-        raise ConfigError(f"{Path(folder) / 'session.json'}: expected view {index} done, found it "
+        raise ConfigError(f"{Path(folder) / SESSION_FILE}: expected view {index} done, found it "
                           f"{'pending' if any(v.index == index for v in session.views) else 'missing'}")
     verify_views(session, views=[view], workers=1, contents=False)   # the contents as the frames are read
-    stamp = _stamp(view.folder / "cloud.json")
+    stamp = _stamp(view.folder / CLOUD_INFO_FILE)
     cloud, _ = view_cloud(view, session.pattern, session.rig, cache_settings(session, method, table_margin, max_motion),
                           session.capture.full_scale, table_transform(session.rig), table_margin, session)
-    done = ViewDone(view.folder.name, len(cloud), _stamp(view.folder / "cloud.json") != stamp)
+    done = ViewDone(view.folder.name, len(cloud), _stamp(view.folder / CLOUD_INFO_FILE) != stamp)
     del cloud
     release_free_memory()   # the view's stack and maps: a worker holds one view at a time
     return done
@@ -237,8 +238,8 @@ def _view_indices(folder: Path) -> list[int] | None:
     """The done views of a coded-light session (None: a laser session, processed in one task)."""
     from rangekit.formats.sessions.session import Session
 
-    if not (folder / "session.json").is_file():
-        raise ConfigError(f"{folder}: not a session folder (no session.json)")
+    if not (folder / SESSION_FILE).is_file():
+        raise ConfigError(f"{folder}: not a session folder (no {SESSION_FILE})")
     session = Session.load(folder)
     return None if session.is_laser else [v.index for v in session.done_views]
 

@@ -18,6 +18,7 @@ from rangekit.rig.camera_controls import controls_from_capture
 from rangekit.io import atomic_write_json, write_png
 from rangekit.rig.rig_edits import write_capture_fields
 from rangekit.rig.rig_file import Rig, load_rig, save_rig
+from rangekit.formats.sessions.files import RIG_FILE
 
 __all__ = ["check_simulated", "check_hardware", "write_check", "write_pattern_delay", "simulated_check_rig"]
 
@@ -81,6 +82,6 @@ def write_check(out: str | Path, result: CheckResult, images: dict, full_scale: 
                                                  MIN_CONFIDENCE, result.stats))
     names = ["check.json", "check.png"]
     if rig is not None:
-        save_rig(rig, folder / "rig.json")
-        names.append("rig.json")
+        save_rig(rig, folder / RIG_FILE)
+        names.append(RIG_FILE)
     return names

@@ -19,6 +19,7 @@ from rangekit._runtime.arguments import check_callable, check_choice, check_path
 from rangekit.errors import naming
 from rangekit.io import atomic_save_npy, write_png
 from rangekit.progress import call_progress
+from rangekit.formats.sessions.files import MESH_FILE
 
 __all__ = ["photometric_folder"]
 
@@ -70,5 +71,5 @@ def photometric_folder(folder: str | Path, out: str | Path, *, method: str = "ro
     albedo = np.nan_to_num(res.albedo if res.albedo.ndim == 2 else res.albedo.mean(axis=2))
     scale = np.percentile(albedo[data.mask], 99) if data.mask.any() else 1.0
     write_png(out / "albedo.png", np.rint(np.clip(albedo / max(scale, 1e-12), 0, 1) * 255).astype(np.uint8))
-    save_mesh(out / "mesh.ply", TriangleMesh(V, F), units="pixels (x, y on the image grid, z integrated depth)")
+    save_mesh(out / MESH_FILE, TriangleMesh(V, F), units="pixels (x, y on the image grid, z integrated depth)")
     return out

@@ -25,6 +25,7 @@ from rangekit.io import atomic_save_npy, read_png, write_png
 from rangekit.progress import call_progress
 from rangekit.rig.plausibility import check_stereo_baseline
 from rangekit.rig.rig_file import load_rig
+from rangekit.formats.sessions.files import CLOUD_FILE, RIG_FILE
 
 __all__ = ["DepthRun", "tof_depth_files", "stereo_depth_files", "write_depth_outputs"]
 
@@ -152,7 +153,7 @@ def dots_depth_folder(folder: str | Path, *, rig_file: str | Path | None = None,
     t0 = time.perf_counter()
     folder = Path(folder)
     cap = load_dots_capture(folder, load_rig(rig_file) if rig_file else None)
-    with naming(rig_file or folder / "rig.json"):  # rectification refuses a rig without a usable baseline
+    with naming(rig_file or folder / RIG_FILE):  # rectification refuses a rig without a usable baseline
         res = dots_depth(cap.image, cap.reference, cap.rig.cameras[0], cap.rig.projector, cap.reference_distance,
                          where=str(folder / "reference.png"))
     dmap = res.disparity
@@ -185,6 +186,6 @@ def write_depth_outputs(out: str | Path, depth: np.ndarray, points: np.ndarray, 
         atomic_save_npy(out / "confidence.npy", np.asarray(confidence, dtype=np.float32))
         write_png(out / "confidence.png", np.rint(np.clip(confidence, 0, 1) * 255).astype(np.uint8))
         names += ["confidence.npy", "confidence.png"]
-    save_cloud(out / "cloud.ply", PointCloud(np.asarray(points, dtype=np.float64).reshape(-1, 3)))
-    names.append("cloud.ply")
+    save_cloud(out / CLOUD_FILE, PointCloud(np.asarray(points, dtype=np.float64).reshape(-1, 3)))
+    names.append(CLOUD_FILE)
     return names

@@ -24,6 +24,7 @@ from rangekit.errors import ConfigError, FileFormatError, InputError, naming
 from rangekit.rig.rig_file import Rig, load_rig
 from rangekit.stereo.coded_pair import PairReconstruction
 from rangekit.surface.cloud import PointCloud
+from rangekit.formats.sessions.files import PATTERNS_FILE, RIG_FILE
 
 __all__ = ["CheckedReconstruction", "reconstruct", "reconstruct_capture", "reconstruct_checked", "reconstruct_tool_capture"]
 
@@ -69,13 +70,13 @@ def reconstruct_capture(images_or_folder, rig: Rig | str | Path | None = None,
     rig = rig if rig is not None else folder_rig
     if rig is None or rig.projector is None:
         raise ConfigError(f"{where}: no rig with a projector; give rig= (a Rig or a rig file"
-                          f"{', or put rig.json in the folder' if folder_spec is not None or where != 'images' else ''})")
+                          f"{', or put ' + RIG_FILE + ' in the folder' if folder_spec is not None or where != 'images' else ''})")
     if isinstance(pattern, str):
         pattern = make_pattern_spec(pattern, (rig.projector.width, rig.projector.height))
     spec = pattern if pattern is not None else folder_spec
     if spec is None:
         raise ConfigError(f"{where}: no pattern set; give pattern= (a PatternSpec or a method name) or put "
-                          "patterns.json in the folder")
+                          f"{PATTERNS_FILE} in the folder")
     with naming(where):
         return reconstruct_view(images, spec, rig.camera, rig.projector, subpixel=subpixel, method=method,
                                 full_scale=full_scale, response=rig.projector_response, motion=True,
@@ -92,7 +93,7 @@ def reconstruct_checked(capture, rigs: Sequence[tuple[str, Rig]], *, subpixel: b
 
     images, _, spec, full_scale, where = _images(capture)
     if spec is None:
-        raise ConfigError(f"{where}: no patterns.json; give the pattern set")
+        raise ConfigError(f"{where}: no {PATTERNS_FILE}; give the pattern set")
     with naming(where):
         dec = decode(images, spec, subpixel=subpixel, full_scale=full_scale, response=rigs[0][1].projector_response,
                      motion=True, max_motion=max_motion)

@@ -20,6 +20,7 @@ from rangekit.registration.multiview import MultiViewOptions, MultiViewResult, r
 from rangekit.registration.view_graph import ViewsCutOff
 from rangekit.registration.pairs import all_pairs, nearest_and_long_links
 from rangekit.rig.rig_file import table_frame, turntable_prior
+from rangekit.formats.sessions.files import MERGED_FILE, MESH_FILE, POSES_FILE
 
 __all__ = ["parse_init", "RegisterReport", "register"]
 
@@ -79,7 +80,7 @@ def register(paths: Sequence[str | Path], out_dir: str | Path, *, init: str | No
     for k, p in enumerate(paths):
         check_path(f"paths[{k}]", p, what="a cloud file")
     check_path("out_dir", out_dir, what="a folder")
-    check_text("init", init, what="prior poses (a poses.json, a Stanford .conf or turntable:...)", optional=True)
+    check_text("init", init, what=f"prior poses (a {POSES_FILE}, a Stanford .conf or turntable:...)", optional=True)
     check_number("voxel", voxel, lo=0, lo_open=True, unit="metres", optional=True)
     check_bool("mesh", mesh)
     check_callable("progress", progress)
@@ -113,8 +114,8 @@ def register(paths: Sequence[str | Path], out_dir: str | Path, *, init: str | No
         quoted = lambda ps: " ".join(shlex.quote(str(p)) for p in ps)  # noqa: E731
         alone = [paths[k] for k in cut.views]
         raise RegistrationError(
-            f"{cut}. Wrote the other {len(keep)} views to {out} (poses.json, merged.ply"
-            f"{', mesh.ply' if report.mesh_path else ''}). To retry with every pair: rangekit register "
+            f"{cut}. Wrote the other {len(keep)} views to {out} ({POSES_FILE}, {MERGED_FILE}"
+            f"{', ' + MESH_FILE if report.mesh_path else ''}). To retry with every pair: rangekit register "
             f"{quoted(paths)} --neighbours 0 --out {shlex.quote(str(out) + '-all')}"
             + (f"; to register those on their own: rangekit register {quoted(alone)} --out "
                f"{shlex.quote(str(out) + '-rest')}" if len(alone) > 1 else "")) from None
@@ -132,9 +133,9 @@ def _write(out: Path, paths: list[Path], clouds: list[PointCloud], res: MultiVie
               # Edges whose overlap left motions free: the prior was kept along them (not measured).
               "prior_kept": [f"{e.i}-{e.j}: {e.unconstrained}" for e in edges_of[k] if e.unconstrained]}
              for k in range(len(paths))]
-    save_poses(out / "poses.json", [str(p) for p in paths], res.T_world_view, extra=extra)
+    save_poses(out / POSES_FILE, [str(p) for p in paths], res.T_world_view, extra=extra)
     merged = merge_clouds(clouds, res.T_world_view)
-    save_cloud(out / "merged.ply", merged)
+    save_cloud(out / MERGED_FILE, merged)
     mesh_path = None
     if mesh:
         from rangekit.formats.meshes import save_mesh
@@ -142,9 +143,9 @@ def _write(out: Path, paths: list[Path], clouds: list[PointCloud], res: MultiVie
         from rangekit.surface.fusion import poisson_mesh
 
         say("meshing (screened Poisson)")
-        with naming(out / "merged.ply"):  # the merged scans: too flat or too few to close (use --no-mesh)
+        with naming(out / MERGED_FILE):  # the merged scans: too flat or too few to close (use --no-mesh)
             m = poisson_mesh(merged if merged.normals is not None
                              else oriented_normals_cloud(merged.points, voxel=voxel))
-        mesh_path = out / "mesh.ply"
+        mesh_path = out / MESH_FILE
         save_mesh(mesh_path, m)
     return RegisterReport([str(p) for p in paths], res, merged, mesh_path)

@@ -22,6 +22,7 @@ from rangekit.errors import naming
 from rangekit.io import atomic_save_npy, write_png
 from rangekit.progress import call_progress
 from rangekit.rig.rig_file import Rig, save_rig
+from rangekit.formats.sessions.files import RIG_FILE
 
 __all__ = ["DepthComparison", "LiveStereoRun", "compare_depths", "stereo_depth_device"]
 
@@ -88,7 +89,7 @@ def stereo_depth_device(out: str | Path, *, device_id: str | None = None, size: 
     write_png(out / "right.png", pair.right)
     save_rig(Rig(cameras=(pair.left_camera, pair.right_camera),
                  devices={"depthai": {"device_id": pair.device_id, "sockets": ["CAM_B", "CAM_C"],
-                                      "size": [pair.left.shape[1], pair.left.shape[0]]}}), out / "rig.json")
+                                      "size": [pair.left.shape[1], pair.left.shape[0]]}}), out / RIG_FILE)
     opts = {} if num_disparities is None else {"num_disparities": num_disparities}
     with naming(f"depthai {pair.device_id} calibration"):
         res = stereo_depth(pair.left, pair.right, pair.left_camera, pair.right_camera, method=method,
@@ -96,7 +97,7 @@ def stereo_depth_device(out: str | Path, *, device_id: str | None = None, size: 
     ok = np.isfinite(res.depth)
     call_progress(progress, f"{res.disparity.method}: baseline {res.rectification.baseline * 1e3:.1f} mm; depth for "
                             f"{ok.mean():.1%} of the left image in {time.perf_counter() - t0:.1f} s")
-    names = ["left.png", "right.png", "rig.json"]
+    names = ["left.png", "right.png", RIG_FILE]
     names += write_depth_outputs(out, res.depth, res.points, confidence=res.confidence)
     comparison = None
     if pair.device_depth is not None:

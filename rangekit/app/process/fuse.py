@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from rangekit.app.process.decode import DecodedViews
-from rangekit.app.process.fused_outputs import MESH_FILE, WATERTIGHT_FILE, save_one
+from rangekit.app.process.fused_outputs import save_one
 from rangekit.app.process.options import POISSON_POINTS, ProcessOptions
 from rangekit.app.process.register import RegisteredViews
 from rangekit.formats.clouds import save_cloud
@@ -26,6 +26,7 @@ from rangekit.geometry import compose
 from rangekit.rig.rig_file import Rig
 from rangekit.surface.cloud import PointCloud, merge_clouds, view_index
 from rangekit.surface.mesh import TriangleMesh
+from rangekit.formats.sessions.files import MERGED_FILE, MESH_FILE, WATERTIGHT_FILE
 
 __all__ = ["CHILD_MIN_POINTS", "POISSON_POINTS", "CHILD_IMPORTS", "FusedViews", "FusionInput", "fusion_input",
            "large_poisson", "surfaces", "save_merged", "observed_rule", "close", "save_observed", "save_closed"]
@@ -98,7 +99,7 @@ def save_merged(folder, fusion: FusionInput, registered: RegisteredViews) -> Non
     """Write ``merged.ply`` (every view's points in the registered frame, each with its ``view``) and let the
     merged cloud go: not kept beside Poisson's octree and the evaluator (2M points, 130 MB)."""
     clouds = registered.decoded.clouds
-    save_cloud(folder / "merged.ply", fusion.merged, fields={"view": view_index(clouds)})
+    save_cloud(folder / MERGED_FILE, fusion.merged, fields={"view": view_index(clouds)})
     fusion.merged = None
 
 

@@ -21,12 +21,11 @@ from rangekit.formats.meshes import MESH_FORMATS
 from rangekit.formats.sessions.summary import Accuracy, ClosedAccuracy, MeshFigures
 from rangekit.surface.mesh import TriangleMesh
 from rangekit.surface.observed import FusedMeshes
+from rangekit.formats.sessions.files import MESH_FILE, WATERTIGHT_FILE
 
-__all__ = ["MESH_FILE", "WATERTIGHT_FILE", "MESH_EXPORT_FORMATS", "export_meshes", "mesh_info", "save_fused",
+__all__ = ["MESH_EXPORT_FORMATS", "export_meshes", "mesh_info", "save_fused",
            "save_one", "evaluate_fused", "evaluate_observed", "with_closed"]
 
-MESH_FILE = "mesh.ply"
-WATERTIGHT_FILE = "mesh_watertight.ply"
 #: ``--format`` of scan and process: the mesh files' format (PLY always written; the others beside it): the
 #: mesh writers of rangekit.formats.meshes.MESH_FORMATS, the one list.
 MESH_EXPORT_FORMATS = tuple(suffix[1:] for suffix in MESH_FORMATS)

@@ -42,6 +42,8 @@ from rangekit.io import atomic_write_json
 from rangekit.progress import call_progress
 from rangekit.rig.rig_file import turntable_prior
 from rangekit.surface.cloud import PointCloud
+from rangekit.formats.sessions.files import (MERGED_FILE, MESH_FILE, POSES_FILE, REPORT_FILE, SUMMARY_FILE,
+                                             WATERTIGHT_FILE)
 
 __all__ = ["LaserProfiles", "laser_profiles", "oriented_profiles", "profile_spacing", "process_laser", "SATURATED_SHARE"]
 
@@ -204,7 +206,7 @@ def process_laser(session: Session, options: ProcessOptions, evaluate, runner,
     (:class:`rangekit.app.runner.Runner`), each mesh as :class:`rangekit.app.events.MeshReady`).
     ``evaluate(mesh, angles, cloud=points)`` also measures the merged cloud."""
     from rangekit.app.events import MeshReady, Stage
-    from rangekit.app.process.fused_outputs import MESH_FILE, WATERTIGHT_FILE, evaluate_fused, save_fused
+    from rangekit.app.process.fused_outputs import evaluate_fused, save_fused
     from rangekit.surface.fusion import poisson_meshes
 
     out, fusion, table_margin, progress = session.folder, options.fusion, options.table_margin, runner.progress
@@ -214,13 +216,13 @@ def process_laser(session: Session, options: ProcessOptions, evaluate, runner,
     with timer.stage(Stage.PROFILES):
         profiles = laser_profiles(session, method=method, table_margin=table_margin, progress=progress,
                                   map_steps=runner.map_views)
-        save_poses(out / "poses.json", profiles.names, profiles.T_world_view,
+        save_poses(out / POSES_FILE, profiles.names, profiles.T_world_view,
                    world=f"frame of {profiles.names[0]} (the rig's world at its turntable angle); each step "
                          "placed by its turntable angle")
     with timer.stage(Stage.FUSE):
         call_progress(progress, f"normals of {len(profiles.cloud):,} points")
         merged = oriented_profiles(profiles)
-        save_cloud(out / "merged.ply", merged)
+        save_cloud(out / MERGED_FILE, merged)
         call_progress(progress, f"fusing {len(merged):,} points (poisson)")
         depth, most = options.poisson(laser=True)      # the laser's own by default: depth 9, 400k points
         step = max(1, len(merged) // most)
@@ -250,8 +252,8 @@ def process_laser(session: Session, options: ProcessOptions, evaluate, runner,
         with timer.stage(Stage.REPORT):
             from rangekit.app.laser.report import write_laser_report
 
-            call_progress(progress, "writing report.html")
+            call_progress(progress, f"writing {REPORT_FILE}")
             write_laser_report(out, result, profiles=profiles, merged=merged, mesh=mesh, session=session, truth=truth,
                                progress=progress, watertight=fused.watertight)
-    atomic_write_json(out / "summary.json", result.to_dict())   # last: the set is complete
+    atomic_write_json(out / SUMMARY_FILE, result.to_dict())   # last: the set is complete
     return result

@@ -43,7 +43,7 @@ from rangekit.app.process.decode import DecodedViews, decode
 from rangekit.app.process.evaluate import Evaluator, measure_closed, measure_views
 from rangekit.app.process.fuse import (CHILD_IMPORTS, FusedViews, close, fusion_input, large_poisson, observed_rule,
                                        save_closed, save_merged, save_observed, summary_line, surfaces)
-from rangekit.app.process.fused_outputs import MESH_FILE, WATERTIGHT_FILE, evaluate_observed
+from rangekit.app.process.fused_outputs import evaluate_observed
 from rangekit.app.process.options import ProcessOptions
 from rangekit.app.process.register import RegisteredViews, evaluator_angles, register
 from rangekit.app.process.view_cache import cache_settings, table_transform, view_clouds
@@ -54,6 +54,7 @@ from rangekit.formats.sessions.lock import session_lock
 from rangekit.formats.sessions.session import Session
 from rangekit.formats.sessions.summary import ProcessResult
 from rangekit.io import atomic_write_json, fsync_folder
+from rangekit.formats.sessions.files import MESH_FILE, REPORT_FILE, SESSION_FILE, SUMMARY_FILE, WATERTIGHT_FILE
 
 __all__ = ["process_session"]
 
@@ -89,8 +90,8 @@ def process_session(session: Session | str | Path, options: ProcessOptions | Non
     runner = Runner(on_event, plan=plan, memo=memo)
     try:
         with failures_announced(runner.emit):
-            if not (folder / "session.json").is_file():
-                raise ConfigError(f"{folder}: not a session folder (no session.json)")
+            if not (folder / SESSION_FILE).is_file():
+                raise ConfigError(f"{folder}: not a session folder (no {SESSION_FILE})")
         with failures_announced(runner.emit), session_lock(folder), one_blas_thread(), ExitStack() as children:
             if not isinstance(session, Session):    # (one BLAS thread: thin products, rangekit._runtime.threads)
                 session = Session.load(folder)
@@ -140,7 +141,7 @@ def _process(session: Session, options: ProcessOptions, evaluate: Evaluator | No
                            options=options.to_dict())
     if options.report:
         _report(result, registered, fused, session, truth_mesh, runner, agreement[0].result())
-    atomic_write_json(session.folder / "summary.json", result.to_dict())   # last: the set is complete
+    atomic_write_json(session.folder / SUMMARY_FILE, result.to_dict())   # last: the set is complete
     return result
 
 
@@ -225,9 +226,9 @@ def _start(session: Session, runner: Runner) -> None:
                           "(resume the scan)")
     unverified = verify_views(session, contents=False)
     if unverified:
-        runner.say(f"{', '.join(unverified)}: no frame checksums in session.json (written by an older rangekit); "
+        runner.say(f"{', '.join(unverified)}: no frame checksums in {SESSION_FILE} (written by an older rangekit); "
                    "their frames are not verified")
-    stale = out / "summary.json"
+    stale = out / SUMMARY_FILE
     if stale.exists():
         stale.unlink()
         fsync_folder(out)
@@ -254,7 +255,7 @@ def _report(result: ProcessResult, registered: RegisteredViews, fused: FusedView
 
     d = registered.decoded
     with runner.stage(Stage.REPORT):
-        runner.say("writing report.html")
+        runner.say(f"writing {REPORT_FILE}")
         runner.release_memory()   # the evaluation's temporaries
         write_report(session.folder, result, clouds=d.clouds, maps=None, rows=d.rows,
                      merged=merge_clouds(d.clouds, registered.T_world_view), mesh=fused.observed, session=session,

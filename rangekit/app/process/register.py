@@ -14,6 +14,7 @@ from rangekit.formats.poses import save_poses
 from rangekit.formats.sessions.session import Session, SessionView
 from rangekit.formats.sessions.summary import Edge
 from rangekit.rig.rig_file import turntable_prior
+from rangekit.formats.sessions.files import POSES_FILE
 
 if TYPE_CHECKING:
     from rangekit.registration.ahead import RegistrationAhead
@@ -107,7 +108,7 @@ def register(decoded: DecodedViews, session: Session, *, progress=None, map_pair
             from rangekit.progress import LOGGER
 
             LOGGER.warning(note)
-    save_poses(session.folder / "poses.json", decoded.names, T,
+    save_poses(session.folder / POSES_FILE, decoded.names, T,
                world=f"frame of {views[0].folder.name} (the rig's world at its turntable angle)",
                extra=None if view_passes is None else [{"pass": p} for p in view_passes])
     edges = _edge_rows(res)

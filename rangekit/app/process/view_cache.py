@@ -34,6 +34,7 @@ from rangekit.formats.ply_write import write_cloud_ply
 from rangekit.formats.sessions.check import file_sha256, read_view_stack, verify_views
 from rangekit.formats.sessions.view_maps import ViewMaps
 from rangekit.surface.cloud import PointCloud
+from rangekit.formats.sessions.files import CLOUD_FILE, CLOUD_INFO_FILE, MAPS_FILE
 
 __all__ = ["ViewMaps", "cache_settings", "table_transform", "view_cloud", "view_clouds", "white_frame_index"]
 
@@ -73,14 +74,14 @@ def _read_cache(v: SessionView, settings: dict, shape: tuple[int, int]) -> tuple
     """The view's cached cloud and maps when ``cloud.json`` holds these settings and its files are intact
     (recorded SHA-256s, arrays of the camera's ``shape``); None otherwise (the cache is rebuilt)."""
     try:
-        meta = read_json(v.folder / "cloud.json", what="view cache")
+        meta = read_json(v.folder / CLOUD_INFO_FILE, what="view cache")
         if not isinstance(meta, dict) or meta.get("settings") != settings:
             return None
         sha = meta.get("sha256")
         if not isinstance(sha, dict) or any(file_sha256(v.folder / name) != sha.get(name) for name in _CACHE_FILES):
             return None
-        cloud = load_cloud(v.folder / "cloud.ply")
-        with np.load(v.folder / "maps.npz") as npz:
+        cloud = load_cloud(v.folder / CLOUD_FILE)
+        with np.load(v.folder / MAPS_FILE) as npz:
             maps = {k: np.asarray(npz[k], dtype=np.float32) for k in _MAP_NAMES}
     except (RangekitError, OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):
         return None
@@ -89,7 +90,7 @@ def _read_cache(v: SessionView, settings: dict, shape: tuple[int, int]) -> tuple
     return cloud, maps
 
 
-_CACHE_FILES = ("cloud.ply", "maps.npz")
+_CACHE_FILES = (CLOUD_FILE, MAPS_FILE)
 _MAP_NAMES = ("proj_col", "confidence", "depth", "sigma")  # a cache without one of them is rebuilt
 
 
@@ -210,10 +211,10 @@ def _decode_view(v: SessionView, stacks, white_image: np.ndarray, spec: PatternS
     maps = ViewMaps(rec.decoded.proj_col.astype(np.float32), rec.decoded.confidence.astype(np.float32), depth,
                     white_image, sigma)
     # Each file's SHA-256 taken from the bytes as they are written: nothing is read back.
-    sha256 = {"cloud.ply": atomic_write_with(v.folder / "cloud.ply", lambda f: write_cloud_ply(f, c), sha256=True),
+    sha256 = {CLOUD_FILE: atomic_write_with(v.folder / CLOUD_FILE, lambda f: write_cloud_ply(f, c), sha256=True),
               # uncompressed: deflating the float maps cost 0.18 CPU-s a view (21 MB instead of 4 MB on disk)
-              "maps.npz": atomic_save_npz(v.folder / "maps.npz", level=0, sha256=True, proj_col=maps.proj_col,
+              MAPS_FILE: atomic_save_npz(v.folder / MAPS_FILE, level=0, sha256=True, proj_col=maps.proj_col,
                                           confidence=maps.confidence, depth=depth, sigma=sigma)}
     # cloud.json last, with the others' checksums: it vouches for a complete cache.
-    atomic_write_json(v.folder / "cloud.json", {"settings": settings, "points": len(c), "sha256": sha256})
+    atomic_write_json(v.folder / CLOUD_INFO_FILE, {"settings": settings, "points": len(c), "sha256": sha256})
     return c, maps

@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING, Callable, Sequence
 from rangekit.app.report.context import ReportContext
 from rangekit.app.report.panels import PANELS
 from rangekit.io import atomic_write_text
+from rangekit.formats.sessions.files import REPORT_FILE
 
 if TYPE_CHECKING:
     from rangekit.formats.sessions.view_maps import ViewMaps
@@ -83,6 +84,6 @@ def write_page(out: Path, sections: Sequence[str]) -> Path:
             f"<meta http-equiv='Content-Security-Policy' content=\"{CSP}\">"
             f"<title>rangekit report: {html.escape(out.name)}</title><style>{_CSS}</style></head><body>"
             + "".join(sections) + "</body></html>")
-    path = out / "report.html"
+    path = out / REPORT_FILE
     atomic_write_text(path, page)
     return path

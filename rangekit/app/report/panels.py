@@ -17,6 +17,7 @@ import numpy as np
 from rangekit.app.report.context import INVENTED_COLOUR, OBSERVED_COLOUR, SIDE_NAMES, SIDES, ReportContext
 from rangekit.app.report.figures import crop as _crop, figure as _img
 from rangekit.progress import call_progress
+from rangekit.formats.sessions.files import MESH_FILE, WATERTIGHT_FILE
 
 if TYPE_CHECKING:
     from rangekit.formats.sessions.session import Session
@@ -61,9 +62,9 @@ def accuracy_panel(ctx: ReportContext) -> str:
     bar = colour_bar(0.0, vmax * 1e3, label="distance to the true surface, mm", cmap="turbo")
     return ("<h2>Accuracy against the true surface (simulator)</h2>"
             f"<p>RMS {a.rms * 1e3:.3f} mm, 95th percentile {a.p95 * 1e3:.3f} mm, completeness "
-            f"{a.completeness:.1%} within {a.tolerance * 1e3:g} mm, on the observed mesh (mesh.ply: "
+            f"{a.completeness:.1%} within {a.tolerance * 1e3:g} mm, on the observed mesh ({MESH_FILE}: "
             "only surface some view's points support)"
-            + (f"; the closed mesh (mesh_watertight.ply): RMS {a.watertight.rms * 1e3:.3f} mm, 95th "
+            + (f"; the closed mesh ({WATERTIGHT_FILE}): RMS {a.watertight.rms * 1e3:.3f} mm, 95th "
                f"percentile {a.watertight.p95 * 1e3:.3f} mm, "
                f"{a.watertight.unobserved_area:.0%} of its area where no view can see"
                if a.watertight is not None else "") + ".</p>"
@@ -98,7 +99,7 @@ def closed_mesh_panel(ctx: ReportContext) -> str:
             for (az, el), name in zip(SIDES, SIDE_NAMES)]
     invented = 1.0 - float(watertight.observed.mean())
     return ("<h2>Closed mesh</h2>"
-            f"<p>mesh_watertight.ply: blue where some view observed the surface, grey where the fusion "
+            f"<p>{WATERTIGHT_FILE}: blue where some view observed the surface, grey where the fusion "
             f"closed it with surface no view saw ({invented:.1%} of its vertices, flagged "
             f"<code>observed = 0</code> in the file).</p><div class='row'>{''.join(figs)}</div>")
 

@@ -28,6 +28,7 @@ from rangekit.errors import ConfigError
 from rangekit.formats.sessions.session import ScanPlan, Session
 from rangekit.formats.sessions.summary import ProcessResult
 from rangekit.laser.sequence import LaserSequence
+from rangekit.formats.sessions.files import SESSION_FILE
 
 if TYPE_CHECKING:
     from rangekit.app.scan.vdi2634 import Vdi2634Result
@@ -94,7 +95,7 @@ def _scan(options: ScanOptions, bus: EventBus, t0: float) -> ScanResult:
         if options.artefact is not None:
             return _scan_artefacts(options, bus, t0)
         with ExitStack() as held:
-            if options.resume is not None and (options.folder / "session.json").is_file():
+            if options.resume is not None and (options.folder / SESSION_FILE).is_file():
                 held.enter_context(session_lock(options.folder))
             process_options = options.processing
             streaming = None
@@ -237,8 +238,8 @@ def _process(session: Session | str | Path, options: ProcessOptions, on_event, p
     ``options.truth``)."""
     with failures_announced(on_event):
         if not isinstance(session, Session):
-            if not (Path(session) / "session.json").is_file():
-                raise ConfigError(f"{session}: not a session folder (no session.json)")
+            if not (Path(session) / SESSION_FILE).is_file():
+                raise ConfigError(f"{session}: not a session folder (no {SESSION_FILE})")
             session = Session.load(session)
         on_event = logged(session.folder, on_event)
         evaluate = memo.evaluate

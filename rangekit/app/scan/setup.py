@@ -18,6 +18,7 @@ from rangekit.laser.sequence import LaserSequence
 from rangekit.laser.triangulate import check_plane_camera
 from rangekit.rig.checks import validate_rig_for_hardware
 from rangekit.rig.rig_file import Rig, load_rig
+from rangekit.formats.sessions.files import RIG_FILE, SESSION_FILE
 
 __all__ = ["ScanSetup", "OBJECT_FOLDER", "prepare_scan", "check_laser_planes"]
 
@@ -88,7 +89,7 @@ def prepare_scan(options: ScanOptions, progress: Callable | None = None) -> Scan
         if options.flipped and session.plan.passes < 2:
             raise OptionError(f"{{flipped}} confirms that the object was turned over between passes, but the session "
                               f"in {resume} has one pass: nothing is turned over; leave {{flipped}} out")
-        rig_file, the_rig, spec = f"{resume}/rig.json", session.rig, session.pattern
+        rig_file, the_rig, spec = f"{resume}/{RIG_FILE}", session.rig, session.pattern
         n_views, hardware, passes = len(session.views), session.hardware is not None, session.plan.passes
         method = "laser" if session.is_laser else "coded"
     else:
@@ -97,8 +98,8 @@ def prepare_scan(options: ScanOptions, progress: Callable | None = None) -> Scan
         method, rig, obj, n_views, patterns, seed, passes = (SCAN_DEFAULTS[k] if v is None else v
                                                              for k, v in given.items())
         folder = Path(options.out)
-        if (folder / "session.json").exists():
-            raise OptionError(f"{{out}} {folder}: already holds a session (session.json); continue it with "
+        if (folder / SESSION_FILE).exists():
+            raise OptionError(f"{{out}} {folder}: already holds a session ({SESSION_FILE}); continue it with "
                               f"'rangekit scan --resume {folder}' or choose another folder")
         if folder.exists() and (not folder.is_dir() or any(folder.iterdir())):
             raise OptionError(f"{{out}} {folder}: exists and is not an empty folder; choose a new or empty folder")
@@ -165,7 +166,7 @@ def _check_resume_options(session: Session, given: dict) -> None:
     """OptionError naming the first option given that differs from the session."""
     sim = session.simulator
     recorded = {"method": "laser" if session.is_laser else "coded",
-                "rig": "sim" if sim is not None else (session.hardware or {}).get("rig_file", "rig.json"),
+                "rig": "sim" if sim is not None else (session.hardware or {}).get("rig_file", RIG_FILE),
                 "object": sim.object if sim is not None else None, "views": session.plan.views_per_pass,
                 "passes": session.plan.passes,
                 "patterns": session.pattern.method, "seed": sim.seed if sim is not None else None}
@@ -285,7 +286,7 @@ def _simulator(session: Session | None, obj: str, seed: int, rig: Rig | None, la
         try:
             imaging = ImagingModel(**settings.imaging)
         except (RangekitError, TypeError, ValueError) as exc:
-            raise ConfigError(f"{session.folder / 'session.json'}: simulator.imaging: expected the simulator's "
+            raise ConfigError(f"{session.folder / SESSION_FILE}: simulator.imaging: expected the simulator's "
                               f"imaging model fields, found {str(exc)[:200]}") from None
         return SimRig(default_scene(obj), rig, imaging=imaging, seed=seed, pass_motions=settings.pass_motions,
                       **options), settings

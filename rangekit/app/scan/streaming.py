@@ -55,8 +55,9 @@ from rangekit.errors import MotionError
 from rangekit.formats.sessions.session import Session
 from rangekit.geometry import apply_T, compose, invert_T, rotation_angle
 from rangekit.surface.cloud import PointCloud
+from rangekit.formats.sessions.files import PREVIEW_FILE
 
-__all__ = ["NICE", "INTEGRATE_S", "PLACE_VOXEL_M", "MAX_REFINE_DEG", "MAX_REFINE_M", "PREVIEW_FILE", "StreamingProcessor"]
+__all__ = ["NICE", "INTEGRATE_S", "PLACE_VOXEL_M", "MAX_REFINE_DEG", "MAX_REFINE_M", "StreamingProcessor"]
 
 #: How much lower the streaming thread's priority is than the capture's (Linux: per thread).
 NICE = 10
@@ -69,7 +70,6 @@ MAX_REFINE_DEG, MAX_REFINE_M = 0.5, 0.001
 #: wait of the capture with at least this long left (:mod:`rangekit.app.acquire.quiet`).
 INTEGRATE_S = 0.06
 #: The preview surface, in the session folder.
-PREVIEW_FILE = "preview.ply"
 
 
 class StreamingProcessor:

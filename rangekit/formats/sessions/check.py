@@ -24,6 +24,7 @@ from rangekit.errors import FileFormatError
 from rangekit.regular_files import read_regular_file
 from rangekit.formats.capture import IMAGE_SUFFIXES
 from rangekit.formats.sessions.session import Session, SessionView, exposure_folder
+from rangekit.formats.sessions.files import SESSION_FILE
 
 __all__ = ["frame_sha256", "file_sha256", "verify_views", "read_view_stack"]
 
@@ -60,7 +61,7 @@ def _frame_files(v: SessionView, subfolders: tuple[str, ...] = ()) -> set[str]:
 
 def _problem(session: Session, v: SessionView, frame: str, what: str) -> FileFormatError:
     return FileFormatError(f"{v.folder}: frame {frame} {what}; the view's frames no longer match the SHA-256 "
-                           f"recorded in {session.folder / 'session.json'} (views[{v.index}].sha256). Restore "
+                           f"recorded in {session.folder / SESSION_FILE} (views[{v.index}].sha256). Restore "
                            "the original frame, or scan the view again into a new session")
 
 

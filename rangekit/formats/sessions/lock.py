@@ -18,10 +18,10 @@ from typing import Iterator
 
 from rangekit.errors import FileFormatError, RangekitError
 from rangekit.io import fsync_folder
+from rangekit.formats.sessions.files import LOCK_FILE
 
-__all__ = ["LOCK_NAME", "SessionLocked", "session_lock"]
+__all__ = ["SessionLocked", "session_lock"]
 
-LOCK_NAME = ".lock"
 _held: dict[str, list] = {}   # resolved folder -> [fd, depth]
 
 
@@ -76,7 +76,7 @@ def session_lock(folder: str | Path) -> Iterator[None]:
         finally:
             _held[key][1] -= 1
         return
-    path = folder / LOCK_NAME
+    path = folder / LOCK_FILE
     fd = _open_lock(path)
     try:
         fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)

@@ -42,6 +42,7 @@ from rangekit.formats.sessions.summary import ProcessResult
 from rangekit.io import atomic_write_json, read_json
 from rangekit.rig.rig_file import Rig, load_rig
 from rangekit.formats.sessions.object import object_source
+from rangekit.formats.sessions.files import RIG_FILE, SESSION_FILE, view_folder
 
 __all__ = ["SESSION_SCHEMA", "ScanPlan", "CaptureSettings", "SimulatorSettings", "SessionView", "Session",
            "load_session", "view_folder", "exposure_folder", "frame_files", "FRAME_FORMATS", "ProcessResult"]
@@ -151,11 +152,6 @@ def frame_files(pattern, exposures_us, frame_format: str = "png") -> list[str]:
     return files if not exposures_us else [f"{exposure_folder(e)}/{f}" for e in exposures_us for f in files]
 
 
-def view_folder(folder: str | Path, index: int) -> Path:
-    """The folder of view ``index`` in a session folder: ``view_NNN``."""
-    return Path(folder) / f"view_{index:03d}"
-
-
 @dataclass(frozen=True, eq=False)
 class Session:
     """A session folder's manifest and rig. Build a new one with :meth:`new`, read one with :meth:`load`."""
@@ -205,7 +201,7 @@ class Session:
         (checked by :meth:`load`); None on hardware."""
         if self.simulator is None:
             return None
-        return object_source(self.folder, self.simulator.object, self.folder / "session.json")
+        return object_source(self.folder, self.simulator.object, self.folder / SESSION_FILE)
 
     def with_view_done(self, index: int, sha256: dict | None = None, done: bool = True) -> "Session":
         """This session with view ``index`` done, its frames' ``sha256`` (file -> hex); ``done=False``: pending again."""
@@ -233,7 +229,7 @@ class Session:
 
     def save(self) -> None:
         """Write ``session.json`` atomically."""
-        atomic_write_json(self.folder / "session.json", self.to_dict())
+        atomic_write_json(self.folder / SESSION_FILE, self.to_dict())
 
     @classmethod
     def load(cls, folder: str | Path) -> "Session":
@@ -248,7 +244,7 @@ class Session:
         FileFormatError
             session.json or rig.json is missing or not JSON.
         """
-        return _from_dict(read_json(Path(folder) / "session.json", what="session manifest"), Path(folder))
+        return _from_dict(read_json(Path(folder) / SESSION_FILE, what="session manifest"), Path(folder))
 
 
 def load_session(folder: str | Path) -> Session:
@@ -370,7 +366,7 @@ def _views(value, path: Path, folder: Path, plan: ScanPlan, frame_files: list[st
 
 
 def _from_dict(data, folder: Path) -> Session:
-    path = folder / "session.json"
+    path = folder / SESSION_FILE
     if not isinstance(data, dict):
         raise ConfigError(f"{path}: expected a JSON object (a session manifest), found {type(data).__name__} "
                           f"{_show(data)}")
@@ -391,7 +387,7 @@ def _from_dict(data, folder: Path) -> Session:
             raise _error(path, "hardware.rig_file", "a file name", d["rig_file"])
         if simulator is not None:
             raise ConfigError(f"{path}: expected either simulator or hardware, found both")
-    rig = load_rig(folder / "rig.json")
+    rig = load_rig(folder / RIG_FILE)
     if early is not None:
         capture = early
     else:  # written before capture settings were recorded

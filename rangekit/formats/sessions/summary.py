@@ -16,6 +16,7 @@ import numpy as np
 
 from rangekit.formats.sessions.laser_summary import LaserSummary
 from rangekit.formats.sessions.view_errors import ViewErrors
+from rangekit.formats.sessions.files import MESH_FILE, SUMMARY_FILE, WATERTIGHT_FILE
 
 __all__ = ["SUMMARY_SCHEMA", "Edge", "MeshFigures", "Accuracy", "ClosedAccuracy", "ProcessResult", "LaserSummary",
            "ViewErrors"]
@@ -177,7 +178,7 @@ class ProcessResult:
 
     @property
     def mesh_path(self) -> Path:
-        return self.folder / "mesh.ply"
+        return self.folder / MESH_FILE
 
     @property
     def mesh_watertight(self) -> bool:
@@ -205,7 +206,7 @@ class ProcessResult:
         from rangekit.errors import FileFormatError, shown
 
         if d.get("schema") != SUMMARY_SCHEMA:
-            raise FileFormatError(f"{Path(folder) / 'summary.json'}: schema: expected {SUMMARY_SCHEMA!r}, found "
+            raise FileFormatError(f"{Path(folder) / SUMMARY_FILE}: schema: expected {SUMMARY_SCHEMA!r}, found "
                                   f"{shown(d.get('schema'))}")
         rmse = d.get("registration_rmse_m")
         acc, closed = d.get("accuracy"), d.get("mesh_watertight")
@@ -245,7 +246,7 @@ class ProcessResult:
                  + (f", volume {m.volume * 1e6:.1f} cm^3" if m.volume is not None else "")]
         w = self.watertight_mesh
         if w:
-            lines.append(f"closed mesh (mesh_watertight.ply): {w.vertices:,} vertices, watertight {w.watertight}"
+            lines.append(f"closed mesh ({WATERTIGHT_FILE}): {w.vertices:,} vertices, watertight {w.watertight}"
                          + (f", volume {w.volume * 1e6:.1f} cm^3" if w.volume is not None else "")
                          + f"; {w.unobserved_vertices:,} vertices ({w.unobserved_area * 1e4:.1f} cm^2) no "
                            "view observed")

@@ -19,6 +19,7 @@ from rangekit.errors import RangekitError
 from rangekit.ui.jobs.base import Job, JobState
 from rangekit.ui.paths import confined
 from rangekit.ui.sessions_list import readable_name
+from rangekit.formats.sessions.files import MESH_FILE, PREVIEW_FILE, WATERTIGHT_FILE
 
 __all__ = ["CLOUD_SUFFIXES", "RegisterJob", "list_clouds"]
 
@@ -27,7 +28,7 @@ CLOUD_SUFFIXES = (".ply", ".pcd", ".xyz", ".npy", ".e57")
 STAGING = ".registering"
 #: The most files listed, and the most points of one cloud sent to a page.
 MAX_LISTED, POINTS_PER_CLOUD = 2000, 20_000
-_NOT_CLOUDS = {"mesh.ply", "mesh_watertight.ply", "preview.ply"}   # meshes, not scans
+_NOT_CLOUDS = {MESH_FILE, WATERTIGHT_FILE, PREVIEW_FILE}   # meshes, not scans
 
 
 def list_clouds(sessions: Path) -> list[str]:

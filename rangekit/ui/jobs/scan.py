@@ -20,14 +20,14 @@ import threading
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from rangekit.app.event_log import (EVENTS_FILE, JobExited, JobLaunched, JobPaused, append_event, read_events,
-                                    to_json)
+from rangekit.app.event_log import JobExited, JobLaunched, JobPaused, append_event, read_events, to_json
 from rangekit.errors import RangekitError
 from rangekit.ui.jobs.base import Job, JobState
 from rangekit.ui.jobs.child import spawned
 from rangekit.ui.jobs.scan_view import ScanView
 from rangekit.ui.paths import confined
 from rangekit.ui.scan_options import option_limits
+from rangekit.formats.sessions.files import EVENTS_FILE, SESSION_FILE
 
 __all__ = ["Followed", "ScanJob"]
 
@@ -93,7 +93,7 @@ class ScanJob(Job):
         from rangekit.app.process.options import FUSION_METHODS
 
         folder = confined(self.sessions, name)
-        if folder.parent != self.sessions or not (folder / "session.json").is_file():
+        if folder.parent != self.sessions or not (folder / SESSION_FILE).is_file():
             raise RangekitError(f"session {name!r}: no session folder of that name under the sessions folder")
         if fusion not in FUSION_METHODS:
             raise RangekitError(f"fusion: expected {' or '.join(FUSION_METHODS)}, found {fusion!r}")

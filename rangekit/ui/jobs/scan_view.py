@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 
 from rangekit.app import events as ev
 from rangekit.app.event_log import JobExited, JobPaused
+from rangekit.formats.sessions.files import MESH_FILE, REPORT_FILE, SUMMARY_FILE, view_name
 
 __all__ = ["ScanView"]
 
@@ -34,7 +35,7 @@ class ScanView:
     lines: list = field(default_factory=list)
 
     def _view(self, k: int, name: str | None = None) -> dict:
-        view = self.views.setdefault(k, {"index": k, "name": f"view_{k:03d}", "done": False, "decoded": False})
+        view = self.views.setdefault(k, {"index": k, "name": view_name(k), "done": False, "decoded": False})
         if name:
             view["name"] = name
         self.total = max(self.total, k + 1)
@@ -62,7 +63,7 @@ class ScanView:
         elif isinstance(event, ev.MeshReady):
             self._file(event.path.name)
         elif isinstance(event, ev.StageFinished) and event.stage == "report":
-            self._file("report.html")
+            self._file(REPORT_FILE)
         elif isinstance(event, ev.Progress):
             self.lines = (self.lines + [event.message])[-KEPT_LINES:]
         elif isinstance(event, ev.JobFailed) and current:
@@ -72,8 +73,8 @@ class ScanView:
             self.paused = event.paused
         elif isinstance(event, JobExited) and current:
             self.exit_code, self.paused = event.exit_code, False
-            if event.exit_code == 0 and "mesh.ply" in self.files:
-                self._file("summary.json")       # written last by a processing that finished
+            if event.exit_code == 0 and MESH_FILE in self.files:
+                self._file(SUMMARY_FILE)       # written last by a processing that finished
             self.lines = (self.lines + list(event.last_lines))[-KEPT_LINES:]
 
     def snapshot(self) -> dict:

@@ -15,7 +15,7 @@ from rangekit.cli import main
 from rangekit.formats.meshes import load_mesh
 from rangekit.surface.mesh import TriangleMesh, distance_to_surface
 from rangekit.sim import default_scene
-from sessions import frame_paths
+from support.sessions import frame_paths
 
 SCAN = ["--views", "6", "--seed", "1"]   # the same settings for the reference and the interrupted scan
 
@@ -58,8 +58,7 @@ def test_scan_gives_a_watertight_mesh_close_to_the_true_surface(scanned):
 
 @pytest.mark.slow
 def test_report_opens_in_headless_chromium_with_every_image_loaded(scanned, tmp_path):
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-    from chromium import chromium_paths, open_page
+    from support.chromium import chromium_paths, open_page
 
     html = (scanned / "report.html").read_text()
     assert "src=\"http" not in html and "src='http" not in html  # self-contained

@@ -5,7 +5,7 @@ using only the standard library (urllib + json + subprocess): no selenium, no
 playwright, no browser downloads.  Install the browser with
 ``apt-get install chromium chromium-driver`` (``make test`` does this as root).
 
-    python tests/chromium.py PAGE.html --screenshot out.png [--width 1280] [--height 900]
+    python tests/support/chromium.py PAGE.html --screenshot out.png [--width 1280] [--height 900]
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """The executor (rangekit/_runtime/executor.py): one configured worker count, 0 = automatic; calls placed here, on
-a thread or in a child behind one interface; an ordered map that holds at most ``workers`` results. And the job's
-event bus (rangekit/app/bus.py): subscribers on its own thread, in order, a subscriber's error raised to the job."""
+a thread or in a child behind one interface; an ordered map that holds at most ``workers`` results. (The job's
+event bus: tests/app/test_bus.py.)"""
 
 from __future__ import annotations
 
@@ -10,7 +10,6 @@ import threading
 import pytest
 
 from rangekit._runtime.executor import WORKERS_ENV, Where, ordered_map, start, worker_count
-from rangekit.app.bus import EventBus
 from rangekit.errors import ConfigError
 
 
@@ -60,33 +59,3 @@ def test_the_ordered_map_keeps_the_order_and_holds_at_most_workers_results(worke
     for k in ordered_map(slow, range(10), workers=workers):
         taken.append(k)
     assert taken == list(range(10)) and most[0] <= workers
-
-
-def test_the_bus_hands_events_on_its_own_thread_in_order():
-    seen, threads = [], set()
-
-    def subscriber(event) -> None:
-        seen.append(event)
-        threads.add(threading.current_thread().name)
-
-    with EventBus(subscriber) as bus:
-        for k in range(100):
-            bus.publish(k)
-        bus.flush()
-        assert seen == list(range(100))
-    assert threads == {"rangekit-events"}
-
-
-def test_a_subscriber_that_raises_stops_the_job_with_its_error():
-    def fails(event) -> None:
-        if event == 3:
-            raise KeyError("subscriber")
-
-    bus = EventBus(fails)
-    with pytest.raises(KeyError, match="subscriber"):
-        for k in range(1000):
-            bus.publish(k)
-            if k == 4:
-                bus.flush()
-    with pytest.raises(KeyError):
-        bus.close()

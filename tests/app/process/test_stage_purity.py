@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 
 #: The stage modules: each takes a typed input and returns a typed output.
 STAGES = ("rangekit/app/process/decode.py", "rangekit/app/process/register.py", "rangekit/app/process/fuse.py",

@@ -18,13 +18,13 @@ from pathlib import Path
 
 import pytest
 
-from sessions import N_VIEWS
+from support.sessions import N_VIEWS
 from rangekit.app.batch.sessions import WORKER_ENV, SchedulerUnreachable, process_sessions
 from rangekit.app.process.options import ProcessOptions
 from rangekit.app.process.process import process_session
 from rangekit.cli import main
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 OUTPUTS = ("mesh.ply", "mesh_watertight.ply", "poses.json", "merged.ply")
 
 

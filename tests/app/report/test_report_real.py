@@ -20,7 +20,7 @@ from rangekit.app.report.views import saturated_fraction
 
 @pytest.fixture(scope="module")
 def report(tmp_path_factory, reference_session):
-    from sessions import N_VIEWS
+    from support.sessions import N_VIEWS
 
     from rangekit.app.process.process import process_session
 
@@ -77,7 +77,7 @@ def test_report_without_truth_shows_quality_coverage_residuals_and_views(report)
 
 
 def test_the_3d_view_turns_when_dragged_and_the_page_makes_no_request(report, tmp_path):
-    from chromium import chromium_paths, open_page
+    from support.chromium import chromium_paths, open_page
 
     if chromium_paths() is None:
         pytest.skip("headless browser missing: apt-get install chromium chromium-driver")

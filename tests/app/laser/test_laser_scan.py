@@ -115,7 +115,7 @@ def test_laser_session_refuses_tsdf(laser_scan, capsys):
 def test_full_laser_scan_with_calibrated_planes(obj, tmp_path):
     """The acceptance scan: 400 steps, two lasers, planes calibrated from 10 simulated board poses; the merged
     cloud within 0.1 mm RMS of the true surface, for lumpy and for the Stanford bunny standing upright."""
-    from shared_data import require_shared
+    from support.shared_data import require_shared
 
     bunny = require_shared("stanford-bunny", "bun_zipper.ply") if obj == "bunny" else None
     args = ["--object", str(bunny), "--up", "0", "1", "0"] if obj == "bunny" else []

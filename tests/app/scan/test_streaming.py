@@ -3,7 +3,7 @@
 the same bytes as processing the session from scratch; a resumed scan decodes nothing twice; in real time, a
 view is decoded before the next one's last frame is taken.
 
-Sessions: the small rig (320x256 camera), the lumpy object, Gray code (tests/sessions.py).
+Sessions: the small rig (320x256 camera), the lumpy object, Gray code (tests/support/sessions.py).
 """
 
 from __future__ import annotations
@@ -17,11 +17,12 @@ import pytest
 from rangekit.app import events as ev
 from rangekit.app.acquire.acquire import acquire
 from rangekit.app.process.options import ProcessOptions
-from rangekit.app.scan.streaming import PREVIEW_FILE, StreamingProcessor
+from rangekit.app.scan.streaming import StreamingProcessor
+from rangekit.formats.sessions.files import PREVIEW_FILE
 from rangekit.coded.patterns import make_pattern_spec
 from rangekit.formats.sessions.session import CaptureSettings, ScanPlan, Session, SimulatorSettings
 from rangekit.sim import ImagingModel
-from sessions import N_VIEWS, copy_session, sim
+from support.sessions import N_VIEWS, copy_session, sim
 
 CACHE = ("cloud.ply", "maps.npz", "cloud.json")
 
@@ -169,7 +170,7 @@ def test_in_real_time_a_view_is_decoded_before_the_next_ones_last_frame(tmp_path
     of the capture's waits (rangekit.app.acquire.quiet)."""
     from rangekit.sim import SimRig, default_scene
     from rangekit.sim.devices.realtime import realtime_options
-    from small_rigs import small_rig
+    from support.small_rigs import small_rig
 
     devices = SimRig(default_scene("lumpy"), small_rig(), seed=3, **realtime_options(0.02))
     order = []

@@ -153,7 +153,7 @@ def test_a_rig_without_lasers_is_named():
 
 
 def test_cli_lasers_with_a_bad_rig_file_is_refused_before_any_work(tmp_path, capsys):
-    """(Hardware laser calibration itself: tests/laser/test_laser_calibration_hw.py.)"""
+    """(Hardware laser calibration itself: tests/app/laser/test_laser_calibration_hw.py.)"""
     rig = tmp_path / "rig.json"
     rig.write_text("{}")
     assert main(["calibrate", "--rig", str(rig), "--lasers", "--out", str(tmp_path / "out.json")]) == 1

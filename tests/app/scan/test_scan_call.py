@@ -13,8 +13,8 @@ from pathlib import Path
 import pytest
 
 import rangekit as rk
-from sessions import N_VIEWS, frame_paths
-from file_reads import FileReads
+from support.sessions import N_VIEWS, frame_paths
+from support.file_reads import FileReads
 from rangekit.app import events as ev
 from rangekit.app.process.options import PROCESS_FLAGS
 from rangekit.app.scan.options import SCAN_FIELDS, SCAN_FLAGS, ScanOptions

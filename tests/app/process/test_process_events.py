@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import rangekit as rk
-from sessions import N_VIEWS
+from support.sessions import N_VIEWS
 from rangekit.app import events as ev
 from rangekit.app.process.options import ProcessOptions
 from rangekit.cli import main

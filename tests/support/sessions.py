@@ -15,7 +15,7 @@ from rangekit.app.acquire.acquire import acquire
 from rangekit.coded.patterns import make_pattern_spec
 from rangekit.formats.sessions.session import ScanPlan, SimulatorSettings
 from rangekit.sim import ImagingModel, SimRig, default_scene
-from small_rigs import small_rig
+from support.small_rigs import small_rig
 
 N_VIEWS = 4
 

@@ -12,8 +12,8 @@ from rangekit.coded.patterns import make_pattern_spec
 from rangekit.errors import DeviceDisconnected, StorageError
 from rangekit.formats.sessions.session import ScanPlan, load_session
 from rangekit.io import write_frame
-from sessions import pngs, sim
-from small_rigs import small_rig
+from support.sessions import pngs, sim
+from support.small_rigs import small_rig
 
 SPEC = make_pattern_spec("graycode", (1280, 800))
 PLAN = ScanPlan(n_views=3)

@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from small_rigs import small_projector_rig
+from support.small_rigs import small_projector_rig
 
 from rangekit.app.acquire.acquire import acquire
 from rangekit.app.check.steps import auto_exposures, pattern_delay_for

@@ -10,8 +10,8 @@ from rangekit.formats.sessions.session import ScanPlan, Session, SimulatorSettin
 from rangekit.errors import ConfigError, DecodeError, DeviceDisconnected
 from rangekit.coded.patterns import make_pattern_spec
 from rangekit.sim import SimRig, default_scene
-from sessions import pngs, sim
-from small_rigs import small_rig
+from support.sessions import pngs, sim
+from support.small_rigs import small_rig
 
 
 

@@ -24,7 +24,7 @@ from websockets.sync.client import connect  # noqa: E402
 
 from support.ui_server import start_ui  # noqa: E402
 
-from rangekit.ui.server import STATIC  # noqa: E402
+from rangekit.ui.routes.page import STATIC  # noqa: E402
 
 
 def _cpu_s(pid: int) -> float:

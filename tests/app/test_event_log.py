@@ -4,6 +4,7 @@ child; the lines read back typed, in order; a resumed scan appends; a reader fol
 from __future__ import annotations
 
 import json
+from collections import Counter
 import subprocess
 import sys
 from pathlib import Path
@@ -126,8 +127,12 @@ def test_a_scan_in_process_and_as_a_child_write_every_views_events_in_order(tmp_
                             "--no-report"], capture_output=True, text=True, stdin=subprocess.DEVNULL, timeout=900)
     assert child.returncode == 0, child.stderr
     by_child = _check_scan_log(tmp_path / "child", None, 3)
-    assert [type(e) for e in by_child if not isinstance(e, (ev.Progress, ev.CaptureLoad))] == \
-        [type(e) for e in logged if not isinstance(e, (ev.Progress, ev.CaptureLoad))]
+    # the same events; their interleaving across the streaming decoder's thread is the scheduler's
+    # (each view's own order is checked above)
+    kinds = lambda events: Counter(type(e).__name__ for e in events if not isinstance(e, (ev.Progress, ev.CaptureLoad)))
+    assert kinds(by_child) == kinds(logged)
+    stages = lambda events: [e.stage for e in events if isinstance(e, ev.StageStarted)]
+    assert sorted(stages(by_child)) == sorted(stages(logged))
 
 
 def test_a_resumed_scan_appends_to_the_log(tmp_path):

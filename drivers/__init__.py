@@ -1,12 +1,12 @@
 """Real hardware drivers: serial turntables (Horus, FabScan), projector control (ESC/VP21, PJLink),
-a full-screen projector display (pygame, optional) and Luxonis depthai cameras.
+a full-screen projector display (pygame, optional) and the cameras of :data:`rangekit.drivers.cameras.CAMERA_DRIVERS`.
 
 ``open_rig_devices(rig)`` opens what a rig file's ``devices`` section names (every field: docs/rig.md)::
 
     "devices": {
       "turntable": {"protocol": "horus" | "fabscan", "port": "/dev/ttyUSB0", "baud": 115200, "timeout_s": 2},
       "projector": {"display": 1, "control": {"protocol": "escvp21" | "pjlink", "port": "/dev/ttyUSB1"}},
-      "camera": {"type": "depthai", "id": null, "socket": "CAM_A", "search_timeout_s": 3}
+      "camera": {"type": "depthai", "id": null, "socket": "CAM_A", "search_timeout_s": 3}   # or another driver's
     }
 
 Each opened device that can come back after it went away mid-scan has ``reconnect(timeout_s)``;
@@ -25,25 +25,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from rangekit.rig.camera_controls import controls_from_capture
 from rangekit.errors import ConfigError
-from rangekit.rig.checks import DEFAULT_REPLY_S, DEFAULT_SEARCH_S, validate_rig_for_hardware
+from rangekit.drivers.cameras import CAMERA_DRIVERS, camera_driver
+from rangekit.rig.checks import DEFAULT_REPLY_S, validate_rig_for_hardware
 
 __all__ = ["HardwareRig", "open_rig_devices", "CAMERA_DRIVERS"]
-
-
-def _open_depthai(sec: dict, rig, *, coded_light: bool, where: str):
-    """An OAK camera (:class:`rangekit.drivers.depthai.camera.DepthaiCamera`) of a ``devices.camera`` entry."""
-    from rangekit.drivers.depthai.camera import DepthaiCamera
-
-    return DepthaiCamera(sec.get("id"), socket=sec.get("socket", "CAM_A"), size=(rig.camera.width, rig.camera.height),
-                         controls=controls_from_capture(rig.capture, where=where), coded_light=coded_light,
-                         search_timeout_s=sec.get("search_timeout_s", DEFAULT_SEARCH_S), where=where)
-
-
-#: The camera drivers, by the rig file's ``devices.camera.type`` (each entry in this one place; the names the rig
-#: file may hold are rangekit.rig.checks.CAMERA_TYPES): ``open(section, rig, coded_light=, where=)`` -> a camera.
-CAMERA_DRIVERS = {"depthai": _open_depthai}
 
 
 @dataclass
@@ -115,8 +101,8 @@ def open_rig_devices(rig, *, where: str = "rig file", open_camera: bool = True, 
         camera = None
         sec = _section(devices, "camera")
         if open_camera and sec is not None:
-            camera = CAMERA_DRIVERS[sec["type"]](sec, rig, where=where,
-                                                 coded_light=projector is not None if coded_light is None else coded_light)
+            camera = camera_driver(sec["type"]).open_camera(
+                sec, rig, where=where, coded_light=projector is not None if coded_light is None else coded_light)
             opened.append(camera)
         return HardwareRig(camera, projector, turntable, control)
     except BaseException:

@@ -34,7 +34,7 @@ from rangekit.errors import ConfigError, DeviceDisconnected, DeviceError, Device
 from rangekit.rig.rig_file import Rig
 from rangekit.rig.checks import DEFAULT_SEARCH_S, DEPTHAI_SOCKETS
 
-__all__ = ["DepthaiCamera", "DEPTHAI_NAMES", "calibration_to_rig", "pinhole_from_calibration",
+__all__ = ["DepthaiCamera", "open_camera", "list_cameras", "DEPTHAI_NAMES", "calibration_to_rig", "pinhole_from_calibration",
            "scale_intrinsics", "SOCKETS"]
 
 SOCKETS = DEPTHAI_SOCKETS
@@ -370,3 +370,21 @@ class DepthaiCamera:
                 ts = msg.getTimestamp()
             if ts >= t0:
                 return msg
+
+
+def open_camera(sec: dict, rig, *, coded_light: bool, where: str) -> DepthaiCamera:
+    """An OAK camera of a checked ``devices.camera`` section (:mod:`rangekit.drivers.cameras`)."""
+    from rangekit.rig.camera_controls import controls_from_capture
+
+    return DepthaiCamera(sec.get("id"), socket=sec.get("socket", "CAM_A"), size=(rig.camera.width, rig.camera.height),
+                         controls=controls_from_capture(rig.capture, where=where), coded_light=coded_light,
+                         search_timeout_s=sec.get("search_timeout_s", DEFAULT_SEARCH_S), where=where)
+
+
+def list_cameras(timeout_s: float = 1.0) -> list:
+    """The OAK cameras that answer within ``timeout_s`` (:mod:`rangekit.drivers.cameras`)."""
+    from rangekit.drivers.cameras import FoundCamera
+    from rangekit.drivers.discovery import list_depthai_devices
+
+    return [FoundCamera(c["device_id"], c["name"], f"{c['state']} {c['protocol']}")
+            for c in list_depthai_devices(timeout_s=timeout_s)]

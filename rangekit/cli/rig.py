@@ -16,7 +16,7 @@ from rangekit.formats.sessions.files import RIG_FILE
 
 
 def cmd_rig_init(args: argparse.Namespace) -> int:
-    """rangekit rig init [--sim] > rig.json: a template rig file, or the simulator's true rig"""
+    """rangekit rig init [--sim] [--camera TYPE] > rig.json: a template rig file, or the simulator's true rig"""
     if args.sim:
         from rangekit.sim import default_rig
 
@@ -24,7 +24,7 @@ def cmd_rig_init(args: argparse.Namespace) -> int:
     else:
         from rangekit.rig.rig_file import template_rig
 
-        data = template_rig()
+        data = template_rig(camera=args.camera)
     _print_rig(data, f"rangekit rig init > {RIG_FILE}")
     return 0
 
@@ -174,19 +174,25 @@ def _check_captures_options(args: argparse.Namespace) -> None:
 
 
 def cmd_devices(args: argparse.Namespace) -> int:
-    """rangekit devices [--timeout 1.0]: list serial ports and depthai cameras"""
-    from rangekit.drivers.discovery import list_depthai_devices, list_serial_ports
+    """rangekit devices [--timeout 1.0]: list serial ports and the cameras of every camera driver"""
+    from rangekit.drivers.cameras import CAMERA_DRIVERS, MissingPackage, camera_driver
+    from rangekit.drivers.discovery import list_serial_ports
 
     ports = list_serial_ports()
     result("serial ports:" if ports else "serial ports: none found")
     for p in ports:
         result(f"  {p['device']}  {p['description']}  USB {p['vid_pid'] or '-'}  serial {p['serial_number'] or '-'}")
-    t0 = time.monotonic()
-    cams = list_depthai_devices(timeout_s=args.timeout)
-    searched = f"(search limit {args.timeout:g} s; {time.monotonic() - t0:.2f} s with loading depthai)"
-    result(f"depthai devices: {searched}" if cams else f"depthai devices: none found {searched}")
-    for c in cams:
-        result(f"  {c['device_id']}  {c['name']}  {c['state']}  {c['protocol']}")
+    for kind, driver in CAMERA_DRIVERS.items():
+        t0 = time.monotonic()
+        try:
+            cams = camera_driver(kind).list_cameras(timeout_s=args.timeout)
+        except MissingPackage as exc:
+            result(f"{kind} cameras: not listed: {exc}")
+            continue
+        searched = f"(search limit {args.timeout:g} s; {time.monotonic() - t0:.2f} s with loading its package)"
+        result(f"{kind} cameras: {searched}" if cams else f"{kind} cameras: none found {searched}")
+        for c in cams:
+            result(f"  {c.id}  {c.name}  {c.detail}".rstrip())
     return 0
 
 
@@ -244,6 +250,7 @@ def add_calibrate_parser(sub) -> None:
 
 def add_parsers(sub) -> None:
     from rangekit.formats.layouts import LAYOUTS as CAPTURE_LAYOUTS
+    from rangekit.rig.checks import CAMERA_TEMPLATES
 
     rig = sub.add_parser("rig", help="rig files: write a template, import a calibration",
                          description="Rig files (docs/rig.md documents every field).")
@@ -254,6 +261,8 @@ def add_parsers(sub) -> None:
                                           "hardware, or with --sim the simulator's default rig (its true "
                                           "parameters).")
     init.add_argument("--sim", action="store_true", help="print the simulator's default rig instead")
+    init.add_argument("--camera", choices=CAMERA_TEMPLATES, default="depthai",
+                      help="the camera driver whose section devices.camera holds (default depthai; docs/hardware.md)")
     init.set_defaults(func=cmd_rig_init)
     imp = rig_sub.add_parser("import", help="a rig file from an OpenCV stereo calibration, a structured-light "
                                             "tool's calibration, a depthai EEPROM JSON or a Horus calibration.json",
@@ -292,8 +301,10 @@ def add_parsers(sub) -> None:
                           "(SLStudio: by default the import follows the tool, so its clouds and rangekit's agree)")
     imp.set_defaults(func=cmd_rig_import)
 
-    dev = sub.add_parser("devices", help="list serial ports and depthai cameras",
-                         description="List serial ports (device, USB VID:PID, serial number) and depthai cameras.")
+    dev = sub.add_parser("devices", help="list serial ports and cameras",
+                         description="List serial ports (device, USB VID:PID, serial number) and the cameras of "
+                                     "every camera driver (docs/hardware.md), each with the id its rig file "
+                                     "section takes.")
     dev.add_argument("--timeout", type=float_in(0.0, MAX_SEARCH_S), default=1.0,
-                     help=f"seconds to search for depthai cameras, 0..{MAX_SEARCH_S:g} (default 1)")
+                     help=f"seconds to search for cameras of each driver, 0..{MAX_SEARCH_S:g} (default 1)")
     dev.set_defaults(func=cmd_devices)

@@ -16,7 +16,7 @@ from rangekit.rig.camera_controls import check_refresh, controls_from_capture
 from rangekit.errors import ConfigError
 
 __all__ = ["validate_devices", "validate_capture", "validate_rig_for_hardware", "DEVICE_FIELDS", "CAPTURE_FIELDS",
-           "CAPTURE_BITS", "TURNTABLE_PROTOCOLS", "PROJECTOR_PROTOCOLS", "DEPTHAI_SOCKETS", "MAX_SEARCH_S",
+           "CAPTURE_BITS", "CAMERA_TYPES", "CAMERA_SECTION_FIELDS", "CAMERA_TEMPLATES", "TURNTABLE_PROTOCOLS", "PROJECTOR_PROTOCOLS", "DEPTHAI_SOCKETS", "MAX_SEARCH_S",
            "REFRESH_HZ", "DEFAULT_SEARCH_S", "DEFAULT_RECONNECT_S", "DEFAULT_REPLY_S", "reconnect_timeout_s"]
 
 #: Serial turntable protocols (rangekit.drivers.turntable): Horus (Ciclop) and FabScan boards.
@@ -44,7 +44,7 @@ DEVICE_FIELDS = {
     "devices.turntable": ("type", "protocol", "port", "baud", "timeout_s", "reconnect_timeout_s"),
     "devices.projector": ("type", "display", "control", "refresh_hz", "reconnect_timeout_s"),
     "devices.projector.control": ("protocol", "port", "baud", "timeout", "password"),
-    "devices.camera": ("type", "id", "socket", "search_timeout_s", "reconnect_timeout_s"),
+    "devices.camera": ("type",),   # and the fields of its type: CAMERA_SECTION_FIELDS
     "devices.depthai": ("device_id", "sockets", "size"),  # written by depthai.camera.calibration_to_rig
 }
 #: The ``capture`` settings: name -> (smallest, largest allowed value, unit). ``bits`` is the camera's
@@ -182,19 +182,38 @@ def _check_projector(sec, where: str) -> None:
         raise _error(where, f"{path}.timeout", f"must be a positive number of seconds, found {_show(timeout)}")
 
 
-#: ``devices.camera.type``: the simulator's camera, or one of the camera drivers (rangekit.drivers.CAMERA_DRIVERS,
-#: one entry per type; tests/rig/test_rig_file.py checks the two agree).
-CAMERA_TYPES = ("sim", "depthai")
+#: The fields of ``devices.camera`` by its ``type`` (besides ``type``), one entry per camera driver
+#: (rangekit.drivers.CAMERA_DRIVERS has the same keys; tests/rig/test_rig_file.py checks they agree). Each type's
+#: checker is in :data:`_CAMERA_CHECKS`, its section in ``rangekit rig init --camera TYPE`` in
+#: :data:`CAMERA_TEMPLATES`.
+CAMERA_SECTION_FIELDS = {
+    "depthai": ("id", "socket", "search_timeout_s", "reconnect_timeout_s"),
+}
+#: ``devices.camera.type``: the simulator's camera, or one of the camera drivers.
+CAMERA_TYPES = ("sim", *CAMERA_SECTION_FIELDS)
+#: Each driver's ``devices.camera`` section as ``rangekit rig init --camera TYPE`` writes it.
+CAMERA_TEMPLATES = {
+    "depthai": {"type": "depthai", "id": None, "socket": "CAM_A", "search_timeout_s": DEFAULT_SEARCH_S},
+}
 
 
 def _check_camera(sec, where: str) -> None:
     path = "devices.camera"
-    sec = _object(sec, where, path)
-    if sec.get("type") not in CAMERA_TYPES:
-        raise _error(where, f"{path}.type", f"must be {' or '.join(repr(t) for t in reversed(CAMERA_TYPES))}, "
-                                            f"found {_show(sec.get('type'))}")
-    if sec["type"] == "sim":
-        return
+    if not isinstance(sec, dict):
+        raise _error(where, path, f"must be an object ({{...}}), found {_show(sec)}")
+    kind = sec.get("type")
+    if kind not in CAMERA_TYPES:
+        raise _error(where, f"{path}.type", f"must be one of {', '.join(repr(t) for t in CAMERA_TYPES)}, "
+                                            f"found {_show(kind)}")
+    allowed = ("type", *CAMERA_SECTION_FIELDS.get(kind, ()))
+    unknown = [k for k in sec if k not in allowed]
+    if unknown:
+        raise _error(where, f"{path}.{unknown[0]}", f"unknown field; a {kind!r} camera has only {', '.join(allowed)}")
+    if kind != "sim":
+        _CAMERA_CHECKS[kind](sec, where, path)
+
+
+def _check_depthai_camera(sec: dict, where: str, path: str) -> None:
     if sec.get("id") is not None and not isinstance(sec["id"], str):
         raise _error(where, f"{path}.id", "must be a string (device id/MXID, name or IP address) or null for the "
                      f"first device found, found {_show(sec['id'])}")
@@ -202,6 +221,12 @@ def _check_camera(sec, where: str) -> None:
         raise _error(where, f"{path}.socket", f"must be one of {', '.join(DEPTHAI_SOCKETS)}, found {_show(sec['socket'])}")
     _number_in(sec, "search_timeout_s", 0.0, MAX_SEARCH_S, where, path, "seconds (how long to look for the device)")
     _number_in(sec, "reconnect_timeout_s", 0.0, MAX_SEARCH_S, where, path, _RECONNECT)
+
+
+#: Each camera type's checker of its section's values (the fields are checked against CAMERA_SECTION_FIELDS first).
+_CAMERA_CHECKS = {
+    "depthai": _check_depthai_camera,
+}
 
 
 def _check_depthai_record(sec, where: str) -> None:

@@ -40,7 +40,7 @@ from rangekit.io import atomic_write_json, read_json
 from rangekit.rig.lasers import LineLaser, laser_from_dict
 from rangekit.rig.plausibility import intrinsics_problem
 from rangekit.rig.projector_response import ProjectorResponse
-from rangekit.rig.checks import DEFAULT_SEARCH_S
+from rangekit.rig.checks import CAMERA_TEMPLATES
 
 __all__ = ["Rig", "SCHEMA", "RIG_FIELDS", "CAMERA_FIELDS", "load_rig", "save_rig", "template_rig", "table_motion",
            "turntable_prior", "table_frame"]
@@ -195,19 +195,23 @@ def load_rig(path: str | Path) -> Rig:
     return Rig.from_dict(read_json(path, what="rig file"), where=str(path))
 
 
-def template_rig() -> dict:
+def template_rig(camera: str = "depthai") -> dict:
     """A rig file to edit for real hardware (``rangekit rig init > rig.json``); plain JSON types.
 
     World = the camera's frame (OpenCV: x right, y down, z forward; metres). Placeholders, to be replaced
     by a calibration: a 1280x800 depthai camera (CAM_A) with zero distortion; a 1280x800 projector
     0.2 m to the camera's right, turned towards a point 0.5 m in front of the camera; a turntable
     0.5 m in front of the camera, its top 5 cm below the optical axis, its z axis pointing up (world -y);
-    no measured projector response (null: decoded as linear).
+    no measured projector response (null: decoded as linear). ``camera``: the camera driver whose section
+    ``devices.camera`` holds (:data:`rangekit.rig.checks.CAMERA_TEMPLATES`).
     ``devices`` names a Horus turntable, an ESC/VP21 projector on display 1 refreshing at 60 Hz and a
     depthai camera; ``capture`` holds every capture setting rangekit reads, at its default, the camera's
     controls locked (``CameraControls()``: 33333 us = two 60 Hz periods, ISO 100, 5600 K, lens 130).
     See docs/rig.md.
     """
+    if camera not in CAMERA_TEMPLATES:
+        raise ConfigError(f"camera: expected one of {', '.join(CAMERA_TEMPLATES)}, found {camera!r}")
+    camera_section = dict(CAMERA_TEMPLATES[camera])
     camera = {"name": "camera", "width": 1280, "height": 800,
               "K": [[1000.0, 0.0, 639.5], [0.0, 1000.0, 399.5], [0.0, 0.0, 1.0]],
               "dist": [0.0, 0.0, 0.0, 0.0, 0.0],
@@ -232,7 +236,7 @@ def template_rig() -> dict:
             "turntable": {"protocol": "horus", "port": "/dev/ttyUSB0", "baud": 115200},
             "projector": {"display": 1, "refresh_hz": 60.0,
                           "control": {"protocol": "escvp21", "port": "/dev/ttyUSB1", "baud": 9600}},
-            "camera": {"type": "depthai", "id": None, "socket": "CAM_A", "search_timeout_s": DEFAULT_SEARCH_S},
+            "camera": camera_section,
         },
         "capture": {"pattern_delay_s": 0.1, "turntable_settle_s": 0.5, "camera": CameraControls().to_dict()},
         "projector_response": None,

@@ -140,7 +140,7 @@ def test_cli_devices_never_hangs():
     # a loaded machine took 9 s to start Python and import, so no wall-clock figure is asserted).
     res = _run("from rangekit.cli import main; raise SystemExit(main(['devices']))")
     assert res.returncode == 0, res.stderr
-    assert "serial ports" in res.stdout and "depthai devices" in res.stdout
+    assert "serial ports" in res.stdout and "depthai cameras" in res.stdout
 
 
 @pytest.mark.hardware

@@ -43,8 +43,8 @@ def test_devices_with_a_short_timeout_returns_cleanly(timeout):
     _clean_exit(run)
     assert "serial ports" in run.out
     pytest.importorskip("depthai")
-    line = next(ln for ln in run.out.splitlines() if ln.startswith("depthai devices:"))
-    assert line.startswith("depthai devices: none found") or run.out.count("\n  ") >= 1, run.out
+    line = next(ln for ln in run.out.splitlines() if ln.startswith("depthai cameras:"))
+    assert line.startswith("depthai cameras: none found") or run.out.count("\n  ") >= 1, run.out
     assert f"search limit {float(timeout):g} s" in line
 
 

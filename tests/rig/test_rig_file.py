@@ -100,8 +100,8 @@ BAD_DEVICES = [
     ("devices.projector.control.timeout", 0, "positive number of seconds"),
     ("devices.projector.control.password", "secret", "only the 'pjlink' protocol"),
     ("devices.projector.control.pasword", "secret", "unknown field"),
-    ("devices.camera.type", "realsense", "'depthai' or 'sim'"),
-    ("devices.camera.type", ..., "'depthai' or 'sim'"),
+    ("devices.camera.type", "kinect", "one of 'sim', 'depthai'"),
+    ("devices.camera.type", ..., "one of 'sim', 'depthai'"),
     ("devices.camera.socket", "RGB", "CAM_A"),
     ("devices.camera.id", 1234, "string"),
     ("devices.scanner", {}, "unknown field"),
@@ -281,7 +281,26 @@ def test_every_camera_type_a_rig_file_may_name_has_its_driver():
     from rangekit.drivers import CAMERA_DRIVERS
     from rangekit.rig.checks import CAMERA_TYPES
 
-    assert set(CAMERA_TYPES) == {"sim", *CAMERA_DRIVERS}
+    from rangekit.rig.checks import CAMERA_SECTION_FIELDS, CAMERA_TEMPLATES, validate_devices
+
+    assert set(CAMERA_TYPES) == {"sim", *CAMERA_DRIVERS} == {"sim", *CAMERA_SECTION_FIELDS} == {"sim", *CAMERA_TEMPLATES}
+    for kind in CAMERA_DRIVERS:    # rig init --camera KIND writes a section its check takes
+        assert template_rig(camera=kind)["devices"]["camera"]["type"] == kind
+        validate_devices({"camera": CAMERA_TEMPLATES[kind]}, where="t")
+        with pytest.raises(ConfigError, match=rf"t: devices.camera.colour: unknown field; a '{kind}' camera has only"):
+            validate_devices({"camera": {**CAMERA_TEMPLATES[kind], "colour": 1}}, where="t")
+
+
+def test_a_camera_drivers_missing_package_is_one_line_naming_its_extra(monkeypatch):
+    from rangekit.drivers.cameras import CAMERA_DRIVERS, CameraDriver, MissingPackage, camera_driver
+
+    monkeypatch.setitem(CAMERA_DRIVERS, "nothing", CameraDriver("rangekit.drivers.cameras", "a camera",
+                                                                 ("rangekit_no_such_package",), "nothing"))
+    with pytest.raises(MissingPackage, match=r"nothing cameras \(a camera\) need the Python package "
+                                             r"'rangekit_no_such_package'.*pip install 'rangekit\[nothing\]'"):
+        camera_driver("nothing")
+    module = camera_driver("depthai")
+    assert callable(module.open_camera) and callable(module.list_cameras)
 
 
 def test_the_mesh_formats_are_listed_once():

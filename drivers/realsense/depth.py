@@ -3,8 +3,8 @@ projected random texture; the camera matches the pair on board).
 
 The dot emitter is switched on (``emitter_enabled`` 1, and ``laser_power`` when given), the Z16 depth stream of
 the requested size is started, ``settle_frames`` frames are dropped so that the emitter's light is in the one
-kept, and the frame is turned into metres with the depth units the SDK reports (``frame.get_units()``; 0 =
-no match, NaN here). The range map (the distance along each pixel's ray) is computed with the stream's own
+kept, and the frame is turned into metres with the depth units the SDK reports (``frame.get_units()``, a float32:
+its shortest decimal, 0.001 and not 0.0010000000475; 0 = no match, NaN here). The range map (the distance along each pixel's ray) is computed with the stream's own
 intrinsics (:func:`rangekit.drivers.realsense.device.pinhole_from_intrinsics`, :func:`rangekit.tof.range_maps.
 depth_to_range`). A recording (``bag``) gives its first depth frame, with the emitter as recorded.
 """
@@ -91,7 +91,7 @@ def capture_range(serial: str | None = None, *, bag: str | Path | None = None, s
         stream = profile.get_stream(rs.stream.depth).as_video_stream_profile()
         camera = pinhole_from_intrinsics(rs, stream.get_intrinsics(), name="depth", where=name)
         frame = _depth_frame(pipeline, 0 if bag is not None else settle_frames, frame_timeout_s, name)
-        units = float(frame.get_units())
+        units = float(str(np.float32(frame.get_units())))   # the decimal the camera was set to (0.001), not float32's
         depth = depth_metres(np.asanyarray(frame.get_data()), units)
         return RealSenseRange(depth, depth_to_range(depth, camera), camera, units,
                               read_option(rs, sensor, rs.option.emitter_enabled), int(frame.get_frame_number()),

@@ -17,8 +17,8 @@ keep is refused, never scanned with):
 ``focus``
 ==========================  ===========================================================================
 
-``devices.camera.bag`` plays a recording instead (``.bag``/``.db3``, :func:`~.device.open_recording`): every
-frame in order, the controls those recorded (read back into :attr:`RealSenseCamera.read_back`, not set).
+``devices.camera.bag`` plays a recording instead (``.bag``/``.db3``, :class:`~.recording.RecordingStream`): every
+frame in order, none dropped, the controls those recorded (read back into :attr:`RealSenseCamera.read_back`, not set).
 
 Device loss: a frame that does not come within ``frame_timeout_s`` is a DeviceTimeout while the camera is still
 listed and a DeviceDisconnected once it is not; :meth:`RealSenseCamera.reconnect` searches for the same serial
@@ -34,8 +34,9 @@ from pathlib import Path
 import numpy as np
 
 from rangekit.camera import PinholeCamera
-from rangekit.drivers.realsense.device import (CHECK_CABLE, device_serial, find_device, open_recording,
-                                               pinhole_from_intrinsics, read_option, set_option, stream_sensor)
+from rangekit.drivers.realsense.device import (CHECK_CABLE, device_serial, find_device, pinhole_from_intrinsics,
+                                               read_option, set_option, stream_sensor)
+from rangekit.drivers.realsense.recording import RecordingStream
 from rangekit.drivers.retry import retry
 from rangekit.errors import ConfigError, DeviceDisconnected, DeviceError, DeviceTimeout, one_line
 from rangekit.rig.camera_controls import CameraControls, require_locked
@@ -91,7 +92,7 @@ class RealSenseCamera:
         self.coded_light, self.emitter, self._where = coded_light, bool(emitter), where
         self.frame_timeout_s = float(frame_timeout_s)
         self._ctx = rs.context() if context is None else context
-        self._pipeline = None
+        self._pipeline = self._recording = None
         self.read_back: dict[str, float | None] = {}
         self.last_frame_time: float | None = None
         self._open(search_timeout_s)
@@ -100,16 +101,17 @@ class RealSenseCamera:
     def _open(self, timeout_s: float) -> None:
         """Find the camera (or open the recording), start the infrared stream, apply the controls."""
         rs = self._rs
-        cfg = rs.config()
         if self.bag is not None:
-            device = open_recording(rs, self._ctx, self.bag)
-            self.serial = device_serial(rs, device)
-            cfg.enable_device_from_file(str(self.bag), repeat_playback=False)
-        else:
-            device = find_device(rs, self._ctx, self.serial, timeout_s)
-            self.serial = device_serial(rs, device)
-            cfg.enable_device(self.serial)
-        self._name = f"RealSense {self.serial}" + (f" (recording {self.bag})" if self.bag else "")
+            self._recording = RecordingStream(rs, self._ctx, self.bag, rs.stream.infrared, index=self.infrared,
+                                              size=self.size)
+            self.serial, self._name = self._recording.serial, self._recording.name
+            self._started(self._recording.profile.as_video_stream_profile(), self._recording.sensor)
+            return
+        cfg = rs.config()
+        device = find_device(rs, self._ctx, self.serial, timeout_s)
+        self.serial = device_serial(rs, device)
+        cfg.enable_device(self.serial)
+        self._name = f"RealSense {self.serial}"
         (w, h), fps = self.size, int(self.controls.fps)
         cfg.enable_stream(rs.stream.infrared, self.infrared, w, h, rs.format.y8, fps)
         pipeline = rs.pipeline(self._ctx)
@@ -120,13 +122,15 @@ class RealSenseCamera:
                               f"({one_line(exc)}); it offers {self._offered(device)}: set cameras[0].width/height "
                               "and capture.camera.fps to one of them") from exc
         self._pipeline = pipeline
+        stream = profile.get_stream(rs.stream.infrared, self.infrared).as_video_stream_profile()
+        self._started(stream, stream_sensor(rs, profile.get_device(), rs.stream.infrared, self._name))
+
+    def _started(self, stream, sensor) -> None:
+        """The stream runs: its intrinsics, its sensor, the controls (the stream closed again on failure)."""
         try:
-            if self.bag is not None:
-                profile.get_device().as_playback().set_real_time(False)
-            stream = profile.get_stream(rs.stream.infrared, self.infrared).as_video_stream_profile()
-            self._camera = pinhole_from_intrinsics(rs, stream.get_intrinsics(), name=f"infrared {self.infrared}",
+            self._camera = pinhole_from_intrinsics(self._rs, stream.get_intrinsics(), name=f"infrared {self.infrared}",
                                                    where=self._name)
-            self._sensor = stream_sensor(rs, profile.get_device(), rs.stream.infrared, self._name)
+            self._sensor = sensor
             self._apply(self.controls)
         except BaseException:
             self.close()
@@ -134,6 +138,8 @@ class RealSenseCamera:
 
     def _offered(self, device) -> str:
         rs = self._rs
+        if device is None:
+            return "only the streams it recorded"
         found = sorted({f"{p.as_video_stream_profile().width()}x{p.as_video_stream_profile().height()} "
                         f"{p.fps()} fps" for s in device.query_sensors() for p in s.get_stream_profiles()
                         if p.stream_type() == rs.stream.infrared and p.format() == rs.format.y8})
@@ -179,15 +185,18 @@ class RealSenseCamera:
         """One (H, W) uint8 infrared frame taken after this call started (frames already waiting are dropped;
         with host timestamps, so is one exposed before the call); a recording's next frame, none dropped. Raises
         DeviceTimeout / DeviceDisconnected (module doc)."""
+        if self._recording is not None:
+            self.last_frame_time = None
+            return self._recording.next_frame(self.frame_timeout_s).data
         t0 = time.time() * 1000.0
-        while self.bag is None and self._pipeline.poll_for_frames():
+        while self._pipeline.poll_for_frames():
             pass
         deadline = time.monotonic() + self.frame_timeout_s
         while True:
             frame = self._wait(max(0.001, deadline - time.monotonic())).get_infrared_frame(self.infrared)
             domain = frame.get_frame_timestamp_domain().name
             ts = frame.get_timestamp()
-            if self.bag is None and domain in _HOST_DOMAINS and ts < t0:
+            if domain in _HOST_DOMAINS and ts < t0:
                 continue
             self.last_frame_time = time.monotonic() - (time.time() - ts / 1000.0) if domain in _HOST_DOMAINS \
                 else None
@@ -197,9 +206,6 @@ class RealSenseCamera:
         try:
             return self._pipeline.wait_for_frames(max(1, int(left_s * 1000)))
         except RuntimeError as exc:
-            if self.bag is not None:
-                raise DeviceError(f"{self._name}: the recording has no more frames ({one_line(exc)}); record a longer "
-                                  "one or scan fewer frames") from exc
             try:
                 listed = self.serial in {device_serial(self._rs, d) for d in self._ctx.query_devices()}
             except RuntimeError:
@@ -224,6 +230,9 @@ class RealSenseCamera:
     # ------------------------------------------------------------------ lifetime
     def close(self) -> None:
         """Stop the stream (idempotent)."""
+        recording, self._recording = self._recording, None
+        if recording is not None:
+            recording.close()
         pipeline, self._pipeline = self._pipeline, None
         if pipeline is not None:
             try:

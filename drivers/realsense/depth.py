@@ -18,8 +18,9 @@ from pathlib import Path
 import numpy as np
 
 from rangekit.camera import PinholeCamera
-from rangekit.drivers.realsense.device import (CHECK_CABLE, device_serial, find_device, open_recording,
-                                               pinhole_from_intrinsics, read_option, set_option, stream_sensor)
+from rangekit.drivers.realsense.device import (CHECK_CABLE, device_serial, find_device, pinhole_from_intrinsics,
+                                               read_option, set_option, stream_sensor)
+from rangekit.drivers.realsense.recording import RecordingStream
 from rangekit.errors import ConfigError, DeviceError, DeviceTimeout, one_line
 from rangekit.rig.checks import DEFAULT_SEARCH_S
 
@@ -59,45 +60,52 @@ def capture_range(serial: str | None = None, *, bag: str | Path | None = None, s
     DeviceDisconnected when the camera is not found; DeviceError when the stream or the emitter cannot be set;
     DeviceTimeout when no frame comes; FileFormatError for a ``bag`` that is not a recording."""
     import pyrealsense2 as rs
-    from rangekit.tof.range_maps import depth_to_range
 
     if laser_power is not None and not 0.0 <= laser_power <= 1.0:
         raise ConfigError(f"capture_range: laser_power must be a fraction 0..1 of the emitter's power, found "
                           f"{laser_power!r}")
     ctx = rs.context() if context is None else context
-    cfg = rs.config()
+    size = (int(size[0]), int(size[1]))
     if bag is not None:
-        serial = device_serial(rs, open_recording(rs, ctx, bag))
-        cfg.enable_device_from_file(str(bag), repeat_playback=False)
-    else:
-        serial = device_serial(rs, find_device(rs, ctx, serial, search_timeout_s))
-        cfg.enable_device(serial)
-    name = f"RealSense {serial}" + (f" (recording {bag})" if bag is not None else "")
-    (w, h) = int(size[0]), int(size[1])
-    cfg.enable_stream(rs.stream.depth, w, h, rs.format.z16, int(fps))
+        rec = RecordingStream(rs, ctx, bag, rs.stream.depth, size=size)
+        try:
+            frame = rec.next_frame(frame_timeout_s)
+            camera = pinhole_from_intrinsics(rs, rec.profile.as_video_stream_profile().get_intrinsics(), name="depth",
+                                             where=rec.name)
+            emitter = read_option(rs, rec.sensor, rs.option.emitter_enabled)
+            return _range(frame.data, frame.units, camera, emitter, frame.number, rec.serial)
+        finally:
+            rec.close()
+    serial = device_serial(rs, find_device(rs, ctx, serial, search_timeout_s))
+    name = f"RealSense {serial}"
+    cfg = rs.config()
+    cfg.enable_device(serial)
+    cfg.enable_stream(rs.stream.depth, size[0], size[1], rs.format.z16, int(fps))
     pipeline = rs.pipeline(ctx)
     try:
         profile = pipeline.start(cfg)
     except RuntimeError as exc:
-        raise DeviceError(f"{name}: cannot stream depth at {w}x{h} Z16 {fps} fps ({one_line(exc)}); choose a size "
-                          "and rate the camera offers (rangekit devices, the RealSense Viewer)") from exc
+        raise DeviceError(f"{name}: cannot stream depth at {size[0]}x{size[1]} Z16 {fps} fps ({one_line(exc)}); "
+                          "choose a size and rate the camera offers (the RealSense Viewer lists them)") from exc
     try:
-        device = profile.get_device()
-        if bag is not None:
-            device.as_playback().set_real_time(False)
-        sensor = stream_sensor(rs, device, rs.stream.depth, name)
-        if bag is None:
-            _emitter_on(rs, sensor, laser_power, name)
+        sensor = stream_sensor(rs, profile.get_device(), rs.stream.depth, name)
+        _emitter_on(rs, sensor, laser_power, name)
         stream = profile.get_stream(rs.stream.depth).as_video_stream_profile()
         camera = pinhole_from_intrinsics(rs, stream.get_intrinsics(), name="depth", where=name)
-        frame = _depth_frame(pipeline, 0 if bag is not None else settle_frames, frame_timeout_s, name)
-        units = float(str(np.float32(frame.get_units())))   # the decimal the camera was set to (0.001), not float32's
-        depth = depth_metres(np.asanyarray(frame.get_data()), units)
-        return RealSenseRange(depth, depth_to_range(depth, camera), camera, units,
-                              read_option(rs, sensor, rs.option.emitter_enabled), int(frame.get_frame_number()),
-                              serial)
+        frame = _depth_frame(pipeline, settle_frames, frame_timeout_s, name)
+        return _range(np.asanyarray(frame.get_data()), frame.get_units(), camera,
+                      read_option(rs, sensor, rs.option.emitter_enabled), int(frame.get_frame_number()), serial)
     finally:
         pipeline.stop()
+
+
+def _range(z16: np.ndarray, units: float, camera: PinholeCamera, emitter, number: int, serial: str) -> RealSenseRange:
+    """The :class:`RealSenseRange` of a Z16 frame; ``units`` the SDK's float32, taken as its shortest decimal."""
+    from rangekit.tof.range_maps import depth_to_range
+
+    units = float(str(np.float32(units)))    # the decimal the camera was set to (0.001), not float32's 0.0010000000475
+    depth = depth_metres(z16, units)
+    return RealSenseRange(depth, depth_to_range(depth, camera), camera, units, emitter, number, serial)
 
 
 def _emitter_on(rs, sensor, laser_power: float | None, name: str) -> None:

@@ -68,8 +68,9 @@ def find_device(rs, ctx, serial: str | None, timeout_s: float):
         time.sleep(min(0.1, max(0.0, deadline - time.monotonic())))
 
 
-def open_recording(rs, ctx, path: str | Path):
-    """The playback device of a RealSense recording (``.bag`` or ``.db3``), not in real time.
+def open_recording(rs, ctx, path: str | Path) -> str:
+    """Check that ``path`` is a RealSense recording (``.bag`` or ``.db3``) the SDK can play; returns the serial number
+    of the camera it recorded.
 
     Raises FileFormatError, one line naming the file, when it is missing, has another suffix or is not a
     recording the SDK can read."""
@@ -84,8 +85,9 @@ def open_recording(rs, ctx, path: str | Path):
     except RuntimeError as exc:
         raise FileFormatError(f"{path}: not a RealSense recording the SDK can read ({one_line(exc)}); expected a "
                               ".bag (ROS1) or .db3 (ROS2) file written by the RealSense Viewer or rs.recorder") from exc
-    device.as_playback().set_real_time(False)
-    return device
+    serial = device_serial(rs, device)
+    ctx.unload_device(str(path))      # checked only: the pipeline plays the file itself (its own playback device)
+    return serial
 
 
 def stream_sensor(rs, device, stream, name: str):

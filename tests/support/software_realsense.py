@@ -121,18 +121,16 @@ class SoftwareRealSense:
             self._thread.join()
 
 
-def record(dev: SoftwareRealSense, path, frames: int, *, exposure_us: float = 4000.0, emitter: int = 0,
-           streams=("infrared", "depth")) -> list[int]:
-    """Record ``frames`` framesets of the fed device ``dev`` into ``path`` (a .db3) through the SDK's recorder (the
-    pipeline's ``enable_record_to_file``), the sensor's exposure and emitter set first; returns the infrared frames'
-    numbers recorded, in order."""
+def record(dev: SoftwareRealSense, path, frames: int, *, exposure_us: float = 4000.0, emitter: int = 0) -> list[int]:
+    """Record ``frames`` framesets (infrared and depth) of the fed device ``dev`` into ``path`` (a .db3) through the
+    SDK's recorder (the pipeline's ``enable_record_to_file``), the sensor's exposure and emitter set first; returns
+    the infrared frames' numbers waited for, in order. (A recording of the depth stream alone is refused on playback:
+    "File contains extrinsics that do not map to an existing stream".)"""
     cfg = rs.config()
     cfg.enable_device(dev.serial)
     w, h = dev.camera.width, dev.camera.height
-    if "infrared" in streams:
-        cfg.enable_stream(rs.stream.infrared, 1, w, h, rs.format.y8, dev.fps)
-    if "depth" in streams:
-        cfg.enable_stream(rs.stream.depth, 0, w, h, rs.format.z16, dev.fps)
+    cfg.enable_stream(rs.stream.infrared, 1, w, h, rs.format.y8, dev.fps)
+    cfg.enable_stream(rs.stream.depth, 0, w, h, rs.format.z16, dev.fps)
     cfg.enable_record_to_file(str(path))
     pipe = rs.pipeline(dev.context)
     profile = pipe.start(cfg)
@@ -143,8 +141,7 @@ def record(dev: SoftwareRealSense, path, frames: int, *, exposure_us: float = 40
     try:
         while len(numbers) < frames:
             fs = pipe.wait_for_frames(3000)
-            f = fs.get_infrared_frame(1) if "infrared" in streams else fs.get_depth_frame()
-            numbers.append(int(f.get_frame_number()))
+            numbers.append(int(fs.get_infrared_frame(1).get_frame_number()))
     finally:
         pipe.stop()
     return numbers

@@ -53,6 +53,8 @@ class MissingPackage(DeviceError):
 #: The camera drivers by ``devices.camera.type``.
 CAMERA_DRIVERS: dict[str, CameraDriver] = {
     "depthai": CameraDriver("rangekit.drivers.depthai.camera", "Luxonis OAK (depthai)", ("depthai",)),
+    "realsense": CameraDriver("rangekit.drivers.realsense.camera", "Intel RealSense (infrared imager)",
+                              ("pyrealsense2",), "realsense"),
 }
 
 

@@ -42,7 +42,8 @@ def cmd_stereo(args: argparse.Namespace) -> int:
                              f"{', '.join(given)} (found {' '.join(str(v) for v in (args.left, args.right, args.rig) if v)})")
         return _stereo_device(args)
     device_only = [n for n, v in (("--dots", args.dots), ("--flood", args.flood), ("--device-id", args.device_id),
-                                  ("--size", args.size)) if v is not None] + (["--on-device"] if args.on_device else [])
+                                  ("--size", args.size), ("--camera", args.camera), ("--bag", args.bag))
+                   if v is not None] + (["--on-device"] if args.on_device else [])
     if device_only:
         raise UsageError(f"{', '.join(device_only)}: only with --device (live capture from an OAK-D)")
     missing = [n for n, v in (("LEFT", args.left), ("RIGHT", args.right), ("--rig", args.rig)) if v is None]
@@ -62,6 +63,10 @@ def cmd_stereo(args: argparse.Namespace) -> int:
 def _stereo_device(args: argparse.Namespace) -> int:
     from rangekit.app.commands.stereo_live import stereo_depth_device
 
+    if args.camera == "realsense":
+        return _stereo_realsense(args)
+    if args.bag is not None:
+        raise UsageError(f"--bag plays a RealSense recording: only with --camera realsense (found --bag {args.bag})")
     check_output(args.out, folder=True)
     replace = claim_folder(args.out, "depth", force=args.force,
                            names=_DEPTH_FILES + ("left.png", "right.png", RIG_FILE, "device_depth.*"))
@@ -70,6 +75,28 @@ def _stereo_device(args: argparse.Namespace) -> int:
                               flood=0.0 if args.flood is None else args.flood, on_device=args.on_device,
                               method=args.method, min_depth=args.min_depth, alpha=args.alpha,
                               num_disparities=args.num_disparities, progress=say)
+    replace()
+    result(f"wrote {args.out}/{', '.join(run.names)} ({run.n_points:,} points)")
+    return 0
+
+
+def _stereo_realsense(args: argparse.Namespace) -> int:
+    """rangekit stereo --device --camera realsense [--device-id SERIAL | --bag FILE]: the camera's own depth frame."""
+    from rangekit.app.commands.stereo_live import realsense_depth_device
+
+    ours = [n for n, v in (("--flood", args.flood), ("--num-disparities", args.num_disparities)) if v is not None]
+    ours += ["--on-device"] if args.on_device else []
+    if ours:
+        raise UsageError(f"{', '.join(ours)}: not with --camera realsense (it matches the pair on board, and has no "
+                         "flood light)")
+    if args.bag is not None and args.device_id is not None:
+        raise UsageError(f"--bag plays a recording, --device-id chooses a camera: give one (found --bag {args.bag} "
+                         f"--device-id {args.device_id})")
+    check_output(args.out, folder=True)
+    replace = claim_folder(args.out, "depth", force=args.force, inputs=[args.bag] if args.bag else [],
+                           names=_DEPTH_FILES + (RIG_FILE,))
+    run = realsense_depth_device(args.out, serial=args.device_id, bag=args.bag, size=args.size or (848, 480),
+                                 laser_power=args.dots, progress=say)
     replace()
     result(f"wrote {args.out}/{', '.join(run.names)} ({run.n_points:,} points)")
     return 0
@@ -109,8 +136,14 @@ def add_parsers(sub) -> None:
     stp.add_argument("--device", action="store_true",
                      help="capture a synchronised pair from an attached OAK-D (CAM_B left, CAM_C right, dot projector "
                           f"on, flood off) with its own calibration; writes left.png, right.png and {RIG_FILE} too")
-    stp.add_argument("--device-id", help="with --device: device id (MXID), name or IP (default the first found)")
-    stp.add_argument("--dots", type=fraction, help="with --device: IR dot projector power 0..1 (default 0.8)")
+    stp.add_argument("--device-id", help="with --device: device id (MXID), name or IP (default the first found); a "
+                                          "RealSense's serial number with --camera realsense")
+    stp.add_argument("--camera", choices=("depthai", "realsense"),
+                     help="with --device: an OAK-D (depthai, default: the pair matched here) or a RealSense (its own "
+                          "depth frame, emitter on; writes range.npy and the SDK's intrinsics in rig.json)")
+    stp.add_argument("--bag", help="with --device --camera realsense: play a recording (.bag or .db3) instead of a camera")
+    stp.add_argument("--dots", type=fraction, help="with --device: IR dot projector power 0..1 (default 0.8; a "
+                                                   "RealSense's laser_power, default as it is)")
     stp.add_argument("--flood", type=fraction, help="with --device: IR flood light power 0..1 (default 0: off)")
     stp.add_argument("--size", type=size, help="with --device: WxH of both mono frames (default 640x400)")
     stp.add_argument("--on-device", action="store_true",

@@ -188,12 +188,15 @@ def _check_projector(sec, where: str) -> None:
 #: :data:`CAMERA_TEMPLATES`.
 CAMERA_SECTION_FIELDS = {
     "depthai": ("id", "socket", "search_timeout_s", "reconnect_timeout_s"),
+    "realsense": ("serial", "bag", "infrared", "search_timeout_s", "reconnect_timeout_s"),
 }
 #: ``devices.camera.type``: the simulator's camera, or one of the camera drivers.
 CAMERA_TYPES = ("sim", *CAMERA_SECTION_FIELDS)
 #: Each driver's ``devices.camera`` section as ``rangekit rig init --camera TYPE`` writes it.
 CAMERA_TEMPLATES = {
     "depthai": {"type": "depthai", "id": None, "socket": "CAM_A", "search_timeout_s": DEFAULT_SEARCH_S},
+    "realsense": {"type": "realsense", "serial": None, "bag": None, "infrared": 1,
+                  "search_timeout_s": DEFAULT_SEARCH_S},
 }
 
 
@@ -223,9 +226,25 @@ def _check_depthai_camera(sec: dict, where: str, path: str) -> None:
     _number_in(sec, "reconnect_timeout_s", 0.0, MAX_SEARCH_S, where, path, _RECONNECT)
 
 
+def _check_realsense_camera(sec: dict, where: str, path: str) -> None:
+    for key, what in (("serial", "the camera's serial number (rangekit devices lists it) or null for the first found"),
+                      ("bag", "the path of a recording (.bag or .db3) to play instead of a camera, or null")):
+        if sec.get(key) is not None and not (isinstance(sec[key], str) and sec[key]):
+            raise _error(where, f"{path}.{key}", f"must be a string ({what}), found {_show(sec[key])}")
+    if sec.get("bag") is not None and not sec["bag"].lower().endswith((".bag", ".db3")):
+        raise _error(where, f"{path}.bag", f"must be a RealSense recording ending with .bag or .db3, found "
+                                           f"{_show(sec['bag'])}")
+    if sec.get("infrared", 1) not in (1, 2) or isinstance(sec.get("infrared"), bool):
+        raise _error(where, f"{path}.infrared", f"must be 1 (the left imager, the depth's frame) or 2, found "
+                                                f"{_show(sec['infrared'])}")
+    _number_in(sec, "search_timeout_s", 0.0, MAX_SEARCH_S, where, path, "seconds (how long to look for the device)")
+    _number_in(sec, "reconnect_timeout_s", 0.0, MAX_SEARCH_S, where, path, _RECONNECT)
+
+
 #: Each camera type's checker of its section's values (the fields are checked against CAMERA_SECTION_FIELDS first).
 _CAMERA_CHECKS = {
     "depthai": _check_depthai_camera,
+    "realsense": _check_realsense_camera,
 }
 
 

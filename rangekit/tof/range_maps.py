@@ -14,7 +14,7 @@ from rangekit.camera import PinholeCamera, pixel_rays
 from rangekit.errors import InputError
 from rangekit.geometry import apply_T
 
-__all__ = ["range_to_depth", "range_to_points", "flying_pixels", "partial_pixels"]
+__all__ = ["range_to_depth", "depth_to_range", "range_to_points", "flying_pixels", "partial_pixels"]
 
 
 def _check_range_map(range_map, camera: PinholeCamera, where: str) -> np.ndarray:
@@ -33,6 +33,13 @@ def range_to_depth(range_map, camera: PinholeCamera) -> np.ndarray:
     """
     r = _check_range_map(range_map, camera, "range_to_depth")
     return r * pixel_rays(camera)[..., 2]
+
+
+def depth_to_range(depth_map, camera: PinholeCamera) -> np.ndarray:
+    """(H, W) radial distance along each pixel's ray in metres from camera-frame z (NaN stays NaN): the inverse of
+    :func:`range_to_depth`, ``r = z / d_z`` (a depth camera's map as a range map)."""
+    z = _check_range_map(depth_map, camera, "depth_to_range")
+    return z / pixel_rays(camera)[..., 2]
 
 
 def range_to_points(range_map, camera: PinholeCamera, *, frame: str = "world") -> np.ndarray:

@@ -6,6 +6,11 @@ offline with ``rangekit stereo OUT/left.png OUT/right.png --rig OUT/rig.json``.
 
 With ``on_device`` the camera's own StereoDepth (aligned to the left camera) is saved next to ours as
 ``device_depth.npy`` / ``device_depth.png`` and the difference is summarised (:func:`compare_depths`).
+
+``rangekit stereo --device --camera realsense``: a RealSense matches its pair on board (emitter on,
+:func:`rangekit.drivers.realsense.depth.capture_range`); :func:`realsense_depth_device` writes its depth frame as the
+same depth outputs, with the range map (``range.npy``) and the depth stream's intrinsics as the SDK reports them
+(``rig.json``: that camera, its ``devices.camera`` section), live or from a recording.
 """
 
 from __future__ import annotations
@@ -24,7 +29,7 @@ from rangekit.progress import call_progress
 from rangekit.rig.rig_file import Rig, save_rig
 from rangekit.formats.sessions.files import RIG_FILE
 
-__all__ = ["DepthComparison", "LiveStereoRun", "compare_depths", "stereo_depth_device"]
+__all__ = ["DepthComparison", "LiveStereoRun", "compare_depths", "stereo_depth_device", "realsense_depth_device"]
 
 
 @dataclass(frozen=True)
@@ -114,3 +119,27 @@ def stereo_depth_device(out: str | Path, *, device_id: str | None = None, size: 
             call_progress(progress, f"the device's depth is {dev.shape[1]}x{dev.shape[0]}, ours "
                                     f"{res.depth.shape[1]}x{res.depth.shape[0]}: not compared")
     return LiveStereoRun(out, names, len(res.points), res.depth, comparison)
+
+
+def realsense_depth_device(out: str | Path, *, serial: str | None = None, bag: str | Path | None = None,
+                           size: tuple[int, int] = (848, 480), fps: int = 30, laser_power: float | None = None,
+                           search_timeout_s: float = 3.0, progress: Callable | None = None,
+                           context=None) -> LiveStereoRun:
+    """One RealSense depth frame written as depth outputs, ``range.npy`` and ``rig.json`` (module doc)."""
+    from rangekit.drivers.realsense.depth import capture_range
+    from rangekit.tof.range_maps import range_to_points
+
+    frame = capture_range(serial, bag=bag, size=size, fps=fps, laser_power=laser_power,
+                          search_timeout_s=search_timeout_s, context=context)
+    ok = np.isfinite(frame.depth)
+    emitter = "as recorded" if bag is not None else "on"
+    call_progress(progress, f"RealSense {frame.serial}: depth frame {frame.frame_number} at {frame.camera.width}x"
+                            f"{frame.camera.height} (emitter {emitter}, {frame.depth_units * 1e3:g} mm a unit); depth "
+                            f"for {ok.mean():.1%} of the pixels")
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    section = {"type": "realsense", "serial": frame.serial, "bag": None if bag is None else str(bag)}
+    save_rig(Rig(cameras=(frame.camera,), devices={"camera": section}), out / RIG_FILE)
+    points = range_to_points(frame.range, frame.camera)[ok]
+    names = [RIG_FILE] + write_depth_outputs(out, frame.depth, points, range_map=frame.range)
+    return LiveStereoRun(out, names, len(points), frame.depth, None)

@@ -105,5 +105,5 @@ class VsyncTrigger:
                 self.clock.sleep(ready - self.clock.now())
             return self.count, pulse
         self.clock.sleep(max(0.0, float(timeout_s)))
-        raise MissedTrigger(f"camera (simulated): no triggered frame within {float(timeout_s):g} s; trigger "
-                            f"{self.count + 1} never came (the projector showed no new pattern)")
+        raise MissedTrigger(f"camera (simulated): no triggered frame within {float(timeout_s):g} s ({self.count} "
+                            "pulse(s) counted since it was armed, no frame left)")

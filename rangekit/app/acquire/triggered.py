@@ -71,7 +71,10 @@ def take_triggered(camera, light, names: list[str], at: Callable[[str, str | Non
     capture = _deferred(camera)
     for i, name in enumerate(names):
         at(f"frame {i} ({name}): camera", "camera")
-        frame = capture(FRAME_TIMEOUT_S)
+        try:
+            frame = capture(FRAME_TIMEOUT_S)
+        except MissedTrigger as exc:
+            raise MissedTrigger(f"no frame for trigger {i + 1}: {exc}") from exc
         if frame.trigger != i + 1:
             missed = f"trigger {i + 1}" if frame.trigger == i + 2 else f"triggers {i + 1}..{frame.trigger - 1}"
             raise MissedTrigger(f"the camera missed {missed}: the frame taken for it carries trigger {frame.trigger}"

@@ -32,6 +32,7 @@ __all__ = [
     "DeviceError",
     "DeviceTimeout",
     "DeviceDisconnected",
+    "MissedTrigger",
     "ProtocolError",
     "CommandError",
     "StorageError",
@@ -154,6 +155,11 @@ class DeviceTimeout(DeviceError):
 
 class DeviceDisconnected(DeviceError):
     """A device went away (unplugged, port closed)."""
+
+
+class MissedTrigger(DeviceError):
+    """A triggered camera's frame is not the one of the trigger expected (a trigger it missed, or a frame
+    left over from another): the frame is never taken as the wrong one; the view is taken again."""
 
 
 class ProtocolError(DeviceError):

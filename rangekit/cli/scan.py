@@ -340,6 +340,10 @@ def add_parsers(sub) -> None:
     scan.add_argument("--realtime", action="store_true",
                       help="the simulator keeps real time: the rig file's pattern delay (0.1 s) and frame rate, the "
                            "projector's latency, the turntable's speed and settling (as long as a real rig takes)")
+    scan.add_argument("--triggered", action="store_true",
+                      help="simulator: the camera is triggered by the projector's VSYNC (the session's rig file says "
+                           "capture.trigger 'projector'): no pattern delay, every frame's trigger count checked, a "
+                           "missed trigger named and its view taken again")
     scan.add_argument("--frames", choices=("npy.zst", "png"), default=None,
                       help="the frame files of a new coded-light session: npy.zst (default: zstd-compressed NumPy "
                            "arrays, 3x faster to read than PNG and 4x to write, as many bytes; 'zstd -d' opens them) "

@@ -17,7 +17,8 @@ from rangekit.errors import ConfigError
 
 __all__ = ["validate_devices", "validate_capture", "validate_rig_for_hardware", "DEVICE_FIELDS", "CAPTURE_FIELDS",
            "CAPTURE_BITS", "CAMERA_TYPES", "CAMERA_SECTION_FIELDS", "CAMERA_TEMPLATES", "TURNTABLE_PROTOCOLS", "PROJECTOR_PROTOCOLS", "DEPTHAI_SOCKETS", "MAX_SEARCH_S",
-           "REFRESH_HZ", "DEFAULT_SEARCH_S", "DEFAULT_RECONNECT_S", "DEFAULT_REPLY_S", "reconnect_timeout_s"]
+           "REFRESH_HZ", "DEFAULT_SEARCH_S", "DEFAULT_RECONNECT_S", "DEFAULT_REPLY_S", "reconnect_timeout_s",
+           "CAPTURE_TRIGGERS", "camera_triggered"]
 
 #: Serial turntable protocols (rangekit.drivers.turntable): Horus (Ciclop) and FabScan boards.
 TURNTABLE_PROTOCOLS = ("horus", "fabscan")
@@ -57,6 +58,17 @@ CAPTURE_FIELDS = {
     "bits": (8, 16, "bits per pixel"),
 }
 CAPTURE_BITS = (8, 10, 12, 16)
+#: ``capture.trigger``: what starts each exposure. ``"none"`` (the default): the camera runs free, and a scan waits
+#: ``capture.pattern_delay_s`` after each pattern before it takes the next frame; ``"projector"``: the camera is
+#: triggered by the projector's VSYNC, one trigger for each new pattern, exposing while that pattern is shown, so a
+#: scan waits no pattern delay and checks each frame's trigger count (:mod:`rangekit.app.acquire.triggered`).
+CAPTURE_TRIGGERS = ("none", "projector")
+
+
+def camera_triggered(capture: dict | None) -> bool:
+    """Whether a rig file's ``capture`` section says the camera is triggered by the projector
+    (``capture.trigger`` "projector"); the one reading of that field."""
+    return (capture or {}).get("trigger", "none") == "projector"
 
 
 def _error(where: str, path: str, problem: str) -> ConfigError:
@@ -280,8 +292,8 @@ def validate_devices(devices: dict, *, where: str) -> None:
 
 
 def validate_capture(capture: dict, *, where: str) -> None:
-    """Check a rig file's ``capture`` section: known fields (``CAPTURE_FIELDS`` and ``camera``), numbers in
-    range."""
+    """Check a rig file's ``capture`` section: known fields (``CAPTURE_FIELDS``, ``camera`` and ``trigger``, one of
+    :data:`CAPTURE_TRIGGERS`), numbers in range."""
     path = "capture"
     if capture is None:
         return
@@ -291,8 +303,14 @@ def validate_capture(capture: dict, *, where: str) -> None:
     for key, value in capture.items():
         if key == "camera":
             continue
+        if key == "trigger":
+            if value not in CAPTURE_TRIGGERS:
+                raise _error(where, f"{path}.trigger", f"must be {' or '.join(repr(t) for t in CAPTURE_TRIGGERS)} "
+                             f"(what starts each exposure), found {_show(value)}")
+            continue
         if key not in CAPTURE_FIELDS:
-            raise _error(where, f"{path}.{key}", f"unknown field; capture has only camera, {', '.join(CAPTURE_FIELDS)}")
+            raise _error(where, f"{path}.{key}", f"unknown field; capture has only camera, trigger, "
+                         f"{', '.join(CAPTURE_FIELDS)}")
         if key == "bits":
             if not (_is_int(value) and value in CAPTURE_BITS):
                 raise _error(where, f"{path}.bits", f"must be {', '.join(map(str, CAPTURE_BITS[:-1]))} or "

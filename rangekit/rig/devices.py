@@ -6,13 +6,14 @@ Units: angles in radians, images as numpy arrays (RGB channel order, uint8 or ui
 
 from __future__ import annotations
 
-from typing import Protocol, runtime_checkable
+from dataclasses import dataclass
+from typing import Callable, Protocol, runtime_checkable
 
 import numpy as np
 
 from rangekit.camera import PinholeCamera
 
-__all__ = ["Camera", "Projector", "Turntable", "RigDevices", "check_pattern"]
+__all__ = ["Camera", "TriggeredCamera", "TriggeredFrame", "Projector", "Turntable", "RigDevices", "check_pattern"]
 
 
 def check_pattern(image: np.ndarray, resolution: tuple[int, int], name: str = "projector") -> np.ndarray:
@@ -41,6 +42,46 @@ class Camera(Protocol):
 
     def capture(self) -> np.ndarray:
         """One exposure: (H, W) or (H, W, 3) uint8/uint16, taken after the call started."""
+        ...
+
+
+@dataclass(frozen=True, eq=False)
+class TriggeredFrame:
+    """A frame a trigger exposed.
+
+    ``image``: (H, W) or (H, W, 3) uint8/uint16, as :meth:`Camera.capture` gives it; or (the simulator's
+    ``capture_triggered_deferred``) a function of no argument that returns it, rendered where the frame is written.
+    ``trigger``: the camera's count of trigger pulses since :meth:`TriggeredCamera.arm_trigger`, at the pulse that
+    exposed this frame (1 = the first pulse after arming). Pulses the camera received but exposed no frame for (it
+    was busy) are counted too, so a frame after a missed trigger carries a count one too high.
+    """
+
+    image: np.ndarray | Callable[[], np.ndarray]
+    trigger: int
+
+
+@runtime_checkable
+class TriggeredCamera(Camera, Protocol):
+    """A camera triggered by the projector (a rig file's ``capture.trigger`` "projector",
+    :func:`rangekit.rig.checks.camera_triggered`): each new pattern the projector shows sends one pulse (its VSYNC
+    at the first refresh showing the pattern) to the camera's trigger input, and the camera exposes while that
+    pattern is shown. Acquisition (:mod:`rangekit.app.acquire.triggered`) arms the camera, shows a view's
+    patterns at the projector's pace without waiting between them, then takes the view's frames in order, each of
+    which must carry the next trigger count, 1, 2, ...; any other count (or no frame) is a missed trigger,
+    :class:`rangekit.errors.MissedTrigger`, and the view is taken again.
+    """
+
+    def arm_trigger(self) -> None:
+        """Wait for triggers from now on: frames not yet taken are dropped and the trigger count restarts at 0.
+        Raises DeviceError when the camera cannot be triggered as the rig file says (no trigger input, an
+        exposure longer than the projector shows a pattern)."""
+        ...
+
+    def capture_triggered(self, timeout_s: float) -> TriggeredFrame:
+        """The next frame a trigger exposed, oldest first, waiting up to ``timeout_s`` seconds for it. A
+        camera that drops frames must still count the pulses (a hardware trigger counter, e.g. GenICam's
+        ``Counter0`` of ``Line0`` rising edges read as chunk data), never renumber the frames it delivers.
+        Raises MissedTrigger when no frame comes in time."""
         ...
 
 

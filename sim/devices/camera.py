@@ -6,6 +6,7 @@ import numpy as np
 
 from rangekit.camera import PinholeCamera
 from rangekit.rig.camera_controls import CameraControls
+from rangekit.rig.devices import TriggeredFrame
 from rangekit.errors import DeviceError
 from rangekit.sim.devices.clock import next_tick
 from rangekit.sim.imaging.sensor import REF_EXPOSURE_US, REF_ISO, Exposure, auto_exposure_step, exposure_for
@@ -23,6 +24,10 @@ class SimCamera:
     have no effect (the simulated sensor is neutral and always in focus). A laser-lit rig renders at the
     reference exposure only. Each capture exposes the frame at the next tick of the shared clock (frame
     period ``1 / fps``) and returns at the end of that frame period; ``last_frame_time`` is its start.
+
+    On a rig whose file says ``capture.trigger`` "projector" the camera is also a
+    :class:`rangekit.rig.devices.TriggeredCamera`: :meth:`arm_trigger`, :meth:`capture_triggered`, each frame
+    exposed by the projector's VSYNC pulse (:mod:`rangekit.sim.devices.trigger`).
     """
 
     def __init__(self, rig) -> None:        # rig: the SimRig it belongs to
@@ -100,3 +105,42 @@ class SimCamera:
         out = renderer.render(image, rng, exposure)
         self.observe(out)
         return lambda: out
+
+    # ---------------------------------------------------------------- triggered by the projector
+    def _trigger(self):
+        trigger = self._rig.trigger
+        if trigger is None:
+            raise DeviceError("simulated camera: not triggered; the rig file's capture.trigger is not 'projector'")
+        return trigger
+
+    def arm_trigger(self) -> None:
+        """Count the projector's pulses from 0, frames not taken dropped; each pattern is shown for the whole
+        refreshes the camera's exposure spans. Refuses auto-exposure (the exposure sets how long a pattern is
+        shown) and the lasers (they send no trigger)."""
+        trigger = self._trigger()
+        if self.auto_exposure or self._rig.light == "laser":
+            raise DeviceError("simulated camera: a camera triggered by the projector needs a locked exposure and the "
+                              f"projector's light, found exposure_us {self.controls.exposure_us}, light "
+                              f"{self._rig.light!r}")
+        trigger.arm(self.controls.exposure_us)
+
+    def capture_triggered(self, timeout_s: float) -> TriggeredFrame:
+        """The next frame the projector's pulse exposed (:class:`rangekit.rig.devices.TriggeredFrame`)."""
+        frame = self.capture_triggered_deferred(timeout_s)
+        return TriggeredFrame(frame.image(), frame.trigger)
+
+    def capture_triggered_deferred(self, timeout_s: float) -> TriggeredFrame:
+        """:meth:`capture_triggered` with the image a function that renders it (as :meth:`capture_deferred`):
+        the pattern the pulse showed, the noise of the same capture state, so the same bytes as an untriggered
+        capture of that pattern. ``last_frame_time`` is the pulse's time, ``last_exposure_window`` the exposure
+        (start, end) and ``last_shown_window`` the pattern's display (start, end), seconds on the shared clock."""
+        trigger = self._trigger()
+        self._rig._faults.tick("camera")
+        exposure = self.exposure()
+        count, pulse = trigger.next_pulse(timeout_s)
+        self.last_frame_time, self.last_exposure = pulse.time_s, exposure
+        self.last_exposure_window = (pulse.time_s, pulse.time_s + exposure.exposure_us * 1e-6)
+        self.last_shown_window = (pulse.time_s, pulse.time_s + pulse.hold_s)
+        image, renderer = pulse.image, self._rig.capture_renderer()
+        rng = self._rig.rng_for(image)
+        return TriggeredFrame(lambda: renderer.render(image, rng, exposure), count)

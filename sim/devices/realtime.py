@@ -12,6 +12,11 @@ What then takes time, as on a rig:
 - each turntable move: :data:`REALTIME_TURNTABLE_DEG_S`, then the rig file's ``capture.turntable_settle_s``
   (0.5 s by default).
 
+A camera triggered by the projector (``rangekit scan --triggered``, the rig file's ``capture.trigger``
+"projector") waits no pattern delay: each pattern is shown for the whole refreshes (60 Hz) its exposure spans,
+the view's patterns one after the other, the frames exposed on the projector's VSYNC after its latency
+(:mod:`rangekit.sim.devices.trigger`).
+
 The frames are the same bytes as without real time: each sees the pattern shown for it.
 """
 
@@ -27,8 +32,9 @@ REALTIME_LATENCY_S = 0.05
 REALTIME_TURNTABLE_DEG_S = 30.0
 
 
-def realtime_options(pattern_delay_s: float) -> dict:
+def realtime_options(pattern_delay_s: float, *, triggered: bool = False) -> dict:
     """:class:`rangekit.sim.devices.sim_rig.SimRig` keywords for real time, for a scan waiting ``pattern_delay_s``
-    after each pattern: the wall clock, the projector's latency (at most half the delay), the turntable's speed."""
-    return {"clock": WallClock(), "latency_s": min(REALTIME_LATENCY_S, 0.5 * float(pattern_delay_s)),
-            "turntable_speed_deg_s": REALTIME_TURNTABLE_DEG_S}
+    after each pattern: the wall clock, the projector's latency (at most half the delay; ``triggered``, a camera
+    triggered by the projector, which waits no delay: :data:`REALTIME_LATENCY_S`), the turntable's speed."""
+    latency = REALTIME_LATENCY_S if triggered else min(REALTIME_LATENCY_S, 0.5 * float(pattern_delay_s))
+    return {"clock": WallClock(), "latency_s": latency, "turntable_speed_deg_s": REALTIME_TURNTABLE_DEG_S}

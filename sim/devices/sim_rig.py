@@ -20,6 +20,7 @@ from dataclasses import replace
 import numpy as np
 
 from rangekit.camera import PinholeCamera, world_pixel_rays
+from rangekit.rig.checks import camera_triggered
 from rangekit.rig.devices import check_pattern
 from rangekit.errors import DeviceDisconnected, SceneError
 from rangekit.geometry import look_at, make_T
@@ -29,6 +30,7 @@ from rangekit.sim.scene.raycast import ViewGeometry, cast_view, pixel_corners
 from rangekit.sim.devices.clock import TICK_EPS_S, SimClock
 from rangekit.sim.imaging.render import ImagingModel, ViewRenderer
 from rangekit.sim.devices.camera import SimCamera
+from rangekit.sim.devices.trigger import DEFAULT_REFRESH_HZ, VsyncTrigger
 from rangekit.sim.scene.scene import Scene
 
 __all__ = ["default_rig", "SimCamera", "SimProjector", "SimTurntable", "SimRig"]
@@ -111,10 +113,12 @@ class SimProjector:
     ``latency_s``: the display's latency (seconds, >= 0). A pattern shown at time t (``clock.now()``)
     is seen by camera frames exposed at or after t + latency_s; frames before see the previous pattern
     (:meth:`image_at`). ``clock``: the clock shared with the camera (:mod:`rangekit.sim.devices.clock`).
+    ``trigger``: the VSYNC line to a triggered camera (:mod:`rangekit.sim.devices.trigger`): :meth:`show` is then
+    a flip at the projector's refresh, which sends the camera a pulse once the pattern is shown.
     """
 
     def __init__(self, model: PinholeCamera, faults: _Faults | None = None, *, latency_s: float = 0.0,
-                 clock=None) -> None:
+                 clock=None, trigger: VsyncTrigger | None = None) -> None:
         self._model = model
         self._image = np.zeros((model.height, model.width), np.uint8)
         self._faults = faults or _Faults()
@@ -123,6 +127,7 @@ class SimProjector:
             raise SceneError(f"SimProjector: latency_s must be a finite number of seconds >= 0, found {latency_s!r}")
         self.latency_s = latency
         self.clock = clock if clock is not None else SimClock()
+        self.trigger = trigger
         self._shown: list[tuple[float, np.ndarray]] = []    # (time shown, image), oldest first
         self._seen = self._image                              # what the light showed before self._shown
 
@@ -142,6 +147,8 @@ class SimProjector:
     def show(self, image: np.ndarray) -> None:
         self._faults.tick("projector")
         img = check_pattern(image, self.resolution, self._model.name)
+        if self.trigger is not None:
+            self.trigger.flip(img)
         self._image = img
         self._shown.append((self.clock.now(), img))
 
@@ -169,6 +176,10 @@ class SimRig:
     clock : the clock the devices share (:mod:`rangekit.sim.devices.clock`); default a virtual :class:`SimClock`.
         ``sim.sleep`` waits on it (acquisition and calibration wait through ``devices.sleep``).
     turntable_speed_deg_s : the turntable's speed on ``clock`` (None: it moves instantly).
+
+    A rig whose ``capture.trigger`` is "projector" has its camera triggered by the projector's VSYNC
+    (``trigger``, :mod:`rangekit.sim.devices.trigger`; the refresh rate ``devices.projector.refresh_hz``, else
+    60 Hz); :meth:`inject_missed_trigger` makes the camera miss a pulse.
     pass_motions : (passes, 4, 4) a multi-pass scan's motion of the object in each pass
         (:func:`rangekit.sim.scene.passes.pass_motions`); :meth:`start_pass` turns it over between passes.
     """
@@ -198,8 +209,11 @@ class SimRig:
         self.clock = clock if clock is not None else SimClock()
         self.sleep = self.clock.sleep
         self.camera = SimCamera(self)
+        refresh_hz = ((self.rig.devices or {}).get("projector") or {}).get("refresh_hz", DEFAULT_REFRESH_HZ)
+        self.trigger = VsyncTrigger(self.clock, refresh_hz, latency_s) if (
+            camera_triggered(self.rig.capture) and self.rig.projector is not None) else None
         self.projector = None if self.rig.projector is None else SimProjector(
-            self.rig.projector, self._faults, latency_s=latency_s, clock=self.clock)
+            self.rig.projector, self._faults, latency_s=latency_s, clock=self.clock, trigger=self.trigger)
         speed = None if turntable_speed_deg_s is None else np.radians(float(turntable_speed_deg_s))
         self.turntable = SimTurntable(self._faults, speed_rad_s=speed, clock=self.clock) \
             if self.rig.T_world_table is not None else None
@@ -256,6 +270,15 @@ class SimRig:
         if device not in ("camera", "projector", "turntable"):
             raise ValueError(f"inject_fault: device must be camera, projector or turntable, found {device!r}")
         self._faults.arm(device, after)
+
+    def inject_missed_trigger(self, after: int = 0) -> None:
+        """The triggered camera misses the (after + 1)-th projector pulse it takes from now: it counts the pulse
+        and exposes no frame for it (:meth:`rangekit.sim.devices.trigger.VsyncTrigger.miss`). For testing that a
+        missed trigger is named and the view taken again."""
+        if self.trigger is None or int(after) < 0:
+            raise SceneError(f"inject_missed_trigger: needs a rig whose capture.trigger is 'projector' and after >= 0, "
+                             f"found trigger {self.rig.capture.get('trigger', 'none')!r}, after={after!r}")
+        self.trigger.miss(int(after))
 
     def inject_motion(self, T_move: np.ndarray, after: int = 0, frames: int = 1) -> None:
         """Knock the object: from the camera's (after + 1)-th capture from now, for ``frames`` captures, the object

@@ -138,7 +138,9 @@ BAD_CAPTURE = [
     ("turntable_settle_s", None, "number of seconds"),
     ("turntable_settle_s", 500, "from 0 to 60"),
     ("bits", 11, "8, 10, 12 or 16"),
-    ("exposure", 10, "unknown field; capture has only camera, pattern_delay_s, turntable_settle_s, bits"),
+    ("trigger", "vsync", "must be 'none' or 'projector'"),
+    ("trigger", True, "must be 'none' or 'projector'"),
+    ("exposure", 10, "unknown field; capture has only camera, trigger, pattern_delay_s, turntable_settle_s, bits"),
 ]
 
 

@@ -37,7 +37,7 @@ from rangekit.rig.camera_controls import controls_from_capture, require_locked
 from rangekit.coded.patterns import PatternSpec
 from rangekit.laser.sequence import LaserSequence
 from rangekit.rig.devices import RigDevices
-from rangekit.errors import ConfigError, DeviceError, StorageError
+from rangekit.errors import ConfigError, DeviceError, MissedTrigger, StorageError
 from rangekit.formats.sessions.session import (CaptureSettings, ScanPlan, Session, SimulatorSettings, exposure_folder,
                                                frame_files, view_folder)
 from rangekit.formats.sessions.check import verify_views
@@ -47,6 +47,7 @@ from rangekit.app.events import CaptureLoad, OnEvent, ViewAcquired, emit
 from rangekit.app.acquire.lights import light_for
 from rangekit.app.acquire.quiet import QuietWindows, quiet_window
 from rangekit.app.acquire.reconnect import MAX_RETAKES, reconnected
+from rangekit.app.acquire.triggered import take_triggered, uses_trigger
 from rangekit.io import atomic_write_bytes, atomic_write_json, fsync_folder
 from rangekit.progress import LOGGER, call_progress
 from rangekit.rig.rig_file import Rig, save_rig
@@ -190,7 +191,7 @@ def _acquire(devices, rig, spec, out: Path, plan, resume, capture, simulator, ha
                session.capture.turntable_settle_s,
                session.capture.pattern_delay_s,
                tuple((e, None if e is None else replace(controls, exposure_us=float(e))) for e in exposures),
-               progress, on_event, quiet)
+               progress, on_event, quiet, uses_trigger(devices.camera, rig, spec))
     try:
         return _views(run, session, angles, turn_over)
     finally:
@@ -218,6 +219,7 @@ class _Run:
     progress: Callable | None
     on_event: OnEvent | None
     quiet: QuietWindows | None = None
+    triggered: bool = False    # frames on the projector's trigger (rangekit.app.acquire.triggered), no pattern delay
     lock: threading.Lock = field(default_factory=threading.Lock)
 
     def report(self, *args, **kwargs) -> None:
@@ -273,16 +275,31 @@ def _views(run: _Run, session: Session, angles: np.ndarray, turn_over=None) -> S
 
 def _take_view(run: _Run, k: int, angle: float, state: dict, done: list, writer: FrameWriter) -> None:
     """:func:`_view`, taken again from its turntable move (its frames so far dropped) each time its device went away
-    and came back (:func:`rangekit.app.acquire.reconnect.reconnected`), at most :data:`MAX_RETAKES` times."""
+    and came back (:func:`rangekit.app.acquire.reconnect.reconnected`) or its camera missed a trigger
+    (:mod:`rangekit.app.acquire.triggered`), at most :data:`MAX_RETAKES` times. Before a view is taken again the
+    simulator's noise restarts (``devices.restart_noise``), so it records the bytes of a view taken once."""
     for retake in range(MAX_RETAKES + 1):
         taken = state["frames"][0]
         try:
             return _view(run, k, angle, state, done, writer, retake=retake > 0)
         except FrameError as exc:
-            if retake == MAX_RETAKES or not reconnected(run.devices, run.rig, exc, run.report, run.plan.n_views):
+            if retake == MAX_RETAKES or not (_missed_trigger(run, exc) or reconnected(
+                    run.devices, run.rig, exc, run.report, run.plan.n_views)):
                 raise
             writer.drop_view()
             state["frames"][0] = taken
+            restart_noise = getattr(run.devices, "restart_noise", None)
+            if restart_noise is not None:
+                restart_noise()
+
+
+def _missed_trigger(run: _Run, exc: FrameError) -> bool:
+    """Whether ``exc`` is a missed trigger (the view is then taken again); it is reported, naming the view and
+    frame."""
+    if not isinstance(exc.error, MissedTrigger):
+        return False
+    run.report(f"view {exc.view + 1}/{run.plan.n_views}, {exc.step}: {exc.error}; the view is taken again")
+    return True
 
 
 def _fail(out, k, exc: FrameError, done) -> None:
@@ -313,6 +330,18 @@ def _taken(camera):
     return capture
 
 
+class _At:
+    """The step a view is at, its file and its device: what a failure names (:class:`FrameError`)."""
+
+    def __init__(self, target: Path) -> None:
+        self.step, self.target, self.device = "turntable move", target, None
+
+    def __call__(self, step: str, device: str | None, target: Path | None = None) -> None:
+        self.step, self.device = step, device
+        if target is not None:
+            self.target = target
+
+
 def _view(run: _Run, k: int, angle: float, state: dict, done: list, writer: FrameWriter, *,
           retake: bool = False) -> None:
     """Take view ``k``'s frames and hand them to ``writer``, with the view's finishing step; ``retake``: the view
@@ -325,15 +354,15 @@ def _view(run: _Run, k: int, angle: float, state: dict, done: list, writer: Fram
     real = not getattr(getattr(devices, "clock", None), "virtual", False)   # its sleeps take real time
     deferred = getattr(devices.camera, "capture_deferred", None)
     capture = deferred if deferred is not None else _taken(devices.camera)
-    step, target, device = "turntable move", partial, None
+    at = _At(partial)
     try:
         shutil.rmtree(partial, ignore_errors=True)
         shutil.rmtree(final, ignore_errors=True)
         partial.mkdir(parents=True)
         if retake:
-            step, device = f"{light.device} reset before the view is taken again", light.device
+            at(f"{light.device} reset before the view is taken again", light.device)
             light.reset()
-        step, device = "turntable move", "turntable"
+        at("turntable move", "turntable")
         if devices.turntable is not None:
             LOGGER.debug("view %d/%d: turntable to %.1f deg", k + 1, run.plan.n_views, np.degrees(angle))
             with quiet_window(run.quiet if real else None):
@@ -343,26 +372,33 @@ def _view(run: _Run, k: int, angle: float, state: dict, done: list, writer: Fram
         for exposure, controls in run.exposures:
             sub = "" if exposure is None else f"{exposure_folder(exposure)}/"
             if exposure is not None:
-                step, device = f"exposure {exposure} us: camera controls", None
+                at(f"exposure {exposure} us: camera controls", None)
                 (partial / sub).mkdir()
-                device = "camera"
+                at(f"exposure {exposure} us: camera controls", "camera")
                 devices.camera.set_controls(controls)
-            for i, (name, file) in enumerate(zip(names, files)):
-                step, device = f"{sub}frame {i} ({name}): {light.device}", light.device
+
+            def record(i: int, image, sub=sub) -> None:
+                state["frames"][0] += 1
+                run.report(f"view {k + 1}/{run.plan.n_views}: {sub}frame {i + 1}/{len(names)}", *state["frames"])
+                at(f"{sub}frame {i} ({names[i]}): writing", None, partial / sub / files[i])
+                writer.frame(k, angle, sub + files[i], f"{sub}frame {i} ({names[i]})", at.target, image)
+
+            if run.triggered:
+                take_triggered(devices.camera, light, names, lambda step, device, sub=sub: at(sub + step, device),
+                               record)
+                continue
+            for i, name in enumerate(names):
+                at(f"{sub}frame {i} ({name}): {light.device}", light.device)
                 light.show(i)
                 if run.pattern_settle_s > 0:
                     with quiet_window(run.quiet if real else None, run.pattern_settle_s):
                         sleep(run.pattern_settle_s)
-                step, device = f"{sub}frame {i} ({name}): camera", "camera"
-                image = capture()
-                state["frames"][0] += 1
-                run.report(f"view {k + 1}/{run.plan.n_views}: {sub}frame {i + 1}/{len(names)}", *state["frames"])
-                step, target, device = f"{sub}frame {i} ({name}): writing", partial / sub / file, None
-                writer.frame(k, angle, sub + file, f"{sub}frame {i} ({name})", target, image)
-        step, device = f"after frame {len(names) - 1} ({names[-1]}): {light.device} off", light.device
+                at(f"{sub}frame {i} ({name}): camera", "camera")
+                record(i, capture())
+        at(f"after frame {len(names) - 1} ({names[-1]}): {light.device} off", light.device)
         light.show(None)
     except (DeviceError, OSError) as exc:
-        raise FrameError(k, angle, step, target, exc, device=device) from exc
+        raise FrameError(k, angle, at.step, at.target, exc, device=at.device) from exc
 
     def finish(sha256: dict) -> None:
         step, target = f"writing {VIEW_FILE}", partial

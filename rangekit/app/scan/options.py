@@ -27,7 +27,7 @@ LASER_STEPS = 400
 ARTEFACTS = ("vdi2634",)
 #: Options of a turntable scan that ``artefact`` (one view per artefact position, coded light) does not take.
 _NOT_WITH_ARTEFACT = ("resume", "method", "steps", "up", "object", "views", "patterns", "passes", "flipped",
-                      "frames", "sim_bump")
+                      "frames", "sim_bump", "triggered")
 
 
 @dataclass(frozen=True)
@@ -58,6 +58,10 @@ class ScanOptions:
         ``processing`` is the one source; given together with a ``processing`` whose field differs, refused.
     realtime : the simulator keeps real time: the rig file's waits and frame rate, the projector's latency,
         the turntable's speed (:mod:`rangekit.sim.devices.realtime`); the frames are the same bytes.
+    triggered : a new simulated coded-light scan's camera is triggered by the projector's VSYNC (the session's rig
+        file says ``capture.trigger`` "projector"): no pattern delay, each frame's trigger count checked, a missed
+        trigger named and its view taken again (:mod:`rangekit.app.acquire.triggered`). A hardware rig's file says
+        it itself.
     frames : the frame files of a new session: ``"npy.zst"`` (:mod:`rangekit.npy_zst`; the default for coded
         light: 3x faster to read than PNG, 4x to write, as many bytes) or ``"png"`` (the default, and the only
         format, for a laser scan).
@@ -86,6 +90,7 @@ class ScanOptions:
     report: bool | None = option(None, "--no-report")
     format: str | None = option(None, "--format")
     realtime: bool = option(False, "--realtime")
+    triggered: bool = option(False, "--triggered")
     frames: str | None = option(None, "--frames")
     sim_bump: tuple[int, int, float] | None = option(None, "--sim-bump")
     processing: ProcessOptions | None = None
@@ -126,7 +131,7 @@ def _check_values(o: ScanOptions) -> None:
     for name, choices in (("fusion", FUSION_METHODS), ("format", MESH_EXPORT_FORMATS)):
         if getattr(o, name) is not None and getattr(o, name) not in choices:
             raise OptionError(f"{{{name}}} must be one of {', '.join(choices)}, found {getattr(o, name)!r}")
-    for name in ("flipped", "allow_auto_exposure", "process", "report", "realtime"):
+    for name in ("flipped", "allow_auto_exposure", "process", "report", "realtime", "triggered"):
         if not isinstance(getattr(o, name), bool) and not (name == "report" and o.report is None):
             raise OptionError(f"{{{name}}}: expected True or False, found {getattr(o, name)!r}")
     check_instance("{processing}", o.processing, ProcessOptions, "a ProcessOptions", optional=True, error=OptionError)
@@ -181,6 +186,11 @@ def _check_combination(o: ScanOptions) -> None:
     if o.realtime and o.rig not in (None, "sim"):
         raise OptionError(f"{{realtime}} makes the simulator keep real time; {{rig}} {o.rig} is hardware, which "
                           "keeps it anyway: leave {realtime} out")
+    if o.triggered and (o.rig not in (None, "sim") or o.resume is not None or o.method == "laser"):
+        raise OptionError("{triggered} makes a new simulated coded-light scan's camera triggered by the projector; "
+                          + (f"{{rig}} {o.rig} says it in its file (capture.trigger)" if o.rig not in (None, "sim")
+                             else "a resumed session's rig file says it (capture.trigger)" if o.resume is not None
+                             else "a laser scan's lasers send no trigger") + ": leave {triggered} out")
     if o.resume is not None and o.frames is not None:
         raise OptionError("{frames}: a resumed scan keeps its session's frame format; leave {frames} out")
     if o.sim_bump is not None:

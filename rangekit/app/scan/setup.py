@@ -122,7 +122,8 @@ def prepare_scan(options: ScanOptions, progress: Callable | None = None) -> Scan
         devices, simulator, hw = _open_hardware(the_rig, rig_file, laser), None, {"rig_file": str(rig_file)}
     else:
         devices, simulator = _simulator(session, obj, seed, the_rig, laser,
-                                        object_file if session is None else None, passes, options.realtime)
+                                        object_file if session is None else None, passes, options.realtime,
+                                        options.triggered)
         the_rig, hw = (session.rig if session else _scan_rig(devices.rig, laser, seed, progress)), None
         if session is None and object_file is not None:
             # The session keeps its own copy of the object's mesh, named relative to its folder.
@@ -257,27 +258,34 @@ def _default_sim_rig() -> Rig:
 
 
 def _simulator(session: Session | None, obj: str, seed: int, rig: Rig | None, laser: bool = False,
-               object_file: tuple[str, bytes] | None = None, passes: int = 1, realtime: bool = False):
+               object_file: tuple[str, bytes] | None = None, passes: int = 1, realtime: bool = False,
+               triggered: bool = False):
     """The simulated rig of a new scan (object, seed, default imaging) or of a resumed one (its settings).
     A laser scan renders the line lasers of :func:`rangekit.sim.laser.rig.laser_rig` (the simulator's truth;
     the session's rig holds the calibrated planes). ``object_file``: (name, bytes) the session will keep of
     a mesh file, which the simulator then reads (turned upright by ``--up``). ``passes`` > 1: the object
     is turned over between passes (:func:`rangekit.sim.scene.passes.pass_motions`, recorded for the truth).
     ``realtime``: the devices keep real time (:mod:`rangekit.sim.devices.realtime`), waiting the session's (or
-    the rig file's) pattern delay."""
+    the rig file's) pattern delay. ``triggered`` (a new scan): the simulator's rig says ``capture.trigger``
+    "projector", its camera triggered by the projector's VSYNC (:mod:`rangekit.sim.devices.trigger`); a resumed
+    session's rig says it itself."""
     import tempfile
 
     from rangekit.sim import ImagingModel, SimRig, default_scene
     from rangekit.sim.laser.rig import laser_rig
 
     options = {"light": "laser"} if laser else {}
+    if triggered and rig is None:
+        rig = _default_sim_rig()
+        rig = replace(rig, capture={**rig.capture, "trigger": "projector"})
     if realtime:
+        from rangekit.rig.checks import camera_triggered
         from rangekit.sim.devices.realtime import realtime_options
 
         capture = session.capture if session is not None else None
         delay = capture.pattern_delay_s if capture is not None else CaptureSettings.from_rig(
             rig if rig is not None else _default_sim_rig(), hardware=True).pattern_delay_s
-        options.update(realtime_options(delay))
+        options.update(realtime_options(delay, triggered=rig is not None and camera_triggered(rig.capture)))
     if laser:
         rig = laser_rig(rig if rig is not None and not rig.lasers else None)
     if session is not None:

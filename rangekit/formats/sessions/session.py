@@ -41,6 +41,7 @@ from rangekit.errors import ConfigError, RangekitError, shown
 from rangekit.formats.sessions.summary import ProcessResult
 from rangekit.io import atomic_write_json, read_json
 from rangekit.rig.rig_file import Rig, load_rig
+from rangekit.rig.checks import camera_triggered
 from rangekit.formats.sessions.object import object_source
 from rangekit.formats.sessions.files import RIG_FILE, SESSION_FILE, view_folder
 
@@ -100,11 +101,13 @@ class CaptureSettings:
     @classmethod
     def from_rig(cls, rig: Rig, *, hardware: bool) -> "CaptureSettings":
         """The rig file's ``capture`` section; waits on hardware (defaults 0.1 s and 0.5 s), and on the
-        simulator the pattern delay the rig file states (``rangekit check``'s measured latency), else none."""
+        simulator the pattern delay the rig file states (``rangekit check``'s measured latency), else none. A
+        camera triggered by the projector (``capture.trigger`` "projector") waits no pattern delay."""
         c = rig.capture
+        delay = 0.0 if camera_triggered(c) else c.get("pattern_delay_s", DEFAULT_PATTERN_DELAY_S if hardware else 0.0)
         if not hardware:
-            return cls(bits=c.get("bits"), pattern_delay_s=float(c.get("pattern_delay_s", 0.0)))
-        return cls(bits=c.get("bits"), pattern_delay_s=float(c.get("pattern_delay_s", DEFAULT_PATTERN_DELAY_S)),
+            return cls(bits=c.get("bits"), pattern_delay_s=float(delay))
+        return cls(bits=c.get("bits"), pattern_delay_s=float(delay),
                    turntable_settle_s=float(c.get("turntable_settle_s", DEFAULT_TURNTABLE_SETTLE_S)))
 
 

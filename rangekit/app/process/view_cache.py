@@ -96,9 +96,11 @@ _MAP_NAMES = ("proj_col", "confidence", "depth", "sigma")  # a cache without one
 
 def view_cloud(v: SessionView, spec: PatternSpec, rig: Rig, settings: dict, full_scale: float | None,
                T_table_world: np.ndarray | None, table_margin: float,
-               session: Session | None = None) -> tuple[PointCloud, ViewMaps]:
+               session: Session | None = None, *, cores: int | None = None) -> tuple[PointCloud, ViewMaps]:
     """Decode, triangulate and filter one view, or reuse its cache when made with the same ``settings``, on this
-    thread (its numba setting holds).
+    thread: with ``cores`` None its numba setting holds; else on one BLAS thread and ``cores`` numba threads
+    (0: the configured number, :func:`rangekit._runtime.executor.worker_count`; the scan's live processing decodes
+    a view on 1 while the capture runs, on every core once it waits for the view).
 
     ``settings["method"]`` is the triangulation method, ``settings["exposures_us"]`` (when present) the
     exposures of a multi-exposure session, each decoded from its ``e<us>/`` folder and merged per pixel; ``full_scale`` the camera's largest pixel value
@@ -106,6 +108,9 @@ def view_cloud(v: SessionView, spec: PatternSpec, rig: Rig, settings: dict, full
     (``T_table_world`` maps world points to the table frame; None: no table) are dropped. ``session``: the
     frames are checked against its recorded SHA-256s (:func:`view_clouds`).
     """
+    if cores is not None:
+        with one_blas_thread(), numba_threads(worker_count(cores)):
+            return view_cloud(v, spec, rig, settings, full_scale, T_table_world, table_margin, session)
     return next(view_clouds([v], spec, rig, settings, full_scale, T_table_world, table_margin, session, workers=1))
 
 

@@ -12,7 +12,7 @@ Where each piece of work runs is the placement table, :data:`PLACEMENTS`: one pl
     work           LOCAL           STREAMING (a scan)                    DASK (a batch)
                    rangekit process                                      rangekit process S1 S2
     ============== =============== ===================================== ========================
-    view decode    threads         the streaming thread as views come    a task per view
+    view decode    threads         the streaming worker as views come    a task per view, in memo
     pair refine    threads         ahead as views come, then threads     a task per pair
     truth prepare  a thread        ahead as views come, then a thread    a thread
     poisson        a child         a child                               a thread (1 core/worker)
@@ -22,9 +22,16 @@ Where each piece of work runs is the placement table, :data:`PLACEMENTS`: one pl
     report panels  threads         threads                               threads
     ============== =============== ===================================== ========================
 
+The STREAMING placement's live part is :class:`StreamingWorker`: as the scan's events announce views it runs the
+scan's per-view steps (:class:`rangekit.app.scan.streaming.StreamingViews`: decode, place, integrate, the
+registration and the truth ahead; no thread of their own) on a queue worker at a lower priority than the capture
+(:class:`rangekit._runtime.queue_worker.QueueWorker`), held back while the capture is behind.
+
 What the streaming placement or Dask did ahead reaches the runner in a :class:`Memo` (decoded views, the
-registration's levels and first pairs, the prepared evaluator; Dask's decoded views are its view caches on disk),
-taken only where it is exactly what the stage would compute: the outputs are the same bytes in every placement.
+registration's levels and first pairs, the prepared evaluator; Dask's decoded views are read from the view caches
+its tasks wrote as they are taken), taken only where it is exactly what the stage would compute: the outputs are
+the same bytes in every placement. The decode stage has one path in all three: each view from the memo, else
+decoded on the runner's threads (LOCAL: every view; STREAMING: those the scan did not get to; DASK: none).
 """
 
 from __future__ import annotations
@@ -86,15 +93,20 @@ PLACEMENTS: dict[Work, dict[Plan, Where]] = {
 
 @dataclass(eq=False)
 class Memo:
-    """What was computed ahead of the stages, by the scan's live processing (:mod:`rangekit.app.scan.streaming`):
-    ``decoded`` each view decoded (index -> ``(cloud, ViewMaps)``, its frames checked when read; taken out as it
-    is used, so its maps are freed with the others'), ``registration`` the registration's levels and first-round
-    pairs (:class:`rangekit.registration.ahead.RegistrationAhead`), ``evaluate`` the evaluator with the truth's
-    samples and the views' errors made. Dask's views are its view caches on disk (no memo needed)."""
+    """What was computed ahead of the stages, by the scan's live processing (STREAMING:
+    :class:`StreamingWorker`) or by Dask's view tasks (DASK): ``decoded`` each view decoded (index ->
+    ``(cloud, ViewMaps)``, its frames checked when read; taken out with ``pop`` as it is used, so its maps are
+    freed with the others'; DASK's is :class:`rangekit.app.process.view_cache.ViewCaches`, which reads each view
+    from the cache its task wrote as it is taken), ``announced`` whether those views were announced as
+    :class:`~rangekit.app.events.ViewDecoded` when they were decoded (a Dask view task announces nothing: the
+    decode stage does as it takes them), ``registration`` the registration's levels and first-round pairs
+    (:class:`rangekit.registration.ahead.RegistrationAhead`), ``evaluate`` the evaluator with the truth's samples
+    and the views' errors made. LOCAL's is empty: every view is decoded on the runner's threads."""
 
-    decoded: dict = field(default_factory=dict)
+    decoded: Any = field(default_factory=dict)   # a dict, or any mapping with ``in`` and ``pop``
     registration: RegistrationAhead | None = None
     evaluate: Any = None
+    announced: bool = True
 
 
 class Runner:

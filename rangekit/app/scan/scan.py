@@ -252,6 +252,7 @@ def _process(session: Session | str | Path, options: ProcessOptions, on_event, p
 
 
 def process_placed(session: Session | str | Path, options: ProcessOptions, *, plan: Plan,
-                   on_event=None) -> ProcessResult:
-    """:func:`process` as a placement of the plan runs it (a Dask session task: ``Plan.DASK``)."""
-    return _process(session, options, on_event, plan, Memo())
+                   on_event=None, memo: Memo | None = None) -> ProcessResult:
+    """:func:`process` as a placement of the plan runs it (a Dask session task: ``Plan.DASK``, its ``memo`` the
+    views its view tasks decoded)."""
+    return _process(session, options, on_event, plan, memo if memo is not None else Memo())

@@ -3,7 +3,8 @@
     PYTHONPATH=. .venv/bin/python benchmarks/app/bench_gil_stalls.py SESSION
 
 SESSION: a coded-light session (``rangekit scan --out SESSION --no-process``). A copy without its caches and outputs
-is fed through :class:`rangekit.app.scan.streaming.StreamingProcessor` view by view, as a resumed scan would be
+is fed through the scan's STREAMING worker (:class:`rangekit.app.runner.StreamingWorker` running
+:class:`rangekit.app.scan.streaming.StreamingViews`) view by view, as a resumed scan would be
 (every view but the last while the "acquisition" runs, so each view's work ahead is done), while a probe thread
 sleeps 1 ms at a time and records how long each sleep really took. A gap much longer than 1 ms is time in which
 no other Python thread could run: the capture's, in a real scan. Printed (JSON lines): the gaps over 15 ms (count,
@@ -89,7 +90,8 @@ def cast_2m_rays() -> dict:
 def streaming(session: Path) -> dict:
     from rangekit.app.events import ScanStarted
     from rangekit.app.process.options import ProcessOptions
-    from rangekit.app.scan.streaming import StreamingProcessor
+    from rangekit.app.runner import StreamingWorker
+    from rangekit.app.scan.streaming import StreamingViews
     from rangekit.formats.sessions.session import Session
 
     with tempfile.TemporaryDirectory() as tmp:
@@ -100,15 +102,15 @@ def streaming(session: Path) -> dict:
         n = len(Session.load(copy).views)
         with Probe(watch="rangekit-streaming") as probe:
             t0 = time.perf_counter()
-            proc = StreamingProcessor(copy, ProcessOptions())
+            proc = StreamingWorker(StreamingViews(copy, ProcessOptions()))
             proc.on_event(ScanStarted(copy, n, 0, 0, True, None, False))     # as a resumed scan: every view queued
-            while len(proc.decoded) < n - 1 and proc.error is None:        # the "acquisition" runs until then
+            while len(proc.steps.decoded) < n - 1 and proc.error is None:        # the "acquisition" runs until then
                 time.sleep(0.05)
             proc.finish()
             seconds = time.perf_counter() - t0
         if proc.error is not None:
             raise SystemExit(f"streaming failed: {proc.error!r}")
-        return {"views": n, "seconds": round(seconds, 1), "measured_ahead": len(proc.measured), **probe.summary()}
+        return {"views": n, "seconds": round(seconds, 1), "measured_ahead": len(proc.steps.measured), **probe.summary()}
 
 
 if __name__ == "__main__":

@@ -5,21 +5,27 @@ the concurrency must not change a byte of what the job writes).
 holding the sim, drivers and calib links), the five scenarios of the acceptance and copies each one's
 mesh.ply, mesh_watertight.ply, poses.json and summary.json into OUT/SCENARIO/:
 
-- ``scan``: ``rangekit scan --out S --views 6`` (the defaults but the views: 12 took twice as long);
+- ``scan``: ``rangekit scan --out S --views N`` (the defaults but the views: N is ``--views``, 6 unless told;
+  the default scan's 12 takes twice as long);
 - ``process``: ``rangekit process`` of a copy of that session, its outputs and view caches removed;
 - ``dask_a``, ``dask_b``: ``rangekit process A B`` of two such copies (several sessions: the Dask batch on a
   local cluster of its default 2 workers on 127.0.0.1);
-- ``realtime``: ``rangekit scan --out R --views 6 --realtime``;
-- ``resume``: ``rangekit scan --out S2 --views 6`` stopped by SIGINT once ``view 3/6 done`` is printed, then
-  ``rangekit scan --resume S2``.
+- ``realtime``: ``rangekit scan --out R --views N --realtime``;
+- ``resume``: ``rangekit scan --out S2 --views N`` stopped by SIGINT once ``view N/2 of N done`` is printed
+  (``view 3/6 done`` at 6), then ``rangekit scan --resume S2``.
 
-Each scenario's log and wall/CPU seconds go to OUT/logs/. ``compare`` says, file by file, identical or not;
-summary.json is compared with every timing entry removed (a key named ``seconds`` or ending in ``_seconds``
-or ``_s``) and a top-level ``options`` entry ignored (issue 49 records the options there).
+Each scenario's log and wall/CPU seconds go to OUT/logs/, and the views to OUT/logs/run.json. ``compare`` says,
+file by file, identical or not; summary.json is compared with every timing entry removed (a key named ``seconds``
+or ending in ``_seconds`` or ``_s``) and a top-level ``options`` entry ignored (issue 49 records the options
+there).
 
     python benchmarks/app/same_outputs.py run --tree /work/wt-base --out /work/baseline-49
     python benchmarks/app/same_outputs.py run --tree . --out /tmp/mine [--only scan,process]
+    python benchmarks/app/same_outputs.py run --tree /work/wt-base --views 12 --only scan,realtime \\
+        --out /work/baseline-49-v12
     python benchmarks/app/same_outputs.py compare /work/baseline-49 /tmp/mine
+
+``compare`` looks only at the scenarios the base holds, and refuses two runs made at different views.
 
 Under load on the 2-core machine a run takes about 8 minutes.
 """
@@ -40,7 +46,6 @@ from pathlib import Path
 
 FILES = ("mesh.ply", "mesh_watertight.ply", "poses.json", "summary.json")
 SCENARIOS = ("scan", "process", "dask_a", "dask_b", "realtime", "resume")
-VIEWS = ["--views", "6"]
 #: What processing writes into a session (its outputs and each view's cache): removed from a copy to process.
 OUTPUTS = ("mesh.ply", "mesh_watertight.ply", "poses.json", "summary.json", "merged.ply", "report.html",
            "preview.ply")
@@ -105,15 +110,16 @@ def _unprocessed_copy(session: Path, to: Path) -> Path:
     return to
 
 
-def run(tree: Path, out: Path, python: str, only: set[str]) -> None:
+def run(tree: Path, out: Path, python: str, only: set[str], views: int = 6) -> None:
     out.mkdir(parents=True, exist_ok=True)
     (out / "logs").mkdir(exist_ok=True)
     r = Runner(tree.resolve(), python, out / "logs")
+    scan_views = ["--views", str(views)]
     with tempfile.TemporaryDirectory(prefix="same_outputs_") as tmp:
         work = Path(tmp)
         scanned = work / "scan"
         if only & {"scan", "process", "dask_a", "dask_b"}:
-            r.run("scan", "scan", "--out", str(scanned), *VIEWS)
+            r.run("scan", "scan", "--out", str(scanned), *scan_views)
             _keep(scanned, out / "scan")
         if "process" in only:
             copy = _unprocessed_copy(scanned, work / "process")
@@ -125,11 +131,11 @@ def run(tree: Path, out: Path, python: str, only: set[str]) -> None:
             _keep(a, out / "dask_a")
             _keep(b, out / "dask_b")
         if "realtime" in only:
-            r.run("realtime", "scan", "--out", str(work / "realtime"), *VIEWS, "--realtime")
+            r.run("realtime", "scan", "--out", str(work / "realtime"), *scan_views, "--realtime")
             _keep(work / "realtime", out / "realtime")
         if "resume" in only:
             s = work / "resume"
-            rc = r.run_until("resume_stopped", "view 3/6 done", "scan", "--out", str(s), *VIEWS)
+            rc = r.run_until("resume_stopped", f"view {views // 2}/{views} done", "scan", "--out", str(s), *scan_views)
             if rc != 130:
                 raise SystemExit(f"resume: the interrupted scan exited {rc}, expected 130; see logs/resume_stopped.log")
             r.run("resume", "scan", "--resume", str(s))
@@ -138,7 +144,7 @@ def run(tree: Path, out: Path, python: str, only: set[str]) -> None:
     dirty = subprocess.run(["git", "-C", str(tree), "status", "--porcelain", "--untracked-files=no"],
                            capture_output=True, text=True).stdout.strip()
     (out / "logs" / "run.json").write_text(json.dumps({"tree": str(tree), "commit": head, "dirty": bool(dirty),
-                                                       "times": r.times}, indent=1))
+                                                       "views": views, "times": r.times}, indent=1))
     print(json.dumps(r.times, indent=1))
 
 
@@ -161,9 +167,18 @@ def same(a: Path, b: Path) -> bool:
     return a.read_bytes() == b.read_bytes()
 
 
+def _views(out: Path) -> int:
+    """The views a run was made at (6 for a run from before ``--views``)."""
+    run_json = out / "logs" / "run.json"
+    return json.loads(run_json.read_text()).get("views", 6) if run_json.is_file() else 6
+
+
 def compare(base: Path, other: Path) -> int:
+    if _views(base) != _views(other):
+        print(f"{base} was run at {_views(base)} views, {other} at {_views(other)}: not comparable")
+        return 1
     differ = 0
-    for scenario in SCENARIOS:
+    for scenario in (s for s in SCENARIOS if (base / s).is_dir()):
         for name in FILES:
             a, b = base / scenario / name, other / scenario / name
             if not (a.is_file() and b.is_file()):
@@ -183,6 +198,7 @@ def main() -> int:
     r.add_argument("--tree", required=True, type=Path, help="the checkout to run (PYTHONPATH)")
     r.add_argument("--out", required=True, type=Path, help="where each scenario's files go")
     r.add_argument("--python", default=sys.executable, help="the interpreter (default: this one)")
+    r.add_argument("--views", type=int, default=6, help="the views of every scan (default 6; at least 2)")
     r.add_argument("--only", default=",".join(s for s in SCENARIOS if s != "dask_b"),
                    help="comma-separated scenarios (default all; dask_a and dask_b run together)")
     c = sub.add_parser("compare", help="file by file, identical or not")
@@ -194,7 +210,9 @@ def main() -> int:
         unknown = only - set(SCENARIOS)
         if unknown:
             p.error(f"--only: unknown scenario(s) {', '.join(sorted(unknown))}; expected of {', '.join(SCENARIOS)}")
-        run(args.tree, args.out, args.python, only)
+        if args.views < 2:
+            p.error(f"--views: got {args.views}, expected at least 2")
+        run(args.tree, args.out, args.python, only, args.views)
         return 0
     return compare(args.base, args.other)
 

@@ -12,7 +12,7 @@ Where each piece of work runs is the placement table, :data:`PLACEMENTS`: one pl
     work           LOCAL           STREAMING (a scan)                    DASK (a batch)
                    rangekit process                                      rangekit process S1 S2
     ============== =============== ===================================== ========================
-    view decode    threads         the streaming thread as views come    a task per view
+    view decode    threads         the streaming worker as views come    a task per view, in memo
     pair refine    threads         ahead as views come, then threads     a task per pair
     truth prepare  a thread        ahead as views come, then a thread    a thread
     poisson        a child         a child                               a thread (1 core/worker)
@@ -22,9 +22,16 @@ Where each piece of work runs is the placement table, :data:`PLACEMENTS`: one pl
     report panels  threads         threads                               threads
     ============== =============== ===================================== ========================
 
+The STREAMING placement's live part is :class:`StreamingWorker`: as the scan's events announce views it runs the
+scan's per-view steps (:class:`rangekit.app.scan.streaming.StreamingViews`: decode, place, integrate, the
+registration and the truth ahead; no thread of their own) on a queue worker at a lower priority than the capture
+(:class:`rangekit._runtime.queue_worker.QueueWorker`), held back while the capture is behind.
+
 What the streaming placement or Dask did ahead reaches the runner in a :class:`Memo` (decoded views, the
-registration's levels and first pairs, the prepared evaluator; Dask's decoded views are its view caches on disk),
-taken only where it is exactly what the stage would compute: the outputs are the same bytes in every placement.
+registration's levels and first pairs, the prepared evaluator; Dask's decoded views are read from the view caches
+its tasks wrote as they are taken), taken only where it is exactly what the stage would compute: the outputs are
+the same bytes in every placement. The decode stage has one path in all three: each view from the memo, else
+decoded on the runner's threads (LOCAL: every view; STREAMING: those the scan did not get to; DASK: none).
 """
 
 from __future__ import annotations
@@ -37,13 +44,15 @@ from typing import TYPE_CHECKING, Any
 
 from rangekit._runtime.executor import Where, ordered_map, start
 from rangekit._runtime.memory import release_free_memory, reuse_freed_memory
+from rangekit._runtime.queue_worker import QueueWorker
+from rangekit._runtime.threads import one_blas_thread
 from rangekit.app.bus import EventBus
-from rangekit.app.events import Progress, Stage, StageClock
+from rangekit.app.events import CaptureLoad, Progress, Stage, StageClock
 
 if TYPE_CHECKING:
     from rangekit.registration.ahead import RegistrationAhead
 
-__all__ = ["Plan", "Work", "PLACEMENTS", "Memo", "Runner"]
+__all__ = ["Plan", "Work", "PLACEMENTS", "Memo", "Runner", "StreamingWorker", "STREAMING_NICE"]
 
 
 class Plan(str, Enum):
@@ -84,15 +93,20 @@ PLACEMENTS: dict[Work, dict[Plan, Where]] = {
 
 @dataclass(eq=False)
 class Memo:
-    """What was computed ahead of the stages, by the scan's live processing (:mod:`rangekit.app.scan.streaming`):
-    ``decoded`` each view decoded (index -> ``(cloud, ViewMaps)``, its frames checked when read; taken out as it
-    is used, so its maps are freed with the others'), ``registration`` the registration's levels and first-round
-    pairs (:class:`rangekit.registration.ahead.RegistrationAhead`), ``evaluate`` the evaluator with the truth's
-    samples and the views' errors made. Dask's views are its view caches on disk (no memo needed)."""
+    """What was computed ahead of the stages, by the scan's live processing (STREAMING:
+    :class:`StreamingWorker`) or by Dask's view tasks (DASK): ``decoded`` each view decoded (index ->
+    ``(cloud, ViewMaps)``, its frames checked when read; taken out with ``pop`` as it is used, so its maps are
+    freed with the others'; DASK's is :class:`rangekit.app.process.view_cache.ViewCaches`, which reads each view
+    from the cache its task wrote as it is taken), ``announced`` whether those views were announced as
+    :class:`~rangekit.app.events.ViewDecoded` when they were decoded (a Dask view task announces nothing: the
+    decode stage does as it takes them), ``registration`` the registration's levels and first-round pairs
+    (:class:`rangekit.registration.ahead.RegistrationAhead`), ``evaluate`` the evaluator with the truth's samples
+    and the views' errors made. LOCAL's is empty: every view is decoded on the runner's threads."""
 
-    decoded: dict = field(default_factory=dict)
+    decoded: Any = field(default_factory=dict)   # a dict, or any mapping with ``in`` and ``pop``
     registration: RegistrationAhead | None = None
     evaluate: Any = None
+    announced: bool = True
 
 
 class Runner:
@@ -196,3 +210,71 @@ class Runner:
 
             return dask_pair_mapper()
         return None
+
+
+#: How much lower the streaming worker's priority is than the capture's (its niceness; Linux: per thread).
+STREAMING_NICE = 10
+
+
+class StreamingWorker:
+    """The STREAMING placement's live part: the scan's views, each through ``steps.view(k)`` as the scan's events
+    bring them (``steps.views_of(event)``), on a worker thread of its own
+    (:class:`rangekit._runtime.queue_worker.QueueWorker`) at niceness :data:`STREAMING_NICE` and one BLAS thread,
+    so the capture's threads get the cores whenever they need them and the steps take what they leave. It backs
+    off: while the capture is behind (the frames waiting to be written reached the writer's limit,
+    :class:`~rangekit.app.events.CaptureLoad`) no new view is started; it starts again when they have drained to
+    half, or when the acquisition ends (:meth:`drain`). ``steps``: the per-view steps
+    (:class:`rangekit.app.scan.streaming.StreamingViews`). Use :meth:`on_event` as a subscriber of the scan's
+    events, then :meth:`drain` and :meth:`write_preview` (or :meth:`finish`, both), or :meth:`stop` on an error;
+    :meth:`memo` hands on what was done to the processing."""
+
+    def __init__(self, steps) -> None:
+        self.steps = steps
+        self._worker = QueueWorker(self._one, name="rangekit-streaming", nice=STREAMING_NICE)
+
+    def on_event(self, event) -> None:
+        """A subscriber of the scan's events: queues the views an event brings; a :class:`CaptureLoad` holds the
+        worker back (``behind``) or lets it go."""
+        if isinstance(event, CaptureLoad):
+            (self._worker.hold if event.behind else self._worker.release)()
+        for k in self.steps.views_of(event):
+            self._worker.put(k)
+
+    @property
+    def paused(self) -> int:
+        """Views that waited for the capture to catch up."""
+        return self._worker.paused
+
+    @property
+    def error(self) -> BaseException | None:
+        """The error that stopped the steps (the processing decodes the views left and meets it), or None."""
+        return self._worker.error
+
+    def drain(self) -> None:
+        """The acquisition is over: the views queued go through their steps at once (each on every core), then
+        the worker ends."""
+        self.steps.acquisition_over = True
+        self._worker.finish()
+
+    def write_preview(self):
+        """After :meth:`drain`: the steps' preview (its path), or None when the steps failed (:attr:`error`)."""
+        return None if self.error is not None else self.steps.write_preview()
+
+    def finish(self):
+        """:meth:`drain`, then :meth:`write_preview`."""
+        self.drain()
+        return self.write_preview()
+
+    def stop(self) -> None:
+        """Stop after the view going through its steps (its cache is complete or not written); the queued ones
+        are left to the resumed scan or ``rangekit process``."""
+        self._worker.stop()
+
+    def memo(self) -> Memo:
+        """What the steps did ahead, for the processing: each view decoded, the registration's levels and first
+        pairs, the prepared evaluator."""
+        return Memo(self.steps.results, self.steps.registration, self.steps.evaluate)
+
+    def _one(self, k: int) -> None:
+        with one_blas_thread():   # thin products (rangekit._runtime.threads)
+            self.steps.view(k)

@@ -1,12 +1,14 @@
 """Many sessions processed on Dask (``rangekit process S1 S2 ... [--scheduler local|ADDRESS] [--workers N]``).
 
-Each coded-light view's decoding is one task (:func:`decode_view_task`): it checks the view's frames
-against their SHA-256s, then decodes, triangulates and filters the view into its cache in the view folder
+The DASK placement of the job runner's plan (:data:`rangekit.app.runner.PLACEMENTS`). Each coded-light view's
+decoding is one task (:func:`decode_view_task`): it checks the view's frames against their SHA-256s, then
+decodes, triangulates and filters the view into its cache in the view folder
 (:mod:`rangekit.app.process.view_cache`: ``cloud.json`` is written last and vouches for the rest). Then, per
-session, one task (:func:`finish_session_task`) runs :func:`rangekit.app.scan.scan.process` (registration,
-fusion, evaluation on the simulator, report), which finds every view in the cache; each view pair's
-registration within it is a task of its own (:mod:`rangekit.app.batch.pairs`). Its outputs are the bytes of
-processing the session in one process. A laser session is one task.
+session, one task (:func:`finish_session_task`) runs the processing (registration, fusion, evaluation on the
+simulator, report) with those views in the runner's memo (:class:`rangekit.app.process.view_cache.ViewCaches`:
+each read from its cache as the decode stage takes it, its frames checked); each view pair's registration within
+it is a task of its own (:mod:`rangekit.app.batch.pairs`). Its outputs are the bytes of processing the session in
+one process. A laser session is one task.
 
 Tasks are idempotent through the cache: a task retried after its worker died, or a rerun of the whole
 batch, reads what was finished and redoes only what was not. A worker holds one view's image stack at a
@@ -113,12 +115,13 @@ def probe_scheduler(address: str, timeout: float) -> None:
 
 @dataclass(frozen=True)
 class ViewDone:
-    """A view task's result: the view folder's name, its points, and whether this task decoded it (False:
-    it was found in the cache)."""
+    """A view task's result: the view folder's name, its points, whether this task decoded it (False: it was
+    found in the cache), and its index in the session."""
 
     view: str
     points: int
     decoded: bool
+    index: int
 
 
 @dataclass(frozen=True)
@@ -168,7 +171,7 @@ def decode_view_task(folder: str, index: int, method: str = "auto", table_margin
     stamp = _stamp(view.folder / CLOUD_INFO_FILE)
     cloud, _ = view_cloud(view, session.pattern, session.rig, cache_settings(session, method, table_margin, max_motion),
                           session.capture.full_scale, table_transform(session.rig), table_margin, session)
-    done = ViewDone(view.folder.name, len(cloud), _stamp(view.folder / CLOUD_INFO_FILE) != stamp)
+    done = ViewDone(view.folder.name, len(cloud), _stamp(view.folder / CLOUD_INFO_FILE) != stamp, index)
     del cloud
     release_free_memory()   # the view's stack and maps: a worker holds one view at a time
     return done
@@ -185,13 +188,17 @@ def _stamp(path: Path) -> tuple[int, int] | None:
 
 def finish_session_task(folder: str, views: Sequence[ViewDone], options: ProcessOptions) -> tuple[str, ...]:
     """Register, fuse, evaluate (a simulated session, with ``options.truth``) and report the session in
-    ``folder`` once its ``views`` are decoded (a Dask task; they come from the cache). Returns the end-of-run
-    summary lines."""
-    from rangekit.app.runner import Plan
+    ``folder`` once its ``views`` are decoded (a Dask task; they come from their caches, through the runner's memo).
+    Returns the end-of-run summary lines."""
+    from rangekit.app.process.view_cache import ViewCaches
+    from rangekit.app.runner import Memo, Plan
     from rangekit.app.scan.scan import process_placed
 
-    # the Dask placement of the plan: each view pair's registration a task of its own (PLACEMENTS, batch_pairs)
-    return tuple(process_placed(folder, options, plan=Plan.DASK).summary_lines())
+    # the Dask placement of the plan: the views its tasks decoded in the memo, each view pair's registration a
+    # task of its own (PLACEMENTS, batch_pairs)
+    decoded = ViewCaches(folder, [v.index for v in views], options.method, options.table_margin, options.max_motion)
+    memo = Memo(decoded=decoded, announced=False)
+    return tuple(process_placed(folder, options, plan=Plan.DASK, memo=memo).summary_lines())
 
 
 def process_sessions(folders: Sequence[str | Path], options: ProcessOptions | None = None, *,

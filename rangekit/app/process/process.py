@@ -154,8 +154,8 @@ def _decoded_views(session: Session, options: ProcessOptions, runner: Runner) ->
     ahead, its frames checked then; taken out as it is used, so its maps are freed with the others') or decoded
     on the runner's worker threads, the next view's frames read while one decodes, each frame once (its SHA-256
     checked from the bytes read). Each view is announced as :class:`ViewDecoded` (a view from the memo was, when
-    it was decoded) and as a progress line."""
-    views, given = session.done_views, runner.memo.decoded
+    it was decoded, unless the memo says otherwise: Dask's view tasks announce nothing) and as a progress line."""
+    views, given, announced = session.done_views, runner.memo.decoded, runner.memo.announced
     settings = cache_settings(session, options.method, options.table_margin, options.max_motion)
     handed = {v.index for v in views if v.index in given}
     rest = view_clouds([v for v in views if v.index not in handed], session.pattern, session.rig, settings,
@@ -163,7 +163,7 @@ def _decoded_views(session: Session, options: ProcessOptions, runner: Runner) ->
                        map_views=runner.map_views)
     for k, v in enumerate(views):
         cloud, maps = given.pop(v.index) if v.index in handed else next(rest)
-        if v.index not in handed:
+        if v.index not in handed or not announced:
             runner.emit(ViewDecoded(k, len(views), v.folder.name, cloud))
         runner.say(f"decoded {v.folder.name}: {len(cloud):,} points", k + 1, len(views))
         yield cloud, maps

@@ -36,7 +36,8 @@ from rangekit.formats.sessions.view_maps import ViewMaps
 from rangekit.surface.cloud import PointCloud
 from rangekit.formats.sessions.files import CLOUD_FILE, CLOUD_INFO_FILE, MAPS_FILE
 
-__all__ = ["ViewMaps", "cache_settings", "table_transform", "view_cloud", "view_clouds", "white_frame_index"]
+__all__ = ["ViewMaps", "ViewCaches", "cache_settings", "table_transform", "view_cloud", "view_clouds",
+           "white_frame_index"]
 
 
 def cache_settings(session: Session, method: str, table_margin: float,
@@ -96,9 +97,11 @@ _MAP_NAMES = ("proj_col", "confidence", "depth", "sigma")  # a cache without one
 
 def view_cloud(v: SessionView, spec: PatternSpec, rig: Rig, settings: dict, full_scale: float | None,
                T_table_world: np.ndarray | None, table_margin: float,
-               session: Session | None = None) -> tuple[PointCloud, ViewMaps]:
+               session: Session | None = None, *, cores: int | None = None) -> tuple[PointCloud, ViewMaps]:
     """Decode, triangulate and filter one view, or reuse its cache when made with the same ``settings``, on this
-    thread (its numba setting holds).
+    thread: with ``cores`` None its numba setting holds; else on one BLAS thread and ``cores`` numba threads
+    (0: the configured number, :func:`rangekit._runtime.executor.worker_count`; the scan's live processing decodes
+    a view on 1 while the capture runs, on every core once it waits for the view).
 
     ``settings["method"]`` is the triangulation method, ``settings["exposures_us"]`` (when present) the
     exposures of a multi-exposure session, each decoded from its ``e<us>/`` folder and merged per pixel; ``full_scale`` the camera's largest pixel value
@@ -106,6 +109,9 @@ def view_cloud(v: SessionView, spec: PatternSpec, rig: Rig, settings: dict, full
     (``T_table_world`` maps world points to the table frame; None: no table) are dropped. ``session``: the
     frames are checked against its recorded SHA-256s (:func:`view_clouds`).
     """
+    if cores is not None:
+        with one_blas_thread(), numba_threads(worker_count(cores)):
+            return view_cloud(v, spec, rig, settings, full_scale, T_table_world, table_margin, session)
     return next(view_clouds([v], spec, rig, settings, full_scale, T_table_world, table_margin, session, workers=1))
 
 
@@ -145,6 +151,47 @@ def view_clouds(views: Sequence[SessionView], spec: PatternSpec, rig: Rig, setti
         yield from map_views(one, views)
         return
     yield from ordered_map(one, views, workers=n, name="rangekit-views")
+
+
+class ViewCaches:
+    """The views of a session decoded into their caches elsewhere (the Dask batch's view tasks,
+    :mod:`rangekit.app.batch.sessions`), as the job runner's memo holds decoded views
+    (:attr:`rangekit.app.runner.Memo.decoded`: index -> ``(cloud, ViewMaps)``, taken out with :meth:`pop`). Nothing
+    is read until a view is taken: :meth:`pop` reads its cache then, its frames checked against their recorded
+    SHA-256s as every cached view's are (:func:`view_cloud` with the session; a cache no longer valid is decoded
+    again there), so at most the view being taken is held.
+
+    ``folder``: the session; ``indices``: the views whose caches were written; ``method``, ``table_margin``,
+    ``max_motion``: the processing's options (:func:`cache_settings`). The session is read once, at the first
+    :meth:`pop` (inside the processing's lock).
+    """
+
+    def __init__(self, folder, indices, method: str, table_margin: float, max_motion: float | None) -> None:
+        self.folder, self._left = folder, list(indices)
+        self._options = (method, table_margin, max_motion)
+        self._session: Session | None = None
+
+    def __contains__(self, index) -> bool:
+        return index in self._left
+
+    def __len__(self) -> int:
+        return len(self._left)
+
+    def __iter__(self) -> Iterator[int]:
+        return iter(list(self._left))
+
+    def pop(self, index: int) -> tuple[PointCloud, ViewMaps]:
+        """View ``index``'s cloud and maps, read from its cache (class doc); KeyError when it is not held."""
+        if index not in self._left:
+            raise KeyError(index)
+        if self._session is None:
+            self._session = Session.load(self.folder)
+        session = self._session
+        view = next(v for v in session.views if v.index == index)
+        self._left.remove(index)
+        method, table_margin, max_motion = self._options
+        return view_cloud(view, session.pattern, session.rig, cache_settings(session, method, table_margin, max_motion),
+                          session.capture.full_scale, table_transform(session.rig), table_margin, session)
 
 
 def _stored_maps(m: dict, folders: list, white: int) -> ViewMaps:

@@ -18,7 +18,7 @@ from rangekit._runtime.executor import Where, start
 from rangekit.app.bus import EventBus
 from rangekit.app.event_log import logged
 from rangekit.app.events import OnEvent, ScanStarted, Stage, StageClock, emit, failures_announced, progress_of
-from rangekit.app.runner import Memo, Plan
+from rangekit.app.runner import Memo, Plan, StreamingWorker
 from rangekit.app.process.evaluate import Evaluator, measuring
 from rangekit.app.process.options import ProcessOptions
 from rangekit.app.process.process import process_session
@@ -87,8 +87,9 @@ def scan(options: ScanOptions, on_event: OnEvent | None = None) -> ScanResult:
 
 
 def _scan(options: ScanOptions, bus: EventBus, t0: float) -> ScanResult:
-    """:func:`scan` with its event bus (:class:`rangekit.app.bus.EventBus`): the streaming processor's subscriber
-    first (it queues the views as they are acquired), then the caller's."""
+    """:func:`scan` with its event bus (:class:`rangekit.app.bus.EventBus`): the streaming worker's subscriber
+    first (:class:`rangekit.app.runner.StreamingWorker`: it queues the views as they are acquired), then the
+    caller's."""
     from rangekit.formats.sessions.lock import session_lock
 
     with failures_announced(bus):
@@ -99,24 +100,23 @@ def _scan(options: ScanOptions, bus: EventBus, t0: float) -> ScanResult:
                 held.enter_context(session_lock(options.folder))
             process_options = options.processing
             streaming = None
-            if options.process:
-                from rangekit.app.scan.streaming import StreamingProcessor
+            if options.process:   # the STREAMING placement: each view's steps as it comes, on the runner's worker
+                from rangekit.app.scan.streaming import StreamingViews
 
-                streaming = StreamingProcessor(options.folder, process_options, bus)
+                streaming = StreamingWorker(StreamingViews(options.folder, process_options, bus))
                 bus.subscribe(streaming.on_event, first=True)
                 held.callback(streaming.stop)     # an error or Ctrl-C: the view being decoded finishes, no more
-            session = _acquire(options, bus, None if streaming is None else streaming.quiet)
+            session = _acquire(options, bus, None if streaming is None else streaming.steps.quiet)
             acquisition_s = time.perf_counter() - t0
             if not options.process:
                 return ScanResult(options.folder, session, acquisition_s, None, time.perf_counter() - t0)
-            bus.flush()               # every view acquired is queued for the streaming processor
+            bus.flush()               # every view acquired is queued for the streaming worker
             streaming.drain()
-            if streaming.moved:       # the object moved during some views: each taken once more
+            if streaming.steps.moved:   # the object moved during some views: each taken once more
                 bus.unsubscribe(streaming.on_event)
-                session = _take_again(options, session, streaming.moved, bus)
-            memo = Memo(streaming.results, streaming.registration, streaming.evaluate)
+                session = _take_again(options, session, streaming.steps.moved, bus)
             with start(Where.THREAD, streaming.write_preview) as preview:   # the preview beside the processing
-                processed = _process(session, process_options, bus, Plan.STREAMING, memo)
+                processed = _process(session, process_options, bus, Plan.STREAMING, streaming.memo())
                 preview.result()
     return ScanResult(options.folder, session, acquisition_s, processed, time.perf_counter() - t0)
 
@@ -252,6 +252,7 @@ def _process(session: Session | str | Path, options: ProcessOptions, on_event, p
 
 
 def process_placed(session: Session | str | Path, options: ProcessOptions, *, plan: Plan,
-                   on_event=None) -> ProcessResult:
-    """:func:`process` as a placement of the plan runs it (a Dask session task: ``Plan.DASK``)."""
-    return _process(session, options, on_event, plan, Memo())
+                   on_event=None, memo: Memo | None = None) -> ProcessResult:
+    """:func:`process` as a placement of the plan runs it (a Dask session task: ``Plan.DASK``, its ``memo`` the
+    views its view tasks decoded)."""
+    return _process(session, options, on_event, plan, memo if memo is not None else Memo())

@@ -1,55 +1,50 @@
 """Processing while the scan runs (issue 36): each view decoded as soon as its frames are on disk, placed beside
 the views already in, and integrated into a preview surface, while the next view is captured.
 
-:class:`StreamingProcessor` subscribes to the scan's events. On each :class:`~rangekit.app.events.ViewAcquired`
-(and, on a resumed scan, for every view already done) it queues the view; its thread then
+This module holds the per-view steps, with no thread of their own: :class:`StreamingViews` says which views an
+event of the scan brings (:meth:`StreamingViews.views_of`) and does one view's steps when called
+(:meth:`StreamingViews.view`). The job runner runs them: the STREAMING placement of the plan
+(:class:`rangekit.app.runner.StreamingWorker`, issue 49) queues the views as the scan's events announce them and
+calls the steps on a worker thread of lower priority that backs off while the capture is behind. One view's steps:
 
-1. decodes the view into its cache (:func:`rangekit.app.process.view_cache.view_cloud`: ``cloud.ply``,
+1. decode the view into its cache (:func:`rangekit.app.process.view_cache.view_cloud`: ``cloud.ply``,
    ``maps.npz``, ``cloud.json``, exactly what ``rangekit process`` would write), announced as
-   :class:`~rangekit.app.events.ViewDecoded`: the scan's processing afterwards reads every view from its cache,
-   so its mesh is the same bytes as ``rangekit process`` of the session, and a view decoded once is never
-   decoded again (an interrupted scan resumed, or processed later);
-2. places it: the turntable prior refined by ICP against the view before it, at a 2 mm voxel, the refinement
+   :class:`~rangekit.app.events.ViewDecoded`: the scan's processing afterwards takes every view as it is
+   (:attr:`StreamingViews.results`, the runner's memo), so its mesh is the same bytes as ``rangekit process`` of
+   the session, and a view decoded once is never decoded again (an interrupted scan resumed, or processed later);
+2. place it: the turntable prior refined by ICP against the view before it, at a 2 mm voxel, the refinement
    kept only within :data:`MAX_REFINE_DEG` and :data:`MAX_REFINE_M` of the prior
    (:class:`~rangekit.app.events.ViewPlaced`, the growing model for a live view); the closing refinement of all
    the views together is the processing's, once, at the end;
-3. integrates its depth map into a TSDF volume around the turntable (:mod:`rangekit.surface.tsdf_volume`);
-4. does ahead what the scan's processing would do with it after the last view (issue 36: the mesh within 10 s
+3. integrate its depth map into a TSDF volume around the turntable (:mod:`rangekit.surface.tsdf_volume`), in one
+   of the capture's waits (:mod:`rangekit.app.acquire.quiet`);
+4. do ahead what the scan's processing would do with it after the last view (issue 36: the mesh within 10 s
    of the last frame), each piece taken by the processing only where it is exactly its own, so the outputs are
    the bytes ``rangekit process`` writes: the registration's levels and first-round pairs
-   (:attr:`registration`, :class:`rangekit.registration.ahead.RegistrationAhead`, one-pass turntable scans),
-   and on the simulator the truth's samples and the view's errors against the truth (:attr:`evaluate`).
+   (:attr:`StreamingViews.registration`, :class:`rangekit.registration.ahead.RegistrationAhead`, one-pass
+   turntable scans), and on the simulator the truth's samples and the view's errors against the truth
+   (:attr:`StreamingViews.evaluate`).
 
-:meth:`StreamingProcessor.finish` waits for the views still queued and writes ``preview.ply``, the TSDF's surface
-(:class:`~rangekit.app.events.MeshReady` ``"preview"``). The scan's processing then takes each view's cloud and maps
-as they are (:attr:`StreamingProcessor.results`): no frame is read or checked twice, no cache read back. A multi-pass scan's preview holds its first pass (the
-object turned over is placed by the processing's pass registration).
+The last view (or any once the acquisition is over, :attr:`StreamingViews.acquisition_over`) is what the
+processing waits for: it is decoded on every core, its work ahead done first and its placing left to
+:meth:`StreamingViews.write_preview`, which writes ``preview.ply``, the TSDF's surface
+(:class:`~rangekit.app.events.MeshReady` ``"preview"``), beside the processing. A multi-pass scan's preview holds its
+first pass (the object turned over is placed by the processing's pass registration).
 
 A view during which the object moved (:class:`~rangekit.errors.MotionError`: the processing's check of each view,
-:func:`rangekit.coded.motion.detect_motion`, ``ProcessOptions.max_motion``) is left out (:attr:`StreamingProcessor.moved`)
-and the others go on; the scan takes such a view again once the others are in (:func:`rangekit.app.scan.scan.scan`),
-and its processing checks it again.
-
-Acquisition comes first: the thread runs at a lower priority (nice + :data:`NICE`) with the decoder on one
-thread and one numba thread, so the kernel gives the capture's threads the cores whenever they need them, and
-processing takes what they leave. And it backs off: while the capture is behind (the frames waiting to be written
-reached the writer's limit, :class:`~rangekit.app.events.CaptureLoad`), no new view is started; it starts again
-when they have drained to half, or when the acquisition ends (:meth:`StreamingProcessor.finish`).
+:func:`rangekit.coded.motion.detect_motion`, ``ProcessOptions.max_motion``) is left out
+(:attr:`StreamingViews.moved`) and the others go on; the scan takes such a view again once the others are in
+(:func:`rangekit.app.scan.scan.scan`), and its processing checks it again.
 """
 
 from __future__ import annotations
 
-import os
-import queue
-import threading
 from pathlib import Path
 
 import numpy as np
 
 from rangekit.app.acquire.quiet import QuietWindows
-from rangekit.app.events import (CaptureLoad, MeshReady, OnEvent, ScanStarted, ViewAcquired, ViewDecoded, ViewPlaced,
-                                 emit)
-from rangekit._runtime.executor import worker_count
+from rangekit.app.events import MeshReady, OnEvent, ScanStarted, ViewAcquired, ViewDecoded, ViewPlaced, emit
 from rangekit.app.process.options import ProcessOptions
 from rangekit.errors import MotionError
 from rangekit.formats.sessions.session import Session
@@ -57,10 +52,8 @@ from rangekit.geometry import apply_T, compose, invert_T, rotation_angle
 from rangekit.surface.cloud import PointCloud
 from rangekit.formats.sessions.files import PREVIEW_FILE
 
-__all__ = ["NICE", "INTEGRATE_S", "PLACE_VOXEL_M", "MAX_REFINE_DEG", "MAX_REFINE_M", "StreamingProcessor"]
+__all__ = ["INTEGRATE_S", "PLACE_VOXEL_M", "MAX_REFINE_DEG", "MAX_REFINE_M", "StreamingViews"]
 
-#: How much lower the streaming thread's priority is than the capture's (Linux: per thread).
-NICE = 10
 #: Voxel of the clouds a view is placed with (metres).
 PLACE_VOXEL_M = 0.002
 #: The most a view's placement may move from the turntable prior (a calibrated axis is better than a pair's ICP
@@ -69,31 +62,24 @@ MAX_REFINE_DEG, MAX_REFINE_M = 0.5, 0.001
 #: How long one view's TSDF integration holds the GIL (37 ms on the default rig), with a margin: it starts in a
 #: wait of the capture with at least this long left (:mod:`rangekit.app.acquire.quiet`).
 INTEGRATE_S = 0.06
-#: The preview surface, in the session folder.
 
 
-class StreamingProcessor:
-    """Decode, place and integrate each view of a coded-light scan while the scan runs (module doc).
+class StreamingViews:
+    """Decode, place and integrate each view of a coded-light scan as it comes (module doc): the steps, called
+    one view at a time from one thread (the runner's :class:`rangekit.app.runner.StreamingWorker`).
 
     ``folder``: the session folder; ``options``: the processing's (its triangulation method and table margin make
-    the cache's settings); ``on_event``: the scan's event bus (:class:`rangekit.app.bus.EventBus`), given each event
-    of this thread. Use :meth:`on_event` as a subscriber of the scan's
-    events, then :meth:`finish` (or :meth:`stop` on an error).
+    the cache's settings); ``on_event``: the scan's event bus (:class:`rangekit.app.bus.EventBus`), given each
+    event of the steps.
     """
 
     def __init__(self, folder: str | Path, options: ProcessOptions, on_event: OnEvent | None = None) -> None:
         self.folder, self.options, self._on_event = Path(folder), options, on_event
-        self._queue: queue.Queue = queue.Queue()
         self._placed: dict[int, tuple[np.ndarray, PointCloud]] = {}
         self._volume = None
-        self._stopping = False
-        self._finishing = False   # the acquisition is over (drain)
         self._unplaced: list = []  # the last views, placed in the preview by write_preview
         self._laser = False
-        self._capture_keeps_up = threading.Event()   # cleared while the capture is behind (CaptureLoad)
-        self._capture_keeps_up.set()
-        self.paused = 0                              # times a view waited for the capture to catch up
-        self.error: BaseException | None = None    # the first failure of the thread (the processing decodes again)
+        self.acquisition_over = False              # set once the acquisition has ended: every view is urgent
         self.decoded: list[int] = []               # views decoded here, in order
         self.moved: dict = {}                      # index -> MotionError: views the object moved during
         self.results: dict = {}                    # index -> (cloud, ViewMaps): the processing takes them as they are
@@ -101,45 +87,37 @@ class StreamingProcessor:
         self.measured: list[int] = []              # views whose errors against the truth were measured here
         self.registration = None                   # RegistrationAhead of a one-pass turntable scan, from view 0 on
         self.quiet = QuietWindows()                # the capture's waits: the TSDF integration starts in one
-        self._thread = threading.Thread(target=self._run, name="rangekit-streaming", daemon=True)
-        self._thread.start()
 
-    # ------------------------------------------------------------ the scan's side
-    def on_event(self, event) -> None:
-        """A subscriber of the scan's events: queues each view of a coded-light scan as it is acquired (and the done
-        views of a resumed scan); a laser scan's steps are left to its processing."""
+    def views_of(self, event) -> list[int]:
+        """The views ``event`` (one of the scan's) brings to process: each view of a coded-light scan as it is
+        acquired, and the done views of a resumed scan as it starts; a laser scan's steps are left to its
+        processing."""
         if isinstance(event, ScanStarted):
             self._laser = event.laser          # a laser scan's profiles are placed by its own processing
             if event.resume and not event.laser:
-                for view in Session.load(self.folder).done_views:
-                    self._queue.put(view.index)
+                return [view.index for view in Session.load(self.folder).done_views]
         elif isinstance(event, ViewAcquired) and not self._laser:
-            self._queue.put(event.index)
-        elif isinstance(event, CaptureLoad):
-            (self._capture_keeps_up.clear if event.behind else self._capture_keeps_up.set)()
+            return [event.index]
+        return []
 
-    def finish(self) -> Path | None:
-        """Wait for every queued view (:meth:`drain`), then write and announce the preview surface
-        (:meth:`write_preview`); its path (None if no view was placed or the thread failed: :attr:`error`)."""
-        self.drain()
-        return self.write_preview()
-
-    def drain(self) -> None:
-        """The acquisition is over: decode what is queued (what would only serve the processing beside the
-        fusion, the last views' errors against the truth, is left to it), then end the thread."""
-        self._finishing = True
-        self._capture_keeps_up.set()     # no more backlog to wait for
-        self._queue.put(None)
-        self._thread.join()
+    def view(self, k: int) -> None:
+        """View ``k``'s steps (module doc; nothing if it was done already); a view the object moved during is
+        recorded in :attr:`moved` and the next goes on. Any other error is raised: the runner stops the steps,
+        and the processing decodes the rest itself and meets it."""
+        if k in self.decoded or k in self.moved:
+            return
+        try:
+            self._stream(k)
+        except MotionError as exc:   # this view is refused; the others go on (module doc)
+            self.moved[k] = exc
 
     def write_preview(self) -> Path | None:
-        """After :meth:`drain`: place the last views, then write and announce the preview surface (the scan does it
-        beside its processing); its path, or None (no view placed, or the thread failed: :attr:`error`)."""
-        if self.error is None:
-            for k, cloud, depth, session in self._unplaced:
-                self._place_and_integrate(k, cloud, depth, session)
+        """After the last view's steps: place the last views, then write and announce the preview surface (the
+        scan does it beside its processing); its path, or None (no view placed)."""
+        for k, cloud, depth, session in self._unplaced:
+            self._place_and_integrate(k, cloud, depth, session)
         self._unplaced = []
-        if self._volume is None or self.error is not None:
+        if self._volume is None:
             return None
         from rangekit.formats.meshes import save_mesh
         from rangekit.surface.mesh import mesh_from_open3d
@@ -152,40 +130,11 @@ class StreamingProcessor:
         self._emit(MeshReady("preview", path, mesh))
         return path
 
-    def stop(self) -> None:
-        """Stop after the view being decoded (its cache is complete or not written); the queued ones are left to
-        the resumed scan or ``rangekit process``."""
-        self._stopping = True
-        self._capture_keeps_up.set()
-        self._queue.put(None)
-        self._thread.join()
-
-    # ------------------------------------------------------------ the thread
+    # ------------------------------------------------------------ the steps
     def _emit(self, event) -> None:
         emit(self._on_event, event)   # the bus: thread-safe, its subscribers on its own thread
 
-    def _run(self) -> None:
-        _lower_priority()
-        try:
-            while True:
-                k = self._queue.get()
-                if k is None or self._stopping:
-                    return
-                if not self._capture_keeps_up.is_set():   # back off until the capture has caught up
-                    self.paused += 1
-                    self._capture_keeps_up.wait()
-                    if self._stopping:
-                        return
-                if k not in self.decoded and k not in self.moved:
-                    try:
-                        self._stream(k)
-                    except MotionError as exc:   # this view is refused; the others go on (module doc)
-                        self.moved[k] = exc
-        except BaseException as exc:   # the scan goes on; its processing decodes the view and reports the error
-            self.error = exc
-
     def _stream(self, k: int) -> None:
-        from rangekit._runtime.threads import numba_threads, one_blas_thread
         from rangekit.app.process.view_cache import cache_settings, table_transform, view_cloud
 
         session = Session.load(self.folder)
@@ -193,11 +142,10 @@ class StreamingProcessor:
         total = len(session.views)
         # The last view (or any once the acquisition is over) is what the processing waits for: decoded on every
         # core (the same maps: each pixel's decode is its own), its work ahead first, its preview placing after.
-        last = self._finishing or k == total - 1
+        last = self.acquisition_over or k == total - 1
         settings = cache_settings(session, self.options.method, self.options.table_margin, self.options.max_motion)
-        with one_blas_thread(), numba_threads(worker_count() if last else 1):
-            cloud, maps = view_cloud(view, session.pattern, rig, settings, session.capture.full_scale,
-                                     table_transform(rig), self.options.table_margin, session)
+        cloud, maps = view_cloud(view, session.pattern, rig, settings, session.capture.full_scale,
+                                 table_transform(rig), self.options.table_margin, session, cores=0 if last else 1)
         self.decoded.append(k)
         self.results[k] = (cloud, maps)
         self._emit(ViewDecoded(k, total, view.folder.name, cloud))
@@ -220,33 +168,31 @@ class StreamingProcessor:
         """What the processing would do with view ``k`` after the last view, done now (module doc, 4; ``truth``
         False: not its errors against the truth); a failure here leaves that piece to the processing, which then
         meets it itself."""
-        from rangekit._runtime.threads import one_blas_thread
         from rangekit.app.process.register import evaluator_angles, turntable_registration
         from rangekit.app.scan.truth import session_evaluator
         from rangekit.registration.ahead import RegistrationAhead
 
-        with one_blas_thread():
-            try:
-                if self.options.truth and self.evaluate is None and k == 0:
-                    self.evaluate = session_evaluator(session)
-                if truth and self.evaluate is not None and self.evaluate.measures:
-                    angles = evaluator_angles(session.views, multi_pass=session.plan.passes > 1)
-                    self.evaluate.prepare(angles)                  # the truth's samples, once
-                    self.evaluate.prepare_view(angles, k, cloud, maps.proj_col)
-                    self.measured.append(k)
-            except Exception:   # noqa: BLE001 - the processing makes its own evaluator and meets the error
-                self.evaluate = None
-            if session.plan.passes != 1 or session.rig.T_world_table is None:
-                return
-            try:
-                if k == 0 and self.registration is None:
-                    prior, options = turntable_registration(session.rig, session.views, cloud)
-                    if options.voxel is not None:
-                        self.registration = RegistrationAhead(prior, options)
-                if self.registration is not None and k not in self.registration.views:
-                    self.registration.add(k, cloud)
-            except Exception:   # noqa: BLE001 - the processing registers the views itself and meets the error
-                self.registration = None
+        try:
+            if self.options.truth and self.evaluate is None and k == 0:
+                self.evaluate = session_evaluator(session)
+            if truth and self.evaluate is not None and self.evaluate.measures:
+                angles = evaluator_angles(session.views, multi_pass=session.plan.passes > 1)
+                self.evaluate.prepare(angles)                  # the truth's samples, once
+                self.evaluate.prepare_view(angles, k, cloud, maps.proj_col)
+                self.measured.append(k)
+        except Exception:   # noqa: BLE001 - the processing makes its own evaluator and meets the error
+            self.evaluate = None
+        if session.plan.passes != 1 or session.rig.T_world_table is None:
+            return
+        try:
+            if k == 0 and self.registration is None:
+                prior, options = turntable_registration(session.rig, session.views, cloud)
+                if options.voxel is not None:
+                    self.registration = RegistrationAhead(prior, options)
+            if self.registration is not None and k not in self.registration.views:
+                self.registration.add(k, cloud)
+        except Exception:   # noqa: BLE001 - the processing registers the views itself and meets the error
+            self.registration = None
 
     def _place(self, k: int, cloud: PointCloud, session: Session) -> np.ndarray:
         """View ``k``'s pose in the first view's frame: the turntable prior, refined by ICP against the nearest
@@ -303,10 +249,3 @@ def _turntable_box(points: np.ndarray, T_world_table: np.ndarray, grow: float = 
     world = apply_T(T_world_table, corners)
     return world.min(axis=0), world.max(axis=0)
 
-
-def _lower_priority() -> None:
-    """This thread at nice + :data:`NICE` (Linux schedules threads; elsewhere nothing)."""
-    try:
-        os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), NICE)
-    except (AttributeError, OSError):
-        pass

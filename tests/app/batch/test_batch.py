@@ -89,6 +89,40 @@ def test_a_failing_session_is_reported_by_name_while_the_others_finish(local_bat
     assert any(str(missing) in line and "failed" in line for line in lines)
 
 
+def test_the_session_task_takes_its_views_from_the_memo_as_read_from_their_caches(sessions, tmp_path):
+    """The DASK placement's memo (rangekit.app.process.view_cache.ViewCaches, what finish_session_task hands the
+    runner): the views the view tasks wrote, each read from its cache only when the decode stage takes it and
+    announced then; the outputs are serial processing's bytes. A frame changed after its view task ran is found
+    as the view is taken (its frames checked, as every cached view's are)."""
+    from rangekit.app import events as ev
+    from rangekit.app.process.view_cache import ViewCaches
+    from rangekit.app.runner import Memo, Plan
+    from rangekit.app.scan.scan import process_placed
+    from rangekit.errors import FileFormatError
+
+    root, _, serial = sessions
+    options = ProcessOptions(report=False)
+
+    def written(name):   # the serial session's views, cached, its outputs removed (as after the view tasks)
+        folder = shutil.copytree(root / "serial", tmp_path / name)
+        for out in (*OUTPUTS, "summary.json"):
+            (folder / out).unlink(missing_ok=True)
+        return folder, ViewCaches(folder, range(N_VIEWS), options.method, options.table_margin, options.max_motion)
+
+    folder, caches = written("good")
+    seen = []
+    process_placed(folder, options, plan=Plan.LOCAL, memo=Memo(decoded=caches, announced=False), on_event=seen.append)
+    assert len(caches) == 0                     # every view taken from the memo
+    assert [e.index for e in seen if isinstance(e, ev.ViewDecoded)] == list(range(N_VIEWS))
+    for name in OUTPUTS:
+        assert (folder / name).read_bytes() == serial[name], name
+    folder, caches = written("changed")
+    frame = folder / "view_001" / "003.png"
+    frame.write_bytes(frame.read_bytes() + b"\0")
+    with pytest.raises(FileFormatError, match="003.png"):
+        process_placed(folder, options, plan=Plan.LOCAL, memo=Memo(decoded=caches, announced=False))
+
+
 def _free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))

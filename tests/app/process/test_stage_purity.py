@@ -15,7 +15,9 @@ ROOT = Path(__file__).resolve().parents[3]
 #: The stage modules: each takes a typed input and returns a typed output.
 STAGES = ("rangekit/app/process/decode.py", "rangekit/app/process/register.py", "rangekit/app/process/fuse.py",
           "rangekit/app/process/evaluate.py", "rangekit/app/process/fused_outputs.py", "rangekit/app/process/laser.py",
-          "rangekit/app/report/page.py")
+          "rangekit/app/report/page.py",
+          # the scan's per-view steps: the runner's STREAMING worker runs them (rangekit.app.runner.StreamingWorker)
+          "rangekit/app/scan/streaming.py")
 #: What a stage may not import (a module or anything under it).
 FORBIDDEN = ("rangekit._runtime", "threading", "concurrent.futures", "multiprocessing")
 

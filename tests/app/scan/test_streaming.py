@@ -1,7 +1,8 @@
-"""Processing while the scan runs (issue 36, rangekit.app.scan.streaming): each view decoded into the cache
-``rangekit process`` reads, placed and fused into a preview as it is acquired; the processing afterwards gives
-the same bytes as processing the session from scratch; a resumed scan decodes nothing twice; in real time, a
-view is decoded before the next one's last frame is taken.
+"""Processing while the scan runs (issue 36, rangekit.app.scan.streaming's steps on the runner's STREAMING worker,
+rangekit.app.runner.StreamingWorker): each view decoded into the cache ``rangekit process`` reads, placed and
+fused into a preview as it is acquired; the processing afterwards gives the same bytes as processing the session
+from scratch; a resumed scan decodes nothing twice; in real time, a view is decoded before the next one's last
+frame is taken; the worker backs off while the capture is behind.
 
 Sessions: the small rig (320x256 camera), the lumpy object, Gray code (tests/support/sessions.py).
 """
@@ -17,7 +18,8 @@ import pytest
 from rangekit.app import events as ev
 from rangekit.app.acquire.acquire import acquire
 from rangekit.app.process.options import ProcessOptions
-from rangekit.app.scan.streaming import StreamingProcessor
+from rangekit.app.runner import StreamingWorker
+from rangekit.app.scan.streaming import StreamingViews
 from rangekit.formats.sessions.files import PREVIEW_FILE
 from rangekit.coded.patterns import make_pattern_spec
 from rangekit.formats.sessions.session import CaptureSettings, ScanPlan, Session, SimulatorSettings
@@ -34,6 +36,11 @@ def _acquire(out, devices, streaming, **kwargs):
                    **kwargs)
 
 
+def _streaming(folder, on_event=None) -> StreamingWorker:
+    """The scan's STREAMING placement of a session folder, as rangekit.app.scan.scan builds it."""
+    return StreamingWorker(StreamingViews(folder, ProcessOptions(), on_event))
+
+
 def _cache(session_folder, index):
     return {name: (session_folder / f"view_{index:03d}" / name).read_bytes() for name in CACHE}
 
@@ -44,11 +51,11 @@ def streamed(tmp_path_factory):
     views handed to processing)."""
     out = tmp_path_factory.mktemp("streamed") / "s"
     seen = []
-    streaming = StreamingProcessor(out, ProcessOptions(), seen.append)
+    streaming = _streaming(out, seen.append)
     _acquire(out, sim(), streaming)
     preview = streaming.finish()
     assert streaming.error is None
-    return out, seen, preview, streaming.results, streaming
+    return out, seen, preview, streaming.steps.results, streaming
 
 
 def test_each_view_is_decoded_into_the_cache_processing_reads(streamed, tmp_path):
@@ -110,11 +117,11 @@ def test_a_resumed_scan_decodes_nothing_twice(streamed, tmp_path):
     part = copy_session(out, tmp_path / "part", pending=(2, 3))
     before = {k: {n: (part / f"view_{k:03d}" / n).stat().st_mtime_ns for n in CACHE} for k in (0, 1)}
     seen = []
-    streaming = StreamingProcessor(part, ProcessOptions(), seen.append)
+    streaming = _streaming(part, seen.append)
     streaming.on_event(ev.ScanStarted(part, N_VIEWS, 2, 44, True, None, False))
     _acquire(part, sim(), streaming, resume=True)
     streaming.finish()
-    assert streaming.error is None and sorted(streaming.decoded) == [0, 1, 2, 3]
+    assert streaming.error is None and sorted(streaming.steps.decoded) == [0, 1, 2, 3]
     after = {k: {n: (part / f"view_{k:03d}" / n).stat().st_mtime_ns for n in CACHE} for k in (0, 1)}
     assert after == before
     for k in (2, 3):
@@ -130,11 +137,12 @@ def test_the_final_mesh_is_what_rangekit_process_makes(streamed, tmp_path):
     import json
 
     from rangekit.app.process.process import process_session
-    from rangekit.app.runner import Memo, Plan
+    from rangekit.app.runner import Plan
     from rangekit.app.scan.scan import process
 
     out, _, _, results, streaming = streamed
-    ahead, evaluate = streaming.registration, streaming.evaluate
+    memo = streaming.memo()
+    ahead, evaluate = memo.registration, memo.evaluate
     assert ahead is not None and ahead.views == list(range(N_VIEWS)) and evaluate is not None
     scanned = shutil.copytree(out, tmp_path / "scanned")
     cached = shutil.copytree(out, tmp_path / "cached")
@@ -143,11 +151,12 @@ def test_the_final_mesh_is_what_rangekit_process_makes(streamed, tmp_path):
         for name in CACHE:
             (fresh / f"view_{k:03d}" / name).unlink()
     process_session(scanned, ProcessOptions(report=False), evaluate=evaluate, plan=Plan.STREAMING,
-                    memo=Memo(results, ahead, evaluate))
+                    memo=memo)
     # the errors of the views decoded while the capture ran (not the last one's: the processing measures it
     # beside the fusion)
     assert ahead.taken == {"levels": 2, "pairs": len(ahead._jobs), "overlaps": len(ahead._joint)}
-    assert evaluate.views_taken == len(streaming.measured) >= 1 and N_VIEWS - 1 not in streaming.measured
+    measured = streaming.steps.measured
+    assert evaluate.views_taken == len(measured) >= 1 and N_VIEWS - 1 not in measured
     process(cached, ProcessOptions(report=False))
     process(fresh, ProcessOptions(report=False))
     for name in ("mesh.ply", "mesh_watertight.ply", "merged.ply", "poses.json"):
@@ -174,15 +183,15 @@ def test_in_real_time_a_view_is_decoded_before_the_next_ones_last_frame(tmp_path
 
     devices = SimRig(default_scene("lumpy"), small_rig(), seed=3, **realtime_options(0.02))
     order = []
-    streaming = StreamingProcessor(tmp_path / "s", ProcessOptions(), order.append)
+    streaming = _streaming(tmp_path / "s", order.append)
     integrations = []     # each TSDF integration's wait for a quiet window of the capture: went in one (True)
 
-    class Recorded(type(streaming.quiet)):
+    class Recorded(type(streaming.steps.quiet)):
         def wait(self, need_s, timeout_s=1.0):
             ok = super().wait(need_s, timeout_s)
             integrations.append(ok)
             return ok
-    streaming.quiet = Recorded()
+    streaming.steps.quiet = Recorded()
 
     def on_event(event):
         streaming.on_event(event)
@@ -191,7 +200,7 @@ def test_in_real_time_a_view_is_decoded_before_the_next_ones_last_frame(tmp_path
     spec = make_pattern_spec("graycode", (1280, 800))
     acquire(devices, devices.rig, spec, tmp_path / "s", plan=ScanPlan(3),
             capture=CaptureSettings(bits=8, pattern_delay_s=0.02, turntable_settle_s=0.05),
-            simulator=SimulatorSettings("lumpy", 3, asdict(ImagingModel())), on_event=on_event, quiet=streaming.quiet)
+            simulator=SimulatorSettings("lumpy", 3, asdict(ImagingModel())), on_event=on_event, quiet=streaming.steps.quiet)
     streaming.finish()
     assert len(integrations) == 3 and all(integrations), integrations   # none waited out its timeout
     names = [(type(e).__name__, e.index) for e in order if isinstance(e, (ev.ViewAcquired, ev.ViewDecoded))]
@@ -206,12 +215,12 @@ def test_no_view_is_started_while_the_capture_is_behind(reference_session, tmp_p
     import time
 
     folder = copy_session(reference_session, tmp_path / "s")
-    streaming = StreamingProcessor(folder, ProcessOptions())
+    streaming = _streaming(folder)
     streaming.on_event(ev.ScanStarted(folder, N_VIEWS, 0, 60, False, None, False))
     streaming.on_event(ev.CaptureLoad(True, 64))
     streaming.on_event(ev.ViewAcquired(0, N_VIEWS, folder / "view_000", 0.0, 60))
     time.sleep(0.5)
-    assert streaming.decoded == [] and streaming.paused == 1
+    assert streaming.steps.decoded == [] and streaming.paused == 1
     streaming.on_event(ev.CaptureLoad(False, 32))
     streaming.on_event(ev.CaptureLoad(True, 64))
     streaming.on_event(ev.ViewAcquired(1, N_VIEWS, folder / "view_001", 0.0, 60))
@@ -219,6 +228,6 @@ def test_no_view_is_started_while_the_capture_is_behind(reference_session, tmp_p
     while streaming.paused < 2 and time.monotonic() < deadline:
         time.sleep(0.05)
     time.sleep(0.3)
-    assert streaming.decoded == [0] and streaming.paused == 2   # view 0 went when the capture caught up; view 1 waits
+    assert streaming.steps.decoded == [0] and streaming.paused == 2   # view 0 went when the capture caught up; view 1 waits
     streaming.finish()                       # the acquisition is over: the rest goes
-    assert streaming.error is None and streaming.decoded == [0, 1]
+    assert streaming.error is None and streaming.steps.decoded == [0, 1]

@@ -53,6 +53,7 @@ class MissingPackage(DeviceError):
 #: The camera drivers by ``devices.camera.type``.
 CAMERA_DRIVERS: dict[str, CameraDriver] = {
     "depthai": CameraDriver("rangekit.drivers.depthai.camera", "Luxonis OAK (depthai)", ("depthai",)),
+    "uvc": CameraDriver("rangekit.drivers.uvc.camera", "UVC webcams (V4L2)", ("linuxpy",), "uvc"),
 }
 
 

@@ -183,9 +183,9 @@ class UvcCamera:
         (H, W, 3) RGB uint8, or (H, W) with mono controls."""
         for _ in range(self.flush_frames):
             self._grab()
-        return self.next_frame()
+        return self.unflushed_frame()
 
-    def next_frame(self) -> np.ndarray:
+    def unflushed_frame(self) -> np.ndarray:
         """The next frame of the driver's queue, nothing dropped (``rangekit check`` counts the stale ones)."""
         import cv2
 

@@ -25,7 +25,7 @@ import numpy as np
 
 from rangekit.drivers.depthai.controls import check_frame_period
 from rangekit.drivers.retry import retry
-from rangekit.drivers.uvc.controls import apply_controls
+from rangekit.drivers.uvc.controls import apply_controls, verify
 from rangekit.drivers.uvc.v4l2 import node_path, open_node
 from rangekit.errors import ConfigError, DeviceDisconnected, DeviceError, DeviceTimeout
 from rangekit.rig.camera_controls import CameraControls, require_locked
@@ -115,6 +115,13 @@ class UvcCamera:
         import cv2
 
         self._node = open_node(self.path)        # one line when missing, not a device or not a capture node
+        applied = None
+        if self.controls is not None:            # written and read back before any frame
+            applied = apply_controls(self._node, self.controls)
+            self.limits = applied.limits
+            if self.coded_light and any(line.startswith("exposure") for line in applied.limits):
+                raise DeviceError(f"{self.name}: {applied.limits[0]}; coded light needs a locked exposure: use "
+                                  "another camera")
         real = os.path.realpath(self.path)
         match = re.fullmatch(r"/dev/video(\d+)", real)
         self._cap = self._video_capture(int(match.group(1)) if match else real, cv2.CAP_V4L2)
@@ -134,12 +141,9 @@ class UvcCamera:
         if got_fps > 0 and abs(got_fps - fps) > 0.01 * fps:
             raise DeviceError(f"{self.name}: asked for capture.camera.fps {fps:g}, the camera runs at {got_fps:g} at "
                               f"{self.size[0]}x{self.size[1]} {self.format}; set capture.camera.fps to {got_fps:g}")
-        if self.controls is not None:
-            applied = apply_controls(self._node, self.controls)
-            self.limits = applied.limits
-            if self.coded_light and any(line.startswith("exposure") for line in applied.limits):
-                raise DeviceError(f"{self.name}: {applied.limits[0]}; coded light needs a locked exposure: use "
-                                  "another camera")
+        if applied is not None:                  # a webcam may reset its controls when its stream starts
+            self._grab()
+            verify(self._node, applied, when=" after its stream started")
 
     def _video_capture(self, source, api):
         import cv2

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 from rangekit.rig.camera_controls import CONTROL_FIELDS, CameraControls
 from rangekit.errors import DeviceError
 
-__all__ = ["Applied", "planned_writes", "apply_controls", "EXPOSURE_UNIT_US"]
+__all__ = ["Applied", "planned_writes", "apply_controls", "verify", "EXPOSURE_UNIT_US"]
 
 #: V4L2's ``exposure_absolute`` unit, microseconds.
 EXPOSURE_UNIT_US = 100.0
@@ -145,11 +145,19 @@ def apply_controls(node, controls: CameraControls) -> Applied:
     writes, limits = planned_writes(node, controls)
     for w in writes:
         node.write(w.control, w.value)
-    for w in writes:
-        got = node.read(w.control)
-        if got != w.value:
-            raise DeviceError(f"{node.name}: the camera ignores {w.control}: wrote {w.value}, read back {got} "
-                              f"({w.field}); a control that does not hold changes the frames between patterns, so "
-                              "the camera is refused: check that no other program (a browser, guvcview) sets it, "
-                              "or use another camera")
-    return Applied(tuple((w.control, w.value) for w in writes), tuple(limits))
+    applied = Applied(tuple((w.control, w.value) for w in writes), tuple(limits))
+    verify(node, applied, fields={w.control: w.field for w in writes})
+    return applied
+
+
+def verify(node, applied: Applied, *, fields: dict | None = None, when: str = "") -> None:
+    """Read every control of ``applied`` back; one that differs is a DeviceError naming the device, the control,
+    the value written and read (``fields``: the rig-file field of each control; ``when``: after what)."""
+    for control, value in applied.writes:
+        got = node.read(control)
+        if got != value:
+            field = (fields or {}).get(control)
+            raise DeviceError(f"{node.name}: the camera ignores {control}: wrote {value}, read back {got}"
+                              f"{f' ({field})' if field else ''}{when}; a control that does not hold changes the "
+                              "frames between patterns, so the camera is refused: check that no other program (a "
+                              "browser, guvcview) sets it, or use another camera")

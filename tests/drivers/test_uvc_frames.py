@@ -131,3 +131,20 @@ def test_a_lost_camera_is_disconnected_and_comes_back_with_the_same_frames(recor
     again = [cam.capture() for _ in range(2)]
     cam.close()
     assert all(np.array_equal(a, b) for a, b in zip(first, again))     # replayed byte-identical
+
+
+def test_the_live_page_streams_a_uvc_camera(recording, tmp_path):
+    """The web app's Live page takes its frames from RigHolder.grab (rangekit.ui.stream) and draws them with
+    live_frame: a uvc camera of a hardware rig file, here on the recording."""
+    from rangekit.ui.live import live_frame
+    from rangekit.ui.rig_holder import RigHolder
+
+    holder = RigHolder.hardware(_rig_file(tmp_path, {"type": "uvc", "device": str(recording), "flush_frames": 0}))
+    try:
+        assert holder.fault is None, holder.fault
+        frames = [holder.grab() for _ in range(2)]
+        shown = live_frame(frames[1], holder.full_scale, 1)
+    finally:
+        holder.close()
+    assert [_index(f) for f in frames] == [0, 1]
+    assert shown is not None

@@ -55,6 +55,7 @@ CAMERA_DRIVERS: dict[str, CameraDriver] = {
     "depthai": CameraDriver("rangekit.drivers.depthai.camera", "Luxonis OAK (depthai)", ("depthai",)),
     "realsense": CameraDriver("rangekit.drivers.realsense.camera", "Intel RealSense (infrared imager)",
                               ("pyrealsense2",), "realsense"),
+    "uvc": CameraDriver("rangekit.drivers.uvc.camera", "UVC webcams (V4L2)", ("linuxpy",), "uvc"),
 }
 
 

@@ -33,8 +33,8 @@ def cmd_check(args: argparse.Namespace) -> int:
                              "object and measures the real latency: leave them out")
         check_output(args.rig, option="--rig", force=True)   # its pattern delay is rewritten in place
         result, images, rig = check_hardware(args.rig, progress=console())
-        write_pattern_delay(args.rig, result.pattern_delay_s)
-        rig_note = f"wrote capture.pattern_delay_s {result.pattern_delay_s:g} into {args.rig} (no other field changed)"
+        written = write_pattern_delay(args.rig, result.pattern_delay_s, result.flush_frames)
+        rig_note = f"wrote {' and '.join(written)} into {args.rig} (no other field changed)"
         full_scale, out_rig = float((1 << int(rig.capture.get("bits", 8))) - 1), None
     else:
         from rangekit.sim import SimRig, default_scene

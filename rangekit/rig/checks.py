@@ -17,8 +17,8 @@ from rangekit.errors import ConfigError
 
 __all__ = ["validate_devices", "validate_capture", "validate_rig_for_hardware", "DEVICE_FIELDS", "CAPTURE_FIELDS",
            "CAPTURE_BITS", "CAMERA_TYPES", "CAMERA_SECTION_FIELDS", "CAMERA_TEMPLATES", "TURNTABLE_PROTOCOLS", "PROJECTOR_PROTOCOLS", "DEPTHAI_SOCKETS", "MAX_SEARCH_S",
-           "REFRESH_HZ", "DEFAULT_SEARCH_S", "DEFAULT_RECONNECT_S", "DEFAULT_REPLY_S", "reconnect_timeout_s",
-           "CAPTURE_TRIGGERS", "camera_triggered"]
+           "REFRESH_HZ", "DEFAULT_SEARCH_S", "UVC_FORMATS", "MAX_FLUSH_FRAMES", "DEFAULT_FLUSH_FRAMES",
+           "DEFAULT_RECONNECT_S", "DEFAULT_REPLY_S", "reconnect_timeout_s", "CAPTURE_TRIGGERS", "camera_triggered"]
 
 #: Serial turntable protocols (rangekit.drivers.turntable): Horus (Ciclop) and FabScan boards.
 TURNTABLE_PROTOCOLS = ("horus", "fabscan")
@@ -34,6 +34,11 @@ DEFAULT_SEARCH_S = 3.0
 #: mid-scan (unplugged, reset, stopped answering) to come back before it ends; long enough for a USB device
 #: to enumerate again and an OAK camera to boot. 0: never wait.
 DEFAULT_RECONNECT_S = 10.0
+#: ``devices.camera.format`` of a "uvc" camera (rangekit.drivers.uvc.camera); ``flush_frames``: the most frames a
+#: webcam's driver queues that a capture may discard, and the number when absent (OpenCV's V4L2 backend queues 4).
+UVC_FORMATS = ("MJPEG", "YUYV")
+MAX_FLUSH_FRAMES = 32
+DEFAULT_FLUSH_FRAMES = 4
 #: ``devices.turntable.timeout_s`` when absent: seconds a turntable board may take to answer a command.
 DEFAULT_REPLY_S = 2.0
 #: ``devices.projector.refresh_hz``: the projector's refresh rate, Hz (smallest, largest).
@@ -201,6 +206,7 @@ def _check_projector(sec, where: str) -> None:
 CAMERA_SECTION_FIELDS = {
     "depthai": ("id", "socket", "search_timeout_s", "reconnect_timeout_s"),
     "realsense": ("serial", "bag", "infrared", "search_timeout_s", "reconnect_timeout_s"),
+    "uvc": ("device", "format", "flush_frames", "reconnect_timeout_s"),
 }
 #: ``devices.camera.type``: the simulator's camera, or one of the camera drivers.
 CAMERA_TYPES = ("sim", *CAMERA_SECTION_FIELDS)
@@ -209,6 +215,7 @@ CAMERA_TEMPLATES = {
     "depthai": {"type": "depthai", "id": None, "socket": "CAM_A", "search_timeout_s": DEFAULT_SEARCH_S},
     "realsense": {"type": "realsense", "serial": None, "bag": None, "infrared": 1,
                   "search_timeout_s": DEFAULT_SEARCH_S},
+    "uvc": {"type": "uvc", "device": "/dev/video0", "format": "MJPEG", "flush_frames": DEFAULT_FLUSH_FRAMES},
 }
 
 
@@ -250,6 +257,19 @@ def _check_realsense_camera(sec: dict, where: str, path: str) -> None:
         raise _error(where, f"{path}.infrared", f"must be 1 (the left imager, the depth's frame) or 2, found "
                                                 f"{_show(sec['infrared'])}")
     _number_in(sec, "search_timeout_s", 0.0, MAX_SEARCH_S, where, path, "seconds (how long to look for the device)")
+
+
+def _check_uvc_camera(sec: dict, where: str, path: str) -> None:
+    device = sec.get("device", 0)
+    if not ((_is_int(device) and device >= 0) or (isinstance(device, str) and device.strip())):
+        raise _error(where, f"{path}.device", "must be a device path ('/dev/video0', a '/dev/v4l/by-id/...' link) or "
+                     f"an index >= 0 (0 = /dev/video0), found {_show(device)}")
+    if sec.get("format", "MJPEG") not in UVC_FORMATS:
+        raise _error(where, f"{path}.format", f"must be one of {', '.join(UVC_FORMATS)}, found {_show(sec['format'])}")
+    flush = sec.get("flush_frames", 0)
+    if not (_is_int(flush) and 0 <= flush <= MAX_FLUSH_FRAMES):
+        raise _error(where, f"{path}.flush_frames", f"must be a whole number of frames 0..{MAX_FLUSH_FRAMES} (the "
+                     f"stale frames dropped after a pattern change; rangekit check measures it), found {_show(flush)}")
     _number_in(sec, "reconnect_timeout_s", 0.0, MAX_SEARCH_S, where, path, _RECONNECT)
 
 
@@ -257,6 +277,7 @@ def _check_realsense_camera(sec: dict, where: str, path: str) -> None:
 _CAMERA_CHECKS = {
     "depthai": _check_depthai_camera,
     "realsense": _check_realsense_camera,
+    "uvc": _check_uvc_camera,
 }
 
 

@@ -1,5 +1,5 @@
-"""Changes to a rig file made by a program (``rangekit check``'s pattern delay, the web app's camera controls):
-the JSON read, the named fields of its ``capture`` section changed, the result checked as a rig file, then
+"""Changes to a rig file made by a program (``rangekit check``'s pattern delay and flush frames, the web app's camera
+controls): the JSON read, the named fields of its ``capture`` (or ``devices.camera``) section changed, the result checked as a rig file, then
 written atomically. Every other field stays as the user wrote it; a change that would make the file invalid is
 refused with the rig file's own one-line error, and the file is left as it was."""
 
@@ -12,7 +12,7 @@ from rangekit.io import atomic_write_json, read_json
 from rangekit.rig.camera_controls import CameraControls, controls_from_capture
 from rangekit.rig.rig_file import Rig
 
-__all__ = ["write_camera_controls", "write_capture_fields"]
+__all__ = ["write_camera_controls", "write_capture_fields", "write_camera_section_fields"]
 
 
 def write_capture_fields(rig_file: str | Path, fields: dict, *, camera: dict | None = None) -> Rig:
@@ -42,3 +42,21 @@ def write_camera_controls(rig_file: str | Path, changes: dict) -> tuple[Rig, Cam
     its controls."""
     rig = write_capture_fields(rig_file, {}, camera=changes)
     return rig, controls_from_capture(rig.capture, where=str(rig_file))
+
+
+def write_camera_section_fields(rig_file: str | Path, fields: dict) -> Rig:
+    """Set ``devices.camera.<name>`` for each of ``fields`` in ``rig_file`` (``rangekit check``'s measured
+    ``flush_frames``); returns the rig as written. ConfigError (naming the file and the field) before any write,
+    e.g. for a field the camera's type does not have."""
+    from rangekit.rig.checks import validate_devices
+
+    data = read_json(rig_file, what="rig file")
+    camera = data.get("devices", {}).get("camera") if isinstance(data, dict) and isinstance(data.get("devices"),
+                                                                                            dict) else None
+    if not isinstance(camera, dict):
+        raise ConfigError(f"{rig_file}: devices.camera: expected an object {{...}}, found {shown(camera)}")
+    camera.update(fields)
+    rig = Rig.from_dict(data, where=str(rig_file))
+    validate_devices(rig.devices, where=str(rig_file))
+    atomic_write_json(rig_file, data)
+    return rig

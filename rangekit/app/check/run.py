@@ -1,8 +1,9 @@
 """``rangekit check`` as a job: open the simulator or the rig file's hardware, run :func:`.check.run_check`,
 write the pattern delay into the rig file and the outputs (``check.json``, ``check.png``).
 
-On hardware (``rig_file``) the rig file is rewritten atomically with ``capture.pattern_delay_s`` set and
-every other field as it was (the JSON is read, that one field changed, written back). On the simulator the
+On hardware (``rig_file``) the rig file is rewritten atomically with ``capture.pattern_delay_s`` set (and
+``devices.camera.flush_frames``, where the camera's type has that field: a UVC webcam) and every other field as it
+was (the JSON is read, those fields changed, written back). On the simulator the
 default rig with the measured delay is written to ``OUT/rig.json`` (with ``out``).
 """
 
@@ -16,7 +17,7 @@ from rangekit.app.check.steps import CheckResult, run_check
 from rangekit.app.check.stats import check_figure
 from rangekit.rig.camera_controls import controls_from_capture
 from rangekit.io import atomic_write_json, write_png
-from rangekit.rig.rig_edits import write_capture_fields
+from rangekit.rig.rig_edits import write_camera_section_fields, write_capture_fields
 from rangekit.rig.rig_file import Rig, load_rig, save_rig
 from rangekit.formats.sessions.files import RIG_FILE
 
@@ -64,9 +65,19 @@ def check_hardware(rig_file: str, *, progress=None) -> tuple[CheckResult, dict, 
     return result, images, rig
 
 
-def write_pattern_delay(rig_file: str | Path, delay_s: float) -> None:
-    """Rewrite ``rig_file`` atomically with ``capture.pattern_delay_s`` = ``delay_s``, nothing else changed."""
-    write_capture_fields(rig_file, {"pattern_delay_s": float(delay_s)})
+def write_pattern_delay(rig_file: str | Path, delay_s: float, flush_frames: int | None = None) -> list[str]:
+    """Rewrite ``rig_file`` atomically with ``capture.pattern_delay_s`` = ``delay_s`` and, when the camera's type
+    has the field, ``devices.camera.flush_frames``; nothing else changed. Returns the fields written, as
+    "field value"."""
+    from rangekit.rig.checks import CAMERA_SECTION_FIELDS
+
+    rig = write_capture_fields(rig_file, {"pattern_delay_s": float(delay_s)})
+    written = [f"capture.pattern_delay_s {float(delay_s):g}"]
+    kind = ((rig.devices or {}).get("camera") or {}).get("type")
+    if flush_frames is not None and "flush_frames" in CAMERA_SECTION_FIELDS.get(kind, ()):
+        write_camera_section_fields(rig_file, {"flush_frames": int(flush_frames)})
+        written.append(f"devices.camera.flush_frames {int(flush_frames)}")
+    return written
 
 
 def write_check(out: str | Path, result: CheckResult, images: dict, full_scale: float,

@@ -11,8 +11,15 @@ Steps (the devices: ``camera``, ``projector``, and optionally ``sleep``/``clock`
 4. Latency: black, a capture to settle, then white shown at ``t0``; consecutive frames are captured and
    the first whose mean moved by more than half the white-black step gives ``latency = frame time - t0``
    (``camera.last_frame_time`` when the camera has it, else the clock when ``capture`` returned); three
-   times, the largest kept. ``pattern_delay_s`` = latency rounded up to whole frame periods, plus one.
-5. One coded-light view captured with that delay and reconstructed as a test.
+   times, the largest kept. ``pattern_delay_s`` = latency rounded up to whole frame periods, plus one. Frames
+   are read with ``camera.unflushed_frame()`` when the camera has it (a UVC webcam: the next frame of its driver's
+   queue, none dropped), else ``capture()``.
+5. Flush frames: black, then white shown and ``pattern_delay_s`` waited, as a scan waits; the frames read that
+   still show black are the stale frames a driver queues (a UVC webcam's 2-4), three times, the largest kept: a
+   capture must drop that many (the camera's ``flush_frames``, set for the test view; ``rangekit check --rig``
+   writes it into ``devices.camera.flush_frames`` where the camera type has that field). 0 for a camera whose
+   ``capture`` returns only frames exposed after the call (the simulator's, depthai's).
+6. One coded-light view captured with that delay and reconstructed as a test.
 """
 
 from __future__ import annotations
@@ -25,10 +32,11 @@ import numpy as np
 
 from rangekit.app.check.stats import DARK_TARGET, TARGET_P99, ImageStats, image_stats, lit_mask
 from rangekit.rig.camera_controls import CONTROL_FIELDS, CameraControls, round_to_refresh
+from rangekit.rig.checks import MAX_FLUSH_FRAMES
 from rangekit.errors import DeviceError
 
-__all__ = ["SETTLE_S", "CheckResult", "run_check", "measure_latency", "pattern_delay_for", "auto_exposures",
-           "exposures_from_check"]
+__all__ = ["SETTLE_S", "CheckResult", "run_check", "measure_latency", "measure_flush_frames", "pattern_delay_for",
+           "auto_exposures", "exposures_from_check"]
 
 #: Wait after showing a pattern before a settled capture (seconds, the devices' clock): longer than any
 #: projector's latency.
@@ -53,6 +61,8 @@ class CheckResult:
     checker_contrast: float           # |checker - mid| / half the white-black step on the object, ~1 in focus
     points: int = 0
     rms_m: float | None = None
+    flush_frames: int = 0             # stale frames after a pattern change and the pattern delay: a capture drops them
+    flush_counts: tuple = ()          # each of the three measurements
 
     def to_dict(self) -> dict:
         """check.json."""
@@ -64,7 +74,8 @@ class CheckResult:
                 "contrast_percentiles": s.contrast_percentiles, "contrast_histogram": {
                     "counts": s.histogram[0], "edges": s.histogram[1]},
                 "white_p99": s.white_p99, "object_pixels": s.n_object, "frame_period_s": self.frame_period_s,
-                "pattern_delay_s": self.pattern_delay_s, "checker_contrast": self.checker_contrast,
+                "pattern_delay_s": self.pattern_delay_s, "flush_frames": self.flush_frames,
+                "flush_counts": list(self.flush_counts), "checker_contrast": self.checker_contrast,
                 "test_view": {"points": self.points, "rms_m": self.rms_m}}
 
     def advice(self) -> list[str]:
@@ -83,6 +94,9 @@ class CheckResult:
                          f"{MIN_CONFIDENCE:.0%} of full scale): {self.dark_exposure_us:.0f} us lifts it "
                          "(scan with --exposures auto)")
         lines.append(f"latency {self.latency_s * 1e3:.0f} ms: pattern_delay_s set to {self.pattern_delay_s:g}")
+        if self.flush_frames:
+            lines.append(f"{self.flush_frames} frame(s) queued by the camera's driver still show the old pattern after "
+                         f"the delay: each capture drops them (flush_frames {self.flush_frames})")
         return lines
 
 
@@ -117,11 +131,9 @@ def pattern_delay_for(latency_s: float, frame_period_s: float) -> float:
     return round(n * frame_period_s, 6)
 
 
-def measure_latency(devices, *, repeats: int = 3, max_s: float = SETTLE_S) -> tuple[float, ...]:
-    """The projector-to-camera latency (seconds), measured ``repeats`` times (module docstring, step 4).
-    DeviceError when the camera does not see the projector or no frame changes within ``max_s``."""
-    now, sleep = _clock(devices)
-    cam = devices.camera
+def _black_and_step(devices) -> tuple[float, float]:
+    """The settled black frame's mean and the white-black step; DeviceError when the camera does not see the
+    projector."""
     black = _shot(devices, _flat(devices, 0)).astype(np.float64).mean()
     white = _shot(devices, _flat(devices, 255)).astype(np.float64).mean()
     step = white - black
@@ -129,13 +141,45 @@ def measure_latency(devices, *, repeats: int = 3, max_s: float = SETTLE_S) -> tu
         raise DeviceError(f"camera: its mean brightness does not change between the projector's black and white "
                           f"({black:.1f} and {white:.1f}); aim the projector at the object and check that it shows "
                           "the patterns")
+    return black, step
+
+
+def measure_flush_frames(devices, delay_s: float, *, repeats: int = 3) -> tuple[int, ...]:
+    """The frames that still show the old pattern after a pattern change and ``delay_s`` seconds (module docstring,
+    step 5), measured ``repeats`` times. DeviceError when more than MAX_FLUSH_FRAMES do."""
+    _, sleep = _clock(devices)
+    cam = devices.camera
+    black, step = _black_and_step(devices)
+    read = getattr(cam, "unflushed_frame", cam.capture)
+    out = []
+    for _ in range(repeats):
+        _shot(devices, _flat(devices, 0))
+        devices.projector.show(_flat(devices, 255))
+        sleep(delay_s)
+        stale = 0
+        while np.asarray(read()).astype(np.float64).mean() - black <= step / 2:
+            stale += 1
+            if stale > MAX_FLUSH_FRAMES:
+                raise DeviceError(f"camera: {stale} frames after the projector showed white and {delay_s:g} s still "
+                                  "show black; check the projector's input and the camera's frame rate")
+        out.append(stale)
+    return tuple(out)
+
+
+def measure_latency(devices, *, repeats: int = 3, max_s: float = SETTLE_S) -> tuple[float, ...]:
+    """The projector-to-camera latency (seconds), measured ``repeats`` times (module docstring, step 4).
+    DeviceError when the camera does not see the projector or no frame changes within ``max_s``."""
+    now, sleep = _clock(devices)
+    cam = devices.camera
+    black, step = _black_and_step(devices)
+    read = getattr(cam, "unflushed_frame", cam.capture)
     out = []
     for _ in range(repeats):
         _shot(devices, _flat(devices, 0))
         t0 = now()
         devices.projector.show(_flat(devices, 255))
         while True:
-            frame = np.asarray(cam.capture()).astype(np.float64).mean()
+            frame = np.asarray(read()).astype(np.float64).mean()
             t = getattr(cam, "last_frame_time", None)
             t = now() if t is None else t
             if frame - black > step / 2:
@@ -220,9 +264,13 @@ def run_check(devices, rig, controls: CameraControls, *, full_scale: float, mask
     period = 1.0 / controls.fps
     latency = max(latencies)
     delay = pattern_delay_for(latency, period)
+    call_progress(progress, "frames queued after a pattern change")
+    flush_counts = measure_flush_frames(devices, delay)
+    if hasattr(devices.camera, "flush_frames"):
+        devices.camera.flush_frames = max(flush_counts)
     points, rms = _test_view(devices, rig, spec, delay, full_scale, truth, progress)
     result = CheckResult(float(controls.exposure_us), stats, suggested, dark, latency, latencies, period, delay,
-                         checker_contrast, points, rms)
+                         checker_contrast, points, rms, flush_frames=max(flush_counts), flush_counts=flush_counts)
     return result, {"white": white, "black": black, "checker": checker, "mask": mask}
 
 

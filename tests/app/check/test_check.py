@@ -86,6 +86,7 @@ def test_a_scan_with_the_written_delay_records_the_latency_free_frames(checked, 
     for key in ("latency_s", "saturated_fraction", "dark_fraction", "suggested_exposure_us", "channel_saturation",
                 "contrast_percentiles"):
         assert key in data
+    assert data["flush_frames"] == 0 and data["flush_counts"] == [0, 0, 0]   # the simulator's frames are all fresh
     assert load_rig(tmp_path / "out" / "rig.json").capture["pattern_delay_s"] == result.pattern_delay_s
     png = read_png(tmp_path / "out" / "check.png")
     assert png.shape[0] == 256 and png.shape[1] == 2 * 320 + 320

@@ -28,7 +28,7 @@ from rangekit.progress import call_progress
 from rangekit.rig.rig_file import Rig, turntable_prior
 from rangekit.surface.cloud import PointCloud
 
-__all__ = ["RecordingCloud", "reconstruct_laser_recording"]
+__all__ = ["RecordingCloud", "reconstruct_laser_recording", "recording_lines", "truth_figures"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -104,3 +104,41 @@ def reconstruct_laser_recording(recording: LaserRecording, rig: Rig, *, method: 
                               "on, and aimed at the object?")
     cloud = PointCloud(np.concatenate(points), colours=np.concatenate(colours))
     return RecordingCloud(cloud, np.concatenate(steps), np.concatenate(lasers), n_points, on_table, T_world_view)
+
+
+def recording_lines(recording: LaserRecording, rec: RecordingCloud) -> list[str]:
+    """Lines for ``rangekit reconstruct``: where the lasers agree (two or more lasers), and on a simulated recording
+    (its truth beside it, :func:`rangekit.sim.laser.recording.recording_truth`) the cloud's distance to the true
+    surface, all and per laser."""
+    from rangekit.errors import InputError
+    from rangekit.laser.agreement import laser_agreement
+
+    lines = []
+    P = rec.cloud.points
+    for k in range(1, rec.n_points.shape[1]):
+        try:
+            lines.append(f"lasers 0 and {k}: " + laser_agreement(P[rec.laser == 0], P[rec.laser == k]).line())
+        except InputError as exc:
+            lines.append(f"lasers 0 and {k}: not compared: {exc}")
+    figures = truth_figures(recording, rec)
+    if figures is not None:
+        per = ", ".join(f"laser {k} {v * 1e3:.4f} mm" for k, v in enumerate(figures["laser_rms"]))
+        lines.append(f"cloud against the true surface: RMS {figures['rms'] * 1e3:.4f} mm, 95th percentile "
+                     f"{figures['p95'] * 1e3:.4f} mm over {len(P):,} points ({per})")
+    return lines
+
+
+def truth_figures(recording: LaserRecording, rec: RecordingCloud) -> dict | None:
+    """The cloud against the simulator's truth beside the recording (None without it): ``rms``, ``p95`` and
+    ``laser_rms`` (per laser), metres; the cloud (the rig's world at the first step) against the true object at the
+    first step's angle in the true world."""
+    from rangekit.sim.laser.recording import recording_truth
+    from rangekit.surface.mesh import distance_to_surface
+
+    truth = recording_truth(recording.folder)
+    if truth is None or truth.object is None or not len(rec.cloud):
+        return None
+    d = distance_to_surface(rec.cloud.points, truth.object_mesh(float(recording.angles[0])))
+    return {"rms": float(np.sqrt(np.mean(d ** 2))), "p95": float(np.percentile(d, 95)),
+            "laser_rms": [float(np.sqrt(np.mean(d[rec.laser == k] ** 2))) if (rec.laser == k).any() else float("nan")
+                          for k in range(rec.n_points.shape[1])]}

@@ -149,7 +149,7 @@ def _folder_frames(folder: Path, layout: LaserLayout) -> tuple[list[list[Path]],
     kinds = layout.kinds(n, off)
     lists = {kind: _images(folder / kind) for kind in kinds}
     if n == 0 or not any(lists.values()):
-        raise FileFormatError(f"{folder}: no frames: expected {layout.name}'s subfolders laser0/, laser1/, ... (and "
+        raise FileFormatError(f"{folder}: no frames: expected the subfolders of {layout.name}, laser0/, laser1/, ... (and "
                               f"off/ if recorded), each with one image ({', '.join(FRAME_SUFFIXES)}) per step, found "
                               f"{'none of them' if n == 0 else 'no images in ' + ', '.join(k + '/' for k in kinds)}")
     counts = {kind: len(files) for kind, files in lists.items()}
@@ -167,7 +167,7 @@ def _interleaved_frames(folder: Path, layout: LaserLayout) -> tuple[list[list[Pa
     kinds = layout.kinds(layout.n_lasers, bool(layout.off))
     files = _images(folder)
     if not files:
-        raise FileFormatError(f"{folder}: no frames: expected {layout.name}'s images ({', '.join(FRAME_SUFFIXES)}), "
+        raise FileFormatError(f"{folder}: no frames: expected the images of {layout.name} ({', '.join(FRAME_SUFFIXES)}), "
                               f"{len(kinds)} per step ({', '.join(kinds)}) in numeric order of the names, found none")
     if len(files) % len(kinds):
         raise FileFormatError(f"{folder}: {len(files)} frames ({files[0].name} ... {files[-1].name}) are not a whole "
@@ -245,6 +245,11 @@ def read_laser_recording(folder: str | Path, layout: str | LaserLayout, *, step_
     return LaserRecording(folder, layout, out, n, off, source)
 
 
+def _described(img: np.ndarray) -> str:
+    """"640x480 RGB uint8"."""
+    return f"{img.shape[1]}x{img.shape[0]} {'RGB' if img.ndim == 3 else 'grey'} {img.dtype}"
+
+
 def read_step_frames(step: LaserStep) -> tuple[np.ndarray | None, tuple[np.ndarray, ...]]:
     """The step's laser-off image (None when not recorded) and laser images, each as recorded (RGB or grey);
     FileFormatError naming the file for an unreadable one or one of another size than the step's first."""
@@ -252,8 +257,8 @@ def read_step_frames(step: LaserStep) -> tuple[np.ndarray | None, tuple[np.ndarr
     images = [read_png(p) for p in paths]
     for p, img in zip(paths[1:], images[1:]):
         if img.shape != images[0].shape or img.dtype != images[0].dtype:
-            raise FileFormatError(f"{p}: image is {img.dtype} {img.shape[1::-1]}, but {paths[0]} is {images[0].dtype} "
-                                  f"{images[0].shape[1::-1]}; a step's frames need one size and depth")
+            raise FileFormatError(f"{p}: image is {_described(img)}, but {paths[0]} is {_described(images[0])}; a "
+                                  "step's frames need one size, depth and number of channels")
     return (images[0] if step.off is not None else None), tuple(images[1:] if step.off is not None else images)
 
 

@@ -104,3 +104,31 @@ def test_bad_recordings_are_one_line(recorded, cli, tmp_path):
     run = cli("calibrate", "--lasers", "--captures", blank, "--projector", "800x600", "--out", tmp_path / "r3.json")
     assert run.code == 2 and "--projector: not with --lasers --captures" in run.err
     assert Board().cols == 10
+
+
+@pytest.mark.slow
+def test_acceptance_full_resolution_against_the_laser_scan(tmp_path):
+    """Issue 50's acceptance at the simulator's 1280x1024 (40 steps, a few minutes): the recorded rig's cloud
+    within 1.5x of ``rangekit scan --method laser``'s RMS against the truth, the axis within 0.1 deg, the two
+    lasers within 0.1 mm RMS of each other."""
+    import json
+
+    from rangekit.app.laser.recorded_calibration import calibrate_laser_recordings
+    from rangekit.app.laser.recording import reconstruct_laser_recording, truth_figures
+    from rangekit.cli import main
+    from rangekit.formats.layouts.laser import read_laser_recording
+    from rangekit.laser.agreement import laser_agreement
+    from rangekit.sim.laser.recording import write_board_recordings, write_scan_recording
+
+    n = 40
+    sweeps = write_board_recordings(tmp_path / "cal")
+    write_scan_recording(tmp_path / "scan", [360.0 * k / n for k in range(n)])
+    cal = calibrate_laser_recordings(tmp_path / "rig.json", sweeps, layout="laser:folders", board=Board())
+    assert cal.axis_error_deg < 0.1
+    recording = read_laser_recording(tmp_path / "scan", "laser:folders", step_deg=360.0 / n)
+    rec = reconstruct_laser_recording(recording, cal.rig)
+    P = rec.cloud.points
+    assert laser_agreement(P[rec.laser == 0], P[rec.laser == 1]).rms < 0.1e-3
+    assert main(["scan", "--method", "laser", "--steps", str(n), "--out", str(tmp_path / "s"), "--no-report"]) == 0
+    scan_rms = json.loads((tmp_path / "s" / "summary.json").read_text())["accuracy"]["cloud_rms"]
+    assert truth_figures(recording, rec)["rms"] < 1.5 * scan_rms

@@ -56,6 +56,10 @@ def _prepare(out: Path, layout, n_lasers: int, off: bool):
     if layout.off is not None and layout.off != off:
         off = layout.off
     out.mkdir(parents=True, exist_ok=True)
+    if (out / TRUTH_FILE).is_file():        # a recording this module wrote: its old frames go (fewer steps now)
+        for old in [*out.glob("[0-9][0-9][0-9][0-9][0-9].png"), *out.glob("off/*.png"), *out.glob("laser[0-9]/*.png")]:
+            old.unlink()
+        (out / STEPS_FILE).unlink(missing_ok=True)
     if layout.folders:
         for kind in layout.kinds(n_lasers, off):
             (out / kind).mkdir(exist_ok=True)

@@ -88,6 +88,7 @@ class RecordedLaserCalibration:
                                       "not found (too few laser points on it): the origin is the axis point nearest "
                                       "the camera"))
         lines += [f"rejected {r}" for r in self.rejected]
+        lines.append("laser planes (camera frame; the rig file holds them in the turntable frame):")
         for cal in self.lasers:
             lines += report_lines(cal)
         lines += list(self.truth_lines)

@@ -208,7 +208,7 @@ def calibrate_laser_recordings(out: str | Path, captures: Sequence[str | Path], 
     FileFormatError : a recording without frames, a frame missing, a bad step table (named), images of two sizes.
     CalibrationError : too few board poses, no sweep fixing the axis, a laser lighting no pose (each named).
     """
-    from rangekit.app.laser.calibration import fit_laser_planes
+    from rangekit.app.laser.calibration import fit_laser_planes, plane_in_world
     from rangekit.calib.camera import LENS_MODELS, calibrate_device
     from rangekit.calib.turntable import turntable_frame
     from rangekit.laser.plane_calib import calibrated_laser
@@ -245,11 +245,9 @@ def calibrate_laser_recordings(out: str | Path, captures: Sequence[str | Path], 
         height = _refined_height(axis, table, height)
         T_cam_table[:3, 3] = axis.point + height * axis.direction
     T_world_cam = invert_T(T_cam_table)
-    from rangekit.app.laser.calibration import plane_in_world
-
-    world_lasers = tuple(dataclasses.replace(calibrated_laser(l, c), plane=plane_in_world(c.plane, np.eye(4), T_world_cam),
-                                             origin=None, switch=k + 1)
-                         for k, (l, c) in enumerate(zip(fitted, cals)))
+    world_lasers = tuple(dataclasses.replace(calibrated_laser(laser, c), origin=None, switch=k + 1,
+                                             plane=plane_in_world(c.plane, np.eye(4), T_world_cam))
+                         for k, (laser, c) in enumerate(zip(fitted, cals)))
     rig = Rig(cameras=(dataclasses.replace(camera, T_world_cam=T_world_cam),), T_world_table=np.eye(4),
               lasers=world_lasers)
     truth_lines, axis_err = _against_truth(captures, rig, axis, cals)
@@ -261,6 +259,7 @@ def calibrate_laser_recordings(out: str | Path, captures: Sequence[str | Path], 
 def _against_truth(captures, rig: Rig, axis, cals) -> tuple[list[str], float | None]:
     """Lines comparing the calibration with the simulator's truth beside the recordings (none for a real one): the
     axis direction in the camera frame, each plane relative to the camera, the intrinsics."""
+    from rangekit.app.laser.calibration import plane_in_world
     from rangekit.laser.plane_calib import plane_errors
     from rangekit.sim.laser.recording import recording_truth
 
@@ -278,8 +277,6 @@ def _against_truth(captures, rig: Rig, axis, cals) -> tuple[list[str], float | N
     lines = [f"against the truth: turntable axis {err:.4f} deg off, passing {off * 1e3:.3f} mm from the true one; "
              f"fx {K[0, 0] - Kt[0, 0]:+.2f} fy {K[1, 1] - Kt[1, 1]:+.2f} cx {K[0, 2] - Kt[0, 2]:+.2f} cy "
              f"{K[1, 2] - Kt[1, 2]:+.2f} px"]
-    from rangekit.app.laser.calibration import plane_in_world
-
     for cal, laser in zip(cals, truth.rig.lasers):
         true_plane = plane_in_world(laser.plane, true_cam.T_world_cam, np.eye(4))   # into the true camera frame
         e = plane_errors(cal.plane, true_plane)

@@ -39,7 +39,6 @@ def recorded(tmp_path_factory):
 
 
 def test_calibrated_from_board_sweeps(recorded):
-    from rangekit.calib.turntable import turntable_frame  # noqa: F401  (the world convention used)
     from rangekit.rig.rig_file import load_rig
 
     root, truth, _ = recorded

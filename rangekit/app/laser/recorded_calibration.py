@@ -16,7 +16,8 @@ the lines across the board. From them (Horus's order: camera, laser planes, plat
    (:func:`rangekit.app.laser.calibration.fit_laser_planes`: robust, poses whose line misses the board named);
 4. **the table top**: the laser points of every step met with their planes; the densest height along the axis is
    the turntable's top, where the lines cross the disc beside the board
-   (:func:`rangekit.calib.turntable.turntable_frame`).
+   (:func:`rangekit.calib.turntable.turntable_frame`), unless it lies above the board's lowest edge (which stands
+   on the table): then that edge.
 
 The rig file's world is the turntable frame (z up the axis, origin on it at the table top, y from the camera
 towards the axis), as the simulator's and ``rangekit calibrate``'s.
@@ -39,7 +40,11 @@ from rangekit.geometry import invert_T
 from rangekit.rig.lasers import LineLaser
 from rangekit.rig.rig_file import Rig
 
-__all__ = ["RecordedLaserCalibration", "calibrate_laser_recordings", "ambient_frame"]
+__all__ = ["RecordedLaserCalibration", "calibrate_laser_recordings", "ambient_frame", "TABLE_BELOW_BOARD"]
+
+#: The densest height of the laser points is taken for the table top only if it lies at most this far (m) above
+#: the board's lowest edge, which stands on the table (else it is the board's own, and that edge is taken).
+TABLE_BELOW_BOARD = 0.005
 
 
 def ambient_frame(off: np.ndarray | None, frames: Sequence[np.ndarray]) -> np.ndarray:
@@ -56,7 +61,8 @@ def ambient_frame(off: np.ndarray | None, frames: Sequence[np.ndarray]) -> np.nd
 class RecordedLaserCalibration:
     """What :func:`calibrate_laser_recordings` found: the ``rig`` written; the camera's reprojection RMS (px); the
     fitted ``axis`` (:class:`rangekit.calib.turntable.AxisFit`, camera frame) and each sweep's; the table top's
-    height along the axis (m from the axis point nearest the camera; None: not found); each laser's
+    height along the axis (m from the axis point nearest the camera), from the lines on the table or else from the
+    board's lowest edge (``table_from_lines``); each laser's
     :class:`rangekit.laser.plane_calib.LaserPlaneCalibration`; every rejection by name; the figures against the
     simulator's truth (``truth_lines``) when the recordings carry it."""
 
@@ -64,7 +70,8 @@ class RecordedLaserCalibration:
     camera_rms: float
     axis: object
     sweep_axes: tuple
-    table_height: float | None
+    table_height: float
+    table_from_lines: bool
     lasers: tuple
     rejected: tuple[str, ...]
     truth_lines: tuple[str, ...]
@@ -83,10 +90,9 @@ class RecordedLaserCalibration:
             spread = max(math.degrees(math.acos(min(1.0, abs(float(a.direction @ self.axis.direction)))))
                          for a in self.sweep_axes)
             lines.append(f"  {len(self.sweep_axes)} sweeps' axes within {spread:.4f} deg of their mean")
-        lines.append("table top: " + (f"{self.table_height * 1e3:+.3f} mm along the axis from its point nearest the "
-                                      "camera" if self.table_height is not None else
-                                      "not found (too few laser points on it): the origin is the axis point nearest "
-                                      "the camera"))
+        lines.append(f"table top: {self.table_height * 1e3:+.3f} mm along the axis from its point nearest the camera, "
+                     + ("where the laser lines cross it" if self.table_from_lines else
+                        "the board's lowest edge (too few laser points on the table itself)"))
         lines += [f"rejected {r}" for r in self.rejected]
         lines.append("laser planes (camera frame; the rig file holds them in the turntable frame):")
         for cal in self.lasers:
@@ -185,6 +191,15 @@ def _table_points(camera, planes, views) -> np.ndarray | None:
     return np.concatenate(chunks) if chunks else None
 
 
+def _board_bottom(axis, board: Board, T_cam: dict) -> float:
+    """The lowest height along the axis of the board's outline over its poses (m from ``axis.point``): the board
+    stands on the table, so its bottom edge is the table top when its lines on the table are too few."""
+    x0, y0, x1, y1 = board.extent
+    outline = np.array([[x0, y0, 0.0], [x1, y0, 0.0], [x0, y1, 0.0], [x1, y1, 0.0]])
+    return float(min(float(np.min(((T[:3, :3] @ outline.T).T + T[:3, 3] - axis.point) @ axis.direction))
+                     for T in T_cam.values()))
+
+
 def _refined_height(axis, P: np.ndarray, height: float) -> float:
     """The table top's height along the axis, the median of the points within 0.3 then 0.1 mm of ``height``
     (:func:`rangekit.calib.turntable.turntable_frame`'s median over 1 mm takes in the board's bottom edge)."""
@@ -237,13 +252,16 @@ def calibrate_laser_recordings(out: str | Path, captures: Sequence[str | Path], 
     fitted, cals, fit_rejected = fit_laser_planes(lasers, camera, board, views, T_cam, names)
     rejected += fit_rejected
     table = _table_points(camera, [c.plane for c in cals], views)
+    T_cam_table, _ = turntable_frame(axis, None)
+    bottom = _board_bottom(axis, board, T_cam)     # the board stands on the table: its lowest edge is on it
     try:
-        T_cam_table, height = turntable_frame(axis, table)
-    except CalibrationError:
-        T_cam_table, height = turntable_frame(axis, None)
-    if height is not None:
-        height = _refined_height(axis, table, height)
-        T_cam_table[:3, 3] = axis.point + height * axis.direction
+        height = _refined_height(axis, table, turntable_frame(axis, table)[1])
+        from_table = height <= bottom + TABLE_BELOW_BOARD
+    except CalibrationError:        # too few points for a table top
+        from_table = False
+    if not from_table:
+        height = bottom
+    T_cam_table[:3, 3] = axis.point + height * axis.direction
     T_world_cam = invert_T(T_cam_table)
     world_lasers = tuple(dataclasses.replace(calibrated_laser(laser, c), origin=None, switch=k + 1,
                                              plane=plane_in_world(c.plane, np.eye(4), T_world_cam))
@@ -252,7 +270,7 @@ def calibrate_laser_recordings(out: str | Path, captures: Sequence[str | Path], 
               lasers=world_lasers)
     truth_lines, axis_err = _against_truth(captures, rig, axis, cals)
     save_rig(rig, out)
-    return RecordedLaserCalibration(rig, float(dev.rms), axis, fits, height, tuple(cals), tuple(rejected),
+    return RecordedLaserCalibration(rig, float(dev.rms), axis, fits, height, from_table, tuple(cals), tuple(rejected),
                                     tuple(truth_lines), axis_err, time.perf_counter() - t0)
 
 

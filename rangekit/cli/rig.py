@@ -275,7 +275,9 @@ def add_calibrate_parser(sub) -> None:
                      help="with --lasers: board poses for the laser planes (default 10)")
     cal.add_argument("--captures", nargs="+", metavar="DIR",
                      help="calibrate from board poses another tool recorded, one folder per pose in the capture "
-                          "layout --pattern (docs/real-captures.md); needs --projector")
+                          "layout --pattern (docs/real-captures.md); needs --projector. With --lasers: a laser rig "
+                          "(camera, turntable axis, laser planes) from recorded board sweeps on the turntable, one "
+                          "folder per sweep in a laser layout (docs/laser.md)")
     cal.add_argument("--pattern", choices=sorted(CAPTURE_LAYOUTS) + list(LASER_LAYOUTS), default=None,
                      help="with --captures: the folders' capture layout; it must code columns and rows (e.g. "
                           "slstudio:calibration); with --lasers --captures a laser recording layout (default "

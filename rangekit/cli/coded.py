@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import time
 
-from rangekit.cli._common import check_beside, check_output, note, result, say, size
+from rangekit.cli._common import check_beside, check_output, console, finite_float, note, result, say, size
 from rangekit.formats.sessions.files import MAPS_FILE, PATTERNS_FILE, RIG_FILE
 
 
@@ -92,6 +92,12 @@ def cmd_reconstruct(args: argparse.Namespace) -> int:
         stem = Path(args.out).stem
         check_beside(args.out, (f"{stem}.refined-rig.json", f"{stem}.refinement.json"), force=args.force,
                      inputs=list(args.capture) + list(args.rig or []))
+    from rangekit.formats.layouts.laser import LASER_LAYOUTS
+
+    if args.pattern in LASER_LAYOUTS:
+        return _reconstruct_laser_recording(args, t0)
+    if args.step_deg is not None:
+        raise UsageError(f"--step-deg: only with --pattern laser:... (a recorded laser scan: {', '.join(LASER_LAYOUTS)})")
     if args.pattern is not None:
         return _reconstruct_layout(args, t0)
     if len(args.capture) != 1:
@@ -201,6 +207,39 @@ def _reconstruct_laser(args: argparse.Namespace, t0: float) -> int:
     return 0
 
 
+def _reconstruct_laser_recording(args: argparse.Namespace, t0: float) -> int:
+    """``rangekit reconstruct DIR --pattern laser:... --rig RIG.json [--step-deg DEG]``: a recorded laser-line
+    turntable scan, every step on the rig's laser planes, turned back by its angle, the lasers merged (docs/laser.md,
+    "A webcam laser rig from recorded frames")."""
+    from rangekit.app.laser.recording import reconstruct_laser_recording, recording_lines
+    from rangekit.errors import UsageError
+    from rangekit.formats.clouds import save_cloud
+    from rangekit.formats.layouts.laser import read_laser_recording
+    from rangekit.rig.rig_file import load_rig
+
+    given = [f for f, v in (("--projector", args.projector is not None), ("--pair-only", args.pair_only),
+                            ("--refine-lens", args.refine_lens)) if v]
+    if given:
+        raise UsageError(f"{given[0]}: not with --pattern {args.pattern} (a recorded laser scan)")
+    if len(args.capture) != 1:
+        raise UsageError(f"--pattern {args.pattern}: one recording folder, found {len(args.capture)}")
+    if not args.rig or len(args.rig) != 1:
+        raise UsageError(f"--pattern {args.pattern}: give the laser rig with --rig RIG.json (one; from 'rangekit "
+                         "calibrate --lasers --captures ...')")
+    recording = read_laser_recording(args.capture[0], args.pattern, step_deg=args.step_deg)
+    say(recording.line())
+    rig = load_rig(args.rig[0])
+    if not rig.lasers:
+        raise UsageError(f"--rig {args.rig[0]}: no 'lasers'; calibrate them with rangekit calibrate --lasers")
+    rec = reconstruct_laser_recording(recording, rig, method=args.peaks, progress=console())
+    save_cloud(args.out, rec.cloud)
+    say(rec.summary())
+    for line in recording_lines(recording, rec):
+        say(line)
+    result(f"wrote {len(rec.cloud)} points to {args.out} in {time.perf_counter() - t0:.1f} s")
+    return 0
+
+
 def _reconstruct_laser_stereo(args: argparse.Namespace, t0: float) -> int:
     """``rangekit reconstruct`` of a two-camera laser capture folder (left/, right/): see docs/laser.md."""
     from pathlib import Path
@@ -246,6 +285,7 @@ def add_parsers(sub) -> None:
     from rangekit.coded.motion import MAX_MOTION_SHARE
     from rangekit.coded.patterns import PATTERN_METHODS
     from rangekit.formats.layouts import LAYOUTS as CAPTURE_LAYOUTS
+    from rangekit.formats.layouts.laser import LASER_LAYOUTS
 
     dec = sub.add_parser("decode", help=f"decode coded-light images into projector coordinates ({MAPS_FILE})",
                          description="Decode a capture into per-pixel projector column/row maps with confidence.")
@@ -288,9 +328,12 @@ def add_parsers(sub) -> None:
                           f"during it, as 'rangekit decode' does (default {MAX_MOTION_SHARE * 100:.0f}%%; 'none')")
     rec.add_argument("--refine-lens", action="store_true",
                      help="refine the projector's (or second camera's) focal length too (two views cannot fix its principal point)")
-    rec.add_argument("--pattern", choices=sorted(CAPTURE_LAYOUTS), default=None,
+    rec.add_argument("--pattern", choices=sorted(CAPTURE_LAYOUTS) + list(LASER_LAYOUTS), default=None,
                      help="another tool's capture layout, read as it lies on disk (docs/real-captures.md); needs "
-                          "--rig")
+                          "--rig; laser:... a recorded laser-line turntable scan (docs/laser.md)")
+    rec.add_argument("--step-deg", type=finite_float, default=None,
+                     help="with --pattern laser:...: the turntable's step between the recorded steps, degrees (a "
+                          "recording with a steps.csv gives each step's angle instead)")
     rec.add_argument("--projector", type=size, default=None,
                      help="with --pattern and a rig of two cameras: the projector's size WxH the tool projected at")
     rec.add_argument("--method", default="auto", choices=("auto", "ray-plane", "ray-ray"),

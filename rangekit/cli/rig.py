@@ -8,8 +8,8 @@ import sys
 import time
 from pathlib import Path
 
-from rangekit.cli._common import (check_beside, check_output, console, float_in, int_in, note, positive_float, result, say, seed,
-                                  size)
+from rangekit.cli._common import (check_beside, check_output, console, finite_float, float_in, int_in, note, positive_float,
+                                  result, say, seed, size)
 from rangekit.drivers.discovery import MAX_SEARCH_S
 from rangekit.errors import UsageError
 from rangekit.formats.sessions.files import RIG_FILE
@@ -109,6 +109,8 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     check_beside(args.out, ("coverage.png",), force=args.force, inputs=inputs)
     _check_square(args.square_mm)
     board = Board(kind=args.board, cols=args.cols, rows=args.rows, square=args.square_mm / 1000.0)
+    if args.captures and args.lasers:
+        return _calibrate_laser_recordings(args, board, t0)
     if args.captures:
         from rangekit.app.calibrate_recorded import calibrate_recordings
 
@@ -137,6 +139,21 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _calibrate_laser_recordings(args: argparse.Namespace, board, t0: float) -> int:
+    """``rangekit calibrate --lasers --captures DIR [DIR ...] --pattern laser:...``: a laser rig from recorded board
+    sweeps on the turntable (docs/laser.md, "A webcam laser rig from recorded frames")."""
+    from rangekit.app.laser.recorded_calibration import calibrate_laser_recordings
+
+    cal = calibrate_laser_recordings(args.out, args.captures, layout=args.pattern or "laser:folders", board=board,
+                                     step_deg=args.step_deg, lens=args.lens, force=args.force, report=say)
+    say("")
+    say("== laser rig ==")
+    for line in cal.summary_lines():
+        say(line)
+    result(f"wrote {args.out} in {time.perf_counter() - t0:.1f} s")
+    return 0
+
+
 def _check_square(square_mm: float) -> None:
     """--square-mm against the one rule of a board's square (rangekit.rig.plausibility.BOARD_SQUARE): refused
     before any pose (a 1e9 mm square otherwise fails as "no pose found" or as poses nearly parallel)."""
@@ -153,12 +170,20 @@ def _check_captures_options(args: argparse.Namespace) -> None:
     its own poses; those two are refused without it. UsageError naming the option."""
     from rangekit.errors import UsageError
 
+    from rangekit.formats.layouts.laser import LASER_LAYOUTS
+
     if not args.captures:
         given = [name for name, value in (("--pattern", args.pattern), ("--projector", args.projector),
-                                          ("--corners", args.corners != "quadratic")) if value]
+                                          ("--corners", args.corners != "quadratic"),
+                                          ("--step-deg", args.step_deg is not None)) if value]
         if given:
             raise UsageError(f"{given[0]}: only with --captures DIR [DIR ...] (board poses another tool recorded)")
         return
+    if args.lasers or (args.pattern or "") in LASER_LAYOUTS:
+        _check_laser_captures_options(args, LASER_LAYOUTS)
+        return
+    if args.step_deg is not None:
+        raise UsageError("--step-deg: only with --lasers --captures (recorded laser board sweeps)")
     needed = (("--pattern", args.pattern, "the folders' capture layout, e.g. slstudio:calibration"),
               ("--projector", args.projector, "the projector screen the tool drew its patterns on, WxH, e.g. "
                                               "1824x1140"))
@@ -170,6 +195,23 @@ def _check_captures_options(args: argparse.Namespace) -> None:
     for name, value, default in defaults:
         if value != default:
             raise UsageError(f"{name}: not with --captures (the recorded folders are the board poses; the rig "
+                             "file is written from them alone)")
+
+
+def _check_laser_captures_options(args: argparse.Namespace, layouts) -> None:
+    """--lasers --captures: the folders are laser recordings (--pattern a laser layout, default laser:folders); the
+    options of a coded-light recording or of a calibration that captures its own poses are refused by name."""
+    if not args.lasers:
+        raise UsageError(f"--pattern {args.pattern}: a laser recording layout; calibrate from it with --lasers")
+    if args.pattern is not None and args.pattern not in layouts:
+        raise UsageError(f"--pattern {args.pattern}: with --lasers --captures, expected a laser recording layout "
+                         f"({', '.join(layouts)})")
+    refused = (("--projector", args.projector is not None), ("--corners", args.corners != "quadratic"),
+               ("--rig", args.rig != "sim"), ("--poses", args.poses != 20), ("--seed", args.seed != 0),
+               ("--laser-poses", args.laser_poses != 10))
+    for name, given in refused:
+        if given:
+            raise UsageError(f"{name}: not with --lasers --captures (the recorded board sweeps are the poses; the rig "
                              "file is written from them alone)")
 
 
@@ -199,6 +241,7 @@ def cmd_devices(args: argparse.Namespace) -> int:
 def add_calibrate_parser(sub) -> None:
     from rangekit.calib.camera import CORNER_FITS, LENS_MODELS
     from rangekit.formats.layouts import LAYOUTS as CAPTURE_LAYOUTS
+    from rangekit.formats.layouts.laser import LASER_LAYOUTS
 
     cal = sub.add_parser("calibrate", help="calibrate camera, projector, turntable axis and projector response",
                          description="Capture a board at several poses under coded light (the simulator moves it; "
@@ -232,10 +275,16 @@ def add_calibrate_parser(sub) -> None:
                      help="with --lasers: board poses for the laser planes (default 10)")
     cal.add_argument("--captures", nargs="+", metavar="DIR",
                      help="calibrate from board poses another tool recorded, one folder per pose in the capture "
-                          "layout --pattern (docs/real-captures.md); needs --projector")
-    cal.add_argument("--pattern", choices=sorted(CAPTURE_LAYOUTS), default=None,
+                          "layout --pattern (docs/real-captures.md); needs --projector. With --lasers: a laser rig "
+                          "(camera, turntable axis, laser planes) from recorded board sweeps on the turntable, one "
+                          "folder per sweep in a laser layout (docs/laser.md)")
+    cal.add_argument("--pattern", choices=sorted(CAPTURE_LAYOUTS) + list(LASER_LAYOUTS), default=None,
                      help="with --captures: the folders' capture layout; it must code columns and rows (e.g. "
-                          "slstudio:calibration)")
+                          "slstudio:calibration); with --lasers --captures a laser recording layout (default "
+                          "laser:folders: off/, laser0/, laser1/ subfolders; docs/laser.md)")
+    cal.add_argument("--step-deg", type=finite_float, default=None,
+                     help="with --lasers --captures: the turntable's step between the recorded frames, degrees (a "
+                          "recording with a steps.csv gives each step's angle instead)")
     cal.add_argument("--projector", type=size, default=None,
                      help="with --captures: the projector screen the patterns were drawn on, WxH (e.g. 1824x1140)")
     cal.add_argument("--corners", choices=CORNER_FITS, default=CORNER_FITS[0],

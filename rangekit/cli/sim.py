@@ -36,6 +36,9 @@ _WRITES = {
     "projector": ("[0-9][0-9][0-9].png", PATTERNS_FILE, RIG_FILE, "capture.json", "ground_truth.npz", "preview.png"),
     "laser": ("off.png", "laser*.png", RIG_FILE, "capture.json", "ground_truth.npz"),
     "laser-stereo": ("left", "right", RIG_FILE, "capture.json", "ground_truth.npz"),
+    "laser-recording": ("off", "laser[0-9]", "[0-9][0-9][0-9][0-9][0-9].png", "steps.csv", "truth.json",
+                        "true-rig.json"),
+    "laser-board": ("sweep_[0-9]*",),
     "dots": ("image.png", "reference.png", RIG_FILE, "capture.json", "ground_truth.npz"),
     "stereo": ("left.png", "right.png", RIG_FILE, "capture.json", "ground_truth.npz", "preview.png"),
     "tof": ("samples", "tof.json", RIG_FILE, "ground_truth.npz", "preview.png"),
@@ -53,7 +56,8 @@ def _sim_render(args: argparse.Namespace) -> int:
     check_output(args.out, folder=True)
     _check_motion_options(args)
     _check_sensor_options(args)
-    if args.sensor in ("laser", "laser-stereo"):
+    _check_recording_options(args)
+    if args.sensor in LASER_SENSORS:
         given = [f for f, v in (("--patterns", args.patterns), ("--global-fraction", args.global_fraction),
                                 ("--motion-mm", args.motion_mm)) if v is not None]
         if given:
@@ -61,7 +65,7 @@ def _sim_render(args: argparse.Namespace) -> int:
                              "lasers (docs/simulator.md)")
     elif args.mono:
         raise UsageError(f"--mono: only for --sensor laser or laser-stereo, found --sensor {args.sensor}")
-    if args.sensor not in ("projector", "laser", "laser-stereo"):
+    if args.sensor not in ("projector", *LASER_SENSORS):
         given = [f for f, v in (("--object", args.object), ("--object-unit", args.object_unit),
                                 ("--patterns", args.patterns), ("--rig", args.rig), ("--motion-mm", args.motion_mm),
                                 ("--global-fraction", args.global_fraction), ("--angle-deg", args.angle_deg),
@@ -70,6 +74,16 @@ def _sim_render(args: argparse.Namespace) -> int:
         if given:
             raise UsageError(f"{', '.join(given)}: only for --sensor projector, laser or laser-stereo; the "
                              f"{args.sensor} sensor renders its own scene (docs/simulator.md)")
+    if args.sensor in ("laser-recording", "laser-board"):
+        from rangekit.app.commands.simulate import render_laser_recording
+
+        folders = render_laser_recording(args.out, board=args.sensor == "laser-board", obj=args.object or "lumpy",
+                                         rig_file=args.rig, steps=args.laser_steps or 100,
+                                         layout=args.layout or "laser:folders", seed=args.seed,
+                                         noise=not args.no_noise, colour=not args.mono, progress=console())
+        result(f"wrote {len(folders)} recording(s) ({', '.join(str(f) for f in folders)}) with their truth "
+               f"(truth.json, true-rig.json) in {time.perf_counter() - t0:.1f} s")
+        return 0
     if args.sensor == "laser":
         render_laser_capture(args.out, obj=args.object or "lumpy", rig_file=args.rig,
                              angle=np.radians(args.angle_deg or 0.0), bits=args.bits or 8, seed=args.seed,
@@ -119,6 +133,28 @@ def _sim_render(args: argparse.Namespace) -> int:
     return 0
 
 
+#: The sensors that draw line lasers.
+LASER_SENSORS = ("laser", "laser-stereo", "laser-recording", "laser-board")
+
+
+def _check_recording_options(args: argparse.Namespace) -> None:
+    """--laser-steps and --layout only for the laser recordings; --angle-deg and --bits not for them."""
+    recording = args.sensor in ("laser-recording", "laser-board")
+    given = [f for f, v in (("--laser-steps", args.laser_steps), ("--layout", args.layout)) if v is not None]
+    if given and not recording:
+        raise UsageError(f"{given[0]}: only for --sensor laser-recording or laser-board, found --sensor {args.sensor}")
+    if args.laser_steps is not None and args.sensor == "laser-board":
+        raise UsageError("--laser-steps: only for --sensor laser-recording (the board's sweeps are the simulator's)")
+    if recording:
+        given = [f for f, v in (("--angle-deg", args.angle_deg), ("--bits", args.bits),
+                                ("--object-unit", args.object_unit)) if v is not None]
+        if args.sensor == "laser-board" and args.object is not None:
+            given.append("--object")
+        if given:
+            raise UsageError(f"{', '.join(given)}: not for --sensor {args.sensor} (a recording turns the table itself, "
+                             "8-bit frames)")
+
+
 def _check_sensor_options(args: argparse.Namespace) -> None:
     """The options of one kind of sensor refused with another (they were ignored), and --frequencies-mhz checked in
     the user's MHz (UsageError naming the option)."""
@@ -139,7 +175,7 @@ def _check_sensor_options(args: argparse.Namespace) -> None:
     if args.plan is not None and args.frequencies_mhz:
         raise UsageError(f"--plan {args.plan} with --frequencies-mhz: give one of them (--frequencies-mhz replaces "
                          "the plan)")
-    if args.size is not None and args.sensor in ("projector", "laser", "laser-stereo"):
+    if args.size is not None and args.sensor in ("projector", *LASER_SENSORS):
         raise UsageError(f"--size: only for --sensor tof, tof-pulsed, stereo or dots; the {args.sensor} sensor's "
                          "camera is the rig file's (--rig)")
     if args.no_noise and args.sensor in ("stereo", "dots"):
@@ -196,10 +232,13 @@ def add_parsers(sub) -> None:
         description="Render the captures a real rig would take of an object, plus ground_truth.npz "
                     "(depth, xyz, normals, proj_col, proj_row, valid), the rig file and a preview PNG.")
     render.add_argument("--sensor", default="projector",
-                        choices=("projector", "laser", "laser-stereo", "tof", "tof-pulsed", "stereo", "dots"),
+                        choices=("projector", "laser", "laser-stereo", "laser-recording", "laser-board", "tof",
+                                 "tof-pulsed", "stereo", "dots"),
                         help="projector-camera rig (default), laser-line turntable scanner (Ciclop-like: off.png "
                              "and one image per laser), the same lasers seen by two cameras (laser-sheet stereo: "
-                             "left/ and right/), continuous-wave or pulsed time of flight, the "
+                             "left/ and right/), a laser rig's recording of a turntable scan or of calibration "
+                             "board sweeps in a laser layout with its truth (laser-recording, laser-board), "
+                             "continuous-wave or pulsed time of flight, the "
                              "active-stereo pair, or one camera with a random-dot projector and its reference "
                              "image (Kinect v1 style)")
     render.add_argument("--object", default=None,
@@ -222,6 +261,11 @@ def add_parsers(sub) -> None:
                         help="camera bit depth (default 8; projector and laser sensors)")
     render.add_argument("--seed", type=seed, default=0, help="noise seed (default 0)")
     render.add_argument("--no-noise", action="store_true", help="disable shot and read noise")
+    render.add_argument("--laser-steps", type=int_in(2, 3600), default=None, metavar="N",
+                        help="--sensor laser-recording: turntable steps over a full turn (default 100)")
+    render.add_argument("--layout", default=None, choices=LazyChoices("rangekit.formats.layouts.laser", "LASER_LAYOUTS"),
+                        metavar="LAYOUT", help="--sensor laser-recording, laser-board: the recording's laser layout "
+                                               "(default laser:folders; docs/laser.md)")
     render.add_argument("--mono", action="store_true",
                         help="--sensor laser, laser-stereo: a monochrome camera (default: RGB, the laser mostly in R)")
     render.add_argument("--global-fraction", type=float_in(0.0, 1.0), default=None,

@@ -44,10 +44,13 @@ class OutputSet:
 #: Checked in this order: a processed session holds poses.json too, so the session comes first.
 OUTPUT_SETS: tuple[OutputSet, ...] = (
     OutputSet("session", "a scan session (rangekit scan)", (SESSION_FILE,), SESSION_MEMBERS),
-    OutputSet("capture", "a capture (rangekit sim render)", ("ground_truth.npz",),
+    OutputSet("capture", "a capture (rangekit sim render)", ("ground_truth.npz", "truth.json"),
               ("[0-9][0-9][0-9].png", "off.png", "laser*.png", "left.png", "right.png", "left", "right",
                "image.png", "reference.png", "tof.json", "samples", "round_trip_s.npy", "capture.json",
-               PATTERNS_FILE, RIG_FILE, "ground_truth.npz", "preview.png")),
+               PATTERNS_FILE, RIG_FILE, "ground_truth.npz", "preview.png",
+               # a laser rig's recording (--sensor laser-recording, laser-board; rangekit.sim.laser.recording)
+               "off", "laser[0-9]", "[0-9][0-9][0-9][0-9][0-9].png", "steps.csv", "truth.json", "true-rig.json",
+               "sweep_[0-9]*")),
     OutputSet("check", "a check (rangekit check)", ("check.json",), ("check.json", "check.png", RIG_FILE)),
     OutputSet("registration", "registered scans (rangekit register)", (POSES_FILE,),
               (POSES_FILE, MERGED_FILE, MESH_FILE)),

@@ -27,7 +27,8 @@ from rangekit.sim.laser.frames import LaserLook, LaserView
 from rangekit.sim.scene.raycast import pixel_corners
 from rangekit.sim.imaging.render import ImagingModel
 
-__all__ = ["line_on_board", "laser_board_poses", "BoardLaserFrames", "render_board_pose", "CALIBRATION_LOOK"]
+__all__ = ["line_on_board", "laser_board_poses", "BoardLaserFrames", "render_board_pose", "CALIBRATION_LOOK",
+           "turntable_board_scene_laser"]
 
 #: Room light on while the board is calibrated (brighter than a scan's 0.12: the corners are found in the
 #: laser-off image); a white square under the line stays below full scale (0.3 * 0.9 + 0.6 < 1).
@@ -146,3 +147,29 @@ def render_board_pose(rig: Rig, board: Board, T_world_board: np.ndarray, *, seed
                      ambient_scale=ambient_scale, cam_rays=cam_rays, corner_rays=corner_rays)
     frames = tuple(view.frame(k).image for k in range(len(rig.lasers))) if lasers else ()
     return BoardLaserFrames(off=view.off(), frames=frames, T_world_board=np.asarray(T_world_board, dtype=np.float64))
+
+
+def turntable_board_scene_laser(rig: Rig, board: Board, *, tilt_deg: float = 20.0, offset: float = 0.04):
+    """``board`` standing on the turntable disc, leaning back by ``tilt_deg`` and facing the camera (a laser rig
+    has no projector): its bottom edge's middle ``offset`` metres behind the turntable axis, on the far side from
+    the camera; it rides on the turntable, so a turntable angle turns it about the axis and both laser lines
+    cross it for angles of about -30..+30 deg (the lasers of :func:`rangekit.sim.laser.rig.laser_rig`). The scene
+    holds the turntable disc too (the table top the lines also light). As
+    :func:`rangekit.sim.writers.calibration.turntable_board_scene` for a projector-camera rig."""
+    from rangekit.geometry import apply_T, compose, invert_T
+    from rangekit.sim.scene.objects import board_object, turntable_disc
+    from rangekit.sim.scene.scene import Scene
+
+    if rig.T_world_table is None:
+        raise SceneError("turntable_board_scene_laser: the rig needs a turntable (T_world_table)")
+    c = apply_T(invert_T(rig.T_world_table), rig.camera.center[None])[0, :2]
+    h = c / np.linalg.norm(c)
+    t = math.radians(tilt_deg)
+    x_axis = np.array([-h[1], h[0], 0.0])
+    y_axis = np.array([math.sin(t) * h[0], math.sin(t) * h[1], -math.cos(t)])   # down the board
+    R = np.column_stack([x_axis, y_axis, np.cross(x_axis, y_axis)])
+    x0, _, x1, y1 = board.extent
+    bottom = np.array([-offset * h[0], -offset * h[1], 0.0])
+    T_table_board = make_T(R, bottom - R @ np.array([(x0 + x1) / 2, y1, 0.0]))
+    obj = board_object(board).with_pose(compose(rig.T_world_table, T_table_board))
+    return Scene((obj, turntable_disc().with_pose(rig.T_world_table)))

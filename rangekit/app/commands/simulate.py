@@ -15,7 +15,7 @@ from rangekit.errors import InputError, UsageError
 from rangekit.progress import call_progress
 
 __all__ = ["render_projector_capture", "render_laser_capture", "render_laser_stereo_capture", "render_tof_capture",
-           "render_stereo_capture", "BYTES_PER_PIXEL"]
+           "render_stereo_capture", "render_laser_recording", "BYTES_PER_PIXEL"]
 
 #: Peak memory of a simulated capture per camera pixel, bytes (measured as the growth of the peak from a
 #: small to a large sensor: ToF 4.6 KB/px, its 3x3 rays per pixel; pulsed ToF 0.54 KB; stereo 1.0 KB per
@@ -244,3 +244,35 @@ def render_stereo_capture(out: str | Path, *, size: tuple[int, int] = (640, 400)
     call_progress(progress, f"rendering the stereo pair ({rig.cameras[0].width}x{rig.cameras[0].height}, "
                             f"dots {'off' if not dots else 'on'})")
     write_stereo_capture(render_stereo(stereo_scene(), rig, dots=dots, seed=seed), rig, out)
+
+
+def render_laser_recording(out: str | Path, *, board: bool = False, obj: str = "lumpy",
+                           rig_file: str | Path | None = None, steps: int = 100, layout: str = "laser:folders",
+                           seed: int = 0, noise: bool = True, colour: bool = True,
+                           progress: Callable | None = None) -> list[Path]:
+    """``rangekit sim render --sensor laser-recording|laser-board``: a laser rig's recording in a laser layout
+    (:mod:`rangekit.formats.layouts.laser`) with its truth (:mod:`rangekit.sim.laser.recording`): ``obj`` turned in
+    ``steps`` uniform steps over a turn, or (``board``) the calibration board's sweeps on the turntable, one folder
+    each. The rig file's rig (it must list ``lasers`` and the turntable), default the simulator's laser rig."""
+    from rangekit.errors import ConfigError
+    from rangekit.rig.rig_file import load_rig
+    from rangekit.sim import ImagingModel
+    from rangekit.sim.laser.recording import write_board_recordings, write_scan_recording
+    from rangekit.sim.laser.rig import laser_rig
+
+    imaging = ImagingModel(colour=colour)
+    if not noise:
+        imaging = imaging.noiseless()
+    if rig_file:
+        rig = load_rig(rig_file)
+        if not rig.lasers or rig.T_world_table is None:
+            raise ConfigError(f"{rig_file}: a laser recording needs line lasers and the turntable, found "
+                              f"{len(rig.lasers)} laser(s) and {'a' if rig.T_world_table is not None else 'no'} "
+                              "turntable (docs/rig.md, 'lasers')")
+        _check_size("laser", (rig.camera.width, rig.camera.height), option=None, where=f"{rig_file}: ")
+    else:
+        rig = laser_rig()
+    if board:
+        return write_board_recordings(out, rig=rig, layout=layout, seed=seed, imaging=imaging, progress=progress)
+    return [write_scan_recording(out, [360.0 * k / steps for k in range(steps)], obj=obj, rig=rig, layout=layout,
+                                 seed=seed, imaging=imaging, progress=progress)]

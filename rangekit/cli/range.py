@@ -140,7 +140,7 @@ def add_parsers(sub) -> None:
                                           "RealSense's serial number with --camera realsense")
     stp.add_argument("--camera", choices=("depthai", "realsense"),
                      help="with --device: an OAK-D (depthai, default: the pair matched here) or a RealSense (its own "
-                          "depth frame, emitter on; writes range.npy and the SDK's intrinsics in rig.json)")
+                          f"depth frame, emitter on; writes range.npy and the SDK's intrinsics in {RIG_FILE})")
     stp.add_argument("--bag", help="with --device --camera realsense: play a recording (.bag or .db3) instead of a camera")
     stp.add_argument("--dots", type=fraction, help="with --device: IR dot projector power 0..1 (default 0.8; a "
                                                    "RealSense's laser_power, default as it is)")

@@ -53,6 +53,8 @@ class MissingPackage(DeviceError):
 #: The camera drivers by ``devices.camera.type``.
 CAMERA_DRIVERS: dict[str, CameraDriver] = {
     "depthai": CameraDriver("rangekit.drivers.depthai.camera", "Luxonis OAK (depthai)", ("depthai",)),
+    "genicam": CameraDriver("rangekit.drivers.genicam.camera", "GenICam/GenTL machine-vision cameras (harvesters)",
+                            ("harvesters", "genicam"), "genicam"),
 }
 
 

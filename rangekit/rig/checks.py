@@ -16,7 +16,7 @@ from rangekit.rig.camera_controls import check_refresh, controls_from_capture
 from rangekit.errors import ConfigError
 
 __all__ = ["validate_devices", "validate_capture", "validate_rig_for_hardware", "DEVICE_FIELDS", "CAPTURE_FIELDS",
-           "CAPTURE_BITS", "CAMERA_TYPES", "CAMERA_SECTION_FIELDS", "CAMERA_TEMPLATES", "TURNTABLE_PROTOCOLS", "PROJECTOR_PROTOCOLS", "DEPTHAI_SOCKETS", "MAX_SEARCH_S",
+           "CAPTURE_BITS", "CAMERA_TYPES", "GENICAM_PIXEL_FORMATS", "GENICAM_TRIGGER_ACTIVATIONS", "CAMERA_SECTION_FIELDS", "CAMERA_TEMPLATES", "TURNTABLE_PROTOCOLS", "PROJECTOR_PROTOCOLS", "DEPTHAI_SOCKETS", "MAX_SEARCH_S",
            "REFRESH_HZ", "DEFAULT_SEARCH_S", "DEFAULT_RECONNECT_S", "DEFAULT_REPLY_S", "reconnect_timeout_s"]
 
 #: Serial turntable protocols (rangekit.drivers.turntable): Horus (Ciclop) and FabScan boards.
@@ -25,6 +25,15 @@ TURNTABLE_PROTOCOLS = ("horus", "fabscan")
 PROJECTOR_PROTOCOLS = ("escvp21", "pjlink")
 #: depthai camera board sockets (rangekit.drivers.depthai.camera).
 DEPTHAI_SOCKETS = ("CAM_A", "CAM_B", "CAM_C", "CAM_D", "CAM_E", "CAM_F", "CAM_G", "CAM_H")
+#: The pixel formats a GenICam camera's frames are read in (rangekit.drivers.genicam.frames: mono as is, Bayer made
+#: grey, RGB as RGB).
+GENICAM_PIXEL_FORMATS = ("Mono8", "Mono10", "Mono12", "Mono16",
+                         *(f"Bayer{p}{b}" for p in ("RG", "GR", "GB", "BG") for b in (8, 10, 12, 16)),
+                         "RGB8", "BGR8", "RGBa8", "BGRa8")
+#: GenICam's ``TriggerActivation`` values (SFNC): the edge or level of a hardware trigger line.
+GENICAM_TRIGGER_ACTIVATIONS = ("RisingEdge", "FallingEdge", "AnyEdge", "LevelHigh", "LevelLow")
+#: The most frames a GenICam camera drops after flushing its buffers (``devices.camera.flush_frames``).
+MAX_FLUSH_FRAMES = 10
 #: The longest depthai device search accepted (seconds; depthai takes it as a C int of milliseconds), and
 #: the search a camera opened from a rig file gets without ``devices.camera.search_timeout_s``.
 MAX_SEARCH_S = 600.0
@@ -188,12 +197,17 @@ def _check_projector(sec, where: str) -> None:
 #: :data:`CAMERA_TEMPLATES`.
 CAMERA_SECTION_FIELDS = {
     "depthai": ("id", "socket", "search_timeout_s", "reconnect_timeout_s"),
+    "genicam": ("producer", "serial", "user_id", "pixel_format", "trigger_source", "trigger_activation", "flush_frames",
+                "search_timeout_s", "reconnect_timeout_s"),
 }
 #: ``devices.camera.type``: the simulator's camera, or one of the camera drivers.
 CAMERA_TYPES = ("sim", *CAMERA_SECTION_FIELDS)
 #: Each driver's ``devices.camera`` section as ``rangekit rig init --camera TYPE`` writes it.
 CAMERA_TEMPLATES = {
     "depthai": {"type": "depthai", "id": None, "socket": "CAM_A", "search_timeout_s": DEFAULT_SEARCH_S},
+    "genicam": {"type": "genicam", "producer": None, "serial": None, "user_id": None, "pixel_format": "Mono8",
+                "trigger_source": None, "trigger_activation": "RisingEdge", "flush_frames": 2,
+                "search_timeout_s": DEFAULT_SEARCH_S},
 }
 
 
@@ -223,9 +237,31 @@ def _check_depthai_camera(sec: dict, where: str, path: str) -> None:
     _number_in(sec, "reconnect_timeout_s", 0.0, MAX_SEARCH_S, where, path, _RECONNECT)
 
 
+def _check_genicam_camera(sec: dict, where: str, path: str) -> None:
+    for key, what in (("producer", "the path of the camera maker's GenTL producer (.cti), or null for "
+                                   "GENICAM_GENTL64_PATH"),
+                      ("serial", "the camera's serial number, or null"), ("user_id", "the camera's user id, or null"),
+                      ("trigger_source", "'Software', a line such as 'Line1', or null for a free-running camera")):
+        if sec.get(key) is not None and not (isinstance(sec[key], str) and sec[key].strip()):
+            raise _error(where, f"{path}.{key}", f"must be a non-empty string ({what}), found {_show(sec[key])}")
+    if sec.get("pixel_format", "Mono8") not in GENICAM_PIXEL_FORMATS:
+        raise _error(where, f"{path}.pixel_format", f"must be one of {', '.join(GENICAM_PIXEL_FORMATS)}, found "
+                     f"{_show(sec['pixel_format'])}")
+    if sec.get("trigger_activation", "RisingEdge") not in GENICAM_TRIGGER_ACTIVATIONS:
+        raise _error(where, f"{path}.trigger_activation", f"must be one of {', '.join(GENICAM_TRIGGER_ACTIVATIONS)}, "
+                     f"found {_show(sec['trigger_activation'])}")
+    flush = sec.get("flush_frames", 2)
+    if not (_is_int(flush) and 0 <= flush <= MAX_FLUSH_FRAMES):
+        raise _error(where, f"{path}.flush_frames", f"must be an integer 0..{MAX_FLUSH_FRAMES} (frames dropped after "
+                     f"each pattern change), found {_show(flush)}")
+    _number_in(sec, "search_timeout_s", 0.0, MAX_SEARCH_S, where, path, "seconds (how long to look for the device)")
+    _number_in(sec, "reconnect_timeout_s", 0.0, MAX_SEARCH_S, where, path, _RECONNECT)
+
+
 #: Each camera type's checker of its section's values (the fields are checked against CAMERA_SECTION_FIELDS first).
 _CAMERA_CHECKS = {
     "depthai": _check_depthai_camera,
+    "genicam": _check_genicam_camera,
 }
 
 

@@ -1,7 +1,7 @@
 """The GenTL producer of a GenICam camera, and the device chosen on it.
 
 A camera maker ships a *GenTL producer*: a shared library (``.cti``) exporting the GenTL C functions
-(``GCInitLib``, ``TLOpen``, ``DevOpen``, ...). harvesters loads it and opens its devices. Where it comes from:
+(``GCInitLib``, ``TLOpen``, ``IFOpenDevice``, ...). harvesters loads it and opens its devices. Where it comes from:
 
 1. ``devices.camera.producer`` (the rig file): the path of a ``.cti`` file;
 2. else the environment variable ``GENICAM_GENTL64_PATH`` (the GenTL standard's): folders or ``.cti`` files
@@ -34,8 +34,8 @@ __all__ = ["GENTL_ENV", "GENTL_FUNCTIONS", "DeviceEntry", "shipped_producer", "p
 #: The GenTL standard's list of producer folders (64-bit processes).
 GENTL_ENV = "GENICAM_GENTL64_PATH"
 #: The GenTL functions a producer must export to be loaded (a subset of the standard's; every producer has them).
-GENTL_FUNCTIONS = ("GCInitLib", "GCCloseLib", "TLOpen", "TLUpdateInterfaceList", "IFOpen", "IFUpdateDeviceList",
-                   "DevOpen", "DSOpen", "DSAnnounceBuffer", "DSQueueBuffer", "DSStartAcquisition")
+GENTL_FUNCTIONS = ("GCInitLib", "GCCloseLib", "TLOpen", "TLUpdateInterfaceList", "TLOpenInterface", "IFUpdateDeviceList",
+                   "IFOpenDevice", "DevOpenDataStream", "DSAnnounceBuffer", "DSQueueBuffer", "DSStartAcquisition")
 
 
 @dataclass(frozen=True)

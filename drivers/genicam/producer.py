@@ -72,10 +72,10 @@ def check_producer(path: str, what: str) -> str:
     path came from) and what to check."""
     p = Path(path)
     if not p.exists():
-        raise DeviceError(f"{what}: GenTL producer {str(p)!r} does not exist; give the path of the camera maker's "
-                          f".cti file{_hint()}")
+        raise DeviceError(f"{what}: {str(p)!r} does not exist; give the path of the camera maker's GenTL producer "
+                          f"(.cti file){_hint()}")
     if not p.is_file():
-        raise DeviceError(f"{what}: GenTL producer {str(p)!r} is not a file; give the path of a .cti file{_hint()}")
+        raise DeviceError(f"{what}: {str(p)!r} is not a file; give the path of a GenTL producer (.cti file){_hint()}")
     try:
         lib = ctypes.CDLL(str(p.resolve()))
     except OSError as exc:

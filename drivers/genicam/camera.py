@@ -91,7 +91,7 @@ class GenicamCamera:
             require_locked(self.controls, where=where)
         check_frame_period(self.controls, name=where)
         self.harvester = self._acquirer = None
-        self.triggered = False
+        self.triggered, self._warned = False, False
         self.limits: tuple[str, ...] = ()
         self.last_frame_id: int | None = None
         self.last_frame_time: float | None = None
@@ -118,8 +118,10 @@ class GenicamCamera:
             if isinstance(exc, (DeviceError, ConfigError)):
                 raise
             raise DeviceError(f"{self.name}: could not start streaming ({one_line(exc)}); {_CHECK}") from None
-        for line in self.limits:
-            LOGGER.warning("%s: limit of the device: %s", self.name, line)
+        if not self._warned:        # once: a reconnect meets the same limits
+            for line in self.limits:
+                LOGGER.warning("%s: limit of the device: %s", self.name, line)
+            self._warned = True
 
     def reconnect(self, timeout_s: float) -> None:
         """Release the device and its producer and open them again (the same serial number), waiting up to
@@ -127,6 +129,12 @@ class GenicamCamera:
         are written again. DeviceDisconnected when it is not back in time."""
         self.close()
         retry(self._open, timeout_s)
+
+    @property
+    def node_map(self):
+        """The device's GenICam node map (genicam.genapi), for what rangekit does not set; DeviceDisconnected when
+        closed."""
+        return self._node_map()
 
     # ------------------------------------------------------------------ Camera protocol
     @property
@@ -265,6 +273,12 @@ def open_camera(sec: dict, rig, *, coded_light: bool, where: str) -> GenicamCame
 
     cam = rig.camera
     controls = controls_from_capture(rig.capture, where=where)
+    fmt = sec.get("pixel_format", "Mono8")
+    bits = int("".join(c for c in fmt if c.isdigit()) or 8)
+    if bits in (10, 12) and rig.capture.get("bits") != bits:
+        raise ConfigError(f"{where}: capture.bits: devices.camera.pixel_format {fmt} gives {bits}-bit values, found "
+                          f"{rig.capture.get('bits')!r}; set capture.bits to {bits} (decoding takes 2**bits - 1 as "
+                          "full scale)")
     frame_timeout = max(2.0, 3.0 * (sec.get("flush_frames", FLUSH_FRAMES) + 1) / controls.fps)
     return GenicamCamera(producer_files(sec.get("producer"), where=where), serial=sec.get("serial"),
                          user_id=sec.get("user_id"), pixel_format=sec.get("pixel_format", "Mono8"),

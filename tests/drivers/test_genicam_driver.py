@@ -31,7 +31,7 @@ def test_open_grab_and_set_what_the_node_map_has():
     with _camera(serial="0", size=(320, 240), controls=CameraControls(exposure_us=10_000.0, fps=50.0)) as cam:
         frame = cam.capture()
         assert frame.shape == (240, 320) and frame.dtype == np.uint8
-        nm = cam.harvester and cam._acquirer.remote_device.node_map
+        nm = cam.node_map
         assert (nm.Width.value, nm.Height.value, nm.PixelFormat.value) == (320, 240, "Mono8")
         assert nm.AcquisitionFrameRate.value == pytest.approx(50.0)
         # what the device lacks is named as its limit, not an error
@@ -132,3 +132,19 @@ def test_200_frames_at_the_frame_rate_none_dropped_or_repeated(fps):
         took = time.perf_counter() - t0
     assert np.all(np.diff(ids) == 1), np.unique(np.diff(ids))
     print(f"200 frames at {fps:g} fps set: {took:.2f} s, {200 / took:.1f} fps measured, ids {ids[0]}..{ids[-1]}")
+
+
+def test_controls_changed_while_streaming_and_a_camera_that_stops_sending():
+    from dataclasses import replace
+
+    from rangekit.errors import DeviceTimeout
+
+    with _camera(serial="0") as cam:
+        cam.set_controls(replace(FAST, exposure_us=5_000.0))     # no ExposureTime node: a limit, not an error
+        assert cam.controls.exposure_us == 5_000.0
+        with pytest.raises(DeviceError, match=r"capture.camera.fps is set when the camera is opened \(100.0\)"):
+            cam.set_controls(replace(FAST, fps=50.0))
+        cam.frame_timeout_s = 0.3
+        cam.node_map.AcquisitionStop.execute()                   # the camera stops sending (a trigger without pulses)
+        with pytest.raises(DeviceTimeout, match=r"serial 0 \(Viky VikyTL_DEV_red\): no frame within 0.3 s; check"):
+            cam.capture()

@@ -101,3 +101,29 @@ def test_pixel_formats_become_frames():
     assert to_frame(rgba[:18], 3, 2, "BGR8")[0, 0].tolist() == [2, 1, 0]
     with pytest.raises(DeviceError, match="a Mono8 frame of 4x4 needs 16 values, the buffer has 12"):
         to_frame(np.zeros(12, np.uint8), 4, 4, "Mono8")
+
+
+def test_devices_lists_the_producers_cameras(cli, monkeypatch, tmp_path):
+    from rangekit.drivers.genicam.producer import GENTL_ENV
+
+    monkeypatch.setenv(GENTL_ENV, _producer())
+    run = cli("devices", "--timeout", "0")
+    assert run.code == 0, run.err
+    assert "genicam cameras: (search limit" in run.out
+    assert "  1  Machine Vision Games Ltd. Viky  id VikyTL_DEV_green" in run.out
+    monkeypatch.setenv(GENTL_ENV, str(tmp_path / "nothing.cti"))
+    run = cli("devices", "--timeout", "0")
+    assert run.code == 0 and "genicam cameras: not listed: GENICAM_GENTL64_PATH entry" in run.out
+    assert "nothing.cti' does not exist" in run.out
+
+
+def test_a_12_bit_pixel_format_needs_capture_bits(tmp_path, cli):
+    from rangekit.drivers import open_rig_devices
+    from rangekit.rig.rig_file import load_rig
+
+    path = _rig_file(tmp_path, _producer(), cli)
+    rig = json.loads(open(path).read())
+    rig["devices"]["camera"]["pixel_format"] = "Mono12"
+    open(path, "w").write(json.dumps(rig))
+    with pytest.raises(ConfigError, match="capture.bits: devices.camera.pixel_format Mono12 gives 12-bit values"):
+        open_rig_devices(load_rig(path), where=path)

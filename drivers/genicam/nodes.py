@@ -20,7 +20,7 @@ and the ``devices.camera`` section map onto them as follows (docs/hardware.md, "
                            edge, section ``trigger_activation``); null: ``TriggerMode`` Off (free-running)
 =========================  ===========================================================================================
 
-Every write is read back: a value the camera changed (beyond its increment, or 1 % of a number) or refused is a
+Every write is read back from the device (genapi's cache bypassed): a value the camera changed (beyond its increment, or 1 % of a number) or refused is a
 :class:`DeviceError` naming the device, the node, what was written and what was read or why it was refused. A node
 the device lacks is one of its *limits*: a line saying what is not applied, kept on the camera
 (``GenicamCamera.limits``) and shown by ``rangekit check``, never an error.
@@ -86,6 +86,15 @@ def _close_enough(got, want, node) -> bool:
     return abs(float(got) - float(want)) <= max(inc, 0.01 * abs(float(want)), 1e-9)
 
 
+def _device_value(node):
+    """The node's value read from the device, not from genapi's cache (a write-through cache would give back what
+    was written, whatever the camera made of it)."""
+    try:
+        return node.get_value(False, True)
+    except TypeError:       # a node type whose get_value takes no such arguments
+        return node.value
+
+
 def set_node(nm, names: tuple[str, ...], value, *, device: str, limits: list, unapplied: str):
     """Write ``value`` into the first of ``names`` the device has and read it back; the value read.
 
@@ -104,7 +113,7 @@ def set_node(nm, names: tuple[str, ...], value, *, device: str, limits: list, un
                           "program holds the camera and that the node is not locked by another setting")
     try:
         node.value = value
-        got = node.value
+        got = _device_value(node)
     except GenericException as exc:
         raise DeviceError(f"{device}: node {name} refused {value!r} ({_reason(exc)}); {_takes(node)}") from None
     if not _close_enough(got, value, node):

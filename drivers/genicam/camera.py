@@ -117,7 +117,8 @@ class GenicamCamera:
             self.close()
             if isinstance(exc, (DeviceError, ConfigError)):
                 raise
-            raise DeviceError(f"{self.name}: could not start streaming ({one_line(exc)}); {_CHECK}") from None
+            raise DeviceError(f"{self.name}: could not start streaming ({one_line(exc)}); check that no other "
+                              f"program holds it, and {_CHECK.removeprefix('check ')}") from None
         if not self._warned:        # once: a reconnect meets the same limits
             for line in self.limits:
                 LOGGER.warning("%s: limit of the device: %s", self.name, line)

@@ -127,3 +127,14 @@ def test_a_12_bit_pixel_format_needs_capture_bits(tmp_path, cli):
     open(path, "w").write(json.dumps(rig))
     with pytest.raises(ConfigError, match="capture.bits: devices.camera.pixel_format Mono12 gives 12-bit values"):
         open_rig_devices(load_rig(path), where=path)
+
+
+def test_importing_the_driver_imports_neither_harvesters_nor_genicam():
+    import subprocess
+    import sys
+
+    code = ("import sys, rangekit.drivers.genicam.camera, rangekit.cli\n"
+            "print(sorted(m for m in ('harvesters', 'genicam', 'cv2') if m in sys.modules))")
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert res.returncode == 0, res.stderr
+    assert "harvesters" not in res.stdout and "genicam" not in res.stdout, res.stdout

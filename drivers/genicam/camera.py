@@ -132,6 +132,11 @@ class GenicamCamera:
         retry(self._open, timeout_s)
 
     @property
+    def acquirer(self):
+        """harvesters' ``ImageAcquirer`` of the device (None when closed), for what rangekit does not wrap."""
+        return self._acquirer
+
+    @property
     def node_map(self):
         """The device's GenICam node map (genicam.genapi), for what rangekit does not set; DeviceDisconnected when
         closed."""

@@ -56,6 +56,8 @@ CAMERA_DRIVERS: dict[str, CameraDriver] = {
     "realsense": CameraDriver("rangekit.drivers.realsense.camera", "Intel RealSense (infrared imager)",
                               ("pyrealsense2",), "realsense"),
     "uvc": CameraDriver("rangekit.drivers.uvc.camera", "UVC webcams (V4L2)", ("linuxpy",), "uvc"),
+    "genicam": CameraDriver("rangekit.drivers.genicam.camera", "GenICam/GenTL machine-vision cameras (harvesters)",
+                            ("harvesters", "genicam"), "genicam"),
 }
 
 

@@ -33,6 +33,8 @@ def cmd_check(args: argparse.Namespace) -> int:
                              "object and measures the real latency: leave them out")
         check_output(args.rig, option="--rig", force=True)   # its pattern delay is rewritten in place
         result, images, rig = check_hardware(args.rig, progress=console())
+        if not hasattr(result, "pattern_delay_s"):     # a camera without a projector display: the camera alone
+            return _camera_only(args, result, images, replace, t0)
         written = write_pattern_delay(args.rig, result.pattern_delay_s, result.flush_frames)
         rig_note = f"wrote {' and '.join(written)} into {args.rig} (no other field changed)"
         full_scale, out_rig = float((1 << int(rig.capture.get("bits", 8))) - 1), None
@@ -68,6 +70,21 @@ def cmd_check(args: argparse.Namespace) -> int:
         replace()
         say(f"wrote {', '.join(f'{args.out}/{n}' for n in names)}")
     say(rig_note)
+    final(f"check took {time.perf_counter() - t0:.1f} s")
+    return 0
+
+
+def _camera_only(args: argparse.Namespace, result, images: dict, replace, t0: float) -> int:
+    """The camera check's lines and files (rangekit.app.check.camera); the rig file is not changed."""
+    from rangekit.app.check.run import write_check
+
+    say("")
+    for line in result.lines():
+        say(line)
+    if args.out:
+        names = write_check(args.out, result, images, 0.0)
+        replace()
+        say(f"wrote {', '.join(f'{args.out}/{n}' for n in names)}")
     final(f"check took {time.perf_counter() - t0:.1f} s")
     return 0
 

@@ -217,7 +217,8 @@ def _check_laser_captures_options(args: argparse.Namespace, layouts) -> None:
 
 def cmd_devices(args: argparse.Namespace) -> int:
     """rangekit devices [--timeout 1.0]: list serial ports and the cameras of every camera driver"""
-    from rangekit.drivers.cameras import CAMERA_DRIVERS, MissingPackage, camera_driver
+    from rangekit.drivers.cameras import CAMERA_DRIVERS, camera_driver
+    from rangekit.errors import DeviceError
     from rangekit.drivers.discovery import list_serial_ports
 
     ports = list_serial_ports()
@@ -228,7 +229,7 @@ def cmd_devices(args: argparse.Namespace) -> int:
         t0 = time.monotonic()
         try:
             cams = camera_driver(kind).list_cameras(timeout_s=args.timeout)
-        except MissingPackage as exc:
+        except DeviceError as exc:     # its package missing (MissingPackage), a bad producer path, ...
             result(f"{kind} cameras: not listed: {exc}")
             continue
         searched = f"(search limit {args.timeout:g} s; {time.monotonic() - t0:.2f} s with loading its package)"

@@ -16,7 +16,8 @@ from rangekit.rig.camera_controls import check_refresh, controls_from_capture
 from rangekit.errors import ConfigError
 
 __all__ = ["validate_devices", "validate_capture", "validate_rig_for_hardware", "DEVICE_FIELDS", "CAPTURE_FIELDS",
-           "CAPTURE_BITS", "CAMERA_TYPES", "CAMERA_SECTION_FIELDS", "CAMERA_TEMPLATES", "TURNTABLE_PROTOCOLS", "PROJECTOR_PROTOCOLS", "DEPTHAI_SOCKETS", "MAX_SEARCH_S",
+           "CAPTURE_BITS", "CAMERA_TYPES", "GENICAM_PIXEL_FORMATS", "GENICAM_TRIGGER_ACTIVATIONS", "CAMERA_SECTION_FIELDS",
+           "CAMERA_TEMPLATES", "TURNTABLE_PROTOCOLS", "PROJECTOR_PROTOCOLS", "DEPTHAI_SOCKETS", "MAX_SEARCH_S",
            "REFRESH_HZ", "DEFAULT_SEARCH_S", "UVC_FORMATS", "MAX_FLUSH_FRAMES", "DEFAULT_FLUSH_FRAMES",
            "DEFAULT_RECONNECT_S", "DEFAULT_REPLY_S", "reconnect_timeout_s", "CAPTURE_TRIGGERS", "camera_triggered"]
 
@@ -26,6 +27,13 @@ TURNTABLE_PROTOCOLS = ("horus", "fabscan")
 PROJECTOR_PROTOCOLS = ("escvp21", "pjlink")
 #: depthai camera board sockets (rangekit.drivers.depthai.camera).
 DEPTHAI_SOCKETS = ("CAM_A", "CAM_B", "CAM_C", "CAM_D", "CAM_E", "CAM_F", "CAM_G", "CAM_H")
+#: The pixel formats a GenICam camera's frames are read in (rangekit.drivers.genicam.frames: mono as is, Bayer made
+#: grey, RGB as RGB).
+GENICAM_PIXEL_FORMATS = ("Mono8", "Mono10", "Mono12", "Mono16",
+                         *(f"Bayer{p}{b}" for p in ("RG", "GR", "GB", "BG") for b in (8, 10, 12, 16)),
+                         "RGB8", "BGR8", "RGBa8", "BGRa8")
+#: GenICam's ``TriggerActivation`` values (SFNC): the edge or level of a hardware trigger line.
+GENICAM_TRIGGER_ACTIVATIONS = ("RisingEdge", "FallingEdge", "AnyEdge", "LevelHigh", "LevelLow")
 #: The longest depthai device search accepted (seconds; depthai takes it as a C int of milliseconds), and
 #: the search a camera opened from a rig file gets without ``devices.camera.search_timeout_s``.
 MAX_SEARCH_S = 600.0
@@ -34,8 +42,9 @@ DEFAULT_SEARCH_S = 3.0
 #: mid-scan (unplugged, reset, stopped answering) to come back before it ends; long enough for a USB device
 #: to enumerate again and an OAK camera to boot. 0: never wait.
 DEFAULT_RECONNECT_S = 10.0
-#: ``devices.camera.format`` of a "uvc" camera (rangekit.drivers.uvc.camera); ``flush_frames``: the most frames a
-#: webcam's driver queues that a capture may discard, and the number when absent (OpenCV's V4L2 backend queues 4).
+#: ``devices.camera.format`` of a "uvc" camera (rangekit.drivers.uvc.camera); ``flush_frames`` (uvc, genicam): the
+#: most frames a capture may discard after a pattern change, and a webcam's number when absent (OpenCV's V4L2
+#: backend queues 4).
 UVC_FORMATS = ("MJPEG", "YUYV")
 MAX_FLUSH_FRAMES = 32
 DEFAULT_FLUSH_FRAMES = 4
@@ -207,6 +216,8 @@ CAMERA_SECTION_FIELDS = {
     "depthai": ("id", "socket", "search_timeout_s", "reconnect_timeout_s"),
     "realsense": ("serial", "bag", "infrared", "search_timeout_s", "reconnect_timeout_s"),
     "uvc": ("device", "format", "flush_frames", "reconnect_timeout_s"),
+    "genicam": ("producer", "serial", "user_id", "pixel_format", "trigger_source", "trigger_activation", "flush_frames",
+                "search_timeout_s", "reconnect_timeout_s"),
 }
 #: ``devices.camera.type``: the simulator's camera, or one of the camera drivers.
 CAMERA_TYPES = ("sim", *CAMERA_SECTION_FIELDS)
@@ -216,6 +227,9 @@ CAMERA_TEMPLATES = {
     "realsense": {"type": "realsense", "serial": None, "bag": None, "infrared": 1,
                   "search_timeout_s": DEFAULT_SEARCH_S},
     "uvc": {"type": "uvc", "device": "/dev/video0", "format": "MJPEG", "flush_frames": DEFAULT_FLUSH_FRAMES},
+    "genicam": {"type": "genicam", "producer": None, "serial": None, "user_id": None, "pixel_format": "Mono8",
+                "trigger_source": None, "trigger_activation": "RisingEdge", "flush_frames": 2,
+                "search_timeout_s": DEFAULT_SEARCH_S},
 }
 
 
@@ -270,6 +284,26 @@ def _check_uvc_camera(sec: dict, where: str, path: str) -> None:
     if not (_is_int(flush) and 0 <= flush <= MAX_FLUSH_FRAMES):
         raise _error(where, f"{path}.flush_frames", f"must be a whole number of frames 0..{MAX_FLUSH_FRAMES} (the "
                      f"stale frames dropped after a pattern change; rangekit check measures it), found {_show(flush)}")
+
+
+def _check_genicam_camera(sec: dict, where: str, path: str) -> None:
+    for key, what in (("producer", "the path of the camera maker's GenTL producer (.cti), or null for "
+                                   "GENICAM_GENTL64_PATH"),
+                      ("serial", "the camera's serial number, or null"), ("user_id", "the camera's user id, or null"),
+                      ("trigger_source", "'Software', a line such as 'Line1', or null for a free-running camera")):
+        if sec.get(key) is not None and not (isinstance(sec[key], str) and sec[key].strip()):
+            raise _error(where, f"{path}.{key}", f"must be a non-empty string ({what}), found {_show(sec[key])}")
+    if sec.get("pixel_format", "Mono8") not in GENICAM_PIXEL_FORMATS:
+        raise _error(where, f"{path}.pixel_format", f"must be one of {', '.join(GENICAM_PIXEL_FORMATS)}, found "
+                     f"{_show(sec['pixel_format'])}")
+    if sec.get("trigger_activation", "RisingEdge") not in GENICAM_TRIGGER_ACTIVATIONS:
+        raise _error(where, f"{path}.trigger_activation", f"must be one of {', '.join(GENICAM_TRIGGER_ACTIVATIONS)}, "
+                     f"found {_show(sec['trigger_activation'])}")
+    flush = sec.get("flush_frames", 2)
+    if not (_is_int(flush) and 0 <= flush <= MAX_FLUSH_FRAMES):
+        raise _error(where, f"{path}.flush_frames", f"must be an integer 0..{MAX_FLUSH_FRAMES} (frames dropped after "
+                     f"each pattern change), found {_show(flush)}")
+    _number_in(sec, "search_timeout_s", 0.0, MAX_SEARCH_S, where, path, "seconds (how long to look for the device)")
     _number_in(sec, "reconnect_timeout_s", 0.0, MAX_SEARCH_S, where, path, _RECONNECT)
 
 
@@ -278,6 +312,7 @@ _CAMERA_CHECKS = {
     "depthai": _check_depthai_camera,
     "realsense": _check_realsense_camera,
     "uvc": _check_uvc_camera,
+    "genicam": _check_genicam_camera,
 }
 
 

@@ -13,7 +13,9 @@ from pathlib import Path
 
 import numpy as np
 
+from rangekit.app.check.camera import CameraCheck, check_camera
 from rangekit.app.check.steps import CheckResult, run_check
+from rangekit.errors import ConfigError
 from rangekit.app.check.stats import check_figure
 from rangekit.rig.camera_controls import controls_from_capture
 from rangekit.io import atomic_write_json, write_png
@@ -51,13 +53,20 @@ def check_simulated(sim, *, spec=None, progress=None, rig: Rig | None = None) ->
                      spec=spec, progress=progress)
 
 
-def check_hardware(rig_file: str, *, progress=None) -> tuple[CheckResult, dict, Rig]:
-    """Check the rig file's devices (opened, checked, closed)."""
+def check_hardware(rig_file: str, *, progress=None) -> tuple[CheckResult | CameraCheck, dict, Rig]:
+    """Check the rig file's devices (opened, checked, closed). Without a projector display the camera alone is
+    checked (:mod:`rangekit.app.check.camera`: a :class:`CameraCheck`, images ``{"frame": last frame}``)."""
     from rangekit.drivers import open_rig_devices
 
     rig = load_rig(rig_file)
     devices = open_rig_devices(rig, where=rig_file, coded_light=False)
     try:
+        if devices.camera is None:
+            raise ConfigError(f"{rig_file}: devices.camera: no camera to check (a 'sim' camera or none); name the "
+                              "camera's driver (rangekit rig init --camera TYPE writes its section)")
+        if devices.projector is None:
+            result, frame = check_camera(devices.camera, _full_scale(rig))
+            return result, {"frame": frame}, rig
         controls = controls_from_capture(rig.capture, where=rig_file)
         result, images = run_check(devices, rig, controls, full_scale=_full_scale(rig), progress=progress)
     finally:
@@ -80,7 +89,7 @@ def write_pattern_delay(rig_file: str | Path, delay_s: float, flush_frames: int 
     return written
 
 
-def write_check(out: str | Path, result: CheckResult, images: dict, full_scale: float,
+def write_check(out: str | Path, result: CheckResult | CameraCheck, images: dict, full_scale: float,
                 rig: Rig | None = None) -> list[str]:
     """Write ``check.json``, ``check.png`` (and ``rig.json`` when ``rig`` is given) into ``out``; returns
     the names written."""
@@ -89,6 +98,9 @@ def write_check(out: str | Path, result: CheckResult, images: dict, full_scale: 
     folder = Path(out)
     folder.mkdir(parents=True, exist_ok=True)
     atomic_write_json(folder / "check.json", result.to_dict())
+    if isinstance(result, CameraCheck):
+        write_png(folder / "check.png", images["frame"])
+        return ["check.json", "check.png"]
     write_png(folder / "check.png", check_figure(images["white"], images["black"], full_scale, images["mask"],
                                                  MIN_CONFIDENCE, result.stats))
     names = ["check.json", "check.png"]

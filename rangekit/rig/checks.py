@@ -246,6 +246,7 @@ def _check_camera(sec, where: str) -> None:
     if unknown:
         raise _error(where, f"{path}.{unknown[0]}", f"unknown field; a {kind!r} camera has only {', '.join(allowed)}")
     if kind != "sim":
+        _number_in(sec, "reconnect_timeout_s", 0.0, MAX_SEARCH_S, where, path, _RECONNECT)   # every driver's
         _CAMERA_CHECKS[kind](sec, where, path)
 
 

@@ -94,8 +94,9 @@ for (const b of document.querySelectorAll("#session-export button")) {
 }
 window.addEventListener("hashchange", loadSessions);
 rangekitEvents.listen((m) => {
-  if (m.kind !== "event" || !m.current) return;
-  if (m.event.type === "JobExited") loadSessions(); else if (location.hash === "#sessions") showSessionBusy();
+  if (m.kind === "event" && !m.current) return;
+  if (m.kind === "event" && m.event.type === "JobExited") loadSessions();
+  else if (location.hash === "#sessions") showSessionBusy();
 });
 let sessionsRegistered = null;       // the registration's last state and name saved: a change may be a new folder
 rangekitEvents.onJob("register", (r) => {

@@ -4,6 +4,10 @@ caller at a time.
 The Live page grabs frames, shows test patterns and jogs the turntable through it; a long job (a scan, a
 calibration) takes the whole rig with :meth:`RigHolder.hold` and the live stream waits meanwhile. Every device
 call is made under one lock, so two browsers cannot interleave a pattern and a frame.
+
+Every change of what :meth:`RigHolder.status` shows (a pattern, a jog, a job taking or freeing the rig, the rig
+file written, the devices opened) calls :attr:`RigHolder.on_change`: the app says it on its notifier
+(:mod:`rangekit.ui.jobs.notifier`), and the pages are sent the status again over ``/ws/jobs``.
 """
 
 from __future__ import annotations
@@ -69,7 +73,12 @@ class RigHolder:
         self._closers: list = []
         self._angle_deg: float | None = None   # the turntable's angle as last read (degrees)
         self.turning = False                   # a jog under way (the status shows the last angle meanwhile)
+        self.on_change = None                  # called (no argument) whenever the status changes
         self._show(self.pattern)
+
+    def _changed(self) -> None:
+        if self.on_change is not None:
+            self.on_change()
 
     @classmethod
     def simulated(cls, rig_file: Path, obj: str = "lumpy") -> "RigHolder":
@@ -126,10 +135,12 @@ class RigHolder:
                 self.devices = open_rig_devices(self.rig, where=str(self.rig_file))
             except RangekitError as exc:
                 self.devices, self.fault, self.last_reply = _NoDevices(), str(exc), "not connected"
+                self._changed()
                 return self.status()
             self._closers = [self.devices.close]
             self.fault, self.last_reply = None, "opened"
             self._show(self.pattern)
+            self._changed()
             return self.status()
 
     def release(self, what: str) -> None:
@@ -139,6 +150,7 @@ class RigHolder:
             self.busy = what
             self.close()
             self.devices = _NoDevices()
+        self._changed()
 
     def reacquire(self) -> None:
         """After :meth:`release`: free the rig and open its devices again."""
@@ -179,6 +191,7 @@ class RigHolder:
             save_rig(rig, self.rig_file)
             self.rig = rig
             self.last_reply = f"rig file: {self.rig_file.name} written (calibrated)"
+        self._changed()
 
     def set_camera(self, changes: dict) -> dict:
         """Write the ``capture.camera`` fields of ``changes`` into the rig file (atomically, checked first: a bad
@@ -197,7 +210,8 @@ class RigHolder:
             self.rig = replace(self.rig, capture={**self.rig.capture, **rig.capture})
             self.last_reply = "rig file: " + ", ".join([*(f"capture.{k} {v}" for k, v in fields.items()),
                                                         *(f"capture.camera.{k} {v}" for k, v in camera.items())])
-            return dict(rig.capture.get("camera", {}))
+        self._changed()
+        return dict(rig.capture.get("camera", {}))
 
     @contextmanager
     def hold(self, what: str):
@@ -206,11 +220,13 @@ class RigHolder:
             if self.busy is not None:
                 raise RangekitError(f"the rig is busy: {self.busy}; wait for it to finish")
             self.busy = what
+        self._changed()
         try:
             yield self.devices
         finally:
             with self._lock:
                 self.busy, self._live_while_busy = None, False
+            self._changed()
 
     def grab(self) -> np.ndarray | None:
         """One camera frame with the current pattern, or None while a job holds the rig."""
@@ -222,9 +238,13 @@ class RigHolder:
             try:
                 image = self.devices.camera.capture()
             except RangekitError as exc:
-                self.fault = str(exc)
+                if self.fault != str(exc):
+                    self.fault = str(exc)
+                    self._changed()
                 raise
-            self.fault = None
+            if self.fault is not None:
+                self.fault = None
+                self._changed()
             return image
 
     def _show(self, name: str) -> None:
@@ -244,6 +264,7 @@ class RigHolder:
             self._show(name)
             self.pattern = name
             self.last_reply = f"pattern {name} shown"
+        self._changed()
 
     def turn(self, *, degrees: float | None = None, home: bool = False) -> float:
         """Jog the turntable by ``degrees`` or send it home (0 degrees); returns its angle in degrees."""
@@ -255,13 +276,16 @@ class RigHolder:
             target = 0.0 if home else float(np.degrees(table.angle)) + float(degrees)
             started = time.perf_counter()
             self.turning, self.last_reply = True, f"turntable turning to {target:.2f} deg"
+            self._changed()
             try:
                 table.rotate_to(np.radians(target))
             finally:
                 self.turning = False
+                self._changed()
             self._angle_deg = round(float(np.degrees(table.angle)), 3)
             self.last_reply = f"turntable at {self._angle_deg:.2f} deg ({time.perf_counter() - started:.2f} s)"
-            return self._angle_deg
+        self._changed()
+        return self._angle_deg
 
     def _refuse_if_busy(self) -> None:
         if self.busy is not None:

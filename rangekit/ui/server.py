@@ -2,8 +2,9 @@
 
 The routes live in :mod:`rangekit.ui.routes`, one module per resource: page (the page, its static files, tickets),
 rig (status, pattern, turntable, camera controls), stream (``/ws/live``), check, calibrate (the wizard and the
-recorded calibration), scan, events (``/ws/events``: the scan job's events), sessions, register. The jobs live in
-:mod:`rangekit.ui.jobs`. Every request passes :class:`rangekit.ui.access.Gate` first, as Starlette middleware (the
+recorded calibration), scan, events (``/ws/events``: the scan job's events), jobs (``/ws/jobs``: the other jobs'
+and the rig's state, sent as it changes), sessions, register. The jobs live in :mod:`rangekit.ui.jobs`; each says
+its changes on the app's one :class:`rangekit.ui.jobs.notifier.Notifier`, as the rig does. Every request passes :class:`rangekit.ui.access.Gate` first, as Starlette middleware (the
 token in its header, the app's own origin for a change, the host; see there); every failure is answered by
 :func:`rangekit.ui.routes.common.error_response` (``{"error", "field"}``). Every JSON field is type-checked first
 (:mod:`rangekit.ui.guard.fields`), the body bounded (:mod:`rangekit.ui.guard.body`), and every device call and
@@ -62,20 +63,23 @@ def make_app(holder: RigHolder, token: str, host: str, port: int, sessions: Path
     from rangekit.ui.guard.tickets import Tickets
     from rangekit.ui.jobs.calibrate import CalibrateJob
     from rangekit.ui.jobs.check import CheckJob
+    from rangekit.ui.jobs.notifier import Notifier, Topic
     from rangekit.ui.jobs.recorded import RecordedCalibrationJob
     from rangekit.ui.jobs.register import RegisterJob
     from rangekit.ui.jobs.scan import ScanJob
-    from rangekit.ui.routes import calibrate, check, common, events, page, register, rig, scan
+    from rangekit.ui.routes import calibrate, check, common, events, jobs, page, register, rig, scan
     from rangekit.ui.routes import sessions as sessions_routes
     from rangekit.ui.routes import stream as stream_routes
     from rangekit.ui.stream import LiveStream
 
-    live = LiveStream(holder)
-    ui = common.Ui(holder=holder, sessions=sessions, stream=live, check=CheckJob(holder),
-                   calibration=CalibrateJob(holder, live), recorded=RecordedCalibrationJob(sessions),
-                   registration=RegisterJob(sessions), scans=ScanJob(sessions, obj, holder), tickets=Tickets())
-    routes = [r for room in (rig, stream_routes, check, calibrate, scan, events, sessions_routes, register, page)
-              for r in room.routes(ui)]
+    live, notifier = LiveStream(holder), Notifier()
+    holder.on_change = lambda: notifier.changed(Topic.RIG)
+    ui = common.Ui(holder=holder, sessions=sessions, stream=live, check=CheckJob(holder, notifier),
+                   calibration=CalibrateJob(holder, live, notifier), recorded=RecordedCalibrationJob(sessions, notifier),
+                   registration=RegisterJob(sessions, notifier), scans=ScanJob(sessions, obj, holder),
+                   tickets=Tickets(), notifier=notifier)
+    routes = [r for room in (rig, stream_routes, check, calibrate, scan, events, jobs, sessions_routes, register,
+                             page) for r in room.routes(ui)]
 
     @contextlib.asynccontextmanager
     async def lifespan(app):

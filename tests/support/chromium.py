@@ -177,6 +177,10 @@ class Page:
         target = None if css is None else self.element(css)
         self._client.call("POST", f"/session/{self._sid}/frame", {"id": target})
 
+    def cdp(self, cmd: str, params: dict | None = None):
+        """Send the DevTools command ``cmd`` to the page (``Network.setBlockedURLs``, ...); its result."""
+        return self._client.call("POST", f"/session/{self._sid}/goog/cdp/execute", {"cmd": cmd, "params": params or {}})
+
     def screenshot(self, out: str | Path) -> None:
         """The viewport as it is now, a PNG at ``out`` (a page's state mid-interaction, for the docs)."""
         _screenshot(self._client, self._sid, Path(out), 0, 0, full_page=False)

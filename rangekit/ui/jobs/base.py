@@ -1,6 +1,8 @@
 """What every job of the web app shares (the check, the calibration, the recorded calibration, the registration,
 the scan): one at a time, its :class:`JobState`, its lines for people, the same state for every page open, and a
-failure as one line.
+failure as one line. Each change (a run begun, a line, its end) is said on the app's
+:class:`rangekit.ui.jobs.notifier.Notifier` under the job's :attr:`Job.TOPIC`: the pages follow it over
+``/ws/jobs``, never by asking again.
 
 A :class:`rangekit.errors.RangekitError` is rangekit's own one-line message, shown as it is (the command line's
 words). Anything else is a bug: its traceback goes to the server's log and the page gets one line naming it, never
@@ -44,18 +46,26 @@ def failed(exc: BaseException, what: str) -> str:
 class Job:
     """One job of its kind at a time: ``state`` (:class:`JobState`), ``fields`` (what the page shows of the run:
     its result, its error), ``lines`` (its progress, the last :attr:`KEPT_LINES`). A subclass names itself
-    (:attr:`WHAT`) and its lines' key (:attr:`LINES`), and runs its work with :meth:`launch`."""
+    (:attr:`WHAT`), its lines' key (:attr:`LINES`) and its :attr:`TOPIC` on ``notifier`` (a
+    :class:`rangekit.ui.jobs.notifier.Notifier`; None: it tells nobody), and runs its work with :meth:`launch`."""
 
     WHAT = "job"
     LINES = "lines"
     KEPT_LINES = 200
     SHOWN_LINES = 40
+    TOPIC = None
 
-    def __init__(self) -> None:
+    def __init__(self, notifier=None) -> None:
         self._cond = threading.Condition()
+        self.notifier = notifier
         self.state = JobState.IDLE
         self.fields: dict = {}
         self.lines: list[str] = []
+
+    def changed(self) -> None:
+        """Say that the snapshot changed (the pages following the job are sent it again)."""
+        if self.notifier is not None and self.TOPIC is not None:
+            self.notifier.changed(self.TOPIC)
 
     @property
     def running(self) -> bool:
@@ -70,6 +80,7 @@ class Job:
         """A line for people (the ``progress(msg, done, total)`` and ``report(line)`` callables of the library)."""
         with self._cond:
             self.lines = (self.lines + [str(line)])[-self.KEPT_LINES:]
+        self.changed()
 
     def begin(self, **fields) -> None:
         """Mark a run started (refused while one runs), with ``fields`` shown from now on."""
@@ -77,12 +88,14 @@ class Job:
             if self.running:
                 raise RangekitError(f"a {self.WHAT} is running already")
             self.state, self.fields, self.lines = JobState.RUNNING, dict(fields), []
+        self.changed()
 
     def finish(self, state: JobState, **fields) -> None:
         """The run ended in ``state``; ``fields`` replace what it showed (a failure's ``error``)."""
         with self._cond:
             self.state, self.fields = state, dict(fields)
             self._cond.notify_all()
+        self.changed()
 
     def launch(self, work, *args, keep: dict | None = None) -> None:
         """``work(*args)`` on a thread of its own: its dict result shown as the job's fields once DONE, or its

@@ -24,6 +24,7 @@ from rangekit.boards import Board
 from rangekit.errors import RangekitError
 from rangekit.ui.board_live import live_corners
 from rangekit.ui.jobs.base import Job, JobState, failed
+from rangekit.ui.jobs.notifier import Topic
 from rangekit.ui.rig_holder import RigHolder, test_pattern
 
 __all__ = ["CalibrateJob", "Step"]
@@ -53,11 +54,11 @@ class CalibrateJob(Job):
     """The calibration of ``holder``'s rig (at most one at a time); ``stream`` (a
     :class:`rangekit.ui.stream.LiveStream`) gets the board-corner annotation while a pose is placed."""
 
-    WHAT, LINES = "calibration", "progress"
+    WHAT, LINES, TOPIC = "calibration", "progress", Topic.CALIBRATE
 
-    def __init__(self, holder: RigHolder, stream=None) -> None:
+    def __init__(self, holder: RigHolder, stream=None, notifier=None) -> None:
         self.holder, self.stream = holder, stream
-        super().__init__()
+        super().__init__(notifier)
         self.step = Step.STARTING
         self.poses: list[dict] = []
         self.pictures: dict[str, bytes] = {}
@@ -90,6 +91,7 @@ class CalibrateJob(Job):
             self.poses, self.lines, self.pictures, self._uv = [], [], {}, {}
             self._placements = 0
             self._go, self._decision, self._cancel = False, None, False
+        self.changed()
         threading.Thread(target=self._run, args=(n_poses, seed), name="rangekit-calibrate", daemon=True).start()
         return self.snapshot()
 
@@ -100,6 +102,7 @@ class CalibrateJob(Job):
             self._go = True
             self.step = Step.CAPTURING
             self._cond.notify_all()
+        self.changed()
         return self.snapshot()
 
     def decide(self, keep: bool) -> dict:
@@ -109,6 +112,7 @@ class CalibrateJob(Job):
             self._decision = not keep
             self.step = Step.CAPTURING if keep else Step.MOVING
             self._cond.notify_all()
+        self.changed()
         return self.snapshot()
 
     def next_pose(self) -> dict:
@@ -156,6 +160,7 @@ class CalibrateJob(Job):
                 self.step = Step(state)
             self.fields = {**self.fields, **fields}
             self._cond.notify_all()
+        self.changed()
 
     def _wait(self, ready) -> None:
         with self._cond:

@@ -12,6 +12,7 @@ import cv2
 
 from rangekit.errors import RangekitError
 from rangekit.ui.jobs.base import Job
+from rangekit.ui.jobs.notifier import Topic
 from rangekit.ui.rig_holder import RigHolder
 
 __all__ = ["CheckJob"]
@@ -20,10 +21,10 @@ __all__ = ["CheckJob"]
 class CheckJob(Job):
     """The latest check of ``holder``'s rig."""
 
-    WHAT, LINES, SHOWN_LINES = "check", "progress", 20
+    WHAT, LINES, SHOWN_LINES, TOPIC = "check", "progress", 20, Topic.CHECK
 
-    def __init__(self, holder: RigHolder) -> None:
-        super().__init__()
+    def __init__(self, holder: RigHolder, notifier=None) -> None:
+        super().__init__(notifier)
         self.holder = holder
         self.figure_png: bytes | None = None
 

@@ -12,6 +12,7 @@ from pathlib import Path
 
 from rangekit.errors import RangekitError
 from rangekit.ui.jobs.base import Job
+from rangekit.ui.jobs.notifier import Topic
 from rangekit.ui.paths import confined
 
 __all__ = ["RecordedCalibrationJob", "parse_projector_size", "pose_folders"]
@@ -53,10 +54,10 @@ def pose_folders(sessions: Path, text: str) -> list[Path]:
 class RecordedCalibrationJob(Job):
     """The latest calibration from recorded captures under ``sessions``."""
 
-    WHAT = "calibration from recorded captures"
+    WHAT, TOPIC = "calibration from recorded captures", Topic.RECORDED
 
-    def __init__(self, sessions: Path) -> None:
-        super().__init__()
+    def __init__(self, sessions: Path, notifier=None) -> None:
+        super().__init__(notifier)
         self.sessions = Path(sessions).resolve()
 
     def snapshot(self) -> dict:

@@ -17,6 +17,7 @@ import numpy as np
 
 from rangekit.errors import RangekitError
 from rangekit.ui.jobs.base import Job, JobState
+from rangekit.ui.jobs.notifier import Topic
 from rangekit.ui.paths import confined
 from rangekit.ui.sessions_list import readable_name
 from rangekit.formats.sessions.files import MESH_FILE, PREVIEW_FILE, WATERTIGHT_FILE
@@ -51,10 +52,10 @@ def list_clouds(sessions: Path) -> list[str]:
 class RegisterJob(Job):
     """The latest registration of clouds under ``sessions``."""
 
-    WHAT, SHOWN_LINES = "registration", 30
+    WHAT, SHOWN_LINES, TOPIC = "registration", 30, Topic.REGISTER
 
-    def __init__(self, sessions: Path) -> None:
-        super().__init__()
+    def __init__(self, sessions: Path, notifier=None) -> None:
+        super().__init__(notifier)
         self.sessions = Path(sessions).resolve()
         self._report = None
 
@@ -116,4 +117,5 @@ class RegisterJob(Job):
                 raise RangekitError(f"name: {name}: exists under the sessions folder; choose another name")
             os.replace(self.sessions / STAGING, folder)
             self.fields = {**self.fields, "saved": name}
+        self.changed()
         return self.snapshot()

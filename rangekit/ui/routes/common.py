@@ -26,7 +26,8 @@ __all__ = ["Ui", "action", "binary", "error_response", "field_of", "given", "jso
 @dataclass(frozen=True)
 class Ui:
     """The app's state the routes share: the rig holder, the live stream, the jobs, the sessions folder, the
-    tickets the Gate redeems."""
+    tickets the Gate redeems, the notifier the jobs and the rig say their changes on
+    (:class:`rangekit.ui.jobs.notifier.Notifier`)."""
 
     holder: object
     sessions: Path
@@ -37,6 +38,7 @@ class Ui:
     registration: object
     scans: object
     tickets: object
+    notifier: object
 
 
 def json_response(data, status: int = 200):

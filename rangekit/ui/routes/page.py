@@ -14,7 +14,7 @@ __all__ = ["SOCKETS", "STATIC", "routes"]
 
 STATIC = Path(__file__).resolve().parents[1] / "static"
 #: The WebSockets a page opens (each with a ticket).
-SOCKETS = ("/ws/live", "/ws/events")
+SOCKETS = ("/ws/live", "/ws/events", "/ws/jobs")
 
 
 def routes(ui: Ui) -> list:

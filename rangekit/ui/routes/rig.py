@@ -9,7 +9,7 @@ from rangekit.errors import RangekitError
 from rangekit.ui.guard.fields import Field, flag, number, take, text
 from rangekit.ui.routes.common import Ui, action, given, reading
 
-__all__ = ["CAMERA_FIELDS", "MAX_JOG_DEG", "routes"]
+__all__ = ["CAMERA_FIELDS", "MAX_JOG_DEG", "routes", "status_body"]
 
 #: The camera controls the Live page sets (the rig file's capture.camera fields).
 CAMERA_FIELDS = ("exposure_us", "iso", "white_balance_k", "focus")
@@ -23,10 +23,16 @@ def _camera_value(name, value):
     return value
 
 
+def status_body(ui: Ui) -> dict:
+    """What ``GET /api/status`` answers, and ``/ws/jobs`` sends as ``{"rig": ...}`` when it changes: the rig's
+    status, the patterns it shows, the live stream's error."""
+    from rangekit.ui.rig_holder import PATTERNS
+
+    return {"rig": ui.holder.status(), "patterns": list(PATTERNS), "live_error": ui.stream.error}
+
+
 def routes(ui: Ui) -> list:
     from starlette.routing import Route
-
-    from rangekit.ui.rig_holder import PATTERNS
 
     holder = ui.holder
 
@@ -57,8 +63,7 @@ def routes(ui: Ui) -> list:
         return rig()
 
     return [
-        Route("/api/status", reading(lambda r: {"rig": holder.status(), "patterns": list(PATTERNS),
-                                                 "live_error": ui.stream.error})),
+        Route("/api/status", reading(lambda r: status_body(ui))),
         Route("/api/pattern", action("pattern", {"name": text()}, pattern), methods=["POST"]),
         Route("/api/reconnect", action("reconnect", {}, lambda r, f: {"rig": holder.connect()}), methods=["POST"]),
         Route("/api/turntable", action("turntable", {"degrees": number(-MAX_JOG_DEG, MAX_JOG_DEG, None),

@@ -1,13 +1,14 @@
 // rangekit ui: the Calibrate page (rangekit calibrate pose by pose: place, capture, keep or retake; the result
-// per parameter, written to the rig file), and a calibration from recorded capture folders.
+// per parameter, written to the rig file), and a calibration from recorded capture folders. Both shown as the
+// server sends their state (events.js, /ws/jobs), no timer.
 "use strict";
 
 function calError(text) { $("calibrate-error").textContent = text || ""; }
 
-async function calPost(action, body) {
-  const data = await send(`/api/calibrate/${action}`, body || {}, { form: $("calibrate-form"), error: $("calibrate-error") });
-  if (data) showCalibration(data);
-  return data;
+// An action of the wizard; its refusal shown by its field. The state it leads to comes over /ws/jobs (an answer
+// could arrive after a newer state there).
+function calPost(action, body) {
+  return send(`/api/calibrate/${action}`, body || {}, { form: $("calibrate-form"), error: $("calibrate-error") });
 }
 
 let calPictures = "";
@@ -56,12 +57,6 @@ function showCalibration(c) {
   }
 }
 
-async function pollCalibrate() {
-  if (location.hash !== "#calibrate" && window.rangekitCalibrate) return;
-  const c = await getJson("/api/calibrate");
-  if (c) showCalibration(c);
-}
-
 $("calibrate-form").onsubmit = (ev) => {
   ev.preventDefault();
   calPost("start", { poses: typed($("calibrate-form").poses.value) });
@@ -86,7 +81,7 @@ $("calibrate-next").onclick = () => calPost("next");
 })();
 
 // -- from recorded capture folders (under --sessions), as rangekit calibrate --captures
-async function showRecorded(c) {
+function showRecorded(c) {
   $("recorded-state").textContent = c.state === "idle" ? "" : c.state + (c.error ? `: ${c.error}` : c.rig_file ? `: wrote ${c.rig_file}` : "");
   $("recorded-start").disabled = c.state === "running";
   $("recorded-lines").innerHTML = "";
@@ -94,20 +89,14 @@ async function showRecorded(c) {
   const select = $("recorded-form").pattern;
   if (!select.options.length) for (const name of c.layouts || []) select.add(new Option(name, name));
 }
-async function pollRecorded() {
-  if (location.hash !== "#calibrate" && $("recorded-form").pattern.options.length) return;
-  const c = await getJson("/api/calibrate-recorded");
-  if (c) showRecorded(c);
-}
 $("recorded-form").onsubmit = async (ev) => {
   ev.preventDefault();
   const f = $("recorded-form"), num = (t) => typed(t, /^[0-9.]+$/);
   const body = { captures: f.captures.value.trim(), pattern: f.pattern.value, projector: f.projector.value.trim(), out: f.out.value.trim(),
                  cols: num(f.cols.value), rows: num(f.rows.value), square_mm: num(f.square_mm.value),
                  replace: f.replace.checked };
-  const data = await send("/api/calibrate-recorded/start", body, { form: f, error: $("recorded-state") });
-  if (data) showRecorded(data);
+  await send("/api/calibrate-recorded/start", body, { form: f, error: $("recorded-state") });
 };
 
-setInterval(() => { pollCalibrate(); pollRecorded(); }, 600);
-pollCalibrate(); pollRecorded();
+rangekitEvents.onJob("calibrate", showCalibration);
+rangekitEvents.onJob("recorded", showRecorded);

@@ -1,5 +1,7 @@
 // rangekit ui: the Live page (the camera stream with its figures, the camera controls written into the rig file,
-// the projector's patterns, the turntable) and the devices' status in the header.
+// the projector's patterns, the turntable) and the devices' status in the header. The status is shown from the answer
+// to a request that changes it and whenever the server sends it (events.js, /ws/jobs: a jog, a pattern, a job taking
+// or freeing the rig, from this page or any other); no timer.
 "use strict";
 
 function showError(text) { $("error").textContent = text || ""; }
@@ -36,10 +38,8 @@ function showStatus(rig) {
   $("reconnect").hidden = rig.source !== "hardware";
 }
 
-async function loadStatus() {
-  const r = await api("/api/status");
-  if (!r.ok) return;
-  const data = await r.json();
+// GET /api/status's body, as /ws/jobs sends it: the pattern buttons (once), the status.
+function showRigStatus(data) {
   const box = $("patterns");
   if (!box.children.length) {
     for (const name of data.patterns) {
@@ -113,7 +113,6 @@ $("controls").onsubmit = async (ev) => {
 for (const b of document.querySelectorAll("[data-jog]")) b.onclick = () => post("/api/turntable", { degrees: Number(b.dataset.jog) });
 $("home").onclick = () => post("/api/turntable", { home: true });
 $("reconnect").onclick = () => post("/api/reconnect", {});
-loadStatus();
-setInterval(loadStatus, 2000);
+rangekitEvents.onRig(showRigStatus);
 startLive();
 

@@ -1,10 +1,12 @@
 // rangekit ui: the Sessions page (every session under --sessions: state, figures, files; one opened shows its
-// mesh in 3D and its report, and can be processed again or exported).
+// mesh in 3D and its report, and can be processed again or exported). The list is read when the page is shown, when a
+// job that writes sessions ends (a scan or a processing: its JobExited on /ws/events; a registration: its state on
+// /ws/jobs) and after an export; no timer.
 "use strict";
 
 let sessionOpen = null, sessionMeshShown = null;
 
-async function pollSessions() {
+async function loadSessions() {
   if (location.hash !== "#sessions") return;
   const got = await api("/api/sessions");
   if (!got.ok) return;
@@ -49,7 +51,7 @@ async function showReport(path) {
 }
 
 function clearReport() { $("session-report").removeAttribute("src"); delete $("session-report").dataset.path; }
-function openSession(name) { sessionOpen = name; sessionMeshShown = null; clearReport(); pollSessions(); }
+function openSession(name) { sessionOpen = name; sessionMeshShown = null; clearReport(); loadSessions(); }
 
 async function showSession(s) {
   $("session-detail").hidden = false;
@@ -63,8 +65,13 @@ async function showSession(s) {
     const n = await window.rangekitSession3d.showMesh(base + "mesh.ply");
     $("session-mesh-note").textContent = `mesh.ply: ${n} vertices (drag to turn, wheel to zoom)`;
   } else if (!s.files.includes("mesh.ply")) $("session-mesh-note").textContent = "no mesh yet: process the session";
-  const job = window.rangekitScanView;     // the scan job as its events tell it (scan.js)
-  const busy = job.name === s.name && job.launched && job.exitCode === null;
+  showSessionBusy();
+}
+
+// Whether the open session is being processed, with the job's last line (the scan job as its events tell it, scan.js).
+function showSessionBusy() {
+  const job = window.rangekitScanView;
+  const busy = sessionOpen !== null && job.name === sessionOpen && job.launched && job.exitCode === null;
   $("session-state").textContent = busy ? `processing: ${job.lines.slice(-1)[0] || ""}` : "";
 }
 
@@ -82,9 +89,19 @@ for (const b of document.querySelectorAll("#session-export button")) {
   b.onclick = async () => {
     const data = await sessionPost("export", { format: b.dataset.format });
     if (data) $("session-state").textContent = `written: ${data.files.join(", ")}`;
-    pollSessions();
+    loadSessions();
   };
 }
-window.addEventListener("hashchange", pollSessions);
-setInterval(pollSessions, 2000);
-pollSessions();
+window.addEventListener("hashchange", loadSessions);
+rangekitEvents.listen((m) => {
+  if (m.kind === "event" && !m.current) return;
+  if (m.kind === "event" && m.event.type === "JobExited") loadSessions();
+  else if (location.hash === "#sessions") showSessionBusy();
+});
+let sessionsRegistered = null;       // the registration's last state and name saved: a change may be a new folder
+rangekitEvents.onJob("register", (r) => {
+  const key = `${r.state} ${r.saved || ""}`;
+  if (sessionsRegistered !== null && key !== sessionsRegistered && r.state !== "running") loadSessions();
+  sessionsRegistered = key;
+});
+loadSessions();

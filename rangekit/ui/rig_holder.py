@@ -103,6 +103,7 @@ class RigHolder:
         sim.turntable = HorusTurntable(firmware.port)
         holder = cls(sim, rig, "simulator", float(sim.imaging.max_value), rig_file)
         holder._closers += [sim.turntable.close, firmware.stop]
+        holder._read_angle()     # shown from the start, even while the live stream keeps the lock busy
         holder.last_reply = f"opened; turntable: Horus firmware on {firmware.port}"
         return holder
 
@@ -139,6 +140,7 @@ class RigHolder:
                 return self.status()
             self._closers = [self.devices.close]
             self.fault, self.last_reply = None, "opened"
+            self._read_angle()     # shown from the start, even while the live stream keeps the lock busy
             self._show(self.pattern)
             self._changed()
             return self.status()
@@ -287,6 +289,15 @@ class RigHolder:
         self._changed()
         return self._angle_deg
 
+    def _read_angle(self) -> None:
+        """Ask the turntable for its angle (the caller holds the lock); its failure is the rig's fault."""
+        table = self.devices.turntable
+        if table is not None:
+            try:
+                self._angle_deg = round(float(np.degrees(table.angle)), 3)
+            except RangekitError as exc:
+                self.fault = str(exc)
+
     def _refuse_if_busy(self) -> None:
         if self.busy is not None:
             raise RangekitError(f"the rig is busy: {self.busy}; wait for it to finish")
@@ -299,9 +310,7 @@ class RigHolder:
         table = self.devices.turntable
         if table is not None and self.busy is None and self._lock.acquire(blocking=False):
             try:
-                self._angle_deg = round(float(np.degrees(table.angle)), 3)
-            except RangekitError as exc:
-                self.fault = str(exc)
+                self._read_angle()
             finally:
                 self._lock.release()
         written = dict(self.rig.capture.get("camera", {}))

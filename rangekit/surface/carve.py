@@ -224,3 +224,4 @@ def hold_out(vertices: np.ndarray, movable: np.ndarray, space: CarvedSpace, *,
     d = space.depth_inside(V)
     on_hull = movable & (np.abs(d) <= h)
     return V, on_hull
+

@@ -132,7 +132,8 @@ def carved_space(registered: RegisteredViews, observed: TriangleMesh, rig: Rig, 
     """What the views saw as empty (:func:`rangekit.surface.carve.carve`, session world): each view's free depth
     seen from its registered camera pose, on a grid around the ``observed`` mesh (its extent and a tenth of it
     more each side, from the table top up). None without the views' free depths (no turntable) or with several
-    passes (the object turned over: the table top is not one plane of the object's frame)."""
+    passes (the object turned over: the table top is not one plane of the object's frame). The free depths are
+    let go once carved (63 MB for 12 views of 1280 x 1024)."""
     from rangekit.geometry import apply_T, invert_T
     from rangekit.surface.carve import carve
 
@@ -144,7 +145,9 @@ def carved_space(registered: RegisteredViews, observed: TriangleMesh, rig: Rig, 
     P = apply_T(invert_T(rig.T_world_table), observed.vertices)
     lo, hi = P.min(axis=0), P.max(axis=0)
     pad = 0.1 * (hi - lo)
-    return carve(views, rig.T_world_table, lo - pad, hi + pad)
+    space = carve(views, rig.T_world_table, lo - pad, hi + pad)
+    free.clear()
+    return space
 
 
 def save_closed(folder, closed: TriangleMesh, rule, options: ProcessOptions,

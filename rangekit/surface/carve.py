@@ -6,7 +6,8 @@ its ray is empty from the camera up to that depth. A pixel lit and off the objec
 the whole ray down to the table, which is the shape from silhouette; a pixel on the object carves in front of
 the surface, which reaches into concavities a silhouette cannot. The turntable is solid: nothing of the object
 lies below its top. What is neither carved nor under the table is the *hull*: the object and whatever no view
-could see into.
+could see into (under an overhang near the table no ray reaches; the projector's light paths, each decoded
+point lit along its projector ray, were tried as more views and carved nothing more on the default object).
 
 - :func:`free_depth`: a view's (H, W) depth up to which each pixel's ray is empty (0 where unknown).
 - :func:`carve`: the :class:`CarvedSpace` of several views on a voxel grid in the table's frame.
@@ -149,8 +150,8 @@ class CarvedSpace:
 
 def carve(views: Sequence[tuple[np.ndarray, PinholeCamera]], T_world_table: np.ndarray, lo: np.ndarray,
           hi: np.ndarray, *, voxel: float | None = None, margin: float = CARVE_MARGIN) -> CarvedSpace:
-    """Carve a grid spanning ``lo`` .. ``hi`` (3,) metres in the table frame (``lo[2]`` raised to... the table:
-    the grid starts two voxels under the table top) by every view of ``views``: ``(free, camera)``, ``free`` the
+    """Carve a grid spanning ``lo`` .. ``hi`` (3,) metres in the table frame (``lo[2]`` is not used: the grid
+    starts two voxels under the table top) by every view of ``views``: ``(free, camera)``, ``free`` the
     view's :func:`free_depth` (H, W) and ``camera`` posed where it saw the object from (world frame). A voxel is
     carved when some view sees its centre in front of that pixel's free depth by ``margin`` metres, or
     when it lies under the table top. ``voxel`` metres: default the longest side over :data:`GRID_VOXELS`."""

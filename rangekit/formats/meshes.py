@@ -11,7 +11,7 @@ import numpy as np
 from rangekit._runtime.arguments import check_path, check_text
 from rangekit.regular_files import check_regular_file, read_regular_file
 from rangekit.errors import FileFormatError
-from rangekit.formats.ply import ply_observed, ply_vertex_attributes, read_ply
+from rangekit.formats.ply import ply_flag, ply_observed, ply_vertex_attributes, read_ply
 from rangekit.formats.ply_write import mesh_ply_bytes
 from rangekit.io import atomic_write_bytes
 from rangekit.surface.convert import as_mesh
@@ -86,7 +86,7 @@ def _read_ply_mesh(path: Path) -> TriangleMesh:
         raise FileFormatError(f"{path}: expected finite vertices, found "
                               f"{np.count_nonzero(~np.isfinite(points).all(axis=1))} that are not")
     return TriangleMesh(points, triangles, None if colours is None else colours.astype(np.float32),
-                        ply_observed(header, elements["vertex"]))
+                        ply_observed(header, elements["vertex"]), ply_flag(header, elements["vertex"], "carved"))
 
 
 def _obj_geometry(path: Path):

@@ -20,7 +20,7 @@ import numpy as np
 from rangekit.errors import FileFormatError, shown
 from rangekit.formats.parsing import ascii_rows, read_bytes, truncated_error
 
-__all__ = ["PlyLists", "PlyHeader", "read_ply", "ply_points", "ply_observed", "ply_vertex_attributes", "ply_vertex_scalar"]
+__all__ = ["PlyLists", "PlyHeader", "read_ply", "ply_points", "ply_observed", "ply_flag", "ply_vertex_attributes", "ply_vertex_scalar"]
 
 
 @dataclass(frozen=True)
@@ -292,12 +292,17 @@ def ply_points(path: Path, header: PlyHeader, vertex: dict) -> np.ndarray:
     return np.column_stack([np.asarray(vertex[c], dtype=np.float64) for c in "xyz"])
 
 
+def ply_flag(header: PlyHeader, vertex: dict, name: str) -> np.ndarray | None:
+    """(N,) bool of a PLY vertex element's scalar property ``name`` (non-zero = True), or None without it."""
+    props = {p.name: p for p in header.element("vertex").properties}
+    if name not in props or props[name].count_dtype is not None:
+        return None
+    return np.asarray(vertex[name]) != 0
+
+
 def ply_observed(header: PlyHeader, vertex: dict) -> np.ndarray | None:
     """(N,) bool of a PLY vertex element's ``observed`` property (non-zero = observed), or None without it."""
-    props = {p.name: p for p in header.element("vertex").properties}
-    if "observed" not in props or props["observed"].count_dtype is not None:
-        return None
-    return np.asarray(vertex["observed"]) != 0
+    return ply_flag(header, vertex, "observed")
 
 
 def ply_vertex_attributes(path: Path, header: PlyHeader, vertex: dict

@@ -114,9 +114,12 @@ def write_cloud_ply(f: BinaryIO, cloud: PointCloud, fields: dict[str, np.ndarray
 
 def mesh_ply_bytes(mesh: TriangleMesh, units: str = "metres") -> bytes:
     """A triangle mesh as binary PLY: float64 xyz, float32 unit area-weighted vertex normals ``nx ny nz`` (what
-    MeshLab, Open3D and trimesh shade with), uint8 RGB, uint8 ``observed`` (when the mesh has the flag), faces
+    MeshLab, Open3D and trimesh shade with), uint8 RGB, uint8 ``observed`` and ``carved`` (when the mesh has
+    the flags: observed 1 where a view's points support the vertex; carved 1 where an unobserved vertex lies on the
+    hull free-space carving left, rangekit.surface.carve; both 0: a fitted guess), faces
     as ``list uchar int``, comment "rangekit mesh, UNITS" (``units``: metres, or pixels for a photometric
     surface whose camera is not known)."""
     normals = vertex_normals(mesh.vertices, mesh.triangles, sums=mesh.normal_sums)
+    carved = None if mesh.carved is None else {"carved": np.asarray(mesh.carved, dtype=np.uint8)}
     return _ply_bytes(f"rangekit mesh, {units}", _vertex_records(mesh.vertices, normals, mesh.vertex_colours,
-                                                               observed=mesh.observed), mesh.triangles)
+                                                               observed=mesh.observed, extra=carved), mesh.triangles)

@@ -27,6 +27,8 @@ class TriangleMesh:
     triangles: np.ndarray                     # (F, 3) int64 indices into ``vertices``
     vertex_colours: np.ndarray | None = None  # (V, 3) float32 linear RGB in [0, 1]
     observed: np.ndarray | None = None        # (V,) bool: some view's points support the vertex (fusion)
+    carved: np.ndarray | None = None          # (V,) bool: an unobserved vertex placed on the carved hull
+                                              # (rangekit.surface.carve); unobserved and not carved: guessed
 
     def __post_init__(self) -> None:
         V = as_points("vertices", self.vertices, rows="V")
@@ -53,6 +55,11 @@ class TriangleMesh:
             if O.shape != (len(V),):
                 raise InputError(f"TriangleMesh: observed must be ({len(V)},) bool, found shape {O.shape}")
             object.__setattr__(self, "observed", O.astype(bool))
+        if self.carved is not None:
+            K = np.asarray(self.carved)
+            if K.shape != (len(V),):
+                raise InputError(f"TriangleMesh: carved must be ({len(V)},) bool, found shape {K.shape}")
+            object.__setattr__(self, "carved", K.astype(bool))
 
     def __repr__(self) -> str:
         ext = np.ptp(self.vertices, axis=0) if len(self.vertices) else np.zeros(3)

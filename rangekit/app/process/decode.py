@@ -33,6 +33,9 @@ class DecodedViews:
                                   # beside the fusion)
     settings: dict                # the cache settings the views were decoded with (view_cache.cache_settings)
     rows: ViewRows | None         # the report's per-view part, made from each view's maps as it was decoded
+    free: list[np.ndarray] | None = None   # (H, W) float32 per view: camera z up to which each pixel's ray is
+                                  # empty (rangekit.surface.carve.free_depth), for the closed mesh's carving;
+                                  # None without a turntable
 
     @property
     def names(self) -> list[str]:
@@ -50,15 +53,43 @@ def decode(session: Session, options: ProcessOptions, views: Iterable[tuple[Poin
     clouds: list[PointCloud] = []
     maps: list[ViewMaps] = []
     rows, view_maps = (_rows_maker(session) if options.report else None), None
+    table = _table_view(session)
+    free: list[np.ndarray] | None = [] if table is not None else None
     for k, (cloud, view_maps) in enumerate(views):
         clouds.append(cloud)
+        if table is not None:
+            free.append(_free_depth(view_maps, table))
         if rows is not None:
             rows.add(done[k].folder.name, cloud, view_maps)
         maps.append(view_maps if options.fusion == "tsdf" else _column_only(view_maps))
     proj_cols = [m.proj_col for m in maps]
     kept = maps if options.fusion == "tsdf" else None
     del maps, view_maps
-    return DecodedViews(done, clouds, proj_cols, kept, settings, None if rows is None else rows.finish())
+    return DecodedViews(done, clouds, proj_cols, kept, settings, None if rows is None else rows.finish(), free)
+
+
+#: Decoded pixels weaker than this are not taken as seen (reconstruct_decoded's ``min_confidence``).
+_MIN_CONFIDENCE = 0.03
+
+
+def _table_view(session: Session):
+    """What the rig's camera and projector see of the turntable top (rangekit.surface.carve.table_view); None
+    without a turntable."""
+    rig = session.rig
+    if rig.T_world_table is None or rig.projector is None:
+        return None
+    from rangekit.surface.carve import table_view
+
+    return table_view(rig.camera, rig.projector, rig.T_world_table)
+
+
+def _free_depth(m: ViewMaps, table) -> np.ndarray:
+    """A view's free depth (rangekit.surface.carve.free_depth) from its maps: its kept points' depth, the table
+    top's where a confident decoded column is the table's own."""
+    from rangekit.surface.carve import free_depth, view_depth
+
+    cols = np.where(m.confidence >= _MIN_CONFIDENCE, m.proj_col, np.nan)
+    return free_depth(view_depth(m.depth, cols, table))
 
 
 def _rows_maker(session: Session):

@@ -3,6 +3,8 @@
     mesh.ply              the observed surface only (open): what some view's points support
     mesh_watertight.ply   the same surface closed, with the PLY vertex property ``observed`` (uchar, 0 where
                           no view's points support the vertex: the closing, the balloon, a web across a gap)
+                          and ``carved`` (uchar, 1 where such a vertex lies on the hull the views' free space
+                          left, rangekit.surface.carve; both 0: guessed)
 
 :func:`save_fused` writes both and returns their ``summary.json`` entries (:func:`save_one` one of them);
 :func:`evaluate_fused` measures both against the truth (the summary's accuracy is the observed mesh's, the

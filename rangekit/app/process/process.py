@@ -41,8 +41,8 @@ from rangekit._runtime.threads import one_blas_thread
 from rangekit.app.events import (MeshReady, OnEvent, PairRegistered, Stage, ViewDecoded, failures_announced)
 from rangekit.app.process.decode import DecodedViews, decode
 from rangekit.app.process.evaluate import Evaluator, measure_closed, measure_views
-from rangekit.app.process.fuse import (CHILD_IMPORTS, FusedViews, close, fusion_input, large_poisson, observed_rule,
-                                       save_closed, save_merged, save_observed, summary_line, surfaces)
+from rangekit.app.process.fuse import (CHILD_IMPORTS, FusedViews, carved_space, close, fusion_input, large_poisson,
+                                       observed_rule, save_closed, save_merged, save_observed, summary_line, surfaces)
 from rangekit.app.process.fused_outputs import evaluate_observed
 from rangekit.app.process.options import ProcessOptions
 from rangekit.app.process.register import RegisteredViews, evaluator_angles, register
@@ -207,9 +207,11 @@ def _fuse(registered: RegisteredViews, session: Session, options: ProcessOptions
                 with runner.stage(Stage.EVALUATE):
                     runner.say("measuring the observed mesh and each view against the true surface")
                     evaluation = evaluate_observed(evaluate, mesh, registered.angles, views=registered)
+            space = carved_space(registered, mesh, session.rig, session.plan.passes)
             closed = closing.result()
         runner.release_memory()   # the fusion's and the evaluator's temporaries
-        watertight, watertight_info = save_closed(out, closed, rule, options)
+        watertight, watertight_info = save_closed(out, closed, rule, options, space)
+        del space
         del closed, rule
         runner.emit(MeshReady("watertight", out / WATERTIGHT_FILE, watertight))
         runner.say(summary_line(mesh, watertight_info))

@@ -31,8 +31,10 @@ def table_up(rig) -> np.ndarray:
     return rig.T_world_table[:3, 2] if rig.T_world_table is not None else np.array([0.0, -1.0, 0.0])
 
 
-#: The report's colours of a closed mesh: surface some view observed, and surface the fusion invented.
+#: The report's colours of a closed mesh: surface some view observed, surface on the hull free-space carving
+#: left (no view measured it, but views saw the space around it empty), and surface the fusion guessed.
 OBSERVED_COLOUR = (0.35, 0.62, 0.85)
+CARVED_COLOUR = (0.90, 0.62, 0.25)
 INVENTED_COLOUR = (0.55, 0.55, 0.55)
 
 

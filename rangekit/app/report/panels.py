@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
 
-from rangekit.app.report.context import INVENTED_COLOUR, OBSERVED_COLOUR, SIDE_NAMES, SIDES, ReportContext
+from rangekit.app.report.context import CARVED_COLOUR, INVENTED_COLOUR, OBSERVED_COLOUR, SIDE_NAMES, SIDES, ReportContext
 from rangekit.app.report.figures import crop as _crop, figure as _img
 from rangekit.progress import call_progress
 from rangekit.formats.sessions.files import MESH_FILE, WATERTIGHT_FILE
@@ -84,24 +84,29 @@ def mesh_panel(ctx: ReportContext) -> str:
 
 
 def closed_mesh_panel(ctx: ReportContext) -> str:
-    """The closed mesh: blue where some view observed the surface, grey where the fusion invented it."""
+    """The closed mesh: blue where some view observed the surface, orange where it lies on the carved hull (no view
+    measured it, the views saw the space around it empty), grey where the fusion guessed it."""
     from rangekit.rendering.snapshot import fit_camera, render_mesh
 
     watertight = ctx.watertight
     if watertight is None or watertight.observed is None:
         return ""
     call_progress(ctx.progress, "report: closed mesh renders")
-    colours = np.where(watertight.observed[:, None], np.array(OBSERVED_COLOUR), np.array(INVENTED_COLOUR))
+    carved = watertight.carved if watertight.carved is not None else np.zeros(len(watertight.vertices), bool)
+    colours = np.where(watertight.observed[:, None], np.array(OBSERVED_COLOUR),
+                       np.where(carved[:, None], np.array(CARVED_COLOUR), np.array(INVENTED_COLOUR)))
     figs = [_img(_crop(render_mesh(watertight, fit_camera(watertight.vertices, azimuth=az, elevation=el, size=ctx.size,
                                                           up=ctx.up, tight=True),
                                    vertex_colours=colours, smooth=True)), name,
-                 alt=f"{name}: closed mesh, grey where no view observed the surface")
+                 alt=f"{name}: closed mesh, orange on the carved hull, grey where guessed")
             for (az, el), name in zip(SIDES, SIDE_NAMES)]
-    invented = 1.0 - float(watertight.observed.mean())
+    on_hull = float((carved & ~watertight.observed).mean())
+    guessed = 1.0 - float(watertight.observed.mean()) - on_hull
     return ("<h2>Closed mesh</h2>"
-            f"<p>{WATERTIGHT_FILE}: blue where some view observed the surface, grey where the fusion "
-            f"closed it with surface no view saw ({invented:.1%} of its vertices, flagged "
-            f"<code>observed = 0</code> in the file).</p><div class='row'>{''.join(figs)}</div>")
+            f"<p>{WATERTIGHT_FILE}: blue where some view observed the surface; orange where no view measured it "
+            f"and it lies on the hull the views' free space carved ({on_hull:.1%} of its vertices, flagged "
+            f"<code>carved = 1</code> in the file); grey where the fusion guessed it ({guessed:.1%}, "
+            f"<code>observed = 0</code> and <code>carved = 0</code>).</p><div class='row'>{''.join(figs)}</div>")
 
 
 def registration_panel(ctx: ReportContext) -> str:

@@ -287,6 +287,7 @@ def scan_help() -> dict:
 
 def add_parsers(sub) -> None:
     from rangekit.coded.patterns import PATTERN_METHODS
+    from rangekit.coded.presets import PRESETS
 
     options, values = "rangekit.app.scan.options:ScanOptions", "rangekit.cli.scan:scan_help"
 
@@ -319,8 +320,13 @@ def add_parsers(sub) -> None:
                                      "asks)"), values)
     scan.add_argument("--flipped", action="store_true",
                       help="with --resume: the object has been turned over for the next pass (no terminal to ask on)")
-    lazy_help(scan.add_argument("--patterns", choices=PATTERN_METHODS,
-                                help="pattern set (default {patterns}: Gray code + phase shift)"), values)
+    lazy_help(scan.add_argument("--patterns", choices=PATTERN_METHODS + tuple(PRESETS),
+                                help="pattern set: a method or a named set (docs/coded-light.md, 'Frames against "
+                                     "accuracy'; default {patterns}: Gray code + phase shift)"), values)
+    scan.add_argument("--target-mm", type=option_range(options, "target_mm"), metavar="MM",
+                      help="the patterns of fewest frames whose measured accuracy meets MM: one view's points at most "
+                           "MM RMS against the simulator's truth (docs/coded-light.md, 'Frames against accuracy'; "
+                           "not with --patterns)")
     lazy_help(scan.add_argument("--seed", type=option_range(options, "seed"),
                                 help="simulator noise seed (default {seed})"), values)
     scan.add_argument("--artefact", choices=("vdi2634",),

@@ -38,8 +38,6 @@ def candidates() -> dict[str, Preset]:
     """Set name -> pattern set: the presets, then other sets measured for comparison."""
     return {**PRESETS,
             "graycode": Preset("graycode", "Gray code, subpixel edges: 44 frames"),
-            "phase-3f-3step": Preset("phase", "W, W/8, W/64, 3 steps each: 20 frames", {"steps": 3, "fine_steps": 3},
-                                     (1, 8, 64)),
             "micro": Preset("micro", "SLStudio's micro phase shifting: 24 frames")}
 
 

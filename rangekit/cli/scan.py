@@ -323,7 +323,7 @@ def add_parsers(sub) -> None:
     lazy_help(scan.add_argument("--patterns", choices=PATTERN_METHODS + tuple(PRESETS),
                                 help="pattern set: a method or a named set (docs/coded-light.md, 'Frames against "
                                      "accuracy'; default {patterns}: Gray code + phase shift)"), values)
-    scan.add_argument("--target-mm", type=option_range(options, "target_mm"), metavar="MM",
+    scan.add_argument("--target-mm", type=finite_float, metavar="MM",
                       help="the patterns of fewest frames whose measured accuracy meets MM: one view's points at most "
                            "MM RMS against the simulator's truth (docs/coded-light.md, 'Frames against accuracy'; "
                            "not with --patterns)")

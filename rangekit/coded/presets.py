@@ -48,14 +48,22 @@ PRESETS: dict[str, Preset] = {
     "hybrid-8step": Preset("hybrid", "Gray code + 8 steps of a 16 px period (the method's own options): 60 frames",
                            {"steps": 8, "period": 16}),
     "hybrid-4step": Preset("hybrid", "Gray code + 4 steps of a 16 px period: 52 frames", {"steps": 4, "period": 16}),
+    "hybrid-8step-min3": Preset("hybrid", "Gray code without its 3 finest bits (8 px blocks) + 8 steps of a 16 px "
+                                "period: 48 frames", {"steps": 8, "period": 16, "min_bit": 3}),
+    "hybrid-4step-min3": Preset("hybrid", "Gray code without its 3 finest bits + 4 steps of a 16 px period: 40 frames",
+                                {"steps": 4, "period": 16, "min_bit": 3}),
     "phase-3f": Preset("phase", "three frequencies W, W/8, W/64, 4 + 4 + 8 steps (the method's own options): "
                        "34 frames", {"steps": 4, "fine_steps": 8}, (1, 8, 64)),
     "phase-3f-16px": Preset("phase", "three frequencies W, W/10, W/80 (16 px on the 1280 px projector's columns, "
                             "as hybrid's), 4 + 4 + 8 steps: 34 frames", {"steps": 4, "fine_steps": 8}, (1, 10, 80)),
     "phase-3f-16px-3step": Preset("phase", "three frequencies W, W/10, W/80, 3 + 3 + 8 steps: 30 frames",
                                   {"steps": 3, "fine_steps": 8}, (1, 10, 80)),
+    "phase-3f-16px-6step": Preset("phase", "three frequencies W, W/10, W/80, 3 + 3 + 6 steps: 26 frames",
+                                  {"steps": 3, "fine_steps": 6}, (1, 10, 80)),
     "phase-3f-4step": Preset("phase", "three frequencies W, W/8, W/64, 4 steps each: 26 frames",
                              {"steps": 4, "fine_steps": 4}, (1, 8, 64)),
+    "phase-3f-3step": Preset("phase", "three frequencies W, W/8, W/64, 3 steps each: 20 frames",
+                             {"steps": 3, "fine_steps": 3}, (1, 8, 64)),
     "phase-2f": Preset("phase", "two frequencies W, W/16, 4 + 8 steps: 26 frames", {"steps": 4, "fine_steps": 8},
                        (1, 16)),
     "phase-2f-4step": Preset("phase", "two frequencies W, W/16, 4 steps each: 18 frames",

@@ -98,6 +98,8 @@ def prepare_scan(options: ScanOptions, progress: Callable | None = None) -> Scan
             given["views"] = LASER_STEPS
         method, rig, obj, n_views, patterns, seed, passes = (SCAN_DEFAULTS[k] if v is None else v
                                                              for k, v in given.items())
+        if options.target_mm is not None:      # checked before anything opens: OptionError when none meets it
+            patterns = fastest_for(options.target_mm)
         folder = Path(options.out)
         if (folder / SESSION_FILE).exists():
             raise OptionError(f"{{out}} {folder}: already holds a session ({SESSION_FILE}); continue it with "
@@ -132,7 +134,7 @@ def prepare_scan(options: ScanOptions, progress: Callable | None = None) -> Scan
                 f"{OBJECT_FOLDER}/{object_file[0]}": object_file[1]}
     if spec is None:
         spec = LaserSequence(len(the_rig.lasers)) if laser else _pattern_spec(
-            patterns, options.target_mm, (the_rig.projector.width, the_rig.projector.height))
+            patterns, (the_rig.projector.width, the_rig.projector.height))
     capture = None if session else replace(CaptureSettings.from_rig(the_rig, hardware=hardware or options.realtime),
                                            frame_format=options.frames or ("png" if laser else FRAME_FORMATS[0]))
     n_done = len(session.done_views) if session else 0
@@ -147,11 +149,9 @@ def prepare_scan(options: ScanOptions, progress: Callable | None = None) -> Scan
     return setup
 
 
-def _pattern_spec(patterns: str, target_mm: float | None, size: tuple[int, int]) -> PatternSpec:
-    """A new coded-light scan's patterns: the fastest measured set that meets ``target_mm`` when given, else
-    ``patterns``: a named set (:data:`rangekit.coded.presets.PRESETS`) or a method with its own options."""
-    if target_mm is not None:
-        patterns = fastest_for(target_mm)
+def _pattern_spec(patterns: str, size: tuple[int, int]) -> PatternSpec:
+    """A new coded-light scan's patterns on a ``(width, height)`` projector: a named set
+    (:data:`rangekit.coded.presets.PRESETS`) or a method with its own options."""
     return preset_spec(patterns, size) if patterns in PRESETS else make_pattern_spec(patterns, size)
 
 

@@ -1,4 +1,4 @@
-"""Frames against accuracy (issue 51 Deliver 2): every pattern set :mod:`rangekit.coded.presets` names, and more
+"""Frames against accuracy (issue 51 Deliver 2): every pattern set :mod:`rangekit.app.scan.presets` names, and more
 candidates, on the simulator's default object and the zoo's hard ones, against the simulator's exact truth.
 
     PYTHONPATH=. python benchmarks/coded/frames_vs_accuracy.py [--objects lumpy bowl thin] [--seed 1]
@@ -29,7 +29,7 @@ import time
 
 import numpy as np
 
-from rangekit.coded.presets import PRESETS, Preset
+from rangekit.app.scan.presets import PRESETS, Preset
 from rangekit.coded.reconstruct import reconstruct_view
 from rangekit.sim import SimRig, default_scene
 

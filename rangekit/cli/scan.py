@@ -287,7 +287,7 @@ def scan_help() -> dict:
 
 def add_parsers(sub) -> None:
     from rangekit.coded.patterns import PATTERN_METHODS
-    from rangekit.coded.presets import PRESETS
+    from rangekit.app.scan.presets import PRESETS
 
     options, values = "rangekit.app.scan.options:ScanOptions", "rangekit.cli.scan:scan_help"
 

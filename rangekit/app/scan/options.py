@@ -44,10 +44,10 @@ class ScanOptions:
     passes : coded-light passes (1..8), the object turned over between them; flipped : with ``resume``, the
         user confirms the object is already turned over for the next pass.
     patterns : the pattern set: a method (:data:`rangekit.coded.patterns.PATTERN_METHODS`, its own options) or a
-        named set (:data:`rangekit.coded.presets.PRESETS`).
+        named set (:data:`rangekit.app.scan.presets.PRESETS`).
     target_mm : a new coded-light scan's patterns are the fewest frames whose measured accuracy meets it: one view's
         points at most this RMS (mm) against the simulator's truth on every measured object
-        (:func:`rangekit.coded.presets.fastest_for`; not with ``patterns``).
+        (:func:`rangekit.app.scan.presets.fastest_for`; not with ``patterns``).
     seed : the simulator's noise seed (0 <= seed < 2**32).
     up : (x, y, z) of a mesh file object that points up on the turntable (Stanford meshes: (0, 1, 0)).
     artefact : ``"vdi2634"``: scan the guideline's artefacts instead (with ``out``, ``rig``, ``positions``,
@@ -121,7 +121,7 @@ def _check_values(o: ScanOptions) -> None:
     from rangekit.app.process.fused_outputs import MESH_EXPORT_FORMATS
     from rangekit.app.process.options import FUSION_METHODS
     from rangekit.coded.patterns import PATTERN_METHODS
-    from rangekit.coded.presets import PRESETS
+    from rangekit.app.scan.presets import PRESETS
 
     for name, what in (("out", "a new session folder"), ("resume", "a session folder"), ("rig", "'sim' or a rig file"),
                        ("object", "a built-in object's name or a mesh file")):

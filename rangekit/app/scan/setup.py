@@ -10,8 +10,8 @@ from typing import Callable
 
 import numpy as np
 from rangekit.app.scan.options import LASER_STEPS, SCAN_DEFAULTS, ScanOptions
+from rangekit.app.scan.presets import PRESETS, fastest_for, preset_of, preset_spec
 from rangekit.coded.patterns import PatternSpec, make_pattern_spec
-from rangekit.coded.presets import PRESETS, fastest_for, preset_of, preset_spec
 from rangekit.errors import ConfigError, OptionError, RangekitError
 from rangekit.formats.sessions.session import FRAME_FORMATS, CaptureSettings, Session, SimulatorSettings
 from rangekit.geometry import R_up_to_z
@@ -151,7 +151,7 @@ def prepare_scan(options: ScanOptions, progress: Callable | None = None) -> Scan
 
 def _pattern_spec(patterns: str, size: tuple[int, int]) -> PatternSpec:
     """A new coded-light scan's patterns on a ``(width, height)`` projector: a named set
-    (:data:`rangekit.coded.presets.PRESETS`) or a method with its own options."""
+    (:data:`rangekit.app.scan.presets.PRESETS`) or a method with its own options."""
     return preset_spec(patterns, size) if patterns in PRESETS else make_pattern_spec(patterns, size)
 
 

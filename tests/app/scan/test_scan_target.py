@@ -11,7 +11,7 @@ from rangekit.app.scan.options import ScanOptions
 from rangekit.app.scan.setup import prepare_scan
 from rangekit.cli import main
 from rangekit.coded.patterns import PatternSpec
-from rangekit.coded.presets import MEASURED, fastest_for, preset_spec
+from rangekit.app.scan.presets import MEASURED, fastest_for, preset_spec
 from rangekit.errors import OptionError
 
 

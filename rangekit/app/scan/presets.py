@@ -155,5 +155,5 @@ def fastest_for(target_mm: float) -> str:
                           f"({', '.join(MEASURED_OBJECTS)}); the best is {best[1]!r} at {best[0]:.4f} mm: "
                           "ask for at least that")
     if not ok:
-        raise OptionError("{target_mm}: no pattern set has been measured (rangekit.coded.presets.MEASURED is empty)")
+        raise OptionError("{target_mm}: no pattern set has been measured (rangekit.app.scan.presets.MEASURED is empty)")
     return min(ok)[2]

@@ -1,11 +1,11 @@
-"""Named pattern sets and the fastest set for a stated accuracy (rangekit/coded/presets.py, issue 51 Deliver 2)."""
+"""Named pattern sets and the fastest set for a stated accuracy (rangekit/app/scan/presets.py, issue 51 Deliver 2)."""
 
 from __future__ import annotations
 
 import pytest
 
 from rangekit.coded.patterns import PatternSpec
-from rangekit.coded.presets import MEASURED, MEASURED_OBJECTS, PRESETS, fastest_for, preset_of, preset_spec
+from rangekit.app.scan.presets import MEASURED, MEASURED_OBJECTS, PRESETS, fastest_for, preset_of, preset_spec
 from rangekit.errors import OptionError
 
 

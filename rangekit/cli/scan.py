@@ -286,9 +286,6 @@ def scan_help() -> dict:
 
 
 def add_parsers(sub) -> None:
-    from rangekit.coded.patterns import PATTERN_METHODS
-    from rangekit.app.scan.presets import PRESETS
-
     options, values = "rangekit.app.scan.options:ScanOptions", "rangekit.cli.scan:scan_help"
 
     scan = sub.add_parser("scan", help="scan: acquire a turntable session (resumable), then process it into a mesh",
@@ -320,8 +317,10 @@ def add_parsers(sub) -> None:
                                      "asks)"), values)
     scan.add_argument("--flipped", action="store_true",
                       help="with --resume: the object has been turned over for the next pass (no terminal to ask on)")
-    lazy_help(scan.add_argument("--patterns", choices=PATTERN_METHODS + tuple(PRESETS),
-                                help="pattern set: a method or a named set (docs/coded-light.md, 'Frames against "
+    # No choices: the named sets live in rangekit.app (not imported to build the parser); ScanOptions names them.
+    lazy_help(scan.add_argument("--patterns", metavar="PATTERNS",
+                                help="pattern set: a method (rangekit.coded.patterns.PATTERN_METHODS) or a named set "
+                                     "(rangekit.app.scan.presets.PRESETS, docs/coded-light.md 'Frames against "
                                      "accuracy'; default {patterns}: Gray code + phase shift)"), values)
     scan.add_argument("--target-mm", type=finite_float, metavar="MM",
                       help="the patterns of fewest frames whose measured accuracy meets MM: one view's points at most "

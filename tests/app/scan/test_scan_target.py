@@ -59,3 +59,10 @@ def test_a_resumed_scan_keeps_its_preset_and_refuses_another(tmp_path):
     other = next(n for n in MEASURED if n != name)
     with pytest.raises(OptionError, match=f"patterns {other!r} differs from the session"):
         prepare_scan(ScanOptions(resume=out, patterns=other, process=False))
+
+
+def test_an_unknown_pattern_set_is_refused_by_its_flag_naming_the_sets(tmp_path, capsys):
+    assert main(["scan", "--out", str(tmp_path / "s"), "--patterns", "fast", "--no-process"]) == 2
+    err = capsys.readouterr().err
+    assert "--patterns must be one of white, black, graycode" in err and "phase-3f-16px-3step" in err
+    assert "found 'fast'" in err

@@ -286,8 +286,6 @@ def scan_help() -> dict:
 
 
 def add_parsers(sub) -> None:
-    from rangekit.coded.patterns import PATTERN_METHODS
-
     options, values = "rangekit.app.scan.options:ScanOptions", "rangekit.cli.scan:scan_help"
 
     scan = sub.add_parser("scan", help="scan: acquire a turntable session (resumable), then process it into a mesh",
@@ -319,8 +317,15 @@ def add_parsers(sub) -> None:
                                      "asks)"), values)
     scan.add_argument("--flipped", action="store_true",
                       help="with --resume: the object has been turned over for the next pass (no terminal to ask on)")
-    lazy_help(scan.add_argument("--patterns", choices=PATTERN_METHODS,
-                                help="pattern set (default {patterns}: Gray code + phase shift)"), values)
+    # No choices: the named sets live in rangekit.app (not imported to build the parser); ScanOptions names them.
+    lazy_help(scan.add_argument("--patterns", metavar="PATTERNS",
+                                help="pattern set: a method (rangekit.coded.patterns.PATTERN_METHODS) or a named set "
+                                     "(rangekit.app.scan.presets.PRESETS, docs/coded-light.md 'Frames against "
+                                     "accuracy'; default {patterns}: Gray code + phase shift)"), values)
+    scan.add_argument("--target-mm", type=finite_float, metavar="MM",
+                      help="the patterns of fewest frames whose measured accuracy meets MM: one view's points at most "
+                           "MM RMS against the simulator's truth (docs/coded-light.md, 'Frames against accuracy'; "
+                           "not with --patterns)")
     lazy_help(scan.add_argument("--seed", type=option_range(options, "seed"),
                                 help="simulator noise seed (default {seed})"), values)
     scan.add_argument("--artefact", choices=("vdi2634",),

@@ -99,18 +99,20 @@ def axis_code(fr: CaptureStack, spec: PatternSpec, axis: str, workers: int, chun
     past the projector's width (height), or for Gray codes with ``keep_beyond`` the code itself (the caller
     measures how many pixels decode past the projector, :func:`codes_beyond`). ``ties``: the bit of a pixel whose
     frame equals its inverse, "zero" (rangekit's rule, frame brighter than inverse) or "one" (Gray codes only:
-    RoomAlive's ``frame >= inverse``)."""
+    RoomAlive's ``frame >= inverse``). A hybrid without its Gray bits below ``m = spec.min_gray_bit`` gives the
+    block ``code >> m`` (the Gray code's bits above m are the Gray code of ``u >> m``)."""
     from rangekit.coded import _kernels as K
 
     H, W = fr.shape
     prefix = "col" if axis == "columns" else "row"
-    nb = spec.bits(axis)
+    nb, m = spec.bits(axis), spec.min_gray_bit
     code = np.empty((H, W), np.int32)
     if spec.xor_base is None:
-        p_idx = np.array([fr.index[f"{prefix}_b{b}"] for b in range(nb - 1, -1, -1)], np.int64)
-        i_idx = np.array([fr.index[f"{prefix}_b{b}_inv"] for b in range(nb - 1, -1, -1)], np.int64)
-        limit = 1 << nb if keep_beyond else spec.width if axis == "columns" else spec.height
-        K.gray_rows(fr.stack, p_idx, i_idx, gray_lut(nb), limit, code, 1 if ties == "one" else 0)
+        p_idx = np.array([fr.index[f"{prefix}_b{b}"] for b in range(nb - 1, m - 1, -1)], np.int64)
+        i_idx = np.array([fr.index[f"{prefix}_b{b}_inv"] for b in range(nb - 1, m - 1, -1)], np.int64)
+        size = spec.width if axis == "columns" else spec.height
+        limit = 1 << (nb - m) if keep_beyond else -(-size // (1 << m))
+        K.gray_rows(fr.stack, p_idx, i_idx, gray_lut(nb - m), limit, code, 1 if ties == "one" else 0)
         return code
     if ties != "zero":
         raise DecodeError(f"ties={ties!r}: expected 'zero' for XOR codes ('one' is for Gray codes)")

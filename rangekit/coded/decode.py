@@ -313,7 +313,7 @@ def _masks(fr: CaptureStack, spec: PatternSpec, fs: float, o: DecodeOptions, bin
     sep_axis = spec.axes[0]
     sep_prefix = "col" if sep_axis == "columns" else "row"
     sep_bits = [b for b in {"xor02": (0,), "xor04": (0, 1)}.get(spec.method, (1, 2))
-                if binary and b < spec.bits(sep_axis)]
+                if binary and spec.min_gray_bit <= b < spec.bits(sep_axis)]
     sep_p = np.array([idx[f"{sep_prefix}_b{b}"] for b in sep_bits], np.int64)
     sep_i = np.array([idx[f"{sep_prefix}_b{b}_inv"] for b in sep_bits], np.int64)
     conf = np.empty((H, W), np.float32)

@@ -26,7 +26,10 @@ Methods and frame lists (Fusiello ch. 13.2; pixel centres at integers, column u 
     SLStudio's 2x3, N-step and single-period codecs are this method frame for frame.
 ``hybrid``
     The graycode frames, then ``steps`` phase frames of one ``period`` per axis: the Gray code gives the
-    period, the phase the position inside it.
+    period, the phase the position inside it. Option ``min_bit`` m (default 0) leaves the Gray bits below m out
+    (2 m frames fewer per axis): the code then names a block of ``2**m`` columns, whose centre unwraps the phase
+    as long as ``2**m <= period / 2`` (a pixel read into the neighbouring block at a block edge is then still
+    within half a period); the direct/global separation needs Gray bits 1 and 2, so m over 1 drops it.
 ``micro``, ``modulated``, ``ftp``, ``psp``, ``faps``
     Other tools' fringe codecs (SLStudio's micro and modulated phase shifting, OpenCV's sinusoidal
     patterns), their frames value for value as the tool makes them: :mod:`rangekit.coded.codecs.fringes`.
@@ -181,6 +184,14 @@ class PatternSpec:
             if not (is_number(period) and 0 < period <= MAX_IMAGE_SIDE_PX):
                 raise PatternError(f"hybrid period must be a number in (0, {MAX_IMAGE_SIDE_PX}] projector px, "
                                    f"found {show(period)}")
+            if "min_bit" in opts:
+                m = whole_number(opts["min_bit"], "hybrid min_bit (the finest Gray bit projected)", 0,
+                                 min(self.bits(a) for a in axes) - 1)
+                if 2 ** m > period / 2:
+                    raise PatternError(f"hybrid min_bit {m}: a Gray code without bits below {m} names blocks of "
+                                       f"{2 ** m} px, more than half the {period:g} px period; expected a min_bit with "
+                                       f"2**min_bit <= period / 2")
+                opts["min_bit"] = m
         for key in ("steps", "fine_steps"):
             if key in opts and self.method in ("phase", "hybrid"):
                 opts[key] = whole_number(opts[key], f"phase shifting {key}", 3, MAX_PHASE_STEPS)
@@ -221,6 +232,11 @@ class PatternSpec:
         return n_bits_for(self._size(axis))
 
     @property
+    def min_gray_bit(self) -> int:
+        """The finest Gray bit projected: hybrid's ``min_bit`` option, else 0 (every bit)."""
+        return int(self.options.get("min_bit", 0)) if self.method == "hybrid" else 0
+
+    @property
     def xor_base(self) -> int | None:
         """Base bit of an XOR code (0 for XOR-02, 1 for XOR-04), else None."""
         return {"xor02": 0, "xor04": 1}.get(self.method)
@@ -249,7 +265,7 @@ class PatternSpec:
         for axis in self.axes:
             prefix = "col" if axis == "columns" else "row"
             if m in _BINARY:
-                for b in range(self.bits(axis) - 1, -1, -1):
+                for b in range(self.bits(axis) - 1, self.min_gray_bit - 1, -1):
                     names += [f"{prefix}_b{b}", f"{prefix}_b{b}_inv"]
         for axis in self.axes:
             prefix = "col" if axis == "columns" else "row"

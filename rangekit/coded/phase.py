@@ -112,10 +112,11 @@ def decode_phase_maps(fr: CaptureStack, spec: PatternSpec, shadow, low, glob_mas
     for axis in spec.axes:
         size = spec.width if axis == "columns" else spec.height
         coarse = None
+        block = 1 << spec.min_gray_bit       # hybrid: projector px a Gray code names (its finest bit's)
         if spec.method == "hybrid":
             code = axis_code(fr, spec, axis, workers, chunk_rows)
             incons |= code < 0
-            coarse = code.astype(np.float32)
+            coarse = (code * block).astype(np.float32) + np.float32((block - 1) / 2)   # the block's centre
         ph = np.empty((H, W), np.float32)
         mod = np.empty((H, W), np.float32)
         fine = np.empty((4, H, W), np.float32)
@@ -128,8 +129,8 @@ def decode_phase_maps(fr: CaptureStack, spec: PatternSpec, shadow, low, glob_mas
                 fine[i, rs] = a
 
         run_parallel(run, row_chunks(H, chunk_rows), workers)
-        if coarse is not None:
-            incons |= np.abs(ph - coarse) > max_disagreement
+        if coarse is not None:    # a block's centre is up to (block - 1) / 2 from its columns
+            incons |= np.abs(ph - coarse) > max_disagreement + (block - 1) / 2
         incons |= (ph < -0.5) | (ph > size - 0.5)
         weak = (2 * mod < t_low) & ~shadow
         low |= weak
@@ -161,8 +162,8 @@ def _coordinate_stds(fr: CaptureStack, spec: PatternSpec, fines: dict, ok: np.nd
         B_img = fr.get("black", sub).astype(np.float32)[use]
         L = W_img[sub][use] + B_img
         prefix = "col" if spec.axes[0] == "columns" else "row"
-        n_bits = spec.bits(spec.axes[0])
-        bits = [b for b in (2, 3, 4) if b < n_bits] or list(range(n_bits))
+        n_bits, m = spec.bits(spec.axes[0]), spec.min_gray_bit
+        bits = [b for b in (2, 3, 4) if m <= b < n_bits] or list(range(m, n_bits))
         D2 = np.mean([(fr.get(f"{prefix}_b{b}", sub).astype(np.float32)[use]
                        + fr.get(f"{prefix}_b{b}_inv", sub).astype(np.float32)[use] - L) ** 2 for b in bits], axis=0)
         noise = fit_noise_model(L, D2, ka=4.0, kb=2.0)

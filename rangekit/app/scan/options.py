@@ -26,8 +26,8 @@ LASER_STEPS = 400
 #: ``artefact``: the simulated acceptance test of VDI/VDE 2634 part 2 (:mod:`rangekit.app.scan.vdi2634`).
 ARTEFACTS = ("vdi2634",)
 #: Options of a turntable scan that ``artefact`` (one view per artefact position, coded light) does not take.
-_NOT_WITH_ARTEFACT = ("resume", "method", "steps", "up", "object", "views", "patterns", "passes", "flipped",
-                      "frames", "sim_bump", "triggered")
+_NOT_WITH_ARTEFACT = ("resume", "method", "steps", "up", "object", "views", "patterns", "target_mm", "passes",
+                      "flipped", "frames", "sim_bump", "triggered")
 
 
 @dataclass(frozen=True)
@@ -43,7 +43,11 @@ class ScanOptions:
     views : turntable views over a full turn (coded light, 2..720); steps : a laser scan's steps (2..3600).
     passes : coded-light passes (1..8), the object turned over between them; flipped : with ``resume``, the
         user confirms the object is already turned over for the next pass.
-    patterns : the pattern set (:data:`rangekit.coded.patterns.PATTERN_METHODS`).
+    patterns : the pattern set: a method (:data:`rangekit.coded.patterns.PATTERN_METHODS`, its own options) or a
+        named set (:data:`rangekit.app.scan.presets.PRESETS`).
+    target_mm : a new coded-light scan's patterns are the fewest frames whose measured accuracy meets it: one view's
+        points at most this RMS (mm) against the simulator's truth on every measured object
+        (:func:`rangekit.app.scan.presets.fastest_for`; not with ``patterns``).
     seed : the simulator's noise seed (0 <= seed < 2**32).
     up : (x, y, z) of a mesh file object that points up on the turntable (Stanford meshes: (0, 1, 0)).
     artefact : ``"vdi2634"``: scan the guideline's artefacts instead (with ``out``, ``rig``, ``positions``,
@@ -79,6 +83,7 @@ class ScanOptions:
     passes: int | None = option(None, "--passes", lo=1, hi=8, integer=True, initial=1)
     flipped: bool = option(False, "--flipped")
     patterns: str | None = option(None, "--patterns", initial="hybrid")
+    target_mm: float | None = option(None, "--target-mm", lo=0.001, hi=10.0, unit="mm")
     seed: int | None = option(None, "--seed", lo=0, hi=2**32 - 1, integer=True, initial=0)
     up: tuple[float, float, float] | None = option(None, "--up")
     artefact: str | None = option(None, "--artefact")
@@ -116,6 +121,7 @@ def _check_values(o: ScanOptions) -> None:
     from rangekit.app.process.fused_outputs import MESH_EXPORT_FORMATS
     from rangekit.app.process.options import FUSION_METHODS
     from rangekit.coded.patterns import PATTERN_METHODS
+    from rangekit.app.scan.presets import PRESETS
 
     for name, what in (("out", "a new session folder"), ("resume", "a session folder"), ("rig", "'sim' or a rig file"),
                        ("object", "a built-in object's name or a mesh file")):
@@ -123,7 +129,7 @@ def _check_values(o: ScanOptions) -> None:
     check_ranges(o, OptionError)
     from rangekit.formats.sessions.session import FRAME_FORMATS
 
-    for name, choices in (("method", SCAN_METHODS), ("patterns", PATTERN_METHODS), ("artefact", ARTEFACTS),
+    for name, choices in (("method", SCAN_METHODS), ("patterns", PATTERN_METHODS + tuple(PRESETS)), ("artefact", ARTEFACTS),
                           ("frames", FRAME_FORMATS)):
         value = getattr(o, name)
         if value is not None and value not in choices:
@@ -176,6 +182,11 @@ def _check_combination(o: ScanOptions) -> None:
                           "give it with {resume} DIR")
     if o.method == "laser" and o.patterns is not None:
         raise OptionError("{patterns}: a laser scan projects no patterns; leave {patterns} out with {method} laser")
+    if o.target_mm is not None and (o.patterns is not None or o.method == "laser" or o.resume is not None):
+        raise OptionError(f"{{target_mm}} {o.target_mm:g} picks a new coded-light scan's patterns; "
+                          + ("{patterns} names them too: give one of the two" if o.patterns is not None
+                             else "a laser scan projects no patterns: leave {target_mm} out" if o.method == "laser"
+                             else "a resumed scan keeps its session's patterns: leave {target_mm} out"))
     if o.method == "laser" and o.passes not in (None, 1):
         raise OptionError(f"{{passes}}: a laser scan takes one pass, found {o.passes}; leave {{passes}} out with "
                           "{method} laser")

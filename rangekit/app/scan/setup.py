@@ -10,6 +10,7 @@ from typing import Callable
 
 import numpy as np
 from rangekit.app.scan.options import LASER_STEPS, SCAN_DEFAULTS, ScanOptions
+from rangekit.app.scan.presets import PRESETS, fastest_for, preset_of, preset_spec
 from rangekit.coded.patterns import PatternSpec, make_pattern_spec
 from rangekit.errors import ConfigError, OptionError, RangekitError
 from rangekit.formats.sessions.session import FRAME_FORMATS, CaptureSettings, Session, SimulatorSettings
@@ -97,6 +98,8 @@ def prepare_scan(options: ScanOptions, progress: Callable | None = None) -> Scan
             given["views"] = LASER_STEPS
         method, rig, obj, n_views, patterns, seed, passes = (SCAN_DEFAULTS[k] if v is None else v
                                                              for k, v in given.items())
+        if options.target_mm is not None:      # checked before anything opens: OptionError when none meets it
+            patterns = fastest_for(options.target_mm)
         folder = Path(options.out)
         if (folder / SESSION_FILE).exists():
             raise OptionError(f"{{out}} {folder}: already holds a session ({SESSION_FILE}); continue it with "
@@ -130,7 +133,7 @@ def prepare_scan(options: ScanOptions, progress: Callable | None = None) -> Scan
             simulator, files = replace(simulator, object=f"{OBJECT_FOLDER}/{object_file[0]}"), {
                 f"{OBJECT_FOLDER}/{object_file[0]}": object_file[1]}
     if spec is None:
-        spec = LaserSequence(len(the_rig.lasers)) if laser else make_pattern_spec(
+        spec = LaserSequence(len(the_rig.lasers)) if laser else _pattern_spec(
             patterns, (the_rig.projector.width, the_rig.projector.height))
     capture = None if session else replace(CaptureSettings.from_rig(the_rig, hardware=hardware or options.realtime),
                                            frame_format=options.frames or ("png" if laser else FRAME_FORMATS[0]))
@@ -144,6 +147,12 @@ def prepare_scan(options: ScanOptions, progress: Callable | None = None) -> Scan
             setup.close()
             raise
     return setup
+
+
+def _pattern_spec(patterns: str, size: tuple[int, int]) -> PatternSpec:
+    """A new coded-light scan's patterns on a ``(width, height)`` projector: a named set
+    (:data:`rangekit.app.scan.presets.PRESETS`) or a method with its own options."""
+    return preset_spec(patterns, size) if patterns in PRESETS else make_pattern_spec(patterns, size)
 
 
 def _with_exposures(setup: ScanSetup, given: tuple, progress: Callable | None) -> ScanSetup:
@@ -170,7 +179,8 @@ def _check_resume_options(session: Session, given: dict) -> None:
                 "rig": "sim" if sim is not None else (session.hardware or {}).get("rig_file", RIG_FILE),
                 "object": sim.object if sim is not None else None, "views": session.plan.views_per_pass,
                 "passes": session.plan.passes,
-                "patterns": session.pattern.method, "seed": sim.seed if sim is not None else None}
+                "patterns": session.pattern.method if given.get("patterns") not in PRESETS
+                else preset_of(session.pattern), "seed": sim.seed if sim is not None else None}
     for key, value in given.items():
         if value is None:
             continue

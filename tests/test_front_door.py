@@ -92,7 +92,7 @@ ARGUMENTS = {
             "projector_response": optional(OBJECT), "lasers": but(ITEMS, "empty")},
     "PointCloud": {"points": ARRAY, "colours": optional(ARRAY), "normals": optional(ARRAY), "sigma": optional(ARRAY)},
     "TriangleMesh": {"vertices": ARRAY, "triangles": but(ARRAY, "empty"), "vertex_colours": optional(ARRAY),
-                     "observed": optional(ARRAY)},
+                     "observed": optional(ARRAY), "carved": optional(ARRAY)},
     "as_cloud": {"x=cloud": CLOUD, "what": NAME}, "as_mesh": {"x=mesh": MESH, "what": NAME},
     "from_open3d": {"x": CLOUD}, "from_trimesh": {"x": CLOUD}, "to_trimesh": {"x": CLOUD}, "to_open3d": {"x": CLOUD},
     "estimate_normals": {"points": ARRAY, "k": NUMBER, "viewpoint": optional(VECTOR)},

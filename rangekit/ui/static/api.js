@@ -59,10 +59,16 @@ async function send(path, body, { form = null, error = null } = {}) {
   const r = await api(path, body ?? {});
   const data = await r.json().catch(() => ({ error: `HTTP ${r.status}` }));
   if (form) for (const e of form.querySelectorAll(".field-error")) e.textContent = "";
-  if (r.ok) { if (error) error.textContent = ""; return data; }
+  // On success only a refusal this call showed is cleared: the slot may already show the job's own state, pushed
+  // by the jobs socket before this response arrived (a job that failed at once).
+  if (r.ok) {
+    if (error && error.textContent === error.dataset.refusal) error.textContent = "";
+    if (error) delete error.dataset.refusal;
+    return data;
+  }
   const slot = form && data.field ? form.querySelector(`.field-error[data-for="${data.field}"]`) : null;
   if (slot) slot.textContent = data.error;
-  else if (error) error.textContent = data.error || `HTTP ${r.status}`;
+  else if (error) error.textContent = error.dataset.refusal = data.error || `HTTP ${r.status}`;
   return null;
 }
 

@@ -1,7 +1,7 @@
 """The scan a person waits for (issue 51, Deliver 1 and 3): ``--realtime`` on the simulator models the triggered rig
 (the frames the same bytes, only the time changes); the streaming volume is Open3D's VoxelBlockGrid
 (:class:`rangekit.surface.block_volume.BlockVolume`), measured against the truth; the preview is announced before
-the observed mesh. No wall-clock assert: the times are benchmarks/app/bench_time_to_mesh.py's."""
+the observed mesh. No wall-clock assert: the times are benchmarks/app/scan/bench_time_to_mesh.py's."""
 
 from __future__ import annotations
 

@@ -1,8 +1,8 @@
 """The time a person waits for the mesh (issue 51): ``rangekit scan --realtime`` of the default object, run as a
 user runs it (the CLI, a process of its own), side by side for two trees in one run, pairs in turn.
 
-    PYTHONPATH=. python benchmarks/app/bench_time_to_mesh.py --old /work/wt-302 --pairs 2 [--out /tmp/ttm]
-    PYTHONPATH=. python benchmarks/app/bench_time_to_mesh.py --old /work/wt-302 --rows old new new-png
+    PYTHONPATH=. python benchmarks/app/scan/bench_time_to_mesh.py --old /work/wt-302 --pairs 2 [--out /tmp/ttm]
+    PYTHONPATH=. python benchmarks/app/scan/bench_time_to_mesh.py --old /work/wt-302 --rows old new new-png
 
 Each run's times come from the files it writes, the same way for any version (an old tree's scan has no
 ``events.jsonl`` timestamps): the start is when the process is launched; the last frame is the newest frame file's
@@ -31,7 +31,7 @@ import sys
 import time
 from pathlib import Path
 
-HERE = Path(__file__).resolve().parents[2]
+HERE = Path(__file__).resolve().parents[3]
 
 
 def _mtime(path: Path) -> float | None:

@@ -101,12 +101,15 @@ class Memo:
     :class:`~rangekit.app.events.ViewDecoded` when they were decoded (a Dask view task announces nothing: the
     decode stage does as it takes them), ``registration`` the registration's levels and first-round pairs
     (:class:`rangekit.registration.ahead.RegistrationAhead`), ``evaluate`` the evaluator with the truth's samples
-    and the views' errors made. LOCAL's is empty: every view is decoded on the runner's threads."""
+    and the views' errors made, ``before_mesh`` called and waited for before the observed mesh is announced (a
+    scan's preview written beside the processing: a watcher has the preview first, issue 51; mesh.ply is written
+    before it, whatever it takes). LOCAL's is empty: every view is decoded on the runner's threads."""
 
     decoded: Any = field(default_factory=dict)   # a dict, or any mapping with ``in`` and ``pop``
     registration: RegistrationAhead | None = None
     evaluate: Any = None
     announced: bool = True
+    before_mesh: Callable[[], Any] | None = None
 
 
 class Runner:

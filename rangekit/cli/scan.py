@@ -343,8 +343,10 @@ def add_parsers(sub) -> None:
                            "4x apart from rangekit check's statistics")
     scan.add_argument("--no-process", action="store_true", help="acquire only (process later with 'rangekit process')")
     scan.add_argument("--realtime", action="store_true",
-                      help="the simulator keeps real time: the rig file's pattern delay (0.1 s) and frame rate, the "
-                           "projector's latency, the turntable's speed and settling (as long as a real rig takes)")
+                      help="the simulator keeps real time: the projector's latency, the turntable's speed and "
+                           "settling, the camera's frame rate (as long as a real rig takes). A new coded-light scan "
+                           "models the rig we recommend, the camera triggered by the projector's VSYNC (as "
+                           "--triggered: no pattern delay; the frames are the same bytes, only the time changes)")
     scan.add_argument("--triggered", action="store_true",
                       help="simulator: the camera is triggered by the projector's VSYNC (the session's rig file says "
                            "capture.trigger 'projector'): no pattern delay, every frame's trigger count checked, a "

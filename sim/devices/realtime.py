@@ -13,7 +13,8 @@ What then takes time, as on a rig:
   (0.5 s by default).
 
 A camera triggered by the projector (``rangekit scan --triggered``, the rig file's ``capture.trigger``
-"projector") waits no pattern delay: each pattern is shown for the whole refreshes (60 Hz) its exposure spans,
+"projector"; a new coded-light ``--realtime`` scan models that rig, issue 51: ``ScanOptions.sim_triggered``) waits
+no pattern delay: each pattern is shown for the whole refreshes (60 Hz) its exposure spans,
 the view's patterns one after the other, the frames exposed on the projector's VSYNC after its latency
 (:mod:`rangekit.sim.devices.trigger`).
 

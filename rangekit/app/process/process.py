@@ -201,6 +201,8 @@ def _fuse(registered: RegisteredViews, session: Session, options: ProcessOptions
             del trimmed
             mesh, mesh_info = save_observed(out, full, rule, options)
             del full
+            if runner.memo.before_mesh is not None:   # a scan's preview: announced first (Memo)
+                runner.memo.before_mesh()
             runner.emit(MeshReady("observed", out / MESH_FILE, mesh))
             agreement.append(children.enter_context(_agreement_beside(options.report, mesh, registered, runner)))
             if evaluate is not None:

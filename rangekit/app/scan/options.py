@@ -61,7 +61,9 @@ class ScanOptions:
         of ``processing`` it names (``fusion``, ``report``, ``mesh_format``) and reads None afterwards, so that
         ``processing`` is the one source; given together with a ``processing`` whose field differs, refused.
     realtime : the simulator keeps real time: the rig file's waits and frame rate, the projector's latency,
-        the turntable's speed (:mod:`rangekit.sim.devices.realtime`); the frames are the same bytes.
+        the turntable's speed (:mod:`rangekit.sim.devices.realtime`); the frames are the same bytes. A new
+        coded-light scan then models the rig we recommend, the camera triggered by the projector's VSYNC
+        (issue 51: as ``triggered``; :attr:`sim_triggered`): the frames are the same bytes, only the time changes.
     triggered : a new simulated coded-light scan's camera is triggered by the projector's VSYNC (the session's rig
         file says ``capture.trigger`` "projector"): no pattern delay, each frame's trigger count checked, a missed
         trigger named and its view taken again (:mod:`rangekit.app.acquire.triggered`). A hardware rig's file says
@@ -109,6 +111,13 @@ class ScanOptions:
     def folder(self) -> Path:
         """The session folder: ``resume`` or ``out``."""
         return Path(self.resume if self.resume is not None else self.out)
+
+    @property
+    def sim_triggered(self) -> bool:
+        """Whether a new simulated scan's camera is triggered by the projector (the one rule): ``triggered``, or
+        ``realtime`` on a new coded-light scan (issue 51: real time on the simulator models the recommended rig,
+        :mod:`rangekit.sim.devices.realtime`). A resumed session's rig file says it itself."""
+        return self.resume is None and self.method != "laser" and (self.triggered or self.realtime)
 
     @property
     def turntable_positions(self) -> int | None:

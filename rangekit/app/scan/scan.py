@@ -116,9 +116,21 @@ def _scan(options: ScanOptions, bus: EventBus, t0: float) -> ScanResult:
                 bus.unsubscribe(streaming.on_event)
                 session = _take_again(options, session, streaming.steps.moved, bus)
             with start(Where.THREAD, streaming.write_preview) as preview:   # the preview beside the processing
-                processed = _process(session, process_options, bus, Plan.STREAMING, streaming.memo())
+                memo = streaming.memo()
+                memo.before_mesh = _waiting(preview)    # announced before the observed mesh (issue 51)
+                processed = _process(session, process_options, bus, Plan.STREAMING, memo)
                 preview.result()
     return ScanResult(options.folder, session, acquisition_s, processed, time.perf_counter() - t0)
+
+
+def _waiting(call):
+    """A call that waits for ``call`` to end, its error left to ``call.result()`` afterwards."""
+    def wait() -> None:
+        try:
+            call.result()
+        except Exception:   # noqa: BLE001 - raised by the scan's own preview.result() after the processing
+            pass
+    return wait
 
 
 def _take_again(options: ScanOptions, session: Session, moved: dict, on_event: OnEvent | None) -> Session:

@@ -126,7 +126,7 @@ def prepare_scan(options: ScanOptions, progress: Callable | None = None) -> Scan
     else:
         devices, simulator = _simulator(session, obj, seed, the_rig, laser,
                                         object_file if session is None else None, passes, options.realtime,
-                                        options.triggered)
+                                        options.sim_triggered)
         the_rig, hw = (session.rig if session else _scan_rig(devices.rig, laser, seed, progress)), None
         if session is None and object_file is not None:
             # The session keeps its own copy of the object's mesh, named relative to its folder.

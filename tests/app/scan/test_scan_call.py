@@ -162,6 +162,8 @@ def test_the_call_makes_the_files_of_the_command_and_reads_each_frame_once(tmp_p
     decoded = [e for e in seen if isinstance(e, ev.ViewDecoded)]
     assert [e.index for e in decoded] == list(range(12))
     assert max(seen.index(e) for e in decoded) < seen.index(ev.StageStarted("fuse"))
+    kinds = [e.kind for e in seen if isinstance(e, ev.MeshReady)]
+    assert kinds[:2] == ["preview", "observed"], kinds   # the preview first (issue 51: Memo.before_mesh)
     assert main(["-q", "scan", "--out", str(by_cli), "--object", "lumpy"]) == 0
     for name in ("mesh.ply", "mesh_watertight.ply", "merged.ply", "poses.json"):
         assert (by_call / name).read_bytes() == (by_cli / name).read_bytes(), name

@@ -5,8 +5,10 @@ The scan's live processing (the STREAMING placement, :class:`rangekit.app.runner
 capture's threads come first, so the worker runs at niceness ``nice`` (Linux schedules threads: the kernel gives
 the capture the cores whenever it needs them, the worker what they leave), and while the capture is behind it
 starts no new item (:meth:`QueueWorker.hold`, :meth:`QueueWorker.release`). Items are handled in the order
-given; :meth:`QueueWorker.finish` handles what is queued, then ends the thread; :meth:`QueueWorker.stop` ends it
-after the item being handled. The first exception of ``fn`` ends the worker and is kept in
+given; :meth:`QueueWorker.finish` ends the thread after the item being handled and handles what is left on the
+caller's own thread, at the caller's priority (once the capture is over the work is what the caller waits for: a
+thread cannot take back the priority it gave away without privilege, and at niceness 10 beside other programs
+it got almost no CPU, issue 51); :meth:`QueueWorker.stop` ends it after the item being handled. The first exception of ``fn`` ends the worker and is kept in
 :attr:`QueueWorker.error` (the caller decides what it means); the caller's thread never sees it raised.
 """
 
@@ -33,7 +35,8 @@ class QueueWorker:
         self._queue: queue.Queue = queue.Queue()
         self._go = threading.Event()     # cleared while held
         self._go.set()
-        self._stopping = False
+        self._stopping = self._handing_over = False
+        self._handed: list = []          # the item the worker took when told to hand over (finish)
         self.paused = 0
         self.error: BaseException | None = None
         self._thread = threading.Thread(target=self._run, name=name, daemon=True)
@@ -52,10 +55,25 @@ class QueueWorker:
         self._go.set()
 
     def finish(self) -> None:
-        """Handle every item queued (no more holding back), then end the thread; returns when it has ended."""
+        """Handle every item queued (no more holding back): the worker ends after the item it is handling, the rest
+        are handled here, on the caller's thread and priority (module doc), unless an item failed. Returns when all
+        are done."""
+        self._handing_over = True
         self._go.set()
         self._queue.put(_END)
         self._thread.join()
+        left = self._handed
+        while True:
+            try:
+                item = self._queue.get_nowait()
+            except queue.Empty:
+                break
+            if item is not _END:
+                left.append(item)
+        for item in left:
+            if self.error is not None:
+                return
+            self._call(item)
 
     def stop(self) -> None:
         """End the thread after the item being handled; the queued ones are dropped. Returns when it has ended."""
@@ -66,18 +84,25 @@ class QueueWorker:
 
     def _run(self) -> None:
         _lower_priority(self._nice)
-        try:
-            while True:
-                item = self._queue.get()
-                if item is _END or self._stopping:
+        while self.error is None:
+            item = self._queue.get()
+            if item is _END or self._stopping:
+                return
+            if not self._go.is_set():   # held: wait for the release
+                self.paused += 1
+                self._go.wait()
+                if self._stopping:
                     return
-                if not self._go.is_set():   # held: wait for the release
-                    self.paused += 1
-                    self._go.wait()
-                    if self._stopping:
-                        return
-                self._fn(item)
-        except BaseException as exc:   # kept for the caller (module doc)
+            if self._handing_over:      # finish(): the caller handles this item and the rest, in order
+                self._handed.append(item)
+                return
+            self._call(item)
+
+    def _call(self, item: Any) -> None:
+        """``fn(item)``, its exception kept in :attr:`error` (module doc)."""
+        try:
+            self._fn(item)
+        except BaseException as exc:   # noqa: BLE001 - kept for the caller (module doc)
             self.error = exc
 
 

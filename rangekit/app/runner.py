@@ -254,8 +254,9 @@ class StreamingWorker:
         return self._worker.error
 
     def drain(self) -> None:
-        """The acquisition is over: the views queued go through their steps at once (each on every core), then
-        the worker ends."""
+        """The acquisition is over: the worker ends after the view it is on and the views queued go through their
+        steps at once, on the caller's thread at its priority (each on every core;
+        :meth:`rangekit._runtime.queue_worker.QueueWorker.finish`)."""
         self.steps.acquisition_over = True
         self._worker.finish()
 

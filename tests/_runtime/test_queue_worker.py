@@ -10,20 +10,40 @@ import threading
 from rangekit._runtime.queue_worker import QueueWorker
 
 
-def test_items_are_handled_in_order_on_a_lower_priority_thread():
+def test_items_run_in_order_on_a_lower_priority_thread_and_what_is_left_at_finish_on_the_caller():
+    """Until finish the items run on the worker at its niceness; from finish on, the worker ends after the item it
+    is handling and the rest run on the caller's thread at the caller's priority (issue 51: at niceness 10 beside
+    other programs the worker got no CPU once the capture was over)."""
     seen, where = [], []
+    started, gate = threading.Event(), threading.Event()
 
     def fn(item):
         seen.append(item)
-        where.append((threading.current_thread().name, os.getpriority(os.PRIO_PROCESS, threading.get_native_id())))
+        where.append((item, threading.current_thread().name,
+                      os.getpriority(os.PRIO_PROCESS, threading.get_native_id())))
+        if item == 2:
+            started.set()
+            gate.wait(30)
 
     before = os.getpriority(os.PRIO_PROCESS, 0)
     worker = QueueWorker(fn, name="rk-test-worker", nice=min(19, before + 5))
-    for k in range(5):
+    for k in range(3):
         worker.put(k)
+    assert started.wait(30)       # item 2 is being handled on the worker
+    for k in range(3, 6):
+        worker.put(k)
+
+    def let_go():                 # item 2 ends once finish has begun, so 3.. are the caller's
+        while not worker._handing_over:
+            threading.Event().wait(0.005)
+        gate.set()
+
+    threading.Thread(target=let_go).start()
     worker.finish()
-    assert seen == [0, 1, 2, 3, 4] and worker.error is None and worker.paused == 0
-    assert set(where) == {("rk-test-worker", min(19, before + 5))}
+    lower, caller = min(19, before + 5), threading.current_thread().name
+    assert seen == [0, 1, 2, 3, 4, 5] and worker.error is None and worker.paused == 0
+    assert where == [(0, "rk-test-worker", lower), (1, "rk-test-worker", lower), (2, "rk-test-worker", lower),
+                     (3, caller, before), (4, caller, before), (5, caller, before)]
     assert os.getpriority(os.PRIO_PROCESS, 0) == before   # the caller's own priority is untouched
 
 

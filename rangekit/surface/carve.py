@@ -30,7 +30,7 @@ from rangekit.errors import InputError
 from rangekit.geometry import apply_T, invert_T
 
 __all__ = ["CARVE_MARGIN", "GRID_VOXELS", "TABLE_COLUMNS", "TableView", "table_view", "view_depth",
-           "CarvedSpace", "free_depth", "carve", "hold_out"]
+           "CarvedSpace", "free_depth", "carve", "hold_out", "close_in_hull"]
 
 #: Metres: a voxel is carved when its centre lies this far in front of the depth a view measured along the
 #: pixel's ray: 20x the views' noise (0.015 mm RMS on the default object), so no noise carves the surface. The
@@ -226,3 +226,35 @@ def hold_out(vertices: np.ndarray, movable: np.ndarray, space: CarvedSpace, *,
     on_hull = movable & (np.abs(d) <= h)
     return V, on_hull
 
+
+
+def close_in_hull(vertices: np.ndarray, triangles: np.ndarray, movable: np.ndarray,
+                  space: CarvedSpace) -> tuple[np.ndarray, np.ndarray]:
+    """``(vertices, on_hull)`` as :func:`hold_out` gives them, the ``movable`` (V,) bool vertices of the closed mesh
+    ``vertices`` (V, 3, world), ``triangles`` (F, 3) first placed where the surface around them continues its
+    curvature (:func:`rangekit.surface.watertight.continue_curvature`, curvature radii under a voxel not
+    continued: an edge, not a surface), then held out of carved space. Poisson's closing and the thin-plate
+    fairing continue only the slope: a wide hole in a curved surface sags (the bowl's inside floor 3 mm deep),
+    or balloons out (the default object's underside 5.4 mm out, onto the hull). A connected part of the movable
+    vertices that the continuation leaves off the grid or more than a voxel inside carved space is held out from
+    where it was given instead."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    from rangekit.surface.watertight import continue_curvature
+
+    F = np.asarray(triangles, np.int64)
+    movable = np.asarray(movable, dtype=bool)
+    given, given_on = hold_out(vertices, movable, space)
+    V, on_hull = hold_out(continue_curvature(vertices, F, movable, max_curvature=1.0 / space.voxel), movable, space)
+    g = space._grid(V)
+    bad = movable & ((space.depth_inside(V) > space.voxel)
+                     | np.any((g < -0.5) | (g > np.array(space.carved.shape) - 0.5), axis=1))
+    if bad.any():
+        e = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
+        e = e[movable[e[:, 0]] & movable[e[:, 1]]]
+        n = len(movable)
+        _, part = connected_components(coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n)), directed=False)
+        back = movable & np.isin(part, np.unique(part[bad]))
+        V[back], on_hull[back] = given[back], given_on[back]
+    return V, on_hull

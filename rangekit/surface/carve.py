@@ -17,7 +17,8 @@ point lit along its projector ray, were tried as more views and carved nothing m
   (:func:`rangekit.surface.watertight.continue_curvature`), then held out: what ``rangekit process`` does.
 
 Units are metres; the views' cameras and the mesh share one frame ("world"); the grid lives in the table frame
-(``T_world_table``: z up from the table top). Deterministic: numpy and scipy only.
+(``T_world_table``: z up from the table top). Deterministic: numpy, scipy and one numba kernel (each voxel against
+each view, the lens model's own compiled distortion: 0.33 CPU-s for 12 views of the default object, 2.7 in numpy).
 """
 
 from __future__ import annotations
@@ -26,7 +27,9 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
+from rangekit._compiled.lens import distort_point
 from rangekit.camera import PinholeCamera
 from rangekit.errors import InputError
 from rangekit.geometry import apply_T, invert_T
@@ -45,7 +48,7 @@ GRID_VOXELS = 160
 #: A decoded pixel off the object sees the table top when its projector column is within this many columns of
 #: the one the table top would show it (the decoding's error is a small fraction of a column).
 TABLE_COLUMNS = 1.0
-_CHUNK = 1 << 19   # voxel centres projected at a time (each view): 12 MB of float64 temporaries
+_CHUNK = 1 << 19   # voxels tested at a time (each view)
 
 
 @dataclass(frozen=True, eq=False)
@@ -169,31 +172,57 @@ def carve(views: Sequence[tuple[np.ndarray, PinholeCamera]], T_world_table: np.n
     carved[:, :, :2] = True          # centres at -1.5 h and -0.5 h: under the table top
     space = CarvedSpace(np.asarray(T_world_table, np.float64), lo, h, carved)
     flat = carved.reshape(-1)
+    cams = [(np.ascontiguousarray(free, dtype=np.float32), camera) for free, camera in views]
     for start in range(0, flat.size, _CHUNK):
         idx = np.arange(start, min(start + _CHUNK, flat.size))
         idx = idx[~flat[idx]]
-        X = space.centres(np.column_stack(np.unravel_index(idx, shape)))
-        for free, camera in views:
+        for free, camera in cams:
             if not len(idx):
                 break
-            hit = _seen_empty(free, camera, X, margin)
+            hit = _seen_empty(free, camera, space, idx, margin)
             flat[idx[hit]] = True
-            idx, X = idx[~hit], X[~hit]
+            idx = idx[~hit]
     return space
 
 
-def _seen_empty(free: np.ndarray, camera: PinholeCamera, X: np.ndarray, margin: float) -> np.ndarray:
-    """(N,) bool: the world points ``X`` lie in front of ``free`` (the view's :func:`free_depth`) by ``margin``."""
-    Xc = apply_T(camera.T_cam_world, X)
-    z = Xc[:, 2]
-    uv = camera.project_cam(Xc)
-    H, W = free.shape
-    with np.errstate(invalid="ignore"):
-        u, v = np.rint(uv[:, 0]), np.rint(uv[:, 1])
-        ok = (z > 0) & (u >= 0) & (u < W) & (v >= 0) & (v < H)
-    out = np.zeros(len(X), dtype=bool)
-    out[ok] = z[ok] < free[v[ok].astype(np.int64), u[ok].astype(np.int64)] - margin
+def _seen_empty(free: np.ndarray, camera: PinholeCamera, space: CarvedSpace, idx: np.ndarray,
+                margin: float) -> np.ndarray:
+    """(N,) bool: the centres of the voxels ``idx`` (N,) (flat indices of ``space``'s grid) lie in front of
+    ``free`` (the view's :func:`free_depth`, float32) by ``margin``, each projected as ``camera.project`` does
+    (the lens model's own compiled :func:`rangekit._compiled.lens.distort_point`), in one compiled pass."""
+    from rangekit.lens import _full_coeffs
+
+    A = (camera.T_cam_world @ space.T_world_table)[:3]          # camera from table: the grid's own frame
+    out = np.empty(len(idx), dtype=np.bool_)
+    _seen_empty_kernel(np.ascontiguousarray(idx, np.int64), np.array(space.carved.shape, np.int64),
+                       np.asarray(space.origin, np.float64), float(space.voxel), np.ascontiguousarray(A),
+                       np.asarray(camera.K, np.float64), _full_coeffs(np.asarray(camera.dist, np.float64)), free,
+                       float(margin), out)
     return out
+
+
+@njit(cache=True, nogil=True)
+def _seen_empty_kernel(idx, shape, origin, h, A, K, d, free, margin, out):  # pragma: no cover - compiled
+    """:func:`_seen_empty`: each voxel's table-frame centre to the camera, distorted, its nearest pixel's test."""
+    H, W = free.shape
+    for n in range(len(idx)):
+        i = idx[n]
+        iz = i % shape[2]
+        iy = (i // shape[2]) % shape[1]
+        ix = i // (shape[2] * shape[1])
+        x = origin[0] + ix * h
+        y = origin[1] + iy * h
+        z = origin[2] + iz * h
+        zc = A[2, 0] * x + A[2, 1] * y + A[2, 2] * z + A[2, 3]
+        out[n] = False
+        if not zc > 0:
+            continue
+        xd, yd = distort_point((A[0, 0] * x + A[0, 1] * y + A[0, 2] * z + A[0, 3]) / zc,
+                               (A[1, 0] * x + A[1, 1] * y + A[1, 2] * z + A[1, 3]) / zc, d)
+        u = np.rint(K[0, 0] * xd + K[0, 2])
+        v = np.rint(K[1, 1] * yd + K[1, 2])
+        if 0 <= u < W and 0 <= v < H:
+            out[n] = zc < free[int(v), int(u)] - margin
 
 
 def hold_out(vertices: np.ndarray, movable: np.ndarray, space: CarvedSpace, *,

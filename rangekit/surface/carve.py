@@ -63,18 +63,40 @@ class TableView:
 
 def table_view(camera: PinholeCamera, projector: PinholeCamera, T_world_table: np.ndarray) -> TableView:
     """The :class:`TableView` of ``camera`` and ``projector`` (rig world) on the table plane (z = 0 of
-    ``T_world_table``): computed once for a turntable scan, whose views all see the same plane."""
+    ``T_world_table``): computed once for a turntable scan, whose views all see the same plane; one compiled pass
+    over the camera's cached pixel rays (0.9 CPU-s in numpy for 1280 x 1024, the projection's temporaries)."""
     from rangekit.camera import pixel_rays
+    from rangekit.lens import _full_coeffs
 
-    d = pixel_rays(camera).reshape(-1, 3)                        # camera frame
+    d = np.ascontiguousarray(pixel_rays(camera).reshape(-1, 3), dtype=np.float64)      # camera frame
     T_cam_table = camera.T_cam_world @ np.asarray(T_world_table, np.float64)
     n, p0 = T_cam_table[:3, 2], T_cam_table[:3, 3]             # the plane's normal and a point, camera frame
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = (p0 @ n) / (d @ n)
-    t = np.where(t > 0, t, np.nan)
-    X = apply_T(camera.T_world_cam, d * t[:, None])
+    A = (projector.T_cam_world @ camera.T_world_cam)[:3]       # projector from camera
+    depth, col = np.empty(len(d)), np.empty(len(d))
+    _table_kernel(d, np.ascontiguousarray(n), float(p0 @ n), np.ascontiguousarray(A),
+                  np.asarray(projector.K, np.float64), _full_coeffs(np.asarray(projector.dist, np.float64)), depth, col)
     shape = (camera.height, camera.width)
-    return TableView((d[:, 2] * t).reshape(shape), projector.project(X)[:, 0].reshape(shape))
+    return TableView(depth.reshape(shape), col.reshape(shape))
+
+
+@njit(cache=True, nogil=True)
+def _table_kernel(d, n, c, A, K, dist, depth, col):  # pragma: no cover - compiled
+    """:func:`table_view` per pixel ray ``d[i]`` (camera frame): its hit on the plane ``x . n = c``, that point's
+    camera z and its projector column (the lens model's own distortion); NaN where the ray misses the plane
+    or the point lies behind the projector."""
+    for i in range(len(d)):
+        t = c / (d[i, 0] * n[0] + d[i, 1] * n[1] + d[i, 2] * n[2])
+        depth[i] = np.nan
+        col[i] = np.nan
+        if not (t > 0 and np.isfinite(t)):
+            continue
+        x, y, z = d[i, 0] * t, d[i, 1] * t, d[i, 2] * t
+        depth[i] = z
+        zp = A[2, 0] * x + A[2, 1] * y + A[2, 2] * z + A[2, 3]
+        if zp > 0:
+            xd, _ = distort_point((A[0, 0] * x + A[0, 1] * y + A[0, 2] * z + A[0, 3]) / zp,
+                                  (A[1, 0] * x + A[1, 1] * y + A[1, 2] * z + A[1, 3]) / zp, dist)
+            col[i] = K[0, 0] * xd + K[0, 2]
 
 
 def view_depth(depth: np.ndarray, proj_col: np.ndarray, table: TableView) -> np.ndarray:

@@ -131,3 +131,23 @@ def test_table_view_and_view_depth():
 def test_carve_refuses_bad_bounds():
     with pytest.raises(InputError, match="hi > lo"):
         carve([], np.eye(4), np.zeros(3), np.zeros(3))
+
+
+def test_close_in_hull_continues_the_curvature_of_a_flattened_underside(space):
+    """The sphere's underside (a 50-degree cap around the point resting on the table) given flattened, the rest on
+    the true sphere: holding out alone leaves the flat guess (it lies inside the hull), the continued curvature
+    brings it back to within a millimetre of the sphere, no vertex more than a voxel inside carved space."""
+    import trimesh
+
+    from rangekit.surface.carve import close_in_hull
+
+    m = trimesh.creation.icosphere(subdivisions=5, radius=R)
+    V, F = np.asarray(m.vertices) + CENTRE, np.asarray(m.faces)
+    cap = V[:, 2] < R * (1 - np.cos(np.radians(50)))
+    V[cap, 2] = R * (1 - np.cos(np.radians(50)))          # the cap flattened: a guess 11 mm off at its middle
+    err = lambda P: np.abs(np.linalg.norm(P[cap] - CENTRE, axis=1) - R)   # noqa: E731
+    held, _ = hold_out(V, cap, space)
+    closed, on_hull = close_in_hull(V, F, cap, space)
+    assert err(held).max() > 0.01 and err(closed).max() < 0.001, (err(held).max(), err(closed).max())
+    assert space.depth_inside(closed).max() <= space.voxel
+    assert not on_hull[~cap].any() and np.array_equal(closed[~cap], V[~cap])

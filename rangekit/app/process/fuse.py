@@ -153,13 +153,14 @@ def carved_space(registered: RegisteredViews, observed: TriangleMesh, rig: Rig, 
 def save_closed(folder, closed: TriangleMesh, rule, options: ProcessOptions,
                 space=None) -> tuple[TriangleMesh, MeshFigures]:
     """The closed surface with each vertex flagged observed or not, written as ``mesh_watertight.ply``; with
-    ``space`` (:func:`carved_space`) its unobserved vertices held out of carved space
-    (:func:`rangekit.surface.carve.hold_out`) and flagged ``carved`` where they lie on the hull."""
+    ``space`` (:func:`carved_space`) its unobserved vertices placed where the surface continues its curvature and
+    held out of carved space (:func:`rangekit.surface.carve.close_in_hull`), flagged ``carved`` where they lie on
+    the hull."""
     watertight = rule.flagged(closed)
     if space is not None:
-        from rangekit.surface.carve import hold_out
+        from rangekit.surface.carve import close_in_hull
 
-        V, on_hull = hold_out(watertight.vertices, ~watertight.observed, space)
+        V, on_hull = close_in_hull(watertight.vertices, watertight.triangles, ~watertight.observed, space)
         watertight = TriangleMesh(V, watertight.triangles, watertight.vertex_colours, watertight.observed, on_hull)
     return watertight, save_one(folder, watertight, options.fusion, WATERTIGHT_FILE, options.mesh_format)
 

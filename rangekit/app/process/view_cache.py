@@ -53,8 +53,7 @@ def cache_settings(session: Session, method: str, table_margin: float,
                 "edge_margin_px": EDGE_MARGIN_PX,
                 "pattern": spec.to_dict()["method"], "full_scale": full_scale,
                 "projector_response": None if rig.projector_response is None else rig.projector_response.to_dict()}
-    if (max_motion is not None and getattr(spec, "method", None) in MOTION_METHODS
-            and not getattr(spec, "min_gray_bit", 0)):    # the check reads every Gray bit (a hybrid's min_bit 0)
+    if max_motion is not None and getattr(spec, "method", None) in MOTION_METHODS:   # a min_bit hybrid: its blocks
         settings["max_motion"] = float(max_motion)
     if session.capture.exposures_us:      # multi-exposure: each exposure decoded, merged per pixel
         settings["exposures_us"] = list(session.capture.exposures_us)

@@ -44,8 +44,8 @@ class ScanOptions:
     passes : coded-light passes (1..8), the object turned over between them; flipped : with ``resume``, the
         user confirms the object is already turned over for the next pass.
     patterns : the pattern set: a method (:data:`rangekit.coded.patterns.PATTERN_METHODS`, its own options) or a
-        named set (:data:`rangekit.app.scan.presets.PRESETS`); default ``hybrid-8step-min3`` (48 frames: Gray code without
-        its 3 finest bits + 8 steps of a 16 px period, as accurate as the 60-frame ``hybrid``; issue 51).
+        named set (:data:`rangekit.app.scan.presets.PRESETS`); default ``hybrid-8step-min3`` (48 frames: Gray code
+        without its 3 finest bits + 8 steps of a 16 px period, as accurate as the 60-frame ``hybrid``; issue 51).
     target_mm : a new coded-light scan's patterns are the fewest frames whose measured accuracy meets it: one view's
         points at most this RMS (mm) against the simulator's truth on every measured object
         (:func:`rangekit.app.scan.presets.fastest_for`; not with ``patterns``).

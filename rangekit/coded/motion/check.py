@@ -205,7 +205,7 @@ def check_motion(fr: CaptureStack, spec: PatternSpec, codes: dict[str, np.ndarra
             o = _tiled_offsets(res, lo, lv, edge_bit_lut(size), nb)
             offsets[axis] = o
             prefix = "col" if axis == "columns" else "row"
-            named = max(NAMED_OFFSET_CODES / (1 << m), 0.5 * float(o.max()))   # the bits displaced about as much as the most
+            named = max(NAMED_OFFSET_CODES, 0.5 * float(o.max()))   # the bits displaced about as much as the most
             for b in range(nb - 1, -1, -1):                        # in capture order: most significant first
                 if o[b] > named:
                     moved += [f"{prefix}_b{b}", f"{prefix}_b{b}_inv"]
@@ -240,7 +240,8 @@ def _flag_axis(stack: np.ndarray, spec: PatternSpec, axis: str, code: np.ndarray
     the axis's codes; ``t``: their crossings (:func:`rangekit.coded.binary.axis_crossings`); ``level``: (H, W) how
     many finest bits are not checked at each pixel (:func:`unread_levels`); ``frames``: each bit's pattern and
     inverse frame in ``stack`` (bit 0 first); ``weak``: grey levels; ``limit``: codes (of each level); ``max_gap``:
-    camera pixels between successive edges (:data:`EDGE_GAP_PX`)."""
+    camera pixels between successive edges (:data:`EDGE_GAP_PX`); ``confirm``: an edge over the limit flags only
+    where its neighbours' residuals confirm it (:func:`_displaced_edges`; a hybrid's blocks)."""
     from rangekit.coded.motion import _kernels as M
 
     along = axis == "rows"                     # row codes: their edges run down camera columns

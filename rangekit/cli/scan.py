@@ -321,8 +321,7 @@ def add_parsers(sub) -> None:
     lazy_help(scan.add_argument("--patterns", metavar="PATTERNS",
                                 help="pattern set: a method (rangekit.coded.patterns.PATTERN_METHODS) or a named set "
                                      "(rangekit.app.scan.presets.PRESETS, docs/coded-light.md 'Frames against "
-                                     "accuracy'; default {patterns}: Gray code without its 3 finest bits + phase "
-                                     "shift, 48 frames)"), values)
+                                     "accuracy'; default {patterns}: Gray code + phase shift)"), values)
     scan.add_argument("--target-mm", type=finite_float, metavar="MM",
                       help="the patterns of fewest frames whose measured accuracy meets MM: one view's points at most "
                            "MM RMS against the simulator's truth (docs/coded-light.md, 'Frames against accuracy'; "

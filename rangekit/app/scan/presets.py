@@ -8,8 +8,7 @@ percentile (mm) and the completeness on the default object (``lumpy``) and the z
 ("Frames against accuracy") shows the table.
 
 :func:`fastest_for` picks the preset of fewest frames whose *worst* RMS over those objects is at most the target:
-``rangekit scan --target-mm 0.05``. A scan's default is ``hybrid-8step-min3`` (issue 51: the 60-frame ``hybrid``'s
-accuracy in 48 frames, motion check included; :class:`rangekit.app.scan.options.ScanOptions` ``patterns``).
+``rangekit scan --target-mm 0.05``.
 """
 
 from __future__ import annotations

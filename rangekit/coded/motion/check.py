@@ -52,11 +52,16 @@ checked on what its Gray frames are: the Gray code of its ``2**m`` px blocks
 pixels (:data:`MOTION_LIMIT_CODES` / 2**m blocks) and the edges may be 2**m times as far apart
 (:data:`EDGE_GAP_PX`). Blocks' edges are far apart (about 11 camera pixels on the default rig), so a crease of the
 surface, where the object stands on the table, changes their spacing much as a move would: there an edge is flagged
-only when both its neighbours' residuals go the other way (:data:`CONFIRM_SHARE`). On the default object with a
-0.5 mm knock (``hybrid-8step-min3``, :func:`rangekit.coded.motion.detect.detect_motion`): still 0.00%, a knock from
-col_b3 (its finest column bit) on 19.4%, from col_b4 5.4%, from col_b5 2.9%, from col_b8 0.1% (a coarse bit's few
-edges; the full code misses it too). Its frames are not named: the blocks' bits' offsets, solved as above, carry the
-surface's curvature over a block's width as much as a move (the knocks named bits 4 to 6 for any of them).
+only when both its neighbours' residuals go the other way (:data:`CONFIRM_SHARE`); codes turn back by at most
+``MAX_TURN_BACK >> m`` blocks (a longer step back is a depth edge in projector pixels too: the zoo's still ``thin``
+and ``bowl`` 2.0-4.3% and 1.1-1.4% flagged before, 0.33-0.57% and 0.00% after). On the default object with a 0.5 mm
+knock (``hybrid-8step-min3``, :func:`rangekit.coded.motion.detect.detect_motion`): still 0.00%, a knock from col_b3
+(its finest column bit) on 19.3%, from col_b4 4.9%, from col_b5 2.2%, from col_b8 0.1% (a coarse bit's few edges).
+Its frames are not named: the blocks' bits' offsets, solved as above, carry the surface's curvature over a block's
+width as much as a move (the knocks named bits 4 to 6 for any of them). **Not yet fit for refusing views**: a still
+upright bunny (``--object bun_zipper.ply --up 0 1 0``, 6 views) is 4.2-9.2% flagged, its bumps over a block's width
+(8 projector px) displacing the edges as a knock would (still 2.6% with the limit doubled and :data:`CONFIRM_SHARE`
+0.5); ``rangekit process`` does not check such a view (:func:`rangekit.app.process.view_cache.cache_settings`).
 
 What it cannot see: a move between the column frames and the row frames, or before the first bit, leaves each
 axis's bits consistent among themselves (the capture is then one of the moved object, up to its white and black
@@ -192,7 +197,7 @@ def check_motion(fr: CaptureStack, spec: PatternSpec, codes: dict[str, np.ndarra
                  else np.zeros(fr.shape, np.int8))
         t = crossings[axis] if crossings and axis in crossings else axis_crossings(fr, spec, axis, code)
         flags, res, lo, lv = _flag_axis(fr.stack, spec, axis, code, t, level, (p_by_bit, i_by_bit), weak,
-                                        limit / (1 << m), EDGE_GAP_PX * (1 << m), line_pairs, confirm=m > 0)
+                                        limit / (1 << m), EDGE_GAP_PX * (1 << m), line_pairs, blocks_bits=m)
         mask |= flags
         residuals[axis] = res, lo, lv
     mask &= decoded
@@ -233,15 +238,16 @@ def unread_levels(fr: CaptureStack, p_by_bit: np.ndarray, i_by_bit: np.ndarray, 
 
 def _flag_axis(stack: np.ndarray, spec: PatternSpec, axis: str, code: np.ndarray, t: np.ndarray, level: np.ndarray,
                frames: tuple[np.ndarray, np.ndarray], weak: float, limit: float, max_gap: float, line_pairs: bool,
-               confirm: bool = False) -> tuple[np.ndarray, ...]:
+               blocks_bits: int = 0) -> tuple[np.ndarray, ...]:
     """One axis's check (:func:`check_motion`): ``(flags (H, W) bool, residuals, lower codes, levels)``, the last
     three along rows of the axis's crossings (camera rows for column codes, camera columns for row codes; each
     residual in codes of its level: :func:`rangekit.coded.motion._kernels.crossing_residuals`). ``code``: (H, W)
     the axis's codes; ``t``: their crossings (:func:`rangekit.coded.binary.axis_crossings`); ``level``: (H, W) how
     many finest bits are not checked at each pixel (:func:`unread_levels`); ``frames``: each bit's pattern and
     inverse frame in ``stack`` (bit 0 first); ``weak``: grey levels; ``limit``: codes (of each level); ``max_gap``:
-    camera pixels between successive edges (:data:`EDGE_GAP_PX`); ``confirm``: an edge over the limit flags only
-    where its neighbours' residuals confirm it (:func:`_displaced_edges`; a hybrid's blocks)."""
+    camera pixels between successive edges (:data:`EDGE_GAP_PX`); ``blocks_bits``: m of a hybrid's 2**m px blocks
+    (0: the codes themselves): an edge over the limit flags only where its neighbours' residuals confirm it
+    (:func:`_displaced_edges`), and codes turn back only by at most ``MAX_TURN_BACK >> m`` blocks."""
     from rangekit.coded.motion import _kernels as M
 
     along = axis == "rows"                     # row codes: their edges run down camera columns
@@ -259,11 +265,11 @@ def _flag_axis(stack: np.ndarray, spec: PatternSpec, axis: str, code: np.ndarray
     res = np.empty(t2.shape, np.float64)
     lo = np.empty(t2.shape, np.int64)
     M.crossing_residuals(c2, l2, tl, max_gap, stack, p_by_bit, i_by_bit, lut, frame_words(nb, spec.xor_base),
-                         float(weak), along, res, lo)
+                         float(weak), along, res, lo, M.MAX_TURN_BACK >> blocks_bits)
     lv = l2[:, :-1]
     res, limits = still_baseline(res, lo, lv, lut, nb, limit)
     flags = np.empty(c2.shape, bool)
-    if confirm:
+    if blocks_bits:
         M.flag_bracketed(tl, _displaced_edges(res / limits[lv], lo, lv), 1.0, flags)
     else:
         M.flag_bracketed(tl, res / limits[lv] if l2.any() else res, 1.0 if l2.any() else float(limits[0]), flags)
@@ -293,7 +299,8 @@ def _displaced_edges(r: np.ndarray, lo: np.ndarray, level: np.ndarray) -> np.nda
     if not big.any():
         return r
     adjacent = (ys[1:] == ys[:-1]) & (np.abs(c[1:] - c[:-1]) == np.left_shift(1, m[1:])) & (m[1:] == m[:-1])
-    against = adjacent & np.isfinite(v[1:]) & np.isfinite(v[:-1]) & (v[1:] * v[:-1] < 0)
+    finite = np.isfinite(v)
+    against = adjacent & finite[1:] & finite[:-1] & (np.where(finite, v, 0.0)[1:] * np.where(finite, v, 0.0)[:-1] < 0)
     before = np.r_[False, against & (np.abs(v[:-1]) >= CONFIRM_SHARE)]   # the previous edge's residual
     after = np.r_[against & (np.abs(v[1:]) >= CONFIRM_SHARE), False]     # the next edge's
     drop = big & ~(before & after)

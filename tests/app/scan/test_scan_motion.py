@@ -15,11 +15,7 @@ from rangekit.errors import MotionError
 
 pytestmark = pytest.mark.slow     # three views of the default rig at full size, twice (about a minute)
 
-#: The default patterns (hybrid-8step-min3, 48 frames, issue 51): view 1, from frame 16 (col_b3, the finest column
-#: bit it projects) on, 0.5 mm along x. Its check reads the Gray code's 8 px blocks and names no frame.
-KNOCK = (1, 16, 0.5)
-#: The 60-frame hybrid: view 1, from frame 20 (col_b1) on, 0.5 mm along x; its check names the frames.
-KNOCK_HYBRID = (1, 20, 0.5)
+KNOCK = (1, 20, 0.5)              # view 1, from frame 20 (col_b1) on, 0.5 mm along x
 
 
 def test_a_knocked_view_is_taken_again_and_the_mesh_is_the_still_scans(tmp_path):
@@ -27,11 +23,9 @@ def test_a_knocked_view_is_taken_again_and_the_mesh_is_the_still_scans(tmp_path)
     knocked = rk.scan(ScanOptions(out=tmp_path / "knocked", views=3, sim_bump=KNOCK, report=False),
                       on_event=seen.append)
     still = rk.scan(ScanOptions(out=tmp_path / "still", views=3, report=False))
-    assert knocked.folder.joinpath("patterns.json").read_text() == still.folder.joinpath("patterns.json").read_text()
-    assert '"min_bit": 3' in still.folder.joinpath("patterns.json").read_text()
     said = [e.message for e in seen if isinstance(e, Progress)]
     again = [line for line in said if "taking it again" in line]
-    assert len(again) == 1 and again[0].startswith("view 1: ") and "moved" in again[0], again
+    assert len(again) == 1 and again[0].startswith("view 1: ") and "col_b1" in again[0], again
     assert [e.index for e in seen if isinstance(e, ViewAcquired)] == [0, 1, 2, 1]      # view 1 once more
     # Taken again still, view 1 has the still scan's frames: the same mesh, to the byte.
     for name in ("mesh.ply", "poses.json"):
@@ -41,7 +35,7 @@ def test_a_knocked_view_is_taken_again_and_the_mesh_is_the_still_scans(tmp_path)
 
 
 def test_a_session_with_a_knocked_view_is_refused_by_name(tmp_path):
-    res = rk.scan(ScanOptions(out=tmp_path / "s", views=3, sim_bump=KNOCK_HYBRID, patterns="hybrid", process=False))
+    res = rk.scan(ScanOptions(out=tmp_path / "s", views=3, sim_bump=KNOCK, process=False))
     with pytest.raises(MotionError, match=r"view_001.*moved during the capture.*col_b1"):
         rk.process(res.folder)
     assert not (res.folder / "mesh.ply").exists()

@@ -28,8 +28,7 @@ def test_target_mm_gives_the_fastest_measured_set_that_meets_it(tmp_path):
     name = fastest_for(loose)
     assert _spec(tmp_path, target_mm=loose) == preset_spec(name, (1280, 800))
     assert _spec(tmp_path, patterns=name) == preset_spec(name, (1280, 800))
-    assert _spec(tmp_path) == preset_spec("hybrid-8step-min3", (1280, 800))   # the default (issue 51): 48 frames
-    assert _spec(tmp_path).n_frames == 48
+    assert _spec(tmp_path) == PatternSpec("hybrid", 1280, 800)      # the default: the method's own options
 
 
 @pytest.mark.parametrize("given, text", [

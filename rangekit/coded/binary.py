@@ -12,9 +12,10 @@ import numpy as np
 
 from rangekit.coded.frames import CaptureStack, row_chunks, run_parallel
 from rangekit.errors import DecodeError
-from rangekit.coded.patterns import PatternSpec, gray_decode, gray_encode
+from rangekit.coded.patterns import PatternSpec, gray_decode, gray_encode, make_pattern_spec
 
-__all__ = ["axis_code", "axis_crossings", "codes_beyond", "axis_subpixel", "edge_bit_lut", "gray_lut", "smooth_along_stripes"]
+__all__ = ["axis_code", "axis_crossings", "codes_beyond", "axis_subpixel", "edge_bit_lut", "gray_blocks", "gray_lut",
+           "smooth_along_stripes"]
 
 
 def _decode_bits(fr: CaptureStack, spec: PatternSpec, axis: str, region, need_diffs: bool):
@@ -148,13 +149,34 @@ def codes_beyond(code: np.ndarray, spec: PatternSpec, axis: str, counted: np.nda
     return n, top, int(np.count_nonzero(counted)), smooth
 
 
+def gray_blocks(fr: CaptureStack, spec: PatternSpec) -> tuple[CaptureStack, PatternSpec]:
+    """A hybrid capture without its Gray bits below ``m = spec.min_gray_bit`` as what its Gray frames are: the Gray
+    code of its ``2**m`` px blocks, a ``graycode`` capture on a projector of ``ceil(W / 2**m) x ceil(H / 2**m)``
+    (the Gray code's bits above m are the Gray code of ``u >> m``, :func:`axis_code`), whose bit ``b`` is the
+    hybrid's bit ``b + m``: the frames white, black, then each axis's bits, are the hybrid's first frames in the same
+    order (``fr.stack`` sliced, no copy). Any other capture is returned as it is."""
+    m = spec.min_gray_bit
+    if not m:
+        return fr, spec
+    blocks = make_pattern_spec("graycode", (-(-spec.width // (1 << m)), -(-spec.height // (1 << m))), axes=spec.axes)
+    for axis in spec.axes:
+        if blocks.bits(axis) != spec.bits(axis) - m:      # ceil(log2(ceil(n / 2**m))) = ceil(log2(n)) - m
+            raise DecodeError(f"a hybrid's Gray code without its bits below {m}: {blocks.bits(axis)} block bits for "
+                              f"{axis}, expected {spec.bits(axis) - m}")
+    return CaptureStack(fr.stack[:blocks.n_frames], blocks, "rangekit"), blocks
+
+
 def axis_crossings(fr: CaptureStack, spec: PatternSpec, axis: str, code: np.ndarray, min_bit: int = 0) -> np.ndarray:
     """Stripe-edge crossings of one axis's code map: (H, W-1) along camera rows for columns, (H-1, W) along camera
     columns for rows; float32 fraction of the way from a pixel to its neighbour where the pattern and inverse of
     the bit that changes between their codes cross, NaN where the codes do not differ by one or that bit is below
-    ``min_bit`` (the finer stripes' edges left out: ``decode(..., min_edge_bit=...)``; compiled)."""
+    ``min_bit`` (the finer stripes' edges left out: ``decode(..., min_edge_bit=...)``; compiled). A hybrid without
+    its finest Gray bits (``code`` its blocks, :func:`axis_code`): the edges of its blocks (:func:`gray_blocks`)."""
     from rangekit.coded import _kernels as K
 
+    if spec.min_gray_bit:
+        min_bit = max(min_bit - spec.min_gray_bit, 0)
+        fr, spec = gray_blocks(fr, spec)
     H, W = fr.shape
     prefix = "col" if axis == "columns" else "row"
     nb = spec.bits(axis)

@@ -46,3 +46,26 @@ def test_the_columns_without_the_finest_bits_are_the_full_codes_columns():
     lit = both & binary_erosion(truth.lit & (truth.object_id == 0), iterations=3)   # away from the rim
     assert lit.sum() > 10_000
     assert np.sqrt(np.mean((b.proj_col[lit] - truth.proj_col[lit]) ** 2)) <= 0.05
+
+
+@pytest.mark.parametrize("size, m", [((1280, 800), 3), ((320, 200), 2), ((1000, 750), 3)])
+def test_a_hybrids_gray_frames_are_the_gray_code_of_its_blocks(size, m):
+    """rangekit.coded.binary.gray_blocks (issue 51, the motion check of a min_bit code): the hybrid's white, black and
+    Gray frames are, frame for frame and pixel for pixel, a graycode capture of its 2**m px blocks, each block frame
+    pixel 2**m x 2**m projector pixels (the last block cut at the projector's edge)."""
+    from rangekit.coded.binary import gray_blocks
+    from rangekit.coded.frames import CaptureStack
+
+    spec = make_pattern_spec("hybrid", size, min_bit=m)
+    stack = np.stack(list(spec.frames()))
+    fr, blocks = gray_blocks(CaptureStack(stack, spec, "rangekit"), spec)
+    assert blocks.method == "graycode" and blocks.n_frames < spec.n_frames
+    assert np.shares_memory(fr.stack, stack)
+    for i in range(blocks.n_frames):
+        big = np.repeat(np.repeat(blocks.frame(i), 1 << m, axis=0), 1 << m, axis=1)[:size[1], :size[0]]
+        name = blocks.frame_names[i]
+        if name.startswith(("col_b", "row_b")):
+            b = int(name[5:].split("_")[0])
+            name = f"{name[:5]}{b + m}{name[5 + len(str(b)):]}"
+        assert spec.frame_names[i] == name
+        np.testing.assert_array_equal(big, stack[i], err_msg=name)

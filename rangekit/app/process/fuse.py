@@ -4,8 +4,8 @@ and the same surface closed (mesh_watertight.ply), in steps the runner places an
 cloud and Poisson's sample), :func:`surfaces` (the fusion itself: Open3D's Poisson holds the GIL for its whole run,
 so a large one runs in a child process, :data:`CHILD_MIN_POINTS`; the TSDF, whose input is the 230 MB of depth
 maps, on a thread), :func:`observed_rule` (what the views observed), then the observed mesh cut and saved
-(:func:`save_observed`, Poisson's surface subdivided once and put back on its input points:
-:mod:`rangekit.surface.refine`) while the rest is closed (:func:`close`, on a thread: its numpy, scipy and numba work lets
+(:func:`save_observed`, Poisson's surface put back on its input points, its edges halved where the surface bows
+from them: :mod:`rangekit.surface.refine`) while the rest is closed (:func:`close`, on a thread: its numpy, scipy and numba work lets
 the GIL go), and the closed mesh flagged and saved (:func:`save_closed`). One Poisson thread: Open3D's
 multi-threaded Poisson is not deterministic (a resumed scan must give the same mesh as an uninterrupted one). A
 second child process took as long and 0.1-0.3 GB more at the peak (docs/benchmarks.md).
@@ -141,9 +141,10 @@ def close(trimmed: TriangleMesh) -> TriangleMesh:
 def save_observed(folder, full: TriangleMesh, observed: ObservedInput,
                   options: ProcessOptions) -> tuple[TriangleMesh, MeshFigures]:
     """The fused surface cut to what the views observed, written as ``mesh.ply``: the mesh and its entry. Poisson's
-    cut surface is subdivided once and its vertices put back on the input points
-    (:func:`rangekit.surface.refine.refine_to_points`): at octree depth 8 its flat triangles leave curved parts
-    (the upright bunny: 0.023 mm RMS, 95th percentile 0.043 mm, refined 0.013 / 0.024; docs/benchmarks.md)."""
+    cut surface is put back on the input points, its edges halved where the surface bows more than
+    :data:`rangekit.surface.refine.SPLIT_SAG` from them (:func:`rangekit.surface.refine.refine_to_points`, on the
+    observed rule's k-d tree): at octree depth 8 its flat triangles leave curved parts (the upright bunny: 0.023 mm
+    RMS, 95th percentile 0.043 mm, refined 0.013 / 0.024 with 1.6 times the vertices; docs/benchmarks.md)."""
     mesh = observed.rule.observed_part(full)
     if observed.normals is not None:
         from rangekit.surface.refine import refine_to_points

@@ -189,10 +189,11 @@ def test_export_writes_each_format_of_scan_format_from_the_same_mesh(processed):
         for stem in ("mesh", "mesh_watertight"):
             ply, out = load_mesh(folder / f"{stem}.ply"), load_mesh(folder / f"{stem}.{fmt}")
             assert len(out.triangles) == len(ply.triangles)
-            # The same corners (STL repeats a vertex per triangle; float32 files round to 1e-7 m).
-            corners = [np.unique(np.round(np.asarray(m.vertices)[np.asarray(m.triangles)].reshape(-1, 3), 6), axis=0)
-                       for m in (ply, out)]
-            assert corners[0].shape == corners[1].shape and np.abs(corners[0] - corners[1]).max() <= 1.5e-6
+            # The same corners, triangle by triangle (STL repeats a vertex per triangle; float32 files round to
+            # 1e-7 m). Not compared as sets rounded to 1 um: Poisson leaves distinct vertices 0.04 um apart, which
+            # float32 can put on either side of a rounding step.
+            corners = [np.asarray(m.vertices)[np.asarray(m.triangles)] for m in (ply, out)]
+            assert np.abs(corners[0] - corners[1]).max() <= 1.5e-6
             assert processed.request(f"/api/sessions/done/files/{stem}.{fmt}")[0] == 200
     assert _post(processed, "/api/sessions/done/process", {"fusion": "marching"})[1]["error"] == (
         "fusion: expected poisson or tsdf, found 'marching'")

@@ -4,7 +4,8 @@ and the same surface closed (mesh_watertight.ply), in steps the runner places an
 cloud and Poisson's sample), :func:`surfaces` (the fusion itself: Open3D's Poisson holds the GIL for its whole run,
 so a large one runs in a child process, :data:`CHILD_MIN_POINTS`; the TSDF, whose input is the 230 MB of depth
 maps, on a thread), :func:`observed_rule` (what the views observed), then the observed mesh cut and saved
-(:func:`save_observed`) while the rest is closed (:func:`close`, on a thread: its numpy, scipy and numba work lets
+(:func:`save_observed`, Poisson's surface put back on its input points, its edges halved where the surface bows
+from them: :mod:`rangekit.surface.refine`) while the rest is closed (:func:`close`, on a thread: its numpy, scipy and numba work lets
 the GIL go), and the closed mesh flagged and saved (:func:`save_closed`). One Poisson thread: Open3D's
 multi-threaded Poisson is not deterministic (a resumed scan must give the same mesh as an uninterrupted one). A
 second child process took as long and 0.1-0.3 GB more at the peak (docs/benchmarks.md).
@@ -28,8 +29,9 @@ from rangekit.surface.cloud import PointCloud, merge_clouds, view_index
 from rangekit.surface.mesh import TriangleMesh
 from rangekit.formats.sessions.files import MERGED_FILE, MESH_FILE, WATERTIGHT_FILE
 
-__all__ = ["CHILD_MIN_POINTS", "POISSON_POINTS", "CHILD_IMPORTS", "FusedViews", "FusionInput", "fusion_input",
-           "large_poisson", "surfaces", "save_merged", "observed_rule", "close", "save_observed", "carved_space", "save_closed"]
+__all__ = ["CHILD_MIN_POINTS", "POISSON_POINTS", "CHILD_IMPORTS", "FusedViews", "FusionInput", "ObservedInput",
+           "fusion_input", "large_poisson", "surfaces", "save_merged", "observed_rule", "close", "save_observed",
+           "carved_space", "save_closed"]
 
 #: Fewest sampled points whose Poisson runs in a child process: below, it takes less than the child's start
 #: (about 1 s of imports, on the other core).
@@ -62,6 +64,16 @@ class FusionInput:
     @property
     def n_merged(self) -> int:
         return len(self.merged)
+
+
+@dataclass(frozen=True, eq=False)
+class ObservedInput:
+    """What the views observed (:class:`rangekit.surface.observed.ObservedRule`, whose k-d tree holds Poisson's
+    input points) and those points' (N, 3) unit normals, in the tree's order, which the observed mesh is refined
+    onto (:func:`rangekit.surface.refine.refine_to_points`); ``normals`` None: a TSDF fusion, not refined."""
+
+    rule: object
+    normals: np.ndarray | None
 
 
 def _sample_step(decoded: DecodedViews, options: ProcessOptions) -> int:
@@ -103,16 +115,20 @@ def save_merged(folder, fusion: FusionInput, registered: RegisteredViews) -> Non
     fusion.merged = None
 
 
-def observed_rule(fusion: FusionInput, options: ProcessOptions):
+def observed_rule(fusion: FusionInput, options: ProcessOptions) -> ObservedInput:
     """What the views observed (:func:`rangekit.surface.observed.observed_rule`): Poisson's input points (the
-    TSDF's: the sample), their spacing; the sample is let go."""
+    TSDF's: the sample), their spacing, and for Poisson their normals; the sample is let go."""
     from rangekit.surface.fusion import poisson_input
     from rangekit.surface.observed import observed_rule as rule_of
 
     sample = fusion.sample
-    rule = rule_of(sample.points[poisson_input(sample)] if options.fusion == "poisson" else sample.points)
+    if options.fusion == "poisson":
+        used = poisson_input(sample)
+        observed = ObservedInput(rule_of(sample.points[used]), sample.normals[used])
+    else:
+        observed = ObservedInput(rule_of(sample.points), None)
     fusion.sample = None
-    return rule
+    return observed
 
 
 def close(trimmed: TriangleMesh) -> TriangleMesh:
@@ -122,9 +138,19 @@ def close(trimmed: TriangleMesh) -> TriangleMesh:
     return make_watertight(trimmed)
 
 
-def save_observed(folder, full: TriangleMesh, rule, options: ProcessOptions) -> tuple[TriangleMesh, MeshFigures]:
-    """The fused surface cut to what the views observed, written as ``mesh.ply``: the mesh and its entry."""
-    mesh = rule.observed_part(full)
+def save_observed(folder, full: TriangleMesh, observed: ObservedInput,
+                  options: ProcessOptions) -> tuple[TriangleMesh, MeshFigures]:
+    """The fused surface cut to what the views observed, written as ``mesh.ply``: the mesh and its entry. Poisson's
+    cut surface is put back on the input points, its edges halved where the surface bows more than
+    :data:`rangekit.surface.refine.SPLIT_SAG` from them (:func:`rangekit.surface.refine.refine_to_points`, on the
+    observed rule's k-d tree): at octree depth 8 its flat triangles leave curved parts (the upright bunny: 0.023 mm
+    RMS, 95th percentile 0.043 mm, refined 0.013 / 0.024 with 1.6 times the vertices; docs/benchmarks.md)."""
+    mesh = observed.rule.observed_part(full)
+    if observed.normals is not None:
+        from rangekit.surface.refine import refine_to_points
+
+        tree = observed.rule.tree
+        mesh = refine_to_points(mesh, tree.data, observed.normals, tree=tree)
     return mesh, save_one(folder, mesh, options.fusion, MESH_FILE, options.mesh_format)
 
 
@@ -150,13 +176,13 @@ def carved_space(registered: RegisteredViews, observed: TriangleMesh, rig: Rig, 
     return space
 
 
-def save_closed(folder, closed: TriangleMesh, rule, options: ProcessOptions,
+def save_closed(folder, closed: TriangleMesh, observed: ObservedInput, options: ProcessOptions,
                 space=None) -> tuple[TriangleMesh, MeshFigures]:
     """The closed surface with each vertex flagged observed or not, written as ``mesh_watertight.ply``; with
     ``space`` (:func:`carved_space`) its unobserved vertices placed where the surface continues its curvature and
     held out of carved space (:func:`rangekit.surface.carve.close_in_hull`), flagged ``carved`` where they lie on
     the hull."""
-    watertight = rule.flagged(closed)
+    watertight = observed.rule.flagged(closed)
     if space is not None:
         from rangekit.surface.carve import close_in_hull
 

@@ -81,3 +81,14 @@ def start_ui(sessions, *args: str, timeout: float = 60.0, port: int = 0) -> Serv
             return Server(proc, url, token, f"{parts.scheme}://{parts.netloc}")
     proc.kill()
     raise RuntimeError(f"rangekit ui printed no URL: {proc.stderr.read()}")
+
+
+def serving(tmp_path_factory):
+    """A module's ``rangekit ui`` on a fresh sessions folder (as ``.sessions``), stopped after the module's tests,
+    its log then in ``.log``: make it the module's fixture with
+    ``server = pytest.fixture(scope="module", name="server")(serving)``."""
+    sessions = tmp_path_factory.mktemp("sessions")
+    s = start_ui(sessions)
+    s.sessions = sessions
+    yield s
+    s.log = s.stop()

@@ -16,20 +16,14 @@ import pytest
 from websockets.sync.client import connect
 
 from support.chromium import chromium_paths, open_page
-from support.ui_server import start_ui
+from support.ui_server import serving
 
 #: The GET endpoints the pages polled on a timer before (issue 49): unreachable for the page in the browser test.
 POLLED = ("/api/check", "/api/calibrate", "/api/calibrate-recorded", "/api/register", "/api/status", "/api/scan",
           "/api/sessions")
 
 
-@pytest.fixture(scope="module")
-def server(tmp_path_factory):
-    sessions = tmp_path_factory.mktemp("sessions")
-    s = start_ui(sessions)
-    s.sessions = sessions
-    yield s
-    s.stop()
+server = pytest.fixture(scope="module", name="server")(serving)
 
 
 def _post(server, path, data=None):

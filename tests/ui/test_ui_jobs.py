@@ -13,7 +13,7 @@ import time
 import numpy as np
 import pytest
 
-from support.ui_server import start_ui
+from support.ui_server import serving, start_ui
 
 
 def _post(server, path, data=None):
@@ -35,13 +35,7 @@ def _wait(server, path, done, timeout=300.0):
     raise AssertionError(f"{path}: never finished: {state}")
 
 
-@pytest.fixture(scope="module")
-def server(tmp_path_factory):
-    sessions = tmp_path_factory.mktemp("sessions")
-    s = start_ui(sessions)
-    s.sessions = sessions
-    yield s
-    s.stop()
+server = pytest.fixture(scope="module", name="server")(serving)
 
 
 def test_the_wizard_refuses_steps_out_of_turn_and_cancels_cleanly(server):

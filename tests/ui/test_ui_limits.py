@@ -13,16 +13,10 @@ import time
 
 import pytest
 
-from support.ui_server import start_ui
+from support.ui_server import serving
 
 
-@pytest.fixture(scope="module")
-def server(tmp_path_factory):
-    sessions = tmp_path_factory.mktemp("sessions")
-    s = start_ui(sessions)
-    s.sessions = sessions
-    yield s
-    s.log = s.stop()
+server = pytest.fixture(scope="module", name="server")(serving)
 
 
 def _raw(server, head: bytes, body: bytes = b"", read: bool = True) -> bytes:

@@ -47,21 +47,12 @@ half as much as the most displaced one was captured after the move. Where the mo
 back and leave no residual to solve with: the frames are then named from where it was smaller.
 
 A hybrid without its Gray bits below m (``min_bit``, :attr:`rangekit.coded.patterns.PatternSpec.min_gray_bit`) is
-checked on what its Gray frames are: the Gray code of its ``2**m`` px blocks
-(:func:`rangekit.coded.binary.gray_blocks`), block bit ``b`` its bit ``b + m``. The limit stays the same in projector
-pixels (:data:`MOTION_LIMIT_CODES` / 2**m blocks) and the edges may be 2**m times as far apart
-(:data:`EDGE_GAP_PX`). Blocks' edges are far apart (about 11 camera pixels on the default rig), so a crease of the
-surface, where the object stands on the table, changes their spacing much as a move would: there an edge is flagged
-only when both its neighbours' residuals go the other way (:data:`CONFIRM_SHARE`); codes turn back by at most
-``MAX_TURN_BACK >> m`` blocks (a longer step back is a depth edge in projector pixels too: the zoo's still ``thin``
-and ``bowl`` 2.0-4.3% and 1.1-1.4% flagged before, 0.33-0.57% and 0.00% after). On the default object with a 0.5 mm
-knock (``hybrid-8step-min3``, :func:`rangekit.coded.motion.detect.detect_motion`): still 0.00%, a knock from col_b3
-(its finest column bit) on 19.3%, from col_b4 4.9%, from col_b5 2.2%, from col_b8 0.1% (a coarse bit's few edges).
-Its frames are not named: the blocks' bits' offsets, solved as above, carry the surface's curvature over a block's
-width as much as a move (the knocks named bits 4 to 6 for any of them). **Not yet fit for refusing views**: a still
-upright bunny (``--object bun_zipper.ply --up 0 1 0``, 6 views) is 4.2-9.2% flagged, its bumps over a block's width
-(8 projector px) displacing the edges as a knock would (still 2.6% with the limit doubled and :data:`CONFIRM_SHARE`
-0.5); ``rangekit process`` does not check such a view (:func:`rangekit.app.process.view_cache.cache_settings`).
+checked otherwise: each edge of its ``2**m`` px Gray blocks (:func:`rangekit.coded.binary.gray_blocks`) against the
+phase decoded at the same camera point (:mod:`rangekit.coded.motion.blocks`): on a still object they name the same
+projector column whatever the surface's shape, and a move between a bit's frames and the phase frames sets them
+apart. The blocks' edges are too far apart (about 11 camera pixels on the default rig) for the spacing of three
+to tell a move from the surface's bumps: checked that way, a still upright Stanford bunny was 4.2-9.7% flagged.
+Its frames are not named (every block bit is compared with the phase, not with each other).
 
 What it cannot see: a move between the column frames and the row frames, or before the first bit, leaves each
 axis's bits consistent among themselves (the capture is then one of the moved object, up to its white and black
@@ -106,11 +97,6 @@ NOISE_SIGMAS = 3.0
 READ_SIGMAS = 6.0
 #: Largest gap between successive edges (camera pixels) for a residual: wider gaps are not one surface.
 EDGE_GAP_PX = 6.0
-#: A hybrid without its finest Gray bits (blocks of ``2**m`` codes): an edge's residual over the limit flags only
-#: where both neighbouring edges' residuals go the other way by at least this share of the limit
-#: (:func:`_displaced_edges`: a crease of the surface is not a move; blocks about 11 camera pixels apart flagged
-#: 2.8% of a still capture of the default object along its foot on the table without this rule, none with it).
-CONFIRM_SHARE = 0.25
 #: A decoded pixel is flagged too where more than this share of the decoded pixels within :data:`REGION_HALF_PX`
 #: moved: the pixels whose code no edge could check (no stripe edge on both sides: the integer code kept), among
 #: pixels that moved, are as suspect (on the default rig they held 10% of the pixels a 0.5 mm slip spoiled).
@@ -174,7 +160,8 @@ def check_motion(fr: CaptureStack, spec: PatternSpec, codes: dict[str, np.ndarra
     (:func:`rangekit.coded.motion.detect.detect_motion`'s layout).
     """
     frame_order = {name: i for i, name in enumerate(spec.frame_names)}
-    m = spec.min_gray_bit            # a hybrid without its finest Gray bits: the Gray code of its 2**m px blocks
+    m = spec.min_gray_bit            # a hybrid without its finest Gray bits: its blocks' edges against the phase
+    fr0, spec0 = fr, spec
     fr, spec = gray_blocks(fr, spec)
     mask = np.zeros(fr.shape, bool)
     moved: list[str] = []
@@ -193,17 +180,21 @@ def check_motion(fr: CaptureStack, spec: PatternSpec, codes: dict[str, np.ndarra
         i_by_bit = np.array([fr.index[f"{prefix}_b{b}_inv"] for b in range(nb)], np.int64)
         weak = (read_sigmas * pair_noise(fr, int(p_by_bit[-1]), int(i_by_bit[-1]), decoded, along)
                 if read_sigmas else 0.0)
+        t = crossings[axis] if crossings and axis in crossings else axis_crossings(fr0, spec0, axis, code)
+        if m:
+            mask |= _flag_blocks(fr0, spec0, spec, axis, code, t, decoded, (p_by_bit, i_by_bit), weak, limit,
+                                 line_pairs)
+            continue
         level = (unread_levels(fr, p_by_bit, i_by_bit, decoded, weak, tile) if weak and spec.xor_base is None
                  else np.zeros(fr.shape, np.int8))
-        t = crossings[axis] if crossings and axis in crossings else axis_crossings(fr, spec, axis, code)
-        flags, res, lo, lv = _flag_axis(fr.stack, spec, axis, code, t, level, (p_by_bit, i_by_bit), weak,
-                                        limit / (1 << m), EDGE_GAP_PX * (1 << m), line_pairs, blocks_bits=m)
+        flags, res, lo, lv = _flag_axis(fr.stack, spec, axis, code, t, level, (p_by_bit, i_by_bit), weak, limit,
+                                        EDGE_GAP_PX, line_pairs)
         mask |= flags
         residuals[axis] = res, lo, lv
     mask &= decoded
     mask |= decoded & (_local_share(mask, decoded, region_half) > REGION_SHARE)
     share = float(np.count_nonzero(mask)) / max(int(np.count_nonzero(decoded)), 1)
-    if share > NAMED_SHARE and not m:          # something moved: which frames (not of blocks: module doc)
+    if share > NAMED_SHARE:          # something moved: which frames (not of blocks: module doc)
         for axis, (res, lo, lv) in residuals.items():
             size = spec.width if axis == "columns" else spec.height
             nb = spec.bits(axis)
@@ -237,17 +228,15 @@ def unread_levels(fr: CaptureStack, p_by_bit: np.ndarray, i_by_bit: np.ndarray, 
 
 
 def _flag_axis(stack: np.ndarray, spec: PatternSpec, axis: str, code: np.ndarray, t: np.ndarray, level: np.ndarray,
-               frames: tuple[np.ndarray, np.ndarray], weak: float, limit: float, max_gap: float, line_pairs: bool,
-               blocks_bits: int = 0) -> tuple[np.ndarray, ...]:
+               frames: tuple[np.ndarray, np.ndarray], weak: float, limit: float, max_gap: float, line_pairs: bool
+               ) -> tuple[np.ndarray, ...]:
     """One axis's check (:func:`check_motion`): ``(flags (H, W) bool, residuals, lower codes, levels)``, the last
     three along rows of the axis's crossings (camera rows for column codes, camera columns for row codes; each
     residual in codes of its level: :func:`rangekit.coded.motion._kernels.crossing_residuals`). ``code``: (H, W)
     the axis's codes; ``t``: their crossings (:func:`rangekit.coded.binary.axis_crossings`); ``level``: (H, W) how
     many finest bits are not checked at each pixel (:func:`unread_levels`); ``frames``: each bit's pattern and
     inverse frame in ``stack`` (bit 0 first); ``weak``: grey levels; ``limit``: codes (of each level); ``max_gap``:
-    camera pixels between successive edges (:data:`EDGE_GAP_PX`); ``blocks_bits``: m of a hybrid's 2**m px blocks
-    (0: the codes themselves): an edge over the limit flags only where its neighbours' residuals confirm it
-    (:func:`_displaced_edges`), and codes turn back only by at most ``MAX_TURN_BACK >> m`` blocks."""
+    camera pixels between successive edges (:data:`EDGE_GAP_PX`)."""
     from rangekit.coded.motion import _kernels as M
 
     along = axis == "rows"                     # row codes: their edges run down camera columns
@@ -265,16 +254,19 @@ def _flag_axis(stack: np.ndarray, spec: PatternSpec, axis: str, code: np.ndarray
     res = np.empty(t2.shape, np.float64)
     lo = np.empty(t2.shape, np.int64)
     M.crossing_residuals(c2, l2, tl, max_gap, stack, p_by_bit, i_by_bit, lut, frame_words(nb, spec.xor_base),
-                         float(weak), along, res, lo, M.MAX_TURN_BACK >> blocks_bits)
+                         float(weak), along, res, lo)
     lv = l2[:, :-1]
     res, limits = still_baseline(res, lo, lv, lut, nb, limit)
     flags = np.empty(c2.shape, bool)
-    if blocks_bits:
-        M.flag_bracketed(tl, _displaced_edges(res / limits[lv], lo, lv), 1.0, flags)
-    else:
-        M.flag_bracketed(tl, res / limits[lv] if l2.any() else res, 1.0 if l2.any() else float(limits[0]), flags)
-    # A move displaces a stripe along its whole length; the noise at a stripe edge flags a pixel here and there.
-    # Kept: flags with a flagged neighbour along the stripe (the next camera row for column codes).
+    M.flag_bracketed(tl, res / limits[lv] if l2.any() else res, 1.0 if l2.any() else float(limits[0]), flags)
+    flags = _along_stripe(flags, line_pairs)
+    return (flags.T if along else flags), res, lo, lv
+
+
+def _along_stripe(flags: np.ndarray, line_pairs: bool) -> np.ndarray:
+    """``flags`` (lines, N) kept where the neighbouring line along the stripe is flagged too: a move displaces a
+    stripe along its whole length, the noise at a stripe edge flags a pixel here and there (``line_pairs``: each
+    line's neighbour is the other line of its pair)."""
     along_stripe = np.zeros_like(flags)
     if line_pairs:                                   # each line's neighbour: the other line of its pair
         n = len(flags) // 2 * 2
@@ -282,31 +274,39 @@ def _flag_axis(stack: np.ndarray, spec: PatternSpec, axis: str, code: np.ndarray
     else:
         along_stripe[1:] |= flags[:-1]
         along_stripe[:-1] |= flags[1:]
-    flags &= along_stripe
-    return (flags.T if along else flags), res, lo, lv
+    return flags & along_stripe
 
 
-def _displaced_edges(r: np.ndarray, lo: np.ndarray, level: np.ndarray) -> np.ndarray:
-    """``r`` (lines, crossings) residuals over their limits, with those over 1 kept only where both neighbouring
-    edges along the line have residuals the other way of at least :data:`CONFIRM_SHARE` (a displaced edge: its
-    neighbours' are -1/2 of its own), the others 0. A crease of the surface (an object standing on the table) moves
-    no edge, but changes the spacing of the edges: the residual of the edge before it and the one after it are of
-    opposite signs, beside edges of none. ``lo``: each crossing's lower code, ``level``: its level (neighbouring
-    edges' lower codes are ``1 << level`` apart). ``inf`` (codes turning back) is kept."""
-    ys, xs = np.nonzero(~np.isnan(r))          # row-major: each line's crossings in order
-    v, c, m = r[ys, xs], lo[ys, xs], level[ys, xs].astype(np.int64)
-    big = np.isfinite(v) & (np.abs(v) > 1.0)
-    if not big.any():
-        return r
-    adjacent = (ys[1:] == ys[:-1]) & (np.abs(c[1:] - c[:-1]) == np.left_shift(1, m[1:])) & (m[1:] == m[:-1])
-    finite = np.isfinite(v)
-    against = adjacent & finite[1:] & finite[:-1] & (np.where(finite, v, 0.0)[1:] * np.where(finite, v, 0.0)[:-1] < 0)
-    before = np.r_[False, against & (np.abs(v[:-1]) >= CONFIRM_SHARE)]   # the previous edge's residual
-    after = np.r_[against & (np.abs(v[1:]) >= CONFIRM_SHARE), False]     # the next edge's
-    drop = big & ~(before & after)
-    out = r.copy()
-    out[ys[drop], xs[drop]] = 0.0
-    return out
+def _flag_blocks(fr: CaptureStack, spec: PatternSpec, blocks: PatternSpec, axis: str, code: np.ndarray,
+                 t: np.ndarray, decoded: np.ndarray, frames: tuple[np.ndarray, np.ndarray], weak: float, limit: float,
+                 line_pairs: bool) -> np.ndarray:
+    """(H, W) bool: the pixels of a hybrid without its finest Gray bits bracketed by a block edge off the phase
+    (:mod:`rangekit.coded.motion.blocks`). ``fr``/``spec``: the capture; ``blocks``: its Gray code of blocks
+    (:func:`rangekit.coded.binary.gray_blocks`); ``code``: (H, W) the axis's block codes; ``t``: their crossings;
+    ``frames``: each block bit's pattern and inverse frame; ``weak``: grey levels (an edge whose bit changes by
+    less across its pair is not checked); ``limit``: projector px."""
+    from rangekit.coded.motion import _kernels as M
+    from rangekit.coded.motion.blocks import edge_offsets, read_edges, wrapped_phase
+
+    along = axis == "rows"
+    tr = (lambda a: np.ascontiguousarray(a.T)) if along else (lambda a: a)
+    u, period = wrapped_phase(fr, spec, axis)
+    c2, t2 = tr(code), tr(t)
+    lut = edge_bit_lut(blocks.width if axis == "columns" else blocks.height)
+    sure, bit = read_edges(fr.stack, c2, t2, frames, lut, weak, along)
+    off = edge_offsets(c2, t2, tr(u), period, 1 << spec.min_gray_bit, tr(decoded), sure, MAX_CODE_STEP)
+    ok = np.isfinite(off)
+    if ok.any():                           # each bit's own offset (a real projector's edges sit off the phase)
+        nb = len(frames[0])
+        b = bit[ok]
+        medians = np.array([np.median(off[ok][b == k]) if np.any(b == k) else 0.0 for k in range(nb)])
+        off[ok] -= medians[b]
+        sigma = 1.4826 * float(np.median(np.abs(off[ok])))
+        limit = max(limit, NOISE_SIGMAS * sigma)
+    flags = np.empty(c2.shape, bool)
+    M.flag_bracketed(t2, off, float(limit), flags)
+    flags = _along_stripe(flags, line_pairs)
+    return flags.T if along else flags
 
 
 def still_baseline(res: np.ndarray, lo: np.ndarray, level: np.ndarray, edge_bit: np.ndarray, nb: int, limit: float

@@ -77,11 +77,12 @@ def summary() -> str:
     stages = ", ".join(f"{k} {v:.1f}" + (" (beside the fusion)" if k == "evaluate" else "") for k, v in sec.items())
     processing = run["wall_s"] - run["acquisition_s"]
     n_views = len(s["views"])
+    n_frames = len(json.loads((SCAN / "session.json").read_text())["pattern"]["frames"])   # the default patterns'
     return "\n".join([
         f"`make scan` runs `rangekit scan --out scan1` on the simulated rig. It took {run['wall_s']:.0f} s on 2 cores,",
         f"with a peak of {run['peak_gb']:.1f} GB over its processes (`make docs-figures`, an idle machine):",
         "",
-        f"- **Acquisition, {run['acquisition_s']:.0f} s**: {n_views} turntable views of the `lumpy` object, 60 hybrid "
+        f"- **Acquisition, {run['acquisition_s']:.0f} s**: {n_views} turntable views of the `lumpy` object, {n_frames} hybrid "
         "frames each (Gray",
         "  code + phase shift), rendered, encoded and written on both cores.",
         f"- **Processing, {processing:.0f} s** (stages, s: {stages}): every view decoded and",

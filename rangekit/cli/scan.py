@@ -16,7 +16,7 @@ from rangekit.formats.sessions.files import (MERGED_FILE, MESH_FILE, POSES_FILE,
 
 def cmd_scan(args: argparse.Namespace) -> int:
     """rangekit scan --out DIR | --resume DIR [--method coded|laser] [--rig sim|RIG.json] [--object lumpy]
-    [--views 12 | --steps 400] [--passes 2 [--flipped]] [--patterns hybrid] [--up X Y Z] [--allow-auto-exposure]:
+    [--views 12 | --steps 400] [--passes 2 [--flipped]] [--patterns hybrid-8step-min3] [--up X Y Z] [--allow-auto-exposure]:
     :func:`rangekit.app.scan.scan.scan` with these options, its events shown as it runs."""
     from rangekit.app.scan.options import SCAN_FLAGS
     from rangekit.app.scan.scan import scan
@@ -321,7 +321,7 @@ def add_parsers(sub) -> None:
     lazy_help(scan.add_argument("--patterns", metavar="PATTERNS",
                                 help="pattern set: a method (rangekit.coded.patterns.PATTERN_METHODS) or a named set "
                                      "(rangekit.app.scan.presets.PRESETS, docs/coded-light.md 'Frames against "
-                                     "accuracy'; default {patterns}: Gray code + phase shift)"), values)
+                                     "accuracy'; default {patterns}: Gray code of 8 px blocks + phase shift, 48 frames)"), values)
     scan.add_argument("--target-mm", type=finite_float, metavar="MM",
                       help="the patterns of fewest frames whose measured accuracy meets MM: one view's points at most "
                            "MM RMS against the simulator's truth (docs/coded-light.md, 'Frames against accuracy'; "

@@ -46,8 +46,8 @@ def cache_settings(session: Session, method: str, table_margin: float,
     cache is reused only when they are equal. ``method`` is the triangulation method, ``table_margin`` in
     metres (see :func:`view_cloud`), ``max_motion`` the share of a view's decoded pixels that may have moved
     during its capture (:func:`rangekit.coded.motion.detect_motion`; over it the view is refused, MotionError;
-    None: not checked; recorded for the patterns it reads; not for a hybrid without its finest Gray bits, whose
-    check on its blocks flags a still bumpy surface: issue 51, docs/coded-light.md). The one place they are built,
+    None: not checked; recorded for the patterns it reads, a hybrid without its finest Gray bits included: its
+    blocks' edges against the phase, issue 51). The one place they are built,
     for processing in one process (:mod:`rangekit.app.process.process`) and as Dask tasks
     (:mod:`rangekit.app.batch.sessions`)."""
     rig, spec, full_scale = session.rig, session.pattern, session.capture.full_scale
@@ -55,8 +55,7 @@ def cache_settings(session: Session, method: str, table_margin: float,
                 "edge_margin_px": EDGE_MARGIN_PX,
                 "pattern": spec.to_dict()["method"], "full_scale": full_scale,
                 "projector_response": None if rig.projector_response is None else rig.projector_response.to_dict()}
-    if (max_motion is not None and getattr(spec, "method", None) in MOTION_METHODS
-            and not getattr(spec, "min_gray_bit", 0)):    # a min_bit hybrid's blocks: still bunny views 4-9% flagged
+    if max_motion is not None and getattr(spec, "method", None) in MOTION_METHODS:
         settings["max_motion"] = float(max_motion)
     if session.capture.exposures_us:      # multi-exposure: each exposure decoded, merged per pixel
         settings["exposures_us"] = list(session.capture.exposures_us)

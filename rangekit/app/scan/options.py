@@ -44,7 +44,8 @@ class ScanOptions:
     passes : coded-light passes (1..8), the object turned over between them; flipped : with ``resume``, the
         user confirms the object is already turned over for the next pass.
     patterns : the pattern set: a method (:data:`rangekit.coded.patterns.PATTERN_METHODS`, its own options) or a
-        named set (:data:`rangekit.app.scan.presets.PRESETS`).
+        named set (:data:`rangekit.app.scan.presets.PRESETS`); default ``hybrid-8step-min3`` (issue 51: 48 frames,
+        the 60-frame ``hybrid``'s accuracy, its motion check its Gray blocks against the phase).
     target_mm : a new coded-light scan's patterns are the fewest frames whose measured accuracy meets it: one view's
         points at most this RMS (mm) against the simulator's truth on every measured object
         (:func:`rangekit.app.scan.presets.fastest_for`; not with ``patterns``).
@@ -84,7 +85,7 @@ class ScanOptions:
     steps: int | None = option(None, "--steps", lo=2, hi=3600, integer=True, initial=LASER_STEPS)
     passes: int | None = option(None, "--passes", lo=1, hi=8, integer=True, initial=1)
     flipped: bool = option(False, "--flipped")
-    patterns: str | None = option(None, "--patterns", initial="hybrid")
+    patterns: str | None = option(None, "--patterns", initial="hybrid-8step-min3")
     target_mm: float | None = option(None, "--target-mm", lo=0.001, hi=10.0, unit="mm")
     seed: int | None = option(None, "--seed", lo=0, hi=2**32 - 1, integer=True, initial=0)
     up: tuple[float, float, float] | None = option(None, "--up")

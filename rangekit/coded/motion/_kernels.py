@@ -71,7 +71,7 @@ def level_crossings(stack, code, level, t_fine, p_by_bit, i_by_bit, edge_bit, tr
 
 @njit(parallel=True, cache=True, nogil=True)
 def crossing_residuals(code, level, t, max_gap, stack, p_by_bit, i_by_bit, edge_bit, words, weak, transposed,
-                       res, lo, max_back=MAX_TURN_BACK):  # pragma: no cover - compiled
+                       res, lo):  # pragma: no cover - compiled
     """Each stripe-edge crossing's disagreement with the code changes on either side of it along the row.
 
     ``code`` (H, W) int32 integer codes (-1 invalid); ``level`` (H, W) int8: each pixel's code is checked with its
@@ -98,9 +98,7 @@ def crossing_residuals(code, level, t, max_gap, stack, p_by_bit, i_by_bit, edge_
     - otherwise NaN. ``lo[y, x]`` = the lower code of the crossing where ``res`` is set (of the whole code: the
       last code under the edge, ``((a + 1) << level) - 1`` for masked codes a | a + 1), else -1.
 
-    Codes, steps and residuals are in masked codes (units of ``1 << level`` codes). ``max_back``: the longest step
-    back that counts as turning back (:data:`MAX_TURN_BACK`; a hybrid's 2**m px blocks: ``MAX_TURN_BACK >> m``, a
-    longer one is a depth edge in projector pixels too).
+    Codes, steps and residuals are in masked codes (units of ``1 << level`` codes).
     """
     H, W = code.shape
     nb = p_by_bit.shape[0]
@@ -145,8 +143,8 @@ def crossing_residuals(code, level, t, max_gap, stack, p_by_bit, i_by_bit, edge_
                 continue
             if pos[k] - pos[k - 1] > max_gap or pos[k + 1] - pos[k] > max_gap:
                 continue
-            back_a = step[k - 1] * step[k] < 0 and 2 <= abs(step[k - 1]) <= max_back
-            back_b = step[k + 1] * step[k] < 0 and 2 <= abs(step[k + 1]) <= max_back
+            back_a = step[k - 1] * step[k] < 0 and 2 <= abs(step[k - 1]) <= MAX_TURN_BACK
+            back_b = step[k + 1] * step[k] < 0 and 2 <= abs(step[k + 1]) <= MAX_TURN_BACK
             if back_a or back_b:
                 misread = False
                 for kk in (k - 1, k + 1):

@@ -28,7 +28,9 @@ def test_target_mm_gives_the_fastest_measured_set_that_meets_it(tmp_path):
     name = fastest_for(loose)
     assert _spec(tmp_path, target_mm=loose) == preset_spec(name, (1280, 800))
     assert _spec(tmp_path, patterns=name) == preset_spec(name, (1280, 800))
-    assert _spec(tmp_path) == PatternSpec("hybrid", 1280, 800)      # the default: the method's own options
+    # the default (issue 51): 48 frames, the Gray code of 8 px blocks + phase shift
+    assert _spec(tmp_path) == preset_spec("hybrid-8step-min3", (1280, 800)) != PatternSpec("hybrid", 1280, 800)
+    assert _spec(tmp_path, patterns="hybrid") == PatternSpec("hybrid", 1280, 800)   # the method's own options
 
 
 @pytest.mark.parametrize("given, text", [

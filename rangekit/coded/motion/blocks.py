@@ -46,13 +46,18 @@ import numpy as np
 from rangekit.coded.frames import CaptureStack
 from rangekit.coded.patterns import PatternSpec
 
-__all__ = ["MAX_STEP_CHANGE", "edge_offsets", "read_edges", "wrapped_phase"]
+__all__ = ["MAX_BIT_BIAS_SHARE", "MAX_STEP_CHANGE", "edge_offsets", "offset_baseline", "read_edges", "wrapped_phase"]
 
 #: The projector column's step across an edge's pixel pair may differ from the mean of the steps on either side by
 #: at most this (projector px, plus half that mean step): past it the pair spans a depth edge (two surfaces). A
 #: still surface's steps change by the curvature (about 0.01 px a pixel on the bunny's bumps) and the phase
 #: noise (about 0.05 px).
 MAX_STEP_CHANGE = 0.5
+#: Each bit's median offset is taken off up to this share of the limit: a real projector's stripe edges sit off
+#: the true edge by their own amount (SLStudio's skull: up to 0.08 codes, :func:`rangekit.coded.motion.check.
+#: still_baseline`); a bit's edges displaced by more over most of the image (a large object moved about evenly)
+#: are a move, not the projector's.
+MAX_BIT_BIAS_SHARE = 0.5
 
 
 def wrapped_phase(fr: CaptureStack, spec: PatternSpec, axis: str) -> tuple[np.ndarray, float]:
@@ -133,3 +138,29 @@ def read_edges(stack: np.ndarray, code: np.ndarray, t: np.ndarray, frames: tuple
     sure[ys, xs] = np.abs(slope) >= weak
     bit[ys, xs] = k
     return sure, bit
+
+
+def offset_baseline(off: np.ndarray, bit: np.ndarray, nb: int, limit: float, noise_sigmas: float, line_pairs: bool
+                    ) -> tuple[np.ndarray, float]:
+    """``(offsets, limit)``: :func:`edge_offsets`'s ``off`` (lines, crossings) with each block bit's median offset
+    taken off (at most :data:`MAX_BIT_BIAS_SHARE` of ``limit`` either way), and the limit (projector px) at least
+    ``noise_sigmas`` times the offsets' noise: the MAD's sigma of the difference between an edge's offset and the
+    same edge's (crossing the same pixel pair) on the neighbouring line along the stripe, over sqrt(2). A move
+    displaces a stripe along its length, so it does not raise that noise as it would the offsets' own spread
+    (``line_pairs``: each line's neighbour is the other line of its pair). ``bit``: each crossing's block bit;
+    ``nb``: the block bits."""
+    ok = np.isfinite(off)
+    if not ok.any():
+        return off, limit
+    b, v = bit[ok], off[ok]
+    cap = MAX_BIT_BIAS_SHARE * limit
+    medians = np.array([np.clip(np.median(v[b == k]), -cap, cap) if np.any(b == k) else 0.0 for k in range(nb)])
+    out = off.copy()
+    out[ok] = v - medians[b]
+    first, second = (out[0::2], out[1::2]) if line_pairs else (out[:-1], out[1:])
+    n = min(len(first), len(second))
+    d = np.abs(first[:n] - second[:n])
+    d = d[np.isfinite(d)]
+    if d.size:
+        limit = max(limit, noise_sigmas * 1.4826 * float(np.median(d)) / np.sqrt(2.0))
+    return out, limit

@@ -286,7 +286,7 @@ def _flag_blocks(fr: CaptureStack, spec: PatternSpec, blocks: PatternSpec, axis:
     ``frames``: each block bit's pattern and inverse frame; ``weak``: grey levels (an edge whose bit changes by
     less across its pair is not checked); ``limit``: projector px."""
     from rangekit.coded.motion import _kernels as M
-    from rangekit.coded.motion.blocks import edge_offsets, read_edges, wrapped_phase
+    from rangekit.coded.motion.blocks import edge_offsets, offset_baseline, read_edges, wrapped_phase
 
     along = axis == "rows"
     tr = (lambda a: np.ascontiguousarray(a.T)) if along else (lambda a: a)
@@ -295,14 +295,7 @@ def _flag_blocks(fr: CaptureStack, spec: PatternSpec, blocks: PatternSpec, axis:
     lut = edge_bit_lut(blocks.width if axis == "columns" else blocks.height)
     sure, bit = read_edges(fr.stack, c2, t2, frames, lut, weak, along)
     off = edge_offsets(c2, t2, tr(u), period, 1 << spec.min_gray_bit, tr(decoded), sure, MAX_CODE_STEP)
-    ok = np.isfinite(off)
-    if ok.any():                           # each bit's own offset (a real projector's edges sit off the phase)
-        nb = len(frames[0])
-        b = bit[ok]
-        medians = np.array([np.median(off[ok][b == k]) if np.any(b == k) else 0.0 for k in range(nb)])
-        off[ok] -= medians[b]
-        sigma = 1.4826 * float(np.median(np.abs(off[ok])))
-        limit = max(limit, NOISE_SIGMAS * sigma)
+    off, limit = offset_baseline(off, bit, len(frames[0]), limit, NOISE_SIGMAS, line_pairs)
     flags = np.empty(c2.shape, bool)
     M.flag_bracketed(t2, off, float(limit), flags)
     flags = _along_stripe(flags, line_pairs)

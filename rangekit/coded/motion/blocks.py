@@ -33,10 +33,10 @@ code_step`) applied edge by edge. And only where the phase is of one surface aro
 pixel pair agrees with the steps before and after it (:data:`MAX_STEP_CHANGE`; a depth edge or a silhouette
 mixes two surfaces, a move does not, as the phase frames come from one pose), and where the edge's bit is read
 (its pattern - inverse changes by at least ``weak`` across the pair: located to better than ``sqrt(2) / 6`` of
-a camera pixel). Each bit's median offset is taken off (a real projector's stripe edge sits off the phase by its
-own amount, :func:`rangekit.coded.motion.check.still_baseline`'s reason), and the limit is
-:data:`rangekit.coded.motion.check.MOTION_LIMIT_CODES` projector px, at least NOISE_SIGMAS times the offsets'
-own spread (MAD).
+a camera pixel). Each bit's median offset is taken off up to :data:`MAX_BIT_BIAS_SHARE` of the limit (a real
+projector's stripe edge sits off the phase by its own amount, :func:`rangekit.coded.motion.check.still_baseline`'s
+reason), and the limit is :data:`rangekit.coded.motion.check.MOTION_LIMIT_CODES` projector px, at least
+NOISE_SIGMAS times the offsets' noise along the stripe (:func:`offset_baseline`).
 """
 
 from __future__ import annotations

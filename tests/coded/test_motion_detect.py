@@ -65,8 +65,10 @@ def test_a_half_millimetre_knock_on_the_default_rig():
 def test_a_knock_is_caught_on_the_blocks_of_a_hybrid_without_its_finest_gray_bits():
     """Issue 51: a hybrid without its Gray bits below 2 (``min_bit``: its Gray code names blocks of 4 px, checked as the
     Gray code of its blocks, rangekit.coded.binary.gray_blocks) on the small rig: a 2 mm knock from col_b2, its finest
-    column bit, on is refused (measured 26.5% moved), a still capture is not (0.00%); no frame is named (module doc of
-    rangekit.coded.motion.check). Before issue 51 such a capture was not checked."""
+    column bit, on is refused (14.6%; 26.5% by the blocks' spacing), a still capture is not (0.00%); the frames named
+    are all after the move: the column phase frames (rangekit.coded.motion.blocks.frames_after; col_b2 is not named:
+    with a 16 px period over 4 px blocks its edges are placed by col_b3's too, which the knock displaced by more than
+    a block). Before issue 51 such a capture was not checked."""
     rig = small_projector_rig()
     options = {"steps": 8, "period": 16, "min_bit": 2}
     spec, still = _capture(rig, "hybrid", **options)
@@ -76,7 +78,9 @@ def test_a_knock_is_caught_on_the_blocks_of_a_hybrid_without_its_finest_gray_bit
     _, knocked = _capture(rig, "hybrid", knock_from=spec.frame_names.index("col_b2"), mm=2.0, **options)
     got = detect_motion(knocked, spec, decoded)
     assert got.share > 5 * MAX_MOTION_SHARE, got.describe()
-    assert got.moved_frames == () and got.undersampled == ()
+    first = spec.frame_names.index("col_b2")
+    assert "col_p16_s0" in got.moved_frames, got.describe()
+    assert all(spec.frame_names.index(f) >= first for f in got.moved_frames) and got.undersampled == ()
 
 
 @pytest.mark.slow
@@ -99,6 +103,10 @@ def test_a_half_millimetre_knock_with_the_48_frame_hybrid():
         _, knocked = _capture(rig, "hybrid", knock_from=spec.frame_names.index(bit), **options)
         got = detect_motion(knocked, spec, decoded)
         assert got.share > share, (bit, got.describe())
+        # the frames after the move named: from the knocked one on (the column phase frames too), none before it
+        first = spec.frame_names.index(bit)
+        assert bit in got.moved_frames and "col_p16_s7" in got.moved_frames, (bit, got.describe())
+        assert all(spec.frame_names.index(f) >= first for f in got.moved_frames), (bit, got.describe())
 
 
 @pytest.mark.slow

@@ -46,7 +46,8 @@ import numpy as np
 from rangekit.coded.frames import CaptureStack
 from rangekit.coded.patterns import PatternSpec
 
-__all__ = ["MAX_BIT_BIAS_SHARE", "MAX_STEP_CHANGE", "edge_offsets", "offset_baseline", "read_edges", "wrapped_phase"]
+__all__ = ["MAX_BIT_BIAS_SHARE", "MAX_STEP_CHANGE", "MIN_BIT_EDGES", "edge_offsets", "frames_after", "offset_baseline",
+           "read_edges", "wrapped_phase"]
 
 #: The projector column's step across an edge's pixel pair may differ from the mean of the steps on either side by
 #: at most this (projector px, plus half that mean step): past it the pair spans a depth edge (two surfaces). A
@@ -58,6 +59,8 @@ MAX_STEP_CHANGE = 0.5
 #: still_baseline`); a bit's edges displaced by more over most of the image (a large object moved about evenly)
 #: are a move, not the projector's.
 MAX_BIT_BIAS_SHARE = 0.5
+#: A block bit with fewer checked edges than this says nothing of when the move came (:func:`frames_after`).
+MIN_BIT_EDGES = 50
 
 
 def wrapped_phase(fr: CaptureStack, spec: PatternSpec, axis: str) -> tuple[np.ndarray, float]:
@@ -164,3 +167,40 @@ def offset_baseline(off: np.ndarray, bit: np.ndarray, nb: int, limit: float, noi
     if d.size:
         limit = max(limit, noise_sigmas * 1.4826 * float(np.median(d)) / np.sqrt(2.0))
     return out, limit
+
+
+def frames_after(off: np.ndarray, bit: np.ndarray, limit: float, spec: PatternSpec, axis: str) -> list[str]:
+    """The frames of ``axis`` taken after a move (call it where the axis's pixels moved), from which block bits'
+    edges are off the phase: ``x_k`` of each bit's ``n_k`` checked edges over ``limit`` (:func:`offset_baseline`'s
+    offsets ``off``; ``bit`` each crossing's block bit; bits with under :data:`MIN_BIT_EDGES` edges left out). The
+    bits are captured most significant first and the phase frames last, and a move splits them once: the bits
+    before it are off the phase at one rate, those after it at a lower one (the noise's). The split is the one of
+    most binomial likelihood, kept only where it gains more than BIC's ``ln(sum n) / 2`` over one rate for every
+    bit (then the move came after the Gray frames). Returned: the bits after the split and the axis's phase frames.
+    ``spec``: the hybrid (its bit ``b + min_gray_bit`` is block bit b). Where the phase period spans more than two
+    blocks, an edge's column modulo the period depends on the next bits too, so a move of over a block puts the
+    edges of the bits after it off the phase as well, and only the later frames are named (the small rig's 4 px
+    blocks, 16 px period, a 2 mm knock from col_b2: the phase frames); the default rig's 8 px blocks and 16 px
+    period name each bit after a 0.5 mm knock."""
+    ok = np.isfinite(off)
+    m, prefix = spec.min_gray_bit, ("col" if axis == "columns" else "row")
+    nb = spec.bits(axis) - m
+    n = np.bincount(bit[ok], minlength=nb)[:nb].astype(np.float64)
+    x = np.bincount(bit[ok], weights=np.abs(off[ok]) > limit, minlength=nb)[:nb]
+    order = [k for k in range(nb - 1, -1, -1) if n[k] >= MIN_BIT_EDGES]      # capture order
+    xs, ns = x[order], n[order]
+
+    def loglik(xx: np.ndarray, nn: np.ndarray) -> float:
+        p = min(max(xx.sum() / max(nn.sum(), 1.0), 1e-9), 1 - 1e-9)
+        return float(xx.sum() * np.log(p) + (nn.sum() - xx.sum()) * np.log(1 - p))
+
+    best, split = loglik(xs, ns) + 0.5 * np.log(max(ns.sum(), 2.0)), len(order)
+    for j in range(1, len(order)):
+        before, after = xs[:j].sum() / ns[:j].sum(), xs[j:].sum() / ns[j:].sum()
+        if after < before:
+            ll = loglik(xs[:j], ns[:j]) + loglik(xs[j:], ns[j:])
+            if ll > best:
+                best, split = ll, j
+    period, steps = spec.phase_plan(axis)[-1]
+    return ([f"{prefix}_b{k + m}{inv}" for k in order[split:] for inv in ("", "_inv")]
+            + [f"{prefix}_p{period:g}_s{s}" for s in range(steps)])

@@ -52,7 +52,8 @@ phase decoded at the same camera point (:mod:`rangekit.coded.motion.blocks`): on
 projector column whatever the surface's shape, and a move between a bit's frames and the phase frames sets them
 apart. The blocks' edges are too far apart (about 11 camera pixels on the default rig) for the spacing of three
 to tell a move from the surface's bumps: checked that way, a still upright Stanford bunny was 4.2-9.7% flagged.
-Its frames are not named (every block bit is compared with the phase, not with each other).
+The frames taken after a move are named from which bits' edges are off the phase
+(:func:`rangekit.coded.motion.blocks.frames_after`).
 
 What it cannot see: a move between the column frames and the row frames, or before the first bit, leaves each
 axis's bits consistent among themselves (the capture is then one of the moved object, up to its white and black
@@ -167,6 +168,7 @@ def check_motion(fr: CaptureStack, spec: PatternSpec, codes: dict[str, np.ndarra
     moved: list[str] = []
     offsets: dict[str, np.ndarray] = {}
     residuals: dict[str, tuple[np.ndarray, ...]] = {}
+    after: dict[str, list[str]] = {}           # a hybrid's blocks: each axis's frames taken after a move
     undersampled: list[str] = []
     for axis, code in codes.items():
         c_along = code.T if axis == "rows" else code
@@ -182,8 +184,9 @@ def check_motion(fr: CaptureStack, spec: PatternSpec, codes: dict[str, np.ndarra
                 if read_sigmas else 0.0)
         t = crossings[axis] if crossings and axis in crossings else axis_crossings(fr0, spec0, axis, code)
         if m:
-            mask |= _flag_blocks(fr0, spec0, spec, axis, code, t, decoded, (p_by_bit, i_by_bit), weak, limit,
-                                 line_pairs)
+            flags, after[axis] = _flag_blocks(fr0, spec0, spec, axis, code, t, decoded, (p_by_bit, i_by_bit), weak,
+                                              limit, line_pairs)
+            mask |= flags
             continue
         level = (unread_levels(fr, p_by_bit, i_by_bit, decoded, weak, tile) if weak and spec.xor_base is None
                  else np.zeros(fr.shape, np.int8))
@@ -194,7 +197,8 @@ def check_motion(fr: CaptureStack, spec: PatternSpec, codes: dict[str, np.ndarra
     mask &= decoded
     mask |= decoded & (_local_share(mask, decoded, region_half) > REGION_SHARE)
     share = float(np.count_nonzero(mask)) / max(int(np.count_nonzero(decoded)), 1)
-    if share > NAMED_SHARE:          # something moved: which frames (not of blocks: module doc)
+    if share > NAMED_SHARE:          # something moved: which frames
+        moved += [name for names in after.values() for name in names]
         for axis, (res, lo, lv) in residuals.items():
             size = spec.width if axis == "columns" else spec.height
             nb = spec.bits(axis)
@@ -279,14 +283,15 @@ def _along_stripe(flags: np.ndarray, line_pairs: bool) -> np.ndarray:
 
 def _flag_blocks(fr: CaptureStack, spec: PatternSpec, blocks: PatternSpec, axis: str, code: np.ndarray,
                  t: np.ndarray, decoded: np.ndarray, frames: tuple[np.ndarray, np.ndarray], weak: float, limit: float,
-                 line_pairs: bool) -> np.ndarray:
-    """(H, W) bool: the pixels of a hybrid without its finest Gray bits bracketed by a block edge off the phase
-    (:mod:`rangekit.coded.motion.blocks`). ``fr``/``spec``: the capture; ``blocks``: its Gray code of blocks
+                 line_pairs: bool) -> tuple[np.ndarray, list[str]]:
+    """``(flags, after)``: (H, W) bool the pixels of a hybrid without its finest Gray bits bracketed by a block edge
+    off the phase (:mod:`rangekit.coded.motion.blocks`), and the frames of the axis taken after a move
+    (:func:`rangekit.coded.motion.blocks.frames_after`). ``fr``/``spec``: the capture; ``blocks``: its Gray code of blocks
     (:func:`rangekit.coded.binary.gray_blocks`); ``code``: (H, W) the axis's block codes; ``t``: their crossings;
     ``frames``: each block bit's pattern and inverse frame; ``weak``: grey levels (an edge whose bit changes by
     less across its pair is not checked); ``limit``: projector px."""
     from rangekit.coded.motion import _kernels as M
-    from rangekit.coded.motion.blocks import edge_offsets, offset_baseline, read_edges, wrapped_phase
+    from rangekit.coded.motion.blocks import edge_offsets, frames_after, offset_baseline, read_edges, wrapped_phase
 
     along = axis == "rows"
     tr = (lambda a: np.ascontiguousarray(a.T)) if along else (lambda a: a)
@@ -299,7 +304,9 @@ def _flag_blocks(fr: CaptureStack, spec: PatternSpec, blocks: PatternSpec, axis:
     flags = np.empty(c2.shape, bool)
     M.flag_bracketed(t2, off, float(limit), flags)
     flags = _along_stripe(flags, line_pairs)
-    return flags.T if along else flags
+    flags = flags.T if along else flags
+    moved = np.count_nonzero(flags & decoded) > NAMED_SHARE * max(int(np.count_nonzero(decoded)), 1)
+    return flags, (frames_after(off, bit, limit, spec, axis) if moved else [])
 
 
 def still_baseline(res: np.ndarray, lo: np.ndarray, level: np.ndarray, edge_bit: np.ndarray, nb: int, limit: float

@@ -18,10 +18,10 @@ from rangekit.errors import MotionError
 pytestmark = pytest.mark.slow     # three views of the default rig at full size, twice (about a minute)
 
 #: (patterns, knock: view 1 from this frame on, 0.5 mm along x, what the refusal names): the 60-frame hybrid from
-#: frame 20 (col_b1; the frames named), the default 48 frames from frame 32 (col_p16_s0, the first column phase
-#: frame: 16% of the pixels flagged; no frame named).
+#: frame 20 (col_b1), the default 48 frames from frame 32 (col_p16_s0, the first column phase frame: 16% of the
+#: pixels flagged; the column and row phase frames named).
 KNOCKS = [pytest.param("hybrid", (1, 20, 0.5), "col_b1", id="hybrid-60"),
-          pytest.param(None, (1, 32, 0.5), "none named", id="default-48")]
+          pytest.param(None, (1, 32, 0.5), "frames after: col_p16_s0", id="default-48")]
 
 
 @pytest.mark.parametrize("patterns, knock, named", KNOCKS)

@@ -44,6 +44,8 @@ class Preset:
 
 
 #: The named pattern sets ``rangekit scan --patterns`` takes besides the bare methods, fewest frames last.
+#: ``hybrid-8step-min3`` is the scan's default (:class:`rangekit.app.scan.options.ScanOptions`; issue 51: the fewest
+#: frames that keep the 60-frame hybrid's accuracy with a motion check, docs/coded-light.md).
 PRESETS: dict[str, Preset] = {
     "hybrid-8step": Preset("hybrid", "Gray code + 8 steps of a 16 px period (the method's own options): 60 frames",
                            {"steps": 8, "period": 16}),

@@ -27,9 +27,10 @@ calls the steps on a worker thread of lower priority that backs off while the ca
    (:attr:`StreamingViews.evaluate`).
 
 The last view (or any once the acquisition is over, :attr:`StreamingViews.acquisition_over`) is what the
-processing waits for: it is decoded on every core, its work ahead done first and its placing left to
-:meth:`StreamingViews.write_preview`, which writes ``preview.ply``, the TSDF's surface
-(:class:`~rangekit.app.events.MeshReady` ``"preview"``), beside the processing. A multi-pass scan's preview holds its
+processing waits for: it is decoded on every core, then its placing is left to :meth:`StreamingViews.write_preview`,
+which writes ``preview.ply``, the TSDF's surface (:class:`~rangekit.app.events.MeshReady` ``"preview"``), and
+its work ahead to :meth:`StreamingViews.last_ahead`, run beside it (the preview waits for nothing but the decoding;
+issue 51); then the processing, the preview still beside it. A multi-pass scan's preview holds its
 first pass (the object turned over is placed by the processing's pass registration).
 
 A view during which the object moved (:class:`~rangekit.errors.MotionError`: the processing's check of each view,
@@ -81,6 +82,7 @@ class StreamingViews:
         self._placed: dict[int, tuple[np.ndarray, PointCloud]] = {}
         self._volume = None
         self._unplaced: list = []  # the last views, placed in the preview by write_preview
+        self._unregistered: list = []  # the last views, their registration ahead done by last_ahead
         self._laser = False
         self.acquisition_over = False              # set once the acquisition has ended: every view is urgent
         self.decoded: list[int] = []               # views decoded here, in order
@@ -133,6 +135,14 @@ class StreamingViews:
         self._emit(MeshReady("preview", path, mesh))
         return path
 
+    def last_ahead(self) -> None:
+        """After the last view's steps: its work ahead (module doc, 4; not its errors against the truth), which the
+        processing then takes; the scan runs it beside :meth:`write_preview`, so the preview waits for the last
+        view's decoding only (issue 51)."""
+        for k, cloud, maps, session in self._unregistered:
+            self._ahead(k, cloud, maps, session, truth=False)
+        self._unregistered = []
+
     # ------------------------------------------------------------ the steps
     def _emit(self, event) -> None:
         emit(self._on_event, event)   # the bus: thread-safe, its subscribers on its own thread
@@ -153,8 +163,8 @@ class StreamingViews:
         self.results[k] = (cloud, maps)
         self._emit(ViewDecoded(k, total, view.folder.name, cloud))
         placed = rig.T_world_table is not None and session.plan.view_passes()[k] == 0 and len(cloud) > 0
-        if last:
-            self._ahead(k, cloud, maps, session, truth=False)   # its errors: beside the fusion
+        if last:   # its work ahead beside the preview (last_ahead), its errors after the mesh
+            self._unregistered.append((k, cloud, maps, session))
             if placed:
                 self._unplaced.append((k, cloud, maps.depth, session))
             return

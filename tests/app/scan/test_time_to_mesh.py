@@ -126,3 +126,48 @@ def test_the_observed_mesh_waits_for_what_must_be_announced_first(tmp_session):
     assert written.is_set()
     ready = [i for i, e in enumerate(seen) if isinstance(e, ev.MeshReady) and e.kind == "observed"]
     assert len(ready) == 1 and seen.index("before_mesh") < ready[0]
+
+
+def test_a_scans_views_are_measured_against_the_truth_after_mesh_ply(tmp_session, tmp_path):
+    """Memo.truth_after_mesh (a scan's): the views' errors against the truth are measured once mesh.ply is written,
+    not beside Poisson (the simulator-only measures took a core from it); the outputs and every figure are the
+    ones ``rangekit process`` writes with the views measured beside the fusion."""
+    import json
+    import shutil
+
+    from rangekit.app.process.options import ProcessOptions
+    from rangekit.app.runner import Memo, Plan
+    from rangekit.app.scan.scan import process_placed, session_evaluator
+    from rangekit.formats.sessions.session import Session
+
+    local = shutil.copytree(tmp_session, tmp_path / "local")
+    truth = session_evaluator(Session.load(tmp_session))
+    mesh_there: list = []
+
+    class Watching:   # the evaluator, noting whether mesh.ply was there when the views were measured
+        measures = True
+
+        def __getattr__(self, name):
+            return getattr(truth, name)
+
+        def __call__(self, *args, **kwargs):
+            return truth(*args, **kwargs)
+
+        def prepare(self, angles, views=None):
+            if views is not None:
+                mesh_there.append((tmp_session / "mesh.ply").is_file())
+            return truth.prepare(angles, views)
+
+    process_placed(tmp_session, ProcessOptions(report=False), plan=Plan.STREAMING,
+                   memo=Memo(evaluate=Watching(), truth_after_mesh=True))
+    assert mesh_there == [True]
+    process_placed(local, ProcessOptions(report=False), plan=Plan.LOCAL)
+    for name in ("mesh.ply", "mesh_watertight.ply", "merged.ply", "poses.json"):
+        assert (tmp_session / name).read_bytes() == (local / name).read_bytes(), name
+
+    def figures(folder):   # summary.json but its seconds
+        d = json.loads((folder / "summary.json").read_text())
+        d.pop("seconds", None)
+        return d
+
+    assert figures(tmp_session) == figures(local) and figures(local)["view_errors"] is not None

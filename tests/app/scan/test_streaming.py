@@ -154,7 +154,8 @@ def test_the_final_mesh_is_what_rangekit_process_makes(streamed, tmp_path):
                     memo=memo)
     # the errors of the views decoded while the capture ran (not the last one's: the processing measures it
     # once mesh.ply is written, Memo.truth_after_mesh)
-    assert ahead.taken == {"levels": 2, "pairs": len(ahead._jobs), "overlaps": len(ahead._joint)}
+    assert ahead.taken == {"levels": 2, "pairs": len(ahead._jobs), "overlaps": len(ahead._joint),
+                           "matches": len(ahead._matches)} and len(ahead._matches) > 0
     measured = streaming.steps.measured
     assert evaluate.views_taken == len(measured) >= 1 and N_VIEWS - 1 not in measured
     process(cached, ProcessOptions(report=False))

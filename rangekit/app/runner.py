@@ -106,7 +106,8 @@ class Memo:
     before it, whatever it takes), ``truth_after_mesh`` whether the views are measured against the truth after
 mesh.ply is written rather than beside Poisson (a scan: a person waits for the mesh, and the simulator-only measures
 took a core from Poisson, issue 51; the figures are the same). LOCAL's is empty: every view is decoded on the
-runner's threads."""
+runner's threads. ``free``: each view's free depth (index -> (H, W) float32, the closed mesh's carving,
+:func:`rangekit.app.process.decode.free_depth_of`), made from its maps as it was decoded."""
 
     decoded: Any = field(default_factory=dict)   # a dict, or any mapping with ``in`` and ``pop``
     registration: RegistrationAhead | None = None
@@ -114,6 +115,7 @@ runner's threads."""
     announced: bool = True
     before_mesh: Callable[[], Any] | None = None
     truth_after_mesh: bool = False
+    free: dict = field(default_factory=dict)
 
 
 class Runner:
@@ -283,7 +285,8 @@ class StreamingWorker:
         pairs, the prepared evaluator (the last views' work ahead done here first, on the caller's thread: the scan
         calls this beside :meth:`write_preview`)."""
         self.steps.last_ahead()
-        return Memo(self.steps.results, self.steps.registration, self.steps.evaluate, truth_after_mesh=True)
+        return Memo(self.steps.results, self.steps.registration, self.steps.evaluate, truth_after_mesh=True,
+                    free=self.steps.free)
 
     def _one(self, k: int) -> None:
         with one_blas_thread():   # thin products (rangekit._runtime.threads)

@@ -110,7 +110,7 @@ def _process(session: Session, options: ProcessOptions, evaluate: Evaluator | No
 
         return process_laser(session, options, evaluate, runner)
     with runner.stage(Stage.DECODE, reuse_memory=True):   # each view's stacks reuse the last one's pages
-        decoded = decode(session, options, _decoded_views(session, options, runner))
+        decoded = decode(session, options, _decoded_views(session, options, runner), runner.memo.free)
     # the Poisson child imports on the other core while the views register
     child = spawn_child(CHILD_IMPORTS) if large_poisson(decoded, options) and \
         runner.where(Work.POISSON) is Where.CHILD else None

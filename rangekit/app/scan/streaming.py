@@ -23,7 +23,8 @@ calls the steps on a worker thread of lower priority that backs off while the ca
    of the last frame), each piece taken by the processing only where it is exactly its own, so the outputs are
    the bytes ``rangekit process`` writes: the registration's levels and first-round pairs
    (:attr:`StreamingViews.registration`, :class:`rangekit.registration.ahead.RegistrationAhead`, one-pass
-   turntable scans), and on the simulator the truth's samples and the view's errors against the truth
+   turntable scans), its free depth for the closed mesh's carving (:attr:`StreamingViews.free`), and on the
+   simulator the truth's samples and the view's errors against the truth
    (:attr:`StreamingViews.evaluate`).
 
 The last view (or any once the acquisition is over, :attr:`StreamingViews.acquisition_over`) is what the
@@ -88,6 +89,8 @@ class StreamingViews:
         self.decoded: list[int] = []               # views decoded here, in order
         self.moved: dict = {}                      # index -> MotionError: views the object moved during
         self.results: dict = {}                    # index -> (cloud, ViewMaps): the processing takes them as they are
+        self.free: dict = {}                       # index -> the view's free depth (the carving's), taken likewise
+        self._table = None                         # what the camera and projector see of the table (free_depth_of)
         self.evaluate = None                       # the session's Truth, prepared view by view (NO_TRUTH on hardware)
         self.measured: list[int] = []              # views whose errors against the truth were measured here
         self.registration = None                   # RegistrationAhead of a one-pass turntable scan, from view 0 on
@@ -140,6 +143,7 @@ class StreamingViews:
         processing then takes; the scan runs it beside :meth:`write_preview`, so the preview waits for the last
         view's decoding only (issue 51)."""
         for k, cloud, maps, session in self._unregistered:
+            self._free(k, maps, session)
             self._ahead(k, cloud, maps, session, truth=False)
         self._unregistered = []
 
@@ -170,7 +174,18 @@ class StreamingViews:
             return
         if placed:
             self._place_and_integrate(k, cloud, maps.depth, session)
+        self._free(k, maps, session)
         self._ahead(k, cloud, maps, session)
+
+    def _free(self, k: int, maps, session: Session) -> None:
+        """View ``k``'s free depth, the closed mesh's carving (:func:`rangekit.app.process.decode.free_depth_of`,
+        as the processing's decode stage makes it: it takes this one); nothing without a turntable."""
+        from rangekit.app.process.decode import carving_table, free_depth_of
+
+        if self._table is None:
+            self._table = (carving_table(session),)
+        if self._table[0] is not None:
+            self.free[k] = free_depth_of(maps, self._table[0])
 
     def _place_and_integrate(self, k: int, cloud: PointCloud, depth: np.ndarray, session: Session) -> None:
         T = self._place(k, cloud, session)

@@ -144,6 +144,7 @@ def test_the_final_mesh_is_what_rangekit_process_makes(streamed, tmp_path):
     memo = streaming.memo()
     ahead, evaluate = memo.registration, memo.evaluate
     assert ahead is not None and ahead.views == list(range(N_VIEWS)) and evaluate is not None
+    assert sorted(memo.free) == list(range(N_VIEWS))   # each view's free depth (the carving's), made as it came
     scanned = shutil.copytree(out, tmp_path / "scanned")
     cached = shutil.copytree(out, tmp_path / "cached")
     fresh = copy_session(out, tmp_path / "fresh")

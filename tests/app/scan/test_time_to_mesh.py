@@ -171,3 +171,23 @@ def test_a_scans_views_are_measured_against_the_truth_after_mesh_ply(tmp_session
         return d
 
     assert figures(tmp_session) == figures(local) and figures(local)["view_errors"] is not None
+
+
+def test_the_decode_stage_takes_a_views_free_depth_made_as_it_came(tmp_session):
+    """The carving's free depth of a view, made by the scan as the view was decoded (Memo.free), is taken by the
+    decode stage as it is, and equals the one the stage makes itself."""
+    from rangekit.app.process.decode import carving_table, decode, free_depth_of
+    from rangekit.app.process.options import ProcessOptions
+    from rangekit.app.process.view_cache import cache_settings, table_transform, view_clouds
+    from rangekit.formats.sessions.session import Session
+
+    session, options = Session.load(tmp_session), ProcessOptions(report=False)
+    views = list(view_clouds(session.done_views, session.pattern, session.rig,
+                             cache_settings(session, options.method, options.table_margin, options.max_motion),
+                             session.capture.full_scale, table_transform(session.rig), options.table_margin))
+    index = session.done_views[1].index
+    ahead = {index: free_depth_of(views[1][1], carving_table(session))}
+    given, made = decode(session, options, iter(views), ahead), decode(session, options, iter(views))
+    assert given.free[1] is ahead[index]
+    assert len(given.free) == len(made.free) == len(views)
+    assert all(np.array_equal(a, b, equal_nan=True) for a, b in zip(given.free, made.free))

@@ -104,10 +104,10 @@ class Memo:
     and the views' errors made, ``before_mesh`` called and waited for before the observed mesh is announced (a
     scan's preview written beside the processing: a watcher has the preview first, issue 51; mesh.ply is written
     before it, whatever it takes), ``truth_after_mesh`` whether the views are measured against the truth after
-mesh.ply is written rather than beside Poisson (a scan: a person waits for the mesh, and the simulator-only measures
-took a core from Poisson, issue 51; the figures are the same). LOCAL's is empty: every view is decoded on the
-runner's threads. ``free``: each view's free depth (index -> (H, W) float32, the closed mesh's carving,
-:func:`rangekit.app.process.decode.free_depth_of`), made from its maps as it was decoded."""
+    mesh.ply is written rather than beside Poisson (a scan: a person waits for the mesh, and the simulator-only
+    measures took a core from Poisson, issue 51; the figures are the same), ``free`` each view's free depth (index
+    -> (H, W) float32, the closed mesh's carving, :func:`rangekit.app.process.decode.free_depth_of`) made from its
+    maps as it was decoded. LOCAL's is empty: every view is decoded on the runner's threads."""
 
     decoded: Any = field(default_factory=dict)   # a dict, or any mapping with ``in`` and ``pop``
     registration: RegistrationAhead | None = None

@@ -173,8 +173,9 @@ def _decoded_views(session: Session, options: ProcessOptions, runner: Runner) ->
 def _fuse(registered: RegisteredViews, session: Session, options: ProcessOptions, evaluate: Evaluator | None,
           child, runner: Runner, agreement: list, children: ExitStack) -> FusedViews:
     """The fuse stage's steps, placed: the fusion beside this thread (a child for a large Poisson, else a
-    thread) while the merged cloud is written and the views are measured; then the observed mesh cut and saved,
-    and measured, while the rest is closed on a thread; the report's views' agreement started on a thread as soon
+    thread) while the merged cloud is written and the views are measured (a scan's, ``Memo.truth_after_mesh``:
+    once mesh.ply is written); then the observed mesh cut and saved, and measured, while the rest is closed on a
+    thread; the report's views' agreement started on a thread as soon
     as the observed mesh is saved."""
     out = session.folder
     given = fusion_input(registered, options)

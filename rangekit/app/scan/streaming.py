@@ -143,7 +143,10 @@ class StreamingViews:
         processing then takes; the scan runs it beside :meth:`write_preview`, so the preview waits for the last
         view's decoding only (issue 51)."""
         for k, cloud, maps, session in self._unregistered:
-            self._free(k, maps, session)
+            try:
+                self._free(k, maps, session)
+            except Exception:   # noqa: BLE001 - the decode stage makes it itself and meets the error
+                self.free.pop(k, None)
             self._ahead(k, cloud, maps, session, truth=False)
         self._unregistered = []
 

@@ -13,8 +13,10 @@ point lit along its projector ray, were tried as more views and carved nothing m
 - :func:`carve`: the :class:`CarvedSpace` of several views on a voxel grid in the table's frame.
 - :func:`hold_out`: a closed mesh's unobserved vertices moved out of carved space onto the hull, and which
   vertices lie on the hull (``carved``).
-- :func:`close_in_hull`: those vertices first placed where the surface around them continues its curvature
-  (:func:`rangekit.surface.watertight.continue_curvature`), then held out: what ``rangekit process`` does.
+- :func:`fill_in_hull`: a closed mesh's free vertices placed where the surface bends least (the thin-plate energy,
+  :func:`rangekit.surface.watertight.thin_plate_band`) on or above the table top and outside carved space.
+- :func:`close_in_hull`: the unobserved vertices and the observed rim's :data:`RIM_RINGS` rings around them
+  filled so, then held out: what ``rangekit process`` does.
 
 Units are metres; the views' cameras and the mesh share one frame ("world"); the grid lives in the table frame
 (``T_world_table``: z up from the table top). Deterministic: numpy, scipy and one numba kernel (each voxel against

@@ -4,9 +4,12 @@ The simulator's truth measures the closed mesh as ``rangekit process`` does (``u
 whose nearest true point no view can see); this splits those samples by the nearest true point's height above
 the table top, its true normal's z (table frame: -1 faces the table) and the mesh's own flags (observed, carved,
 guessed), each row's share of the samples and of the squared error, its RMS and which side of the true surface
-the mesh lies (``out``: outside the object). Not a timing (issue 51 Deliver 4, docs/benchmarks.md).
+the mesh lies (``out``: outside the object). With ``--hull``, what bounds it: the carved space made again from
+the views' cached maps and the registered poses as ``rangekit process`` makes it, and the true surface's unseen
+samples' distance to its hull (a closed mesh on the hull is that far off, whatever fills it), by height over the
+table. Not a timing (issue 51 Deliver 4, docs/benchmarks.md).
 
-    PYTHONPATH=. .venv/bin/python benchmarks/surface/closed_breakdown.py SESSION [SESSION ...]
+    PYTHONPATH=. .venv/bin/python benchmarks/surface/closed_breakdown.py [--hull] SESSION [SESSION ...]
 """
 
 from __future__ import annotations
@@ -14,6 +17,54 @@ from __future__ import annotations
 import argparse
 
 import numpy as np
+
+
+def _space(session, mesh):
+    """The session's carved space, as ``rangekit.app.process.fuse.carved_space`` makes it, from each view's cached
+    maps (``maps.npz``, left by ``rangekit process``) and ``poses.json``."""
+    from rangekit.formats.poses import load_poses
+    from rangekit.geometry import apply_T, compose, invert_T
+    from rangekit.surface.carve import carve, free_depth, table_view, view_depth
+
+    rig = session.rig
+    _, T = load_poses(session.folder / "poses.json")
+    table = table_view(rig.camera, rig.projector, rig.T_world_table)
+    views = []
+    for k, v in enumerate(session.done_views):
+        with np.load(v.folder / "maps.npz") as m:
+            cols = np.where(m["confidence"] >= 0.03, m["proj_col"], np.nan)
+            views.append((free_depth(view_depth(m["depth"], cols, table)),
+                          rig.camera.with_pose(compose(T[k], rig.camera.T_world_cam))))
+    P = apply_T(invert_T(rig.T_world_table), mesh.vertices)
+    lo, hi = P.min(axis=0), P.max(axis=0)
+    return carve(views, rig.T_world_table, lo - 0.1 * (hi - lo), hi + 0.1 * (hi - lo))
+
+
+def hull_bound(folder) -> list[str]:
+    """The true surface's unseen samples' distance to the hull (RMS, by height over the table)."""
+    from pathlib import Path
+
+    from rangekit.app.scan.truth import session_evaluator
+    from rangekit.formats.meshes import load_mesh
+    from rangekit.formats.sessions.session import Session
+    from rangekit.geometry import apply_T, invert_T
+
+    session = Session.load(Path(folder))
+    evaluate = session_evaluator(session)
+    evaluate.prepare([v.angle for v in session.done_views])
+    truth = evaluate._truth
+    space = _space(session, load_mesh(Path(folder) / "mesh.ply"))
+    P = truth.samples[~truth.seen]
+    d = space.depth_inside(P)
+    z = apply_T(invert_T(session.rig.T_world_table), P)[:, 2]
+    lines = [f"{folder}: the true unseen surface to the hull: RMS {np.sqrt(np.mean(d ** 2)) * 1e3:.2f} mm, "
+             f"{np.mean(d < -space.voxel):.0%} more than a voxel ({space.voxel * 1e3:.2f} mm) inside it"]
+    for lo, hi in ((0, 0.002), (0.002, 0.01), (0.01, np.inf)):
+        sel = (z >= lo) & (z < hi)
+        if sel.any():
+            lines.append(f"  {lo * 1e3:.0f}-{hi * 1e3:.0f} mm over the table: {sel.mean():.0%} of it, "
+                         f"RMS {np.sqrt(np.mean(d[sel] ** 2)) * 1e3:.2f} mm")
+    return lines
 
 
 def breakdown(folder) -> list[str]:
@@ -74,8 +125,10 @@ def breakdown(folder) -> list[str]:
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("sessions", nargs="+", help="processed simulated session folders")
-    for folder in parser.parse_args().sessions:
-        print("\n".join(breakdown(folder)) + "\n")
+    parser.add_argument("--hull", action="store_true", help="also the true unseen surface's distance to the hull")
+    args = parser.parse_args()
+    for folder in args.sessions:
+        print("\n".join(breakdown(folder) + (hull_bound(folder) if args.hull else [])) + "\n")
     return 0
 
 

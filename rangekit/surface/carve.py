@@ -13,8 +13,10 @@ point lit along its projector ray, were tried as more views and carved nothing m
 - :func:`carve`: the :class:`CarvedSpace` of several views on a voxel grid in the table's frame.
 - :func:`hold_out`: a closed mesh's unobserved vertices moved out of carved space onto the hull, and which
   vertices lie on the hull (``carved``).
-- :func:`close_in_hull`: those vertices first placed where the surface around them continues its curvature
-  (:func:`rangekit.surface.watertight.continue_curvature`), then held out: what ``rangekit process`` does.
+- :func:`fill_in_hull`: a closed mesh's free vertices placed where the surface bends least (the thin-plate energy,
+  :func:`rangekit.surface.watertight.thin_plate_band`) on or above the table top and outside carved space.
+- :func:`close_in_hull`: the unobserved vertices and the observed rim's :data:`RIM_RINGS` rings around them
+  filled so, then held out: what ``rangekit process`` does.
 
 Units are metres; the views' cameras and the mesh share one frame ("world"); the grid lives in the table frame
 (``T_world_table``: z up from the table top). Deterministic: numpy, scipy and one numba kernel (each voxel against
@@ -35,7 +37,8 @@ from rangekit.errors import InputError
 from rangekit.geometry import apply_T, invert_T
 
 __all__ = ["CARVE_MARGIN", "GRID_VOXELS", "TABLE_COLUMNS", "TableView", "table_view", "view_depth",
-           "CarvedSpace", "free_depth", "carve", "hold_out", "close_in_hull"]
+           "CarvedSpace", "free_depth", "carve", "hold_out", "close_in_hull", "fill_in_hull", "RIM_RINGS",
+           "HULL_PASSES"]
 
 #: Metres: a voxel is carved when its centre lies this far in front of the depth a view measured along the
 #: pixel's ray: 20x the views' noise (0.015 mm RMS on the default object), so no noise carves the surface. The
@@ -48,6 +51,13 @@ GRID_VOXELS = 160
 #: A decoded pixel off the object sees the table top when its projector column is within this many columns of
 #: the one the table top would show it (the decoding's error is a small fraction of a column).
 TABLE_COLUMNS = 1.0
+#: Rings of observed vertices around each hole that :func:`close_in_hull` fills in again with the hole: where
+#: Poisson's surface bends towards its guess (normals 25, 19, 9 and 4 degrees off the truth at the 90th percentile
+#: on the bowl's first four rings, under 2 from the fifth on; 9, 6, 3 and 2.5 on lumpy's; docs/benchmarks.md).
+RIM_RINGS = 4
+#: Passes of :func:`fill_in_hull` that hold the vertices inside carved space on the hull and solve the rest again.
+HULL_PASSES = 3
+_TABLE_PASSES = 8  # active-set passes of the table top (each adds the vertices still under it; 1-2 are used)
 _CHUNK = 1 << 19   # voxels tested at a time (each view)
 
 
@@ -283,31 +293,83 @@ def hold_out(vertices: np.ndarray, movable: np.ndarray, space: CarvedSpace, *,
 
 def close_in_hull(vertices: np.ndarray, triangles: np.ndarray, movable: np.ndarray,
                   space: CarvedSpace) -> tuple[np.ndarray, np.ndarray]:
-    """``(vertices, on_hull)`` as :func:`hold_out` gives them, the ``movable`` (V,) bool vertices of the closed mesh
-    ``vertices`` (V, 3, world), ``triangles`` (F, 3) first placed where the surface around them continues its
-    curvature (:func:`rangekit.surface.watertight.continue_curvature`, curvature radii under a voxel not
-    continued: an edge, not a surface), then held out of carved space. Poisson's closing and the thin-plate
-    fairing continue only the slope: a wide hole in a curved surface sags (the bowl's inside floor 3 mm deep),
-    or balloons out (the default object's underside 5.4 mm out, onto the hull). A connected part of the movable
-    vertices that the continuation leaves off the grid or more than a voxel inside carved space is held out from
-    where it was given instead."""
+    """``(vertices, on_hull)``: the closed mesh ``vertices`` (V, 3, world), ``triangles`` (F, 3) with its
+    ``movable`` (V,) bool (unobserved) vertices filled in by :func:`fill_in_hull` and held out of carved space
+    (:func:`hold_out`); ``on_hull`` (V,) bool: movable vertices within a voxel of the hull. The fill also re-places
+    the :data:`RIM_RINGS` rings of observed vertices around each hole: Poisson's surface bends towards its own
+    guess there (its normals up to 25 degrees off on the bowl's rim ring, within 2 degrees from the fifth ring on;
+    docs/benchmarks.md), and a fill continues the slope it is given. A connected part of the filled vertices that
+    the fill leaves off the grid or more than a voxel inside carved space is held out from where it was given
+    instead."""
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
 
-    from rangekit.surface.watertight import continue_curvature
+    from rangekit.surface.watertight import ring_band
 
     F = np.asarray(triangles, np.int64)
     movable = np.asarray(movable, dtype=bool)
     given, given_on = hold_out(vertices, movable, space)
-    V, on_hull = hold_out(continue_curvature(vertices, F, movable, max_curvature=1.0 / space.voxel), movable, space)
+    wide = ring_band(F, movable, RIM_RINGS) if movable.any() and not movable.all() else movable
+    V, on_hull = hold_out(fill_in_hull(vertices, F, wide, space), wide, space)
+    on_hull &= movable
     g = space._grid(V)
-    bad = movable & ((space.depth_inside(V) > space.voxel)
-                     | np.any((g < -0.5) | (g > np.array(space.carved.shape) - 0.5), axis=1))
+    bad = wide & ((space.depth_inside(V) > space.voxel)
+                  | np.any((g < -0.5) | (g > np.array(space.carved.shape) - 0.5), axis=1))
     if bad.any():
         e = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
-        e = e[movable[e[:, 0]] & movable[e[:, 1]]]
-        n = len(movable)
+        e = e[wide[e[:, 0]] & wide[e[:, 1]]]
+        n = len(wide)
         _, part = connected_components(coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n)), directed=False)
-        back = movable & np.isin(part, np.unique(part[bad]))
+        back = wide & np.isin(part, np.unique(part[bad]))
         V[back], on_hull[back] = given[back], given_on[back]
     return V, on_hull
+
+
+def fill_in_hull(vertices: np.ndarray, triangles: np.ndarray, free: np.ndarray, space: CarvedSpace, *,
+                 passes: int = HULL_PASSES) -> np.ndarray:
+    """(V, 3) ``vertices`` (world) with the ``free`` (V,) bool ones placed where they bend least
+    (:func:`rangekit.surface.watertight.thin_plate_band`: the fixed surface's position and slope continued) on or
+    above the table top and outside carved space. In the table frame: x and y free, z solved with the vertices
+    that would go under the table held on it (an active set: each pass adds those still under it); then, for
+    ``passes`` passes, the vertices more than half a voxel inside carved space are held out onto the hull
+    (:func:`hold_out`), held there, and the rest solved again, so the fill bends smoothly off the hull where it
+    touches it instead of being pushed onto it vertex by vertex."""
+    from rangekit.surface.watertight import thin_plate_band
+
+    V = np.array(vertices, dtype=np.float64)
+    free = np.asarray(free, dtype=bool)
+    if V.ndim != 2 or V.shape[1] != 3 or free.shape != (len(V),):
+        raise InputError(f"fill_in_hull: vertices must be (V, 3) and free (V,), found {V.shape} and {free.shape}")
+    if not free.any() or free.all():
+        return V
+    T_table_world = invert_T(space.T_world_table)
+    band = thin_plate_band(apply_T(T_table_world, V), triangles, free)
+    X = apply_T(T_table_world, V[band.used])
+    held = np.zeros(len(X), dtype=bool)           # held out onto the hull: fixed in all three coordinates
+    for p in range(passes + 1):
+        fr = band.free & ~held
+        X[:, :2] = band.solve(X[:, :2], fr)
+        on_table = np.zeros(len(X), dtype=bool)
+        for _ in range(_TABLE_PASSES):
+            z = band.solve(np.where(on_table, 0.0, X[:, 2]), fr & ~on_table)
+            under = fr & ~on_table & (z < 0)
+            X[:, 2] = z
+            if not under.any():
+                break
+            on_table |= under
+        X[on_table, 2] = 0.0
+        if p == passes:
+            break
+        W = apply_T(space.T_world_table, X)
+        inside = fr & (space.depth_inside(W) > 0.5 * space.voxel)
+        if not inside.any():
+            break
+        out = np.zeros(len(V), dtype=bool)
+        out[band.used[inside]] = True
+        moved = V.copy()
+        moved[band.used] = W
+        moved, _ = hold_out(moved, out, space)
+        X[inside] = apply_T(T_table_world, moved[band.used[inside]])
+        held |= inside
+    V[band.used[band.free]] = apply_T(space.T_world_table, X[band.free])
+    return V

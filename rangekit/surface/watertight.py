@@ -11,6 +11,8 @@ guess, not a measurement (on the simulated ``lumpy`` object it departs from the 
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
+
 import numpy as np
 import scipy.sparse as sp
 from numba import njit
@@ -23,7 +25,7 @@ from rangekit.surface.mesh import TriangleMesh, signed_volume
 from rangekit.surface.topology import directed_edges as _edges
 from rangekit.surface.topology import merged_vertex_ids, unique_rows
 
-__all__ = ["make_watertight", "clean_mesh", "continue_curvature"]
+__all__ = ["make_watertight", "clean_mesh", "continue_curvature", "ring_band", "ThinPlateBand", "thin_plate_band"]
 
 
 def _face_edge_ids(F: np.ndarray, n_vertices: int) -> tuple[np.ndarray, int]:
@@ -429,3 +431,64 @@ def continue_curvature(vertices: np.ndarray, triangles: np.ndarray, free: np.nda
     rhs = w @ (mass[rows, None] * Hf[rows, None] * N[rows] - Lr[:, fixed] @ X[fixed])
     out[used[fi]] = splu((Af.T @ Af).tocsc()).solve(np.asarray(Af.T @ rhs))
     return out
+
+
+def ring_band(triangles: np.ndarray, free: np.ndarray, rings: int) -> np.ndarray:
+    """(V,) bool: the ``free`` (V,) bool vertices and the ``rings`` rings of vertices around them (edge-connected
+    through ``triangles`` (F, 3))."""
+    free = np.asarray(free, dtype=bool)
+    return free | np.any(_rings(np.asarray(triangles, np.int64), free, int(rings)), axis=0) if rings > 0 else free
+
+
+@dataclass(frozen=True, eq=False)
+class ThinPlateBand:
+    """The thin-plate energy ``|M^-1/2 L x|^2`` over the band of a mesh around its free vertices
+    (:func:`thin_plate_band`): ``used`` (B,) the band's vertex ids, ``L`` (B, B) its cotangent Laplacian and
+    ``mass`` (B,) its lumped areas (m^2) from the mesh as given, ``rows`` the rows of ``L`` the energy sums (the
+    free vertices and their fixed neighbours), ``free`` (B,) bool."""
+
+    used: np.ndarray
+    L: sp.csc_matrix
+    mass: np.ndarray
+    rows: np.ndarray
+    free: np.ndarray
+    _last: dict = field(default_factory=dict, repr=False)   # the last free set's factorisation
+
+    def solve(self, x: np.ndarray, free: np.ndarray | None = None) -> np.ndarray:
+        """(B,) or (B, k) ``x`` (values on the band) with the ``free`` (B,) bool entries (default the band's
+        free vertices) replaced by the values minimising the thin-plate energy, the others held."""
+        fr = self.free if free is None else np.asarray(free, dtype=bool)
+        out = np.array(x, dtype=np.float64)
+        fi, fx = np.flatnonzero(fr), np.flatnonzero(~fr)
+        if not len(fi):
+            return out
+        key = fr.tobytes()
+        if self._last.get("key") != key:      # the same free set solved again (x, y then z): one factorisation
+            w = sp.diags(1.0 / np.sqrt(self.mass[self.rows]))
+            Lr = self.L[self.rows]
+            A = (w @ Lr[:, fi]).tocsc()
+            self._last.update(key=key, A=A, B=(w @ Lr[:, fx]).tocsc(), lu=splu((A.T @ A).tocsc()))
+        A, B, lu = self._last["A"], self._last["B"], self._last["lu"]
+        out[fi] = lu.solve(np.asarray(A.T @ -(B @ out[fx])))
+        return out
+
+
+def thin_plate_band(vertices: np.ndarray, triangles: np.ndarray, free: np.ndarray) -> ThinPlateBand:
+    """The :class:`ThinPlateBand` of the mesh ``vertices`` (V, 3), ``triangles`` (F, 3) around its ``free`` (V,)
+    bool vertices: the faces within three rings of them, whose cotangents and areas (the mesh as given) make the
+    Laplacian exact on the free vertices and their fixed neighbours. Minimising ``|M^-1/2 L x|^2`` over the
+    free vertices continues the fixed surface's position and slope across them (Botsch & Kobbelt 2004)."""
+    V, F = np.asarray(vertices, np.float64), np.asarray(triangles, np.int64)
+    free = np.asarray(free, dtype=bool)
+    if V.ndim != 2 or V.shape[1] != 3 or free.shape != (len(V),):
+        raise InputError(f"thin_plate_band: vertices must be (V, 3) and free (V,), found {V.shape} and {free.shape}")
+    around = _rings(F, free, 3)
+    band = free | np.any(around, axis=0)
+    faces = np.any(band[F], axis=1)
+    used = np.flatnonzero(np.bincount(F[faces].ravel(), minlength=len(V)) > 0)
+    index = np.full(len(V), -1, np.int64)
+    index[used] = np.arange(len(used))
+    Fb = index[F[faces]]
+    L, mass = _cotan_laplacian(V[used][Fb], Fb, len(used))
+    return ThinPlateBand(used, L, mass, np.flatnonzero(free[used] | around[0][used]), free[used])
+

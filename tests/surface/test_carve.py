@@ -133,21 +133,28 @@ def test_carve_refuses_bad_bounds():
         carve([], np.eye(4), np.zeros(3), np.zeros(3))
 
 
-def test_close_in_hull_continues_the_curvature_of_a_flattened_underside(space):
+def test_close_in_hull_fills_a_flattened_underside(space):
     """The sphere's underside (a 50-degree cap around the point resting on the table) given flattened, the rest on
-    the true sphere: holding out alone leaves the flat guess (it lies inside the hull), the continued curvature
-    brings it back to within a millimetre of the sphere, no vertex more than a voxel inside carved space."""
+    the true sphere: holding out alone leaves the flat guess (it lies inside the hull); the thin-plate fill
+    continues the slope of the sphere around it (3.4 mm at most off the sphere, from 10.7: the slope alone
+    sags over so wide a cap; the curvature's continuation, ``continue_curvature``, came within 1 mm here but
+    followed Poisson's bent rim on the scanned bowl, docs/benchmarks.md), no vertex more than a voxel inside
+    carved space. The rim's rings are filled again with the cap, and stay on the sphere."""
     import trimesh
 
-    from rangekit.surface.carve import close_in_hull
+    from rangekit.surface.carve import RIM_RINGS, close_in_hull
+    from rangekit.surface.watertight import ring_band
 
     m = trimesh.creation.icosphere(subdivisions=5, radius=R)
     V, F = np.asarray(m.vertices) + CENTRE, np.asarray(m.faces)
     cap = V[:, 2] < R * (1 - np.cos(np.radians(50)))
     V[cap, 2] = R * (1 - np.cos(np.radians(50)))          # the cap flattened: a guess 11 mm off at its middle
-    err = lambda P: np.abs(np.linalg.norm(P[cap] - CENTRE, axis=1) - R)   # noqa: E731
+    err = lambda P, sel=cap: np.abs(np.linalg.norm(P[sel] - CENTRE, axis=1) - R)   # noqa: E731
     held, _ = hold_out(V, cap, space)
     closed, on_hull = close_in_hull(V, F, cap, space)
-    assert err(held).max() > 0.01 and err(closed).max() < 0.001, (err(held).max(), err(closed).max())
+    assert err(held).max() > 0.01 and err(closed).max() < 0.004, (err(held).max(), err(closed).max())
+    assert np.sqrt(np.mean(err(closed) ** 2)) < 0.35 * np.sqrt(np.mean(err(held) ** 2))   # 1.6 mm RMS from 5.5
     assert space.depth_inside(closed).max() <= space.voxel
-    assert not on_hull[~cap].any() and np.array_equal(closed[~cap], V[~cap])
+    rim = ring_band(F, cap, RIM_RINGS) & ~cap
+    assert err(closed, rim).max() < 0.001                  # re-placed, still on the sphere
+    assert not on_hull[~cap].any() and np.array_equal(closed[~(cap | rim)], V[~(cap | rim)])

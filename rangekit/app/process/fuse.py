@@ -179,8 +179,9 @@ def carved_space(registered: RegisteredViews, observed: TriangleMesh, rig: Rig, 
 def save_closed(folder, closed: TriangleMesh, observed: ObservedInput, options: ProcessOptions,
                 space=None) -> tuple[TriangleMesh, MeshFigures]:
     """The closed surface with each vertex flagged observed or not, written as ``mesh_watertight.ply``; with
-    ``space`` (:func:`carved_space`) its unobserved vertices placed where the surface continues its curvature and
-    held out of carved space (:func:`rangekit.surface.carve.close_in_hull`), flagged ``carved`` where they lie on
+    ``space`` (:func:`carved_space`) its unobserved vertices (and the observed rim's rings around them) filled in
+    where they bend least on the table top and outside carved space, then held out of it
+    (:func:`rangekit.surface.carve.close_in_hull`), flagged ``carved`` where they lie on
     the hull."""
     watertight = observed.rule.flagged(closed)
     if space is not None:

@@ -98,6 +98,12 @@ def _within(vertices: np.ndarray, tree: cKDTree, s: np.ndarray, factor: float, m
     if len(vertices) == 0:
         return np.zeros(0, dtype=bool)
     d, nearest = tree.query(vertices, k=1)
+    return _near_enough(d, nearest, tree, s, factor, median, k)
+
+
+def _near_enough(d: np.ndarray, nearest: np.ndarray, tree: cKDTree, s: np.ndarray, factor: float, median: float,
+                 k: int) -> np.ndarray:
+    """:func:`_within` given each vertex's nearest point ``nearest`` (V,) and its distance ``d`` (V,)."""
     return d <= factor * np.minimum(_filled(tree, s, nearest, k), MAX_SPACING_RATIO * median)
 
 
@@ -139,6 +145,11 @@ def _spaced_tree(points: np.ndarray, spacing: np.ndarray | None, factor: float, 
 def keep_observed(mesh: TriangleMesh, observed: np.ndarray) -> TriangleMesh:
     """``mesh`` without the vertices where ``observed`` (V,) bool is False, nor any triangle touching one;
     unreferenced vertices dropped, order kept. Colours follow their vertices."""
+    return _kept(mesh, observed)[0]
+
+
+def _kept(mesh: TriangleMesh, observed: np.ndarray) -> tuple[TriangleMesh, np.ndarray]:
+    """:func:`keep_observed` and which vertices of ``mesh`` it kept ((V,) bool, their order kept)."""
     observed = np.asarray(observed, dtype=bool)
     if observed.shape != (len(mesh.vertices),):
         raise InputError(f"keep_observed: observed must be ({len(mesh.vertices)},) bool, found shape {observed.shape}")
@@ -147,7 +158,7 @@ def keep_observed(mesh: TriangleMesh, observed: np.ndarray) -> TriangleMesh:
     used[F] = True
     remap = np.cumsum(used) - 1
     C = mesh.vertex_colours
-    return TriangleMesh(mesh.vertices[used], remap[F], None if C is None else C[used])
+    return TriangleMesh(mesh.vertices[used], remap[F], None if C is None else C[used]), used
 
 
 @dataclass(frozen=True, eq=False)
@@ -209,13 +220,24 @@ class ObservedRule:
         """``surface`` without its unobserved vertices (:func:`keep_observed`): every component the points
         support is kept (two ears apart are two components), unlike a closed mesh, its largest component
         closed. MeshError when no triangle is left."""
+        return self.observed_near(surface, 1)[0]
+
+    def observed_near(self, surface: TriangleMesh, k: int) -> tuple[TriangleMesh, np.ndarray, np.ndarray]:
+        """:meth:`observed_part` and its vertices' ``k`` nearest points from the same k-d tree query: ``(mesh,
+        distances (V, k) metres, indices (V, k) into the tree's points)``, nearest first (what
+        :func:`rangekit.surface.refine.refine_to_points` projects the vertices with)."""
         from rangekit.errors import MeshError
 
-        observed = keep_observed(surface, self.flags(surface.vertices))
+        V = np.asarray(surface.vertices, dtype=np.float64)
+        d, idx = self.tree.query(V, k=k)
+        d, idx = d.reshape(len(V), k), idx.reshape(len(V), k)
+        flags = _near_enough(d[:, 0], idx[:, 0], self.tree, self.spacing, self.factor, self.median, self.k) \
+            if len(V) else np.zeros(0, dtype=bool)
+        observed, used = _kept(surface, flags)
         if len(observed.triangles) == 0:
             raise MeshError(f"no triangle of the fused surface ({len(surface.triangles)} triangles) lies within "
                             f"{self.factor:g} point spacings of the {self.tree.n} input points")
-        return observed
+        return observed, d[used], idx[used]
 
     def flagged(self, closed: TriangleMesh) -> TriangleMesh:
         """``closed`` with its per-vertex ``observed`` flag."""

@@ -133,7 +133,7 @@ def _spaced_tree(points: np.ndarray, spacing: np.ndarray | None, factor: float, 
                          f"{np.count_nonzero(~np.isfinite(P).all(axis=1))} rows that are not")
     from scipy.spatial import cKDTree
 
-    tree = cKDTree(_points(P, "observed_vertices"))
+    tree = cKDTree(_points(P, "observed_vertices"), balanced_tree=False)   # built in half the time, the same answers
     if spacing is None:                # computed where needed (:func:`_filled`): NaN until then
         return tree, np.full(tree.n, np.nan)
     s = np.asarray(spacing, dtype=np.float64)

@@ -28,7 +28,7 @@ import numpy as np
 from rangekit.errors import InputError
 from rangekit.formats.sessions.summary import Accuracy
 from rangekit.formats.sessions.view_errors import ViewErrors
-from rangekit.geometry import apply_T, invert_T
+from rangekit.geometry import apply_T, cross_rows, invert_T
 from rangekit.surface.mesh import TriangleMesh
 from rangekit.surface.raycast import mesh_scene, query_scene, raycasting_scene
 from rangekit.rig.rig_file import Rig
@@ -44,7 +44,7 @@ __all__ = ["Accuracy", "TruthEvaluation", "TruthSamples", "sample_surface", "vis
 def sample_surface(V: np.ndarray, F: np.ndarray, n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
     """``n`` area-uniform random points on a triangle mesh: (points (n, 3), face index (n,))."""
     a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
-    area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+    area = 0.5 * np.linalg.norm(cross_rows(b - a, c - a), axis=1)
     if area.sum() <= 0:
         raise InputError("sample_surface: the mesh has no area")
     face = rng.choice(len(F), size=n, p=area / area.sum())
@@ -83,7 +83,7 @@ def visible_samples(truth: TriangleMesh, scene: Scene, rig: Rig, angles: np.ndar
     serves every view: the camera and projector centres are moved into it instead of the scene to them.
     """
     a, b, c = (truth.vertices[truth.triangles[face, k]] for k in range(3))
-    N = np.cross(b - a, c - a)
+    N = cross_rows(b - a, c - a)
     N /= np.linalg.norm(N, axis=1, keepdims=True)
     if light == "laser":
         return laser_visible_samples(scene.world_mesh(np.eye(4)), rig, angles, P, N, eps=eps, min_cos=min_cos)

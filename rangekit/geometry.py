@@ -21,6 +21,7 @@ __all__ = [
     "compose",
     "apply_T",
     "transform_vectors",
+    "cross_rows",
     "rotvec_to_R",
     "R_to_rotvec",
     "quat_to_R",
@@ -81,6 +82,23 @@ def apply_T(T: np.ndarray, points: np.ndarray) -> np.ndarray:
     T = np.asarray(T, dtype=np.float64)
     out = _rotate(_as_points(points), T[:3, :3])
     out += T[:3, 3]
+    return out
+
+
+def cross_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(N, 3) float64 row-wise cross products of ``a`` and ``b`` ((N, 3) each, or one of them (3,)): the same bits
+    as ``np.cross(a, b)`` (the same products and differences, in the same order) at a third of its CPU on
+    200k rows (``np.cross`` moves axes and allocates a temporary per term; issue 51, the truth evaluation)."""
+    a, b = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    np.multiply(a1, b2, out=out[..., 0])
+    out[..., 0] -= a2 * b1
+    np.multiply(a2, b0, out=out[..., 1])
+    out[..., 1] -= a0 * b2
+    np.multiply(a0, b1, out=out[..., 2])
+    out[..., 2] -= a1 * b0
     return out
 
 

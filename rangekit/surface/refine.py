@@ -124,10 +124,12 @@ def _checked(vertices, points, normals, k) -> tuple[np.ndarray, np.ndarray, np.n
     return V, P, Nm
 
 
-def _project(V: np.ndarray, P: np.ndarray, Nm: np.ndarray, k: int, tree) -> tuple[np.ndarray, np.ndarray]:
+def _project(V: np.ndarray, P: np.ndarray, Nm: np.ndarray, k: int, tree,
+             near: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """:func:`project_to_points` on checked arrays, and the planes' unit normals (V, 3) (zero where the
-    neighbours' normals cancel)."""
-    if tree is None:
+    neighbours' normals cancel). ``near``: the vertices' ``k`` nearest points as the tree's query gives them
+    (distances, indices; (V, k) each), when already queried."""
+    if tree is None and near is None:
         from scipy.spatial import cKDTree
 
         tree = cKDTree(P)
@@ -135,7 +137,10 @@ def _project(V: np.ndarray, P: np.ndarray, Nm: np.ndarray, k: int, tree) -> tupl
     out, normal = V.copy(), np.zeros_like(V)
     for start in range(0, len(V), _CHUNK):
         Q = V[start:start + _CHUNK]
-        d, idx = tree.query(Q, k=k)
+        if near is None:
+            d, idx = tree.query(Q, k=k)
+        else:
+            d, idx = near[0][start:start + _CHUNK], near[1][start:start + _CHUNK]
         d, idx = d.reshape(len(Q), k), idx.reshape(len(Q), k)
         sigma = np.maximum(0.5 * d[:, -1:], 1e-12)
         w = np.exp(-(d / sigma) ** 2)
@@ -168,17 +173,23 @@ def edge_sag(vertices: np.ndarray, normals: np.ndarray, edges: np.ndarray) -> np
 
 
 def refine_to_points(mesh: TriangleMesh, points: np.ndarray, normals: np.ndarray, *, k: int = REFINE_NEIGHBOURS,
-                     tree=None, sag: float = SPLIT_SAG) -> TriangleMesh:
+                     tree=None, sag: float = SPLIT_SAG, near: tuple[np.ndarray, np.ndarray] | None = None
+                     ) -> TriangleMesh:
     """``mesh`` on the oriented ``points``' surface: its vertices projected (:func:`project_to_points`), its edges
     whose surface bows more than ``sag`` metres from the chord (:func:`edge_sag`, from the planes' normals at the
     ends) halved (:func:`subdivide_edges`) and their midpoints projected too. ``sag`` 0: every edge halved (every
-    triangle into four). An empty mesh is returned as it is."""
+    triangle into four). An empty mesh is returned as it is. ``near``: the vertices' ``k`` nearest points,
+    ``(distances, indices)`` (V, k) each as ``tree.query(mesh.vertices, k)`` gives them, when already queried
+    (:meth:`rangekit.surface.observed.ObservedRule.observed_near`: the observed cut's query, not made twice)."""
     if len(mesh.triangles) == 0:
         return mesh
     if not sag >= 0:
         raise InputError(f"refine_to_points: sag must be >= 0 metres, found {sag!r}")
     V, P, Nm = _checked(mesh.vertices, points, normals, k)
-    placed, n = _project(V, P, Nm, k, tree)
+    if near is not None and (np.shape(near[0]) != (len(V), min(k, len(P))) or np.shape(near[1]) != np.shape(near[0])):
+        raise InputError(f"refine_to_points: near must be two ({len(V)}, {min(k, len(P))}) arrays, found "
+                         f"{np.shape(near[0])} and {np.shape(near[1])}")
+    placed, n = _project(V, P, Nm, k, tree, near)
     edges, edge_of = mesh_edges(mesh.triangles, len(V))
     split = edge_sag(placed, n, edges) > sag if sag > 0 else np.ones(len(edges), dtype=bool)
     fine = subdivide_edges(TriangleMesh(placed, mesh.triangles, mesh.vertex_colours), split, edges, edge_of)

@@ -15,7 +15,7 @@ import numpy as np
 
 from rangekit.camera import PinholeCamera, world_pixel_rays
 from rangekit.errors import SceneError
-from rangekit.geometry import invert_T
+from rangekit.geometry import cross_rows, invert_T
 from rangekit.sim.scene.scene_object import PlanarTexture
 from rangekit.surface.raycast import query_scene, raycasting_scene
 
@@ -92,11 +92,11 @@ def _intersect_exact(mesh: WorldMesh, prim: np.ndarray, o: np.ndarray, d: np.nda
     v0 = mesh.vertices[tri[:, 0]]
     e1 = mesh.vertices[tri[:, 1]] - v0
     e2 = mesh.vertices[tri[:, 2]] - v0
-    pvec = np.cross(d, e2)
+    pvec = cross_rows(d, e2)
     det = np.einsum("ij,ij->i", e1, pvec)
     tvec = o - v0
     b1 = np.einsum("ij,ij->i", tvec, pvec) / det
-    qvec = np.cross(tvec, e1)
+    qvec = cross_rows(tvec, e1)
     b2 = np.einsum("ij,ij->i", d, qvec) / det
     t = np.einsum("ij,ij->i", e2, qvec) / det
     return t, b1, b2
@@ -298,7 +298,7 @@ def _camera_hits(mesh: WorldMesh, camera: PinholeCamera, scene, cam_rays, pixels
     p = o + t[:, None] * d
     tri = mesh.triangles[prim]
     v0 = mesh.vertices[tri[:, 0]]
-    n_face = np.cross(mesh.vertices[tri[:, 1]] - v0, mesh.vertices[tri[:, 2]] - v0)
+    n_face = cross_rows(mesh.vertices[tri[:, 1]] - v0, mesh.vertices[tri[:, 2]] - v0)
     n_face /= np.linalg.norm(n_face, axis=1, keepdims=True)
     # Barycentric weights, clipped for attribute interpolation (float32 may pick an edge neighbour).
     wb = np.column_stack([1.0 - b1 - b2, b1, b2]).clip(0.0, 1.0)

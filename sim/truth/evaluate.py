@@ -28,7 +28,7 @@ import numpy as np
 from rangekit.errors import InputError
 from rangekit.formats.sessions.summary import Accuracy
 from rangekit.formats.sessions.view_errors import ViewErrors
-from rangekit.geometry import apply_T, invert_T
+from rangekit.geometry import apply_T, cross_rows, invert_T
 from rangekit.surface.mesh import TriangleMesh
 from rangekit.surface.raycast import mesh_scene, query_scene, raycasting_scene
 from rangekit.rig.rig_file import Rig
@@ -44,7 +44,7 @@ __all__ = ["Accuracy", "TruthEvaluation", "TruthSamples", "sample_surface", "vis
 def sample_surface(V: np.ndarray, F: np.ndarray, n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
     """``n`` area-uniform random points on a triangle mesh: (points (n, 3), face index (n,))."""
     a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
-    area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+    area = 0.5 * np.linalg.norm(cross_rows(b - a, c - a), axis=1)
     if area.sum() <= 0:
         raise InputError("sample_surface: the mesh has no area")
     face = rng.choice(len(F), size=n, p=area / area.sum())
@@ -83,7 +83,7 @@ def visible_samples(truth: TriangleMesh, scene: Scene, rig: Rig, angles: np.ndar
     serves every view: the camera and projector centres are moved into it instead of the scene to them.
     """
     a, b, c = (truth.vertices[truth.triangles[face, k]] for k in range(3))
-    N = np.cross(b - a, c - a)
+    N = cross_rows(b - a, c - a)
     N /= np.linalg.norm(N, axis=1, keepdims=True)
     if light == "laser":
         return laser_visible_samples(scene.world_mesh(np.eye(4)), rig, angles, P, N, eps=eps, min_cos=min_cos)
@@ -123,6 +123,32 @@ def _closest_on(mesh: TriangleMesh, P: np.ndarray) -> tuple[np.ndarray, np.ndarr
     ans = query_scene(scene, "compute_closest_points", (P - c).astype(np.float32))
     Q = ans["points"].astype(np.float64) + c
     return np.linalg.norm(P - Q, axis=1), Q, ans["primitive_ids"].astype(np.int64)
+
+
+#: :func:`_within` takes a sample as within the tolerance without asking Open3D when a vertex of the mesh is this
+#: much nearer than the tolerance: far more than the float32 query's error (about 1e-8 m), so the answer is the same.
+_SURE_MARGIN = 1e-6
+
+
+def _within(mesh: TriangleMesh, P: np.ndarray, tolerance: float) -> np.ndarray:
+    """(n,) bool: ``_closest_on(mesh, P)[0] <= tolerance``, the same answers for less CPU. A point with a vertex of
+    the mesh (one of its triangles') within ``tolerance - _SURE_MARGIN`` is within the tolerance (the vertex is
+    on the surface): a k-d tree of the vertices answers most of them (79-85% of the 12-view scan's truth samples,
+    0.70 + 0.53 -> 0.36 + 0.28 CPU-s, loaded); Open3D's closest-point query answers the rest."""
+    from scipy.spatial import cKDTree
+
+    used = np.zeros(len(mesh.vertices), dtype=bool)
+    used[mesh.triangles.ravel()] = True
+    bound = tolerance - _SURE_MARGIN
+    out = np.zeros(len(P), dtype=bool)
+    if bound > 0:
+        d_vertex, _ = cKDTree(mesh.vertices[used], balanced_tree=False, compact_nodes=False).query(
+            P, distance_upper_bound=bound)
+        out = d_vertex <= bound
+    rest = np.flatnonzero(~out)
+    if rest.size:
+        out[rest] = _closest_on(mesh, P[rest])[0] <= tolerance
+    return out
 
 
 def _identity(T: np.ndarray) -> bool:
@@ -197,7 +223,8 @@ def mesh_accuracy(mesh: TriangleMesh, scene: Scene, rig: Rig, angles, *, toleran
     rng = np.random.default_rng(seed)
     # The mesh is brought to the truth's frame (table at angle 0) by inv(M0). When that is the identity (the
     # first view at table angle 0, the usual case) the mesh object itself is used: the same coordinates, and
-    # the ray-casting scene built here (rangekit.surface.raycast.mesh_scene) serves the report's renders.
+    # the ray-casting scene built here (rangekit.surface.raycast.mesh_scene, when some sample needs Open3D's query
+    # in _within) serves the report's renders.
     mesh0 = mesh if _identity(truth.M0) else TriangleMesh(apply_T(invert_T(truth.M0), mesh.vertices), mesh.triangles)
     Pm, _ = sample_surface(mesh0.vertices, mesh0.triangles, n_samples, rng)
     d_mesh, Q, q_face = _closest_on(truth.truth, Pm)
@@ -205,7 +232,7 @@ def mesh_accuracy(mesh: TriangleMesh, scene: Scene, rig: Rig, angles, *, toleran
     seen = truth.seen
     if not seen.any() or not on_seen.any():
         raise InputError("mesh_accuracy: no view sees the object")
-    d_truth, _, _ = _closest_on(mesh0, truth.samples)     # every sample: the whole surface's completeness
+    near = _within(mesh0, truth.samples, tolerance)     # every sample: the whole surface's completeness
     d = d_mesh[on_seen]
     diag = float(np.linalg.norm(np.ptp(truth.truth.vertices, axis=0)))
     d_fill = d_mesh[~on_seen]
@@ -216,12 +243,12 @@ def mesh_accuracy(mesh: TriangleMesh, scene: Scene, rig: Rig, angles, *, toleran
         cloud_figures = {"cloud_rms": float(np.sqrt(np.mean(d_cloud ** 2))),
                          "cloud_p95": float(np.percentile(d_cloud, 95)), "n_cloud": int(len(d_cloud))}
     return Accuracy(rms=float(np.sqrt(np.mean(d ** 2))), p95=float(np.percentile(d, 95)), max=float(d.max()),
-                    completeness=float(np.mean(d_truth[seen] <= tolerance)), tolerance=tolerance, diagonal=diag,
+                    completeness=float(np.mean(near[seen])), tolerance=tolerance, diagonal=diag,
                     visible_fraction=float(seen.mean()), unobserved_area=float(np.mean(~on_seen)),
                     unobserved_rms=float(np.sqrt(np.mean(d_fill ** 2))) if d_fill.size else 0.0,
                     rms_all=float(np.sqrt(np.mean(d_mesh ** 2))), max_incidence=float(np.radians(max_incidence_deg)),
                     n_mesh_samples=int(on_seen.sum()), n_truth_samples=int(seen.sum()),
-                    completeness_whole=float(np.mean(d_truth <= tolerance)), **cloud_figures)
+                    completeness_whole=float(np.mean(near)), **cloud_figures)
 
 
 _TRUTH_OPTIONS = ("table_margin", "max_incidence_deg", "n_samples", "seed", "light", "pass_motions")

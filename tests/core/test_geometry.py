@@ -150,3 +150,18 @@ def test_rigid_problem_names_what_is_wrong():
     bottom[3, 2] = 1.0
     assert "last row" in rigid_problem(bottom)
     assert "shape (3, 4)" in rigid_problem(T[:3])
+
+
+def test_cross_rows_is_np_cross_bit_for_bit():
+    """cross_rows (the truth evaluation's ray hits and normals) gives np.cross's very bits: rows, one vector
+    against rows, float32 rows against float64 rows."""
+    from rangekit.geometry import cross_rows
+
+    rng = np.random.default_rng(5)
+    a, b = rng.standard_normal((1000, 3)) * 1e-3, rng.standard_normal((1000, 3)) + 0.05
+    assert np.array_equal(cross_rows(a, b), np.cross(a, b))
+    assert np.array_equal(cross_rows(a, b[0]), np.cross(a, b[0]))
+    assert np.array_equal(cross_rows(b[0], a), np.cross(b[0], a))
+    f = a.astype(np.float32)
+    assert np.array_equal(cross_rows(f, b), np.cross(f, b))
+    assert cross_rows(a, b).dtype == np.float64

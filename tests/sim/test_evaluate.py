@@ -77,3 +77,27 @@ def test_visibility_matches_the_ray_cast_ground_truth(sphere_setup):
     uv = np.rint(rig.camera.project(P[seen])).astype(int)
     lit = gt.lit[uv[:, 1], uv[:, 0]] & (gt.object_id[uv[:, 1], uv[:, 0]] == 0)
     assert seen.sum() > 5000 and lit.mean() > 0.995
+
+
+def test_within_answers_as_the_closest_point_query(sphere_setup):
+    """The completeness's k-d tree shortcut (_within) says "within the tolerance" exactly where Open3D's closest-point
+    distance does: points from on the surface to twice the tolerance off it, many within a micrometre of the
+    tolerance either side, and a vertex no triangle uses (which must not count as surface) at a far point."""
+    from rangekit.sim.truth.evaluate import _closest_on, _within
+
+    _, _, truth = sphere_setup
+    rng = np.random.default_rng(3)
+    P, face = sample_surface(truth.vertices, truth.triangles, 20_000, rng)
+    a, b, c = (truth.vertices[truth.triangles[face, k]] for k in range(3))
+    n = np.cross(b - a, c - a)
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    tol = 1e-3
+    off = np.concatenate([rng.uniform(0, 2 * tol, 10_000), tol + rng.uniform(-2e-6, 2e-6, 10_000)])
+    Q = P + off[:, None] * n * rng.choice([-1.0, 1.0], size=(len(P), 1))
+    far = truth.vertices.max(axis=0) + [0.05, 0.0, 0.0]
+    mesh = TriangleMesh(np.vstack([truth.vertices, far]), truth.triangles)    # the last vertex is no triangle's
+    Q = np.vstack([Q, far + [1e-4, 0.0, 0.0]])
+    expected = _closest_on(mesh, Q)[0] <= tol
+    got = _within(mesh, Q, tol)
+    assert np.array_equal(got, expected)
+    assert 0.3 < expected.mean() < 0.8 and not got[-1]

@@ -221,3 +221,23 @@ def test_summary_reports_both_meshes(tmp_path):
     text = "\n".join(r.summary_lines())
     assert "observed surface" in text and "closed mesh (mesh_watertight.ply): 10 vertices, watertight True" in text
     assert "closed mesh against the true surface: RMS 0.100 mm" in text
+
+
+def test_rule_spacing_computed_where_needed_is_the_full_rules():
+    """A large cloud's rule computes a point's spacing only when it is a vertex's nearest point and the median from
+    every N // MEDIAN_POINTS-th point (issue 51: the fusion's CPU): each spacing it computed is point_spacing's, the
+    median within 1% of all points', and the flags of vertices near and off the surface are the full rule's."""
+    from rangekit.surface.observed import MEDIAN_POINTS, observed_rule
+
+    rng = np.random.default_rng(5)
+    P = R * _fibonacci_sphere(3 * MEDIAN_POINTS) + rng.normal(0, 2e-6, (3 * MEDIAN_POINTS, 3))
+    full = point_spacing(P)
+    V = R * _fibonacci_sphere(20_000) * rng.uniform(0.97, 1.03, (20_000, 1))   # within and beyond 2 spacings
+    rule = observed_rule(P)
+    flags = rule.flags(V)
+    known = np.isfinite(rule.spacing)
+    assert 0 < known.sum() < len(P) // 2                    # not every point's spacing was computed
+    np.testing.assert_array_equal(rule.spacing[known], full[known])
+    assert abs(rule.median / np.median(full) - 1) < 0.01
+    np.testing.assert_array_equal(flags, observed_vertices(V, P, spacing=full))
+    assert 0 < flags.sum() < len(V)                         # both kinds of vertex are there

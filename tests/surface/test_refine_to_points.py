@@ -159,3 +159,25 @@ def test_projection_is_exact_on_a_plane_and_keeps_a_vertex_whose_neighbours_disa
 def test_bad_input_is_named(points, normals, vertices, k, match):
     with pytest.raises(InputError, match=match):
         project_to_points(vertices, points, normals, k=k)
+
+
+def test_the_observed_cuts_query_refines_as_a_query_of_its_own():
+    """The observed mesh cut and refined from one k-d tree query (ObservedRule.observed_near, refine_to_points'
+    ``near``; issue 51: the fusion's CPU) is the same mesh, to the bit, as the cut and a query of its own; a
+    ``near`` of the wrong shape is named."""
+    from rangekit.surface.observed import observed_rule
+
+    P, N = _sphere_points(60_000, 10e-6)
+    keep = P[:, 2] > -0.5 * R                                # the bottom unobserved: the cut drops vertices
+    rule = observed_rule(P[keep])
+    coarse = _coarse_sphere(4)
+    cut = rule.observed_part(coarse)
+    alone = refine_to_points(cut, P[keep], N[keep], tree=rule.tree)
+    cut2, d, idx = rule.observed_near(coarse, 6)
+    shared = refine_to_points(cut2, P[keep], N[keep], tree=rule.tree, near=(d, idx))
+    assert 0 < len(cut.vertices) < len(coarse.vertices)
+    np.testing.assert_array_equal(cut2.triangles, cut.triangles)
+    np.testing.assert_array_equal(shared.vertices, alone.vertices)
+    np.testing.assert_array_equal(shared.triangles, alone.triangles)
+    with pytest.raises(InputError, match="near must be"):
+        refine_to_points(cut2, P[keep], N[keep], near=(d[:, :3], idx[:, :3]))

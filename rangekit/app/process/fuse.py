@@ -145,12 +145,14 @@ def save_observed(folder, full: TriangleMesh, observed: ObservedInput,
     :data:`rangekit.surface.refine.SPLIT_SAG` from them (:func:`rangekit.surface.refine.refine_to_points`, on the
     observed rule's k-d tree): at octree depth 8 its flat triangles leave curved parts (the upright bunny: 0.023 mm
     RMS, 95th percentile 0.043 mm, refined 0.013 / 0.024 with 1.6 times the vertices; docs/benchmarks.md)."""
-    mesh = observed.rule.observed_part(full)
-    if observed.normals is not None:
-        from rangekit.surface.refine import refine_to_points
+    if observed.normals is None:
+        mesh = observed.rule.observed_part(full)
+    else:   # the cut's k-d tree query gives the refinement's neighbours too
+        from rangekit.surface.refine import REFINE_NEIGHBOURS, refine_to_points
 
         tree = observed.rule.tree
-        mesh = refine_to_points(mesh, tree.data, observed.normals, tree=tree)
+        mesh, d, idx = observed.rule.observed_near(full, min(REFINE_NEIGHBOURS, tree.n))
+        mesh = refine_to_points(mesh, tree.data, observed.normals, tree=tree, near=(d, idx))
     return mesh, save_one(folder, mesh, options.fusion, MESH_FILE, options.mesh_format)
 
 

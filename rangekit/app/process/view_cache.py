@@ -142,11 +142,13 @@ def view_clouds(views: Sequence[SessionView], spec: PatternSpec, rig: Rig, setti
                 verify_views(session, views=[v])
             return cached[0], _stored_maps(cached[1], folders, white)
         stacks = _read_stacks(v, folders, session)
-        images = stacks[0]
+        # the white capture copied out: a view of it would keep the view's whole stack alive
+        white_image = stacks[0][white].copy()
+        # the frames handed over in a list that _decode_view empties: no frame of this view is kept once decoded
+        held = [stacks if settings.get("exposures_us") else stacks[0]]
+        del stacks
         with one_blas_thread(), (numba_threads(1) if n > 1 else nullcontext()):   # thin products
-            # the white capture copied out: a view of it would keep the view's whole stack alive
-            return _decode_view(v, stacks if settings.get("exposures_us") else images, images[white].copy(), spec,
-                                rig, settings, full_scale, T_table_world, table_margin)
+            return _decode_view(v, held, white_image, spec, rig, settings, full_scale, T_table_world, table_margin)
 
     n = worker_count(workers)
     if map_views is not None:   # the job runner's map over views (rangekit.app.runner.Runner.map_views)
@@ -227,22 +229,26 @@ def _check_still(stacks, spec: PatternSpec, decoded: np.ndarray, max_motion: flo
                               "moved (max_motion); capture the view again")
 
 
-def _decode_view(v: SessionView, stacks, white_image: np.ndarray, spec: PatternSpec, rig: Rig, settings: dict,
+def _decode_view(v: SessionView, held: list, white_image: np.ndarray, spec: PatternSpec, rig: Rig, settings: dict,
                  full_scale: float | None, T_table_world: np.ndarray | None,
                  table_margin: float) -> tuple[PointCloud, ViewMaps]:
     """:func:`view_cloud` past its cache, on one BLAS thread: its products are thin, (N, 3) @ (3, 3), and two
-    OpenBLAS threads spent 2x the CPU on them for the same bits."""
+    OpenBLAS threads spent 2x the CPU on them for the same bits. ``held``: a list of one item, the view's frames
+    (one exposure's stack, or the list of every exposure's), taken out of it so that they are freed as soon as
+    decoded and checked, not held while the view is triangulated and written (the decode stage's peak: issue 51)."""
     exposures = settings.get("exposures_us")
+    stacks = held.pop()
     with naming(v.folder):      # a view refused (the object moved during it: MotionError) is named
         rec = reconstruct_view(stacks, spec, rig.camera, rig.projector, method=settings["method"],
                                full_scale=full_scale, response=rig.projector_response, exposures_us=exposures)
         if settings.get("max_motion") is not None:
             _check_still(stacks if exposures else [stacks], spec, np.isfinite(rec.decoded.proj_col),
                          settings["max_motion"])
+    del stacks
     if rec.rig_check is not None and rec.rig_check.checkable and not rec.rig_check.fits:
         # a session's rig is its own: said, not refined per view (rangekit reconstruct refines one capture's)
         LOGGER.warning(f"{v.folder}: {rec.rig_check.describe()}")
-    xyz = rec.triangulated.xyz.copy()
+    xyz = rec.triangulated.xyz      # read only here: no (H, W, 3) float64 copy (31 MB at 1280 x 1024)
     valid = np.isfinite(xyz[:, :, 0])
     c = rec.cloud
     if T_table_world is not None:

@@ -25,7 +25,7 @@ from rangekit.surface.mesh import TriangleMesh, signed_volume
 from rangekit.surface.topology import directed_edges as _edges
 from rangekit.surface.topology import merged_vertex_ids, unique_rows
 
-__all__ = ["make_watertight", "clean_mesh", "continue_curvature", "ring_band", "ThinPlateBand", "thin_plate_band"]
+__all__ = ["make_watertight", "clean_mesh", "ring_band", "ThinPlateBand", "thin_plate_band"]
 
 
 def _face_edge_ids(F: np.ndarray, n_vertices: int) -> tuple[np.ndarray, int]:
@@ -369,15 +369,6 @@ def make_watertight(mesh: TriangleMesh) -> TriangleMesh:
 
 
 
-def _vertex_normals(V: np.ndarray, F: np.ndarray) -> np.ndarray:
-    """(V, 3) unit area-weighted vertex normals (zero where a vertex has no area)."""
-    n = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
-    N = np.zeros_like(V)
-    for k in range(3):
-        np.add.at(N, F[:, k], n)
-    return N / np.maximum(np.linalg.norm(N, axis=1, keepdims=True), 1e-300)
-
-
 def _rings(F: np.ndarray, start: np.ndarray, count: int) -> list[np.ndarray]:
     """``count`` successive (V,) bool rings of vertices around ``start`` (V,) bool, nearest first."""
     rings, seen = [], start.copy()
@@ -387,50 +378,6 @@ def _rings(F: np.ndarray, start: np.ndarray, count: int) -> list[np.ndarray]:
         rings.append(grown & ~seen)
         seen = grown
     return rings
-
-
-def continue_curvature(vertices: np.ndarray, triangles: np.ndarray, free: np.ndarray, *, max_curvature: float,
-                       rings: int = 3) -> np.ndarray:
-    """(V, 3) ``vertices`` with the ``free`` (V,) bool ones placed so the surface continues the mean curvature of
-    the fixed surface around them (a curvature-continuous hole fill: Laplacian coordinates, Sorkine 2006). The
-    thin-plate fairing of :func:`make_watertight` continues only the slope: over a wide hole in a curved surface
-    it sags (a sphere's cap 40 degrees wide comes out 0.05 radii too deep), the curvature's continuation does not.
-
-    Steps on the band of faces within ``rings + 2`` rings of the free vertices (cotangent Laplacian L, lumped
-    areas M, of the mesh as given): the signed mean curvature ``H = n . (L x) / M`` of the fixed vertices within
-    ``rings`` rings of the free ones, clipped to +-``max_curvature`` (1/m: a sharp edge's is not continued);
-    ``H`` interpolated harmonically over the free vertices; then the free positions solving ``L x = M H n`` in
-    least squares over the free vertices and their fixed neighbours (``n`` the vertex normals as given)."""
-    V, F = np.asarray(vertices, np.float64), np.asarray(triangles, np.int64)
-    free = np.asarray(free, dtype=bool)
-    if V.ndim != 2 or V.shape[1] != 3 or free.shape != (len(V),):
-        raise InputError(f"continue_curvature: vertices must be (V, 3) and free (V,), found {V.shape} and {free.shape}")
-    out = V.copy()
-    if not free.any() or free.all():
-        return out
-    around = _rings(F, free, rings + 2)
-    band = free | np.any(around, axis=0)
-    faces = np.any(band[F], axis=1)
-    used = np.flatnonzero(np.bincount(F[faces].ravel(), minlength=len(V)) > 0)
-    index = np.full(len(V), -1, np.int64)
-    index[used] = np.arange(len(used))
-    Fb, X, fr = index[F[faces]], V[used], free[used]
-    Lc, mass = _cotan_laplacian(X[Fb], Fb, len(X))
-    N = _vertex_normals(X, Fb)
-    H = np.clip(np.einsum("ij,ij->i", Lc @ X, N) / mass, -max_curvature, max_curvature)
-    data = np.any(around[:rings], axis=0)[used]
-    fi, di = np.flatnonzero(fr), np.flatnonzero(data)
-    A = (-Lc).tocsr()
-    Hf = H.copy()
-    Hf[fi] = splu(A[fi][:, fi].tocsc()).solve(-(A[fi][:, di] @ H[di]))
-    rows = np.flatnonzero(fr | around[0][used])
-    w = sp.diags(1.0 / np.sqrt(mass[rows]))
-    Lr = Lc[rows]
-    fixed = np.flatnonzero(~fr)
-    Af = (w @ Lr[:, fi]).tocsc()
-    rhs = w @ (mass[rows, None] * Hf[rows, None] * N[rows] - Lr[:, fixed] @ X[fixed])
-    out[used[fi]] = splu((Af.T @ Af).tocsc()).solve(np.asarray(Af.T @ rhs))
-    return out
 
 
 def ring_band(triangles: np.ndarray, free: np.ndarray, rings: int) -> np.ndarray:

@@ -103,13 +103,19 @@ class Memo:
     (:class:`rangekit.registration.ahead.RegistrationAhead`), ``evaluate`` the evaluator with the truth's samples
     and the views' errors made, ``before_mesh`` called and waited for before the observed mesh is announced (a
     scan's preview written beside the processing: a watcher has the preview first, issue 51; mesh.ply is written
-    before it, whatever it takes). LOCAL's is empty: every view is decoded on the runner's threads."""
+    before it, whatever it takes), ``truth_after_mesh`` whether the views are measured against the truth after
+    mesh.ply is written rather than beside Poisson (a scan: a person waits for the mesh, and the simulator-only
+    measures took a core from Poisson, issue 51; the figures are the same), ``free`` each view's free depth (index
+    -> (H, W) float32, the closed mesh's carving, :func:`rangekit.app.process.decode.free_depth_of`) made from its
+    maps as it was decoded. LOCAL's is empty: every view is decoded on the runner's threads."""
 
     decoded: Any = field(default_factory=dict)   # a dict, or any mapping with ``in`` and ``pop``
     registration: RegistrationAhead | None = None
     evaluate: Any = None
     announced: bool = True
     before_mesh: Callable[[], Any] | None = None
+    truth_after_mesh: bool = False
+    free: dict = field(default_factory=dict)
 
 
 class Runner:
@@ -276,8 +282,11 @@ class StreamingWorker:
 
     def memo(self) -> Memo:
         """What the steps did ahead, for the processing: each view decoded, the registration's levels and first
-        pairs, the prepared evaluator."""
-        return Memo(self.steps.results, self.steps.registration, self.steps.evaluate)
+        pairs, the prepared evaluator (the last views' work ahead done here first, on the caller's thread: the scan
+        calls this beside :meth:`write_preview`)."""
+        self.steps.last_ahead()
+        return Memo(self.steps.results, self.steps.registration, self.steps.evaluate, truth_after_mesh=True,
+                    free=self.steps.free)
 
     def _one(self, k: int) -> None:
         with one_blas_thread():   # thin products (rangekit._runtime.threads)

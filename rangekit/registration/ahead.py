@@ -5,7 +5,8 @@ poses (the turntable's) and, once the first view is in, the voxel (:func:`rangek
 So as each view arrives it can do what :func:`rangekit.registration.multiview.register_views` would do first:
 downsample the view to the two levels (``voxel`` and ``fine_voxel``, with normals), build the fine level's k-d
 tree, refine each first-round candidate pair whose two views are both in and, on the turntable, measure the
-overlap of each pair the joint refinement will consider. The final ``register_views(..., ahead=...)`` takes a level only when
+overlap of each pair the joint refinement will consider and find its first iteration's correspondences (they
+depend on the start poses, known before any view, the two views' fine levels and samples only: issue 51). The final ``register_views(..., ahead=...)`` takes a level only when
 its voxel is the same and every view is in, and a pair's result only when its job is equal to its own and its
 clouds are the very level clouds taken; everything else it computes. A pair's refinement depends only on its job
 and its two clouds (:mod:`rangekit.registration.pair_refine`), so the poses are the same bits with or without
@@ -22,6 +23,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from rangekit.geometry import invert_T
+from rangekit.registration.joint import joint_samples, pair_matches
 from rangekit.registration.multiview import (MultiViewOptions, first_view_world, pair_jobs, refinement_pairs)
 from rangekit.registration.pair_refine import PairJob, PairMapper, mutual_overlap, refine_pair
 from rangekit.surface.cloud import PointCloud, downsample_with_normals
@@ -54,14 +56,21 @@ class RegistrationAhead:
         # On the turntable the joint refinement starts from the prior's nearest turntable poses: its candidate
         # pairs and their overlaps on the fine level are known before the last view is in.
         self._joint: dict[tuple[int, int], np.ndarray] = {}
+        self._T_joint: np.ndarray | None = None
         if options.turntable:
             from rangekit.registration.turntable import onto_turntable
 
-            T_joint = onto_turntable(T)
+            self._T_joint = T_joint = onto_turntable(T)
             self._joint = {(i, j): invert_T(T_joint[i]) @ T_joint[j]
                            for i, j in refinement_pairs(options, prior=True)(T_joint, True)}
         self._overlaps: dict[tuple[int, int], float] = {}
-        self.taken = {"levels": 0, "pairs": 0, "overlaps": 0}   # what the final registration took of it
+        # ... and so are its first iteration's correspondences: each view's samples (drawn in view order, as the
+        # joint refinement draws them) matched in the other view of each overlapping pair, both ways.
+        self._draw = np.random.default_rng(options.rng)
+        self._samples: dict[int, tuple[np.ndarray, np.ndarray | None]] = {}
+        self._matches: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}
+        self._reach = 2.5 * self.fine       # the joint refinement's max_distance (multiview: 2.5 fine voxels)
+        self.taken = {"levels": 0, "pairs": 0, "overlaps": 0, "matches": 0}   # what the final registration took
 
     @property
     def views(self) -> list[int]:
@@ -79,10 +88,17 @@ class RegistrationAhead:
         for (i, j), job in self._jobs.items():
             if k in (i, j) and i in level and j in level and (i, j) not in self._refined:
                 self._refined[i, j] = refine_pair(job, level[i], level[j])
+        if self.options.joint_iterations > 0 and k == len(self._samples):   # drawn in view order only
+            picks = joint_samples(self._draw, len(fine.points), self.options.joint_samples)
+            self._samples[k] = (fine.points[picks], None if fine.normals is None else fine.normals[picks])
         for (i, j), T_i_j in self._joint.items():
             if k in (i, j) and i in fine_level and j in fine_level:
                 self._overlaps[i, j] = mutual_overlap(fine_level[i], fine_level[j], self._trees[i], self._trees[j],
                                                       T_i_j, 2 * self.fine)
+                if self._overlaps[i, j] >= self.options.min_overlap and i in self._samples and j in self._samples:
+                    for a, b, T_a_b in ((i, j, T_i_j), (j, i, invert_T(self._T_joint[j]) @ self._T_joint[i])):
+                        self._matches[a, b] = pair_matches(T_a_b, *self._samples[b], fine_level[a], self._trees[a],
+                                                           self._reach)
 
     def level(self, voxel: float, n: int) -> list[PointCloud] | None:
         """Every view's cloud downsampled to ``voxel`` when that is one of the two levels and all ``n`` views
@@ -114,6 +130,19 @@ class RegistrationAhead:
             self.taken["overlaps"] += 1
             return self._overlaps[i, j]
         return mutual_overlap(a, b, tree_a, tree_b, T_a_b, radius)
+
+    def first_matches(self, i: int, j: int, T_i: np.ndarray, T_j: np.ndarray, cloud_i: PointCloud, tree_i: cKDTree,
+                      samples_j: np.ndarray, max_distance: float) -> tuple[np.ndarray, np.ndarray] | None:
+        """The joint refinement's first-iteration correspondences of directed pair (target ``i``, source ``j``)
+        (:data:`rangekit.registration.joint.FirstMatches`), when found here for the same start poses, target cloud
+        and tree (this object's fine level), source samples and ``max_distance``; else None."""
+        found = self._matches.get((i, j))
+        if found is None or max_distance != self._reach or cloud_i is not self._levels[self.fine].get(i) \
+                or tree_i is not self._trees.get(i) or not np.array_equal(T_i, self._T_joint[i]) \
+                or not np.array_equal(T_j, self._T_joint[j]) or not np.array_equal(samples_j, self._samples[j][0]):
+            return None
+        self.taken["matches"] += 1
+        return found
 
     def mapper(self, fallback: PairMapper | None = None) -> PairMapper:
         """A :data:`~rangekit.registration.pair_refine.PairMapper` that gives a pair refined ahead when its job

@@ -20,7 +20,11 @@ from rangekit.geometry import apply_T, invert_T, make_T, rotvec_to_R
 from rangekit.registration.icp import MIN_NORMAL_COS
 from rangekit.surface.cloud import PointCloud
 
-__all__ = ["JointResult", "refine_jointly"]
+__all__ = ["JointResult", "refine_jointly", "pair_matches", "joint_samples", "FirstMatches"]
+
+#: ``first(i, j, T_i, T_j, cloud_i, tree_i, samples_j, max_distance)``: directed pair (target ``i``, source ``j``)'s
+#: correspondences at the start poses, found ahead (:func:`pair_matches`' ``(idx, ok)``), or None: find them.
+FirstMatches = Callable[..., "tuple[np.ndarray, np.ndarray] | None"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -36,7 +40,8 @@ def refine_jointly(clouds: Sequence[PointCloud], T_world_view: np.ndarray, pairs
                    max_distance: float, iterations: int = 15, samples: int = 8000, kernel_k: float = 1.345,
                    tolerance: float = 1e-9, rng: int = 0, hold: dict | None = None,
                    basis: Callable[[np.ndarray, np.ndarray, float], np.ndarray] | None = None,
-                   trees: Sequence[cKDTree] | None = None, workers: int = 0) -> JointResult:
+                   trees: Sequence[cKDTree] | None = None, workers: int = 0,
+                   first: FirstMatches | None = None) -> JointResult:
     """Multi-view ICP: refine every pose at once (view 0 fixed) by Gauss-Newton on point-to-plane residuals
     of all overlapping ``pairs`` in both directions, re-associating closest points each iteration.
 
@@ -55,12 +60,15 @@ def refine_jointly(clouds: Sequence[PointCloud], T_world_view: np.ndarray, pairs
 
     ``trees``: each cloud's k-d tree of its points, when built already. ``workers``: threads that find the
     directed pairs' correspondences (the k-d tree queries release the GIL); the result does not depend on it.
+    ``first``: the first iteration's correspondences of a directed pair found ahead (:data:`FirstMatches`, a scan's
+    :meth:`rangekit.registration.ahead.RegistrationAhead.first_matches`: they depend on the start poses, the two
+    clouds and the samples only); the result is the same bits with or without it.
     """
     n = len(clouds)
     T = np.array(T_world_view, dtype=np.float64, copy=True)
     gen = np.random.default_rng(rng)
     trees = list(trees) if trees is not None else [cKDTree(c.points) for c in clouds]
-    picks = [gen.choice(len(c.points), min(samples, len(c.points)), replace=False) for c in clouds]
+    picks = [joint_samples(gen, len(c.points), samples) for c in clouds]
     subs = [c.points[k] for c, k in zip(clouds, picks)]
     sub_normals = [None if c.normals is None else c.normals[k] for c, k in zip(clouds, picks)]
     centre = np.mean([apply_T(T[k], c.points.mean(axis=0, keepdims=True))[0] for k, c in enumerate(clouds)], axis=0)
@@ -73,9 +81,14 @@ def refine_jointly(clouds: Sequence[PointCloud], T_world_view: np.ndarray, pairs
             g = np.zeros(6 * n)
             # Each directed pair's correspondences on its own (the k-d tree queries release the GIL), two at a time,
             # taken in order: the same sums in the same order as one after another.
-            terms = [x for x in pool.map(lambda ij: _pair_terms(ij[0], ij[1], T[ij[0]], T[ij[1]], clouds, trees, subs,
-                                                                sub_normals, centre, max_distance), directed)
-                     if x is not None]
+            ask = first if it == 1 and first is not None else None
+
+            def terms_of(ij, ask=ask):
+                i, j = ij
+                match = None if ask is None else ask(i, j, T[i], T[j], clouds[i], trees[i], subs[j], max_distance)
+                return _pair_terms(i, j, T[i], T[j], clouds, trees, subs, sub_normals, centre, max_distance, match)
+
+            terms = [x for x in pool.map(terms_of, directed) if x is not None]
             res_all = [x[:5] for x in terms]
             pair_rmse = {(min(i, j), max(i, j)): rmse_ij for i, j, _, _, _, rmse_ij in terms}
             if not res_all:
@@ -118,20 +131,30 @@ def refine_jointly(clouds: Sequence[PointCloud], T_world_view: np.ndarray, pairs
     return JointResult(T, rmse, it, converged, pair_rmse)
 
 
-def _pair_terms(i: int, j: int, T_i: np.ndarray, T_j: np.ndarray, clouds: Sequence[PointCloud], trees: Sequence,
-                subs: list, sub_normals: list, centre: np.ndarray, max_distance: float):
-    """The residuals and Jacobians of directed pair (target ``i``, source ``j``) at poses ``T_i``, ``T_j``:
-    ``(i, j, r (m,), Ji (m, 6), Jj (m, 6), rms of r)`` over view j's sample points whose closest point in
-    view i lies within ``max_distance`` (metres) and faces the same way; None with fewer than 10."""
-    p_j = subs[j]
-    T_i_j = invert_T(T_i) @ T_j
-    d, idx = trees[i].query(apply_T(T_i_j, p_j), k=1, distance_upper_bound=max_distance, workers=1)
+def pair_matches(T_i_j: np.ndarray, p_j: np.ndarray, normals_j: np.ndarray | None, cloud_i: PointCloud,
+                 tree_i: cKDTree, max_distance: float) -> tuple[np.ndarray, np.ndarray]:
+    """The correspondences of source samples ``p_j`` (m, 3; ``normals_j`` theirs or None) in target ``cloud_i``
+    (``tree_i`` its k-d tree) with the source at ``T_i_j``: ``(idx (m,), ok (m,) bool)``, each sample's closest
+    target point and whether it lies within ``max_distance`` (metres) and faces the same way."""
+    d, idx = tree_i.query(apply_T(T_i_j, p_j), k=1, distance_upper_bound=max_distance, workers=1)
     ok = np.isfinite(d)
-    if sub_normals[j] is not None:
+    if normals_j is not None:
         # Only surfaces facing the same way: the two faces of a thin part (a fin, a sheet) are
         # closer than the gate but are not the same surface.
-        n_src = sub_normals[j] @ T_i_j[:3, :3].T
-        ok[ok] = np.einsum("ij,ij->i", n_src[ok], clouds[i].normals[idx[ok]]) > MIN_NORMAL_COS
+        n_src = normals_j @ T_i_j[:3, :3].T
+        ok[ok] = np.einsum("ij,ij->i", n_src[ok], cloud_i.normals[idx[ok]]) > MIN_NORMAL_COS
+    return idx, ok
+
+
+def _pair_terms(i: int, j: int, T_i: np.ndarray, T_j: np.ndarray, clouds: Sequence[PointCloud], trees: Sequence,
+                subs: list, sub_normals: list, centre: np.ndarray, max_distance: float, match=None):
+    """The residuals and Jacobians of directed pair (target ``i``, source ``j``) at poses ``T_i``, ``T_j``:
+    ``(i, j, r (m,), Ji (m, 6), Jj (m, 6), rms of r)`` over view j's sample points whose closest point in
+    view i lies within ``max_distance`` (metres) and faces the same way (:func:`pair_matches`, or ``match``, its
+    result found ahead); None with fewer than 10."""
+    p_j = subs[j]
+    idx, ok = match if match is not None else \
+        pair_matches(invert_T(T_i) @ T_j, p_j, sub_normals[j], clouds[i], trees[i], max_distance)
     if np.count_nonzero(ok) < 10:
         return None
     pw = apply_T(T_j, p_j[ok]) - centre
@@ -180,3 +203,9 @@ def _held_basis(n: int, hold: dict, centre: np.ndarray, length: float) -> np.nda
         B[6 * k: 6 * k + 6, col: col + b.shape[1]] = b
         col += b.shape[1]
     return B
+
+
+def joint_samples(gen: np.random.Generator, n_points: int, samples: int) -> np.ndarray:
+    """The indices of the points of a view (``n_points``) the joint refinement samples, drawn from ``gen``, which
+    draws each view's in turn (the first view's first): at most ``samples``, without repeats."""
+    return gen.choice(n_points, min(samples, n_points), replace=False)

@@ -50,6 +50,8 @@ class WorkAhead(Protocol):
     def trees(self, clouds: Sequence[PointCloud]) -> list[cKDTree] | None: ...
     def overlap(self, a: PointCloud, b: PointCloud, tree_a: cKDTree, tree_b: cKDTree, T_a_b: np.ndarray,
                 radius: float) -> float: ...
+    def first_matches(self, i: int, j: int, T_i: np.ndarray, T_j: np.ndarray, cloud_i: PointCloud, tree_i: cKDTree,
+                      samples_j: np.ndarray, max_distance: float) -> tuple[np.ndarray, np.ndarray] | None: ...
 
 
 __all__ = ["MultiViewOptions", "EdgeResult", "MultiViewResult", "register_views", "pairwise_overlap",
@@ -382,7 +384,8 @@ class _Refinement:
                             2 * fine) >= options.min_overlap]
         joint = refine_jointly(fine_clouds, T, pairs, max_distance=2.5 * fine, iterations=options.joint_iterations,
                                samples=options.joint_samples, tolerance=options.joint_tolerance, rng=options.rng,
-                               hold=_joint_holds(n, pairs, edges, holds, T), basis=basis, trees=trees)
+                               hold=_joint_holds(n, pairs, edges, holds, T), basis=basis, trees=trees,
+                               first=None if ahead is None else ahead.first_matches)
         self.say(f"joint refinement of {n} views over {len(pairs)} pairs: rmse {joint.rmse * 1e3:.4f} mm, "
                  f"{joint.n_iterations} iterations{'' if joint.converged else ' (not converged)'}")
         return joint.T_world_view, joint.rmse, len(pairs), bool(joint.converged)

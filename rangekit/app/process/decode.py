@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 
 from rangekit.app.process.options import ProcessOptions
 from rangekit.app.process.view_cache import ViewMaps, cache_settings
@@ -18,7 +18,7 @@ from rangekit.app.report.view_rows import ViewRows
 from rangekit.formats.sessions.session import Session, SessionView
 from rangekit.surface.cloud import PointCloud
 
-__all__ = ["DecodedViews", "decode"]
+__all__ = ["DecodedViews", "decode", "carving_table", "free_depth_of"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -42,23 +42,28 @@ class DecodedViews:
         return [v.folder.name for v in self.views]
 
 
-def decode(session: Session, options: ProcessOptions, views: Iterable[tuple[PointCloud, ViewMaps]]) -> DecodedViews:
+def decode(session: Session, options: ProcessOptions, views: Iterable[tuple[PointCloud, ViewMaps]],
+           free_ahead: Mapping[int, np.ndarray] | None = None) -> DecodedViews:
     """Gather the decoded ``views`` of ``session`` (each completed view's ``(cloud, ViewMaps)``, in order, as
     :func:`rangekit.app.process.view_cache.view_cloud` gives them) into :class:`DecodedViews`. With
     ``options.report`` each view's report row is made from its maps as it comes
     (:class:`rangekit.app.report.view_rows.ViewRowsMaker`), so no map is read back from the cache; of each view's
-    maps only what the later stages need is kept (the TSDF's depth maps; Poisson's projector columns)."""
+    maps only what the later stages need is kept (the TSDF's depth maps; Poisson's projector columns).
+    ``free_ahead``: view index -> its free depth made already from the same maps (:func:`free_depth_of`; a scan's,
+    as each view was decoded), taken as it is."""
     done = session.done_views
     settings = cache_settings(session, options.method, options.table_margin, options.max_motion)
     clouds: list[PointCloud] = []
     maps: list[ViewMaps] = []
     rows, view_maps = (_rows_maker(session) if options.report else None), None
-    table = _table_view(session)
+    table = carving_table(session)
+    free_ahead = free_ahead or {}
     free: list[np.ndarray] | None = [] if table is not None else None
     for k, (cloud, view_maps) in enumerate(views):
         clouds.append(cloud)
         if table is not None:
-            free.append(_free_depth(view_maps, table))
+            index = done[k].index
+            free.append(free_ahead[index] if index in free_ahead else free_depth_of(view_maps, table))
         if rows is not None:
             rows.add(done[k].folder.name, cloud, view_maps)
         maps.append(view_maps if options.fusion == "tsdf" else _column_only(view_maps))
@@ -72,7 +77,7 @@ def decode(session: Session, options: ProcessOptions, views: Iterable[tuple[Poin
 _MIN_CONFIDENCE = 0.03
 
 
-def _table_view(session: Session):
+def carving_table(session: Session):
     """What the rig's camera and projector see of the turntable top (rangekit.surface.carve.table_view); None
     without a turntable."""
     rig = session.rig
@@ -83,7 +88,7 @@ def _table_view(session: Session):
     return table_view(rig.camera, rig.projector, rig.T_world_table)
 
 
-def _free_depth(m: ViewMaps, table) -> np.ndarray:
+def free_depth_of(m: ViewMaps, table) -> np.ndarray:
     """A view's free depth (rangekit.surface.carve.free_depth) from its maps: its kept points' depth, the table
     top's where a confident decoded column is the table's own."""
     from rangekit.surface.carve import free_depth, view_depth

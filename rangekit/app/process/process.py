@@ -110,7 +110,7 @@ def _process(session: Session, options: ProcessOptions, evaluate: Evaluator | No
 
         return process_laser(session, options, evaluate, runner)
     with runner.stage(Stage.DECODE, reuse_memory=True):   # each view's stacks reuse the last one's pages
-        decoded = decode(session, options, _decoded_views(session, options, runner))
+        decoded = decode(session, options, _decoded_views(session, options, runner), runner.memo.free)
     # the Poisson child imports on the other core while the views register
     child = spawn_child(CHILD_IMPORTS) if large_poisson(decoded, options) and \
         runner.where(Work.POISSON) is Where.CHILD else None
@@ -173,23 +173,26 @@ def _decoded_views(session: Session, options: ProcessOptions, runner: Runner) ->
 def _fuse(registered: RegisteredViews, session: Session, options: ProcessOptions, evaluate: Evaluator | None,
           child, runner: Runner, agreement: list, children: ExitStack) -> FusedViews:
     """The fuse stage's steps, placed: the fusion beside this thread (a child for a large Poisson, else a
-    thread) while the merged cloud is written and the views are measured; then the observed mesh cut and saved,
-    and measured, while the rest is closed on a thread; the report's views' agreement started on a thread as soon
+    thread) while the merged cloud is written and the views are measured (a scan's, ``Memo.truth_after_mesh``:
+    once mesh.ply is written); then the observed mesh cut and saved, and measured, while the rest is closed on a
+    thread; the report's views' agreement started on a thread as soon
     as the observed mesh is saved."""
     out = session.folder
     given = fusion_input(registered, options)
+    late = evaluate is not None and runner.memo.truth_after_mesh   # a scan: the views measured after mesh.ply
     runner.say(f"fusing {given.n_merged:,} points ({options.fusion})"
-               + ("; measuring the views against the true surface alongside" if evaluate is not None else ""))
+               + ("; measuring the views against the true surface alongside" if evaluate is not None and not late
+                  else ""))
     fn, args, kwargs = surfaces(given if options.fusion == "poisson" else registered, options, session.rig)
     work = Work.POISSON if options.fusion == "poisson" else Work.TSDF
     where = runner.where(work) if options.fusion != "poisson" or large_poisson(registered.decoded, options) \
         else Where.THREAD
     with runner.beside(work, fn, *args, where=where, child=child, **kwargs) as fusion:
         save_merged(out, given, registered)
-        if evaluate is not None:
+        if evaluate is not None and not late:
             with runner.stage(Stage.EVALUATE, reuse_memory=True):   # each view's casts reuse the last's pages
                 measure_views(evaluate, registered)
-        else:
+        elif not late:
             measure_views(None, registered)
         runner.release_memory()
         rule = observed_rule(given, options)
@@ -205,6 +208,9 @@ def _fuse(registered: RegisteredViews, session: Session, options: ProcessOptions
                 runner.memo.before_mesh()
             runner.emit(MeshReady("observed", out / MESH_FILE, mesh))
             agreement.append(children.enter_context(_agreement_beside(options.report, mesh, registered, runner)))
+            if late:   # the views against the truth, now that mesh.ply is out (Memo.truth_after_mesh)
+                with runner.stage(Stage.EVALUATE, reuse_memory=True):
+                    measure_views(evaluate, registered)
             if evaluate is not None:
                 with runner.stage(Stage.EVALUATE):
                     runner.say("measuring the observed mesh and each view against the true surface")

@@ -23,13 +23,15 @@ calls the steps on a worker thread of lower priority that backs off while the ca
    of the last frame), each piece taken by the processing only where it is exactly its own, so the outputs are
    the bytes ``rangekit process`` writes: the registration's levels and first-round pairs
    (:attr:`StreamingViews.registration`, :class:`rangekit.registration.ahead.RegistrationAhead`, one-pass
-   turntable scans), and on the simulator the truth's samples and the view's errors against the truth
+   turntable scans), its free depth for the closed mesh's carving (:attr:`StreamingViews.free`), and on the
+   simulator the truth's samples and the view's errors against the truth
    (:attr:`StreamingViews.evaluate`).
 
 The last view (or any once the acquisition is over, :attr:`StreamingViews.acquisition_over`) is what the
-processing waits for: it is decoded on every core, its work ahead done first and its placing left to
-:meth:`StreamingViews.write_preview`, which writes ``preview.ply``, the TSDF's surface
-(:class:`~rangekit.app.events.MeshReady` ``"preview"``), beside the processing. A multi-pass scan's preview holds its
+processing waits for: it is decoded on every core, then its placing is left to :meth:`StreamingViews.write_preview`,
+which writes ``preview.ply``, the TSDF's surface (:class:`~rangekit.app.events.MeshReady` ``"preview"``), and
+its work ahead to :meth:`StreamingViews.last_ahead`, run beside it (the preview waits for nothing but the decoding;
+issue 51); then the processing, the preview still beside it. A multi-pass scan's preview holds its
 first pass (the object turned over is placed by the processing's pass registration).
 
 A view during which the object moved (:class:`~rangekit.errors.MotionError`: the processing's check of each view,
@@ -81,11 +83,14 @@ class StreamingViews:
         self._placed: dict[int, tuple[np.ndarray, PointCloud]] = {}
         self._volume = None
         self._unplaced: list = []  # the last views, placed in the preview by write_preview
+        self._unregistered: list = []  # the last views, their registration ahead done by last_ahead
         self._laser = False
         self.acquisition_over = False              # set once the acquisition has ended: every view is urgent
         self.decoded: list[int] = []               # views decoded here, in order
         self.moved: dict = {}                      # index -> MotionError: views the object moved during
         self.results: dict = {}                    # index -> (cloud, ViewMaps): the processing takes them as they are
+        self.free: dict = {}                       # index -> the view's free depth (the carving's), taken likewise
+        self._table = None                         # what the camera and projector see of the table (free_depth_of)
         self.evaluate = None                       # the session's Truth, prepared view by view (NO_TRUTH on hardware)
         self.measured: list[int] = []              # views whose errors against the truth were measured here
         self.registration = None                   # RegistrationAhead of a one-pass turntable scan, from view 0 on
@@ -133,6 +138,18 @@ class StreamingViews:
         self._emit(MeshReady("preview", path, mesh))
         return path
 
+    def last_ahead(self) -> None:
+        """After the last view's steps: its work ahead (module doc, 4; not its errors against the truth), which the
+        processing then takes; the scan runs it beside :meth:`write_preview`, so the preview waits for the last
+        view's decoding only (issue 51)."""
+        for k, cloud, maps, session in self._unregistered:
+            try:
+                self._free(k, maps, session)
+            except Exception:   # noqa: BLE001 - the decode stage makes it itself and meets the error
+                self.free.pop(k, None)
+            self._ahead(k, cloud, maps, session, truth=False)
+        self._unregistered = []
+
     # ------------------------------------------------------------ the steps
     def _emit(self, event) -> None:
         emit(self._on_event, event)   # the bus: thread-safe, its subscribers on its own thread
@@ -153,14 +170,25 @@ class StreamingViews:
         self.results[k] = (cloud, maps)
         self._emit(ViewDecoded(k, total, view.folder.name, cloud))
         placed = rig.T_world_table is not None and session.plan.view_passes()[k] == 0 and len(cloud) > 0
-        if last:
-            self._ahead(k, cloud, maps, session, truth=False)   # its errors: beside the fusion
+        if last:   # its work ahead beside the preview (last_ahead), its errors after the mesh
+            self._unregistered.append((k, cloud, maps, session))
             if placed:
                 self._unplaced.append((k, cloud, maps.depth, session))
             return
         if placed:
             self._place_and_integrate(k, cloud, maps.depth, session)
+        self._free(k, maps, session)
         self._ahead(k, cloud, maps, session)
+
+    def _free(self, k: int, maps, session: Session) -> None:
+        """View ``k``'s free depth, the closed mesh's carving (:func:`rangekit.app.process.decode.free_depth_of`,
+        as the processing's decode stage makes it: it takes this one); nothing without a turntable."""
+        from rangekit.app.process.decode import carving_table, free_depth_of
+
+        if self._table is None:
+            self._table = (carving_table(session),)
+        if self._table[0] is not None:
+            self.free[k] = free_depth_of(maps, self._table[0])
 
     def _place_and_integrate(self, k: int, cloud: PointCloud, depth: np.ndarray, session: Session) -> None:
         T = self._place(k, cloud, session)

@@ -144,6 +144,7 @@ def test_the_final_mesh_is_what_rangekit_process_makes(streamed, tmp_path):
     memo = streaming.memo()
     ahead, evaluate = memo.registration, memo.evaluate
     assert ahead is not None and ahead.views == list(range(N_VIEWS)) and evaluate is not None
+    assert sorted(memo.free) == list(range(N_VIEWS))   # each view's free depth (the carving's), made as it came
     scanned = shutil.copytree(out, tmp_path / "scanned")
     cached = shutil.copytree(out, tmp_path / "cached")
     fresh = copy_session(out, tmp_path / "fresh")
@@ -153,8 +154,9 @@ def test_the_final_mesh_is_what_rangekit_process_makes(streamed, tmp_path):
     process_session(scanned, ProcessOptions(report=False), evaluate=evaluate, plan=Plan.STREAMING,
                     memo=memo)
     # the errors of the views decoded while the capture ran (not the last one's: the processing measures it
-    # beside the fusion)
-    assert ahead.taken == {"levels": 2, "pairs": len(ahead._jobs), "overlaps": len(ahead._joint)}
+    # once mesh.ply is written, Memo.truth_after_mesh)
+    assert ahead.taken == {"levels": 2, "pairs": len(ahead._jobs), "overlaps": len(ahead._joint),
+                           "matches": len(ahead._matches)} and len(ahead._matches) > 0
     measured = streaming.steps.measured
     assert evaluate.views_taken == len(measured) >= 1 and N_VIEWS - 1 not in measured
     process(cached, ProcessOptions(report=False))

@@ -126,3 +126,68 @@ def test_the_observed_mesh_waits_for_what_must_be_announced_first(tmp_session):
     assert written.is_set()
     ready = [i for i, e in enumerate(seen) if isinstance(e, ev.MeshReady) and e.kind == "observed"]
     assert len(ready) == 1 and seen.index("before_mesh") < ready[0]
+
+
+def test_a_scans_views_are_measured_against_the_truth_after_mesh_ply(tmp_session, tmp_path):
+    """Memo.truth_after_mesh (a scan's): the views' errors against the truth are measured once mesh.ply is written,
+    not beside Poisson (the simulator-only measures took a core from it); the outputs and every figure are the
+    ones ``rangekit process`` writes with the views measured beside the fusion."""
+    import json
+    import shutil
+
+    from rangekit.app.process.options import ProcessOptions
+    from rangekit.app.runner import Memo, Plan
+    from rangekit.app.scan.scan import process_placed, session_evaluator
+    from rangekit.formats.sessions.session import Session
+
+    local = shutil.copytree(tmp_session, tmp_path / "local")
+    truth = session_evaluator(Session.load(tmp_session))
+    mesh_there: list = []
+
+    class Watching:   # the evaluator, noting whether mesh.ply was there when the views were measured
+        measures = True
+
+        def __getattr__(self, name):
+            return getattr(truth, name)
+
+        def __call__(self, *args, **kwargs):
+            return truth(*args, **kwargs)
+
+        def prepare(self, angles, views=None):
+            if views is not None:
+                mesh_there.append((tmp_session / "mesh.ply").is_file())
+            return truth.prepare(angles, views)
+
+    process_placed(tmp_session, ProcessOptions(report=False), plan=Plan.STREAMING,
+                   memo=Memo(evaluate=Watching(), truth_after_mesh=True))
+    assert mesh_there == [True]
+    process_placed(local, ProcessOptions(report=False), plan=Plan.LOCAL)
+    for name in ("mesh.ply", "mesh_watertight.ply", "merged.ply", "poses.json"):
+        assert (tmp_session / name).read_bytes() == (local / name).read_bytes(), name
+
+    def figures(folder):   # summary.json but its seconds
+        d = json.loads((folder / "summary.json").read_text())
+        d.pop("seconds", None)
+        return d
+
+    assert figures(tmp_session) == figures(local) and figures(local)["view_errors"] is not None
+
+
+def test_the_decode_stage_takes_a_views_free_depth_made_as_it_came(tmp_session):
+    """The carving's free depth of a view, made by the scan as the view was decoded (Memo.free), is taken by the
+    decode stage as it is, and equals the one the stage makes itself."""
+    from rangekit.app.process.decode import carving_table, decode, free_depth_of
+    from rangekit.app.process.options import ProcessOptions
+    from rangekit.app.process.view_cache import cache_settings, table_transform, view_clouds
+    from rangekit.formats.sessions.session import Session
+
+    session, options = Session.load(tmp_session), ProcessOptions(report=False)
+    views = list(view_clouds(session.done_views, session.pattern, session.rig,
+                             cache_settings(session, options.method, options.table_margin, options.max_motion),
+                             session.capture.full_scale, table_transform(session.rig), options.table_margin))
+    index = session.done_views[1].index
+    ahead = {index: free_depth_of(views[1][1], carving_table(session))}
+    given, made = decode(session, options, iter(views), ahead), decode(session, options, iter(views))
+    assert given.free[1] is ahead[index]
+    assert len(given.free) == len(made.free) == len(views)
+    assert all(np.array_equal(a, b, equal_nan=True) for a, b in zip(given.free, made.free))

@@ -1,0 +1,119 @@
+"""What ``rangekit scan --realtime`` does after its last frame, replayed on a session's frames with no capture
+(issue 51: the preview within 1 s of the last frame, mesh.ply within 3 s), side by side for two trees in one run.
+
+    PYTHONPATH=. python benchmarks/app/scan/bench_after_last_frame.py /tmp/r49/S12 --old /work/main --pairs 2
+
+Each run is a process of its own with the tree on PYTHONPATH: the session is copied without its caches and
+outputs, views 0..n-2 go through the scan's streaming steps (as they would while the capture runs), then the clock
+starts where the last frame would be written: the last view queued and drained, the preview beside the processing,
+as :func:`rangekit.app.scan.scan.scan` does after its acquisition. Printed per run (one JSON line): the seconds from
+there to the last view decoded, the preview, the registration's end (poses.json), mesh.ply and the closed mesh, and
+the CPU seconds this process used by each (user + system; the Poisson child's are not in it: it is the same
+code on both sides). The machine's load makes the seconds noisy; the CPU seconds say what work is left after the
+last frame. The capture itself is bench_time_to_mesh.py's.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import shutil
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parents[3]
+CACHES = ("cloud.ply", "maps.npz", "cloud.json", "*.ply", "poses.json", "summary.json", "events.jsonl", "report.html")
+
+
+def _cpu() -> float:
+    r = resource.getrusage(resource.RUSAGE_SELF)
+    return r.ru_utime + r.ru_stime
+
+
+def replay(session: Path, work: Path) -> dict:
+    """One replay (module doc) of ``session`` in ``work`` (removed first): each span's seconds and CPU seconds."""
+    from rangekit._runtime.executor import Where, start
+    from rangekit.app.bus import EventBus
+    from rangekit.app.events import MeshReady, StageFinished, ViewDecoded
+    from rangekit.app.process.options import ProcessOptions
+    from rangekit.app.runner import Plan, StreamingWorker
+    from rangekit.app.scan.scan import _process, _waiting
+    from rangekit.app.scan.streaming import StreamingViews
+    from rangekit.formats.sessions.session import Session
+
+    if work.exists():
+        shutil.rmtree(work)
+    shutil.copytree(session, work, ignore=shutil.ignore_patterns(*CACHES))
+    clock: dict = {}
+    t0 = c0 = None
+
+    def mark(name: str) -> None:
+        if t0 is not None and name not in clock:
+            clock[name] = (round(time.perf_counter() - t0, 2), round(_cpu() - c0, 2))
+
+    def on_event(event) -> None:
+        if isinstance(event, ViewDecoded) and event.index == event.total - 1:
+            mark("decoded")
+        elif isinstance(event, MeshReady):
+            mark(event.kind)
+        elif isinstance(event, StageFinished) and event.stage == "register":
+            mark("registered")
+
+    options = ProcessOptions(report=False)
+    with EventBus(on_event) as bus:
+        worker = StreamingWorker(StreamingViews(work, options, bus))
+        n = len(Session.load(work).views)
+        for k in range(n - 1):
+            worker.steps.view(k)
+        bus.flush()
+        t0, c0 = time.perf_counter(), _cpu()
+        worker._worker.put(n - 1)                     # view n-1 acquired: its last frame is on disk
+        worker.drain()
+        with start(Where.THREAD, worker.write_preview) as preview:
+            memo = worker.memo()
+            memo.before_mesh = _waiting(preview)
+            _process(Session.load(work), options, bus, Plan.STREAMING, memo)
+            preview.result()
+        bus.flush()
+    accuracy = json.loads((work / "summary.json").read_text())["accuracy"]
+    return {"spans_s_cpu": clock, "rms_mm": round(accuracy["rms"] * 1e3, 4), "completeness": accuracy["completeness"]}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("session", type=Path)
+    parser.add_argument("--old", type=Path, required=True)
+    parser.add_argument("--new", type=Path, default=HERE)
+    parser.add_argument("--pairs", type=int, default=2)
+    parser.add_argument("--out", type=Path, default=Path("/tmp/after_last_frame"))
+    parser.add_argument("--one", type=Path, help=argparse.SUPPRESS)   # a child run: the work folder
+    args = parser.parse_args()
+    if args.one is not None:
+        print(json.dumps(replay(args.session, args.one)))
+        return
+    rows: dict = {"old": [], "new": []}
+    for pair in range(args.pairs):
+        for row in ("old", "new") if pair % 2 == 0 else ("new", "old"):
+            tree = args.old if row == "old" else args.new
+            load = round(os.getloadavg()[0], 2)
+            out = subprocess.run([sys.executable, str(Path(__file__).resolve()), str(args.session), "--old", ".",
+                                  "--one", str(args.out / f"{row}_{pair}")], cwd=tree, capture_output=True, text=True,
+                                 env={**os.environ, "PYTHONPATH": str(tree)}, check=True)
+            got = {"pair": pair, "row": row, "load": load, **json.loads(out.stdout.strip().splitlines()[-1])}
+            rows[row].append(got)
+            print(json.dumps(got), flush=True)
+    for row, runs in rows.items():
+        spans = sorted({s for r in runs for s in r["spans_s_cpu"]}, key=lambda s: runs[0]["spans_s_cpu"].get(s, (0,))[0])
+        print(json.dumps({"row": row, "median [s, CPU s]": {
+            s: [statistics.median(r["spans_s_cpu"][s][i] for r in runs if s in r["spans_s_cpu"]) for i in (0, 1)]
+            for s in spans}}))
+    shutil.rmtree(args.out, ignore_errors=True)
+
+
+if __name__ == "__main__":
+    main()

@@ -173,10 +173,11 @@ def _decoded_views(session: Session, options: ProcessOptions, runner: Runner) ->
 def _fuse(registered: RegisteredViews, session: Session, options: ProcessOptions, evaluate: Evaluator | None,
           child, runner: Runner, agreement: list, children: ExitStack) -> FusedViews:
     """The fuse stage's steps, placed: the fusion beside this thread (a child for a large Poisson, else a
-    thread) while the merged cloud is written and the views are measured (a scan's, ``Memo.truth_after_mesh``:
-    once mesh.ply is written); then the observed mesh cut and saved, and measured, while the rest is closed on a
-    thread; the report's views' agreement started on a thread as soon
-    as the observed mesh is saved."""
+    thread) while the merged cloud is written and the views are measured; then the observed mesh cut and saved,
+    and measured, while the rest is closed on a thread; the report's views' agreement started on a thread as soon
+    as the observed mesh is saved. A scan's measures against the truth (``Memo.truth_after_mesh``) come once both
+    meshes are written, beside nothing that makes them: the mesh a person waits for comes first, and no
+    simulator-only work (its reuse of freed memory, its threads) runs beside the closing."""
     out = session.folder
     given = fusion_input(registered, options)
     late = evaluate is not None and runner.memo.truth_after_mesh   # a scan: the views measured after mesh.ply
@@ -208,13 +209,8 @@ def _fuse(registered: RegisteredViews, session: Session, options: ProcessOptions
                 runner.memo.before_mesh()
             runner.emit(MeshReady("observed", out / MESH_FILE, mesh))
             agreement.append(children.enter_context(_agreement_beside(options.report, mesh, registered, runner)))
-            if late:   # the views against the truth, now that mesh.ply is out (Memo.truth_after_mesh)
-                with runner.stage(Stage.EVALUATE, reuse_memory=True):
-                    measure_views(evaluate, registered)
-            if evaluate is not None:
-                with runner.stage(Stage.EVALUATE):
-                    runner.say("measuring the observed mesh and each view against the true surface")
-                    evaluation = evaluate_observed(evaluate, mesh, registered.angles, views=registered)
+            if evaluate is not None and not late:
+                evaluation = _measure_observed(evaluate, mesh, registered, runner)
             space = carved_space(registered, mesh, session.rig, session.plan.passes)
             closed = closing.result()
         runner.release_memory()   # the fusion's and the evaluator's temporaries
@@ -223,7 +219,18 @@ def _fuse(registered: RegisteredViews, session: Session, options: ProcessOptions
         del closed, rule
         runner.emit(MeshReady("watertight", out / WATERTIGHT_FILE, watertight))
         runner.say(summary_line(mesh, watertight_info))
+    if late:   # the views and the observed mesh against the truth once both meshes are out (Memo.truth_after_mesh)
+        with runner.stage(Stage.EVALUATE, reuse_memory=True):
+            measure_views(evaluate, registered)
+        evaluation = _measure_observed(evaluate, mesh, registered, runner)
     return FusedViews(mesh, watertight, mesh_info, watertight_info, evaluation)
+
+
+def _measure_observed(evaluate: Evaluator, mesh, registered: RegisteredViews, runner: Runner):
+    """The observed mesh and each view against the true surface (:func:`evaluate_observed`), as a stage."""
+    with runner.stage(Stage.EVALUATE):
+        runner.say("measuring the observed mesh and each view against the true surface")
+        return evaluate_observed(evaluate, mesh, registered.angles, views=registered)
 
 
 def _start(session: Session, runner: Runner) -> None:

@@ -173,6 +173,56 @@ def test_the_final_mesh_is_what_rangekit_process_makes(streamed, tmp_path):
     assert figures(fresh)["view_errors"] is not None
 
 
+@pytest.mark.parametrize("on_worker", [0, 1, N_VIEWS - 1])
+def test_the_mesh_is_the_same_whichever_views_the_worker_took_before_the_acquisition_ended(streamed, tmp_path,
+                                                                                             on_worker):
+    """What a scan does after its acquisition, with the split between the streaming worker (views decoded, placed
+    and worked ahead on its thread while the capture runs) and the drain (the views left: decoded on the scan's
+    thread, their work ahead beside the preview, ``StreamingViews.last_ahead``) forced: the first ``on_worker``
+    views through the worker, the rest drained, as a resumed or loaded scan splits them. Whatever the split, the
+    meshes, poses and figures are the bytes ``rangekit process`` writes (issue 51: a resumed scan under load once
+    wrote other bytes than its uninterrupted twin)."""
+    import json
+    import time
+
+    from rangekit._runtime.executor import Where, start
+    from rangekit.app.runner import Plan
+    from rangekit.app.scan.scan import _process, _waiting, process
+
+    out = streamed[0]
+    scanned, fresh = copy_session(out, tmp_path / "scanned"), copy_session(out, tmp_path / "fresh")
+    for folder in (scanned, fresh):
+        for k in range(N_VIEWS):
+            for name in CACHE:
+                (folder / f"view_{k:03d}" / name).unlink(missing_ok=True)
+    options = ProcessOptions(report=False)
+    worker = _streaming(scanned)
+    for k in range(on_worker):
+        worker.on_event(ev.ViewAcquired(k, N_VIEWS, str(scanned / f"view_{k:03d}"), 0.0, 1))
+    while len(worker.steps.decoded) < on_worker and worker.error is None:   # the worker's views, on its thread
+        time.sleep(0.01)
+    for k in range(on_worker, N_VIEWS):
+        worker.on_event(ev.ViewAcquired(k, N_VIEWS, str(scanned / f"view_{k:03d}"), 0.0, 1))
+    worker.drain()
+    assert worker.error is None and worker.steps.decoded == list(range(N_VIEWS))
+    with start(Where.THREAD, worker.write_preview) as preview:   # as rangekit.app.scan.scan does
+        memo = worker.memo()
+        memo.before_mesh = _waiting(preview)
+        _process(Session.load(scanned), options, None, Plan.STREAMING, memo)
+        assert preview.result() is not None
+    assert sorted(memo.free) == list(range(N_VIEWS)) and memo.registration.taken["matches"] > 0
+    process(fresh, options)
+    for name in ("mesh.ply", "mesh_watertight.ply", "merged.ply", "poses.json"):
+        assert (scanned / name).read_bytes() == (fresh / name).read_bytes(), name
+
+    def figures(folder):   # summary.json but its seconds
+        d = json.loads((folder / "summary.json").read_text())
+        d.pop("seconds", None)
+        return d
+
+    assert figures(scanned) == figures(fresh)
+
+
 @pytest.mark.slow
 def test_in_real_time_a_view_is_decoded_before_the_next_ones_last_frame(tmp_path):
     """The simulated rig on the wall clock (a 20 ms pattern delay, 30 frames a second, the turntable at its

@@ -103,9 +103,11 @@ class Memo:
     (:class:`rangekit.registration.ahead.RegistrationAhead`), ``evaluate`` the evaluator with the truth's samples
     and the views' errors made, ``before_mesh`` called and waited for before the observed mesh is announced (a
     scan's preview written beside the processing: a watcher has the preview first, issue 51; mesh.ply is written
-    before it, whatever it takes), ``truth_after_mesh`` whether the views are measured against the truth after
-    mesh.ply is written rather than beside Poisson (a scan: a person waits for the mesh, and the simulator-only
-    measures took a core from Poisson, issue 51; the figures are the same), ``free`` each view's free depth (index
+    before it, whatever it takes), ``truth_after_mesh`` whether the views and the observed mesh are measured against
+    the truth once mesh.ply and the closed mesh are written rather than beside Poisson and the closing (a scan: a
+    person waits for the mesh, the simulator-only measures took a core from Poisson, and run beside the closing
+    they were the one concurrency of the closed mesh's path the work ahead added, issue 51; the figures are the
+    same), ``free`` each view's free depth (index
     -> (H, W) float32, the closed mesh's carving, :func:`rangekit.app.process.decode.free_depth_of`) made from its
     maps as it was decoded. LOCAL's is empty: every view is decoded on the runner's threads."""
 

@@ -14,7 +14,7 @@ point lit along its projector ray, were tried as more views and carved nothing m
 - :func:`hold_out`: a closed mesh's unobserved vertices moved out of carved space onto the hull, and which
   vertices lie on the hull (``carved``).
 - :func:`fill_in_hull`: a closed mesh's free vertices placed where the surface bends least (the thin-plate energy,
-  :func:`rangekit.surface.watertight.thin_plate_band`) on or above the table top and outside carved space.
+  :func:`rangekit.surface.thin_plate.thin_plate_band`) on or above the table top and outside carved space.
 - :func:`close_in_hull`: the unobserved vertices and the observed rim's :data:`RIM_RINGS` rings around them
   filled so, then held out: what ``rangekit process`` does.
 
@@ -304,7 +304,7 @@ def close_in_hull(vertices: np.ndarray, triangles: np.ndarray, movable: np.ndarr
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
 
-    from rangekit.surface.watertight import ring_band
+    from rangekit.surface.thin_plate import ring_band
 
     F = np.asarray(triangles, np.int64)
     movable = np.asarray(movable, dtype=bool)
@@ -328,13 +328,13 @@ def close_in_hull(vertices: np.ndarray, triangles: np.ndarray, movable: np.ndarr
 def fill_in_hull(vertices: np.ndarray, triangles: np.ndarray, free: np.ndarray, space: CarvedSpace, *,
                  passes: int = HULL_PASSES) -> np.ndarray:
     """(V, 3) ``vertices`` (world) with the ``free`` (V,) bool ones placed where they bend least
-    (:func:`rangekit.surface.watertight.thin_plate_band`: the fixed surface's position and slope continued) on or
+    (:func:`rangekit.surface.thin_plate.thin_plate_band`: the fixed surface's position and slope continued) on or
     above the table top and outside carved space. In the table frame: x and y free, z solved with the vertices
     that would go under the table held on it (an active set: each pass adds those still under it); then, for
     ``passes`` passes, the vertices more than half a voxel inside carved space are held out onto the hull
     (:func:`hold_out`), held there, and the rest solved again, so the fill bends smoothly off the hull where it
     touches it instead of being pushed onto it vertex by vertex."""
-    from rangekit.surface.watertight import thin_plate_band
+    from rangekit.surface.thin_plate import thin_plate_band
 
     V = np.array(vertices, dtype=np.float64)
     free = np.asarray(free, dtype=bool)

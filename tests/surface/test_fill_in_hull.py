@@ -10,7 +10,7 @@ import trimesh
 
 from rangekit.errors import InputError
 from rangekit.surface.carve import RIM_RINGS, CarvedSpace, close_in_hull, fill_in_hull
-from rangekit.surface.watertight import ring_band
+from rangekit.surface.thin_plate import ring_band
 
 R = 0.05       # metres
 VOXEL = 0.001

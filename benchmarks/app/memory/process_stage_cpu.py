@@ -2,7 +2,7 @@
 stage's start and end (getrusage, every thread of this process; the Poisson child's as the children's), from the
 runner's stage events.
 
-    PYTHONPATH=<tree> python benchmarks/app/process_stage_cpu.py SESSION
+    PYTHONPATH=<tree> python benchmarks/app/memory/process_stage_cpu.py SESSION
 
 SESSION is processed in place: give a fresh copy of a simulated session (``cp -r``) to include the decode. Run it
 with two trees' PYTHONPATH on two copies to compare them (issue 51: the decode stage's system time).

@@ -5,7 +5,8 @@ whose nearest true point no view can see); this splits those samples by the near
 the table top, its true normal's z (table frame: -1 faces the table) and the mesh's own flags (observed, carved,
 guessed), each row's share of the samples and of the squared error, its RMS and which side of the true surface
 the mesh lies (``out``: outside the object). With ``--hull``, what bounds it: the carved space made again from
-the views' cached maps and the registered poses as ``rangekit process`` makes it, and the true surface's unseen
+the views' cached maps and the registered poses as ``rangekit process`` makes it
+(:func:`rangekit.app.process.carved.carved_space_of`), and the true surface's unseen
 samples' distance to its hull (a closed mesh on the hull is that far off, whatever fills it), by height over the
 table. Not a timing (issue 51 Deliver 4, docs/benchmarks.md).
 
@@ -19,31 +20,11 @@ import argparse
 import numpy as np
 
 
-def _space(session, mesh):
-    """The session's carved space, as ``rangekit.app.process.fuse.carved_space`` makes it, from each view's cached
-    maps (``maps.npz``, left by ``rangekit process``) and ``poses.json``."""
-    from rangekit.formats.poses import load_poses
-    from rangekit.geometry import apply_T, compose, invert_T
-    from rangekit.surface.carve import carve, free_depth, table_view, view_depth
-
-    rig = session.rig
-    _, T = load_poses(session.folder / "poses.json")
-    table = table_view(rig.camera, rig.projector, rig.T_world_table)
-    views = []
-    for k, v in enumerate(session.done_views):
-        with np.load(v.folder / "maps.npz") as m:
-            cols = np.where(m["confidence"] >= 0.03, m["proj_col"], np.nan)
-            views.append((free_depth(view_depth(m["depth"], cols, table)),
-                          rig.camera.with_pose(compose(T[k], rig.camera.T_world_cam))))
-    P = apply_T(invert_T(rig.T_world_table), mesh.vertices)
-    lo, hi = P.min(axis=0), P.max(axis=0)
-    return carve(views, rig.T_world_table, lo - 0.1 * (hi - lo), hi + 0.1 * (hi - lo))
-
-
 def hull_bound(folder) -> list[str]:
     """The true surface's unseen samples' distance to the hull (RMS, by height over the table)."""
     from pathlib import Path
 
+    from rangekit.app.process.carved import carved_space_of
     from rangekit.app.scan.truth import session_evaluator
     from rangekit.formats.meshes import load_mesh
     from rangekit.formats.sessions.session import Session
@@ -53,7 +34,7 @@ def hull_bound(folder) -> list[str]:
     evaluate = session_evaluator(session)
     evaluate.prepare([v.angle for v in session.done_views])
     truth = evaluate._truth
-    space = _space(session, load_mesh(Path(folder) / "mesh.ply"))
+    space = carved_space_of(session, load_mesh(Path(folder) / "mesh.ply"))
     P = truth.samples[~truth.seen]
     d = space.depth_inside(P)
     z = apply_T(invert_T(session.rig.T_world_table), P)[:, 2]

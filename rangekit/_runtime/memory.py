@@ -13,17 +13,30 @@ only make the next stage or task fault them in again.
 The other way round, :func:`reuse_freed_memory`: inside its block arrays up to a threshold come from the heap
 and freed ones stay there, so a decoder's temporaries (tens of MB each, allocated and freed many times per
 view) reuse pages instead of mapping fresh ones that the kernel must fault in and zero (the system time and
-"Minor page faults" of ``/usr/bin/time -v rangekit decode ...`` show it). On leaving, glibc's limits are set
-to where its own adjustment takes them (32 MB) and the free pages are returned.
+"Minor page faults" of ``/usr/bin/time -v rangekit decode ...`` show it). A worker thread's arena is made of
+64 MB heaps that glibc unmaps as soon as one is wholly free, whatever the trim threshold, so inside the block
+the top pad is raised to a heap's size, which keeps them. A block larger than a heap (a view's frame stack:
+48-60 frames of 1280x1024 are 63-79 MB) is mapped on its own on a worker thread whatever the threshold:
+:func:`reused_array` keeps one per thread for the next view. On leaving the outermost block, glibc's limits
+are set to where its own adjustment takes them (32 MB), the top pad to its default, the kept arrays dropped and
+the free pages returned. Blocks may nest and overlap on several threads: the settings hold until the last one
+ends. Inside, numpy's advice for huge pages on its large arrays is off too: the pages the block does fault in
+(its first view's) then come 4 kB at a time; as 2 MB huge pages the kernel spent about 4x the system time
+zeroing them (``perf``: ``clear_page_erms`` under ``do_huge_pmd_anonymous_page``; the decode of the 12-view
+default session, issue 51).
 """
 
 from __future__ import annotations
 
 import ctypes
 import os
+import sys
+import threading
 from contextlib import contextmanager
 
-__all__ = ["release_free_memory", "reuse_freed_memory"]
+import numpy as np
+
+__all__ = ["release_free_memory", "reuse_freed_memory", "reused_array"]
 
 try:
     _LIBC = ctypes.CDLL(None)   # the process's own symbols: libc's, without a search (ldconfig) for it
@@ -34,11 +47,21 @@ _MALLOPT = getattr(_LIBC, "mallopt", None)
 #: glibc reads MALLOC_ARENA_MAX when the process starts: set then, it holds for the whole process.
 _ONE_ARENA = os.environ.get("MALLOC_ARENA_MAX") == "1"
 #: mallopt's parameters (glibc's malloc.h).
-_M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3
+_M_TRIM_THRESHOLD, _M_TOP_PAD, _M_MMAP_THRESHOLD = -1, -2, -3
 #: Where glibc's own adjustment of the mmap threshold stops (DEFAULT_MMAP_THRESHOLD_MAX on 64-bit).
 _MMAP_THRESHOLD_MAX = 32 * 2**20
+#: glibc's own top pad (DEFAULT_TOP_PAD) and the size of a worker thread's heap (HEAP_MAX_SIZE on 64-bit).
+_DEFAULT_TOP_PAD, _HEAP_BYTES = 128 * 2**10, 2 * _MMAP_THRESHOLD_MAX
 #: Arrays up to this size come from the heap inside :func:`reuse_freed_memory`.
 REUSE_BYTES = 256 * 2**20
+
+#: numpy's switch for madvise(MADV_HUGEPAGE) on its large arrays (numpy 2: np._core; 1.x: np.core).
+_MULTIARRAY = getattr(getattr(np, "_core", None), "multiarray", None) or np.core.multiarray
+_SET_HUGEPAGE = getattr(_MULTIARRAY, "_set_madvise_hugepage", None)
+
+_LOCK = threading.Lock()
+_OPEN = 0                                        # reuse blocks open, on every thread
+_KEPT: dict[tuple[int, str], np.ndarray] = {}    # (thread ident, name) -> the array reused_array keeps
 
 
 def release_free_memory() -> None:
@@ -55,14 +78,64 @@ def reuse_freed_memory(limit: int = REUSE_BYTES):
     and the free pages are returned (:func:`release_free_memory`). Nothing without glibc, and nothing where
     the process was started with its malloc settings (the Dask workers: ``MALLOC_ARENA_MAX``,
     ``MALLOC_MMAP_THRESHOLD_``), which it keeps."""
+    global _OPEN
     if _MALLOPT is None or _ONE_ARENA or "MALLOC_MMAP_THRESHOLD_" in os.environ:
         yield
         return
-    _MALLOPT(_M_MMAP_THRESHOLD, int(limit))
-    _MALLOPT(_M_TRIM_THRESHOLD, 2 * int(limit))
+    with _LOCK:
+        _OPEN += 1
+        if _OPEN == 1:
+            _huge_pages(False)
+            _MALLOPT(_M_MMAP_THRESHOLD, int(limit))
+            _MALLOPT(_M_TRIM_THRESHOLD, 2 * int(limit))
+            _MALLOPT(_M_TOP_PAD, _HEAP_BYTES)
     try:
         yield
     finally:
-        _MALLOPT(_M_MMAP_THRESHOLD, _MMAP_THRESHOLD_MAX)
-        _MALLOPT(_M_TRIM_THRESHOLD, 2 * _MMAP_THRESHOLD_MAX)
-        release_free_memory()
+        with _LOCK:
+            _OPEN -= 1
+            last = _OPEN == 0
+            if last:
+                _KEPT.clear()
+                _MALLOPT(_M_MMAP_THRESHOLD, _MMAP_THRESHOLD_MAX)
+                _MALLOPT(_M_TRIM_THRESHOLD, 2 * _MMAP_THRESHOLD_MAX)
+                _MALLOPT(_M_TOP_PAD, _DEFAULT_TOP_PAD)
+                _huge_pages(True)
+        if last:
+            release_free_memory()
+
+
+_HUGE_BEFORE = [True]
+
+
+def _huge_pages(on: bool) -> None:
+    """numpy's huge-page advice off (remembering what it was), or back to what it was."""
+    if _SET_HUGEPAGE is None:
+        return
+    if not on:
+        _HUGE_BEFORE[0] = bool(_SET_HUGEPAGE(False))   # returns the previous setting
+    else:
+        _SET_HUGEPAGE(_HUGE_BEFORE[0])
+
+
+def reused_array(name: str, shape: tuple[int, ...], dtype) -> np.ndarray:
+    """An uninitialised array of ``shape`` and ``dtype``: inside :func:`reuse_freed_memory`, the one this thread
+    last had under ``name`` when its shape and dtype are these and nothing holds it or a view of it any more (its
+    pages already faulted in; its old contents left, the caller overwrites them), else a new one kept for next
+    time; outside a block always a new one, nothing kept. For a large array made again and again on a worker
+    thread (a view's frame stack): glibc maps such a block afresh each time (module doc)."""
+    dtype = np.dtype(dtype)
+    shape = tuple(int(n) for n in shape)
+    key = (threading.get_ident(), name)
+    with _LOCK:
+        if _OPEN == 0:
+            return np.empty(shape, dtype)
+        kept = _KEPT.pop(key, None)
+    # held by this frame and getrefcount's argument alone: no caller and no view (a view holds its base) left
+    if kept is None or kept.shape != shape or kept.dtype != dtype or sys.getrefcount(kept) > 2:
+        kept = None     # dropped here, before its replacement is made: not both at once
+        kept = np.empty(shape, dtype)
+    with _LOCK:
+        if _OPEN > 0:
+            _KEPT[key] = kept
+    return kept

@@ -19,7 +19,8 @@ from rangekit.rig.projector_response import ProjectorResponse
 from rangekit.coded.uncertainty import point_sigma
 from rangekit.coded.triangulate import TriangulationResult, filter_range_map, triangulate
 
-__all__ = ["EDGE_MARGIN_PX", "Reconstruction", "decoded_coordinates", "reconstruct_decoded", "reconstruct_view"]
+__all__ = ["EDGE_MARGIN_PX", "Reconstruction", "decode_view", "decoded_coordinates", "reconstruct_decoded",
+           "reconstruct_view"]
 
 #: Pixels dropped around depth edges beyond the one-pixel rim. Under the camera blur the points within
 #: 2 px of a depth edge mix the two surfaces: on the simulated bunny (4 views) they were 6.8% of the
@@ -68,6 +69,20 @@ def reconstruct_view(images, spec: PatternSpec, camera: PinholeCamera, projector
     ``motion``, ``max_motion``: the decoder's motion check (binary codes; a capture over ``max_motion`` moved is a
     MotionError), as ``rangekit decode`` runs it; off where the caller checks motion its own way (a scan's views).
     """
+    dec = decode_view(images, spec, camera, projector, order=order, subpixel=subpixel, full_scale=full_scale,
+                      response=response, exposures_us=exposures_us, decode_options=decode_options, motion=motion,
+                      max_motion=max_motion)
+    return reconstruct_decoded(dec, camera, projector, method=method, max_jump=max_jump, max_residual=max_residual,
+                               min_confidence=min_confidence, edge_margin=edge_margin, full_scale=full_scale)
+
+
+def decode_view(images, spec: PatternSpec, camera: PinholeCamera, projector: PinholeCamera, *,
+                order: str = "rangekit", subpixel: bool = True, full_scale: float | None = None,
+                response: ProjectorResponse | None = None, exposures_us=None, decode_options: dict | None = None,
+                motion: bool = False, max_motion: float | None = MAX_MOTION_SHARE) -> DecodeResult:
+    """:func:`reconstruct_view`'s first half, its keywords: the rig's sizes checked against ``images`` and
+    ``spec``, then the capture decoded (each exposure's, merged). The result's ``white`` may be a view of
+    ``images`` (copy it out to free the frames before :func:`reconstruct_decoded`: the decode stage does)."""
     probe = np.asarray(images[0][0] if exposures_us is not None else images[0])
     if camera.size != (probe.shape[1], probe.shape[0]):
         raise ConfigError(f"the captures are {probe.shape[1]}x{probe.shape[0]} "
@@ -84,8 +99,7 @@ def reconstruct_view(images, spec: PatternSpec, camera: PinholeCamera, projector
     else:
         dec = decode(images, spec, order=order, subpixel=subpixel, full_scale=full_scale, response=response,
                      motion=motion, max_motion=max_motion, **(decode_options or {}))
-    return reconstruct_decoded(dec, camera, projector, method=method, max_jump=max_jump, max_residual=max_residual,
-                               min_confidence=min_confidence, edge_margin=edge_margin, full_scale=full_scale)
+    return dec
 
 
 def decoded_coordinates(dec: DecodeResult, min_confidence: float) -> tuple[np.ndarray, np.ndarray | None]:

@@ -83,17 +83,25 @@ def read_stack(paths: Sequence[Path], *, workers: int = 0, what: str = "a captur
 
 
 def stack_from_bytes(paths: Sequence[Path], contents: list[bytes], *, workers: int = 0,
-                     what: str = "a capture") -> np.ndarray:
+                     what: str = "a capture", empty=np.empty) -> np.ndarray:
     """:func:`read_stack` of files already read: ``contents[k]`` the bytes of ``paths[k]`` (which name them in
     errors; no file is opened). The headers are checked first, then each image decoded into the stack on
-    ``workers`` threads and its bytes dropped from ``contents``."""
+    ``workers`` threads and its bytes dropped from ``contents``. ``empty(shape, dtype)`` makes the stack (e.g.
+    :func:`rangekit._runtime.memory.reused_array`'s kept one: every pixel is written)."""
     check_image_files(paths, what=what, contents=contents)
     if len(paths) == 0:
         return np.zeros((0, 0, 0), dtype=np.uint8)
-    first = decode_image(contents[0], paths[0])
-    stack = np.empty((len(paths),) + first.shape, dtype=first.dtype)
-    stack[0] = first
-    del first
+    if is_npy_zst(contents[0]):
+        shape, dtype = npy_zst_header(contents[0], paths[0])
+    else:
+        first = decode_image(contents[0], paths[0])
+        shape, dtype = first.shape, first.dtype
+    stack = empty((len(paths),) + tuple(shape), dtype)
+    if is_npy_zst(contents[0]):
+        decode_npy_zst(contents[0], paths[0], out=stack[0])
+    else:
+        stack[0] = first
+        del first
 
     def load(k: int) -> None:
         data, contents[k] = contents[k], b""

@@ -331,7 +331,13 @@ class _Light:
 def _projector_light(scene, projector: PinholeCamera, hits: _Hits, shadow_eps: float) -> _Light:
     """Which hits ``projector`` lights: inside its image, facing it, and no triangle of ``scene`` more than
     ``shadow_eps`` metres closer to it along the shadow ray."""
-    p, n, n_face, prim = hits.p, hits.n, hits.n_face, hits.prim
+    return _light_on(scene, projector, hits.p, hits.n, hits.n_face, hits.prim, shadow_eps)
+
+
+def _light_on(scene, projector: PinholeCamera, p: np.ndarray, n: np.ndarray, n_face: np.ndarray, prim: np.ndarray,
+              shadow_eps: float) -> _Light:
+    """:func:`_projector_light` of the hits ``p`` (K, 3) with shading and face normals ``n``, ``n_face`` (K, 3) on
+    triangles ``prim`` (K,): each hit's answer its own (the same bits for any subset of the hits)."""
     c_p = projector.center
     to_p = c_p - p
     dist_p = np.linalg.norm(to_p, axis=1)
@@ -360,19 +366,36 @@ class ViewCodes:
 
 
 def cast_codes(mesh: WorldMesh, camera: PinholeCamera, projector: PinholeCamera | None, *,
-               cam_rays: tuple[np.ndarray, np.ndarray] | None = None, shadow_eps: float = 2e-5) -> ViewCodes:
+               cam_rays: tuple[np.ndarray, np.ndarray] | None = None, shadow_eps: float = 2e-5,
+               pixels: np.ndarray | None = None, light_at: np.ndarray | None = None,
+               light_object: int | None = None) -> ViewCodes:
     """:func:`cast_view`'s depth, projector column and object maps (the same bits) without its shading (albedo,
     textures, normals, specular, the other maps): the truth a decoding is measured against, at about 2/3 of
-    the cost. Arguments and errors as :func:`cast_view`."""
+    the cost. Arguments and errors as :func:`cast_view`; ``pixels`` as there (the maps hold nothing at the other
+    pixels). The projector's light is traced only where asked: ``light_at`` (H * W,) bool, the pixels whose
+    hits it is traced for, and ``light_object``, only on that object's hits (index into ``mesh.object_names``);
+    ``proj_col`` is NaN at the other hits. Every pixel's values are its own ray's: the same bits whichever
+    other pixels are cast or lit."""
     H, W = camera.height, camera.width
     scene = _scene_of(mesh)
-    hits = _camera_hits(mesh, camera, scene, cam_rays, None)
+    hits = _camera_hits(mesh, camera, scene, cam_rays, pixels)
     depth = np.full(H * W, np.nan)
     depth[hits.hit_idx] = hits.cam_z
     obj = np.full(H * W, -1, np.int32)
     obj[hits.hit_idx] = hits.owner
     proj_col = np.full(H * W, np.nan)
     if projector is not None:
-        light = _projector_light(scene, projector, hits, shadow_eps)
-        proj_col[hits.hit_idx[light.ok]] = light.uvp[light.ok, 0]
+        wanted = np.ones(len(hits.hit_idx), dtype=bool)
+        if light_at is not None:
+            wanted &= np.asarray(light_at, dtype=bool).reshape(-1)[hits.hit_idx]
+        if light_object is not None:
+            wanted &= hits.owner == light_object
+        if wanted.all():
+            light = _projector_light(scene, projector, hits, shadow_eps)
+            proj_col[hits.hit_idx[light.ok]] = light.uvp[light.ok, 0]
+        else:
+            some = np.flatnonzero(wanted)
+            light = _light_on(scene, projector, hits.p[some], hits.n[some], hits.n_face[some], hits.prim[some],
+                              shadow_eps)
+            proj_col[hits.hit_idx[some[light.ok]]] = light.uvp[light.ok, 0]
     return ViewCodes(depth.reshape(H, W), proj_col.reshape(H, W), obj.reshape(H, W))

@@ -56,3 +56,101 @@ def test_inside_the_block_a_64_mb_array_comes_from_the_heap_and_after_it_from_it
 def test_a_process_started_with_its_malloc_settings_keeps_them():
     # a 1 MB threshold set at start (as the Dask workers get theirs): the block must not lift it
     assert probe({"MALLOC_MMAP_THRESHOLD_": str(1 << 20)}) == "True True"
+
+
+HEAP_PROBE = textwrap.dedent("""
+    import ctypes, sys, threading, numpy as np
+    from contextlib import nullcontext
+    from rangekit._runtime.memory import reuse_freed_memory
+
+    class Info(ctypes.Structure):
+        _fields_ = [(n, ctypes.c_size_t) for n in ("arena", "ordblks", "smblks", "hblks", "hblkhd", "usmblks",
+                                                    "fsmblks", "uordblks", "fordblks", "keepcost")]
+    libc = ctypes.CDLL(None)
+    libc.mallinfo2.restype = Info
+    dropped = []
+
+    def on_a_thread():
+        # 20 MB blocks on a worker thread's own arena (several of its 64 MB heaps), all freed: bytes unmapped
+        blocks = [np.ones(20 << 20, dtype=np.uint8) for _ in range(8)]
+        before = libc.mallinfo2().arena
+        del blocks
+        dropped.append(before - libc.mallinfo2().arena)
+
+    if sys.argv[1] == "after":      # the block's 32 MB mmap threshold left, its top pad not
+        with reuse_freed_memory():
+            pass
+    with reuse_freed_memory() if sys.argv[1] == "inside" else nullcontext():
+        t = threading.Thread(target=on_a_thread)
+        t.start()
+        t.join()
+    print(dropped[0] >> 20)
+""")
+
+
+def heap_probe(where: str) -> int:
+    out = subprocess.run([sys.executable, "-c", HEAP_PROBE, where], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    return int(out.stdout)
+
+
+def test_inside_the_block_a_worker_threads_freed_heaps_are_kept_and_after_it_unmapped():
+    # glibc unmaps a thread arena's heap once it is wholly free, whatever the trim threshold: the next view's
+    # arrays would fault its pages in again (rangekit._runtime.memory's doc)
+    assert heap_probe("inside") == 0
+    assert heap_probe("after") >= 20   # at least one wholly free heap unmapped
+
+
+def test_reused_array_gives_a_threads_last_array_back_only_inside_the_block_and_only_when_free():
+    import threading
+
+    import numpy as np
+
+    from rangekit._runtime import memory
+    from rangekit._runtime.memory import reuse_freed_memory, reused_array
+
+    if memory._MALLOPT is None or memory._ONE_ARENA or "MALLOC_MMAP_THRESHOLD_" in os.environ:
+        pytest.skip("the block changes nothing in this process")
+    a = reused_array("t", (4, 5), np.uint8)
+    assert reused_array("t", (4, 5), np.uint8) is not a        # outside a block: a new one each time
+    with reuse_freed_memory():
+        a = reused_array("t", (4, 5), np.uint8)
+        first = id(a)
+        del a
+        b = reused_array("t", (4, 5), np.uint8)
+        assert id(b) == first                                   # the same array, free again
+        view = b[1:]
+        del b
+        c = reused_array("t", (4, 5), np.uint8)
+        assert id(c) != first and c.base is None                # a view still holds it: a new one
+        assert view.base is not c
+        del view
+        assert reused_array("t", (4, 6), np.uint8).shape == (4, 6)    # another shape: a new one
+        other = []
+        t = threading.Thread(target=lambda: other.append(reused_array("t", (4, 6), np.uint8)))
+        t.start()
+        t.join()
+        assert other[0] is not reused_array("t", (4, 6), np.uint8)   # each thread its own
+        del other
+        with reuse_freed_memory():                              # nested: the outer block still holds it
+            pass
+        assert memory._KEPT
+    assert not memory._KEPT                                     # dropped when the last block ends
+
+
+def test_numpys_huge_page_advice_is_off_inside_the_block_and_as_it_was_after():
+    import numpy as np
+
+    from rangekit._runtime import memory
+    from rangekit._runtime.memory import reuse_freed_memory
+
+    if memory._SET_HUGEPAGE is None or memory._MALLOPT is None or memory._ONE_ARENA \
+            or "MALLOC_MMAP_THRESHOLD_" in os.environ:
+        pytest.skip("the block changes nothing in this process")
+    get = np._core.multiarray._get_madvise_hugepage
+    was = get()
+    with reuse_freed_memory():
+        with reuse_freed_memory():
+            assert get() is False
+        assert get() is False
+    assert get() == was

@@ -5,6 +5,7 @@ half scale), projector blur sigma 1 projector px, projector gamma 2.2. Run with 
 the measured figures quoted in docs/coded-light.md.
 """
 
+from dataclasses import replace
 from typing import NamedTuple
 
 import numpy as np
@@ -15,7 +16,7 @@ from scipy.ndimage import binary_erosion
 from rangekit.coded.decode import decode
 from rangekit.errors import DecodeError
 from rangekit.coded.patterns import make_pattern_spec
-from rangekit.coded.reconstruct import reconstruct_view
+from rangekit.coded.reconstruct import decode_view, reconstruct_decoded, reconstruct_view
 from rangekit.sim import ImagingModel, SimRig, default_scene
 from rangekit.coded.triangulate import triangulate_ray_plane, triangulate_ray_ray
 
@@ -200,6 +201,24 @@ def test_sphere_and_plane_fits_from_reconstructed_points(scenes):
             else:
                 lines.append(f"{method}{' subpixel' if subpixel else ''} plane: fit RMS {_fit_plane_rms(P) * 1e3:.4f} mm")
     print("\n" + "\n".join(lines))
+
+
+def test_decoding_then_triangulating_without_the_frames_is_reconstruct_view(scenes):
+    # the decode stage decodes, checks motion, copies the white capture out and frees the frames, then
+    # triangulates (rangekit.app.process.view_cache): the same cloud and maps as in one call
+    imgs, spec, sim = capture("sphere", scenes["sphere"], "hybrid")
+    cam, proj = sim.rig.camera, sim.rig.projector
+    whole = reconstruct_view(imgs, spec, cam, proj)
+    dec = decode_view(imgs, spec, cam, proj)
+    assert np.shares_memory(dec.white, imgs)      # a view of the frames until copied out
+    dec = replace(dec, white=np.array(dec.white))
+    assert not np.shares_memory(dec.white, imgs)
+    halves = reconstruct_decoded(dec, cam, proj)
+    for a, b in ((whole.cloud.points, halves.cloud.points), (whole.cloud.colours, halves.cloud.colours),
+                 (whole.cloud.normals, halves.cloud.normals), (whole.cloud.sigma, halves.cloud.sigma),
+                 (whole.sigma, halves.sigma), (whole.triangulated.xyz, halves.triangulated.xyz),
+                 (whole.decoded.proj_col, halves.decoded.proj_col)):
+        assert a.dtype == b.dtype and a.tobytes() == b.tobytes()
 
 
 def test_xor_codes_keep_columns_under_global_light(scenes):

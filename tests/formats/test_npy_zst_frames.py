@@ -16,7 +16,7 @@ from rangekit.app.process.options import ProcessOptions
 from rangekit.app.process.process import process_session
 from rangekit.coded.patterns import make_pattern_spec
 from rangekit.errors import FileFormatError, RangekitError
-from rangekit.formats.capture import list_images, read_stack
+from rangekit.formats.capture import list_images, read_stack, stack_from_bytes
 from rangekit.formats.sessions.session import CaptureSettings, ScanPlan, Session, SimulatorSettings
 from rangekit.image_header import read_image_header
 from rangekit.io import decode_image, read_png, write_frame
@@ -61,6 +61,26 @@ def test_a_frame_folder_in_either_format_reads_the_same(tmp_path):
     a, b = read_stack(list_images(tmp_path / "png")), read_stack(list_images(tmp_path / "zst"))
     assert [p.name for p in list_images(tmp_path / "zst")][:3] == ["000.npy.zst", "001.npy.zst", "002.npy.zst"]
     assert np.array_equal(a, b) and np.array_equal(b, np.stack(frames))
+
+
+@pytest.mark.parametrize("suffix", ["png", "npy.zst"])
+def test_a_stack_read_into_a_given_array_is_the_same_stack(suffix, tmp_path):
+    # the decode stage reads each view into the array its thread had for the last one (reused_array): every
+    # pixel written whatever was there, the first frame too
+    frames = [np.full((8, 9), k * 20, dtype=np.uint8) for k in range(12)]
+    for k, f in enumerate(frames):
+        write_frame(tmp_path / f"{k:03d}.{suffix}", f)
+    paths = list_images(tmp_path)
+    dirty = np.full((12, 8, 9), 255, np.uint8)
+    made = []
+
+    def empty(shape, dtype):
+        made.append((shape, np.dtype(dtype)))
+        return dirty
+
+    stack = stack_from_bytes(paths, [p.read_bytes() for p in paths], empty=empty)
+    assert stack is dirty and made == [((12, 8, 9), np.dtype(np.uint8))]
+    assert np.array_equal(stack, np.stack(frames))
 
 
 def _damaged():

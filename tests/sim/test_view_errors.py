@@ -88,3 +88,35 @@ def test_cast_codes_are_cast_views_maps_bit_for_bit(obj):
         assert np.array_equal(getattr(codes, name), getattr(whole, name), equal_nan=True), name
     none = cast_codes(world, cam, None)
     assert np.isnan(none.proj_col).all() and np.array_equal(none.depth, whole.depth, equal_nan=True)
+
+
+def test_the_truth_cast_only_where_the_errors_read_it_is_the_whole_casts_bits():
+    """The per-view errors cast only the box's pixels near a cloud point or decoded, and trace the projector's light
+    only for the decoded pixels' hits on the object (view_errors._needed): there the depth, projector column and
+    object are the whole cast's to the bit, and so are the depth edges at every cloud point's pixel."""
+    from rangekit.sim.scene.raycast import cast_view
+    from rangekit.sim.truth.view_errors import _EDGE_REACH, _box, _MARGIN, _needed, _truth_in_box
+
+    rig = default_rig()
+    cam = rig.camera.resized(320, 256)
+    world = default_scene("steps").world_mesh(rig.T_world_rotated(0.9))
+    whole = cast_view(world, cam, rig.projector)
+    on = whole.lit & (whole.object_id == 0)
+    rows, cols = np.nonzero(on)
+    keep = (rows + cols) % 3 != 0            # a cloud with holes, and a decoded map with others
+    uv = np.column_stack([cols[keep], rows[keep]])
+    decoded = np.where(on & ((np.arange(on.size).reshape(on.shape) % 5) != 0), whole.proj_col, np.nan)
+    box = _box(uv, cam, _MARGIN)
+    cast, light_at = _needed(uv, box, decoded[box])
+    assert 0 < cast.sum() < cast.size and light_at.sum() < cast.sum()
+    part, edges = _truth_in_box(world, cam, rig.projector, box, cast, light_at)
+    full, full_edges = _truth_in_box(world, cam, rig.projector, box)
+    assert np.array_equal(part.depth[cast], full.depth[cast], equal_nan=True)
+    assert np.array_equal(part.object_id[cast], full.object_id[cast])
+    assert np.isnan(part.depth[~cast]).all()
+    lit = light_at & (full.object_id == 0)
+    assert np.array_equal(part.proj_col[lit], full.proj_col[lit], equal_nan=True)
+    assert np.isnan(part.proj_col[~lit]).all() and np.isfinite(part.proj_col[lit]).sum() > 1000
+    u, v = uv[:, 0] - box[1].start, uv[:, 1] - box[0].start
+    assert np.array_equal(edges[v, u], full_edges[v, u]) and full_edges[v, u].any()
+    assert _EDGE_REACH >= 3      # depth_edges looks 1 (3x3 filters) + EDGE_PX (dilations) pixels away

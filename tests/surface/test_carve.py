@@ -143,7 +143,7 @@ def test_close_in_hull_fills_a_flattened_underside(space):
     import trimesh
 
     from rangekit.surface.carve import RIM_RINGS, close_in_hull
-    from rangekit.surface.watertight import ring_band
+    from rangekit.surface.thin_plate import ring_band
 
     m = trimesh.creation.icosphere(subdivisions=5, radius=R)
     V, F = np.asarray(m.vertices) + CENTRE, np.asarray(m.faces)

@@ -10,7 +10,7 @@ import trimesh
 
 from rangekit.errors import InputError
 from rangekit.surface.carve import RIM_RINGS, CarvedSpace, close_in_hull, fill_in_hull
-from rangekit.surface.watertight import ring_band
+from rangekit.surface.thin_plate import ring_band
 
 R = 0.05       # metres
 VOXEL = 0.001
@@ -88,6 +88,23 @@ def test_the_fill_stays_out_of_carved_space():
     space = _space(carved_above=0.06 - R * np.cos(np.radians(40)) - 0.003)   # nothing lower than 3 mm under the rim
     out, _ = close_in_hull(guess, F, free, space)
     assert space.depth_inside(out[free]).max() <= 0.5 * VOXEL
+
+
+def test_observed_vertices_a_view_saw_through_are_held_out_onto_the_hull():
+    """The sphere's top 2.5 mm lie in carved space (a view saw empty space there; the points put the surface 2.5
+    voxels deep): those observed vertices go onto the hull (the plane the carving left), counted on it; the other
+    observed vertices away from the cap's rim stay where they were."""
+    V, guess, F, free = _sphere(0.06, 40.0)
+    top = 0.06 + R - 0.0025
+    space = _space(carved_above=top)
+    deep = ~free & (space.depth_inside(guess) > VOXEL)
+    assert deep.sum() > 50 and space.depth_inside(guess).max() > 1.5 * VOXEL
+    out, on_hull = close_in_hull(guess, F, free, space)
+    assert space.depth_inside(out).max() <= VOXEL, space.depth_inside(out).max()
+    assert on_hull[deep].all()
+    assert np.abs(out[deep, 2] - top).max() < VOXEL, np.abs(out[deep, 2] - top).max()
+    kept = ~free & ~ring_band(F, free, RIM_RINGS) & (guess[:, 2] < top - 2 * VOXEL)
+    assert np.array_equal(out[kept], guess[kept]) and not on_hull[kept].any()
 
 
 def test_shapes_are_checked():

@@ -184,13 +184,15 @@ def save_closed(folder, closed: TriangleMesh, observed: ObservedInput, options: 
     ``space`` (:func:`carved_space`) its unobserved vertices (and the observed rim's rings around them) filled in
     where they bend least on the table top and outside carved space, then held out of it
     (:func:`rangekit.surface.carve.close_in_hull`), flagged ``carved`` where they lie on
-    the hull."""
+    the hull; an observed vertex more than a voxel inside carved space is held out onto the hull too and flagged
+    carved, not observed (the views saw through where the points put it)."""
     watertight = observed.rule.flagged(closed)
     if space is not None:
         from rangekit.surface.carve import close_in_hull
 
         V, on_hull = close_in_hull(watertight.vertices, watertight.triangles, ~watertight.observed, space)
-        watertight = TriangleMesh(V, watertight.triangles, watertight.vertex_colours, watertight.observed, on_hull)
+        watertight = TriangleMesh(V, watertight.triangles, watertight.vertex_colours,
+                                  watertight.observed & ~on_hull, on_hull)
     return watertight, save_one(folder, watertight, options.fusion, WATERTIGHT_FILE, options.mesh_format)
 
 

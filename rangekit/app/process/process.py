@@ -267,14 +267,19 @@ def _report(result: ProcessResult, registered: RegisteredViews, fused: FusedView
             runner: Runner, agreement: tuple | None) -> None:
     """``report.html``: the summary, the meshes, the per-view rows made as the views were decoded; its panels on
     the runner's worker threads."""
+    import numpy as np
+
     from rangekit.app.report.page import write_report
-    from rangekit.surface.cloud import merge_clouds
+    from rangekit.geometry import apply_T
+    from rangekit.surface.cloud import PointCloud
 
     d = registered.decoded
     with runner.stage(Stage.REPORT):
         runner.say(f"writing {REPORT_FILE}")
         runner.release_memory()   # the evaluation's temporaries
+        # The report draws the merged cloud's points only: not its normals, colours and sigma (2M points each)
+        merged = PointCloud(np.concatenate([apply_T(T, c.points) for T, c in zip(registered.T_world_view, d.clouds)]))
         write_report(session.folder, result, clouds=d.clouds, maps=None, rows=d.rows,
-                     merged=merge_clouds(d.clouds, registered.T_world_view), mesh=fused.observed, session=session,
+                     merged=merged, mesh=fused.observed, session=session,
                      truth=truth, progress=runner.progress, watertight=fused.watertight, agreement=agreement,
                      map_panels=runner.map_ordered)

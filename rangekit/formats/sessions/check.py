@@ -104,11 +104,13 @@ def verify_views(session: Session, *, workers: int = 0, views: list[SessionView]
     return unverified
 
 
-def read_view_stack(session: Session, v: SessionView, folder: Path, *, workers: int = 0) -> np.ndarray:
+def read_view_stack(session: Session, v: SessionView, folder: Path, *, workers: int = 0,
+                    empty=np.empty) -> np.ndarray:
     """The frames of ``folder`` (view ``v``'s folder or one of its exposure sub-folders) as one stack
     (:func:`rangekit.formats.capture.read_stack`), each file read once: its SHA-256 taken from the bytes read
     and checked against ``session.json`` before any pixel is decoded (FileFormatError naming the view and the
-    frame, as :func:`verify_views`). A view without recorded checksums is read unchecked."""
+    frame, as :func:`verify_views`). A view without recorded checksums is read unchecked. ``empty(shape,
+    dtype)`` makes the stack (:func:`rangekit.formats.capture.stack_from_bytes`)."""
     from rangekit.formats.capture import list_images, stack_from_bytes
 
     paths = list_images(folder)
@@ -133,4 +135,4 @@ def read_view_stack(session: Session, v: SessionView, folder: Path, *, workers: 
             if digest != recorded:
                 raise _problem(session, v, name, f"has changed: sha256 {digest[:16]}..., recorded {recorded[:16]}...")
     del read_files
-    return stack_from_bytes(paths, contents, workers=workers)
+    return stack_from_bytes(paths, contents, workers=workers, empty=empty)

@@ -2,39 +2,20 @@
 (4 views of the lumpy object, the small rig) against the simulator's truth.
 
 The carving volume is made again here from what processing left on disk (each view's cached maps, the registered
-poses) with the library's functions, so the check of the closed mesh does not take the processing's word for it.
+poses: :func:`rangekit.app.process.carved.carved_space_of`), so the check of the closed mesh does not take the
+processing's word for it.
 """
 
 from __future__ import annotations
 
-import numpy as np
-
+from rangekit.app.process.carved import carved_space_of
 from rangekit.app.process.process import process_session
 from rangekit.app.scan.truth import session_evaluator
 from rangekit.formats.meshes import load_mesh
-from rangekit.formats.poses import load_poses
 from rangekit.formats.sessions.session import Session
-from rangekit.geometry import apply_T, compose, invert_T
-from rangekit.surface.carve import carve, free_depth, table_view, view_depth
 
 #: The closed mesh's RMS where no view can see, on this session without the carving (main at bafb7ad, 4.93 mm).
 UNCARVED_UNOBSERVED_RMS = 0.00493
-
-
-def _space(folder, mesh):
-    session = Session.load(folder)
-    rig = session.rig
-    _, T = load_poses(folder / "poses.json")
-    table = table_view(rig.camera, rig.projector, rig.T_world_table)
-    views = []
-    for k, v in enumerate(session.done_views):
-        with np.load(v.folder / "maps.npz") as m:
-            cols = np.where(m["confidence"] >= 0.03, m["proj_col"], np.nan)
-            views.append((free_depth(view_depth(m["depth"], cols, table)),
-                          rig.camera.with_pose(compose(T[k], rig.camera.T_world_cam))))
-    P = apply_T(invert_T(rig.T_world_table), mesh.vertices)
-    lo, hi = P.min(axis=0), P.max(axis=0)
-    return carve(views, rig.T_world_table, lo - 0.1 * (hi - lo), hi + 0.1 * (hi - lo))
 
 
 def test_the_closed_mesh_keeps_out_of_carved_space(tmp_session):
@@ -46,7 +27,7 @@ def test_the_closed_mesh_keeps_out_of_carved_space(tmp_session):
     # the 1825 unobserved vertices, 128 were carved, the rest a guess inside it)
     assert not (closed.carved & closed.observed).any()
     assert 0 < closed.carved.sum() < (~closed.observed).sum()
-    space = _space(tmp_session, load_mesh(tmp_session / "mesh.ply"))
+    space = carved_space_of(session, load_mesh(tmp_session / "mesh.ply"))
     inside = space.depth_inside(closed.vertices)
     assert inside.max() <= space.voxel, f"{inside.max() * 1e3:.2f} mm inside carved space"
     closed_accuracy = result.accuracy.watertight

@@ -30,7 +30,7 @@ def carved_space_of(session: Session | str | Path, mesh: TriangleMesh, options: 
     ``mesh.ply`` read back) as :func:`rangekit.app.process.fuse.carved_space` makes it: each completed view's free
     depth from its cached maps (a cache not made with ``options``' settings, default :class:`ProcessOptions`, is
     decoded again from the frames; every frame's SHA-256 is checked), seen from its pose in ``poses.json``. None
-    where processing carves nothing (no turntable, several passes)."""
+    where processing carves nothing (no turntable)."""
     if not isinstance(session, Session):
         session = Session.load(Path(session))
     options = replace(options or ProcessOptions(), report=False)
@@ -43,4 +43,4 @@ def carved_space_of(session: Session | str | Path, mesh: TriangleMesh, options: 
                         options.max_motion)
     decoded = decode(session, options, (caches.pop(v.index) for v in done))
     registered = RegisteredViews(decoded, T_world_view, edges=[], rmse=float("nan"), view_passes=None)
-    return carved_space(registered, mesh, session.rig, session.plan.passes)
+    return carved_space(registered, mesh, session.rig)

@@ -156,17 +156,19 @@ def save_observed(folder, full: TriangleMesh, observed: ObservedInput,
     return mesh, save_one(folder, mesh, options.fusion, MESH_FILE, options.mesh_format)
 
 
-def carved_space(registered: RegisteredViews, observed: TriangleMesh, rig: Rig, passes: int = 1):
+def carved_space(registered: RegisteredViews, observed: TriangleMesh, rig: Rig):
     """What the views saw as empty (:func:`rangekit.surface.carve.carve`, session world): each view's free depth
     seen from its registered camera pose, on a grid around the ``observed`` mesh (its extent and a tenth of it
-    more each side, from the table top up). None without the views' free depths (no turntable) or with several
-    passes (the object turned over: the table top is not one plane of the object's frame). The free depths are
-    let go once carved (63 MB for 12 views of 1280 x 1024)."""
+    more each side, from the table top up). None without the views' free depths (no turntable). A scan of several
+    passes carves with every pass's views: the rig, the table and each pixel's free depth are the same whichever
+    way up the object stands, each view's registered pose puts its camera in the first pass's world, and the first
+    pass's table top (the world's) is the floor. The free depths are let go once carved (63 MB for 12 views of
+    1280 x 1024)."""
     from rangekit.geometry import apply_T, invert_T
     from rangekit.surface.carve import carve
 
     free = registered.decoded.free
-    if free is None or passes > 1:
+    if free is None:
         return None
     views = [(f, rig.camera.with_pose(compose(Tk, rig.camera.T_world_cam)))
              for f, Tk in zip(free, registered.T_world_view)]

@@ -211,7 +211,7 @@ def _fuse(registered: RegisteredViews, session: Session, options: ProcessOptions
             agreement.append(children.enter_context(_agreement_beside(options.report, mesh, registered, runner)))
             if evaluate is not None and not late:
                 evaluation = _measure_observed(evaluate, mesh, registered, runner)
-            space = carved_space(registered, mesh, session.rig, session.plan.passes)
+            space = carved_space(registered, mesh, session.rig)
             closed = closing.result()
         runner.release_memory()   # the fusion's and the evaluator's temporaries
         watertight, watertight_info = save_closed(out, closed, rule, options, space)

@@ -75,7 +75,7 @@ class Setup:
         return apply_T(t.M0, t.samples), t.seen
 
 
-def _misses(setup: Setup, full, refined, cut_points: np.ndarray) -> str:
+def _misses(setup: Setup, full, refined) -> str:
     """The seen truth samples the refined mesh misses, split by cause (module doc)."""
     from scipy.spatial import cKDTree
 
@@ -138,15 +138,20 @@ def streamed(setup: Setup, voxel: float, weight: float, extend: int, poses: list
     rule = observed_rule(setup.points)
     c3 = _cpu()
     cut, d, idx = rule.observed_near(full, min(REFINE_NEIGHBOURS, rule.tree.n))
-    refined = refine_to_points(cut, rule.tree.data, setup.normals, tree=rule.tree, near=(d, idx))
     c4 = _cpu()
-    a_full, a_cut, a = (setup.accuracy(m) for m in (full, cut, refined))
-    print(f"{label} poses, voxel {voxel * 1e3:.2f} mm, weight {weight:g}, extended {extend} px: integrate {(c1 - c0) / len(setup.depths):.2f} CPU-s a view, "
-          f"marching cubes {c2 - c1:.2f}, observed rule {c3 - c2:.2f}, cut and refine {c4 - c3:.2f}; completeness "
-          f"full {a_full.completeness * 100:.2f}% cut {a_cut.completeness * 100:.2f}% refined "
-          f"{a.completeness * 100:.2f}%; refined RMS {a.rms * 1e3:.4f} mm p95 {a.p95 * 1e3:.4f} mm, "
+    refined = refine_to_points(cut, rule.tree.data, setup.normals, tree=rule.tree, near=(d, idx))
+    c5 = _cpu()
+    projected = refine_to_points(cut, rule.tree.data, setup.normals, tree=rule.tree, near=(d, idx), sag=1.0)
+    c6 = _cpu()
+    a_full, a_cut, a, a_p = (setup.accuracy(m) for m in (full, cut, refined, projected))
+    print(f"{label} poses, voxel {voxel * 1e3:.2f} mm, weight {weight:g}, extended {extend} px: integrate "
+          f"{(c1 - c0) / len(setup.depths):.2f} CPU-s a view, marching cubes {c2 - c1:.2f}, observed rule's tree "
+          f"{c3 - c2:.2f}, cut (its query) {c4 - c3:.2f}, refine {c5 - c4:.2f} (projection only {c6 - c5:.2f}); "
+          f"completeness full {a_full.completeness * 100:.2f}% cut {a_cut.completeness * 100:.2f}% refined "
+          f"{a.completeness * 100:.2f}% (projected only {a_p.completeness * 100:.2f}%); refined RMS "
+          f"{a.rms * 1e3:.4f} mm p95 {a.p95 * 1e3:.4f} mm (projected only {a_p.rms * 1e3:.4f} / {a_p.p95 * 1e3:.4f}), "
           f"{len(refined.vertices):,} vertices", flush=True)
-    print("  " + _misses(setup, full, refined, setup.points), flush=True)
+    print("  " + _misses(setup, full, refined), flush=True)
 
 
 def streamed_poses(setup: Setup) -> list:
@@ -157,8 +162,19 @@ def streamed_poses(setup: Setup) -> list:
     from rangekit.formats.clouds import load_cloud
 
     worker = StreamingViews(setup.folder, ProcessOptions())
-    return [worker._place(k, load_cloud(setup.folder / f"view_{k:03d}" / "cloud.ply"), setup.session)
-            for k in range(len(setup.poses))]
+    clouds = [load_cloud(setup.folder / f"view_{k:03d}" / "cloud.ply") for k in range(len(setup.poses))]
+    return [worker._place(k, cloud, setup.session) for k, cloud in enumerate(clouds)], clouds
+
+
+def points_at(clouds: list, poses: list) -> tuple[np.ndarray, np.ndarray]:
+    """The views' points merged at ``poses`` and sampled as ``rangekit process`` samples Poisson's input: (points,
+    normals)."""
+    from rangekit.surface.cloud import merge_clouds
+    from rangekit.surface.fusion import poisson_input
+
+    sample = _sample(merge_clouds(clouds, np.array(poses)), 700_000)
+    used = poisson_input(sample)
+    return sample.points[used], sample.normals[used]
 
 
 def main() -> int:
@@ -179,13 +195,15 @@ def main() -> int:
     a = setup.accuracy(poisson)
     print(f"{args.session}: {len(setup.depths)} views, {len(setup.points):,} points; mesh.ply (Poisson): "
           f"completeness {a.completeness * 100:.2f}%, RMS {a.rms * 1e3:.4f} mm", flush=True)
-    print("  " + _misses(setup, poisson, poisson, setup.points), flush=True)
-    poses = {"registered": setup.poses}
+    print("  " + _misses(setup, poisson, poisson), flush=True)
+    poses = {"registered": (setup.poses, setup.points, setup.normals)}
     if args.streamed_poses:
-        poses["streamed"] = streamed_poses(setup)
-        step = [np.linalg.norm(a[:3, 3] - b[:3, 3]) for a, b in zip(poses["registered"], poses["streamed"])]
+        Ts, clouds = streamed_poses(setup)
+        poses["streamed"] = (Ts, *points_at(clouds, Ts))
+        step = [np.linalg.norm(a[:3, 3] - b[:3, 3]) for a, b in zip(setup.poses, Ts)]
         print(f"streamed poses against the registered: at most {max(step) * 1e3:.3f} mm apart (translation)")
-    for label, Ts in poses.items():
+    for label, (Ts, points, normals) in poses.items():
+        setup.points, setup.normals = points, normals
         for voxel in args.voxels:
             for weight in args.weights:
                 for extend in args.extend:

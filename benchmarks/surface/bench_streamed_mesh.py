@@ -2,7 +2,7 @@
 last view cost.
 
     PYTHONPATH=. python benchmarks/surface/bench_streamed_mesh.py SESSION [--voxels 0.6 0.4] [--weights 0.5]
-        [--extend 0 4] [--streamed-poses]
+        [--extend 0 4] [--streamed-poses] [--after-last]
 
 SESSION is a processed simulated session (``mesh.ply``, ``merged.ply``, ``poses.json``, each view's cached
 ``maps.npz``). For each voxel (mm), marching-cubes weight threshold and rim extension (pixels), the views' depth maps are
@@ -154,6 +154,56 @@ def streamed(setup: Setup, voxel: float, weight: float, extend: int, poses: list
     print("  " + _misses(setup, full, refined), flush=True)
 
 
+def after_last(setup: Setup, voxel: float, extend: int, workers: int) -> None:
+    """The steps after the last view alone, as a scan would run them with every earlier view integrated ahead: the
+    last view's integration, marching cubes, the observed rule's tree, the cut's query on ``workers`` threads (each
+    query its own: the same answers), the cut, the vertices projected onto the points' planes (no halving), the
+    mesh written; CPU (this process, every thread) and wall seconds of each."""
+    import tempfile
+
+    from rangekit.formats.meshes import save_mesh
+    from rangekit.geometry import compose
+    from rangekit.surface.block_volume import BlockVolume
+    from rangekit.surface.mesh import TriangleMesh, mesh_from_open3d
+    from rangekit.surface.observed import _kept, _near_enough, observed_rule
+    from rangekit.surface.refine import REFINE_NEIGHBOURS, _project
+
+    volume = BlockVolume(voxel, extend_px=extend)
+    views = [(d, setup.camera.with_pose(compose(T, setup.camera.T_world_cam))) for d, T in zip(setup.depths, setup.poses)]
+    for depth, camera in views[:-1]:
+        volume.integrate(depth, camera)
+    marks = [("start", _cpu(), time.perf_counter())]
+
+    def mark(name):
+        marks.append((name, _cpu(), time.perf_counter()))
+
+    volume.integrate(*views[-1])
+    mark("integrate the last view")
+    full = mesh_from_open3d(volume.mesh())
+    mark("marching cubes")
+    rule = observed_rule(setup.points)
+    mark("the rule's tree")
+    V = full.vertices
+    d, idx = rule.tree.query(V, k=REFINE_NEIGHBOURS, workers=workers)
+    mark(f"the cut's query ({workers} workers)")
+    flags = _near_enough(d[:, 0], idx[:, 0], rule.tree, rule.spacing, rule.factor, rule.median, rule.k)
+    cut, used = _kept(full, flags)
+    mark("the cut")
+    placed, _ = _project(cut.vertices, rule.tree.data, setup.normals, REFINE_NEIGHBOURS, rule.tree,
+                         (d[used], idx[used]))
+    mesh = TriangleMesh(placed, cut.triangles)
+    mark("the projection")
+    with tempfile.TemporaryDirectory() as tmp:
+        save_mesh(Path(tmp) / "mesh.ply", mesh)
+    mark("mesh.ply written")
+    steps = ", ".join(f"{b[0]} {b[1] - a[1]:.2f} / {b[2] - a[2]:.2f}" for a, b in zip(marks, marks[1:]))
+    total = f"{marks[-1][1] - marks[0][1]:.2f} CPU-s / {marks[-1][2] - marks[0][2]:.2f} s"
+    a = setup.accuracy(mesh)
+    print(f"after the last view, voxel {voxel * 1e3:.2f} mm, extended {extend} px (CPU-s / wall s): {steps}; "
+          f"total {total}; completeness {a.completeness * 100:.2f}%, RMS {a.rms * 1e3:.4f} mm, "
+          f"{len(mesh.vertices):,} vertices", flush=True)
+
+
 def streamed_poses(setup: Setup) -> list:
     """Each view's pose as the scan's streaming worker places it, views in order
     (:meth:`rangekit.app.scan.streaming.StreamingViews._place`)."""
@@ -187,6 +237,8 @@ def main() -> int:
     ap.add_argument("--streamed-poses", action="store_true", help="also at the poses the scan's streaming worker "
                     "places the views at (the turntable prior refined by ICP against the nearest view placed before), "
                     "without the joint registration")
+    ap.add_argument("--after-last", action="store_true", help="only the steps after the last view (the last "
+                    "--voxels and --extend), the cut's query on 1 then 2 threads: CPU and wall seconds")
     args = ap.parse_args()
     from rangekit.formats.meshes import load_mesh
 
@@ -202,6 +254,10 @@ def main() -> int:
         poses["streamed"] = (Ts, *points_at(clouds, Ts))
         step = [np.linalg.norm(a[:3, 3] - b[:3, 3]) for a, b in zip(setup.poses, Ts)]
         print(f"streamed poses against the registered: at most {max(step) * 1e3:.3f} mm apart (translation)")
+    if args.after_last:
+        for workers in (1, 2):
+            after_last(setup, args.voxels[-1] * 1e-3, args.extend[-1], workers)
+        return 0
     for label, (Ts, points, normals) in poses.items():
         setup.points, setup.normals = points, normals
         for voxel in args.voxels:

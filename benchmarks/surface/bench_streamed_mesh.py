@@ -16,9 +16,12 @@ line each:
 - the true surface samples the views see that the refined mesh misses (beyond the evaluator's 1 mm), split by
   what explains them: ``no point`` (no input point within 1 mm: the decode never saw them), ``full misses`` (the
   volume's own surface is more than 1 mm off: the TSDF lost them), ``cut`` (the volume had them, the observed cut
-  dropped them), each with its height above the table top and the most head-on view's incidence.
+  dropped them), each with its height above the table top and the most head-on view's incidence (against the
+  nearest input point's normal). "Input points" are Poisson's sample of ``merged.ply``, as ``rangekit process``
+  takes them (every k-th point, about 700k).
 
 The session's own mesh.ply (``rangekit process``'s Poisson route) is measured the same way first, for reference.
+``--after-last``: only the steps after the last view (:func:`after_last`), CPU and wall seconds each.
 """
 
 from __future__ import annotations

@@ -18,6 +18,7 @@ import os
 import queue
 import threading
 from collections.abc import Callable
+from contextlib import AbstractContextManager, nullcontext
 from typing import Any
 
 __all__ = ["QueueWorker"]
@@ -27,11 +28,14 @@ _END = object()   # the last item: the worker ends when it takes it
 
 class QueueWorker:
     """``fn(item)`` for each :meth:`put` item, in order, on a thread of its own named ``name`` at niceness
-    ``nice`` (module doc); started at once. :attr:`paused` counts the items that waited for a :meth:`release`,
+    ``nice`` (module doc); started at once. ``context()``: a context the worker's whole loop runs in, and the items
+    :meth:`finish` hands on to the caller, entered there before the worker ends (the scan's:
+    :func:`rangekit._runtime.memory.reuse_freed_memory`, one block from the first view to the last). :attr:`paused` counts the items that waited for a :meth:`release`,
     :attr:`error` holds the exception that ended it (None: none)."""
 
-    def __init__(self, fn: Callable[[Any], None], *, name: str, nice: int = 0) -> None:
-        self._fn, self._nice = fn, nice
+    def __init__(self, fn: Callable[[Any], None], *, name: str, nice: int = 0,
+                 context: Callable[[], AbstractContextManager] = nullcontext) -> None:
+        self._fn, self._nice, self._context = fn, nice, context
         self._queue: queue.Queue = queue.Queue()
         self._go = threading.Event()     # cleared while held
         self._go.set()
@@ -58,22 +62,23 @@ class QueueWorker:
         """Handle every item queued (no more holding back): the worker ends after the item it is handling, the rest
         are handled here, on the caller's thread and priority (module doc), unless an item failed. Returns when all
         are done."""
-        self._handing_over = True
-        self._go.set()
-        self._queue.put(_END)
-        self._thread.join()
-        left = self._handed
-        while True:
-            try:
-                item = self._queue.get_nowait()
-            except queue.Empty:
-                break
-            if item is not _END:
-                left.append(item)
-        for item in left:
-            if self.error is not None:
-                return
-            self._call(item)
+        with self._context():   # entered before the worker's ends: one block from its items on to the caller's
+            self._handing_over = True
+            self._go.set()
+            self._queue.put(_END)
+            self._thread.join()
+            left = self._handed
+            while True:
+                try:
+                    item = self._queue.get_nowait()
+                except queue.Empty:
+                    break
+                if item is not _END:
+                    left.append(item)
+            for item in left:
+                if self.error is not None:
+                    return
+                self._call(item)
 
     def stop(self) -> None:
         """End the thread after the item being handled; the queued ones are dropped. Returns when it has ended."""
@@ -84,6 +89,10 @@ class QueueWorker:
 
     def _run(self) -> None:
         _lower_priority(self._nice)
+        with self._context():
+            self._loop()
+
+    def _loop(self) -> None:
         while self.error is None:
             item = self._queue.get()
             if item is _END or self._stopping:

@@ -30,12 +30,16 @@ class QueueWorker:
     """``fn(item)`` for each :meth:`put` item, in order, on a thread of its own named ``name`` at niceness
     ``nice`` (module doc); started at once. ``context()``: a context the worker's whole loop runs in, and the items
     :meth:`finish` hands on to the caller, entered there before the worker ends (the scan's:
-    :func:`rangekit._runtime.memory.reuse_freed_memory`, one block from the first view to the last). :attr:`paused` counts the items that waited for a :meth:`release`,
+    :func:`rangekit._runtime.memory.reuse_freed_memory`, one block from the first view to the last). ``idle()``:
+    called on the worker before it waits for the next item, returns how long to wait before calling it again (None:
+    until an item comes): work done ahead while the queue is empty (the scan's last view's frames read as they are
+    written), never while held. :attr:`paused` counts the items that waited for a :meth:`release`,
     :attr:`error` holds the exception that ended it (None: none)."""
 
     def __init__(self, fn: Callable[[Any], None], *, name: str, nice: int = 0,
-                 context: Callable[[], AbstractContextManager] = nullcontext) -> None:
-        self._fn, self._nice, self._context = fn, nice, context
+                 context: Callable[[], AbstractContextManager] = nullcontext,
+                 idle: Callable[[], float | None] | None = None) -> None:
+        self._fn, self._nice, self._context, self._idle = fn, nice, context, idle
         self._queue: queue.Queue = queue.Queue()
         self._go = threading.Event()     # cleared while held
         self._go.set()
@@ -94,7 +98,10 @@ class QueueWorker:
 
     def _loop(self) -> None:
         while self.error is None:
-            item = self._queue.get()
+            try:
+                item = self._queue.get(timeout=self._idle_call())
+            except queue.Empty:
+                continue
             if item is _END or self._stopping:
                 return
             if not self._go.is_set():   # held: wait for the release
@@ -106,6 +113,16 @@ class QueueWorker:
                 self._handed.append(item)
                 return
             self._call(item)
+
+    def _idle_call(self) -> float | None:
+        """``idle()`` before the worker waits for an item (not while held, nor once told to end): how long to wait
+        before calling it again (None: until an item comes). Its exception is dropped: idle work is optional."""
+        if self._idle is None or not self._go.is_set() or self._handing_over or self._stopping:
+            return None
+        try:
+            return self._idle()
+        except Exception:   # noqa: BLE001 - idle work only does ahead what an item would do (class doc)
+            return None
 
     def _call(self, item: Any) -> None:
         """``fn(item)``, its exception kept in :attr:`error` (module doc)."""

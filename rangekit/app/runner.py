@@ -245,9 +245,10 @@ class StreamingWorker:
         self._thread: int | None = None   # the thread that ran the last view's steps
         # one memory-reuse block from the first view to the last, those drain() hands to the caller included: each
         # view's frame stack and temporaries reuse the pages of the view before (the last view's decode 0.74 ->
-        # 0.65 CPU-s under load, issue 51)
+        # 0.65 CPU-s under load, issue 51); while the queue is empty the steps read the last view's frames ahead
+        # (StreamingViews.prefetch)
         self._worker = QueueWorker(self._one, name="rangekit-streaming", nice=STREAMING_NICE,
-                                   context=reuse_freed_memory)
+                                   context=reuse_freed_memory, idle=getattr(steps, "prefetch", None))
 
     def on_event(self, event) -> None:
         """A subscriber of the scan's events: queues the views an event brings; a :class:`CaptureLoad` holds the

@@ -27,8 +27,11 @@ calls the steps on a worker thread of lower priority that backs off while the ca
    simulator the truth's samples and the view's errors against the truth
    (:attr:`StreamingViews.evaluate`).
 
+While the last view is taken, its frames are read as they are written (:meth:`StreamingViews.prefetch`, between
+the worker's views; :mod:`rangekit.app.scan.frames_ahead`), so that after its last frame only the rest are read.
 The last view (or any once the acquisition is over, :attr:`StreamingViews.acquisition_over`) is what the
-processing waits for: it is decoded on every core, then its placing is left to :meth:`StreamingViews.write_preview`,
+processing waits for: it is decoded on every core, then its placing (by the turntable prior) is left to
+:meth:`StreamingViews.write_preview`,
 which writes ``preview.ply``, the TSDF's surface (:class:`~rangekit.app.events.MeshReady` ``"preview"``), and
 its work ahead to :meth:`StreamingViews.last_ahead`, run beside it (the preview waits for nothing but the decoding;
 issue 51); then the processing, the preview still beside it. A multi-pass scan's preview holds its
@@ -53,7 +56,7 @@ from rangekit.errors import MotionError
 from rangekit.formats.sessions.session import Session
 from rangekit.geometry import apply_T, compose, invert_T, rotation_angle
 from rangekit.surface.cloud import PointCloud
-from rangekit.formats.sessions.files import PREVIEW_FILE
+from rangekit.formats.sessions.files import PREVIEW_FILE, partial_view_folder
 
 __all__ = ["INTEGRATE_S", "PLACE_VOXEL_M", "MAX_REFINE_DEG", "MAX_REFINE_M", "StreamingViews"]
 
@@ -64,6 +67,8 @@ PLACE_VOXEL_M = 0.002
 MAX_REFINE_DEG, MAX_REFINE_M = 0.5, 0.001
 #: The preview's voxel: the turntable's box (its diagonal, :func:`_turntable_box`) over this many.
 PREVIEW_VOXELS = 256
+#: How often the frames of the last view are looked for while it is taken (seconds; :meth:`StreamingViews.prefetch`).
+PREFETCH_S = 0.05
 #: How long one view's TSDF integration holds the GIL (37 ms on the default rig), with a margin: it starts in a
 #: wait of the capture with at least this long left (:mod:`rangekit.app.acquire.quiet`).
 INTEGRATE_S = 0.06
@@ -95,6 +100,8 @@ class StreamingViews:
         self.measured: list[int] = []              # views whose errors against the truth were measured here
         self.registration = None                   # RegistrationAhead of a one-pass turntable scan, from view 0 on
         self.quiet = QuietWindows()                # the capture's waits: the TSDF integration starts in one
+        self._coming: int | None = None            # the last view, while it is taken (its frames read: prefetch)
+        self._frames = None                        # FramesAhead: the frames of it read so far
 
     def views_of(self, event) -> list[int]:
         """The views ``event`` (one of the scan's) brings to process: each view of a coded-light scan as it is
@@ -105,8 +112,31 @@ class StreamingViews:
             if event.resume and not event.laser:
                 return [view.index for view in Session.load(self.folder).done_views]
         elif isinstance(event, ViewAcquired) and not self._laser:
+            if event.index == event.total - 2:   # the last view is being taken: its frames read as they come
+                self._coming = event.total - 1
             return [event.index]
         return []
+
+    def prefetch(self) -> float | None:
+        """While the scan takes its last view, between the worker's views (the runner's
+        :class:`~rangekit.app.runner.StreamingWorker` calls it whenever its queue is empty): the frames of that view
+        on disk so far, in frame order, read, checksummed and decoded into its stack, so that once its last frame is
+        written only the rest are read (:func:`rangekit.formats.sessions.check.read_view_stack`'s ``have``: a frame
+        taken again, or not the one recorded, is read again; the same pixels). One-exposure sessions. Returns how
+        long to wait before calling again (None: nothing to read ahead)."""
+        k = self._coming
+        if k is None or k in self.decoded or k in self.moved:
+            return None
+        if self._frames is None or self._frames.view != k:
+            from rangekit.app.scan.frames_ahead import FramesAhead
+
+            session = Session.load(self.folder)
+            if session.capture.exposures_us or k >= len(session.views):
+                self._coming = None
+                return None
+            self._frames = FramesAhead(k, partial_view_folder(self.folder, k), len(session.pattern.frame_names))
+        self._frames.read()
+        return PREFETCH_S
 
     def view(self, k: int) -> None:
         """View ``k``'s steps (module doc; nothing if it was done already); a view the object moved during is
@@ -164,8 +194,13 @@ class StreamingViews:
         # core (the same maps: each pixel's decode is its own), its work ahead first, its preview placing after.
         last = self.acquisition_over or k == total - 1
         settings = cache_settings(session, self.options.method, self.options.table_margin, self.options.max_motion)
+        had, self._frames = self._frames, None   # the frames read ahead (prefetch), dropped with the view's stack
+        have = had.have() if had is not None and had.view == k else None
+        del had
         cloud, maps = view_cloud(view, session.pattern, rig, settings, session.capture.full_scale,
-                                 table_transform(rig), self.options.table_margin, session, cores=0 if last else 1)
+                                 table_transform(rig), self.options.table_margin, session, cores=0 if last else 1,
+                                 have=have)
+        del have
         self.decoded.append(k)
         self.results[k] = (cloud, maps)
         self._emit(ViewDecoded(k, total, view.folder.name, cloud))
@@ -283,4 +318,5 @@ def _turntable_box(points: np.ndarray, T_world_table: np.ndarray, grow: float = 
     corners = np.array([[x, y, z] for x in (-radius, radius) for y in (-radius, radius) for z in (z0 - pad, z1 + pad)])
     world = apply_T(T_world_table, corners)
     return world.min(axis=0), world.max(axis=0)
+
 

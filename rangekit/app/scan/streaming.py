@@ -102,6 +102,7 @@ class StreamingViews:
         self.quiet = QuietWindows()                # the capture's waits: the TSDF integration starts in one
         self._coming: int | None = None            # the last view, while it is taken (its frames read: prefetch)
         self._frames = None                        # FramesAhead: the frames of it read so far
+        self.read_ahead: dict[int, int] = {}       # index -> frames of the view read while it was taken (prefetch)
 
     def views_of(self, event) -> list[int]:
         """The views ``event`` (one of the scan's) brings to process: each view of a coded-light scan as it is
@@ -197,6 +198,8 @@ class StreamingViews:
         had, self._frames = self._frames, None   # the frames read ahead (prefetch), dropped with the view's stack
         have = had.have() if had is not None and had.view == k else None
         del had
+        if have is not None:
+            self.read_ahead[k] = len(have[1])
         cloud, maps = view_cloud(view, session.pattern, rig, settings, session.capture.full_scale,
                                  table_transform(rig), self.options.table_margin, session, cores=0 if last else 1,
                                  have=have)

@@ -76,6 +76,7 @@ def test_the_last_views_frames_read_ahead_give_the_cache_decoding_from_scratch_g
     shutil.rmtree(partial)                    # the view finished: its folder as recorded
     steps.view(k)
     assert steps._frames is None and steps.prefetch() is None
+    assert steps.read_ahead == {k: len(frames) if taken == "all" else 5}
     assert _cache(out, k) == _cache(fresh, k)
 
 

@@ -195,9 +195,9 @@ class StreamingViews:
         # core (the same maps: each pixel's decode is its own), its work ahead first, its preview placing after.
         last = self.acquisition_over or k == total - 1
         settings = cache_settings(session, self.options.method, self.options.table_margin, self.options.max_motion)
-        had, self._frames = self._frames, None   # the frames read ahead (prefetch), dropped with the view's stack
-        have = had.have() if had is not None and had.view == k else None
-        del had
+        have = None   # the frames read ahead (prefetch), handed on and dropped with the view's stack
+        if self._frames is not None and self._frames.view == k:
+            have, self._frames = self._frames.have(), None
         if have is not None:
             self.read_ahead[k] = len(have[1])
         cloud, maps = view_cloud(view, session.pattern, rig, settings, session.capture.full_scale,
@@ -321,5 +321,3 @@ def _turntable_box(points: np.ndarray, T_world_table: np.ndarray, grow: float = 
     corners = np.array([[x, y, z] for x in (-radius, radius) for y in (-radius, radius) for z in (z0 - pad, z1 + pad)])
     world = apply_T(T_world_table, corners)
     return world.min(axis=0), world.max(axis=0)
-
-

@@ -55,11 +55,12 @@ def test_the_last_views_frames_read_ahead_give_the_cache_decoding_from_scratch_g
                                                                                      tmp_path, taken):
     """``some``: 5 frames on disk while it is taken (the rest read after its last frame, into the stack's tail);
     ``all``: every frame read ahead (none read after); ``retaken``: the frames read ahead were another capture's
-    (view 0's: the view taken again after a fault), so every frame is read again."""
+    (view 0's: the view taken again after a fault), so every frame is read again. The view before it is decoded
+    after the reading began (the worker a view behind): what was read is kept for the last view."""
     out = _fresh(reference_session, tmp_path / "s")
     fresh, k = expected
     steps = StreamingViews(out, ProcessOptions())
-    for j in range(k):
+    for j in range(k - 1):
         steps.view(j)
     final, partial = view_folder(out, k), partial_view_folder(out, k)
     frames = list_images(final)
@@ -73,6 +74,8 @@ def test_the_last_views_frames_read_ahead_give_the_cache_decoding_from_scratch_g
     assert steps.prefetch() is not None
     read = steps._frames.have()
     assert read is not None and len(read[1]) == (len(frames) if taken == "all" else 5)
+    steps.view(k - 1)                         # the worker a view behind: what was read ahead is kept for view k
+    assert steps._frames is not None and steps._frames.have()[1] == read[1]
     shutil.rmtree(partial)                    # the view finished: its folder as recorded
     steps.view(k)
     assert steps._frames is None and steps.prefetch() is None

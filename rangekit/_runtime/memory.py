@@ -17,7 +17,9 @@ view) reuse pages instead of mapping fresh ones that the kernel must fault in an
 64 MB heaps that glibc unmaps as soon as one is wholly free, whatever the trim threshold, so inside the block
 the top pad is raised to a heap's size, which keeps them. A block larger than a heap (a view's frame stack:
 48-60 frames of 1280x1024 are 63-79 MB) is mapped on its own on a worker thread whatever the threshold:
-:func:`reused_array` keeps one per thread for the next view. On leaving the outermost block, glibc's limits
+:func:`reused_array` keeps one per thread for the next view (:func:`adopt_kept` hands a thread's on to the thread
+that takes over its work: the scan's last view, decoded on the caller's thread once the streaming worker has
+ended). On leaving the outermost block, glibc's limits
 are set to where its own adjustment takes them (32 MB), the top pad to its default, the kept arrays dropped and
 the free pages returned. Blocks may nest and overlap on several threads: the settings hold until the last one
 ends. Inside, numpy's advice for huge pages on its large arrays is off too: the pages the block does fault in
@@ -36,7 +38,7 @@ from contextlib import contextmanager
 
 import numpy as np
 
-__all__ = ["release_free_memory", "reuse_freed_memory", "reused_array"]
+__all__ = ["release_free_memory", "reuse_freed_memory", "reused_array", "adopt_kept"]
 
 try:
     _LIBC = ctypes.CDLL(None)   # the process's own symbols: libc's, without a search (ldconfig) for it
@@ -139,3 +141,19 @@ def reused_array(name: str, shape: tuple[int, ...], dtype) -> np.ndarray:
         if _OPEN > 0:
             _KEPT[key] = kept
     return kept
+
+
+def adopt_kept(thread_ident: int) -> int:
+    """The arrays :func:`reused_array` keeps for thread ``thread_ident`` (one that has ended, or handed its work on
+    to this one) become this thread's: its next :func:`reused_array` of the same name, shape and dtype takes them,
+    pages already faulted in (the scan's last view, decoded on the caller's thread after the streaming worker's
+    earlier views: :class:`rangekit.app.runner.StreamingWorker`). Returns how many were handed on (0 outside a
+    block, or with none kept); an array this thread keeps under the same name is dropped for it."""
+    me = threading.get_ident()
+    if thread_ident == me:
+        return 0
+    with _LOCK:
+        names = [name for ident, name in _KEPT if ident == thread_ident]
+        for name in names:
+            _KEPT[(me, name)] = _KEPT.pop((thread_ident, name))
+    return len(names)

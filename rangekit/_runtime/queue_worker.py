@@ -18,6 +18,7 @@ import os
 import queue
 import threading
 from collections.abc import Callable
+from contextlib import AbstractContextManager, nullcontext
 from typing import Any
 
 __all__ = ["QueueWorker"]
@@ -27,11 +28,18 @@ _END = object()   # the last item: the worker ends when it takes it
 
 class QueueWorker:
     """``fn(item)`` for each :meth:`put` item, in order, on a thread of its own named ``name`` at niceness
-    ``nice`` (module doc); started at once. :attr:`paused` counts the items that waited for a :meth:`release`,
+    ``nice`` (module doc); started at once. ``context()``: a context the worker's whole loop runs in, and the items
+    :meth:`finish` hands on to the caller, entered there before the worker ends (the scan's:
+    :func:`rangekit._runtime.memory.reuse_freed_memory`, one block from the first view to the last). ``idle()``:
+    called on the worker before it waits for the next item, returns how long to wait before calling it again (None:
+    until an item comes): work done ahead while the queue is empty (the scan's last view's frames read as they are
+    written), never while held. :attr:`paused` counts the items that waited for a :meth:`release`,
     :attr:`error` holds the exception that ended it (None: none)."""
 
-    def __init__(self, fn: Callable[[Any], None], *, name: str, nice: int = 0) -> None:
-        self._fn, self._nice = fn, nice
+    def __init__(self, fn: Callable[[Any], None], *, name: str, nice: int = 0,
+                 context: Callable[[], AbstractContextManager] = nullcontext,
+                 idle: Callable[[], float | None] | None = None) -> None:
+        self._fn, self._nice, self._context, self._idle = fn, nice, context, idle
         self._queue: queue.Queue = queue.Queue()
         self._go = threading.Event()     # cleared while held
         self._go.set()
@@ -58,22 +66,23 @@ class QueueWorker:
         """Handle every item queued (no more holding back): the worker ends after the item it is handling, the rest
         are handled here, on the caller's thread and priority (module doc), unless an item failed. Returns when all
         are done."""
-        self._handing_over = True
-        self._go.set()
-        self._queue.put(_END)
-        self._thread.join()
-        left = self._handed
-        while True:
-            try:
-                item = self._queue.get_nowait()
-            except queue.Empty:
-                break
-            if item is not _END:
-                left.append(item)
-        for item in left:
-            if self.error is not None:
-                return
-            self._call(item)
+        with self._context():   # entered before the worker's ends: one block from its items on to the caller's
+            self._handing_over = True
+            self._go.set()
+            self._queue.put(_END)
+            self._thread.join()
+            left = self._handed
+            while True:
+                try:
+                    item = self._queue.get_nowait()
+                except queue.Empty:
+                    break
+                if item is not _END:
+                    left.append(item)
+            for item in left:
+                if self.error is not None:
+                    return
+                self._call(item)
 
     def stop(self) -> None:
         """End the thread after the item being handled; the queued ones are dropped. Returns when it has ended."""
@@ -84,8 +93,15 @@ class QueueWorker:
 
     def _run(self) -> None:
         _lower_priority(self._nice)
+        with self._context():
+            self._loop()
+
+    def _loop(self) -> None:
         while self.error is None:
-            item = self._queue.get()
+            try:
+                item = self._queue.get(timeout=self._idle_call())
+            except queue.Empty:
+                continue
             if item is _END or self._stopping:
                 return
             if not self._go.is_set():   # held: wait for the release
@@ -97,6 +113,16 @@ class QueueWorker:
                 self._handed.append(item)
                 return
             self._call(item)
+
+    def _idle_call(self) -> float | None:
+        """``idle()`` before the worker waits for an item (not while held, nor once told to end): how long to wait
+        before calling it again (None: until an item comes). Its exception is dropped: idle work is optional."""
+        if self._idle is None or not self._go.is_set() or self._handing_over or self._stopping:
+            return None
+        try:
+            return self._idle()
+        except Exception:   # noqa: BLE001 - idle work only does ahead what an item would do (class doc)
+            return None
 
     def _call(self, item: Any) -> None:
         """``fn(item)``, its exception kept in :attr:`error` (module doc)."""

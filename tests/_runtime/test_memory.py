@@ -154,3 +154,37 @@ def test_numpys_huge_page_advice_is_off_inside_the_block_and_as_it_was_after():
             assert get() is False
         assert get() is False
     assert get() == was
+
+
+def test_adopt_kept_hands_a_threads_kept_array_to_the_thread_that_takes_over_its_work():
+    """The scan's last view is decoded on the caller's thread once the streaming worker has ended: it takes the
+    worker's frame stack, its pages faulted in (rangekit.app.runner.StreamingWorker); outside a block nothing is
+    kept to hand on."""
+    import threading
+
+    import numpy as np
+
+    from rangekit._runtime import memory
+    from rangekit._runtime.memory import adopt_kept, reuse_freed_memory, reused_array
+
+    if memory._MALLOPT is None or memory._ONE_ARENA or "MALLOC_MMAP_THRESHOLD_" in os.environ:
+        pytest.skip("the block changes nothing in this process")
+    ident, made = [], []
+
+    def worker():
+        ident.append(threading.get_ident())
+        made.append(id(reused_array("frames0", (48, 8, 8), np.uint8)))   # freed at once: kept for the thread
+
+    t = threading.Thread(target=worker)
+    t.start()
+    t.join()
+    assert adopt_kept(ident[0]) == 0                                    # outside a block: nothing was kept
+    with reuse_freed_memory():
+        t = threading.Thread(target=worker)
+        t.start()
+        t.join()
+        assert reused_array("frames0", (48, 8, 8), np.uint8) is not None and len(memory._KEPT) == 2
+        assert adopt_kept(ident[1]) == 1 and adopt_kept(threading.get_ident()) == 0
+        assert id(reused_array("frames0", (48, 8, 8), np.uint8)) == made[1]   # the worker's array, taken over
+        assert len(memory._KEPT) == 1
+    assert not memory._KEPT

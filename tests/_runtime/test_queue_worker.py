@@ -107,3 +107,51 @@ def test_the_first_error_is_kept_and_ends_the_worker():
     worker.finish()
     assert seen == [0, 1] and isinstance(worker.error, ValueError)
     worker.stop()          # after the end: returns at once
+
+
+def test_the_context_holds_from_the_workers_first_item_through_the_items_finish_hands_to_the_caller():
+    """QueueWorker(context=): the worker's loop runs inside it, and finish enters it on the caller's thread before
+    the worker ends, so it is never left between the two (the scan's memory-reuse block: the last view, decoded on
+    the caller's thread, reuses the worker's pages, rangekit.app.runner.StreamingWorker)."""
+    from contextlib import contextmanager
+
+    lock, held, seen = threading.Lock(), [0], []
+    entries = []
+
+    @contextmanager
+    def counted():
+        with lock:
+            held[0] += 1
+            entries.append(threading.current_thread().name)
+        try:
+            yield
+        finally:
+            with lock:
+                held[0] -= 1
+                seen.append(("exit", held[0]))
+
+    started, gate = threading.Event(), threading.Event()
+
+    def fn(item):
+        seen.append((item, held[0]))
+        if item == 0:
+            started.set()
+            gate.wait(30)
+
+    worker = QueueWorker(fn, name="rk-test-context", context=counted)
+    worker.put(0)
+    assert started.wait(30)
+    worker.put(1)
+
+    def let_go():
+        while not worker._handing_over:
+            threading.Event().wait(0.005)
+        gate.set()
+
+    threading.Thread(target=let_go).start()
+    worker.finish()
+    caller = threading.current_thread().name
+    assert sorted(entries) == sorted(["rk-test-context", caller])
+    # item 0 inside the worker's block; the worker's block ends with the caller's already entered (1 left), item 1
+    # inside the caller's, then it ends: the count never reaches 0 in between
+    assert seen == [(0, 1), ("exit", 1), (1, 1), ("exit", 0)]

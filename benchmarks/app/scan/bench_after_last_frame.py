@@ -4,8 +4,9 @@
     PYTHONPATH=. python benchmarks/app/scan/bench_after_last_frame.py /tmp/r49/S12 --old /work/main --pairs 2
 
 Each run is a process of its own with the tree on PYTHONPATH: the session is copied without its caches and
-outputs, views 0..n-2 go through the scan's streaming steps (as they would while the capture runs), then the clock
-starts where the last frame would be written: the last view queued and drained, the preview beside the processing,
+outputs, views 0..n-2 go through the scan's streaming steps on its worker thread (as they would while the capture
+runs; a tree that reads the last view's frames ahead as they are written, ``StreamingViews.prefetch``, has them
+read but its last one, as while it is taken), then the clock starts where the last frame would be written: the last view queued and drained, the preview beside the processing,
 as :func:`rangekit.app.scan.scan.scan` does after its acquisition. Printed per run (one JSON line): the seconds from
 there to the last view decoded, the preview, the registration's end (poses.json), mesh.ply and the closed mesh, and
 the CPU seconds this process used by each (user + system; the Poisson child's are not in it: it is the same
@@ -68,8 +69,12 @@ def replay(session: Path, work: Path) -> dict:
     with EventBus(on_event) as bus:
         worker = StreamingWorker(StreamingViews(work, options, bus))
         n = len(Session.load(work).views)
-        for k in range(n - 1):
-            worker.steps.view(k)
+        for k in range(n - 1):        # on the streaming worker's thread, as during a scan (its memory reuse too)
+            worker._worker.put(k)
+        while len(worker.steps.decoded) + len(worker.steps.moved) < n - 1 and worker.error is None:
+            time.sleep(0.02)
+        if getattr(worker.steps, "prefetch", None) is not None:
+            _taking_the_last_view(worker, work, n)
         bus.flush()
         t0, c0 = time.perf_counter(), _cpu()
         worker._worker.put(n - 1)                     # view n-1 acquired: its last frame is on disk
@@ -82,6 +87,33 @@ def replay(session: Path, work: Path) -> dict:
         bus.flush()
     accuracy = json.loads((work / "summary.json").read_text())["accuracy"]
     return {"spans_s_cpu": clock, "rms_mm": round(accuracy["rms"] * 1e3, 4), "completeness": accuracy["completeness"]}
+
+
+def _taking_the_last_view(worker, work: Path, n: int) -> None:
+    """The last view as while it is taken (a tree whose steps read its frames ahead, ``StreamingViews.prefetch``):
+    its frames but the last in its ``.partial`` folder, read by the worker while it waits; then its last frame
+    written and the view finished, as the capture does."""
+    from rangekit.app.events import ViewAcquired
+    from rangekit.formats.capture import list_images
+    from rangekit.formats.sessions.files import partial_view_folder, view_folder
+
+    final, partial = view_folder(work, n - 1), partial_view_folder(work, n - 1)
+    final.rename(partial)
+    frames = list_images(partial)
+    held = work / "last_frame"
+    held.mkdir()
+    frames[-1].rename(held / frames[-1].name)
+    worker.steps.views_of(ViewAcquired(n - 2, n, view_folder(work, n - 2), 0.0, len(frames)))
+    worker._worker.put(n - 2)        # done already: the worker then waits, reading the last view's frames ahead
+    t0 = time.perf_counter()
+    while time.perf_counter() - t0 < 60:
+        got = worker.steps._frames
+        if got is not None and len(got.sha256) == len(frames) - 1:
+            break
+        time.sleep(0.02)
+    (held / frames[-1].name).rename(partial / frames[-1].name)
+    partial.rename(final)
+    held.rmdir()
 
 
 def main() -> None:

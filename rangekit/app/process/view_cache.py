@@ -102,7 +102,8 @@ _MAP_NAMES = ("proj_col", "confidence", "depth", "sigma")  # a cache without one
 
 def view_cloud(v: SessionView, spec: PatternSpec, rig: Rig, settings: dict, full_scale: float | None,
                T_table_world: np.ndarray | None, table_margin: float,
-               session: Session | None = None, *, cores: int | None = None) -> tuple[PointCloud, ViewMaps]:
+               session: Session | None = None, *, cores: int | None = None,
+               have: tuple[np.ndarray, dict] | None = None) -> tuple[PointCloud, ViewMaps]:
     """Decode, triangulate and filter one view, or reuse its cache when made with the same ``settings``, on this
     thread: with ``cores`` None its numba setting holds; else on one BLAS thread and ``cores`` numba threads
     (0: the configured number, :func:`rangekit._runtime.executor.worker_count`; the scan's live processing decodes
@@ -112,18 +113,22 @@ def view_cloud(v: SessionView, spec: PatternSpec, rig: Rig, settings: dict, full
     exposures of a multi-exposure session, each decoded from its ``e<us>/`` folder and merged per pixel; ``full_scale`` the camera's largest pixel value
     (None: the images' dtype). Points less than ``table_margin`` metres above the turntable top
     (``T_table_world`` maps world points to the table frame; None: no table) are dropped. ``session``: the
-    frames are checked against its recorded SHA-256s (:func:`view_clouds`).
+    frames are checked against its recorded SHA-256s (:func:`view_clouds`). ``have``: ``(stack, {frame name:
+    SHA-256})``, the view's frames already read into ``stack`` (K, H, W) as far as they go (one exposure; the scan's
+    last view: :meth:`rangekit.app.scan.streaming.StreamingViews.prefetch`): only the rest are read
+    (:func:`rangekit.formats.sessions.check.read_view_stack`), the same pixels.
     """
     if cores is not None:
         with one_blas_thread(), numba_threads(worker_count(cores)):
-            return view_cloud(v, spec, rig, settings, full_scale, T_table_world, table_margin, session)
-    return next(view_clouds([v], spec, rig, settings, full_scale, T_table_world, table_margin, session, workers=1))
+            return view_cloud(v, spec, rig, settings, full_scale, T_table_world, table_margin, session, have=have)
+    return next(view_clouds([v], spec, rig, settings, full_scale, T_table_world, table_margin, session, workers=1,
+                            have=None if have is None else {v.index: have}))
 
 
 def view_clouds(views: Sequence[SessionView], spec: PatternSpec, rig: Rig, settings: dict,
                 full_scale: float | None, T_table_world: np.ndarray | None,
                 table_margin: float, session: Session | None = None, *,
-                workers: int = 0, map_views=None) -> Iterator[tuple[PointCloud, ViewMaps]]:
+                workers: int = 0, map_views=None, have: dict | None = None) -> Iterator[tuple[PointCloud, ViewMaps]]:
     """:func:`view_cloud` of each view, yielded in order, ``workers`` views at a time on as many threads
     (:func:`rangekit._runtime.executor.ordered_map`; 0: the configured number, each with one numba and one BLAS
     thread; 1: on this thread, one view after another): two views side by side used
@@ -133,7 +138,8 @@ def view_clouds(views: Sequence[SessionView], spec: PatternSpec, rig: Rig, setti
     ``session``: each frame is checked against the SHA-256 recorded in its ``session.json``, taken from the bytes
     read for decoding (:func:`rangekit.formats.sessions.check.read_view_stack`: each frame read once); a view
     taken from its cache has its frames hashed there instead. None: the frames are read unchecked. ``map_views(fn,
-    views)``: the job runner's map (in order, on the configured number of threads) instead of this one's."""
+    views)``: the job runner's map (in order, on the configured number of threads) instead of this one's. ``have``:
+    view index -> frames already read (:func:`view_cloud`)."""
     shape = (rig.camera.height, rig.camera.width)
     white = white_frame_index(spec)
 
@@ -144,7 +150,7 @@ def view_clouds(views: Sequence[SessionView], spec: PatternSpec, rig: Rig, setti
             if session is not None:
                 verify_views(session, views=[v])
             return cached[0], _stored_maps(cached[1], folders, white)
-        stacks = _read_stacks(v, folders, session)
+        stacks = _read_stacks(v, folders, session, None if have is None else have.get(v.index))
         # the white capture copied out: a view of it would keep the view's whole stack alive
         white_image = stacks[0][white].copy()
         # the frames handed over in a list that _decode_view empties: no frame of this view is kept once decoded
@@ -215,13 +221,14 @@ def _frame_folders(v: SessionView, settings: dict) -> list:
     return [v.folder] if not exposures else [v.folder / exposure_folder(e) for e in exposures]
 
 
-def _read_stacks(v: SessionView, folders: list, session: Session | None) -> list:
+def _read_stacks(v: SessionView, folders: list, session: Session | None, have=None) -> list:
     """Each folder's frames as one stack; inside the decode stage's memory reuse each thread's stacks go into the
     arrays it had for its last view (:func:`rangekit._runtime.memory.reused_array`: a 60-frame stack is 79 MB of
-    fresh pages otherwise)."""
+    fresh pages otherwise). ``have``: the frames of a one-folder view already read (:func:`view_cloud`)."""
     if session is None:
         return [read_stack(list_images(f)) for f in folders]
-    return [read_view_stack(session, v, f, empty=partial(reused_array, f"frames{k}")) for k, f in enumerate(folders)]
+    return [read_view_stack(session, v, f, empty=partial(reused_array, f"frames{k}"),
+                            have=have if len(folders) == 1 else None) for k, f in enumerate(folders)]
 
 
 def _check_still(stacks, spec: PatternSpec, decoded: np.ndarray, max_motion: float) -> None:

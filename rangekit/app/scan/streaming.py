@@ -27,8 +27,11 @@ calls the steps on a worker thread of lower priority that backs off while the ca
    simulator the truth's samples and the view's errors against the truth
    (:attr:`StreamingViews.evaluate`).
 
+While the last view is taken, its frames are read as they are written (:meth:`StreamingViews.prefetch`, between
+the worker's views; :mod:`rangekit.app.scan.frames_ahead`), so that after its last frame only the rest are read.
 The last view (or any once the acquisition is over, :attr:`StreamingViews.acquisition_over`) is what the
-processing waits for: it is decoded on every core, then its placing is left to :meth:`StreamingViews.write_preview`,
+processing waits for: it is decoded on every core, then its placing (by the turntable prior) is left to
+:meth:`StreamingViews.write_preview`,
 which writes ``preview.ply``, the TSDF's surface (:class:`~rangekit.app.events.MeshReady` ``"preview"``), and
 its work ahead to :meth:`StreamingViews.last_ahead`, run beside it (the preview waits for nothing but the decoding;
 issue 51); then the processing, the preview still beside it. A multi-pass scan's preview holds its
@@ -53,7 +56,7 @@ from rangekit.errors import MotionError
 from rangekit.formats.sessions.session import Session
 from rangekit.geometry import apply_T, compose, invert_T, rotation_angle
 from rangekit.surface.cloud import PointCloud
-from rangekit.formats.sessions.files import PREVIEW_FILE
+from rangekit.formats.sessions.files import PREVIEW_FILE, partial_view_folder
 
 __all__ = ["INTEGRATE_S", "PLACE_VOXEL_M", "MAX_REFINE_DEG", "MAX_REFINE_M", "StreamingViews"]
 
@@ -64,6 +67,8 @@ PLACE_VOXEL_M = 0.002
 MAX_REFINE_DEG, MAX_REFINE_M = 0.5, 0.001
 #: The preview's voxel: the turntable's box (its diagonal, :func:`_turntable_box`) over this many.
 PREVIEW_VOXELS = 256
+#: How often the frames of the last view are looked for while it is taken (seconds; :meth:`StreamingViews.prefetch`).
+PREFETCH_S = 0.05
 #: How long one view's TSDF integration holds the GIL (37 ms on the default rig), with a margin: it starts in a
 #: wait of the capture with at least this long left (:mod:`rangekit.app.acquire.quiet`).
 INTEGRATE_S = 0.06
@@ -95,6 +100,9 @@ class StreamingViews:
         self.measured: list[int] = []              # views whose errors against the truth were measured here
         self.registration = None                   # RegistrationAhead of a one-pass turntable scan, from view 0 on
         self.quiet = QuietWindows()                # the capture's waits: the TSDF integration starts in one
+        self._coming: int | None = None            # the last view, while it is taken (its frames read: prefetch)
+        self._frames = None                        # FramesAhead: the frames of it read so far
+        self.read_ahead: dict[int, int] = {}       # index -> frames of the view read while it was taken (prefetch)
 
     def views_of(self, event) -> list[int]:
         """The views ``event`` (one of the scan's) brings to process: each view of a coded-light scan as it is
@@ -105,8 +113,31 @@ class StreamingViews:
             if event.resume and not event.laser:
                 return [view.index for view in Session.load(self.folder).done_views]
         elif isinstance(event, ViewAcquired) and not self._laser:
+            if event.index == event.total - 2:   # the last view is being taken: its frames read as they come
+                self._coming = event.total - 1
             return [event.index]
         return []
+
+    def prefetch(self) -> float | None:
+        """While the scan takes its last view, between the worker's views (the runner's
+        :class:`~rangekit.app.runner.StreamingWorker` calls it whenever its queue is empty): the frames of that view
+        on disk so far, in frame order, read, checksummed and decoded into its stack, so that once its last frame is
+        written only the rest are read (:func:`rangekit.formats.sessions.check.read_view_stack`'s ``have``: a frame
+        taken again, or not the one recorded, is read again; the same pixels). One-exposure sessions. Returns how
+        long to wait before calling again (None: nothing to read ahead)."""
+        k = self._coming
+        if k is None or k in self.decoded or k in self.moved:
+            return None
+        if self._frames is None or self._frames.view != k:
+            from rangekit.app.scan.frames_ahead import FramesAhead
+
+            session = Session.load(self.folder)
+            if session.capture.exposures_us or k >= len(session.views):
+                self._coming = None
+                return None
+            self._frames = FramesAhead(k, partial_view_folder(self.folder, k), len(session.pattern.frame_names))
+        self._frames.read()
+        return PREFETCH_S
 
     def view(self, k: int) -> None:
         """View ``k``'s steps (module doc; nothing if it was done already); a view the object moved during is
@@ -122,8 +153,8 @@ class StreamingViews:
     def write_preview(self) -> Path | None:
         """After the last view's steps: place the last views, then write and announce the preview surface (the
         scan does it beside its processing); its path, or None (no view placed)."""
-        for k, cloud, depth, session in self._unplaced:
-            self._place_and_integrate(k, cloud, depth, session)
+        for k, cloud, depth, session in self._unplaced:   # by the turntable prior: nothing is placed after them
+            self._place_and_integrate(k, cloud, depth, session, refine=False)
         self._unplaced = []
         if self._volume is None:
             return None
@@ -164,8 +195,15 @@ class StreamingViews:
         # core (the same maps: each pixel's decode is its own), its work ahead first, its preview placing after.
         last = self.acquisition_over or k == total - 1
         settings = cache_settings(session, self.options.method, self.options.table_margin, self.options.max_motion)
+        have = None   # the frames read ahead (prefetch), handed on and dropped with the view's stack
+        if self._frames is not None and self._frames.view == k:
+            have, self._frames = self._frames.have(), None
+        if have is not None:
+            self.read_ahead[k] = len(have[1])
         cloud, maps = view_cloud(view, session.pattern, rig, settings, session.capture.full_scale,
-                                 table_transform(rig), self.options.table_margin, session, cores=0 if last else 1)
+                                 table_transform(rig), self.options.table_margin, session, cores=0 if last else 1,
+                                 have=have)
+        del have
         self.decoded.append(k)
         self.results[k] = (cloud, maps)
         self._emit(ViewDecoded(k, total, view.folder.name, cloud))
@@ -190,8 +228,9 @@ class StreamingViews:
         if self._table[0] is not None:
             self.free[k] = free_depth_of(maps, self._table[0])
 
-    def _place_and_integrate(self, k: int, cloud: PointCloud, depth: np.ndarray, session: Session) -> None:
-        T = self._place(k, cloud, session)
+    def _place_and_integrate(self, k: int, cloud: PointCloud, depth: np.ndarray, session: Session, *,
+                             refine: bool = True) -> None:
+        T = self._place(k, cloud, session, refine=refine)
         self._emit(ViewPlaced(k, len(session.views), session.views[k].folder.name, cloud, T))
         self._integrate(depth, T, session, cloud)
 
@@ -225,15 +264,19 @@ class StreamingViews:
         except Exception:   # noqa: BLE001 - the processing registers the views itself and meets the error
             self.registration = None
 
-    def _place(self, k: int, cloud: PointCloud, session: Session) -> np.ndarray:
+    def _place(self, k: int, cloud: PointCloud, session: Session, *, refine: bool = True) -> np.ndarray:
         """View ``k``'s pose in the first view's frame: the turntable prior, refined by ICP against the nearest
-        view placed before it (kept as the prior when ICP does not converge)."""
+        view placed before it (kept as the prior when ICP does not converge); ``refine`` False: the prior (the
+        last views, placed in the preview after the acquisition: their ICP, 0.08-0.1 CPU-s, was the preview's
+        largest step, and no view is placed against them; the processing registers every view, issue 51)."""
         from rangekit.registration.icp import IcpOptions, icp
         from rangekit.rig.rig_file import turntable_prior
         from rangekit.surface.cloud import downsample_with_normals
 
         angles = [session.views[0].angle, session.views[k].angle]
         prior = turntable_prior(session.rig.T_world_table, angles)[1]
+        if not refine:
+            return prior
         small = downsample_with_normals(cloud, PLACE_VOXEL_M)
         T = prior
         if self._placed:
@@ -278,4 +321,3 @@ def _turntable_box(points: np.ndarray, T_world_table: np.ndarray, grow: float = 
     corners = np.array([[x, y, z] for x in (-radius, radius) for y in (-radius, radius) for z in (z0 - pad, z1 + pad)])
     world = apply_T(T_world_table, corners)
     return world.min(axis=0), world.max(axis=0)
-

@@ -105,15 +105,52 @@ def verify_views(session: Session, *, workers: int = 0, views: list[SessionView]
 
 
 def read_view_stack(session: Session, v: SessionView, folder: Path, *, workers: int = 0,
-                    empty=np.empty) -> np.ndarray:
+                    empty=np.empty, have: tuple[np.ndarray, dict] | None = None) -> np.ndarray:
     """The frames of ``folder`` (view ``v``'s folder or one of its exposure sub-folders) as one stack
     (:func:`rangekit.formats.capture.read_stack`), each file read once: its SHA-256 taken from the bytes read
     and checked against ``session.json`` before any pixel is decoded (FileFormatError naming the view and the
     frame, as :func:`verify_views`). A view without recorded checksums is read unchecked. ``empty(shape,
-    dtype)`` makes the stack (:func:`rangekit.formats.capture.stack_from_bytes`)."""
-    from rangekit.formats.capture import list_images, stack_from_bytes
+    dtype)`` makes the stack (:func:`rangekit.formats.capture.stack_from_bytes`).
+
+    ``have``: ``(stack, {frame name: SHA-256})``, frames already decoded into ``stack`` (K, H, W) at their places
+    in frame order (the scan's last view, read while its last frames were taken:
+    :meth:`rangekit.app.scan.streaming.StreamingViews.prefetch`). Those whose SHA-256 is the recorded one are not
+    read again, the others are read into ``stack`` when they are its last frames; otherwise (a frame taken again
+    before the others, another count) every frame is read as without ``have``. The same pixels either way."""
+    from rangekit.formats.capture import list_images
 
     paths = list_images(folder)
+    start = _first_unread(v, paths, have)
+    if start is None:
+        return _read_view_stack(session, v, paths, workers=workers, empty=empty)
+    stack = have[0]
+    if start < len(paths):   # the frames not had read straight into the stack's tail
+        tail = stack[start:]
+
+        def into(shape, dtype):
+            return tail if (tuple(shape), np.dtype(dtype)) == (tail.shape, tail.dtype) else np.empty(shape, dtype)
+
+        if _read_view_stack(session, v, paths[start:], workers=workers, empty=into) is not tail:
+            return _read_view_stack(session, v, paths, workers=workers, empty=empty)   # another size or depth
+    return stack
+
+
+def _first_unread(v: SessionView, paths: list[Path], have: tuple[np.ndarray, dict] | None) -> int | None:
+    """Where the frames ``have`` holds (:func:`read_view_stack`) stop being the recorded ones: frames before it are
+    had, those from it on are to be read; None when ``have`` cannot be used (none, no recorded checksums, a stack
+    of another count, or a frame had after one that is not)."""
+    if have is None or v.sha256 is None or have[0].shape[0] != len(paths):
+        return None
+    known = have[1]
+    names = [path.relative_to(v.folder).as_posix() for path in paths]
+    had = [known.get(name) is not None and known.get(name) == v.sha256.get(name) for name in names]
+    start = next((i for i, ok in enumerate(had) if not ok), len(had))
+    return None if any(had[start:]) or start == 0 else start
+
+
+def _read_view_stack(session: Session, v: SessionView, paths: list[Path], *, workers: int, empty) -> np.ndarray:
+    """:func:`read_view_stack` of the frame files ``paths``."""
+    from rangekit.formats.capture import stack_from_bytes
 
     def read(path: Path) -> tuple[bytes, str | None]:   # hashed on the reading thread (hashlib frees the GIL)
         try:

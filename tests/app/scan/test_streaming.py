@@ -228,7 +228,7 @@ def test_in_real_time_a_view_is_decoded_before_the_next_ones_last_frame(tmp_path
     """The simulated rig on the wall clock (a 20 ms pattern delay, 30 frames a second, the turntable at its
     real-time speed): each view's ViewDecoded comes before the next view's ViewAcquired (sent once that view's
     last frame is on disk), so processing keeps up with the capture; each view's TSDF integration started in one
-    of the capture's waits (rangekit.app.acquire.quiet)."""
+    of the capture's waits (rangekit.app.acquire.quiet); the last view's frames were read while it was taken."""
     from rangekit.sim import SimRig, default_scene
     from rangekit.sim.devices.realtime import realtime_options
     from support.small_rigs import small_rig
@@ -259,6 +259,9 @@ def test_in_real_time_a_view_is_decoded_before_the_next_ones_last_frame(tmp_path
     print(f"\n{names}")
     for k in range(2):
         assert names.index(("ViewDecoded", k)) < names.index(("ViewAcquired", k + 1)), names
+    # the last view's frames were read as the capture wrote them (StreamingViews.prefetch; its bytes:
+    # tests/app/scan/test_prefetch.py)
+    assert streaming.steps.read_ahead.get(2, 0) > 0, streaming.steps.read_ahead
 
 
 def test_no_view_is_started_while_the_capture_is_behind(reference_session, tmp_path):

@@ -25,7 +25,7 @@ from rangekit.camera import PinholeCamera
 from rangekit.errors import InputError
 from rangekit.surface.tsdf_volume import depth_image
 
-__all__ = ["BlockVolume", "BLOCK_RESOLUTION", "TRUNC_VOXELS", "extend_depth"]
+__all__ = ["BlockVolume", "BLOCK_RESOLUTION", "TRUNC_VOXELS", "extend_depth", "canonical_mesh"]
 
 #: Voxels a side of one block of the grid.
 BLOCK_RESOLUTION = 16
@@ -96,6 +96,32 @@ class BlockVolume:
             if "shape {0}" not in str(exc):
                 raise
             return o3d.geometry.TriangleMesh()
+
+    def surface(self, min_weight: float = 0.5):
+        """:meth:`mesh` as a :class:`rangekit.surface.mesh.TriangleMesh` in one order whatever the order of the
+        grid's blocks (:func:`canonical_mesh`): the same views integrated give the same bytes."""
+        from rangekit.surface.mesh import mesh_from_open3d
+
+        return canonical_mesh(mesh_from_open3d(self.mesh(min_weight)))
+
+
+def canonical_mesh(mesh):
+    """``mesh`` (a :class:`rangekit.surface.mesh.TriangleMesh`, no colours kept) with its vertices sorted by their
+    coordinates (x, then y, then z) and its triangles, each turned to start at its lowest vertex (the winding
+    kept), sorted by their corners: the one order of a surface whatever order it was built in (Open3D's hash map of
+    blocks, filled by several threads, gives its marching cubes' vertices in another order from run to run)."""
+    from rangekit.surface.mesh import TriangleMesh
+
+    V = np.asarray(mesh.vertices, dtype=np.float64)
+    F = np.asarray(mesh.triangles, dtype=np.int64)
+    order = np.lexsort((V[:, 2], V[:, 1], V[:, 0]))
+    rank = np.empty(len(V), dtype=np.int64)
+    rank[order] = np.arange(len(V))
+    F = rank[F]
+    turn = np.argmin(F, axis=1)
+    F = np.take_along_axis(F, (turn[:, None] + np.arange(3)) % 3, axis=1)
+    F = F[np.lexsort((F[:, 2], F[:, 1], F[:, 0]))]
+    return TriangleMesh(V[order], F)
 
 
 def extend_depth(z: np.ndarray, pixels: int) -> np.ndarray:

@@ -155,13 +155,21 @@ def _project(V: np.ndarray, P: np.ndarray, Nm: np.ndarray, k: int, tree,
 
 
 def project_to_points(vertices: np.ndarray, points: np.ndarray, normals: np.ndarray, *, k: int = REFINE_NEIGHBOURS,
-                      tree=None) -> np.ndarray:
+                      tree=None, near: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """(V, 3): each of ``vertices`` (V, 3) moved along the weighted mean normal of its ``k`` nearest ``points``
     (N, 3) onto the plane through their weighted mean. ``normals`` (N, 3) unit, the points' (their sign does not
     matter beyond the neighbourhood agreeing). Weights fall as a Gaussian of the distance with sigma half the
-    ``k``-th neighbour's distance. ``tree``: a ``scipy.spatial.cKDTree`` of ``points``, if one is at hand."""
+    ``k``-th neighbour's distance. ``tree``: a ``scipy.spatial.cKDTree`` of ``points``, if one is at hand;
+    ``near``: the vertices' ``k`` nearest points (distances, indices; (V, k) each), when already queried."""
     V, P, Nm = _checked(vertices, points, normals, k)
-    return _project(V, P, Nm, k, tree)[0]
+    _check_near(near, len(V), min(k, len(P)))
+    return _project(V, P, Nm, k, tree, near)[0]
+
+
+def _check_near(near, n_vertices: int, k: int) -> None:
+    if near is not None and (np.shape(near[0]) != (n_vertices, k) or np.shape(near[1]) != np.shape(near[0])):
+        raise InputError(f"refine_to_points: near must be two ({n_vertices}, {k}) arrays, found "
+                         f"{np.shape(near[0])} and {np.shape(near[1])}")
 
 
 def edge_sag(vertices: np.ndarray, normals: np.ndarray, edges: np.ndarray) -> np.ndarray:
@@ -186,9 +194,7 @@ def refine_to_points(mesh: TriangleMesh, points: np.ndarray, normals: np.ndarray
     if not sag >= 0:
         raise InputError(f"refine_to_points: sag must be >= 0 metres, found {sag!r}")
     V, P, Nm = _checked(mesh.vertices, points, normals, k)
-    if near is not None and (np.shape(near[0]) != (len(V), min(k, len(P))) or np.shape(near[1]) != np.shape(near[0])):
-        raise InputError(f"refine_to_points: near must be two ({len(V)}, {min(k, len(P))}) arrays, found "
-                         f"{np.shape(near[0])} and {np.shape(near[1])}")
+    _check_near(near, len(V), min(k, len(P)))
     placed, n = _project(V, P, Nm, k, tree, near)
     edges, edge_of = mesh_edges(mesh.triangles, len(V))
     split = edge_sag(placed, n, edges) > sag if sag > 0 else np.ones(len(edges), dtype=bool)

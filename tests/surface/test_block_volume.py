@@ -95,3 +95,21 @@ def test_the_extended_volume_reaches_past_the_rim_of_the_data_and_keeps_the_surf
           f"{ {k: round(v * 1e3, 4) for k, v in off.items()} }")
     assert covered["extended"] > 0.99 and covered["plain"] < 0.6
     assert off["extended"] < voxel / 15 and abs(off["extended"] - off["plain"]) < voxel / 200
+
+
+def test_canonical_mesh_is_one_order_whatever_the_order_given():
+    from rangekit.surface.block_volume import canonical_mesh
+    from rangekit.surface.mesh import TriangleMesh
+
+    rng = np.random.default_rng(4)
+    V = rng.normal(size=(50, 3))
+    F = np.array([rng.choice(50, 3, replace=False) for _ in range(80)])
+    perm = rng.permutation(50)
+    inverse = np.argsort(perm)
+    shuffled = TriangleMesh(V[perm], np.roll(inverse[F], 1, axis=1)[rng.permutation(80)])   # turned, reordered
+    a, b = canonical_mesh(TriangleMesh(V, F)), canonical_mesh(shuffled)
+    assert np.array_equal(a.vertices, b.vertices) and np.array_equal(a.triangles, b.triangles)
+    assert np.all(np.diff(a.vertices[:, 0]) >= 0)
+    # the same triangles, each with its winding: every (corner, next corner) edge of one is one of the other's
+    edges = lambda m: {tuple(m.vertices[t[i]]) + tuple(m.vertices[t[(i + 1) % 3]]) for t in m.triangles for i in range(3)}
+    assert edges(a) == edges(TriangleMesh(V, F))

@@ -29,8 +29,8 @@ class DecodedViews:
     clouds: list[PointCloud]      # each view's filtered cloud, session world at the view's own turntable angle
     proj_cols: list[np.ndarray]   # (H, W) float32 decoded projector columns, NaN where undecoded: the
                                   # evaluator's per-view errors; emptied by the fusion stage once used (63 MB)
-    maps: list[ViewMaps] | None   # the TSDF's input (depth maps); None for Poisson (230 MB for 12 views not kept
-                                  # beside the fusion)
+    maps: list[ViewMaps] | None   # the TSDF's input (depth maps; the blocks fusion's: the depth and columns
+                                  # only); None for Poisson (230 MB for 12 views not kept beside the fusion)
     settings: dict                # the cache settings the views were decoded with (view_cache.cache_settings)
     rows: ViewRows | None         # the report's per-view part, made from each view's maps as it was decoded
     free: list[np.ndarray] | None = None   # (H, W) float32 per view: camera z up to which each pixel's ray is
@@ -66,9 +66,9 @@ def decode(session: Session, options: ProcessOptions, views: Iterable[tuple[Poin
             free.append(free_ahead[index] if index in free_ahead else free_depth_of(view_maps, table))
         if rows is not None:
             rows.add(done[k].folder.name, cloud, view_maps)
-        maps.append(view_maps if options.fusion == "tsdf" else _column_only(view_maps))
+        maps.append(view_maps if options.fusion == "tsdf" else _column_only(view_maps, options.fusion == "blocks"))
     proj_cols = [m.proj_col for m in maps]
-    kept = maps if options.fusion == "tsdf" else None
+    kept = maps if options.fusion in ("tsdf", "blocks") else None
     del maps, view_maps
     return DecodedViews(done, clouds, proj_cols, kept, settings, None if rows is None else rows.finish(), free)
 
@@ -104,7 +104,8 @@ def _rows_maker(session: Session):
     return ViewRowsMaker(rig=session.rig, full_scale=session.capture.full_scale, up=table_up(session.rig))
 
 
-def _column_only(m: ViewMaps) -> ViewMaps:
+def _column_only(m: ViewMaps, depth: bool = False) -> ViewMaps:
     """What Poisson's later stages keep of a view's maps: its projector columns (the evaluator's per-view
-    errors); the rest is freed as the next view decodes."""
-    return ViewMaps(m.proj_col, None, None, None, None)
+    errors), and with ``depth`` its depth map (the blocks fusion's input); the rest is freed as the next view
+    decodes."""
+    return ViewMaps(m.proj_col, None, m.depth if depth else None, None, None)

@@ -15,9 +15,12 @@ from rangekit.errors import OptionError
 __all__ = ["FUSION_METHODS", "TRIANGULATION_METHODS", "POISSON_DEFAULTS", "POISSON_POINTS", "ProcessOptions",
            "PROCESS_FLAGS"]
 
-#: ``fusion``: screened Poisson on the merged oriented cloud (the default, the more accurate) or the truncated
-#: signed distance volume of the registered depth maps.
-FUSION_METHODS = ("poisson", "tsdf")
+#: ``fusion``: screened Poisson on the merged oriented cloud (``rangekit process``'s default), the truncated
+#: signed distance volume of the registered depth maps (dense, the batch's), or ``blocks``: the sparse TSDF volume a
+#: scan streams its views into (0.4 mm voxels, each view's depth carried 4 px past its rim), its observed cut
+#: projected onto the points' planes (issue 51: ``rangekit scan``'s default, no Poisson after the last frame;
+#: :func:`rangekit.app.process.fuse.blocks_surface`).
+FUSION_METHODS = ("poisson", "tsdf", "blocks")
 #: ``method``: how a coded-light pixel is triangulated (:func:`rangekit.coded.triangulate.triangulate`).
 TRIANGULATION_METHODS = ("auto", "ray-plane", "ray-ray")
 #: Poisson's input of a coded-light scan: every k-th merged point, k the smallest that leaves at most this many.

@@ -42,7 +42,8 @@ from rangekit.app.events import (MeshReady, OnEvent, PairRegistered, Stage, View
 from rangekit.app.process.decode import DecodedViews, decode
 from rangekit.app.process.evaluate import Evaluator, measure_closed, measure_views
 from rangekit.app.process.fuse import (CHILD_IMPORTS, FusedViews, carved_space, close, fusion_input, large_poisson,
-                                       observed_rule, save_closed, save_merged, save_observed, summary_line, surfaces)
+                                       observed_rule, poisson_closed, save_closed, save_merged, save_observed,
+                                       summary_line, surfaces)
 from rangekit.app.process.fused_outputs import evaluate_observed
 from rangekit.app.process.options import ProcessOptions
 from rangekit.app.process.register import RegisteredViews, evaluator_angles, register
@@ -188,7 +189,8 @@ def _fuse(registered: RegisteredViews, session: Session, options: ProcessOptions
     work = Work.POISSON if options.fusion == "poisson" else Work.TSDF
     where = runner.where(work) if options.fusion != "poisson" or large_poisson(registered.decoded, options) \
         else Where.THREAD
-    with runner.beside(work, fn, *args, where=where, child=child, **kwargs) as fusion:
+    blocks = options.fusion == "blocks"   # its closed mesh is Poisson's (fuse.poisson_closed): the child is that's
+    with runner.beside(work, fn, *args, where=where, child=None if blocks else child, **kwargs) as fusion:
         save_merged(out, given, registered)
         if evaluate is not None and not late:
             with runner.stage(Stage.EVALUATE, reuse_memory=True):   # each view's casts reuse the last's pages
@@ -197,12 +199,12 @@ def _fuse(registered: RegisteredViews, session: Session, options: ProcessOptions
             measure_views(None, registered)
         runner.release_memory()
         rule = observed_rule(given, options)
-        del given
+        sample, given = given.sample, None   # (the blocks fusion's closed mesh's input; None otherwise)
         runner.release_memory()   # what this process freed beside Poisson, before the closing and the evaluation
         full, trimmed = fusion.result()
         evaluation = None
-        with runner.beside(Work.CLOSING, close, trimmed) as closing:
-            del trimmed
+        with _closing(runner, trimmed, sample, options, child, registered) as closing:
+            del trimmed, sample
             mesh, mesh_info = save_observed(out, full, rule, options)
             del full
             if runner.memo.before_mesh is not None:   # a scan's preview: announced first (Memo)
@@ -224,6 +226,17 @@ def _fuse(registered: RegisteredViews, session: Session, options: ProcessOptions
             measure_views(evaluate, registered)
         evaluation = _measure_observed(evaluate, mesh, registered, runner)
     return FusedViews(mesh, watertight, mesh_info, watertight_info, evaluation)
+
+
+def _closing(runner: Runner, trimmed, sample, options: ProcessOptions, child, registered: RegisteredViews):
+    """The surface to close closed beside this thread (:func:`close`, on a thread); the blocks fusion's closed mesh
+    from the sample by Poisson instead (:func:`poisson_closed`, in the child spawned for it when large), as
+    ``with ... as call: ...; call.result()``."""
+    if options.fusion != "blocks":
+        return runner.beside(Work.CLOSING, close, trimmed)
+    where = runner.where(Work.POISSON) if large_poisson(registered.decoded, options) else Where.THREAD
+    return runner.beside(Work.POISSON, poisson_closed, sample, options.poisson(laser=False)[0], where=where,
+                         child=child)
 
 
 def _measure_observed(evaluate: Evaluator, mesh, registered: RegisteredViews, runner: Runner):

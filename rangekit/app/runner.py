@@ -110,7 +110,9 @@ class Memo:
     they were the one concurrency of the closed mesh's path the work ahead added, issue 51; the figures are the
     same), ``free`` each view's free depth (index
     -> (H, W) float32, the closed mesh's carving, :func:`rangekit.app.process.decode.free_depth_of`) made from its
-    maps as it was decoded. LOCAL's is empty: every view is decoded on the runner's threads."""
+    maps as it was decoded, ``blocks`` the blocks fusion's volume filled as the views came
+(:class:`rangekit.app.process.blocks.BlocksAhead`). LOCAL's is empty: every view is decoded on the runner's
+threads."""
 
     decoded: Any = field(default_factory=dict)   # a dict, or any mapping with ``in`` and ``pop``
     registration: RegistrationAhead | None = None
@@ -119,6 +121,7 @@ class Memo:
     before_mesh: Callable[[], Any] | None = None
     truth_after_mesh: bool = False
     free: dict = field(default_factory=dict)
+    blocks: Any = None   # the blocks fusion's volume filled as the views came (app/process/blocks.BlocksAhead)
 
 
 class Runner:
@@ -295,7 +298,7 @@ class StreamingWorker:
         calls this beside :meth:`write_preview`)."""
         self.steps.last_ahead()
         return Memo(self.steps.results, self.steps.registration, self.steps.evaluate, truth_after_mesh=True,
-                    free=self.steps.free)
+                    free=self.steps.free, blocks=getattr(self.steps, "blocks", None))
 
     def _one(self, k: int) -> None:
         me = threading.get_ident()

@@ -222,14 +222,16 @@ class ObservedRule:
         closed. MeshError when no triangle is left."""
         return self.observed_near(surface, 1)[0]
 
-    def observed_near(self, surface: TriangleMesh, k: int) -> tuple[TriangleMesh, np.ndarray, np.ndarray]:
+    def observed_near(self, surface: TriangleMesh, k: int, workers: int = 1
+                      ) -> tuple[TriangleMesh, np.ndarray, np.ndarray]:
         """:meth:`observed_part` and its vertices' ``k`` nearest points from the same k-d tree query: ``(mesh,
         distances (V, k) metres, indices (V, k) into the tree's points)``, nearest first (what
-        :func:`rangekit.surface.refine.refine_to_points` projects the vertices with)."""
+        :func:`rangekit.surface.refine.refine_to_points` projects the vertices with); the query on ``workers``
+        threads (scipy's: each vertex's query its own, the same answers)."""
         from rangekit.errors import MeshError
 
         V = np.asarray(surface.vertices, dtype=np.float64)
-        d, idx = self.tree.query(V, k=k)
+        d, idx = self.tree.query(V, k=k, workers=workers)
         d, idx = d.reshape(len(V), k), idx.reshape(len(V), k)
         flags = _near_enough(d[:, 0], idx[:, 0], self.tree, self.spacing, self.factor, self.median, self.k) \
             if len(V) else np.zeros(0, dtype=bool)

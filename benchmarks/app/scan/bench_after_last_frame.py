@@ -7,7 +7,8 @@ Each run is a process of its own with the tree on PYTHONPATH: the session is cop
 outputs, views 0..n-2 go through the scan's streaming steps on its worker thread (as they would while the capture
 runs; a tree that reads the last view's frames ahead as they are written, ``StreamingViews.prefetch``, has them
 read but its last one, as while it is taken), then the clock starts where the last frame would be written: the last view queued and drained, the preview beside the processing,
-as :func:`rangekit.app.scan.scan.scan` does after its acquisition. Printed per run (one JSON line): the seconds from
+as :func:`rangekit.app.scan.scan.scan` does after its acquisition, with the scan's default fusion
+(``SCAN_FUSION``: blocks since issue 51 M6; Poisson before). Printed per run (one JSON line): the seconds from
 there to the last view decoded, the preview, the registration's end (poses.json), mesh.ply and the closed mesh, and
 the CPU seconds this process used by each (user + system; the Poisson child's are not in it: it is the same
 code on both sides). The machine's load makes the seconds noisy; the CPU seconds say what work is left after the
@@ -65,7 +66,11 @@ def replay(session: Path, work: Path) -> dict:
         elif isinstance(event, StageFinished) and event.stage == "register":
             mark("registered")
 
-    options = ProcessOptions(report=False)
+    try:   # the scan's own fusion (a tree before issue 51 M6: Poisson, ProcessOptions' default)
+        from rangekit.app.scan.options import SCAN_FUSION
+        options = ProcessOptions(report=False, fusion=SCAN_FUSION)
+    except ImportError:
+        options = ProcessOptions(report=False)
     with EventBus(on_event) as bus:
         worker = StreamingWorker(StreamingViews(work, options, bus))
         n = len(Session.load(work).views)

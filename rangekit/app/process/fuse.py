@@ -11,9 +11,9 @@ multi-threaded Poisson is not deterministic (a resumed scan must give the same m
 second child process took as long and 0.1-0.3 GB more at the peak (docs/benchmarks.md).
 
 The blocks fusion (``--fusion blocks``, issue 51: ``rangekit scan``'s) makes the observed mesh without Poisson: the
-views' depth maps in index order in the sparse volume a scan streams into (:func:`blocks_surface`), its observed cut
-projected onto the points' planes (:func:`project_observed`); its closed mesh is Poisson's of the same sample,
-made beside the observed mesh (:func:`poisson_closed`).
+views' depth maps in index order in the sparse volume a scan streams into, its observed cut projected onto the
+points' planes; its closed mesh is Poisson's of the same sample, made beside the observed mesh
+(:mod:`rangekit.app.process.blocks`).
 """
 
 from __future__ import annotations
@@ -34,10 +34,8 @@ from rangekit.surface.cloud import PointCloud, merge_clouds, view_index
 from rangekit.surface.mesh import TriangleMesh
 from rangekit.formats.sessions.files import MERGED_FILE, MESH_FILE, WATERTIGHT_FILE
 
-__all__ = ["CHILD_MIN_POINTS", "POISSON_POINTS", "CHILD_IMPORTS", "BLOCKS_VOXEL_M", "BLOCKS_EXTEND_PX", "FusedViews",
-           "FusionInput", "ObservedInput", "blocks_volume", "blocks_surface", "project_observed",
-           "fusion_input", "large_poisson", "surfaces", "save_merged", "observed_rule", "close", "poisson_closed",
-           "save_observed",
+__all__ = ["CHILD_MIN_POINTS", "POISSON_POINTS", "CHILD_IMPORTS", "FusedViews", "FusionInput", "ObservedInput",
+           "fusion_input", "large_poisson", "surfaces", "save_merged", "observed_rule", "close", "save_observed",
            "carved_space", "save_closed"]
 
 #: Fewest sampled points whose Poisson runs in a child process: below, it takes less than the child's start
@@ -45,10 +43,6 @@ __all__ = ["CHILD_MIN_POINTS", "POISSON_POINTS", "CHILD_IMPORTS", "BLOCKS_VOXEL_
 CHILD_MIN_POINTS = 100_000
 #: What the Poisson child imports while the views are registered (Open3D alone: 0.6 s).
 CHILD_IMPORTS = ("open3d", "rangekit.surface.fusion")
-#: The blocks fusion's voxel (metres) and each view's depth carried past its rim (pixels): 0.6 mm lost the thin
-#: object's walls (95.2% complete), 0 px the strips every view's data stops short of (99.41% against 99.67% on the
-#: default scan); docs/benchmarks.md, issue 51 "The streamed mesh".
-BLOCKS_VOXEL_M, BLOCKS_EXTEND_PX = 0.0004, 4
 
 
 @dataclass(frozen=True, eq=False)
@@ -94,10 +88,12 @@ def _sample_step(decoded: DecodedViews, options: ProcessOptions) -> int:
 
 
 def large_poisson(decoded: DecodedViews, options: ProcessOptions) -> bool:
-    """A Poisson fusion (the blocks fusion's closed mesh's too: :func:`poisson_closed`) large enough to gain from a
-    child process (its sample at least :data:`CHILD_MIN_POINTS`), known once the views are decoded."""
+    """A Poisson fusion (the blocks fusion's closed mesh's too:
+    :func:`rangekit.app.process.blocks.poisson_closed`) large enough to gain from a child process (its sample at
+    least :data:`CHILD_MIN_POINTS`), known once the views are decoded."""
     step = _sample_step(decoded, options)
-    return options.fusion in ("poisson", "blocks") and -(-sum(len(c) for c in decoded.clouds) // step) >= CHILD_MIN_POINTS
+    points = -(-sum(len(c) for c in decoded.clouds) // step)
+    return options.fusion in ("poisson", "blocks") and points >= CHILD_MIN_POINTS
 
 
 def fusion_input(registered: RegisteredViews, options: ProcessOptions) -> FusionInput:
@@ -108,17 +104,24 @@ def fusion_input(registered: RegisteredViews, options: ProcessOptions) -> Fusion
     return FusionInput(merged, sample, step)
 
 
-def surfaces(given: FusionInput | RegisteredViews, options: ProcessOptions, rig: Rig | None = None):
+def surfaces(given: FusionInput | RegisteredViews, options: ProcessOptions, rig: Rig | None = None, *,
+             passes: int = 1, ahead=None):
     """``(fn, args, kwargs)`` of the fusion, for the runner to start where it places it: Poisson of the sample
     (:func:`rangekit.surface.fusion.poisson_surfaces`, one thread), the TSDF of the registered views' depth
-    maps, or the blocks volume of them (:func:`blocks_surface`); each gives ``(surface, surface to close)``,
-    session world."""
+    maps, or the blocks volume of them (:func:`rangekit.app.process.blocks.blocks_surface`, at
+    :func:`~rangekit.app.process.blocks.volume_poses` for a scan of ``passes``; ``ahead`` a scan's
+    :class:`~rangekit.app.process.blocks.BlocksAhead`, taken where it is exactly its own); each gives ``(surface,
+    surface to close)``, session world."""
     if options.fusion == "poisson":
         from rangekit.surface.fusion import poisson_surfaces
 
         return poisson_surfaces, (given.sample,), {"depth": options.poisson(laser=False)[0], "n_threads": 1}
     if options.fusion == "blocks":
-        return blocks_surface, (given.decoded.maps, given.T_world_view, rig), {}
+        from rangekit.app.process.blocks import blocks_surface, volume_poses
+
+        d = given.decoded
+        poses, prior = volume_poses(rig, d.views, passes, given.T_world_view, d.clouds)
+        return blocks_surface, (d.maps, poses, rig, ahead if prior else None, [v.index for v in d.views]), {}
     return _tsdf_surface, (given.decoded.maps, given.T_world_view, rig), {}
 
 
@@ -154,15 +157,6 @@ def close(trimmed: TriangleMesh) -> TriangleMesh:
     return make_watertight(trimmed)
 
 
-def poisson_closed(sample: PointCloud, depth: int) -> TriangleMesh:
-    """The blocks fusion's closed mesh: Poisson's density-trimmed surface of the sample (one thread, as the Poisson
-    fusion's), closed (:func:`close`): the same closed mesh as the Poisson fusion's. The blocks volume's own surface
-    closed instead measured 0.072 mm RMS against Poisson's 0.017 on the default scan, and its hole filling (the
-    open table side) took 4.5 s and 6.8 GB (docs/benchmarks.md, issue 51 M6)."""
-    from rangekit.surface.fusion import poisson_surfaces
-
-    return close(poisson_surfaces(sample, depth=depth, n_threads=1)[1])
-
 
 def save_observed(folder, full: TriangleMesh, observed: ObservedInput,
                   options: ProcessOptions) -> tuple[TriangleMesh, MeshFigures]:
@@ -174,7 +168,10 @@ def save_observed(folder, full: TriangleMesh, observed: ObservedInput,
     if observed.normals is None:
         mesh = observed.rule.observed_part(full)
     elif options.fusion == "blocks":   # at 0.4 mm voxels no edge bows from the points: projected, not halved
-        mesh = project_observed(full, observed)
+        from rangekit._runtime.executor import worker_count
+        from rangekit.app.process.blocks import project_observed
+
+        mesh = project_observed(full, observed.rule, observed.normals, workers=worker_count())
     else:   # the cut's k-d tree query gives the refinement's neighbours too
         from rangekit.surface.refine import REFINE_NEIGHBOURS, refine_to_points
 
@@ -240,37 +237,3 @@ def _tsdf_surface(maps: list, T_world_view: np.ndarray, rig: Rig) -> tuple:
     surface = tsdf_fuse([(m.depth, None, rig.camera.with_pose(compose(Tk, rig.camera.T_world_cam)))
                          for m, Tk in zip(maps, T_world_view)], watertight=False)
     return surface, surface
-
-
-def blocks_volume():
-    """An empty volume of the blocks fusion (:data:`BLOCKS_VOXEL_M`, :data:`BLOCKS_EXTEND_PX`): the one place of
-    its settings, for ``rangekit process --fusion blocks`` and a scan's streaming alike."""
-    from rangekit.surface.block_volume import BlockVolume
-
-    return BlockVolume(BLOCKS_VOXEL_M, extend_px=BLOCKS_EXTEND_PX)
-
-
-def blocks_surface(maps: list, T_world_view: np.ndarray, rig: Rig) -> tuple:
-    """Each view's camera-frame depth map, in index order, integrated at its registered pose into the sparse
-    volume (:func:`blocks_volume`), then marching cubes in one order (:meth:`BlockVolume.surface`): the surface
-    (session world) twice, as :func:`_tsdf_surface`."""
-    volume = blocks_volume()
-    for m, Tk in zip(maps, T_world_view):
-        volume.integrate(m.depth, rig.camera.with_pose(compose(Tk, rig.camera.T_world_cam)))
-    surface = volume.surface()
-    return surface, surface
-
-
-def project_observed(full: TriangleMesh, observed: ObservedInput) -> TriangleMesh:
-    """``full`` cut to what the points observed (:meth:`rangekit.surface.observed.ObservedRule.observed_near`), its
-    vertices projected onto the planes of their nearest input points (:func:`rangekit.surface.refine.project_to_points`,
-    the cut's query reused), no edge halved: the blocks fusion's observed mesh (its 0.4 mm voxels measured the same
-    RMS and completeness with and without the halving on the default scan, docs/benchmarks.md)."""
-    from rangekit.surface.refine import REFINE_NEIGHBOURS, project_to_points
-
-    tree = observed.rule.tree
-    cut, d, idx = observed.rule.observed_near(full, min(REFINE_NEIGHBOURS, tree.n))
-    if len(cut.triangles) == 0:
-        return cut
-    placed = project_to_points(cut.vertices, tree.data, observed.normals, tree=tree, near=(d, idx))
-    return TriangleMesh(placed, cut.triangles, cut.vertex_colours)

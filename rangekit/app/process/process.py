@@ -41,9 +41,9 @@ from rangekit._runtime.threads import one_blas_thread
 from rangekit.app.events import (MeshReady, OnEvent, PairRegistered, Stage, ViewDecoded, failures_announced)
 from rangekit.app.process.decode import DecodedViews, decode
 from rangekit.app.process.evaluate import Evaluator, measure_closed, measure_views
+from rangekit.app.process.blocks import poisson_closed
 from rangekit.app.process.fuse import (CHILD_IMPORTS, FusedViews, carved_space, close, fusion_input, large_poisson,
-                                       observed_rule, poisson_closed, save_closed, save_merged, save_observed,
-                                       summary_line, surfaces)
+                                       observed_rule, save_closed, save_merged, save_observed, summary_line, surfaces)
 from rangekit.app.process.fused_outputs import evaluate_observed
 from rangekit.app.process.options import ProcessOptions
 from rangekit.app.process.register import RegisteredViews, evaluator_angles, register
@@ -185,13 +185,15 @@ def _fuse(registered: RegisteredViews, session: Session, options: ProcessOptions
     runner.say(f"fusing {given.n_merged:,} points ({options.fusion})"
                + ("; measuring the views against the true surface alongside" if evaluate is not None and not late
                   else ""))
-    fn, args, kwargs = surfaces(given if options.fusion == "poisson" else registered, options, session.rig)
+    fn, args, kwargs = surfaces(given if options.fusion == "poisson" else registered, options, session.rig,
+                                passes=session.plan.passes, ahead=runner.memo.blocks)
     work = Work.POISSON if options.fusion == "poisson" else Work.TSDF
     where = runner.where(work) if options.fusion != "poisson" or large_poisson(registered.decoded, options) \
         else Where.THREAD
-    blocks = options.fusion == "blocks"   # its closed mesh is Poisson's (fuse.poisson_closed): the child is that's
+    blocks = options.fusion == "blocks"   # its closed mesh is Poisson's (blocks.poisson_closed): the child is that's
     with runner.beside(work, fn, *args, where=where, child=None if blocks else child, **kwargs) as fusion:
-        save_merged(out, given, registered)
+        if not blocks:   # blocks: merged.ply once mesh.ply is out (the blocks' surface was made ahead in a scan)
+            save_merged(out, given, registered)
         if evaluate is not None and not late:
             with runner.stage(Stage.EVALUATE, reuse_memory=True):   # each view's casts reuse the last's pages
                 measure_views(evaluate, registered)
@@ -199,17 +201,22 @@ def _fuse(registered: RegisteredViews, session: Session, options: ProcessOptions
             measure_views(None, registered)
         runner.release_memory()
         rule = observed_rule(given, options)
-        sample, given = given.sample, None   # (the blocks fusion's closed mesh's input; None otherwise)
+        sample = given.sample   # (the blocks fusion's closed mesh's input; None otherwise)
         runner.release_memory()   # what this process freed beside Poisson, before the closing and the evaluation
         full, trimmed = fusion.result()
         evaluation = None
+        # blocks: mesh.ply before its closed mesh's Poisson starts on the other core (a scan's query uses both)
+        early = save_observed(out, full, rule, options) if blocks else None
         with _closing(runner, trimmed, sample, options, child, registered) as closing:
             del trimmed, sample
-            mesh, mesh_info = save_observed(out, full, rule, options)
-            del full
+            mesh, mesh_info = early if early is not None else save_observed(out, full, rule, options)
+            del full, early
             if runner.memo.before_mesh is not None:   # a scan's preview: announced first (Memo)
                 runner.memo.before_mesh()
             runner.emit(MeshReady("observed", out / MESH_FILE, mesh))
+            if blocks:
+                save_merged(out, given, registered)
+            del given
             agreement.append(children.enter_context(_agreement_beside(options.report, mesh, registered, runner)))
             if evaluate is not None and not late:
                 evaluation = _measure_observed(evaluate, mesh, registered, runner)

@@ -16,7 +16,7 @@ from rangekit._runtime.option_fields import UNSET, check_ranges, flags, option, 
 from rangekit.app.process.options import ProcessOptions
 from rangekit.errors import OptionError
 
-__all__ = ["ScanOptions", "SCAN_FLAGS", "SCAN_METHODS", "SCAN_DEFAULTS", "LASER_STEPS", "ARTEFACTS"]
+__all__ = ["ScanOptions", "SCAN_FLAGS", "SCAN_METHODS", "SCAN_DEFAULTS", "SCAN_FUSION", "LASER_STEPS", "ARTEFACTS"]
 
 #: Scan methods: coded light (projector patterns, views registered) and laser lines (profiles at small
 #: turntable steps, placed by the turntable angle).
@@ -57,7 +57,7 @@ class ScanOptions:
     exposures : multi-exposure capture, 2 to 8 exposures in microseconds, or ``("auto",)``.
     process : decode, register and fuse after acquisition; processing : how
         (:class:`rangekit.app.process.options.ProcessOptions`, every option of ``rangekit process``; None: its
-        defaults). After the check it is never None.
+        defaults but the fusion, :data:`SCAN_FUSION` for coded light). After the check it is never None.
     fusion, report, format : shorthands kept for the callers of older versions: each, when given, fills the field
         of ``processing`` it names (``fusion``, ``report``, ``mesh_format``) and reads None afterwards, so that
         ``processing`` is the one source; given together with a ``processing`` whose field differs, refused.
@@ -229,6 +229,10 @@ def _check_combination(o: ScanOptions) -> None:
         raise OptionError("{exposures}: multi-exposure capture is for coded light; leave it out with {method} laser")
 
 
+#: A coded-light scan's fusion when neither ``fusion`` nor ``processing`` is given: the blocks volume its views are
+#: integrated into as they come, so that after the last frame only the last view's part is left (issue 51: mesh.ply
+#: within a few seconds of the last frame; ``rangekit process`` keeps Poisson). A laser scan fuses with Poisson.
+SCAN_FUSION = "blocks"
 #: The shorthands of ``processing``'s fields: ScanOptions' field -> ProcessOptions' field.
 _SHORTHANDS = {"fusion": "fusion", "report": "report", "format": "mesh_format"}
 
@@ -239,6 +243,7 @@ def _fill_processing(o: ScanOptions) -> None:
     given = {_SHORTHANDS[name]: getattr(o, name) for name in _SHORTHANDS if getattr(o, name) is not None}
     section = o.processing
     if section is None:
+        given.setdefault("fusion", "poisson" if o.method == "laser" else SCAN_FUSION)
         section = ProcessOptions(**given)
     else:
         for name, value in given.items():

@@ -25,7 +25,10 @@ calls the steps on a worker thread of lower priority that backs off while the ca
    (:attr:`StreamingViews.registration`, :class:`rangekit.registration.ahead.RegistrationAhead`, one-pass
    turntable scans), its free depth for the closed mesh's carving (:attr:`StreamingViews.free`), and on the
    simulator the truth's samples and the view's errors against the truth
-   (:attr:`StreamingViews.evaluate`).
+   (:attr:`StreamingViews.evaluate`); for the blocks fusion (the scan's default) its depth map integrated into the
+   0.4 mm volume at its turntable prior pose (:attr:`StreamingViews.blocks`,
+   :class:`rangekit.app.process.blocks.BlocksAhead`; the last view's, and the marching cubes, on a thread of their
+   own beside the registration).
 
 While the last view is taken, its frames are read as they are written (:meth:`StreamingViews.prefetch`, between
 the worker's views; :mod:`rangekit.app.scan.frames_ahead`), so that after its last frame only the rest are read.
@@ -72,6 +75,8 @@ PREFETCH_S = 0.05
 #: How long one view's TSDF integration holds the GIL (37 ms on the default rig), with a margin: it starts in a
 #: wait of the capture with at least this long left (:mod:`rangekit.app.acquire.quiet`).
 INTEGRATE_S = 0.06
+#: The same for a view's integration into the blocks fusion's 0.4 mm volume (0.15-0.2 s loaded, issue 51).
+BLOCKS_INTEGRATE_S = 0.25
 
 
 class StreamingViews:
@@ -103,6 +108,8 @@ class StreamingViews:
         self._coming: int | None = None            # the last view, while it is taken (its frames read: prefetch)
         self._frames = None                        # FramesAhead: the frames of it read so far
         self.read_ahead: dict[int, int] = {}       # index -> frames of the view read while it was taken (prefetch)
+        self.blocks = None                         # BlocksAhead: the blocks fusion's volume, from view 0 on
+        self._blocks_last: list = []               # the last views' (k, depth, angle), integrated by last_ahead
 
     def views_of(self, event) -> list[int]:
         """The views ``event`` (one of the scan's) brings to process: each view of a coded-light scan as it is
@@ -152,7 +159,16 @@ class StreamingViews:
 
     def write_preview(self) -> Path | None:
         """After the last view's steps: place the last views, then write and announce the preview surface (the
-        scan does it beside its processing); its path, or None (no view placed)."""
+        scan does it beside its processing); its path, or None (no view placed). Then the blocks fusion's volume is
+        finished on a thread of its own (:meth:`rangekit.app.process.blocks.BlocksAhead.finish`)."""
+        try:
+            return self._preview()
+        finally:   # then the blocks fusion's last views and marching cubes, beside the registration (Open3D holds
+            if self.blocks is not None:   # the GIL: after the preview, not beside it)
+                self.blocks.finish(self._blocks_last)
+            self._blocks_last = []
+
+    def _preview(self) -> Path | None:
         for k, cloud, depth, session in self._unplaced:   # by the turntable prior: nothing is placed after them
             self._place_and_integrate(k, cloud, depth, session, refine=False)
         self._unplaced = []
@@ -208,15 +224,30 @@ class StreamingViews:
         self.results[k] = (cloud, maps)
         self._emit(ViewDecoded(k, total, view.folder.name, cloud))
         placed = rig.T_world_table is not None and session.plan.view_passes()[k] == 0 and len(cloud) > 0
+        self._blocks_start(k, session)
         if last:   # its work ahead beside the preview (last_ahead), its errors after the mesh
             self._unregistered.append((k, cloud, maps, session))
+            self._blocks_last.append((k, maps.depth, view.angle))
             if placed:
                 self._unplaced.append((k, cloud, maps.depth, session))
             return
         if placed:
             self._place_and_integrate(k, cloud, maps.depth, session)
+        if self.blocks is not None:
+            self.quiet.wait(BLOCKS_INTEGRATE_S)   # Open3D holds the GIL throughout (INTEGRATE_S)
+            self.blocks.add(k, maps.depth, view.angle)
         self._free(k, maps, session)
         self._ahead(k, cloud, maps, session)
+
+    def _blocks_start(self, k: int, session: Session) -> None:
+        """At view 0 of a one-pass turntable scan fused by blocks (``--fusion blocks``, the scan's default): the
+        volume that each view is integrated into as it comes (module doc, 4; the processing takes it where it is
+        exactly its own, :func:`rangekit.app.process.blocks.blocks_surface`)."""
+        if k == 0 and self.blocks is None and self.options.fusion == "blocks" and session.plan.passes == 1 \
+                and session.rig.T_world_table is not None:
+            from rangekit.app.process.blocks import BlocksAhead
+
+            self.blocks = BlocksAhead(session.rig, session.views[0].angle)
 
     def _free(self, k: int, maps, session: Session) -> None:
         """View ``k``'s free depth, the closed mesh's carving (:func:`rangekit.app.process.decode.free_depth_of`,

@@ -91,8 +91,10 @@ def scan_options(args: argparse.Namespace):
     for name in ("up", "positions", "exposures"):
         if values[name] is not None:
             values[name] = tuple(values[name])
-    try:
-        processing = process_options(args)
+    from rangekit.app.scan.options import SCAN_FUSION
+
+    try:   # a coded-light scan fuses by blocks unless --fusion says otherwise (ScanOptions' SCAN_FUSION)
+        processing = process_options(args, fusion="poisson" if values.get("method") == "laser" else SCAN_FUSION)
     except OptionError as exc:
         raise exc.within("processing") from None
     return ScanOptions(**values, processing=processing)
@@ -129,10 +131,10 @@ class _ScanPrinter:
             self._progress(event)
 
 
-def process_options(args: argparse.Namespace):
+def process_options(args: argparse.Namespace, fusion: str | None = None):
     """The :class:`rangekit.app.process.options.ProcessOptions` of the processing flags given (those of
     :func:`_processing_options`, on both commands; a flag ``--no-X`` negated); the others take the dataclass's
-    defaults, the one place they are written."""
+    defaults, the one place they are written, but the fusion when ``fusion`` is given (``rangekit scan``'s)."""
     from rangekit.app.process.options import PROCESS_FLAGS, ProcessOptions
 
     given = {}
@@ -140,6 +142,8 @@ def process_options(args: argparse.Namespace):
         dest = flag.lstrip("-").replace("-", "_")
         if hasattr(args, dest):
             given[field] = not getattr(args, dest) if flag.startswith("--no-") else getattr(args, dest)
+    if fusion is not None:
+        given.setdefault("fusion", fusion)
     return ProcessOptions(**given)
 
 
@@ -257,8 +261,10 @@ def _processing_options(p: argparse.ArgumentParser) -> None:
         "rangekit.app.process.options:ProcessOptions"
     lazy_help(p.add_argument("--fusion", default=given, choices=LazyChoices("rangekit.app.process.options",
                                                                             "FUSION_METHODS"),
-                             metavar="{poisson,tsdf}", help="fusion into one mesh: poisson (screened Poisson of the "
-                                                            "merged cloud) or tsdf; default {fusion}"), values)
+                             metavar="{poisson,tsdf,blocks}",
+                             help="fusion into one mesh: poisson (screened Poisson of the merged cloud), tsdf, or "
+                                  "blocks (the sparse volume a scan fills as its views come, cut to the points and "
+                                  "projected onto them); default {fusion} (rangekit scan: blocks)"), values)
     p.add_argument("--no-report", action="store_true", default=given, help=f"skip {REPORT_FILE}")
     lazy_help(p.add_argument("--format", default=given,
                              choices=LazyChoices("rangekit.app.process.fused_outputs", "MESH_EXPORT_FORMATS"),

@@ -20,8 +20,6 @@ Units are metres; poses ``T_world_view`` (4, 4) in the session world (the first 
 
 from __future__ import annotations
 
-import threading
-
 import numpy as np
 
 from rangekit.geometry import apply_T, compose
@@ -38,8 +36,6 @@ BLOCKS_VOXEL_M, BLOCKS_EXTEND_PX = 0.0004, 4
 #: The most a view's points may move between its turntable prior pose and its registered pose (metres, at its
 #: points' box's corners) for the volume to be filled at the prior: a quarter voxel (the default scan: 0.003 mm).
 PRIOR_AGREES_M = BLOCKS_VOXEL_M / 4
-#: How long the processing waits for a scan's volume to be finished (:meth:`BlocksAhead.surface_of`), seconds.
-FINISH_WAIT_S = 30.0
 
 
 def blocks_volume():
@@ -82,23 +78,22 @@ class BlocksAhead:
     """A scan's blocks volume filled as its views come (:mod:`rangekit.app.scan.streaming`): each view, in index
     order from view 0, at its turntable prior pose (:func:`prior_pose`); a view out of order (one taken again after
     the object moved) ends the filling, and the processing then fills its own. :meth:`finish` integrates the last
-    views and starts marching cubes on a thread; :meth:`surface_of` gives that surface where it is exactly the one
-    :func:`blocks_surface` would make."""
+    views and makes the surface (a scan calls it once its preview is written, on the preview's thread, beside the
+    registration); :meth:`surface_of` gives that surface where it is exactly the one :func:`blocks_surface` would
+    make. No thread of its own: the runner's placements run it."""
 
     def __init__(self, rig: Rig, angle0: float) -> None:
         self._rig, self._angle0 = rig, float(angle0)
         self._volume = blocks_volume()
         self.views: list[int] = []     # the view indices integrated, in order
-        self.broken = False            # a view came out of order: nothing here is taken
+        self.broken = False            # a view came out of order (or the surface failed): nothing here is taken
         self._surface: TriangleMesh | None = None
-        self._done = threading.Event()
-        self._started = threading.Event()   # finish() was called: surface_of waits for its thread
-        self._error: BaseException | None = None
+        self.taken = False             # the processing took the surface made here
 
     def add(self, k: int, depth: np.ndarray, angle: float) -> None:
         """Integrate view ``k`` (its (H, W) camera-frame depth in metres, its turntable ``angle`` in radians) if it
         is the next in index order; else stop filling (:attr:`broken`)."""
-        if self.broken or k != len(self.views):
+        if self.broken or self._volume is None or k != len(self.views):
             self.broken = True
             return
         rig = self._rig
@@ -107,34 +102,23 @@ class BlocksAhead:
         self.views.append(k)
 
     def finish(self, last: list) -> None:
-        """Integrate the ``last`` views (``(k, depth, angle)`` each) and make the surface, on a thread of its own
-        (beside the registration's threads: Open3D holds the GIL, so the scan starts it once its preview is
-        written); :meth:`surface_of` waits for it."""
-        def run() -> None:
-            try:
-                for k, depth, angle in last:
-                    self.add(k, depth, angle)
-                if not self.broken:
-                    self._surface = self._volume.surface()
-            except BaseException as exc:   # noqa: BLE001 - the processing fills its own volume and meets it
-                self._error = exc
-            finally:
-                self._volume = None
-                self._done.set()
-
-        self._started.set()
-        threading.Thread(target=run, name="rangekit-blocks", daemon=True).start()
+        """Integrate the ``last`` views (``(k, depth, angle)`` each), then make the surface (marching cubes in one
+        order) and let the volume go; an error leaves the surface to the processing (:attr:`broken`)."""
+        try:
+            for k, depth, angle in last:
+                self.add(k, depth, angle)
+            if not self.broken:
+                self._surface = self._volume.surface()
+        except Exception:   # noqa: BLE001 - the processing fills its own volume and meets the error
+            self.broken = True
+        self._volume = None
 
     def surface_of(self, indices: list[int]) -> TriangleMesh | None:
-        """The surface made ahead when it holds exactly the views ``indices`` (in order, at their prior poses),
-        else None; waits for :meth:`finish` (a scan calls it once its preview is written, :data:`FINISH_WAIT_S` at
-        most: a scan whose steps failed never does) and its thread. Either way the bytes are those of
-        :func:`blocks_surface` without it."""
-        if not self._started.wait(FINISH_WAIT_S):
+        """The surface made by :meth:`finish` when it holds exactly the views ``indices`` (in order, at their
+        prior poses), else None (also before :meth:`finish`)."""
+        if self.broken or self._surface is None or self.views != list(indices):
             return None
-        self._done.wait()
-        if self.broken or self._error is not None or self.views != list(indices):
-            return None
+        self.taken = True
         return self._surface
 
 

@@ -158,20 +158,21 @@ def close(trimmed: TriangleMesh) -> TriangleMesh:
 
 
 
-def save_observed(folder, full: TriangleMesh, observed: ObservedInput,
-                  options: ProcessOptions) -> tuple[TriangleMesh, MeshFigures]:
+def save_observed(folder, full: TriangleMesh, observed: ObservedInput, options: ProcessOptions,
+                  workers: int = 1) -> tuple[TriangleMesh, MeshFigures]:
     """The fused surface cut to what the views observed, written as ``mesh.ply``: the mesh and its entry. Poisson's
     cut surface is put back on the input points, its edges halved where the surface bows more than
     :data:`rangekit.surface.refine.SPLIT_SAG` from them (:func:`rangekit.surface.refine.refine_to_points`, on the
     observed rule's k-d tree): at octree depth 8 its flat triangles leave curved parts (the upright bunny: 0.023 mm
-    RMS, 95th percentile 0.043 mm, refined 0.013 / 0.024 with 1.6 times the vertices; docs/benchmarks.md)."""
+    RMS, 95th percentile 0.043 mm, refined 0.013 / 0.024 with 1.6 times the vertices; docs/benchmarks.md). The
+    blocks fusion's cut is projected only (:func:`rangekit.app.process.blocks.project_observed`), its query on
+    ``workers`` threads (the same answers)."""
     if observed.normals is None:
         mesh = observed.rule.observed_part(full)
     elif options.fusion == "blocks":   # at 0.4 mm voxels no edge bows from the points: projected, not halved
-        from rangekit._runtime.executor import worker_count
         from rangekit.app.process.blocks import project_observed
 
-        mesh = project_observed(full, observed.rule, observed.normals, workers=worker_count())
+        mesh = project_observed(full, observed.rule, observed.normals, workers=workers)
     else:   # the cut's k-d tree query gives the refinement's neighbours too
         from rangekit.surface.refine import REFINE_NEIGHBOURS, refine_to_points
 

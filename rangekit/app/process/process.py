@@ -36,7 +36,7 @@ from contextlib import ExitStack
 from pathlib import Path
 
 from rangekit._runtime.child import spawn_child
-from rangekit._runtime.executor import Where
+from rangekit._runtime.executor import Where, worker_count
 from rangekit._runtime.threads import one_blas_thread
 from rangekit.app.events import (MeshReady, OnEvent, PairRegistered, Stage, ViewDecoded, failures_announced)
 from rangekit.app.process.decode import DecodedViews, decode
@@ -185,12 +185,14 @@ def _fuse(registered: RegisteredViews, session: Session, options: ProcessOptions
     runner.say(f"fusing {given.n_merged:,} points ({options.fusion})"
                + ("; measuring the views against the true surface alongside" if evaluate is not None and not late
                   else ""))
+    blocks = options.fusion == "blocks"   # its closed mesh is Poisson's (blocks.poisson_closed): the child is that's
+    if blocks and runner.memo.blocks is not None and runner.memo.before_mesh is not None:
+        runner.memo.before_mesh()   # a scan's preview, then its volume finished on the same thread (BlocksAhead)
     fn, args, kwargs = surfaces(given if options.fusion == "poisson" else registered, options, session.rig,
                                 passes=session.plan.passes, ahead=runner.memo.blocks)
     work = Work.POISSON if options.fusion == "poisson" else Work.TSDF
     where = runner.where(work) if options.fusion != "poisson" or large_poisson(registered.decoded, options) \
         else Where.THREAD
-    blocks = options.fusion == "blocks"   # its closed mesh is Poisson's (blocks.poisson_closed): the child is that's
     with runner.beside(work, fn, *args, where=where, child=None if blocks else child, **kwargs) as fusion:
         if not blocks:   # blocks: merged.ply once mesh.ply is out (the blocks' surface was made ahead in a scan)
             save_merged(out, given, registered)
@@ -206,7 +208,7 @@ def _fuse(registered: RegisteredViews, session: Session, options: ProcessOptions
         full, trimmed = fusion.result()
         evaluation = None
         # blocks: mesh.ply before its closed mesh's Poisson starts on the other core (a scan's query uses both)
-        early = save_observed(out, full, rule, options) if blocks else None
+        early = save_observed(out, full, rule, options, worker_count()) if blocks else None
         with _closing(runner, trimmed, sample, options, child, registered) as closing:
             del trimmed, sample
             mesh, mesh_info = early if early is not None else save_observed(out, full, rule, options)

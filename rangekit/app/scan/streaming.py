@@ -27,8 +27,8 @@ calls the steps on a worker thread of lower priority that backs off while the ca
    simulator the truth's samples and the view's errors against the truth
    (:attr:`StreamingViews.evaluate`); for the blocks fusion (the scan's default) its depth map integrated into the
    0.4 mm volume at its turntable prior pose (:attr:`StreamingViews.blocks`,
-   :class:`rangekit.app.process.blocks.BlocksAhead`; the last view's, and the marching cubes, on a thread of their
-   own beside the registration).
+   :class:`rangekit.app.process.blocks.BlocksAhead`; the last view's, and the marching cubes, after the preview on
+   its thread, beside the registration).
 
 While the last view is taken, its frames are read as they are written (:meth:`StreamingViews.prefetch`, between
 the worker's views; :mod:`rangekit.app.scan.frames_ahead`), so that after its last frame only the rest are read.
@@ -160,11 +160,12 @@ class StreamingViews:
     def write_preview(self) -> Path | None:
         """After the last view's steps: place the last views, then write and announce the preview surface (the
         scan does it beside its processing); its path, or None (no view placed). Then the blocks fusion's volume is
-        finished on a thread of its own (:meth:`rangekit.app.process.blocks.BlocksAhead.finish`)."""
+        finished (:meth:`rangekit.app.process.blocks.BlocksAhead.finish`; the processing waits for this call,
+        ``Memo.before_mesh``, before it takes it)."""
         try:
             return self._preview()
         finally:   # then the blocks fusion's last views and marching cubes, beside the registration (Open3D holds
-            if self.blocks is not None:   # the GIL: after the preview, not beside it)
+            if self.blocks is not None:   # the GIL: after the preview, not beside it; the processing waits for it)
                 self.blocks.finish(self._blocks_last)
             self._blocks_last = []
 

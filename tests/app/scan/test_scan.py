@@ -25,21 +25,22 @@ def scanned(tmp_path_factory):
     out = tmp_path_factory.mktemp("scan") / "scan1"
     assert main(["scan", "--out", str(out), *SCAN]) == 0
     # Kept apart: later tests reprocess this session with other settings.
-    (out.parent / "poisson_mesh.ply").write_bytes((out / "mesh.ply").read_bytes())
-    (out.parent / "poisson_summary.json").write_bytes((out / "summary.json").read_bytes())
-    (out.parent / "poisson_mesh_watertight.ply").write_bytes((out / "mesh_watertight.ply").read_bytes())
+    (out.parent / "scan_mesh.ply").write_bytes((out / "mesh.ply").read_bytes())
+    (out.parent / "scan_summary.json").write_bytes((out / "summary.json").read_bytes())
+    (out.parent / "scan_mesh_watertight.ply").write_bytes((out / "mesh_watertight.ply").read_bytes())
     return out
 
 
 @pytest.mark.slow
 def test_scan_gives_a_watertight_mesh_close_to_the_true_surface(scanned):
-    mesh = load_mesh(scanned.parent / "poisson_mesh.ply")   # the observed surface
-    closed = load_mesh(scanned.parent / "poisson_mesh_watertight.ply")
-    summary = json.loads((scanned.parent / "poisson_summary.json").read_text())
+    mesh = load_mesh(scanned.parent / "scan_mesh.ply")   # the observed surface
+    closed = load_mesh(scanned.parent / "scan_mesh_watertight.ply")
+    summary = json.loads((scanned.parent / "scan_summary.json").read_text())
     acc = summary["accuracy"]
     print(f"\n6-view scan: observed mesh RMS {acc['rms'] * 1e3:.4f} mm = "
           f"{acc['rms'] / acc['diagonal']:.3%} of the diagonal, p95 {acc['p95'] * 1e3:.3f} mm, completeness "
           f"{acc['completeness']:.1%}; closed mesh RMS {acc['watertight']['rms'] * 1e3:.3f} mm; time {summary['seconds']}")
+    assert summary["mesh"]["fusion"] == "blocks"   # the scan's own fusion (ScanOptions: SCAN_FUSION)
     assert closed.is_watertight and summary["mesh_watertight"]["watertight"] and not summary["mesh"]["watertight"]
     assert closed.observed is not None and 0 < (~closed.observed).sum() == summary["mesh_watertight"]["unobserved_vertices"]
     assert acc["rms"] <= 0.001 * acc["diagonal"] and acc["completeness"] >= 0.95
@@ -142,8 +143,8 @@ def test_interrupt_during_acquisition_and_processing_then_resume_gives_the_same_
     rc = subprocess.run([sys.executable, "-m", "rangekit", "scan", "--resume", str(out), "--no-report"],
                         capture_output=True, text=True, cwd=tmp_path)
     assert rc.returncode == 0, rc.stderr
-    assert (out / "mesh.ply").read_bytes() == (scanned.parent / "poisson_mesh.ply").read_bytes()
-    assert (out / "mesh_watertight.ply").read_bytes() == (scanned.parent / "poisson_mesh_watertight.ply").read_bytes()
+    assert (out / "mesh.ply").read_bytes() == (scanned.parent / "scan_mesh.ply").read_bytes()
+    assert (out / "mesh_watertight.ply").read_bytes() == (scanned.parent / "scan_mesh_watertight.ply").read_bytes()
     # Non-interactive output: plain lines, no carriage returns or escape codes.
     for text in (log, log2, rc.stdout, rc.stderr):
         assert "\r" not in text and "\x1b" not in text

@@ -19,6 +19,7 @@ from rangekit.app import events as ev
 from rangekit.app.acquire.acquire import acquire
 from rangekit.app.process.options import ProcessOptions
 from rangekit.app.runner import StreamingWorker
+from rangekit.app.scan.options import SCAN_FUSION
 from rangekit.app.scan.streaming import StreamingViews
 from rangekit.formats.sessions.files import PREVIEW_FILE
 from rangekit.coded.patterns import make_pattern_spec
@@ -27,6 +28,8 @@ from rangekit.sim import ImagingModel
 from support.sessions import N_VIEWS, copy_session, sim
 
 CACHE = ("cloud.ply", "maps.npz", "cloud.json")
+#: How the scan processes by default (its fusion: the blocks volume filled as the views come, issue 51).
+SCANS = ProcessOptions(report=False, fusion=SCAN_FUSION)
 
 
 def _acquire(out, devices, streaming, **kwargs):
@@ -38,7 +41,7 @@ def _acquire(out, devices, streaming, **kwargs):
 
 def _streaming(folder, on_event=None) -> StreamingWorker:
     """The scan's STREAMING placement of a session folder, as rangekit.app.scan.scan builds it."""
-    return StreamingWorker(StreamingViews(folder, ProcessOptions(), on_event))
+    return StreamingWorker(StreamingViews(folder, ProcessOptions(fusion=SCAN_FUSION), on_event))
 
 
 def _cache(session_folder, index):
@@ -151,16 +154,16 @@ def test_the_final_mesh_is_what_rangekit_process_makes(streamed, tmp_path):
     for k in range(N_VIEWS):
         for name in CACHE:
             (fresh / f"view_{k:03d}" / name).unlink()
-    process_session(scanned, ProcessOptions(report=False), evaluate=evaluate, plan=Plan.STREAMING,
-                    memo=memo)
+    process_session(scanned, SCANS, evaluate=evaluate, plan=Plan.STREAMING, memo=memo)
+    assert memo.blocks.taken and memo.blocks.views == list(range(N_VIEWS))   # the volume filled as views came
     # the errors of the views decoded while the capture ran (not the last one's: the processing measures it
     # once mesh.ply is written, Memo.truth_after_mesh)
     assert ahead.taken == {"levels": 2, "pairs": len(ahead._jobs), "overlaps": len(ahead._joint),
                            "matches": len(ahead._matches)} and len(ahead._matches) > 0
     measured = streaming.steps.measured
     assert evaluate.views_taken == len(measured) >= 1 and N_VIEWS - 1 not in measured
-    process(cached, ProcessOptions(report=False))
-    process(fresh, ProcessOptions(report=False))
+    process(cached, SCANS)
+    process(fresh, SCANS)
     for name in ("mesh.ply", "mesh_watertight.ply", "merged.ply", "poses.json"):
         assert (scanned / name).read_bytes() == (fresh / name).read_bytes() == (cached / name).read_bytes(), name
 
@@ -195,7 +198,7 @@ def test_the_mesh_is_the_same_whichever_views_the_worker_took_before_the_acquisi
         for k in range(N_VIEWS):
             for name in CACHE:
                 (folder / f"view_{k:03d}" / name).unlink(missing_ok=True)
-    options = ProcessOptions(report=False)
+    options = SCANS
     worker = _streaming(scanned)
     for k in range(on_worker):
         worker.on_event(ev.ViewAcquired(k, N_VIEWS, str(scanned / f"view_{k:03d}"), 0.0, 1))
@@ -211,6 +214,7 @@ def test_the_mesh_is_the_same_whichever_views_the_worker_took_before_the_acquisi
         _process(Session.load(scanned), options, None, Plan.STREAMING, memo)
         assert preview.result() is not None
     assert sorted(memo.free) == list(range(N_VIEWS)) and memo.registration.taken["matches"] > 0
+    assert memo.blocks.taken and memo.blocks.views == list(range(N_VIEWS))
     process(fresh, options)
     for name in ("mesh.ply", "mesh_watertight.ply", "merged.ply", "poses.json"):
         assert (scanned / name).read_bytes() == (fresh / name).read_bytes(), name

@@ -106,22 +106,28 @@ class BlockVolume:
 
 
 def canonical_mesh(mesh):
-    """``mesh`` (a :class:`rangekit.surface.mesh.TriangleMesh`, no colours kept) with its vertices sorted by their
-    coordinates (x, then y, then z) and its triangles, each turned to start at its lowest vertex (the winding
-    kept), sorted by their corners: the one order of a surface whatever order it was built in (Open3D's hash map of
-    blocks, filled by several threads, gives its marching cubes' vertices in another order from run to run)."""
+    """``mesh`` (a :class:`rangekit.surface.mesh.TriangleMesh`, no colours kept) in one order whatever order it was
+    built in (Open3D's hash map of blocks, filled by several threads, gives its marching cubes' vertices in another
+    order from run to run): its vertices sorted by their coordinates (x, then y, then z), those at one point (the
+    grid's marching cubes repeats a few where blocks meet: 8 of 437k on the default scan) made one, the triangles
+    then left with two corners at one vertex dropped, and each triangle turned to start at its lowest vertex (the
+    winding kept) and the triangles sorted by their corners."""
     from rangekit.surface.mesh import TriangleMesh
 
     V = np.asarray(mesh.vertices, dtype=np.float64)
     F = np.asarray(mesh.triangles, dtype=np.int64)
     order = np.lexsort((V[:, 2], V[:, 1], V[:, 0]))
+    Vs = V[order]
+    new = np.ones(len(Vs), dtype=bool)
+    new[1:] = np.any(Vs[1:] != Vs[:-1], axis=1)        # a vertex at the point of the one before it is that one
     rank = np.empty(len(V), dtype=np.int64)
-    rank[order] = np.arange(len(V))
+    rank[order] = np.cumsum(new) - 1
     F = rank[F]
+    F = F[(F[:, 0] != F[:, 1]) & (F[:, 1] != F[:, 2]) & (F[:, 2] != F[:, 0])]
     turn = np.argmin(F, axis=1)
     F = np.take_along_axis(F, (turn[:, None] + np.arange(3)) % 3, axis=1)
     F = F[np.lexsort((F[:, 2], F[:, 1], F[:, 0]))]
-    return TriangleMesh(V[order], F)
+    return TriangleMesh(Vs[new], F)
 
 
 def extend_depth(z: np.ndarray, pixels: int) -> np.ndarray:

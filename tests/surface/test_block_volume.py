@@ -113,3 +113,13 @@ def test_canonical_mesh_is_one_order_whatever_the_order_given():
     # the same triangles, each with its winding: every (corner, next corner) edge of one is one of the other's
     edges = lambda m: {tuple(m.vertices[t[i]]) + tuple(m.vertices[t[(i + 1) % 3]]) for t in m.triangles for i in range(3)}
     assert edges(a) == edges(TriangleMesh(V, F))
+    # A vertex repeated at one point (as the grid's marching cubes repeats a few where blocks meet), in either order:
+    # made one, the same mesh; a triangle left with two corners at it dropped.
+    Vd = np.concatenate([V, V[:1]])
+    Fd = np.concatenate([F, [[50, 1, 2], [0, 50, 3]]])
+    for first in (Vd, Vd[::-1]):
+        perm = np.arange(51) if first is Vd else np.arange(51)[::-1]
+        inv = np.argsort(perm)
+        got = canonical_mesh(TriangleMesh(first, inv[Fd]))
+        assert np.array_equal(got.vertices, a.vertices) and len(got.triangles) == 81
+    assert np.array_equal(got.triangles, canonical_mesh(TriangleMesh(Vd, Fd)).triangles)

@@ -231,8 +231,8 @@ def test_the_mesh_is_the_same_whichever_views_the_worker_took_before_the_acquisi
 def test_in_real_time_a_view_is_decoded_before_the_next_ones_last_frame(tmp_path):
     """The simulated rig on the wall clock (a 20 ms pattern delay, 30 frames a second, the turntable at its
     real-time speed): each view's ViewDecoded comes before the next view's ViewAcquired (sent once that view's
-    last frame is on disk), so processing keeps up with the capture; each view's TSDF integration started in one
-    of the capture's waits (rangekit.app.acquire.quiet); the last view's frames were read while it was taken."""
+    last frame is on disk), so processing keeps up with the capture; each view's TSDF integrations (the preview's,
+    the blocks fusion's) started in one of the capture's waits (rangekit.app.acquire.quiet); the last view's frames were read while it was taken."""
     from rangekit.sim import SimRig, default_scene
     from rangekit.sim.devices.realtime import realtime_options
     from support.small_rigs import small_rig
@@ -258,7 +258,9 @@ def test_in_real_time_a_view_is_decoded_before_the_next_ones_last_frame(tmp_path
             capture=CaptureSettings(bits=8, pattern_delay_s=0.02, turntable_settle_s=0.05),
             simulator=SimulatorSettings("lumpy", 3, asdict(ImagingModel())), on_event=on_event, quiet=streaming.steps.quiet)
     streaming.finish()
-    assert len(integrations) == 3 and all(integrations), integrations   # none waited out its timeout
+    # each view's preview integration and, but the last's (integrated once the preview is written), its blocks
+    # fusion's: none waited out its timeout
+    assert len(integrations) == 3 + 2 and all(integrations), integrations
     names = [(type(e).__name__, e.index) for e in order if isinstance(e, (ev.ViewAcquired, ev.ViewDecoded))]
     print(f"\n{names}")
     for k in range(2):

@@ -33,8 +33,8 @@ The last view (or any once the acquisition is over, :attr:`StreamingViews.acquis
 processing waits for: it is decoded on every core, then its placing (by the turntable prior) is left to
 :meth:`StreamingViews.write_preview`,
 which writes ``preview.ply``, the TSDF's surface (:class:`~rangekit.app.events.MeshReady` ``"preview"``), and
-its work ahead to :meth:`StreamingViews.last_ahead`, run beside it (the preview waits for nothing but the decoding;
-issue 51); then the processing, the preview still beside it. A multi-pass scan's preview holds its
+its work ahead to :meth:`StreamingViews.last_ahead`, run after it (the preview waits for nothing but the decoding;
+issue 51); then the processing. A multi-pass scan's preview holds its
 first pass (the object turned over is placed by the processing's pass registration).
 
 A view during which the object moved (:class:`~rangekit.errors.MotionError`: the processing's check of each view,
@@ -50,7 +50,7 @@ from pathlib import Path
 import numpy as np
 
 from rangekit.app.acquire.quiet import QuietWindows
-from rangekit.app.events import MeshReady, OnEvent, ScanStarted, ViewAcquired, ViewDecoded, ViewPlaced, emit
+from rangekit.app.events import MeshReady, MeshStarted, OnEvent, ScanStarted, ViewAcquired, ViewDecoded, ViewPlaced, emit
 from rangekit.app.process.options import ProcessOptions
 from rangekit.errors import MotionError
 from rangekit.formats.sessions.session import Session
@@ -152,7 +152,9 @@ class StreamingViews:
 
     def write_preview(self) -> Path | None:
         """After the last view's steps: place the last views, then write and announce the preview surface (the
-        scan does it beside its processing); its path, or None (no view placed)."""
+        scan does it before its processing); its path, or None (no view placed)."""
+        if self._unplaced or self._volume is not None:
+            self._emit(MeshStarted("preview"))
         for k, cloud, depth, session in self._unplaced:   # by the turntable prior: nothing is placed after them
             self._place_and_integrate(k, cloud, depth, session, refine=False)
         self._unplaced = []
@@ -171,7 +173,7 @@ class StreamingViews:
 
     def last_ahead(self) -> None:
         """After the last view's steps: its work ahead (module doc, 4; not its errors against the truth), which the
-        processing then takes; the scan runs it beside :meth:`write_preview`, so the preview waits for the last
+        processing then takes; the scan runs it after :meth:`write_preview`, so the preview waits for the last
         view's decoding only (issue 51)."""
         for k, cloud, maps, session in self._unregistered:
             try:
@@ -208,7 +210,7 @@ class StreamingViews:
         self.results[k] = (cloud, maps)
         self._emit(ViewDecoded(k, total, view.folder.name, cloud))
         placed = rig.T_world_table is not None and session.plan.view_passes()[k] == 0 and len(cloud) > 0
-        if last:   # its work ahead beside the preview (last_ahead), its errors after the mesh
+        if last:   # its work ahead after the preview (last_ahead), its errors after the mesh
             self._unregistered.append((k, cloud, maps, session))
             if placed:
                 self._unplaced.append((k, cloud, maps.depth, session))

@@ -30,12 +30,13 @@ calls the steps on a worker thread of lower priority that backs off while the ca
 While the last view is taken, its frames are read as they are written (:meth:`StreamingViews.prefetch`, between
 the worker's views; :mod:`rangekit.app.scan.frames_ahead`), so that after its last frame only the rest are read.
 The last view (or any once the acquisition is over, :attr:`StreamingViews.acquisition_over`) is what the
-processing waits for: it is decoded on every core, then its placing (by the turntable prior) is left to
-:meth:`StreamingViews.write_preview`,
-which writes ``preview.ply``, the TSDF's surface (:class:`~rangekit.app.events.MeshReady` ``"preview"``), and
-its work ahead to :meth:`StreamingViews.last_ahead`, run after it (the preview waits for nothing but the decoding;
-issue 51); then the processing. A multi-pass scan's preview holds its
-first pass (the object turned over is placed by the processing's pass registration).
+preview and the processing wait for: it is decoded on every core (on the scan's thread: the runner's worker starts no
+view from the last one's acquisition on), placed by the turntable prior and integrated before its cache is
+written, and the scan's final view then writes ``preview.ply``, the TSDF's surface
+(:meth:`StreamingViews.write_preview`, :class:`~rangekit.app.events.MeshReady` ``"preview"``; issue 51: the preview
+waits for nothing but the last view's decoding); its work ahead is left to :meth:`StreamingViews.last_ahead`, run
+after it; then the processing. A multi-pass scan's preview holds its first pass (the object turned over is placed
+by the processing's pass registration).
 
 A view during which the object moved (:class:`~rangekit.errors.MotionError`: the processing's check of each view,
 :func:`rangekit.coded.motion.detect_motion`, ``ProcessOptions.max_motion``) is left out
@@ -87,7 +88,9 @@ class StreamingViews:
         self.folder, self.options, self._on_event = Path(folder), options, on_event
         self._placed: dict[int, tuple[np.ndarray, PointCloud]] = {}
         self._volume = None
-        self._unplaced: list = []  # the last views, placed in the preview by write_preview
+        self._preview_due = False                  # a view came into the volume since the preview was written
+        self._preview_path: Path | None = None     # the preview written, if it was
+        self._preview_failed: Exception | None = None   # the final view's writing of it failed (write_preview)
         self._unregistered: list = []  # the last views, their registration ahead done by last_ahead
         self._laser = False
         self.acquisition_over = False              # set once the acquisition has ended: every view is urgent
@@ -151,23 +154,27 @@ class StreamingViews:
             self.moved[k] = exc
 
     def write_preview(self) -> Path | None:
-        """After the last view's steps: place the last views, then write and announce the preview surface (the
-        scan does it before its processing); its path, or None (no view placed)."""
-        if self._unplaced or self._volume is not None:
-            self._emit(MeshStarted("preview"))
-        for k, cloud, depth, session in self._unplaced:   # by the turntable prior: nothing is placed after them
-            self._place_and_integrate(k, cloud, depth, session, refine=False)
-        self._unplaced = []
-        if self._volume is None:
-            return None
+        """Write and announce the preview surface, the streaming volume's (:class:`MeshStarted`, then
+        :class:`MeshReady` ``"preview"``): the scan's final view does it before its cache is written, and the scan
+        calls it again after the last view's steps, before its processing, when a view came into the volume since
+        (a view taken again: nothing is written twice). Its path, or None (no view placed); the final view's
+        failure to write it is raised here."""
+        if self._preview_failed is not None:
+            error, self._preview_failed = self._preview_failed, None
+            raise error
+        if self._volume is None or not self._preview_due:
+            return self._preview_path
         from rangekit.formats.meshes import save_mesh
         from rangekit.surface.mesh import mesh_from_open3d
 
+        self._emit(MeshStarted("preview"))
+        self._preview_due = False
         mesh = mesh_from_open3d(self._volume.mesh())
         if len(mesh.triangles) == 0:
             return None
         path = self.folder / PREVIEW_FILE
         save_mesh(path, mesh)
+        self._preview_path = path
         self._emit(MeshReady("preview", path, mesh))
         return path
 
@@ -193,9 +200,16 @@ class StreamingViews:
         session = Session.load(self.folder)
         view, rig = session.views[k], session.rig
         total = len(session.views)
-        # The last view (or any once the acquisition is over) is what the processing waits for: decoded on every
-        # core (the same maps: each pixel's decode is its own), its work ahead first, its preview placing after.
+        # The last view (or any once the acquisition is over) is what the preview and the processing wait for:
+        # decoded on every core (the same maps: each pixel's decode is its own), into the preview (placed by the
+        # turntable prior) before its cache is written, the scan's final view then writing it; its work ahead after.
         last = self.acquisition_over or k == total - 1
+        previewed = []
+
+        def preview_first(cloud: PointCloud, maps) -> None:
+            self._preview(k, cloud, maps.depth, session)
+            previewed.append(k)
+
         settings = cache_settings(session, self.options.method, self.options.table_margin, self.options.max_motion)
         have = None   # the frames read ahead (prefetch), handed on and dropped with the view's stack
         if self._frames is not None and self._frames.view == k:
@@ -204,21 +218,37 @@ class StreamingViews:
             self.read_ahead[k] = len(have[1])
         cloud, maps = view_cloud(view, session.pattern, rig, settings, session.capture.full_scale,
                                  table_transform(rig), self.options.table_margin, session, cores=0 if last else 1,
-                                 have=have)
+                                 have=have, before_writes=preview_first if last else None)
         del have
         self.decoded.append(k)
         self.results[k] = (cloud, maps)
         self._emit(ViewDecoded(k, total, view.folder.name, cloud))
-        placed = rig.T_world_table is not None and session.plan.view_passes()[k] == 0 and len(cloud) > 0
         if last:   # its work ahead after the preview (last_ahead), its errors after the mesh
             self._unregistered.append((k, cloud, maps, session))
-            if placed:
-                self._unplaced.append((k, cloud, maps.depth, session))
+            if not previewed:   # taken from its cache (a resumed scan)
+                self._preview(k, cloud, maps.depth, session)
             return
-        if placed:
+        if self._placed_view(k, cloud, session):
             self._place_and_integrate(k, cloud, maps.depth, session)
         self._free(k, maps, session)
         self._ahead(k, cloud, maps, session)
+
+    @staticmethod
+    def _placed_view(k: int, cloud: PointCloud, session: Session) -> bool:
+        """Whether view ``k`` goes into the preview: a turntable's first pass, with points."""
+        return session.rig.T_world_table is not None and session.plan.view_passes()[k] == 0 and len(cloud) > 0
+
+    def _preview(self, k: int, cloud: PointCloud, depth: np.ndarray, session: Session) -> None:
+        """A last view (module doc) into the preview, placed by the turntable prior (:meth:`_place`); the scan's
+        final view then writes the preview (:meth:`write_preview`; its failure is kept for the scan's own call, the
+        view's steps go on)."""
+        if self._placed_view(k, cloud, session):
+            self._place_and_integrate(k, cloud, depth, session, refine=False)
+        if k == len(session.views) - 1:
+            try:
+                self.write_preview()
+            except Exception as exc:   # noqa: BLE001 - raised by the scan's write_preview (module doc)
+                self._preview_failed = exc
 
     def _free(self, k: int, maps, session: Session) -> None:
         """View ``k``'s free depth, the closed mesh's carving (:func:`rangekit.app.process.decode.free_depth_of`,
@@ -306,6 +336,7 @@ class StreamingViews:
         camera = rig.camera.with_pose(compose(T, rig.camera.T_world_cam))
         self.quiet.wait(INTEGRATE_S)   # Open3D holds the GIL throughout: in a wait of the capture, not across a frame
         self._volume.integrate(depth, camera)
+        self._preview_due = True
 
 
 def _rotated(T: np.ndarray, normals: np.ndarray | None) -> np.ndarray | None:

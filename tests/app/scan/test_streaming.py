@@ -110,6 +110,42 @@ def test_views_are_placed_near_their_true_poses_and_the_preview_lies_on_the_obje
     assert len(mesh.triangles) > 1000 and rms < 3e-4
 
 
+def test_the_final_view_goes_into_the_preview_before_its_cache_is_written(streamed):
+    """The last view is decoded on the caller's thread (the worker starts none from its ViewAcquired on), placed
+    and integrated, and the preview written before its cache (issue 51: the preview waits for nothing but the last
+    view's decoding); the preview is announced once."""
+    out, seen, preview, _, streaming = streamed
+    last = N_VIEWS - 1
+    order = [(type(e).__name__, getattr(e, "index", getattr(e, "kind", None))) for e in seen
+             if isinstance(e, (ev.ViewPlaced, ev.ViewDecoded, ev.MeshStarted, ev.MeshReady))]
+    assert (order.index(("ViewDecoded", last - 1)) < order.index(("ViewPlaced", last))
+            < order.index(("MeshStarted", "preview")) < order.index(("MeshReady", "preview"))
+            < order.index(("ViewDecoded", last))), order
+    assert order.count(("MeshReady", "preview")) == 1
+    assert preview.stat().st_mtime_ns <= (out / f"view_{last:03d}" / "cloud.json").stat().st_mtime_ns
+    assert streaming.write_preview() == preview and order.count(("MeshReady", "preview")) == 1
+
+
+def test_a_preview_that_cannot_be_written_leaves_the_views_steps_and_is_raised_by_write_preview(reference_session,
+                                                                                                  tmp_path):
+    """The final view writes the preview before its cache: a failure there (preview.ply a folder) does not stop the
+    view's steps (its cache written, handed to the processing); the scan's own write_preview raises it."""
+    folder = copy_session(reference_session, tmp_path / "s")
+    for k in range(N_VIEWS):
+        for name in CACHE:
+            (folder / f"view_{k:03d}" / name).unlink(missing_ok=True)
+    (folder / PREVIEW_FILE).mkdir()
+    streaming = _streaming(folder)
+    streaming.on_event(ev.ScanStarted(folder, N_VIEWS, 0, 60, False, None, False))
+    for k in range(N_VIEWS):
+        streaming.on_event(ev.ViewAcquired(k, N_VIEWS, folder / f"view_{k:03d}", 0.0, 60))
+    streaming.drain()
+    assert streaming.error is None and streaming.steps.decoded == list(range(N_VIEWS))
+    assert all((folder / f"view_{k:03d}" / "cloud.json").is_file() for k in range(N_VIEWS))
+    with pytest.raises(OSError):
+        streaming.write_preview()
+
+
 def test_a_resumed_scan_decodes_nothing_twice(streamed, tmp_path):
     """Views 0 and 1 streamed, the scan stopped; resumed, the streaming processor takes the done views from their
     cache (files untouched) and decodes only views 2 and 3."""

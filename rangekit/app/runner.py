@@ -260,7 +260,9 @@ class StreamingWorker:
             (self._worker.hold if event.behind else self._worker.release)()
         if isinstance(event, ViewAcquired) and event.index == event.total - 1:
             # the last view: the scan waits for it, so it and any view not yet started are decoded on the scan's
-            # thread at its priority (drain), never started here at niceness 10 (issue 51: the preview)
+            # thread at its priority (drain), never started here at niceness 10, and the view being decoded here
+            # leaves the rest of its steps to the scan too (issue 51: the preview)
+            self.steps.acquisition_over = True
             self._worker.hand_over()
         for k in self.steps.views_of(event):
             self._worker.put(k)

@@ -93,7 +93,7 @@ class StreamingViews:
         self._preview_failed: Exception | None = None   # the final view's writing of it failed (write_preview)
         self._unregistered: list = []  # the last views, their registration ahead done by last_ahead
         self._laser = False
-        self.acquisition_over = False              # set once the acquisition has ended: every view is urgent
+        self.acquisition_over = False              # set once the last view is acquired: every view is urgent
         self.decoded: list[int] = []               # views decoded here, in order
         self.moved: dict = {}                      # index -> MotionError: views the object moved during
         self.results: dict = {}                    # index -> (cloud, ViewMaps): the processing takes them as they are
@@ -223,7 +223,9 @@ class StreamingViews:
         self.decoded.append(k)
         self.results[k] = (cloud, maps)
         self._emit(ViewDecoded(k, total, view.folder.name, cloud))
-        if last:   # its work ahead after the preview (last_ahead), its errors after the mesh
+        # the acquisition ended while this view was decoded (its last view acquired: the worker hands over): the
+        # preview waits for this view, so its ICP placing and its work ahead wait for the preview, as a last view's
+        if last or self.acquisition_over:   # its work ahead after the preview (last_ahead), its errors after the mesh
             self._unregistered.append((k, cloud, maps, session))
             if not previewed:   # taken from its cache (a resumed scan)
                 self._preview(k, cloud, maps.depth, session)

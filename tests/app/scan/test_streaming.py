@@ -146,6 +146,48 @@ def test_a_preview_that_cannot_be_written_leaves_the_views_steps_and_is_raised_b
         streaming.write_preview()
 
 
+def test_a_view_the_worker_is_on_when_the_last_is_acquired_leaves_the_rest_of_its_steps_to_the_scan(
+        reference_session, tmp_path):
+    """The last view acquired while the worker is on view N-2 (held after its decode by its ViewDecoded's
+    subscriber): the worker starts nothing more, and view N-2's ICP placing, free depth and registration ahead wait
+    for the preview (its placing by the prior, its work ahead in last_ahead, on the scan's thread), as a last
+    view's; the processing gives the bytes ``rangekit process`` writes."""
+    import threading
+
+    from rangekit.app.scan.scan import _preview_then_process, process
+
+    scanned, fresh = copy_session(reference_session, tmp_path / "scanned"), copy_session(reference_session,
+                                                                                         tmp_path / "fresh")
+    for folder in (scanned, fresh):
+        for k in range(N_VIEWS):
+            for name in CACHE:
+                (folder / f"view_{k:03d}" / name).unlink(missing_ok=True)
+    decoded, gate = threading.Event(), threading.Event()
+
+    def on_event(event):
+        if isinstance(event, ev.ViewDecoded) and event.index == N_VIEWS - 2:
+            decoded.set()
+            gate.wait(120)
+
+    streaming = _streaming(scanned, on_event)
+    streaming.on_event(ev.ScanStarted(scanned, N_VIEWS, 0, 60, False, None, False))
+    for k in range(N_VIEWS - 1):
+        streaming.on_event(ev.ViewAcquired(k, N_VIEWS, scanned / f"view_{k:03d}", 0.0, 60))
+    assert decoded.wait(300)
+    streaming.on_event(ev.ViewAcquired(N_VIEWS - 1, N_VIEWS, scanned / f"view_{N_VIEWS - 1:03d}", 0.0, 60))
+    gate.set()
+    streaming.drain()
+    steps = streaming.steps
+    assert streaming.error is None and steps.decoded == list(range(N_VIEWS))
+    assert sorted(steps.free) == list(range(N_VIEWS - 2)) and N_VIEWS - 2 not in steps.registration.views
+    options = ProcessOptions(report=False)
+    _preview_then_process(streaming, Session.load(scanned), options, None)
+    assert sorted(steps.free) == list(range(N_VIEWS)) and (scanned / PREVIEW_FILE).is_file()
+    process(fresh, options)
+    for name in ("mesh.ply", "mesh_watertight.ply", "merged.ply", "poses.json"):
+        assert (scanned / name).read_bytes() == (fresh / name).read_bytes(), name
+
+
 def test_a_resumed_scan_decodes_nothing_twice(streamed, tmp_path):
     """Views 0 and 1 streamed, the scan stopped; resumed, the streaming processor takes the done views from their
     cache (files untouched) and decodes only views 2 and 3."""

@@ -156,8 +156,9 @@ class PairRegistered:
 
 @dataclass(frozen=True)
 class MeshStarted:
-    """The mesh ``kind`` (as :class:`MeshReady`'s) is being made: for ``"preview"``, the scan's last views placed
-    and integrated into the streaming volume, its surface extracted and written (:mod:`rangekit.app.scan.streaming`)."""
+    """The mesh ``kind`` (as :class:`MeshReady`'s) is being made: for ``"preview"``, the streaming volume's surface
+    extracted and written, the scan's final view placed and integrated just before (its :class:`ViewPlaced`;
+    :mod:`rangekit.app.scan.streaming`)."""
 
     kind: str
 

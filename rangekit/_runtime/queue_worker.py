@@ -10,8 +10,9 @@ caller's own thread, at the caller's priority (once the capture is over the work
 thread cannot take back the priority it gave away without privilege, and at niceness 10 beside other programs
 it got almost no CPU, issue 51); :meth:`QueueWorker.hand_over` says so ahead, as soon as the caller knows the items
 to come are its own (the scan's last view: no item starts on the worker from then on, and :meth:`QueueWorker.finish`
-finds them all queued); :meth:`QueueWorker.stop` ends it after the item being handled. The first exception of ``fn`` ends the worker and is kept in
-:attr:`QueueWorker.error` (the caller decides what it means); the caller's thread never sees it raised.
+finds them all queued); :meth:`QueueWorker.stop` ends it after the item being handled. The first exception of
+``fn`` ends the worker and is kept in :attr:`QueueWorker.error` (the caller decides what it means); the caller's
+thread never sees it raised.
 """
 
 from __future__ import annotations

@@ -25,7 +25,8 @@ if TYPE_CHECKING:
     from rangekit.surface.mesh import TriangleMesh
 
 __all__ = ["StageStarted", "StageFinished", "Progress", "ScanStarted", "FramesWritten", "ViewAcquired", "CaptureLoad",
-           "ViewDecoded", "ViewPlaced", "PairRegistered", "MeshStarted", "MeshReady", "JobFailed", "Event", "OnEvent", "emit", "progress_of", "progress_subscriber"]
+           "ViewDecoded", "ViewPlaced", "PairRegistered", "MeshStarted", "MeshReady", "JobFailed", "Event", "OnEvent",
+           "emit", "progress_of", "progress_subscriber"]
 
 
 class Stage(str, Enum):

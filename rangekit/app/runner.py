@@ -105,8 +105,8 @@ class Memo:
     (:class:`rangekit.registration.ahead.RegistrationAhead`), ``evaluate`` the evaluator with the truth's samples
     and the views' errors made, ``before_mesh`` called and waited for before the observed mesh is announced (a
     preview written beside the processing: a watcher has the preview first, issue 51; mesh.ply is written before
-    it, whatever it takes; the scan now writes its preview before the processing and sets none), ``truth_after_mesh`` whether the views and the observed mesh are measured against
-    the truth once mesh.ply and the closed mesh are written rather than beside Poisson and the closing (a scan: a
+    it, whatever it takes; the scan now writes its preview before the processing and sets none),
+    ``truth_after_mesh`` whether the views and the observed mesh are measured against the truth once mesh.ply and the closed mesh are written rather than beside Poisson and the closing (a scan: a
     person waits for the mesh, the simulator-only measures took a core from Poisson, and run beside the closing
     they were the one concurrency of the closed mesh's path the work ahead added, issue 51; the figures are the
     same), ``free`` each view's free depth (index
@@ -236,10 +236,11 @@ class StreamingWorker:
     so the capture's threads get the cores whenever they need them and the steps take what they leave. It backs
     off: while the capture is behind (the frames waiting to be written reached the writer's limit,
     :class:`~rangekit.app.events.CaptureLoad`) no new view is started; it starts again when they have drained to
-    half, or when the acquisition ends (:meth:`drain`). From the last view's :class:`~rangekit.app.events.ViewAcquired`
-    on it starts none (:meth:`rangekit._runtime.queue_worker.QueueWorker.hand_over`): that view, and any queued
-    behind the one it is on, are decoded by :meth:`drain` on the scan's thread, at its priority and on every core. ``steps``: the per-view steps
-    (:class:`rangekit.app.scan.streaming.StreamingViews`). Use :meth:`on_event` as a subscriber of the scan's
+    half, or when the acquisition ends (:meth:`drain`). From the last view's
+    :class:`~rangekit.app.events.ViewAcquired` on it starts none
+    (:meth:`rangekit._runtime.queue_worker.QueueWorker.hand_over`): that view, and any queued behind the one it is
+    on, are decoded by :meth:`drain` on the scan's thread, at its priority and on every core. ``steps``: the
+    per-view steps (:class:`rangekit.app.scan.streaming.StreamingViews`). Use :meth:`on_event` as a subscriber of the scan's
     events, then :meth:`drain` and :meth:`write_preview` (or :meth:`finish`, both), or :meth:`stop` on an error;
     :meth:`memo` hands on what was done to the processing."""
 

@@ -51,7 +51,8 @@ from pathlib import Path
 import numpy as np
 
 from rangekit.app.acquire.quiet import QuietWindows
-from rangekit.app.events import MeshReady, MeshStarted, OnEvent, ScanStarted, ViewAcquired, ViewDecoded, ViewPlaced, emit
+from rangekit.app.events import (MeshReady, MeshStarted, OnEvent, ScanStarted, ViewAcquired, ViewDecoded, ViewPlaced,
+                                 emit)
 from rangekit.app.process.options import ProcessOptions
 from rangekit.errors import MotionError
 from rangekit.formats.sessions.session import Session
@@ -156,9 +157,9 @@ class StreamingViews:
     def write_preview(self) -> Path | None:
         """Write and announce the preview surface, the streaming volume's (:class:`MeshStarted`, then
         :class:`MeshReady` ``"preview"``): the scan's final view does it before its cache is written, and the scan
-        calls it again after the last view's steps, before its processing, when a view came into the volume since
-        (a view taken again: nothing is written twice). Its path, or None (no view placed); the final view's
-        failure to write it is raised here."""
+        calls it again after the last view's steps, before its processing: written again only if a view came into
+        the volume since (a resumed scan's final view, decoded first; a final view refused for motion). Its path, or
+        None (no view placed); the final view's failure to write it is raised here."""
         if self._preview_failed is not None:
             error, self._preview_failed = self._preview_failed, None
             raise error

@@ -8,8 +8,11 @@ starts no new item (:meth:`QueueWorker.hold`, :meth:`QueueWorker.release`). Item
 given; :meth:`QueueWorker.finish` ends the thread after the item being handled and handles what is left on the
 caller's own thread, at the caller's priority (once the capture is over the work is what the caller waits for: a
 thread cannot take back the priority it gave away without privilege, and at niceness 10 beside other programs
-it got almost no CPU, issue 51); :meth:`QueueWorker.stop` ends it after the item being handled. The first exception of ``fn`` ends the worker and is kept in
-:attr:`QueueWorker.error` (the caller decides what it means); the caller's thread never sees it raised.
+it got almost no CPU, issue 51); :meth:`QueueWorker.hand_over` says so ahead, as soon as the caller knows the items
+to come are its own (the scan's last view: no item starts on the worker from then on, and :meth:`QueueWorker.finish`
+finds them all queued); :meth:`QueueWorker.stop` ends it after the item being handled. The first exception of
+``fn`` ends the worker and is kept in :attr:`QueueWorker.error` (the caller decides what it means); the caller's
+thread never sees it raised.
 """
 
 from __future__ import annotations
@@ -62,6 +65,12 @@ class QueueWorker:
         """Let items start again (after :meth:`hold`)."""
         self._go.set()
 
+    def hand_over(self) -> None:
+        """From now on no item starts on the worker (nor its idle work): the item it is handling goes on, those
+        queued and to come wait for :meth:`finish`, which handles them on the caller's thread, in order. The worker
+        stays in its context until then (module doc)."""
+        self._handing_over = True
+
     def finish(self) -> None:
         """Handle every item queued (no more holding back): the worker ends after the item it is handling, the rest
         are handled here, on the caller's thread and priority (module doc), unless an item failed. Returns when all
@@ -104,14 +113,14 @@ class QueueWorker:
                 continue
             if item is _END or self._stopping:
                 return
-            if not self._go.is_set():   # held: wait for the release
+            if not self._handing_over and not self._go.is_set():   # held: wait for the release
                 self.paused += 1
                 self._go.wait()
                 if self._stopping:
                     return
-            if self._handing_over:      # finish(): the caller handles this item and the rest, in order
+            if self._handing_over:      # hand_over(), finish(): the caller handles this item and the rest, in order
                 self._handed.append(item)
-                return
+                continue                # until finish()'s end (its context entered by then)
             self._call(item)
 
     def _idle_call(self) -> float | None:

@@ -4,17 +4,29 @@ published. A slow subscriber (a console, a web page, ``events.jsonl``) delays on
 
 A subscriber that raises stops the job with its exception: the bus keeps the first one and raises it in the next
 :meth:`EventBus.publish` (and from :meth:`EventBus.close`), no later event is handed on; nothing is swallowed.
+
+Each event is stamped with the moment it was published (``time.monotonic()``, on the publishing thread): a
+subscriber reads it with :func:`published_at` while the event is handed to it (the session's ``events.jsonl``
+gives each line its time so, not when the bus's thread got to it).
 """
 
 from __future__ import annotations
 
 import queue
 import threading
+import time
 from typing import Callable
 
-__all__ = ["EventBus"]
+__all__ = ["EventBus", "published_at"]
 
 _STOP = object()
+_handing = threading.local()   # on a bus's thread: .at, the publishing moment of the event being handed on
+
+
+def published_at() -> float | None:
+    """The ``time.monotonic()`` at which the event being handed on was published, when called by a subscriber on
+    a bus's thread; None elsewhere (the caller then takes the time itself)."""
+    return getattr(_handing, "at", None)
 
 
 class EventBus:
@@ -64,7 +76,7 @@ class EventBus:
                 if self._thread is None:
                     self._thread = threading.Thread(target=self._run, name="rangekit-events", daemon=True)
                     self._thread.start()
-        self._queue.put(event)
+        self._queue.put((event, time.monotonic()))
 
     __call__ = publish
 
@@ -72,7 +84,7 @@ class EventBus:
         """Wait until every event published so far was handed on; raise a subscriber's error."""
         if self._thread is not None and self._thread.is_alive():
             done = threading.Event()
-            self._queue.put(done)
+            self._queue.put((done, None))
             while not done.wait(0.05):
                 if not self._thread.is_alive():
                     break
@@ -82,7 +94,7 @@ class EventBus:
     def close(self) -> None:
         """Hand on every event published, end the thread; raise a subscriber's error."""
         if self._thread is not None:
-            self._queue.put(_STOP)
+            self._queue.put((_STOP, None))
             self._thread.join()
             self._thread = None
         if self._error is not None:
@@ -90,7 +102,7 @@ class EventBus:
 
     def _run(self) -> None:
         while True:
-            event = self._queue.get()
+            event, _handing.at = self._queue.get()
             if event is _STOP:
                 return
             if isinstance(event, threading.Event):

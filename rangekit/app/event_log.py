@@ -7,12 +7,16 @@ running job.
   inline (their counts, names and paths), a pose as 16 numbers (row-major), paths as strings, seconds and metres.
 - :class:`EventLog`: a subscriber appending each event to ``FOLDER/events.jsonl``, a line written and flushed at a
   time (the file opened, appended and closed per line: nothing buffered, nothing to close), across a resume too.
-  Events that come before the folder exists (a new scan's set-up) wait in memory until it does.
+  Events that come before the folder exists (a new scan's set-up) wait in memory until it does. Each line ends
+  with ``"t"``: the seconds from the job's start (the log's making, :func:`logged`) to the event's publishing on
+  the job's bus (:func:`rangekit.app.bus.published_at`; monotonic), so a scan can be placed step by step after its
+  last frame; a resumed scan's or a later ``rangekit process``'s lines count from their own start. Lines without it
+  (an older rangekit's, the web app's :class:`JobLaunched`...) read as well.
 - :func:`logged`: the scan's and the processing's subscriber with the log in front (a chain already logging into
   that folder is returned as it is, so a scan's processing writes each event once).
 - :func:`read_events`: the complete lines from a byte offset on, typed, with the offset after each (a watcher
   follows the file by calling it again from the last offset; a line still being written is left for the next
-  call).
+  call); :func:`read_timeline`: the whole file as ``(t, event)``, ``t`` None where a line has no time.
 - The events of the process that runs a job as a child (the web app): :class:`JobLaunched`, :class:`JobPaused`,
   :class:`JobExited`, which that process appends to the same file before, during and after the child.
 """
@@ -21,6 +25,7 @@ from __future__ import annotations
 
 import json
 import threading
+import time
 from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Iterator
@@ -28,11 +33,12 @@ from typing import Iterator
 import numpy as np
 
 from rangekit.app import events as ev
+from rangekit.app.bus import published_at
 from rangekit.errors import FileFormatError
 from rangekit.formats.sessions.files import EVENTS_FILE
 
 __all__ = ["EventLog", "JobExited", "JobLaunched", "JobPaused", "LoggedCloud", "LoggedError",
-           "LoggedMesh", "append_event", "from_json", "logged", "read_events", "to_json"]
+           "LoggedMesh", "append_event", "from_json", "logged", "read_events", "read_timeline", "to_json"]
 
 #: The file's name in a session folder (listed in :data:`rangekit.formats.output_sets.OUTPUT_SETS`).
 #: The longest line read back (bytes): a longer one is refused as not a log of this kind.
@@ -90,9 +96,11 @@ class LoggedError(Exception):
 
 
 _TYPES = {cls.__name__: cls for cls in (ev.StageStarted, ev.StageFinished, ev.Progress, ev.ScanStarted,
-                                         ev.ViewAcquired, ev.CaptureLoad, ev.ViewDecoded, ev.ViewPlaced,
-                                         ev.PairRegistered, ev.MeshReady, ev.JobFailed, JobLaunched, JobPaused,
-                                         JobExited)}
+                                         ev.FramesWritten, ev.ViewAcquired, ev.CaptureLoad, ev.ViewDecoded,
+                                         ev.ViewPlaced, ev.PairRegistered, ev.MeshStarted, ev.MeshReady,
+                                         ev.JobFailed, JobLaunched, JobPaused, JobExited)}
+#: The key of a line's time (module doc): seconds from the job's start, 0.1 ms.
+TIME_KEY = "t"
 _PATHS = {"folder", "path"}
 
 
@@ -174,6 +182,7 @@ class EventLog:
 
     def __init__(self, folder: str | Path) -> None:
         self.folder = Path(folder)
+        self.start = time.monotonic()          # the job's start: each line's time counts from it (module doc)
         self._lock = threading.Lock()
         self._waiting: list[str] = []
 
@@ -182,7 +191,10 @@ class EventLog:
         return self.folder / EVENTS_FILE
 
     def __call__(self, event) -> None:
-        line = json.dumps(to_json(event), allow_nan=False) + "\n"
+        at = published_at()                     # on the bus's thread: when it was published, else now
+        data = to_json(event)
+        data[TIME_KEY] = round((time.monotonic() if at is None else at) - self.start, 4)
+        line = json.dumps(data, allow_nan=False) + "\n"
         with self._lock:
             if not self.folder.is_dir():          # a new scan's set-up: the folder is made a moment later
                 self._waiting.append(line)
@@ -238,3 +250,9 @@ def read_events(path: str | Path, offset: int = 0, *, typed: bool = True) -> Ite
         except ValueError:
             raise FileFormatError(f"{path}: the line at offset {at - len(raw)} is not JSON") from None
         yield (from_json(obj) if typed else obj), at
+
+
+def read_timeline(path: str | Path) -> list[tuple[float | None, object]]:
+    """Every complete line of the events file ``path`` as ``(t, event)``: ``t`` the seconds from its job's start to
+    the event (module doc; None for a line without a time), ``event`` typed (:func:`from_json`)."""
+    return [(obj.get(TIME_KEY), from_json(obj)) for obj, _ in read_events(path, typed=False)]

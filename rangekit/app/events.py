@@ -24,8 +24,9 @@ if TYPE_CHECKING:
     from rangekit.surface.cloud import PointCloud
     from rangekit.surface.mesh import TriangleMesh
 
-__all__ = ["StageStarted", "StageFinished", "Progress", "ScanStarted", "ViewAcquired", "CaptureLoad", "ViewDecoded", "ViewPlaced",
-           "PairRegistered", "MeshReady", "JobFailed", "Event", "OnEvent", "emit", "progress_of", "progress_subscriber"]
+__all__ = ["StageStarted", "StageFinished", "Progress", "ScanStarted", "FramesWritten", "ViewAcquired", "CaptureLoad",
+           "ViewDecoded", "ViewPlaced", "PairRegistered", "MeshStarted", "MeshReady", "JobFailed", "Event", "OnEvent",
+           "emit", "progress_of", "progress_subscriber"]
 
 
 class Stage(str, Enum):
@@ -83,6 +84,16 @@ class ScanStarted:
     resume: bool
     exposures_us: tuple[int, ...] | None
     laser: bool
+
+
+@dataclass(frozen=True)
+class FramesWritten:
+    """Every frame of view ``index`` (0-based, of ``total``) is on disk, ``n_frames`` of them: its last frame was
+    just written; the view is finished next (view.json, its folder renamed, session.json: :class:`ViewAcquired`)."""
+
+    index: int
+    total: int
+    n_frames: int
 
 
 @dataclass(frozen=True)
@@ -144,6 +155,15 @@ class PairRegistered:
     reason: str
 
 
+@dataclass(frozen=True)
+class MeshStarted:
+    """The mesh ``kind`` (as :class:`MeshReady`'s) is being made: for ``"preview"``, the streaming volume's surface
+    extracted and written, the scan's final view placed and integrated just before (its :class:`ViewPlaced`;
+    :mod:`rangekit.app.scan.streaming`)."""
+
+    kind: str
+
+
 @dataclass(frozen=True, eq=False)
 class MeshReady:
     """A mesh file was written: ``kind`` ``"observed"`` (mesh.ply), ``"watertight"`` (mesh_watertight.ply) or
@@ -161,8 +181,8 @@ class JobFailed:
     error: BaseException
 
 
-Event = Union[StageStarted, StageFinished, Progress, ScanStarted, ViewAcquired, CaptureLoad, ViewDecoded, ViewPlaced,
-              PairRegistered, MeshReady, JobFailed]
+Event = Union[StageStarted, StageFinished, Progress, ScanStarted, FramesWritten, ViewAcquired, CaptureLoad, ViewDecoded,
+              ViewPlaced, PairRegistered, MeshStarted, MeshReady, JobFailed]
 #: A subscriber: called with each event.
 OnEvent = Callable[[Event], None]
 

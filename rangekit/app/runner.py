@@ -25,7 +25,8 @@ Where each piece of work runs is the placement table, :data:`PLACEMENTS`: one pl
 The STREAMING placement's live part is :class:`StreamingWorker`: as the scan's events announce views it runs the
 scan's per-view steps (:class:`rangekit.app.scan.streaming.StreamingViews`: decode, place, integrate, the
 registration and the truth ahead; no thread of their own) on a queue worker at a lower priority than the capture
-(:class:`rangekit._runtime.queue_worker.QueueWorker`), held back while the capture is behind.
+(:class:`rangekit._runtime.queue_worker.QueueWorker`), held back while the capture is behind; the last view, which
+the scan waits for, is left to the scan's own thread.
 
 What the streaming placement or Dask did ahead reaches the runner in a :class:`Memo` (decoded views, the
 registration's levels and first pairs, the prepared evaluator; Dask's decoded views are read from the view caches
@@ -48,7 +49,7 @@ from rangekit._runtime.memory import adopt_kept, release_free_memory, reuse_free
 from rangekit._runtime.queue_worker import QueueWorker
 from rangekit._runtime.threads import one_blas_thread
 from rangekit.app.bus import EventBus
-from rangekit.app.events import CaptureLoad, Progress, Stage, StageClock
+from rangekit.app.events import CaptureLoad, Progress, Stage, StageClock, ViewAcquired
 
 if TYPE_CHECKING:
     from rangekit.registration.ahead import RegistrationAhead
@@ -103,9 +104,9 @@ class Memo:
     decode stage does as it takes them), ``registration`` the registration's levels and first-round pairs
     (:class:`rangekit.registration.ahead.RegistrationAhead`), ``evaluate`` the evaluator with the truth's samples
     and the views' errors made, ``before_mesh`` called and waited for before the observed mesh is announced (a
-    scan's preview written beside the processing: a watcher has the preview first, issue 51; mesh.ply is written
-    before it, whatever it takes), ``truth_after_mesh`` whether the views and the observed mesh are measured against
-    the truth once mesh.ply and the closed mesh are written rather than beside Poisson and the closing (a scan: a
+    preview written beside the processing: a watcher has the preview first, issue 51; mesh.ply is written before
+    it, whatever it takes; the scan now writes its preview before the processing and sets none),
+    ``truth_after_mesh`` whether the views and the observed mesh are measured against the truth once mesh.ply and the closed mesh are written rather than beside Poisson and the closing (a scan: a
     person waits for the mesh, the simulator-only measures took a core from Poisson, and run beside the closing
     they were the one concurrency of the closed mesh's path the work ahead added, issue 51; the figures are the
     same), ``free`` each view's free depth (index
@@ -238,8 +239,11 @@ class StreamingWorker:
     so the capture's threads get the cores whenever they need them and the steps take what they leave. It backs
     off: while the capture is behind (the frames waiting to be written reached the writer's limit,
     :class:`~rangekit.app.events.CaptureLoad`) no new view is started; it starts again when they have drained to
-    half, or when the acquisition ends (:meth:`drain`). ``steps``: the per-view steps
-    (:class:`rangekit.app.scan.streaming.StreamingViews`). Use :meth:`on_event` as a subscriber of the scan's
+    half, or when the acquisition ends (:meth:`drain`). From the last view's
+    :class:`~rangekit.app.events.ViewAcquired` on it starts none
+    (:meth:`rangekit._runtime.queue_worker.QueueWorker.hand_over`): that view, and any queued behind the one it is
+    on, are decoded by :meth:`drain` on the scan's thread, at its priority and on every core. ``steps``: the
+    per-view steps (:class:`rangekit.app.scan.streaming.StreamingViews`). Use :meth:`on_event` as a subscriber of the scan's
     events, then :meth:`drain` and :meth:`write_preview` (or :meth:`finish`, both), or :meth:`stop` on an error;
     :meth:`memo` hands on what was done to the processing."""
 
@@ -258,6 +262,12 @@ class StreamingWorker:
         worker back (``behind``) or lets it go."""
         if isinstance(event, CaptureLoad):
             (self._worker.hold if event.behind else self._worker.release)()
+        if isinstance(event, ViewAcquired) and event.index == event.total - 1:
+            # the last view: the scan waits for it, so it and any view not yet started are decoded on the scan's
+            # thread at its priority (drain), never started here at niceness 10, and the view being decoded here
+            # leaves the rest of its steps to the scan too (issue 51: the preview)
+            self.steps.acquisition_over = True
+            self._worker.hand_over()
         for k in self.steps.views_of(event):
             self._worker.put(k)
 
@@ -282,6 +292,12 @@ class StreamingWorker:
         """After :meth:`drain`: the steps' preview (its path), or None when the steps failed (:attr:`error`)."""
         return None if self.error is not None else self.steps.write_preview()
 
+    def finish_blocks(self) -> None:
+        """After :meth:`write_preview`: the blocks fusion's volume finished (the steps' ``finish_blocks``), unless
+        the steps failed (the processing then fills its own volume)."""
+        if self.error is None:
+            self.steps.finish_blocks()
+
     def finish(self):
         """:meth:`drain`, then :meth:`write_preview`."""
         self.drain()
@@ -295,7 +311,7 @@ class StreamingWorker:
     def memo(self) -> Memo:
         """What the steps did ahead, for the processing: each view decoded, the registration's levels and first
         pairs, the prepared evaluator (the last views' work ahead done here first, on the caller's thread: the scan
-        calls this beside :meth:`write_preview`)."""
+        calls this after :meth:`write_preview`)."""
         self.steps.last_ahead()
         return Memo(self.steps.results, self.steps.registration, self.steps.evaluate, truth_after_mesh=True,
                     free=self.steps.free, blocks=getattr(self.steps, "blocks", None))

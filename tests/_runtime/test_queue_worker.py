@@ -155,3 +155,57 @@ def test_the_context_holds_from_the_workers_first_item_through_the_items_finish_
     # item 0 inside the worker's block; the worker's block ends with the caller's already entered (1 left), item 1
     # inside the caller's, then it ends: the count never reaches 0 in between
     assert seen == [(0, 1), ("exit", 1), (1, 1), ("exit", 0)]
+
+
+def test_after_hand_over_no_item_starts_on_the_worker_and_finish_handles_them_on_the_caller_in_its_context():
+    """hand_over (the scan's last view acquired): the item being handled goes on, the next ones (queued before or
+    after) wait for finish and run on the caller's thread at its priority, in order; the worker's idle work stops
+    and its context is held until finish has entered the caller's (the memory-reuse block never ends between)."""
+    from contextlib import contextmanager
+
+    lock, held, seen, idle = threading.Lock(), [0], [], []
+
+    @contextmanager
+    def counted():
+        with lock:
+            held[0] += 1
+        try:
+            yield
+        finally:
+            with lock:
+                held[0] -= 1
+                seen.append(("exit", held[0]))
+
+    started, gate = threading.Event(), threading.Event()
+
+    def fn(item):
+        seen.append((item, threading.current_thread().name,
+                     os.getpriority(os.PRIO_PROCESS, threading.get_native_id()), held[0]))
+        if item == 0:
+            started.set()
+            gate.wait(30)
+
+    def idle_work():
+        idle.append(worker._handing_over)
+        return 0.01
+
+    before = os.getpriority(os.PRIO_PROCESS, 0)
+    lower = min(19, before + 5)
+    worker = QueueWorker(fn, name="rk-test-hand-over", nice=lower, context=counted, idle=idle_work)
+    worker.put(0)
+    assert started.wait(30)
+    worker.put(1)              # queued before the hand-over
+    worker.hand_over()
+    worker.put(2)              # after it
+    gate.set()
+    for _ in range(300):       # the worker has ended item 0 and takes 1 and 2 for the caller, running none
+        if len(worker._handed) == 2:
+            break
+        threading.Event().wait(0.01)
+    assert [s[0] for s in seen] == [0] and worker._thread.is_alive() and held[0] == 1
+    worker.finish()
+    caller = threading.current_thread().name
+    # the worker's block ends with the caller's entered (1 left): the count never reaches 0 in between
+    assert seen == [(0, "rk-test-hand-over", lower, 1), ("exit", 1), (1, caller, before, 1), (2, caller, before, 1),
+                    ("exit", 0)], seen
+    assert not any(idle) and held[0] == 0 and worker.error is None

@@ -55,7 +55,8 @@ def test_every_event_type_goes_to_a_line_and_back():
     T = np.arange(16.0).reshape(4, 4)
     events = [ev.StageStarted("decode"), ev.StageFinished("decode", 1.5), ev.Progress("a line", 1, 3),
               ev.ScanStarted(Path("/s"), 6, 2, 44, True, (2000, 8000), False), ev.ViewAcquired(1, 6, Path("/s/v"), 0.5, 44),
-              ev.CaptureLoad(True, 3), ev.ViewDecoded(3, 6, "view_003", cloud),
+              ev.CaptureLoad(True, 3), ev.ViewDecoded(3, 6, "view_003", cloud), ev.FramesWritten(1, 6, 44),
+              ev.MeshStarted("preview"),
               ev.ViewPlaced(3, 6, "view_003", cloud, T), ev.PairRegistered(0, 1, 1e-4, 0.8, False, "too little overlap"),
               ev.MeshReady("observed", Path("/s/mesh.ply"), mesh), ev.JobFailed(ValueError("bad\nthing")),
               JobExited(130, ("a", "b"))]
@@ -65,9 +66,9 @@ def test_every_event_type_goes_to_a_line_and_back():
         back = from_json(json.loads(line))
         assert _same(event, back), (event, back)
     assert to_json(events[6]) == {"type": "ViewDecoded", "index": 3, "total": 6, "name": "view_003", "points": 5}
-    assert to_json(events[7])["T_world_view"] == list(range(16))
-    assert isinstance(from_json(to_json(events[10])).error, LoggedError)
-    assert from_json(to_json(events[10])).error.kind == "ValueError"
+    assert to_json(events[9])["T_world_view"] == list(range(16))
+    assert isinstance(from_json(to_json(events[12])).error, LoggedError)
+    assert from_json(to_json(events[12])).error.kind == "ValueError"
     with pytest.raises(FileFormatError, match="type: expected one of"):
         from_json({"type": "Nothing"})
     with pytest.raises(FileFormatError, match="a ViewDecoded line"):
@@ -94,6 +95,49 @@ def test_events_wait_for_the_folder_then_a_reader_follows_from_an_offset(tmp_pat
     ((event, end),) = read_events(folder / EVENTS_FILE, offset)
     assert event == ev.StageFinished("acquire", 2.0) and end == (folder / EVENTS_FILE).stat().st_size
     assert list(read_events(tmp_path / "none" / EVENTS_FILE)) == []
+
+
+def test_each_line_has_the_seconds_from_the_jobs_start_to_the_events_publishing(tmp_path):
+    """A line's "t": when the event was published on the job's bus (not when the bus's thread got to it, behind a
+    slow subscriber), counted from the log's making (the job's start), monotonic; lines without one (an older
+    rangekit's, the web app's) read as before, their time None."""
+    import threading
+    import time
+
+    from rangekit.app.bus import EventBus
+    from rangekit.app.event_log import append_event, read_timeline
+
+    folder = tmp_path / "s"
+    folder.mkdir()
+    log = EventLog(folder)
+    gate = threading.Event()
+
+    def slow(event):          # holds the bus's thread on the first event until the gate opens
+        if isinstance(event, ev.Progress):
+            gate.wait(30)
+
+    with EventBus(slow, log) as bus:
+        before = time.monotonic()
+        bus.publish(ev.Progress("first"))
+        bus.publish(ev.FramesWritten(0, 1, 44))
+        published = time.monotonic()
+        time.sleep(0.05)      # the second event waits behind the first on the bus's thread
+        opened = time.monotonic()
+        gate.set()
+    append_event(folder, JobExited(0))    # the web app's line: no time
+    with open(folder / EVENTS_FILE, "a") as f:   # an older rangekit's line
+        f.write('{"type": "StageStarted", "stage": "decode"}\n')
+    timeline = read_timeline(folder / EVENTS_FILE)
+    assert [type(e).__name__ for _, e in timeline] == ["Progress", "FramesWritten", "JobExited", "StageStarted"]
+    (t1, _), (t2, _) = timeline[:2]
+    ms = 1e-4                 # a line's time is rounded to 0.1 ms
+    assert before - log.start - ms <= t1 <= t2 <= published - log.start + ms
+    assert t2 < opened - log.start - ms
+    assert [t for t, _ in timeline[2:]] == [None, None]
+    assert [type(e).__name__ for e, _ in read_events(folder / EVENTS_FILE)] == [type(e).__name__ for _, e in timeline]
+    log(ev.MeshStarted("preview"))        # called off a bus (no publishing time): its own moment
+    t3 = read_timeline(folder / EVENTS_FILE)[-1][0]
+    assert opened - log.start - ms <= t3 <= time.monotonic() - log.start + ms
 
 
 def _check_scan_log(folder: Path, seen: list | None, views: int) -> list:

@@ -190,7 +190,7 @@ def test_export_writes_each_format_of_scan_format_from_the_same_mesh(processed):
             assert np.abs(corners[0] - corners[1]).max() <= 1.5e-6
             assert processed.request(f"/api/sessions/done/files/{stem}.{fmt}")[0] == 200
     assert _post(processed, "/api/sessions/done/process", {"fusion": "marching"})[1]["error"] == (
-        "fusion: expected poisson or tsdf, found 'marching'")
+        "fusion: expected poisson or tsdf or blocks, found 'marching'")
     status, body, _ = processed.request("/api/sessions/%2E%2E/process", data={})
     assert status == 400 and json.loads(body)["error"].startswith("path '..': refused")
 

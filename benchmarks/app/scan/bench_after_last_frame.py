@@ -6,8 +6,10 @@
 Each run is a process of its own with the tree on PYTHONPATH: the session is copied without its caches and
 outputs, views 0..n-2 go through the scan's streaming steps on its worker thread (as they would while the capture
 runs; a tree that reads the last view's frames ahead as they are written, ``StreamingViews.prefetch``, has them
-read but its last one, as while it is taken), then the clock starts where the last frame would be written: the last view queued and drained, the preview beside the processing,
-as :func:`rangekit.app.scan.scan.scan` does after its acquisition, with the scan's default fusion
+read but its last one, as while it is taken), then the clock starts where the last frame would be written: the last
+view announced to the worker (its ``ViewAcquired``, as the scan's bus hands it on) and drained, then the preview and
+the processing as :func:`rangekit.app.scan.scan.scan` does after its acquisition (``_preview_then_process`` where the
+tree has it: the preview first; else the preview beside the processing), with the scan's default fusion
 (``SCAN_FUSION``: blocks since issue 51 M6; Poisson before). Printed per run (one JSON line): the seconds from
 there to the last view decoded, the preview, the registration's end (poses.json), mesh.ply and the closed mesh, and
 the CPU seconds this process used by each (user + system; the Poisson child's are not in it: it is the same
@@ -44,7 +46,9 @@ def replay(session: Path, work: Path) -> dict:
     from rangekit.app.events import MeshReady, StageFinished, ViewDecoded
     from rangekit.app.process.options import ProcessOptions
     from rangekit.app.runner import Plan, StreamingWorker
-    from rangekit.app.scan.scan import _process, _waiting
+    import rangekit.app.scan.scan as scan_module
+    from rangekit.app.events import ViewAcquired
+    from rangekit.formats.sessions.files import view_folder
     from rangekit.app.scan.streaming import StreamingViews
     from rangekit.formats.sessions.session import Session
 
@@ -82,13 +86,18 @@ def replay(session: Path, work: Path) -> dict:
             _taking_the_last_view(worker, work, n)
         bus.flush()
         t0, c0 = time.perf_counter(), _cpu()
-        worker._worker.put(n - 1)                     # view n-1 acquired: its last frame is on disk
+        # view n-1 acquired: its last frame is on disk
+        worker.on_event(ViewAcquired(n - 1, n, view_folder(work, n - 1), 0.0, 0))
         worker.drain()
-        with start(Where.THREAD, worker.write_preview) as preview:
-            memo = worker.memo()
-            memo.before_mesh = _waiting(preview)
-            _process(Session.load(work), options, bus, Plan.STREAMING, memo)
-            preview.result()
+        after = getattr(scan_module, "_preview_then_process", None)
+        if after is not None:
+            after(worker, Session.load(work), options, bus)
+        else:                                         # an older tree: the preview beside the processing
+            with start(Where.THREAD, worker.write_preview) as preview:
+                memo = worker.memo()
+                memo.before_mesh = scan_module._waiting(preview)
+                scan_module._process(Session.load(work), options, bus, Plan.STREAMING, memo)
+                preview.result()
         bus.flush()
     accuracy = json.loads((work / "summary.json").read_text())["accuracy"]
     return {"spans_s_cpu": clock, "rms_mm": round(accuracy["rms"] * 1e3, 4), "completeness": accuracy["completeness"]}

@@ -43,7 +43,7 @@ from rangekit.formats.sessions.session import (CaptureSettings, ScanPlan, Sessio
 from rangekit.formats.sessions.check import verify_views
 from rangekit.formats.sessions.lock import session_lock
 from rangekit.app.acquire.frame_writer import FrameError, FrameWriter
-from rangekit.app.events import CaptureLoad, OnEvent, ViewAcquired, emit
+from rangekit.app.events import CaptureLoad, FramesWritten, OnEvent, ViewAcquired, emit
 from rangekit.app.acquire.lights import light_for
 from rangekit.app.acquire.quiet import QuietWindows, quiet_window
 from rangekit.app.acquire.reconnect import MAX_RETAKES, reconnected
@@ -401,6 +401,7 @@ def _view(run: _Run, k: int, angle: float, state: dict, done: list, writer: Fram
         raise FrameError(k, angle, at.step, at.target, exc, device=at.device) from exc
 
     def finish(sha256: dict) -> None:
+        run.announce(FramesWritten(k, run.plan.n_views, len(sha256)))   # its last frame is on disk
         step, target = f"writing {VIEW_FILE}", partial
         try:
             # Each view is a self-contained capture folder (rangekit reconstruct view_NNN works on it).

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import zipfile
 from dataclasses import replace
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import nullcontext
 from functools import partial
 
@@ -103,7 +103,8 @@ _MAP_NAMES = ("proj_col", "confidence", "depth", "sigma")  # a cache without one
 def view_cloud(v: SessionView, spec: PatternSpec, rig: Rig, settings: dict, full_scale: float | None,
                T_table_world: np.ndarray | None, table_margin: float,
                session: Session | None = None, *, cores: int | None = None,
-               have: tuple[np.ndarray, dict] | None = None) -> tuple[PointCloud, ViewMaps]:
+               have: tuple[np.ndarray, dict] | None = None,
+               before_writes: Callable[[PointCloud, ViewMaps], None] | None = None) -> tuple[PointCloud, ViewMaps]:
     """Decode, triangulate and filter one view, or reuse its cache when made with the same ``settings``, on this
     thread: with ``cores`` None its numba setting holds; else on one BLAS thread and ``cores`` numba threads
     (0: the configured number, :func:`rangekit._runtime.executor.worker_count`; the scan's live processing decodes
@@ -116,19 +117,24 @@ def view_cloud(v: SessionView, spec: PatternSpec, rig: Rig, settings: dict, full
     frames are checked against its recorded SHA-256s (:func:`view_clouds`). ``have``: ``(stack, {frame name:
     SHA-256})``, the view's frames already read into ``stack`` (K, H, W) as far as they go (one exposure; the scan's
     last view: :meth:`rangekit.app.scan.streaming.StreamingViews.prefetch`): only the rest are read
-    (:func:`rangekit.formats.sessions.check.read_view_stack`), the same pixels.
+    (:func:`rangekit.formats.sessions.check.read_view_stack`), the same pixels. ``before_writes(cloud, maps)``:
+    called with the view's cloud and maps once it is decoded, before its cache is written (not for a view taken
+    from its cache; the scan's last views go into its preview first, issue 51); the same bytes are written after.
     """
     if cores is not None:
         with one_blas_thread(), numba_threads(worker_count(cores)):
-            return view_cloud(v, spec, rig, settings, full_scale, T_table_world, table_margin, session, have=have)
+            return view_cloud(v, spec, rig, settings, full_scale, T_table_world, table_margin, session, have=have,
+                              before_writes=before_writes)
     return next(view_clouds([v], spec, rig, settings, full_scale, T_table_world, table_margin, session, workers=1,
-                            have=None if have is None else {v.index: have}))
+                            have=None if have is None else {v.index: have}, before_writes=before_writes))
 
 
 def view_clouds(views: Sequence[SessionView], spec: PatternSpec, rig: Rig, settings: dict,
                 full_scale: float | None, T_table_world: np.ndarray | None,
                 table_margin: float, session: Session | None = None, *,
-                workers: int = 0, map_views=None, have: dict | None = None) -> Iterator[tuple[PointCloud, ViewMaps]]:
+                workers: int = 0, map_views=None, have: dict | None = None,
+                before_writes: Callable[[PointCloud, ViewMaps], None] | None = None
+                ) -> Iterator[tuple[PointCloud, ViewMaps]]:
     """:func:`view_cloud` of each view, yielded in order, ``workers`` views at a time on as many threads
     (:func:`rangekit._runtime.executor.ordered_map`; 0: the configured number, each with one numba and one BLAS
     thread; 1: on this thread, one view after another): two views side by side used
@@ -139,7 +145,8 @@ def view_clouds(views: Sequence[SessionView], spec: PatternSpec, rig: Rig, setti
     read for decoding (:func:`rangekit.formats.sessions.check.read_view_stack`: each frame read once); a view
     taken from its cache has its frames hashed there instead. None: the frames are read unchecked. ``map_views(fn,
     views)``: the job runner's map (in order, on the configured number of threads) instead of this one's. ``have``:
-    view index -> frames already read (:func:`view_cloud`)."""
+    view index -> frames already read, ``before_writes``: called for each view decoded, on its thread
+    (:func:`view_cloud`)."""
     shape = (rig.camera.height, rig.camera.width)
     white = white_frame_index(spec)
 
@@ -157,7 +164,8 @@ def view_clouds(views: Sequence[SessionView], spec: PatternSpec, rig: Rig, setti
         held = [stacks if settings.get("exposures_us") else stacks[0]]
         del stacks
         with one_blas_thread(), (numba_threads(1) if n > 1 else nullcontext()):   # thin products
-            return _decode_view(v, held, white_image, spec, rig, settings, full_scale, T_table_world, table_margin)
+            return _decode_view(v, held, white_image, spec, rig, settings, full_scale, T_table_world, table_margin,
+                                before_writes)
 
     n = worker_count(workers)
     if map_views is not None:   # the job runner's map over views (rangekit.app.runner.Runner.map_views)
@@ -244,7 +252,7 @@ def _check_still(stacks, spec: PatternSpec, decoded: np.ndarray, max_motion: flo
 
 def _decode_view(v: SessionView, held: list, white_image: np.ndarray, spec: PatternSpec, rig: Rig, settings: dict,
                  full_scale: float | None, T_table_world: np.ndarray | None,
-                 table_margin: float) -> tuple[PointCloud, ViewMaps]:
+                 table_margin: float, before_writes=None) -> tuple[PointCloud, ViewMaps]:
     """:func:`view_cloud` past its cache, on one BLAS thread: its products are thin, (N, 3) @ (3, 3), and two
     OpenBLAS threads spent 2x the CPU on them for the same bits. ``held``: a list of one item, the view's frames
     (one exposure's stack, or the list of every exposure's), taken out of it so that they are freed as soon as
@@ -283,6 +291,8 @@ def _decode_view(v: SessionView, held: list, white_image: np.ndarray, spec: Patt
         sigma[valid] = rec.sigma[valid]
     maps = ViewMaps(rec.decoded.proj_col.astype(np.float32), rec.decoded.confidence.astype(np.float32), depth,
                     white_image, sigma)
+    if before_writes is not None:   # the scan's last view into its preview first (view_cloud)
+        before_writes(c, maps)
     # Each file's SHA-256 taken from the bytes as they are written: nothing is read back.
     sha256 = {CLOUD_FILE: atomic_write_with(v.folder / CLOUD_FILE, lambda f: write_cloud_ply(f, c), sha256=True),
               # uncompressed: deflating the float maps cost 0.18 CPU-s a view (21 MB instead of 4 MB on disk)

@@ -27,18 +27,19 @@ calls the steps on a worker thread of lower priority that backs off while the ca
    simulator the truth's samples and the view's errors against the truth
    (:attr:`StreamingViews.evaluate`); for the blocks fusion (the scan's default) its depth map integrated into the
    0.4 mm volume at its turntable prior pose (:attr:`StreamingViews.blocks`,
-   :class:`rangekit.app.process.blocks.BlocksAhead`; the last view's, and the marching cubes, after the preview on
-   its thread, beside the registration).
+   :class:`rangekit.app.process.blocks.BlocksAhead`; the last views', and the marching cubes, after the preview
+   (:meth:`StreamingViews.finish_blocks`), beside the registration).
 
 While the last view is taken, its frames are read as they are written (:meth:`StreamingViews.prefetch`, between
 the worker's views; :mod:`rangekit.app.scan.frames_ahead`), so that after its last frame only the rest are read.
 The last view (or any once the acquisition is over, :attr:`StreamingViews.acquisition_over`) is what the
-processing waits for: it is decoded on every core, then its placing (by the turntable prior) is left to
-:meth:`StreamingViews.write_preview`,
-which writes ``preview.ply``, the TSDF's surface (:class:`~rangekit.app.events.MeshReady` ``"preview"``), and
-its work ahead to :meth:`StreamingViews.last_ahead`, run beside it (the preview waits for nothing but the decoding;
-issue 51); then the processing, the preview still beside it. A multi-pass scan's preview holds its
-first pass (the object turned over is placed by the processing's pass registration).
+preview and the processing wait for: it is decoded on every core (on the scan's thread: the runner's worker starts no
+view from the last one's acquisition on), placed by the turntable prior and integrated before its cache is
+written, and the scan's final view then writes ``preview.ply``, the TSDF's surface
+(:meth:`StreamingViews.write_preview`, :class:`~rangekit.app.events.MeshReady` ``"preview"``; issue 51: the preview
+waits for nothing but the last view's decoding); its work ahead is left to :meth:`StreamingViews.last_ahead`, run
+after it; then the processing. A multi-pass scan's preview holds its first pass (the object turned over is placed
+by the processing's pass registration).
 
 A view during which the object moved (:class:`~rangekit.errors.MotionError`: the processing's check of each view,
 :func:`rangekit.coded.motion.detect_motion`, ``ProcessOptions.max_motion``) is left out
@@ -53,7 +54,8 @@ from pathlib import Path
 import numpy as np
 
 from rangekit.app.acquire.quiet import QuietWindows
-from rangekit.app.events import MeshReady, OnEvent, ScanStarted, ViewAcquired, ViewDecoded, ViewPlaced, emit
+from rangekit.app.events import (MeshReady, MeshStarted, OnEvent, ScanStarted, ViewAcquired, ViewDecoded, ViewPlaced,
+                                 emit)
 from rangekit.app.process.options import ProcessOptions
 from rangekit.errors import MotionError
 from rangekit.formats.sessions.session import Session
@@ -92,10 +94,12 @@ class StreamingViews:
         self.folder, self.options, self._on_event = Path(folder), options, on_event
         self._placed: dict[int, tuple[np.ndarray, PointCloud]] = {}
         self._volume = None
-        self._unplaced: list = []  # the last views, placed in the preview by write_preview
+        self._preview_due = False                  # a view came into the volume since the preview was written
+        self._preview_path: Path | None = None     # the preview written, if it was
+        self._preview_failed: Exception | None = None   # the final view's writing of it failed (write_preview)
         self._unregistered: list = []  # the last views, their registration ahead done by last_ahead
         self._laser = False
-        self.acquisition_over = False              # set once the acquisition has ended: every view is urgent
+        self.acquisition_over = False              # set once the last view is acquired: every view is urgent
         self.decoded: list[int] = []               # views decoded here, in order
         self.moved: dict = {}                      # index -> MotionError: views the object moved during
         self.results: dict = {}                    # index -> (cloud, ViewMaps): the processing takes them as they are
@@ -109,7 +113,7 @@ class StreamingViews:
         self._frames = None                        # FramesAhead: the frames of it read so far
         self.read_ahead: dict[int, int] = {}       # index -> frames of the view read while it was taken (prefetch)
         self.blocks = None                         # BlocksAhead: the blocks fusion's volume, from view 0 on
-        self._blocks_last: list = []               # the last views' (k, depth, angle), integrated by last_ahead
+        self._blocks_last: list = []               # the last views' (k, depth, angle), integrated by finish_blocks
 
     def views_of(self, event) -> list[int]:
         """The views ``event`` (one of the scan's) brings to process: each view of a coded-light scan as it is
@@ -158,37 +162,41 @@ class StreamingViews:
             self.moved[k] = exc
 
     def write_preview(self) -> Path | None:
-        """After the last view's steps: place the last views, then write and announce the preview surface (the
-        scan does it beside its processing); its path, or None (no view placed). Then the blocks fusion's volume is
-        finished (:meth:`rangekit.app.process.blocks.BlocksAhead.finish`; the processing waits for this call,
-        ``Memo.before_mesh``, before it takes it)."""
-        try:
-            return self._preview()
-        finally:   # then the blocks fusion's last views and marching cubes, beside the registration (Open3D holds
-            if self.blocks is not None:   # the GIL: after the preview, not beside it; the processing waits for it)
-                self.blocks.finish(self._blocks_last)
-            self._blocks_last = []
-
-    def _preview(self) -> Path | None:
-        for k, cloud, depth, session in self._unplaced:   # by the turntable prior: nothing is placed after them
-            self._place_and_integrate(k, cloud, depth, session, refine=False)
-        self._unplaced = []
-        if self._volume is None:
-            return None
+        """Write and announce the preview surface, the streaming volume's (:class:`MeshStarted`, then
+        :class:`MeshReady` ``"preview"``): the scan's final view does it before its cache is written, and the scan
+        calls it again after the last view's steps, before its processing: written again only if a view came into
+        the volume since (a resumed scan's final view, decoded first; a final view refused for motion). Its path, or
+        None (no view placed); the final view's failure to write it is raised here."""
+        if self._preview_failed is not None:
+            error, self._preview_failed = self._preview_failed, None
+            raise error
+        if self._volume is None or not self._preview_due:
+            return self._preview_path
         from rangekit.formats.meshes import save_mesh
         from rangekit.surface.mesh import mesh_from_open3d
 
+        self._emit(MeshStarted("preview"))
+        self._preview_due = False
         mesh = mesh_from_open3d(self._volume.mesh())
         if len(mesh.triangles) == 0:
             return None
         path = self.folder / PREVIEW_FILE
         save_mesh(path, mesh)
+        self._preview_path = path
         self._emit(MeshReady("preview", path, mesh))
         return path
 
+    def finish_blocks(self) -> None:
+        """After the preview: the blocks fusion's last views integrated and its surface made
+        (:meth:`rangekit.app.process.blocks.BlocksAhead.finish`); the scan runs it beside its processing, which waits
+        for it (``Memo.before_mesh``) before it takes the volume."""
+        if self.blocks is not None:
+            self.blocks.finish(self._blocks_last)
+        self._blocks_last = []
+
     def last_ahead(self) -> None:
         """After the last view's steps: its work ahead (module doc, 4; not its errors against the truth), which the
-        processing then takes; the scan runs it beside :meth:`write_preview`, so the preview waits for the last
+        processing then takes; the scan runs it after :meth:`write_preview`, so the preview waits for the last
         view's decoding only (issue 51)."""
         for k, cloud, maps, session in self._unregistered:
             try:
@@ -208,9 +216,16 @@ class StreamingViews:
         session = Session.load(self.folder)
         view, rig = session.views[k], session.rig
         total = len(session.views)
-        # The last view (or any once the acquisition is over) is what the processing waits for: decoded on every
-        # core (the same maps: each pixel's decode is its own), its work ahead first, its preview placing after.
+        # The last view (or any once the acquisition is over) is what the preview and the processing wait for:
+        # decoded on every core (the same maps: each pixel's decode is its own), into the preview (placed by the
+        # turntable prior) before its cache is written, the scan's final view then writing it; its work ahead after.
         last = self.acquisition_over or k == total - 1
+        previewed = []
+
+        def preview_first(cloud: PointCloud, maps) -> None:
+            self._preview(k, cloud, maps.depth, session)
+            previewed.append(k)
+
         settings = cache_settings(session, self.options.method, self.options.table_margin, self.options.max_motion)
         have = None   # the frames read ahead (prefetch), handed on and dropped with the view's stack
         if self._frames is not None and self._frames.view == k:
@@ -219,20 +234,21 @@ class StreamingViews:
             self.read_ahead[k] = len(have[1])
         cloud, maps = view_cloud(view, session.pattern, rig, settings, session.capture.full_scale,
                                  table_transform(rig), self.options.table_margin, session, cores=0 if last else 1,
-                                 have=have)
+                                 have=have, before_writes=preview_first if last else None)
         del have
         self.decoded.append(k)
         self.results[k] = (cloud, maps)
         self._emit(ViewDecoded(k, total, view.folder.name, cloud))
-        placed = rig.T_world_table is not None and session.plan.view_passes()[k] == 0 and len(cloud) > 0
         self._blocks_start(k, session)
-        if last:   # its work ahead beside the preview (last_ahead), its errors after the mesh
+        # the acquisition ended while this view was decoded (its last view acquired: the worker hands over): the
+        # preview waits for this view, so its ICP placing and its work ahead wait for the preview, as a last view's
+        if last or self.acquisition_over:   # its work ahead after the preview (last_ahead), its errors after the mesh
             self._unregistered.append((k, cloud, maps, session))
             self._blocks_last.append((k, maps.depth, view.angle))
-            if placed:
-                self._unplaced.append((k, cloud, maps.depth, session))
+            if not previewed:   # taken from its cache (a resumed scan)
+                self._preview(k, cloud, maps.depth, session)
             return
-        if placed:
+        if self._placed_view(k, cloud, session):
             self._place_and_integrate(k, cloud, maps.depth, session)
         if self.blocks is not None:
             self.quiet.wait(BLOCKS_INTEGRATE_S)   # Open3D holds the GIL throughout (INTEGRATE_S)
@@ -249,6 +265,23 @@ class StreamingViews:
             from rangekit.app.process.blocks import BlocksAhead
 
             self.blocks = BlocksAhead(session.rig, session.views[0].angle)
+
+    @staticmethod
+    def _placed_view(k: int, cloud: PointCloud, session: Session) -> bool:
+        """Whether view ``k`` goes into the preview: a turntable's first pass, with points."""
+        return session.rig.T_world_table is not None and session.plan.view_passes()[k] == 0 and len(cloud) > 0
+
+    def _preview(self, k: int, cloud: PointCloud, depth: np.ndarray, session: Session) -> None:
+        """A last view (module doc) into the preview, placed by the turntable prior (:meth:`_place`); the scan's
+        final view then writes the preview (:meth:`write_preview`; its failure is kept for the scan's own call, the
+        view's steps go on)."""
+        if self._placed_view(k, cloud, session):
+            self._place_and_integrate(k, cloud, depth, session, refine=False)
+        if k == len(session.views) - 1:
+            try:
+                self.write_preview()
+            except Exception as exc:   # noqa: BLE001 - raised by the scan's write_preview (module doc)
+                self._preview_failed = exc
 
     def _free(self, k: int, maps, session: Session) -> None:
         """View ``k``'s free depth, the closed mesh's carving (:func:`rangekit.app.process.decode.free_depth_of`,
@@ -336,6 +369,7 @@ class StreamingViews:
         camera = rig.camera.with_pose(compose(T, rig.camera.T_world_cam))
         self.quiet.wait(INTEGRATE_S)   # Open3D holds the GIL throughout: in a wait of the capture, not across a frame
         self._volume.integrate(depth, camera)
+        self._preview_due = True
 
 
 def _rotated(T: np.ndarray, normals: np.ndarray | None) -> np.ndarray | None:

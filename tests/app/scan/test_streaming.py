@@ -113,6 +113,84 @@ def test_views_are_placed_near_their_true_poses_and_the_preview_lies_on_the_obje
     assert len(mesh.triangles) > 1000 and rms < 3e-4
 
 
+def test_the_final_view_goes_into_the_preview_before_its_cache_is_written(streamed):
+    """The last view is decoded on the caller's thread (the worker starts none from its ViewAcquired on), placed
+    and integrated, and the preview written before its cache (issue 51: the preview waits for nothing but the last
+    view's decoding); the preview is announced once."""
+    out, seen, preview, _, streaming = streamed
+    last = N_VIEWS - 1
+    order = [(type(e).__name__, getattr(e, "index", getattr(e, "kind", None))) for e in seen
+             if isinstance(e, (ev.ViewPlaced, ev.ViewDecoded, ev.MeshStarted, ev.MeshReady))]
+    assert (order.index(("ViewDecoded", last - 1)) < order.index(("ViewPlaced", last))
+            < order.index(("MeshStarted", "preview")) < order.index(("MeshReady", "preview"))
+            < order.index(("ViewDecoded", last))), order
+    assert order.count(("MeshReady", "preview")) == 1
+    assert preview.stat().st_mtime_ns <= (out / f"view_{last:03d}" / "cloud.json").stat().st_mtime_ns
+    assert streaming.write_preview() == preview and order.count(("MeshReady", "preview")) == 1
+
+
+def test_a_preview_that_cannot_be_written_leaves_the_views_steps_and_is_raised_by_write_preview(reference_session,
+                                                                                                  tmp_path):
+    """The final view writes the preview before its cache: a failure there (preview.ply a folder) does not stop the
+    view's steps (its cache written, handed to the processing); the scan's own write_preview raises it."""
+    folder = copy_session(reference_session, tmp_path / "s")
+    for k in range(N_VIEWS):
+        for name in CACHE:
+            (folder / f"view_{k:03d}" / name).unlink(missing_ok=True)
+    (folder / PREVIEW_FILE).mkdir()
+    streaming = _streaming(folder)
+    streaming.on_event(ev.ScanStarted(folder, N_VIEWS, 0, 60, False, None, False))
+    for k in range(N_VIEWS):
+        streaming.on_event(ev.ViewAcquired(k, N_VIEWS, folder / f"view_{k:03d}", 0.0, 60))
+    streaming.drain()
+    assert streaming.error is None and streaming.steps.decoded == list(range(N_VIEWS))
+    assert all((folder / f"view_{k:03d}" / "cloud.json").is_file() for k in range(N_VIEWS))
+    with pytest.raises(OSError):
+        streaming.write_preview()
+
+
+def test_a_view_the_worker_is_on_when_the_last_is_acquired_leaves_the_rest_of_its_steps_to_the_scan(
+        reference_session, tmp_path):
+    """The last view acquired while the worker is on view N-2 (held after its decode by its ViewDecoded's
+    subscriber): the worker starts nothing more, and view N-2's ICP placing, free depth and registration ahead wait
+    for the preview (its placing by the prior, its work ahead in last_ahead, on the scan's thread), as a last
+    view's; the processing gives the bytes ``rangekit process`` writes."""
+    import threading
+
+    from rangekit.app.scan.scan import _preview_then_process, process
+
+    scanned, fresh = copy_session(reference_session, tmp_path / "scanned"), copy_session(reference_session,
+                                                                                         tmp_path / "fresh")
+    for folder in (scanned, fresh):
+        for k in range(N_VIEWS):
+            for name in CACHE:
+                (folder / f"view_{k:03d}" / name).unlink(missing_ok=True)
+    decoded, gate = threading.Event(), threading.Event()
+
+    def on_event(event):
+        if isinstance(event, ev.ViewDecoded) and event.index == N_VIEWS - 2:
+            decoded.set()
+            gate.wait(120)
+
+    streaming = _streaming(scanned, on_event)
+    streaming.on_event(ev.ScanStarted(scanned, N_VIEWS, 0, 60, False, None, False))
+    for k in range(N_VIEWS - 1):
+        streaming.on_event(ev.ViewAcquired(k, N_VIEWS, scanned / f"view_{k:03d}", 0.0, 60))
+    assert decoded.wait(300)
+    streaming.on_event(ev.ViewAcquired(N_VIEWS - 1, N_VIEWS, scanned / f"view_{N_VIEWS - 1:03d}", 0.0, 60))
+    gate.set()
+    streaming.drain()
+    steps = streaming.steps
+    assert streaming.error is None and steps.decoded == list(range(N_VIEWS))
+    assert sorted(steps.free) == list(range(N_VIEWS - 2)) and N_VIEWS - 2 not in steps.registration.views
+    options = ProcessOptions(report=False)
+    _preview_then_process(streaming, Session.load(scanned), options, None)
+    assert sorted(steps.free) == list(range(N_VIEWS)) and (scanned / PREVIEW_FILE).is_file()
+    process(fresh, options)
+    for name in ("mesh.ply", "mesh_watertight.ply", "merged.ply", "poses.json"):
+        assert (scanned / name).read_bytes() == (fresh / name).read_bytes(), name
+
+
 def test_a_resumed_scan_decodes_nothing_twice(streamed, tmp_path):
     """Views 0 and 1 streamed, the scan stopped; resumed, the streaming processor takes the done views from their
     cache (files untouched) and decodes only views 2 and 3."""
@@ -208,10 +286,11 @@ def test_the_mesh_is_the_same_whichever_views_the_worker_took_before_the_acquisi
         worker.on_event(ev.ViewAcquired(k, N_VIEWS, str(scanned / f"view_{k:03d}"), 0.0, 1))
     worker.drain()
     assert worker.error is None and worker.steps.decoded == list(range(N_VIEWS))
-    with start(Where.THREAD, worker.write_preview) as preview:   # as rangekit.app.scan.scan does
-        memo = worker.memo()
-        memo.before_mesh = _waiting(preview)
-        _process(Session.load(scanned), options, None, Plan.STREAMING, memo)
+    with start(Where.HERE, worker.write_preview) as preview:   # as rangekit.app.scan.scan._preview_then_process
+        with start(Where.THREAD, worker.finish_blocks) as blocks:
+            memo = worker.memo()
+            memo.before_mesh = _waiting(blocks)
+            _process(Session.load(scanned), options, None, Plan.STREAMING, memo)
         assert preview.result() is not None
     assert sorted(memo.free) == list(range(N_VIEWS)) and memo.registration.taken["matches"] > 0
     assert memo.blocks.taken and memo.blocks.views == list(range(N_VIEWS))

@@ -243,9 +243,9 @@ class StreamingWorker:
     :class:`~rangekit.app.events.ViewAcquired` on it starts none
     (:meth:`rangekit._runtime.queue_worker.QueueWorker.hand_over`): that view, and any queued behind the one it is
     on, are decoded by :meth:`drain` on the scan's thread, at its priority and on every core. ``steps``: the
-    per-view steps (:class:`rangekit.app.scan.streaming.StreamingViews`). Use :meth:`on_event` as a subscriber of the scan's
-    events, then :meth:`drain` and :meth:`write_preview` (or :meth:`finish`, both), or :meth:`stop` on an error;
-    :meth:`memo` hands on what was done to the processing."""
+    per-view steps (:class:`rangekit.app.scan.streaming.StreamingViews`). Use :meth:`on_event` as a subscriber of
+    the scan's events, then :meth:`drain`, :meth:`write_preview` and :meth:`finish_blocks` (or :meth:`finish`, all
+    three), or :meth:`stop` on an error; :meth:`memo` hands on what was done to the processing."""
 
     def __init__(self, steps) -> None:
         self.steps = steps
@@ -299,9 +299,11 @@ class StreamingWorker:
             self.steps.finish_blocks()
 
     def finish(self):
-        """:meth:`drain`, then :meth:`write_preview`."""
+        """:meth:`drain`, then :meth:`write_preview` (its answer) and :meth:`finish_blocks`."""
         self.drain()
-        return self.write_preview()
+        preview = self.write_preview()
+        self.finish_blocks()
+        return preview
 
     def stop(self) -> None:
         """Stop after the view going through its steps (its cache is complete or not written); the queued ones

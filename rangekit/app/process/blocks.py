@@ -120,6 +120,15 @@ class BlocksAhead:
             self._volume.integrate(depth, camera)
         self.views.append(k)
 
+    def send_now(self, k: int, depth: np.ndarray, angle: float) -> bool:
+        """A last view (one :meth:`finish` would integrate), given as soon as it is decoded: sent to the volume's
+        child now (True: it integrates beside the preview; pickled and queued here, a few milliseconds), or left to
+        :meth:`finish` (False: a volume in this process would hold the GIL before the preview)."""
+        if self._child is None:
+            return False
+        self.add(k, depth, angle)
+        return True
+
     def _stop(self) -> None:
         self.broken = True
         if self._child is not None:

@@ -27,8 +27,8 @@ calls the steps on a worker thread of lower priority that backs off while the ca
    simulator the truth's samples and the view's errors against the truth
    (:attr:`StreamingViews.evaluate`); for the blocks fusion (the scan's default) its depth map integrated into the
    0.4 mm volume at its turntable prior pose (:attr:`StreamingViews.blocks`,
-   :class:`rangekit.app.process.blocks.BlocksAhead`; the last view's, and the marching cubes, after the preview on
-   its thread, beside the registration).
+   :class:`rangekit.app.process.blocks.BlocksAhead`, in a child process: the last view's sent as it is decoded, the
+   marching cubes waited for after the preview on its thread, beside the registration).
 
 While the last view is taken, its frames are read as they are written (:meth:`StreamingViews.prefetch`, between
 the worker's views; :mod:`rangekit.app.scan.frames_ahead`), so that after its last frame only the rest are read.
@@ -228,7 +228,8 @@ class StreamingViews:
         self._blocks_start(k, session)
         if last:   # its work ahead beside the preview (last_ahead), its errors after the mesh
             self._unregistered.append((k, cloud, maps, session))
-            self._blocks_last.append((k, maps.depth, view.angle))
+            if self.blocks is not None and not self.blocks.send_now(k, maps.depth, view.angle):   # its child's: now
+                self._blocks_last.append((k, maps.depth, view.angle))
             if placed:
                 self._unplaced.append((k, cloud, maps.depth, session))
             return

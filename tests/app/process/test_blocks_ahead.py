@@ -43,8 +43,9 @@ def test_the_volume_filled_in_its_child_is_the_one_filled_here():
     centre, depths = _views(rig)
     ahead = BlocksAhead(rig, ANGLES[0])
     assert ahead._child is not None                      # the volume in a child process of its own
-    for k in range(3):
+    for k in range(2):
         ahead.add(k, depths[k], ANGLES[k])
+    assert ahead.send_now(2, depths[2], ANGLES[2])      # a last view, sent to the child as it is decoded
     ahead.finish([(3, depths[3], ANGLES[3])])
     assert ahead._child is None and not ahead.broken
     poses = np.stack([prior_pose(rig, ANGLES[0], a) for a in ANGLES])

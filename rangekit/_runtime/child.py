@@ -22,6 +22,10 @@ small work, whose run is shorter than a child's start: about 1 s of imports) beh
 - A child can be started ahead of its call (:func:`spawn_child`, with the modules the call will need
   imported while the parent still works: Open3D alone takes 0.6 s) and given the call later
   (:meth:`ChildCall.start`).
+- A call started with ``more=True`` is then sent further objects (:meth:`ChildCall.send`, queued: the caller
+  never waits for the child), which it reads with :func:`messages` until the parent's :meth:`ChildCall.result`
+  (or :meth:`ChildCall.close_input`) ends them: a scan's blocks volume filled in a child view by view (issue 51,
+  :class:`rangekit.app.process.blocks.BlocksAhead`).
 """
 
 from __future__ import annotations
@@ -30,6 +34,7 @@ import importlib
 import multiprocessing
 import os
 import pickle
+import queue
 import subprocess
 import sys
 import threading
@@ -39,7 +44,7 @@ from typing import Any, Callable, Sequence
 
 from rangekit.errors import RangekitError
 
-__all__ = ["ChildCall", "ThreadCall", "call_beside", "child_call", "spawn_child"]
+__all__ = ["ChildCall", "ThreadCall", "call_beside", "child_call", "spawn_child", "messages"]
 
 # The child's first lines: no Ctrl-C, the parent's import path, then serve the call.
 _BOOT = ("import pickle, signal, sys; signal.signal(signal.SIGINT, signal.SIG_IGN); "
@@ -74,6 +79,23 @@ def _serve() -> None:
         out.write(data)
 
 
+def messages():
+    """In a child's call started with ``more=True``: the objects the parent sends (:meth:`ChildCall.send`), in
+    order, until it ends them."""
+    while True:
+        try:
+            item = pickle.load(sys.stdin.buffer)
+        except EOFError:   # the parent closed its end: no more
+            return
+        if isinstance(item, str) and item == _END:
+            return
+        yield item
+
+
+#: The parent's last message to a call started with ``more=True`` (:func:`messages`).
+_END = "rangekit._runtime.child: end of messages"
+
+
 class ChildCall:
     """A call running in a child process (see the module docstring); a context manager that ends the
     child if the block raises. ``ChildCall(imports)`` starts the child, which imports ``imports`` (module
@@ -83,18 +105,41 @@ class ChildCall:
         self._name = "a call"
         self._proc = subprocess.Popen([sys.executable, "-c", _BOOT], stdin=subprocess.PIPE, stdout=subprocess.PIPE)
         self._writer: threading.Thread | None = None
+        self._queue: queue.SimpleQueue = queue.SimpleQueue()   # payloads for the writer thread; None: close stdin
+        self._open = False                                     # more messages may follow (start's ``more``)
         self._send(pickle.dumps(list(sys.path)) + pickle.dumps(list(imports)), close=False)   # a few hundred bytes
 
-    def start(self, fn: Callable, args: tuple = (), kwargs: dict | None = None) -> "ChildCall":
-        """Send the call ``fn(*args, **kwargs)`` (once); return self."""
+    def start(self, fn: Callable, args: tuple = (), kwargs: dict | None = None, more: bool = False) -> "ChildCall":
+        """Send the call ``fn(*args, **kwargs)`` (once); ``more``: further objects follow (:meth:`send`, read
+        with :func:`messages`); return self."""
         if self._writer is not None:
             raise RuntimeError(f"{self._name} was already sent to this child process")
         self._name = f"{fn.__module__}.{fn.__qualname__}"
-        payload = pickle.dumps((fn, args, kwargs or {}), protocol=pickle.HIGHEST_PROTOCOL)
-        self._writer = threading.Thread(target=self._send, args=(payload,), daemon=True,
-                                        name=f"rangekit-{fn.__name__}-send")
+        self._queue.put(pickle.dumps((fn, args, kwargs or {}), protocol=pickle.HIGHEST_PROTOCOL))
+        self._open = bool(more)
+        if not more:
+            self._queue.put(None)
+        self._writer = threading.Thread(target=self._write_queued, daemon=True, name=f"rangekit-{fn.__name__}-send")
         self._writer.start()
         return self
+
+    def send(self, item: Any) -> None:
+        """Queue ``item`` for the call started with ``more=True`` (:func:`messages`); returns at once."""
+        if not self._open:
+            raise RuntimeError(f"{self._name} takes no more messages")
+        self._queue.put(pickle.dumps(item, protocol=pickle.HIGHEST_PROTOCOL))
+
+    def close_input(self) -> None:
+        """End the messages of a call started with ``more=True`` (:meth:`result` does it too)."""
+        if self._open:
+            self._open = False
+            self._queue.put(pickle.dumps(_END))
+            self._queue.put(None)
+
+    def _write_queued(self) -> None:
+        while (payload := self._queue.get()) is not None:
+            self._send(payload, close=False)
+        self._send(b"")
 
     def _send(self, payload: bytes, close: bool = True) -> None:
         try:
@@ -107,6 +152,7 @@ class ChildCall:
 
     def result(self) -> Any:
         """Wait for the child's answer; return it, or raise its exception."""
+        self.close_input()
         try:   # unpickled as it arrives: the answer's bytes (66 MB for Poisson's two meshes) are never held whole
             status, value = pickle.load(self._proc.stdout)
         except (EOFError, pickle.UnpicklingError):
@@ -126,6 +172,8 @@ class ChildCall:
         if self._proc.poll() is None:
             self._proc.terminate()
         self._proc.wait()
+        if self._writer is not None:
+            self._queue.put(None)   # a writer waiting for more messages: let it end
         if self._writer is not None:
             self._writer.join()
         self._proc.stdout.close()

@@ -81,12 +81,13 @@ def _spacing(tree: cKDTree, k: int) -> np.ndarray:
     return d[:, 1:].mean(axis=1)
 
 
-def _filled(tree: cKDTree, s: np.ndarray, rows: np.ndarray, k: int) -> np.ndarray:
-    """``s[rows]``, the points' spacing (:func:`_spacing`), each NaN among them computed once and kept in ``s``."""
+def _filled(tree: cKDTree, s: np.ndarray, rows: np.ndarray, k: int, workers: int = 1) -> np.ndarray:
+    """``s[rows]``, the points' spacing (:func:`_spacing`), each NaN among them computed once and kept in ``s``
+    (the query on ``workers`` threads: each point's its own, the same answers)."""
     missing = np.unique(rows[np.isnan(s[rows])])
     if len(missing):
         k = int(min(k, tree.n - 1))
-        d, _ = tree.query(tree.data[missing], k=k + 1)
+        d, _ = tree.query(tree.data[missing], k=k + 1, workers=workers)
         s[missing] = d[:, 1:].mean(axis=1)
     return s[rows]
 
@@ -102,9 +103,9 @@ def _within(vertices: np.ndarray, tree: cKDTree, s: np.ndarray, factor: float, m
 
 
 def _near_enough(d: np.ndarray, nearest: np.ndarray, tree: cKDTree, s: np.ndarray, factor: float, median: float,
-                 k: int) -> np.ndarray:
+                 k: int, workers: int = 1) -> np.ndarray:
     """:func:`_within` given each vertex's nearest point ``nearest`` (V,) and its distance ``d`` (V,)."""
-    return d <= factor * np.minimum(_filled(tree, s, nearest, k), MAX_SPACING_RATIO * median)
+    return d <= factor * np.minimum(_filled(tree, s, nearest, k, workers), MAX_SPACING_RATIO * median)
 
 
 def observed_vertices(vertices: np.ndarray, points: np.ndarray, *, spacing: np.ndarray | None = None,
@@ -227,14 +228,14 @@ class ObservedRule:
         """:meth:`observed_part` and its vertices' ``k`` nearest points from the same k-d tree query: ``(mesh,
         distances (V, k) metres, indices (V, k) into the tree's points)``, nearest first (what
         :func:`rangekit.surface.refine.refine_to_points` projects the vertices with); the query on ``workers``
-        threads (scipy's: each vertex's query its own, the same answers)."""
+        threads (scipy's: each vertex's query its own, the same answers), the nearest points' spacing too."""
         from rangekit.errors import MeshError
 
         V = np.asarray(surface.vertices, dtype=np.float64)
         d, idx = self.tree.query(V, k=k, workers=workers)
         d, idx = d.reshape(len(V), k), idx.reshape(len(V), k)
-        flags = _near_enough(d[:, 0], idx[:, 0], self.tree, self.spacing, self.factor, self.median, self.k) \
-            if len(V) else np.zeros(0, dtype=bool)
+        flags = _near_enough(d[:, 0], idx[:, 0], self.tree, self.spacing, self.factor, self.median, self.k,
+                             workers) if len(V) else np.zeros(0, dtype=bool)
         observed, used = _kept(surface, flags)
         if len(observed.triangles) == 0:
             raise MeshError(f"no triangle of the fused surface ({len(surface.triangles)} triangles) lies within "

@@ -139,3 +139,35 @@ def test_poissons_child_loads_open3d_and_the_fusion_without_numba_scipy_or_plotl
         got = call_beside(loaded, "open3d", "rangekit.surface.fusion", "numba", "scipy", "plotly", "dash",
                           in_child=True, child=child).result()
     assert got == ["open3d", "rangekit.surface.fusion"]
+
+
+def summed_messages(start):
+    from rangekit._runtime.child import messages
+
+    return start + sum(int(x.sum()) for x in messages())
+
+
+def test_a_call_with_more_reads_every_message_sent_until_its_result():
+    import numpy as np
+
+    parts = [np.arange(n * 100_000, dtype=np.int64) for n in range(1, 5)]    # 0.8-3.2 MB each: more than a pipe holds
+    with spawn_child() as child:
+        child.start(summed_messages, (7,), more=True)
+        for p in parts:
+            child.send(p)
+        assert child.result() == 7 + sum(int(p.sum()) for p in parts)
+    with child_call(summed_messages, 3) as call:           # no more: the call reads none
+        assert call.result() == 3
+
+
+def test_a_call_with_more_ended_before_its_messages_leaves_no_process():
+    with spawn_child() as child:
+        child.start(summed_messages, (0,), more=True)
+        child.send(np_zeros())
+    assert child._proc.returncode is not None and not child._writer.is_alive()
+
+
+def np_zeros():
+    import numpy as np
+
+    return np.zeros(10)

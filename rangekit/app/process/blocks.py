@@ -20,6 +20,8 @@ Units are metres; poses ``T_world_view`` (4, 4) in the session world (the first 
 
 from __future__ import annotations
 
+import weakref
+
 import numpy as np
 
 from rangekit.geometry import apply_T, compose
@@ -27,7 +29,7 @@ from rangekit.rig.rig_file import Rig, turntable_prior
 from rangekit.surface.mesh import TriangleMesh
 
 __all__ = ["BLOCKS_VOXEL_M", "BLOCKS_EXTEND_PX", "PRIOR_AGREES_M", "blocks_volume", "prior_pose", "volume_poses",
-           "BlocksAhead", "blocks_surface", "project_observed", "poisson_closed"]
+           "BlocksAhead", "FILL_IMPORTS", "fill_volume", "blocks_surface", "project_observed", "poisson_closed"]
 
 #: The volume's voxel (metres) and each view's depth carried past its rim (pixels): 0.6 mm lost the thin object's
 #: walls (95.2% complete), 0 px the strips every view's data stops short of (99.41% against 99.67% on the default
@@ -80,11 +82,25 @@ class BlocksAhead:
     the object moved) ends the filling, and the processing then fills its own. :meth:`finish` integrates the last
     views and makes the surface (a scan calls it once its preview is written, on the preview's thread, beside the
     registration); :meth:`surface_of` gives that surface where it is exactly the one :func:`blocks_surface` would
-    make. No thread of its own: the runner's placements run it."""
+    make. No thread of its own: the runner's placements run it.
+
+    The volume lives in a child process started at view 0 (:func:`rangekit._runtime.child.spawn_child`; each view's
+    depth and camera sent to it, :func:`fill_volume`): Open3D holds the GIL through the integration and the marching
+    cubes, which in this process left the joint registration beside them a 20% share of the interpreter (issue 51
+    M7). In a daemonic process (a Dask worker) it is filled here, as :func:`blocks_surface` fills its own: the same
+    bytes either way."""
 
     def __init__(self, rig: Rig, angle0: float) -> None:
+        from rangekit._runtime.child import spawn_child
+
         self._rig, self._angle0 = rig, float(angle0)
-        self._volume = blocks_volume()
+        self._child = spawn_child(FILL_IMPORTS)
+        if self._child is not None:
+            self._child.start(fill_volume, more=True)
+            weakref.finalize(self, self._child.terminate)   # a scan that never finishes it leaves no process
+            self._volume = None
+        else:
+            self._volume = blocks_volume()
         self.views: list[int] = []     # the view indices integrated, in order
         self.broken = False            # a view came out of order (or the surface failed): nothing here is taken
         self._surface: TriangleMesh | None = None
@@ -93,25 +109,46 @@ class BlocksAhead:
     def add(self, k: int, depth: np.ndarray, angle: float) -> None:
         """Integrate view ``k`` (its (H, W) camera-frame depth in metres, its turntable ``angle`` in radians) if it
         is the next in index order; else stop filling (:attr:`broken`)."""
-        if self.broken or self._volume is None or k != len(self.views):
-            self.broken = True
+        if self.broken or k != len(self.views) or (self._volume is None and self._child is None):
+            self._stop()
             return
         rig = self._rig
-        self._volume.integrate(depth, rig.camera.with_pose(compose(prior_pose(rig, self._angle0, angle),
-                                                                   rig.camera.T_world_cam)))
+        camera = rig.camera.with_pose(compose(prior_pose(rig, self._angle0, angle), rig.camera.T_world_cam))
+        if self._child is not None:
+            self._child.send((depth, camera))
+        else:
+            self._volume.integrate(depth, camera)
         self.views.append(k)
+
+    def send_now(self, k: int, depth: np.ndarray, angle: float) -> bool:
+        """A last view (one :meth:`finish` would integrate), given as soon as it is decoded: sent to the volume's
+        child now (True: it integrates beside the preview; pickled and queued here, a few milliseconds), or left to
+        :meth:`finish` (False: a volume in this process would hold the GIL before the preview)."""
+        if self._child is None:
+            return False
+        self.add(k, depth, angle)
+        return True
+
+    def _stop(self) -> None:
+        self.broken = True
+        if self._child is not None:
+            self._child.terminate()
+        self._child = self._volume = None
 
     def finish(self, last: list) -> None:
         """Integrate the ``last`` views (``(k, depth, angle)`` each), then make the surface (marching cubes in one
-        order) and let the volume go; an error leaves the surface to the processing (:attr:`broken`)."""
+        order) and let the volume go; an error leaves the surface to the processing (:attr:`broken`). With the
+        volume in its child, this thread waits for the child's answer without the GIL."""
         try:
             for k, depth, angle in last:
                 self.add(k, depth, angle)
             if not self.broken:
-                self._surface = self._volume.surface()
+                self._surface = self._child.result() if self._child is not None else self._volume.surface()
         except Exception:   # noqa: BLE001 - the processing fills its own volume and meets the error
             self.broken = True
-        self._volume = None
+        if self._child is not None:
+            self._child.terminate()
+        self._child = self._volume = None
 
     def surface_of(self, indices: list[int]) -> TriangleMesh | None:
         """The surface made by :meth:`finish` when it holds exactly the views ``indices`` (in order, at their
@@ -120,6 +157,22 @@ class BlocksAhead:
             return None
         self.taken = True
         return self._surface
+
+
+#: What :class:`BlocksAhead`'s child imports while the scan's first view is decoded (Open3D: 0.6 s).
+FILL_IMPORTS = ("open3d", "rangekit.surface.block_volume", "rangekit.app.process.blocks")
+
+
+def fill_volume() -> TriangleMesh:
+    """In :class:`BlocksAhead`'s child: a blocks volume (:func:`blocks_volume`) filled with the ``(depth, camera)``
+    views the scan sends (:func:`rangekit._runtime.child.messages`), in order; its surface in one order
+    (:meth:`rangekit.surface.block_volume.BlockVolume.surface`)."""
+    from rangekit._runtime.child import messages
+
+    volume = blocks_volume()
+    for depth, camera in messages():
+        volume.integrate(depth, camera)
+    return volume.surface()
 
 
 def blocks_surface(maps: list, poses: np.ndarray, rig: Rig, ahead: BlocksAhead | None = None,

@@ -186,6 +186,8 @@ def _fuse(registered: RegisteredViews, session: Session, options: ProcessOptions
                + ("; measuring the views against the true surface alongside" if evaluate is not None and not late
                   else ""))
     blocks = options.fusion == "blocks"   # its closed mesh is Poisson's (blocks.poisson_closed): the child is that's
+    # a scan's blocks: the observed rule (its k-d tree) first, while its volume makes the surface in its own child
+    rule = observed_rule(given, options) if blocks and runner.memo.blocks is not None else None
     if blocks and runner.memo.blocks is not None and runner.memo.before_mesh is not None:
         runner.memo.before_mesh()   # a scan's preview, then its volume finished on the same thread (BlocksAhead)
     fn, args, kwargs = surfaces(given if options.fusion == "poisson" else registered, options, session.rig,
@@ -202,7 +204,7 @@ def _fuse(registered: RegisteredViews, session: Session, options: ProcessOptions
         elif not late:
             measure_views(None, registered)
         runner.release_memory()
-        rule = observed_rule(given, options)
+        rule = rule if rule is not None else observed_rule(given, options)
         sample = given.sample   # (the blocks fusion's closed mesh's input; None otherwise)
         runner.release_memory()   # what this process freed beside Poisson, before the closing and the evaluation
         full, trimmed = fusion.result()

@@ -27,8 +27,8 @@ calls the steps on a worker thread of lower priority that backs off while the ca
    simulator the truth's samples and the view's errors against the truth
    (:attr:`StreamingViews.evaluate`); for the blocks fusion (the scan's default) its depth map integrated into the
    0.4 mm volume at its turntable prior pose (:attr:`StreamingViews.blocks`,
-   :class:`rangekit.app.process.blocks.BlocksAhead`; the last views', and the marching cubes, after the preview
-   (:meth:`StreamingViews.finish_blocks`), beside the registration).
+   :class:`rangekit.app.process.blocks.BlocksAhead`, in a child process: the last views' sent as they are decoded,
+   the marching cubes waited for after the preview (:meth:`StreamingViews.finish_blocks`), beside the registration).
 
 While the last view is taken, its frames are read as they are written (:meth:`StreamingViews.prefetch`, between
 the worker's views; :mod:`rangekit.app.scan.frames_ahead`), so that after its last frame only the rest are read.
@@ -244,7 +244,8 @@ class StreamingViews:
         # preview waits for this view, so its ICP placing and its work ahead wait for the preview, as a last view's
         if last or self.acquisition_over:   # its work ahead after the preview (last_ahead), its errors after the mesh
             self._unregistered.append((k, cloud, maps, session))
-            self._blocks_last.append((k, maps.depth, view.angle))
+            if self.blocks is not None and not self.blocks.send_now(k, maps.depth, view.angle):   # its child's: now
+                self._blocks_last.append((k, maps.depth, view.angle))
             if not previewed:   # taken from its cache (a resumed scan)
                 self._preview(k, cloud, maps.depth, session)
             return

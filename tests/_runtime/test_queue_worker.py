@@ -10,6 +10,30 @@ import threading
 from rangekit._runtime.queue_worker import QueueWorker
 
 
+def _counted(held: list, seen: list, entries: list | None = None):
+    """A context (a context manager factory, as ``QueueWorker(context=)`` takes) that counts the blocks open in
+    ``held[0]``, appends ("exit", count left) to ``seen`` as each ends and each entering thread's name to
+    ``entries``."""
+    from contextlib import contextmanager
+
+    lock = threading.Lock()
+
+    @contextmanager
+    def counted():
+        with lock:
+            held[0] += 1
+            if entries is not None:
+                entries.append(threading.current_thread().name)
+        try:
+            yield
+        finally:
+            with lock:
+                held[0] -= 1
+                seen.append(("exit", held[0]))
+
+    return counted
+
+
 def test_items_run_in_order_on_a_lower_priority_thread_and_what_is_left_at_finish_on_the_caller():
     """Until finish the items run on the worker at its niceness; from finish on, the worker ends after the item it
     is handling and the rest run on the caller's thread at the caller's priority (issue 51: at niceness 10 beside
@@ -113,22 +137,8 @@ def test_the_context_holds_from_the_workers_first_item_through_the_items_finish_
     """QueueWorker(context=): the worker's loop runs inside it, and finish enters it on the caller's thread before
     the worker ends, so it is never left between the two (the scan's memory-reuse block: the last view, decoded on
     the caller's thread, reuses the worker's pages, rangekit.app.runner.StreamingWorker)."""
-    from contextlib import contextmanager
-
-    lock, held, seen = threading.Lock(), [0], []
-    entries = []
-
-    @contextmanager
-    def counted():
-        with lock:
-            held[0] += 1
-            entries.append(threading.current_thread().name)
-        try:
-            yield
-        finally:
-            with lock:
-                held[0] -= 1
-                seen.append(("exit", held[0]))
+    held, seen, entries = [0], [], []
+    counted = _counted(held, seen, entries)
 
     started, gate = threading.Event(), threading.Event()
 
@@ -161,20 +171,8 @@ def test_after_hand_over_no_item_starts_on_the_worker_and_finish_handles_them_on
     """hand_over (the scan's last view acquired): the item being handled goes on, the next ones (queued before or
     after) wait for finish and run on the caller's thread at its priority, in order; the worker's idle work stops
     and its context is held until finish has entered the caller's (the memory-reuse block never ends between)."""
-    from contextlib import contextmanager
-
-    lock, held, seen, idle = threading.Lock(), [0], [], []
-
-    @contextmanager
-    def counted():
-        with lock:
-            held[0] += 1
-        try:
-            yield
-        finally:
-            with lock:
-                held[0] -= 1
-                seen.append(("exit", held[0]))
+    held, seen, idle = [0], [], []
+    counted = _counted(held, seen)
 
     started, gate = threading.Event(), threading.Event()
 

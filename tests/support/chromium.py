@@ -156,16 +156,17 @@ class Page:
         """The WebDriver reference of the first element matching the CSS selector ``css``."""
         return self._client.call("POST", f"/session/{self._sid}/element", {"using": "css selector", "value": css})
 
-    def until(self, script: str, timeout: float = 60.0):
+    def until(self, script: str, timeout: float = 60.0, describe: str | None = None):
         """Run ``script`` every 0.1 s until it returns something true; that value (AssertionError after
-        ``timeout`` seconds, naming the script)."""
+        ``timeout`` seconds, naming the script and, with ``describe`` (a script too), what the page then showed)."""
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
             value = self.execute(script)
             if value:
                 return value
             time.sleep(0.1)
-        raise AssertionError(f"the page never satisfied: {script}")
+        shown = f"; the page then showed: {self.execute(describe)!r}" if describe else ""
+        raise AssertionError(f"the page never satisfied: {script}{shown}")
 
     def goto(self, url: str) -> None:
         """Navigate this tab to ``url`` (an http://127.x.x.x page: another local server, the app again)."""

@@ -34,6 +34,12 @@ def _progress_at_least(taken: int, shown: int) -> str:
             f"return p && p.views > 0 && p.taken >= {int(taken)} && p.shown >= {int(shown)} ? p : null;")
 
 
+#: What a page shows of the scan and of its events socket (said when a wait for it fails).
+_DESCRIBE = ("const c = window.rangekitEvents || {}, s = window.rangekitScanView || {};"
+             "return {text: document.getElementById('scan-state').textContent, session: c.session ?? null,"
+             " offset: c.offset, received: c.received, connects: c.connects, socket: c.socket ? c.socket.readyState : null,"
+             " name: s.name, total: s.total, views: s.views ? s.views.size : null, launched: s.launched,"
+             " exit: s.exitCode, hash: location.hash, drawn: window.rangekitScan3d ? window.rangekitScan3d.count : null};")
 #: The page follows the server's events: its socket has brought the server's first message (no job yet here).
 _FOLLOWING = "return window.rangekitEvents.session !== undefined && window.rangekitScan3d !== undefined;"
 #: Seconds a page may take to show what the server already knows (a browser on a loaded machine: generous; the
@@ -68,7 +74,8 @@ def test_pages_closing_opening_and_side_by_side_leave_the_scan_alone(tmp_path):
                     seen.append((time.monotonic(), progress))
                 time.sleep(0.25)
             if name == "b":    # the scan ended: the page shows its last views once their events came
-                seen.append((time.monotonic(), page.until(_progress_at_least(4, 3), timeout=_CATCH_UP_S)))
+                seen.append((time.monotonic(), page.until(_progress_at_least(4, 3), timeout=_CATCH_UP_S,
+                                                                describe=_DESCRIBE)))
             return seen
         try:
             results[name] = open_page(server.url, width=1200, height=900, timeout_s=900, interact=interact)["interaction"]
@@ -99,7 +106,8 @@ def test_pages_closing_opening_and_side_by_side_leave_the_scan_alone(tmp_path):
             # the page shows the views the server had taken when it opened (its replay folded in), no fewer
             c_seen["before"] = _scan_state(server)
             taken_before = sum(v["done"] for v in c_seen["before"]["views"])
-            c_seen["first"] = page.until(_progress_at_least(taken_before, 0), timeout=_CATCH_UP_S)
+            c_seen["first"] = page.until(_progress_at_least(taken_before, 0), timeout=_CATCH_UP_S,
+                                         describe=_DESCRIBE)
             c_seen["server"] = _scan_state(server)
             c_seen["drawn"] = page.until("return window.rangekitScan3d.count >= "
                                            f"{sum(v['decoded'] for v in c_seen['server']['views'])} && "

@@ -17,10 +17,11 @@ view) reuse pages instead of mapping fresh ones that the kernel must fault in an
 64 MB heaps that glibc unmaps as soon as one is wholly free, whatever the trim threshold, so inside the block
 the top pad is raised to a heap's size, which keeps them. A block larger than a heap (a view's frame stack:
 48-60 frames of 1280x1024 are 63-79 MB) is mapped on its own on a worker thread whatever the threshold:
-:func:`reused_array` keeps one per thread for the next view (:func:`adopt_kept` hands a thread's on to the thread
-that takes over its work: the scan's last view, decoded on the caller's thread once the streaming worker has
-ended). On leaving the outermost block, glibc's limits
-are set to where its own adjustment takes them (32 MB), the top pad to its default, the kept arrays dropped and
+:func:`reused_array` keeps one per thread for the next view where a stage asks for it (the scan's frames read
+ahead, :mod:`rangekit.app.scan.frames_ahead`; the batch decode reads each view into a fresh one, whose pages go
+when the view is decoded: kept, they raised ``rangekit process``'s peak); :func:`adopt_kept` hands a thread's on
+to the thread that takes over its work (the scan's last view, decoded on the caller's thread once the streaming
+worker has ended). On leaving the outermost block, glibc's limits are set to where its own adjustment takes them (32 MB), the top pad to its default, the kept arrays dropped and
 the free pages returned. Blocks may nest and overlap on several threads: the settings hold until the last one
 ends. Inside, numpy's advice for huge pages on its large arrays is off too: the pages the block does fault in
 (its first view's) then come 4 kB at a time; as 2 MB huge pages the kernel spent about 4x the system time

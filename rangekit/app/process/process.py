@@ -198,6 +198,7 @@ def _fuse(registered: RegisteredViews, session: Session, options: ProcessOptions
     with runner.beside(work, fn, *args, where=where, child=None if blocks else child, **kwargs) as fusion:
         if not blocks:   # blocks: merged.ply once mesh.ply is out (the blocks' surface was made ahead in a scan)
             save_merged(out, given, registered)
+        runner.release_memory()   # the input's copy sent to the fusion's child, the merged file's: before the casts
         if evaluate is not None and not late:
             with runner.stage(Stage.EVALUATE, reuse_memory=True):   # each view's casts reuse the last's pages
                 measure_views(evaluate, registered)

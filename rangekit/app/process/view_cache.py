@@ -14,11 +14,9 @@ import zipfile
 from dataclasses import replace
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import nullcontext
-from functools import partial
 
 import numpy as np
 from rangekit._runtime.executor import ordered_map, worker_count
-from rangekit._runtime.memory import reused_array
 from rangekit._runtime.threads import numba_threads, one_blas_thread
 
 from rangekit import __version__
@@ -230,13 +228,13 @@ def _frame_folders(v: SessionView, settings: dict) -> list:
 
 
 def _read_stacks(v: SessionView, folders: list, session: Session | None, have=None) -> list:
-    """Each folder's frames as one stack; inside the decode stage's memory reuse each thread's stacks go into the
-    arrays it had for its last view (:func:`rangekit._runtime.memory.reused_array`: a 60-frame stack is 79 MB of
-    fresh pages otherwise). ``have``: the frames of a one-folder view already read (:func:`view_cloud`)."""
+    """Each folder's frames as one stack, each in a fresh array freed as soon as the view is decoded: kept for a
+    thread's next view (:func:`rangekit._runtime.memory.reused_array`) the decode stage's peak was 110-170 MB higher
+    (1.41-1.47 GB against 1.29-1.33 GB, ``rangekit process`` of the 12-view default session, issue 51), for no CPU
+    that a side-by-side measured (20.7 against 20.8 CPU-s). ``have``: the frames of a one-folder view already read (:func:`view_cloud`)."""
     if session is None:
         return [read_stack(list_images(f)) for f in folders]
-    return [read_view_stack(session, v, f, empty=partial(reused_array, f"frames{k}"),
-                            have=have if len(folders) == 1 else None) for k, f in enumerate(folders)]
+    return [read_view_stack(session, v, f, have=have if len(folders) == 1 else None) for f in folders]
 
 
 def _check_still(stacks, spec: PatternSpec, decoded: np.ndarray, max_motion: float) -> None:
@@ -265,8 +263,7 @@ def _decode_view(v: SessionView, held: list, white_image: np.ndarray, spec: Patt
         if settings.get("max_motion") is not None:
             _check_still(stacks if exposures else [stacks], spec, np.isfinite(dec.proj_col), settings["max_motion"])
     # the decoded white copied out of the stack (a view of it otherwise): the frames are freed before the
-    # triangulation (a view's peak 75 MB lower at 60 frames; inside the decode stage's memory reuse the stack is
-    # kept for the thread's next view instead, rangekit._runtime.memory.reused_array)
+    # triangulation (a view's peak 75 MB lower at 60 frames)
     dec = replace(dec, white=np.array(dec.white))
     del stacks
     rec = reconstruct_decoded(dec, rig.camera, rig.projector, method=settings["method"], full_scale=full_scale)

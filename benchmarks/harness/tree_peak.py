@@ -8,6 +8,11 @@ memory is the sum over the tree. Here the tree (the command and every descendant
 50 ms with psutil and the largest sum of resident sizes is printed, with the wall time and the user +
 system CPU of the command and every descendant it waited for (``os.wait4``'s resource usage).
 The command's own output goes to this process's stdout/stderr.
+
+A sum of resident sizes counts the shared libraries (Open3D, OpenCV, numpy: about 250 MB) once per process, so a
+tree of many Python processes (``pytest -n 2`` with its command-line children) sums far above what the machine
+gives it. The last figure printed is that instead: the peak of the machine's used memory (``MemTotal -
+MemAvailable``, /proc/meminfo) above what it was when the command started (on a machine doing nothing else).
 """
 
 from __future__ import annotations
@@ -41,6 +46,16 @@ def _tree_rss(root: psutil.Process) -> int:
 _LINE = re.compile(r": ([\d.]+) s wall, ([\d.]+) CPU-s .* peak of the process tree ([\d.]+) GB, exit (-?\d+)")
 
 
+def _machine_used() -> int:
+    """Bytes of the machine's memory in use now (MemTotal - MemAvailable; 0 where /proc/meminfo is missing)."""
+    try:
+        with open("/proc/meminfo") as f:
+            info = {line.split(":")[0]: int(line.split()[1]) * 1024 for line in f}
+    except (OSError, ValueError, IndexError):
+        return 0
+    return info.get("MemTotal", 0) - info.get("MemAvailable", 0)
+
+
 def measured(command: list[str], **popen) -> dict:
     """Run ``command`` under this script (``popen``: subprocess.run's keywords, e.g. ``cwd``, ``env``):
     {wall_s, cpu_s, peak_gb, exit, stderr}. Its own output is dropped but for stderr."""
@@ -61,13 +76,14 @@ def main() -> int:
     cmd = args.command[1:] if args.command[:1] == ["--"] else args.command
     if not cmd:
         ap.error("give the command after --")
-    t0 = time.perf_counter()
+    t0, used0 = time.perf_counter(), _machine_used()
     proc = subprocess.Popen(cmd)
-    root, peak, done = psutil.Process(proc.pid), [0], threading.Event()
+    root, peak, done = psutil.Process(proc.pid), [0, 0], threading.Event()
 
     def sample() -> None:
         while not done.is_set():
             peak[0] = max(peak[0], _tree_rss(root))
+            peak[1] = max(peak[1], _machine_used() - used0)
             time.sleep(0.05)
 
     sampler = threading.Thread(target=sample, daemon=True)
@@ -79,7 +95,8 @@ def main() -> int:
     code = os.waitstatus_to_exitcode(status)
     print(f"{args.label}: {wall:.1f} s wall, {usage.ru_utime + usage.ru_stime:.1f} CPU-s "
           f"({usage.ru_utime:.1f} user + {usage.ru_stime:.1f} sys), peak of the process tree "
-          f"{peak[0] / 1e9:.2f} GB, exit {code}", file=sys.stderr)
+          f"{peak[0] / 1e9:.2f} GB, exit {code}; the machine's used memory {peak[1] / 1e9:.2f} GB above its start",
+          file=sys.stderr)
     return code
 
 

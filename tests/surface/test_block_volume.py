@@ -97,6 +97,26 @@ def test_the_extended_volume_reaches_past_the_rim_of_the_data_and_keeps_the_surf
     assert off["extended"] < voxel / 15 and abs(off["extended"] - off["plain"]) < voxel / 200
 
 
+def test_the_surface_is_the_same_bytes_whatever_the_first_capacity_and_the_hash_map_grows_past_it():
+    """The blocks' hash map is allocated at its first capacity and grows when a view needs more: a volume begun
+    with room for 4 blocks holds the sphere's (14 of them at 1 mm) and gives the surface, byte for byte, of one
+    begun with the default room."""
+    from rangekit.sim import default_rig
+    from rangekit.surface.block_volume import BlockVolume
+
+    rig = default_rig()
+    centre = rig.camera.T_world_cam[:3, 3] + 0.45 * rig.camera.T_world_cam[:3, 2]
+    small, default = BlockVolume(0.001, blocks=4), BlockVolume(0.001)
+    for depth, camera in _sphere_views(rig, centre, 0.02):
+        small.integrate(depth, camera)
+        default.integrate(depth, camera)
+    used = small._grid.hashmap().size()
+    assert used > 2 * 4 and small._grid.hashmap().capacity() >= used == default._grid.hashmap().size()
+    a, b = small.surface(), default.surface()
+    assert len(a.vertices) > 1000
+    assert np.array_equal(a.vertices, b.vertices) and np.array_equal(a.triangles, b.triangles)
+
+
 def test_canonical_mesh_is_one_order_whatever_the_order_given():
     from rangekit.surface.block_volume import canonical_mesh
     from rangekit.surface.mesh import TriangleMesh

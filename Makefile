@@ -32,8 +32,8 @@ bytecode: $(STAMP)
 	@$(BIN)/python -m compileall -q -j 0 rangekit sim drivers calib >/dev/null
 
 test: $(STAMP) browser bytecode
-	@# Two pytest-xdist workers, one a core: 5 minutes instead of 8.5 here (the sum of the tree's RSS, shared libraries
-	@# counted in every process, peaked at 7.5 GB on 2026-12-07: docs/benchmarks.md, issue 51 sixth stop).
+	@# Two pytest-xdist workers, one a core: 5 minutes instead of 8.5 here; the machine's used memory rose 4.4 GB at
+	@# its peak on 2026-12-07 (docs/benchmarks.md, issue 51 seventh stop: over the 4 GB budget, what would go further).
 	$(BIN)/python -m pytest -q -m "not slow" -n 2
 
 test-bare: $(STAMP) browser bytecode

@@ -6,10 +6,11 @@ import json
 import os
 import subprocess
 import sys
+import threading
 import time
 import urllib.error
 import urllib.request
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from urllib.parse import urlsplit
 
 
@@ -19,6 +20,8 @@ class Server:
     url: str            # as printed, with the token
     token: str
     base: str           # http://127.0.0.1:PORT
+    err: list = field(default_factory=list)        # the server's stderr lines so far (read as it writes them)
+    drains: list = field(default_factory=list)     # the threads reading its stdout and stderr
 
     def request(self, path: str, *, data=None, token: str | None = "header", headers: dict | None = None,
                 method: str | None = None, raw: bytes | None = None):
@@ -59,7 +62,22 @@ class Server:
             except subprocess.TimeoutExpired:
                 self.proc.kill()
                 self.proc.wait()
-        return self.proc.stderr.read() if self.proc.stderr else ""
+        for t in self.drains:
+            t.join(timeout=10)
+        return "".join(self.err)
+
+
+def _drain(stream, into: list | None) -> threading.Thread:
+    """A thread reading ``stream`` to its end, its lines kept in ``into`` (None: dropped). A pipe nobody reads
+    fills at 64 kB, and the server then blocks on its next write: its log lines, a traceback of a closed socket."""
+    def read() -> None:
+        for line in stream:
+            if into is not None:
+                into.append(line)
+
+    t = threading.Thread(target=read, daemon=True)
+    t.start()
+    return t
 
 
 def start_ui(sessions, *args: str, timeout: float = 60.0, port: int = 0) -> Server:
@@ -78,7 +96,9 @@ def start_ui(sessions, *args: str, timeout: float = 60.0, port: int = 0) -> Serv
             url = line.strip()
             parts = urlsplit(url)
             token = parts.query.removeprefix("token=")
-            return Server(proc, url, token, f"{parts.scheme}://{parts.netloc}")
+            server = Server(proc, url, token, f"{parts.scheme}://{parts.netloc}")
+            server.drains = [_drain(proc.stdout, None), _drain(proc.stderr, server.err)]
+            return server
     proc.kill()
     raise RuntimeError(f"rangekit ui printed no URL: {proc.stderr.read()}")
 

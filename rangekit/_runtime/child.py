@@ -174,7 +174,6 @@ class ChildCall:
         self._proc.wait()
         if self._writer is not None:
             self._queue.put(None)   # a writer waiting for more messages: let it end
-        if self._writer is not None:
             self._writer.join()
         self._proc.stdout.close()
 

@@ -46,7 +46,7 @@ def poisson_input_problem(points: np.ndarray, *, watertight: bool = True,
 
 
 def poisson_mesh(cloud: PointCloud, *, depth: int = 9, density_quantile: float = 0.02, watertight: bool = True,
-                 n_threads: int = -1) -> TriangleMesh:
+                 n_threads: int = 1) -> TriangleMesh:
     """Screened Poisson surface of an oriented point cloud, trimmed where unsupported and closed again.
 
     Parameters
@@ -61,7 +61,10 @@ def poisson_mesh(cloud: PointCloud, *, depth: int = 9, density_quantile: float =
         removed (0 keeps everything: Poisson's own closed but invented surface where there is no data).
     watertight : close the holes the trimming opened with :func:`make_watertight`; otherwise return the
         cleaned, trimmed (open) surface.
-    n_threads : Open3D threads, -1 for all.
+    n_threads : Open3D threads, -1 for all. Default 1: Open3D's Poisson on more than one thread now and then
+        dies of a segmentation fault, taking the Python process with it (Open3D issue #6828; here about 1 call
+        in 500 on a 134-point sphere at depth 5 with -1, none in 2000 with 1), and its surface differs from run to
+        run (docs/benchmarks.md).
 
     Returns
     -------
@@ -126,7 +129,7 @@ def _poisson_surface(cloud: PointCloud, depth: int, density_quantile: float, wat
     return mesh, full, cloud
 
 
-def poisson_meshes(cloud: PointCloud, *, depth: int = 9, density_quantile: float = 0.02, n_threads: int = -1,
+def poisson_meshes(cloud: PointCloud, *, depth: int = 9, density_quantile: float = 0.02, n_threads: int = 1,
                    spacing: np.ndarray | None = None, factor: float = OBSERVED_FACTOR) -> FusedMeshes:
     """Screened Poisson (as :func:`poisson_mesh`) split into what the views saw and the closed surface.
 
@@ -159,7 +162,7 @@ def poisson_input(cloud: PointCloud) -> np.ndarray:
 
 
 def poisson_surfaces(cloud: PointCloud, *, depth: int = 9, density_quantile: float = 0.02,
-                     n_threads: int = -1) -> tuple[TriangleMesh, TriangleMesh]:
+                     n_threads: int = 1) -> tuple[TriangleMesh, TriangleMesh]:
     """Poisson's two open surfaces (the cloud's frame): the whole (untrimmed) one, which the points'
     :class:`~rangekit.surface.observed.ObservedRule` cuts to the observed mesh, and the density-trimmed
     one, which :func:`make_watertight` closes."""

@@ -241,3 +241,22 @@ def test_rule_spacing_computed_where_needed_is_the_full_rules():
     assert abs(rule.median / np.median(full) - 1) < 0.01
     np.testing.assert_array_equal(flags, observed_vertices(V, P, spacing=full))
     assert 0 < flags.sum() < len(V)                         # both kinds of vertex are there
+
+
+def test_poisson_runs_on_one_thread_unless_asked():
+    """Open3D's Poisson on more than one thread now and then segfaults (Open3D issue #6828; a CI worker died of
+    it in a 134-point call) and differs from run to run: every Poisson entry point defaults to one thread, and
+    a small surface made twice is the same bytes."""
+    import inspect
+
+    from rangekit.surface.fusion import poisson_mesh, poisson_surfaces
+
+    for fn in (poisson_mesh, poisson_meshes, poisson_surfaces):
+        assert inspect.signature(fn).parameters["n_threads"].default == 1, fn.__name__
+    rng = np.random.default_rng(3)
+    d = rng.normal(size=(600, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    cloud = PointCloud(0.1 * d, None, d)
+    a, b = (poisson_surfaces(cloud, depth=6)[0] for _ in range(2))
+    np.testing.assert_array_equal(a.vertices, b.vertices)
+    np.testing.assert_array_equal(a.triangles, b.triangles)

@@ -32,15 +32,16 @@ bytecode: $(STAMP)
 	@$(BIN)/python -m compileall -q -j 0 rangekit sim drivers calib >/dev/null
 
 test: $(STAMP) browser bytecode
-	@# Two pytest-xdist workers, one a core: 5 minutes instead of 8.5 here; the machine's used memory rose 4.4 GB at
-	@# its peak on 2026-12-07 (docs/benchmarks.md, issue 51 seventh stop: over the 4 GB budget, what would go further).
-	$(BIN)/python -m pytest -q -m "not slow" -n 2
+	@# Two pytest-xdist workers, one a core: 6 minutes instead of 8.5 here. --dist loadgroup: the memory-heavy modules
+	@# (tests/conftest.py's MEMORY_HEAVY) run on one worker, one after another; the machine's used memory rose 3.6 GB
+	@# at its peak (4.8 GB before; docs/benchmarks.md, "Issue 51, eighth stop: make test's memory").
+	$(BIN)/python -m pytest -q -m "not slow" -n 2 --dist loadgroup
 
 test-bare: $(STAMP) browser bytecode
 	@# The suite as a bare clone sees it: the shared real data hidden (an empty RANGEKIT_DATA), every test that
 	@# needs it skipped with a reason naming the folder. CI runs it.
 	mkdir -p build/no-shared-data
-	RANGEKIT_DATA=$(CURDIR)/build/no-shared-data $(BIN)/python -m pytest -q -m "not slow" -n 2 -rs
+	RANGEKIT_DATA=$(CURDIR)/build/no-shared-data $(BIN)/python -m pytest -q -m "not slow" -n 2 --dist loadgroup -rs
 
 test-slow: $(STAMP) browser bytecode peers
 	@# The full-size cases (whole calibration, 6-view scans to a mesh, 12-view registration, ...): CI runs them.

@@ -24,6 +24,7 @@ import cv2
 import numpy as np
 
 from rangekit.budget import check_budget
+from rangekit._runtime.memory import forgettable_cache
 from rangekit.errors import InputError
 from rangekit.image import to_grey
 
@@ -195,6 +196,9 @@ def _texture(board: Board, texel: float) -> tuple[np.ndarray, tuple[float, float
     img[m: m + board.rows * n, m: m + board.cols * n] = inner
     img.flags.writeable = False
     return img, extent
+
+
+forgettable_cache(_texture.cache_clear)
 
 
 @dataclass(frozen=True)

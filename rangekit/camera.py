@@ -12,12 +12,14 @@ k6[, s1, s2, s3, s4[, tx, ty]]]])``; the tilted-sensor terms tx, ty must be zero
 from __future__ import annotations
 
 import json
+import threading
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from rangekit.errors import ConfigError, InputError
+from rangekit._runtime.memory import forgettable_cache
 from rangekit.geometry import apply_T, invert_T, rigid_problem, transform_vectors
 from rangekit.lens import distort, distort_jacobian, undistort
 
@@ -273,6 +275,7 @@ class PinholeCamera:
 
 
 _RAY_CACHE: dict[bytes, np.ndarray] = {}
+_RAY_LOCK = threading.Lock()
 
 
 def pixel_rays(camera: PinholeCamera) -> np.ndarray:
@@ -285,12 +288,13 @@ def pixel_rays(camera: PinholeCamera) -> np.ndarray:
     Depends only on the lens (K, dist, size), not on the pose, and is cached (with the world rays, the last
     eight): undoing the distortion of every pixel is costly, and a lens does not change between views."""
     key = _lens_key(camera)
-    if key not in _RAY_CACHE:
+    d = _RAY_CACHE.get(key)
+    if d is None:
         xy = camera.pixels_to_normalized(camera.pixel_grid())
         d = np.column_stack([xy, np.ones(len(xy))])
         d /= np.linalg.norm(d, axis=1, keepdims=True)
-        _cache_rays(key, d.reshape(camera.height, camera.width, 3))
-    return _RAY_CACHE[key]
+        d = _cache_rays(key, d.reshape(camera.height, camera.width, 3))
+    return d
 
 
 def world_pixel_rays(camera: PinholeCamera) -> tuple[np.ndarray, np.ndarray]:
@@ -299,9 +303,9 @@ def world_pixel_rays(camera: PinholeCamera) -> tuple[np.ndarray, np.ndarray]:
     Both read-only: the directions cached per lens and pose (a turntable scan's views share the pose), the
     origins the centre broadcast to every row (no memory: most callers read only the directions)."""
     key = b"world" + camera.T_world_cam.tobytes() + _lens_key(camera)
-    if key not in _RAY_CACHE:
-        _cache_rays(key, transform_vectors(camera.T_world_cam, pixel_rays(camera).reshape(-1, 3)))
-    d = _RAY_CACHE[key]
+    d = _RAY_CACHE.get(key)
+    if d is None:
+        d = _cache_rays(key, transform_vectors(camera.T_world_cam, pixel_rays(camera).reshape(-1, 3)))
     return np.broadcast_to(camera.center, d.shape), d
 
 
@@ -309,13 +313,19 @@ def _lens_key(camera: PinholeCamera) -> bytes:
     return np.concatenate([camera.K.ravel(), camera.dist.ravel(), [camera.dist.size, *camera.size]]).tobytes()
 
 
+@forgettable_cache
 def forget_pixel_rays() -> None:
-    """Drop the cached rays (63 MB at 1280x1024): processing's views are decoded and measured."""
-    _RAY_CACHE.clear()
+    """Drop the cached rays (63 MB at 1280x1024): processing's views are decoded and measured. Safe beside
+    threads that read them (each keeps the array it was given)."""
+    with _RAY_LOCK:
+        _RAY_CACHE.clear()
 
 
-def _cache_rays(key: bytes, d: np.ndarray) -> None:
-    d.flags.writeable = False  # kept read-only; the oldest of eight goes
-    if len(_RAY_CACHE) >= 8:
-        _RAY_CACHE.pop(next(iter(_RAY_CACHE)))
-    _RAY_CACHE[key] = d
+def _cache_rays(key: bytes, d: np.ndarray) -> np.ndarray:
+    """``d``, read-only, kept under ``key``; the oldest of eight goes."""
+    d.flags.writeable = False
+    with _RAY_LOCK:
+        if len(_RAY_CACHE) >= 8:
+            _RAY_CACHE.pop(next(iter(_RAY_CACHE)))
+        _RAY_CACHE[key] = d
+    return d

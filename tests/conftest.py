@@ -107,9 +107,23 @@ def _rss() -> int:
         return int(f.read().split()[1]) * _PAGE
 
 
+#: glibc's mallopt parameters (malloc.h) and the worker's limits between tests.
+_M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3
+_WORKER_MMAP_BYTES = 1 << 20
+#: A worker holding more than this after a module drops the library's caches (:func:`_collect_after_module`).
+_CACHES_KEPT_BELOW = 900 << 20
+
+
 def _free_memory() -> None:
+    """Collect the cycles and hand the free heap back; and the worker's glibc limits back to 1 MB: an in-process
+    scan's :func:`rangekit._runtime.memory.reuse_freed_memory` leaves them at 32 MB (as a long scan wants), and the
+    worker's heap then holds every array under 32 MB of every later test, fragmented (a worker grew from 0.5 to
+    1.6 GB over the run)."""
     gc.collect()
     if _LIBC is not None and hasattr(_LIBC, "malloc_trim"):
+        if hasattr(_LIBC, "mallopt") and "MALLOC_MMAP_THRESHOLD_" not in os.environ:
+            _LIBC.mallopt(_M_MMAP_THRESHOLD, _WORKER_MMAP_BYTES)
+            _LIBC.mallopt(_M_TRIM_THRESHOLD, 2 * _WORKER_MMAP_BYTES)
         _LIBC.malloc_trim(0)
     _RSS_AFTER_LAST_FREE[0] = _rss()
 
@@ -136,8 +150,34 @@ def _logger_as_imported():
 
 @pytest.fixture(scope="module", autouse=True)
 def _collect_after_module():
+    """After each module the freed heap handed back, and where the worker then holds more than
+    :data:`_CACHES_KEPT_BELOW`, the library's caches of large arrays emptied too (a module's rigs and boards are
+    seldom the next one's; between the modules of tests/sim and tests/calib they held 250 MB of a worker; emptied
+    after every module, their arrays made again cost the run 50 CPU-s)."""
     yield
     _free_memory()
+    if _rss() > _CACHES_KEPT_BELOW:
+        from rangekit._runtime.memory import forget_caches
+
+        forget_caches()
+        _RSS_AFTER_LAST_FREE[0] = _rss()
+
+
+#: The modules whose tests take the most memory: those of tests/ui (each starts a ``rangekit ui``, 0.7-1.3 GB
+#: once its live frames and jobs ran) and those whose tests grow their worker by 0.8-1.1 GB (full-size
+#: simulated captures and their truth; ``benchmarks/harness/suite_memory.py`` names them).
+MEMORY_HEAVY = ("tests/ui/", "tests/sim/test_sim.py", "tests/coded/test_coded_light.py",
+                "tests/calib/test_calibration.py", "tests/app/scan/test_scan_call.py", "tests/rig/test_response.py",
+                "tests/coded/test_hybrid_min_bit.py")
+
+
+def pytest_collection_modifyitems(config, items):
+    """The memory-heavy modules (:data:`MEMORY_HEAVY`) share one pytest-xdist worker, one after another, where the
+    run distributes by group (``-n 2 --dist loadgroup``, as ``make test`` runs): two of them at once, one on
+    each worker, took ``make test`` over the 4 GB of the machine it is kept under."""
+    for item in items:
+        if item.nodeid.startswith(MEMORY_HEAVY):
+            item.add_marker(pytest.mark.xdist_group("memory-heavy"))
 
 
 @pytest.hookimpl(hookwrapper=True)

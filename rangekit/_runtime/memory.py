@@ -32,14 +32,16 @@ default session, issue 51).
 from __future__ import annotations
 
 import ctypes
+import gc
 import os
 import sys
 import threading
 from contextlib import contextmanager
+from typing import Callable
 
 import numpy as np
 
-__all__ = ["release_free_memory", "reuse_freed_memory", "reused_array", "adopt_kept"]
+__all__ = ["release_free_memory", "reuse_freed_memory", "reused_array", "adopt_kept", "forgettable_cache", "forget_caches"]
 
 try:
     _LIBC = ctypes.CDLL(None)   # the process's own symbols: libc's, without a search (ldconfig) for it
@@ -65,6 +67,28 @@ _SET_HUGEPAGE = getattr(_MULTIARRAY, "_set_madvise_hugepage", None)
 _LOCK = threading.Lock()
 _OPEN = 0                                        # reuse blocks open, on every thread
 _KEPT: dict[tuple[int, str], np.ndarray] = {}    # (thread ident, name) -> the array reused_array keeps
+
+
+#: The clearing functions of the caches of large arrays (:func:`forgettable_cache`).
+_CACHES: list[Callable[[], None]] = []
+
+
+def forgettable_cache(clear: Callable[[], None]) -> Callable[[], None]:
+    """Register ``clear``, which empties a module's cache of large arrays (the per-pixel rays, the boards'
+    textures), with :func:`forget_caches`; returns it."""
+    _CACHES.append(clear)
+    return clear
+
+
+def forget_caches() -> None:
+    """Empty every registered cache (:func:`forgettable_cache`), collect the cycles and return the free pages
+    (:func:`release_free_memory`): where a long-lived process finished a piece of work whose rigs and boards
+    the next one may not share (a job of ``rangekit ui``, a test module). The next call that needs a cached
+    array computes it again, the same bytes."""
+    for clear in list(_CACHES):
+        clear()
+    gc.collect()
+    release_free_memory()
 
 
 def release_free_memory() -> None:

@@ -16,6 +16,7 @@ import numpy as np
 import trimesh
 
 from rangekit.boards import Board
+from rangekit._runtime.memory import forgettable_cache
 from rangekit.errors import FileFormatError, InputError, SceneError
 from rangekit.sim.scene.scene_object import PlanarTexture, SceneObject
 from rangekit.sim.scene.zoo import bowl, bunny, steps, thin
@@ -173,6 +174,9 @@ def board_object(board: Board, *, name: str = "board", texel: float | None = Non
 def _board_texture(board: Board, texel: float) -> PlanarTexture:
     """One shared (immutable) texture per board, so a calibration run builds its summed-area table once."""
     return PlanarTexture(*board.texture(texel))
+
+
+forgettable_cache(_board_texture.cache_clear)
 
 
 def board_corners(rows: int = 7, cols: int = 9, square: float = 0.02) -> np.ndarray:

@@ -1,6 +1,7 @@
 """rangekit._runtime.memory against glibc's own counters (mallinfo2): inside reuse_freed_memory a large array comes from
 the heap, after it from its own mapping again, and a process started with its malloc settings keeps them.
-Each case runs in a fresh interpreter, so the suite's own allocator is left as it was."""
+Each case runs in a fresh interpreter with glibc's own settings (the suite's ``MALLOC_*`` variables left out),
+so the suite's own allocator is left as it was."""
 
 import os
 import subprocess
@@ -34,9 +35,14 @@ PROBE = textwrap.dedent("""
 """)
 
 
+def _glibc_defaults(env: dict | None = None) -> dict:
+    """This process's environment without the ``MALLOC_*`` settings (``make test`` sets one), with ``env``."""
+    return {**{k: v for k, v in os.environ.items() if not k.startswith("MALLOC_")}, **(env or {})}
+
+
 def probe(env=None) -> str:
     out = subprocess.run([sys.executable, "-c", PROBE], capture_output=True, text=True, timeout=120,
-                         env={**os.environ, **(env or {})})
+                         env=_glibc_defaults(env))
     assert out.returncode == 0, out.stderr
     return out.stdout.strip()
 
@@ -89,7 +95,8 @@ HEAP_PROBE = textwrap.dedent("""
 
 
 def heap_probe(where: str) -> int:
-    out = subprocess.run([sys.executable, "-c", HEAP_PROBE, where], capture_output=True, text=True, timeout=120)
+    out = subprocess.run([sys.executable, "-c", HEAP_PROBE, where], capture_output=True, text=True, timeout=120,
+                         env=_glibc_defaults())
     assert out.returncode == 0, out.stderr
     return int(out.stdout)
 

@@ -14,6 +14,7 @@ from __future__ import annotations
 import threading
 from enum import Enum
 
+from rangekit._runtime.memory import forget_caches
 from rangekit.errors import RangekitError
 from rangekit.progress import LOGGER
 
@@ -91,11 +92,14 @@ class Job:
         self.changed()
 
     def finish(self, state: JobState, **fields) -> None:
-        """The run ended in ``state``; ``fields`` replace what it showed (a failure's ``error``)."""
+        """The run ended in ``state``; ``fields`` replace what it showed (a failure's ``error``). The memory the
+        run took is handed back (:func:`forget_caches`): a server left running keeps no job's rays, textures
+        or freed heap."""
         with self._cond:
             self.state, self.fields = state, dict(fields)
             self._cond.notify_all()
         self.changed()
+        forget_caches()
 
     def launch(self, work, *args, keep: dict | None = None) -> None:
         """``work(*args)`` on a thread of its own: its dict result shown as the job's fields once DONE, or its

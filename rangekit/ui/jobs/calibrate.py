@@ -20,6 +20,7 @@ from enum import Enum
 import cv2
 import numpy as np
 
+from rangekit._runtime.memory import forget_caches
 from rangekit.boards import Board
 from rangekit.errors import RangekitError
 from rangekit.ui.board_live import live_corners
@@ -200,6 +201,7 @@ class CalibrateJob(Job):
             self._set(state="cancelled")
         except Exception as exc:  # noqa: BLE001 - the page gets one line, the log the details
             self._set("failed", error=failed(exc, "calibration"))
+        forget_caches()     # as every job's end (Job.finish): the board's textures, the rays, the freed heap
 
     def _scene_now(self) -> None:
         """Simulator: put the board at the pool's current pose, shifted by the drag."""

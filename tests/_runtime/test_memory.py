@@ -195,3 +195,34 @@ def test_adopt_kept_hands_a_threads_kept_array_to_the_thread_that_takes_over_its
         assert id(reused_array("frames0", (48, 8, 8), np.uint8)) == made[1]   # the worker's array, taken over
         assert len(memory._KEPT) == 1
     assert not memory._KEPT
+
+
+def test_forget_caches_empties_the_rays_and_the_board_textures_and_they_come_back_the_same():
+    """One call empties every registered cache of large arrays (rangekit ui after a job, the suite between
+    modules); the next call that needs one makes the same bytes again."""
+    import numpy as np
+
+    from rangekit import boards, camera
+    from rangekit._runtime.memory import forget_caches, forgettable_cache
+    from rangekit.sim import default_rig
+    from rangekit.sim.scene import objects
+
+    cam = default_rig().camera
+    rays = camera.pixel_rays(cam)
+    board = boards.Board()
+    texture = board.texture(board.square / 20)
+    objects._board_texture(board, board.square / 20)
+    from rangekit._runtime import memory
+
+    called = []
+    clear = forgettable_cache(lambda: called.append(1))
+    try:
+        forget_caches()
+    finally:
+        memory._CACHES.remove(clear)
+    assert called == [1] and not camera._RAY_CACHE
+    assert boards._texture.cache_info().currsize == 0 and objects._board_texture.cache_info().currsize == 0
+    again = camera.pixel_rays(cam)
+    assert again is not rays
+    np.testing.assert_array_equal(again, rays)
+    np.testing.assert_array_equal(board.texture(board.square / 20)[0], texture[0])

@@ -107,8 +107,7 @@ def _rss() -> int:
         return int(f.read().split()[1]) * _PAGE
 
 
-#: glibc's mallopt parameters (malloc.h) and the worker's limits between tests.
-_M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3
+#: The worker's glibc mmap threshold between tests (its trim threshold twice that).
 _WORKER_MMAP_BYTES = 1 << 20
 #: A worker holding more than this after a module drops the library's caches (:func:`_collect_after_module`).
 _CACHES_KEPT_BELOW = 900 << 20
@@ -117,13 +116,14 @@ _CACHES_KEPT_BELOW = 900 << 20
 def _free_memory() -> None:
     """Collect the cycles and hand the free heap back; and the worker's glibc limits back to 1 MB: an in-process
     scan's :func:`rangekit._runtime.memory.reuse_freed_memory` leaves them at 32 MB (as a long scan wants), and the
-    worker's heap then holds every array under 32 MB of every later test, fragmented (a worker grew from 0.5 to
-    1.6 GB over the run)."""
+    worker's heap then holds every array under 32 MB of every later test, fragmented (docs/benchmarks.md, "Issue 51, eighth stop")."""
+    from rangekit._runtime import memory
+
     gc.collect()
     if _LIBC is not None and hasattr(_LIBC, "malloc_trim"):
-        if hasattr(_LIBC, "mallopt") and "MALLOC_MMAP_THRESHOLD_" not in os.environ:
-            _LIBC.mallopt(_M_MMAP_THRESHOLD, _WORKER_MMAP_BYTES)
-            _LIBC.mallopt(_M_TRIM_THRESHOLD, 2 * _WORKER_MMAP_BYTES)
+        if memory._MALLOPT is not None and "MALLOC_MMAP_THRESHOLD_" not in os.environ:
+            memory._MALLOPT(memory._M_MMAP_THRESHOLD, _WORKER_MMAP_BYTES)
+            memory._MALLOPT(memory._M_TRIM_THRESHOLD, 2 * _WORKER_MMAP_BYTES)
         _LIBC.malloc_trim(0)
     _RSS_AFTER_LAST_FREE[0] = _rss()
 
@@ -152,8 +152,7 @@ def _logger_as_imported():
 def _collect_after_module():
     """After each module the freed heap handed back, and where the worker then holds more than
     :data:`_CACHES_KEPT_BELOW`, the library's caches of large arrays emptied too (a module's rigs and boards are
-    seldom the next one's; between the modules of tests/sim and tests/calib they held 250 MB of a worker; emptied
-    after every module, their arrays made again cost the run 50 CPU-s)."""
+    seldom the next one's; emptied after every module, the arrays made again would cost CPU in every module)."""
     yield
     _free_memory()
     if _rss() > _CACHES_KEPT_BELOW:

@@ -62,9 +62,9 @@ def poisson_mesh(cloud: PointCloud, *, depth: int = 9, density_quantile: float =
     watertight : close the holes the trimming opened with :func:`make_watertight`; otherwise return the
         cleaned, trimmed (open) surface.
     n_threads : Open3D threads, -1 for all. Default 1: Open3D's Poisson on more than one thread now and then
-        dies of a segmentation fault, taking the Python process with it (Open3D issue #6828; here about 1 call
-        in 500 on a 134-point sphere at depth 5 with -1, none in 2000 with 1), and its surface differs from run to
-        run (docs/benchmarks.md).
+        dies of a segmentation fault, taking the Python process with it (Open3D issue #6828; here, calling it in
+        a loop on the 134-point sphere of tests/formats/test_formats_roundtrip.py at depth 5: 2 crashes in at most
+        700 calls with -1, none in 2000 with 1), and its surface differs from run to run (docs/benchmarks.md).
 
     Returns
     -------

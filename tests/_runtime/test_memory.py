@@ -203,6 +203,7 @@ def test_forget_caches_empties_the_rays_and_the_board_textures_and_they_come_bac
     import numpy as np
 
     from rangekit import boards, camera
+    from rangekit._runtime import memory
     from rangekit._runtime.memory import forget_caches, forgettable_cache
     from rangekit.sim import default_rig
     from rangekit.sim.scene import objects
@@ -212,8 +213,6 @@ def test_forget_caches_empties_the_rays_and_the_board_textures_and_they_come_bac
     board = boards.Board()
     texture = board.texture(board.square / 20)
     objects._board_texture(board, board.square / 20)
-    from rangekit._runtime import memory
-
     called = []
     clear = forgettable_cache(lambda: called.append(1))
     try:
